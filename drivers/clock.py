@@ -1,0 +1,81 @@
+"""The one clock everything runs on.
+
+Hardware runs on :class:`SystemClock`; emulation runs on :class:`VirtualClock`, whose time moves
+only when somebody sleeps on it. Nothing in gyrocal calls ``time.time()`` or ``time.monotonic()``
+directly: it takes a :class:`Clock` and asks it.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol, runtime_checkable
+
+__all__ = ["Clock", "SystemClock", "VirtualClock"]
+
+
+@runtime_checkable
+class Clock(Protocol):
+    """What gyrocal needs of a clock: a monotonic time in seconds and a way to wait."""
+
+    def monotonic(self) -> float:
+        """Seconds on this clock; never decreases."""
+        ...
+
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` on this clock."""
+        ...
+
+
+class SystemClock:
+    """The host's monotonic clock (``time.monotonic`` / ``time.sleep``)."""
+
+    def monotonic(self) -> float:
+        """Seconds from the host's monotonic clock."""
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        """Block for ``seconds`` of wall time (negative values are treated as zero)."""
+        if seconds > 0:
+            time.sleep(seconds)
+
+    def __repr__(self) -> str:
+        return "SystemClock()"
+
+
+class VirtualClock:
+    """A clock that advances only when :meth:`sleep` (or :meth:`advance`) is called.
+
+    Emulated devices read it to decide what has happened by now, and spend time on it for
+    the bus transfers they model, so a whole calibration protocol runs in a fraction of its
+    jig time and is exactly repeatable.
+
+    Parameters
+    ----------
+    start : float
+        The initial time in seconds.
+    """
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._t = float(start)
+
+    def monotonic(self) -> float:
+        """The current virtual time in seconds."""
+        return self._t
+
+    def sleep(self, seconds: float) -> None:
+        """Advance the virtual time by ``seconds``.
+
+        Raises
+        ------
+        ValueError
+            If ``seconds`` is negative or not finite.
+        """
+        seconds = float(seconds)
+        if not seconds >= 0.0 or seconds == float("inf"):
+            raise ValueError(f"sleep needs a finite, non-negative duration, got {seconds!r}")
+        self._t += seconds
+
+    advance = sleep
+
+    def __repr__(self) -> str:
+        return f"VirtualClock(t={self._t:.6f})"

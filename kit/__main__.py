@@ -1,0 +1,7 @@
+"""``python -m kit`` is the same as the ``gyrocal`` console script."""
+
+import sys
+
+from kit.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""One module per ``gyrocal`` subcommand (see :data:`kit.cli.COMMANDS`)."""

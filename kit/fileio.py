@@ -1,0 +1,71 @@
+"""Writing output files safely: never half-written, never silently overwritten."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from kit.errors import InputError, OutputExistsError
+
+__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text"]
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically.
+
+    The data go to a temporary file in the same directory, which is flushed, fsynced and then
+    renamed over ``path``, so a reader sees either the old file or the whole new one.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination file.
+    data : bytes
+        Contents.
+    force : bool
+        Replace an existing file. Without it an existing file is an error.
+
+    Returns
+    -------
+    Path
+        The destination.
+
+    Raises
+    ------
+    OutputExistsError
+        If ``path`` exists and ``force`` is false.
+    InputError
+        If the directory does not exist.
+    """
+    dest = Path(path)
+    if dest.exists() and not force:
+        raise OutputExistsError(f"{dest} already exists; pass --force to replace it")
+    if not dest.parent.is_dir():
+        raise InputError(f"cannot write {dest}: directory {dest.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, dest)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return dest
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str, *, force: bool = False) -> Path:
+    """:func:`atomic_write_bytes` for UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8"), force=force)
+
+
+def atomic_write_json(path: str | os.PathLike[str], doc: Any, *, force: bool = False) -> Path:
+    """:func:`atomic_write_text` of ``doc`` as indented JSON with a final newline."""
+    return atomic_write_text(path, json.dumps(doc, indent=2) + "\n", force=force)
