@@ -1,0 +1,863 @@
+r"""Estimators of the six calibration parameters from an observation set.
+
+Three methods over one :class:`~calib.observations.ObservationSet`, shaped like
+``scipy.optimize.least_squares``: arguments are validated up front with a
+:class:`~calib.errors.CalibInputError` that names what is wrong, and non-convergence is a status on
+the returned :class:`FitResult`, not an exception.
+
+``iterative-ls``
+    The paper's Algorithm 1 on the squared-norm regression, Eq. (4)-(7).
+``levenberg-marquardt``
+    ``scipy.optimize.least_squares(method="lm")`` on the same residuals, the paper's baseline.
+``paired-axis``
+    Our estimator: every window's full mean vector, with one rotation axis per servo shared by its
+    clockwise and counter-clockwise turns, and the rest windows, weighted by the measured noise.
+
+Squared-norm residuals (paper Eq. 3-5), with ``θ = (k, b)`` and window means ``m̄_i``:
+
+.. math:: r_i(θ) = \sum_j k_j^2 (\bar m_{ij} + b_j)^2 - ω_i^2
+
+Covariance of the squared-norm methods comes from first-order propagation of the window noise: a
+perturbation ``δm̄_ij`` of a mean and ``δω_i`` of a reference rate perturb ``r_i`` by
+``δ_i = Σ_j 2 k_j^2 (m̄_ij + b_j) δm̄_ij - 2 ω_i δω_i``, with variance ``S_ii``; the estimator's
+linear response to ``δ`` then gives a sandwich covariance (see :func:`fit_iterative_ls` and
+:func:`fit_levenberg_marquardt`).
+
+The paired-axis model (derived in ``hardware_docs/method.md``): for a window of servo ``s`` with
+signed reference rate ``ω_i`` the true rate in the sensor frame is ``ω_i u_s``, ``u_s`` a unit
+vector, and by Eq. (1) the expected reading is
+
+.. math:: E[\bar m_i] = ω_i\, u_s ⊘ k - b ,
+
+while a rest window reads ``E[\bar m_r] = -b``. Each ``u_s`` has two free angles. Residuals are
+whitened by each window's covariance ``diag(σ²_ij) + σ²_{ω,i} (u_s⊘k)(u_s⊘k)ᵀ`` and the sum of
+squares is minimised by Levenberg-Marquardt with an analytic Jacobian; the covariance is
+``(J̃ᵀJ̃)⁻¹`` and ``Σ ẽ²`` is chi-square with ``3n + 3r - 6 - 2S`` degrees of freedom.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from calib.errors import CalibInputError
+from calib.model import Consistency, GyroCalibration
+from calib.observations import ObservationSet
+
+__all__ = [
+    "CONSISTENCY_ALPHA",
+    "METHODS",
+    "FitResult",
+    "estimate",
+    "fit_iterative_ls",
+    "fit_levenberg_marquardt",
+    "fit_paired_axis",
+    "iterative_ls_batch",
+    "paired_axis_batch",
+]
+
+#: The chi-square test's level: a fit is consistent when its p-value is at least this.
+CONSISTENCY_ALPHA = 0.01
+
+_AXES = "xyz"
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """What an estimator returns.
+
+    Attributes
+    ----------
+    method : str
+        ``iterative-ls``, ``levenberg-marquardt`` or ``paired-axis``.
+    scale, bias : numpy.ndarray, shape (3,)
+        The estimates (model ``g = scale ∘ (m + bias)``, paper Eq. 1); NaN only if the estimator
+        failed before producing any estimate.
+    covariance : numpy.ndarray, shape (6, 6)
+        Covariance of ``(k_x, k_y, k_z, b_x, b_y, b_z)``.
+    iterations : int
+        Iterations used (least-squares solves for Algorithm 1, function evaluations for LM,
+        Levenberg-Marquardt steps for paired-axis).
+    success : bool
+        Whether the estimator converged to a valid estimate.
+    status : str
+        ``converged``, ``max-iterations``, ``sqrt-failed``, ``diverged``, ``singular`` or the
+        scipy status text.
+    message : str
+        Human-readable account of ``status``.
+    consistency : Consistency or None
+        Chi-square test of the residuals, when there are redundant degrees of freedom.
+    residuals : numpy.ndarray
+        The final residuals (whitened for paired-axis).
+    axes : dict or None
+        Paired-axis only: ``{motor: unit axis (3,)}`` in the sensor frame.
+    axes_std_rad : dict or None
+        Paired-axis only: ``{motor: one-sigma angular uncertainty of the axis, rad}``.
+    extra : dict
+        Method-specific details (Algorithm 1: ``beta``, ``beta0``, ``condition_met``, and
+        ``history`` of the (k, b) iterates).
+    """
+
+    method: str
+    scale: np.ndarray
+    bias: np.ndarray
+    covariance: np.ndarray
+    iterations: int
+    success: bool
+    status: str
+    message: str
+    consistency: Consistency | None = None
+    residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    axes: dict[int, np.ndarray] | None = None
+    axes_std_rad: dict[int, float] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def scale_std(self) -> np.ndarray:
+        """One-sigma uncertainty of ``scale``."""
+        return np.sqrt(np.clip(np.diag(self.covariance)[:3], 0, None))
+
+    @property
+    def bias_std(self) -> np.ndarray:
+        """One-sigma uncertainty of ``bias``."""
+        return np.sqrt(np.clip(np.diag(self.covariance)[3:], 0, None))
+
+    def to_calibration(
+        self,
+        *,
+        sensor: dict[str, Any] | None = None,
+        temperature_c: float | None = None,
+        created: str | None = None,
+        source: str | None = None,
+    ) -> GyroCalibration:
+        """The result as a :class:`~calib.model.GyroCalibration` (Calibration v1).
+
+        Raises
+        ------
+        CalibInputError
+            If the fit did not produce a valid estimate (``success`` is false).
+        """
+        if not self.success:
+            raise CalibInputError(f"{self.method} did not produce a calibration: {self.message}")
+        axes = None
+        if self.axes is not None:
+            axes = {
+                str(m): {
+                    "axis": [float(x) for x in u],
+                    "misalignment_deg": float(_misalignment_deg(u)),
+                    "nearest": _nearest_axis(u),
+                    "std_deg": float(np.degrees((self.axes_std_rad or {}).get(m, np.nan))),
+                }
+                for m, u in self.axes.items()
+            }
+        return GyroCalibration(
+            scale=tuple(self.scale),  # type: ignore[arg-type]
+            bias=tuple(self.bias),  # type: ignore[arg-type]
+            scale_std=tuple(self.scale_std),  # type: ignore[arg-type]
+            bias_std=tuple(self.bias_std),  # type: ignore[arg-type]
+            covariance=tuple(tuple(float(x) for x in r) for r in self.covariance),
+            method=self.method,
+            iterations=int(self.iterations),
+            consistency=self.consistency,
+            sensor=dict(sensor or {}),
+            temperature_c=temperature_c,
+            created=created,
+            source=source,
+            axes=axes,
+        )
+
+
+def _nearest_axis(u: np.ndarray) -> str:
+    j = int(np.argmax(np.abs(u)))
+    return ("+" if u[j] >= 0 else "-") + _AXES[j]
+
+
+def _misalignment_deg(u: np.ndarray) -> float:
+    """Angle between ``u`` and the sensor axis nearest to it, degrees."""
+    return float(np.degrees(np.arccos(np.clip(np.max(np.abs(u)), -1.0, 1.0))))
+
+
+# ---------------------------------------------------------------------------------- validation
+def _validate_common(obs: ObservationSet, method: str, min_windows: int) -> None:
+    if not isinstance(obs, ObservationSet):
+        raise CalibInputError(f"obs must be an ObservationSet, got {type(obs).__name__}")
+    if obs.n_windows < min_windows:
+        raise CalibInputError(
+            f"{method} needs at least {min_windows} rotation windows, got {obs.n_windows}; "
+            "turn every servo both ways (the paper's six observations, ±x, ±y, ±z)"
+        )
+    for m in obs.motors:
+        dirs = set(obs.direction[obs.motor == m].tolist())
+        if dirs != {-1, 1}:
+            only = "positive" if dirs == {1} else "negative"
+            raise CalibInputError(
+                f"servo {m} turned only in the {only} direction; every servo must turn both ways "
+                "(a clockwise and a counter-clockwise turn share one axis, which is what "
+                "separates bias from scale)"
+            )
+    if np.any(np.abs(obs.rate) < 1e-3):
+        i = int(np.flatnonzero(np.abs(obs.rate) < 1e-3)[0])
+        raise CalibInputError(f"window {i} has a reference rate of {obs.rate[i]:.2e} rad/s")
+    # Every sensor axis must be the dominant axis of some window.
+    unit = obs.mean / np.linalg.norm(obs.mean, axis=1, keepdims=True)
+    covered = np.any(np.abs(unit) > 0.7, axis=0)
+    if not np.all(covered):
+        missing = ", ".join(_AXES[j] for j in np.flatnonzero(~covered))
+        raise CalibInputError(
+            f"no window rotates about the sensor's {missing} axis; the fit needs a rotation "
+            "about each of x, y and z (check which sensor axis each servo turns about)"
+        )
+
+
+# ---------------------------------------------------------------------------------- squared norm
+def _design(mean: np.ndarray) -> np.ndarray:
+    """Observation matrix with columns ordered as β1..β6 of Eq. (4): m², then m.
+
+    The paper's Eq. (8) prints the linear columns first; this order matches its β definitions.
+    """
+    return np.concatenate([mean**2, mean], axis=-1)
+
+
+def _theta_from_beta(beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    k = np.sqrt(beta[..., :3])
+    b = beta[..., 3:] / (2.0 * beta[..., :3])
+    return k, b
+
+
+def _sq_residuals(theta: np.ndarray, mean: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    k, b = theta[:3], theta[3:]
+    return np.sum(k**2 * (mean + b) ** 2, axis=1) - rate**2
+
+
+def _sq_jacobian(theta: np.ndarray, mean: np.ndarray, rate: np.ndarray | None = None) -> np.ndarray:
+    k, b = theta[:3], theta[3:]
+    mb = mean + b
+    return np.concatenate([2 * k * mb**2, 2 * k**2 * mb], axis=1)
+
+
+def _sq_noise_cov(theta: np.ndarray, obs: ObservationSet) -> np.ndarray:
+    """``S``: variance of each squared-norm residual's noise, diagonal (windows independent)."""
+    k, b = theta[:3], theta[3:]
+    g = 2 * k**2 * (obs.mean + b)
+    var = np.sum(g**2 * obs.mean_std**2, axis=1) + (2 * obs.rate * obs.rate_std) ** 2
+    return np.diag(var)
+
+
+def _sq_consistency(e: np.ndarray, S: np.ndarray, H: np.ndarray) -> Consistency | None:
+    """Chi-square of residuals ``e = (I - H) δ`` with ``Cov δ = S``."""
+    n = e.size
+    dof = n - 6
+    if dof <= 0:
+        return None
+    R = np.eye(n) - H
+    cov_e = R @ S @ R.T
+    chi2 = float(e @ np.linalg.pinv(cov_e, rcond=1e-10, hermitian=True) @ e)
+    p = float(stats.chi2.sf(chi2, dof))
+    return Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
+
+
+def _ils_solve(
+    X: np.ndarray, Y: np.ndarray, tol: float, max_iter: int
+) -> tuple[np.ndarray, np.ndarray, list[float], str]:
+    """Algorithm 1's iterates for one run: ``(beta, [β_Y, v], gammas, status)``.
+
+    ``β⁽ⁿ⁺¹⁾ = (XᵀX)⁻¹Xᵀ(Y − γ⁽ⁿ⁾) = β_Y − γ⁽ⁿ⁾ v`` with ``β_Y = (XᵀX)⁻¹XᵀY`` and
+    ``v = (XᵀX)⁻¹Xᵀ1``, so each iteration is a scalar update of ``γ`` and the stopping sum
+    ``Σ|β⁽ⁿ⁺¹⁾ − β⁽ⁿ⁾|`` is ``|γ⁽ⁿ⁾ − γ⁽ⁿ⁻¹⁾| Σ|v|``: the paper's iterates, computed without
+    re-solving. ``gammas`` lists ``γ⁽ⁿ⁾`` of every update, so iterate ``n + 1`` is
+    ``β_Y − gammas[n − 1] v``. Status ``singular`` if ``X`` is rank-deficient.
+    """
+    rhs = np.stack([Y, np.ones_like(Y)], axis=1)
+    try:
+        if X.shape[0] == 6:
+            sol = np.linalg.solve(X, rhs)
+        else:
+            sol, _, rank, _ = np.linalg.lstsq(X, rhs, rcond=None)
+            if rank < 6:
+                raise np.linalg.LinAlgError("rank-deficient")
+    except np.linalg.LinAlgError:
+        return np.full(6, np.nan), np.full((2, 6), np.nan), [], "singular"
+    by = sol[:, 0].tolist()
+    v = sol[:, 1].tolist()
+    vsum = sum(abs(x) for x in v)
+    gamma_prev = gamma = 0.0
+    gammas: list[float] = []
+    beta = by
+    status = "max-iterations"
+    it = 1
+    while it < max_iter:
+        b1, b2, b3 = beta[0], beta[1], beta[2]
+        if b1 <= 0 or b2 <= 0 or b3 <= 0:
+            status = "sqrt-failed"
+            break
+        gamma = beta[3] ** 2 / (4 * b1) + beta[4] ** 2 / (4 * b2) + beta[5] ** 2 / (4 * b3)
+        if gamma != gamma or abs(gamma) == float("inf"):
+            status = "diverged"
+            break
+        beta = [y - gamma * x for y, x in zip(by, v, strict=True)]
+        gammas.append(gamma)
+        it += 1
+        if abs(gamma - gamma_prev) * vsum <= tol:
+            status = "converged"
+            break
+        gamma_prev = gamma
+    if status != "sqrt-failed" and min(beta[0], beta[1], beta[2]) <= 0:
+        status = "sqrt-failed"
+    return np.array(beta), sol.T, gammas, status
+
+
+def fit_iterative_ls(
+    obs: ObservationSet, *, tol: float = 1e-6, max_iter: int = 100, covariance: bool = True
+) -> FitResult:
+    r"""The paper's Algorithm 1: iterative least squares on the squared-norm regression.
+
+    With ``X`` the observation matrix (Eq. 8; columns ``m²`` then ``m`` to match β1..β6 of Eq. 4)
+    and ``Y = ω²`` (Eq. 7, squares of the window means, Eq. 9), starting from ``β0 = 0``::
+
+        β⁽¹⁾ = (XᵀX)⁻¹ Xᵀ (Y - β0⁽⁰⁾)
+        while Σ_j |β_j⁽ⁿ⁺¹⁾ - β_j⁽ⁿ⁾| > tol:
+            γ⁽ⁿ⁾ = Σ_j β_{j+3}⁽ⁿ⁾² / (4 β_j⁽ⁿ⁾)
+            β⁽ⁿ⁺¹⁾ = (XᵀX)⁻¹ Xᵀ (Y - γ⁽ⁿ⁾)
+
+    and ``k = sqrt(β1..3)``, ``b = β4..6 / (2 β1..3)``. With exactly six windows ``(XᵀX)⁻¹Xᵀ`` is
+    ``X⁻¹``; with more it is the least-squares solution of the same equations. Because ``γ`` only
+    shifts ``Y`` by a constant, the iterates are computed as ``β_Y − γ v`` (see :func:`_ils_solve`).
+
+    Each step contracts the error by about ``γ / (ω² - γ)`` (a constant shift of ``Y`` is absorbed
+    by scaling β), so the paper's condition ``0 <= β0 < 0.5`` (at ``ω = 1 rad/s``) is the condition
+    ``γ < ω²/2``; ``extra["condition_met"]`` reports the paper's literal condition.
+
+    Covariance: differentiating the fixed point ``XᵀXβ = Xᵀ(Y - γ(β))`` gives
+    ``(XᵀX + Xᵀ1∇γᵀ) dβ = Xᵀδ``, hence ``Cov β = A⁻¹ XᵀSX A⁻ᵀ`` with ``A = XᵀX + Xᵀ1∇γᵀ``, mapped
+    to ``(k, b)`` by the Jacobian of the return formulas.
+
+    Parameters
+    ----------
+    obs : ObservationSet
+        At least six rotation windows covering ±x, ±y, ±z; rest windows are not used.
+    tol : float
+        Stopping tolerance on ``Σ|Δβ|`` (the paper's 1e-6).
+    max_iter : int
+        Most least-squares solves before giving up with status ``max-iterations``.
+    covariance : bool
+        Compute the covariance (skip it to time the bare algorithm).
+
+    Returns
+    -------
+    FitResult
+        ``iterations`` counts least-squares solves (the first estimate is iteration 1, as in the
+        paper's Table I); ``extra["history"]`` holds ``(k, b)`` after each solve.
+    """
+    if not (tol > 0 and np.isfinite(tol)):
+        raise CalibInputError(f"tol must be a positive number, got {tol!r}")
+    if int(max_iter) < 1:
+        raise CalibInputError(f"max_iter must be at least 1, got {max_iter!r}")
+    _validate_common(obs, "iterative-ls", 6)
+    X = _design(obs.mean)
+    Y = obs.rate**2
+    beta, (by, v), gammas, status = _ils_solve(X, Y, float(tol), int(max_iter))
+    iterations = 1 + len(gammas)
+    if status == "singular":
+        return _failed("iterative-ls", "singular", "the observation matrix X is rank-deficient")
+    gamma = gammas[-1] if gammas else 0.0
+    condition_met = 0.0 <= gamma < 0.5
+    condition = (
+        ""
+        if condition_met
+        else (
+            f"; the paper's convergence condition 0 <= β0 < 0.5 does not hold (β0 = {gamma:.3g}; "
+            f"the iteration contracts by about β0/(ω² - β0) with mean ω² = {np.mean(Y):.3g})"
+        )
+    )
+    extra = {"beta": beta, "beta0": gamma, "condition_met": condition_met}
+    if status == "sqrt-failed":
+        bad = ", ".join(f"β{j + 1} = {beta[j]:.4g}" for j in range(3) if beta[j] <= 0)
+        return _failed(
+            "iterative-ls",
+            "sqrt-failed",
+            f"k = sqrt(β) needs β1..3 > 0, got {bad}: the windows do not fit g = k(m + b) "
+            "(check the axis assignment, that the sensor turned with the servo, and saturation)"
+            + condition,
+            iterations,
+            extra,
+        )
+    if status == "diverged":
+        return _failed(
+            "iterative-ls", "diverged", "the iteration diverged" + condition, iterations, extra
+        )
+    message = {
+        "converged": f"converged in {iterations} iterations (tol {tol:g})",
+        "max-iterations": f"no convergence in {max_iter} iterations",
+    }[status] + condition
+    k, b = _theta_from_beta(beta)
+    theta = np.concatenate([k, b])
+    cov = np.full((6, 6), np.nan)
+    consistency = None
+    if covariance:
+        S = _sq_noise_cov(theta, obs)
+        grad_gamma = np.concatenate(
+            [-(beta[3:] ** 2) / (4 * beta[:3] ** 2), beta[3:] / (2 * beta[:3])]
+        )
+        ones = np.ones(X.shape[0])
+        A = X.T @ X + np.outer(X.T @ ones, grad_gamma)
+        Ainv_Xt = np.linalg.solve(A, X.T)
+        cov_beta = Ainv_Xt @ S @ Ainv_Xt.T
+        T = np.zeros((6, 6))  # d(k, b) / dβ
+        T[[0, 1, 2], [0, 1, 2]] = 1 / (2 * k)
+        T[[3, 4, 5], [0, 1, 2]] = -beta[3:] / (2 * beta[:3] ** 2)
+        T[[3, 4, 5], [3, 4, 5]] = 1 / (2 * beta[:3])
+        cov = T @ cov_beta @ T.T
+        # e = (I - H) δ to first order, with H = (X + 1∇γᵀ) A⁻¹ Xᵀ
+        e = Y - gamma - X @ beta
+        H = (X + np.outer(ones, grad_gamma)) @ Ainv_Xt
+        consistency = _sq_consistency(e, S, H)
+    # History of iterates: β⁽¹⁾ = β_Y, then β_Y − γ⁽ⁿ⁾ v.
+    hist_beta = by[None, :] - np.array([0.0, *gammas])[:, None] * v[None, :]
+    hist = np.concatenate(_theta_from_beta(hist_beta), axis=1)
+    return FitResult(
+        method="iterative-ls",
+        scale=k,
+        bias=b,
+        covariance=cov,
+        iterations=iterations,
+        success=status == "converged",
+        status=status,
+        message=message,
+        consistency=consistency,
+        residuals=_sq_residuals(theta, obs.mean, obs.rate),
+        extra={**extra, "history": hist},
+    )
+
+
+def iterative_ls_batch(
+    mean: np.ndarray, rate: np.ndarray, *, tol: float = 1e-6, max_iter: int = 100
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Algorithm 1 for ``B`` runs at once (same iterates as :func:`fit_iterative_ls`).
+
+    Parameters
+    ----------
+    mean : ndarray, shape (B, n, 3)
+    rate : ndarray, shape (B, n)
+
+    Returns
+    -------
+    scale, bias : ndarray, shape (B, 3)
+        NaN where the run failed.
+    iterations : ndarray of int, shape (B,)
+    converged : ndarray of bool, shape (B,)
+    """
+    X = _design(mean)
+    Y = rate**2
+    rhs = np.stack([Y, np.ones_like(Y)], axis=2)
+    if X.shape[1] == 6:
+        sol = np.linalg.solve(X, rhs)
+    else:
+        sol = np.linalg.pinv(X) @ rhs
+    by, v = sol[..., 0], sol[..., 1]
+    vsum = np.abs(v).sum(axis=1)
+    B = mean.shape[0]
+    gamma_prev = np.zeros(B)
+    beta = by.copy()
+    it = np.ones(B, dtype=np.int64)
+    active = np.ones(B, dtype=bool)
+    converged = np.zeros(B, dtype=bool)
+    failed = np.zeros(B, dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(int(max_iter) - 1):
+            if not active.any():
+                break
+            bad = active & np.any(beta[:, :3] <= 0, axis=1)
+            failed |= bad
+            active &= ~bad
+            gamma = np.sum(beta[:, 3:] ** 2 / (4 * beta[:, :3]), axis=1)
+            new = by - gamma[:, None] * v
+            beta = np.where(active[:, None], new, beta)
+            it += active
+            done = active & (np.abs(gamma - gamma_prev) * vsum <= tol)
+            converged |= done
+            active &= ~done
+            gamma_prev = np.where(active, gamma, gamma_prev)
+        ok = converged & np.all(beta[:, :3] > 0, axis=1) & ~failed
+        k = np.where(ok[:, None], np.sqrt(np.abs(beta[:, :3])), np.nan)
+        b = np.where(ok[:, None], beta[:, 3:] / (2 * beta[:, :3]), np.nan)
+    return k, b, it, ok
+
+
+def _failed(
+    method: str,
+    status: str,
+    message: str,
+    iterations: int = 0,
+    extra: dict[str, Any] | None = None,
+) -> FitResult:
+    nan3 = np.full(3, np.nan)
+    return FitResult(
+        method=method, scale=nan3, bias=nan3.copy(), covariance=np.full((6, 6), np.nan),
+        iterations=iterations, success=False, status=status, message=message,
+        extra=dict(extra or {}),
+    )
+
+
+def fit_levenberg_marquardt(
+    obs: ObservationSet,
+    *,
+    x0: np.ndarray | None = None,
+    xtol: float = 1e-14,
+    ftol: float = 1e-14,
+    covariance: bool = True,
+) -> FitResult:
+    """The paper's baseline: ``scipy.optimize.least_squares(method="lm")`` on Eq. (3) residuals.
+
+    Minimises ``Σ r_i(θ)²`` with ``r_i = Σ_j k_j²(m̄_ij + b_j)² - ω_i²`` over ``θ = (k, b)`` from
+    ``x0`` (default ``k = 1, b = 0``). Covariance is the least-squares sandwich
+    ``(JᵀJ)⁻¹ JᵀSJ (JᵀJ)⁻¹`` with ``S`` the residual noise variance (module docstring).
+
+    Parameters
+    ----------
+    obs : ObservationSet
+        At least six rotation windows covering ±x, ±y, ±z; rest windows are not used.
+    x0 : array_like, shape (6,), optional
+        Starting point ``(k_x, k_y, k_z, b_x, b_y, b_z)``.
+    xtol, ftol : float
+        Passed to ``least_squares``.
+    covariance : bool
+        Compute the covariance.
+
+    Returns
+    -------
+    FitResult
+        ``iterations`` is scipy's number of function evaluations.
+    """
+    _validate_common(obs, "levenberg-marquardt", 6)
+    if x0 is None:
+        x0 = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    else:
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape != (6,) or not np.all(np.isfinite(x0)):
+            raise CalibInputError(f"x0 must be 6 finite numbers, got {x0!r}")
+    mean, rate = obs.mean, obs.rate
+    res = optimize.least_squares(
+        _sq_residuals,
+        x0,
+        jac=_sq_jacobian,
+        method="lm",
+        xtol=xtol,
+        ftol=ftol,
+        gtol=1e-15,
+        args=(mean, rate),
+    )
+    theta = res.x.copy()
+    theta[:3] = np.abs(theta[:3])  # r depends on k²: the sign of k is not identified
+    ok = bool(res.status > 0) and np.all(np.isfinite(theta))
+    cov = np.full((6, 6), np.nan)
+    consistency = None
+    if covariance and ok:
+        J = _sq_jacobian(theta, mean)
+        S = _sq_noise_cov(theta, obs)
+        JtJ_inv = np.linalg.pinv(J.T @ J)
+        cov = JtJ_inv @ J.T @ S @ J @ JtJ_inv
+        consistency = _sq_consistency(res.fun, S, J @ JtJ_inv @ J.T)
+    return FitResult(
+        method="levenberg-marquardt",
+        scale=theta[:3],
+        bias=theta[3:],
+        covariance=cov,
+        iterations=int(res.nfev),
+        success=ok,
+        status="converged" if ok else "not-converged",
+        message=str(res.message),
+        consistency=consistency,
+        residuals=np.asarray(res.fun),
+    )
+
+
+# ---------------------------------------------------------------------------------- paired axis
+def _tangent_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane orthogonal to each unit vector in ``u`` (..., 3)."""
+    helper = np.zeros_like(u)
+    idx = np.argmin(np.abs(u), axis=-1)
+    np.put_along_axis(helper, idx[..., None], 1.0, axis=-1)
+    t1 = np.cross(u, helper)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    t2 = np.cross(u, t1)
+    return t1, t2
+
+
+@dataclass(frozen=True, eq=False)
+class PairedAxisBatch:
+    """Results of :func:`paired_axis_batch` for ``B`` independent runs."""
+
+    scale: np.ndarray  # (B, 3)
+    bias: np.ndarray  # (B, 3)
+    axes: np.ndarray  # (B, S, 3)
+    covariance: np.ndarray  # (B, P, P), P = 6 + 2S: k, b, then two angles per servo
+    chi2: np.ndarray  # (B,)
+    dof: int
+    iterations: np.ndarray  # (B,)
+    converged: np.ndarray  # (B,) bool
+    residuals: np.ndarray  # (B, 3n + 3r) whitened
+
+
+def _paired_initial(
+    mean: np.ndarray,
+    rate: np.ndarray,
+    sidx: np.ndarray,
+    n_servos: int,
+    rest_mean: np.ndarray,
+    rest_std: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A closed-form start: per-servo regressions ``m̄ = ω d_s + c_s`` and the rests."""
+    B = mean.shape[0]
+    d = np.zeros((B, n_servos, 3))
+    c = np.zeros((B, n_servos, 3))
+    for s in range(n_servos):
+        sel = sidx == s
+        w = rate[:, sel]  # (B, ns)
+        m = mean[:, sel, :]
+        wm, mm = w.mean(axis=1), m.mean(axis=1)
+        dw = w - wm[:, None]
+        d[:, s] = np.einsum("bi,bij->bj", dw, m - mm[:, None, :]) / np.sum(dw**2, axis=1)[:, None]
+        c[:, s] = mm - d[:, s] * wm[:, None]
+    if rest_mean.shape[1]:
+        wr = 1.0 / rest_std**2
+        b0 = -np.sum(wr * rest_mean, axis=1) / np.sum(wr, axis=1)
+    else:
+        b0 = -c.mean(axis=1)
+    dom = np.argmax(np.abs(d), axis=2)  # (B, S) dominant sensor axis of each servo
+    k0 = np.ones((B, 3))
+    for j in range(3):
+        hit = dom == j
+        inv = np.where(hit, 1.0 / np.abs(d[:, :, j]), 0.0)
+        cnt = hit.sum(axis=1)
+        k0[:, j] = np.where(cnt > 0, inv.sum(axis=1) / np.maximum(cnt, 1), 1.0)
+    u0 = k0[:, None, :] * d
+    u0 /= np.linalg.norm(u0, axis=2, keepdims=True)
+    return k0, b0, u0
+
+
+def paired_axis_batch(
+    mean: np.ndarray,
+    rate: np.ndarray,
+    motor_index: np.ndarray,
+    mean_std: np.ndarray,
+    rate_std: np.ndarray,
+    rest_mean: np.ndarray,
+    rest_std: np.ndarray,
+    *,
+    max_iter: int = 50,
+    xtol: float = 1e-12,
+) -> PairedAxisBatch:
+    """The paired-axis fit for ``B`` runs of the same protocol at once (vectorised).
+
+    Parameters
+    ----------
+    mean : ndarray, shape (B, n, 3)
+        Window mean readings.
+    rate : ndarray, shape (B, n)
+        Signed reference rates.
+    motor_index : ndarray of int, shape (n,)
+        Servo of each window as an index ``0..S-1`` (same for every run).
+    mean_std : ndarray, shape (B, n, 3)
+        Standard errors of the window means.
+    rate_std : ndarray, shape (B, n)
+        Standard errors of the reference rates.
+    rest_mean, rest_std : ndarray, shape (B, r, 3)
+        Rest-window means and their standard errors (``r`` may be 0).
+    max_iter : int
+        Most Levenberg-Marquardt steps.
+    xtol : float
+        Convergence threshold on the largest parameter step.
+
+    Returns
+    -------
+    PairedAxisBatch
+    """
+    B, n, _ = mean.shape
+    r = rest_mean.shape[1]
+    S = int(motor_index.max()) + 1
+    P = 6 + 2 * S
+    k, b, u = _paired_initial(mean, rate, motor_index, S, rest_mean, rest_std)
+    w = rate[:, :, None]  # (B, n, 1)
+    var_m = mean_std**2
+    var_w = rate_std[:, :, None, None] ** 2
+    eye3 = np.eye(3)
+
+    def evaluate(k, b, u, with_jac):
+        ui = u[:, motor_index, :]  # (B, n, 3)
+        ci = ui / k[:, None, :]
+        e = mean - (w * ci - b[:, None, :])  # (B, n, 3)
+        C = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
+        L = np.linalg.cholesky(C)  # (B, n, 3, 3)
+        ew = np.linalg.solve(L, e[..., None])[..., 0]  # whitened: L⁻¹ e
+        er = (rest_mean + b[:, None, :]) / rest_std
+        E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r)], axis=1)
+        if not with_jac:
+            return E, None, None
+        t1, t2 = _tangent_basis(u)  # (B, S, 3)
+        J = np.zeros((B, n, 3, P))
+        idx = np.arange(3)
+        J[:, :, idx, idx] = w * ui / k[:, None, :] ** 2
+        J[:, :, idx, 3 + idx] = 1.0
+        cols = 6 + 2 * motor_index
+        ar = np.arange(n)
+        J[:, ar, :, cols] = np.moveaxis(-w * t1[:, motor_index, :] / k[:, None, :], 1, 0)
+        J[:, ar, :, cols + 1] = np.moveaxis(-w * t2[:, motor_index, :] / k[:, None, :], 1, 0)
+        Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
+        Jr = np.zeros((B, r, 3, P))
+        Jr[:, :, idx, 3 + idx] = 1.0 / rest_std
+        J = np.concatenate([Jw, Jr.reshape(B, 3 * r, P)], axis=1)
+        return E, J, (t1, t2)
+
+    E, J, tb = evaluate(k, b, u, True)
+    cost = np.sum(E**2, axis=1)
+    lam = np.full(B, 1e-3)
+    active = np.ones(B, dtype=bool)
+    iterations = np.zeros(B, dtype=np.int64)
+    converged = np.zeros(B, dtype=bool)
+    for _ in range(int(max_iter)):
+        if not active.any():
+            break
+        JtJ = np.einsum("bip,biq->bpq", J, J)
+        g = np.einsum("bip,bi->bp", J, E)
+        D = np.einsum("bpp->bp", JtJ)
+        A = JtJ + (lam[:, None] * D)[:, :, None] * np.eye(P)
+        step = -np.linalg.solve(A, g[..., None])[..., 0]
+        t1, t2 = tb
+        k_new = k + step[:, :3]
+        b_new = b + step[:, 3:6]
+        da = step[:, 6::2][..., None]
+        db = step[:, 7::2][..., None]
+        u_new = u + da * t1 + db * t2
+        u_new /= np.linalg.norm(u_new, axis=2, keepdims=True)
+        bad_k = np.any(k_new <= 0, axis=1)
+        k_new = np.where(bad_k[:, None], k, k_new)
+        E_new, _, _ = evaluate(k_new, b_new, u_new, False)
+        cost_new = np.sum(E_new**2, axis=1)
+        accept = active & ~bad_k & (cost_new <= cost)
+        iterations += active
+        small = np.max(np.abs(step), axis=1) <= xtol * (1.0 + np.max(np.abs(k), axis=1))
+        k = np.where(accept[:, None], k_new, k)
+        b = np.where(accept[:, None], b_new, b)
+        u = np.where(accept[:, None, None], u_new, u)
+        lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
+        done = active & (small | (accept & (cost - cost_new <= 1e-14 * (1.0 + cost))))
+        converged |= done
+        active &= ~done
+        if accept.any():
+            E_acc, J_acc, tb_acc = evaluate(k, b, u, True)
+            E = np.where(accept[:, None], E_acc, E)
+            J = np.where(accept[:, None, None], J_acc, J)
+            tb = (
+                np.where(accept[:, None, None], tb_acc[0], tb[0]),
+                np.where(accept[:, None, None], tb_acc[1], tb[1]),
+            )
+            cost = np.sum(E**2, axis=1)
+    E, J, _ = evaluate(k, b, u, True)
+    JtJ = np.einsum("bip,biq->bpq", J, J)
+    cov = np.linalg.pinv(JtJ, hermitian=True)
+    return PairedAxisBatch(
+        scale=k,
+        bias=b,
+        axes=u,
+        covariance=cov,
+        chi2=np.sum(E**2, axis=1),
+        dof=3 * n + 3 * r - P,
+        iterations=iterations,
+        converged=converged,
+        residuals=E,
+    )
+
+
+def fit_paired_axis(
+    obs: ObservationSet, *, use_rests: bool = True, max_iter: int = 50
+) -> FitResult:
+    r"""Paired-axis fit: scale, bias and each servo's axis from every window's full mean vector.
+
+    Model (paper Eq. 1 inverted): a window of servo ``s`` at signed reference rate ``ω_i`` reads
+    ``E[m̄_i] = ω_i u_s ⊘ k − b`` with ``u_s`` the servo's unit axis in the sensor frame (two free
+    angles), and a rest reads ``E[m̄_r] = −b``. The clockwise and counter-clockwise turns of a servo
+    share ``u_s``, so their off-axis components pin the bias, and every window informs every bias
+    component (DESIGN.md fact 3). Residuals are whitened by each window's noise (module docstring)
+    and minimised by Levenberg-Marquardt with an analytic Jacobian, starting from a closed-form
+    per-servo regression. Covariance ``(J̃ᵀJ̃)⁻¹``; consistency: ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``.
+
+    Parameters
+    ----------
+    obs : ObservationSet
+        Rotation windows of every servo in both directions covering ±x, ±y, ±z, and rest windows.
+    use_rests : bool
+        Use the rest windows (default). Without them the bias comes from the turns alone.
+    max_iter : int
+        Most Levenberg-Marquardt steps.
+
+    Returns
+    -------
+    FitResult
+        With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``.
+    """
+    motors = obs.motors
+    _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
+    sidx = np.searchsorted(np.array(sorted(motors)), obs.motor)
+    order = sorted(motors)
+    r_mean = obs.rest_mean if use_rests else np.zeros((0, 3))
+    r_std = obs.rest_mean_std if use_rests else np.zeros((0, 3))
+    res = paired_axis_batch(
+        obs.mean[None],
+        obs.rate[None],
+        sidx,
+        obs.mean_std[None],
+        obs.rate_std[None],
+        r_mean[None],
+        r_std[None],
+        max_iter=max_iter,
+    )
+    k, b, cov = res.scale[0], res.bias[0], res.covariance[0]
+    ok = bool(res.converged[0]) and np.all(np.isfinite(k)) and np.all(k > 0)
+    dof = res.dof
+    consistency = None
+    if dof > 0:
+        chi2 = float(res.chi2[0])
+        p = float(stats.chi2.sf(chi2, dof))
+        consistency = Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
+    axes = {m: res.axes[0, i].copy() for i, m in enumerate(order)}
+    axes_std = {}
+    for i, m in enumerate(order):
+        blk = cov[6 + 2 * i : 8 + 2 * i, 6 + 2 * i : 8 + 2 * i]
+        axes_std[m] = float(np.sqrt(max(np.linalg.eigvalsh(blk).max(), 0.0)))
+    it = int(res.iterations[0])
+    return FitResult(
+        method="paired-axis",
+        scale=k.copy(),
+        bias=b.copy(),
+        covariance=cov[:6, :6].copy(),
+        iterations=it,
+        success=ok,
+        status="converged" if ok else "max-iterations",
+        message=f"converged in {it} steps" if ok else f"no convergence in {max_iter} steps",
+        consistency=consistency,
+        residuals=res.residuals[0].copy(),
+        axes=axes,
+        axes_std_rad=axes_std,
+    )
+
+
+#: The estimators by name.
+METHODS = {
+    "paired-axis": fit_paired_axis,
+    "iterative-ls": fit_iterative_ls,
+    "levenberg-marquardt": fit_levenberg_marquardt,
+}
+
+
+def estimate(obs: ObservationSet, method: str = "paired-axis", **options: Any) -> FitResult:
+    """Run the estimator named ``method`` (a key of :data:`METHODS`) on ``obs``."""
+    try:
+        fn = METHODS[method]
+    except KeyError:
+        raise CalibInputError(
+            f"unknown method {method!r}; choose one of {', '.join(METHODS)}"
+        ) from None
+    return fn(obs, **options)

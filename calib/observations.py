@@ -1,0 +1,188 @@
+"""Observations: what the estimators see of a calibration run.
+
+A *rotation window* is a stretch of one servo's turn (whole revolutions where possible, DESIGN.md
+fact 2) reduced to the mean gyro reading over the window and the encoder's mean rate over the
+same window (the paper's Eq. 9: average first, then square). A *rest window* is a stretch with
+every servo still: its mean reading is minus the bias.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.errors import CalibInputError
+
+__all__ = ["ObservationSet"]
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _arr(
+    value: object, name: str, shape: tuple[int | None, ...], dtype: type = float
+) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be numeric, got {value!r}") from None
+    if a.ndim != len(shape) or any(
+        s is not None and s != d for s, d in zip(shape, a.shape, strict=True)
+    ):
+        want = str(tuple("n" if s is None else s for s in shape)).replace("'", "")
+        raise CalibInputError(f"{name} must have shape {want}, got {a.shape}")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        bad = np.argwhere(~np.isfinite(a))[0].tolist()
+        raise CalibInputError(f"{name} contains NaN or inf (first at index {bad})")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class ObservationSet:
+    """Rotation windows and rest windows of one calibration run.
+
+    Parameters
+    ----------
+    mean : array_like, shape (n, 3)
+        Mean gyro reading over each rotation window, rad/s (datasheet sensitivity only).
+    rate : array_like, shape (n,)
+        The encoder's mean rate over the same window, rad/s, signed: positive in the servo's
+        positive direction.
+    motor : array_like of int, shape (n,)
+        Dynamixel ID of the servo that turned.
+    direction : array_like of int, shape (n,)
+        +1 or -1, the commanded direction; must agree with the sign of ``rate``.
+    count : array_like of int, shape (n,)
+        Gyro samples in the window.
+    noise : array_like, shape (n, 3)
+        In-window noise estimate: standard deviation of one sample, rad/s, per axis.
+    mean_std : array_like, shape (n, 3), optional
+        Standard error of ``mean``; defaults to ``noise / sqrt(count)`` (white noise).
+    rate_std : array_like, shape (n,), optional
+        Standard error of ``rate`` (encoder quantisation and timing); defaults to 0.
+    rest_mean, rest_count, rest_noise, rest_mean_std : optional
+        The same for rest windows (shapes (r, 3), (r,), (r, 3), (r, 3)).
+    temperature_c : float, optional
+        Mean die temperature over the run.
+
+    Raises
+    ------
+    CalibInputError
+        On mismatched shapes, NaN or inf, counts below 2, non-positive noise, a direction that is
+        not ±1 or disagrees with the sign of ``rate``.
+    """
+
+    mean: np.ndarray
+    rate: np.ndarray
+    motor: np.ndarray
+    direction: np.ndarray
+    count: np.ndarray
+    noise: np.ndarray
+    mean_std: np.ndarray | None = None
+    rate_std: np.ndarray | None = None
+    rest_mean: np.ndarray | None = None
+    rest_count: np.ndarray | None = None
+    rest_noise: np.ndarray | None = None
+    rest_mean_std: np.ndarray | None = None
+    temperature_c: float | None = None
+
+    def __post_init__(self) -> None:
+        mean = _arr(self.mean, "mean", (None, 3))
+        n = mean.shape[0]
+        rate = _arr(self.rate, "rate", (n,))
+        motor = _arr(self.motor, "motor", (n,), dtype=np.int64)
+        direction = _arr(self.direction, "direction", (n,), dtype=np.int64)
+        count = _arr(self.count, "count", (n,), dtype=np.int64)
+        noise = _arr(self.noise, "noise", (n, 3))
+        if not np.all(np.isin(direction, (-1, 1))):
+            raise CalibInputError("direction must be +1 or -1 for every window")
+        wrong = np.flatnonzero(np.sign(rate) != direction)
+        if wrong.size:
+            i = int(wrong[0])
+            raise CalibInputError(
+                f"window {i}: reference rate {rate[i]:+.4f} rad/s disagrees with direction "
+                f"{direction[i]:+d}; check the encoder sign or the segment table"
+            )
+        if np.any(count < 2):
+            raise CalibInputError("every window needs at least 2 gyro samples")
+        if np.any(noise <= 0):
+            raise CalibInputError("noise must be positive (a constant signal means a stuck axis)")
+        if self.mean_std is None:
+            mean_std = noise / np.sqrt(count)[:, None]
+        else:
+            mean_std = _arr(self.mean_std, "mean_std", (n, 3))
+            if np.any(mean_std <= 0):
+                raise CalibInputError("mean_std must be positive")
+        if self.rate_std is None:
+            rate_std = np.zeros(n)
+        else:
+            rate_std = _arr(self.rate_std, "rate_std", (n,))
+            if np.any(rate_std < 0):
+                raise CalibInputError("rate_std must not be negative")
+
+        if self.rest_mean is None:
+            if any(v is not None for v in (self.rest_count, self.rest_noise, self.rest_mean_std)):
+                raise CalibInputError("rest_count/rest_noise given without rest_mean")
+            r_mean = np.zeros((0, 3))
+            r_count = np.zeros(0, dtype=np.int64)
+            r_noise = np.zeros((0, 3))
+            r_std = np.zeros((0, 3))
+        else:
+            r_mean = _arr(self.rest_mean, "rest_mean", (None, 3))
+            r = r_mean.shape[0]
+            if self.rest_count is None or self.rest_noise is None:
+                raise CalibInputError("rest windows need rest_count and rest_noise")
+            r_count = _arr(self.rest_count, "rest_count", (r,), dtype=np.int64)
+            r_noise = _arr(self.rest_noise, "rest_noise", (r, 3))
+            if np.any(r_count < 2):
+                raise CalibInputError("every rest window needs at least 2 gyro samples")
+            if np.any(r_noise <= 0):
+                raise CalibInputError("rest_noise must be positive")
+            if self.rest_mean_std is None:
+                r_std = r_noise / np.sqrt(r_count)[:, None]
+            else:
+                r_std = _arr(self.rest_mean_std, "rest_mean_std", (r, 3))
+                if np.any(r_std <= 0):
+                    raise CalibInputError("rest_mean_std must be positive")
+        temp = self.temperature_c
+        if temp is not None:
+            temp = float(temp)
+            if not np.isfinite(temp):
+                raise CalibInputError("temperature_c must be finite")
+        for name, v in (
+            ("mean", mean), ("rate", rate), ("motor", motor), ("direction", direction),
+            ("count", count), ("noise", noise), ("mean_std", mean_std), ("rate_std", rate_std),
+            ("rest_mean", r_mean), ("rest_count", r_count), ("rest_noise", r_noise),
+            ("rest_mean_std", r_std),
+        ):
+            object.__setattr__(self, name, _ro(v))
+        object.__setattr__(self, "temperature_c", temp)
+
+    @property
+    def n_windows(self) -> int:
+        """Number of rotation windows."""
+        return int(self.mean.shape[0])
+
+    @property
+    def n_rests(self) -> int:
+        """Number of rest windows."""
+        return int(self.rest_mean.shape[0])  # type: ignore[union-attr]
+
+    @property
+    def motors(self) -> tuple[int, ...]:
+        """The servo IDs that turned, in order of first appearance."""
+        _, first = np.unique(self.motor, return_index=True)
+        return tuple(int(self.motor[i]) for i in sorted(first))
+
+    def without_rests(self) -> ObservationSet:
+        """The same rotation windows with the rest windows dropped (the paper's six-observation
+        view)."""
+        return ObservationSet(
+            mean=self.mean, rate=self.rate, motor=self.motor, direction=self.direction,
+            count=self.count, noise=self.noise, mean_std=self.mean_std, rate_std=self.rate_std,
+            temperature_c=self.temperature_c,
+        )

@@ -1,0 +1,337 @@
+"""Vectorised synthetic sensor and protocol for Monte Carlo work (seeded, sample level).
+
+A run is a sensor with true scale ``k`` and bias ``b`` (paper Eq. 1: ``g = k ∘ (m + b)``, so the
+reading is ``m = g ⊘ k − b + noise``), mounted with a small misalignment so that each servo's
+rotation axis ``u_s`` in the sensor frame is off the sensor axis, and turned by the protocol: for
+each servo a rest, ``turns`` whole revolutions one way, a rest, the same the other way. Samples are
+drawn at ``odr_hz``; the servo's speed ripples; windows are whole revolutions, so the encoder's
+reference (angle change over duration) is the exact mean of the true rate over the window.
+
+The speed ripple is a band-limited process: random-phase sinusoids at the revolution frequency and
+its first harmonics plus a few Hz, with total standard deviation ``ripple`` × speed. The paper
+describes its rotation noise only as "N(0, 5% ω)"; a physical servo's ripple comes from its control
+loop and gearing, not independent per sample.
+
+Everything is a pure function of its arguments and a ``numpy.random.Generator``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.errors import CalibInputError
+from calib.observations import ObservationSet
+
+__all__ = [
+    "SensorPreset",
+    "SimProtocol",
+    "SimulatedRuns",
+    "draw_mount_axes",
+    "draw_sensors",
+    "noise_std_from_density",
+    "simulate_runs",
+]
+
+
+@dataclass(frozen=True)
+class SensorPreset:
+    """A distribution of true sensor errors (paper Section III).
+
+    Attributes
+    ----------
+    scale_range : (float, float)
+        Scale factors ~ U(lo, hi) per axis.
+    bias_abs_range : (float, float)
+        |bias| ~ U(lo, hi) per axis with a random sign (rad/s). ``(0, 0.1)`` is U(-0.1, 0.1).
+    """
+
+    scale_range: tuple[float, float] = (0.8, 1.2)
+    bias_abs_range: tuple[float, float] = (0.0, 0.1)
+
+
+#: Paper, normal conditions: k ~ U(0.8, 1.2), b ~ U(-0.1, 0.1) rad/s.
+NORMAL = SensorPreset((0.8, 1.2), (0.0, 0.1))
+#: Paper, extreme conditions: k ~ U(1.2, 2.0), |b| ~ U(0.1, 0.2) rad/s.
+EXTREME = SensorPreset((1.2, 2.0), (0.1, 0.2))
+
+
+def draw_sensors(
+    rng: np.random.Generator, n: int, preset: SensorPreset = NORMAL
+) -> tuple[np.ndarray, np.ndarray]:
+    """Draw ``n`` sensors' true scale and bias, each of shape ``(n, 3)``."""
+    lo, hi = preset.scale_range
+    scale = rng.uniform(lo, hi, size=(n, 3))
+    blo, bhi = preset.bias_abs_range
+    bias = rng.uniform(blo, bhi, size=(n, 3)) * rng.choice([-1.0, 1.0], size=(n, 3))
+    return scale, bias
+
+
+def _rotation_matrices(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation matrices (n, 3, 3) about unit ``axis`` (n, 3) by ``angle`` (n,)."""
+    x, y, z = axis[:, 0], axis[:, 1], axis[:, 2]
+    c, s = np.cos(angle), np.sin(angle)
+    C = 1 - c
+    return np.stack(
+        [
+            np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], axis=-1),
+            np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], axis=-1),
+            np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def draw_mount_axes(
+    rng: np.random.Generator, n: int, misalignment: float = 0.1, n_servos: int = 3
+) -> np.ndarray:
+    """Rotation axes of the servos in the sensor frame for ``n`` randomly misaligned mounts.
+
+    The mount is a rigid rotation by an angle ~ U(0, ``misalignment``) rad about a random axis
+    (the paper's "misalignment U(0 %, 10 %)"), so servo ``s`` (nominally about sensor axis ``s``)
+    turns about ``u_s = Rᵀ e_s``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, n_servos, 3)
+    """
+    if n_servos != 3:
+        raise CalibInputError("draw_mount_axes models the three-servo gimbal (n_servos=3)")
+    ax = rng.standard_normal((n, 3))
+    ax /= np.linalg.norm(ax, axis=1, keepdims=True)
+    R = _rotation_matrices(ax, rng.uniform(0.0, misalignment, size=n))
+    return np.transpose(R, (0, 2, 1)) @ np.eye(3)  # rows: Rᵀ e_s
+
+
+def noise_std_from_density(density_rad_s_sqrt_hz: float, odr_hz: float) -> float:
+    """Per-sample standard deviation of white noise of the given density: ``N·sqrt(odr)``."""
+    return float(density_rad_s_sqrt_hz) * float(np.sqrt(odr_hz))
+
+
+@dataclass(frozen=True)
+class SimProtocol:
+    """A calibration protocol for simulation.
+
+    Attributes
+    ----------
+    speed : float
+        Commanded speed, rad/s.
+    turns : int
+        Whole revolutions per direction per servo.
+    odr_hz : float
+        Gyro output data rate.
+    rest_s : float
+        Rest before each turn (and after the last), s.
+    ripple : float
+        Speed ripple as a fraction of the speed (standard deviation).
+    window : str
+        ``"revolution"``: one window per revolution; ``"turn"``: one window per turn.
+    """
+
+    speed: float = 1.0
+    turns: int = 1
+    odr_hz: float = 200.0
+    rest_s: float = 3.0
+    ripple: float = 0.05
+    window: str = "revolution"
+
+    def __post_init__(self) -> None:
+        if not (self.speed > 0 and np.isfinite(self.speed)):
+            raise CalibInputError(f"speed must be positive, got {self.speed!r}")
+        if int(self.turns) != self.turns or self.turns < 1:
+            raise CalibInputError(f"turns must be a positive integer, got {self.turns!r}")
+        if not self.odr_hz > 0:
+            raise CalibInputError(f"odr_hz must be positive, got {self.odr_hz!r}")
+        if self.rest_s < 0:
+            raise CalibInputError(f"rest_s must not be negative, got {self.rest_s!r}")
+        if self.window not in ("revolution", "turn"):
+            raise CalibInputError(f"window must be 'revolution' or 'turn', got {self.window!r}")
+
+    @property
+    def samples_per_revolution(self) -> int:
+        """Gyro samples in one revolution (rounded: windows hold whole samples)."""
+        return int(round(2 * np.pi / self.speed * self.odr_hz))
+
+    @property
+    def rest_samples(self) -> int:
+        """Gyro samples in one rest."""
+        return int(round(self.rest_s * self.odr_hz))
+
+    def layout(self, n_servos: int = 3) -> tuple[np.ndarray, np.ndarray, int]:
+        """``(motor_index, direction, samples)`` of each rotation window, in protocol order."""
+        per_turn = self.turns if self.window == "revolution" else 1
+        n_per = self.samples_per_revolution * (1 if self.window == "revolution" else self.turns)
+        motor, direction = [], []
+        for s in range(n_servos):
+            for d in (1, -1):
+                motor += [s] * per_turn
+                direction += [d] * per_turn
+        return np.array(motor), np.array(direction), n_per
+
+    @property
+    def n_rests(self) -> int:
+        """Rest windows: one before every turn and one at the end (three servos)."""
+        return 7 if self.rest_s > 0 else 0
+
+    @property
+    def duration_s(self) -> float:
+        """Jig time of the rotations and rests (ramps not modelled)."""
+        return 6 * self.turns * 2 * np.pi / self.speed + self.n_rests * self.rest_s
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedRuns:
+    """Window statistics of ``B`` simulated runs of one protocol (arrays lead with ``B``)."""
+
+    mean: np.ndarray  # (B, n, 3)
+    rate: np.ndarray  # (B, n) signed encoder reference
+    motor_index: np.ndarray  # (n,)
+    direction: np.ndarray  # (n,)
+    count: np.ndarray  # (n,)
+    noise: np.ndarray  # (B, n, 3) in-window first-difference noise estimate
+    rate_std: np.ndarray  # (B, n)
+    rest_mean: np.ndarray  # (B, r, 3)
+    rest_count: np.ndarray  # (r,)
+    rest_noise: np.ndarray  # (B, r, 3)
+
+    @property
+    def mean_std(self) -> np.ndarray:
+        """Standard errors of the window means (white-noise estimate)."""
+        return self.noise / np.sqrt(self.count)[None, :, None]
+
+    @property
+    def rest_mean_std(self) -> np.ndarray:
+        """Standard errors of the rest means."""
+        return self.rest_noise / np.sqrt(self.rest_count)[None, :, None]
+
+    def observation_set(self, i: int, motor_ids: tuple[int, ...] = (1, 2, 3)) -> ObservationSet:
+        """Run ``i`` as an :class:`~calib.observations.ObservationSet` (servo IDs ``motor_ids``)."""
+        r = self.rest_mean.shape[1]
+        return ObservationSet(
+            mean=self.mean[i],
+            rate=self.rate[i],
+            motor=np.asarray(motor_ids)[self.motor_index],
+            direction=self.direction,
+            count=self.count,
+            noise=self.noise[i],
+            rate_std=self.rate_std[i],
+            rest_mean=self.rest_mean[i] if r else None,
+            rest_count=self.rest_count if r else None,
+            rest_noise=self.rest_noise[i] if r else None,
+        )
+
+
+def _diff_std(x: np.ndarray, axis: int) -> np.ndarray:
+    """White-noise standard deviation from first differences, ``std(diff)/√2`` (robust to drift)."""
+    d = np.diff(x, axis=axis)
+    return np.sqrt(np.mean(d.astype(np.float64) ** 2, axis=axis) / 2.0)
+
+
+def simulate_runs(
+    rng: np.random.Generator,
+    scale: np.ndarray,
+    bias: np.ndarray,
+    axes: np.ndarray,
+    protocol: SimProtocol,
+    noise_std: float | np.ndarray,
+    *,
+    encoder_ticks: int = 4096,
+    dtype: type = np.float32,
+) -> SimulatedRuns:
+    """Simulate ``B`` runs of ``protocol`` at sample level and reduce them to window statistics.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The only source of randomness.
+    scale, bias : ndarray, shape (B, 3)
+        True parameters (paper Eq. 1).
+    axes : ndarray, shape (B, 3, 3)
+        Servo axes in the sensor frame (see :func:`draw_mount_axes`).
+    protocol : SimProtocol
+        What the jig does.
+    noise_std : float or ndarray of shape (3,)
+        White noise per sample, rad/s.
+    encoder_ticks : int
+        Encoder resolution per revolution; the reference rate of a window carries the
+        quantisation of its two end angles.
+    dtype : numpy dtype
+        Sample precision (float32 halves the time; window sums are accumulated in float64).
+
+    Returns
+    -------
+    SimulatedRuns
+    """
+    scale = np.asarray(scale, dtype=float)
+    bias = np.asarray(bias, dtype=float)
+    axes = np.asarray(axes, dtype=float)
+    B = scale.shape[0]
+    if scale.shape != (B, 3) or bias.shape != (B, 3) or axes.shape != (B, 3, 3):
+        raise CalibInputError(
+            f"scale and bias must be (B, 3) and axes (B, 3, 3); got {scale.shape}, "
+            f"{bias.shape}, {axes.shape}"
+        )
+    sigma = np.broadcast_to(np.asarray(noise_std, dtype=float), (3,))
+    motor, direction, n_per = protocol.layout()
+    n = motor.size
+    w = protocol.speed
+    dt = 1.0 / protocol.odr_hz
+    t = np.arange(n_per) * dt
+
+    # Band-limited ripple: a sinusoid at the revolution frequency, its 2nd and 3rd harmonics and
+    # one at 3-6 Hz, random phases; per-component amplitude gives a total std of ripple·ω.
+    f_rev = w / (2 * np.pi)
+    n_comp = 4
+    freqs = np.empty((B, n, n_comp))
+    freqs[..., 0], freqs[..., 1], freqs[..., 2] = f_rev, 2 * f_rev, 3 * f_rev
+    freqs[..., 3] = rng.uniform(3.0, 6.0, size=(B, n))
+    phase = rng.uniform(0, 2 * np.pi, size=(B, n, n_comp))
+    amp = protocol.ripple * w * np.sqrt(2.0 / n_comp)
+    # Mean of each sinusoid over the window's samples, computed in closed form per component,
+    # and the sample-level ripple for the noise estimate.
+    ripple = np.zeros((B, n, n_per), dtype=dtype)
+    for c in range(n_comp):
+        ripple += (amp * np.sin(2 * np.pi * freqs[..., c, None] * t + phase[..., c, None])).astype(
+            dtype
+        )
+    omega = (direction * w)[None, :, None] + direction[None, :, None] * ripple  # (B, n, N)
+    # True mean rate over the window = encoder angle change / duration (whole samples, the rate
+    # held over each sample period), plus the quantisation of the two end angles.
+    true_mean = omega.mean(axis=2, dtype=np.float64)
+    q = 2 * np.pi / encoder_ticks
+    duration = n_per * dt
+    quant = (rng.uniform(-0.5, 0.5, size=(B, n)) - rng.uniform(-0.5, 0.5, size=(B, n))) * q
+    rate = true_mean + quant / duration
+    rate_std = np.full((B, n), q / np.sqrt(6.0) / duration)
+
+    u = axes[:, motor, :]  # (B, n, 3)
+    c_vec = (u / scale[:, None, :]).astype(dtype)
+    mean = np.empty((B, n, 3))
+    noise = np.empty((B, n, 3))
+    for j in range(3):
+        x = omega * c_vec[:, :, j, None]
+        x += rng.standard_normal((B, n, n_per), dtype=dtype) * dtype(sigma[j])
+        mean[:, :, j] = x.mean(axis=2, dtype=np.float64) - bias[:, None, j]
+        noise[:, :, j] = _diff_std(x, axis=2)
+    r = protocol.n_rests
+    nr = protocol.rest_samples
+    rest_mean = np.empty((B, r, 3))
+    rest_noise = np.empty((B, r, 3))
+    if r:
+        for j in range(3):
+            x = rng.standard_normal((B, r, nr), dtype=dtype) * dtype(sigma[j])
+            rest_mean[:, :, j] = x.mean(axis=2, dtype=np.float64) - bias[:, None, j]
+            rest_noise[:, :, j] = _diff_std(x, axis=2)
+    return SimulatedRuns(
+        mean=mean,
+        rate=rate,
+        motor_index=motor,
+        direction=direction,
+        count=np.full(n, n_per),
+        noise=noise,
+        rate_std=rate_std,
+        rest_mean=rest_mean,
+        rest_count=np.full(r, nr),
+        rest_noise=rest_noise,
+    )
