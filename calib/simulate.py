@@ -31,6 +31,9 @@ __all__ = [
     "draw_mount_axes",
     "draw_sensors",
     "noise_std_from_density",
+    "RawRun",
+    "profile_duration",
+    "simulate_raw_run",
     "simulate_runs",
 ]
 
@@ -335,3 +338,196 @@ def simulate_runs(
         rest_count=np.full(r, nr),
         rest_noise=rest_noise,
     )
+
+
+# ---------------------------------------------------------------------------------- raw streams
+@dataclass(frozen=True, eq=False)
+class RawRun:
+    """One simulated run as raw streams, in the shape of a Recording v1.
+
+    Attributes
+    ----------
+    imu_t, imu_rate, imu_temp : ndarray
+        Gyro sample times (the chip's true sampling instants on the host clock), readings (rad/s)
+        and die temperature.
+    enc_t, enc_motor, enc_angle : ndarray
+        Encoder readings as a host would timestamp them (with jitter), quantised.
+    segments : tuple of Segment
+    scale, bias : ndarray (3,)
+        Truth.
+    axes : ndarray (3, 3)
+        Servo axes in the sensor frame (row s = servo ``motor_ids[s]``).
+    motor_ids : tuple of int
+    grid_t : ndarray
+        The fine time grid of the true motion.
+    grid_rate : ndarray (3, G)
+        Each servo's true shaft rate on the grid, rad/s.
+    grid_angle : ndarray (3, G)
+        Each servo's true shaft angle on the grid, rad.
+    """
+
+    imu_t: np.ndarray
+    imu_rate: np.ndarray
+    imu_temp: np.ndarray
+    enc_t: np.ndarray
+    enc_motor: np.ndarray
+    enc_angle: np.ndarray
+    segments: tuple
+    scale: np.ndarray
+    bias: np.ndarray
+    axes: np.ndarray
+    motor_ids: tuple[int, ...]
+    grid_t: np.ndarray
+    grid_rate: np.ndarray
+    grid_angle: np.ndarray
+
+    def true_weighted_rate(self, motor: int, corners: tuple[float, float, float, float]) -> float:
+        """The true mean shaft rate of ``motor`` under a trapezoidal window (fine-grid quadrature),
+        for checking window extraction against the truth."""
+        s = self.motor_ids.index(motor)
+        a, a2, b2, b = corners
+        t = self.grid_t
+        up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0, 1)
+        dn = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0, 1)
+        w = np.where((t >= a) & (t <= b), np.minimum(up, dn), 0.0)
+        return float(np.trapezoid(w * self.grid_rate[s], t) / np.trapezoid(w, t))
+
+
+def _speed_profile(t: np.ndarray, total: float, speed: float, accel: float) -> np.ndarray:
+    """Trapezoidal speed profile (≥ 0) covering ``total`` rad from t = 0; zero outside."""
+    t_acc = speed / accel
+    if speed * t_acc >= total:  # triangle: never reaches full speed
+        t_acc = np.sqrt(total / accel)
+        peak = accel * t_acc
+        t_flat = 0.0
+    else:
+        peak = speed
+        t_flat = (total - speed * t_acc) / speed
+    t_end = 2 * t_acc + t_flat
+    v = np.where(t < t_acc, accel * t, peak)
+    v = np.where(t > t_acc + t_flat, peak - accel * (t - t_acc - t_flat), v)
+    return np.where((t >= 0) & (t <= t_end), np.maximum(v, 0.0), 0.0)
+
+
+def profile_duration(total: float, speed: float, accel: float) -> float:
+    """Duration of :func:`_speed_profile`."""
+    t_acc = speed / accel
+    if speed * t_acc >= total:
+        return 2 * np.sqrt(total / accel)
+    return 2 * t_acc + (total - speed * t_acc) / speed
+
+
+def simulate_raw_run(
+    rng: np.random.Generator,
+    scale: np.ndarray,
+    bias: np.ndarray,
+    axes: np.ndarray,
+    protocol: SimProtocol,
+    noise_std: float,
+    *,
+    accel: float = 8.0,
+    imu_clock_error: float = 0.0,
+    enc_rate_hz: float = 100.0,
+    enc_jitter_s: float = 0.0,
+    imu_jitter_s: float = 0.0,
+    encoder_ticks: int = 4096,
+    motor_ids: tuple[int, ...] = (1, 2, 3),
+    settle_s: float = 0.1,
+    grid_hz: float = 10_000.0,
+    temperature_c: float = 25.0,
+) -> RawRun:
+    """Simulate one run as raw streams: rests, then for each servo a turn each way.
+
+    The servo follows a trapezoidal speed profile (acceleration ``accel``) over ``turns`` whole
+    revolutions, with ripple proportional to the current speed (``protocol.ripple``, random-phase
+    sinusoids at the revolution frequency, its harmonics and 3-6 Hz); its angle is the exact
+    integral of its rate on a fine grid. The gyro samples the true rate at its own instants
+    (its clock runs ``1 + imu_clock_error`` fast against the host) and reads
+    ``m = (ω u_s) ⊘ k − b + noise`` (paper Eq. 1). The encoder is read at ``enc_rate_hz``,
+    quantised to ``encoder_ticks`` per revolution and timestamped with Gaussian jitter; the gyro's
+    recorded timestamps may carry jitter too (``imu_jitter_s``, clipped to a third of a period so
+    the order is kept).
+
+    Returns
+    -------
+    RawRun
+    """
+    scale = np.asarray(scale, dtype=float).reshape(3)
+    bias = np.asarray(bias, dtype=float).reshape(3)
+    axes = np.asarray(axes, dtype=float).reshape(3, 3)
+    from calib.segments import Segment  # local: keeps the Monte Carlo path import-light
+
+    total = TWO_PI_SIM * protocol.turns
+    t_turn = profile_duration(total, protocol.speed, accel)
+    segs: list[Segment] = []
+    starts = []
+    t = 0.0
+    idx = 0
+    for s, motor in enumerate(motor_ids):
+        for d in (1, -1):
+            segs.append(Segment(idx, "rest", None, 0, 0.0, t, t + protocol.rest_s))
+            t += protocol.rest_s
+            idx += 1
+            segs.append(Segment(idx, "rotate", motor, d, protocol.speed, t,
+                                t + t_turn + settle_s))
+            starts.append((s, d, t))
+            t += t_turn + settle_s
+            idx += 1
+    segs.append(Segment(idx, "rest", None, 0, 0.0, t, t + protocol.rest_s))
+    t_total = t + protocol.rest_s
+
+    g = np.arange(0.0, t_total + 1.0 / grid_hz, 1.0 / grid_hz)
+    rate = np.zeros((3, g.size))
+    for s, d, t0 in starts:
+        p = _speed_profile(g - t0, total, protocol.speed, accel)
+        f_rev = protocol.speed / TWO_PI_SIM
+        freqs = [f_rev, 2 * f_rev, 3 * f_rev, rng.uniform(3.0, 6.0)]
+        amp = protocol.ripple * np.sqrt(2.0 / len(freqs))
+        rip = sum(amp * np.sin(TWO_PI_SIM * f * (g - t0) + rng.uniform(0, TWO_PI_SIM))
+                  for f in freqs)
+        rate[s] += d * p * (1.0 + rip)
+    # Exact integral of the piecewise-linear rate on the grid.
+    angle = np.concatenate(
+        [np.zeros((3, 1)), np.cumsum((rate[:, 1:] + rate[:, :-1]) / 2 / grid_hz, axis=1)], axis=1
+    )
+
+    # Gyro: true sampling instants of a chip whose clock runs (1 + err) fast.
+    period = 1.0 / (protocol.odr_hz * (1.0 + imu_clock_error))
+    imu_t = np.arange(0.0, t_total, period) + rng.uniform(0, period)
+    imu_t = imu_t[imu_t <= g[-1]]
+    w_true = np.stack([np.interp(imu_t, g, rate[s]) for s in range(3)], axis=1)  # shaft rates
+    g_sensor = w_true @ axes  # Σ_s ω_s u_s, sensor frame
+    m = g_sensor / scale - bias + rng.standard_normal(g_sensor.shape) * noise_std
+    # Encoder: every servo read together at enc_rate_hz (a sync read), jittered timestamps.
+    te = np.arange(0.0, t_total, 1.0 / enc_rate_hz)
+    q = TWO_PI_SIM / encoder_ticks
+    enc_t, enc_m, enc_a = [], [], []
+    stamp = np.sort(te + rng.normal(0.0, enc_jitter_s, te.size)) if enc_jitter_s else te
+    for s, motor in enumerate(motor_ids):
+        th = np.interp(te, g, angle[s])
+        enc_t.append(stamp)
+        enc_m.append(np.full(te.size, motor))
+        enc_a.append(np.round(th / q) * q)
+    order = np.argsort(np.concatenate(enc_t), kind="stable")
+    if imu_jitter_s:
+        lim = period / 3
+        imu_t = imu_t + np.clip(rng.normal(0.0, imu_jitter_s, imu_t.size), -lim, lim)
+    return RawRun(
+        imu_t=imu_t,
+        imu_rate=m,
+        imu_temp=np.full(imu_t.size, float(temperature_c)),
+        enc_t=np.concatenate(enc_t)[order],
+        enc_motor=np.concatenate(enc_m)[order],
+        enc_angle=np.concatenate(enc_a)[order],
+        segments=tuple(segs),
+        scale=scale,
+        bias=bias,
+        axes=axes,
+        motor_ids=tuple(motor_ids),
+        grid_t=g,
+        grid_rate=rate,
+        grid_angle=angle,
+    )
+
+
+TWO_PI_SIM = 2.0 * np.pi

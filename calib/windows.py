@@ -1,0 +1,491 @@
+r"""From raw streams to observations: steady windows, encoder reference, gyro means.
+
+Input: the gyro samples ``(t, m)``, each servo's encoder angle ``θ(t)`` (cumulative, unwrapped),
+all on one clock, and the protocol segments. Output: an
+:class:`~calib.observations.ObservationSet` with one rotation window per turn and one rest window
+per rest, plus a record of every window used.
+
+A rotation window is a trapezoidal weight ``w(t)``: rising from 0 to 1 over ``[a, a+L_a]``, 1 until
+``b-L_b``, falling to 0 at ``b``. The gyro mean and the reference are taken with the same weight
+on the same clock (DESIGN.md fact 2):
+
+.. math::
+
+    \bar m = \frac{\int w\, m\, dt}{\int w\, dt}, \qquad
+    \bar ω = \frac{\int w\, \dot θ\, dt}{\int w\, dt}
+           = \frac{\bar θ_{down} - \bar θ_{up}}{\int w\, dt},
+
+the second by parts, with ``θ̄_up``, ``θ̄_down`` the mean encoder angles over the two ramps. The
+reference therefore needs no derivative and no single crossing time: jitter of the encoder
+timestamps and the encoder's quantisation average over the ramps' samples, and speed ripple cancels
+because gyro and encoder see the same motion through the same weight. Nothing uses a nominal figure
+(commanded speed, 2π over a nominal period, sample count over the nominal ODR).
+
+Placement:
+
+``tapered`` (the turn has at least two whole revolutions at steady speed)
+    ``a`` and the ramp ends at interpolated encoder crossings: ramps of one revolution and a span
+    of ``K + 1`` whole revolutions (``K >= 1``) centred in the steady part. The weight is a box of
+    one revolution convolved with a box of ``K``, so a once-per-revolution wobble of the mount and
+    its harmonics average out exactly (double zeros of its transform).
+``rest-to-rest`` (no two steady revolutions, as in the paper's one-turn protocol)
+    From still time before the motion to still time after it, ramping inside the still margins;
+    the reference is the change of the still angles over the window.
+``revolution`` (no still time either)
+    One whole steady revolution between interpolated crossings (a box).
+
+Rest windows take the gyro samples of a rest segment, after a settling guard, while every encoder
+is still. Noise is estimated per axis from first differences; a correlation factor estimated on the
+rests (block means against first differences) corrects the standard error of coloured noise (e.g.
+a sensor's low-pass filter).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.errors import CalibInputError
+from calib.observations import ObservationSet
+from calib.segments import Segment
+
+__all__ = ["ExtractedWindows", "Window", "extract_observations"]
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class Window:
+    """One window used for the fit.
+
+    Attributes
+    ----------
+    kind : str
+        ``tapered``, ``rest-to-rest``, ``revolution`` or ``rest``.
+    segment : int
+        Index of the protocol segment.
+    motor : int or None
+    direction : int
+    corners : tuple of 4 float
+        ``(a, a + L_a, b - L_b, b)`` on the recording clock.
+    revolutions : float
+        Shaft revolutions inside the window (0 for rests).
+    rate : float
+        Reference rate (0 for rests), rad/s.
+    mean : tuple of 3 float
+        Gyro mean, rad/s.
+    count : int
+        Gyro samples inside ``[a, b]``.
+    """
+
+    kind: str
+    segment: int
+    motor: int | None
+    direction: int
+    corners: tuple[float, float, float, float]
+    revolutions: float
+    rate: float
+    mean: tuple[float, float, float]
+    count: int
+
+
+@dataclass(frozen=True, eq=False)
+class ExtractedWindows:
+    """What :func:`extract_observations` returns."""
+
+    observations: ObservationSet
+    windows: tuple[Window, ...]
+    rests: tuple[Window, ...]
+    warnings: tuple[str, ...]
+    noise_correlation: np.ndarray  # (3,) factor applied to the white-noise standard errors
+
+
+def _crossing(t: np.ndarray, th: np.ndarray, target: float, direction: int) -> float:
+    """Time at which the angle, monotone in ``direction`` over ``t``, reaches ``target``
+    (linear interpolation between encoder readings)."""
+    return float(np.interp(direction * target, direction * th, t))
+
+
+def _weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
+    """The trapezoid ``w(t)``; a zero-length ramp is a vertical edge (the window includes it)."""
+    a, a2, b2, b = corners
+    up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0.0, 1.0)
+    down = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0.0, 1.0)
+    return np.where((t >= a) & (t <= b), np.minimum(up, down), 0.0)
+
+
+def _grid(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
+    a, b = corners[0], corners[3]
+    inside = t[(t > a) & (t < b)]
+    return np.unique(np.concatenate([inside, np.asarray(corners, dtype=float)]))
+
+
+def _weighted_mean(
+    t: np.ndarray, x: np.ndarray, corners: tuple[float, float, float, float]
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """``∫ w x dt / ∫ w dt`` for piecewise-linear ``x`` (N, k); also ``∫w`` and the per-sample
+    quadrature weights of the samples inside the window (for the standard error)."""
+    g = _grid(t, corners)
+    w = _weight(g, corners)
+    xi = np.column_stack([np.interp(g, t, x[:, j]) for j in range(x.shape[1])])
+    dt = np.diff(g)
+    integ = np.sum(dt[:, None] * (w[:-1, None] * xi[:-1] + w[1:, None] * xi[1:]) / 2, axis=0)
+    wint = float(np.sum(dt * (w[:-1] + w[1:]) / 2))
+    # Quadrature weight of each original sample (trapezoid, ignoring the edge interpolation).
+    a, b = corners[0], corners[3]
+    sel = (t >= a) & (t <= b)
+    ts = t[sel]
+    if ts.size:
+        half = np.diff(ts) / 2
+        qw = np.zeros(ts.size)
+        qw[:-1] += half
+        qw[1:] += half
+        qw *= _weight(ts, corners)
+    else:
+        qw = np.zeros(0)
+    return integ / wint, wint, qw
+
+
+def _ramp_mean(t: np.ndarray, th: np.ndarray, lo: float, hi: float) -> float:
+    """Mean of the piecewise-linear angle over ``[lo, hi]`` (its value at ``lo`` if empty)."""
+    if hi <= lo:
+        return float(np.interp(lo, t, th))
+    g = np.unique(np.concatenate([t[(t > lo) & (t < hi)], [lo, hi]]))
+    v = np.interp(g, t, th)
+    return float(np.sum(np.diff(g) * (v[:-1] + v[1:]) / 2) / (hi - lo))
+
+
+def _ramp_angle_std(
+    t: np.ndarray, th: np.ndarray, lo: float, hi: float, q: float, still: bool
+) -> float:
+    """Standard error of the mean angle over a ramp ``[lo, hi]``.
+
+    Still: the quantisation offset ``q/√12`` (it does not average). Moving: the per-reading
+    scatter (quantisation and timestamp jitter, independent from reading to reading) divided by the
+    square root of the readings averaged. The scatter is estimated from second differences of the
+    residual about a straight line, ``std(Δ²r)/√6``, which removes smooth speed ripple: ripple is
+    real motion that the gyro sees too and does not bias the reference. A zero-length ramp (one
+    interpolated angle) takes the scatter over ±0.1 s undivided.
+    """
+    floor = q / np.sqrt(12.0)
+    if still:
+        return floor
+    point = hi <= lo
+    if point:
+        lo, hi = lo - 0.1, hi + 0.1
+    sel = (t >= lo) & (t <= hi)
+    if sel.sum() < 4:
+        return floor
+    ts, ys = t[sel], th[sel]
+    A = np.column_stack([np.ones_like(ts), ts - ts.mean()])
+    resid = ys - A @ np.linalg.lstsq(A, ys, rcond=None)[0]
+    sd = max(float(np.sqrt(np.mean(np.diff(resid, 2) ** 2) / 6.0)), floor)
+    return sd if point else sd / np.sqrt(sel.sum())
+
+
+def _diff_noise(x: np.ndarray) -> np.ndarray:
+    """Per-axis white-noise standard deviation from first differences, ``std(diff)/√2``."""
+    d = np.diff(x, axis=0)
+    return np.sqrt(np.mean(d**2, axis=0) / 2.0)
+
+
+def _correlation_factor(rest_samples: list[np.ndarray]) -> np.ndarray:
+    """Ratio of the long-run variance to the first-difference variance, per axis (1 = white).
+
+    Block means of length 10 over the rests; a factor not distinguishable from 1 (within three
+    standard errors) is taken as 1, so white noise is not penalised by estimation noise.
+    """
+    blk = 10
+    num = np.zeros(3)
+    den = np.zeros(3)
+    nblocks = 0
+    for x in rest_samples:
+        n = (x.shape[0] // blk) * blk
+        if n < 2 * blk:
+            continue
+        xb = x[:n].reshape(-1, blk, 3).mean(axis=1)
+        num += np.sum((xb - xb.mean(axis=0)) ** 2, axis=0) * blk
+        den += np.sum(np.diff(x, axis=0) ** 2, axis=0) / 2 * (xb.shape[0] - 1) / (x.shape[0] - 1)
+        nblocks += xb.shape[0] - 1
+    if nblocks < 30:
+        return np.ones(3)
+    tau = num / den
+    se = tau * np.sqrt(2.0 / nblocks)
+    return np.where(np.abs(tau - 1.0) > 3 * se, np.clip(tau, 0.25, 25.0), 1.0)
+
+
+def extract_observations(
+    imu_t: np.ndarray,
+    imu_rate: np.ndarray,
+    enc_t: np.ndarray,
+    enc_motor: np.ndarray,
+    enc_angle: np.ndarray,
+    segments: Sequence[Segment],
+    *,
+    imu_temp: np.ndarray | None = None,
+    encoder_ticks: int = 4096,
+    steady_tolerance: float = 0.15,
+    still_margin_s: float = 0.5,
+    rest_guard_s: float = 0.2,
+) -> ExtractedWindows:
+    """Turn a calibration run's raw streams into observations (DESIGN.md fact 2).
+
+    Parameters
+    ----------
+    imu_t : ndarray, shape (N,)
+        Gyro sample times on the recording clock, increasing.
+    imu_rate : ndarray, shape (N, 3)
+        Gyro readings, rad/s (datasheet sensitivity only).
+    enc_t, enc_motor, enc_angle : ndarray, shape (M,)
+        Encoder readings: time, servo ID, cumulative angle in rad.
+    segments : sequence of Segment
+        The protocol's rotate and rest segments.
+    imu_temp : ndarray, shape (N,), optional
+        Die temperature, °C (NaN where absent).
+    encoder_ticks : int
+        Encoder counts per revolution (4096 for Dynamixel X).
+    steady_tolerance : float
+        The steady part of a turn runs from the first to the last encoder reading whose smoothed
+        speed is above ``1 - steady_tolerance`` times the plateau (the median speed while
+        moving).
+    still_margin_s : float
+        Longest still time taken on each side of a rest-to-rest window.
+    rest_guard_s : float
+        Settling time skipped at each end of a rest.
+
+    Returns
+    -------
+    ExtractedWindows
+
+    Raises
+    ------
+    CalibInputError
+        On malformed arrays, a servo without encoder data, a turn the gyro stream does not cover
+        (a truncated recording), a turn in the wrong direction, or a turn too short to window.
+    """
+    imu_t = np.asarray(imu_t, dtype=float)
+    imu_rate = np.asarray(imu_rate, dtype=float)
+    enc_t = np.asarray(enc_t, dtype=float)
+    enc_motor = np.asarray(enc_motor)
+    enc_angle = np.asarray(enc_angle, dtype=float)
+    if imu_t.ndim != 1 or imu_rate.shape != (imu_t.size, 3):
+        raise CalibInputError(
+            f"imu_t must be (N,) and imu_rate (N, 3); got {imu_t.shape} and {imu_rate.shape}"
+        )
+    if not (enc_t.shape == enc_motor.shape == enc_angle.shape) or enc_t.ndim != 1:
+        raise CalibInputError("enc_t, enc_motor and enc_angle must be 1-D arrays of one length")
+    if imu_t.size < 2:
+        raise CalibInputError("the gyro stream is empty")
+    for name, a in (("imu_t", imu_t), ("imu_rate", imu_rate), ("enc_t", enc_t),
+                    ("enc_angle", enc_angle)):
+        if not np.all(np.isfinite(a)):
+            raise CalibInputError(f"{name} contains NaN or inf")
+    if np.any(np.diff(imu_t) <= 0):
+        raise CalibInputError("imu_t must be strictly increasing")
+    temp = None if imu_temp is None else np.asarray(imu_temp, dtype=float)
+    if temp is not None and temp.shape != imu_t.shape:
+        raise CalibInputError(f"imu_temp must have shape {imu_t.shape}, got {temp.shape}")
+    q = TWO_PI / int(encoder_ticks)
+    dt_med = float(np.median(np.diff(imu_t)))
+    warnings: list[str] = []
+
+    enc: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for m in np.unique(enc_motor):
+        sel = enc_motor == m
+        order = np.argsort(enc_t[sel], kind="stable")
+        enc[int(m)] = (enc_t[sel][order], enc_angle[sel][order])
+
+    def covers(a: float, b: float, what: str) -> None:
+        if a < imu_t[0] or b > imu_t[-1]:
+            raise CalibInputError(
+                f"{what} spans {a:.3f}-{b:.3f} s but the gyro stream covers "
+                f"{imu_t[0]:.3f}-{imu_t[-1]:.3f} s: the recording is truncated"
+            )
+
+    def gap_inside(a: float, b: float) -> bool:
+        sel = (imu_t >= a) & (imu_t <= b)
+        ts = imu_t[sel]
+        return ts.size < 2 or bool(np.any(np.diff(ts) > 2.5 * dt_med))
+
+    def still_all(a: float, b: float) -> bool:
+        for t, th in enc.values():
+            sel = (t >= a) & (t <= b)
+            if sel.any() and np.ptp(th[sel]) > 4 * q:
+                return False
+        return True
+
+    # ------------------------------------------------------------------ rests
+    rest_windows: list[Window] = []
+    rest_samples: list[np.ndarray] = []
+    for seg in segments:
+        if seg.kind != "rest":
+            continue
+        a, b = seg.t_start + rest_guard_s, seg.t_end - rest_guard_s
+        if b - a < 10 * dt_med:
+            continue
+        if a < imu_t[0] or b > imu_t[-1]:
+            warnings.append(f"rest {seg.index} is not covered by the gyro stream; skipped")
+            continue
+        if not still_all(a, b):
+            warnings.append(f"rest {seg.index}: a servo moved during the rest; skipped")
+            continue
+        if gap_inside(a, b):
+            warnings.append(f"rest {seg.index}: gap in the gyro stream; skipped")
+            continue
+        sel = (imu_t >= a) & (imu_t <= b)
+        x = imu_rate[sel]
+        rest_samples.append(x)
+        rest_windows.append(
+            Window("rest", seg.index, None, 0, (a, a, b, b), 0.0, 0.0,
+                   tuple(float(v) for v in x.mean(axis=0)), int(x.shape[0]))  # type: ignore[arg-type]
+        )
+    tau = _correlation_factor(rest_samples)
+
+    # ------------------------------------------------------------------ rotations
+    windows: list[Window] = []
+    rows: list[tuple[np.ndarray, float, int, int, int, np.ndarray, np.ndarray, float]] = []
+    rot_segments = [s for s in segments if s.kind == "rotate"]
+    for k_seg, seg in enumerate(rot_segments):
+        if seg.motor not in enc:
+            raise CalibInputError(
+                f"segment {seg.index}: no encoder readings of servo {seg.motor} in the recording"
+            )
+        t, th = enc[seg.motor]
+        # Neighbouring time for still margins: up to the previous/next rotation of any servo.
+        prev_end = max([s.t_end for s in rot_segments[:k_seg]], default=-np.inf)
+        next_start = min([s.t_start for s in rot_segments[k_seg + 1:]], default=np.inf)
+        lo = max(prev_end, seg.t_start - 10.0)
+        hi = min(next_start, seg.t_end + 10.0)
+        sel = (t >= lo) & (t <= hi)
+        ts, ys = t[sel], th[sel]
+        if ts.size < 6:
+            raise CalibInputError(
+                f"segment {seg.index}: only {ts.size} encoder readings of servo {seg.motor}"
+            )
+        inseg = (ts >= seg.t_start) & (ts <= seg.t_end)
+        if inseg.sum() < 3:
+            raise CalibInputError(f"segment {seg.index}: no encoder readings during the turn")
+        th0 = float(ys[inseg][0])
+        th1 = float(ys[inseg][-1])
+        moved = th1 - th0
+        if abs(moved) < np.pi:
+            raise CalibInputError(
+                f"segment {seg.index}: servo {seg.motor} turned only {abs(moved):.2f} rad; "
+                "it may have stalled (check power and the velocity limit)"
+            )
+        if np.sign(moved) != seg.direction:
+            raise CalibInputError(
+                f"segment {seg.index}: servo {seg.motor} turned {moved:+.2f} rad against its "
+                f"command (direction {seg.direction:+d}); check the encoder sign convention"
+            )
+        d = seg.direction
+        # Motion start/stop: the angle leaves its start / reaches its end by more than 3 ticks.
+        moving = (d * (ys - th0) > 3 * q) & (d * (th1 - ys) > 3 * q)
+        if not moving.any():
+            raise CalibInputError(f"segment {seg.index}: no motion found in the encoder data")
+        i0, i1 = int(np.argmax(moving)), int(moving.size - 1 - np.argmax(moving[::-1]))
+        t_move0, t_move1 = ts[max(i0 - 1, 0)], ts[min(i1 + 1, ts.size - 1)]
+        # Smoothed speed over about 0.1 s, plateau = median speed while moving.
+        span = max(1, int(round(0.05 / max(np.median(np.diff(ts)), 1e-6))))
+        j = np.arange(ts.size)
+        jl, jh = np.clip(j - span, 0, ts.size - 1), np.clip(j + span, 0, ts.size - 1)
+        v = d * (ys[jh] - ys[jl]) / np.maximum(ts[jh] - ts[jl], 1e-9)
+        plateau = float(np.median(v[i0 : i1 + 1]))
+        # Steady span: from the first to the last reading at plateau speed. Ripple dips in between
+        # are real motion that gyro and encoder share; only the acceleration ramps are excluded.
+        fast = (v >= (1.0 - steady_tolerance) * plateau) & (j >= i0) & (j <= i1)
+        if fast.any():
+            s0 = int(np.argmax(fast))
+            s1 = int(fast.size - 1 - np.argmax(fast[::-1]))
+        else:
+            s0, s1 = 0, -1
+        steady_revs = abs(ys[s1] - ys[s0]) / TWO_PI if s1 > s0 else 0.0
+        still_before = t_move0 - max(lo, seg.t_start - 10.0)
+        still_after = min(hi, seg.t_end + 10.0) - t_move1
+        kind = None
+        tt, yy = ts[s0 : s1 + 1], ys[s0 : s1 + 1]
+        if steady_revs >= 2.0:
+            # K + 1 whole revolutions centred in the steady span, ramps of one revolution.
+            K = int(np.floor(steady_revs)) - 1
+            base = yy[0] + d * (steady_revs - (K + 1)) * TWO_PI / 2
+            c = [_crossing(tt, yy, base + d * TWO_PI * n, d) for n in (0, 1, K, K + 1)]
+            corners = (c[0], c[1], c[2], c[3])
+            kind, revs = "tapered", float(K + 1)
+        elif min(still_before, still_after) >= 0.05:
+            ma = min(still_margin_s, still_before)
+            mb = min(still_margin_s, still_after)
+            corners = (t_move0 - ma, t_move0, t_move1, t_move1 + mb)
+            kind, revs = "rest-to-rest", abs(moved) / TWO_PI
+        elif steady_revs >= 1.0:
+            c1 = _crossing(tt, yy, yy[0] + d * TWO_PI, d)
+            corners = (float(tt[0]), float(tt[0]), c1, c1)
+            kind, revs = "revolution", 1.0
+        else:
+            raise CalibInputError(
+                f"segment {seg.index}: servo {seg.motor} made {steady_revs:.2f} steady "
+                "revolutions and has no still time around the turn; nothing to window "
+                "(turn more, or rest between turns)"
+            )
+        a, a2, b2, b = corners
+        covers(a, b, f"the window of segment {seg.index}")
+        if gap_inside(a, b):
+            warnings.append(
+                f"segment {seg.index}: gap in the gyro stream inside the window; turn skipped"
+            )
+            continue
+        # Reference: (mean angle over the down ramp - over the up ramp) / ∫w.
+        still_edges = kind == "rest-to-rest"
+        th_up = _ramp_mean(t, th, a, a2)
+        th_dn = _ramp_mean(t, th, b2, b)
+        mean, wint, qw = _weighted_mean(imu_t, imu_rate, corners)
+        rate = (th_dn - th_up) / wint
+        if np.sign(rate) != d:
+            raise CalibInputError(f"segment {seg.index}: reference rate has the wrong sign")
+        rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q, still_edges),
+                                  _ramp_angle_std(t, th, b2, b, q, still_edges)) / wint)
+        sel = (imu_t >= a) & (imu_t <= b)
+        x = imu_rate[sel]
+        noise = np.maximum(_diff_noise(x), 1e-12)
+        neff_factor = float(np.sqrt(np.sum(qw**2)) / np.sum(qw))
+        mean_std = noise * neff_factor * np.sqrt(tau)
+        rows.append((mean, rate, int(seg.motor), d, int(x.shape[0]), noise, mean_std, rate_std))
+        windows.append(
+            Window(kind, seg.index, int(seg.motor), d, corners, revs, float(rate),
+                   tuple(float(v) for v in mean), int(x.shape[0]))  # type: ignore[arg-type]
+        )
+    if not rows:
+        raise CalibInputError("no rotation windows: the recording has no usable turns")
+    rest_kw = {}
+    if rest_windows:
+        rest_kw = dict(
+            rest_mean=np.array([w.mean for w in rest_windows]),
+            rest_count=np.array([w.count for w in rest_windows]),
+            rest_noise=np.array([np.maximum(_diff_noise(x), 1e-12) for x in rest_samples]),
+        )
+        rest_kw["rest_mean_std"] = (
+            rest_kw["rest_noise"] / np.sqrt(rest_kw["rest_count"])[:, None] * np.sqrt(tau)
+        )
+    t_mean = None
+    if temp is not None and np.any(np.isfinite(temp)):
+        t_mean = float(np.nanmean(temp))
+    obs = ObservationSet(
+        mean=np.array([r[0] for r in rows]),
+        rate=np.array([r[1] for r in rows]),
+        motor=np.array([r[2] for r in rows]),
+        direction=np.array([r[3] for r in rows]),
+        count=np.array([r[4] for r in rows]),
+        noise=np.array([r[5] for r in rows]),
+        mean_std=np.array([r[6] for r in rows]),
+        rate_std=np.array([r[7] for r in rows]),
+        temperature_c=t_mean,
+        **rest_kw,
+    )
+    return ExtractedWindows(
+        observations=obs,
+        windows=tuple(windows),
+        rests=tuple(rest_windows),
+        warnings=tuple(warnings),
+        noise_correlation=tau,
+    )

@@ -1,0 +1,183 @@
+import numpy as np
+import pytest
+
+from calib.errors import CalibInputError
+from calib.estimators import fit_paired_axis
+from calib.segments import Segment
+from calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_raw_run
+from calib.windows import extract_observations
+
+
+def _run(seed, protocol, **kw):
+    rng = np.random.default_rng(seed)
+    k, b = draw_sensors(rng, 1)
+    axes = draw_mount_axes(rng, 1)[0]
+    opts = dict(imu_clock_error=0.01, enc_jitter_s=0.003, enc_rate_hz=200.0, imu_jitter_s=0.001)
+    opts.update(kw)
+    return simulate_raw_run(rng, k[0], b[0], axes, protocol, 0.035, **opts)
+
+
+def _extract(run, **kw):
+    return extract_observations(run.imu_t, run.imu_rate, run.enc_t, run.enc_motor,
+                                run.enc_angle, run.segments, imu_temp=run.imu_temp, **kw)
+
+
+def _true_mean(run, corners):
+    """Noise-free weighted mean reading over a window, from the fine-grid truth (Eq. 1)."""
+    a, a2, b2, b = corners
+    t = run.grid_t
+    up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0, 1)
+    dn = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0, 1)
+    w = np.where((t >= a) & (t <= b), np.minimum(up, dn), 0.0)
+    g = run.grid_rate.T @ run.axes  # sensor-frame true rate
+    m = g / run.scale - run.bias
+    return np.trapezoid(w[:, None] * m, t, axis=0) / np.trapezoid(w, t)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_multi_turn_windows_are_tapered_and_exact(seed):
+    # Accelerating and decelerating turns, 5 % ripple, 3 ms encoder jitter, IMU clock 1 % off.
+    run = _run(seed, SimProtocol(speed=3.0, turns=4, rest_s=1.0, ripple=0.05))
+    ex = _extract(run)
+    assert len(ex.windows) == 6 and ex.warnings == ()
+    obs = ex.observations
+    for i, w in enumerate(ex.windows):
+        assert w.kind == "tapered" and w.revolutions == 3.0
+        truth = run.true_weighted_rate(w.motor, w.corners)
+        assert abs(w.rate - truth) / abs(truth) < 1e-4
+        z = (obs.mean[i] - _true_mean(run, w.corners)) / obs.mean_std[i]
+        assert np.all(np.abs(z) < 4.5), z
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_papers_one_turn_protocol_uses_rest_to_rest_windows(seed):
+    run = _run(seed, SimProtocol(speed=np.radians(60), turns=1, rest_s=3.0))
+    ex = _extract(run)
+    assert [w.kind for w in ex.windows] == ["rest-to-rest"] * 6
+    for i, w in enumerate(ex.windows):
+        a, a2, b2, b = w.corners
+        assert a < a2 and b2 < b  # still time on both sides
+        truth = run.true_weighted_rate(w.motor, w.corners)
+        # One revolution between still angles: the encoder's quantisation of the two still
+        # angles (q/√12 each, q = 2π/4096) is a floor of about 1e-4 relative, which rate_std
+        # reports.
+        rate_std = ex.observations.rate_std[i]
+        q = 2 * np.pi / 4096
+        assert rate_std == pytest.approx(np.sqrt(2 / 12) * q * abs(w.rate) / (2 * np.pi), rel=0.01)
+        assert abs(w.rate - truth) < 4 * rate_std
+        assert abs(w.rate - truth) / abs(truth) < 3e-4
+        z = (ex.observations.mean[i] - _true_mean(run, w.corners)) / ex.observations.mean_std[i]
+        assert np.all(np.abs(z) < 4.5)
+
+
+def test_rests_measure_minus_the_bias():
+    run = _run(5, SimProtocol(speed=2.0, turns=3, rest_s=2.0))
+    ex = _extract(run)
+    obs = ex.observations
+    assert obs.n_rests == 7
+    z = (obs.rest_mean + run.bias) / obs.rest_mean_std
+    assert np.all(np.abs(z) < 4.5)
+    np.testing.assert_allclose(ex.noise_correlation, 1.0)
+    assert obs.temperature_c == pytest.approx(25.0)
+
+
+def test_whole_chain_recovers_the_truth():
+    run = _run(6, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    res = fit_paired_axis(_extract(run).observations)
+    assert res.success and res.consistency.ok
+    assert np.all(np.abs(res.scale - run.scale) < 4 * res.scale_std)
+    assert np.all(np.abs(res.bias - run.bias) < 4 * res.bias_std)
+
+
+def test_coloured_noise_is_corrected_on_the_rests():
+    run = _run(7, SimProtocol(speed=3.0, turns=3, rest_s=4.0), enc_jitter_s=0.0)
+    rng = np.random.default_rng(70)
+    phi = 0.6
+    e = rng.normal(0, 0.03, run.imu_rate.shape)
+    ar = np.zeros_like(e)
+    for i in range(1, e.shape[0]):
+        ar[i] = phi * ar[i - 1] + e[i]
+    clean = np.stack([np.interp(run.imu_t, run.grid_t, run.grid_rate[s]) for s in range(3)], 1)
+    m = clean @ run.axes / run.scale - run.bias + ar
+    ex = extract_observations(run.imu_t, m, run.enc_t, run.enc_motor, run.enc_angle,
+                              run.segments)
+    # Long-run variance of 10-sample block means over the first-difference variance, AR(1).
+    B = 10
+    lags = np.arange(-B + 1, B)
+    block_var = np.sum((B - np.abs(lags)) * phi ** np.abs(lags)) / B**2  # × var(x)
+    expected = block_var * B / (1 - phi)
+    np.testing.assert_allclose(ex.noise_correlation, expected, rtol=0.2)
+
+
+def test_a_gap_in_the_gyro_stream_drops_that_turn_with_a_warning():
+    run = _run(8, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    seg = [s for s in run.segments if s.kind == "rotate"][2]
+    mid = (seg.t_start + seg.t_end) / 2
+    keep = np.abs(run.imu_t - mid) > 0.1
+    ex = extract_observations(run.imu_t[keep], run.imu_rate[keep], run.enc_t, run.enc_motor,
+                              run.enc_angle, run.segments)
+    assert len(ex.windows) == 5
+    assert any(f"segment {seg.index}: gap" in w for w in ex.warnings)
+
+
+def test_a_rest_with_movement_is_skipped():
+    run = _run(9, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    rest = [s for s in run.segments if s.kind == "rest"][1]
+    enc_angle = run.enc_angle.copy()
+    nudge = (run.enc_t > rest.t_start + 0.4) & (run.enc_t < rest.t_start + 0.6) & (
+        run.enc_motor == 2)
+    enc_angle[nudge] += 0.05
+    ex = extract_observations(run.imu_t, run.imu_rate, run.enc_t, run.enc_motor, enc_angle,
+                              run.segments)
+    assert ex.observations.n_rests == 6
+    assert any("moved during the rest" in w for w in ex.warnings)
+
+
+# ------------------------------------------------------------------ bad input
+def test_truncated_gyro_stream_is_named():
+    run = _run(10, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    cut = run.imu_t < run.imu_t[-1] * 0.6
+    with pytest.raises(CalibInputError, match="the recording is truncated"):
+        extract_observations(run.imu_t[cut], run.imu_rate[cut], run.enc_t, run.enc_motor,
+                             run.enc_angle, run.segments)
+
+
+def test_missing_servo_encoder_is_named():
+    run = _run(11, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    keep = run.enc_motor != 3
+    with pytest.raises(CalibInputError, match="no encoder readings of servo 3"):
+        extract_observations(run.imu_t, run.imu_rate, run.enc_t[keep], run.enc_motor[keep],
+                             run.enc_angle[keep], run.segments)
+
+
+def test_turn_against_its_command_is_named():
+    run = _run(12, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    segs = [Segment(s.index, s.kind, s.motor, -s.direction, s.speed, s.t_start, s.t_end)
+            if s.kind == "rotate" else s for s in run.segments]
+    with pytest.raises(CalibInputError, match="against its command"):
+        extract_observations(run.imu_t, run.imu_rate, run.enc_t, run.enc_motor, run.enc_angle,
+                             segs)
+
+
+def test_stalled_servo_is_named():
+    run = _run(13, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    angle = np.where(run.enc_motor == 1, 0.0, run.enc_angle)
+    with pytest.raises(CalibInputError, match="stalled"):
+        extract_observations(run.imu_t, run.imu_rate, run.enc_t, run.enc_motor, angle,
+                             run.segments)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(imu_rate=np.zeros((5, 2))), r"imu_rate \(N, 3\)"),
+        (dict(imu_t=np.array([0.0, 0.0, 1.0]), imu_rate=np.zeros((3, 3))), "strictly increasing"),
+        (dict(enc_angle=np.array([np.nan])), "enc_t, enc_motor and enc_angle"),
+    ],
+)
+def test_malformed_arrays(kwargs, message):
+    args = dict(imu_t=np.arange(5.0), imu_rate=np.zeros((5, 3)), enc_t=np.zeros(2),
+                enc_motor=np.ones(2), enc_angle=np.zeros(2), segments=())
+    args.update(kwargs)
+    with pytest.raises(CalibInputError, match=message):
+        extract_observations(**args)
