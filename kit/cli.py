@@ -20,7 +20,10 @@ from kit.errors import EXIT_CODES, exit_code_for
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: (subcommand, module) in the order of ``gyrocal --help``.
-COMMANDS: tuple[tuple[str, str], ...] = ()
+COMMANDS: tuple[tuple[str, str], ...] = (
+    ("estimate", "kit.commands.estimate"),
+    ("simulate-recording", "kit.commands.simulate_recording"),
+)
 
 
 def _epilog() -> str:

@@ -47,6 +47,7 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
         raise InputError(f"cannot write {dest}: directory {dest.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
     try:
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual file mode
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
@@ -59,6 +60,12 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
             pass
         raise
     return dest
+
+
+def _umask() -> int:
+    current = os.umask(0)
+    os.umask(current)
+    return current
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str, *, force: bool = False) -> Path:

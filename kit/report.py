@@ -1,0 +1,61 @@
+"""Plain-text reports of calibrations for the terminal."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from calib.model import GyroCalibration
+
+__all__ = ["calibration_table"]
+
+
+def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = None) -> str:
+    """The result table: scale and bias with standard deviations, the verdict, the axes.
+
+    With ``truth`` (a simulated recording's ``{"scale", "bias"}``) each row also shows the error
+    in units of its own standard deviation.
+    """
+    lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)",
+             "model: g = scale * (m + bias), rad/s", ""]
+    head = f"{'axis':<5}{'scale':>12}{'± std':>11}{'bias rad/s':>14}{'± std':>11}"
+    if truth is not None:
+        head += f"{'scale err/σ':>13}{'bias err/σ':>12}"
+    lines.append(head)
+    for j, ax in enumerate("xyz"):
+        row = (f"{ax:<5}{cal.scale[j]:>12.6f}{cal.scale_std[j]:>11.2e}"
+               f"{cal.bias[j]:>14.6f}{cal.bias_std[j]:>11.2e}")
+        if truth is not None:
+            ks = (cal.scale[j] - truth["scale"][j]) / cal.scale_std[j]
+            bs = (cal.bias[j] - truth["bias"][j]) / cal.bias_std[j]
+            row += f"{ks:>13.2f}{bs:>12.2f}"
+        lines.append(row)
+    lines.append("")
+    c = cal.consistency
+    if c is None:
+        lines.append("consistency: not tested (no redundant observations)")
+    else:
+        verdict = "consistent" if c.ok else "NOT consistent"
+        lines.append(
+            f"consistency: {verdict} with the measured noise "
+            f"(chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})"
+        )
+        if not c.ok:
+            lines.append(
+                "  the residuals are larger than the noise explains: check the mount (did the "
+                "sensor slip or flex?), the gyro range (saturation), and repeat the run"
+            )
+    if cal.axes:
+        lines.append("")
+        lines.append("servo axes in the sensor frame (mounting misalignment):")
+        for motor, info in sorted(cal.axes.items(), key=lambda kv: int(kv[0])):
+            u = np.asarray(info["axis"])
+            lines.append(
+                f"  servo {motor}: [{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]  nearest {info['nearest']}"
+                f", off by {info['misalignment_deg']:.2f}° ± {info['std_deg']:.2f}°"
+            )
+    if cal.temperature_c is not None:
+        lines.append(f"\nmean die temperature: {cal.temperature_c:.1f} °C")
+    return "\n".join(lines)
