@@ -630,7 +630,8 @@ def _paired_initial(
     k0 = np.ones((B, 3))
     for j in range(3):
         hit = dom == j
-        inv = np.where(hit, 1.0 / np.abs(d[:, :, j]), 0.0)
+        with np.errstate(divide="ignore"):
+            inv = np.where(hit, 1.0 / np.abs(d[:, :, j]), 0.0)
         cnt = hit.sum(axis=1)
         k0[:, j] = np.where(cnt > 0, inv.sum(axis=1) / np.maximum(cnt, 1), 1.0)
     u0 = k0[:, None, :] * d

@@ -227,7 +227,7 @@ def extract_observations(
     imu_temp: np.ndarray | None = None,
     encoder_ticks: int = 4096,
     steady_tolerance: float = 0.15,
-    still_margin_s: float = 0.5,
+    still_margin_s: float = 0.15,
     rest_guard_s: float = 0.2,
 ) -> ExtractedWindows:
     """Turn a calibration run's raw streams into observations (DESIGN.md fact 2).
@@ -251,7 +251,9 @@ def extract_observations(
         speed is above ``1 - steady_tolerance`` times the plateau (the median speed while
         moving).
     still_margin_s : float
-        Longest still time taken on each side of a rest-to-rest window.
+        Longest still time taken on each side of a rest-to-rest window (the still angle is
+        constant, so a short margin suffices; rest windows exclude it, so no sample is used
+        twice).
     rest_guard_s : float
         Settling time skipped at each end of a rest.
 
@@ -315,33 +317,6 @@ def extract_observations(
             if sel.any() and np.ptp(th[sel]) > 4 * q:
                 return False
         return True
-
-    # ------------------------------------------------------------------ rests
-    rest_windows: list[Window] = []
-    rest_samples: list[np.ndarray] = []
-    for seg in segments:
-        if seg.kind != "rest":
-            continue
-        a, b = seg.t_start + rest_guard_s, seg.t_end - rest_guard_s
-        if b - a < 10 * dt_med:
-            continue
-        if a < imu_t[0] or b > imu_t[-1]:
-            warnings.append(f"rest {seg.index} is not covered by the gyro stream; skipped")
-            continue
-        if not still_all(a, b):
-            warnings.append(f"rest {seg.index}: a servo moved during the rest; skipped")
-            continue
-        if gap_inside(a, b):
-            warnings.append(f"rest {seg.index}: gap in the gyro stream; skipped")
-            continue
-        sel = (imu_t >= a) & (imu_t <= b)
-        x = imu_rate[sel]
-        rest_samples.append(x)
-        rest_windows.append(
-            Window("rest", seg.index, None, 0, (a, a, b, b), 0.0, 0.0,
-                   tuple(float(v) for v in x.mean(axis=0)), int(x.shape[0]))  # type: ignore[arg-type]
-        )
-    tau = _correlation_factor(rest_samples)
 
     # ------------------------------------------------------------------ rotations
     windows: list[Window] = []
@@ -449,12 +424,51 @@ def extract_observations(
         x = imu_rate[sel]
         noise = np.maximum(_diff_noise(x), 1e-12)
         neff_factor = float(np.sqrt(np.sum(qw**2)) / np.sum(qw))
-        mean_std = noise * neff_factor * np.sqrt(tau)
+        mean_std = noise * neff_factor  # white; the rests' correlation factor is applied below
         rows.append((mean, rate, int(seg.motor), d, int(x.shape[0]), noise, mean_std, rate_std))
         windows.append(
             Window(kind, seg.index, int(seg.motor), d, corners, revs, float(rate),
                    tuple(float(v) for v in mean), int(x.shape[0]))  # type: ignore[arg-type]
         )
+    # ------------------------------------------------------------------ rests
+    rest_windows: list[Window] = []
+    rest_samples: list[np.ndarray] = []
+    for seg in segments:
+        if seg.kind != "rest":
+            continue
+        a, b = seg.t_start + rest_guard_s, seg.t_end - rest_guard_s
+        # Keep clear of every rotation window (a rest-to-rest window's still margins), so that
+        # no sample enters two windows: the windows' errors are then independent.
+        for w in windows:
+            wa, wb = w.corners[0], w.corners[3]
+            if wb <= a or wa >= b:
+                continue
+            if wa <= a:
+                a = wb
+            elif wb >= b:
+                b = wa
+            else:  # a window inside the rest: keep the longer side
+                a, b = (a, wa) if wa - a >= b - wb else (wb, b)
+        if b - a < 10 * dt_med:
+            continue
+        if a < imu_t[0] or b > imu_t[-1]:
+            warnings.append(f"rest {seg.index} is not covered by the gyro stream; skipped")
+            continue
+        if not still_all(a, b):
+            warnings.append(f"rest {seg.index}: a servo moved during the rest; skipped")
+            continue
+        if gap_inside(a, b):
+            warnings.append(f"rest {seg.index}: gap in the gyro stream; skipped")
+            continue
+        sel = (imu_t >= a) & (imu_t <= b)
+        x = imu_rate[sel]
+        rest_samples.append(x)
+        rest_windows.append(
+            Window("rest", seg.index, None, 0, (a, a, b, b), 0.0, 0.0,
+                   tuple(float(v) for v in x.mean(axis=0)), int(x.shape[0]))  # type: ignore[arg-type]
+        )
+    tau = _correlation_factor(rest_samples)
+
     if not rows:
         raise CalibInputError("no rotation windows: the recording has no usable turns")
     rest_kw = {}
@@ -477,7 +491,7 @@ def extract_observations(
         direction=np.array([r[3] for r in rows]),
         count=np.array([r[4] for r in rows]),
         noise=np.array([r[5] for r in rows]),
-        mean_std=np.array([r[6] for r in rows]),
+        mean_std=np.array([r[6] for r in rows]) * np.sqrt(tau),
         rate_std=np.array([r[7] for r in rows]),
         temperature_c=t_mean,
         **rest_kw,

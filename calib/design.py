@@ -1,0 +1,357 @@
+r"""Experimental design: the paper's G-optimal six-point design, design scores, and a planner.
+
+The paper (Section II-B) chooses the six observations ``±x, ±y, ±z`` so as to minimise the maximum
+variance of the model's prediction over the design region, the sphere ``|m| = ω``. For the
+squared-norm model Eq. (5) with ``β0`` tied to the other parameters, the regressors of a reading
+``m`` are ``f(m) = (m_x², m_y², m_z², m_x, m_y, m_z)`` and the standardised prediction variance of
+an ``n``-point design with matrix ``F`` (rows ``f(m_i)``) is
+
+.. math:: d(m) = n\, f(m)^T (F^T F)^{-1} f(m).
+
+By the Kiefer-Wolfowitz theorem ``max d >= p`` (here ``p = 6``), with equality for a G-optimal
+design; the six-point design reaches it (``d(m) = 3 + 3 Σ m_j⁴/ω⁴``, largest on the axes).
+
+The planner goes beyond the paper's fixed protocol: for a given servo top speed, gyro full-scale
+range, noise and time budget it chooses speed, whole turns per direction and rest length so that
+the worst-direction standard deviation of a calibrated rate at a reference rate (the same
+G-criterion, now in rad/s and for our paired-axis estimator with its rests) is smallest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from calib.errors import CalibInputError
+
+__all__ = [
+    "PAPER_DESIGN",
+    "DesignScore",
+    "Plan",
+    "paper_plan",
+    "plan_protocol",
+    "predict_uncertainty",
+    "score_design",
+    "sphere_points",
+]
+
+#: The paper's six-point G-optimal design (rows: ±x, ±y, ±z on the unit sphere).
+PAPER_DESIGN = np.array(
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float
+)
+
+
+def sphere_points(n: int = 2000) -> np.ndarray:
+    """``n`` nearly uniform unit vectors (Fibonacci lattice), shape ``(n, 3)``."""
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1 - 2 * i / n)
+    theta = np.pi * (1 + 5**0.5) * i
+    return np.column_stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)])
+
+
+def _regressors(m: np.ndarray) -> np.ndarray:
+    return np.concatenate([m**2, m], axis=-1)
+
+
+@dataclass(frozen=True)
+class DesignScore:
+    """Score of a design on the sphere (paper Section II-B).
+
+    Attributes
+    ----------
+    max_variance : float
+        Largest standardised prediction variance ``max d(m)`` over the sphere.
+    argmax : tuple of 3 float
+        Where it is reached (unit vector).
+    g_efficiency : float
+        ``p / max d``: 1 for a G-optimal design, smaller is worse; 0 for a singular design.
+    d_criterion : float
+        ``det(FᵀF/n)^(1/p)`` (larger is better).
+    """
+
+    max_variance: float
+    argmax: tuple[float, float, float]
+    g_efficiency: float
+    d_criterion: float
+
+
+def score_design(points: np.ndarray, radius: float = 1.0, n_search: int = 4000) -> DesignScore:
+    """Maximum prediction variance of a design over the sphere of ``radius`` (G-criterion).
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 3)
+        The design's readings (directions are scaled to ``radius``; a zero row is refused).
+    radius : float
+        Rotation rate of the design region, rad/s.
+    n_search : int
+        Lattice points searched before local refinement.
+
+    Returns
+    -------
+    DesignScore
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] < 1:
+        raise CalibInputError(f"points must have shape (n, 3), got {P.shape}")
+    norms = np.linalg.norm(P, axis=1)
+    if np.any(norms == 0) or not np.all(np.isfinite(P)):
+        raise CalibInputError("design points must be finite and non-zero")
+    if not radius > 0:
+        raise CalibInputError(f"radius must be positive, got {radius!r}")
+    P = P / norms[:, None] * radius
+    n, p = P.shape[0], 6
+    F = _regressors(P)
+    M = F.T @ F
+    if np.linalg.matrix_rank(M) < p:
+        return DesignScore(np.inf, (np.nan, np.nan, np.nan), 0.0, 0.0)
+    Minv = np.linalg.inv(M)
+
+    def d(u: np.ndarray) -> float:
+        u = radius * u / np.linalg.norm(u)
+        f = _regressors(u)
+        return float(n * f @ Minv @ f)
+
+    S = sphere_points(n_search)
+    fs = _regressors(radius * S)
+    vals = n * np.einsum("ij,jk,ik->i", fs, Minv, fs)
+    best = np.argsort(vals)[-5:]
+    top, arg = -np.inf, S[best[-1]]
+    for i in best:
+        res = optimize.minimize(lambda u: -d(u), S[i], method="Nelder-Mead",
+                                options={"xatol": 1e-10, "fatol": 1e-12})
+        if -res.fun > top:
+            top, arg = -res.fun, res.x / np.linalg.norm(res.x)
+    det = float(np.linalg.det(M / n))
+    return DesignScore(
+        max_variance=float(top),
+        argmax=(float(arg[0]), float(arg[1]), float(arg[2])),
+        g_efficiency=p / float(top),
+        d_criterion=max(det, 0.0) ** (1 / p),
+    )
+
+
+# ---------------------------------------------------------------------------------- planning
+@dataclass(frozen=True)
+class Plan:
+    """A calibration protocol: each servo turns ``turns`` revolutions one way, then back.
+
+    Attributes
+    ----------
+    speed : float
+        Commanded speed, rad/s.
+    turns : int
+        Whole revolutions per direction.
+    rest_s : float
+        Rest before each turn and after the last, s.
+    accel : float
+        Profile acceleration assumed, rad/s².
+    jig_time_s : float
+        Total time the jig moves and rests.
+    scale_std, bias_std : tuple of 3 float
+        Predicted one-sigma uncertainties (paired-axis estimator).
+    rate_error_std : float
+        Predicted worst-direction standard deviation of a calibrated rate at ``reference_rate``,
+        rad/s (the planner's objective).
+    reference_rate : float
+        rad/s.
+    """
+
+    speed: float
+    turns: int
+    rest_s: float
+    accel: float
+    jig_time_s: float
+    scale_std: tuple[float, float, float]
+    bias_std: tuple[float, float, float]
+    rate_error_std: float
+    reference_rate: float
+
+    @property
+    def speed_dps(self) -> float:
+        """``speed`` in degrees per second."""
+        return float(np.degrees(self.speed))
+
+
+def _turn_time(turns: int, speed: float, accel: float) -> float:
+    total = 2 * np.pi * turns
+    t_acc = speed / accel
+    if speed * t_acc >= total:
+        return 2 * np.sqrt(total / accel)
+    return 2 * t_acc + (total - speed * t_acc) / speed
+
+
+def jig_time(
+    speed: float, turns: int, rest_s: float, accel: float, settle_s: float = 0.1,
+    n_servos: int = 3,
+) -> float:
+    """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests."""
+    return 2 * n_servos * (_turn_time(turns, speed, accel) + settle_s) + (2 * n_servos + 1) * rest_s
+
+
+def _window_model(
+    speed: float, turns: int, rest_s: float, accel: float, odr_hz: float
+) -> tuple[float, float]:
+    """``(mean rate, effective sample count)`` of the window a turn yields (calib.windows)."""
+    total = 2 * np.pi * turns
+    ramp_angle = speed**2 / (2 * accel)
+    steady_revs = max(total - 2 * ramp_angle, 0.0) / (2 * np.pi)
+    if steady_revs >= 2.0:
+        K = int(np.floor(steady_revs)) - 1
+        period = 2 * np.pi / speed
+        L, Fl = period, (K - 1) * period
+        wint = L + Fl
+        w2 = 2 * L / 3 + Fl  # ∫w² of the trapezoid
+        return speed, odr_hz * wint**2 / w2
+    t_turn = _turn_time(turns, speed, accel)
+    margin = min(0.15, rest_s / 2)
+    T = t_turn + margin  # two half-weight ramps of `margin` in the still time
+    w2 = t_turn + 2 * margin / 3
+    return total / T, odr_hz * T**2 / w2
+
+
+def predict_uncertainty(
+    speed: float,
+    turns: int,
+    rest_s: float,
+    *,
+    noise_std: float,
+    odr_hz: float,
+    accel: float = 10.0,
+    reference_rate: float = 1.0,
+    rest_guard_s: float = 0.2,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Predicted paired-axis uncertainties of a protocol at nominal truth (k = 1, b = 0).
+
+    Returns
+    -------
+    scale_std, bias_std : ndarray, shape (3,)
+    rate_error_std : float
+        ``max_u sqrt(var(k·(m + b) − g))`` over unit directions ``u`` at ``reference_rate``:
+        the G-criterion of the paper, in rad/s, for the calibrated output.
+    """
+    from calib.estimators import paired_axis_batch
+
+    w, neff = _window_model(speed, turns, rest_s, accel, odr_hz)
+    motor = np.repeat(np.arange(3), 2)
+    direction = np.tile([1, -1], 3)
+    rate = (w * direction)[None, :]
+    mean = (rate[0][:, None] * np.eye(3)[motor])[None]
+    sd = noise_std / np.sqrt(neff)
+    mean_std = np.full((1, 6, 3), sd)
+    rate_std = np.full((1, 6), 1e-9)
+    margin = 0.15 if _window_model(speed, turns, rest_s, accel, odr_hz)[0] < speed else 0.0
+    n_rest = max(int((rest_s - 2 * max(rest_guard_s, margin)) * odr_hz), 0)
+    if n_rest >= 10:
+        rest_mean = np.zeros((1, 7, 3))
+        rest_std = np.full((1, 7, 3), noise_std / np.sqrt(n_rest))
+    else:
+        rest_mean = np.zeros((1, 0, 3))
+        rest_std = np.zeros((1, 0, 3))
+    res = paired_axis_batch(mean, rate, motor, mean_std, rate_std, rest_mean, rest_std)
+    C = res.covariance[0, :6, :6]
+    U = sphere_points(400) * reference_rate
+    # Calibrated output error at true rate g: δ(k ∘ (m + b))_j = δk_j g_j + δb_j (k = 1, b = 0),
+    # i.e. gradient row [g_j e_j, e_j] per axis; the error's variance is the sum over axes.
+    eye = np.broadcast_to(np.eye(3), (U.shape[0], 3, 3))
+    G = np.concatenate([U[:, :, None] * eye, eye], axis=2)
+    var = np.einsum("nip,pq,niq->ni", G, C, G).sum(axis=1)
+    scale_std = np.sqrt(np.diag(C)[:3])
+    bias_std = np.sqrt(np.diag(C)[3:])
+    return scale_std, bias_std, float(np.sqrt(var.max()))
+
+
+def plan_protocol(
+    *,
+    servo_max_speed: float,
+    full_scale: float,
+    time_budget_s: float = 30.0,
+    noise_std: float = 0.035,
+    odr_hz: float = 200.0,
+    accel: float = 10.0,
+    reference_rate: float = 1.0,
+    min_rest_s: float = 0.6,
+    max_scale_error: float = 1.25,
+) -> Plan:
+    """Choose speed, turns and rest length for the paired-axis estimator within a time budget.
+
+    Parameters
+    ----------
+    servo_max_speed : float
+        The servo's usable top speed, rad/s (from its Velocity Limit; the planner keeps 10 %
+        headroom so the speed is reached under load).
+    full_scale : float
+        The gyro's full-scale range, rad/s. A reading is ``ω/k``: with scale factors down to
+        ``1/max_scale_error`` (paper: k >= 0.8) the speed stays below
+        ``0.9 · full_scale / max_scale_error`` so nothing saturates.
+    time_budget_s : float
+        Longest jig time.
+    noise_std : float
+        Gyro white noise per sample at ``odr_hz``, rad/s.
+    odr_hz : float
+        Gyro output data rate.
+    accel : float
+        Servo profile acceleration, rad/s².
+    reference_rate : float
+        Rate at which the calibrated output's worst-direction error is minimised, rad/s.
+    min_rest_s : float
+        Shortest rest (settling plus a bias measurement).
+    max_scale_error : float
+        Largest ``1/k`` to allow for when avoiding saturation.
+
+    Returns
+    -------
+    Plan
+
+    Raises
+    ------
+    CalibInputError
+        If the arguments are not positive, or no protocol fits the budget.
+    """
+    for name, v in (("servo_max_speed", servo_max_speed), ("full_scale", full_scale),
+                    ("time_budget_s", time_budget_s), ("noise_std", noise_std),
+                    ("odr_hz", odr_hz), ("accel", accel), ("reference_rate", reference_rate)):
+        if not (v > 0 and np.isfinite(v)):
+            raise CalibInputError(f"{name} must be a positive number, got {v!r}")
+    top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
+    speeds = np.unique(np.concatenate([np.linspace(0.5, top, 12), [top]]))
+    speeds = speeds[speeds <= top]
+    best: Plan | None = None
+    for speed in speeds:
+        for turns in range(1, 9):
+            for rest in (min_rest_s, 1.0, 1.5, 2.0, 3.0):
+                if rest < min_rest_s:
+                    continue
+                T = jig_time(speed, turns, rest, accel)
+                if T > time_budget_s:
+                    continue
+                ks, bs, err = predict_uncertainty(
+                    speed, turns, rest, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
+                    reference_rate=reference_rate,
+                )
+                cand = Plan(
+                    float(speed), turns, float(rest), float(accel), float(T),
+                    tuple(ks), tuple(bs), err, float(reference_rate),  # type: ignore[arg-type]
+                )
+                if best is None or cand.rate_error_std < best.rate_error_std * (1 - 1e-9):
+                    best = cand
+    if best is None:
+        raise CalibInputError(
+            f"no protocol fits {time_budget_s:g} s with speeds up to {top:.2f} rad/s; "
+            "raise the time budget"
+        )
+    return best
+
+
+def paper_plan(
+    noise_std: float = 0.035, odr_hz: float = 200.0, accel: float = 10.0,
+    reference_rate: float = 1.0,
+) -> Plan:
+    """The paper's protocol (60°/s, one turn each way, 3 s waits) with its predicted accuracy."""
+    speed = float(np.radians(60.0))
+    ks, bs, err = predict_uncertainty(speed, 1, 3.0, noise_std=noise_std, odr_hz=odr_hz,
+                                      accel=accel, reference_rate=reference_rate)
+    return Plan(speed, 1, 3.0, accel, jig_time(speed, 1, 3.0, accel), tuple(ks), tuple(bs),
+                err, reference_rate)  # type: ignore[arg-type]
