@@ -17,6 +17,9 @@ Squared-norm residuals (paper Eq. 3-5), with ``θ = (k, b)`` and window means ``
 
 .. math:: r_i(θ) = \sum_j k_j^2 (\bar m_{ij} + b_j)^2 - ω_i^2
 
+All three pool each axis's noise estimates over the windows where they are homogeneous before
+using them as weights or for uncertainties (:func:`calib.observations.pool_noise`).
+
 Covariance of the squared-norm methods comes from first-order propagation of the window noise: a
 perturbation ``δm̄_ij`` of a mean and ``δω_i`` of a reference rate perturb ``r_i`` by
 ``δ_i = Σ_j 2 k_j^2 (m̄_ij + b_j) δm̄_ij - 2 ω_i δω_i``, with variance ``S_ii``; the estimator's
@@ -56,6 +59,7 @@ __all__ = [
     "fit_levenberg_marquardt",
     "fit_paired_axis",
     "iterative_ls_batch",
+    "lm_solve",
     "paired_axis_batch",
 ]
 
@@ -356,6 +360,8 @@ def fit_iterative_ls(
     if int(max_iter) < 1:
         raise CalibInputError(f"max_iter must be at least 1, got {max_iter!r}")
     _validate_common(obs, "iterative-ls", 6)
+    if covariance:
+        obs = obs.with_pooled_noise()
     X = _design(obs.mean)
     Y = obs.rate**2
     beta, (by, v), gammas, status = _ils_solve(X, Y, float(tol), int(max_iter))
@@ -501,6 +507,25 @@ def _failed(
     )
 
 
+def lm_solve(
+    mean: np.ndarray,
+    rate: np.ndarray,
+    x0: np.ndarray | None = None,
+    *,
+    xtol: float = 1e-14,
+    ftol: float = 1e-14,
+) -> optimize.OptimizeResult:
+    """The bare ``scipy.optimize.least_squares(method="lm")`` call on the Eq. (3) residuals of
+    window means ``mean`` (n, 3) and references ``rate`` (n,), from ``x0`` (default k = 1, b = 0).
+    No validation: :func:`fit_levenberg_marquardt` is the checked entry point."""
+    if x0 is None:
+        x0 = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    return optimize.least_squares(
+        _sq_residuals, x0, jac=_sq_jacobian, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
+        args=(mean, rate),
+    )
+
+
 def fit_levenberg_marquardt(
     obs: ObservationSet,
     *,
@@ -532,6 +557,8 @@ def fit_levenberg_marquardt(
         ``iterations`` is scipy's number of function evaluations.
     """
     _validate_common(obs, "levenberg-marquardt", 6)
+    if covariance:
+        obs = obs.with_pooled_noise()
     if x0 is None:
         x0 = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     else:
@@ -539,16 +566,7 @@ def fit_levenberg_marquardt(
         if x0.shape != (6,) or not np.all(np.isfinite(x0)):
             raise CalibInputError(f"x0 must be 6 finite numbers, got {x0!r}")
     mean, rate = obs.mean, obs.rate
-    res = optimize.least_squares(
-        _sq_residuals,
-        x0,
-        jac=_sq_jacobian,
-        method="lm",
-        xtol=xtol,
-        ftol=ftol,
-        gtol=1e-15,
-        args=(mean, rate),
-    )
+    res = lm_solve(mean, rate, x0, xtol=xtol, ftol=ftol)
     theta = res.x.copy()
     theta[:3] = np.abs(theta[:3])  # r depends on k²: the sign of k is not identified
     ok = bool(res.status > 0) and np.all(np.isfinite(theta))
@@ -649,7 +667,7 @@ def paired_axis_batch(
     rest_std: np.ndarray,
     *,
     max_iter: int = 50,
-    xtol: float = 1e-12,
+    xtol: float = 1e-10,
 ) -> PairedAxisBatch:
     """The paired-axis fit for ``B`` runs of the same protocol at once (vectorised).
 
@@ -670,7 +688,9 @@ def paired_axis_batch(
     max_iter : int
         Most Levenberg-Marquardt steps.
     xtol : float
-        Convergence threshold on the largest parameter step.
+        Convergence threshold on the largest parameter step (relative to ``1 + max k``); a run
+        has also converged when a step changes the cost by less than ``1e-10`` relative, up or
+        down (rounding level).
 
     Returns
     -------
@@ -721,8 +741,9 @@ def paired_axis_batch(
     for _ in range(int(max_iter)):
         if not active.any():
             break
-        JtJ = np.einsum("bip,biq->bpq", J, J)
-        g = np.einsum("bip,bi->bp", J, E)
+        Jt = J.transpose(0, 2, 1)
+        JtJ = Jt @ J
+        g = (Jt @ E[..., None])[..., 0]
         D = np.einsum("bpp->bp", JtJ)
         A = JtJ + (lam[:, None] * D)[:, :, None] * np.eye(P)
         step = -np.linalg.solve(A, g[..., None])[..., 0]
@@ -740,11 +761,12 @@ def paired_axis_batch(
         accept = active & ~bad_k & (cost_new <= cost)
         iterations += active
         small = np.max(np.abs(step), axis=1) <= xtol * (1.0 + np.max(np.abs(k), axis=1))
+        flat = np.abs(cost - cost_new) <= 1e-10 * (1.0 + cost)  # at rounding level either way
         k = np.where(accept[:, None], k_new, k)
         b = np.where(accept[:, None], b_new, b)
         u = np.where(accept[:, None, None], u_new, u)
         lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
-        done = active & (small | (accept & (cost - cost_new <= 1e-14 * (1.0 + cost))))
+        done = active & (small | flat)
         converged |= done
         active &= ~done
         if accept.any():
@@ -757,8 +779,7 @@ def paired_axis_batch(
             )
             cost = np.sum(E**2, axis=1)
     E, J, _ = evaluate(k, b, u, True)
-    JtJ = np.einsum("bip,biq->bpq", J, J)
-    cov = np.linalg.pinv(JtJ, hermitian=True)
+    cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
     return PairedAxisBatch(
         scale=k,
         bias=b,
@@ -773,7 +794,7 @@ def paired_axis_batch(
 
 
 def fit_paired_axis(
-    obs: ObservationSet, *, use_rests: bool = True, max_iter: int = 50
+    obs: ObservationSet, *, use_rests: bool = True, max_iter: int = 50, pool: bool = True
 ) -> FitResult:
     r"""Paired-axis fit: scale, bias and each servo's axis from every window's full mean vector.
 
@@ -793,6 +814,10 @@ def fit_paired_axis(
         Use the rest windows (default). Without them the bias comes from the turns alone.
     max_iter : int
         Most Levenberg-Marquardt steps.
+    pool : bool
+        Pool each axis's noise estimate over the windows where they are homogeneous
+        (:func:`calib.observations.pool_noise`), so the weights do not carry the estimates' own
+        scatter.
 
     Returns
     -------
@@ -801,6 +826,8 @@ def fit_paired_axis(
     """
     motors = obs.motors
     _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
+    if pool:
+        obs = obs.with_pooled_noise()
     sidx = np.searchsorted(np.array(sorted(motors)), obs.motor)
     order = sorted(motors)
     r_mean = obs.rest_mean if use_rests else np.zeros((0, 3))

@@ -14,7 +14,51 @@ import numpy as np
 
 from calib.errors import CalibInputError
 
-__all__ = ["ObservationSet"]
+__all__ = ["ObservationSet", "pool_noise"]
+
+
+def pool_noise(
+    noise: np.ndarray, count: np.ndarray, alpha: float = 0.01
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pool per-window noise estimates of each axis when they are homogeneous (Bartlett's test).
+
+    Each window's per-sample standard deviation is an estimate with about ``count - 1`` degrees of
+    freedom; when Bartlett's test does not reject equal variances across the windows of a run at
+    level ``alpha``, the pooled value replaces them for that axis, so the estimator's weights do not
+    carry the estimates' own scatter. Heterogeneous axes (e.g. vibration only while turning) keep
+    their per-window values.
+
+    Parameters
+    ----------
+    noise : ndarray, shape (..., k, 3)
+        Per-window standard deviations of one sample (``...`` are independent runs).
+    count : ndarray of int, shape (k,) or (..., k)
+        Samples per window.
+    alpha : float
+        Test level.
+
+    Returns
+    -------
+    noise : ndarray, same shape
+        With homogeneous axes pooled.
+    pooled : ndarray of bool, shape (..., 3)
+        Which axes were pooled.
+    """
+    from scipy import stats
+
+    nu = np.broadcast_to(np.asarray(count, dtype=float) - 1.0, noise.shape[:-1])[..., None]
+    k = noise.shape[-2]
+    if k < 2:
+        return noise, np.zeros(noise.shape[:-2] + (3,), dtype=bool)
+    s2 = noise**2
+    nsum = nu.sum(axis=-2)
+    sp2 = (nu * s2).sum(axis=-2) / nsum
+    M = nsum * np.log(sp2) - (nu * np.log(s2)).sum(axis=-2)
+    C = 1.0 + ((1.0 / nu).sum(axis=-2) - 1.0 / nsum) / (3.0 * (k - 1))
+    p = stats.chi2.sf(M / C, k - 1)
+    pooled = p >= alpha
+    out = np.where(pooled[..., None, :], np.sqrt(sp2)[..., None, :], noise)
+    return out, pooled
 
 
 def _ro(a: np.ndarray) -> np.ndarray:
@@ -177,6 +221,26 @@ class ObservationSet:
         """The servo IDs that turned, in order of first appearance."""
         _, first = np.unique(self.motor, return_index=True)
         return tuple(int(self.motor[i]) for i in sorted(first))
+
+    def with_pooled_noise(self, alpha: float = 0.01) -> ObservationSet:
+        """The same set with each axis's noise pooled over all windows and rests where they are
+        homogeneous (:func:`pool_noise`); standard errors scale with the noise."""
+        noise_all = np.concatenate([self.noise, self.rest_noise], axis=0)  # type: ignore[list-item]
+        count_all = np.concatenate([self.count, self.rest_count])  # type: ignore[list-item]
+        pooled, _ = pool_noise(noise_all, count_all, alpha)
+        n = self.n_windows
+        ratio = pooled / noise_all
+        rests = {}
+        if self.n_rests:
+            rests = dict(
+                rest_mean=self.rest_mean, rest_count=self.rest_count, rest_noise=pooled[n:],
+                rest_mean_std=self.rest_mean_std * ratio[n:],  # type: ignore[operator]
+            )
+        return ObservationSet(
+            mean=self.mean, rate=self.rate, motor=self.motor, direction=self.direction,
+            count=self.count, noise=pooled[:n], mean_std=self.mean_std * ratio[:n],
+            rate_std=self.rate_std, temperature_c=self.temperature_c, **rests,
+        )
 
     def without_rests(self) -> ObservationSet:
         """The same rotation windows with the rest windows dropped (the paper's six-observation

@@ -228,7 +228,8 @@ class SimulatedRuns:
 def _diff_std(x: np.ndarray, axis: int) -> np.ndarray:
     """White-noise standard deviation from first differences, ``std(diff)/√2`` (robust to drift)."""
     d = np.diff(x, axis=axis)
-    return np.sqrt(np.mean(d.astype(np.float64) ** 2, axis=axis) / 2.0)
+    d *= d
+    return np.sqrt(d.sum(axis=axis, dtype=np.float64) / (2.0 * d.shape[axis]))
 
 
 def simulate_runs(
@@ -282,23 +283,22 @@ def simulate_runs(
     dt = 1.0 / protocol.odr_hz
     t = np.arange(n_per) * dt
 
-    # Band-limited ripple: a sinusoid at the revolution frequency, its 2nd and 3rd harmonics and
-    # one at 3-6 Hz, random phases; per-component amplitude gives a total std of ripple·ω.
+    # Band-limited ripple: sinusoids at the revolution frequency and its 2nd and 3rd harmonics,
+    # and one at 3-6 Hz (one frequency per call), random phases per window; the per-component
+    # amplitude gives a total standard deviation of ripple·ω. Built as coefficients times a
+    # sin/cos basis (one matrix product instead of a sine per sample).
     f_rev = w / (2 * np.pi)
-    n_comp = 4
-    freqs = np.empty((B, n, n_comp))
-    freqs[..., 0], freqs[..., 1], freqs[..., 2] = f_rev, 2 * f_rev, 3 * f_rev
-    freqs[..., 3] = rng.uniform(3.0, 6.0, size=(B, n))
+    freqs = np.array([f_rev, 2 * f_rev, 3 * f_rev, rng.uniform(3.0, 6.0)])
+    n_comp = freqs.size
+    arg = 2 * np.pi * freqs[:, None] * t[None, :]
+    basis = np.concatenate([np.sin(arg), np.cos(arg)]).astype(dtype)  # (2c, N)
     phase = rng.uniform(0, 2 * np.pi, size=(B, n, n_comp))
-    amp = protocol.ripple * w * np.sqrt(2.0 / n_comp)
-    # Mean of each sinusoid over the window's samples, computed in closed form per component,
-    # and the sample-level ripple for the noise estimate.
-    ripple = np.zeros((B, n, n_per), dtype=dtype)
-    for c in range(n_comp):
-        ripple += (amp * np.sin(2 * np.pi * freqs[..., c, None] * t + phase[..., c, None])).astype(
-            dtype
-        )
-    omega = (direction * w)[None, :, None] + direction[None, :, None] * ripple  # (B, n, N)
+    amp = protocol.ripple * np.sqrt(2.0 / n_comp)
+    coef = (amp * np.concatenate([np.cos(phase), np.sin(phase)], axis=2)).astype(dtype)
+    ripple = (coef.reshape(B * n, 2 * n_comp) @ basis).reshape(B, n, n_per)
+    omega = ripple
+    omega += dtype(1.0)
+    omega *= (direction * w)[None, :, None].astype(dtype)  # (B, n, N): d·ω·(1 + ripple)
     # True mean rate over the window = encoder angle change / duration (whole samples, the rate
     # held over each sample period), plus the quantisation of the two end angles.
     true_mean = omega.mean(axis=2, dtype=np.float64)
@@ -313,8 +313,9 @@ def simulate_runs(
     mean = np.empty((B, n, 3))
     noise = np.empty((B, n, 3))
     for j in range(3):
-        x = omega * c_vec[:, :, j, None]
-        x += rng.standard_normal((B, n, n_per), dtype=dtype) * dtype(sigma[j])
+        x = rng.standard_normal((B, n, n_per), dtype=dtype)
+        x *= dtype(sigma[j])
+        x += omega * c_vec[:, :, j, None]
         mean[:, :, j] = x.mean(axis=2, dtype=np.float64) - bias[:, None, j]
         noise[:, :, j] = _diff_std(x, axis=2)
     r = protocol.n_rests
@@ -323,7 +324,8 @@ def simulate_runs(
     rest_noise = np.empty((B, r, 3))
     if r:
         for j in range(3):
-            x = rng.standard_normal((B, r, nr), dtype=dtype) * dtype(sigma[j])
+            x = rng.standard_normal((B, r, nr), dtype=dtype)
+            x *= dtype(sigma[j])
             rest_mean[:, :, j] = x.mean(axis=2, dtype=np.float64) - bias[:, None, j]
             rest_noise[:, :, j] = _diff_std(x, axis=2)
     return SimulatedRuns(

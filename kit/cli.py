@@ -23,6 +23,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 COMMANDS: tuple[tuple[str, str], ...] = (
     ("estimate", "kit.commands.estimate"),
     ("simulate-recording", "kit.commands.simulate_recording"),
+    ("study", "kit.commands.study"),
 )
 
 

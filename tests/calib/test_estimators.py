@@ -274,3 +274,22 @@ def test_algorithm1_reports_when_the_papers_convergence_condition_fails():
     assert not res.success
     assert not res.extra["condition_met"]
     assert "convergence condition 0 <= β0 < 0.5 does not hold" in res.message
+
+
+def test_noise_pooling_follows_bartletts_test():
+    from calib.observations import pool_noise
+
+    rng = np.random.default_rng(4)
+    count = np.full(8, 1000)
+    sigma = np.array([0.03, 0.05, 0.04])
+    x = rng.normal(0, 1, (8, 1000, 3)) * sigma
+    est = np.sqrt(np.mean(np.diff(x, axis=1) ** 2, axis=1) / 2)
+    out, pooled = pool_noise(est, count)
+    assert pooled.all()
+    np.testing.assert_allclose(out[0], np.sqrt(np.mean(est**2, axis=0)), rtol=1e-12)
+    # One window twice as noisy on y (vibration while turning): y is left alone, x and z pooled.
+    est2 = est.copy()
+    est2[3, 1] *= 2.0
+    out2, pooled2 = pool_noise(est2, count)
+    assert pooled2.tolist() == [True, False, True]
+    np.testing.assert_array_equal(out2[:, 1], est2[:, 1])

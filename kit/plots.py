@@ -1,0 +1,69 @@
+"""PNG plots (needs the ``plot`` extra: matplotlib). Imported lazily by the commands."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from kit.errors import InputError
+
+__all__ = ["require_matplotlib", "study_boxplots", "speed_sweep_plot"]
+
+
+def require_matplotlib() -> Any:
+    """``matplotlib.pyplot`` with the non-interactive Agg backend, or a clear error."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise InputError(
+            "plots need matplotlib, which is not installed: pip install 'gyrocal[plot]'"
+        ) from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def study_boxplots(errors: dict[str, np.ndarray], title: str, path: Path) -> Path:
+    """Box plots of estimation errors: one panel per parameter, one box per estimator."""
+    plt = require_matplotlib()
+    names = ["k_x", "k_y", "k_z", "b_x (rad/s)", "b_y (rad/s)", "b_z (rad/s)"]
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), constrained_layout=True)
+    methods = list(errors)
+    for j, ax in enumerate(axes.flat):
+        data = [errors[m][:, j][np.isfinite(errors[m][:, j])] for m in methods]
+        ax.boxplot(data, showfliers=False)
+        ax.set_xticks(range(1, len(methods) + 1), [m.replace("-", "-\n", 1) for m in methods],
+                      fontsize=8)
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        ax.set_title(f"error of {names[j]}")
+        ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
+    fig.suptitle(title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def speed_sweep_plot(sweep: dict[float, dict[float, dict[str, np.ndarray]]], path: Path) -> Path:
+    """Mean squared error of scale factors and biases against speed (paper Fig. 5)."""
+    plt = require_matplotlib()
+    fig, axes = plt.subplots(1, len(sweep), figsize=(6 * len(sweep), 4.5), squeeze=False,
+                             constrained_layout=True)
+    for ax, (noise, by_speed) in zip(axes[0], sweep.items(), strict=True):
+        speeds = sorted(by_speed)
+        methods = list(by_speed[speeds[0]])
+        for m in methods:
+            k = [np.mean(by_speed[s][m][:3]) for s in speeds]
+            b = [np.mean(by_speed[s][m][3:]) for s in speeds]
+            ax.semilogy(speeds, k, "-o", ms=3, label=f"{m}: scale")
+            ax.semilogy(speeds, b, "--s", ms=3, label=f"{m}: bias (rad/s)²")
+        ax.set_xlabel("rotation speed (rad/s)")
+        ax.set_ylabel("mean squared error (Eq. 10)")
+        ax.set_title(f"noise {noise} rad/s per sample")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
