@@ -157,6 +157,7 @@ class EmulatedServo:
         self._boot_time = now
         self._turn_offset = 0  # register-domain offset that re-bases the multi-turn count
         self._rebase()
+        self._goal_to_present()
         self._temperature = self.ambient_c
         self._thermal_t = now
         self._thermal_angle = 0.0
@@ -241,6 +242,12 @@ class EmulatedServo:
         angle = self.motor.angle_at(self.clock.monotonic())
         raw = self._dir * round(self._ticks_internal(angle))
         self._turn_offset = -TICKS_PER_TURN * math.floor(raw / TICKS_PER_TURN)
+
+    def _goal_to_present(self) -> None:
+        """At power-up and after REBOOT, Goal Position holds the present position, so turning
+        torque on does not move the horn (a goal written before torque-on still does, §6.1)."""
+        self._set("Goal Position",
+                  self._position_register(self.motor.angle_at(self.clock.monotonic())))
 
     # ---- time-driven behaviour -------------------------------------------------------------------
     def _max_speed(self) -> float:
@@ -560,8 +567,8 @@ class EmulatedServo:
             return
         if mode == OPERATING_MODES["velocity"]:
             target = self._dir * self._get("Goal Velocity") * VELOCITY_UNIT_RAD_S
-            cap = self._max_speed() * self._speed_cap
-            target = max(-cap, min(cap, target))
+            cap = self._max_speed()
+            target = max(-cap, min(cap, target)) * self._speed_cap
             pa = self._get("Profile Acceleration")
             accel = pa * ACCELERATION_UNIT_RAD_S2 if pa else math.inf
             self.motor.command(now, lambda t0, p0, v0: plan_velocity(t0, p0, v0, target, accel))
@@ -657,6 +664,7 @@ class EmulatedServo:
             self._watchdog_deadline = None
             self._boot_time = now
             self._rebase()
+            self._goal_to_present()
 
     def factory_reset(self, option: int) -> int:
         """FACTORY_RESET: 0xFF all, 0x01 all but ID, 0x02 all but ID and baud rate (§4.4)."""
