@@ -82,6 +82,8 @@ from drivers.errors import CommunicationError, ConfigurationError, SafetyError
 __all__ = ["Gimbal", "GimbalSample", "Motion", "ServoInfo", "ServoStatus"]
 
 TICKS_PER_TURN = 4096
+#: A motion has finished once its servos' encoders have not changed for this long (s).
+SETTLE_S = 0.03
 _ERRNUM_CRC = 3
 _ALERT = 0x80
 
@@ -240,7 +242,7 @@ class Motion:
     t_end: float | None = None
     finished: bool = False
     _history: deque = field(default_factory=lambda: deque(maxlen=4096), repr=False)
-    _settled: dict[int, int] = field(default_factory=dict, repr=False)
+    _settled: dict[int, tuple[int, float]] = field(default_factory=dict, repr=False)
 
 
 class Gimbal:
@@ -863,12 +865,14 @@ class Gimbal:
         for i in m.servo_ids:
             k = self.ids.index(i)
             ticks = int(s.ticks[k])
-            still = (not bool(s.moving[k])) if s.moving is not None else (
-                m._settled.get(i) == ticks)
-            at_goal = abs(ticks - m.goal_ticks[i]) <= 1
-            if not (at_goal and still):
+            last = m._settled.get(i)
+            if last is None or last[0] != ticks:
+                m._settled[i] = last = (ticks, s.t)
+            # finished: on the goal (±1 tick), not Moving (122) where it is read, and the
+            # encoder unchanged for SETTLE_S (the last ticks of a stop may still move)
+            still = s.t - last[1] >= SETTLE_S and (s.moving is None or not bool(s.moving[k]))
+            if not (abs(ticks - m.goal_ticks[i]) <= 1 and still):
                 done = False
-            m._settled[i] = ticks
         if m.kind == "turn":
             i = m.servo_ids[0]
             m._history.append((s.t, int(s.ticks[self.ids.index(i)])))

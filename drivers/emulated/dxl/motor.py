@@ -279,7 +279,7 @@ class MotorParams:
     ripple: tuple[RippleComponent, ...] | None = None
     noise_fraction: float = 0.02
     noise_bandwidth_hz: float = 5.0
-    envelope_speed: float = 0.05
+    envelope_speed: float = 0.3
     lookahead_s: float = 0.1
     history_s: float = 120.0
 
