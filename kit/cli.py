@@ -20,7 +20,9 @@ from kit.errors import EXIT_CODES, exit_code_for
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: (subcommand, module) in the order of ``gyrocal --help``.
-COMMANDS: tuple[tuple[str, str], ...] = ()
+COMMANDS: tuple[tuple[str, str], ...] = (
+    ("emulate", "kit.commands.emulate"),
+)
 
 
 def _epilog() -> str:
