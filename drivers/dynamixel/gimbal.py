@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import signal
+import struct
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -90,6 +91,8 @@ _ALERT = 0x80
 #: Sync-read layouts: (start address, length). "motion" = Realtime Tick (120) .. Present
 #: Position (135): tick, Moving, Moving Status, PWM, current/load, velocity, position.
 SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, 16), "position": (132, 4)}
+_MOTION_STRUCT = struct.Struct("<HBBhhii")
+_POSITION_STRUCT = struct.Struct("<i")
 
 
 @dataclass(frozen=True)
@@ -241,7 +244,7 @@ class Motion:
     t_begin: float
     t_end: float | None = None
     finished: bool = False
-    _history: deque = field(default_factory=lambda: deque(maxlen=4096), repr=False)
+    _history: deque = field(default_factory=deque, repr=False)
     _settled: dict[int, tuple[int, float]] = field(default_factory=dict, repr=False)
 
 
@@ -636,16 +639,15 @@ class Gimbal:
         moving = np.empty(n, dtype=bool) if self.sample_layout == "motion" else None
         for k, dxl_id in enumerate(self.ids):
             data = blocks[dxl_id][1]
-            table = self._table(dxl_id)
             if self.sample_layout == "motion":
-                tick = table["Realtime Tick"].from_bytes(data[0:2])
-                moving[k] = bool(data[2])
-                vel[k] = table["Present Velocity"].to_si(
-                    table["Present Velocity"].from_bytes(data[8:12]))
-                ticks[k] = table["Present Position"].from_bytes(data[12:16])
+                # Realtime Tick u16, Moving u8, Moving Status u8, Present PWM s16,
+                # Present Current/Load s16, Present Velocity s32, Present Position s32 (§5)
+                tick, mov, _, _, _, v_raw, ticks[k] = _MOTION_STRUCT.unpack(data)
+                moving[k] = bool(mov)
+                vel[k] = v_raw * VELOCITY_UNIT_RAD_S
                 tms[k] = self._unwrap_tick(dxl_id, tick, t_mid)
             else:
-                ticks[k] = table["Present Position"].from_bytes(data[0:4])
+                ticks[k] = _POSITION_STRUCT.unpack(data)[0]
         angles = np.array([(ticks[k] - self.home_ticks[i]) * POSITION_UNIT_RAD
                            for k, i in enumerate(self.ids)])
         s = GimbalSample(t_mid, t0, t1, self.ids, angles, ticks, vel, tms, moving)
@@ -894,12 +896,11 @@ class Gimbal:
         remaining = abs(m.goal_ticks[i] - ticks) * POSITION_UNIT_RAD
         if remaining <= m.speed ** 2 / (2 * m.acceleration) + m.speed * 0.05:
             return
-        t_old, ticks_old = None, None
-        for t_h, ticks_h in m._history:
-            if s.t - t_h <= self.stall_timeout_s:
-                break
-            t_old, ticks_old = t_h, ticks_h
-        if t_old is None or s.t - t_old < 0.5 * self.stall_timeout_s:
+        hist = m._history  # (t, ticks); keep one entry older than the window
+        while len(hist) >= 2 and s.t - hist[1][0] > self.stall_timeout_s:
+            hist.popleft()
+        t_old, ticks_old = hist[0]
+        if s.t - t_old < 0.5 * self.stall_timeout_s:
             return
         speed = abs(ticks - ticks_old) * POSITION_UNIT_RAD / (s.t - t_old)
         if speed < self.min_speed_fraction * m.speed:

@@ -58,6 +58,20 @@ def rotation_matrices(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.eye(3)[None] + s * k[None] + c * kk[None]
 
 
+def _skew(a: np.ndarray) -> np.ndarray:
+    """The matrix ``K`` with ``K v = a × v``."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _rotate_back(v: np.ndarray, axis: np.ndarray, skew_t: np.ndarray,
+                 angle: np.ndarray) -> np.ndarray:
+    """``R(axis, angle)ᵀ v`` for each row of ``v`` (Rodrigues, rotation by ``-angle``);
+    ``skew_t`` is ``_skew(axis).T`` so that ``v @ skew_t`` is ``axis × v`` row by row."""
+    c = np.cos(angle)[:, None]
+    s = np.sin(angle)[:, None]
+    return v * c - (v @ skew_t) * s + np.outer(v @ axis, axis) * (1.0 - c)
+
+
 def rotvec_to_matrix(rotvec: Sequence[float] | np.ndarray) -> np.ndarray:
     """The rotation matrix of a rotation vector (axis × angle in rad)."""
     rv = np.asarray(rotvec, dtype=float).reshape(3)
@@ -159,6 +173,7 @@ class GimbalJig:
         self.axes = np.array([rotvec_to_matrix(tv) @ v for tv, v in zip(tilts, nominal,
                                                                           strict=True)])
         self.axes /= np.linalg.norm(self.axes, axis=1, keepdims=True)
+        self._skew_t = [_skew(a).T for a in self.axes]
         if isinstance(mount, (int, float)):
             self.mount_rotvec = _random_rotvec(rng, np.deg2rad(float(mount)))
         else:
@@ -240,11 +255,13 @@ class GimbalJig:
         if t.size == 0:
             return np.zeros((0, 3))
         th, dth = self.joint_angles(t)
-        cum = self._chain(th)
-        w_base = np.zeros((t.size, 3))
+        # R_chainᵀ Σ_i R_1..i−1 a_i θ̇_i = Σ_i R_i+1..nᵀ a_i θ̇_i (R_iᵀ a_i = a_i), by the
+        # recursion u_i = R_iᵀ (u_i−1 + a_i θ̇_i): vector rotations only, no matrices.
+        w = np.zeros((t.size, 3))
         for i in range(len(self.joints)):
-            w_base += np.einsum("nij,j->ni", cum[i], self.axes[i]) * dth[:, i:i + 1]
-        w = np.einsum("nji,nj->ni", cum[-1], w_base)  # R_chainᵀ ω_base
+            a = self.axes[i]
+            w += np.outer(dth[:, i], a)
+            w = _rotate_back(w, a, self._skew_t[i], th[:, i])
         w = w @ self.mount  # Mᵀ w for each row
         for m, ds, slip in self._slip_matrices(t):
             w = np.einsum("nji,nj->ni", m, w) + ds[:, None] * slip.rotvec[None, :]

@@ -78,9 +78,14 @@ class Plan:
         return self.p0[i] + tau * (v0 + 0.5 * a * tau), v0 + a * tau
 
     def state(self, t: float) -> tuple[float, float]:
-        """Trajectory angle and rate at one time."""
-        p, v = self.evaluate(np.array([t]))
-        return float(p[0]), float(v[0])
+        """Trajectory angle and rate at one time (scalar fast path of :meth:`evaluate`)."""
+        t0 = self.t0
+        i = len(t0) - 1
+        while i > 0 and t0[i] > t:
+            i -= 1
+        tau = t - float(t0[i])
+        a, v0 = float(self.a[i]), float(self.v0[i])
+        return float(self.p0[i]) + tau * (v0 + 0.5 * a * tau), v0 + a * tau
 
     def running(self, t: float) -> bool:
         """True while the profile has not reached its end (always True for velocity plans)."""
@@ -463,9 +468,24 @@ class ServoMotor:
         tk = self.t_start + k * self.dt
         return p0 + (t - tk) * rate, rate
 
+    def sample(self, t: float) -> tuple[float, float]:
+        """Shaft angle and rate at one time (scalar fast path of :meth:`motion`)."""
+        k = math.floor((t - self.t_start) / self.dt + 1e-9)
+        g = self._grid
+        if k + 1 > g.k0 + g.n - 1:
+            self._ensure(k + 1)
+        if k < g.k0:
+            return tuple(float(x[0]) for x in self.motion(np.array([t])))  # raises
+        if k + 1 > self._frozen:
+            self._frozen = k + 1
+        j = k - g.k0
+        p0 = float(g.p[j])
+        rate = (float(g.p[j + 1]) - p0) / self.dt
+        return p0 + (t - (self.t_start + k * self.dt)) * rate, rate
+
     def angle_at(self, t: float) -> float:
         """Shaft angle at one time (see :meth:`motion`)."""
-        return float(self.motion(np.array([t]))[0][0])
+        return self.sample(t)[0]
 
     def command(self, t: float, make_plan) -> Plan:
         """Replace the trajectory from the first grid point not yet read after ``t``.

@@ -322,7 +322,7 @@ class EmulatedServo:
 
     def _update_thermal(self, t: float) -> None:
         dt = t - self._thermal_t
-        if dt <= 0:
+        if dt < 0.5:  # the temperature changes over minutes: update at most twice a second
             return
         angle = self.motor.angle_at(t)
         speed = abs(angle - self._thermal_angle) / dt
@@ -599,41 +599,46 @@ class EmulatedServo:
         lo, hi = address, address + length
         if hi <= 120 or lo >= 148:
             return
-        angle, rate = self.motor.motion(np.array([now]))
-        angle, rate = float(angle[0]), float(rate[0])
-        present = self._position_register(angle)
-        vel_units = round(self._dir * rate / VELOCITY_UNIT_RAD_S)
+        angle, rate = self.motor.sample(now)
+        mem = self._mem
+        torque = mem[64]
+        d = self._dir
+        homing = int.from_bytes(mem[20:24], "little", signed=True)
+        present = d * round(self._abs0 + angle / POSITION_UNIT_RAD) + self._turn_offset + homing
+        vel_units = round(d * rate / VELOCITY_UNIT_RAD_S)
         plan = self.motor.plan
-        tp, tv = self.motor.trajectory(now)
-        running = plan.running(now) and bool(self._mem[64])
+        running = bool(torque) and plan.running(now)
         speed_frac = min(abs(rate) / self._max_speed(), 1.5)
-
-        def put(name: str, value: int) -> None:
-            item = self.table[name]
-            if item.address < hi and item.end > lo:
-                lo_r, hi_r = item.raw_range()
-                self._mem[item.address: item.end] = item.to_bytes(max(lo_r, min(hi_r, value)))
-
-        put("Realtime Tick", int(math.floor((now - self._boot_time) * 1000.0)) % TICK_MODULUS)
-        moving = abs(vel_units) > self._get("Moving Threshold") or running
-        put("Moving", int(moving))
-        in_position = (not running) and abs(present - self._get("Goal Position")) <= 1 \
-            if self._mem[11] in (3, 4, 5) else not running
-        status = (int(in_position) | (int(running) << 1)
-                  | (_PROFILE_KIND.get(plan.kind, 0) << 4))
-        put("Moving Status", status)
         sign = 1 if vel_units >= 0 else -1
-        put("Present PWM", round(sign * 885 * min(speed_frac + 0.05, 1.0)) if self._mem[64] else 0)
-        load = round(sign * (50 + 150 * speed_frac)) if self._mem[64] else 0
-        put("Present Current" if "Present Current" in self.table else "Present Load", load)
-        put("Present Velocity", vel_units)
-        put("Present Position", present)
-        put("Velocity Trajectory", round(self._dir * tv / VELOCITY_UNIT_RAD_S))
-        put("Position Trajectory", self._position_register(tp))
-        volts = self.supply_voltage - 0.3 * speed_frac
-        put("Present Input Voltage", round(volts * 10.0))
-        self._update_thermal(now)
-        put("Present Temperature", round(self._temperature))
+        values = {}
+        if lo < 122:
+            values[120] = (2, int(math.floor((now - self._boot_time) * 1000.0)) % TICK_MODULUS)
+        if lo < 124 and hi > 122:
+            moving = abs(vel_units) > int.from_bytes(mem[24:28], "little") or running
+            goal = int.from_bytes(mem[116:120], "little", signed=True)
+            in_position = (not running) and (abs(present - goal) <= 1 if mem[11] in (3, 4, 5)
+                                             else True)
+            values[122] = (1, int(moving))
+            values[123] = (1, int(in_position) | (int(running) << 1)
+                           | (_PROFILE_KIND.get(plan.kind, 0) << 4))
+        if lo < 128 and hi > 124:
+            values[124] = (2, round(sign * 885 * min(speed_frac + 0.05, 1.0)) if torque else 0)
+            values[126] = (2, round(sign * (50 + 150 * speed_frac)) if torque else 0)
+        values[128] = (4, vel_units)
+        values[132] = (4, present)
+        if hi > 136 and lo < 144:
+            tp, tv = self.motor.trajectory(now)
+            values[136] = (4, round(d * tv / VELOCITY_UNIT_RAD_S))
+            values[140] = (4, self._position_register(tp))
+        if hi > 144:
+            values[144] = (2, round((self.supply_voltage - 0.3 * speed_frac) * 10.0))
+            self._update_thermal(now)
+            values[146] = (1, round(self._temperature))
+        for addr, (size, value) in values.items():
+            if addr < hi and addr + size > lo:
+                bits = 8 * size
+                value = max(-(1 << (bits - 1)), min((1 << bits) - 1, value))
+                mem[addr: addr + size] = (value & ((1 << bits) - 1)).to_bytes(size, "little")
 
     def reg_write(self, address: int, data: bytes) -> int:
         """REG_WRITE: validate and hold the write until ACTION (§4.4)."""
