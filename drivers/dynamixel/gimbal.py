@@ -1026,13 +1026,14 @@ class Gimbal:
         """
         self.port.is_using = False
         self.motion = None
+        known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
         for start, items in ((104, [("Goal Velocity", 0)]), (64, [("Torque Enable", 0)])):
             try:
-                self._sync_write(start, items)
+                self._sync_write(start, items, known)
             except CommunicationError:
                 pass
         unconfirmed = []
-        for i in self.ids:
+        for i in known:
             try:
                 self._write_item(i, "Torque Enable", 0, allow_alert=True)
                 if self._read_item(i, "Torque Enable", allow_alert=True) != 0:
@@ -1197,11 +1198,14 @@ class Gimbal:
 
         self._transact(dxl_id, instruction, fn, allow_alert=allow_alert)
 
-    def _sync_write(self, start: int, items: list[tuple[str, int]]) -> None:
-        """GroupSyncWrite of consecutive items starting at ``start`` to every servo (no reply)."""
-        length = sum(self._table(self.ids[0])[n].size for n, _ in items)
+    def _sync_write(self, start: int, items: list[tuple[str, int]],
+                    ids: Sequence[int]) -> None:
+        """GroupSyncWrite of consecutive items from ``start`` to servos ``ids`` (no reply)."""
+        if not ids:
+            return
+        length = sum(self._table(ids[0])[n].size for n, _ in items)
         group = GroupSyncWrite(self.port, self.ph, start, length)
-        for i in self.ids:
+        for i in ids:
             table = self._table(i)
             data = b"".join(table[n].to_bytes(v) for n, v in items)
             group.addParam(i, list(data))
