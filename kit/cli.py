@@ -24,6 +24,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("estimate", "kit.commands.estimate"),
     ("simulate-recording", "kit.commands.simulate_recording"),
     ("study", "kit.commands.study"),
+    ("emulate", "kit.commands.emulate"),
 )
 
 

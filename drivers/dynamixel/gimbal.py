@@ -1,0 +1,1217 @@
+"""The three-axis gimbal of Dynamixel X-series servos, over dynamixel-sdk (Protocol 2.0).
+
+Motion is **extended-position mode with a velocity-based trapezoidal profile** (Operating Mode 4,
+Profile Acceleration and Profile Velocity, hardware reference §5 and §5.1). A turn is one goal
+write: Goal Position = start ± N·4096 ticks. Why this mode rather than velocity mode with the
+encoder as the stop:
+
+* the servo's own profile generator gives a constant-speed stretch between two symmetric ramps,
+  so all but the ramps of an N-turn move are at one speed, and a clean stop exactly on the goal;
+* the goal is a bounded multi-turn position, so the servo cannot overshoot past the cable-wrap
+  limit even if the host stalls, crashes or is late to poll (in velocity mode the stop would be
+  the host's job, late by a poll period and a deceleration);
+* the Bus Watchdog still stops a servo whose host has died mid-turn.
+
+The commanded speed is quantized to Profile Velocity's 0.229 rpm; :class:`Motion` reports the
+quantized speed. The reference rate of a calibration never uses it: it is the encoder's angle
+change over a window divided by the window's duration, both from :meth:`Gimbal.poll`.
+
+Everything is non-blocking so that one loop on one clock can drain the IMU, sample the servos and
+step the protocol: :meth:`Gimbal.begin_turn` starts a turn, :meth:`Gimbal.poll` does one sync read
+(timestamped at the transaction's midpoint on the caller's clock), checks the safety limits and
+tells when the motion has finished. :meth:`Gimbal.run_turn` is a blocking convenience.
+
+Safety (hardware reference §6): the context manager and SIGINT/SIGTERM handlers end every run
+with Goal Velocity 0 and Torque Enable 0 on every servo, confirmed by reading it back; the Bus
+Watchdog is armed while a servo moves; a software turn limit guards the cables; hardware-error
+alerts (status bit 0x80) are read from Hardware Error Status and raised as named errors;
+communication failures are retried a bounded number of times and then raised naming the servo,
+the instruction and the SDK's result text. dynamixel-sdk's pitfalls are handled: every value is
+read as raw bytes and decoded with its control-table record (the SDK returns unsigned values),
+and a status with an error but no data (Access Error, where ``read4ByteTxRx`` raises IndexError)
+is reported as an error, never as a zero reading.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import struct
+import threading
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from dynamixel_sdk import (
+    BROADCAST_ID,
+    COMM_SUCCESS,
+    GroupSyncRead,
+    GroupSyncWrite,
+    PacketHandler,
+    PortHandler,
+)
+
+from drivers.clock import Clock, SystemClock
+from drivers.dynamixel.control_table import (
+    ACCELERATION_UNIT_RAD_S2,
+    COMPATIBLE_MODELS,
+    HARDWARE_ERROR_BITS,
+    MODELS,
+    OPERATING_MODES,
+    POSITION_UNIT_RAD,
+    TICK_MODULUS,
+    VELOCITY_UNIT_RAD_S,
+    WATCHDOG_UNIT_S,
+    ControlTable,
+    ServoModel,
+    model_by_name,
+)
+from drivers.dynamixel.errors import (
+    ServoCommunicationError,
+    ServoIdentityError,
+    ServoStatusError,
+    ShutdownError,
+    StallError,
+    TerminatedBySignal,
+    TurnLimitError,
+    WatchdogTrippedError,
+    hardware_error_for,
+)
+from drivers.errors import CommunicationError, ConfigurationError, SafetyError
+
+__all__ = ["Gimbal", "GimbalSample", "Motion", "ServoInfo", "ServoStatus"]
+
+TICKS_PER_TURN = 4096
+#: A motion has finished once its servos' encoders have not changed for this long (s).
+SETTLE_S = 0.03
+_ERRNUM_CRC = 3
+_ALERT = 0x80
+
+#: Sync-read layouts: (start address, length). "motion" = Realtime Tick (120) .. Present
+#: Position (135): tick, Moving, Moving Status, PWM, current/load, velocity, position.
+SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, 16), "position": (132, 4)}
+_MOTION_STRUCT = struct.Struct("<HBBhhii")
+_POSITION_STRUCT = struct.Struct("<i")
+
+
+@dataclass(frozen=True)
+class ServoInfo:
+    """What :meth:`Gimbal.open` learned about one servo.
+
+    Attributes
+    ----------
+    dxl_id : int
+        The ID.
+    model_number : int
+        Model Number (0).
+    model_name : str
+        The model's name (``"XM430-W350"``).
+    supported : bool
+        True for a fully supported model; False for a compatible one accepted with a notice.
+    firmware : int
+        Firmware Version (6).
+    velocity_limit : float
+        Velocity Limit (44) read from the device, rad/s (firmware-dependent, hardware
+        reference §5).
+    no_load_speed : float
+        The model's no-load speed at the present input voltage, rad/s (hardware reference §5.3).
+    max_speed : float
+        The top speed the planner may ask for: the smaller of the two, rad/s.
+    voltage_v : float
+        Present Input Voltage at open, V.
+    temperature_c : float
+        Present Temperature at open, °C.
+    temperature_limit_c : float
+        Temperature Limit (31), °C.
+    voltage_limits_v : tuple of float
+        (Min, Max) Voltage Limit, V.
+    return_delay_s : float
+        Return Delay Time (9), s.
+    drive_mode : int
+        Drive Mode (10) after open.
+    """
+
+    dxl_id: int
+    model_number: int
+    model_name: str
+    supported: bool
+    firmware: int
+    velocity_limit: float
+    no_load_speed: float
+    max_speed: float
+    voltage_v: float
+    temperature_c: float
+    temperature_limit_c: float
+    voltage_limits_v: tuple[float, float]
+    return_delay_s: float
+    drive_mode: int
+
+
+@dataclass(frozen=True)
+class ServoStatus:
+    """A servo's live state (for ``gyrocal doctor`` and reports)."""
+
+    dxl_id: int
+    torque_enabled: bool
+    moving: bool
+    velocity: float
+    angle: float
+    voltage_v: float
+    temperature_c: float
+    hardware_error: int
+    hardware_error_names: tuple[str, ...]
+    bus_watchdog_tripped: bool
+
+
+@dataclass(frozen=True)
+class GimbalSample:
+    """One sync read of every servo.
+
+    Attributes
+    ----------
+    t : float
+        Time on the caller's clock at the midpoint of the transaction, s.
+    t_start, t_end : float
+        The clock before sending the instruction and after the last status arrived.
+    ids : tuple of int
+        Servo IDs, in the order of the arrays.
+    angles : ndarray
+        Cumulative, unwrapped shaft angles from the home pose (the positions at
+        :meth:`Gimbal.open`), rad, positive in each servo's positive direction.
+    ticks : ndarray of int
+        Present Position as read (signed multi-turn count).
+    velocities : ndarray or None
+        Present Velocity, rad/s (None for the ``"position"`` layout).
+    servo_time_ms : ndarray or None
+        Realtime Tick unwrapped into a cumulative ms count per servo (None for ``"position"``).
+    moving : ndarray of bool or None
+        Moving (122).
+    """
+
+    t: float
+    t_start: float
+    t_end: float
+    ids: tuple[int, ...]
+    angles: np.ndarray
+    ticks: np.ndarray
+    velocities: np.ndarray | None = None
+    servo_time_ms: np.ndarray | None = None
+    moving: np.ndarray | None = None
+
+    def angle(self, dxl_id: int) -> float:
+        """The angle of one servo, rad."""
+        return float(self.angles[self.ids.index(dxl_id)])
+
+
+@dataclass
+class Motion:
+    """A motion in progress or finished: a turn of one servo, or a return to home.
+
+    Attributes
+    ----------
+    kind : str
+        ``"turn"`` or ``"return"``.
+    servo_ids : tuple of int
+        The servos that move.
+    turns : int
+        Whole turns of a turn (0 for a return).
+    direction : int
+        +1 or -1 for a turn (0 for a return).
+    speed : float
+        The commanded (quantized) profile speed, rad/s.
+    acceleration : float
+        The commanded (quantized) profile acceleration, rad/s².
+    start_angles, goal_angles : dict
+        Per servo, rad from home.
+    t_begin : float
+        Clock time of the goal write.
+    t_end : float or None
+        Time of the poll that found it finished.
+    finished : bool
+        True once every servo is at its goal and still.
+    """
+
+    kind: str
+    servo_ids: tuple[int, ...]
+    turns: int
+    direction: int
+    speed: float
+    acceleration: float
+    start_angles: dict[int, float]
+    goal_angles: dict[int, float]
+    goal_ticks: dict[int, int]
+    t_begin: float
+    t_end: float | None = None
+    finished: bool = False
+    _history: deque = field(default_factory=deque, repr=False)
+    _settled: dict[int, tuple[int, float]] = field(default_factory=dict, repr=False)
+
+
+class Gimbal:
+    """Three (or any number of) Dynamixel servos on one bus, driven for gyro calibration.
+
+    Parameters
+    ----------
+    port : str or PortHandler
+        A serial device (``"/dev/ttyUSB0"``) or an existing ``dynamixel_sdk.PortHandler``
+        (for example the emulator's :class:`~drivers.emulated.dxl.EmulatedPortHandler`).
+    ids : sequence of int
+        Servo IDs, base to tip.
+    baudrate : int
+        Bus speed; the servos must be set to it (factory servos run at 57600).
+    clock : Clock or None
+        The caller's clock for timestamps and waits; default :class:`SystemClock`. With the
+        emulator, pass the emulator's clock.
+    max_turns : float
+        Software cable-wrap limit: no servo may be commanded (or found) further than this many
+        turns from its home position.
+    acceleration : float
+        Profile acceleration of every motion, rad/s².
+    watchdog_s : float
+        Bus Watchdog armed while a servo moves, s (20 ms units, 0.02..2.54 s). Poll at least
+        this often while a motion runs.
+    retries : int
+        Extra attempts of a failed transaction before it is raised.
+    sample_layout : str
+        ``"motion"`` (Realtime Tick, Moving, velocity and position, 16 bytes per servo) or
+        ``"position"`` (Present Position only, 4 bytes: the fastest).
+    fast_sync_read : bool
+        Use FAST_SYNC_READ (one combined status; firmware ≥ 45, hardware reference §4.4/§4.6).
+    return_delay_us : float or None
+        If given, write Return Delay Time (EEPROM) at open; None leaves it as it is.
+    accept_compatible : bool
+        Accept models that share the X-430 control table (listed in
+        :data:`~drivers.dynamixel.control_table.COMPATIBLE_MODELS`) with a notice.
+    handle_signals : bool
+        Install SIGINT/SIGTERM handlers while open (main thread only).
+    stall_timeout_s : float
+        Window over which a turning servo must keep at least ``min_speed_fraction`` of its
+        commanded speed.
+    min_speed_fraction : float
+        See ``stall_timeout_s``.
+    packet_handler : object or None
+        A Protocol 2.0 packet handler; default ``dynamixel_sdk.PacketHandler(2.0)``.
+    """
+
+    def __init__(
+        self,
+        port: str | PortHandler,
+        ids: Sequence[int] = (1, 2, 3),
+        *,
+        baudrate: int = 1_000_000,
+        clock: Clock | None = None,
+        max_turns: float = 3.0,
+        acceleration: float = 3.0,
+        watchdog_s: float = 0.1,
+        retries: int = 3,
+        sample_layout: str = "motion",
+        fast_sync_read: bool = False,
+        return_delay_us: float | None = None,
+        accept_compatible: bool = True,
+        handle_signals: bool = True,
+        stall_timeout_s: float = 1.0,
+        min_speed_fraction: float = 0.8,
+        packet_handler: object | None = None,
+    ) -> None:
+        ids = tuple(int(i) for i in ids)
+        if not ids or len(set(ids)) != len(ids) or any(not 0 <= i <= 252 for i in ids):
+            raise ConfigurationError(
+                f"servo IDs must be distinct integers in 0..252, got {ids!r}")
+        if sample_layout not in SAMPLE_LAYOUTS:
+            raise ConfigurationError(
+                f"sample_layout must be one of {sorted(SAMPLE_LAYOUTS)}, got {sample_layout!r}")
+        if not (math.isfinite(max_turns) and max_turns > 0):
+            raise ConfigurationError(f"max_turns must be a positive number, got {max_turns!r}")
+        if not (math.isfinite(acceleration) and acceleration > 0):
+            raise ConfigurationError(
+                f"acceleration must be a positive number of rad/s², got {acceleration!r}")
+        wd_units = round(watchdog_s / WATCHDOG_UNIT_S)
+        if not 1 <= wd_units <= 127:
+            raise ConfigurationError(
+                f"watchdog_s must be 0.02..2.54 s (20 ms steps), got {watchdog_s!r}")
+        if int(retries) < 0:
+            raise ConfigurationError(f"retries must be >= 0, got {retries!r}")
+        self.ids = ids
+        self.baudrate = int(baudrate)
+        self.clock: Clock = clock if clock is not None else SystemClock()
+        self.max_turns = float(max_turns)
+        self.acceleration = float(acceleration)
+        self.watchdog_units = int(wd_units)
+        self.retries = int(retries)
+        self.sample_layout = sample_layout
+        self.fast_sync_read = bool(fast_sync_read)
+        self.return_delay_us = return_delay_us
+        self.accept_compatible = bool(accept_compatible)
+        self.handle_signals = bool(handle_signals)
+        self.stall_timeout_s = float(stall_timeout_s)
+        self.min_speed_fraction = float(min_speed_fraction)
+        if isinstance(port, str):
+            self.port = PortHandler(port)
+            self._owns_port = True
+        else:
+            self.port = port
+            self._owns_port = False
+        self.ph = packet_handler if packet_handler is not None else PacketHandler(2.0)
+        self.infos: dict[int, ServoInfo] = {}
+        self.models: dict[int, ServoModel] = {}
+        self.notices: list[str] = []
+        self.home_ticks: dict[int, int] = {}
+        self.motion: Motion | None = None
+        self.last_sample: GimbalSample | None = None
+        #: Transactions that needed a retry (count), for reports.
+        self.retry_count = 0
+        self.is_open = False
+        self._tick_state: dict[int, tuple[int, float, float]] = {}
+        self._group: GroupSyncRead | None = None
+        self._old_handlers: dict[int, object] = {}
+        self._last_poll_t: float | None = None
+        self._identity: dict[int, tuple[int, str, bool]] = {}
+        #: True if a safe stop on an error path could not be confirmed.
+        self.stop_failed = False
+
+    # =====================================================================================
+    # opening and closing
+    # =====================================================================================
+    def open(self) -> dict[int, ServoInfo]:
+        """Open the port, identify every servo, put it in extended-position mode and hold.
+
+        Returns
+        -------
+        dict
+            :class:`ServoInfo` by ID (also in :attr:`infos`); notices in :attr:`notices`.
+
+        Raises
+        ------
+        CommunicationError
+            The port cannot be opened.
+        ConfigurationError
+            The baud rate is not one dynamixel-sdk supports.
+        ServoIdentityError
+            A servo does not answer a PING or is an unsupported model.
+        ServoHardwareError
+            A servo reports a hardware error (reboot it first: :meth:`reboot`).
+        """
+        if self.is_open:
+            return self.infos
+        self._open_port()
+        try:
+            for dxl_id in self.ids:
+                self._identify(dxl_id)
+            for dxl_id in self.ids:
+                self._prepare(dxl_id)
+            self._group = GroupSyncRead(self.port, self.ph, *SAMPLE_LAYOUTS[self.sample_layout])
+            for dxl_id in self.ids:
+                self._group.addParam(dxl_id)
+            self.is_open = True
+            self._install_signal_handlers()
+            self.last_sample = self.sample()
+        except BaseException:
+            self.is_open = True
+            self._safe_stop_quietly()
+            self.is_open = False
+            self._restore_signal_handlers()
+            if self._owns_port:
+                self._close_port()
+            raise
+        return self.infos
+
+    def _open_port(self) -> None:
+        name = self.port.getPortName()
+        if self.port.getCFlagBaud(self.baudrate) <= 0:
+            raise ConfigurationError(
+                f"baud rate {self.baudrate} is not supported by dynamixel-sdk; use one of 57600, "
+                "115200, 1000000, 2000000, 3000000 or 4000000 and set the servos to it")
+        try:
+            if not getattr(self.port, "is_open", False):
+                self.port.baudrate = self.baudrate
+                ok = self.port.openPort()
+            else:
+                ok = True
+            if ok and self.port.getBaudRate() != self.baudrate:
+                ok = self.port.setBaudRate(self.baudrate)
+        except (OSError, ValueError) as exc:  # pyserial's SerialException is an OSError
+            raise CommunicationError(
+                f"cannot open the servo port {name!r}: {exc}. Check that the U2D2 is plugged in, "
+                "the device name is right, and you may use it (Linux: the 'dialout' group)."
+            ) from exc
+        if not ok:
+            raise CommunicationError(
+                f"cannot open the servo port {name!r} at {self.baudrate} bps")
+
+    def _identify(self, dxl_id: int) -> None:
+        model_number = None
+        last = ""
+        for _ in range(self.retries + 1):
+            number, result, error = self.ph.ping(self.port, dxl_id)
+            self.port.is_using = False
+            if result == COMM_SUCCESS:
+                model_number = int(number)
+                break
+            last = self.ph.getTxRxResult(result)
+            self.retry_count += 1
+        if model_number is None:
+            raise ServoIdentityError(
+                f"servo ID {dxl_id} did not answer a PING at {self.baudrate} bps on "
+                f"{self.port.getPortName()!r} ({last}). Check its power and cable, and that its "
+                "ID and baud rate match the configuration (factory servos: ID 1, 57600 bps; "
+                "Dynamixel Wizard can scan the bus).")
+        if model_number in MODELS:
+            model = MODELS[model_number]
+            supported = True
+        elif model_number in COMPATIBLE_MODELS and self.accept_compatible:
+            name, like = COMPATIBLE_MODELS[model_number]
+            model = model_by_name(like)
+            supported = False
+            self.notices.append(
+                f"servo {dxl_id} is a {name} (model {model_number}): not tested with gyrocal, "
+                f"but its control table matches the {like}'s, which gyrocal uses for it.")
+        else:
+            known = ", ".join(f"{m.name} ({m.number})" for m in MODELS.values())
+            hint = ""
+            if model_number in COMPATIBLE_MODELS:
+                hint = (f" It is a {COMPATIBLE_MODELS[model_number][0]}, which works with "
+                        "accept_compatible=True.")
+            raise ServoIdentityError(
+                f"servo {dxl_id} is model number {model_number}, which gyrocal does not "
+                f"support. Supported: {known}.{hint}")
+        self.models[dxl_id] = model
+        name = model.name if supported else COMPATIBLE_MODELS[model_number][0]
+        self._identity[dxl_id] = (model_number, name, supported)
+
+    def _prepare(self, dxl_id: int) -> None:
+        """Torque off, extended-position mode, velocity-based profile, home, hold (§6.1)."""
+        status = self._read_item(dxl_id, "Hardware Error Status", allow_alert=True)
+        if status:
+            raise hardware_error_for(dxl_id, status)
+        self._write_item(dxl_id, "Torque Enable", 0)
+        self._write_item(dxl_id, "Bus Watchdog", 0)
+        drive = self._read_item(dxl_id, "Drive Mode")
+        # bit2 time-based profile and bit3 torque-on-by-goal-update must be off (§5, §6.4)
+        if drive & 0x0C:
+            drive &= ~0x0C
+            self._write_item(dxl_id, "Drive Mode", drive)
+        if self._read_item(dxl_id, "Operating Mode") != OPERATING_MODES["extended_position"]:
+            self._write_item(dxl_id, "Operating Mode", OPERATING_MODES["extended_position"])
+        if self.return_delay_us is not None:
+            self._write_item(dxl_id, "Return Delay Time",
+                             self._table(dxl_id)["Return Delay Time"].from_si(
+                                 self.return_delay_us * 1e-6))
+        # re-read after the mode switch: Present Position may have been re-based (§5.2, §6.1)
+        present = self._read_item(dxl_id, "Present Position")
+        self.home_ticks[dxl_id] = present
+        model_number, name, supported = self._identity[dxl_id]
+        t = self._table(dxl_id)
+        vlimit = self._read_si(dxl_id, "Velocity Limit")
+        volts = self._read_si(dxl_id, "Present Input Voltage")
+        model = self.models[dxl_id]
+        no_load = model.no_load_speed_rad_s_12v * (volts / 12.0 if volts > 0 else 1.0)
+        self.infos[dxl_id] = ServoInfo(
+            dxl_id=dxl_id,
+            model_number=model_number,
+            model_name=name,
+            supported=supported,
+            firmware=self._read_item(dxl_id, "Firmware Version"),
+            velocity_limit=vlimit,
+            no_load_speed=no_load,
+            max_speed=min(vlimit, no_load) if vlimit > 0 else no_load,
+            voltage_v=volts,
+            temperature_c=self._read_si(dxl_id, "Present Temperature"),
+            temperature_limit_c=self._read_si(dxl_id, "Temperature Limit"),
+            voltage_limits_v=(self._read_si(dxl_id, "Min Voltage Limit"),
+                              self._read_si(dxl_id, "Max Voltage Limit")),
+            return_delay_s=t["Return Delay Time"].to_si(
+                self._read_item(dxl_id, "Return Delay Time")),
+            drive_mode=drive,
+        )
+        # hold where it is: Goal Position = Present Position before torque on (§6.1)
+        self._write_block(dxl_id, "Profile Acceleration",
+                          [("Profile Acceleration", self._accel_units()),
+                           ("Profile Velocity", 0), ("Goal Position", present)])
+        self._write_item(dxl_id, "Torque Enable", 1)
+
+    def close(self) -> None:
+        """Stop every servo (goal velocity 0, torque off, confirmed) and close the port.
+
+        Raises
+        ------
+        ShutdownError
+            If torque off could not be confirmed on every servo (the message names them).
+        """
+        try:
+            if self.is_open:
+                self.stop()
+        finally:
+            self.is_open = False
+            self._restore_signal_handlers()
+            if self._owns_port:
+                self._close_port()
+
+    def _close_port(self) -> None:
+        try:
+            if getattr(self.port, "is_open", False):
+                self.port.closePort()
+        except OSError:
+            pass
+
+    def __enter__(self) -> Gimbal:
+        self.open()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            self.close()
+        except ShutdownError as shutdown:
+            if exc is None:
+                raise
+            # keep the original error; say that the stop could not be confirmed as well
+            raise ShutdownError(f"{shutdown} (while handling: {exc!r})") from exc
+
+    # ---- signals -------------------------------------------------------------------------
+    def _install_signal_handlers(self) -> None:
+        if not self.handle_signals or threading.current_thread() is not threading.main_thread():
+            return
+
+        def on_sigint(signum: int, frame: object) -> None:
+            raise KeyboardInterrupt
+
+        def on_sigterm(signum: int, frame: object) -> None:
+            raise TerminatedBySignal(signum)
+
+        for sig, handler in ((signal.SIGINT, on_sigint), (signal.SIGTERM, on_sigterm)):
+            self._old_handlers[sig] = signal.signal(sig, handler)
+
+    def _restore_signal_handlers(self) -> None:
+        for sig, handler in self._old_handlers.items():
+            try:
+                signal.signal(sig, handler)
+            except (ValueError, TypeError):
+                pass
+        self._old_handlers.clear()
+
+    # =====================================================================================
+    # sampling
+    # =====================================================================================
+    def sample(self) -> GimbalSample:
+        """One sync read of every servo (no safety bookkeeping; see :meth:`poll`).
+
+        Returns
+        -------
+        GimbalSample
+            Timestamped at the transaction's midpoint on :attr:`clock`.
+
+        Raises
+        ------
+        ServoCommunicationError
+            After the bounded retries.
+        ServoHardwareError
+            A servo's status carries the alert bit (the error is read from Hardware Error
+            Status and raised by name).
+        """
+        self._require_open()
+        start, length = SAMPLE_LAYOUTS[self.sample_layout]
+        last = ""
+        failed_id: int | None = None
+        for _attempt in range(self.retries + 1):
+            t0 = self.clock.monotonic()
+            blocks, result_text, failed_id = self._sync_read_once(start, length)
+            t1 = self.clock.monotonic()
+            if blocks is not None:
+                break
+            last = result_text
+            self.retry_count += 1
+        else:
+            what = "FAST_SYNC_READ" if self.fast_sync_read else "SYNC_READ"
+            raise ServoCommunicationError(
+                failed_id, f"{what} of addresses {start}..{start + length - 1}", last,
+                self.retries + 1)
+        alerts = [i for i, (err, _) in blocks.items() if err & _ALERT]
+        if alerts:
+            self._raise_alert(alerts[0])
+        for i, (err, _) in blocks.items():
+            if err & 0x7F:
+                raise ServoStatusError(i, "SYNC_READ", err, self.ph.getRxPacketError(err & 0x7F))
+        t_mid = 0.5 * (t0 + t1)
+        n = len(self.ids)
+        ticks = np.empty(n, dtype=np.int64)
+        vel = np.empty(n) if self.sample_layout == "motion" else None
+        tms = np.empty(n) if self.sample_layout == "motion" else None
+        moving = np.empty(n, dtype=bool) if self.sample_layout == "motion" else None
+        for k, dxl_id in enumerate(self.ids):
+            data = blocks[dxl_id][1]
+            if self.sample_layout == "motion":
+                # Realtime Tick u16, Moving u8, Moving Status u8, Present PWM s16,
+                # Present Current/Load s16, Present Velocity s32, Present Position s32 (§5)
+                tick, mov, _, _, _, v_raw, ticks[k] = _MOTION_STRUCT.unpack(data)
+                moving[k] = bool(mov)
+                vel[k] = v_raw * VELOCITY_UNIT_RAD_S
+                tms[k] = self._unwrap_tick(dxl_id, tick, t_mid)
+            else:
+                ticks[k] = _POSITION_STRUCT.unpack(data)[0]
+        angles = np.array([(ticks[k] - self.home_ticks[i]) * POSITION_UNIT_RAD
+                           for k, i in enumerate(self.ids)])
+        s = GimbalSample(t_mid, t0, t1, self.ids, angles, ticks, vel, tms, moving)
+        self.last_sample = s
+        return s
+
+    def _sync_read_once(self, start: int, length: int):
+        """One sync-read transaction: ``({id: (error, bytes)}, "", None)`` or
+        ``(None, result text, id that failed)``."""
+        self.port.is_using = False
+        ids = list(self.ids)
+        if self.fast_sync_read:
+            result = self.ph.syncReadTx(self.port, start, length, ids, len(ids), True)
+            if result != COMM_SUCCESS:
+                return None, self.ph.getTxRxResult(result), None
+            raw, result, _ = self.ph.fastSyncReadRx(self.port, BROADCAST_ID,
+                                                    (length + 4) * len(ids))
+            if result != COMM_SUCCESS:
+                return None, self.ph.getTxRxResult(result), None
+            blocks = {}
+            pos = 0
+            for _ in ids:
+                if pos + 2 + length > len(raw):
+                    return None, "fast sync read status too short", None
+                err, dxl_id = raw[pos], raw[pos + 1]
+                blocks[dxl_id] = (err, bytes(raw[pos + 2: pos + 2 + length]))
+                pos += length + 4
+            if set(blocks) != set(ids):
+                return None, f"fast sync read answered for IDs {sorted(blocks)}", None
+            return blocks, "", None
+        result = self._group.txPacket()
+        if result != COMM_SUCCESS:
+            return None, self.ph.getTxRxResult(result), None
+        blocks = {}
+        for dxl_id in ids:
+            # GroupSyncRead.rxPacket drops each status's error byte; read them ourselves so a
+            # hardware alert is never missed.
+            data, result, error = self.ph.readRx(self.port, dxl_id, length)
+            if result != COMM_SUCCESS:
+                self.port.is_using = False
+                return None, self.ph.getTxRxResult(result), dxl_id
+            if len(data) != length and not error:
+                return None, f"status of servo {dxl_id} carried {len(data)} bytes", dxl_id
+            blocks[dxl_id] = (error, bytes(data))
+        return blocks, "", None
+
+    def _unwrap_tick(self, dxl_id: int, tick: int, t_host: float) -> float:
+        """Realtime Tick (0..32767 ms, wrapping, hardware reference §5) → cumulative ms."""
+        state = self._tick_state.get(dxl_id)
+        if state is None:
+            self._tick_state[dxl_id] = (tick, float(tick), t_host)
+            return float(tick)
+        last_tick, cum, last_t = state
+        delta = (tick - last_tick) % TICK_MODULUS
+        gap_ms = (t_host - last_t) * 1000.0
+        if gap_ms > TICK_MODULUS * 0.75:  # more than one wrap may have passed between reads
+            delta += TICK_MODULUS * round((gap_ms - delta) / TICK_MODULUS)
+        cum += delta
+        self._tick_state[dxl_id] = (tick, cum, t_host)
+        return cum
+
+    # =====================================================================================
+    # motion
+    # =====================================================================================
+    @property
+    def busy(self) -> bool:
+        """True while a motion is in progress."""
+        return self.motion is not None and not self.motion.finished
+
+    @property
+    def top_speed(self) -> float:
+        """The highest speed every servo can be commanded, rad/s (from the devices' limits)."""
+        self._require_open()
+        return min(info.max_speed for info in self.infos.values())
+
+    def begin_turn(self, servo_id: int, turns: int, speed: float, direction: int = 1) -> Motion:
+        """Start turning one servo by a whole number of turns; the others hold. Non-blocking.
+
+        Parameters
+        ----------
+        servo_id : int
+            The servo to turn.
+        turns : int
+            Whole turns (>= 1).
+        speed : float
+            Cruise speed, rad/s (> 0, at most :attr:`top_speed`); quantized to 0.229 rpm.
+        direction : int
+            +1 (the servo's positive direction) or -1.
+
+        Returns
+        -------
+        Motion
+            The motion, also in :attr:`motion`; poll until ``motion.finished``.
+
+        Raises
+        ------
+        ConfigurationError
+            Bad arguments (the message says which and what is allowed).
+        TurnLimitError
+            The turn would end beyond :attr:`max_turns` from home.
+        SafetyError
+            Another motion is still running.
+        """
+        self._require_open()
+        if servo_id not in self.ids:
+            raise ConfigurationError(f"servo {servo_id!r} is not on this gimbal (IDs {self.ids})")
+        if isinstance(turns, bool) or not float(turns).is_integer() or int(turns) < 1:
+            raise ConfigurationError(f"turns must be a whole number >= 1, got {turns!r}")
+        if direction not in (1, -1):
+            raise ConfigurationError(f"direction must be +1 or -1, got {direction!r}")
+        turns = int(turns)
+        speed_units, speed_q = self._speed_units(servo_id, speed)
+        self._require_idle()
+        s = self.sample()
+        start = int(s.ticks[self.ids.index(servo_id)])
+        goal = start + direction * turns * TICKS_PER_TURN
+        self._check_turn_limit(servo_id, goal)
+        accel_units = self._accel_units()
+        self._write_item(servo_id, "Bus Watchdog", self.watchdog_units)
+        self._write_block(servo_id, "Profile Acceleration",
+                          [("Profile Acceleration", accel_units),
+                           ("Profile Velocity", speed_units), ("Goal Position", goal)])
+        home = self.home_ticks[servo_id]
+        self.motion = Motion(
+            kind="turn", servo_ids=(servo_id,), turns=turns, direction=direction, speed=speed_q,
+            acceleration=accel_units * ACCELERATION_UNIT_RAD_S2,
+            start_angles={servo_id: (start - home) * POSITION_UNIT_RAD},
+            goal_angles={servo_id: (goal - home) * POSITION_UNIT_RAD},
+            goal_ticks={servo_id: goal}, t_begin=self.clock.monotonic())
+        self.motion._history.append((s.t, start))
+        self._last_poll_t = self.clock.monotonic()
+        return self.motion
+
+    def begin_return(self, speed: float | None = None,
+                     servo_ids: Sequence[int] | None = None) -> Motion:
+        """Start moving servos back to their home positions (all at once). Non-blocking.
+
+        Parameters
+        ----------
+        speed : float or None
+            Cruise speed, rad/s; default the top speed's half.
+        servo_ids : sequence of int or None
+            The servos to return; default all.
+        """
+        self._require_open()
+        self._require_idle()
+        ids = tuple(self.ids if servo_ids is None else (int(i) for i in servo_ids))
+        for i in ids:
+            if i not in self.ids:
+                raise ConfigurationError(f"servo {i!r} is not on this gimbal (IDs {self.ids})")
+        if speed is None:
+            speed = 0.5 * self.top_speed
+        s = self.sample()
+        accel_units = self._accel_units()
+        starts, goals, goal_ticks = {}, {}, {}
+        speed_q = 0.0
+        moving = []
+        for i in ids:
+            now_ticks = int(s.ticks[self.ids.index(i)])
+            units, speed_q = self._speed_units(i, speed)
+            starts[i] = (now_ticks - self.home_ticks[i]) * POSITION_UNIT_RAD
+            goals[i] = 0.0
+            goal_ticks[i] = self.home_ticks[i]
+            if now_ticks != self.home_ticks[i]:
+                moving.append(i)
+                self._write_item(i, "Bus Watchdog", self.watchdog_units)
+                self._write_block(i, "Profile Acceleration",
+                                  [("Profile Acceleration", accel_units),
+                                   ("Profile Velocity", units),
+                                   ("Goal Position", self.home_ticks[i])])
+        self.motion = Motion(
+            kind="return", servo_ids=tuple(ids), turns=0, direction=0, speed=speed_q,
+            acceleration=accel_units * ACCELERATION_UNIT_RAD_S2, start_angles=starts,
+            goal_angles=goals, goal_ticks=goal_ticks, t_begin=self.clock.monotonic())
+        if not moving:
+            self.motion.finished = True
+            self.motion.t_end = self.motion.t_begin
+        self._last_poll_t = self.clock.monotonic()
+        return self.motion
+
+    def poll(self) -> GimbalSample:
+        """One sync read, then the motion's bookkeeping and the safety checks.
+
+        Returns
+        -------
+        GimbalSample
+            The sample (also :attr:`last_sample`). ``motion.finished`` turns True on the poll
+            that finds every moving servo on its goal and still; the Bus Watchdog is then
+            disarmed.
+
+        Raises
+        ------
+        TurnLimitError, StallError, WatchdogTrippedError, ServoHardwareError,
+        ServoCommunicationError
+            After stopping every servo (goal velocity 0, torque off).
+        """
+        self._require_open()
+        now = self.clock.monotonic()
+        late = (self.busy and self._last_poll_t is not None
+                and now - self._last_poll_t > self.watchdog_units * WATCHDOG_UNIT_S)
+        self._last_poll_t = now
+        try:
+            s = self.sample()
+            self._check_limits(s)
+            if self.busy:
+                if late:
+                    self._check_watchdog()
+                self._track_motion(s)
+        except Exception:
+            self._safe_stop_quietly()
+            raise
+        return s
+
+    def _track_motion(self, s: GimbalSample) -> None:
+        m = self.motion
+        done = True
+        for i in m.servo_ids:
+            k = self.ids.index(i)
+            ticks = int(s.ticks[k])
+            last = m._settled.get(i)
+            if last is None or last[0] != ticks:
+                m._settled[i] = last = (ticks, s.t)
+            # finished: on the goal (±1 tick), not Moving (122) where it is read, and the
+            # encoder unchanged for SETTLE_S (the last ticks of a stop may still move)
+            still = s.t - last[1] >= SETTLE_S and (s.moving is None or not bool(s.moving[k]))
+            if not (abs(ticks - m.goal_ticks[i]) <= 1 and still):
+                done = False
+        if m.kind == "turn":
+            i = m.servo_ids[0]
+            m._history.append((s.t, int(s.ticks[self.ids.index(i)])))
+            self._check_stall(m, s)
+        if done:
+            m.finished = True
+            m.t_end = s.t
+            for i in m.servo_ids:
+                self._write_item(i, "Bus Watchdog", 0)
+
+    def _check_stall(self, m: Motion, s: GimbalSample) -> None:
+        """A turning servo must keep ``min_speed_fraction`` of its speed over the last
+        ``stall_timeout_s``, once past its acceleration ramp and before its deceleration."""
+        i = m.servo_ids[0]
+        ramp_t = m.speed / m.acceleration
+        if s.t - m.t_begin < ramp_t + self.stall_timeout_s:
+            return
+        ticks = int(s.ticks[self.ids.index(i)])
+        remaining = abs(m.goal_ticks[i] - ticks) * POSITION_UNIT_RAD
+        if remaining <= m.speed ** 2 / (2 * m.acceleration) + m.speed * 0.05:
+            return
+        hist = m._history  # (t, ticks); keep one entry older than the window
+        while len(hist) >= 2 and s.t - hist[1][0] > self.stall_timeout_s:
+            hist.popleft()
+        t_old, ticks_old = hist[0]
+        if s.t - t_old < 0.5 * self.stall_timeout_s:
+            return
+        speed = abs(ticks - ticks_old) * POSITION_UNIT_RAD / (s.t - t_old)
+        if speed < self.min_speed_fraction * m.speed:
+            if self._read_item(i, "Bus Watchdog", allow_alert=True) == -1:
+                raise WatchdogTrippedError(
+                    f"servo {i} stopped: its Bus Watchdog expired because no packet reached it "
+                    f"for {self.watchdog_units * WATCHDOG_UNIT_S * 1000:.0f} ms. Poll the "
+                    "gimbal more often during a motion (or raise watchdog_s).")
+            raise StallError(
+                f"servo {i} turns at {speed:.3f} rad/s but was commanded {m.speed:.3f} rad/s "
+                f"(below {self.min_speed_fraction:.0%} over {self.stall_timeout_s:g} s): it is "
+                "blocked or overloaded. Check that the gimbal turns freely and that no cable "
+                "pulls, lower the speed or the load; it has been stopped.")
+
+    def _check_watchdog(self) -> None:
+        for i in self.motion.servo_ids:
+            if self._read_item(i, "Bus Watchdog", allow_alert=True) == -1:
+                raise WatchdogTrippedError(
+                    f"servo {i} stopped: its Bus Watchdog expired because no packet reached it "
+                    f"for {self.watchdog_units * WATCHDOG_UNIT_S * 1000:.0f} ms. Poll the "
+                    "gimbal more often during a motion (or raise watchdog_s).")
+
+    def _check_limits(self, s: GimbalSample) -> None:
+        margin = 0.05
+        for k, i in enumerate(self.ids):
+            turns = abs(int(s.ticks[k]) - self.home_ticks[i]) / TICKS_PER_TURN
+            if turns > self.max_turns + margin:
+                raise TurnLimitError(
+                    f"servo {i} is {turns:.2f} turns from home, past the software limit of "
+                    f"{self.max_turns:g} turns; it has been stopped. Untwist the cables by hand "
+                    "(torque is off) before the next run.")
+
+    def run_turn(self, servo_id: int, turns: int, speed: float, direction: int = 1, *,
+                 poll_period_s: float = 0.005,
+                 on_sample: Callable[[GimbalSample], None] | None = None,
+                 timeout_s: float | None = None) -> Motion:
+        """Blocking convenience: :meth:`begin_turn`, then :meth:`poll` until it finishes.
+
+        Parameters
+        ----------
+        on_sample : callable or None
+            Called with every sample.
+        timeout_s : float or None
+            Give up (stop and raise :class:`StallError`) after this long; default twice the
+            planned duration plus 2 s.
+        """
+        m = self.begin_turn(servo_id, turns, speed, direction)
+        if timeout_s is None:
+            timeout_s = 2.0 * (turns * 2 * math.pi / m.speed + m.speed / m.acceleration) + 2.0
+        return self._wait(m, poll_period_s, on_sample, timeout_s)
+
+    def return_home(self, speed: float | None = None, *, poll_period_s: float = 0.005,
+                    on_sample: Callable[[GimbalSample], None] | None = None,
+                    timeout_s: float = 60.0) -> Motion:
+        """Blocking convenience: :meth:`begin_return`, then :meth:`poll` until it finishes."""
+        return self._wait(self.begin_return(speed), poll_period_s, on_sample, timeout_s)
+
+    def _wait(self, m: Motion, period: float, on_sample, timeout_s: float) -> Motion:
+        t_end = self.clock.monotonic() + timeout_s
+        while not m.finished:
+            s = self.poll()
+            if on_sample is not None:
+                on_sample(s)
+            if m.finished:
+                break
+            if self.clock.monotonic() > t_end:
+                self._safe_stop_quietly()
+                raise StallError(
+                    f"the {m.kind} of servo(s) {list(m.servo_ids)} did not finish within "
+                    f"{timeout_s:g} s; the servos have been stopped. Check that the gimbal "
+                    "turns freely.")
+            self.clock.sleep(period)
+        return m
+
+    # =====================================================================================
+    # status, stop, reboot
+    # =====================================================================================
+    def read_status(self) -> dict[int, ServoStatus]:
+        """Each servo's live state (velocity, temperature, voltage, hardware error, …).
+
+        Hardware errors are reported, not raised.
+        """
+        self._require_open()
+        out = {}
+        for i in self.ids:
+            t = self._table(i)
+            ram = self._read_raw(i, 64, 7, "READ Torque Enable..Hardware Error Status",
+                                 allow_alert=True)
+            live = self._read_raw(i, 122, 25, "READ Moving..Present Temperature",
+                                  allow_alert=True)
+            hw = ram[6]
+            wd = t["Bus Watchdog"].from_bytes(self._read_raw(i, 98, 1, "READ Bus Watchdog",
+                                                             allow_alert=True))
+            out[i] = ServoStatus(
+                dxl_id=i,
+                torque_enabled=bool(ram[0]),
+                moving=bool(live[0]),
+                velocity=t["Present Velocity"].to_si(
+                    t["Present Velocity"].from_bytes(live[6:10])),
+                angle=(t["Present Position"].from_bytes(live[10:14]) - self.home_ticks[i])
+                * POSITION_UNIT_RAD,
+                voltage_v=t["Present Input Voltage"].to_si(
+                    t["Present Input Voltage"].from_bytes(live[22:24])),
+                temperature_c=t["Present Temperature"].to_si(live[24]),
+                hardware_error=hw,
+                hardware_error_names=tuple(b.name for b in HARDWARE_ERROR_BITS
+                                           if hw & (1 << b.bit)),
+                bus_watchdog_tripped=wd == -1,
+            )
+        return out
+
+    def stop(self) -> None:
+        """Stop every servo: Goal Velocity 0, Torque Enable 0, confirmed by read-back.
+
+        Sync writes reach every servo even if one cannot answer; each servo's torque is then
+        read back. The motion in progress (if any) is abandoned.
+
+        Raises
+        ------
+        ShutdownError
+            If a servo's torque could not be confirmed off (the message names it and says what
+            to do).
+        """
+        self.port.is_using = False
+        self.motion = None
+        known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
+        for start, items in ((104, [("Goal Velocity", 0)]), (64, [("Torque Enable", 0)])):
+            try:
+                self._sync_write(start, items, known)
+            except CommunicationError:
+                pass
+        unconfirmed = []
+        for i in known:
+            try:
+                self._write_item(i, "Torque Enable", 0, allow_alert=True)
+                if self._read_item(i, "Torque Enable", allow_alert=True) != 0:
+                    unconfirmed.append((i, "it still reads torque on"))
+                    continue
+                self._write_item(i, "Bus Watchdog", 0, allow_alert=True)
+            except (CommunicationError, ServoStatusError) as exc:
+                unconfirmed.append((i, str(exc)))
+        if unconfirmed:
+            ids = ", ".join(str(i) for i, _ in unconfirmed)
+            why = "; ".join(f"servo {i}: {w}" for i, w in unconfirmed)
+            raise ShutdownError(
+                f"could not confirm torque off on servo(s) {ids}: {why}. Switch the servo "
+                "power off before touching the gimbal.")
+
+    def _safe_stop_quietly(self) -> None:
+        """Best-effort :meth:`stop` on an error path (its own failure must not hide the error)."""
+        try:
+            if self.is_open:
+                self.stop()
+        except Exception:
+            self.stop_failed = True
+
+    def reboot(self, servo_id: int) -> None:
+        """REBOOT one servo (clears a hardware error), then re-home and hold it.
+
+        The servo forgets its multi-turn count on reboot (hardware reference §5.2), so its home
+        is set again to where it is now.
+        """
+        self._require_open()
+        self._require_idle()
+        last = ""
+        for _ in range(self.retries + 1):
+            result, error = self.ph.reboot(self.port, servo_id)
+            self.port.is_using = False
+            if result == COMM_SUCCESS:
+                break
+            last = self.ph.getTxRxResult(result)
+        else:
+            raise ServoCommunicationError(servo_id, "REBOOT", last, self.retries + 1)
+        self.clock.sleep(0.5)  # boot time
+        self._prepare(servo_id)
+        self._tick_state.pop(servo_id, None)
+
+    # =====================================================================================
+    # transactions
+    # =====================================================================================
+    def _table(self, dxl_id: int) -> ControlTable:
+        return self.models[dxl_id].table
+
+    def _require_open(self) -> None:
+        if not self.is_open:
+            raise SafetyError("the gimbal is not open: call open() or use it in a with-block")
+
+    def _require_idle(self) -> None:
+        if self.busy:
+            raise SafetyError(
+                f"a {self.motion.kind} of servo(s) {list(self.motion.servo_ids)} is still "
+                "running: poll() until it finishes, or stop() first")
+
+    def _accel_units(self) -> int:
+        return max(1, round(self.acceleration / ACCELERATION_UNIT_RAD_S2))
+
+    def _speed_units(self, servo_id: int, speed: float) -> tuple[int, float]:
+        if not (isinstance(speed, (int, float)) and math.isfinite(speed) and speed > 0):
+            raise ConfigurationError(f"speed must be a positive number of rad/s, got {speed!r}")
+        top = self.infos[servo_id].max_speed
+        if speed > top * (1 + 1e-9):
+            raise ConfigurationError(
+                f"speed {speed:.3f} rad/s is above servo {servo_id}'s top speed {top:.3f} rad/s "
+                "(its Velocity Limit and no-load speed at the present voltage)")
+        units = max(1, round(speed / VELOCITY_UNIT_RAD_S))
+        return units, units * VELOCITY_UNIT_RAD_S
+
+    def _check_turn_limit(self, servo_id: int, goal_ticks: int) -> None:
+        turns = abs(goal_ticks - self.home_ticks[servo_id]) / TICKS_PER_TURN
+        if turns > self.max_turns + 1e-9:
+            raise TurnLimitError(
+                f"turning servo {servo_id} to {turns:.2f} turns from home would pass the "
+                f"software cable-wrap limit of {self.max_turns:g} turns; return home first "
+                "(begin_return) or raise max_turns if the cabling allows it.")
+
+    def _raise_alert(self, dxl_id: int) -> None:
+        status = self._read_item(dxl_id, "Hardware Error Status", allow_alert=True)
+        raise hardware_error_for(dxl_id, status)
+
+    def _transact(self, dxl_id: int, instruction: str, fn, *, allow_alert: bool = False,
+                  expect_len: int | None = None):
+        """Run ``fn() -> (data, result, error)`` with bounded retries; returns data."""
+        last = ""
+        attempts = self.retries + 1
+        for _ in range(attempts):
+            self.port.is_using = False
+            try:
+                data, result, error = fn()
+            except IndexError:  # the SDK's pitfall on short replies (hardware reference §4.5)
+                self.port.is_using = False
+                last = "the status packet was too short to decode"
+                self.retry_count += 1
+                continue
+            if result != COMM_SUCCESS:
+                self.port.is_using = False
+                last = self.ph.getTxRxResult(result)
+                self.retry_count += 1
+                continue
+            if error & 0x7F == _ERRNUM_CRC:  # the instruction was corrupted on the way: resend
+                last = self.ph.getRxPacketError(error & 0x7F)
+                self.retry_count += 1
+                continue
+            if error & _ALERT and not allow_alert:
+                self._raise_alert(dxl_id)
+            if error & 0x7F:
+                raise ServoStatusError(dxl_id, instruction, error,
+                                       self.ph.getRxPacketError(error & 0x7F))
+            if expect_len is not None and len(data) != expect_len:
+                last = f"the status carried {len(data)} bytes instead of {expect_len}"
+                self.retry_count += 1
+                continue
+            return data
+        raise ServoCommunicationError(dxl_id, instruction, last, attempts)
+
+    def _read_raw(self, dxl_id: int, address: int, length: int, instruction: str, *,
+                  allow_alert: bool = False) -> bytes:
+        data = self._transact(
+            dxl_id, instruction,
+            lambda: self.ph.readTxRx(self.port, dxl_id, address, length),
+            allow_alert=allow_alert, expect_len=length)
+        return bytes(data)
+
+    def _read_item(self, dxl_id: int, name: str, *, allow_alert: bool = False) -> int:
+        item = self._table(dxl_id)[name]
+        return item.from_bytes(self._read_raw(dxl_id, item.address, item.size, f"READ {name}",
+                                              allow_alert=allow_alert))
+
+    def _read_si(self, dxl_id: int, name: str) -> float:
+        item = self._table(dxl_id)[name]
+        return item.to_si(self._read_item(dxl_id, name))
+
+    def _write_item(self, dxl_id: int, name: str, raw: int, *, allow_alert: bool = False) -> None:
+        item = self._table(dxl_id)[name]
+        self._write_raw(dxl_id, item.address, item.to_bytes(raw), f"WRITE {name}={raw}",
+                        allow_alert=allow_alert)
+
+    def _write_block(self, dxl_id: int, first: str, values: list[tuple[str, int]]) -> None:
+        """Write consecutive items in one WRITE packet (atomic on the servo)."""
+        table = self._table(dxl_id)
+        data = b""
+        address = table[first].address
+        for name, raw in values:
+            item = table[name]
+            if item.address != address + len(data):
+                raise ValueError(f"{name} does not follow the previous item")
+            data += item.to_bytes(raw)
+        desc = "WRITE " + ", ".join(f"{n}={v}" for n, v in values)
+        self._write_raw(dxl_id, address, data, desc)
+
+    def _write_raw(self, dxl_id: int, address: int, data: bytes, instruction: str, *,
+                   allow_alert: bool = False) -> None:
+        def fn():
+            result, error = self.ph.writeTxRx(self.port, dxl_id, address, len(data), list(data))
+            return [], result, error
+
+        self._transact(dxl_id, instruction, fn, allow_alert=allow_alert)
+
+    def _sync_write(self, start: int, items: list[tuple[str, int]],
+                    ids: Sequence[int]) -> None:
+        """GroupSyncWrite of consecutive items from ``start`` to servos ``ids`` (no reply)."""
+        if not ids:
+            return
+        length = sum(self._table(ids[0])[n].size for n, _ in items)
+        group = GroupSyncWrite(self.port, self.ph, start, length)
+        for i in ids:
+            table = self._table(i)
+            data = b"".join(table[n].to_bytes(v) for n, v in items)
+            group.addParam(i, list(data))
+        self.port.is_using = False
+        result = group.txPacket()
+        self.port.is_using = False
+        if result != COMM_SUCCESS:
+            raise ServoCommunicationError(None, f"SYNC_WRITE at {start}",
+                                          self.ph.getTxRxResult(result), 1)

@@ -1,0 +1,235 @@
+"""Dynamixel Protocol 2.0 framing: CRC-16, byte stuffing, packets (hardware reference §4).
+
+Device-side code: it builds status packets and parses instruction packets from a byte stream.
+The host side is dynamixel-sdk itself; nothing here is shared with the driver.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+__all__ = [
+    "BROADCAST_ID",
+    "HEADER",
+    "INSTRUCTIONS",
+    "Instruction",
+    "InstructionParser",
+    "crc16",
+    "fast_status_packet",
+    "remove_stuffing",
+    "status_packet",
+    "stuff",
+]
+
+HEADER = b"\xff\xff\xfd\x00"
+BROADCAST_ID = 0xFE
+MAX_ID = 0xFC
+STATUS = 0x55
+
+#: Instruction codes (hardware reference §4.4).
+INSTRUCTIONS: dict[int, str] = {
+    0x01: "PING",
+    0x02: "READ",
+    0x03: "WRITE",
+    0x04: "REG_WRITE",
+    0x05: "ACTION",
+    0x06: "FACTORY_RESET",
+    0x08: "REBOOT",
+    0x10: "CLEAR",
+    0x82: "SYNC_READ",
+    0x83: "SYNC_WRITE",
+    0x8A: "FAST_SYNC_READ",
+    0x92: "BULK_READ",
+    0x93: "BULK_WRITE",
+    0x9A: "FAST_BULK_READ",
+}
+
+# Status error numbers (hardware reference §4.5).
+ERR_RESULT_FAIL = 1
+ERR_INSTRUCTION = 2
+ERR_CRC = 3
+ERR_DATA_RANGE = 4
+ERR_DATA_LENGTH = 5
+ERR_DATA_LIMIT = 6
+ERR_ACCESS = 7
+ERRBIT_ALERT = 0x80
+
+
+def _make_table() -> tuple[int, ...]:
+    table = []
+    for i in range(256):
+        crc = i << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x8005) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+        table.append(crc)
+    return tuple(table)
+
+
+_TABLE = _make_table()
+
+
+def crc16(data: bytes | bytearray, crc: int = 0) -> int:
+    """CRC-16 of Protocol 2.0: polynomial 0x8005, init 0, MSB first, no final XOR (§4.2).
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes from the first 0xFF of the header up to the byte before CRC_L, stuffing
+        included.
+    crc : int
+        A running CRC to continue (used by Fast Sync Read, §4.6).
+    """
+    for b in data:
+        crc = ((crc << 8) ^ _TABLE[((crc >> 8) ^ b) & 0xFF]) & 0xFFFF
+    return crc
+
+
+def stuff(body: bytes) -> bytes:
+    """Insert a 0xFD after every ``FF FF FD`` in ``body`` (instruction/status onwards, §4.3).
+
+    ``body`` starts at the INST byte; the two bytes before it (LEN_L, LEN_H) never complete a
+    header pattern with it, because the SDK and the e-manual scan from the instruction byte on.
+    """
+    out = bytearray()
+    for b in body:
+        out.append(b)
+        if b == 0xFD and len(out) >= 3 and out[-2] == 0xFF and out[-3] == 0xFF:
+            out.append(0xFD)
+    return bytes(out)
+
+
+def remove_stuffing(body: bytes) -> bytes:
+    """Undo :func:`stuff`: drop the extra 0xFD of every ``FF FF FD FD``."""
+    out = bytearray()
+    i = 0
+    n = len(body)
+    while i < n:
+        b = body[i]
+        out.append(b)
+        if b == 0xFD and len(out) >= 3 and out[-2] == 0xFF and out[-3] == 0xFF \
+                and i + 1 < n and body[i + 1] == 0xFD:
+            i += 1  # skip the stuffing byte
+        i += 1
+    return bytes(out)
+
+
+def _frame(dxl_id: int, body: bytes) -> bytes:
+    """Header + ID + LEN + stuffed body + CRC."""
+    stuffed = stuff(body)
+    length = len(stuffed) + 2
+    head = HEADER + bytes([dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF])
+    packet = head + stuffed
+    crc = crc16(packet)
+    return packet + bytes([crc & 0xFF, crc >> 8])
+
+
+def status_packet(dxl_id: int, error: int, params: bytes = b"") -> bytes:
+    """A (stuffed) status packet: ``FF FF FD 00 ID LEN 55 ERR PARAM… CRC`` (§4.1, §4.3)."""
+    return _frame(dxl_id, bytes([STATUS, error & 0xFF]) + bytes(params))
+
+
+def instruction_packet(dxl_id: int, instruction: int, params: bytes = b"") -> bytes:
+    """A (stuffed) instruction packet, for tests and tools that talk to the emulator directly."""
+    return _frame(dxl_id, bytes([instruction]) + bytes(params))
+
+
+def fast_status_packet(blocks: list[tuple[int, int, bytes]]) -> bytes:
+    """The single Fast Sync/Bulk Read status packet (§4.6): no stuffing, running inner CRCs.
+
+    Parameters
+    ----------
+    blocks : list of (error, id, data)
+        One block per servo, in the order of the instruction's parameters.
+    """
+    # LEN = INST + Σ(ERR + ID + DATA + CRC): the last block's CRC is the packet's CRC.
+    length = 1 + sum(len(d) + 4 for _, _, d in blocks)
+    packet = bytearray(HEADER + bytes([BROADCAST_ID, length & 0xFF, (length >> 8) & 0xFF, STATUS]))
+    for error, dxl_id, data in blocks:
+        packet += bytes([error & 0xFF, dxl_id & 0xFF]) + bytes(data)
+        crc = crc16(packet)
+        packet += bytes([crc & 0xFF, crc >> 8])
+    return bytes(packet)
+
+
+@dataclass(frozen=True)
+class Instruction:
+    """A parsed instruction packet.
+
+    Attributes
+    ----------
+    dxl_id : int
+        The target ID (0xFE for broadcast).
+    code : int
+        The instruction byte.
+    params : bytes
+        The parameters, stuffing removed.
+    crc_ok : bool
+        False if the CRC did not match (the device answers with a CRC error, §4.5).
+    """
+
+    dxl_id: int
+    code: int
+    params: bytes
+    crc_ok: bool = True
+
+    @property
+    def name(self) -> str:
+        """The instruction's name (``"READ"``), or its code in hex if unknown."""
+        return INSTRUCTIONS.get(self.code, f"0x{self.code:02X}")
+
+
+class InstructionParser:
+    """Incremental parser of instruction packets from a byte stream.
+
+    Bytes that do not form a packet are skipped, as a device does while it hunts for the next
+    header (``FF FF FD 00``). A packet whose CRC fails is still returned, marked ``crc_ok=False``.
+    """
+
+    #: The largest LEN a device accepts (dynamixel-sdk's TXPACKET_MAX_LEN is 1024).
+    MAX_LENGTH = 1024
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+
+    def reset(self) -> None:
+        """Forget any partial packet."""
+        self._buf.clear()
+
+    @property
+    def pending(self) -> int:
+        """Bytes held while waiting for the rest of a packet."""
+        return len(self._buf)
+
+    def feed(self, data: bytes) -> Iterator[Instruction]:
+        """Add ``data`` and yield every complete instruction packet it finishes."""
+        self._buf += data
+        buf = self._buf
+        while True:
+            start = buf.find(HEADER[:3])
+            if start < 0:
+                # keep a possible partial header at the end
+                keep = 2 if buf.endswith(b"\xff\xff") else (1 if buf.endswith(b"\xff") else 0)
+                del buf[: len(buf) - keep]
+                return
+            if start:
+                del buf[:start]
+            if len(buf) < 7:
+                return
+            if buf[3] != 0x00:  # FF FF FD FD is stuffing, not a header; reserved must be 0
+                del buf[:1]
+                continue
+            length = buf[5] | (buf[6] << 8)
+            if length < 3 or length > self.MAX_LENGTH:
+                del buf[:1]
+                continue
+            total = 7 + length
+            if len(buf) < total:
+                return
+            packet = bytes(buf[:total])
+            del buf[:total]
+            crc = packet[-2] | (packet[-1] << 8)
+            body = remove_stuffing(packet[7:-2])
+            if not body:
+                continue
+            yield Instruction(packet[4], body[0], body[1:], crc16(packet[:-2]) == crc)

@@ -1,0 +1,282 @@
+"""The jig's physics: a three-axis gimbal of servos carrying the sensor, as a motion source.
+
+A serial chain of servo joints from the base to the tip; the sensor is mounted on the last
+link with a small misalignment. With ``R_j(θ)`` the rotation of joint ``j`` about its axis
+``a_j`` (a unit vector in the frame of the link before it) and ``R_1..i`` the product of the
+first ``i`` joints' rotations, the sensor's orientation in the base frame is
+``R_sensor(t) = R_1..n(t) · M · S(t)`` (``M`` the mount misalignment, ``S`` a slip of the mount,
+identity until it happens) and its true angular rate in its own frame is
+
+    ω_sensor = R_sensor(t)ᵀ Σ_i R_1..i−1(t) a_i θ̇_i(t)   (+ the slip's own rate while it slips).
+
+With only servo ``i`` turning and the joints after it at home, ``ω_sensor = u_i θ̇_i`` with the
+constant axis ``u_i = (R_i+1..n M S)ᵀ a_i``: in the home pose ``u_i = Mᵀ a_i`` (:attr:`home_axes`),
+which is the truth a calibration test compares with.
+
+Joint angles and rates come from the servos' motor models (:meth:`EmulatedServo.true_motion`),
+whose angle is the exact integral of their rate, so the sensor's true rate and the encoders are
+consistent to the last bit. Everything is vectorised over the requested times.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+__all__ = ["GimbalJig", "Joint", "Slip", "rotation_matrices", "rotvec_to_matrix"]
+
+_NAMED_AXES = {
+    "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
+    "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0),
+}
+
+
+class Joint(Protocol):
+    """What the jig needs of a servo: its ID and its true shaft motion."""
+
+    @property
+    def dxl_id(self) -> int:
+        """The servo's ID."""
+        ...
+
+    def true_motion(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Shaft angle (rad) and rate (rad/s) at the times ``t``."""
+        ...
+
+
+def rotation_matrices(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotations by ``angle`` (N,) about the unit ``axis`` (3,), shape (N, 3, 3) (Rodrigues)."""
+    a = np.asarray(axis, dtype=float)
+    th = np.asarray(angle, dtype=float).reshape(-1)
+    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    kk = k @ k
+    s = np.sin(th)[:, None, None]
+    c = (1.0 - np.cos(th))[:, None, None]
+    return np.eye(3)[None] + s * k[None] + c * kk[None]
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    """The matrix ``K`` with ``K v = a × v``."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _rotate_back(v: np.ndarray, axis: np.ndarray, skew_t: np.ndarray,
+                 angle: np.ndarray) -> np.ndarray:
+    """``R(axis, angle)ᵀ v`` for each row of ``v`` (Rodrigues, rotation by ``-angle``);
+    ``skew_t`` is ``_skew(axis).T`` so that ``v @ skew_t`` is ``axis × v`` row by row."""
+    c = np.cos(angle)[:, None]
+    s = np.sin(angle)[:, None]
+    return v * c - (v @ skew_t) * s + np.outer(v @ axis, axis) * (1.0 - c)
+
+
+def rotvec_to_matrix(rotvec: Sequence[float] | np.ndarray) -> np.ndarray:
+    """The rotation matrix of a rotation vector (axis × angle in rad)."""
+    rv = np.asarray(rotvec, dtype=float).reshape(3)
+    angle = float(np.linalg.norm(rv))
+    if angle == 0.0:
+        return np.eye(3)
+    return rotation_matrices(rv / angle, np.array([angle]))[0]
+
+
+def _random_rotvec(rng: np.random.Generator, angle_rad: float) -> np.ndarray:
+    v = rng.standard_normal(3)
+    return v / np.linalg.norm(v) * angle_rad
+
+
+@dataclass(frozen=True)
+class Slip:
+    """A slip of the sensor's mount: it turns by ``rotvec`` (sensor frame, rad) between
+    ``t_start`` and ``t_start + duration_s`` at a constant rate (``duration_s`` 0 = a jump)."""
+
+    t_start: float
+    rotvec: np.ndarray
+    duration_s: float = 0.01
+
+    def progress(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fraction of the slip done at ``t`` and its time derivative."""
+        if self.duration_s <= 0:
+            return (t >= self.t_start).astype(float), np.zeros_like(t)
+        s = np.clip((t - self.t_start) / self.duration_s, 0.0, 1.0)
+        ds = np.where((t >= self.t_start) & (t < self.t_start + self.duration_s),
+                      1.0 / self.duration_s, 0.0)
+        return s, ds
+
+
+class GimbalJig:
+    """Servo joints carrying the sensor: a :class:`~drivers.emulated.motion.MotionSource`.
+
+    Parameters
+    ----------
+    joints : sequence of Joint
+        The servos from the base to the tip (normally :class:`EmulatedServo`).
+    axes : sequence or None
+        Each joint's nominal axis in the home pose, in the sensor's frame before the mount
+        misalignment: ``"x"``, ``"-y"``, … or a 3-vector. Default ``x, y, z`` in chain order
+        (servo IDs 1, 2, 3 turn about sensor x, y, z).
+    tilt_deg : float or sequence of 3-vectors
+        Small tilts of the joint axes off the nominal ones: a magnitude in degrees (each axis is
+        tilted that much in a random direction from ``seed``), or explicit rotation vectors
+        (rad) applied to each nominal axis.
+    mount : float or 3-vector
+        The sensor's mounting misalignment: a magnitude in degrees (random axis from ``seed``)
+        or a rotation vector in rad.
+    seed : int
+        Seed for the random tilts and mount.
+    home_time : float or None
+        The time whose joint angles define the home pose (joint angle 0); default the present
+        time of the first joint's clock (or 0 for joints without a clock).
+    """
+
+    def __init__(
+        self,
+        joints: Sequence[Joint],
+        *,
+        axes: Sequence[str | Sequence[float]] | None = None,
+        tilt_deg: float | Sequence[Sequence[float]] = 0.3,
+        mount: float | Sequence[float] = 3.0,
+        seed: int = 0,
+        home_time: float | None = None,
+    ) -> None:
+        self.joints = list(joints)
+        n = len(self.joints)
+        if n == 0:
+            raise ValueError("a jig needs at least one joint")
+        rng = np.random.default_rng([int(seed), 0x316])
+        if axes is None:
+            axes = ["x", "y", "z"][:n] if n <= 3 else None
+            if axes is None:
+                raise ValueError("give the axes of a jig with more than three joints")
+        if len(axes) != n:
+            raise ValueError(f"{n} joints need {n} axes, got {len(axes)}")
+        nominal = []
+        for spec in axes:
+            if isinstance(spec, str):
+                if spec not in _NAMED_AXES:
+                    raise ValueError(f"axis {spec!r} is not one of {sorted(_NAMED_AXES)}")
+                v = np.array(_NAMED_AXES[spec])
+            else:
+                v = np.asarray(spec, dtype=float).reshape(3)
+                norm = np.linalg.norm(v)
+                if not norm > 0:
+                    raise ValueError(f"axis {spec!r} must be a non-zero 3-vector")
+                v = v / norm
+            nominal.append(v)
+        if isinstance(tilt_deg, (int, float)):
+            tilts = [_random_rotvec(rng, np.deg2rad(float(tilt_deg))) for _ in range(n)]
+        else:
+            tilts = [np.asarray(t, dtype=float).reshape(3) for t in tilt_deg]
+            if len(tilts) != n:
+                raise ValueError(f"give one tilt rotation vector per joint ({n})")
+        self.axes = np.array([rotvec_to_matrix(tv) @ v for tv, v in zip(tilts, nominal,
+                                                                          strict=True)])
+        self.axes /= np.linalg.norm(self.axes, axis=1, keepdims=True)
+        self._skew_t = [_skew(a).T for a in self.axes]
+        if isinstance(mount, (int, float)):
+            self.mount_rotvec = _random_rotvec(rng, np.deg2rad(float(mount)))
+        else:
+            self.mount_rotvec = np.asarray(mount, dtype=float).reshape(3)
+        self.mount = rotvec_to_matrix(self.mount_rotvec)
+        self.slips: list[Slip] = []
+        t_home = home_time
+        if t_home is None:
+            clock = getattr(self.joints[0], "clock", None)
+            t_home = clock.monotonic() if clock is not None else 0.0
+        self.home_time = float(t_home)
+        self.home_angles = np.array(
+            [float(j.true_motion(np.array([self.home_time]))[0][0]) for j in self.joints])
+
+    # ---- truth ---------------------------------------------------------------------------
+    @property
+    def ids(self) -> list[int]:
+        """The joints' servo IDs, base to tip."""
+        return [j.dxl_id for j in self.joints]
+
+    @property
+    def home_axes(self) -> dict[int, np.ndarray]:
+        """Each servo's true rotation axis in the sensor frame in the home pose (before slips).
+
+        A positive turn of servo ``i`` alone, from the home pose, gives the true rate
+        ``home_axes[i] · θ̇_i``.
+        """
+        axes_sensor = self.axes @ self.mount  # rows: Mᵀ a_i
+        return {j.dxl_id: axes_sensor[i].copy() for i, j in enumerate(self.joints)}
+
+    def slip_at(self, t: float, rotvec: Sequence[float] | np.ndarray,
+                duration_s: float = 0.01) -> Slip:
+        """Fault knob: the mount slips at ``t`` by ``rotvec`` (sensor frame, rad) over
+        ``duration_s``. After it, every axis in the sensor frame is turned by ``-rotvec``."""
+        slip = Slip(float(t), np.asarray(rotvec, dtype=float).reshape(3), float(duration_s))
+        self.slips.append(slip)
+        self.slips.sort(key=lambda s: s.t_start)
+        return slip
+
+    def joint_angles(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint angles from home (rad) and rates (rad/s), each shape (N, n_joints)."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        th = np.empty((t.size, len(self.joints)))
+        rate = np.empty_like(th)
+        for i, j in enumerate(self.joints):
+            th[:, i], rate[:, i] = j.true_motion(t)
+        return th - self.home_angles, rate
+
+    def _chain(self, th: np.ndarray) -> list[np.ndarray]:
+        """Cumulative rotations R_1..i for i = 0..n (R_1..0 = I), each (N, 3, 3)."""
+        n_t = th.shape[0]
+        cum = [np.broadcast_to(np.eye(3), (n_t, 3, 3))]
+        for i in range(len(self.joints)):
+            cum.append(cum[-1] @ rotation_matrices(self.axes[i], th[:, i]))
+        return cum
+
+    def _slip_matrices(self, t: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, Slip]]:
+        out = []
+        for slip in self.slips:
+            s, ds = slip.progress(t)
+            angle = float(np.linalg.norm(slip.rotvec))
+            if angle == 0:
+                continue
+            out.append((rotation_matrices(slip.rotvec / angle, s * angle), ds, slip))
+        return out
+
+    def orientation(self, t: np.ndarray) -> np.ndarray:
+        """The sensor's orientation ``R_sensor(t)`` (sensor → base), shape (N, 3, 3)."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        th, _ = self.joint_angles(t)
+        r = self._chain(th)[-1] @ self.mount
+        for m, _, _ in self._slip_matrices(t):
+            r = r @ m
+        return r
+
+    def rate(self, t: np.ndarray) -> np.ndarray:
+        """True angular rate of the sensor in its own frame, rad/s, shape (len(t), 3)."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        if t.size == 0:
+            return np.zeros((0, 3))
+        th, dth = self.joint_angles(t)
+        # R_chainᵀ Σ_i R_1..i−1 a_i θ̇_i = Σ_i R_i+1..nᵀ a_i θ̇_i (R_iᵀ a_i = a_i), by the
+        # recursion u_i = R_iᵀ (u_i−1 + a_i θ̇_i): vector rotations only, no matrices.
+        w = np.zeros((t.size, 3))
+        for i in range(len(self.joints)):
+            a = self.axes[i]
+            w += np.outer(dth[:, i], a)
+            w = _rotate_back(w, a, self._skew_t[i], th[:, i])
+        w = w @ self.mount  # Mᵀ w for each row
+        for m, ds, slip in self._slip_matrices(t):
+            w = np.einsum("nji,nj->ni", m, w) + ds[:, None] * slip.rotvec[None, :]
+        return w
+
+    def joint_axes_sensor(self, t: np.ndarray) -> np.ndarray:
+        """Each joint's axis in the sensor frame at ``t``, shape (N, n_joints, 3)."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        th, _ = self.joint_angles(t)
+        cum = self._chain(th)
+        r_sensor = cum[-1] @ self.mount
+        for m, _, _ in self._slip_matrices(t):
+            r_sensor = r_sensor @ m
+        out = np.empty((t.size, len(self.joints), 3))
+        for i in range(len(self.joints)):
+            a_base = np.einsum("nij,j->ni", cum[i], self.axes[i])
+            out[:, i, :] = np.einsum("nji,nj->ni", r_sensor, a_base)
+        return out

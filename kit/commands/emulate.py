@@ -1,0 +1,98 @@
+"""``gyrocal emulate --pty``: emulated Dynamixel servos behind a pseudo-terminal.
+
+Any serial client (dynamixel-sdk, Dynamixel Wizard under Wine, ``gyrocal doctor --port``) can then
+talk to three emulated X-series servos as to a real U2D2. The first line printed on standard
+output is the device path (with ``--json``: one JSON object); the servos run until Ctrl-C,
+SIGTERM, or ``--duration`` seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+
+HELP = "serve emulated Dynamixel servos on a pseudo-terminal (for any serial client)"
+DESCRIPTION = __doc__
+
+
+def _ids(text: str) -> list[int]:
+    try:
+        ids = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"IDs must be integers separated by commas, got {text!r}") from None
+    if not ids or len(set(ids)) != len(ids) or any(not 0 <= i <= 252 for i in ids):
+        raise argparse.ArgumentTypeError(f"IDs must be distinct integers 0..252, got {text!r}")
+    return ids
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Register the subcommand's options."""
+    parser.add_argument("--pty", action="store_true",
+                        help="serve on a pseudo-terminal and print its device path (required: "
+                             "the only transport a separate process can reach)")
+    parser.add_argument("--ids", type=_ids, default=[1, 2, 3],
+                        help="servo IDs, comma-separated (default 1,2,3)")
+    parser.add_argument("--model", default="XM430-W350",
+                        help="servo model: XM430-W350 (default) or XL430-W250")
+    parser.add_argument("--baud", type=int, default=1_000_000,
+                        help="the servos' configured baud rate (a PTY ignores it, but clients "
+                             "must set one dynamixel-sdk accepts; default 1000000)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="stop after this many seconds (default: until Ctrl-C or SIGTERM)")
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object {device, ids, model, baud} instead of the path")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve until stopped; returns the exit code."""
+    from drivers.clock import SystemClock
+    from drivers.dynamixel.control_table import BAUD_RATES, model_by_name
+    from drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus
+    from kit.errors import InputError
+
+    if not args.pty:
+        raise InputError("gyrocal emulate needs --pty (the in-process emulator is used by "
+                         "'gyrocal calibrate --sim'; a separate process can only reach a PTY)")
+    try:
+        model = model_by_name(args.model)
+    except ValueError as exc:
+        raise InputError(str(exc)) from exc
+    if args.baud not in BAUD_RATES.values():
+        raise InputError(f"--baud must be one of {sorted(BAUD_RATES.values())}, got {args.baud}")
+    if args.duration is not None and not args.duration > 0:
+        raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
+    clock = SystemClock()
+    servos = [EmulatedServo(i, model, clock=clock, seed=args.seed * 1000 + k, baudrate=args.baud)
+              for k, i in enumerate(args.ids)]
+    bridge = PtyServoBridge(ServoBus(servos, clock))
+    path = bridge.start()
+    stop = threading.Event()
+    old = {}
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        old[sig] = signal.signal(sig, on_signal)
+    try:
+        if args.json:
+            print(json.dumps({"device": path, "ids": args.ids, "model": model.name,
+                              "baud": args.baud}), flush=True)
+        else:
+            print(path, flush=True)
+        print(f"gyrocal: {len(servos)} emulated {model.name} servo(s), IDs "
+              f"{','.join(map(str, args.ids))}, on {path}; stop with Ctrl-C", file=sys.stderr,
+              flush=True)
+        stop.wait(args.duration)
+        if bridge.error is not None:
+            raise bridge.error
+    finally:
+        bridge.stop()
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    return 0

@@ -1,0 +1,61 @@
+"""The pseudo-terminal transport: the driver by device path, and ``gyrocal emulate --pty``."""
+
+import json
+import math
+import signal
+import subprocess
+import sys
+
+import pytest
+from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler, PortHandler
+
+from drivers.clock import SystemClock
+from drivers.dynamixel import Gimbal
+from drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX pseudo-terminals")
+
+
+def test_the_driver_opens_a_device_path_and_turns_a_servo_in_real_time():
+    clock = SystemClock()
+    servos = [EmulatedServo(i, clock=clock, seed=i, baudrate=1_000_000) for i in (1, 2, 3)]
+    bus = ServoBus(servos, clock)
+    with PtyServoBridge(bus) as bridge:
+        with Gimbal(bridge.path, clock=clock, acceleration=30.0) as g:
+            assert [g.infos[i].model_number for i in (1, 2, 3)] == [1020] * 3
+            m = g.run_turn(3, 1, 4.5, -1)
+            assert m.finished
+            assert g.last_sample.angle(3) == pytest.approx(-2 * math.pi)
+            assert servos[2].register("Present Position") == g.home_ticks[3] - 4096
+        assert not any(s.torque_enabled() for s in servos)
+    assert bridge.error is None
+
+
+def test_gyrocal_emulate_pty_serves_the_sdk():
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "kit", "emulate", "--pty", "--json", "--ids", "4,5",
+         "--model", "XL430-W250", "--duration", "60"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        info = json.loads(proc.stdout.readline())
+        assert info["ids"] == [4, 5] and info["model"] == "XL430-W250"
+        port = PortHandler(info["device"])
+        assert port.openPort() and port.setBaudRate(1_000_000)
+        ph = PacketHandler(2.0)
+        assert ph.ping(port, 4) == (1060, COMM_SUCCESS, 0)
+        sr = GroupSyncRead(port, ph, 144, 3)
+        sr.addParam(4)
+        sr.addParam(5)
+        assert sr.txRxPacket() == COMM_SUCCESS
+        assert [sr.getData(i, 144, 2) for i in (4, 5)] == [120, 120]
+        port.closePort()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+
+
+def test_gyrocal_emulate_without_pty_is_a_usage_error():
+    proc = subprocess.run([sys.executable, "-m", "kit", "emulate"], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2 and "--pty" in proc.stderr
