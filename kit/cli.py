@@ -21,6 +21,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: (subcommand, module) in the order of ``gyrocal --help``.
 COMMANDS: tuple[tuple[str, str], ...] = (
+    ("init", "kit.commands.init"),
     ("estimate", "kit.commands.estimate"),
     ("simulate-recording", "kit.commands.simulate_recording"),
     ("study", "kit.commands.study"),

@@ -1,0 +1,28 @@
+"""``gyrocal init``: write a commented ``gyrocal.toml`` with every key at its default."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "write a commented gyrocal.toml to edit"
+DESCRIPTION = (
+    "Write a configuration file with every key, its default and what it means: the serial port "
+    "and servo IDs, which sensor axis each servo turns about, the IMU model, bus, address, range "
+    "and rate, and the protocol. Refuses to overwrite without --force."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Register the arguments."""
+    p.add_argument("path", nargs="?", default="gyrocal.toml", help="default: gyrocal.toml")
+    p.add_argument("--force", action="store_true", help="replace an existing file")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the command."""
+    from kit.config import template
+    from kit.fileio import atomic_write_text
+
+    atomic_write_text(args.path, template(), force=args.force)
+    print(f"wrote {args.path}; edit it, then run `gyrocal doctor --config {args.path}`")
+    return 0

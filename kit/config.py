@@ -1,0 +1,222 @@
+"""The ``gyrocal.toml`` configuration: the jig, the sensor, the protocol.
+
+Every key is declared once in :data:`SCHEMA` with its type, default, allowed values and help text;
+:func:`load_config` rejects unknown keys and bad values naming the key and what is allowed, and
+``gyrocal init`` writes :func:`template` (every key, commented). Command-line flags override the
+file through :func:`apply_overrides`.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from kit.errors import InputError
+
+__all__ = ["SCHEMA", "Config", "apply_overrides", "default_config", "load_config", "template"]
+
+
+@dataclass(frozen=True)
+class Key:
+    """One configuration key."""
+
+    default: Any
+    help: str
+    kind: type | tuple[type, ...]
+    choices: tuple[Any, ...] | None = None
+    check: Callable[[Any], str | None] | None = None
+
+
+def _positive(v: Any) -> str | None:
+    return None if v > 0 else "must be positive"
+
+
+def _axes(v: Any) -> str | None:
+    if not isinstance(v, list) or not all(isinstance(a, str) for a in v):
+        return "must be a list of axis names like [\"x\", \"y\", \"z\"] (a sign is allowed: \"-y\")"
+    bad = [a for a in v if a.lstrip("+-") not in ("x", "y", "z") or len(a) > 2]
+    if bad:
+        return f"has unknown axes {bad}; use x, y, z with an optional sign"
+    if sorted(a.lstrip("+-") for a in v) != ["x", "y", "z"][: len(v)] and len(v) == 3:
+        return "must name each of x, y and z once"
+    return None
+
+
+def _ids(v: Any) -> str | None:
+    if not isinstance(v, list) or not v or not all(isinstance(i, int) and not isinstance(i, bool)
+                                                   for i in v):
+        return "must be a non-empty list of integer servo IDs"
+    if len(set(v)) != len(v) or not all(0 <= i <= 252 for i in v):
+        return "must be distinct IDs in 0..252"
+    return None
+
+
+def _address(v: Any) -> str | None:
+    return None if 0x03 <= v <= 0x77 else "must be a 7-bit I2C address (0x03..0x77)"
+
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "gimbal": {
+        "port": Key("/dev/ttyUSB0", "serial device of the U2D2 (or any Dynamixel interface)", str),
+        "baud": Key(57600, "bus speed the servos are set to (factory: 57600)", int,
+                    (9600, 57600, 115200, 1000000, 2000000, 3000000, 4000000)),
+        "ids": Key([1, 2, 3], "servo IDs, base to tip", list, check=_ids),
+        "axes": Key(["x", "y", "z"],
+                    "sensor axis each servo turns about in the home pose, same order as ids",
+                    list, check=_axes),
+        "max_turns": Key(3.0, "software cable-wrap limit: turns from home, either way",
+                         (int, float), check=_positive),
+        "acceleration": Key(10.0, "profile acceleration of every turn, rad/s^2", (int, float),
+                            check=_positive),
+        "sample_hz": Key(200.0, "loop rate: IMU drains and servo sync reads per second",
+                         (int, float), check=_positive),
+    },
+    "imu": {
+        "model": Key("mpu9250", "sensor chip", str, ("mpu9250", "mpu9255", "mpu6500", "lsm9ds1")),
+        "bus": Key(1, "I2C bus number: /dev/i2c-N", int),
+        "address": Key(0x68, "7-bit I2C address (MPU-9250: 0x68/0x69; LSM9DS1 A/G: 0x6A/0x6B)",
+                       int, check=_address),
+        "range_dps": Key(500, "gyro full-scale range, degrees per second", int,
+                         (245, 250, 500, 1000, 2000)),
+        "odr_hz": Key(200.0, "gyro output data rate, Hz", (int, float), check=_positive),
+    },
+    "protocol": {
+        "name": Key("auto", "auto: planned for this servo and gyro; paper: 60 deg/s, one turn, "
+                    "3 s waits", str, ("auto", "paper")),
+        "time_budget_s": Key(30.0, "longest jig time the planner may use, s", (int, float),
+                             check=_positive),
+        "speed_dps": Key(0.0, "fixed turn speed, deg/s (0: planned)", (int, float)),
+        "turns": Key(0, "fixed whole turns per direction (0: planned)", int),
+        "rest_s": Key(0.0, "fixed rest before each turn, s (0: planned)", (int, float)),
+        "method": Key("paired-axis", "estimator", str,
+                      ("paired-axis", "iterative-ls", "levenberg-marquardt")),
+    },
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated configuration: ``sections[section][key]``, plus where it came from."""
+
+    sections: dict[str, dict[str, Any]]
+    source: str
+
+    def __getitem__(self, section: str) -> dict[str, Any]:
+        return self.sections[section]
+
+    def axis_of(self) -> dict[int, str]:
+        """``{servo id: signed sensor axis}`` from gimbal.ids and gimbal.axes."""
+        return dict(zip(self["gimbal"]["ids"], self["gimbal"]["axes"], strict=True))
+
+
+def default_config() -> Config:
+    """Every key at its default."""
+    return Config({s: {k: key.default for k, key in keys.items()} for s, keys in SCHEMA.items()},
+                  "defaults")
+
+
+def _validate(section: str, name: str, value: Any) -> Any:
+    key = SCHEMA[section][name]
+    kinds = key.kind if isinstance(key.kind, tuple) else (key.kind,)
+    ok = isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
+    if not ok:
+        want = " or ".join(k.__name__ for k in kinds)
+        raise InputError(f"config key {section}.{name} must be {want}, got {value!r}")
+    if key.choices is not None and value not in key.choices:
+        allowed = ", ".join(repr(c) for c in key.choices)
+        raise InputError(f"config key {section}.{name} is {value!r}; allowed: {allowed}")
+    if key.check is not None:
+        problem = key.check(value)
+        if problem:
+            raise InputError(f"config key {section}.{name} {problem} (got {value!r})")
+    return value
+
+
+def _merge(base: Config, data: Mapping[str, Any], source: str) -> Config:
+    sections = {s: dict(v) for s, v in base.sections.items()}
+    for section, values in data.items():
+        if section not in SCHEMA:
+            raise InputError(
+                f"{source}: unknown section [{section}]; allowed: {', '.join(SCHEMA)}"
+            )
+        if not isinstance(values, Mapping):
+            raise InputError(f"{source}: [{section}] must be a table of keys")
+        for name, value in values.items():
+            if name not in SCHEMA[section]:
+                raise InputError(
+                    f"{source}: unknown key {section}.{name}; allowed in [{section}]: "
+                    f"{', '.join(SCHEMA[section])}"
+                )
+            sections[section][name] = _validate(section, name, value)
+    cfg = Config(sections, source)
+    g = cfg["gimbal"]
+    if len(g["ids"]) != len(g["axes"]):
+        raise InputError(
+            f"{source}: gimbal.ids has {len(g['ids'])} servos but gimbal.axes names "
+            f"{len(g['axes'])} axes; give one axis per servo"
+        )
+    return cfg
+
+
+def load_config(path: str | os.PathLike[str] | None) -> Config:
+    """Read ``path`` (TOML) over the defaults; None gives the defaults.
+
+    Raises
+    ------
+    InputError
+        If the file is missing or not TOML, or a section, key or value is not allowed.
+    """
+    if path is None:
+        return default_config()
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"config file {p} not found; `gyrocal init` writes one") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{p} is not valid TOML: {exc}") from None
+    return _merge(default_config(), data, str(p))
+
+
+def apply_overrides(cfg: Config, overrides: Mapping[str, Any]) -> Config:
+    """``cfg`` with ``{"section.key": value}`` overrides (from flags; None values are skipped)."""
+    data: dict[str, dict[str, Any]] = {}
+    for dotted, value in overrides.items():
+        if value is None:
+            continue
+        section, name = dotted.split(".", 1)
+        data.setdefault(section, {})[name] = value
+    return _merge(cfg, data, f"{cfg.source} + command line")
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)
+
+
+def template() -> str:
+    """A commented ``gyrocal.toml`` with every key at its default."""
+    lines = [
+        "# gyrocal configuration. Every key is optional; shown here at its default.",
+        "# Command-line flags override these values. See hardware_docs/running.md.",
+    ]
+    for section, keys in SCHEMA.items():
+        lines += ["", f"[{section}]"]
+        for name, key in keys.items():
+            lines.append(f"# {key.help}")
+            if key.choices is not None:
+                lines.append(f"# allowed: {', '.join(_toml_value(c) for c in key.choices)}")
+            value = _toml_value(key.default)
+            if name == "address":
+                value = hex(key.default)
+            lines.append(f"{name} = {value}")
+    return "\n".join(lines) + "\n"
