@@ -263,6 +263,10 @@ class ImuReader(ABC):
     """
 
     family: ClassVar[ChipFamily]
+    #: After an overflow the FIFO holds the oldest samples (stop when full), which continue the
+    #: stream and are delivered; otherwise it holds the newest, whose sample numbers cannot be
+    #: known exactly, and they are dropped with the gap.
+    overflow_keeps_oldest: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -273,10 +277,10 @@ class ImuReader(ABC):
         retries: int = 3,
         retry_delay_s: float = 0.002,
         saturation_fraction: float = 0.98,
-        stuck_after_s: float | None = 2.0,
+        stuck_after_s: float | None = 1.0,
         stuck_min_samples: int = 200,
         discard_first: bool = True,
-        clock_fit_window_s: float = 30.0,
+        clock_fit_window_s: float = 5.0,
     ) -> None:
         if address is None:
             address = self.family.addresses[0]
@@ -590,16 +594,25 @@ class ImuReader(ABC):
     # -- streaming ----------------------------------------------------------------------------
 
     @abstractmethod
-    def _enable_fifo(self) -> tuple[float, float]:
-        """Reset and enable the FIFO; return the host-time bracket of the enabling write."""
+    def _fifo_prepare(self) -> None:
+        """Stop and empty the FIFO and set what it collects, short of enabling it."""
+
+    @abstractmethod
+    def _fifo_go(self) -> None:
+        """The single register write that starts FIFO collection."""
 
     @abstractmethod
     def _disable_fifo(self) -> None:
         """Stop the FIFO."""
 
     @abstractmethod
-    def _fifo_level(self) -> tuple[int, bool]:
-        """Read the FIFO level: (whole samples available, overflowed or full)."""
+    def _fifo_level(self) -> tuple[int, bool, float]:
+        """Read the FIFO level: (whole samples available, overflow flagged, clock time just
+        after the transfer that latched the level)."""
+
+    @abstractmethod
+    def _overflowed(self) -> bool:
+        """Whether the chip reports a lost sample now (asked after each burst)."""
 
     @abstractmethod
     def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -629,8 +642,10 @@ class ImuReader(ABC):
         self._last_t = -math.inf
         self._run_value = np.zeros(3, dtype=np.int32)  # last counts of each axis
         self._run_length = np.zeros(3, dtype=np.int64)  # how many samples they have lasted
-        t_b, t_a = self._enable_fifo()
-        self._sclock.observe(t_b, t_a, 0)
+        self._fifo_prepare()
+        t_b = self._clock.monotonic()
+        self._fifo_go()
+        self._sclock.observe(t_b, self._clock.monotonic(), 0)
         self._streaming = True
 
     @property
@@ -659,54 +674,75 @@ class ImuReader(ABC):
         """
         if not self._streaming:
             raise ImuStateError("the reader is not streaming: call configure() and start() first")
-        clock = self._clock
-        t_b = clock.monotonic()
-        n, overflow = self._fifo_level()
-        t_a = clock.monotonic()
-        if not overflow:
-            self._sclock.observe(t_b, t_a, self._next_index + n)
-        gaps: list[FifoGap] = []
+        t_b = self._clock.monotonic()
+        n, overflow, t_a = self._fifo_level()
+        if overflow and not self.overflow_keeps_oldest:
+            return ImuBatch.empty((self._restart(self._next_index, "fifo overflow"),))
         gyro = np.empty((0, 3), dtype=np.int16)
         temp: np.ndarray | None = None
         if n:
             try:
                 gyro, temp = self._fifo_read(n)
             except OSError as e:
-                gaps.append(
-                    self._restart(
-                        self._next_index,
-                        f"bus error during FIFO read ([Errno {e.errno}] "
-                        f"{os.strerror(e.errno or 0)}); FIFO restarted",
-                    )
-                )
-                return ImuBatch.empty(tuple(gaps))
-        first = self._next_index
-        self._next_index += n
-        if overflow:
-            gaps.append(self._restart(self._next_index, "fifo overflow"))
+                reason = (f"bus error during FIFO read ([Errno {e.errno}] "
+                          f"{os.strerror(e.errno or 0)}); FIFO restarted")
+                return ImuBatch.empty((self._restart(self._next_index, reason),))
+            # A sample can be lost while the burst runs, too: ask the chip again.
+            late = self._overflowed()
+            if late and not self.overflow_keeps_oldest:
+                # the oldest unread slot was overwritten before the burst reached it, so the
+                # slots just read do not follow the last batch: drop them with the gap
+                return ImuBatch.empty((self._restart(self._next_index, "fifo overflow"),))
+            overflow = overflow or late
+        if not overflow:
+            self._sclock.observe(t_b, t_a, self._next_index + n)
         if temp is None:
             temp = np.full(n, self._temperature_counts() if n else 0, dtype=np.float64)
-        index = np.arange(first, first + n, dtype=np.int64)
+        index = np.arange(self._next_index, self._next_index + n, dtype=np.int64)
+        self._next_index += n
         if self._discard_pending and n:
             gyro, temp, index = gyro[1:], temp[1:], index[1:]
             self._discard_pending = False
-        return self._make_batch(index, gyro, temp, tuple(gaps))
+        gaps: tuple[FifoGap, ...] = ()
+        if overflow:
+            # a full FIFO that keeps its oldest samples drops only newer ones: the samples
+            # just read follow the last batch, and the loss comes after them
+            gaps = (self._restart(self._next_index, "fifo overflow"),)
+        return self._make_batch(index, gyro, temp, gaps)
 
     def _restart(self, first_lost: int, reason: str) -> FifoGap:
-        """Restart the FIFO after data were lost; return the gap report."""
-        t_b, t_a = self._enable_fifo()
-        produced = max(self._sclock.count_at(0.5 * (t_b + t_a)), first_lost)
+        """Restart the FIFO after data were lost and report the gap.
+
+        The chip keeps sampling on its own grid while its FIFO is reset, so the first sample
+        collected after the restart is the first grid point after the enabling write. The write
+        is timed just after a predicted sample instant, so that the number of samples produced
+        by then is known exactly from the fitted grid rather than guessed to within one; a write
+        that still straddles a sample instant is done again.
+        """
+        clock, sc = self._clock, self._sclock
+        margin = 0.25 * sc.period_s
+        for _ in range(3):
+            self._fifo_prepare()
+            now = clock.monotonic()
+            next_tick = float(sc.time_of(sc.count_at(now)))
+            clock.sleep(max(0.0, next_tick + margin - now))
+            t_b = clock.monotonic()
+            self._fifo_go()
+            t_a = clock.monotonic()
+            if sc.count_at(t_b - margin) == sc.count_at(t_a + margin):
+                break
+        produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
         lost = produced - first_lost
         if self.discard_first:
             self._discard_pending = True
             lost += 1  # the first sample after the restart is dropped too
-        times = self._sclock.time_of(np.array([first_lost, first_lost + max(lost, 1) - 1]))
+        return self._gap(first_lost, lost, reason)
+
+    def _gap(self, first: int, samples: int, reason: str) -> FifoGap:
+        times = self._sclock.time_of(np.array([first, first + max(samples, 1) - 1]))
         return FifoGap(
-            t=float(times[0]),
-            t_end=float(times[1]),
-            samples=lost,
-            first_index=first_lost,
+            t=float(times[0]), t_end=float(times[1]), samples=samples, first_index=first,
             reason=reason,
         )
 

@@ -5,15 +5,17 @@ WHO_AM_I again; CTRL_REG8 = BDU | IF_ADD_INC (little-endian output); FIFO off; g
 (CTRL_REG4); no high-pass (CTRL_REG3_G = 0); CTRL_REG1_G = ODR_G | FS_G | BW_G; wait for start-up.
 With the gyro on, the accelerometer runs at the gyro's rate and shares each FIFO slot (§2.3).
 
-Streaming (§2.7): CTRL_REG9.FIFO_EN and FIFO_CTRL.FMODE = FIFO (stop when full, 32 slots: 34 ms
-at 952 Hz). ``read()`` reads FIFO_SRC (FSS unread slots, OVRN), then pops the slots through the
-output registers. By default one burst of 12·N bytes from OUT_X_L_G (0x18) reads N whole slots,
-gyro then accelerometer, because the chip jumps from 0x1D to 0x28 and from 0x2D back to 0x18
-while the gyro is on (ST §3.3, ⚠ one source); a slot leaves the FIFO when its last accelerometer
-byte (0x2D) is read. With ``burst_wrap=False`` each slot is read as 6 bytes at 0x18 and 6 at 0x28,
-the portable way. OUT_TEMP is read once per drain (12 bits, 16 LSB/°C, 0 at 25 °C; §2.5).
-A full FIFO is an overflow: its slots are delivered, the FIFO is restarted through bypass mode,
-and the lost samples are reported as a gap.
+Streaming (§2.7): CTRL_REG9.FIFO_EN and FIFO_CTRL.FMODE = continuous (32 slots, 34 ms at
+952 Hz; when full the oldest slot is overwritten and FIFO_SRC.OVRN is set). ``read()`` reads
+FIFO_SRC (FSS unread slots, OVRN), then pops the slots through the output registers. By default
+one burst of 12·N bytes from OUT_X_L_G (0x18) reads N whole slots, gyro then accelerometer,
+because the chip jumps from 0x1D to 0x28 and from 0x2D back to 0x18 while the gyro is on (ST §3.3,
+⚠ one source); a slot leaves the FIFO when its last accelerometer byte (0x2D) is read. With
+``burst_wrap=False`` each slot is read as 6 bytes at 0x18 and 6 at 0x28, the portable way.
+OUT_TEMP is read once per drain (12 bits, 16 LSB/°C, 0 at 25 °C; §2.5). After an overrun the FIFO
+holds the newest 32 slots, whose sample numbers cannot be known exactly: they are dropped, the
+FIFO is restarted, and everything lost is reported as one gap. FIFO_SRC is read again after each
+burst, because a slot overwritten while the burst runs breaks the sequence the same way.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class LSM9DS1Reader(ImuReader):
     """
 
     family = LSM9DS1
+    overflow_keeps_oldest = False  # continuous mode overwrites the oldest slots
 
     def __init__(
         self, bus: Any, address: int | None = None, *, burst_wrap: bool = True, **kwargs: Any
@@ -102,12 +105,12 @@ class LSM9DS1Reader(ImuReader):
         self._verify(R.CTRL_REG1_G, ctrl1)
         self._clock.sleep(self.family.startup_time_s)
 
-    def _enable_fifo(self) -> tuple[float, float]:
+    def _fifo_prepare(self) -> None:
         self._write_byte(R.CTRL_REG9, B.CTRL_REG9_FIFO_EN)
         self._write_byte(R.FIFO_CTRL, B.FMODE_BYPASS << B.FMODE_SHIFT)  # empties the FIFO
-        t_b = self._clock.monotonic()
-        self._write_byte(R.FIFO_CTRL, B.FMODE_FIFO << B.FMODE_SHIFT)
-        return t_b, self._clock.monotonic()
+
+    def _fifo_go(self) -> None:
+        self._write_byte(R.FIFO_CTRL, B.FMODE_CONTINUOUS << B.FMODE_SHIFT)
 
     def _disable_fifo(self) -> None:
         self._write_byte(R.FIFO_CTRL, 0x00)
@@ -116,10 +119,12 @@ class LSM9DS1Reader(ImuReader):
     def _power_down(self) -> None:
         self._write_byte(R.CTRL_REG1_G, 0x00)
 
-    def _fifo_level(self) -> tuple[int, bool]:
+    def _fifo_level(self) -> tuple[int, bool, float]:
         src = self._read_byte(R.FIFO_SRC)
-        n = src & B.FIFO_SRC_FSS_MASK
-        return n, bool(src & B.FIFO_SRC_OVRN) or n >= self.family.fifo_capacity
+        return src & B.FIFO_SRC_FSS_MASK, bool(src & B.FIFO_SRC_OVRN), self._clock.monotonic()
+
+    def _overflowed(self) -> bool:
+        return bool(self._read_byte(R.FIFO_SRC) & B.FIFO_SRC_OVRN)
 
     def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
         if self.burst_wrap:

@@ -7,9 +7,10 @@ GYRO_CONFIG (FS_SEL, FCHOICE_B = 00); wait for the gyro to start.
 
 Streaming (§1.7): FIFO_EN = TEMP | GYRO_XYZ gives 8-byte big-endian frames ``TEMP GX GY GZ``
 (64 frames in the 512-byte FIFO: 64 ms at 1 kHz). ``read()`` latches FIFO_COUNT (2 bytes from
-FIFO_COUNTH) and pops the whole frames from the FIFO_R_W data port in one ``i2c_rdwr`` burst, or
-in 32-byte block reads on a bus without it. A full FIFO is treated as an overflow: the frames are
-delivered, the FIFO is reset (the kernel's policy) and the lost samples are reported as a gap.
+FIFO_COUNTH), pops the whole frames from the FIFO_R_W data port in one ``i2c_rdwr`` burst (or in
+32-byte block reads on a bus without it), then reads INT_STATUS. With FIFO_MODE = 1 a full FIFO
+drops only newer samples, so if FIFO_OFLOW_INT is set the frames just read are still delivered;
+the FIFO is then reset (as the kernel does) and the lost samples are reported as a gap.
 """
 
 from __future__ import annotations
@@ -117,13 +118,14 @@ class MPU9250Reader(ImuReader):
         gyro = B.FIFO_EN_GYRO_X | B.FIFO_EN_GYRO_Y | B.FIFO_EN_GYRO_Z
         return gyro | (B.FIFO_EN_TEMP if self.temperature_in_fifo else 0)
 
-    def _enable_fifo(self) -> tuple[float, float]:
-        # the kernel's order (§1.7): reset, choose sources, enable
+    def _fifo_prepare(self) -> None:
+        # the kernel's order (§1.7): reset, choose sources, then enable (in _fifo_go)
         self._write_byte(R.USER_CTRL, B.USER_CTRL_FIFO_RST)
         self._write_byte(R.FIFO_EN, self._fifo_sources())
-        t_b = self._clock.monotonic()
+        self._read_byte(R.INT_STATUS)  # clears a FIFO_OFLOW_INT left from before
+
+    def _fifo_go(self) -> None:
         self._write_byte(R.USER_CTRL, B.USER_CTRL_FIFO_EN)
-        return t_b, self._clock.monotonic()
 
     def _disable_fifo(self) -> None:
         self._write_byte(R.FIFO_EN, 0x00)
@@ -132,10 +134,13 @@ class MPU9250Reader(ImuReader):
     def _power_down(self) -> None:
         self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_SLEEP | B.PWR_MGMT_1_CLKSEL_AUTO)
 
-    def _fifo_level(self) -> tuple[int, bool]:
+    def _fifo_level(self) -> tuple[int, bool, float]:
         hi, lo = self._read_block(R.FIFO_COUNTH, 2)  # reading COUNTH latches both bytes
-        count = ((hi & 0x1F) << 8) | lo
-        return count // self._frame, count + self._frame > self.family.fifo_capacity
+        # FIFO_OFLOW_INT is asked after the burst (_overflowed), which also covers this drain
+        return (((hi & 0x1F) << 8) | lo) // self._frame, False, self._clock.monotonic()
+
+    def _overflowed(self) -> bool:
+        return bool(self._read_byte(R.INT_STATUS) & B.INT_STATUS_FIFO_OFLOW)  # clears it
 
     def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
         chunk = (BLOCK_MAX // self._frame) * self._frame

@@ -50,7 +50,7 @@ class SampleClock:
         self,
         nominal_period_s: float,
         *,
-        window_s: float = 30.0,
+        window_s: float = 5.0,
         period_tolerance: float = 0.02,
     ) -> None:
         if not (nominal_period_s > 0 and math.isfinite(nominal_period_s)):
@@ -122,4 +122,4 @@ class SampleClock:
     def count_at(self, t: float) -> int:
         """How many samples the chip had produced by host time ``t`` (samples with ``t_k <= t``)."""
         t0 = float(self.time_of(0))
-        return max(0, math.floor((t - t0) / self._p) + 1)
+        return max(0, math.floor((t - t0) / self._p + 1e-9) + 1)  # 1e-9: t == t_k counts k
