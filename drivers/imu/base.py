@@ -253,7 +253,8 @@ class ImuReader(ABC):
     stuck_after_s : float or None
         An axis whose raw counts stay exactly constant (and not saturated) for this long, and
         for at least ``stuck_min_samples`` samples, raises :class:`SensorFaultError`. A live
-        gyro's noise always moves its low bits. ``None`` disables the check.
+        gyro's noise always moves its low bits. The samples read before the run reached that
+        length have been delivered already. ``None`` disables the check.
     stuck_min_samples : int
         See ``stuck_after_s``.
     discard_first : bool
@@ -312,6 +313,7 @@ class ImuReader(ABC):
         self._streaming = False
         self._closed = False
         self.notice: str | None = None
+        self.samples_delivered = self.samples_lost = self.gap_count = 0  # counted from start()
         try:
             self.chip: ChipModel = self._identify()
         except BaseException:
@@ -637,6 +639,7 @@ class ImuReader(ABC):
         if self._streaming:
             return
         self._sclock = SampleClock(1.0 / self._info.odr_hz, window_s=self.clock_fit_window_s)
+        self.samples_delivered = self.samples_lost = self.gap_count = 0
         self._next_index = 0
         self._discard_pending = self.discard_first
         self._last_t = -math.inf
@@ -740,6 +743,8 @@ class ImuReader(ABC):
         return self._gap(first_lost, lost, reason)
 
     def _gap(self, first: int, samples: int, reason: str) -> FifoGap:
+        self.samples_lost += samples
+        self.gap_count += 1
         times = self._sclock.time_of(np.array([first, first + max(samples, 1) - 1]))
         return FifoGap(
             t=float(times[0]), t_end=float(times[1]), samples=samples, first_index=first,
@@ -761,6 +766,7 @@ class ImuReader(ABC):
         if t[0] <= self._last_t:  # a refit moved the line back a hair: keep time increasing
             t = np.maximum(t, self._last_t + 0.5 * self._sclock.period_s)
         self._last_t = float(t[-1])
+        self.samples_delivered += index.size
         return ImuBatch(
             t=t,
             rate=rate,

@@ -323,6 +323,8 @@ def test_a_fifo_overflow_is_a_gap_of_the_right_size_and_time(model):
     assert abs(gap.samples - lost) <= 1
     assert gap.t == pytest.approx(float(chip.sample_time(ks[missing[0]] + 1)), abs=1.5 / odr)
     assert gap.samples == pytest.approx(0.25 * odr, rel=0.5)
+    assert (reader.gap_count, reader.samples_lost) == (1, gap.samples)
+    assert reader.samples_delivered == len(ks)
 
 
 @pytest.mark.parametrize("model", SETUPS)
