@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import errno
 import math
+from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -224,7 +225,7 @@ class _Sample:
     temp: int = 0
 
 
-class _EmulatedImu:
+class _EmulatedImu(ABC):
     """Shared machinery: register pointer, fault knobs, the sample clock and sample generation."""
 
     family: ChipFamily
@@ -296,37 +297,43 @@ class _EmulatedImu:
     def _read_fast(self, length: int) -> bytes | None:
         return None
 
+    @abstractmethod
     def _power_on_reset(self) -> None:
-        raise NotImplementedError
+        """Restore the reset values (power-on and software reset)."""
 
+    @abstractmethod
     def _read_register(self, register: int) -> int:
-        raise NotImplementedError
+        """One register byte as the host reads it (with read side effects)."""
 
+    @abstractmethod
     def _write_register(self, register: int, value: int) -> None:
-        raise NotImplementedError
+        """Write one register (with its side effects)."""
 
+    @abstractmethod
     def _odr_hz(self) -> float | None:
         """The configured output data rate, or ``None`` when the gyro is off."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _sensitivity_rad_s_per_lsb(self) -> float:
-        raise NotImplementedError
+        """The configured gyro sensitivity."""
 
+    @abstractmethod
     def _accel_counts_1g(self) -> int:
-        raise NotImplementedError
+        """Accelerometer counts of 1 g at the configured range."""
 
+    @abstractmethod
     def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        """Temperature register counts for temperatures in °C."""
 
+    @abstractmethod
     def _head_tail(self, n: int) -> tuple[int, int]:
         """How many of ``n`` new samples the FIFO needs from the front and from the back."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
                 skipped: int) -> None:
         """Push generated samples: the first ``head`` rows, then ``skipped`` samples that were
         not generated (they can only be dropped or overwritten), then the rest."""
-        raise NotImplementedError
 
     # -- the sample clock -----------------------------------------------------------------------
 
@@ -395,7 +402,7 @@ class _EmulatedImu:
         accel = np.zeros_like(gyro)
         accel[:, 2] = self._accel_counts_1g()
         temp = self._temperature_counts(temperature)
-        self._ingest(gyro, accel, temp, head if skipped else len(ks), skipped)
+        self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
         self.samples_generated += len(ks)
