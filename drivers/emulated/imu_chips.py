@@ -230,6 +230,7 @@ class _EmulatedImu(ABC):
 
     family: ChipFamily
     default_who_am_i: int
+    temperature_count_limits: tuple[int, int] = (-32768, 32767)
 
     def __init__(
         self,
@@ -321,9 +322,11 @@ class _EmulatedImu(ABC):
     def _accel_counts_1g(self) -> int:
         """Accelerometer counts of 1 g at the configured range."""
 
-    @abstractmethod
     def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
-        """Temperature register counts for temperatures in °C."""
+        """Temperature register counts for temperatures in °C (§1.6, §2.5)."""
+        fam = self.family
+        counts = np.rint((temperature_c - fam.temperature_offset_c) * fam.temperature_lsb_per_c)
+        return np.clip(counts, *self.temperature_count_limits).astype(np.int64)
 
     @abstractmethod
     def _head_tail(self, n: int) -> tuple[int, int]:
@@ -507,11 +510,6 @@ class EmulatedMPU9250(_EmulatedImu):
         fs = (self._regs[_MR.ACCEL_CONFIG] >> _MB.ACCEL_FS_SHIFT) & 0x03
         return int(self.family.extra["accel_lsb_per_g_2g"]) >> fs
 
-    def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
-        fam = self.family
-        counts = np.rint((temperature_c - fam.temperature_offset_c) * fam.temperature_lsb_per_c)
-        return np.clip(counts, -32768, 32767).astype(np.int64)
-
     # FIFO ------------------------------------------------------------------------------------
 
     def _fifo_on(self) -> bool:
@@ -675,6 +673,7 @@ class EmulatedLSM9DS1(_EmulatedImu):
 
     family = LSM9DS1
     default_who_am_i = 0x68
+    temperature_count_limits = (-2048, 2047)  # 12 bits, sign-extended
 
     def _power_on_reset(self) -> None:
         self._regs = bytearray(128)
@@ -727,11 +726,6 @@ class EmulatedLSM9DS1(_EmulatedImu):
     def _accel_counts_1g(self) -> int:
         fs = (self._regs[_LR.CTRL_REG6_XL] >> _LB.FS_XL_SHIFT) & 0x03
         return round(1000.0 / _LSM_ACCEL_MG_PER_LSB[fs])
-
-    def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
-        fam = self.family
-        counts = np.rint((temperature_c - fam.temperature_offset_c) * fam.temperature_lsb_per_c)
-        return np.clip(counts, -2048, 2047).astype(np.int64)
 
     def _word(self, value: int) -> bytes:
         order = "big" if self._regs[_LR.CTRL_REG8] & _LB.CTRL_REG8_BLE else "little"
