@@ -358,7 +358,7 @@ LSM9DS1 = ChipFamily(
             0xD4: "an LSM9DS0 gyroscope or an L3GD20 (WHO_AM_I 0xD4), an older ST part with a "
             "different register map; gyrocal does not drive it",
             0x69: "an LSM6DS3 (WHO_AM_I 0x69); gyrocal does not drive it",
-            0x6A: "an LSM6DSL (WHO_AM_I 0x6A); gyrocal does not drive it",
+            0x6A: "an LSM6DSL or LSM6DS3C (WHO_AM_I 0x6A); gyrocal does not drive it",
             0x6C: "an LSM6DSO (WHO_AM_I 0x6C); gyrocal does not drive it",
         }
     ),
