@@ -1,0 +1,913 @@
+"""Register-level emulated MPU-9250 and LSM9DS1 (accelerometer/gyroscope die) for an
+:class:`~drivers.emulated.smbus.EmulatedSMBus`.
+
+Each chip keeps a register file with the reset values of the hardware reference (§1.9, §2.8),
+answers WHO_AM_I, takes the configuration registers the readers write, and samples its gyro on its
+own clock: sample ``k`` of a configuration is taken at ``t0 + k / (odr · (1 + clock_ppm·1e-6))`` on
+the shared clock, where ``t0`` is when the rate was last set. Whenever the bus touches the chip at
+time ``T`` it generates every sample with time ``≤ T`` in one vectorised step: it asks the
+:class:`~drivers.emulated.motion.MotionSource` for the true rate at those times (in order, never
+later than ``T``, as its contract requires), turns the rates into readings through
+:class:`SensorTruth`, quantizes and clips them to the configured range, and pushes them into the
+FIFO with the chip's FIFO semantics (size, overflow flag, stop-when-full or overwrite; §1.7,
+§2.7). The accelerometer reads a constant 1 g along +z (a motion source gives rates only).
+
+:class:`ChipFaults` holds the fault knobs: NACKs at random or in bursts, a chip that stops
+answering, a smaller FIFO (to provoke overflows), a wrong WHO_AM_I and a stuck axis.
+"""
+
+from __future__ import annotations
+
+import errno
+import math
+from abc import ABC, abstractmethod
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drivers.clock import Clock
+from drivers.emulated.motion import ConstantRate, MotionSource
+from drivers.emulated.smbus import EmulatedSMBus
+from drivers.imu.chips import (
+    LSM9DS1,
+    LSM9DS1_BITS,
+    LSM9DS1_ODR,
+    LSM9DS1_REG,
+    MPU9250,
+    MPU9250_BITS,
+    MPU9250_REG,
+    RAD_PER_DEG,
+    ChipFamily,
+)
+
+__all__ = [
+    "ChipFaults",
+    "EmulatedLSM9DS1",
+    "EmulatedMPU9250",
+    "SensorTruth",
+    "make_emulated_imu",
+]
+
+#: The MPU-9250 datasheet's typical rate noise spectral density, 0.01 °/s/√Hz, in rad/s/√Hz.
+TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ = 0.01 * RAD_PER_DEG
+
+_Vec3 = tuple[float, float, float]
+
+
+def _vec3(name: str, value: Any) -> _Vec3:
+    v = np.broadcast_to(np.asarray(value, dtype=float), (3,))
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+@dataclass(frozen=True)
+class SensorTruth:
+    """The true errors of an emulated gyro, in the calibration model's convention.
+
+    The calibration model is the paper's Eq. 1, ``g = scale ∘ (m + bias)``, with ``g`` the true
+    rate and ``m`` the reading (both rad/s). The emulated chip therefore reads
+
+    ``m = (misalignment @ g) / scale − bias(T) + n``,  elementwise per axis,
+
+    with ``bias(T) = bias + bias_temp_coeff_rad_s_per_c · (T − reference_temperature_c)`` at the
+    chip temperature ``T``, and white noise ``n`` of per-sample standard deviation
+    ``σ = noise_density_rad_s_sqrt_hz · sqrt(odr_hz)`` (the angle-random-walk convention: the
+    mean of the samples over ``τ`` seconds then has deviation ``density / sqrt(τ)``), or
+    ``noise_sigma_rad_s`` when given. ``m`` is then divided by the datasheet sensitivity,
+    rounded to counts and clipped to int16. With ``misalignment`` the identity, a perfect
+    calibration recovers ``scale`` and ``bias`` exactly; the paper's six-parameter model cannot
+    absorb a non-identity ``misalignment``.
+
+    Parameters
+    ----------
+    scale : float or (3,)
+        Per-axis scale factor (dimensionless, near 1).
+    bias : float or (3,)
+        Per-axis bias at the reference temperature, rad/s.
+    misalignment : (3, 3)
+        Sensor-internal axis non-orthogonality, applied to the true rate first.
+    noise_density_rad_s_sqrt_hz : float or (3,)
+        White-noise density; the MPU-9250 datasheet's typical 0.01 °/s/√Hz by default.
+    noise_sigma_rad_s : float or (3,), optional
+        Per-sample noise standard deviation, overriding the density.
+    bias_temp_coeff_rad_s_per_c : float or (3,)
+        Bias change per °C.
+    reference_temperature_c : float
+        Temperature at which the bias is ``bias``.
+    temperature_c : float or callable
+        Chip temperature: a constant, or ``f(t) -> °C`` vectorised over an array of clock times.
+    clock_ppm : float
+        The chip oscillator's error: it samples at ``odr · (1 + clock_ppm·1e-6)``.
+    """
+
+    scale: Any = (1.0, 1.0, 1.0)
+    bias: Any = (0.0, 0.0, 0.0)
+    misalignment: Any = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    noise_density_rad_s_sqrt_hz: Any = TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ
+    noise_sigma_rad_s: Any = None
+    bias_temp_coeff_rad_s_per_c: Any = (0.0, 0.0, 0.0)
+    reference_temperature_c: float = 25.0
+    temperature_c: float | Callable[[np.ndarray], np.ndarray] = 25.0
+    clock_ppm: float = 0.0
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        put(self, "scale", _vec3("scale", self.scale))
+        if any(s == 0.0 for s in self.scale):
+            raise ValueError(f"scale must be non-zero on every axis, got {self.scale!r}")
+        put(self, "bias", _vec3("bias", self.bias))
+        m = np.asarray(self.misalignment, dtype=float)
+        if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+            raise ValueError(f"misalignment must be a finite 3×3 matrix, got {self.misalignment!r}")
+        put(self, "misalignment", tuple(tuple(float(x) for x in row) for row in m))
+        put(self, "noise_density_rad_s_sqrt_hz", _vec3("noise", self.noise_density_rad_s_sqrt_hz))
+        if self.noise_sigma_rad_s is not None:
+            put(self, "noise_sigma_rad_s", _vec3("noise_sigma_rad_s", self.noise_sigma_rad_s))
+        for name in ("noise_density_rad_s_sqrt_hz", "noise_sigma_rad_s"):
+            v = getattr(self, name)
+            if v is not None and min(v) < 0:
+                raise ValueError(f"{name} must be >= 0, got {v!r}")
+        put(
+            self,
+            "bias_temp_coeff_rad_s_per_c",
+            _vec3("bias_temp_coeff_rad_s_per_c", self.bias_temp_coeff_rad_s_per_c),
+        )
+        if not math.isfinite(self.clock_ppm) or abs(self.clock_ppm) >= 1e6:
+            raise ValueError(f"clock_ppm must be finite and above -1e6, got {self.clock_ppm!r}")
+        if not callable(self.temperature_c) and not math.isfinite(self.temperature_c):
+            raise ValueError(
+                f"temperature_c must be finite or callable, got {self.temperature_c!r}"
+            )
+        # arrays for the per-sample arithmetic
+        put(self, "_scale_a", np.asarray(self.scale))
+        put(self, "_bias_a", np.asarray(self.bias))
+        put(self, "_mis_t", np.asarray(self.misalignment).T.copy())
+        put(self, "_coeff_a", np.asarray(self.bias_temp_coeff_rad_s_per_c))
+
+    def sigma_rad_s(self, odr_hz: float) -> np.ndarray:
+        """Per-sample noise standard deviation (3,) at output data rate ``odr_hz``."""
+        if self.noise_sigma_rad_s is not None:
+            return np.asarray(self.noise_sigma_rad_s)
+        return np.asarray(self.noise_density_rad_s_sqrt_hz) * math.sqrt(odr_hz)
+
+    def temperature_at(self, t: np.ndarray) -> np.ndarray:
+        """Chip temperature in °C at clock times ``t``."""
+        t = np.asarray(t, dtype=float)
+        if callable(self.temperature_c):
+            return np.broadcast_to(np.asarray(self.temperature_c(t), dtype=float), t.shape)
+        return np.full(t.shape, float(self.temperature_c))
+
+    def bias_at(self, temperature_c: np.ndarray) -> np.ndarray:
+        """Bias (N, 3) in rad/s at the given temperatures."""
+        dt = np.asarray(temperature_c, dtype=float)[:, None] - self.reference_temperature_c
+        return self._bias_a + self._coeff_a * dt  # type: ignore[attr-defined]
+
+    def reading(self, omega: np.ndarray, temperature_c: np.ndarray) -> np.ndarray:
+        """The noiseless reading ``m`` (N, 3) in rad/s for true rates ``omega`` (N, 3)."""
+        mis_t, scale = self._mis_t, self._scale_a  # type: ignore[attr-defined]
+        return (np.asarray(omega) @ mis_t) / scale - self.bias_at(temperature_c)
+
+    def manifest(self) -> dict[str, list[float]]:
+        """The ``"truth"`` object of a simulated Recording v1 manifest."""
+        return {"scale": list(self.scale), "bias": list(self.bias)}
+
+
+@dataclass
+class ChipFaults:
+    """Fault knobs of an emulated chip (mutable, so a test can break a chip mid-run).
+
+    Parameters
+    ----------
+    nack_probability : float
+        Chance that the chip refuses any one I²C message.
+    nack_errno : int
+        The errno of a refusal: ``EREMOTEIO`` (a NACK, nothing moved) by default; ``EIO`` or
+        ``ETIMEDOUT`` model a transfer that failed part-way, which a reader cannot tell from one
+        that popped FIFO bytes. The emulator refuses before any byte moves either way.
+    nack_bursts : sequence of (start_s, duration_s)
+        Clock intervals during which every message is refused with ``nack_errno``.
+    dead_after_s : float, optional
+        From this clock time on the chip never answers (``EREMOTEIO``).
+    who_am_i : int, optional
+        A wrong identity byte to answer instead of the real one.
+    stuck_axis : int, optional
+        Gyro axis (0, 1, 2) that outputs ``stuck_counts`` from ``stuck_from_s`` on.
+    stuck_counts : int
+        The value of the stuck axis.
+    stuck_from_s : float
+        When the axis sticks.
+    fifo_capacity : int, optional
+        A smaller FIFO than the datasheet's (bytes for the MPU-9250, slots for the LSM9DS1), to
+        provoke overflows at ordinary drain intervals.
+    """
+
+    nack_probability: float = 0.0
+    nack_errno: int = errno.EREMOTEIO
+    nack_bursts: tuple[tuple[float, float], ...] = ()
+    dead_after_s: float | None = None
+    who_am_i: int | None = None
+    stuck_axis: int | None = None
+    stuck_counts: int = 0
+    stuck_from_s: float = 0.0
+    fifo_capacity: int | None = None
+
+
+@dataclass
+class _Sample:
+    """The latest sample, for the output registers."""
+
+    gyro: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
+    accel: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
+    temp: int = 0
+
+
+class _EmulatedImu(ABC):
+    """Shared machinery: register pointer, fault knobs, the sample clock and sample generation."""
+
+    family: ChipFamily
+    default_who_am_i: int
+    temperature_count_limits: tuple[int, int] = (-32768, 32767)
+
+    def __init__(
+        self,
+        clock: Clock,
+        motion: MotionSource | None = None,
+        truth: SensorTruth | None = None,
+        *,
+        faults: ChipFaults | None = None,
+        seed: int = 0,
+    ) -> None:
+        self.clock = clock
+        self.motion: MotionSource = motion if motion is not None else ConstantRate()
+        self.truth = truth if truth is not None else SensorTruth()
+        self.faults = faults if faults is not None else ChipFaults()
+        self._noise_rng = np.random.default_rng([seed, 0])
+        self._fault_rng = np.random.default_rng([seed, 1])
+        self.samples_generated = 0
+        self._power_on_reset()
+
+    # -- I2CDevice ----------------------------------------------------------------------------
+
+    def i2c_ack(self) -> int | None:
+        """Refuse per the fault knobs, else acknowledge."""
+        f = self.faults
+        now = self.clock.monotonic()
+        if f.dead_after_s is not None and now >= f.dead_after_s:
+            return errno.EREMOTEIO
+        for start, duration in f.nack_bursts:
+            if start <= now < start + duration:
+                return f.nack_errno
+        if f.nack_probability > 0 and self._fault_rng.random() < f.nack_probability:
+            return f.nack_errno
+        return None
+
+    def i2c_write(self, data: bytes) -> None:
+        """Set the register pointer and write the following bytes, auto-incrementing."""
+        self._sync()
+        if not data:
+            return
+        self._ptr = self._mask(data[0])
+        for value in data[1:]:
+            self._write_register(self._ptr, value)
+            self._ptr = self._next_pointer(self._ptr)
+
+    def i2c_read(self, length: int) -> bytes:
+        """Read ``length`` bytes from the register pointer."""
+        self._sync()
+        fast = self._read_fast(length)
+        if fast is not None:
+            return fast
+        out = bytearray()
+        for _ in range(length):
+            out.append(self._read_register(self._ptr) & 0xFF)
+            self._ptr = self._next_pointer(self._ptr)
+        return bytes(out)
+
+    # -- chip specifics (subclasses) ------------------------------------------------------------
+
+    def _mask(self, register: int) -> int:
+        return register & 0x7F
+
+    def _next_pointer(self, register: int) -> int:
+        return (register + 1) & 0x7F
+
+    def _read_fast(self, length: int) -> bytes | None:
+        return None
+
+    @abstractmethod
+    def _power_on_reset(self) -> None:
+        """Restore the reset values (power-on and software reset)."""
+
+    @abstractmethod
+    def _read_register(self, register: int) -> int:
+        """One register byte as the host reads it (with read side effects)."""
+
+    @abstractmethod
+    def _write_register(self, register: int, value: int) -> None:
+        """Write one register (with its side effects)."""
+
+    @abstractmethod
+    def _odr_hz(self) -> float | None:
+        """The configured output data rate, or ``None`` when the gyro is off."""
+
+    @abstractmethod
+    def _sensitivity_rad_s_per_lsb(self) -> float:
+        """The configured gyro sensitivity."""
+
+    @abstractmethod
+    def _accel_counts_1g(self) -> int:
+        """Accelerometer counts of 1 g at the configured range."""
+
+    def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
+        """Temperature register counts for temperatures in °C (§1.6, §2.5)."""
+        fam = self.family
+        counts = np.rint((temperature_c - fam.temperature_offset_c) * fam.temperature_lsb_per_c)
+        return np.clip(counts, *self.temperature_count_limits).astype(np.int64)
+
+    @abstractmethod
+    def _head_tail(self, n: int) -> tuple[int, int]:
+        """How many of ``n`` new samples the FIFO needs from the front and from the back."""
+
+    @abstractmethod
+    def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
+                skipped: int) -> None:
+        """Push generated samples: the first ``head`` rows, then ``skipped`` samples that were
+        not generated (they can only be dropped or overwritten), then the rest."""
+
+    # -- the sample clock -----------------------------------------------------------------------
+
+    @property
+    def who_am_i(self) -> int:
+        """The identity byte the chip answers (the fault knob's, if set)."""
+        return self.faults.who_am_i if self.faults.who_am_i is not None else self.default_who_am_i
+
+    @property
+    def true_period_s(self) -> float | None:
+        """The chip's real sample period on the shared clock (``None`` when off)."""
+        return self._period
+
+    def sample_time(self, k: np.ndarray | int) -> np.ndarray:
+        """Shared-clock time of sample ``k`` (1, 2, ...) of the current configuration."""
+        p = self.true_period_s
+        if p is None:
+            raise RuntimeError("the gyro is off")
+        return self._origin + p * np.asarray(k, dtype=float)
+
+    @property
+    def samples_taken(self) -> int:
+        """Samples taken since the rate was last set (the index of the latest)."""
+        return self._k
+
+    def _restart_sampling(self) -> None:
+        """The rate or power state changed: start a new sample grid now."""
+        self._origin = self.clock.monotonic()
+        self._k = 0
+        odr = self._odr_hz()
+        self._period = None if odr is None else 1.0 / (odr * (1.0 + self.truth.clock_ppm * 1e-6))
+
+    def _sync(self) -> None:
+        """Generate every sample with time ≤ now."""
+        period = self._period
+        if period is None:
+            return
+        now = self.clock.monotonic()
+        k_end = math.floor((now - self._origin) / period)
+        while self._origin + k_end * period > now:  # guard the floor against rounding
+            k_end -= 1
+        n = k_end - self._k
+        if n <= 0:
+            return
+        head, tail = self._head_tail(n)
+        head, tail = min(head, n), min(tail, n)
+        if head + tail >= n:
+            ks = np.arange(self._k + 1, k_end + 1)
+            head, skipped = n, 0
+        else:
+            ks = np.concatenate(
+                (np.arange(self._k + 1, self._k + 1 + head), np.arange(k_end - tail + 1, k_end + 1))
+            )
+            skipped = n - head - tail
+        t = self._origin + period * ks
+        omega = np.asarray(self.motion.rate(t), dtype=float)
+        temperature = self.truth.temperature_at(t)
+        m = self.truth.reading(omega, temperature)
+        odr = 1.0 / period
+        m = m + self._noise_rng.standard_normal(m.shape) * self.truth.sigma_rad_s(odr)
+        gyro = np.clip(np.rint(m / self._sensitivity_rad_s_per_lsb()), -32768, 32767)
+        gyro = gyro.astype(np.int64)
+        f = self.faults
+        if f.stuck_axis is not None:
+            gyro[t >= f.stuck_from_s, f.stuck_axis] = f.stuck_counts
+        accel = np.zeros_like(gyro)
+        accel[:, 2] = self._accel_counts_1g()
+        temp = self._temperature_counts(temperature)
+        self._ingest(gyro, accel, temp, head, skipped)
+        self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
+        self._k = k_end
+        self.samples_generated += len(ks)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+_MR, _MB = MPU9250_REG, MPU9250_BITS
+_MPU_READ_ONLY = frozenset(
+    {_MR.INT_STATUS, _MR.FIFO_COUNTH, _MR.FIFO_COUNTL, _MR.FIFO_R_W, _MR.WHO_AM_I}
+    | set(range(_MR.ACCEL_XOUT_H, _MR.GYRO_XOUT_H + 6))
+)
+_MPU_RATE_REGISTERS = frozenset(
+    {_MR.SMPLRT_DIV, _MR.CONFIG, _MR.GYRO_CONFIG, _MR.PWR_MGMT_1, _MR.PWR_MGMT_2}
+)
+_MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
+
+
+class EmulatedMPU9250(_EmulatedImu):
+    """An MPU-9250 (or MPU-9255 / MPU-6500) accel/gyro die on the I²C bus (hardware reference §1).
+
+    128-byte register file, reset values PWR_MGMT_1 = 0x01 and WHO_AM_I, the rest 0 (§1.9).
+    Burst reads and writes auto-increment, except at FIFO_R_W (0x74), a data port that pops the
+    FIFO; an empty FIFO repeats the last byte read (§1.7). Reading FIFO_COUNTH latches the count
+    for FIFO_COUNTL. The FIFO holds 512 bytes of frames in register order (ACCEL, TEMP, GYRO X/Y/Z
+    as enabled in FIFO_EN) written whenever USER_CTRL.FIFO_EN is set; FIFO_RST empties it. When it
+    is full, CONFIG.FIFO_MODE = 0 overwrites the oldest bytes and FIFO_MODE = 1 drops new ones;
+    either way INT_STATUS.FIFO_OFLOW_INT is set. INT_STATUS bit 0 flags new data. Both clear when
+    INT_STATUS is read. H_RESET restores the reset values. The rate is 1 kHz / (1 + SMPLRT_DIV)
+    with DLPF_CFG 1..6, 8 kHz with DLPF_CFG 0 or 7, 32 kHz with FCHOICE_B ≠ 0 (§1.4).
+
+    Parameters
+    ----------
+    clock : Clock
+        The shared clock.
+    motion : MotionSource, optional
+        True angular rate in the sensor frame (at rest when omitted).
+    truth : SensorTruth, optional
+        The sensor's true errors.
+    faults : ChipFaults, optional
+        Fault knobs.
+    seed : int
+        Seed of the noise and fault random generators.
+    variant : str
+        ``"mpu9250"``, ``"mpu9255"`` or ``"mpu6500"``: which WHO_AM_I it answers.
+    """
+
+    family = MPU9250
+
+    def __init__(self, clock: Clock, motion: MotionSource | None = None,
+                 truth: SensorTruth | None = None, *, faults: ChipFaults | None = None,
+                 seed: int = 0, variant: str = "mpu9250") -> None:
+        if variant not in _MPU_VARIANTS:
+            raise ValueError(f"variant must be one of {', '.join(_MPU_VARIANTS)}, got {variant!r}")
+        self.default_who_am_i = _MPU_VARIANTS[variant]
+        self.variant = variant
+        super().__init__(clock, motion, truth, faults=faults, seed=seed)
+
+    def _power_on_reset(self) -> None:
+        self._regs = bytearray(128)
+        self._regs[_MR.PWR_MGMT_1] = 0x01
+        self._ptr = 0
+        self._fifo = bytearray()
+        self._fifo_last = 0
+        self._latched: int | None = None
+        self._int_status = 0
+        self._latest = _Sample()
+        self.fifo_enables: list[int] = []
+        self.overflows = 0
+        self._restart_sampling()
+
+    @property
+    def fifo_capacity(self) -> int:
+        """FIFO size in bytes."""
+        cap = self.faults.fifo_capacity
+        return self.family.fifo_capacity if cap is None else cap
+
+    @property
+    def fifo_level(self) -> int:
+        """Bytes in the FIFO now."""
+        self._sync()
+        return len(self._fifo)
+
+    def _odr_hz(self) -> float | None:
+        r = self._regs
+        if r[_MR.PWR_MGMT_1] & _MB.PWR_MGMT_1_SLEEP:
+            return None
+        if r[_MR.PWR_MGMT_2] & _MB.PWR_MGMT_2_GYRO_DISABLE == _MB.PWR_MGMT_2_GYRO_DISABLE:
+            return None
+        if r[_MR.GYRO_CONFIG] & _MB.GYRO_FCHOICE_B_MASK:
+            return 32000.0
+        if r[_MR.CONFIG] & _MB.CONFIG_DLPF_MASK in (0, 7):
+            return 8000.0
+        return self.family.extra["internal_rate_hz"] / (1 + r[_MR.SMPLRT_DIV])
+
+    def _sensitivity_rad_s_per_lsb(self) -> float:
+        fs = (self._regs[_MR.GYRO_CONFIG] & _MB.GYRO_FS_MASK) >> _MB.GYRO_FS_SHIFT
+        return self.family.gyro_ranges[fs].sensitivity_rad_s_per_lsb
+
+    def _accel_counts_1g(self) -> int:
+        fs = (self._regs[_MR.ACCEL_CONFIG] >> _MB.ACCEL_FS_SHIFT) & 0x03
+        return int(self.family.extra["accel_lsb_per_g_2g"]) >> fs
+
+    # FIFO ------------------------------------------------------------------------------------
+
+    def _fifo_on(self) -> bool:
+        return bool(self._regs[_MR.USER_CTRL] & _MB.USER_CTRL_FIFO_EN)
+
+    def _frame_bytes(self) -> int:
+        en = self._regs[_MR.FIFO_EN]
+        n = 6 if en & _MB.FIFO_EN_ACCEL else 0
+        n += 2 if en & _MB.FIFO_EN_TEMP else 0
+        for bit in (_MB.FIFO_EN_GYRO_X, _MB.FIFO_EN_GYRO_Y, _MB.FIFO_EN_GYRO_Z):
+            n += 2 if en & bit else 0
+        return n
+
+    def _head_tail(self, n: int) -> tuple[int, int]:
+        frame = self._frame_bytes()
+        if not self._fifo_on() or frame == 0:
+            return 0, 1
+        if self._regs[_MR.CONFIG] & _MB.CONFIG_FIFO_MODE:  # stop when full
+            room = max(0, self.fifo_capacity - len(self._fifo))
+            return room // frame + 2, 1
+        return 0, self.fifo_capacity // frame + 2
+
+    def _frames(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray) -> bytes:
+        en = self._regs[_MR.FIFO_EN]
+        cols = []
+        if en & _MB.FIFO_EN_ACCEL:
+            cols.append(accel)
+        if en & _MB.FIFO_EN_TEMP:
+            cols.append(temp[:, None])
+        for axis, bit in enumerate((_MB.FIFO_EN_GYRO_X, _MB.FIFO_EN_GYRO_Y, _MB.FIFO_EN_GYRO_Z)):
+            if en & bit:
+                cols.append(gyro[:, axis : axis + 1])
+        if not cols:
+            return b""
+        return np.hstack(cols).astype(">i2").tobytes()
+
+    def _push(self, data: bytes) -> None:
+        if not data:
+            return
+        cap = self.fifo_capacity
+        fifo = self._fifo
+        if len(fifo) + len(data) > cap:
+            self._int_status |= _MB.INT_STATUS_FIFO_OFLOW
+            self.overflows += 1
+            if self._regs[_MR.CONFIG] & _MB.CONFIG_FIFO_MODE:
+                data = data[: max(0, cap - len(fifo))]
+            else:
+                fifo += data
+                del fifo[: len(fifo) - cap]
+                return
+        fifo += data
+
+    def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
+                skipped: int) -> None:
+        self._int_status |= _MB.INT_STATUS_RAW_DATA_RDY
+        if not self._fifo_on():
+            return
+        self._push(self._frames(gyro[:head], accel[:head], temp[:head]))
+        if skipped:
+            self._push(b"\x00" * (skipped * self._frame_bytes()))  # dropped or overwritten
+        self._push(self._frames(gyro[head:], accel[head:], temp[head:]))
+
+    # registers -------------------------------------------------------------------------------
+
+    def _read_fast(self, length: int) -> bytes | None:
+        if self._ptr != _MR.FIFO_R_W:
+            return None
+        fifo = self._fifo
+        take = min(length, len(fifo))
+        out = bytes(fifo[:take])
+        del fifo[:take]
+        if take:
+            self._fifo_last = out[-1]
+        return out + bytes([self._fifo_last]) * (length - take)
+
+    def _read_register(self, register: int) -> int:
+        r = _MR
+        if register == r.WHO_AM_I:
+            return self.who_am_i
+        if register == r.INT_STATUS:
+            v, self._int_status = self._int_status, 0
+            return v
+        if register == r.FIFO_COUNTH:
+            self._latched = len(self._fifo)
+            return (self._latched >> 8) & 0x1F
+        if register == r.FIFO_COUNTL:
+            count = self._latched if self._latched is not None else len(self._fifo)
+            self._latched = None
+            return count & 0xFF
+        if register == r.FIFO_R_W:
+            return self._read_fast(1)[0]  # type: ignore[index]
+        if r.ACCEL_XOUT_H <= register < r.GYRO_XOUT_H + 6:
+            s = self._latest
+            words = np.concatenate((s.accel, [s.temp], s.gyro)).astype(">i2").tobytes()
+            return words[register - r.ACCEL_XOUT_H]
+        return self._regs[register]
+
+    def _write_register(self, register: int, value: int) -> None:
+        r, b = _MR, _MB
+        if register in _MPU_READ_ONLY:
+            return
+        if register == r.PWR_MGMT_1 and value & b.PWR_MGMT_1_H_RESET:
+            self._power_on_reset()  # H_RESET clears itself
+            return
+        if register == r.SIGNAL_PATH_RESET:
+            return  # self-clearing; the emulated signal paths have no state to reset
+        if register == r.USER_CTRL:
+            was_on = self._fifo_on()
+            if value & b.USER_CTRL_FIFO_RST:
+                self._fifo.clear()
+                self._latched = None
+            value &= ~(b.USER_CTRL_FIFO_RST | 0x03)  # the reset bits clear themselves
+            self._regs[register] = value
+            if self._fifo_on() and not was_on:
+                self.fifo_enables.append(self._k)
+            return
+        old_odr = self._odr_hz()
+        self._regs[register] = value
+        if register in _MPU_RATE_REGISTERS and self._odr_hz() != old_odr:
+            self._restart_sampling()
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+_LR, _LB = LSM9DS1_REG, LSM9DS1_BITS
+_LSM_ODR_BY_CODE = {code: hz for hz, code in LSM9DS1_ODR.items()}
+_LSM_DEFAULTS = {
+    _LR.WHO_AM_I: 0x68, _LR.CTRL_REG4: 0x38, _LR.CTRL_REG5_XL: 0x38, _LR.CTRL_REG8: 0x04
+}
+_LSM_READ_ONLY = frozenset(
+    {_LR.WHO_AM_I, _LR.OUT_TEMP_L, _LR.OUT_TEMP_L + 1, _LR.STATUS_REG, _LR.STATUS_REG + 0x10,
+     _LR.FIFO_SRC}
+    | set(range(_LR.OUT_X_L_G, _LR.OUT_Z_H_G + 1))
+    | set(range(_LR.OUT_X_L_XL, _LR.OUT_Z_H_XL + 1))
+)
+_LSM_ACCEL_MG_PER_LSB = {0b00: 0.061, 0b10: 0.122, 0b11: 0.244, 0b01: 0.732}  # §2.4
+
+
+class EmulatedLSM9DS1(_EmulatedImu):
+    """The accelerometer/gyroscope die of an LSM9DS1 on the I²C bus (hardware reference §2).
+
+    Register file 0x00–0x7F with the reset values of §2.8; the sub-address is masked with 0x7F.
+    Reads and writes auto-increment while CTRL_REG8.IF_ADD_INC is set; while the gyro is on the
+    pointer jumps from 0x1D to 0x28 and from 0x2D back to 0x18 (ST §3.3), so a burst from 0x18
+    reads gyro then accelerometer slot after slot. Output is little-endian (CTRL_REG8.BLE = 1
+    swaps the bytes). OUT_TEMP is ``round((T − 25)·16)``, 12 bits sign-extended (§2.5).
+    FIFO (§2.7): on while CTRL_REG9.FIFO_EN is set and FIFO_CTRL.FMODE is not bypass; 32 slots of
+    gyro + accelerometer (FTH+1 with STOP_ON_FTH). FIFO mode (001) stops when full; continuous
+    (110) overwrites the oldest and sets FIFO_SRC.OVRN, which clears when a slot is read.
+    Bypass (000) empties the FIFO. The trigger modes 011 and 100 act as continuous and bypass
+    (no trigger is emulated). The output registers show the oldest unread slot while the FIFO
+    holds one, and reading OUT_Z_H_XL (0x2D) pops it. SW_RESET restores the reset values; BDU is
+    accepted but has no effect (the emulated registers never change mid-read).
+
+    Parameters
+    ----------
+    clock, motion, truth, faults, seed
+        As for :class:`EmulatedMPU9250`.
+    """
+
+    family = LSM9DS1
+    default_who_am_i = 0x68
+    temperature_count_limits = (-2048, 2047)  # 12 bits, sign-extended
+
+    def _power_on_reset(self) -> None:
+        self._regs = bytearray(128)
+        for reg, value in _LSM_DEFAULTS.items():
+            self._regs[reg] = value
+        self._ptr = 0
+        self._fifo: deque[bytes] = deque()
+        self._ovrn = False
+        self._status = 0
+        self._latest = _Sample()
+        self.fifo_enables: list[int] = []
+        self.overflows = 0
+        self._restart_sampling()
+
+    @property
+    def fifo_capacity(self) -> int:
+        """FIFO depth in slots."""
+        cap = self.faults.fifo_capacity if self.faults.fifo_capacity is not None else 32
+        if self._regs[_LR.CTRL_REG9] & _LB.CTRL_REG9_STOP_ON_FTH:
+            cap = min(cap, (self._regs[_LR.FIFO_CTRL] & _LB.FTH_MASK) + 1)
+        return cap
+
+    @property
+    def fifo_level(self) -> int:
+        """Slots in the FIFO now."""
+        self._sync()
+        return len(self._fifo)
+
+    def _mode(self) -> int:
+        return self._regs[_LR.FIFO_CTRL] >> _LB.FMODE_SHIFT
+
+    def _fifo_on(self) -> bool:
+        if not self._regs[_LR.CTRL_REG9] & _LB.CTRL_REG9_FIFO_EN:
+            return False
+        return self._mode() not in (_LB.FMODE_BYPASS, _LB.FMODE_BYPASS_TO_CONT)
+
+    def _gyro_on(self) -> bool:
+        return self._odr_hz() is not None
+
+    def _odr_hz(self) -> float | None:
+        return _LSM_ODR_BY_CODE.get(self._regs[_LR.CTRL_REG1_G] >> _LB.ODR_G_SHIFT)
+
+    def _sensitivity_rad_s_per_lsb(self) -> float:
+        fs = (self._regs[_LR.CTRL_REG1_G] >> _LB.FS_G_SHIFT) & 0x03
+        for g in self.family.gyro_ranges:
+            if g.code == fs:
+                return g.sensitivity_rad_s_per_lsb
+        return self.family.gyro_ranges[0].sensitivity_rad_s_per_lsb  # FS_G = 10: not available
+
+    def _accel_counts_1g(self) -> int:
+        fs = (self._regs[_LR.CTRL_REG6_XL] >> _LB.FS_XL_SHIFT) & 0x03
+        return round(1000.0 / _LSM_ACCEL_MG_PER_LSB[fs])
+
+    def _word(self, value: int) -> bytes:
+        order = "big" if self._regs[_LR.CTRL_REG8] & _LB.CTRL_REG8_BLE else "little"
+        return int(value).to_bytes(2, order, signed=True)
+
+    # FIFO ------------------------------------------------------------------------------------
+
+    def _head_tail(self, n: int) -> tuple[int, int]:
+        if not self._fifo_on():
+            return 0, 1
+        if self._mode() == _LB.FMODE_FIFO:
+            return max(0, self.fifo_capacity - len(self._fifo)) + 2, 1
+        return 0, self.fifo_capacity + 2
+
+    def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
+                skipped: int) -> None:
+        self._status |= _LB.STATUS_GDA | _LB.STATUS_XLDA | _LB.STATUS_TDA
+        if not self._fifo_on():
+            return
+        slots = np.hstack((gyro, accel)).astype("<i2")
+        if self._regs[_LR.CTRL_REG8] & _LB.CTRL_REG8_BLE:
+            slots = slots.astype(">i2")
+        rows = [row.tobytes() for row in slots]
+        self._push(rows[:head])
+        self._push([b""] * skipped)
+        self._push(rows[head:])
+
+    def _push(self, rows: list[bytes]) -> None:
+        cap = self.fifo_capacity
+        stop = self._mode() == _LB.FMODE_FIFO
+        for row in rows:
+            if len(self._fifo) >= cap:
+                self.overflows += 1
+                if stop:
+                    return
+                self._fifo.popleft()
+                self._ovrn = True
+            self._fifo.append(row)
+
+    def _pop(self) -> None:
+        if self._fifo_on() and self._fifo:
+            self._fifo.popleft()
+            self._ovrn = False
+
+    def _fifo_src(self) -> int:
+        n = len(self._fifo)
+        fth = self._regs[_LR.FIFO_CTRL] & _LB.FTH_MASK
+        v = min(n, 32) & _LB.FIFO_SRC_FSS_MASK
+        v |= _LB.FIFO_SRC_OVRN if self._ovrn else 0
+        v |= _LB.FIFO_SRC_FTH if fth and n >= fth else 0
+        return v
+
+    # registers -------------------------------------------------------------------------------
+
+    def _next_pointer(self, register: int) -> int:
+        if not self._regs[_LR.CTRL_REG8] & _LB.CTRL_REG8_IF_ADD_INC:
+            return register
+        if register == _LR.OUT_Z_H_G and self._gyro_on():
+            return _LR.OUT_X_L_XL
+        if register == _LR.OUT_Z_H_XL:
+            return _LR.OUT_X_L_G if self._gyro_on() else _LR.OUT_X_L_XL
+        return (register + 1) & 0x7F
+
+    def _read_fast(self, length: int) -> bytes | None:
+        """Whole slots from 0x18 out of the FIFO in one step (the wrap of ST §3.3)."""
+        if (
+            self._ptr != _LR.OUT_X_L_G
+            or length % 12
+            or not self._fifo_on()
+            or len(self._fifo) < length // 12
+            or not self._gyro_on()
+            or not self._regs[_LR.CTRL_REG8] & _LB.CTRL_REG8_IF_ADD_INC
+        ):
+            return None
+        rows = [self._fifo.popleft() for _ in range(length // 12)]
+        self._ovrn = False
+        self._status &= ~(_LB.STATUS_GDA | _LB.STATUS_XLDA)
+        return b"".join(rows)
+
+    def _current_slot(self) -> bytes:
+        if self._fifo_on() and self._fifo:
+            return self._fifo[0]
+        s = self._latest
+        return b"".join(self._word(v) for v in (*s.gyro, *s.accel))
+
+    def _read_register(self, register: int) -> int:
+        r = _LR
+        if register == r.WHO_AM_I:
+            return self.who_am_i
+        if register in (r.OUT_TEMP_L, r.OUT_TEMP_L + 1):
+            self._status &= ~_LB.STATUS_TDA
+            return self._word(self._latest.temp)[register - r.OUT_TEMP_L]
+        if register in (r.STATUS_REG, r.STATUS_REG + 0x10):
+            return self._status
+        if r.OUT_X_L_G <= register <= r.OUT_Z_H_G:
+            self._status &= ~_LB.STATUS_GDA
+            return self._current_slot()[register - r.OUT_X_L_G]
+        if r.OUT_X_L_XL <= register <= r.OUT_Z_H_XL:
+            self._status &= ~_LB.STATUS_XLDA
+            v = self._current_slot()[6 + register - r.OUT_X_L_XL]
+            if register == r.OUT_Z_H_XL:
+                self._pop()
+            return v
+        if register == r.FIFO_SRC:
+            return self._fifo_src()
+        return self._regs[register]
+
+    def _write_register(self, register: int, value: int) -> None:
+        r, b = _LR, _LB
+        if register in _LSM_READ_ONLY:
+            return
+        if register == r.CTRL_REG8 and value & b.CTRL_REG8_SW_RESET:
+            self._power_on_reset()  # SW_RESET clears itself
+            return
+        was_on = self._fifo_on()
+        old_odr = self._odr_hz()
+        self._regs[register] = value & ~b.CTRL_REG8_BOOT if register == r.CTRL_REG8 else value
+        if register == r.FIFO_CTRL and self._mode() == b.FMODE_BYPASS:
+            self._fifo.clear()
+            self._ovrn = False
+        if register == r.CTRL_REG1_G and self._odr_hz() != old_odr:
+            self._restart_sampling()
+        if self._fifo_on() and not was_on:
+            self.fifo_enables.append(self._k)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def make_emulated_imu(
+    model: str,
+    clock: Clock,
+    motion: MotionSource | None = None,
+    truth: SensorTruth | None = None,
+    *,
+    address: int | None = None,
+    seed: int = 0,
+    faults: ChipFaults | None = None,
+    bus: EmulatedSMBus | None = None,
+    bus_hz: float = 400_000,
+) -> tuple[EmulatedSMBus, int]:
+    """An emulated sensor on an emulated bus, ready for a reader, in one call.
+
+    Parameters
+    ----------
+    model : str
+        ``"mpu9250"``, ``"mpu9255"``, ``"mpu6500"`` or ``"lsm9ds1"``.
+    clock : Clock
+        The shared clock.
+    motion : MotionSource, optional
+        True rate in the sensor frame (at rest when omitted).
+    truth : SensorTruth, optional
+        The sensor's true errors.
+    address : int, optional
+        Where to attach it; the chip's default address when omitted.
+    seed : int
+        Seed of the chip's random generators.
+    faults : ChipFaults, optional
+        Fault knobs.
+    bus : EmulatedSMBus, optional
+        Attach to this bus instead of a new one.
+    bus_hz : float
+        SCL frequency of a new bus.
+
+    Returns
+    -------
+    (EmulatedSMBus, int)
+        The bus and the address; the chip is ``bus.device(address)``.
+    """
+    key = str(model).strip().lower().replace("-", "")
+    chip: _EmulatedImu
+    if key in _MPU_VARIANTS:
+        chip = EmulatedMPU9250(clock, motion, truth, faults=faults, seed=seed, variant=key)
+    elif key == "lsm9ds1":
+        chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed)
+    else:
+        raise ValueError(
+            f"unknown IMU model {model!r}; choose one of {', '.join([*_MPU_VARIANTS, 'lsm9ds1'])}"
+        )
+    if bus is None:
+        bus = EmulatedSMBus(clock, bus_hz=bus_hz)
+    if address is None:
+        address = chip.family.addresses[0]
+    bus.attach(address, chip)
+    return bus, address

@@ -1,0 +1,103 @@
+"""IMU readers for the MPU-9250 family and the LSM9DS1 over any smbus2-compatible bus.
+
+The kit names the sensor model as a string; :func:`open_imu` turns it into a configured reader::
+
+    reader = open_imu("mpu9250", bus, clock=clock, range_dps=500, odr_hz=1000)
+    reader.start()
+    batch = reader.read()     # ImuBatch: t, rate (rad/s), temperature_c, saturated, gaps
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Any
+
+from drivers.clock import Clock
+from drivers.errors import ConfigurationError, DriverError
+from drivers.imu.base import ChipNotice, FifoGap, ImuBatch, ImuReader, SensorInfo, open_bus
+from drivers.imu.errors import BusOpenError, ChipIdentityError, ImuStateError, SensorFaultError
+from drivers.imu.lsm9ds1 import LSM9DS1Reader
+from drivers.imu.mpu9250 import MPU9250Reader
+
+__all__ = [
+    "MODELS",
+    "READERS",
+    "BusOpenError",
+    "ChipIdentityError",
+    "ChipNotice",
+    "FifoGap",
+    "ImuBatch",
+    "ImuReader",
+    "ImuStateError",
+    "LSM9DS1Reader",
+    "MPU9250Reader",
+    "SensorFaultError",
+    "SensorInfo",
+    "open_bus",
+    "open_imu",
+]
+
+#: Reader class for each model name a config may give.
+READERS: dict[str, type[ImuReader]] = {
+    "mpu9250": MPU9250Reader,
+    "mpu9255": MPU9250Reader,
+    "mpu6500": MPU9250Reader,
+    "lsm9ds1": LSM9DS1Reader,
+}
+#: The model names :func:`open_imu` accepts.
+MODELS: tuple[str, ...] = tuple(READERS)
+
+
+def open_imu(
+    model: str,
+    bus: Any,
+    address: int | None = None,
+    *,
+    clock: Clock | None = None,
+    range_dps: float,
+    odr_hz: float,
+    lowpass_hz: float | None = None,
+    **options: Any,
+) -> ImuReader:
+    """Open and configure the reader for ``model`` (not yet streaming: call ``start()``).
+
+    Parameters
+    ----------
+    model : str
+        One of :data:`MODELS`. The MPU names share one reader, which accepts any of the three
+        chips and reports the one it found as ``reader.model``.
+    bus : smbus2.SMBus-like, int or str
+        A bus object, or an adapter number / device path to open.
+    address : int, optional
+        7-bit address; the chip's default when omitted.
+    clock : Clock, optional
+        The clock of the caller's loop.
+    range_dps, odr_hz, lowpass_hz : float
+        Passed to :meth:`ImuReader.configure`.
+    **options
+        Reader options (``retries``, ``stuck_after_s``, ``burst_wrap``...).
+
+    Returns
+    -------
+    ImuReader
+        The configured reader.
+
+    Raises
+    ------
+    ConfigurationError
+        For an unknown model or settings the chip cannot do.
+    """
+    key = str(model).strip().lower().replace("-", "")
+    cls = READERS.get(key)
+    if cls is None:
+        raise ConfigurationError(
+            f"unknown IMU model {model!r}; choose one of {', '.join(MODELS)}"
+        )
+    reader = cls(bus, address, clock=clock, **options)
+    try:
+        reader.configure(range_dps=range_dps, odr_hz=odr_hz, lowpass_hz=lowpass_hz)
+    except BaseException:
+        with contextlib.suppress(DriverError):  # the configure error is the one to report
+            reader.close()
+        raise
+    return reader

@@ -1,0 +1,382 @@
+"""Per-chip facts as data: register addresses, identity values, ranges, rates, filters, timings.
+
+Every number here is transcribed from ``shared/hardware-reference.md`` (section given on each
+table). The readers (:mod:`drivers.imu.mpu9250`, :mod:`drivers.imu.lsm9ds1`) and the emulated chips
+(:mod:`drivers.emulated.imu_chips`) read them from here; the tests check them against the datasheet
+values written out independently.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from types import MappingProxyType
+
+__all__ = [
+    "LSM9DS1",
+    "LSM9DS1_BITS",
+    "LSM9DS1_BW_G_CUTOFF_HZ",
+    "LSM9DS1_ODR",
+    "LSM9DS1_REG",
+    "MPU9250",
+    "MPU9250_BITS",
+    "MPU9250_DLPF",
+    "MPU9250_REG",
+    "ChipFamily",
+    "ChipModel",
+    "GyroRange",
+    "RAD_PER_DEG",
+    "register_names",
+]
+
+#: Radians per degree.
+RAD_PER_DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True)
+class GyroRange:
+    """One gyro full-scale setting.
+
+    Parameters
+    ----------
+    code : int
+        The register field value (MPU-9250 ``GYRO_FS_SEL``, LSM9DS1 ``FS_G``).
+    full_scale_dps : float
+        The nominal range, ± degrees per second.
+    lsb_per_dps : float
+        The datasheet sensitivity in counts per °/s.
+    """
+
+    code: int
+    full_scale_dps: float
+    lsb_per_dps: float
+
+    @property
+    def sensitivity_rad_s_per_lsb(self) -> float:
+        """rad/s per count: the factor that turns raw counts into rad/s."""
+        return RAD_PER_DEG / self.lsb_per_dps
+
+
+@dataclass(frozen=True)
+class ChipModel:
+    """A chip accepted by a reader, identified by its WHO_AM_I value.
+
+    Parameters
+    ----------
+    name : str
+        The model name used in configs and the Recording v1 manifest (``"mpu9250"``).
+    who_am_i : int
+        The value of the family's WHO_AM_I register.
+    title : str
+        The human name (``"MPU-9250"``).
+    notice : str or None
+        Said to the user when this chip is found (for chips accepted with a caveat).
+    """
+
+    name: str
+    who_am_i: int
+    title: str
+    notice: str | None = None
+
+
+@dataclass(frozen=True)
+class ChipFamily:
+    """The facts one reader needs about the chips it drives.
+
+    Parameters
+    ----------
+    name : str
+        Family name (``"mpu9250"``, ``"lsm9ds1"``).
+    title : str
+        Human name.
+    addresses : tuple of int
+        Possible 7-bit I²C addresses; the first is the default.
+    who_am_i_register : int
+        Where the identity byte is.
+    models : tuple of ChipModel
+        The chips the reader accepts.
+    siblings : mapping int -> str
+        WHO_AM_I values of related chips the reader does not drive, with what to say about them.
+    gyro_ranges : tuple of GyroRange
+        The offered full-scale settings.
+    fifo_capacity : int
+        FIFO size in the unit of ``fifo_capacity_unit``.
+    fifo_capacity_unit : str
+        ``"bytes"`` or ``"samples"``.
+    reset_time_s : float
+        Wait after a software reset.
+    startup_time_s : float
+        Wait after turning the gyro on before its samples are trusted.
+    temperature_offset_c : float
+        Temperature at zero counts.
+    temperature_lsb_per_c : float
+        Counts per °C.
+    max_bus_hz : int
+        Fastest I²C clock the chip supports.
+    """
+
+    name: str
+    title: str
+    addresses: tuple[int, ...]
+    who_am_i_register: int
+    models: tuple[ChipModel, ...]
+    siblings: Mapping[int, str]
+    gyro_ranges: tuple[GyroRange, ...]
+    fifo_capacity: int
+    fifo_capacity_unit: str
+    reset_time_s: float
+    startup_time_s: float
+    temperature_offset_c: float
+    temperature_lsb_per_c: float
+    max_bus_hz: int
+    extra: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+
+    def model_for(self, who_am_i: int) -> ChipModel | None:
+        """The accepted model with this WHO_AM_I value, or ``None``."""
+        for m in self.models:
+            if m.who_am_i == who_am_i:
+                return m
+        return None
+
+    def range_for(self, range_dps: float) -> GyroRange | None:
+        """The offered range whose nominal full scale is ``range_dps`` (±0.5 dps), or ``None``."""
+        for r in self.gyro_ranges:
+            if abs(r.full_scale_dps - range_dps) <= 0.5:
+                return r
+        return None
+
+    def counts_to_celsius(self, counts: float) -> float:
+        """Temperature in °C for a raw temperature reading."""
+        return self.temperature_offset_c + counts / self.temperature_lsb_per_c
+
+
+# ---------------------------------------------------------------------------------------------
+# InvenSense/TDK MPU-9250 family (hardware reference §1)
+
+
+@dataclass(frozen=True)
+class _MPU9250Registers:
+    """MPU-9250 register addresses (hardware reference §1.2) and bits."""
+
+    SMPLRT_DIV: int = 0x19
+    CONFIG: int = 0x1A
+    GYRO_CONFIG: int = 0x1B
+    ACCEL_CONFIG: int = 0x1C
+    ACCEL_CONFIG_2: int = 0x1D
+    FIFO_EN: int = 0x23
+    INT_PIN_CFG: int = 0x37
+    INT_ENABLE: int = 0x38
+    INT_STATUS: int = 0x3A
+    ACCEL_XOUT_H: int = 0x3B
+    TEMP_OUT_H: int = 0x41
+    GYRO_XOUT_H: int = 0x43
+    SIGNAL_PATH_RESET: int = 0x68
+    USER_CTRL: int = 0x6A
+    PWR_MGMT_1: int = 0x6B
+    PWR_MGMT_2: int = 0x6C
+    FIFO_COUNTH: int = 0x72
+    FIFO_COUNTL: int = 0x73
+    FIFO_R_W: int = 0x74
+    WHO_AM_I: int = 0x75
+
+
+@dataclass(frozen=True)
+class _MPU9250Bits:
+    """MPU-9250 register bits and fields (hardware reference §1.2, §1.7)."""
+
+    CONFIG_FIFO_MODE: int = 0x40  # 1: stop writing when full; 0: overwrite the oldest (§1.7)
+    CONFIG_DLPF_MASK: int = 0x07
+    GYRO_FS_SHIFT: int = 3
+    GYRO_FS_MASK: int = 0x18
+    GYRO_FCHOICE_B_MASK: int = 0x03
+    ACCEL_FS_SHIFT: int = 3
+    FIFO_EN_TEMP: int = 0x80
+    FIFO_EN_GYRO_X: int = 0x40
+    FIFO_EN_GYRO_Y: int = 0x20
+    FIFO_EN_GYRO_Z: int = 0x10
+    FIFO_EN_ACCEL: int = 0x08
+    INT_STATUS_FIFO_OFLOW: int = 0x10
+    INT_STATUS_RAW_DATA_RDY: int = 0x01
+    USER_CTRL_FIFO_EN: int = 0x40
+    USER_CTRL_FIFO_RST: int = 0x04
+    PWR_MGMT_1_H_RESET: int = 0x80
+    PWR_MGMT_1_SLEEP: int = 0x40
+    PWR_MGMT_1_CLKSEL_AUTO: int = 0x01
+    PWR_MGMT_2_GYRO_DISABLE: int = 0x07
+    SIGNAL_PATH_RESET_ALL: int = 0x07
+
+
+MPU9250_REG = _MPU9250Registers()
+MPU9250_BITS = _MPU9250Bits()
+
+#: Gyro DLPF settings usable with the FIFO over I²C: FCHOICE_B = 00, DLPF_CFG 1..6, internal
+#: rate 1 kHz, so SAMPLE_RATE = 1000 / (1 + SMPLRT_DIV) (hardware reference §1.4). Maps the
+#: bandwidth in Hz to DLPF_CFG. DLPF_CFG 0 and 7 and FCHOICE_B != 00 sample at 8 or 32 kHz, more
+#: than a 400 kHz I²C bus can carry out of the FIFO, and are not offered.
+MPU9250_DLPF: Mapping[float, int] = MappingProxyType(
+    {184.0: 1, 92.0: 2, 41.0: 3, 20.0: 4, 10.0: 5, 5.0: 6}
+)
+
+MPU6500_NOTICE = (
+    "WHO_AM_I 0x70: this is an MPU-6500, the MPU-9250's accel/gyro die without the AK8963 "
+    "magnetometer. Many boards sold as 'MPU-9250' carry it. Its gyro and registers are the same, "
+    "so gyrocal reads and calibrates it the same way; the sensor is recorded as 'mpu6500'."
+)
+
+MPU9250 = ChipFamily(
+    name="mpu9250",
+    title="MPU-9250",
+    addresses=(0x68, 0x69),
+    who_am_i_register=MPU9250_REG.WHO_AM_I,
+    models=(
+        ChipModel("mpu9250", 0x71, "MPU-9250"),
+        ChipModel("mpu9255", 0x73, "MPU-9255"),
+        ChipModel("mpu6500", 0x70, "MPU-6500", MPU6500_NOTICE),
+    ),
+    siblings=MappingProxyType(
+        {
+            0x68: "an MPU-6050 or MPU-9150 (WHO_AM_I 0x68), an older InvenSense part with a "
+            "different register map; gyrocal does not drive it",
+            0x74: "an MPU-6515 (WHO_AM_I 0x74); gyrocal does not drive it",
+        }
+    ),
+    gyro_ranges=(
+        GyroRange(0, 250.0, 131.0),
+        GyroRange(1, 500.0, 65.5),
+        GyroRange(2, 1000.0, 32.8),
+        GyroRange(3, 2000.0, 16.4),
+    ),
+    fifo_capacity=512,
+    fifo_capacity_unit="bytes",
+    reset_time_s=0.100,  # §1.3 step 1 (and step 2 after SIGNAL_PATH_RESET)
+    startup_time_s=0.070,  # §1.3 step 4: kernel's MPU-6500 gyro start-up (datasheet: 35 ms)
+    temperature_offset_c=21.0,  # §1.6
+    temperature_lsb_per_c=333.87,
+    max_bus_hz=400_000,
+    extra=MappingProxyType(
+        {
+            "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
+            "wake_time_s": 0.010,  # §1.3 step 3
+            "accel_lsb_per_g_2g": 16384.0,  # §1.5
+        }
+    ),
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# ST LSM9DS1 accelerometer + gyroscope die (hardware reference §2)
+
+
+@dataclass(frozen=True)
+class _LSM9DS1Registers:
+    """LSM9DS1 accel/gyro register addresses (hardware reference §2.2) and bits."""
+
+    WHO_AM_I: int = 0x0F
+    CTRL_REG1_G: int = 0x10
+    CTRL_REG3_G: int = 0x12
+    OUT_TEMP_L: int = 0x15
+    STATUS_REG: int = 0x17
+    OUT_X_L_G: int = 0x18
+    OUT_Z_H_G: int = 0x1D
+    CTRL_REG4: int = 0x1E
+    CTRL_REG5_XL: int = 0x1F
+    CTRL_REG6_XL: int = 0x20
+    CTRL_REG8: int = 0x22
+    CTRL_REG9: int = 0x23
+    OUT_X_L_XL: int = 0x28
+    OUT_Z_H_XL: int = 0x2D
+    FIFO_CTRL: int = 0x2E
+    FIFO_SRC: int = 0x2F
+
+
+@dataclass(frozen=True)
+class _LSM9DS1Bits:
+    """LSM9DS1 register bits and fields (hardware reference §2.2, §2.7)."""
+
+    SUBADDRESS_MASK: int = 0x7F
+    ODR_G_SHIFT: int = 5
+    FS_G_SHIFT: int = 3
+    BW_G_MASK: int = 0x03
+    FS_XL_SHIFT: int = 3
+    CTRL_REG4_GYRO_AXES: int = 0x38
+    CTRL_REG8_BOOT: int = 0x80
+    CTRL_REG8_BDU: int = 0x40
+    CTRL_REG8_IF_ADD_INC: int = 0x04
+    CTRL_REG8_BLE: int = 0x02
+    CTRL_REG8_SW_RESET: int = 0x01
+    CTRL_REG9_FIFO_EN: int = 0x02
+    CTRL_REG9_STOP_ON_FTH: int = 0x01
+    FMODE_SHIFT: int = 5
+    FMODE_BYPASS: int = 0b000
+    FMODE_FIFO: int = 0b001  # stop collecting when full
+    FMODE_CONT_TO_FIFO: int = 0b011
+    FMODE_BYPASS_TO_CONT: int = 0b100
+    FMODE_CONTINUOUS: int = 0b110  # overwrite the oldest
+    FTH_MASK: int = 0x1F
+    FIFO_SRC_FTH: int = 0x80
+    FIFO_SRC_OVRN: int = 0x40
+    FIFO_SRC_FSS_MASK: int = 0x3F
+    STATUS_GDA: int = 0x02
+    STATUS_XLDA: int = 0x01
+    STATUS_TDA: int = 0x04
+
+
+LSM9DS1_REG = _LSM9DS1Registers()
+LSM9DS1_BITS = _LSM9DS1Bits()
+
+#: CTRL_REG1_G.ODR_G code for each gyro output data rate in Hz (hardware reference §2.3).
+LSM9DS1_ODR: Mapping[float, int] = MappingProxyType(
+    {14.9: 1, 59.5: 2, 119.0: 3, 238.0: 4, 476.0: 5, 952.0: 6}
+)
+
+#: Gyro low-pass cutoff in Hz for each ODR and BW_G code (ST Table 47), used only to report and
+#: choose the filter. The 238 Hz and 952 Hz rows are in the hardware reference (§2.3, ⚠ ST only);
+#: the other rows follow ST Table 47 but were not re-checked for the reference (⚠). At 14.9 Hz only
+#: LPF1 (5 Hz) acts.
+LSM9DS1_BW_G_CUTOFF_HZ: Mapping[float, tuple[float, float, float, float]] = MappingProxyType(
+    {
+        14.9: (5.0, 5.0, 5.0, 5.0),
+        59.5: (16.0, 16.0, 16.0, 16.0),
+        119.0: (14.0, 31.0, 31.0, 31.0),
+        238.0: (14.0, 29.0, 63.0, 78.0),
+        476.0: (21.0, 28.0, 57.0, 100.0),
+        952.0: (33.0, 40.0, 58.0, 100.0),
+    }
+)
+
+LSM9DS1 = ChipFamily(
+    name="lsm9ds1",
+    title="LSM9DS1 accelerometer/gyroscope",
+    addresses=(0x6B, 0x6A),
+    who_am_i_register=LSM9DS1_REG.WHO_AM_I,
+    models=(ChipModel("lsm9ds1", 0x68, "LSM9DS1"),),
+    siblings=MappingProxyType(
+        {
+            0x3D: "the LSM9DS1's magnetometer die (WHO_AM_I_M 0x3D, at 0x1C or 0x1E); the "
+            "accelerometer/gyroscope die answers at 0x6A or 0x6B",
+            0xD4: "an LSM9DS0 gyroscope or an L3GD20 (WHO_AM_I 0xD4), an older ST part with a "
+            "different register map; gyrocal does not drive it",
+            0x69: "an LSM6DS3 (WHO_AM_I 0x69); gyrocal does not drive it",
+            0x6A: "an LSM6DSL or LSM6DS3C (WHO_AM_I 0x6A); gyrocal does not drive it",
+            0x6C: "an LSM6DSO (WHO_AM_I 0x6C); gyrocal does not drive it",
+        }
+    ),
+    gyro_ranges=(
+        GyroRange(0b00, 245.0, 1000.0 / 8.75),  # §2.4: 8.75 mdps/LSB
+        GyroRange(0b01, 500.0, 1000.0 / 17.50),
+        GyroRange(0b11, 2000.0, 1000.0 / 70.0),
+    ),
+    fifo_capacity=32,
+    fifo_capacity_unit="samples",
+    reset_time_s=0.010,  # §2.6 (⚠ duration not in ST)
+    startup_time_s=0.100,  # not in the hardware reference: a conservative wait (⚠)
+    temperature_offset_c=25.0,  # §2.5: 16 LSB/°C, 0 at 25 °C
+    temperature_lsb_per_c=16.0,
+    max_bus_hz=400_000,
+)
+
+
+def register_names(registers: object) -> dict[int, str]:
+    """Address → name for a register table (``MPU9250_REG`` or ``LSM9DS1_REG``), for messages."""
+    return {addr: name for name, addr in asdict(registers).items()}  # type: ignore[call-overload]

@@ -1,0 +1,156 @@
+"""Reader for the InvenSense/TDK MPU-9250 gyro (also MPU-9255, and MPU-6500 with a notice).
+
+Bring-up (hardware reference §1.3): H_RESET, wait 100 ms; SIGNAL_PATH_RESET, wait 100 ms;
+PWR_MGMT_1 = CLKSEL auto (PLL), wait 10 ms; WHO_AM_I again; all axes on; CONFIG (DLPF_CFG, and
+FIFO_MODE = 1 so a full FIFO keeps its oldest data and never tears a frame), SMPLRT_DIV,
+GYRO_CONFIG (FS_SEL, FCHOICE_B = 00); wait for the gyro to start.
+
+Streaming (§1.7): FIFO_EN = TEMP | GYRO_XYZ gives 8-byte big-endian frames ``TEMP GX GY GZ``
+(64 frames in the 512-byte FIFO: 64 ms at 1 kHz). ``read()`` latches FIFO_COUNT (2 bytes from
+FIFO_COUNTH), pops the whole frames from the FIFO_R_W data port in one ``i2c_rdwr`` burst (or in
+32-byte block reads on a bus without it), then reads INT_STATUS. With FIFO_MODE = 1 a full FIFO
+drops only newer samples, so if FIFO_OFLOW_INT is set the frames just read are still delivered;
+the FIFO is then reset (as the kernel does) and the lost samples are reported as a gap.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from drivers.errors import ConfigurationError
+from drivers.imu.base import BLOCK_MAX, ImuReader
+from drivers.imu.chips import (
+    MPU9250,
+    MPU9250_BITS,
+    MPU9250_DLPF,
+    MPU9250_REG,
+    GyroRange,
+    register_names,
+)
+
+__all__ = ["MPU9250Reader"]
+
+R, B = MPU9250_REG, MPU9250_BITS
+_REG_NAMES = register_names(R)
+
+
+class MPU9250Reader(ImuReader):
+    """MPU-9250 / MPU-9255 / MPU-6500 gyro reader over an smbus2-compatible bus.
+
+    Parameters
+    ----------
+    bus, address, clock, **kwargs
+        As for :class:`~drivers.imu.base.ImuReader` (default address 0x68; 0x69 with AD0 high).
+    temperature_in_fifo : bool
+        Put TEMP_OUT in every FIFO frame (8-byte frames, 64 in the FIFO). With ``False`` the
+        frames are 6 bytes (85 fit, 85 ms at 1 kHz) and TEMP_OUT is read once per drain.
+    """
+
+    family = MPU9250
+
+    def __init__(
+        self,
+        bus: Any,
+        address: int | None = None,
+        *,
+        temperature_in_fifo: bool = True,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(bus, address, **kwargs)
+        self.temperature_in_fifo = bool(temperature_in_fifo)
+        self._frame = 8 if self.temperature_in_fifo else 6
+
+    def _register_names(self) -> dict[int, str]:
+        return _REG_NAMES
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes per FIFO frame."""
+        return self._frame
+
+    def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
+        base = MPU9250.extra["internal_rate_hz"]
+        div = round(base / odr_hz - 1.0) if odr_hz > 0 else -1
+        div = min(max(div, 0), 255)
+        actual = base / (1 + div)
+        if not (odr_hz > 0 and abs(actual - odr_hz) <= 0.01 * odr_hz):
+            examples = ", ".join(f"{base / (1 + d):.4g}" for d in (0, 1, 2, 3, 4, 7, 9, 19, 49, 99))
+            raise ConfigurationError(
+                f"odr_hz={odr_hz!r} is not an MPU-9250 output data rate. With the gyro low-pass "
+                f"filter on, the rate is {base:g}/(1 + SMPLRT_DIV) Hz for SMPLRT_DIV 0..255, that "
+                f"is {examples}, ... down to {base / 256:.4g} Hz."
+            )
+        bands = sorted(MPU9250_DLPF, reverse=True)
+        if lowpass_hz is None:
+            lp = next((b for b in bands if b <= actual / 2), bands[-1])
+        else:
+            lp = next((b for b in bands if abs(b - float(lowpass_hz)) <= 0.5), None)
+            if lp is None:
+                raise ConfigurationError(
+                    f"lowpass_hz={lowpass_hz!r} is not an MPU-9250 gyro filter bandwidth; choose "
+                    "one of " + ", ".join(f"{b:g}" for b in bands) + " Hz"
+                )
+        return actual, lp, (div, MPU9250_DLPF[lp])
+
+    def _bring_up(self, rng: GyroRange, setting: Any) -> None:
+        div, dlpf = setting
+        fam, clock = self.family, self._clock
+        self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_H_RESET)
+        clock.sleep(fam.reset_time_s)
+        self._write_byte(R.SIGNAL_PATH_RESET, B.SIGNAL_PATH_RESET_ALL)
+        clock.sleep(fam.reset_time_s)
+        self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_CLKSEL_AUTO)
+        clock.sleep(fam.extra["wake_time_s"])
+        self._check_identity_again()
+        self._write_byte(R.PWR_MGMT_2, 0x00)
+        config = B.CONFIG_FIFO_MODE | dlpf
+        gyro_config = rng.code << B.GYRO_FS_SHIFT  # FCHOICE_B = 00: the DLPF is in use
+        self._write_byte(R.SMPLRT_DIV, div)
+        self._write_byte(R.CONFIG, config)
+        self._write_byte(R.GYRO_CONFIG, gyro_config)
+        for reg, value in ((R.SMPLRT_DIV, div), (R.CONFIG, config), (R.GYRO_CONFIG, gyro_config)):
+            self._verify(reg, value)
+        clock.sleep(fam.startup_time_s)
+
+    def _fifo_sources(self) -> int:
+        gyro = B.FIFO_EN_GYRO_X | B.FIFO_EN_GYRO_Y | B.FIFO_EN_GYRO_Z
+        return gyro | (B.FIFO_EN_TEMP if self.temperature_in_fifo else 0)
+
+    def _fifo_prepare(self) -> None:
+        # the kernel's order (§1.7): reset, choose sources, then enable (in _fifo_go)
+        self._write_byte(R.USER_CTRL, B.USER_CTRL_FIFO_RST)
+        self._write_byte(R.FIFO_EN, self._fifo_sources())
+        self._read_byte(R.INT_STATUS)  # clears a FIFO_OFLOW_INT left from before
+
+    def _fifo_go(self) -> None:
+        self._write_byte(R.USER_CTRL, B.USER_CTRL_FIFO_EN)
+
+    def _disable_fifo(self) -> None:
+        self._write_byte(R.FIFO_EN, 0x00)
+        self._write_byte(R.USER_CTRL, 0x00)
+
+    def _power_down(self) -> None:
+        self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_SLEEP | B.PWR_MGMT_1_CLKSEL_AUTO)
+
+    def _fifo_level(self) -> tuple[int, bool, float]:
+        hi, lo = self._read_block(R.FIFO_COUNTH, 2)  # reading COUNTH latches both bytes
+        # FIFO_OFLOW_INT is asked after the burst (_overflowed), which also covers this drain
+        return (((hi & 0x1F) << 8) | lo) // self._frame, False, self._clock.monotonic()
+
+    def _overflowed(self) -> bool:
+        return bool(self._read_byte(R.INT_STATUS) & B.INT_STATUS_FIFO_OFLOW)  # clears it
+
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+        chunk = (BLOCK_MAX // self._frame) * self._frame
+        data = self._read_stream(R.FIFO_R_W, n * self._frame, chunk)
+        words = np.frombuffer(data, dtype=">i2").reshape(n, self._frame // 2)
+        if self.temperature_in_fifo:
+            return words[:, 1:4], words[:, 0].astype(np.float64)
+        return words, None
+
+    def _temperature_counts(self) -> int:
+        hi, lo = self._read_block(R.TEMP_OUT_H, 2)
+        return int.from_bytes(bytes((hi, lo)), "big", signed=True)
+

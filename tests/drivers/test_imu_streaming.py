@@ -1,0 +1,405 @@
+"""Streaming through driver + emulator: values, counts, timestamps, bus paths and fault knobs.
+
+Every delivered sample is checked against the emulator's truth at the instant the chip really
+took it (``chip.sample_time``), so a duplicated, skipped, reordered or invented sample fails.
+Sensitivities are the datasheet's (hardware reference §1.5, §2.4), written out here.
+"""
+
+import errno
+import math
+
+import numpy as np
+import pytest
+
+from drivers.clock import VirtualClock
+from drivers.emulated.imu_chips import ChipFaults, SensorTruth, make_emulated_imu
+from drivers.emulated.motion import ConstantRate, FunctionMotion
+from drivers.errors import BusError
+from drivers.imu import SensorFaultError, open_imu
+
+DEG = math.pi / 180
+# model -> (odr_hz, range_dps, rad/s per count from the datasheet)
+SETUPS = {
+    "mpu9250": (1000.0, 500, DEG / 65.5),
+    "lsm9ds1": (952.0, 500, 17.50e-3 * DEG),
+}
+
+
+def wave(range_dps):
+    """A smooth motion at about half full scale, different on each axis."""
+    a = 0.5 * range_dps * DEG
+    return FunctionMotion(lambda t: a * np.column_stack(
+        [np.sin(2 * np.pi * 0.7 * t), np.cos(2 * np.pi * 1.3 * t), np.sin(2 * np.pi * 0.3 * t + 1)]
+    ))
+
+
+def rig(model, truth, motion, faults=None, bus=None, seed=0, **reader_kw):
+    odr, range_dps, _ = SETUPS[model]
+    clock = VirtualClock() if bus is None else bus.clock
+    bus, addr = make_emulated_imu(model, clock, motion, truth, faults=faults, seed=seed, bus=bus)
+    reader = open_imu(model, bus, addr, clock=clock, range_dps=range_dps, odr_hz=odr, **reader_kw)
+    return clock, bus, bus.device(addr), reader
+
+
+def collect(reader, clock, seconds, seed=1, step=(0.002, 0.025)):
+    """Drain at irregular intervals for ``seconds``; return the list of batches."""
+    rng = np.random.default_rng(seed)
+    end = clock.monotonic() + seconds
+    batches = []
+    while clock.monotonic() < end:
+        clock.sleep(rng.uniform(*step))
+        batches.append(reader.read())
+    return batches
+
+
+def cat(batches, field):
+    return np.concatenate([getattr(b, field) for b in batches])
+
+
+def grid_index(chip, batches):
+    """The chip's own sample number of every delivered sample, for a stream without gaps.
+
+    The first sample in the FIFO after the reader's start is the chip's sample
+    ``fifo_enables[0] + 1``; the reader numbers it 0.
+    """
+    return chip.fifo_enables[0] + 1 + cat(batches, "index")
+
+
+def expected_rate(truth, motion, chip, ks, lsb):
+    t = chip.sample_time(ks)
+    m = truth.reading(motion.rate(t), truth.temperature_at(t))
+    return np.clip(np.rint(m / lsb), -32768, 32767) * lsb
+
+
+# ----------------------------------------------------------------------------- streaming
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_constant_rate_reads_back_within_quantization_and_noise(model):
+    odr, _, lsb = SETUPS[model]
+    omega = np.array([0.8, -1.2, 0.3])
+    truth = SensorTruth(scale=(1.02, 0.98, 1.01), bias=(0.015, -0.01, 0.02))  # default noise
+    clock, _, _, reader = rig(model, truth, ConstantRate(omega), seed=4)
+    reader.start()
+    rate = cat(collect(reader, clock, 10.0), "rate")
+    n = len(rate)
+    sigma = truth.sigma_rad_s(odr)
+    # the reading is m = omega/scale - bias (Eq. 1 inverted): no correction is applied
+    expect = truth.reading(omega[None, :], np.array([25.0]))[0]
+    assert np.all(np.abs(rate.mean(axis=0) - expect) < 5 * sigma / math.sqrt(n) + lsb / 2)
+    assert rate.std(axis=0) == pytest.approx(np.hypot(sigma, lsb / math.sqrt(12)), rel=0.05)
+    assert not np.any(np.all(rate == 0.0, axis=1))
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_a_simulated_minute_delivers_every_sample_once_in_order_on_time(model):
+    odr, range_dps, lsb = SETUPS[model]
+    truth = SensorTruth(noise_density_rad_s_sqrt_hz=0.0)
+    motion = wave(range_dps)
+    clock, bus, chip, reader = rig(model, truth, motion, stuck_after_s=None)
+    reader.start()
+    batches = collect(reader, clock, 62.0)
+    t, rate, index = cat(batches, "t"), cat(batches, "rate"), cat(batches, "index")
+    assert not any(b.gaps for b in batches)
+    assert np.all(np.diff(index) == 1) and index[0] == 1  # sample 0 is dropped after a start
+    assert np.all(np.diff(t) > 0)
+    ks = grid_index(chip, batches)
+    np.testing.assert_allclose(rate, expected_rate(truth, motion, chip, ks, lsb), atol=1e-12)
+    assert np.max(np.abs(t - chip.sample_time(ks))) < 0.5e-3
+    # a minute between two samples' midpoints holds exactly ODR × 60 s samples
+    period = 1.0 / odr
+    t0 = t[500] - period / 2
+    assert np.count_nonzero((t >= t0) & (t < t0 + 60.0)) == round(odr * 60)
+    # nothing was left behind: every sample the chip took before the last drain was delivered
+    assert index[-1] + 1 + chip.fifo_level // (8 if model == "mpu9250" else 1) >= (
+        chip.samples_taken - chip.fifo_enables[0] - 1
+    )
+
+
+@pytest.mark.parametrize("model", SETUPS)
+@pytest.mark.parametrize("ppm", [-10_000, 10_000])
+def test_timestamps_follow_a_chip_clock_one_percent_off(model, ppm):
+    odr, range_dps, _ = SETUPS[model]
+    truth = SensorTruth(clock_ppm=ppm)
+    clock, _, chip, reader = rig(model, truth, wave(range_dps))
+    reader.start()
+    batches = collect(reader, clock, 60.0, seed=7)
+    assert not any(b.gaps for b in batches)
+    t = cat(batches, "t")
+    ks = grid_index(chip, batches)
+    err = t - chip.sample_time(ks)
+    assert np.max(np.abs(err)) < 1e-3  # throughout the minute, from the first drain on
+    assert reader.measured_odr_hz == pytest.approx(odr * (1 + ppm * 1e-6), rel=2e-5)
+    # ignoring the chip clock would be half a second off by the end of the minute
+    assert abs((ks[-1] - ks[0]) / odr - (t[-1] - t[0])) > 0.5
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_temperature_comes_with_the_samples(model):
+    warming = SensorTruth(temperature_c=lambda t: 20.0 + 0.5 * t)
+    clock, _, chip, reader = rig(model, warming, ConstantRate((0.1, 0.1, 0.1)))
+    reader.start()
+    batches = collect(reader, clock, 5.0)
+    temp = cat(batches, "temperature_c")
+    ks = grid_index(chip, batches)
+    true_temp = 20.0 + 0.5 * chip.sample_time(ks)
+    if model == "mpu9250":  # TEMP_OUT in every FIFO frame: T = TEMP_OUT/333.87 + 21
+        assert np.max(np.abs(temp - true_temp)) <= 0.5 / 333.87 + 1e-9
+    else:  # OUT_TEMP once per drain, read up to ~35 ms after a batch's oldest sample
+        assert np.max(np.abs(temp - true_temp)) <= 0.5 / 16 + 0.5 * 0.035
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_saturation_is_flagged(model):
+    _, range_dps, lsb = SETUPS[model]
+    over = 1.2 * range_dps * DEG
+    clock, _, _, reader = rig(model, SensorTruth(), ConstantRate((over, -over, 0.5)))
+    reader.start()
+    batches = collect(reader, clock, 1.0)
+    sat, rate = cat(batches, "saturated"), cat(batches, "rate")
+    assert sat[:, 0].all() and sat[:, 1].all() and not sat[:, 2].any()
+    np.testing.assert_allclose(rate[:, 0], 32767 * lsb, rtol=1e-12)
+    np.testing.assert_allclose(rate[:, 1], -32768 * lsb, rtol=1e-12)
+
+
+def test_bursts_longer_than_32_bytes_go_through_i2c_rdwr():
+    for model, fifo_register in (("mpu9250", 0x74), ("lsm9ds1", 0x18)):
+        clock, bus, _, reader = rig(model, SensorTruth(), ConstantRate((0.1, 0.2, 0.3)))
+        reader.start()
+        bus.log.clear()
+        collect(reader, clock, 1.0, step=(0.02, 0.03))
+        fifo_reads = [e for e in bus.log if e.register == fifo_register]
+        assert fifo_reads and all(e.op == "i2c_rdwr" for e in fifo_reads)
+        assert max(e.read_length for e in fifo_reads) > 32
+        assert reader.uses_i2c_rdwr
+
+
+class PlainSMBus:
+    """Only the SMBus methods: a bus object without i2c_rdwr."""
+
+    def __init__(self, bus):
+        self._bus = bus
+        self.read_byte_data = bus.read_byte_data
+        self.write_byte_data = bus.write_byte_data
+        self.read_i2c_block_data = bus.read_i2c_block_data
+        self.write_i2c_block_data = bus.write_i2c_block_data
+        self.close = bus.close
+
+
+@pytest.mark.parametrize("model", SETUPS)
+@pytest.mark.parametrize("how", ["no method", "EOPNOTSUPP"])
+def test_a_bus_without_i2c_rdwr_still_works(model, how):
+    odr, range_dps, lsb = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    clock = VirtualClock()
+    bus, addr = make_emulated_imu(model, clock, motion, truth)
+    if how == "no method":
+        reader_bus = PlainSMBus(bus)
+    else:
+        bus.i2c_rdwr_supported = False
+        reader_bus = bus
+    reader = open_imu(model, reader_bus, addr, clock=clock, range_dps=range_dps, odr_hz=odr)
+    reader.start()
+    batches = collect(reader, clock, 3.0)
+    assert not reader.uses_i2c_rdwr
+    assert not any(b.gaps for b in batches)
+    ks = grid_index(bus.device(addr), batches)
+    assert np.all(np.diff(ks) == 1)
+    np.testing.assert_allclose(
+        cat(batches, "rate"), expected_rate(truth, motion, bus.device(addr), ks, lsb), atol=1e-12
+    )
+    fifo = [e for e in bus.log if e.register in (0x74, 0x18) and e.errno is None]
+    assert fifo and all(e.op == "read_i2c_block_data" and e.read_length <= 32 for e in fifo)
+
+
+def test_lsm_without_the_register_wrap_reads_each_slot_in_two_halves():
+    odr, range_dps, lsb = SETUPS["lsm9ds1"]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    clock, bus, chip, reader = rig("lsm9ds1", truth, motion, burst_wrap=False)
+    reader.start()
+    bus.log.clear()
+    # two transfers per slot keep the bus 40 % busy at 952 Hz: drain more often
+    batches = collect(reader, clock, 2.0, step=(0.002, 0.015))
+    assert not any(b.gaps for b in batches)
+    ks = grid_index(chip, batches)
+    assert np.all(np.diff(ks) == 1)
+    np.testing.assert_allclose(
+        cat(batches, "rate"), expected_rate(truth, motion, chip, ks, lsb), atol=1e-12
+    )
+    halves = {(e.register, e.read_length) for e in bus.log if e.register in (0x18, 0x28)}
+    assert halves == {(0x18, 6), (0x28, 6)}
+
+
+def test_mpu_frames_without_temperature():
+    odr, range_dps, lsb = SETUPS["mpu9250"]
+    truth = SensorTruth(noise_density_rad_s_sqrt_hz=0.0, temperature_c=28.0)
+    motion = wave(range_dps)
+    clock, bus, chip, reader = rig("mpu9250", truth, motion, temperature_in_fifo=False)
+    reader.start()
+    assert bus.read_byte_data(0x68, 0x23) == 0x70  # FIFO_EN: gyro X, Y, Z only
+    batches = collect(reader, clock, 2.0)
+    ks = grid_index(chip, batches)
+    np.testing.assert_allclose(
+        cat(batches, "rate"), expected_rate(truth, motion, chip, ks, lsb), atol=1e-12
+    )
+    assert np.all(np.abs(cat(batches, "temperature_c") - 28.0) <= 0.5 / 333.87)
+
+
+# ----------------------------------------------------------------------------- fault knobs
+
+
+def check_faulty_stream(model, truth, motion, chip, batches):
+    """Every delivered sample is one the chip took, and its index (hence its time) is right or,
+    after a gap whose size had to be estimated, one off at most.
+
+    The samples between gaps are matched by value against the truth at the chip's sample
+    numbers around the reader's; a smooth motion makes every sample distinct.
+    """
+    odr, _, lsb = SETUPS[model]
+    rate, t = cat(batches, "rate"), cat(batches, "t")
+    naive = grid_index(chip, batches)
+    ks = naive.copy()
+    for seg in np.split(np.arange(len(ks)), np.flatnonzero(np.diff(naive) != 1) + 1):
+        for d in (0, 1, -1):
+            expect = expected_rate(truth, motion, chip, naive[seg] + d, lsb)
+            if np.allclose(rate[seg], expect, rtol=0, atol=1e-12):
+                ks[seg] += d
+                break
+        else:
+            raise AssertionError(f"samples {naive[seg][:3]}... are not the chip's")
+    assert np.max(np.abs(t - chip.sample_time(ks))) < 1.0 / odr + 0.5e-3
+    assert np.all(np.diff(t) > 0) and np.all(np.diff(ks) > 0)
+    return ks
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_nacks_are_retried_without_loss(model):
+    _, range_dps, _ = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    faults = ChipFaults(nack_probability=0.03)  # EREMOTEIO: refused before any byte moved
+    clock, bus, chip, reader = rig(model, truth, motion, faults=faults, seed=11)
+    reader.start()
+    batches = collect(reader, clock, 10.0)
+    assert sum(e.errno == errno.EREMOTEIO for e in bus.log) > 50
+    assert not any(b.gaps for b in batches)
+    ks = check_faulty_stream(model, truth, motion, chip, batches)
+    assert np.all(np.diff(ks) == 1)
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_an_io_error_in_a_fifo_burst_restarts_the_fifo_and_reports_a_gap(model):
+    _, range_dps, _ = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    faults = ChipFaults(nack_probability=0.01, nack_errno=errno.EIO)
+    clock, bus, chip, reader = rig(model, truth, motion, faults=faults, seed=12)
+    reader.start()
+    batches = collect(reader, clock, 20.0)
+    gaps = [g for b in batches for g in b.gaps]
+    assert gaps and all("bus error during FIFO read" in g.reason for g in gaps)
+    assert all(g.samples >= 1 and g.t <= g.t_end for g in gaps)
+    ks = check_faulty_stream(model, truth, motion, chip, batches)
+    # the samples the gaps say were lost are (within one) the ones missing
+    assert sum(g.samples for g in gaps) == pytest.approx(ks[-1] - ks[0] + 1 - len(ks),
+                                                         abs=len(gaps))
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_a_fifo_overflow_is_a_gap_of_the_right_size_and_time(model):
+    odr, range_dps, _ = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    clock, _, chip, reader = rig(model, truth, motion)
+    reader.start()
+    before = collect(reader, clock, 3.0)
+    clock.sleep(0.25)  # the host stalls: the FIFO (64 ms / 34 ms) overflows
+    after = collect(reader, clock, 3.0)
+    batches = before + after
+    gaps = [g for b in batches for g in b.gaps]
+    assert len(gaps) == 1 and gaps[0].reason == "fifo overflow"
+    gap = gaps[0]
+    ks = check_faulty_stream(model, truth, motion, chip, batches)
+    missing = np.flatnonzero(np.diff(ks) > 1)
+    assert len(missing) == 1
+    lost = ks[missing[0] + 1] - ks[missing[0]] - 1
+    assert abs(gap.samples - lost) <= 1
+    assert gap.t == pytest.approx(float(chip.sample_time(ks[missing[0]] + 1)), abs=1.5 / odr)
+    assert gap.samples == pytest.approx(0.25 * odr, rel=0.5)
+    assert (reader.gap_count, reader.samples_lost) == (1, gap.samples)
+    assert reader.samples_delivered == len(ks)
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_a_small_fifo_knob_overflows_at_ordinary_drain_rates(model):
+    _, range_dps, _ = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    faults = ChipFaults(fifo_capacity=128 if model == "mpu9250" else 12)  # 16 or 12 samples
+    clock, _, chip, reader = rig(model, truth, motion, faults=faults)
+    reader.start()
+    batches = collect(reader, clock, 10.0, step=(0.003, 0.02))
+    gaps = [g for b in batches for g in b.gaps]
+    assert len(gaps) > 50 and {g.reason for g in gaps} == {"fifo overflow"}
+    check_faulty_stream(model, truth, motion, chip, batches)
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_a_short_nack_burst_is_ridden_out_and_a_long_one_is_a_bus_error(model):
+    odr, range_dps, _ = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    faults = ChipFaults(nack_bursts=((1.0, 0.003), (2.0, 0.5)))  # 3 ms, then 500 ms
+    clock, _, chip, reader = rig(model, truth, motion, faults=faults, retries=3,
+                                 retry_delay_s=0.002)
+    reader.start()
+    batches = collect(reader, clock, 0.99)
+    while clock.monotonic() < 1.01:  # drain inside the short burst
+        clock.sleep(0.0005)
+        batches.append(reader.read())
+    batches += collect(reader, clock, 1.95 - clock.monotonic())  # ends before 1.975
+    assert not any(b.gaps for b in batches)
+    check_faulty_stream(model, truth, motion, chip, batches)
+    clock.sleep(2.1 - clock.monotonic())  # inside the long burst
+    with pytest.raises(BusError) as info:
+        reader.read()
+    e = info.value
+    fifo_level_register = 0x72 if model == "mpu9250" else 0x2F  # FIFO_COUNTH / FIFO_SRC
+    assert (e.errno, e.address, e.register) == (errno.EREMOTEIO, chip.family.addresses[0],
+                                                fifo_level_register)
+    assert "4 attempt" in str(e)
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_a_chip_that_stops_answering_is_a_bus_error_not_zeros(model):
+    _, range_dps, _ = SETUPS[model]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    faults = ChipFaults()
+    clock, _, chip, reader = rig(model, truth, motion, faults=faults)
+    reader.start()
+    batches = collect(reader, clock, 1.0)
+    faults.dead_after_s = clock.monotonic()
+    with pytest.raises(BusError) as info:
+        collect(reader, clock, 1.0)
+    assert info.value.errno == errno.EREMOTEIO
+    check_faulty_stream(model, truth, motion, chip, batches)
+
+
+@pytest.mark.parametrize("model", SETUPS)
+def test_a_stuck_axis_is_a_sensor_fault(model):
+    odr, _, _ = SETUPS[model]
+    faults = ChipFaults(stuck_axis=1, stuck_counts=0, stuck_from_s=0.0)
+    clock, _, _, reader = rig(model, SensorTruth(), ConstantRate((0.2, 0.3, -0.1)),
+                              faults=faults, stuck_after_s=0.5)
+    reader.start()
+    t0 = clock.monotonic()
+    with pytest.raises(SensorFaultError) as info:
+        collect(reader, clock, 5.0)
+    assert info.value.axis == 1 and "axis y" in str(info.value)
+    assert clock.monotonic() - t0 < max(0.5, 200 / odr) + 0.1
+
+
+def test_a_live_axis_at_rest_is_not_called_stuck():
+    # MPU-9250 at ±2000 dps, 4 Hz: the quietest setting, noise about half a count per sample
+    clock = VirtualClock()
+    truth = SensorTruth(noise_density_rad_s_sqrt_hz=0.01 * DEG)
+    bus, addr = make_emulated_imu("mpu9250", clock, ConstantRate(), truth, seed=2)
+    reader = open_imu("mpu9250", bus, addr, clock=clock, range_dps=2000, odr_hz=1000 / 250)
+    reader.start()
+    batches = collect(reader, clock, 120.0, step=(0.5, 1.0))
+    assert sum(len(b) for b in batches) > 400
