@@ -240,8 +240,13 @@ class _EmulatedImu(ABC):
         *,
         faults: ChipFaults | None = None,
         seed: int = 0,
+        subsamples: int = 8,
     ) -> None:
+        if int(subsamples) < 1:
+            raise ValueError(f"subsamples must be at least 1, got {subsamples!r}")
         self.clock = clock
+        #: True-rate evaluations averaged per output sample (see :meth:`_true_rate`).
+        self.subsamples = int(subsamples)
         self.motion: MotionSource = motion if motion is not None else ConstantRate()
         self.truth = truth if truth is not None else SensorTruth()
         self.faults = faults if faults is not None else ChipFaults()
@@ -369,6 +374,24 @@ class _EmulatedImu(ABC):
         odr = self._odr_hz()
         self._period = None if odr is None else 1.0 / (odr * (1.0 + self.truth.clock_ppm * 1e-6))
 
+    def _true_rate(self, t: np.ndarray, period: float) -> np.ndarray:
+        """The true rate each output sample carries: its mean over the sample period.
+
+        A real gyro samples internally at kHz rates, low-pass filters (the DLPF) and decimates
+        to the output rate, so fast motion (a servo's commutation ripple) does not alias into
+        the output. The emulator stands in for that with the mean of ``subsamples`` evaluations
+        spread over ``(t - period, t]`` (a boxcar, which nulls every multiple of the output
+        rate). Sub-sample times are increasing across samples and calls, as the
+        :class:`~drivers.emulated.motion.MotionSource` contract requires.
+        """
+        S = self.subsamples
+        if S == 1:
+            return np.asarray(self.motion.rate(t), dtype=float)
+        offsets = period * ((np.arange(S) + 0.5) / S - 1.0)  # midpoints of S slices
+        ts = (t[:, None] + offsets[None, :]).reshape(-1)
+        w = np.asarray(self.motion.rate(ts), dtype=float).reshape(t.size, S, 3)
+        return w.mean(axis=1)
+
     def _sync(self) -> None:
         """Generate every sample with time ≤ now."""
         period = self._period
@@ -392,7 +415,7 @@ class _EmulatedImu(ABC):
             )
             skipped = n - head - tail
         t = self._origin + period * ks
-        omega = np.asarray(self.motion.rate(t), dtype=float)
+        omega = self._true_rate(t, period)
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         odr = 1.0 / period
@@ -458,12 +481,12 @@ class EmulatedMPU9250(_EmulatedImu):
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
                  truth: SensorTruth | None = None, *, faults: ChipFaults | None = None,
-                 seed: int = 0, variant: str = "mpu9250") -> None:
+                 seed: int = 0, variant: str = "mpu9250", subsamples: int = 8) -> None:
         if variant not in _MPU_VARIANTS:
             raise ValueError(f"variant must be one of {', '.join(_MPU_VARIANTS)}, got {variant!r}")
         self.default_who_am_i = _MPU_VARIANTS[variant]
         self.variant = variant
-        super().__init__(clock, motion, truth, faults=faults, seed=seed)
+        super().__init__(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples)
 
     def _power_on_reset(self) -> None:
         self._regs = bytearray(128)
@@ -866,6 +889,7 @@ def make_emulated_imu(
     faults: ChipFaults | None = None,
     bus: EmulatedSMBus | None = None,
     bus_hz: float = 400_000,
+    subsamples: int = 8,
 ) -> tuple[EmulatedSMBus, int]:
     """An emulated sensor on an emulated bus, ready for a reader, in one call.
 
@@ -889,6 +913,9 @@ def make_emulated_imu(
         Attach to this bus instead of a new one.
     bus_hz : float
         SCL frequency of a new bus.
+    subsamples : int
+        True-rate evaluations averaged into each output sample (the chip's low-pass filter and
+        decimation; 1 samples the rate at the instant).
 
     Returns
     -------
@@ -898,9 +925,11 @@ def make_emulated_imu(
     key = str(model).strip().lower().replace("-", "")
     chip: _EmulatedImu
     if key in _MPU_VARIANTS:
-        chip = EmulatedMPU9250(clock, motion, truth, faults=faults, seed=seed, variant=key)
+        chip = EmulatedMPU9250(clock, motion, truth, faults=faults, seed=seed, variant=key,
+                               subsamples=subsamples)
     elif key == "lsm9ds1":
-        chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed)
+        chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed,
+                               subsamples=subsamples)
     else:
         raise ValueError(
             f"unknown IMU model {model!r}; choose one of {', '.join([*_MPU_VARIANTS, 'lsm9ds1'])}"

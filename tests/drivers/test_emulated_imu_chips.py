@@ -36,13 +36,15 @@ OUT_X_L_XL, FIFO_CTRL, FIFO_SRC = 0x28, 0x2E, 0x2F
 
 def mpu(truth=QUIET, motion=None, **kw):
     clock = VirtualClock()
-    bus, addr = make_emulated_imu("mpu9250", clock, motion or ConstantRate(), truth, **kw)
+    bus, addr = make_emulated_imu("mpu9250", clock, motion or ConstantRate(), truth,
+                                  **{"subsamples": 1, **kw})
     return clock, bus, addr, bus.device(addr)
 
 
 def lsm(truth=QUIET, motion=None, **kw):
     clock = VirtualClock()
-    bus, addr = make_emulated_imu("lsm9ds1", clock, motion or ConstantRate(), truth, **kw)
+    bus, addr = make_emulated_imu("lsm9ds1", clock, motion or ConstantRate(), truth,
+                                  **{"subsamples": 1, **kw})
     return clock, bus, addr, bus.device(addr)
 
 
@@ -430,3 +432,32 @@ def test_make_emulated_imu_rejects_unknown_models_and_shares_a_bus():
     assert isinstance(bus.device(b), EmulatedLSM9DS1)
     with pytest.raises(ValueError, match="variant"):
         EmulatedMPU9250(clock, variant="mpu6050")
+
+
+# ----------------------------------------------------------------------------- anti-aliasing
+def test_each_sample_carries_the_mean_rate_over_its_period():
+    # Default chips stand in for the low-pass filter and decimation of a real gyro: a ramp
+    # reads its value half a period earlier, and fast motion at a multiple of the output rate
+    # (a servo's commutation ripple) does not alias into the samples.
+    ramp = FunctionMotion(lambda t: np.column_stack([t, 0 * t, 0 * t]))
+    period = 1e-3
+    fast = FunctionMotion(lambda t: np.column_stack(
+        [0 * t, 0.5 * np.sin(2 * np.pi * 3 / period * t + 0.3), 0 * t]))
+    for motion, check in ((ramp, "ramp"), (fast, "fast")):
+        clock = VirtualClock()
+        bus, addr = make_emulated_imu("mpu9250", clock, motion,
+                                      SensorTruth(noise_density_rad_s_sqrt_hz=0.0))
+        mpu_stream(bus, addr)  # 1 kHz
+        chip = bus.device(addr)
+        k0 = chip.fifo_enables[-1]
+        clock.sleep(0.04)
+        w, r = i2c_msg.write(addr, [FIFO_R_W]), i2c_msg.read(addr, 8 * 32)
+        bus.i2c_rdwr(w, r)
+        g = np.frombuffer(bytes(r), ">i2").reshape(32, 4)[:, 1:] / 131 * DEG
+        times = chip.sample_time(np.arange(k0 + 1, k0 + 33))
+        if check == "ramp":
+            np.testing.assert_allclose(g[:, 0], times - period / 2, atol=DEG / 131)
+        else:
+            assert np.max(np.abs(g[:, 1])) <= DEG / 131 + 1e-12  # nulled, not aliased
+    with pytest.raises(ValueError, match="subsamples"):
+        make_emulated_imu("mpu9250", VirtualClock(), subsamples=0)

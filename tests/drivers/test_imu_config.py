@@ -42,7 +42,8 @@ LSM_ODR_G = {14.9: 1, 59.5: 2, 119: 3, 238: 4, 476: 5, 952: 6}
 
 def rig(model, truth=QUIET, omega=(0.0, 0.0, 0.0), **kw):
     clock = VirtualClock()
-    bus, addr = make_emulated_imu(model, clock, ConstantRate(omega), truth, **kw)
+    bus, addr = make_emulated_imu(model, clock, ConstantRate(omega), truth,
+                                  **{"subsamples": 1, **kw})
     return clock, bus, addr
 
 

@@ -36,7 +36,8 @@ def wave(range_dps):
 def rig(model, truth, motion, faults=None, bus=None, seed=0, **reader_kw):
     odr, range_dps, _ = SETUPS[model]
     clock = VirtualClock() if bus is None else bus.clock
-    bus, addr = make_emulated_imu(model, clock, motion, truth, faults=faults, seed=seed, bus=bus)
+    bus, addr = make_emulated_imu(model, clock, motion, truth, faults=faults, seed=seed, bus=bus,
+                                  subsamples=1)  # instant samples: the truth at each instant
     reader = open_imu(model, bus, addr, clock=clock, range_dps=range_dps, odr_hz=odr, **reader_kw)
     return clock, bus, bus.device(addr), reader
 
@@ -192,7 +193,7 @@ def test_a_bus_without_i2c_rdwr_still_works(model, how):
     odr, range_dps, lsb = SETUPS[model]
     truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
     clock = VirtualClock()
-    bus, addr = make_emulated_imu(model, clock, motion, truth)
+    bus, addr = make_emulated_imu(model, clock, motion, truth, subsamples=1)
     if how == "no method":
         reader_bus = PlainSMBus(bus)
     else:
@@ -398,7 +399,7 @@ def test_a_live_axis_at_rest_is_not_called_stuck():
     # MPU-9250 at ±2000 dps, 4 Hz: the quietest setting, noise about half a count per sample
     clock = VirtualClock()
     truth = SensorTruth(noise_density_rad_s_sqrt_hz=0.01 * DEG)
-    bus, addr = make_emulated_imu("mpu9250", clock, ConstantRate(), truth, seed=2)
+    bus, addr = make_emulated_imu("mpu9250", clock, ConstantRate(), truth, seed=2, subsamples=1)
     reader = open_imu("mpu9250", bus, addr, clock=clock, range_dps=2000, odr_hz=1000 / 250)
     reader.start()
     batches = collect(reader, clock, 120.0, step=(0.5, 1.0))
