@@ -37,7 +37,10 @@ Placement:
 Rest windows take the gyro samples of a rest segment, after a settling guard, while every encoder
 is still. Noise is estimated per axis from first differences; a correlation factor estimated on the
 rests (block means against first differences) corrects the standard error of coloured noise (e.g.
-a sensor's low-pass filter).
+a sensor's low-pass filter). On the axis a window turns about, the servo's speed ripple (gear mesh,
+control loop) would pass for noise in the first differences; it is real motion that the encoder
+sees too and that cancels between the gyro mean and the reference, so that axis takes the noise
+measured where the servo cannot reach it: at rest and on the other windows' off-axis components.
 """
 
 from __future__ import annotations
@@ -471,6 +474,23 @@ def extract_observations(
 
     if not rows:
         raise CalibInputError("no rotation windows: the recording has no usable turns")
+    # The turning axis's noise: pooled from the rests and the windows turning other axes.
+    noise_rows = np.array([r[5] for r in rows])
+    neff = np.array([r[6] for r in rows]) / noise_rows  # 1/sqrt(n_eff) per window and axis
+    dominant = np.argmax(np.abs(np.array([r[0] for r in rows])), axis=1)
+    for j in range(3):
+        var, dof = [], []
+        for x in rest_samples:
+            var.append(float(_diff_noise(x)[j]) ** 2)
+            dof.append(x.shape[0] - 1)
+        for i, r in enumerate(rows):
+            if dominant[i] != j:
+                var.append(float(noise_rows[i, j]) ** 2)
+                dof.append(r[4] - 1)
+        if dof:
+            pooled = float(np.sqrt(np.dot(var, dof) / np.sum(dof)))
+            noise_rows[dominant == j, j] = pooled
+    rows = [(*r[:5], noise_rows[i], noise_rows[i] * neff[i], r[7]) for i, r in enumerate(rows)]
     rest_kw = {}
     if rest_windows:
         rest_kw = dict(
