@@ -22,6 +22,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 #: (subcommand, module) in the order of ``gyrocal --help``.
 COMMANDS: tuple[tuple[str, str], ...] = (
     ("init", "kit.commands.init"),
+    ("calibrate", "kit.commands.calibrate"),
     ("estimate", "kit.commands.estimate"),
     ("simulate-recording", "kit.commands.simulate_recording"),
     ("study", "kit.commands.study"),
@@ -78,6 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gyrocal: interrupted", file=sys.stderr)
         return 130
+    except SystemExit as exc:  # a signal handler's exit (e.g. SIGTERM -> 143) after a safe stop
+        code = exc.code if isinstance(exc.code, int) else 1
+        print(f"gyrocal: stopped (exit {code})", file=sys.stderr)
+        return code
     except Exception as exc:  # every error becomes a message and a documented exit code
         code = exit_code_for(exc)
         if code == 1 or args.traceback:
