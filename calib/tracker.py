@@ -484,6 +484,11 @@ class BiasTracker:
         return self.kf.x[3:].copy() if self._temp_model else None
 
     @property
+    def tempco_std(self) -> np.ndarray | None:
+        """One-sigma uncertainty of :attr:`tempco`, rad/s/°C (None without the model)."""
+        return np.sqrt(np.diag(self.kf.P)[3:]) if self._temp_model else None
+
+    @property
     def health(self) -> Health:
         """Health flags after the latest sample."""
         since = self._last.get("since", 0.0)
