@@ -32,7 +32,15 @@ from scipy.stats import chi2
 
 from calib.errors import CalibInputError
 
-__all__ = ["StillDetector", "StillSettings", "detect_still", "quiet_windows", "run_lengths"]
+__all__ = [
+    "StillDetector",
+    "StillSettings",
+    "detect_still",
+    "first_still_mean",
+    "quiet_windows",
+    "run_lengths",
+    "white_noise_std",
+]
 
 _BLOCK = 4096  # windows per vectorised block (bounds the temporary to ~4 MB at 40-sample windows)
 
@@ -251,3 +259,67 @@ def detect_still(
     if n > L:
         still[: n - L] = run[L:] >= det.n_min + L
     return still
+
+
+def white_noise_std(rate: np.ndarray) -> np.ndarray:
+    """Per-sample white-noise standard deviation of each axis from first differences.
+
+    Robust to motion and drift: ``1.4826 · MAD(Δm) / √2`` (a smooth motion changes little from
+    one sample to the next; the median ignores the samples where it does).
+
+    Parameters
+    ----------
+    rate : array_like (n, 3)
+        Readings, rad/s, n >= 3.
+
+    Returns
+    -------
+    ndarray (3,)
+    """
+    m = np.asarray(rate, dtype=float)
+    if m.ndim != 2 or m.shape[1] != 3 or m.shape[0] < 3:
+        raise CalibInputError(f"rate must have shape (n >= 3, 3), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise CalibInputError("rate contains NaN or inf")
+    d = np.diff(m, axis=0)
+    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    sigma = 1.4826 * mad / math.sqrt(2.0)
+    if not np.all(sigma > 0):
+        raise CalibInputError(
+            "the readings do not change from sample to sample on some axis (quantised to "
+            "silence?); give the noise density explicitly"
+        )
+    return sigma
+
+
+def first_still_mean(
+    rate: np.ndarray,
+    noise_std: np.ndarray | float,
+    odr_hz: float,
+    settings: StillSettings | None = None,
+    *,
+    seconds: float = 1.0,
+) -> np.ndarray | None:
+    """Mean reading over the first ``seconds`` whose every window passes the variance test.
+
+    A starting point for the bias when there is no calibration (a still sensor reads
+    ``−bias``). The rate test is not applied (there is no bias to test against yet).
+
+    Returns
+    -------
+    ndarray (3,) or None
+        None if no such stretch exists.
+    """
+    det = StillDetector.build(noise_std, odr_hz, settings)
+    loose = StillDetector(det.n_window, det.n_min, det.n_lookahead, det.var_limit,
+                          np.full(3, np.inf))
+    m = np.asarray(rate, dtype=float)
+    quiet = quiet_windows(m, loose, 0)
+    need = max(1, int(round(seconds * float(odr_hz))))
+    run = run_lengths(quiet)
+    hit = np.flatnonzero(run >= need)
+    if hit.size == 0:
+        return None
+    e = int(hit[0])
+    a = e - need - det.n_window + 2
+    return m[max(a, 0) : e + 1].mean(axis=0)

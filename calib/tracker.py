@@ -304,6 +304,11 @@ class TrackResult:
     nis_ok : ndarray (n,) of bool
         The NIS health flag at each sample.
     updates : UpdateLog
+    decision_index : ndarray (d,) of int
+        Every sample (counted from the tracker's first) whose still decision this call made,
+        including samples of earlier calls that were awaiting their look-ahead.
+    decision_still : ndarray (d,) of bool
+        Those decisions.
     """
 
     t: np.ndarray
@@ -315,6 +320,8 @@ class TrackResult:
     since_update_s: np.ndarray
     nis_ok: np.ndarray
     updates: UpdateLog
+    decision_index: np.ndarray
+    decision_still: np.ndarray
 
 
 @dataclass
@@ -770,6 +777,8 @@ class BiasTracker:
             since_update_s=out["since"],
             nis_ok=out["nis_ok"],
             updates=log,
+            decision_index=g0 + np.arange(n_dec, dtype=np.int64),
+            decision_still=still_d.copy(),
         )
 
     # ------------------------------------------------------------------ internals

@@ -20,7 +20,11 @@ from kit.errors import EXIT_CODES, exit_code_for
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: (subcommand, module) in the order of ``gyrocal --help``.
-COMMANDS: tuple[tuple[str, str], ...] = ()
+COMMANDS: tuple[tuple[str, str], ...] = (
+    ("track", "kit.commands.track"),
+    ("noise", "kit.commands.noise"),
+    ("export", "kit.commands.export"),
+)
 
 
 def _epilog() -> str:
