@@ -36,7 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                 continue
             seen.add(opt.name)
             p.add_argument("--" + opt.name.replace("_", "-"), dest="opt_" + opt.name,
-                           type=opt.type, default=None, help=opt.help)
+                           metavar=opt.name.upper(), type=opt.type, default=None,
+                           help=opt.help)
 
 
 def _load(path: str) -> Any:
