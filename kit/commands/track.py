@@ -370,6 +370,9 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
     batch = Batch(s.t, s.rate, s.temperature_c if args.tempco else None, None, rr, ra)
     notes.append("synthetic sensor (calib.noise_sim), not the emulated jig: "
                  f"{args.duration:g} s, {args.motion} motions, 10 degC ramp")
+    if not args.tempco:
+        notes.append("the simulated die warms by 10 degC and its bias follows: without --tempco "
+                     "that drift is unmodelled (the NIS alarms may say so)")
     return tracker, batch, s, "simulation"
 
 
