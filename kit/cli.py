@@ -24,8 +24,11 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("init", "kit.commands.init"),
     ("calibrate", "kit.commands.calibrate"),
     ("estimate", "kit.commands.estimate"),
-    ("simulate-recording", "kit.commands.simulate_recording"),
+    ("export", "kit.commands.export"),
+    ("track", "kit.commands.track"),
+    ("noise", "kit.commands.noise"),
     ("study", "kit.commands.study"),
+    ("simulate-recording", "kit.commands.simulate_recording"),
     ("emulate", "kit.commands.emulate"),
 )
 

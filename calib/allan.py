@@ -1,0 +1,601 @@
+"""Noise characterisation of a still gyro by the overlapping Allan deviation.
+
+The rate record of each axis is treated as frequency data: the overlapping Allan variance at
+averaging time ``τ = m/odr`` is (IEEE Std 952-1997 Annex C; IEEE Std 1554-2005; NIST SP 1065
+eq. 11)
+
+    σ²(τ) = 1 / (2 τ² (n − 2m)) · Σ_k (x_{k+2m} − 2 x_{k+m} + x_k)²,
+
+with ``x`` the integrated rate (angle). The computation is ``allantools.oadev``, a pure
+Python + numpy implementation kept in step with NIST SP 1065 and Stable32, with Greenhall's
+equivalent degrees of freedom (``allantools.edf_greenhall``) for its confidence intervals.
+
+Three IEEE Std 952 noise terms are read off the curve:
+
+==================  =================  ======================  ==========================
+term                coefficient        Allan deviation         unit
+==================  =================  ======================  ==========================
+angle random walk   ``N``              ``N/√τ`` (slope −½)     rad/s/√Hz
+bias instability    ``B``              ``0.664 B`` (floor)     rad/s
+rate random walk    ``K``              ``K √(τ/3)`` (slope ½)  rad/s/√s (= rad/s²/√Hz)
+==================  =================  ======================  ==========================
+
+How (per axis):
+
+1. The three-term model ``σ²(τ) = N²/τ + (0.664 B)² + K² τ/3`` is fitted to the curve by
+   non-negative weighted least squares, the weights the inverse variances ``edf/(2σ⁴)`` of the
+   Allan variance estimates (Greenhall edf of the noise type that dominates at each τ).
+2. ``N`` and ``K`` are each read at one averaging time, the one where that term is best
+   determined: ``N² = (σ̂²(τ) − the other fitted terms)·τ`` and likewise for ``K²``. Their
+   standard deviation is that of the one Allan variance estimate they come from,
+   ``σ²·√(2/edf)``, carried through. Reading at one τ keeps the uncertainty honest: the
+   estimates at different τ of one record are correlated, which a joint fit's covariance would
+   ignore.
+3. ``B`` is read the same way, from the flicker floor ``(0.664 B)²`` at the τ where it is best
+   determined (``0.664 = √(2 ln 2/π)``, IEEE Std 952). The IEEE habit of quoting the curve's
+   minimum over 0.664 is biased low (the minimum of noisy points) and high (white noise and
+   random walk add to the floor); the minimum is kept in ``adev_min`` for comparison with
+   datasheets. Where the curve has no flicker floor, ``B`` is near zero and ``hi95`` bounds it.
+
+Results are frozen dataclasses; :class:`NoiseCharacterisation` round-trips through the
+``gyrocal-noise`` v1 JSON document.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import allantools
+import numpy as np
+from scipy.optimize import nnls
+from scipy.stats import chi2
+
+from calib.errors import CalibInputError, CalibrationFormatError
+from calib.noise_sim import FLICKER_FLOOR
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "AllanCurve",
+    "NoiseCharacterisation",
+    "NoiseFigure",
+    "allan_deviation",
+    "characterise_noise",
+]
+
+FORMAT = "gyrocal-noise"
+VERSION = 1
+METHOD = (
+    "overlapping Allan deviation (IEEE Std 952-1997 Annex C, IEEE Std 1554-2005; allantools "
+    "oadev, Greenhall edf); N, B and K each read at the one tau where best determined"
+)
+
+#: Greenhall's alpha (fractional-frequency power law) of each term: white FM, flicker FM, RW FM.
+_ALPHA = (0, -1, -2)
+_ONE_SIGMA = math.erf(1.0 / math.sqrt(2.0))
+_MIN_SAMPLES = 64
+
+
+def _as_rate(rate: Any, name: str = "rate") -> np.ndarray:
+    try:
+        a = np.asarray(rate, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be an (n, 3) array of rad/s") from None
+    if a.ndim == 1:
+        a = a[:, None]
+    if a.ndim != 2 or a.shape[1] < 1:
+        raise CalibInputError(f"{name} must have shape (n,) or (n, axes), got {a.shape}")
+    if a.shape[0] < _MIN_SAMPLES:
+        raise CalibInputError(
+            f"{name} has {a.shape[0]} samples; an Allan deviation needs at least {_MIN_SAMPLES} "
+            "(a still record of many minutes gives useful figures)"
+        )
+    if not np.all(np.isfinite(a)):
+        raise CalibInputError(f"{name} contains NaN or inf; give a clean, gap-free still record")
+    return a
+
+
+def _odr(odr_hz: Any) -> float:
+    try:
+        v = float(odr_hz)
+    except (TypeError, ValueError):
+        raise CalibInputError(f"odr_hz must be a positive number, got {odr_hz!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise CalibInputError(f"odr_hz must be a positive number, got {odr_hz!r}")
+    return v
+
+
+@dataclass(frozen=True, eq=False)
+class AllanCurve:
+    """Overlapping Allan deviation of each axis.
+
+    Attributes
+    ----------
+    tau_s : ndarray (M,)
+        Averaging times, s.
+    m : ndarray (M,) of int
+        Averaging factors (``tau_s·odr_hz``).
+    adev : ndarray (M, A)
+        Overlapping Allan deviation per axis, rad/s.
+    odr_hz : float
+        Sample rate of the record.
+    n_samples : int
+        Samples per axis.
+    edf : ndarray (M, 3)
+        Greenhall's equivalent degrees of freedom at each τ for white, flicker and
+        random-walk rate noise (columns in that order).
+    """
+
+    tau_s: np.ndarray
+    m: np.ndarray
+    adev: np.ndarray
+    odr_hz: float
+    n_samples: int
+    edf: np.ndarray
+
+    def interval(self, edf: np.ndarray, ci: float = _ONE_SIGMA) -> tuple[np.ndarray, np.ndarray]:
+        """Chi-square confidence interval of ``adev`` for given ``edf`` (NIST SP 1065 eq. 45).
+
+        Parameters
+        ----------
+        edf : ndarray, broadcastable to ``adev``
+        ci : float
+            Confidence level (default one sigma, 0.683).
+
+        Returns
+        -------
+        (lo, hi) : ndarrays shaped like ``adev``
+        """
+        edf = np.broadcast_to(np.asarray(edf, dtype=float), self.adev.shape)
+        lo_q, hi_q = (1.0 - ci) / 2.0, (1.0 + ci) / 2.0
+        lo = self.adev * np.sqrt(edf / chi2.ppf(hi_q, edf))
+        hi = self.adev * np.sqrt(edf / chi2.ppf(lo_q, edf))
+        return lo, hi
+
+
+def _taus_m(n: int, per_octave: int = 2) -> np.ndarray:
+    """Averaging factors ~ evenly spaced in log, ``m ≤ n/4`` (Stable32's stop ratio for oadev)."""
+    top = math.log2(max(n // 4, 1))
+    ms = np.unique(np.round(2.0 ** np.arange(0, top + 1e-9, 1.0 / per_octave)).astype(np.int64))
+    return ms[ms >= 1]
+
+
+def _edf_table(ms: np.ndarray, n: int) -> np.ndarray:
+    out = np.empty((ms.size, 3))
+    for i, m in enumerate(ms):
+        for j, alpha in enumerate(_ALPHA):
+            out[i, j] = allantools.edf_greenhall(
+                alpha=alpha, d=2, m=int(m), N=n + 1, overlapping=True, modified=False
+            )
+    return out
+
+
+def allan_deviation(
+    rate: np.ndarray, odr_hz: float, *, m: np.ndarray | None = None
+) -> AllanCurve:
+    """Overlapping Allan deviation of each column of ``rate`` (IEEE Std 952, NIST SP 1065 eq. 11).
+
+    Parameters
+    ----------
+    rate : array_like, shape (n,) or (n, A)
+        A gap-free, uniformly sampled still record, rad/s.
+    odr_hz : float
+        Its sample rate, Hz.
+    m : array_like of int, optional
+        Averaging factors; default two per octave from 1 up to ``n/4``.
+
+    Returns
+    -------
+    AllanCurve
+    """
+    a = _as_rate(rate)
+    fs = _odr(odr_hz)
+    n = a.shape[0]
+    if m is None:
+        ms = _taus_m(n)
+    else:
+        ms = np.unique(np.asarray(m, dtype=np.int64).reshape(-1))
+        if ms.size == 0 or ms[0] < 1 or ms[-1] > (n - 1) // 2:
+            raise CalibInputError(f"m must be averaging factors in [1, {(n - 1) // 2}]")
+    taus = ms / fs
+    adev = np.empty((ms.size, a.shape[1]))
+    for j in range(a.shape[1]):
+        t_used, ad, _, _ = allantools.oadev(a[:, j], rate=fs, data_type="freq", taus=taus)
+        if t_used.size != ms.size:
+            raise CalibInputError("the record is too short for the requested averaging times")
+        adev[:, j] = ad
+    return AllanCurve(
+        tau_s=taus, m=ms, adev=adev, odr_hz=fs, n_samples=n, edf=_edf_table(ms, n)
+    )
+
+
+@dataclass(frozen=True)
+class NoiseFigure:
+    """One noise coefficient per axis, read off the Allan deviation.
+
+    Attributes
+    ----------
+    value : tuple of 3 float
+    std : tuple of 3 float
+        One-sigma uncertainty: half the width of the 68 % chi-square interval.
+    lo95, hi95 : tuple of 3 float
+        The 95 % interval (chi-square, so not symmetric where the estimate has few degrees
+        of freedom, as rate random walk read at long averaging times has).
+    tau_s : tuple of 3 float
+        The averaging time it was read at, s.
+    unit : str
+    """
+
+    value: tuple[float, ...]
+    std: tuple[float, ...]
+    lo95: tuple[float, ...]
+    hi95: tuple[float, ...]
+    tau_s: tuple[float, ...]
+    unit: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "value": list(self.value),
+            "std": list(self.std),
+            "lo95": list(self.lo95),
+            "hi95": list(self.hi95),
+            "tau_s": list(self.tau_s),
+            "unit": self.unit,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, name: str, unit: str) -> NoiseFigure:
+        """Inverse of :meth:`to_dict`; raises :class:`CalibrationFormatError` naming the field."""
+        if not isinstance(d, Mapping):
+            raise CalibrationFormatError(f"{name!r} must be an object")
+        vals = {}
+        for key in ("value", "std", "lo95", "hi95", "tau_s"):
+            v = d.get(key)
+            ok = isinstance(v, list) and len(v) == 3
+            ok = ok and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in v
+            )
+            if not ok:
+                raise CalibrationFormatError(f"'{name}.{key}' must be a list of 3 finite numbers")
+            vals[key] = tuple(float(x) for x in v)
+        if d.get("unit", unit) != unit:
+            raise CalibrationFormatError(f"'{name}.unit' is {d.get('unit')!r}, expected {unit!r}")
+        return cls(
+            vals["value"], vals["std"], vals["lo95"], vals["hi95"], vals["tau_s"], unit
+        )
+
+
+UNIT_N = "rad/s/sqrt(Hz)"
+UNIT_B = "rad/s"
+UNIT_K = "rad/s/sqrt(s)"
+
+
+@dataclass(frozen=True, eq=False)
+class NoiseCharacterisation:
+    """The noise figures of a gyro from a still record (``gyrocal-noise`` v1).
+
+    Attributes
+    ----------
+    noise_density : NoiseFigure
+        Angle random walk ``N``, rad/s/√Hz (Kalibr's ``gyroscope_noise_density``).
+    bias_instability : NoiseFigure
+        ``B = min σ(τ) / 0.664``, rad/s.
+    rate_random_walk : NoiseFigure
+        ``K``, rad/s/√s (Kalibr's ``gyroscope_random_walk``, rad/s²/√Hz).
+    tau_s : ndarray (M,)
+    adev : ndarray (M, 3)
+        The Allan deviation curve, rad/s.
+    adev_lo, adev_hi : ndarray (M, 3)
+        Its one-sigma chi-square interval (edf of the locally dominant noise term).
+    fit : dict
+        The three-term model's coefficients per axis: ``{"N": [3], "B": [3], "K": [3]}``.
+    adev_min : dict
+        The curve's minimum per axis, ``{"value": [3] rad/s, "tau_s": [3]}``; datasheets often
+        quote ``value / 0.664`` as the bias instability.
+    odr_hz : float
+    n_samples : int
+    sensor : dict
+    temperature_c : float or None
+    created, source : str or None
+    """
+
+    noise_density: NoiseFigure
+    bias_instability: NoiseFigure
+    rate_random_walk: NoiseFigure
+    tau_s: np.ndarray
+    adev: np.ndarray
+    adev_lo: np.ndarray
+    adev_hi: np.ndarray
+    fit: dict[str, tuple[float, ...]]
+    adev_min: dict[str, tuple[float, ...]]
+    odr_hz: float
+    n_samples: int
+    sensor: dict[str, Any] = field(default_factory=dict)
+    temperature_c: float | None = None
+    created: str | None = None
+    source: str | None = None
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the record, s."""
+        return self.n_samples / self.odr_hz
+
+    @property
+    def white_std(self) -> np.ndarray:
+        """Per-sample white-noise standard deviation at ``odr_hz``, ``N √odr``, rad/s."""
+        return np.asarray(self.noise_density.value) * math.sqrt(self.odr_hz)
+
+    def with_meta(self, **fields: Any) -> NoiseCharacterisation:
+        """A copy with ``sensor``, ``temperature_c``, ``created`` or ``source`` replaced."""
+        allowed = {"sensor", "temperature_c", "created", "source"}
+        bad = set(fields) - allowed
+        if bad:
+            raise CalibInputError(f"with_meta accepts {sorted(allowed)}, not {sorted(bad)}")
+        d = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        d.update(fields)
+        return NoiseCharacterisation(**d)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``gyrocal-noise`` v1 document as a JSON-ready dict."""
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "method": METHOD,
+            "odr_hz": self.odr_hz,
+            "n_samples": self.n_samples,
+            "duration_s": self.duration_s,
+            "noise_density": self.noise_density.to_dict(),
+            "bias_instability": self.bias_instability.to_dict(),
+            "rate_random_walk": self.rate_random_walk.to_dict(),
+            "fit": {k: list(v) for k, v in self.fit.items()},
+            "adev_min": {k: list(v) for k, v in self.adev_min.items()},
+            "allan": {
+                "tau_s": self.tau_s.tolist(),
+                "adev": self.adev.tolist(),
+                "adev_lo": self.adev_lo.tolist(),
+                "adev_hi": self.adev_hi.tolist(),
+            },
+            "sensor": dict(self.sensor),
+            "temperature_c": self.temperature_c,
+            "created": self.created,
+            "source": self.source,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> NoiseCharacterisation:
+        """Read a ``gyrocal-noise`` v1 document.
+
+        Raises
+        ------
+        CalibrationFormatError
+            If the format or version is wrong, or a field is missing or malformed (named).
+        """
+        if not isinstance(doc, Mapping):
+            raise CalibrationFormatError("a noise document must be a JSON object")
+        if doc.get("format") != FORMAT:
+            raise CalibrationFormatError(
+                f"not a gyrocal noise document: 'format' is {doc.get('format')!r}, "
+                f"expected {FORMAT!r}"
+            )
+        if doc.get("version") != VERSION or isinstance(doc.get("version"), bool):
+            raise CalibrationFormatError(
+                f"noise document version {doc.get('version')!r} is not supported (this gyrocal "
+                f"reads version {VERSION})"
+            )
+        odr = doc.get("odr_hz")
+        if isinstance(odr, bool) or not isinstance(odr, (int, float)) or not odr > 0:
+            raise CalibrationFormatError("'odr_hz' must be a positive number")
+        n = doc.get("n_samples")
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise CalibrationFormatError("'n_samples' must be a positive integer")
+        allan = doc.get("allan")
+        if not isinstance(allan, Mapping):
+            raise CalibrationFormatError("'allan' must be an object")
+        try:
+            tau = np.asarray(allan["tau_s"], dtype=float)
+            arrs = [np.asarray(allan[k], dtype=float) for k in ("adev", "adev_lo", "adev_hi")]
+        except (KeyError, TypeError, ValueError):
+            raise CalibrationFormatError(
+                "'allan' must hold 'tau_s' [M] and 'adev', 'adev_lo', 'adev_hi' [M][3] numbers"
+            ) from None
+        if tau.ndim != 1 or any(a.shape != (tau.size, 3) for a in arrs):
+            raise CalibrationFormatError("'allan' arrays must be tau_s [M] and [M][3] curves")
+        fit = doc.get("fit") or {}
+        adev_min = doc.get("adev_min") or {}
+        for name, v in (("fit", fit), ("adev_min", adev_min)):
+            ok = isinstance(v, Mapping) and all(
+                isinstance(x, list) and len(x) == 3 and all(
+                    isinstance(e, (int, float)) and not isinstance(e, bool) for e in x
+                )
+                for x in v.values()
+            )
+            if not ok:
+                raise CalibrationFormatError(f"{name!r} must map names to lists of 3 numbers")
+        sensor = doc.get("sensor") or {}
+        if not isinstance(sensor, Mapping):
+            raise CalibrationFormatError("'sensor' must be an object")
+        temp = doc.get("temperature_c")
+        if temp is not None and (isinstance(temp, bool) or not isinstance(temp, (int, float))):
+            raise CalibrationFormatError("'temperature_c' must be a number or null")
+        return cls(
+            noise_density=NoiseFigure.from_dict(doc.get("noise_density"), "noise_density", UNIT_N),
+            bias_instability=NoiseFigure.from_dict(
+                doc.get("bias_instability"), "bias_instability", UNIT_B
+            ),
+            rate_random_walk=NoiseFigure.from_dict(
+                doc.get("rate_random_walk"), "rate_random_walk", UNIT_K
+            ),
+            tau_s=tau,
+            adev=arrs[0],
+            adev_lo=arrs[1],
+            adev_hi=arrs[2],
+            fit={str(k): tuple(float(x) for x in v) for k, v in fit.items()},
+            adev_min={str(k): tuple(float(x) for x in v) for k, v in adev_min.items()},
+            odr_hz=float(odr),
+            n_samples=n,
+            sensor=dict(sensor),
+            temperature_c=None if temp is None else float(temp),
+            created=doc.get("created"),
+            source=doc.get("source"),
+        )
+
+
+def _basis(tau: np.ndarray) -> np.ndarray:
+    """Columns of the Allan-variance model in (N², (0.664 B)², K²): 1/τ, 1, τ/3."""
+    return np.column_stack([1.0 / tau, np.ones_like(tau), tau / 3.0])
+
+
+def _fit_axis(avar: np.ndarray, tau: np.ndarray, edf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted NNLS of the three-term model; returns (coefficients², per-τ edf used)."""
+    A = _basis(tau)
+    model = avar.copy()
+    e = edf[:, 0]
+    coef = np.zeros(3)
+    for _ in range(4):
+        w = np.sqrt(e / 2.0) / model  # 1 / std(σ̂²) with std = σ²·√(2/edf)
+        coef, _ = nnls(A * w[:, None], avar * w)
+        terms = A * coef[None, :]
+        model = np.maximum(terms.sum(axis=1), 1e-300)
+        e = edf[np.arange(tau.size), np.argmax(terms, axis=1)]
+    return coef, e
+
+
+def _chi2_interval(avar: float, edf: float, level: float) -> tuple[float, float]:
+    """Interval of a true Allan variance given its estimate and edf (NIST SP 1065 eq. 45)."""
+    q = (1.0 - level) / 2.0
+    return avar * edf / chi2.ppf(1.0 - q, edf), avar * edf / chi2.ppf(q, edf)
+
+
+def _read_off(
+    avar: np.ndarray,
+    tau: np.ndarray,
+    edf: np.ndarray,
+    coef: np.ndarray,
+    j: int,
+    usable: np.ndarray,
+) -> tuple[float, float, float, float, float]:
+    """Read term ``j`` (0: N, 1: flicker floor, 2: K) at its best-determined τ.
+
+    Returns ``(value, std, lo95, hi95, tau)``: the coefficient from that τ's Allan variance with
+    the other fitted terms subtracted, and the chi-square intervals of that one estimate carried
+    through (``std`` is half the width of the 68 % interval).
+    """
+    A = _basis(tau)
+    terms = A * coef[None, :]
+    model = np.maximum(terms.sum(axis=1), 1e-300)
+    # Predicted std of this term's squared coefficient if read at each τ (from the model).
+    s2 = np.sqrt(2.0 / edf) * model / A[:, j]
+    s2 = np.where(usable, s2, np.inf)
+    i = int(np.argmin(s2))
+    others = model[i] - terms[i, j]
+
+    def coef_of(v: float) -> float:
+        return math.sqrt(max((v - others) / A[i, j], 0.0))
+
+    value = coef_of(float(avar[i]))
+    lo68, hi68 = (coef_of(v) for v in _chi2_interval(float(avar[i]), float(edf[i]), _ONE_SIGMA))
+    lo95, hi95 = (coef_of(v) for v in _chi2_interval(float(avar[i]), float(edf[i]), 0.95))
+    return value, (hi68 - lo68) / 2.0, lo95, hi95, float(tau[i])
+
+
+def characterise_noise(
+    rate: np.ndarray,
+    odr_hz: float,
+    *,
+    min_tau_s: float | None = None,
+    m: np.ndarray | None = None,
+) -> NoiseCharacterisation:
+    """Angle random walk, bias instability and rate random walk of a still record.
+
+    Parameters
+    ----------
+    rate : array_like, shape (n, 3)
+        A gap-free, uniformly sampled record of the sensor at rest, rad/s, at a steady
+        temperature (a temperature drift shows up as rate random walk and rate ramp).
+    odr_hz : float
+        Its sample rate, Hz.
+    min_tau_s : float, optional
+        Shortest averaging time used to read ``N`` (default 10 samples, which keeps clear of
+        the correlation a digital low-pass filter puts between neighbouring samples).
+    m : array_like of int, optional
+        Averaging factors of the curve (see :func:`allan_deviation`).
+
+    Returns
+    -------
+    NoiseCharacterisation
+        ``sensor``, ``temperature_c``, ``created`` and ``source`` are left empty: set them with
+        :meth:`NoiseCharacterisation.with_meta`.
+
+    Notes
+    -----
+    See the module docstring for the method (IEEE Std 952-1997 Annex C).
+    """
+    a = _as_rate(rate)
+    if a.shape[1] != 3:
+        raise CalibInputError(f"rate must have shape (n, 3), got {a.shape}")
+    curve = allan_deviation(a, odr_hz, m=m)
+    fs = curve.odr_hz
+    tau = curve.tau_s
+    min_tau = 10.0 / fs if min_tau_s is None else float(min_tau_s)
+    if not (math.isfinite(min_tau) and min_tau >= 0):
+        raise CalibInputError(f"min_tau_s must be a non-negative number, got {min_tau_s!r}")
+    if tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
+        raise CalibInputError(
+            f"the record ({curve.n_samples} samples at {fs:g} Hz) is too short for a noise "
+            f"characterisation above min_tau_s={min_tau:g} s; record the sensor still for longer"
+        )
+    usable_n = tau >= min_tau
+    out: dict[str, list[tuple[float, ...]]] = {"N": [], "B": [], "K": []}
+    fit: dict[str, list[float]] = {"N": [], "B": [], "K": []}
+    adev_min: dict[str, list[float]] = {"value": [], "tau_s": []}
+    lo = np.empty_like(curve.adev)
+    hi = np.empty_like(curve.adev)
+    for ax in range(3):
+        avar = curve.adev[:, ax] ** 2
+        coef, e_used = _fit_axis(avar, tau, curve.edf)
+        fit["N"].append(math.sqrt(coef[0]))
+        fit["B"].append(math.sqrt(coef[1]) / FLICKER_FLOOR)
+        fit["K"].append(math.sqrt(coef[2]))
+        edf_n = curve.edf[:, 0]
+        edf_k = curve.edf[:, 2]
+        out["N"].append(_read_off(avar, tau, edf_n, coef, 0, usable_n))
+        out["K"].append(_read_off(avar, tau, edf_k, coef, 2, np.ones_like(usable_n)))
+        edf_b = curve.edf[:, 1]
+        vb, sb, lob, hib, tb = _read_off(avar, tau, edf_b, coef, 1, np.ones_like(usable_n))
+        f = FLICKER_FLOOR
+        out["B"].append((vb / f, sb / f, lob / f, hib / f, tb))
+        i = int(np.argmin(curve.adev[:, ax]))
+        adev_min["value"].append(float(curve.adev[i, ax]))
+        adev_min["tau_s"].append(float(tau[i]))
+        lo_ax, hi_ax = curve.interval(e_used[:, None])
+        lo[:, ax], hi[:, ax] = lo_ax[:, ax], hi_ax[:, ax]
+
+    def figure(key: str, unit: str) -> NoiseFigure:
+        vals = out[key]
+        return NoiseFigure(
+            value=tuple(v[0] for v in vals),
+            std=tuple(v[1] for v in vals),
+            lo95=tuple(v[2] for v in vals),
+            hi95=tuple(v[3] for v in vals),
+            tau_s=tuple(v[4] for v in vals),
+            unit=unit,
+        )
+
+    return NoiseCharacterisation(
+        noise_density=figure("N", UNIT_N),
+        bias_instability=figure("B", UNIT_B),
+        rate_random_walk=figure("K", UNIT_K),
+        tau_s=tau,
+        adev=curve.adev,
+        adev_lo=lo,
+        adev_hi=hi,
+        fit={k: tuple(v) for k, v in fit.items()},
+        adev_min={k: tuple(v) for k, v in adev_min.items()},
+        odr_hz=fs,
+        n_samples=curve.n_samples,
+    )

@@ -1,0 +1,325 @@
+"""Deciding when a gyro is still, from its own readings and its noise model.
+
+A window of ``n_w`` consecutive readings ending at sample ``e`` is *quiet* when, on every axis,
+
+* its sample variance is at most ``σ² · χ²_{n_w−1}(1 − α) / (n_w − 1)``: the variance a still
+  sensor with white noise ``σ`` exceeds with probability ``α`` (the chi-square law of a sample
+  variance); this catches any rotation whose rate changes, and
+* the magnitude of its mean, after adding a reference bias (Calibration v1 convention, so a still
+  sensor reads ``−bias``), is at most a rate threshold, by default ``5 σ``: this catches a steady
+  rotation, which the variance test cannot see. It is loose on purpose: it also bounds how far
+  the bias may drift from the reference before the detector stops calling the sensor still.
+
+A sample ``j`` is *still* when every window ending in ``[j − n_min + 1, j + L]`` is quiet: the
+sensor has been quiet for ``min_still_s`` (it has settled), and stays quiet for ``lookahead_s``
+after ``j`` (so the start of a motion, which takes a few samples to show in a window, is not
+taken for stillness). The decision on ``j`` is therefore known ``L`` samples later; streaming
+users get it with that lag.
+
+:func:`quiet_windows` and :func:`run_lengths` are the vectorised pieces; the bias tracker
+(:mod:`calib.tracker`) uses them on batches of any size, carrying the last few samples across
+batches, so a recording processed at once and a live stream fed sample by sample decide alike.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.stats import chi2
+
+from calib.errors import CalibInputError
+
+__all__ = [
+    "StillDetector",
+    "StillSettings",
+    "detect_still",
+    "first_still_mean",
+    "quiet_windows",
+    "run_lengths",
+    "white_noise_std",
+]
+
+_BLOCK = 4096  # windows per vectorised block (bounds the temporary to ~4 MB at 40-sample windows)
+
+
+def _nonneg(v: float, name: str) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be a non-negative number, got {v!r}") from None
+    if not (f >= 0 and math.isfinite(f)):
+        raise CalibInputError(f"{name} must be a non-negative number, got {v!r}")
+    return f
+
+
+@dataclass(frozen=True)
+class StillSettings:
+    """Tuning of the still detector (times in seconds, converted at the sample rate).
+
+    Attributes
+    ----------
+    window_s : float
+        Length of the variance/mean window (at least 2 samples).
+    min_still_s : float
+        How long the sensor must have been quiet before a sample counts as still.
+    lookahead_s : float
+        How long it must stay quiet after the sample (the decision lag).
+    variance_alpha : float
+        Probability that a still sensor's window fails the variance test, per axis.
+    rate_sigma : float
+        Default rate threshold in units of the per-sample noise ``σ``.
+    rate_threshold : float or None
+        Explicit rate threshold, rad/s (overrides ``rate_sigma``).
+    """
+
+    window_s: float = 0.2
+    min_still_s: float = 0.5
+    lookahead_s: float = 0.2
+    variance_alpha: float = 1e-6
+    rate_sigma: float = 5.0
+    rate_threshold: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("window_s", "min_still_s", "lookahead_s", "rate_sigma"):
+            _nonneg(getattr(self, name), name)
+        if not self.window_s > 0:
+            raise CalibInputError("window_s must be positive")
+        if not (0 < self.variance_alpha < 1):
+            raise CalibInputError(f"variance_alpha must be in (0, 1), got {self.variance_alpha!r}")
+        if self.rate_threshold is not None and not _nonneg(self.rate_threshold, "rate_threshold"):
+            raise CalibInputError("rate_threshold must be positive")
+
+
+@dataclass(frozen=True)
+class StillDetector:
+    """The still detector's thresholds for one sensor at one sample rate.
+
+    Build it with :meth:`build`. Attributes are in samples and rad/s.
+
+    Attributes
+    ----------
+    n_window : int
+    n_min : int
+    n_lookahead : int
+    var_limit : ndarray (3,)
+        Per-axis limit on the window's sample variance, (rad/s)².
+    rate_limit : ndarray (3,)
+        Per-axis limit on the magnitude of the window's bias-corrected mean, rad/s.
+    """
+
+    n_window: int
+    n_min: int
+    n_lookahead: int
+    var_limit: np.ndarray
+    rate_limit: np.ndarray
+
+    @classmethod
+    def build(
+        cls, noise_std: np.ndarray | float, odr_hz: float, settings: StillSettings | None = None
+    ) -> StillDetector:
+        """Thresholds from the white-noise level.
+
+        Parameters
+        ----------
+        noise_std : float or array_like (3,)
+            Per-sample white-noise standard deviation of each axis, rad/s (``N √odr``).
+        odr_hz : float
+            Sample rate, Hz.
+        settings : StillSettings, optional
+
+        Returns
+        -------
+        StillDetector
+        """
+        s = settings or StillSettings()
+        try:
+            sigma = np.broadcast_to(np.asarray(noise_std, dtype=float), (3,)).copy()
+        except (TypeError, ValueError):
+            raise CalibInputError(
+                f"noise_std must be 3 positive numbers, got {noise_std!r}"
+            ) from None
+        if not np.all((sigma > 0) & np.isfinite(sigma)):
+            raise CalibInputError(f"noise_std must be positive and finite, got {sigma.tolist()}")
+        fs = _nonneg(odr_hz, "odr_hz")
+        if not fs > 0:
+            raise CalibInputError("odr_hz must be positive")
+        n_w = max(2, int(round(s.window_s * fs)))
+        n_min = max(1, int(round(s.min_still_s * fs)))
+        n_la = int(round(s.lookahead_s * fs))
+        dof = n_w - 1
+        var_limit = sigma**2 * chi2.ppf(1.0 - s.variance_alpha, dof) / dof
+        if s.rate_threshold is not None:
+            rate_limit = np.full(3, float(s.rate_threshold))
+        else:
+            rate_limit = s.rate_sigma * sigma
+        return cls(n_w, n_min, n_la, var_limit, rate_limit)
+
+    @property
+    def history(self) -> int:
+        """Samples a batch needs from before it to test its first window (``n_window − 1``)."""
+        return self.n_window - 1
+
+
+def quiet_windows(
+    centred: np.ndarray, detector: StillDetector, n_history: int
+) -> np.ndarray:
+    """Quiet flags of the windows ending at each of the last ``len(centred) − n_history`` rows.
+
+    Parameters
+    ----------
+    centred : ndarray (h + n, 3)
+        Readings plus the reference bias (a still sensor gives zero mean), the first
+        ``h = n_history`` rows being the end of the previous batch.
+    detector : StillDetector
+    n_history : int
+        Rows of ``centred`` that precede the batch (at most ``n_window − 1``).
+
+    Returns
+    -------
+    ndarray (n,) of bool
+        False where the window would reach before the start of the data.
+    """
+    nw = detector.n_window
+    total = centred.shape[0]
+    n = total - n_history
+    out = np.zeros(n, dtype=bool)
+    first = max(0, nw - 1 - n_history)  # first batch row whose window is complete
+    if first >= n:
+        return out
+    views = sliding_window_view(centred, nw, axis=0)  # (total - nw + 1, 3, nw)
+    w0 = n_history + first - (nw - 1)
+    for b in range(first, n, _BLOCK):
+        e = min(n, b + _BLOCK)
+        v = views[w0 + (b - first) : w0 + (e - first)]
+        mean = v.mean(axis=-1)
+        dev = v - mean[..., None]
+        var = np.einsum("wan,wan->wa", dev, dev) / (nw - 1)
+        ok = (var <= detector.var_limit) & (np.abs(mean) <= detector.rate_limit)
+        out[b:e] = ok.all(axis=1)
+    return out
+
+
+def run_lengths(quiet: np.ndarray, carry: int = 0) -> np.ndarray:
+    """Length of the run of quiet windows ending at each position (0 where not quiet).
+
+    ``carry`` is the run length at the end of the previous batch.
+    """
+    q = np.asarray(quiet, dtype=bool)
+    idx = np.arange(q.size)
+    last_false = np.maximum.accumulate(np.where(~q, idx, -1)) if q.size else idx
+    return np.where(last_false >= 0, idx - last_false, idx + 1 + int(carry))
+
+
+def detect_still(
+    rate: np.ndarray,
+    noise_std: np.ndarray | float,
+    odr_hz: float,
+    *,
+    reference_bias: np.ndarray | None = None,
+    settings: StillSettings | None = None,
+) -> np.ndarray:
+    """Still flags of a whole record (the last ``lookahead`` samples cannot be confirmed: False).
+
+    Parameters
+    ----------
+    rate : array_like (n, 3)
+        Readings, rad/s.
+    noise_std : float or array_like (3,)
+        Per-sample white-noise standard deviation, rad/s.
+    odr_hz : float
+        Sample rate, Hz.
+    reference_bias : array_like (3,), optional
+        Bias (Calibration v1 convention) added before the rate test; default zero.
+    settings : StillSettings, optional
+
+    Returns
+    -------
+    ndarray (n,) of bool
+    """
+    try:
+        m = np.asarray(rate, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibInputError("rate must be an (n, 3) array of rad/s") from None
+    if m.ndim != 2 or m.shape[1] != 3:
+        raise CalibInputError(f"rate must have shape (n, 3), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise CalibInputError("rate contains NaN or inf")
+    det = StillDetector.build(noise_std, odr_hz, settings)
+    b = np.zeros(3) if reference_bias is None else np.asarray(reference_bias, dtype=float)
+    if b.shape != (3,) or not np.all(np.isfinite(b)):
+        raise CalibInputError(f"reference_bias must be 3 finite numbers, got {reference_bias!r}")
+    quiet = quiet_windows(m + b, det, 0)
+    run = run_lengths(quiet)
+    n = m.shape[0]
+    still = np.zeros(n, dtype=bool)
+    L = det.n_lookahead
+    if n > L:
+        still[: n - L] = run[L:] >= det.n_min + L
+    return still
+
+
+def white_noise_std(rate: np.ndarray) -> np.ndarray:
+    """Per-sample white-noise standard deviation of each axis from first differences.
+
+    Robust to motion and drift: ``1.4826 · MAD(Δm) / √2`` (a smooth motion changes little from
+    one sample to the next; the median ignores the samples where it does).
+
+    Parameters
+    ----------
+    rate : array_like (n, 3)
+        Readings, rad/s, n >= 3.
+
+    Returns
+    -------
+    ndarray (3,)
+    """
+    m = np.asarray(rate, dtype=float)
+    if m.ndim != 2 or m.shape[1] != 3 or m.shape[0] < 3:
+        raise CalibInputError(f"rate must have shape (n >= 3, 3), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise CalibInputError("rate contains NaN or inf")
+    d = np.diff(m, axis=0)
+    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    sigma = 1.4826 * mad / math.sqrt(2.0)
+    if not np.all(sigma > 0):
+        raise CalibInputError(
+            "the readings do not change from sample to sample on some axis (quantised to "
+            "silence?); give the noise density explicitly"
+        )
+    return sigma
+
+
+def first_still_mean(
+    rate: np.ndarray,
+    noise_std: np.ndarray | float,
+    odr_hz: float,
+    settings: StillSettings | None = None,
+    *,
+    seconds: float = 1.0,
+) -> np.ndarray | None:
+    """Mean reading over the first ``seconds`` whose every window passes the variance test.
+
+    A starting point for the bias when there is no calibration (a still sensor reads
+    ``−bias``). The rate test is not applied (there is no bias to test against yet).
+
+    Returns
+    -------
+    ndarray (3,) or None
+        None if no such stretch exists.
+    """
+    det = StillDetector.build(noise_std, odr_hz, settings)
+    loose = StillDetector(det.n_window, det.n_min, det.n_lookahead, det.var_limit,
+                          np.full(3, np.inf))
+    m = np.asarray(rate, dtype=float)
+    quiet = quiet_windows(m, loose, 0)
+    need = max(1, int(round(seconds * float(odr_hz))))
+    run = run_lengths(quiet)
+    hit = np.flatnonzero(run >= need)
+    if hit.size == 0:
+        return None
+    e = int(hit[0])
+    a = e - need - det.n_window + 2
+    return m[max(a, 0) : e + 1].mean(axis=0)

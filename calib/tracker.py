@@ -1,0 +1,1002 @@
+"""Online tracking of a gyro's bias with a Kalman filter, seeded from an offline calibration.
+
+Model
+-----
+The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, so a reading is
+``m = g ⊘ scale − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
+``b`` (Calibration v1 convention: added to the reading) is the state; optionally a linear
+temperature coefficient ``c`` joins it, ``b(T) = b_ref + c ∘ (T − T_ref)``:
+
+    x = [b_ref (3)]                 or  x = [b_ref (3), c (3)],
+    F = I,   Q = diag(K²·Δt [, K_c²·Δt]),
+
+a random walk with the rate-random-walk coefficient ``K`` of the noise characterisation (or one
+given by the user), each axis independent.
+
+Measurements
+------------
+*Zero-rate*: while the sensor is still, ``m = −b(T) + v``. *Reference-rate*: while a servo of
+the jig turns at a known rate ``ω`` (from its encoder) about a known axis ``u`` (unit, sensor
+frame), ``m − ω u ⊘ scale = −b(T) + v``. Both have ``H = [−I]`` or ``[−I, −(T − T_ref) I]``.
+
+Consecutive samples of one kind are pooled into update windows of at most
+``update_interval_s``: the window mean ``z̄`` with ``H̄`` at the mean temperature and
+``R = σ²/n`` (plus, for reference windows, the variance the calibration's scale uncertainty,
+the axis uncertainty and the encoder resolution put on ``ω u ⊘ scale``). For a bias constant
+over the window this is exactly the result of ``n`` sequential per-sample updates (the sum of
+``n`` identical-H information terms), at a fraction of the cost; averaging readings and the
+encoder rate over the same window is also what makes a reference rate right (speed ripple
+cancels). Each window is one textbook Kalman step on :class:`filterpy.kalman.KalmanFilter`
+(``x, P, F, Q, H, R``):
+
+    x⁻ = F x,  P⁻ = F P Fᵀ + Q,
+    y = z̄ − H x⁻,  S = H P⁻ Hᵀ + R,  K = P⁻ Hᵀ S⁻¹,
+    x = x⁻ + K y,  P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ   (Joseph form).
+
+Health
+------
+The normalised innovation squared ``ε = yᵀ S⁻¹ y`` of a consistent filter is χ²(3); the sum over
+the last ``nis_window`` updates is χ²(3·window) (Bar-Shalom, Li & Kirubarajan, *Estimation with
+Applications to Tracking and Navigation*, §5.4). When the sum exceeds its ``1 − nis_alpha``
+quantile the health flag fires; with ``recover`` the bias covariance is then widened by the
+squared last innovation, so that the filter follows a real bias jump instead of averaging it
+away. The time since the last measurement update is the other health figure.
+
+Batches and streams
+-------------------
+:meth:`BiasTracker.process` takes a batch ``(t, rate (n, 3), temperature (n,) or None,
+still (n,) or None, reference_rate, reference_axis)`` and carries everything a later batch needs
+(the detector's last window, the samples whose still decision is still open, the open update
+window), so a recording processed at once and the same samples fed one at a time through
+:meth:`BiasTracker.update` give the same estimates. The still decision on a sample comes
+``lookahead_s`` after it (see :mod:`calib.stationarity`); an external ``still`` flag overrides
+the detector's decision for its sample.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+from scipy.stats import chi2
+
+from calib.errors import CalibInputError
+from calib.model import GyroCalibration
+from calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
+
+if TYPE_CHECKING:
+    from calib.allan import NoiseCharacterisation
+
+__all__ = [
+    "BiasTracker",
+    "Health",
+    "TrackResult",
+    "TrackerSettings",
+    "UpdateLog",
+]
+
+#: Resolution of the X-series servo encoder, rad per tick (4096 ticks per turn).
+ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
+
+_KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
+
+
+def _vec3(value: Any, name: str, *, nonneg: bool = False, positive: bool = False) -> np.ndarray:
+    try:
+        a = np.broadcast_to(np.asarray(value, dtype=float), (3,)).copy()
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be a number or 3 numbers, got {value!r}") from None
+    if not np.all(np.isfinite(a)):
+        raise CalibInputError(f"{name} must be finite, got {a.tolist()}")
+    if nonneg and np.any(a < 0):
+        raise CalibInputError(f"{name} must not be negative, got {a.tolist()}")
+    if positive and np.any(a <= 0):
+        raise CalibInputError(f"{name} must be positive, got {a.tolist()}")
+    return a
+
+
+def _pos(value: Any, name: str, *, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be a positive number, got {value!r}") from None
+    ok = (v >= 0 if allow_zero else v > 0) and math.isfinite(v)
+    if not ok:
+        raise CalibInputError(f"{name} must be a positive number, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """Noise model and tuning of the bias tracker.
+
+    Attributes
+    ----------
+    odr_hz : float
+        Gyro sample rate, Hz.
+    noise_density : tuple of 3 float
+        White-noise density ``N``, rad/s/√Hz (per-sample variance ``N²·odr``: ``R``).
+    rate_random_walk : tuple of 3 float
+        ``K``, rad/s/√s: the bias random walk (``Q = K² Δt``).
+    temperature_model : bool
+        Also estimate a linear temperature coefficient per axis (needs temperatures).
+    tempco : tuple of 3 float
+        Prior mean of the coefficient, rad/s/°C.
+    tempco_std : tuple of 3 float
+        Prior standard deviation of the coefficient, rad/s/°C.
+    tempco_random_walk : tuple of 3 float
+        Random walk of the coefficient, rad/s/°C/√s (0: a constant).
+    t_ref_c : float or None
+        Reference temperature of ``b_ref``; default the calibration's ``temperature_c``, else
+        the first sample's temperature.
+    update_interval_s : float
+        Longest update window.
+    nis_window : int
+        Updates summed in the NIS test.
+    nis_alpha : float
+        False-alarm probability of one NIS test.
+    recover : bool
+        Widen the bias covariance when the NIS test fails.
+    stale_after_s : float
+        ``Health.stale`` when no update came for this long.
+    reference_angle_std : float
+        Error of one encoder angle, rad (default one tick of a 4096-tick encoder).
+    reference_axis_std : float
+        Angular uncertainty of a servo axis, rad.
+    still : StillSettings
+        The still detector's tuning.
+    """
+
+    odr_hz: float
+    noise_density: tuple[float, float, float]
+    rate_random_walk: tuple[float, float, float]
+    temperature_model: bool = False
+    tempco: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    tempco_std: tuple[float, float, float] = (1e-3, 1e-3, 1e-3)
+    tempco_random_walk: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    t_ref_c: float | None = None
+    update_interval_s: float = 0.25
+    nis_window: int = 8
+    nis_alpha: float = 1e-4
+    recover: bool = True
+    stale_after_s: float = 30.0
+    reference_angle_std: float = ENCODER_TICK_RAD
+    reference_axis_std: float = 2e-3
+    still: StillSettings = field(default_factory=StillSettings)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "odr_hz", _pos(self.odr_hz, "odr_hz"))
+        for name, kw in (
+            ("noise_density", {"positive": True}),
+            ("rate_random_walk", {"nonneg": True}),
+            ("tempco", {}),
+            ("tempco_std", {"positive": True}),
+            ("tempco_random_walk", {"nonneg": True}),
+        ):
+            a = _vec3(getattr(self, name), name, **kw)
+            object.__setattr__(self, name, tuple(float(x) for x in a))
+        if self.t_ref_c is not None and not math.isfinite(float(self.t_ref_c)):
+            raise CalibInputError(f"t_ref_c must be a finite temperature, got {self.t_ref_c!r}")
+        _pos(self.update_interval_s, "update_interval_s")
+        if isinstance(self.nis_window, bool) or not isinstance(self.nis_window, int):
+            raise CalibInputError(f"nis_window must be a positive integer, got {self.nis_window!r}")
+        if self.nis_window < 1:
+            raise CalibInputError(f"nis_window must be a positive integer, got {self.nis_window!r}")
+        if not (0 < self.nis_alpha < 1):
+            raise CalibInputError(f"nis_alpha must be in (0, 1), got {self.nis_alpha!r}")
+        _pos(self.stale_after_s, "stale_after_s")
+        _pos(self.reference_angle_std, "reference_angle_std", allow_zero=True)
+        _pos(self.reference_axis_std, "reference_axis_std", allow_zero=True)
+        if not isinstance(self.still, StillSettings):
+            raise CalibInputError("still must be a StillSettings")
+
+    @classmethod
+    def from_noise(cls, noise: NoiseCharacterisation, **overrides: Any) -> TrackerSettings:
+        """Settings whose ``R`` and ``Q`` come from a noise characterisation (Allan deviation).
+
+        ``rate_random_walk`` is the characterisation's ``K``, or where that is unresolved
+        (near zero) its 95 % upper bound, so the filter never believes the bias is frozen.
+        """
+        k = np.asarray(noise.rate_random_walk.value)
+        k = np.where(k > 0, k, np.asarray(noise.rate_random_walk.hi95))
+        kw: dict[str, Any] = {
+            "odr_hz": noise.odr_hz,
+            "noise_density": tuple(noise.noise_density.value),
+            "rate_random_walk": tuple(float(x) for x in k),
+        }
+        kw.update(overrides)
+        return cls(**kw)
+
+    @property
+    def noise_std(self) -> np.ndarray:
+        """Per-sample white-noise standard deviation ``N·√odr``, rad/s."""
+        return np.asarray(self.noise_density) * math.sqrt(self.odr_hz)
+
+
+@dataclass(frozen=True)
+class Health:
+    """The tracker's health after the latest sample.
+
+    Attributes
+    ----------
+    nis : float
+        Normalised innovation squared of the last update (χ²(3) when consistent); NaN before.
+    nis_sum : float
+        Sum over the last ``nis_window`` updates since the last alarm.
+    nis_bound : float
+        Its ``1 − nis_alpha`` chi-square quantile.
+    nis_ok : bool
+        False from an update whose NIS test failed until the next one that passes.
+    since_update_s : float
+        Time since the last measurement update (since the first sample before any).
+    stale : bool
+        ``since_update_s`` above ``stale_after_s``.
+    updates, alarms : int
+        Counts so far.
+    """
+
+    nis: float
+    nis_sum: float
+    nis_bound: float
+    nis_ok: bool
+    since_update_s: float
+    stale: bool
+    updates: int
+    alarms: int
+
+    @property
+    def ok(self) -> bool:
+        """Neither flag raised."""
+        return self.nis_ok and not self.stale
+
+
+@dataclass(frozen=True, eq=False)
+class UpdateLog:
+    """The measurement updates applied during one :meth:`BiasTracker.process` call.
+
+    Attributes
+    ----------
+    t : ndarray (W,)
+        Time of each window's last sample, s.
+    kind : ndarray (W,) of str
+        ``"still"`` or ``"reference"``.
+    count : ndarray (W,) of int
+        Samples pooled.
+    nis, nis_sum, nis_bound : ndarray (W,)
+    alarm : ndarray (W,) of bool
+        Whether the NIS test failed at this update.
+    applied_at : ndarray (W,) of int
+        Index (from the tracker's first sample) of the sample at which it took effect.
+    """
+
+    t: np.ndarray
+    kind: np.ndarray
+    count: np.ndarray
+    nis: np.ndarray
+    nis_sum: np.ndarray
+    nis_bound: np.ndarray
+    alarm: np.ndarray
+    applied_at: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TrackResult:
+    """Per-sample output of :meth:`BiasTracker.process` (all rad/s unless named).
+
+    Attributes
+    ----------
+    t : ndarray (n,)
+    bias : ndarray (n, 3)
+        Bias estimate at each sample (Calibration v1 convention: added to the reading).
+    bias_std : ndarray (n, 3)
+        Its one-sigma uncertainty.
+    corrected : ndarray (n, 3)
+        ``scale ∘ (m + bias)``.
+    still : ndarray (n,) of bool
+        Still decision on each sample (False where not yet decided).
+    decided : ndarray (n,) of bool
+        Whether the still decision on the sample was made by the end of the call.
+    since_update_s : ndarray (n,)
+    nis_ok : ndarray (n,) of bool
+        The NIS health flag at each sample.
+    updates : UpdateLog
+    decision_index : ndarray (d,) of int
+        Every sample (counted from the tracker's first) whose still decision this call made,
+        including samples of earlier calls that were awaiting their look-ahead.
+    decision_still : ndarray (d,) of bool
+        Those decisions.
+    """
+
+    t: np.ndarray
+    bias: np.ndarray
+    bias_std: np.ndarray
+    corrected: np.ndarray
+    still: np.ndarray
+    decided: np.ndarray
+    since_update_s: np.ndarray
+    nis_ok: np.ndarray
+    updates: UpdateLog
+    decision_index: np.ndarray
+    decision_still: np.ndarray
+
+
+@dataclass
+class _OpenWindow:
+    kind: int
+    axis: tuple[float, float, float] | None
+    start: int
+    last: int
+    count: int
+    sum_z: np.ndarray
+    sum_temp: float
+    sum_omega: float
+    t_last: float
+
+
+@dataclass
+class _Snapshot:
+    close: int
+    x: np.ndarray
+    P: np.ndarray
+    t_state: float
+    t_update: float
+    nis_ok: bool
+
+
+class BiasTracker:
+    """Kalman-filter tracker of a gyro's bias (see the module docstring for the equations).
+
+    Parameters
+    ----------
+    settings : TrackerSettings
+        Noise model and tuning (:meth:`TrackerSettings.from_noise` from an Allan analysis).
+    calibration : GyroCalibration, optional
+        Seeds the bias and its covariance (``bias``, ``bias_std``) and gives the scale used for
+        the corrected rate and for reference-rate updates; its ``temperature_c`` is the default
+        reference temperature.
+    initial_bias, initial_bias_std : array_like (3,), optional
+        The prior without a calibration (or overriding it), rad/s.
+
+    Attributes
+    ----------
+    kf : filterpy.kalman.KalmanFilter
+        The filter (``x``, ``P``, ``F``, ``Q``, ``H``, ``R`` in filterpy's names).
+    detector : StillDetector
+    """
+
+    def __init__(
+        self,
+        settings: TrackerSettings,
+        calibration: GyroCalibration | None = None,
+        *,
+        initial_bias: Any = None,
+        initial_bias_std: Any = None,
+    ) -> None:
+        if not isinstance(settings, TrackerSettings):
+            raise CalibInputError("settings must be a TrackerSettings")
+        if calibration is not None and not isinstance(calibration, GyroCalibration):
+            raise CalibInputError("calibration must be a GyroCalibration (Calibration v1)")
+        self.settings = settings
+        self.calibration = calibration
+        if initial_bias is not None:
+            b0 = _vec3(initial_bias, "initial_bias")
+        elif calibration is not None:
+            b0 = np.asarray(calibration.bias)
+        else:
+            b0 = np.zeros(3)
+        if initial_bias_std is not None:
+            b0_std = _vec3(initial_bias_std, "initial_bias_std", positive=True)
+        elif calibration is not None:
+            b0_std = np.asarray(calibration.bias_std)
+            if not np.all(np.isfinite(b0_std) & (b0_std > 0)):
+                raise CalibInputError(
+                    "the calibration has no usable bias_std; pass initial_bias_std (rad/s)"
+                )
+        else:
+            raise CalibInputError("give a calibration or initial_bias_std to seed the tracker")
+        if calibration is not None:
+            self.scale = np.asarray(calibration.scale)
+            self.scale_std = np.asarray(calibration.scale_std)
+        else:
+            self.scale = np.ones(3)
+            self.scale_std = np.full(3, np.nan)
+
+        s = settings
+        self._temp_model = bool(s.temperature_model)
+        dim = 6 if self._temp_model else 3
+        kf = KalmanFilter(dim_x=dim, dim_z=3)
+        if self._temp_model:
+            kf.x = np.concatenate([b0, np.asarray(s.tempco)])
+            kf.P = np.diag(np.concatenate([b0_std**2, np.asarray(s.tempco_std) ** 2]))
+            self._q = np.concatenate(
+                [np.asarray(s.rate_random_walk) ** 2, np.asarray(s.tempco_random_walk) ** 2]
+            )
+        else:
+            kf.x = b0.astype(float).copy()
+            kf.P = np.diag(b0_std**2)
+            self._q = np.asarray(s.rate_random_walk) ** 2
+        kf.F = np.eye(dim)
+        kf.Q = np.zeros((dim, dim))
+        self.kf = kf
+        self._dim = dim
+        self._sigma2 = s.noise_std**2
+        self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
+        self._det_bias = b0.copy()
+        self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
+        if s.t_ref_c is not None:
+            self._t_ref: float | None = float(s.t_ref_c)
+        elif calibration is not None and calibration.temperature_c is not None:
+            self._t_ref = float(calibration.temperature_c)
+        else:
+            self._t_ref = None
+        # Streaming state.
+        self._k = 0
+        self._t_last: float | None = None
+        self._t_first: float | None = None
+        self._t_state = 0.0
+        self._t_update = 0.0
+        self._hist = np.zeros((0, 3))
+        self._run = 0
+        self._pending: dict[str, np.ndarray] = {}
+        self._open: _OpenWindow | None = None
+        self._nis_hist: deque[tuple[float, np.ndarray]] = deque(maxlen=s.nis_window)
+        self._nis_ok = True
+        self._nis_last = math.nan
+        self._nis_sum = 0.0
+        self._nis_bound = float(chi2.ppf(1.0 - s.nis_alpha, 3))
+        self._bound_cache: dict[int, float] = {}
+        self._n_updates = 0
+        self._n_alarms = 0
+        self._finished = False
+        self._last: dict[str, Any] = {}
+        self._last_decision: tuple[int, bool] | None = None
+
+    # ------------------------------------------------------------------ public state
+    @property
+    def t_ref_c(self) -> float | None:
+        """Reference temperature of the temperature model, °C (None until known)."""
+        return self._t_ref
+
+    @property
+    def samples(self) -> int:
+        """Samples processed so far."""
+        return self._k
+
+    @property
+    def bias(self) -> np.ndarray:
+        """Bias estimate at the latest sample (its time and temperature), rad/s."""
+        if not self._last:
+            return self._bias_at(None)[0]
+        return self._last["bias"].copy()
+
+    @property
+    def bias_std(self) -> np.ndarray:
+        """One-sigma uncertainty of :attr:`bias`, rad/s."""
+        if not self._last:
+            return np.sqrt(self._bias_at(None)[1])
+        return self._last["bias_std"].copy()
+
+    @property
+    def bias_covariance(self) -> np.ndarray:
+        """Covariance of :attr:`bias` (3×3; axes are independent in this model), (rad/s)²."""
+        return np.diag(self.bias_std**2)
+
+    @property
+    def tempco(self) -> np.ndarray | None:
+        """Estimated temperature coefficient, rad/s/°C (None without the temperature model)."""
+        return self.kf.x[3:].copy() if self._temp_model else None
+
+    @property
+    def tempco_std(self) -> np.ndarray | None:
+        """One-sigma uncertainty of :attr:`tempco`, rad/s/°C (None without the model)."""
+        return np.sqrt(np.diag(self.kf.P)[3:]) if self._temp_model else None
+
+    @property
+    def health(self) -> Health:
+        """Health flags after the latest sample."""
+        since = self._last.get("since", 0.0)
+        return Health(
+            nis=self._nis_last,
+            nis_sum=self._nis_sum,
+            nis_bound=self._nis_bound,
+            nis_ok=self._nis_ok,
+            since_update_s=float(since),
+            stale=bool(since > self.settings.stale_after_s),
+            updates=self._n_updates,
+            alarms=self._n_alarms,
+        )
+
+    @property
+    def last_decision(self) -> tuple[int, bool] | None:
+        """``(sample index, still)`` of the most recent still decision, or None."""
+        return self._last_decision
+
+    def _bias_at(self, temp: float | None) -> tuple[np.ndarray, np.ndarray]:
+        x, P = self.kf.x, self.kf.P
+        if not self._temp_model:
+            return x[:3].copy(), np.diag(P)[:3].copy()
+        dT = 0.0 if temp is None or self._t_ref is None else temp - self._t_ref
+        d = np.diag(P)
+        pbc = np.array([P[i, i + 3] for i in range(3)])
+        return x[:3] + x[3:] * dT, d[:3] + 2 * dT * pbc + dT * dT * d[3:]
+
+    # ------------------------------------------------------------------ streaming
+    def update(
+        self,
+        sample: Any,
+        t: float,
+        temperature: float | None = None,
+        still: bool | None = None,
+        *,
+        reference_rate: float | None = None,
+        reference_axis: Any = None,
+    ) -> np.ndarray:
+        """Feed one reading; returns its corrected rate ``scale ∘ (m + bias)``, rad/s.
+
+        Parameters
+        ----------
+        sample : array_like (3,)
+            The reading ``m``, rad/s.
+        t : float
+            Its time, s (strictly increasing).
+        temperature : float, optional
+            Die temperature, °C (required with the temperature model).
+        still : bool, optional
+            External still flag; None lets the detector decide.
+        reference_rate : float, optional
+            Rate of the turning servo from its encoder, rad/s (jig only).
+        reference_axis : array_like (3,), optional
+            That servo's unit axis in the sensor frame.
+
+        Returns
+        -------
+        ndarray (3,)
+        """
+        m = np.asarray(sample, dtype=float)
+        if m.shape != (3,):
+            raise CalibInputError(f"sample must be 3 numbers (rad/s), got shape {m.shape}")
+        if (reference_rate is None) != (reference_axis is None):
+            raise CalibInputError("give reference_rate and reference_axis together")
+        res = self.process(
+            np.array([t], dtype=float),
+            m[None, :],
+            None if temperature is None else np.array([temperature], dtype=float),
+            None if still is None else np.array([1.0 if still else 0.0]),
+            reference_rate=None if reference_rate is None else np.array([reference_rate], float),
+            reference_axis=None
+            if reference_axis is None
+            else np.asarray(reference_axis, dtype=float).reshape(1, -1),
+        )
+        return res.corrected[0]
+
+    # ------------------------------------------------------------------ batches
+    def _validate(
+        self,
+        t: Any,
+        rate: Any,
+        temperature: Any,
+        still: Any,
+        reference_rate: Any,
+        reference_axis: Any,
+    ) -> tuple[np.ndarray, ...]:
+        try:
+            t = np.asarray(t, dtype=float).reshape(-1)
+            m = np.asarray(rate, dtype=float)
+        except (TypeError, ValueError):
+            raise CalibInputError("t must be (n,) seconds and rate (n, 3) rad/s") from None
+        n = t.size
+        if m.shape != (n, 3):
+            raise CalibInputError(f"rate must have shape ({n}, 3) to match t, got {m.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(m))):
+            raise CalibInputError("t and rate must be finite; drop or repair bad samples first")
+        if n > 1 and np.any(np.diff(t) <= 0):
+            i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+            raise CalibInputError(f"t must increase strictly; t[{i + 1}]={t[i + 1]} <= t[{i}]")
+        if n and self._t_last is not None and t[0] <= self._t_last:
+            raise CalibInputError(
+                f"t[0]={t[0]} is not after the previous sample's time {self._t_last}"
+            )
+        if temperature is None:
+            temp = np.full(n, np.nan)
+        else:
+            temp = np.asarray(temperature, dtype=float).reshape(-1)
+            if temp.shape != (n,):
+                raise CalibInputError(f"temperature must have shape ({n},), got {temp.shape}")
+        if self._temp_model and not np.all(np.isfinite(temp)):
+            raise CalibInputError(
+                "the temperature model needs a finite temperature for every sample; "
+                "give temperature or turn temperature_model off"
+            )
+        if still is None:
+            ext = np.full(n, np.nan)
+        else:
+            ext = np.asarray(still, dtype=float).reshape(-1)
+            if ext.shape != (n,):
+                raise CalibInputError(f"still must have shape ({n},), got {ext.shape}")
+            if not np.all(np.isnan(ext) | (ext == 0) | (ext == 1)):
+                raise CalibInputError(
+                    "still must hold True/False (or NaN: let the detector decide)"
+                )
+        if (reference_rate is None) != (reference_axis is None):
+            raise CalibInputError("give reference_rate and reference_axis together")
+        if reference_rate is None:
+            rr = np.full(n, np.nan)
+            ra = np.full((n, 3), np.nan)
+        else:
+            rr = np.asarray(reference_rate, dtype=float).reshape(-1)
+            ra = np.asarray(reference_axis, dtype=float)
+            if ra.shape == (3,):
+                ra = np.broadcast_to(ra, (n, 3)).copy()
+            if rr.shape != (n,) or ra.shape != (n, 3):
+                raise CalibInputError(
+                    f"reference_rate must be ({n},) and reference_axis ({n}, 3) or (3,), got "
+                    f"{rr.shape} and {ra.shape}"
+                )
+            has = np.isfinite(rr)
+            if has.any():
+                if self.calibration is None:
+                    raise CalibInputError(
+                        "reference-rate updates need a calibration (its scale and scale_std)"
+                    )
+                if not np.all(np.isfinite(self.scale_std)):
+                    raise CalibInputError(
+                        "the calibration has no scale_std; reference-rate updates need it"
+                    )
+                axes = ra[has]
+                if not np.all(np.isfinite(axes)):
+                    raise CalibInputError("reference_axis must be finite where reference_rate is")
+                norms = np.linalg.norm(axes, axis=1)
+                if np.any(np.abs(norms - 1.0) > 1e-6):
+                    raise CalibInputError("reference_axis rows must be unit vectors")
+                if np.any(ext[has] == 1):
+                    raise CalibInputError("a sample cannot be still while a servo turns it")
+        return t, m, temp, ext, rr, ra
+
+    def process(
+        self,
+        t: Any,
+        rate: Any,
+        temperature: Any = None,
+        still: Any = None,
+        *,
+        reference_rate: Any = None,
+        reference_axis: Any = None,
+        finish: bool = False,
+    ) -> TrackResult:
+        """Feed a batch of readings (vectorised); returns per-sample estimates.
+
+        Parameters
+        ----------
+        t : array_like (n,)
+            Sample times, s, strictly increasing (also across calls).
+        rate : array_like (n, 3)
+            Readings ``m``, rad/s.
+        temperature : array_like (n,), optional
+            Die temperature, °C (NaN allowed without the temperature model).
+        still : array_like (n,), optional
+            External still flags: True/False, or NaN where the detector should decide.
+        reference_rate : array_like (n,), optional
+            Encoder rate of the turning servo, rad/s; NaN where none turns.
+        reference_axis : array_like (n, 3) or (3,), optional
+            Unit axis of the turning servo in the sensor frame.
+        finish : bool
+            The stream ends with this batch: decide the samples still awaiting their look-ahead
+            (as not still, unless flagged), close the open update window and apply it. Further
+            calls are refused.
+
+        Returns
+        -------
+        TrackResult
+        """
+        if self._finished:
+            raise CalibInputError("this tracker has finished; start a new one")
+        t, m, temp, ext, rr, ra = self._validate(
+            t, rate, temperature, still, reference_rate, reference_axis
+        )
+        n = t.size
+        if n:
+            if self._t_first is None:
+                self._t_first = float(t[0])
+                self._t_state = float(t[0])
+                self._t_update = float(t[0])
+            if self._t_ref is None and np.isfinite(temp[0]):
+                self._t_ref = float(temp[0])
+        det = self.detector
+        # ---- detector: quiet windows and run lengths, carrying the last window across batches
+        if n:
+            centred = np.concatenate([self._hist, m + self._det_bias[None, :]])
+            quiet = quiet_windows(centred, det, self._hist.shape[0])
+            run = run_lengths(quiet, self._run)
+            self._run = int(run[-1])
+            keep = det.n_window - 1
+            self._hist = centred[-keep:] if keep else centred[:0]
+        else:
+            run = np.zeros(0, dtype=np.int64)
+        # ---- samples awaiting a decision: the pending ones, then this batch
+        cols = {"t": t, "m": m, "temp": temp, "ext": ext, "rr": rr, "ra": ra}
+        if self._pending:
+            S = {k: np.concatenate([self._pending[k], v]) for k, v in cols.items()}
+        else:
+            S = cols
+        P0 = S["t"].size - n
+        g0 = self._k - P0  # global index of S[0]
+        L = det.n_lookahead
+        total = P0 + n
+        n_dec = total if finish else max(total - L, 0)
+        det_still = np.zeros(n_dec, dtype=bool)
+        n_conf = min(n_dec, total - L) if total > L else 0
+        if n_conf > 0:
+            # decision on S[i] uses the run at S[i + L], i.e. batch row i + L - P0 (>= 0)
+            det_still[:n_conf] = run[np.arange(n_conf) + L - P0] >= det.n_min + L
+        ext_d = S["ext"][:n_dec]
+        still_d = np.where(np.isnan(ext_d), det_still, ext_d > 0.5)
+        has_ref = np.isfinite(S["rr"][:n_dec])
+        still_d &= ~has_ref
+        kind = np.where(has_ref, _KIND_REF, np.where(still_d, _KIND_STILL, _KIND_NONE))
+        self._pending = {k: v[n_dec:] for k, v in S.items()}
+        if n_dec:
+            self._last_decision = (g0 + n_dec - 1, bool(still_d[-1]))
+
+        snaps, log = self._assemble_and_apply(S, n_dec, kind, g0, finish)
+
+        # ---- per-sample output of this batch
+        g = self._k + np.arange(n)
+        closes = np.array([s.close for s in snaps], dtype=np.int64)
+        # the last snapshot applied at or before each sample (snapshot 0, close -1, is the state
+        # before this batch)
+        sidx = np.searchsorted(closes, g, side="right") - 1
+        out = self._outputs(snaps, sidx, t, m, temp)
+        # still decisions for this batch's rows
+        still_rows = np.zeros(n, dtype=bool)
+        decided_rows = np.zeros(n, dtype=bool)
+        rows = np.arange(n_dec) + g0 - self._k
+        sel = (rows >= 0) & (rows < n)
+        still_rows[rows[sel]] = still_d[sel]
+        decided_rows[rows[sel]] = True
+        if n:
+            self._k += n
+            self._t_last = float(t[-1])
+            self._last = {
+                "bias": out["bias"][-1],
+                "bias_std": out["bias_std"][-1],
+                "since": out["since"][-1],
+            }
+        if finish:
+            self._finished = True
+        return TrackResult(
+            t=t,
+            bias=out["bias"],
+            bias_std=out["bias_std"],
+            corrected=out["corrected"],
+            still=still_rows,
+            decided=decided_rows,
+            since_update_s=out["since"],
+            nis_ok=out["nis_ok"],
+            updates=log,
+            decision_index=g0 + np.arange(n_dec, dtype=np.int64),
+            decision_still=still_d.copy(),
+        )
+
+    # ------------------------------------------------------------------ internals
+    def _snapshot(self, close: int) -> _Snapshot:
+        return _Snapshot(
+            close=close,
+            x=self.kf.x.copy(),
+            P=self.kf.P.copy(),
+            t_state=self._t_state,
+            t_update=self._t_update,
+            nis_ok=self._nis_ok,
+        )
+
+    def _assemble_and_apply(
+        self, S: dict[str, np.ndarray], n_dec: int, kind: np.ndarray, g0: int, finish: bool
+    ) -> tuple[list[_Snapshot], UpdateLog]:
+        """Pool decided samples into update windows and apply the closed ones in order."""
+        L = self.detector.n_lookahead
+        U = self._U
+        snaps = [self._snapshot(-1)]
+        log: dict[str, list[Any]] = {
+            k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at")
+        }
+
+        def apply(w: _OpenWindow, close: int) -> None:
+            self._apply_window(w, log, close)
+            snaps.append(self._snapshot(close))
+
+        ra = S["ra"][:n_dec]
+        # z_i: the reading, less the reference's ω u ⊘ scale where a servo turns
+        z = S["m"][:n_dec].copy()
+        is_ref = kind == _KIND_REF
+        if is_ref.any():
+            z[is_ref] -= S["rr"][:n_dec][is_ref, None] * ra[is_ref] / self.scale[None, :]
+        # run starts: kind changes, or a different servo axis within reference samples
+        new_run = np.ones(n_dec, dtype=bool)
+        if n_dec > 1:
+            same_axis = np.all(ra[1:] == ra[:-1], axis=1) | ~is_ref[1:]
+            new_run[1:] = (kind[1:] != kind[:-1]) | ~same_axis
+        op = self._open
+        continues = False
+        if op is not None and n_dec:
+            k0 = int(kind[0])
+            axis0 = tuple(float(x) for x in ra[0]) if k0 == _KIND_REF else None
+            continues = k0 == op.kind and axis0 == op.axis
+            if not continues:
+                apply(op, g0 + L)  # closed by the decision on S[0], made at g0 + L
+                self._open = op = None
+        if n_dec:
+            new_run[0] = not continues
+            idx = np.arange(n_dec)
+            run_start = np.maximum.accumulate(np.where(new_run, idx, 0))
+            offset = np.where(run_start == 0, op.count if continues and op else 0, 0)
+            pos = idx - run_start + offset
+            active = kind != _KIND_NONE
+            win_start = active & ((pos % U == 0) | new_run)
+            if continues:
+                win_start[0] = False
+            starts = np.flatnonzero(win_start)
+            # windows: [start, end) in decided rows; the first may be the continued open window
+            bounds = list(starts)
+            if continues:
+                bounds = [0, *bounds]
+            bounds_arr = np.array(bounds, dtype=np.int64)
+            # each window runs to the earlier of the next window start or the end of its run
+            ends_at = np.flatnonzero(np.append(new_run[1:], True))  # last row of each run
+            # exclusive end of the run of each row
+            run_id = np.cumsum(new_run) - int(new_run[0])  # the first run may continue
+            run_end = ends_at[run_id] + 1
+            for wi, b in enumerate(bounds_arr):
+                nxt = bounds_arr[wi + 1] if wi + 1 < bounds_arr.size else n_dec
+                e = int(min(nxt, run_end[b]))
+                if kind[b] == _KIND_NONE:
+                    continue
+                rows = slice(int(b), e)
+                cnt = e - int(b)
+                sum_z = z[rows].sum(axis=0)
+                sum_temp = float(np.sum(S["temp"][rows])) if self._temp_model else 0.0
+                sum_omega = float(np.sum(S["rr"][rows])) if kind[b] == _KIND_REF else 0.0
+                if wi == 0 and continues and op is not None:
+                    w = op
+                    w.count += cnt
+                    w.sum_z = w.sum_z + sum_z
+                    w.sum_temp += sum_temp
+                    w.sum_omega += sum_omega
+                    w.last = g0 + e - 1
+                    w.t_last = float(S["t"][e - 1])
+                else:
+                    w = _OpenWindow(
+                        kind=int(kind[b]),
+                        axis=tuple(float(x) for x in ra[b]) if kind[b] == _KIND_REF else None,
+                        start=g0 + int(b),
+                        last=g0 + e - 1,
+                        count=cnt,
+                        sum_z=sum_z,
+                        sum_temp=sum_temp,
+                        sum_omega=sum_omega,
+                        t_last=float(S["t"][e - 1]),
+                    )
+                if w.count == U:
+                    apply(w, w.last + L)
+                    self._open = None
+                elif e < n_dec:  # ended by a row of another kind (or another axis)
+                    apply(w, w.last + 1 + L)
+                    self._open = None
+                else:
+                    self._open = w
+        if finish and self._open is not None:
+            apply(self._open, self._open.last + 1 + L)
+            self._open = None
+        return snaps, UpdateLog(
+            t=np.array(log["t"], dtype=float),
+            kind=np.array(log["kind"], dtype=object),
+            count=np.array(log["count"], dtype=np.int64),
+            nis=np.array(log["nis"], dtype=float),
+            nis_sum=np.array(log["nis_sum"], dtype=float),
+            nis_bound=np.array(log["nis_bound"], dtype=float),
+            alarm=np.array(log["alarm"], dtype=bool),
+            applied_at=np.array(log["at"], dtype=np.int64),
+        )
+
+    def _bound(self, k: int) -> float:
+        b = self._bound_cache.get(k)
+        if b is None:
+            b = float(chi2.ppf(1.0 - self.settings.nis_alpha, 3 * k))
+            self._bound_cache[k] = b
+        return b
+
+    def _apply_window(self, w: _OpenWindow, log: dict[str, list[Any]], close: int) -> None:
+        """One Kalman step (predict to the window's end, update with its mean)."""
+        s = self.settings
+        kf = self.kf
+        n = w.count
+        zbar = w.sum_z / n
+        R = self._sigma2 / n
+        if w.kind == _KIND_REF:
+            omega = w.sum_omega / n
+            u = np.asarray(w.axis)
+            g = omega * u / self.scale  # the reference's contribution ω u ⊘ scale
+            dur = n / s.odr_hz
+            R = (
+                R
+                + g**2 * (self.scale_std / self.scale) ** 2
+                + (omega * s.reference_axis_std / self.scale) ** 2
+                + (math.sqrt(2.0) * s.reference_angle_std / dur * u / self.scale) ** 2
+            )
+        dt = max(w.t_last - self._t_state, 0.0)
+        kf.Q = np.diag(self._q * dt)
+        kf.predict()
+        if self._temp_model:
+            dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0)
+            kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
+        else:
+            kf.H = -np.eye(3)
+        kf.R = np.diag(R)
+        kf.update(zbar)
+        y = np.asarray(kf.y, dtype=float).reshape(-1)
+        nis = float(y @ np.asarray(kf.SI) @ y)
+        self._t_state = max(self._t_state, w.t_last)
+        self._t_update = w.t_last
+        self._n_updates += 1
+        self._nis_hist.append((nis, y))
+        k = len(self._nis_hist)
+        total = float(sum(v for v, _ in self._nis_hist))
+        bound = self._bound(k)
+        alarm = total > bound
+        self._nis_last, self._nis_sum, self._nis_bound = nis, total, bound
+        if alarm:
+            self._n_alarms += 1
+            if s.recover:
+                P = kf.P.copy()
+                P[np.arange(3), np.arange(3)] += y**2
+                kf.P = P
+            self._nis_hist.clear()
+        self._nis_ok = not alarm
+        log["t"].append(w.t_last)
+        log["kind"].append("reference" if w.kind == _KIND_REF else "still")
+        log["count"].append(n)
+        log["nis"].append(nis)
+        log["nis_sum"].append(total)
+        log["nis_bound"].append(bound)
+        log["alarm"].append(alarm)
+        log["at"].append(close)
+
+    def _outputs(
+        self,
+        snaps: list[_Snapshot],
+        sidx: np.ndarray,
+        t: np.ndarray,
+        m: np.ndarray,
+        temp: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        W = len(snaps)
+        X = np.array([s.x for s in snaps]).reshape(W, self._dim)
+        Pd = np.array([np.diag(s.P) for s in snaps]).reshape(W, self._dim)
+        ts = np.array([s.t_state for s in snaps])
+        tu = np.array([s.t_update for s in snaps])
+        ok = np.array([s.nis_ok for s in snaps], dtype=bool)
+        j = sidx
+        dt = np.maximum(t - ts[j], 0.0)
+        q = self._q
+        if self._temp_model:
+            Pbc = np.array([[s.P[i, i + 3] for i in range(3)] for s in snaps]).reshape(W, 3)
+            dT = (temp - (self._t_ref if self._t_ref is not None else 0.0))[:, None]
+            bias = X[j, :3] + X[j, 3:] * dT
+            var = (
+                Pd[j, :3]
+                + 2 * dT * Pbc[j]
+                + dT * dT * Pd[j, 3:]
+                + (q[None, :3] + q[None, 3:] * dT * dT) * dt[:, None]
+            )
+        else:
+            bias = X[j, :3]
+            var = Pd[j, :3] + q[None, :3] * dt[:, None]
+        return {
+            "bias": bias,
+            "bias_std": np.sqrt(np.maximum(var, 0.0)),
+            "corrected": self.scale[None, :] * (m + bias),
+            "since": t - tu[j],
+            "nis_ok": ok[j],
+        }

@@ -1,0 +1,77 @@
+"""``gyrocal export``: write a calibration or noise document in another tool's format."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from kit.errors import InputError
+
+HELP = "write a calibration or noise document in another tool's format (json, kalibr, ...)"
+DESCRIPTION = (
+    "Render a gyrocal JSON document (a Calibration v1 from 'gyrocal estimate/calibrate', or a "
+    "noise document from 'gyrocal noise') in the format another tool reads. DOC is the JSON file, "
+    "or - for standard input."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Register the flags (format options come from every registered exporter)."""
+    from kit.exports import EXPORTERS
+
+    p.add_argument("doc", metavar="DOC", help="gyrocal JSON document, or - for stdin")
+    lines = [f"{name}: {e.description} (takes {', '.join(e.accepts)})"
+             for name, e in EXPORTERS.items()]
+    p.add_argument("--format", required=True, choices=list(EXPORTERS), metavar="FORMAT",
+                   help="one of: " + "; ".join(lines))
+    p.add_argument("--out", metavar="FILE", help="write here (atomically) instead of stdout")
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
+    seen: set[str] = set()
+    for e in EXPORTERS.values():
+        for opt in e.options:
+            if opt.name in seen:
+                continue
+            seen.add(opt.name)
+            p.add_argument("--" + opt.name.replace("_", "-"), dest="opt_" + opt.name,
+                           metavar=opt.name.upper(), type=opt.type, default=None,
+                           help=opt.help)
+
+
+def _load(path: str) -> Any:
+    if path == "-":
+        text = sys.stdin.read()
+        where = "standard input"
+    else:
+        p = Path(path)
+        if not p.is_file():
+            raise InputError(f"{p} does not exist or is not a file; give a gyrocal JSON document")
+        try:
+            text = p.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"cannot read {p}: {exc}") from None
+        where = str(p)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{where} is not valid JSON: {exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Load, check the document kind against the format, render, write."""
+    from kit.exports import export
+    from kit.fileio import atomic_write_text
+
+    doc = _load(args.doc)
+    options = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_") and v is not None}
+    text, notes = export(doc, args.format, options)
+    for note in notes:
+        print(f"gyrocal: note: {note}", file=sys.stderr)
+    if args.out:
+        atomic_write_text(args.out, text, force=args.force)
+        print(f"wrote {args.out}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return 0

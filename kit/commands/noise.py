@@ -1,0 +1,216 @@
+"""``gyrocal noise``: noise figures of a still gyro (overlapping Allan deviation)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any
+
+import numpy as np
+
+from kit.errors import InputError
+
+HELP = "noise figures of a still gyro: angle random walk, bias instability, rate random walk"
+DESCRIPTION = (
+    "Characterise the gyro's noise from a still recording by the overlapping Allan deviation "
+    "(IEEE Std 952): angle random walk N (rad/s/sqrt(Hz)), bias instability B (rad/s) and rate "
+    "random walk K (rad/s/sqrt(s)), each with its uncertainty. --sim draws a synthetic still "
+    "sensor with known noise (calib.noise_sim; not the emulated jig). --json prints the "
+    "gyrocal-noise v1 document that 'gyrocal export --format kalibr' and 'gyrocal track --noise' "
+    "read."
+)
+
+RAD2DEG = 180.0 / math.pi
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Register the flags."""
+    p.add_argument("recording", nargs="?", metavar="RECORDING",
+                   help="Recording v1 directory of the sensor at rest")
+    p.add_argument("--sim", action="store_true",
+                   help="use a simulated still sensor with known noise instead of a recording")
+    p.add_argument("--duration", type=float, default=1800.0, metavar="S",
+                   help="--sim: length of the record, s (default 1800)")
+    p.add_argument("--odr", type=float, default=200.0, metavar="HZ",
+                   help="--sim: sample rate, Hz (default 200)")
+    p.add_argument("--seed", type=int, default=0, help="--sim: random seed (default 0)")
+    p.add_argument("--sim-noise-density", type=float, default=1.75e-4, metavar="N",
+                   help="--sim: true angle random walk, rad/s/sqrt(Hz) (default 1.75e-4)")
+    p.add_argument("--sim-rate-random-walk", type=float, default=2e-6, metavar="K",
+                   help="--sim: true rate random walk, rad/s/sqrt(s) (default 2e-6)")
+    p.add_argument("--sim-bias-instability", type=float, default=0.0, metavar="B",
+                   help="--sim: true flicker coefficient, rad/s (default 0)")
+    p.add_argument("--span", choices=("auto", "all", "longest-rest"), default="auto",
+                   help="which samples of a recording: all, or its longest rest segment "
+                        "(auto: all if the recording has no rotations)")
+    p.add_argument("--min-tau", type=float, default=None, metavar="S",
+                   help="shortest averaging time to read N at (default 10 samples)")
+    p.add_argument("--json", action="store_true", help="print the gyrocal-noise v1 document")
+    p.add_argument("--out", metavar="FILE", help="also write the document to FILE (atomically)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
+    p.add_argument("--plot", metavar="FILE",
+                   help="draw the Allan deviation to FILE (PNG; needs the 'plot' extra)")
+
+
+def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], str]:
+    from kit.recording import load_recording
+
+    rec = load_recording(args.recording)
+    for w in rec.warnings:
+        print(f"gyrocal: note: {w}", file=sys.stderr)
+    t, rate, temp = rec.imu_t, rec.imu_rate, rec.imu_temp
+    has_rot = any(s.kind == "rotate" for s in rec.segments)
+    span = args.span
+    if span == "auto":
+        span = "longest-rest" if has_rot else "all"
+    if span == "longest-rest":
+        rests = [s for s in rec.segments if s.kind == "rest"]
+        if not rests:
+            raise InputError(
+                f"{rec.path} has no rest segment; record the sensor still, or pass --span all"
+            )
+        seg = max(rests, key=lambda s: s.duration)
+        sel = (t >= seg.t_start) & (t <= seg.t_end)
+        t, rate, temp = t[sel], rate[sel], temp[sel]
+        print(f"gyrocal: note: using rest segment {seg.index} ({seg.duration:.1f} s)",
+              file=sys.stderr)
+    if t.size < 64:
+        raise InputError(
+            f"{rec.path}: only {t.size} samples to analyse; an Allan deviation needs a still "
+            "record of many minutes"
+        )
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    if not period > 0:
+        raise InputError(f"{rec.path}: sample times do not advance")
+    gaps = np.flatnonzero(dt > 1.5 * period)
+    if gaps.size:
+        i = int(gaps[0])
+        raise InputError(
+            f"{rec.path}: {gaps.size} gap(s) in the samples, the first {dt[i]:.4f} s long at "
+            f"t={t[i]:.3f} s (a FIFO overflow?); the Allan deviation needs uniform sampling: "
+            "record again, or cut the recording at the gap"
+        )
+    odr = 1.0 / period
+    manifest_odr = rec.sensor.get("odr_hz")
+    if isinstance(manifest_odr, (int, float)) and abs(manifest_odr - odr) > 0.01 * odr:
+        print(f"gyrocal: note: the samples arrive at {odr:.3f} Hz, the manifest says "
+              f"{manifest_odr} Hz; using the measured rate", file=sys.stderr)
+    meta = {"sensor": rec.sensor, "source": str(rec.path)}
+    ok = np.isfinite(temp)
+    if ok.any():
+        meta["temperature_c"] = float(np.mean(temp[ok]))
+    return rate, odr, meta, str(rec.path)
+
+
+def _from_sim(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], Any]:
+    from calib.noise_sim import NoiseModel, simulate_still
+
+    try:
+        model = NoiseModel(noise_density=args.sim_noise_density,
+                           rate_random_walk=args.sim_rate_random_walk,
+                           bias_instability=args.sim_bias_instability)
+        if not args.sim_noise_density > 0:
+            raise InputError("--sim-noise-density must be positive")
+        s = simulate_still(np.random.default_rng(args.seed), args.duration, odr_hz=args.odr,
+                           model=model)
+    except ValueError as exc:
+        raise InputError(f"--sim: {exc}") from None
+    meta = {"sensor": {"model": "simulated", "odr_hz": s.odr_hz}, "source": "simulation",
+            "temperature_c": 25.0}
+    return s.rate, s.odr_hz, meta, model
+
+
+def _table(nc: Any, truth: Any) -> str:
+    rows = []
+    hdr = (f"{'axis':4}  {'N rad/s/sqrt(Hz)':>22}  {'(deg/sqrt(h))':>13}  "
+           f"{'B rad/s':>22}  {'(deg/h)':>8}  {'K rad/s/sqrt(s)':>22}  {'tau N/B/K s':>18}")
+    rows.append(hdr)
+    rows.append("-" * len(hdr))
+    for i, ax in enumerate("xyz"):
+        n, ns = nc.noise_density.value[i], nc.noise_density.std[i]
+        b, bs = nc.bias_instability.value[i], nc.bias_instability.std[i]
+        k, ks = nc.rate_random_walk.value[i], nc.rate_random_walk.std[i]
+        taus = (f"{nc.noise_density.tau_s[i]:.3g}/{nc.bias_instability.tau_s[i]:.3g}/"
+                f"{nc.rate_random_walk.tau_s[i]:.3g}")
+        rows.append(
+            f"{ax:4}  {n:10.4e} +- {ns:8.2e}  {n * RAD2DEG * 60:13.4f}  "
+            f"{b:10.4e} +- {bs:8.2e}  {b * RAD2DEG * 3600:8.3f}  "
+            f"{k:10.4e} +- {ks:8.2e}  {taus:>18}"
+        )
+    if truth is not None:
+        rows.append(
+            f"true  N {truth.noise_density[0]:.4e}   B {truth.bias_instability[0]:.4e}   "
+            f"K {truth.rate_random_walk[0]:.4e}  (simulation, every axis)"
+        )
+    return "\n".join(rows)
+
+
+def plot_allan(nc: Any, path: str) -> None:
+    """Draw the Allan deviation with its one-sigma band and the fitted noise model to ``path``."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise InputError(
+            "plotting needs matplotlib: pip install 'gyrocal[plot]' (or drop --plot)"
+        ) from None
+    from calib.noise_sim import FLICKER_FLOOR
+
+    tau = nc.tau_s
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for i, (name, col) in enumerate(zip("xyz", ("C0", "C1", "C2"), strict=True)):
+        ax.loglog(tau, nc.adev[:, i], "o-", ms=3, color=col, label=f"{name}")
+        ax.fill_between(tau, nc.adev_lo[:, i], nc.adev_hi[:, i], color=col, alpha=0.2)
+        N, B, K = nc.fit["N"][i], nc.fit["B"][i], nc.fit["K"][i]
+        model = np.sqrt(N**2 / tau + (FLICKER_FLOOR * B) ** 2 + K**2 * tau / 3.0)
+        ax.loglog(tau, model, "--", color=col, lw=1)
+    ax.set_xlabel("averaging time tau, s")
+    ax.set_ylabel("Allan deviation, rad/s")
+    ax.set_title("overlapping Allan deviation (band: 68 %; dashed: N, B, K model)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    try:
+        fig.savefig(path, dpi=120)
+    except OSError as exc:
+        raise InputError(f"cannot write the plot to {path}: {exc}") from None
+    finally:
+        plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Analyse, print, write and plot."""
+    from calib.allan import characterise_noise
+    from calib.noise_sim import FLICKER_FLOOR
+    from kit.fileio import atomic_write_json
+    from kit.recording import now_iso
+
+    if args.sim == (args.recording is not None):
+        raise InputError("give a RECORDING or --sim (one of them)")
+    truth = None
+    if args.sim:
+        rate, odr, meta, truth = _from_sim(args)
+    else:
+        rate, odr, meta, _ = _from_recording(args)
+    nc = characterise_noise(rate, odr, min_tau_s=args.min_tau)
+    nc = nc.with_meta(created=now_iso(), **meta)
+    doc = nc.to_dict()
+    if args.out:
+        atomic_write_json(args.out, doc, force=args.force)
+        print(f"wrote {args.out}", file=sys.stderr)
+    if args.plot:
+        plot_allan(nc, args.plot)
+        print(f"wrote {args.plot}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(doc, indent=2, allow_nan=False))
+    else:
+        print(f"gyrocal noise: {meta['source']}, {nc.duration_s:.1f} s at {odr:g} Hz "
+              f"({nc.n_samples} samples per axis); overlapping Allan deviation, IEEE Std 952")
+        print(_table(nc, truth))
+        print("B: flicker floor 0.664 B read where best determined; curve minimum/0.664: "
+              + ", ".join(f"{v / FLICKER_FLOOR:.3e}" for v in nc.adev_min["value"]) + " rad/s")
+    return 0

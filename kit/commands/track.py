@@ -1,0 +1,479 @@
+"""``gyrocal track``: follow the gyro's bias over a recording (or a simulated session)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from kit.errors import InputError
+
+HELP = "track the gyro bias over a recording with a Kalman filter, seeded from a calibration"
+DESCRIPTION = (
+    "Replay a Recording v1 through the bias tracker (calib.tracker: a Kalman filter on the three "
+    "biases, optionally a temperature coefficient, with zero-rate updates when the sensor is "
+    "still and reference-rate updates while a servo turns about an axis the calibration knows) "
+    "and print or plot the bias over time with its uncertainty. --json prints "
+    '{"t": [N], "bias": [N][3], "bias_std": [N][3], "still": [N]} in rad/s, one row per gyro '
+    "sample, the bias in the Calibration v1 convention (g = scale * (m + bias), so a still "
+    "sensor reads -bias). --sim tracks a synthetic 30-minute session (calib.noise_sim: a "
+    "synthetic sensor, not the emulated jig) and compares with its truth."
+)
+
+DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS gyros
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Register the flags."""
+    p.add_argument("recording", nargs="?", metavar="RECORDING", help="Recording v1 directory")
+    src = p.add_argument_group("simulation (--sim)")
+    src.add_argument("--sim", action="store_true",
+                     help="track a simulated session instead of a recording")
+    src.add_argument("--duration", type=float, default=1800.0, metavar="S",
+                     help="--sim: session length, s (default 1800)")
+    src.add_argument("--seed", type=int, default=0, help="--sim: random seed (default 0)")
+    src.add_argument("--motion", choices=("random", "jig"), default="random",
+                     help="--sim: random hand-held-like motions, or servo turns of the jig")
+    src.add_argument("--step-at", type=float, default=None, metavar="S",
+                     help="--sim: inject a bias step at this time")
+    src.add_argument("--step", type=float, default=2e-3, metavar="RAD_S",
+                     help="--sim: size of the step on the x axis, rad/s (default 2e-3)")
+    m = p.add_argument_group("model")
+    m.add_argument("--cal", metavar="CAL",
+                   help="Calibration v1 JSON: initial bias and bias_std, scale, servo axes")
+    m.add_argument("--noise", metavar="NOISE",
+                   help="gyrocal-noise v1 JSON (from 'gyrocal noise'): sets R and Q")
+    m.add_argument("--noise-density", type=float, default=None, metavar="N",
+                   help="white noise density, rad/s/sqrt(Hz) (default: --noise, else estimated "
+                        "from the recording)")
+    m.add_argument("--rate-random-walk", type=float, default=None, metavar="K",
+                   help="bias random walk, rad/s/sqrt(s) (default: --noise, else "
+                        f"{DEFAULT_RATE_RANDOM_WALK:g})")
+    m.add_argument("--tempco", action="store_true",
+                   help="also estimate a linear temperature coefficient per axis")
+    m.add_argument("--tempco-std", type=float, default=1e-3, metavar="RAD_S_PER_C",
+                   help="prior std of the temperature coefficient (default 1e-3)")
+    m.add_argument("--initial-bias-std", type=float, default=0.1, metavar="RAD_S",
+                   help="prior bias std without --cal (default 0.1)")
+    d = p.add_argument_group("still detection and updates")
+    d.add_argument("--still", choices=("detect", "segments"), default="detect",
+                   help="decide stillness by the detector, or from the recording's rest "
+                        "segments (default detect)")
+    d.add_argument("--no-reference", action="store_true",
+                   help="no reference-rate updates during servo turns")
+    d.add_argument("--still-window", type=float, default=0.2, metavar="S")
+    d.add_argument("--min-still", type=float, default=0.5, metavar="S")
+    d.add_argument("--lookahead", type=float, default=0.2, metavar="S")
+    d.add_argument("--still-rate-threshold", type=float, default=None, metavar="RAD_S",
+                   help="rate gate of the detector (default 5 sigma of the white noise)")
+    d.add_argument("--update-interval", type=float, default=0.25, metavar="S")
+    o = p.add_argument_group("output")
+    o.add_argument("--json", action="store_true", help="print the per-sample JSON document")
+    o.add_argument("--out", metavar="FILE", help="write the JSON document to FILE instead")
+    o.add_argument("--force", action="store_true", help="replace an existing --out file")
+    o.add_argument("--plot", metavar="FILE",
+                   help="draw the bias and its 3-sigma band to FILE (PNG; 'plot' extra)")
+    o.add_argument("--rows", type=int, default=12, help="rows of the text summary (default 12)")
+
+
+@dataclass(frozen=True)
+class Batch:
+    """What a source hands the tracker: a run of samples (a recording, a FIFO drain, ...)."""
+
+    t: np.ndarray
+    rate: np.ndarray
+    temperature: np.ndarray | None = None
+    still: np.ndarray | None = None
+    reference_rate: np.ndarray | None = None
+    reference_axis: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Tracked:
+    """Per-sample output of a whole run."""
+
+    t: np.ndarray
+    bias: np.ndarray
+    bias_std: np.ndarray
+    still: np.ndarray
+    nis_ok: np.ndarray
+    since_update_s: np.ndarray
+    update_t: np.ndarray
+    update_kind: np.ndarray
+    alarm_t: np.ndarray
+
+
+def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
+    """Feed ``batches`` to a :class:`calib.tracker.BiasTracker` and collect per-sample output.
+
+    A live source (the jig's IMU FIFO) is one more iterable of :class:`Batch`. The last batch is
+    processed with ``finish=True``; still decisions that arrive after their batch (the
+    detector's look-ahead) are placed by the sample index the tracker reports with them.
+    """
+    parts: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "di", "ds")
+    }
+    it = iter(batches)
+    current = next(it, None)
+    if current is None:
+        raise InputError("no samples to track")
+    while current is not None:
+        nxt = next(it, None)
+        res = tracker.process(
+            current.t, current.rate, current.temperature, current.still,
+            reference_rate=current.reference_rate, reference_axis=current.reference_axis,
+            finish=nxt is None,
+        )
+        for key, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
+                       ("nis", res.nis_ok), ("since", res.since_update_s),
+                       ("ut", res.updates.t), ("uk", res.updates.kind),
+                       ("al", res.updates.t[res.updates.alarm]),
+                       ("di", res.decision_index), ("ds", res.decision_still)):
+            parts[key].append(v)
+        current = nxt
+    t = np.concatenate(parts["t"])
+    still = np.zeros(t.size, dtype=bool)
+    still[np.concatenate(parts["di"])] = np.concatenate(parts["ds"])
+    return Tracked(
+        t=t,
+        bias=np.vstack(parts["bias"]),
+        bias_std=np.vstack(parts["std"]),
+        still=still,
+        nis_ok=np.concatenate(parts["nis"]),
+        since_update_s=np.concatenate(parts["since"]),
+        update_t=np.concatenate(parts["ut"]),
+        update_kind=np.concatenate(parts["uk"]),
+        alarm_t=np.concatenate(parts["al"]),
+    )
+
+
+def _chunks(batch: Batch, size: int) -> Iterator[Batch]:
+    n = batch.t.size
+    for a in range(0, n, size):
+        sl = slice(a, min(a + size, n))
+        yield Batch(*(None if x is None else x[sl] for x in (
+            batch.t, batch.rate, batch.temperature, batch.still, batch.reference_rate,
+            batch.reference_axis)))
+
+
+def _read_json(path: str, what: str) -> Any:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{what} {p} does not exist or is not a file")
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{what} {p} is not readable JSON: {exc}") from None
+
+
+def load_calibration(path: str) -> Any:
+    """Read a Calibration v1 file (InputError naming the problem)."""
+    from calib.errors import CalibrationFormatError
+    from calib.model import GyroCalibration
+
+    try:
+        return GyroCalibration.from_dict(_read_json(path, "--cal"))
+    except CalibrationFormatError as exc:
+        raise InputError(f"--cal {path}: {exc}") from None
+
+
+def load_noise(path: str) -> Any:
+    """Read a gyrocal-noise v1 file (InputError naming the problem)."""
+    from calib.allan import NoiseCharacterisation
+    from calib.errors import CalibrationFormatError
+
+    try:
+        return NoiseCharacterisation.from_dict(_read_json(path, "--noise"))
+    except CalibrationFormatError as exc:
+        raise InputError(f"--noise {path}: {exc}") from None
+
+
+def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Per-sample reference rate and axis over the recording's rotate segments.
+
+    The rate of sample ``i`` is the encoder angle's change across the sample's own interval
+    ``[t_i − dt/2, t_i + dt/2]`` (linear interpolation of the encoder), so the mean over any
+    run of samples is the angle change across the run divided by its length: the reference a
+    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
+    calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
+    """
+    n = rec.imu_t.size
+    rr = np.full(n, np.nan)
+    ra = np.full((n, 3), np.nan)
+    notes: list[str] = []
+    axes = (cal.axes or {}) if cal is not None else {}
+    if n < 2:
+        return rr, ra, notes
+    dt = float(np.median(np.diff(rec.imu_t)))
+    for seg in rec.segments:
+        if seg.kind != "rotate":
+            continue
+        entry = axes.get(str(seg.motor))
+        if not isinstance(entry, dict) or "axis" not in entry:
+            notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
+                         f"{seg.index} gives no reference-rate updates")
+            continue
+        u = np.asarray(entry["axis"], dtype=float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+            raise InputError(f"--cal: axes[{seg.motor!r}].axis must be 3 finite numbers")
+        u = u / np.linalg.norm(u)
+        et, ea = rec.encoder(seg.motor)
+        sel = (rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end)
+        ti = rec.imu_t[sel]
+        inside = (ti - dt / 2 >= (et[0] if et.size else np.inf)) & (
+            ti + dt / 2 <= (et[-1] if et.size else -np.inf))
+        if et.size < 2 or not inside.any():
+            notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
+            continue
+        idx = np.flatnonzero(sel)[inside]
+        tt = rec.imu_t[idx]
+        rr[idx] = (np.interp(tt + dt / 2, et, ea) - np.interp(tt - dt / 2, et, ea)) / dt
+        ra[idx] = u
+    return rr, ra, notes
+
+
+def _rest_flags(rec: Any, trim_s: float = 0.5) -> np.ndarray:
+    """True on samples inside rest segments (less ``trim_s`` at each end)."""
+    still = np.zeros(rec.imu_t.size)
+    for seg in rec.segments:
+        if seg.kind == "rest" and seg.duration > 2 * trim_s:
+            still[(rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)] = 1.0
+    return still
+
+
+def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any, notes: list[str],
+              axis_std: float | None) -> Any:
+    from calib.stationarity import StillSettings
+    from calib.tracker import TrackerSettings
+
+    try:
+        still = StillSettings(window_s=args.still_window, min_still_s=args.min_still,
+                              lookahead_s=args.lookahead,
+                              rate_threshold=args.still_rate_threshold)
+        kw: dict[str, Any] = dict(
+            odr_hz=odr, noise_density=n_density, rate_random_walk=k,
+            temperature_model=args.tempco, tempco_std=args.tempco_std,
+            update_interval_s=args.update_interval, still=still,
+        )
+        if axis_std is not None:
+            kw["reference_axis_std"] = axis_std
+        return TrackerSettings(**kw)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+
+
+def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any]:
+    from calib.stationarity import first_still_mean, white_noise_std
+    from calib.tracker import BiasTracker
+    from kit.recording import load_recording
+
+    rec = load_recording(args.recording)
+    notes += list(rec.warnings)
+    n = rec.imu_t.size
+    if n < 2:
+        raise InputError(f"{rec.path}: only {n} gyro samples")
+    odr = 1.0 / float(np.median(np.diff(rec.imu_t)))
+    cal = load_calibration(args.cal) if args.cal else None
+    noise = load_noise(args.noise) if args.noise else None
+    if args.noise_density is not None:
+        n_density: Any = args.noise_density
+    elif noise is not None:
+        n_density = tuple(noise.noise_density.value)
+    else:
+        sigma = white_noise_std(rec.imu_rate)
+        n_density = tuple(float(x) for x in sigma / math.sqrt(odr))
+        notes.append("noise density estimated from the recording's sample-to-sample scatter: "
+                     + ", ".join(f"{x:.3g}" for x in n_density) + " rad/s/sqrt(Hz) "
+                     "(measure it with 'gyrocal noise' and pass --noise)")
+    if args.rate_random_walk is not None:
+        k: Any = args.rate_random_walk
+    elif noise is not None:
+        kv = np.asarray(noise.rate_random_walk.value)
+        k = tuple(float(x) for x in np.where(kv > 0, kv, noise.rate_random_walk.hi95))
+    else:
+        k = DEFAULT_RATE_RANDOM_WALK
+        notes.append(f"bias random walk not given: using {k:g} rad/s/sqrt(s) (conservative; "
+                     "measure it with 'gyrocal noise' and pass --noise)")
+    axis_std = None
+    if cal is not None and cal.axes:
+        stds = [v.get("std_deg") for v in cal.axes.values() if isinstance(v, dict)]
+        stds = [s for s in stds if isinstance(s, (int, float)) and math.isfinite(s)]
+        if stds:
+            axis_std = math.radians(max(stds))
+    st = _settings(args, odr, n_density, k, notes, axis_std)
+    temp = rec.imu_temp
+    if args.tempco and not np.all(np.isfinite(temp)):
+        raise InputError(f"{rec.path}: --tempco needs a temperature on every sample (imu.csv "
+                         "temp column); this recording lacks some")
+    if cal is not None:
+        tracker = BiasTracker(st, cal)
+    else:
+        guess = first_still_mean(rec.imu_rate, st.noise_std, odr, st.still)
+        if guess is None:
+            raise InputError(f"{rec.path}: no still second found to start from; give --cal")
+        notes.append("no --cal: starting from the first still second's bias "
+                     f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- "
+                     f"{args.initial_bias_std:g}")
+        try:
+            tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+    still = _rest_flags(rec) if args.still == "segments" else None
+    rr = ra = None
+    if not args.no_reference and cal is not None and any(
+        s.kind == "rotate" for s in rec.segments
+    ):
+        rr, ra, more = encoder_reference(rec, cal)
+        notes += more
+        if not np.isfinite(rr).any():
+            rr = ra = None
+        elif not np.all(np.isfinite(cal.scale_std)):
+            notes.append("the calibration has no scale_std: no reference-rate updates")
+            rr = ra = None
+        if rr is not None and still is not None:
+            still[np.isfinite(rr)] = 0.0
+    batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still, rr, ra)
+    return tracker, batch, None, str(rec.path)
+
+
+def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
+    from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+    from calib.tracker import BiasTracker
+
+    model = NoiseModel(rate_random_walk=1e-5)
+    step = None
+    if args.step_at is not None:
+        step = (args.step_at, (args.step, 0.0, 0.0))
+    try:
+        s = simulate_session(np.random.default_rng(args.seed), args.duration, model=model,
+                             motion=args.motion, bias_step=step)
+        cal = sim_calibration(np.random.default_rng(args.seed + 1), s)
+    except ValueError as exc:
+        raise InputError(f"--sim: {exc}") from None
+    if args.cal:
+        notes.append("--cal is ignored with --sim (the simulation makes its own calibration)")
+    n_density = args.noise_density if args.noise_density is not None else model.noise_density
+    k = args.rate_random_walk if args.rate_random_walk is not None else model.rate_random_walk
+    st = _settings(args, s.odr_hz, n_density, k, notes,
+                   1e-5 if args.motion == "jig" else None)
+    tracker = BiasTracker(st, cal)
+    rr = ra = None
+    if args.motion == "jig" and not args.no_reference:
+        rr, ra = s.reference_rate, s.reference_axis
+    batch = Batch(s.t, s.rate, s.temperature_c if args.tempco else None, None, rr, ra)
+    notes.append("synthetic sensor (calib.noise_sim), not the emulated jig: "
+                 f"{args.duration:g} s, {args.motion} motions, 10 degC ramp")
+    if not args.tempco:
+        notes.append("the simulated die warms by 10 degC and its bias follows: without --tempco "
+                     "that drift is unmodelled (the NIS alarms may say so)")
+    return tracker, batch, s, "simulation"
+
+
+def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
+    """Draw the bias estimate of each axis with its 3-sigma band (and the truth of a --sim)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise InputError(
+            "plotting needs matplotlib: pip install 'gyrocal[plot]' (or drop --plot)"
+        ) from None
+    fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+    step = max(1, tr.t.size // 20000)
+    t = tr.t[::step]
+    for i, (ax, name) in enumerate(zip(axs, "xyz", strict=True)):
+        b = tr.bias[::step, i]
+        sd = tr.bias_std[::step, i]
+        ax.fill_between(t, b - 3 * sd, b + 3 * sd, color="C0", alpha=0.25, label="3 sigma")
+        ax.plot(t, b, color="C0", lw=1, label="estimate")
+        if truth is not None:
+            ax.plot(t, truth.true_bias[::step, i], color="k", lw=0.8, label="truth")
+        for ta in tr.alarm_t:
+            ax.axvline(ta, color="C3", lw=0.8)
+        ax.set_ylabel(f"b{name}, rad/s")
+        ax.grid(True, alpha=0.3)
+    axs[0].legend(loc="upper right", fontsize=8)
+    axs[-1].set_xlabel("t, s")
+    fig.suptitle("gyro bias (Calibration v1 convention); red lines: NIS alarms")
+    try:
+        fig.savefig(path, dpi=110)
+    except OSError as exc:
+        raise InputError(f"cannot write the plot to {path}: {exc}") from None
+    finally:
+        plt.close(fig)
+
+
+def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
+    n = tr.t.size
+    out = [f"gyrocal track: {source}, {n} samples over {tr.t[-1] - tr.t[0]:.1f} s; "
+           f"{tr.update_t.size} updates "
+           f"({np.count_nonzero(tr.update_kind == 'still')} zero-rate, "
+           f"{np.count_nonzero(tr.update_kind == 'reference')} reference-rate), "
+           f"still {100 * tr.still.mean():.1f} % of samples",
+           f"health: {tr.alarm_t.size} NIS alarm(s)"
+           + (f" at t = {', '.join(f'{x:.1f}' for x in tr.alarm_t[:5])} s" if tr.alarm_t.size
+              else "")
+           + f"; longest time without an update {tr.since_update_s.max():.1f} s",
+           f"{'t s':>9}  {'bias x':>11} {'bias y':>11} {'bias z':>11}   "
+           f"{'std x':>9} {'std y':>9} {'std z':>9}  (rad/s, Calibration v1 sign)"]
+    idx = np.unique(np.linspace(0, n - 1, max(2, rows)).round().astype(int))
+    for i in idx:
+        b, s = tr.bias[i], tr.bias_std[i]
+        out.append(f"{tr.t[i]:9.2f}  {b[0]:11.4e} {b[1]:11.4e} {b[2]:11.4e}   "
+                   f"{s[0]:9.2e} {s[1]:9.2e} {s[2]:9.2e}")
+    if truth is not None:
+        err = tr.bias - truth.true_bias
+        rms = np.sqrt(np.mean(err**2, axis=0))
+        inside = np.mean(np.abs(err) <= 3 * tr.bias_std, axis=0)
+        out.append("vs truth: RMS error " + ", ".join(f"{x:.2e}" for x in rms)
+                   + " rad/s; inside 3 sigma " + ", ".join(f"{100 * x:.2f} %" for x in inside))
+    return "\n".join(out)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the tracker and its source, run, report."""
+    from kit.fileio import atomic_write_text
+
+    if args.sim == (args.recording is not None):
+        raise InputError("give a RECORDING or --sim (one of them)")
+    if args.rows < 2:
+        raise InputError("--rows must be at least 2")
+    notes: list[str] = []
+    if args.sim:
+        tracker, batch, truth, source = _simulate(args, notes)
+        # fed one second at a time, as a live source would
+        batches: Iterable[Batch] = _chunks(batch, max(1, int(round(tracker.settings.odr_hz))))
+    else:
+        tracker, batch, truth, source = _replay(args, notes)
+        batches = [batch]
+    tr = run_tracker(tracker, batches)
+    for note in notes:
+        print(f"gyrocal: note: {note}", file=sys.stderr)
+    if args.plot:
+        plot_track(tr, args.plot, truth)
+        print(f"wrote {args.plot}", file=sys.stderr)
+    if args.json or args.out:
+        doc = {
+            "t": tr.t.tolist(),
+            "bias": tr.bias.tolist(),
+            "bias_std": tr.bias_std.tolist(),
+            "still": tr.still.tolist(),
+        }
+        text = json.dumps(doc, allow_nan=False) + "\n"
+        if args.out:
+            atomic_write_text(args.out, text, force=args.force)
+            print(f"wrote {args.out}", file=sys.stderr)
+        else:
+            sys.stdout.write(text)
+    if not args.json:
+        print(_summary(tr, args.rows, source, truth))
+    return 0

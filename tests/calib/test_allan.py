@@ -1,0 +1,139 @@
+"""Allan deviation and the noise figures read off it, against theory and simulated truth."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from calib.allan import NoiseCharacterisation, allan_deviation, characterise_noise
+from calib.errors import CalibInputError, CalibrationFormatError
+from calib.noise_sim import FLICKER_FLOOR, NoiseModel, simulate_still
+
+ODR = 200.0
+
+
+def test_white_noise_follows_n_over_sqrt_tau():
+    # Theory (IEEE Std 952 Annex C): white rate noise of density N has σ(τ) = N/√τ.
+    rng = np.random.default_rng(11)
+    N = 2e-4
+    x = rng.standard_normal((200_000, 3)) * N * math.sqrt(ODR)
+    curve = allan_deviation(x, ODR)
+    theory = N / np.sqrt(curve.tau_s)
+    lo, hi = curve.interval(curve.edf[:, [0]], ci=0.997)
+    inside = (lo <= theory[:, None]) & (theory[:, None] <= hi)
+    assert inside.mean() > 0.95
+    # Where the estimate has many degrees of freedom it is close in absolute terms too.
+    short = curve.tau_s <= 0.25  # edf > 10^4: relative std < 0.7 %
+    np.testing.assert_allclose(curve.adev[short], np.broadcast_to(theory[short, None],
+                               curve.adev[short].shape), rtol=0.025)
+
+
+def test_rate_random_walk_follows_k_sqrt_tau_over_3():
+    # Theory: a bias random walk with increments of variance K² dt has σ(τ) = K √(τ/3).
+    rng = np.random.default_rng(12)
+    K = 1e-4
+    steps = rng.standard_normal((400_000, 3)) * K * math.sqrt(1 / ODR)
+    x = np.cumsum(steps, axis=0)
+    curve = allan_deviation(x, ODR)
+    theory = K * np.sqrt(curve.tau_s / 3.0)
+    lo, hi = curve.interval(curve.edf[:, [2]], ci=0.997)
+    mid = (curve.tau_s > 0.1) & (curve.tau_s < 200)
+    inside = (lo[mid] <= theory[mid, None]) & (theory[mid, None] <= hi[mid])
+    assert inside.mean() > 0.9
+
+
+def test_figures_recover_simulated_noise_density_and_random_walk_within_uncertainty():
+    """On sessions with known N and K, the truth lies inside the stated 95 % intervals about as
+    often as it should, and the stated std is neither far too small nor far too large."""
+    N = np.array([1.75e-4, 1.0e-4, 3.0e-4])
+    K = np.array([2e-5, 1e-5, 3e-5])
+    inside = {"N": [], "K": []}
+    z = {"N": [], "K": []}
+    for seed in range(10):
+        s = simulate_still(
+            np.random.default_rng(100 + seed), 1200.0, odr_hz=ODR,
+            model=NoiseModel(noise_density=N, rate_random_walk=K),
+        )
+        nc = characterise_noise(s.rate, ODR)
+        for key, fig, truth in (("N", nc.noise_density, N), ("K", nc.rate_random_walk, K)):
+            lo, hi = np.array(fig.lo95), np.array(fig.hi95)
+            inside[key] += list((lo <= truth) & (truth <= hi))
+            z[key] += list((np.array(fig.value) - truth) / np.array(fig.std))
+            assert np.all(np.array(fig.std) > 0)
+    for key in ("N", "K"):
+        assert np.mean(inside[key]) >= 0.85, key
+        rms = math.sqrt(np.mean(np.square(z[key])))
+        assert 0.6 < rms < 1.6, (key, rms)
+    # N is read where white noise dominates, so it is also tight in absolute terms.
+    nc_n = np.array(nc.noise_density.value)
+    np.testing.assert_allclose(nc_n, N, rtol=0.03)
+
+
+def test_bias_instability_reads_the_flicker_floor():
+    # Flicker-dominated: the Allan floor is 0.664 B (IEEE Std 952), so B comes back, inside its
+    # stated interval.
+    B = np.array([1e-4, 5e-5, 2e-4])
+    inside = []
+    for seed in range(4):
+        s = simulate_still(
+            np.random.default_rng(70 + seed), 1800.0, odr_hz=ODR,
+            model=NoiseModel(noise_density=2e-5, rate_random_walk=0.0, bias_instability=B),
+        )
+        nc = characterise_noise(s.rate, ODR)
+        fig = nc.bias_instability
+        inside += list((np.array(fig.lo95) <= B) & (B <= np.array(fig.hi95)))
+        np.testing.assert_allclose(fig.value, B, rtol=0.1)
+        assert set(nc.adev_min["tau_s"]) <= set(nc.tau_s.tolist())
+        # No rate random walk in this sensor: K is resolved as (near) zero.
+        assert np.all(np.array(nc.rate_random_walk.value) < 0.2 * B)
+    assert np.mean(inside) >= 0.8
+    assert FLICKER_FLOOR == pytest.approx(0.6643, abs=1e-4)
+
+
+def test_document_round_trip(tmp_path):
+    s = simulate_still(np.random.default_rng(3), 300.0, odr_hz=ODR)
+    nc = characterise_noise(s.rate, ODR).with_meta(
+        sensor={"model": "simulated"}, source="simulation", temperature_c=25.0
+    )
+    doc = json.loads(json.dumps(nc.to_dict()))
+    assert doc["format"] == "gyrocal-noise" and doc["version"] == 1
+    back = NoiseCharacterisation.from_dict(doc)
+    assert back.noise_density == nc.noise_density
+    assert back.rate_random_walk == nc.rate_random_walk
+    np.testing.assert_array_equal(back.adev, nc.adev)
+    assert back.to_dict() == doc
+    np.testing.assert_allclose(back.white_std, np.array(nc.noise_density.value) * math.sqrt(ODR))
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda d: d.update(format="gyrocal-calibration"), "not a gyrocal noise document"),
+        (lambda d: d.update(version=2), "version 2 is not supported"),
+        (lambda d: d["noise_density"].update(value=[1, 2]), "noise_density.value"),
+        (lambda d: d.update(odr_hz=-1), "odr_hz"),
+        (lambda d: d["allan"].update(adev=[[1, 2, 3]]), "allan"),
+    ],
+)
+def test_document_errors_name_the_field(mutate, match):
+    s = simulate_still(np.random.default_rng(3), 120.0, odr_hz=ODR)
+    doc = characterise_noise(s.rate, ODR).to_dict()
+    mutate(doc)
+    with pytest.raises(CalibrationFormatError, match=match):
+        NoiseCharacterisation.from_dict(doc)
+
+
+def test_bad_input_is_named():
+    with pytest.raises(CalibInputError, match="at least"):
+        characterise_noise(np.zeros((10, 3)), ODR)
+    with pytest.raises(CalibInputError, match=r"shape \(n, 3\)"):
+        characterise_noise(np.zeros((1000, 2)), ODR)
+    x = np.zeros((1000, 3))
+    x[5, 1] = np.nan
+    with pytest.raises(CalibInputError, match="NaN"):
+        characterise_noise(x, ODR)
+    with pytest.raises(CalibInputError, match="odr_hz"):
+        characterise_noise(np.zeros((1000, 3)), 0.0)
+    with pytest.raises(CalibInputError, match="too short"):
+        characterise_noise(np.random.default_rng(0).normal(size=(100, 3)), ODR, min_tau_s=1.0)

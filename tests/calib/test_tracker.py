@@ -1,0 +1,289 @@
+"""The bias tracker against simulated truth (calib.noise_sim): consistency, health, equivalence."""
+
+import math
+
+import numpy as np
+import pytest
+
+from calib.errors import CalibInputError
+from calib.model import GyroCalibration
+from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+from calib.stationarity import StillSettings, detect_still
+from calib.tracker import BiasTracker, TrackerSettings
+
+ODR = 200.0
+MODEL = NoiseModel(rate_random_walk=1e-5)
+
+
+def settings(**kw):
+    base = dict(
+        odr_hz=ODR,
+        noise_density=MODEL.noise_density,
+        rate_random_walk=MODEL.rate_random_walk,
+        temperature_model=True,
+    )
+    base.update(kw)
+    return TrackerSettings(**base)
+
+
+def run_session(seed, **sim_kw):
+    s = simulate_session(np.random.default_rng(seed), model=MODEL, **sim_kw)
+    cal = sim_calibration(np.random.default_rng(1000 + seed), s)
+    tr = BiasTracker(settings(), cal)
+    r = tr.process(s.t, s.rate, s.temperature_c, finish=True)
+    return s, cal, tr, r
+
+
+def test_thirty_minute_sessions_stay_inside_their_own_3_sigma_band():
+    """30 minutes, 10 °C ramp, bias random walk, still periods of 2-5 s between motions.
+
+    A consistent filter keeps its error inside 3σ 99.73 % of the time on average; one session's
+    fraction scatters around that because the error is correlated over minutes, so the claim is
+    checked on three independent sessions pooled (and each session must stay near it)."""
+    fractions, nees = [], []
+    for seed in range(3):
+        s, _, _, r = run_session(seed, duration_s=1800.0)
+        assert s.duration_s == pytest.approx(1800.0)
+        assert s.temperature_c[-1] - s.temperature_c[0] == pytest.approx(10.0, abs=0.01)
+        z = (r.bias - s.true_bias) / r.bias_std
+        fractions.append(np.mean(np.abs(z) <= 3.0, axis=0))
+        nees.append(np.mean(z**2, axis=0))
+        # the detector never takes a moving sample for a still one, and finds most still time
+        assert not np.any(r.still & ~s.still)
+        assert r.still.sum() > 0.6 * s.still.sum()
+    fractions = np.array(fractions)
+    assert np.all(fractions.mean(axis=0) >= 0.99), fractions
+    assert np.all(fractions >= 0.97), fractions
+    # Normalised estimation error squared near 1: the stated uncertainty is honest, not inflated.
+    assert np.all((np.array(nees) > 0.6) & (np.array(nees) < 1.6)), nees
+
+
+def test_tracker_beats_the_frozen_calibration_on_a_temperature_ramp():
+    s, cal, tr, r = run_session(4, duration_s=600.0)
+    frozen = np.sqrt(np.mean((np.asarray(cal.bias) - s.true_bias) ** 2, axis=0))
+    tracked = np.sqrt(np.mean((r.bias - s.true_bias) ** 2, axis=0))
+    assert np.all(tracked < 0.3 * frozen)
+    # The temperature coefficient is learnt (truth 3e-4, -2e-4, 1.5e-4 rad/s/°C), to within
+    # its stated uncertainty, from a prior of 0 ± 1e-3.
+    assert np.all(np.abs(tr.tempco - s.tempco) <= 3 * tr.tempco_std)
+    assert np.all(tr.tempco_std < 1e-4)
+    # Corrected rate = scale ∘ (m + bias) (paper Eq. 1) with the tracked bias.
+    np.testing.assert_allclose(r.corrected, np.asarray(cal.scale) * (s.rate + r.bias))
+
+
+def test_health_flag_fires_on_a_bias_step_and_the_filter_recovers():
+    step = np.array([2e-3, -1e-3, 0.0])
+    s, _, _, r = run_session(5, duration_s=600.0, bias_step=(300.0, step))
+    alarms = r.updates.t[r.updates.alarm]
+    assert np.count_nonzero(alarms < 300.0) <= 1  # at most a rare false alarm before
+    after = alarms[alarms >= 300.0]
+    assert after.size >= 1 and after[0] < 310.0, alarms  # fires at the first still period
+    at = r.updates.applied_at[r.updates.alarm & (r.updates.t >= 300.0)][0]
+    assert r.nis_ok[at - 1] and not r.nis_ok[at]  # the per-sample flag shows it
+    # With recovery the estimate follows the jump: inside its band again within 10 s.
+    late = s.t > after[0] + 10.0
+    z = (r.bias[late] - s.true_bias[late]) / r.bias_std[late]
+    assert np.mean(np.abs(z) <= 3.0) > 0.98
+    # Without the step, the same session raises no alarm.
+    _, _, _, r0 = run_session(5, duration_s=600.0)
+    assert not r0.updates.alarm.any()
+
+
+def test_time_since_update_flags_a_stale_estimate():
+    s = simulate_session(np.random.default_rng(6), 60.0, model=MODEL, still_s=(5.0, 5.0),
+                         motion_s=(40.0, 40.0))
+    cal = sim_calibration(np.random.default_rng(7), s)
+    tr = BiasTracker(settings(stale_after_s=30.0), cal)
+    r = tr.process(s.t, s.rate, s.temperature_c)
+    assert r.since_update_s.max() > 30.0
+    moving = ~s.still
+    # uncertainty grows during the long motion (random walk, K² Δt) ...
+    i0 = int(np.flatnonzero(moving)[0])
+    i1 = i0 + int(np.argmin(moving[i0:])) - 1  # last sample of the first (40 s) motion
+    i0 += int(ODR)  # one second in: the still samples' delayed updates are all applied
+    assert np.all(r.bias_std[i1] > r.bias_std[i0])
+    expected = np.sqrt(r.bias_std[i0] ** 2 + 1e-10 * (s.t[i1] - s.t[i0]))
+    # (temperature-model terms add to the random walk's K² Δt, never subtract)
+    assert np.all(r.bias_std[i1] >= expected * 0.999)
+    # ... and the streaming health object reports the stale state at the end of the motion
+    tr2 = BiasTracker(settings(stale_after_s=30.0), cal)
+    tr2.process(s.t[: i1 + 1], s.rate[: i1 + 1], s.temperature_c[: i1 + 1])
+    h = tr2.health
+    assert h.stale and not h.ok and h.since_update_s > 30.0
+
+
+def test_streaming_batch_and_chunks_agree():
+    s = simulate_session(np.random.default_rng(8), 30.0, model=MODEL, motion="jig",
+                         still_s=(2.0, 3.0), motion_s=(3.0, 4.0))
+    cal = sim_calibration(np.random.default_rng(9), s)
+    kw = dict(reference_rate=s.reference_rate, reference_axis=s.reference_axis)
+    st = settings(reference_axis_std=1e-4)
+    batch = BiasTracker(st, cal).process(s.t, s.rate, s.temperature_c, **kw)
+    chunked = BiasTracker(st, cal)
+    parts = []
+    for a in range(0, s.n, 613):
+        b = min(a + 613, s.n)
+        parts.append(chunked.process(s.t[a:b], s.rate[a:b], s.temperature_c[a:b],
+                                     reference_rate=s.reference_rate[a:b],
+                                     reference_axis=s.reference_axis[a:b]).bias)
+    np.testing.assert_allclose(np.vstack(parts), batch.bias, rtol=0, atol=1e-15)
+    stream = BiasTracker(st, cal)
+    bias, std, corr = [], [], []
+    for i in range(s.n):
+        ref = s.reference_rate[i]
+        c = stream.update(s.rate[i], s.t[i], s.temperature_c[i],
+                          reference_rate=None if np.isnan(ref) else float(ref),
+                          reference_axis=None if np.isnan(ref) else s.reference_axis[i])
+        bias.append(stream.bias)
+        std.append(stream.bias_std)
+        corr.append(c)
+    np.testing.assert_allclose(np.array(bias), batch.bias, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.array(std), batch.bias_std, rtol=1e-12)
+    np.testing.assert_allclose(np.array(corr), batch.corrected, rtol=0, atol=1e-14)
+    assert stream.health.updates == batch.updates.t.size > 0
+    assert set(batch.updates.kind) == {"still", "reference"}
+
+
+def test_reference_rate_updates_track_the_bias_while_the_servos_turn():
+    """Jig session with rests too short for the still detector: only the servo turns (known ω
+    from the encoder about known axes, m = ω u ⊘ scale − b) keep the bias right."""
+    s = simulate_session(np.random.default_rng(10), 300.0, model=MODEL, motion="jig",
+                         still_s=(0.3, 0.5), motion_s=(5.0, 8.0))
+    cal = sim_calibration(np.random.default_rng(11), s)
+    st = settings(reference_axis_std=1e-5)
+    with_ref = BiasTracker(st, cal).process(
+        s.t, s.rate, s.temperature_c, reference_rate=s.reference_rate,
+        reference_axis=s.reference_axis,
+    )
+    without = BiasTracker(st, cal).process(s.t, s.rate, s.temperature_c)
+    assert with_ref.still.sum() == 0 and without.updates.t.size == 0
+    assert np.all(with_ref.updates.kind == "reference") and with_ref.updates.t.size > 100
+    err_ref = np.sqrt(np.mean((with_ref.bias - s.true_bias) ** 2, axis=0))
+    err_none = np.sqrt(np.mean((without.bias - s.true_bias) ** 2, axis=0))
+    assert np.all(err_ref < 0.2 * err_none), (err_ref, err_none)
+    z = (with_ref.bias - s.true_bias) / with_ref.bias_std
+    assert np.all(np.mean(np.abs(z) <= 3.0, axis=0) > 0.99)
+
+
+def test_reference_measurement_model_sign():
+    # Noise-free: a servo turning at ω about u; the reading is ω u ⊘ scale − b (paper Eq. 1).
+    b = np.array([0.01, -0.02, 0.005])
+    scale = np.array([1.05, 0.95, 1.0])
+    cal = GyroCalibration(scale=tuple(scale), bias=(0.0, 0.0, 0.0), scale_std=(1e-6,) * 3,
+                          bias_std=(0.05,) * 3)
+    st = TrackerSettings(odr_hz=ODR, noise_density=1e-5, rate_random_walk=0.0,
+                         reference_axis_std=0.0, reference_angle_std=0.0)
+    tr = BiasTracker(st, cal)
+    n = 400
+    u = np.array([0.6, 0.0, 0.8])
+    omega = np.full(n, 1.5)
+    m = omega[:, None] * u / scale - b
+    tr.process(np.arange(n) / ODR, m, reference_rate=omega, reference_axis=u, finish=True)
+    np.testing.assert_allclose(tr.bias, b, atol=1e-5)
+
+
+def test_seeded_from_calibration_and_sign_convention():
+    cal = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.01, -0.02, 0.03),
+                          bias_std=(1e-3, 2e-3, 3e-3), temperature_c=30.0)
+    tr = BiasTracker(settings(temperature_model=False), cal)
+    np.testing.assert_allclose(tr.bias, cal.bias)
+    np.testing.assert_allclose(tr.bias_std, cal.bias_std)
+    assert tr.t_ref_c == 30.0
+    # A still sensor whose bias moved to b reads m ≈ -b: the tracker reports +b.
+    rng = np.random.default_rng(12)
+    b = np.array([0.012, -0.018, 0.029])
+    n = 4000
+    m = -b + rng.standard_normal((n, 3)) * settings().noise_std
+    tr.process(np.arange(n) / ODR, m, finish=True)
+    assert np.all(np.abs(tr.bias - b) < 3 * tr.bias_std)
+    assert np.all(tr.bias_std < 1e-4)
+    np.testing.assert_allclose(tr.bias_covariance, np.diag(tr.bias_std**2))
+
+
+def test_external_still_flags_override_the_detector():
+    s = simulate_session(np.random.default_rng(13), 120.0, model=MODEL)
+    cal = sim_calibration(np.random.default_rng(14), s)
+    never = BiasTracker(settings(), cal).process(s.t, s.rate, s.temperature_c,
+                                                 still=np.zeros(s.n, bool), finish=True)
+    assert never.updates.t.size == 0 and not never.still.any()
+    truth = BiasTracker(settings(), cal).process(s.t, s.rate, s.temperature_c,
+                                                 still=s.still, finish=True)
+    np.testing.assert_array_equal(truth.still, s.still)
+    assert truth.decided.all()
+    z = (truth.bias - s.true_bias) / truth.bias_std
+    assert np.mean(np.abs(z) <= 3) > 0.98
+
+
+def test_from_noise_uses_the_characterisation():
+    from calib.allan import characterise_noise
+    from calib.noise_sim import simulate_still
+
+    still = simulate_still(np.random.default_rng(15), 600.0, model=NoiseModel(
+        noise_density=2e-4, rate_random_walk=1e-5))
+    nc = characterise_noise(still.rate, ODR)
+    st = TrackerSettings.from_noise(nc, temperature_model=True)
+    assert st.odr_hz == ODR and st.temperature_model
+    np.testing.assert_allclose(st.noise_density, nc.noise_density.value)
+    assert all(k > 0 for k in st.rate_random_walk)
+    np.testing.assert_allclose(st.noise_std, np.array(nc.noise_density.value) * math.sqrt(ODR))
+
+
+def test_detect_still_on_its_own():
+    s = simulate_session(np.random.default_rng(16), 120.0, model=MODEL)
+    still = detect_still(s.rate, MODEL.white_std(ODR), ODR, reference_bias=s.true_bias[0])
+    assert not np.any(still & ~s.still) and still.sum() > 0.6 * s.still.sum()
+    # A steady turn (no ripple) has a still sensor's variance: the rate test catches it.
+    n = 2000
+    rng = np.random.default_rng(17)
+    steady = np.array([0.05, 0.0, 0.0]) + rng.standard_normal((n, 3)) * MODEL.white_std(ODR)
+    assert not detect_still(steady, MODEL.white_std(ODR), ODR).any()
+    assert detect_still(steady - [0.05, 0, 0], MODEL.white_std(ODR), ODR)[:-100].mean() > 0.9
+    loose = StillSettings(rate_threshold=0.1)
+    assert detect_still(steady, MODEL.white_std(ODR), ODR, settings=loose)[:-100].mean() > 0.9
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda tr: tr.process([0.0, 0.1], np.zeros((2, 2))), r"rate must have shape \(2, 3\)"),
+        (lambda tr: tr.process([0.0, 0.0], np.zeros((2, 3))), "increase strictly"),
+        (lambda tr: tr.process([0.0], [[np.nan, 0, 0]]), "finite"),
+        (lambda tr: tr.process([0.0], np.zeros((1, 3)), still=[2]), "True/False"),
+        (lambda tr: tr.process([0.0], np.zeros((1, 3)), temperature=[1.0, 2.0]), "temperature"),
+        (lambda tr: tr.process([0.0], np.zeros((1, 3)), reference_rate=[1.0]), "together"),
+        (lambda tr: tr.process([0.0], np.zeros((1, 3)), reference_rate=[1.0],
+                               reference_axis=[1.0, 1.0, 0.0]), "unit vectors"),
+        (lambda tr: tr.update([0, 0], 0.0), "3 numbers"),
+    ],
+)
+def test_bad_arguments_are_named(call, match):
+    cal = GyroCalibration(scale=(1, 1, 1), bias=(0, 0, 0), scale_std=(1e-4,) * 3,
+                          bias_std=(1e-3,) * 3)
+    tr = BiasTracker(settings(temperature_model=False), cal)
+    with pytest.raises(CalibInputError, match=match):
+        call(tr)
+
+
+def test_setup_errors_are_named():
+    with pytest.raises(CalibInputError, match="initial_bias_std"):
+        BiasTracker(settings())
+    with pytest.raises(CalibInputError, match="bias_std"):
+        BiasTracker(settings(), GyroCalibration(scale=(1, 1, 1), bias=(0, 0, 0)))
+    with pytest.raises(CalibInputError, match="noise_density"):
+        settings(noise_density=(0.0, 1e-4, 1e-4))
+    with pytest.raises(CalibInputError, match="nis_alpha"):
+        settings(nis_alpha=2.0)
+    tr = BiasTracker(settings(), initial_bias_std=1e-3)
+    with pytest.raises(CalibInputError, match="temperature"):
+        tr.process([0.0], np.zeros((1, 3)))
+    with pytest.raises(CalibInputError, match="need a calibration"):
+        BiasTracker(settings(temperature_model=False), initial_bias_std=1e-3).process(
+            [0.0], np.zeros((1, 3)), reference_rate=[1.0], reference_axis=[1.0, 0.0, 0.0])
+    tr = BiasTracker(settings(temperature_model=False), initial_bias_std=1e-3)
+    tr.process([0.0], np.zeros((1, 3)), finish=True)
+    with pytest.raises(CalibInputError, match="finished"):
+        tr.process([1.0], np.zeros((1, 3)))
+    tr = BiasTracker(settings(temperature_model=False), initial_bias_std=1e-3)
+    tr.process([1.0], np.zeros((1, 3)))
+    with pytest.raises(CalibInputError, match="not after"):
+        tr.process([0.5], np.zeros((1, 3)))

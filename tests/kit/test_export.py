@@ -1,0 +1,134 @@
+"""gyrocal export: the registry, kalibr and json."""
+
+import json
+
+import numpy as np
+import pytest
+
+from calib.allan import characterise_noise
+from calib.model import GyroCalibration
+from calib.noise_sim import NoiseModel, simulate_still
+from kit.cli import main
+from kit.errors import InputError
+from kit.exports import EXPORTERS, Exporter, export, register
+
+
+@pytest.fixture(scope="module")
+def noise_doc():
+    s = simulate_still(np.random.default_rng(8), 900.0,
+                       model=NoiseModel(noise_density=(1e-4, 2e-4, 1.5e-4), rate_random_walk=2e-5))
+    return characterise_noise(s.rate, 200.0).with_meta(source="simulation").to_dict()
+
+
+@pytest.fixture
+def files(tmp_path, noise_doc):
+    n = tmp_path / "noise.json"
+    n.write_text(json.dumps(noise_doc))
+    c = tmp_path / "cal.json"
+    c.write_text(GyroCalibration(scale=(1, 1, 1), bias=(0.01, 0, 0)).to_json())
+    return n, c
+
+
+def parse_yaml_scalars(text):
+    out = {}
+    for line in text.splitlines():
+        if line and not line.startswith("#"):
+            k, v = line.split(":", 1)
+            out[k.strip()] = v.strip()
+    return out
+
+
+def test_kalibr_fields_units_and_values(files, noise_doc, capsys):
+    n, _ = files
+    assert main(["export", str(n), "--format", "kalibr", "--rostopic", "/imu/data"]) == 0
+    out, err = capsys.readouterr()
+    y = parse_yaml_scalars(out)
+    assert set(y) == {"accelerometer_noise_density", "accelerometer_random_walk",
+                      "gyroscope_noise_density", "gyroscope_random_walk", "rostopic",
+                      "update_rate"}
+    assert float(y["gyroscope_noise_density"]) == pytest.approx(
+        max(noise_doc["noise_density"]["value"]), rel=1e-6)
+    k = noise_doc["rate_random_walk"]
+    k_used = [v if v > 0 else hi for v, hi in zip(k["value"], k["hi95"], strict=True)]
+    assert float(y["gyroscope_random_walk"]) == pytest.approx(max(k_used), rel=1e-6)
+    assert y["rostopic"] == "/imu/data" and float(y["update_rate"]) == 200.0
+    assert "rad/s/sqrt(Hz)" in out and "rad/s^2/sqrt(Hz)" in out
+    assert "NOT MEASURED" in out and "placeholders" in err
+    assert float(y["accelerometer_noise_density"]) > 0
+
+
+def test_kalibr_with_accelerometer_figures(files, capsys):
+    n, _ = files
+    assert main(["export", str(n), "--format", "kalibr", "--accel-noise-density", "2e-3",
+                 "--accel-random-walk", "3e-4"]) == 0
+    out, err = capsys.readouterr()
+    y = parse_yaml_scalars(out)
+    assert float(y["accelerometer_noise_density"]) == 2e-3
+    assert "NOT MEASURED" not in out and err == ""
+
+
+def test_json_reemits_either_document(files, noise_doc, capsys):
+    n, c = files
+    assert main(["export", str(n), "--format", "json"]) == 0
+    assert json.loads(capsys.readouterr().out) == noise_doc
+    assert main(["export", str(c), "--format", "json"]) == 0
+    assert json.loads(capsys.readouterr().out)["format"] == "gyrocal-calibration"
+
+
+def test_kind_is_checked_against_the_format(files, capsys):
+    _, c = files
+    assert main(["export", str(c), "--format", "kalibr"]) == 2
+    assert "takes a gyrocal-noise document, not gyrocal-calibration" in capsys.readouterr().err
+
+
+def test_option_of_another_format_is_refused(files, capsys):
+    n, _ = files
+    assert main(["export", str(n), "--format", "json", "--rostopic", "/x"]) == 2
+    assert "--rostopic does not apply to --format json" in capsys.readouterr().err
+
+
+def test_out_is_atomic_and_refuses_to_overwrite(files, tmp_path, capsys):
+    n, _ = files
+    out = tmp_path / "imu.yaml"
+    assert main(["export", str(n), "--format", "kalibr", "--out", str(out)]) == 0
+    first = out.read_text()
+    assert "gyroscope_noise_density" in first
+    assert main(["export", str(n), "--format", "kalibr", "--out", str(out),
+                 "--rostopic", "/other"]) == 2
+    assert out.read_text() == first
+    assert main(["export", str(n), "--format", "kalibr", "--out", str(out), "--force",
+                 "--rostopic", "/other"]) == 0
+    assert "/other" in out.read_text()
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        ("not json", "not valid JSON"),
+        ('{"format": "something-else"}', "gyrocal exports"),
+        ('{"format": "gyrocal-noise", "version": 7}', "version 7 is not supported"),
+        ('{"format": "gyrocal-calibration", "version": 1, "scale": [1, 1]}', "scale"),
+    ],
+)
+def test_bad_documents_are_named(tmp_path, capsys, content, match):
+    p = tmp_path / "doc.json"
+    p.write_text(content)
+    assert main(["export", str(p), "--format", "json"]) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_registry_is_extensible():
+    def render(doc, options):
+        return f"bias {doc['bias']}\n", []
+
+    ex = register(Exporter("test-bias", ("gyrocal-calibration",), "a test format", render))
+    try:
+        assert EXPORTERS["test-bias"] is ex
+        doc = GyroCalibration(scale=(1, 1, 1), bias=(0.1, 0.2, 0.3)).to_dict()
+        assert export(doc, "test-bias") == ("bias [0.1, 0.2, 0.3]\n", [])
+        with pytest.raises(ValueError, match="already registered"):
+            register(ex)
+        with pytest.raises(InputError, match="unknown export format"):
+            export(doc, "nope")
+    finally:
+        del EXPORTERS["test-bias"]

@@ -1,0 +1,59 @@
+"""gyrocal noise: figures from --sim and from a still Recording v1."""
+
+import json
+
+import numpy as np
+import pytest
+
+from calib.noise_sim import NoiseModel, simulate_still
+from kit.cli import main
+from tests.kit.simrec import write_session
+
+
+def test_sim_json_recovers_the_simulated_density(capsys):
+    assert main(["noise", "--sim", "--duration", "600", "--json", "--seed", "3"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["format"] == "gyrocal-noise" and doc["version"] == 1
+    nd = doc["noise_density"]
+    assert all(lo <= 1.75e-4 <= hi for lo, hi in zip(nd["lo95"], nd["hi95"], strict=True))
+    assert doc["sensor"]["model"] == "simulated" and doc["odr_hz"] == 200.0
+
+
+def test_text_output_out_file_and_plot(tmp_path, capsys):
+    out, png = tmp_path / "noise.json", tmp_path / "adev.png"
+    assert main(["noise", "--sim", "--duration", "300", "--out", str(out),
+                 "--plot", str(png)]) == 0
+    text = capsys.readouterr().out
+    assert "N rad/s/sqrt(Hz)" in text and "true  N 1.7500e-04" in text
+    assert json.loads(out.read_text())["format"] == "gyrocal-noise"
+    assert png.stat().st_size > 10_000
+    assert main(["noise", "--sim", "--duration", "300", "--out", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err
+
+
+def test_from_a_still_recording(tmp_path, capsys):
+    model = NoiseModel(noise_density=(1e-4, 2e-4, 3e-4), rate_random_walk=1e-5)
+    s = simulate_still(np.random.default_rng(5), 600.0, model=model)
+    rec = write_session(tmp_path / "rec", s)
+    assert main(["noise", str(rec), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["source"] == str(rec)
+    np.testing.assert_allclose(doc["noise_density"]["value"], [1e-4, 2e-4, 3e-4], rtol=0.03)
+    assert doc["temperature_c"] == pytest.approx(25.0)
+
+
+def test_gaps_are_refused_with_the_time(tmp_path, capsys):
+    s = simulate_still(np.random.default_rng(6), 120.0)
+    rec = write_session(tmp_path / "rec", s)
+    p = rec / "imu.csv"
+    lines = p.read_text().split("\n")
+    del lines[5001:5051]  # 50 samples lost at t = 25 s
+    p.write_text("\n".join(lines))
+    assert main(["noise", str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert "gap" in err and "t=24.99" in err
+
+
+def test_needs_a_source(capsys):
+    assert main(["noise"]) == 2
+    assert "RECORDING or --sim" in capsys.readouterr().err

@@ -1,0 +1,157 @@
+"""gyrocal track: replay of a Recording v1 against the simulated truth, and --sim."""
+
+import json
+import sys
+
+import numpy as np
+import pytest
+
+from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+from kit.cli import main
+from tests.kit.simrec import write_session
+
+MODEL = NoiseModel(rate_random_walk=1e-5)
+
+
+@pytest.fixture(scope="module")
+def random_rec(tmp_path_factory):
+    d = tmp_path_factory.mktemp("track")
+    s = simulate_session(np.random.default_rng(21), 300.0, model=MODEL)
+    rec = write_session(d / "rec", s)
+    cal = sim_calibration(np.random.default_rng(22), s)
+    (d / "cal.json").write_text(cal.to_json())
+    return s, rec, d / "cal.json"
+
+
+def run_json(capsys, *argv):
+    code = main(["track", *argv, "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out), err
+
+
+def test_json_document_per_sample_in_calibration_sign_convention(random_rec, capsys):
+    s, rec, cal = random_rec
+    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--tempco",
+                        "--noise-density", "1.75e-4", "--rate-random-walk", "1e-5")
+    assert set(doc) == {"t", "bias", "bias_std", "still"}
+    n = s.n
+    assert len(doc["t"]) == len(doc["bias"]) == len(doc["bias_std"]) == len(doc["still"]) == n
+    bias, std = np.array(doc["bias"]), np.array(doc["bias_std"])
+    assert bias.shape == (n, 3) and std.shape == (n, 3)
+    np.testing.assert_allclose(doc["t"], s.t, atol=1e-9)
+    # The truth is in the Calibration v1 convention (m = g/k - b): the tracked bias matches it,
+    # i.e. bias = -(mean still reading), not +.
+    z = (bias - s.true_bias) / std
+    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
+    still = np.array(doc["still"])
+    assert still.any() and not np.any(still & ~s.still)
+    late = still & (s.t > 200)
+    np.testing.assert_allclose(bias[late].mean(0), -s.rate[late].mean(0), atol=2e-4)
+
+
+def test_defaults_without_noise_flags_still_track(random_rec, capsys):
+    s, rec, cal = random_rec
+    doc, err = run_json(capsys, str(rec), "--cal", str(cal))
+    assert "noise density estimated" in err and "bias random walk not given" in err
+    bias, std = np.array(doc["bias"]), np.array(doc["bias_std"])
+    z = (bias - s.true_bias) / std
+    # no temperature model, but the conservative default random walk keeps the band honest
+    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.97)
+
+
+def test_without_calibration_starts_from_the_first_still_second(random_rec, capsys):
+    s, rec, _ = random_rec
+    doc, err = run_json(capsys, str(rec))
+    assert "no --cal" in err
+    bias = np.array(doc["bias"])
+    assert np.all(np.abs(bias[-1] - s.true_bias[-1]) < 1e-3)
+
+
+def test_still_from_segments(tmp_path, capsys):
+    # A jig session: the recording's rest segments say when the sensor was still.
+    s = simulate_session(np.random.default_rng(26), 150.0, model=MODEL, motion="jig")
+    rec = write_session(tmp_path / "rec", s)
+    (tmp_path / "cal.json").write_text(sim_calibration(np.random.default_rng(27), s).to_json())
+    doc, _ = run_json(capsys, str(rec), "--cal", str(tmp_path / "cal.json"), "--still",
+                      "segments", "--tempco", "--no-reference")
+    still = np.array(doc["still"])
+    assert still.sum() > 0.5 * s.still.sum() and not np.any(still & ~s.still)
+    z = (np.array(doc["bias"]) - s.true_bias) / np.array(doc["bias_std"])
+    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.98)
+
+
+def test_reference_rates_from_the_encoders(tmp_path, capsys):
+    # Rests too short for the detector: only the servo turns (encoder rate about the axes the
+    # calibration knows) can keep the bias right.
+    s = simulate_session(np.random.default_rng(23), 240.0, model=MODEL, motion="jig",
+                         still_s=(0.3, 0.5), motion_s=(5.0, 8.0))
+    rec = write_session(tmp_path / "rec", s)
+    calib = sim_calibration(np.random.default_rng(24), s)
+    doc = calib.to_dict()
+    for v in doc["axes"].values():
+        v["std_deg"] = 1e-3
+    (tmp_path / "cal.json").write_text(json.dumps(doc))
+    common = [str(rec), "--cal", str(tmp_path / "cal.json"), "--tempco",
+              "--noise-density", "1.75e-4", "--rate-random-walk", "1e-5"]
+    assert main(["track", *common]) == 0
+    text = capsys.readouterr().out
+    assert "reference-rate" in text and " 0 reference-rate" not in text
+    with_ref, _ = run_json(capsys, *common)
+    without, _ = run_json(capsys, *common, "--no-reference")
+    e_ref = np.sqrt(np.mean((np.array(with_ref["bias"]) - s.true_bias) ** 2, axis=0))
+    e_none = np.sqrt(np.mean((np.array(without["bias"]) - s.true_bias) ** 2, axis=0))
+    assert np.all(e_ref < 0.5 * e_none), (e_ref, e_none)
+    z = (np.array(with_ref["bias"]) - s.true_bias) / np.array(with_ref["bias_std"])
+    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
+
+
+def test_sim_text_and_plot(tmp_path, capsys):
+    png = tmp_path / "bias.png"
+    assert main(["track", "--sim", "--duration", "120", "--tempco", "--step-at", "60",
+                 "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "vs truth" in out and "NIS alarm(s) at t = 6" in out
+    assert png.stat().st_size > 10_000
+
+
+def test_plot_without_matplotlib_says_what_to_install(random_rec, tmp_path, capsys, monkeypatch):
+    s, rec, cal = random_rec
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    code = main(["track", str(rec), "--cal", str(cal), "--plot", str(tmp_path / "x.png")])
+    assert code == 2
+    assert "pip install 'gyrocal[plot]'" in capsys.readouterr().err
+
+
+def test_out_file_is_atomic_and_not_overwritten(random_rec, tmp_path, capsys):
+    s, rec, cal = random_rec
+    out = tmp_path / "track.json"
+    assert main(["track", str(rec), "--cal", str(cal), "--out", str(out)]) == 0
+    assert set(json.loads(out.read_text())) == {"t", "bias", "bias_std", "still"}
+    capsys.readouterr()
+    assert main(["track", str(rec), "--cal", str(cal), "--out", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        ([], "RECORDING or --sim"),
+        (["--sim", "REC"], "RECORDING or --sim"),
+        (["{rec}", "--cal", "{missing}"], "does not exist"),
+        (["{rec}", "--update-interval", "0"], "update_interval_s"),
+        (["{rec}", "--noise", "{rec}/manifest.json"], "not a gyrocal noise document"),
+    ],
+)
+def test_bad_usage_exits_2_with_a_message(random_rec, tmp_path, capsys, argv, match):
+    _, rec, _ = random_rec
+    argv = [a.format(rec=rec, missing=tmp_path / "nope.json") for a in argv]
+    assert main(["track", *argv]) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_tempco_needs_temperatures(tmp_path, capsys):
+    s = simulate_session(np.random.default_rng(25), 30.0, model=MODEL)
+    rec = write_session(tmp_path / "rec", s, temperature=False)
+    assert main(["track", str(rec), "--tempco"]) == 2
+    assert "--tempco needs a temperature" in capsys.readouterr().err
