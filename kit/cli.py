@@ -22,7 +22,9 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 #: (subcommand, module) in the order of ``gyrocal --help``.
 COMMANDS: tuple[tuple[str, str], ...] = (
     ("init", "kit.commands.init"),
+    ("doctor", "kit.commands.doctor"),
     ("calibrate", "kit.commands.calibrate"),
+    ("verify", "kit.commands.verify"),
     ("estimate", "kit.commands.estimate"),
     ("export", "kit.commands.export"),
     ("track", "kit.commands.track"),

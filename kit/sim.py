@@ -15,7 +15,7 @@ import numpy as np
 
 from calib.simulate import NORMAL, draw_sensors
 from drivers.clock import Clock, SystemClock, VirtualClock
-from drivers.emulated.dxl import make_emulated_gimbal
+from drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
 from drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
 from kit.config import Config
 from kit.errors import InputError
@@ -100,6 +100,7 @@ def build_sim(
     realtime: bool = False,
     noise_density_rad_s_sqrt_hz: float | None = None,
     mount_deg: float = 3.0,
+    noise_seed: int | None = None,
 ) -> SimJig:
     """Assemble the emulated jig described by ``cfg`` (IDs, axes, IMU model and address).
 
@@ -107,8 +108,11 @@ def build_sim(
     ----------
     cfg : Config
     seed : int
-        Seeds the sensor's true errors (paper's normal conditions), the mount misalignment, the
-        servo ripple and every noise source.
+        Seeds the sensor's true errors (paper's normal conditions) and the jig's geometry (the
+        mount misalignment and the servo axes' tilts): which sensor on which jig.
+    noise_seed : int, optional
+        Seeds what differs from run to run on the same jig: the gyro noise and the servos'
+        ripple. Defaults to ``seed``; a different value repeats a run with fresh noise.
     scale, bias : list of 3 float, optional
         Fix the sensor's true scale and bias instead of drawing them.
     realtime : bool
@@ -121,17 +125,19 @@ def build_sim(
     clock: Clock = SystemClock() if realtime else VirtualClock()
     k, b = sim_truth(seed, scale, bias)
     g = cfg["gimbal"]
-    port, servo_bus, jig = make_emulated_gimbal(
-        clock, g["ids"], SIM_SERVO_MODEL, seed, baudrate=SIM_BAUD, axes=g["axes"],
+    run_seed = seed if noise_seed is None else noise_seed
+    port, servo_bus, _ = make_emulated_gimbal(
+        clock, g["ids"], SIM_SERVO_MODEL, run_seed, baudrate=SIM_BAUD, axes=g["axes"],
         mount=mount_deg,
     )
+    jig = GimbalJig(servo_bus.servos, axes=g["axes"], mount=mount_deg, seed=seed)
     truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b)}
     if noise_density_rad_s_sqrt_hz is not None:
         truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density_rad_s_sqrt_hz
     truth = SensorTruth(**truth_kw)
     imu_cfg = cfg["imu"]
     imu_bus, address = make_emulated_imu(
-        imu_cfg["model"], clock, jig, truth, address=imu_cfg["address"], seed=seed,
+        imu_cfg["model"], clock, jig, truth, address=imu_cfg["address"], seed=run_seed,
     )
     return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth)
 
@@ -142,3 +148,81 @@ def axis_truth_deg(sim: SimJig) -> dict[str, float]:
     for sid, u in sim.jig.home_axes.items():
         out[str(sid)] = math.degrees(math.acos(min(1.0, float(np.max(np.abs(u))))))
     return out
+
+
+#: ``--sim-fault`` kinds: what each takes, what it does.
+FAULTS: dict[str, tuple[str, str]] = {
+    "stall": ("SERVO:AT[:FRACTION]", "servo reaches only FRACTION (default 0.5) of its speed"),
+    "silent": ("SERVO:AT", "servo stops answering"),
+    "alert": ("SERVO:AT[:BITS]", "servo raises a hardware error (default overload, 32)"),
+    "slip": ("AT:DEG", "the sensor's mount slips by DEG degrees"),
+    "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU) or slots (LSM): overflows"),
+    "nack": ("PROBABILITY", "the IMU refuses I2C messages at random"),
+    "imu-dead": ("AT", "the IMU stops answering"),
+}
+
+
+def fault_help() -> str:
+    """One line per ``--sim-fault`` kind."""
+    return "; ".join(f"{k}:{args} ({what})" for k, (args, what) in FAULTS.items())
+
+
+def apply_fault(sim: SimJig, spec: str) -> str:
+    """Arm one fault knob of the emulated jig from a ``KIND:ARGS`` spec; returns a description.
+
+    Times (``AT``) are seconds on the emulated jig's clock, which starts when the jig is built
+    (the recording's clock starts a fraction of a second later).
+
+    Raises
+    ------
+    InputError
+        If the kind is unknown or its arguments are malformed.
+    """
+    kind, _, rest = spec.partition(":")
+    if kind not in FAULTS:
+        raise InputError(f"--sim-fault {spec!r}: unknown kind {kind!r}; {fault_help()}")
+    parts = [p for p in rest.split(":") if p] if rest else []
+    usage = f"--sim-fault {kind}:{FAULTS[kind][0]}"
+
+    def num(i: int, cast: type = float, default: Any = None) -> Any:
+        if i >= len(parts):
+            if default is None:
+                raise InputError(f"--sim-fault {spec!r}: missing arguments; use {usage}")
+            return default
+        try:
+            return cast(parts[i])
+        except ValueError:
+            raise InputError(f"--sim-fault {spec!r}: {parts[i]!r} is not a number; use {usage}"
+                             ) from None
+
+    def servo(i: int) -> Any:
+        sid = num(i, int)
+        try:
+            return sim.servo_bus.servo(sid)
+        except (KeyError, ValueError, LookupError):
+            raise InputError(f"--sim-fault {spec!r}: no servo {sid} on the emulated jig") from None
+
+    if kind == "stall":
+        frac = num(2, float, 0.5)
+        servo(0).stall_at(num(1), frac)
+        return f"servo {parts[0]} stalls to {frac:.0%} of its speed at {num(1):g} s"
+    if kind == "silent":
+        servo(0).go_silent(num(1))
+        return f"servo {parts[0]} stops answering at {num(1):g} s"
+    if kind == "alert":
+        servo(0).raise_alert_at(num(1), num(2, int, 32))
+        return f"servo {parts[0]} raises hardware error bits {num(2, int, 32)} at {num(1):g} s"
+    if kind == "slip":
+        deg = num(1)
+        axis = np.array([1.0, 1.0, 1.0]) / math.sqrt(3.0)
+        sim.jig.slip_at(num(0), axis * math.radians(deg), 0.05)
+        return f"the mount slips by {deg:g}° at {num(0):g} s"
+    chip = sim.chip
+    if kind == "fifo":
+        chip.faults.fifo_capacity = num(0, int)
+        return f"the IMU FIFO holds only {parts[0]}"
+    if kind == "nack":
+        chip.faults.nack_probability = num(0)
+        return f"the IMU refuses {num(0):.1%} of I2C messages"
+    chip.faults.dead_after_s = num(0)
+    return f"the IMU stops answering at {num(0):g} s"

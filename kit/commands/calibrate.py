@@ -38,13 +38,21 @@ def add_common_jig_arguments(p: argparse.ArgumentParser) -> None:
                    help="gyrocal.toml (default: ./gyrocal.toml if it exists, else defaults)")
     p.add_argument("--sim", action="store_true", help="use the emulated jig instead of hardware")
     p.add_argument("--sim-seed", type=int, default=0, metavar="S",
-                   help="seed of the emulated sensor's true errors and noise (default 0)")
+                   help="seed of the emulated sensor's true errors and the jig's geometry "
+                        "(default 0)")
+    p.add_argument("--sim-noise-seed", type=int, metavar="S",
+                   help="seed of the emulated run's noise and ripple (default: --sim-seed; "
+                        "verify uses a fresh one)")
     p.add_argument("--sim-scale", type=_floats3("--sim-scale"), nargs=3, metavar="K",
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
+    p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
+                   help="arm a fault of the emulated jig (repeatable): stall:SERVO:AT[:FRACTION],"
+                        " silent:SERVO:AT, alert:SERVO:AT[:BITS], slip:AT:DEG, fifo:CAPACITY, "
+                        "nack:PROBABILITY, imu-dead:AT (AT in s on the jig's clock)")
     p.add_argument("--port", help="servo serial port (gimbal.port)")
     p.add_argument("--baud", type=int, help="servo bus speed (gimbal.baud)")
     p.add_argument("--imu-model", help="imu.model")
@@ -94,12 +102,21 @@ class Jig:
 
         self.cfg = cfg
         self.sim = None
+        self.faults: list[str] = []
+        if args.sim_fault and not args.sim:
+            from kit.errors import InputError
+
+            raise InputError("--sim-fault needs --sim")
         g, imu = cfg["gimbal"], cfg["imu"]
         if args.sim:
             from kit.sim import SIM_BAUD, build_sim
 
             self.sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale,
-                                 bias=args.sim_bias, realtime=args.realtime)
+                                 bias=args.sim_bias, realtime=args.realtime,
+                                 noise_seed=args.sim_noise_seed)
+            from kit.sim import apply_fault
+
+            self.faults = [apply_fault(self.sim, spec) for spec in args.sim_fault]
             self.clock = self.sim.clock
             port: Any = self.sim.port
             baud = SIM_BAUD
@@ -160,26 +177,29 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any) -> Any:
     return plan
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run the command."""
+def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any:
+    """Run the protocol on the jig (or the emulated jig) into a Recording v1 at ``rec_dir``.
+
+    Servos stop and torque goes off before the recording is closed, on success, error, Ctrl-C
+    or SIGTERM; an interrupted run raises :class:`~kit.errors.InterruptedRun` (exit 130/143)
+    with the recording kept, marked incomplete. With ``--sim`` the emulated servos' final state
+    is written to ``out/sim-state.json`` (what the emulator holds, not what the driver believes).
+
+    Returns
+    -------
+    Jig
+        The (closed) jig, for its sim truth.
+    """
     from drivers.dynamixel.errors import TerminatedBySignal
-    from kit.errors import InterruptedRun, OutputExistsError
-    from kit.fileio import atomic_write_json, atomic_write_text
-    from kit.pipeline import estimate_recording
+    from kit.errors import InterruptedRun
+    from kit.fileio import atomic_write_json
     from kit.progress import Progress
     from kit.protocol import Runner, build_steps
-    from kit.recording import RecordingWriter, load_recording
-    from kit.report import calibration_table
+    from kit.recording import RecordingWriter
 
-    cfg = load_cli_config(args)
-    out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))
-    cal_path = out / "calibration.json"
-    if cal_path.exists() and not args.force:
-        raise OutputExistsError(f"{cal_path} already exists; pass --force to replace it")
-    out.mkdir(parents=True, exist_ok=True)
     jig = Jig(cfg, args)
-    rec_dir = out / "recording"
     interrupted: BaseException | None = None
+    quiet = getattr(args, "quiet", False)
     try:
         with jig.gimbal:
             plan = choose_plan(cfg, jig.gimbal, jig.imu)
@@ -197,20 +217,22 @@ def run(args: argparse.Namespace) -> int:
                 truth = {**jig.sim.truth.manifest(),
                          "axes": {str(k): v.tolist() for k, v in jig.sim.jig.home_axes.items()}}
             progress = Progress(sys.stderr, plan.jig_time_s,
-                                interactive=False if args.quiet else None)
-            if not args.quiet:
+                                interactive=False if quiet else None)
+            if not quiet:
                 progress.event(
                     f"protocol {cfg['protocol']['name']}: {plan.turns} turn(s) each way at "
                     f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, about "
                     f"{plan.jig_time_s:.0f} s of jig time"
                     + (" (emulated jig)" if jig.sim is not None else ""))
+                for f in jig.faults:
+                    progress.event(f"fault armed: {f}")
             with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
                                  truth=truth, force=args.force) as writer:
                 runner = Runner(
                     jig.gimbal, jig.imu, writer, jig.clock, steps,
                     sample_hz=cfg["gimbal"]["sample_hz"],
-                    on_progress=None if args.quiet else progress.update,
-                    on_event=(lambda line: None) if args.quiet else progress.event,
+                    on_progress=None if quiet else progress.update,
+                    on_event=(lambda line: None) if quiet else progress.event,
                 )
                 try:
                     runner.run()
@@ -229,6 +251,25 @@ def run(args: argparse.Namespace) -> int:
         raise InterruptedRun(
             f"{'terminated' if signum == 15 else 'interrupted'}: servos stopped, torque off; the "
             f"recording in {rec_dir} is kept, marked incomplete", signum)
+    return jig
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the command."""
+    from kit.errors import OutputExistsError
+    from kit.fileio import atomic_write_text
+    from kit.pipeline import estimate_recording
+    from kit.recording import load_recording
+    from kit.report import calibration_table
+
+    cfg = load_cli_config(args)
+    out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))
+    cal_path = out / "calibration.json"
+    if cal_path.exists() and not args.force:
+        raise OutputExistsError(f"{cal_path} already exists; pass --force to replace it")
+    out.mkdir(parents=True, exist_ok=True)
+    rec_dir = out / "recording"
+    run_jig(cfg, args, out, rec_dir)
     rec = load_recording(rec_dir)
     est = estimate_recording(rec, cfg["protocol"]["method"], source=str(rec_dir))
     cal = est.calibration

@@ -1,0 +1,182 @@
+"""``gyrocal doctor``: check the jig and say in plain words what is wrong."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any
+
+HELP = "check the IMU and the servos and say what is wrong"
+DESCRIPTION = (
+    "Open the I2C bus and identify the IMU (WHO_AM_I), stream it briefly (rate, noise, "
+    "temperature), ping the servos and read their model, firmware, voltage, temperature, "
+    "limits and hardware errors, and tell in plain words what is wrong and what to do. With "
+    "--sim it checks the emulated jig. Exit 0 if all is well, 4 if something needs fixing."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Register the arguments."""
+    from kit.commands.calibrate import add_common_jig_arguments
+
+    add_common_jig_arguments(p)
+    p.add_argument("--seconds", type=float, default=1.0, help="IMU test stream, s (default 1)")
+
+
+class _Report:
+    def __init__(self) -> None:
+        self.problems = 0
+        self.lines: list[str] = []
+
+    def ok(self, text: str) -> None:
+        self.lines.append(f"  ok    {text}")
+
+    def warn(self, text: str, fix: str) -> None:
+        self.lines.append(f"  warn  {text}\n        -> {fix}")
+
+    def bad(self, text: str, fix: str | None = None) -> None:
+        """A problem; ``fix`` says what to do (None when ``text`` already says it)."""
+        self.problems += 1
+        self.lines.append(f"  FAIL  {text}" + (f"\n        -> {fix}" if fix else ""))
+
+    def section(self, title: str) -> None:
+        self.lines.append(title)
+
+    def flush(self) -> None:
+        print("\n".join(self.lines))
+        self.lines.clear()
+
+
+def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus: Any) -> None:
+    import numpy as np
+
+    from drivers.errors import DriverError
+    from drivers.imu import open_imu
+
+    imu_cfg = cfg["imu"]
+    where = "the emulated bus" if args.sim else f"/dev/i2c-{imu_cfg['bus']}"
+    rep.section(f"IMU ({imu_cfg['model']} at 0x{imu_cfg['address']:02X} on {where})")
+    try:
+        reader = open_imu(imu_cfg["model"], bus, imu_cfg["address"], clock=clock,
+                          range_dps=imu_cfg["range_dps"], odr_hz=imu_cfg["odr_hz"])
+    except DriverError as exc:  # the drivers' messages say what to do
+        rep.bad(str(exc))
+        return
+    try:
+        info = reader.info
+        rep.ok(f"found {info.model} (WHO_AM_I 0x{info.who_am_i:02X}), ±{info.full_scale_dps:g} "
+               f"°/s, {info.odr_hz:g} Hz, low-pass {info.lowpass_hz:g} Hz")
+        if getattr(reader, "notice", None):
+            rep.warn(str(reader.notice), "fine for gyro calibration; the magnetometer is absent")
+        reader.start()
+        end = clock.monotonic() + args.seconds
+        batches = []
+        while clock.monotonic() < end:
+            clock.sleep(0.01)
+            batches.append(reader.read())
+        rate = np.concatenate([b.rate for b in batches])
+        temp = np.concatenate([b.temperature_c for b in batches])
+        gaps = sum(len(b.gaps) for b in batches)
+        n = rate.shape[0]
+        expect = info.odr_hz * args.seconds
+        if n < 0.8 * expect:
+            rep.bad(f"only {n} samples in {args.seconds:g} s (expected about {expect:.0f})",
+                    "check the I2C speed (400 kHz: dtparam=i2c_arm_baudrate=400000)")
+        else:
+            measured = reader.measured_odr_hz
+            rep.ok(f"{n} samples in {args.seconds:g} s"
+                   + (f", chip clock {measured:.2f} Hz" if measured else ""))
+        if gaps:
+            rep.bad(f"{gaps} FIFO gap(s) while streaming", "a faster I2C bus, or a lower odr_hz")
+        sigma = np.sqrt(np.mean(np.diff(rate, axis=0) ** 2, axis=0) / 2)
+        mean = rate.mean(axis=0)
+        rep.ok(f"at rest: mean [{mean[0]:+.4f} {mean[1]:+.4f} {mean[2]:+.4f}] rad/s, noise "
+               f"[{sigma[0]:.4f} {sigma[1]:.4f} {sigma[2]:.4f}] rad/s per sample, "
+               f"{np.mean(temp):.1f} °C")
+        if np.any(np.abs(mean) > 0.3):
+            rep.warn("a large rate at rest (> 0.3 rad/s)",
+                     "keep the jig still while doctor runs; a bias this large is unusual")
+        if np.any(sigma < 1e-6):
+            rep.bad("an axis does not change at all", "the chip may be broken (a stuck axis)")
+    except DriverError as exc:
+        rep.bad(str(exc))
+    finally:
+        reader.close()
+
+
+def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, port: Any,
+                  baud: int) -> None:
+    from drivers.dynamixel import Gimbal
+    from drivers.errors import DriverError
+
+    g = cfg["gimbal"]
+    rep.section(f"servos {g['ids']} on {'the emulated bus' if args.sim else g['port']} "
+                f"at {baud} baud")
+    if baud < 1_000_000:
+        rep.warn(f"{baud} baud limits the position sampling rate (about 55-80 sync reads/s at "
+                 "57600 for three servos)",
+                 "set the servos to 1 Mbps (Dynamixel Wizard) and gimbal.baud = 1000000")
+    gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=clock, handle_signals=True)
+    try:
+        with gimbal:
+            for note in gimbal.notices:
+                rep.warn(note, "fine if its control table matches the X-430 series")
+            status = gimbal.read_status()
+            for sid in g["ids"]:
+                info = gimbal.infos[sid]
+                st = status[sid]
+                lo, hi = info.voltage_limits_v
+                rep.ok(f"servo {sid}: {info.model_name}, firmware {info.firmware}, "
+                       f"{st.voltage_v:.1f} V, {st.temperature_c:.0f} °C, top speed "
+                       f"{math.degrees(info.max_speed):.0f}°/s "
+                       f"(Velocity Limit {math.degrees(info.velocity_limit):.0f}°/s)")
+                if not lo <= st.voltage_v <= hi:
+                    rep.bad(f"servo {sid}: supply {st.voltage_v:.1f} V outside {lo:g}-{hi:g} V",
+                            "check the power supply and its cable")
+                if st.temperature_c > info.temperature_limit_c - 10:
+                    rep.bad(f"servo {sid} is hot ({st.temperature_c:.0f} °C)",
+                            "let it cool down before calibrating")
+                if st.hardware_error:
+                    rep.bad(f"servo {sid} reports {', '.join(st.hardware_error_names)}",
+                            "fix the cause, then power-cycle or reboot the servo")
+                if info.return_delay_s > 1e-4:
+                    rep.warn(f"servo {sid}: Return Delay Time {info.return_delay_s * 1e6:.0f} µs",
+                             "0 µs (Dynamixel Wizard) gives the fastest position sampling")
+    except DriverError as exc:
+        rep.bad(str(exc))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the command."""
+    from drivers.clock import SystemClock
+    from kit.commands.calibrate import load_cli_config
+    from kit.errors import HardwareError
+
+    cfg = load_cli_config(args)
+    if args.sim:
+        from kit.sim import SIM_BAUD, apply_fault, build_sim
+
+        sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
+                        realtime=args.realtime, noise_seed=args.sim_noise_seed)
+        for spec in args.sim_fault:
+            apply_fault(sim, spec)
+        clock, port, baud, bus = sim.clock, sim.port, SIM_BAUD, sim.imu_bus
+    else:
+        if args.sim_fault:
+            from kit.errors import InputError
+
+            raise InputError("--sim-fault needs --sim")
+        clock, port, baud = SystemClock(), cfg["gimbal"]["port"], cfg["gimbal"]["baud"]
+        bus = cfg["imu"]["bus"]
+    rep = _Report()
+    print(f"gyrocal doctor ({'emulated jig' if args.sim else 'hardware'}; config: {cfg.source})")
+    _check_imu(rep, cfg, args, clock, bus)
+    rep.flush()
+    _check_servos(rep, cfg, args, clock, port, baud)
+    rep.flush()
+    if rep.problems:
+        print(f"\n{rep.problems} problem(s) found", file=sys.stderr)
+        raise HardwareError(f"doctor found {rep.problems} problem(s); see above")
+    print("\nall checks passed: run `gyrocal calibrate`")
+    return 0
