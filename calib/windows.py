@@ -360,7 +360,10 @@ def extract_observations(
             )
         d = seg.direction
         # Motion start/stop: the angle leaves its start / reaches its end by more than 3 ticks.
+        # (only inside the segment: earlier motion, e.g. a failed attempt and its reversal
+        # before a repeated turn, is not this turn)
         moving = (d * (ys - th0) > 3 * q) & (d * (th1 - ys) > 3 * q)
+        moving &= (ts >= seg.t_start - 0.05) & (ts <= seg.t_end + 0.05)
         if not moving.any():
             raise CalibInputError(f"segment {seg.index}: no motion found in the encoder data")
         i0, i1 = int(np.argmax(moving)), int(moving.size - 1 - np.argmax(moving[::-1]))
@@ -380,8 +383,19 @@ def extract_observations(
         else:
             s0, s1 = 0, -1
         steady_revs = abs(ys[s1] - ys[s0]) / TWO_PI if s1 > s0 else 0.0
-        still_before = t_move0 - max(lo, seg.t_start - 10.0)
-        still_after = min(hi, seg.t_end + 10.0) - t_move1
+        # Still time around the turn: back to the last movement of any servo before it, and
+        # on to the first movement after it (a repositioning turn is not a segment).
+        last_move, next_move = lo, hi
+        for t_o, th_o in enc.values():
+            moves = t_o[1:][np.abs(np.diff(th_o)) > 2 * q]  # readings that found a movement
+            before = moves[moves < t_move0 - 0.02]
+            after = moves[moves > t_move1 + 0.02]
+            if before.size:
+                last_move = max(last_move, float(before.max()))
+            if after.size:
+                next_move = min(next_move, float(after.min()))
+        still_before = t_move0 - max(last_move, seg.t_start - 10.0)
+        still_after = min(next_move, seg.t_end + 10.0) - t_move1
         kind = None
         tt, yy = ts[s0 : s1 + 1], ys[s0 : s1 + 1]
         if steady_revs >= 2.0:

@@ -187,6 +187,7 @@ class Runner:
         self._next = 0.0
         # Loop dither (see _tick); seeded so that runs repeat exactly.
         self._dither = np.random.default_rng(0x6779726F)
+        self._rest_s = max((s.rest_s for s in self.steps if s.kind == "rest"), default=0.5)
         self.last_rate = np.zeros(3)
         self.last_speed = 0.0
 
@@ -249,6 +250,17 @@ class Runner:
             self._tick()
         self._tick()  # one reading at rest after the stop
         return start, self.now(), motion
+
+    def _settle(self, turn: Step) -> None:
+        """A rest before a repeated turn, recorded as a rest segment if it passes its check, so
+        that the repeat has still time before it as every other turn does."""
+        rest = Step("rest", rest_s=max(self._rest_s, 0.3))
+        self._data = _StepData()
+        t_start, t_end = self._run_rest(rest)
+        if self._check_rest(rest, self._data) is None:
+            self.writer.append_segment(
+                Segment(self.segment_index, "rest", None, 0, 0.0, t_start, t_end))
+            self.segment_index += 1
 
     def _reposition(self, step: Step) -> None:
         """Undo a failed turn (turn back the same way it came), without recording a segment."""
@@ -364,6 +376,7 @@ class Runner:
                     self.on_event(f"check failed, repeating once: {failure.message}")
                     if step.kind == "rotate":
                         self._reposition(step)
+                        self._settle(step)
                 self.result.steps += 1
             self._data = None
         finally:

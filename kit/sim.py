@@ -167,11 +167,12 @@ def fault_help() -> str:
     return "; ".join(f"{k}:{args} ({what})" for k, (args, what) in FAULTS.items())
 
 
-def apply_fault(sim: SimJig, spec: str) -> str:
+def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
     """Arm one fault knob of the emulated jig from a ``KIND:ARGS`` spec; returns a description.
 
-    Times (``AT``) are seconds on the emulated jig's clock, which starts when the jig is built
-    (the recording's clock starts a fraction of a second later).
+    Times (``AT``) are seconds after ``t0`` on the emulated jig's clock; the kit arms faults
+    when the protocol starts, with ``t0`` the start of the recording clock, so ``AT`` is a time
+    in the recording.
 
     Raises
     ------
@@ -183,6 +184,9 @@ def apply_fault(sim: SimJig, spec: str) -> str:
         raise InputError(f"--sim-fault {spec!r}: unknown kind {kind!r}; {fault_help()}")
     parts = [p for p in rest.split(":") if p] if rest else []
     usage = f"--sim-fault {kind}:{FAULTS[kind][0]}"
+
+    def at(i: int) -> float:
+        return t0 + num(i)
 
     def num(i: int, cast: type = float, default: Any = None) -> Any:
         if i >= len(parts):
@@ -204,18 +208,18 @@ def apply_fault(sim: SimJig, spec: str) -> str:
 
     if kind == "stall":
         frac = num(2, float, 0.5)
-        servo(0).stall_at(num(1), frac)
+        servo(0).stall_at(at(1), frac)
         return f"servo {parts[0]} stalls to {frac:.0%} of its speed at {num(1):g} s"
     if kind == "silent":
-        servo(0).go_silent(num(1))
+        servo(0).go_silent(at(1))
         return f"servo {parts[0]} stops answering at {num(1):g} s"
     if kind == "alert":
-        servo(0).raise_alert_at(num(1), num(2, int, 32))
+        servo(0).raise_alert_at(at(1), num(2, int, 32))
         return f"servo {parts[0]} raises hardware error bits {num(2, int, 32)} at {num(1):g} s"
     if kind == "slip":
         deg = num(1)
         axis = np.array([1.0, 1.0, 1.0]) / math.sqrt(3.0)
-        sim.jig.slip_at(num(0), axis * math.radians(deg), 0.05)
+        sim.jig.slip_at(at(0), axis * math.radians(deg), 0.05)
         return f"the mount slips by {deg:g}° at {num(0):g} s"
     chip = sim.chip
     if kind == "fifo":
@@ -224,5 +228,5 @@ def apply_fault(sim: SimJig, spec: str) -> str:
     if kind == "nack":
         chip.faults.nack_probability = num(0)
         return f"the IMU refuses {num(0):.1%} of I2C messages"
-    chip.faults.dead_after_s = num(0)
+    chip.faults.dead_after_s = at(0)
     return f"the IMU stops answering at {num(0):g} s"

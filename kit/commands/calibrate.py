@@ -52,7 +52,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
                    help="arm a fault of the emulated jig (repeatable): stall:SERVO:AT[:FRACTION],"
                         " silent:SERVO:AT, alert:SERVO:AT[:BITS], slip:AT:DEG, fifo:CAPACITY, "
-                        "nack:PROBABILITY, imu-dead:AT (AT in s on the jig's clock)")
+                        "nack:PROBABILITY, imu-dead:AT (AT: seconds into the recording)")
     p.add_argument("--port", help="servo serial port (gimbal.port)")
     p.add_argument("--baud", type=int, help="servo bus speed (gimbal.baud)")
     p.add_argument("--imu-model", help="imu.model")
@@ -103,6 +103,7 @@ class Jig:
         self.cfg = cfg
         self.sim = None
         self.faults: list[str] = []
+        self._fault_specs: list[str] = []
         if args.sim_fault and not args.sim:
             from kit.errors import InputError
 
@@ -116,7 +117,9 @@ class Jig:
                                  noise_seed=args.sim_noise_seed)
             from kit.sim import apply_fault
 
-            self.faults = [apply_fault(self.sim, spec) for spec in args.sim_fault]
+            self._fault_specs = list(args.sim_fault)
+            for spec in self._fault_specs:  # validate now; armed when the protocol starts
+                apply_fault(build_sim(cfg, seed=args.sim_seed), spec)
             self.clock = self.sim.clock
             port: Any = self.sim.port
             baud = SIM_BAUD
@@ -128,6 +131,17 @@ class Jig:
                             range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
                              max_turns=g["max_turns"], acceleration=g["acceleration"])
+
+    def arm_faults(self) -> list[str]:
+        """Arm the ``--sim-fault`` knobs with their times counted from now (the recording's
+        start); returns their descriptions."""
+        from kit.sim import apply_fault
+
+        if self.sim is None:
+            return []
+        t0 = self.clock.monotonic()
+        self.faults = [apply_fault(self.sim, spec, t0) for spec in self._fault_specs]
+        return self.faults
 
     def close(self) -> None:
         """Close the IMU (the gimbal closes through its context manager)."""
@@ -224,8 +238,6 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
                     f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, about "
                     f"{plan.jig_time_s:.0f} s of jig time"
                     + (" (emulated jig)" if jig.sim is not None else ""))
-                for f in jig.faults:
-                    progress.event(f"fault armed: {f}")
             with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
                                  truth=truth, force=args.force) as writer:
                 runner = Runner(
@@ -234,6 +246,9 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
                     on_progress=None if quiet else progress.update,
                     on_event=(lambda line: None) if quiet else progress.event,
                 )
+                for f in jig.arm_faults():
+                    if not quiet:
+                        progress.event(f"fault armed: {f} (time in the recording)")
                 try:
                     runner.run()
                 finally:

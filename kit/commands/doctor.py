@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime, noise_seed=args.sim_noise_seed)
         for spec in args.sim_fault:
-            apply_fault(sim, spec)
+            apply_fault(sim, spec, sim.clock.monotonic())
         clock, port, baud, bus = sim.clock, sim.port, SIM_BAUD, sim.imu_bus
     else:
         if args.sim_fault:

@@ -1,0 +1,204 @@
+"""End-to-end: `gyrocal calibrate` on the emulated jig, with the real dynamixel-sdk packet path."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kit.cli import COMMANDS, main
+from kit.recording import load_recording
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def calibrate(out, *extra):
+    return main(["calibrate", "--sim", "--out", str(out), "--quiet", *extra])
+
+
+def sim_state(out):
+    return json.loads((Path(out) / "sim-state.json").read_text())["servos"]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Three seeded calibrations of three different emulated sensors."""
+    out = {}
+    for seed in (1, 2, 3):
+        d = tmp_path_factory.mktemp(f"cal{seed}")
+        assert calibrate(d, "--sim-seed", str(seed), "--json") == 0
+        out[seed] = d
+    return out
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_calibrate_recovers_the_truth_within_its_own_uncertainty(runs, seed):
+    d = runs[seed]
+    cal = json.loads((d / "calibration.json").read_text())
+    rec = load_recording(d / "recording")
+    assert rec.complete and cal["consistency"]["ok"]
+    truth = rec.truth
+    for key in ("scale", "bias"):
+        err = np.array(cal[key]) - np.array(truth[key])
+        assert np.all(np.abs(err) < 4 * np.array(cal[f"{key}_std"])), (key, err)
+    # Each servo's estimated axis is the jig's true axis in the sensor frame.
+    for motor, info in cal["axes"].items():
+        true_axis = np.array(truth["axes"][motor])
+        angle = np.arccos(np.clip(np.dot(info["axis"], true_axis), -1, 1))
+        assert angle < 4 * np.radians(info["std_deg"]) + 1e-4
+    # The emulated servos end with torque off (the emulator's own registers).
+    assert all(s["torque_enable"] == 0 for s in sim_state(d).values())
+
+
+def test_estimate_on_the_written_recording_gives_the_same_result(runs, capsys):
+    d = runs[1]
+    capsys.readouterr()
+    assert main(["estimate", str(d / "recording"), "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    cal = json.loads((d / "calibration.json").read_text())
+    np.testing.assert_allclose(again["scale"], cal["scale"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(again["bias"], cal["bias"], rtol=0, atol=1e-12)
+
+
+def test_calibration_is_not_overwritten_without_force(runs, capsys):
+    d = runs[2]
+    before = (d / "calibration.json").read_text()
+    assert calibrate(d, "--sim-seed", "2") == 2
+    assert "already exists; pass --force" in capsys.readouterr().err
+    assert (d / "calibration.json").read_text() == before
+
+
+def test_verify_reports_a_large_improvement_on_a_fresh_run(runs, tmp_path, capsys):
+    capsys.readouterr()
+    cal = runs[3] / "calibration.json"
+    assert main(["verify", str(cal), "--sim", "--sim-seed", "3", "--out", str(tmp_path),
+                 "--quiet", "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)
+    assert v["axes_source"] == "calibration"
+    assert np.all(np.array(v["rms_after"]) < 0.1 * np.array(v["rms_before"]))
+    # Replaying the calibration's own recording works too.
+    assert main(["verify", str(cal), "--recording", str(runs[3] / "recording"), "--json"]) == 0
+    # A calibration of another sensor does not fit this one: verify shows it.
+    other = runs[1] / "calibration.json"
+    assert main(["verify", str(other), "--recording", str(runs[3] / "recording"),
+                 "--json"]) == 0
+    lines = capsys.readouterr().out.split("\n}\n")
+    good, bad = json.loads(lines[0] + "\n}"), json.loads(lines[1] + "\n}")
+    assert np.max(bad["rms_after"]) > 5 * np.max(good["rms_after"])
+
+
+# ------------------------------------------------------------------ runtime checks and faults
+def test_a_servo_that_does_not_reach_its_speed_stops_the_run(tmp_path, capsys):
+    assert calibrate(tmp_path, "--sim-fault", "stall:2:11:0.9") == 5
+    err = capsys.readouterr().err
+    assert "servo 2 reached only" in err and "lower the speed" in err and "failed twice" in err
+    assert all(s["torque_enable"] == 0 for s in sim_state(tmp_path).values())
+    rec = load_recording(tmp_path / "recording")
+    assert not rec.complete
+
+
+def test_saturation_is_caught(tmp_path, capsys):
+    cfg = tmp_path / "g.toml"
+    cfg.write_text("[imu]\nrange_dps = 250\n[protocol]\nspeed_dps = 230\n")
+    code = calibrate(tmp_path / "out", "--config", str(cfg), "--sim-scale", "0.8", "0.8", "0.8")
+    assert code == 5
+    err = capsys.readouterr().err
+    assert "the gyro saturated" in err and "raise imu.range_dps" in err
+
+
+def test_a_fifo_gap_repeats_the_turn_and_the_run_still_calibrates(tmp_path, capsys):
+    code = main(["calibrate", "--sim", "--out", str(tmp_path), "--sim-fault", "fifo:16",
+                 "--json"])
+    captured = capsys.readouterr()
+    assert "gyro samples were lost" in captured.err and "repeating once" in captured.err
+    assert code == 0, captured.err
+    segs = load_recording(tmp_path / "recording").segments
+    assert sum(s.kind == "rotate" for s in segs) == 6
+
+
+def test_movement_during_a_rest_is_caught(tmp_path, capsys):
+    code = calibrate(tmp_path, "--sim-fault", "slip:5.1:1", "--sim-fault", "slip:5.7:1")
+    assert code == 5
+    assert "the sensor moved during a rest" in capsys.readouterr().err
+
+
+def test_an_error_mid_turn_stops_the_servos_and_keeps_the_recording(tmp_path, capsys):
+    # The IMU dies in the middle of servo 1's first turn: a bus error, exit 4.
+    assert calibrate(tmp_path, "--sim-fault", "imu-dead:2.0") == 4
+    assert "gyrocal: error:" in capsys.readouterr().err
+    assert all(s["torque_enable"] == 0 for s in sim_state(tmp_path).values())
+    rec = load_recording(tmp_path / "recording")
+    assert not rec.complete and rec.imu_t.size > 200 and rec.imu_t[-1] < 2.5
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_stops_the_servos_and_keeps_an_incomplete_recording(tmp_path, sig, code):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "kit", "calibrate", "--sim", "--realtime", "--out",
+         str(tmp_path), "--quiet"],
+        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    manifest = tmp_path / "recording" / "manifest.json"
+    deadline = time.monotonic() + 60
+    while not manifest.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.5)  # well into the first turn
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    assert "servos stopped, torque off" in err
+    assert all(s["torque_enable"] == 0 for s in sim_state(tmp_path).values())
+    rec = load_recording(tmp_path / "recording")
+    assert not rec.complete and rec.imu_t.size > 100
+
+
+# ------------------------------------------------------------------ command line
+@pytest.mark.parametrize("name", [name for name, _ in COMMANDS])
+def test_every_subcommand_has_help(name, capsys):
+    assert main([name, "--help"]) == 0
+    assert "usage: gyrocal " + name in capsys.readouterr().out
+
+
+def test_top_level_help_lists_the_exit_codes(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert "exit codes:" in out and "130" in out and "143" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["calibrate", "--sim", "--bogus"], "unrecognized arguments"),
+        (["calibrate", "--sim-fault", "stall:1:1"], "--sim-fault needs --sim"),
+        (["calibrate", "--sim", "--sim-fault", "melt:1"], "unknown kind 'melt'"),
+        (["calibrate", "--sim", "--sim-fault", "stall:9:1"], "no servo 9"),
+        (["calibrate", "--sim", "--config", "/nonexistent/g.toml"], "gyrocal init"),
+        (["calibrate", "--sim", "--imu-model", "bmi160"], "imu.model is 'bmi160'"),
+        (["verify", "/nonexistent/cal.json", "--recording", "x"], "not found"),
+        (["estimate", "/nonexistent/rec"], "not a directory"),
+        (["doctor", "--sim", "--range-dps", "300"], "imu.range_dps is 300"),
+    ],
+)
+def test_bad_usage_config_and_files_exit_2(tmp_path, capsys, argv, message):
+    assert main([*argv]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_bad_config_file_exits_2(tmp_path, capsys):
+    cfg = tmp_path / "g.toml"
+    cfg.write_text("[gimbal]\nports = 'x'\n")
+    assert calibrate(tmp_path / "o", "--config", str(cfg)) == 2
+    assert "unknown key gimbal.ports" in capsys.readouterr().err
+
+
+def test_doctor_on_the_emulated_jig(capsys):
+    assert main(["doctor", "--sim"]) == 0
+    out = capsys.readouterr().out
+    assert "found mpu9250 (WHO_AM_I 0x71)" in out and "all checks passed" in out
+    assert main(["doctor", "--sim", "--sim-fault", "alert:2:0"]) == 4
+    assert "servo 2 reports" in capsys.readouterr().out
