@@ -53,6 +53,7 @@ import numpy as np
 from calib.errors import CalibInputError
 from calib.observations import ObservationSet
 from calib.segments import Segment
+from calib.timebase import TimebaseFit, refit_sample_times
 
 __all__ = ["ExtractedWindows", "Window", "extract_observations"]
 
@@ -103,6 +104,7 @@ class ExtractedWindows:
     rests: tuple[Window, ...]
     warnings: tuple[str, ...]
     noise_correlation: np.ndarray  # (3,) factor applied to the white-noise standard errors
+    timebase: TimebaseFit | None = None  # the gyro time axis refit (None if not attempted)
 
 
 def _crossing(t: np.ndarray, th: np.ndarray, target: float, direction: int) -> float:
@@ -232,6 +234,7 @@ def extract_observations(
     steady_tolerance: float = 0.15,
     still_margin_s: float = 0.15,
     rest_guard_s: float = 0.2,
+    refit_time: bool = True,
 ) -> ExtractedWindows:
     """Turn a calibration run's raw streams into observations (DESIGN.md fact 2).
 
@@ -259,6 +262,9 @@ def extract_observations(
         twice).
     rest_guard_s : float
         Settling time skipped at each end of a rest.
+    refit_time : bool
+        Refit the gyro's time axis over the whole stream first (:mod:`calib.timebase`): a
+        reader's early timestamps rest on a young estimate of the chip's period.
 
     Returns
     -------
@@ -289,6 +295,9 @@ def extract_observations(
             raise CalibInputError(f"{name} contains NaN or inf")
     if np.any(np.diff(imu_t) <= 0):
         raise CalibInputError("imu_t must be strictly increasing")
+    timebase = None
+    if refit_time:
+        imu_t, timebase = refit_sample_times(imu_t)
     temp = None if imu_temp is None else np.asarray(imu_temp, dtype=float)
     if temp is not None and temp.shape != imu_t.shape:
         raise CalibInputError(f"imu_temp must have shape {imu_t.shape}, got {temp.shape}")
@@ -536,4 +545,5 @@ def extract_observations(
         rests=tuple(rest_windows),
         warnings=tuple(warnings),
         noise_correlation=tau,
+        timebase=timebase,
     )
