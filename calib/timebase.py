@@ -5,8 +5,9 @@ FIFO counts and the drain times as they arrive, so its early timestamps rest on 
 that period (a few milliseconds off, stretching the first seconds of the stream by up to a few
 parts in 10⁴, which is a scale error of the same size: DESIGN.md fact 2). With the whole recording
 in hand, the sample index ``i`` of every sample is known (consecutive, except across gaps, whose
-sizes the timestamps give), and the best time axis is the least-squares fit ``t_i = a + P·i``
-(plus a quadratic term for a chip clock drifting with temperature) to all of them at once.
+sizes the timestamps give), and the best time axis is the least-squares fit ``t_i = a + P·i`` to
+all of them at once. A fixed period is the default: over a calibration run a chip clock drifts far
+less than a reader's early estimate errs, and a higher degree would bend to follow that transient.
 
 The refit is applied only where its assumptions hold: samples at a fixed period (every step a whole
 number of periods within a third of a period) and residuals of the fit small against the period.
@@ -44,7 +45,7 @@ class TimebaseFit:
     reason: str = ""
 
 
-def refit_sample_times(t: np.ndarray, degree: int = 2) -> tuple[np.ndarray, TimebaseFit]:
+def refit_sample_times(t: np.ndarray, degree: int = 1) -> tuple[np.ndarray, TimebaseFit]:
     """Least-squares time axis for a stream sampled at a fixed (slowly drifting) period.
 
     Parameters
@@ -52,7 +53,8 @@ def refit_sample_times(t: np.ndarray, degree: int = 2) -> tuple[np.ndarray, Time
     t : ndarray, shape (N,)
         Recorded sample times, increasing.
     degree : int
-        Polynomial degree in the sample index (1: fixed period; 2: linearly drifting period).
+        Polynomial degree in the sample index (1: fixed period, the default; 2: a period drifting
+        linearly, for long recordings).
 
     Returns
     -------
