@@ -8,6 +8,9 @@ in hand, the sample index ``i`` of every sample is known (consecutive, except ac
 sizes the timestamps give), and the best time axis is the least-squares fit ``t_i = a + P·i`` to
 all of them at once. A fixed period is the default: over a calibration run a chip clock drifts far
 less than a reader's early estimate errs, and a higher degree would bend to follow that transient.
+The line is fitted to the samples after the first ``settle_s`` seconds and applied to all of them:
+a reader's timestamps are least certain while its clock fit is young, and that transient would
+otherwise tilt the line (recordings shorter than three times ``settle_s`` use every sample).
 
 The refit is applied only where its assumptions hold: samples at a fixed period (every step a whole
 number of periods within a third of a period) and residuals of the fit small against the period.
@@ -34,7 +37,7 @@ class TimebaseFit:
     period_s : float
         Fitted sample period at the start of the stream.
     residual_rms_s : float
-        RMS of recorded minus refitted times.
+        RMS of recorded minus refitted times (after the reader's fit settled).
     reason : str
         Why the refit was not applied (empty when it was).
     """
@@ -45,7 +48,9 @@ class TimebaseFit:
     reason: str = ""
 
 
-def refit_sample_times(t: np.ndarray, degree: int = 1) -> tuple[np.ndarray, TimebaseFit]:
+def refit_sample_times(
+    t: np.ndarray, degree: int = 1, settle_s: float = 5.0
+) -> tuple[np.ndarray, TimebaseFit]:
     """Least-squares time axis for a stream sampled at a fixed (slowly drifting) period.
 
     Parameters
@@ -55,6 +60,8 @@ def refit_sample_times(t: np.ndarray, degree: int = 1) -> tuple[np.ndarray, Time
     degree : int
         Polynomial degree in the sample index (1: fixed period, the default; 2: a period drifting
         linearly, for long recordings).
+    settle_s : float
+        Time over which a reader's clock fit settles; earlier samples do not shape the line.
 
     Returns
     -------
@@ -76,9 +83,12 @@ def refit_sample_times(t: np.ndarray, degree: int = 1) -> tuple[np.ndarray, Time
                               "steps are not whole periods: not a fixed-rate stream")
     i = np.concatenate([[0.0], np.cumsum(whole)])
     x = i / i[-1]  # scaled for conditioning
-    coeffs = np.polynomial.polynomial.polyfit(x, t, degree)
+    settled = (t - t[0]) >= settle_s
+    if t[-1] - t[0] < 3 * settle_s:
+        settled[:] = True
+    coeffs = np.polynomial.polynomial.polyfit(x[settled], t[settled], degree)
     fitted = np.polynomial.polynomial.polyval(x, coeffs)
-    resid = t - fitted
+    resid = (t - fitted)[settled]
     rms = float(np.sqrt(np.mean(resid**2)))
     p0 = float(coeffs[1] / i[-1])
     if rms > period / 4:
