@@ -25,6 +25,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("calibrate", "kit.commands.calibrate"),
     ("estimate", "kit.commands.estimate"),
     ("export", "kit.commands.export"),
+    ("report", "kit.commands.report"),
     ("track", "kit.commands.track"),
     ("noise", "kit.commands.noise"),
     ("study", "kit.commands.study"),
