@@ -2,9 +2,10 @@
 
 Numbers first (no matplotlib needed): :func:`servo_axes` decides each servo's rotation axis in the
 sensor frame (the calibration's ``axes`` where present, else fitted to the servo's windows under
-the calibration, else the nominal axis of the recording's manifest), :func:`window_residuals` whitens each window's mean against the calibration's
-prediction, and :func:`encoder_rate` / :func:`boxcar_mean` put the gyro and the encoder on the
-same averaging weight. Then the figures (need the ``plot`` extra), each written atomically:
+the calibration, else the nominal axis of the recording's manifest), :func:`window_residuals`
+whitens each window's mean against the calibration's prediction, and :func:`encoder_rate` /
+:func:`boxcar_mean` put the gyro and the encoder on the same averaging weight. Then the figures
+(need the ``plot`` extra), each written atomically:
 
 ``overview.png``
     The whole recording: raw rates, the windows used (rotation windows by servo, rest windows),
