@@ -323,6 +323,21 @@ def _shade_weight(ax: Any, t: np.ndarray, corners: tuple[float, float, float, fl
                     color=color, alpha=0.12, lw=0, label=label)
 
 
+def _gaps(t: np.ndarray) -> list[tuple[float, float]]:
+    """Stretches where the gyro stream skips more than 2.5 sample periods (lost samples)."""
+    if t.size < 3:
+        return []
+    dt = np.diff(t)
+    idx = np.flatnonzero(dt > 2.5 * float(np.median(dt)))
+    return [(float(t[i]), float(t[i + 1])) for i in idx]
+
+
+def _mark_gaps(ax: Any, gaps: list[tuple[float, float]]) -> None:
+    for k, (a, b) in enumerate(gaps):
+        ax.axvspan(a, b, color="red", alpha=0.35, lw=0,
+                   label="gap in the gyro stream" if k == 0 else None)
+
+
 def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
                window: Window | None, axis: ServoAxis, extracted: ExtractedWindows,
                window_index: int | None) -> Any:
@@ -357,6 +372,9 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
         ax.plot(t, ref, color="k", lw=0.9, ls="--", label="encoder reference (50 ms)")
     if window is not None:
         _shade_weight(ax, t, window.corners, label="window weight (height = w)")
+    gaps = _gaps(rec.imu_t[(rec.imu_t >= lo - 1.0) & (rec.imu_t <= hi + 1.0)])
+    gaps = [(a, b) for a, b in gaps if b >= lo and a <= hi]
+    _mark_gaps(ax, gaps)
     ax.set_ylabel("rate about the servo axis\nrad/s")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8, ncol=2)
@@ -395,6 +413,7 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
             ax.plot(t, m[:, j], color=_AXIS_COLORS[j], lw=0.8, label=f"raw {_AXES[j]}")
     if window is not None:
         _shade_weight(ax, t, window.corners)
+    _mark_gaps(ax, gaps)
     ax.set_ylabel("raw gyro rates\nrad/s")
     ax.set_xlabel("t on the recording clock, s")
     ax.grid(True, alpha=0.3)
@@ -417,6 +436,7 @@ def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any
         _shade_weight(ax, rec.imu_t, w.corners, color=colors[int(w.motor)])  # type: ignore[arg-type]
     for w in extracted.rests:
         ax.axvspan(w.corners[0], w.corners[3], color="0.5", alpha=0.15, lw=0)
+    _mark_gaps(ax, _gaps(rec.imu_t))
     handles, labels = ax.get_legend_handles_labels()
     from matplotlib.patches import Patch
 

@@ -189,3 +189,28 @@ def test_window_arithmetic():
     np.testing.assert_array_equal(nominal_axis("-y"), [0, -1, 0])
     with pytest.raises(ValueError, match="not x, y or z"):
         nominal_axis("w")
+
+
+def test_a_turn_with_a_gap_is_planned_without_a_window(run_dir, tmp_path):
+    import shutil
+
+    from kit.commands.report import extract
+    from kit.report_plots import _gaps, plan_report
+
+    rec_dir = tmp_path / "rec"
+    shutil.copytree(run_dir / "recording", rec_dir)
+    rec = load_recording(rec_dir)
+    seg = [s for s in rec.segments if s.kind == "rotate"][1]
+    mid = 0.5 * (seg.t_start + seg.t_end)
+    lines = (rec_dir / "imu.csv").read_text().splitlines()
+    kept = [lines[0]] + [ln for ln in lines[1:] if not mid < float(ln.split(",")[0]) < mid + 0.1]
+    (rec_dir / "imu.csv").write_text("\n".join(kept) + "\n")
+    gapped = load_recording(rec_dir)
+    ex = extract(gapped)
+    assert any(f"segment {seg.index}: gap" in w for w in ex.warnings)
+    plan = {p.name: p.description for p in plan_report(gapped, ex)}
+    name = f"turn-{seg.index:02d}-servo{seg.motor}-{'pos' if seg.direction > 0 else 'neg'}.png"
+    assert "no window" in plan[name]
+    assert sum("no window" in d for d in plan.values()) == 1
+    (a, b), = _gaps(gapped.imu_t)
+    assert a < mid + 0.01 and b > mid + 0.09
