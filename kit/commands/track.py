@@ -107,6 +107,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--live", action="store_true",
                       help="track live on the jig (gyrocal.toml: gimbal, imu) instead of a "
                            "recording")
+    live.add_argument("--turns", type=int, default=0, metavar="N",
+                      help="--live: every --turn-every seconds turn one servo N whole turns and "
+                           "back, for reference-rate updates (needs --cal with the servo axes; "
+                           "default 0: the jig stays still)")
+    live.add_argument("--turn-speed-dps", type=float, default=90.0, metavar="DPS",
+                      help="--live --turns: servo speed, degrees/s (default 90)")
+    live.add_argument("--turn-every", type=float, default=10.0, metavar="S",
+                      help="--live --turns: still time between turn pairs, s (default 10)")
     add_common_jig_arguments(live, sim_flag=False)  # type: ignore[arg-type]
 
 
@@ -425,6 +433,29 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
     return tracker, batch, s, "simulation"
 
 
+@dataclass(frozen=True)
+class TurnPlan:
+    """Turns that give the tracker reference-rate updates during a live run.
+
+    Attributes
+    ----------
+    turns : int
+        Whole turns each way (positive, then back).
+    speed : float
+        rad/s.
+    every_s : float
+        Still time between two turn pairs, s.
+    axes : dict
+        Servo id -> unit axis in the sensor frame (from the calibration); the servos turn in
+        this order, round robin.
+    """
+
+    turns: int
+    speed: float
+    every_s: float
+    axes: dict[int, np.ndarray]
+
+
 class LiveSource:
     """Batches from the jig: the servos hold the sensor still while the IMU FIFO is drained.
 
@@ -433,6 +464,11 @@ class LiveSource:
     period (dithered by up to half a period, seeded, so drains fall at random phases of the
     chip's sample grid). Samples drained in a period in which a servo moved by more than
     :data:`LIVE_MOVE_TOLERANCE_RAD` are flagged not still.
+
+    With a :class:`TurnPlan`, every ``every_s`` of still time one servo turns ``turns`` whole
+    turns and back; the samples of the turn pair go to the tracker as one batch with the
+    encoder's reference rate per sample (the angle change across the sample's own interval, as
+    a replay computes it) and the servo's axis.
 
     Parameters
     ----------
@@ -445,20 +481,23 @@ class LiveSource:
     trust_jig : bool
         Flag every sample still unless a servo moved (``--still segments``); otherwise leave the
         decision to the detector.
+    turns : TurnPlan, optional
     """
 
     def __init__(self, jig: Any, period_s: float, *, temperature: bool = False,
-                 trust_jig: bool = False) -> None:
+                 trust_jig: bool = False, turns: TurnPlan | None = None) -> None:
         self.jig = jig
         self.clock = jig.clock
         self.period_s = float(period_s)
         self.temperature = temperature
         self.trust_jig = trust_jig
+        self.plan = turns
         self.notes: list[str] = []
         self.t0 = math.nan
         self.samples = 0
         self.lost = 0
         self.moved_samples = 0
+        self.turn_pairs = 0
         self.temperatures: list[np.ndarray] = []
         self._next = 0.0
         self._angles: np.ndarray | None = None
@@ -476,7 +515,7 @@ class LiveSource:
         """Time since :meth:`start` on the jig's clock, s."""
         return self.clock.monotonic() - self.t0 if math.isfinite(self.t0) else 0.0
 
-    def _tick(self) -> Any:
+    def _tick(self) -> tuple[Any, bool, Any]:
         b = self.jig.imu.read()
         s = self.jig.gimbal.poll()
         angles = np.asarray(s.angles, dtype=float)
@@ -492,23 +531,16 @@ class LiveSource:
             self.clock.sleep(wait)
         else:
             self._next = self.clock.monotonic()
-        return b, moved
+        return b, moved, s
 
-    def collect(self, until_s: float) -> Batch | None:
-        """Drain until ``until_s`` after :meth:`start`; the samples as one batch (or None)."""
-        parts: list[tuple[Any, bool]] = []
-        while self.elapsed_s < until_s:
-            b, moved = self._tick()
-            if len(b):
-                parts.append((b, moved))
-        if not parts:
-            return None
+    def _batch(self, parts: list[tuple[Any, bool]], planned: bool = False) -> Batch:
         t = np.concatenate([b.t for b, _ in parts]) - self.t0
         rate = np.vstack([b.rate for b, _ in parts])
         temp = np.concatenate([np.asarray(b.temperature_c, dtype=float) for b, _ in parts])
         moved = np.concatenate([np.full(len(b), mv) for b, mv in parts])
         self.samples += t.size
-        self.moved_samples += int(moved.sum())
+        if not planned:
+            self.moved_samples += int(moved.sum())
         self.temperatures.append(temp)
         if self.trust_jig:
             still = np.where(moved, 0.0, 1.0)
@@ -516,12 +548,81 @@ class LiveSource:
             still = np.where(moved, 0.0, np.nan)
         return Batch(t, rate, temp if self.temperature else None, still)
 
+    def collect(self, until_s: float) -> Batch | None:
+        """Drain until ``until_s`` after :meth:`start`; the samples as one batch (or None)."""
+        parts: list[tuple[Any, bool]] = []
+        while self.elapsed_s < until_s:
+            b, moved, _ = self._tick()
+            if len(b):
+                parts.append((b, moved))
+        return self._batch(parts) if parts else None
+
+    def turn_time_s(self) -> float:
+        """Jig time of one turn pair with its settling, s (an upper estimate)."""
+        p = self.plan
+        if p is None:
+            return 0.0
+        accel = float(self.jig.gimbal.acceleration)
+        one = p.turns * 2 * math.pi / p.speed + p.speed / accel
+        return 2 * (one + 0.5) + 0.5
+
+    def turn_pair(self, motor: int) -> Batch | None:
+        """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
+        with the encoder's reference rate and the servo's axis."""
+        p = self.plan
+        if p is None:
+            raise InputError("no turns planned")
+        gimbal = self.jig.gimbal
+        k = gimbal.ids.index(motor)
+        parts: list[tuple[Any, bool]] = []
+        enc_t: list[float] = []
+        enc_a: list[float] = []
+        for direction in (1, -1):
+            gimbal.begin_turn(motor, p.turns, p.speed, direction)
+            while gimbal.busy:
+                b, moved, smp = self._tick()
+                enc_t.append(smp.t - self.t0)
+                enc_a.append(float(smp.angles[k]))
+                if len(b):
+                    parts.append((b, moved))
+        settle_end = self.elapsed_s + 0.3  # encoder readings past the last gyro sample
+        while self.elapsed_s < settle_end:
+            b, moved, smp = self._tick()
+            enc_t.append(smp.t - self.t0)
+            enc_a.append(float(smp.angles[k]))
+            if len(b):
+                parts.append((b, True))
+        self.turn_pairs += 1
+        if not parts:
+            return None
+        batch = self._batch(parts, planned=True)
+        et, ea = np.asarray(enc_t), np.asarray(enc_a)
+        t = batch.t
+        dt = 1.0 / float(self.jig.imu.odr_hz)
+        inside = (t - dt / 2 >= et[0]) & (t + dt / 2 <= et[-1])
+        rr = np.full(t.size, np.nan)
+        rr[inside] = (np.interp(t[inside] + dt / 2, et, ea)
+                      - np.interp(t[inside] - dt / 2, et, ea)) / dt
+        ra = np.full((t.size, 3), np.nan)
+        ra[inside] = p.axes[motor]
+        return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
+
     def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
-        """``first``, then a batch every ``chunk_s`` until ``duration_s``."""
+        """``first``, then a batch every ``chunk_s`` (and the turn pairs of the plan) until
+        ``duration_s``."""
         yield first
         end = float(first.t[-1])
+        order = list(self.plan.axes) if self.plan is not None else []
+        next_turn = self.elapsed_s + self.plan.every_s if self.plan is not None else math.inf
         while self.elapsed_s < duration_s:
-            nxt = self.collect(min(self.elapsed_s + chunk_s, duration_s))
+            now = self.elapsed_s
+            if now >= next_turn and now + self.turn_time_s() < duration_s:
+                nxt = self.turn_pair(order[self.turn_pairs % len(order)])
+                next_turn = self.elapsed_s + self.plan.every_s  # type: ignore[union-attr]
+            else:
+                if now >= next_turn:  # no time left for another turn pair
+                    next_turn = math.inf
+                nxt = self.collect(min(now + chunk_s, duration_s, next_turn))
             if nxt is None:
                 continue
             if nxt.t[0] <= end:
@@ -531,6 +632,40 @@ class LiveSource:
                                     "the I2C bus and imu.odr_hz, and try again")
             end = float(nxt.t[-1])
             yield nxt
+
+
+def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
+    """The --turns plan, checked against the calibration and the config (None without turns)."""
+    if args.turns == 0:
+        return None
+    if args.turns < 0:
+        raise InputError(f"--turns must be a whole number >= 0, got {args.turns}")
+    if args.no_reference:
+        raise InputError("--turns is for reference-rate updates; drop --no-reference")
+    if args.turns > cfg["gimbal"]["max_turns"]:
+        raise InputError(f"--turns {args.turns} exceeds gimbal.max_turns "
+                         f"{cfg['gimbal']['max_turns']} (the cable-wrap limit)")
+    speed_dps, every = args.turn_speed_dps, args.turn_every
+    if not (math.isfinite(speed_dps) and speed_dps > 0):
+        raise InputError(f"--turn-speed-dps must be a positive number, got {speed_dps!r}")
+    if not (math.isfinite(every) and every > 0):
+        raise InputError(f"--turn-every must be a positive number of seconds, got {every!r}")
+    if not args.cal:
+        raise InputError("--turns needs --cal: the reference-rate updates use the calibration's "
+                         "scale and servo axes (a paired-axis calibration from 'gyrocal "
+                         "calibrate')")
+    cal = load_calibration(args.cal)
+    if not np.all(np.isfinite(cal.scale_std)):
+        raise InputError(f"--turns: the calibration {args.cal} has no scale_std")
+    axes: dict[int, np.ndarray] = {}
+    for sid in cfg["gimbal"]["ids"]:
+        entry = (cal.axes or {}).get(str(sid))
+        u = np.asarray(entry.get("axis") if isinstance(entry, dict) else np.nan, dtype=float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+            raise InputError(f"--turns: the calibration {args.cal} has no axis for servo {sid} "
+                             "(calibrate with the paired-axis method)")
+        axes[int(sid)] = u / np.linalg.norm(u)
+    return TurnPlan(int(args.turns), math.radians(speed_dps), float(every), axes)
 
 
 @dataclass(frozen=True)
@@ -553,9 +688,16 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
                          f"got {args.duration!r}")
     cfg = load_cli_config(args)
     period = 1.0 / float(cfg["gimbal"]["sample_hz"])
+    plan = _turn_plan(args, cfg)
     jig = Jig(cfg, args)
     where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
-    source = LiveSource(jig, period, temperature=args.tempco, trust_jig=args.still == "segments")
+    if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
+        jig.close()
+        raise InputError(f"--turn-speed-dps {args.turn_speed_dps:g} is too close to the gyro's "
+                         f"range of {jig.imu.full_scale_dps:g} dps; lower it or raise "
+                         "imu.range_dps")
+    source = LiveSource(jig, period, temperature=args.tempco, trust_jig=args.still == "segments",
+                        turns=plan)
     interrupted: BaseException | None = None
     tr: Tracked | None = None
     try:
@@ -582,6 +724,9 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
             f"{source.elapsed_s:.1f} s of live tracking: servos stopped, torque off; nothing "
             "was printed", signum)
     notes += source.notes
+    if plan is not None:
+        notes.append(f"{source.turn_pairs} turn pair(s) of {plan.turns} turn(s) at "
+                     f"{args.turn_speed_dps:g} deg/s gave reference-rate updates")
     if source.moved_samples:
         notes.append(f"a servo moved under {source.moved_samples} samples: they were not "
                      "taken as still")
@@ -685,6 +830,9 @@ def _check_modes(args: argparse.Namespace) -> None:
                          "on the jig (--live --sim: the emulated jig)")
     given = [name for name, default in _JIG_FLAGS.items()
              if getattr(args, name, default) not in (default,)]
+    given += [name for name, default in (("turns", 0), ("turn_speed_dps", 90.0),
+                                         ("turn_every", 10.0))
+              if getattr(args, name) != default]
     if given:
         flags = ", ".join("--" + g.replace("_", "-") for g in given)
         raise InputError(f"{flags} applies to --live only")

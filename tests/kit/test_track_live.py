@@ -3,6 +3,7 @@ sensor's true bias, and the safe stop on Ctrl-C, SIGTERM and a servo alert."""
 
 import itertools
 import json
+import re
 
 import numpy as np
 import pytest
@@ -149,3 +150,59 @@ def test_real_sigint_on_the_wall_clock_jig_exits_130():
             proc.communicate()
     assert proc.returncode == 130, err
     assert out == "" and "interrupted after" in err and "torque off" in err
+
+
+def _truth_calibration(seed, path, flip_axes=False):
+    """A Calibration v1 holding the emulated jig's true scale, bias and servo axes."""
+    from kit.config import load_config
+    from kit.sim import build_sim
+
+    sim = build_sim(load_config(None), seed=seed)
+    sign = -1.0 if flip_axes else 1.0
+    axes = {str(k): {"axis": (sign * np.asarray(u)).tolist(), "std_deg": 0.01}
+            for k, u in sim.jig.home_axes.items()}
+    cal = GyroCalibration(scale=sim.truth.scale, bias=sim.truth.bias, scale_std=(1e-4,) * 3,
+                          bias_std=(1e-3,) * 3, axes=axes)
+    path.write_text(cal.to_json())
+    return np.asarray(sim.truth.bias)
+
+
+def _turns_run(capsys, tmp_path, cal_path):
+    out_json = tmp_path / "track.json"
+    code = main(["track", "--live", "--sim", "--sim-seed", "7", "--duration", "24", "--turns",
+                 "1", "--turn-every", "3", "--turn-speed-dps", "120", "--cal", str(cal_path),
+                 "--out", str(out_json), "--rows", "2"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    counts = re.search(r"(\d+) zero-rate, (\d+) reference-rate", out)
+    alarms = int(re.search(r"health: (\d+) NIS alarm", out).group(1))
+    return json.loads(out_json.read_text()), int(counts.group(2)), alarms, err
+
+
+def test_live_turns_give_consistent_reference_rate_updates(tmp_path, capsys):
+    true_bias = _truth_calibration(7, tmp_path / "cal.json")
+    doc, n_ref, alarms, err = _turns_run(capsys, tmp_path, tmp_path / "cal.json")
+    assert n_ref > 20 and alarms == 0
+    assert "turn pair(s) of 1 turn(s) at 120 deg/s" in err
+    t, bias, std = np.array(doc["t"]), np.array(doc["bias"]), np.array(doc["bias_std"])
+    assert np.all(np.diff(t) > 0) and t.size > 0.95 * 24 * 200
+    assert not all(doc["still"])  # the turns are not still
+    inside = np.abs(bias - true_bias) <= 3 * std
+    assert np.all(inside[-1]) and inside.mean() > 0.99
+
+
+def test_live_turns_with_wrong_axes_raise_nis_alarms(tmp_path, capsys):
+    _truth_calibration(7, tmp_path / "cal.json", flip_axes=True)  # every axis the wrong way
+    _, n_ref, alarms, _ = _turns_run(capsys, tmp_path, tmp_path / "cal.json")
+    assert n_ref > 20 and alarms > 0
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--turns", "1"], "--turns needs --cal"),
+    (["--turns", "1", "--no-reference", "--cal", "x.json"], "drop --no-reference"),
+    (["--turns", "9", "--cal", "x.json"], "exceeds gimbal.max_turns"),
+    (["--turns", "-1"], "--turns must be"),
+])
+def test_live_turns_bad_usage_exits_2(capsys, argv, match):
+    assert main(["track", "--live", "--sim", *argv]) == 2
+    assert match in capsys.readouterr().err
