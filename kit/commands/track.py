@@ -15,7 +15,7 @@ import numpy as np
 
 from kit.errors import InputError
 
-HELP = "track the gyro bias over a recording with a Kalman filter, seeded from a calibration"
+HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
     "Replay a Recording v1 through the bias tracker (calib.tracker: a Kalman filter on the three "
     "biases, optionally a temperature coefficient, with zero-rate updates when the sensor is "
