@@ -27,6 +27,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("verify", "kit.commands.verify"),
     ("estimate", "kit.commands.estimate"),
     ("export", "kit.commands.export"),
+    ("report", "kit.commands.report"),
     ("track", "kit.commands.track"),
     ("noise", "kit.commands.noise"),
     ("study", "kit.commands.study"),

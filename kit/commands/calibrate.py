@@ -32,11 +32,17 @@ def _floats3(name: str) -> Any:
     return parse
 
 
-def add_common_jig_arguments(p: argparse.ArgumentParser) -> None:
-    """Flags shared by the commands that run the jig (calibrate, verify, doctor)."""
+def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = True) -> None:
+    """Flags shared by the commands that run the jig (calibrate, verify, doctor, track --live).
+
+    With ``sim_flag=False`` the ``--sim`` flag is left to the caller, which must still set
+    ``args.sim`` (``gyrocal track`` has its own ``--sim``).
+    """
     p.add_argument("--config", metavar="FILE",
                    help="gyrocal.toml (default: ./gyrocal.toml if it exists, else defaults)")
-    p.add_argument("--sim", action="store_true", help="use the emulated jig instead of hardware")
+    if sim_flag:
+        p.add_argument("--sim", action="store_true",
+                       help="use the emulated jig instead of hardware")
     p.add_argument("--sim-seed", type=int, default=0, metavar="S",
                    help="seed of the emulated sensor's true errors and the jig's geometry "
                         "(default 0)")

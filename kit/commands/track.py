@@ -15,7 +15,7 @@ import numpy as np
 
 from kit.errors import InputError
 
-HELP = "track the gyro bias over a recording with a Kalman filter, seeded from a calibration"
+HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
     "Replay a Recording v1 through the bias tracker (calib.tracker: a Kalman filter on the three "
     "biases, optionally a temperature coefficient, with zero-rate updates when the sensor is "
@@ -24,23 +24,41 @@ DESCRIPTION = (
     '{"t": [N], "bias": [N][3], "bias_std": [N][3], "still": [N]} in rad/s, one row per gyro '
     "sample, the bias in the Calibration v1 convention (g = scale * (m + bias), so a still "
     "sensor reads -bias). --sim tracks a synthetic 30-minute session (calib.noise_sim: a "
-    "synthetic sensor, not the emulated jig) and compares with its truth."
+    "synthetic sensor, not the emulated jig) and compares with its truth. --live tracks on the "
+    "jig itself: the servos hold the sensor still (torque on) while the IMU FIFO is drained for "
+    "--duration seconds; --live --sim does it on the emulated jig and compares with the emulated "
+    "sensor's true bias. Ctrl-C or an error stops the servos (torque off) and exits 130 or with "
+    "the error's code."
 )
+
+#: Seconds of live data the tracker is built from (noise estimate, first still second).
+LIVE_WARMUP_S = 2.0
+#: Seconds of live data handed to the tracker at a time.
+LIVE_CHUNK_S = 1.0
+#: A servo that moves more than this between two polls marks its samples as not still, rad.
+LIVE_MOVE_TOLERANCE_RAD = 2 * 2 * math.pi / 4096
 
 DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS gyros
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the flags."""
+    from kit.commands.calibrate import add_common_jig_arguments
+
     p.add_argument("recording", nargs="?", metavar="RECORDING", help="Recording v1 directory")
     src = p.add_argument_group("simulation (--sim)")
     src.add_argument("--sim", action="store_true",
-                     help="track a simulated session instead of a recording")
-    src.add_argument("--duration", type=float, default=1800.0, metavar="S",
-                     help="--sim: session length, s (default 1800)")
-    src.add_argument("--seed", type=int, default=0, help="--sim: random seed (default 0)")
-    src.add_argument("--motion", choices=("random", "jig"), default="random",
-                     help="--sim: random hand-held-like motions, or servo turns of the jig")
+                     help="track a synthetic session instead of a recording; with --live, run "
+                          "on the emulated jig")
+    src.add_argument("--duration", type=float, default=None, metavar="S",
+                     help="--sim or --live: session length, s (default 1800 for a synthetic "
+                          "session, 60 live)")
+    src.add_argument("--seed", type=int, default=None,
+                     help="--sim: random seed of the synthetic session (default 0; the emulated "
+                          "jig of --live --sim takes --sim-seed)")
+    src.add_argument("--motion", choices=("random", "jig"), default=None,
+                     help="--sim: random hand-held-like motions (default), or servo turns of "
+                          "the jig")
     src.add_argument("--step-at", type=float, default=None, metavar="S",
                      help="--sim: inject a bias step at this time")
     src.add_argument("--step", type=float, default=2e-3, metavar="RAD_S",
@@ -65,7 +83,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d = p.add_argument_group("still detection and updates")
     d.add_argument("--still", choices=("detect", "segments"), default="detect",
                    help="decide stillness by the detector, or from the recording's rest "
-                        "segments (default detect)")
+                        "segments (--live: every sample while no servo moves) (default detect)")
     d.add_argument("--no-reference", action="store_true",
                    help="no reference-rate updates during servo turns")
     d.add_argument("--still-window", type=float, default=0.2, metavar="S")
@@ -81,6 +99,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--plot", metavar="FILE",
                    help="draw the bias and its 3-sigma band to FILE (PNG; 'plot' extra)")
     o.add_argument("--rows", type=int, default=12, help="rows of the text summary (default 12)")
+    live = p.add_argument_group(
+        "live on the jig (--live; with --sim the emulated jig)",
+        "The servos hold the sensor still with torque on; the IMU FIFO is drained on the\n"
+        "jig's clock for --duration seconds and fed to the tracker. A servo that moves between\n"
+        "two polls marks its samples as not still. Ctrl-C or an error stops the servos first.")
+    live.add_argument("--live", action="store_true",
+                      help="track live on the jig (gyrocal.toml: gimbal, imu) instead of a "
+                           "recording")
+    live.add_argument("--turns", type=int, default=0, metavar="N",
+                      help="--live: every --turn-every seconds turn one servo N whole turns and "
+                           "back, for reference-rate updates (needs --cal with the servo axes; "
+                           "default 0: the jig stays still)")
+    live.add_argument("--turn-speed-dps", type=float, default=90.0, metavar="DPS",
+                      help="--live --turns: servo speed, degrees/s (default 90)")
+    live.add_argument("--turn-every", type=float, default=10.0, metavar="S",
+                      help="--live --turns: still time between turn pairs, s (default 10)")
+    add_common_jig_arguments(live, sim_flag=False)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -269,17 +304,21 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any, note
         raise InputError(str(exc)) from None
 
 
-def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any]:
+def _build_tracker(
+    args: argparse.Namespace, odr: float, rate: np.ndarray, notes: list[str], what: str,
+    where: str,
+) -> tuple[Any, Any]:
+    """The tracker from the flags: calibration, noise model (``rate`` gives the estimates the
+    flags leave open: the white noise, and without --cal the first still second's bias).
+    ``what`` names the data in notes, ``where`` in errors.
+
+    Returns
+    -------
+    (BiasTracker, GyroCalibration or None)
+    """
     from calib.stationarity import first_still_mean, white_noise_std
     from calib.tracker import BiasTracker
-    from kit.recording import load_recording
 
-    rec = load_recording(args.recording)
-    notes += list(rec.warnings)
-    n = rec.imu_t.size
-    if n < 2:
-        raise InputError(f"{rec.path}: only {n} gyro samples")
-    odr = 1.0 / float(np.median(np.diff(rec.imu_t)))
     cal = load_calibration(args.cal) if args.cal else None
     noise = load_noise(args.noise) if args.noise else None
     if args.noise_density is not None:
@@ -287,9 +326,12 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
     elif noise is not None:
         n_density = tuple(noise.noise_density.value)
     else:
-        sigma = white_noise_std(rec.imu_rate)
+        try:
+            sigma = white_noise_std(rate)
+        except ValueError as exc:
+            raise InputError(f"{where}: {exc}") from None
         n_density = tuple(float(x) for x in sigma / math.sqrt(odr))
-        notes.append("noise density estimated from the recording's sample-to-sample scatter: "
+        notes.append(f"noise density estimated from the sample-to-sample scatter of {what}: "
                      + ", ".join(f"{x:.3g}" for x in n_density) + " rad/s/sqrt(Hz) "
                      "(measure it with 'gyrocal noise' and pass --noise)")
     if args.rate_random_walk is not None:
@@ -308,23 +350,38 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
         if stds:
             axis_std = math.radians(max(stds))
     st = _settings(args, odr, n_density, k, notes, axis_std)
+    if cal is not None:
+        try:
+            return BiasTracker(st, cal), cal
+        except ValueError as exc:
+            raise InputError(f"--cal {args.cal}: {exc}") from None
+    guess = first_still_mean(rate, st.noise_std, odr, st.still)
+    if guess is None:
+        raise InputError(f"{where}: no still second found to start from; give --cal")
+    notes.append("no --cal: starting from the first still second's bias "
+                 f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- "
+                 f"{args.initial_bias_std:g}")
+    try:
+        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    return tracker, None
+
+
+def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any]:
+    from kit.recording import load_recording
+
+    rec = load_recording(args.recording)
+    notes += list(rec.warnings)
+    n = rec.imu_t.size
+    if n < 2:
+        raise InputError(f"{rec.path}: only {n} gyro samples")
+    odr = 1.0 / float(np.median(np.diff(rec.imu_t)))
     temp = rec.imu_temp
     if args.tempco and not np.all(np.isfinite(temp)):
         raise InputError(f"{rec.path}: --tempco needs a temperature on every sample (imu.csv "
                          "temp column); this recording lacks some")
-    if cal is not None:
-        tracker = BiasTracker(st, cal)
-    else:
-        guess = first_still_mean(rec.imu_rate, st.noise_std, odr, st.still)
-        if guess is None:
-            raise InputError(f"{rec.path}: no still second found to start from; give --cal")
-        notes.append("no --cal: starting from the first still second's bias "
-                     f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- "
-                     f"{args.initial_bias_std:g}")
-        try:
-            tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std)
-        except ValueError as exc:
-            raise InputError(str(exc)) from None
+    tracker, cal = _build_tracker(args, odr, rec.imu_rate, notes, "the recording", str(rec.path))
     still = _rest_flags(rec) if args.still == "segments" else None
     rr = ra = None
     if not args.no_reference and cal is not None and any(
@@ -374,6 +431,316 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
         notes.append("the simulated die warms by 10 degC and its bias follows: without --tempco "
                      "that drift is unmodelled (the NIS alarms may say so)")
     return tracker, batch, s, "simulation"
+
+
+@dataclass(frozen=True)
+class TurnPlan:
+    """Turns that give the tracker reference-rate updates during a live run.
+
+    Attributes
+    ----------
+    turns : int
+        Whole turns each way (positive, then back).
+    speed : float
+        rad/s.
+    every_s : float
+        Still time between two turn pairs, s.
+    axes : dict
+        Servo id -> unit axis in the sensor frame (from the calibration); the servos turn in
+        this order, round robin.
+    """
+
+    turns: int
+    speed: float
+    every_s: float
+    axes: dict[int, np.ndarray]
+
+
+class LiveSource:
+    """Batches from the jig: the servos hold the sensor still while the IMU FIFO is drained.
+
+    One loop on the jig's clock, as the protocol runner's: drain the FIFO, one sync read of the
+    servos (:meth:`drivers.dynamixel.Gimbal.poll`, with its safety checks), wait for the next
+    period (dithered by up to half a period, seeded, so drains fall at random phases of the
+    chip's sample grid). Samples drained in a period in which a servo moved by more than
+    :data:`LIVE_MOVE_TOLERANCE_RAD` are flagged not still.
+
+    With a :class:`TurnPlan`, every ``every_s`` of still time one servo turns ``turns`` whole
+    turns and back; the samples of the turn pair go to the tracker as one batch with the
+    encoder's reference rate per sample (the angle change across the sample's own interval, as
+    a replay computes it) and the servo's axis.
+
+    Parameters
+    ----------
+    jig : kit.commands.calibrate.Jig
+        Its gimbal open (inside ``with jig.gimbal``), its IMU configured.
+    period_s : float
+        Loop period (the config's ``gimbal.sample_hz``).
+    temperature : bool
+        Hand the die temperature to the tracker (``--tempco``).
+    trust_jig : bool
+        Flag every sample still unless a servo moved (``--still segments``); otherwise leave the
+        decision to the detector.
+    turns : TurnPlan, optional
+    """
+
+    def __init__(self, jig: Any, period_s: float, *, temperature: bool = False,
+                 trust_jig: bool = False, turns: TurnPlan | None = None) -> None:
+        self.jig = jig
+        self.clock = jig.clock
+        self.period_s = float(period_s)
+        self.temperature = temperature
+        self.trust_jig = trust_jig
+        self.plan = turns
+        self.notes: list[str] = []
+        self.t0 = math.nan
+        self.samples = 0
+        self.lost = 0
+        self.moved_samples = 0
+        self.turn_pairs = 0
+        self.temperatures: list[np.ndarray] = []
+        self._next = 0.0
+        self._angles: np.ndarray | None = None
+        self._dither = np.random.default_rng(0x74726B)
+
+    def start(self) -> None:
+        """Note the hold angles and start the IMU stream."""
+        self._angles = np.asarray(self.jig.gimbal.poll().angles, dtype=float)
+        self.t0 = self.clock.monotonic()
+        self._next = self.t0
+        self.jig.imu.start()
+
+    @property
+    def elapsed_s(self) -> float:
+        """Time since :meth:`start` on the jig's clock, s."""
+        return self.clock.monotonic() - self.t0 if math.isfinite(self.t0) else 0.0
+
+    def _tick(self) -> tuple[Any, bool, Any]:
+        b = self.jig.imu.read()
+        s = self.jig.gimbal.poll()
+        angles = np.asarray(s.angles, dtype=float)
+        moved = bool(np.any(np.abs(angles - self._angles) > LIVE_MOVE_TOLERANCE_RAD))
+        self._angles = angles
+        for g in b.gaps:
+            self.lost += int(g.samples)
+            self.notes.append(f"lost {g.samples} gyro samples at {g.t - self.t0:.2f} s "
+                              f"({g.reason})")
+        self._next += self.period_s * (1.0 + self._dither.uniform(-0.5, 0.5))
+        wait = self._next - self.clock.monotonic()
+        if wait > 0:
+            self.clock.sleep(wait)
+        else:
+            self._next = self.clock.monotonic()
+        return b, moved, s
+
+    def _batch(self, parts: list[tuple[Any, bool]], planned: bool = False) -> Batch:
+        t = np.concatenate([b.t for b, _ in parts]) - self.t0
+        rate = np.vstack([b.rate for b, _ in parts])
+        temp = np.concatenate([np.asarray(b.temperature_c, dtype=float) for b, _ in parts])
+        moved = np.concatenate([np.full(len(b), mv) for b, mv in parts])
+        self.samples += t.size
+        if not planned:
+            self.moved_samples += int(moved.sum())
+        self.temperatures.append(temp)
+        if self.trust_jig:
+            still = np.where(moved, 0.0, 1.0)
+        else:
+            still = np.where(moved, 0.0, np.nan)
+        return Batch(t, rate, temp if self.temperature else None, still)
+
+    def collect(self, until_s: float) -> Batch | None:
+        """Drain until ``until_s`` after :meth:`start`; the samples as one batch (or None)."""
+        parts: list[tuple[Any, bool]] = []
+        while self.elapsed_s < until_s:
+            b, moved, _ = self._tick()
+            if len(b):
+                parts.append((b, moved))
+        return self._batch(parts) if parts else None
+
+    def turn_time_s(self) -> float:
+        """Jig time of one turn pair with its settling, s (an upper estimate)."""
+        p = self.plan
+        if p is None:
+            return 0.0
+        accel = float(self.jig.gimbal.acceleration)
+        one = p.turns * 2 * math.pi / p.speed + p.speed / accel
+        return 2 * (one + 0.5) + 0.5
+
+    def turn_pair(self, motor: int) -> Batch | None:
+        """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
+        with the encoder's reference rate and the servo's axis."""
+        p = self.plan
+        if p is None:
+            raise InputError("no turns planned")
+        gimbal = self.jig.gimbal
+        k = gimbal.ids.index(motor)
+        parts: list[tuple[Any, bool]] = []
+        enc_t: list[float] = []
+        enc_a: list[float] = []
+        for direction in (1, -1):
+            gimbal.begin_turn(motor, p.turns, p.speed, direction)
+            while gimbal.busy:
+                b, moved, smp = self._tick()
+                enc_t.append(smp.t - self.t0)
+                enc_a.append(float(smp.angles[k]))
+                if len(b):
+                    parts.append((b, moved))
+        settle_end = self.elapsed_s + 0.3  # encoder readings past the last gyro sample
+        while self.elapsed_s < settle_end:
+            b, moved, smp = self._tick()
+            enc_t.append(smp.t - self.t0)
+            enc_a.append(float(smp.angles[k]))
+            if len(b):
+                parts.append((b, True))
+        self.turn_pairs += 1
+        if not parts:
+            return None
+        batch = self._batch(parts, planned=True)
+        et, ea = np.asarray(enc_t), np.asarray(enc_a)
+        t = batch.t
+        dt = 1.0 / float(self.jig.imu.odr_hz)
+        inside = (t - dt / 2 >= et[0]) & (t + dt / 2 <= et[-1])
+        rr = np.full(t.size, np.nan)
+        rr[inside] = (np.interp(t[inside] + dt / 2, et, ea)
+                      - np.interp(t[inside] - dt / 2, et, ea)) / dt
+        ra = np.full((t.size, 3), np.nan)
+        ra[inside] = p.axes[motor]
+        return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
+
+    def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
+        """``first``, then a batch every ``chunk_s`` (and the turn pairs of the plan) until
+        ``duration_s``."""
+        yield first
+        end = float(first.t[-1])
+        order = list(self.plan.axes) if self.plan is not None else []
+        next_turn = self.elapsed_s + self.plan.every_s if self.plan is not None else math.inf
+        while self.elapsed_s < duration_s:
+            now = self.elapsed_s
+            if now >= next_turn and now + self.turn_time_s() < duration_s:
+                nxt = self.turn_pair(order[self.turn_pairs % len(order)])
+                next_turn = self.elapsed_s + self.plan.every_s  # type: ignore[union-attr]
+            else:
+                if now >= next_turn:  # no time left for another turn pair
+                    next_turn = math.inf
+                nxt = self.collect(min(now + chunk_s, duration_s, next_turn))
+            if nxt is None:
+                continue
+            if nxt.t[0] <= end:
+                from kit.errors import HardwareError
+
+                raise HardwareError("the IMU reader returned samples out of time order; check "
+                                    "the I2C bus and imu.odr_hz, and try again")
+            end = float(nxt.t[-1])
+            yield nxt
+
+
+def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
+    """The --turns plan, checked against the calibration and the config (None without turns)."""
+    if args.turns == 0:
+        return None
+    if args.turns < 0:
+        raise InputError(f"--turns must be a whole number >= 0, got {args.turns}")
+    if args.no_reference:
+        raise InputError("--turns is for reference-rate updates; drop --no-reference")
+    if args.turns > cfg["gimbal"]["max_turns"]:
+        raise InputError(f"--turns {args.turns} exceeds gimbal.max_turns "
+                         f"{cfg['gimbal']['max_turns']} (the cable-wrap limit)")
+    speed_dps, every = args.turn_speed_dps, args.turn_every
+    if not (math.isfinite(speed_dps) and speed_dps > 0):
+        raise InputError(f"--turn-speed-dps must be a positive number, got {speed_dps!r}")
+    if not (math.isfinite(every) and every > 0):
+        raise InputError(f"--turn-every must be a positive number of seconds, got {every!r}")
+    if not args.cal:
+        raise InputError("--turns needs --cal: the reference-rate updates use the calibration's "
+                         "scale and servo axes (a paired-axis calibration from 'gyrocal "
+                         "calibrate')")
+    cal = load_calibration(args.cal)
+    if not np.all(np.isfinite(cal.scale_std)):
+        raise InputError(f"--turns: the calibration {args.cal} has no scale_std")
+    axes: dict[int, np.ndarray] = {}
+    for sid in cfg["gimbal"]["ids"]:
+        entry = (cal.axes or {}).get(str(sid))
+        u = np.asarray(entry.get("axis") if isinstance(entry, dict) else np.nan, dtype=float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+            raise InputError(f"--turns: the calibration {args.cal} has no axis for servo {sid} "
+                             "(calibrate with the paired-axis method)")
+        axes[int(sid)] = u / np.linalg.norm(u)
+    return TurnPlan(int(args.turns), math.radians(speed_dps), float(every), axes)
+
+
+@dataclass(frozen=True)
+class _LiveTruth:
+    """The emulated sensor's true bias at each tracked sample (for the summary and the plot)."""
+
+    true_bias: np.ndarray
+
+
+def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any, str]:
+    """Hold the jig still, track, release: the servos stop and torque goes off at the end, on
+    an error, Ctrl-C or SIGTERM (the gimbal's context), before anything else."""
+    from drivers.dynamixel.errors import TerminatedBySignal
+    from kit.commands.calibrate import Jig, load_cli_config
+    from kit.errors import InterruptedRun
+
+    duration = 60.0 if args.duration is None else float(args.duration)
+    if not (math.isfinite(duration) and duration >= LIVE_WARMUP_S):
+        raise InputError(f"--duration must be at least {LIVE_WARMUP_S:g} s for --live, "
+                         f"got {args.duration!r}")
+    cfg = load_cli_config(args)
+    period = 1.0 / float(cfg["gimbal"]["sample_hz"])
+    plan = _turn_plan(args, cfg)
+    jig = Jig(cfg, args)
+    where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
+    if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
+        jig.close()
+        raise InputError(f"--turn-speed-dps {args.turn_speed_dps:g} is too close to the gyro's "
+                         f"range of {jig.imu.full_scale_dps:g} dps; lower it or raise "
+                         "imu.range_dps")
+    source = LiveSource(jig, period, temperature=args.tempco, trust_jig=args.still == "segments",
+                        turns=plan)
+    interrupted: BaseException | None = None
+    tr: Tracked | None = None
+    try:
+        with jig.gimbal:
+            print(f"gyrocal: tracking live on {where} for {duration:g} s of jig time: the servos "
+                  "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
+            source.start()
+            warm = source.collect(LIVE_WARMUP_S)
+            if warm is None or warm.t.size < 3:
+                raise InputError(f"{where}: the IMU delivered no samples in the first "
+                                 f"{LIVE_WARMUP_S:g} s; check imu.odr_hz and the I2C bus")
+            odr = float(jig.imu.odr_hz)
+            tracker, _ = _build_tracker(args, odr, warm.rate, notes,
+                                        f"the first {LIVE_WARMUP_S:g} s", where)
+            tr = run_tracker(tracker, source.batches(warm, duration, LIVE_CHUNK_S))
+    except (KeyboardInterrupt, TerminatedBySignal) as exc:
+        interrupted = exc
+    finally:
+        jig.close()
+    if interrupted is not None:
+        signum = 15 if isinstance(interrupted, TerminatedBySignal) else 2
+        raise InterruptedRun(
+            f"{'terminated' if signum == 15 else 'interrupted'} after "
+            f"{source.elapsed_s:.1f} s of live tracking: servos stopped, torque off; nothing "
+            "was printed", signum)
+    notes += source.notes
+    if plan is not None:
+        notes.append(f"{source.turn_pairs} turn pair(s) of {plan.turns} turn(s) at "
+                     f"{args.turn_speed_dps:g} deg/s gave reference-rate updates")
+    if source.moved_samples:
+        notes.append(f"a servo moved under {source.moved_samples} samples: they were not "
+                     "taken as still")
+    if source.lost:
+        notes.append(f"{source.lost} gyro samples were lost (FIFO overflow): raise "
+                     "gimbal.sample_hz or lower imu.odr_hz")
+    truth = None
+    if jig.sim is not None and tr is not None:
+        st = jig.sim.truth
+        temp = np.concatenate(source.temperatures)[: tr.t.size]
+        coeff = np.asarray(st.bias_temp_coeff_rad_s_per_c, dtype=float)
+        truth = _LiveTruth(np.asarray(st.bias)[None, :]
+                           + coeff[None, :] * (temp[:, None] - st.reference_temperature_c))
+    return tr, truth, f"live on {where}"  # type: ignore[return-value]
 
 
 def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
@@ -439,23 +806,67 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
     return "\n".join(out)
 
 
+#: Flags of the jig (``--live``) with their defaults, to refuse them elsewhere.
+_JIG_FLAGS = {"config": None, "sim_seed": 0, "sim_scale": None, "sim_bias": None,
+              "realtime": False, "port": None, "baud": None, "imu_model": None, "imu_bus": None,
+              "imu_address": None, "range_dps": None, "odr": None}
+
+
+def _check_modes(args: argparse.Namespace) -> None:
+    """One source (RECORDING, --sim or --live) and only the flags that apply to it; fills in
+    the defaults that depend on the mode."""
+    if args.live:
+        if args.recording is not None:
+            raise InputError("give a RECORDING or --live, not both")
+        for flag, value in (("--seed", args.seed), ("--motion", args.motion),
+                            ("--step-at", args.step_at)):
+            if value is not None:
+                raise InputError(f"{flag} applies to the synthetic session (--sim without "
+                                 "--live); the emulated jig takes --sim-seed, --sim-scale, "
+                                 "--sim-bias")
+        return
+    if args.sim == (args.recording is not None):
+        raise InputError("give a RECORDING or --sim (a synthetic session), or --live to track "
+                         "on the jig (--live --sim: the emulated jig)")
+    given = [name for name, default in _JIG_FLAGS.items()
+             if getattr(args, name, default) not in (default,)]
+    given += [name for name, default in (("turns", 0), ("turn_speed_dps", 90.0),
+                                         ("turn_every", 10.0))
+              if getattr(args, name) != default]
+    if given:
+        flags = ", ".join("--" + g.replace("_", "-") for g in given)
+        raise InputError(f"{flags} applies to --live only")
+    if args.sim:
+        args.duration = 1800.0 if args.duration is None else args.duration
+        args.seed = 0 if args.seed is None else args.seed
+        args.motion = "random" if args.motion is None else args.motion
+    else:
+        for flag, value in (("--duration", args.duration), ("--seed", args.seed),
+                            ("--motion", args.motion), ("--step-at", args.step_at)):
+            if value is not None:
+                raise InputError(f"{flag} applies to --sim or --live, not to a recording")
+
+
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
     from kit.fileio import atomic_write_text
 
-    if args.sim == (args.recording is not None):
-        raise InputError("give a RECORDING or --sim (one of them)")
+    _check_modes(args)
     if args.rows < 2:
         raise InputError("--rows must be at least 2")
     notes: list[str] = []
-    if args.sim:
-        tracker, batch, truth, source = _simulate(args, notes)
-        # fed one second at a time, as a live source would
-        batches: Iterable[Batch] = _chunks(batch, max(1, int(round(tracker.settings.odr_hz))))
+    if args.live:
+        tr, truth, source = _run_live(args, notes)
     else:
-        tracker, batch, truth, source = _replay(args, notes)
-        batches = [batch]
-    tr = run_tracker(tracker, batches)
+        if args.sim:
+            tracker, batch, truth, source = _simulate(args, notes)
+            # fed one second at a time, as a live source would
+            batches: Iterable[Batch] = _chunks(batch,
+                                               max(1, int(round(tracker.settings.odr_hz))))
+        else:
+            tracker, batch, truth, source = _replay(args, notes)
+            batches = [batch]
+        tr = run_tracker(tracker, batches)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.plot:

@@ -1,0 +1,94 @@
+"""``gyrocal report``: PNG plots of a recording and its calibration (the ``plot`` extra)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from kit.errors import InputError
+
+HELP = "plot a recording: raw and calibrated rates per turn against the encoder, windows, residuals"
+DESCRIPTION = (
+    "Write PNG plots of a Recording v1 into --out DIR: an overview; for each turn the raw and "
+    "the calibrated rate about the servo's axis against the encoder reference, with the window "
+    "the estimator used shaded by its weight; the rest windows against -bias; and each window's "
+    "residual in standard deviations. With CAL (Calibration v1 JSON) the plots use that "
+    "calibration; without it one is estimated from the recording. Prints the list of files. "
+    "Needs matplotlib: pip install 'gyrocal[plot]'."
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Register the arguments."""
+    p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
+    p.add_argument("cal", nargs="?", metavar="CAL",
+                   help="Calibration v1 JSON (default: estimate one from the recording)")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
+    p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
+    p.add_argument("--method", choices=("paired-axis", "iterative-ls", "levenberg-marquardt"),
+                   default="paired-axis",
+                   help="estimator when no CAL is given (default paired-axis)")
+
+
+def load_calibration_file(path: str) -> Any:
+    """A Calibration v1 file as a GyroCalibration (InputError naming the problem)."""
+    from calib.errors import CalibrationFormatError
+    from calib.model import GyroCalibration
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"calibration {p} does not exist or is not a file; give a Calibration "
+                         "v1 JSON (from 'gyrocal calibrate' or 'gyrocal estimate --json')")
+    try:
+        return GyroCalibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"calibration {p} is not readable JSON: {exc}") from None
+    except CalibrationFormatError as exc:
+        raise InputError(f"calibration {p}: {exc}") from None
+
+
+def extract(rec: Any) -> Any:
+    """The recording's windows, as ``gyrocal estimate`` takes them."""
+    from calib.errors import CalibInputError
+    from calib.windows import extract_observations
+
+    try:
+        return extract_observations(
+            rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
+            imu_temp=rec.imu_temp,
+        )
+    except CalibInputError as exc:
+        raise InputError(f"{rec.path}: {exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Load, window (and estimate without CAL), draw, print the index."""
+    from kit.plots import require_matplotlib
+    from kit.recording import load_recording
+    from kit.report_plots import write_report
+
+    require_matplotlib()  # before any work: a missing extra is the first thing to say
+    rec = load_recording(args.recording)
+    for w in rec.warnings:
+        print(f"gyrocal: warning: {w}", file=sys.stderr)
+    if args.cal:
+        cal = load_calibration_file(args.cal)
+        extracted = extract(rec)
+        what = f"calibration {args.cal}"
+    else:
+        from kit.pipeline import estimate_recording
+
+        est = estimate_recording(rec, args.method)
+        cal, extracted = est.calibration, est.extracted
+        what = f"a {args.method} estimate from the recording (no CAL given)"
+    for w in extracted.warnings:
+        print(f"gyrocal: warning: {w}", file=sys.stderr)
+    written = write_report(rec, cal, extracted, args.out, force=args.force)
+    print(f"gyrocal report: {len(written)} plots of {rec.path} with {what}")
+    width = max(len(str(p)) for p, _ in written)
+    for path, desc in written:
+        print(f"{str(path):<{width}}  {desc}")
+    return 0

@@ -1,0 +1,599 @@
+"""The plots of ``gyrocal report``: what the estimator saw, turn by turn, and how well it fits.
+
+Numbers first (no matplotlib needed): :func:`servo_axes` decides each servo's rotation axis in the
+sensor frame (the calibration's ``axes`` where present, else fitted to the servo's windows under
+the calibration, else the nominal axis of the recording's manifest), :func:`window_residuals`
+whitens each window's mean against the calibration's prediction, and :func:`encoder_rate` /
+:func:`boxcar_mean` put the gyro and the encoder on the same averaging weight. Then the figures
+(need the ``plot`` extra), each written atomically:
+
+``overview.png``
+    The whole recording: raw rates, the windows used (rotation windows by servo, rest windows),
+    and the servo angles.
+``turn-NN-servoM-pos|neg.png``
+    One rotate segment: the rate about the servo's axis (raw, calibrated, encoder reference) with
+    the window's trapezoid weight shaded; calibrated minus reference on one averaging weight, and
+    the window mean the fit used; the raw rates of all three axes.
+``rests.png``
+    Each rest window's mean reading with its standard error against ``-bias``.
+``residuals.png``
+    Each window's mean minus its prediction in units of its standard deviation.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calib.model import GyroCalibration
+from calib.segments import Segment
+from calib.windows import ExtractedWindows, Window
+from kit.errors import InputError, OutputExistsError
+from kit.fileio import atomic_write_bytes
+from kit.recording import Recording
+
+__all__ = [
+    "PlannedPlot",
+    "Residuals",
+    "ServoAxis",
+    "boxcar_mean",
+    "encoder_rate",
+    "nominal_axis",
+    "plan_report",
+    "servo_axes",
+    "trapezoid_weight",
+    "window_residuals",
+    "write_report",
+]
+
+_AXES = "xyz"
+_AXIS_COLORS = ("C0", "C1", "C2")
+
+
+# ============================================================================ numbers
+@dataclass(frozen=True)
+class ServoAxis:
+    """A servo's rotation axis in the sensor frame.
+
+    Attributes
+    ----------
+    motor : int
+    axis : ndarray (3,)
+        Unit vector: a positive turn of the servo is a positive rotation about it.
+    source : str
+        ``calibration`` (the fit's estimate), ``fitted`` (to the servo's windows under the
+        calibration's scale and bias) or ``nominal`` (the manifest's axis name).
+    """
+
+    motor: int
+    axis: np.ndarray
+    source: str
+
+
+def nominal_axis(name: str) -> np.ndarray:
+    """Unit vector of an axis name such as ``x`` or ``-y``.
+
+    Raises
+    ------
+    InputError
+        If ``name`` is not x, y or z with an optional sign.
+    """
+    s = str(name).strip().lower()
+    sign = -1.0 if s.startswith("-") else 1.0
+    s = s.lstrip("+-")
+    if s not in ("x", "y", "z"):
+        raise InputError(f"axis name {name!r} is not x, y or z with an optional sign")
+    u = np.zeros(3)
+    u["xyz".index(s)] = sign
+    return u
+
+
+def servo_axes(
+    motors: list[int], cal: GyroCalibration, manifest: Mapping[str, Any],
+    windows: tuple[Window, ...] = (),
+) -> dict[int, ServoAxis]:
+    """Each servo's axis in the sensor frame, for the plots and the residuals.
+
+    In order of preference: the calibration's ``axes`` (the paired-axis fit estimates them);
+    else fitted to the servo's windows under this calibration's scale and bias (the least-squares
+    direction of ``ω_i · k ∘ (m̄_i + b)``: the mount's misalignment is then absorbed, as it is by
+    an estimator that does not model axes); else the nominal axis the manifest names.
+
+    Parameters
+    ----------
+    motors : list of int
+        The servos that turned.
+    cal : GyroCalibration
+    manifest : mapping
+        The recording's manifest (``gimbal.motors[].axis`` names the nominal axes).
+    windows : tuple of Window
+        The rotation windows.
+
+    Raises
+    ------
+    InputError
+        A malformed axis in the calibration, or a servo with no axis from any source.
+    """
+    nominal: dict[int, str] = {}
+    for m in (manifest.get("gimbal") or {}).get("motors") or []:
+        if isinstance(m, Mapping) and "id" in m and isinstance(m.get("axis"), str):
+            nominal[int(m["id"])] = m["axis"]
+    k = np.asarray(cal.scale)
+    b = np.asarray(cal.bias)
+    out: dict[int, ServoAxis] = {}
+    for motor in motors:
+        entry = (cal.axes or {}).get(str(motor))
+        acc = np.zeros(3)
+        for w in windows:
+            if w.motor == motor:
+                acc += w.rate * k * (np.asarray(w.mean) + b)
+        if isinstance(entry, Mapping) and "axis" in entry:
+            u = np.asarray(entry["axis"], dtype=float)
+            if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+                raise InputError(
+                    f"the calibration's axes[{str(motor)!r}].axis must be 3 finite numbers, "
+                    f"not all zero; got {entry['axis']!r}"
+                )
+            out[motor] = ServoAxis(motor, u / np.linalg.norm(u), "calibration")
+        elif np.any(acc):
+            out[motor] = ServoAxis(motor, acc / np.linalg.norm(acc), "fitted")
+        elif motor in nominal:
+            out[motor] = ServoAxis(motor, nominal_axis(nominal[motor]), "nominal")
+        else:
+            raise InputError(f"servo {motor}: no axis in the calibration, no window and no axis "
+                             "in the manifest; cannot tell which axis it turns about")
+    return out
+
+
+def trapezoid_weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
+    """The window weight ``w(t)``: 0 before ``a``, rising to 1 at ``a + L_a``, 1 until
+    ``b - L_b``, falling to 0 at ``b`` (a zero-length ramp is a vertical edge)."""
+    t = np.asarray(t, dtype=float)
+    a, a2, b2, b = corners
+    up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0.0, 1.0)
+    down = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0.0, 1.0)
+    return np.where((t >= a) & (t <= b), np.minimum(up, down), 0.0)
+
+
+def encoder_rate(
+    enc_t: np.ndarray, enc_angle: np.ndarray, t: np.ndarray, half_span_s: float
+) -> np.ndarray:
+    """The encoder's mean rate over ``[t - h, t + h]``: ``(θ(t + h) − θ(t − h)) / 2h``, with the
+    angle interpolated linearly between readings (NaN where the readings do not cover it)."""
+    t = np.asarray(t, dtype=float)
+    h = float(half_span_s)
+    if enc_t.size < 2:
+        return np.full(t.shape, np.nan)
+    lo, hi = t - h, t + h
+    r = (np.interp(hi, enc_t, enc_angle) - np.interp(lo, enc_t, enc_angle)) / (2 * h)
+    return np.where((lo >= enc_t[0]) & (hi <= enc_t[-1]), r, np.nan)
+
+
+def boxcar_mean(t: np.ndarray, x: np.ndarray, at: np.ndarray, half_span_s: float) -> np.ndarray:
+    """Mean of the piecewise-linear signal ``x(t)`` over ``[at - h, at + h]`` (the same weight
+    :func:`encoder_rate` puts on the encoder), NaN where ``t`` does not cover it."""
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    h = float(half_span_s)
+    cum = np.concatenate([[0.0], np.cumsum(np.diff(t) * (x[1:] + x[:-1]) / 2)])
+    lo, hi = at - h, at + h
+    r = (np.interp(hi, t, cum) - np.interp(lo, t, cum)) / (2 * h)
+    return np.where((lo >= t[0]) & (hi <= t[-1]), r, np.nan)
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Whitened residuals of the windows against a calibration.
+
+    Attributes
+    ----------
+    labels : list of str
+        One per window: ``s1-`` (servo 1, negative turn), ``rest 4`` (segment 4).
+    kinds : list of str
+        ``rotate`` or ``rest``.
+    z : ndarray (n, 3)
+        ``(mean − prediction) / σ`` per sensor axis.
+    error : ndarray (n, 3)
+        ``mean − prediction``, rad/s.
+    sigma : ndarray (n, 3)
+        The standard deviation each residual is divided by, rad/s.
+    axis_sources : dict
+        Servo -> where its axis came from (see :class:`ServoAxis`).
+    """
+
+    labels: list[str]
+    kinds: list[str]
+    z: np.ndarray
+    error: np.ndarray
+    sigma: np.ndarray
+    axis_sources: dict[int, str]
+
+    @property
+    def chi2(self) -> float:
+        """Sum of the squared whitened residuals."""
+        return float(np.sum(self.z**2))
+
+
+def window_residuals(
+    extracted: ExtractedWindows, cal: GyroCalibration, axes: Mapping[int, ServoAxis]
+) -> Residuals:
+    """Each window's mean minus what the calibration predicts, in units of its deviation.
+
+    A rotation window of servo ``s`` at reference rate ``ω`` predicts ``ω u_s ⊘ k − b`` (the model
+    ``g = k ∘ (m + b)`` inverted, with ``g = ω u_s``); a rest predicts ``−b``. The deviation of
+    each component is ``sqrt(σ_m² + (σ_ω u_s/k)²)``: the window mean's standard error (the noise
+    pooled over the windows where it is homogeneous, as the paired-axis fit does) and the
+    reference rate's. With the calibration fitted on these windows, ``Σ z²`` is close to the fit's
+    chi-square. Axes fitted to the windows (:func:`servo_axes`) take two degrees of freedom per
+    servo from the residuals; nominal axes leave the mount's misalignment in them.
+
+    Parameters
+    ----------
+    extracted : ExtractedWindows
+    cal : GyroCalibration
+    axes : mapping
+        From :func:`servo_axes`.
+
+    Returns
+    -------
+    Residuals
+    """
+    obs = extracted.observations.with_pooled_noise()
+    k = np.asarray(cal.scale)
+    b = np.asarray(cal.bias)
+    labels: list[str] = []
+    kinds: list[str] = []
+    err, sig = [], []
+    for i, w in enumerate(extracted.windows):
+        u = axes[int(w.motor)].axis  # type: ignore[arg-type]
+        pred = obs.rate[i] * u / k - b
+        err.append(obs.mean[i] - pred)
+        sig.append(np.sqrt(obs.mean_std[i] ** 2 + (obs.rate_std[i] * u / k) ** 2))
+        labels.append(f"s{w.motor}{'+' if w.direction > 0 else '-'}")
+        kinds.append("rotate")
+    for i, w in enumerate(extracted.rests):
+        err.append(obs.rest_mean[i] + b)  # type: ignore[index]
+        sig.append(obs.rest_mean_std[i])  # type: ignore[index]
+        labels.append(f"rest {w.segment}")
+        kinds.append("rest")
+    error = np.array(err).reshape(-1, 3)
+    sigma = np.array(sig).reshape(-1, 3)
+    return Residuals(labels, kinds, error / sigma, error, sigma,
+                     {m: a.source for m, a in axes.items()})
+
+
+# ============================================================================ the report
+@dataclass(frozen=True)
+class PlannedPlot:
+    """One file of the report."""
+
+    name: str
+    description: str
+    kind: str  # overview, turn, rests, residuals
+    segment: Segment | None = None
+
+
+def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot]:
+    """The files :func:`write_report` writes, in index order (no matplotlib needed)."""
+    by_segment = {w.segment: w for w in extracted.windows}
+    plots = [PlannedPlot("overview.png", "the whole recording: raw rates, the windows used, "
+                         "servo angles", "overview")]
+    for seg in rec.segments:
+        if seg.kind != "rotate":
+            continue
+        sense = "pos" if seg.direction > 0 else "neg"
+        w = by_segment.get(seg.index)
+        if w is None:
+            what = "no window (skipped by the extraction)"
+        else:
+            what = f"{w.kind} window over {w.revolutions:.2f} rev at {abs(w.rate):.4f} rad/s"
+        plots.append(PlannedPlot(
+            f"turn-{seg.index:02d}-servo{seg.motor}-{sense}.png",
+            f"segment {seg.index}: servo {seg.motor} turns "
+            f"{'positive' if seg.direction > 0 else 'negative'}, {what}", "turn", seg))
+    plots.append(PlannedPlot("rests.png", f"{len(extracted.rests)} rest windows: mean reading "
+                             "against -bias", "rests"))
+    plots.append(PlannedPlot("residuals.png", "each window's mean minus its prediction, in "
+                             "standard deviations", "residuals"))
+    return plots
+
+
+def _save(fig: Any, plt: Any, path: Path, force: bool) -> None:
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=100)
+    finally:
+        plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue(), force=force)
+
+
+def _shade_weight(ax: Any, t: np.ndarray, corners: tuple[float, float, float, float],
+                  color: str = "C3", label: str | None = None) -> None:
+    """The trapezoid weight as a shaded area over the panel's height (axes-fraction y)."""
+    a, b = corners[0], corners[3]
+    tg = np.unique(np.concatenate([np.asarray(corners), t[(t > a) & (t < b)]]))
+    ax.fill_between(tg, 0.0, trapezoid_weight(tg, corners), transform=ax.get_xaxis_transform(),
+                    color=color, alpha=0.12, lw=0, label=label)
+
+
+def _gaps(t: np.ndarray) -> list[tuple[float, float]]:
+    """Stretches where the gyro stream skips more than 2.5 sample periods (lost samples)."""
+    if t.size < 3:
+        return []
+    dt = np.diff(t)
+    idx = np.flatnonzero(dt > 2.5 * float(np.median(dt)))
+    return [(float(t[i]), float(t[i + 1])) for i in idx]
+
+
+def _mark_gaps(ax: Any, gaps: list[tuple[float, float]]) -> None:
+    for k, (a, b) in enumerate(gaps):
+        ax.axvspan(a, b, color="red", alpha=0.35, lw=0,
+                   label="gap in the gyro stream" if k == 0 else None)
+
+
+def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
+               window: Window | None, axis: ServoAxis, extracted: ExtractedWindows,
+               window_index: int | None) -> Any:
+    margin = 0.3
+    lo, hi = seg.t_start - margin, seg.t_end + margin
+    if window is not None:
+        lo, hi = min(lo, window.corners[0] - 0.1), max(hi, window.corners[3] + 0.1)
+    sel = (rec.imu_t >= lo) & (rec.imu_t <= hi)
+    t, m = rec.imu_t[sel], rec.imu_rate[sel]
+    et, ea = rec.encoder(int(seg.motor))  # type: ignore[arg-type]
+    u = axis.axis
+    k = np.asarray(cal.scale)
+    g = cal.apply(m) if m.shape[0] else np.zeros((0, 3))
+    fig, axs = plt.subplots(3, 1, sharex=True, figsize=(10, 8.5), constrained_layout=True,
+                            gridspec_kw={"height_ratios": [1.3, 1.0, 1.0]})
+    sense = "positive" if seg.direction > 0 else "negative"
+    head = (f"segment {seg.index}: servo {seg.motor} turns {sense}; axis "
+            f"[{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}] ({axis.source})")
+    if window is not None:
+        head += (f"\n{window.kind} window over {window.revolutions:.2f} rev, reference "
+                 f"{window.rate:+.5f} rad/s (encoder), {window.count} gyro samples")
+    else:
+        head += "\nno window: the extraction skipped this turn (see its warnings)"
+    fig.suptitle(head, fontsize=10)
+
+    # 1: rate about the servo axis
+    ax = axs[0]
+    if t.size:
+        ax.plot(t, m @ u, color="0.55", lw=0.8, label="raw  m·u")
+        ax.plot(t, g @ u, color="C0", lw=1.0, label="calibrated  g·u")
+        ref = encoder_rate(et, ea, t, 0.025)
+        ax.plot(t, ref, color="k", lw=0.9, ls="--", label="encoder reference (50 ms)")
+    if window is not None:
+        _shade_weight(ax, t, window.corners, label="window weight (height = w)")
+    gaps = _gaps(rec.imu_t[(rec.imu_t >= lo - 1.0) & (rec.imu_t <= hi + 1.0)])
+    gaps = [(a, b) for a, b in gaps if b >= lo and a <= hi]
+    _mark_gaps(ax, gaps)
+    ax.set_ylabel("rate about the servo axis\nrad/s")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8, ncol=2)
+
+    # 2: calibrated minus reference on one weight, and the window mean the fit used
+    ax = axs[1]
+    h = 0.25
+    if t.size > 2:
+        diff = boxcar_mean(t, g @ u, t, h) - encoder_rate(et, ea, t, h)
+        ax.plot(t, diff, color="C0", lw=1.0,
+                label=f"calibrated − reference, both averaged over {2 * h:g} s")
+        finite = diff[np.isfinite(diff)]
+        if finite.size:
+            span = max(float(np.percentile(np.abs(finite), 98)), 1e-4)
+            ax.set_ylim(-2.5 * span, 2.5 * span)
+    if window is not None and window_index is not None:
+        obs = extracted.observations.with_pooled_noise()
+        gm = k * (np.asarray(window.mean) + np.asarray(cal.bias))
+        e = float(gm @ u - window.rate)
+        s = float(math.hypot(np.linalg.norm(k * u * obs.mean_std[window_index]),
+                             obs.rate_std[window_index]))
+        a, b = window.corners[0], window.corners[3]
+        ax.hlines(e, a, b, color="C3", lw=2.0,
+                  label=f"window mean: {e:+.2e} ± {s:.1e} rad/s ({e / s:+.1f} σ)")
+        _shade_weight(ax, t, window.corners)
+    ax.axhline(0.0, color="0.4", lw=0.7)
+    ax.set_ylabel("calibrated − reference\nrad/s")
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+
+    # 3: raw rates, all axes
+    ax = axs[2]
+    for j in range(3):
+        if t.size:
+            ax.plot(t, m[:, j], color=_AXIS_COLORS[j], lw=0.8, label=f"raw {_AXES[j]}")
+    if window is not None:
+        _shade_weight(ax, t, window.corners)
+    _mark_gaps(ax, gaps)
+    ax.set_ylabel("raw gyro rates\nrad/s")
+    ax.set_xlabel("t on the recording clock, s")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8, ncol=3)
+    ax.set_xlim(lo, hi)
+    return fig
+
+
+def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any:
+    fig, axs = plt.subplots(2, 1, sharex=True, figsize=(12, 6.5), constrained_layout=True,
+                            gridspec_kw={"height_ratios": [1.6, 1.0]})
+    step = max(1, rec.imu_t.size // 20000)
+    t = rec.imu_t[::step]
+    ax = axs[0]
+    for j in range(3):
+        ax.plot(t, rec.imu_rate[::step, j], color=_AXIS_COLORS[j], lw=0.7, label=f"raw {_AXES[j]}")
+    motors = sorted({int(w.motor) for w in extracted.windows if w.motor is not None})
+    colors = {m: f"C{3 + i}" for i, m in enumerate(motors)}
+    for w in extracted.windows:
+        _shade_weight(ax, rec.imu_t, w.corners, color=colors[int(w.motor)])  # type: ignore[arg-type]
+    for w in extracted.rests:
+        ax.axvspan(w.corners[0], w.corners[3], color="0.5", alpha=0.15, lw=0)
+    _mark_gaps(ax, _gaps(rec.imu_t))
+    handles, labels = ax.get_legend_handles_labels()
+    from matplotlib.patches import Patch
+
+    handles += [Patch(color=colors[m], alpha=0.3) for m in motors]
+    labels += [f"window, servo {m}" for m in motors]
+    handles.append(Patch(color="0.5", alpha=0.3))
+    labels.append("rest window")
+    ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    ax.set_ylabel("raw gyro rates, rad/s")
+    ax.grid(True, alpha=0.3)
+    ax = axs[1]
+    for m in sorted(int(x) for x in np.unique(rec.enc_motor)):
+        et, ea = rec.encoder(m)
+        ax.plot(et, ea / (2 * np.pi), lw=1.0, label=f"servo {m}",
+                color=colors.get(m, "0.3"))
+    ax.set_ylabel("servo angle, turns")
+    ax.set_xlabel("t on the recording clock, s")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    state = "complete" if rec.complete else "INCOMPLETE (interrupted run)"
+    fig.suptitle(f"{rec.path}: {rec.imu_t.size} gyro samples over "
+                 f"{rec.imu_t[-1] - rec.imu_t[0]:.1f} s, {len(extracted.windows)} rotation "
+                 f"windows, {len(extracted.rests)} rest windows; recording {state}", fontsize=10)
+    return fig
+
+
+def _rests_plot(plt: Any, extracted: ExtractedWindows, cal: GyroCalibration,
+                truth: Mapping[str, Any] | None) -> Any:
+    fig, axs = plt.subplots(1, 3, figsize=(12, 4.5), constrained_layout=True)
+    obs = extracted.observations.with_pooled_noise()
+    x = np.array([w.segment for w in extracted.rests])
+    for j, ax in enumerate(axs):
+        bj, sj = cal.bias[j], cal.bias_std[j]
+        ax.axhline(-bj, color="C0", lw=1.2, label="−bias (calibration)")
+        if math.isfinite(sj):
+            ax.axhspan(-bj - sj, -bj + sj, color="C0", alpha=0.15, lw=0, label="±1σ of the bias")
+        if truth is not None and "bias" in truth:
+            ax.axhline(-float(truth["bias"][j]), color="k", lw=0.8, ls=":",
+                       label="−bias (simulation truth)")
+        if x.size:
+            ax.errorbar(x, obs.rest_mean[:, j], yerr=obs.rest_mean_std[:, j],  # type: ignore[index]
+                        fmt="o", color=_AXIS_COLORS[j], ms=4, capsize=3,
+                        label="rest mean ±1σ")
+        ax.set_title(f"{_AXES[j]} axis")
+        ax.set_xlabel("segment index")
+        ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 3), useOffset=False)
+        ax.grid(True, alpha=0.3)
+    axs[0].set_ylabel("mean reading at rest, rad/s")
+    axs[0].legend(fontsize=8)
+    fig.suptitle("rest windows: a still sensor reads −bias (Calibration v1 convention)",
+                 fontsize=10)
+    return fig
+
+
+def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
+    from scipy import stats
+
+    fig, (ax, axh) = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True,
+                                  gridspec_kw={"width_ratios": [3, 1]})
+    n = len(res.labels)
+    x = np.arange(n)
+    for j in range(3):
+        ax.plot(x + (j - 1) * 0.2, res.z[:, j], "o", color=_AXIS_COLORS[j], ms=5,
+                label=f"{_AXES[j]} component")
+    for level, style in ((0, "-"), (2, "--"), (-2, "--"), (3, ":"), (-3, ":")):
+        ax.axhline(level, color="0.5", lw=0.8, ls=style)
+    ax.set_xticks(x, res.labels, rotation=60, fontsize=8)
+    ax.set_ylabel("(mean − prediction) / σ")
+    lim = max(4.0, float(np.nanmax(np.abs(res.z))) * 1.1) if n else 4.0
+    ax.set_ylim(-lim, lim)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    dof_all = res.z.size
+    text = f"Σz² = {res.chi2:.1f} over {dof_all} residuals"
+    c = cal.consistency
+    if c is not None:
+        text += (f"; the fit: χ² = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g} "
+                 f"({'consistent' if c.ok else 'NOT consistent'})")
+    sources = set(res.axis_sources.values())
+    if sources != {"calibration"}:
+        text += "\nservo axes: " + ", ".join(f"servo {m} {s}" for m, s in
+                                             sorted(res.axis_sources.items()))
+        if "fitted" in sources:
+            text += " (fitted: to the windows under this calibration, which has none)"
+        if "nominal" in sources:
+            text += " (nominal: mounting misalignment shows as off-axis residuals)"
+    ax.set_title(text, fontsize=9)
+    z = res.z[np.isfinite(res.z)]
+    if z.size:
+        bins = np.linspace(-lim, lim, 17)
+        axh.hist(z, bins=bins, color="0.6", density=True, label="all residuals")
+        zz = np.linspace(-lim, lim, 200)
+        axh.plot(zz, stats.norm.pdf(zz), color="k", lw=1.0, label="N(0, 1)")
+        axh.legend(fontsize=8)
+    axh.set_xlabel("z")
+    fig.suptitle(f"residuals of the windows against the calibration ({cal.method})", fontsize=10)
+    return fig
+
+
+def write_report(
+    rec: Recording,
+    cal: GyroCalibration,
+    extracted: ExtractedWindows,
+    out_dir: str | os.PathLike[str],
+    *,
+    force: bool = False,
+) -> list[tuple[Path, str]]:
+    """Draw every plot of :func:`plan_report` into ``out_dir`` (created).
+
+    Every file is checked before anything is drawn: without ``force`` an existing file is an
+    error and nothing is written. Each PNG is written atomically.
+
+    Returns
+    -------
+    list of (Path, str)
+        Each file with its one-line description, in index order.
+
+    Raises
+    ------
+    OutputExistsError
+        If a file exists and ``force`` is false.
+    InputError
+        If matplotlib is missing, or ``out_dir`` cannot be created.
+    """
+    from kit.plots import require_matplotlib
+
+    plt = require_matplotlib()
+    out = Path(out_dir)
+    plan = plan_report(rec, extracted)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out} exists and is not a directory; choose another --out")
+    existing = [p.name for p in plan if (out / p.name).exists()]
+    if existing and not force:
+        raise OutputExistsError(
+            f"{out} already holds {', '.join(existing[:4])}"
+            + (f" and {len(existing) - 4} more" if len(existing) > 4 else "")
+            + "; choose another --out or pass --force to replace them"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create {out}: {exc.strerror}") from None
+    motors = sorted({int(s.motor) for s in rec.segments if s.kind == "rotate"})  # type: ignore[arg-type]
+    axes = servo_axes(motors, cal, rec.manifest, extracted.windows)
+    index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}
+    written: list[tuple[Path, str]] = []
+    for p in plan:
+        if p.kind == "overview":
+            fig = _overview_plot(plt, rec, extracted)
+        elif p.kind == "turn":
+            seg = p.segment
+            i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
+            fig = _turn_plot(plt, rec, cal, seg, w, axes[int(seg.motor)], extracted, i)  # type: ignore[union-attr,arg-type]
+        elif p.kind == "rests":
+            fig = _rests_plot(plt, extracted, cal, rec.truth)
+        else:
+            fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
+        _save(fig, plt, out / p.name, force)
+        written.append((out / p.name, p.description))
+    return written

@@ -1,0 +1,216 @@
+"""gyrocal report: PNG plots of an emulated-jig recording, the residual arithmetic against the
+simulation's truth, and the refusals (missing recording, missing matplotlib, existing files)."""
+
+import sys
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from calib.model import GyroCalibration
+from kit.cli import main
+from kit.recording import load_recording
+from kit.report_plots import (
+    boxcar_mean,
+    encoder_rate,
+    nominal_axis,
+    servo_axes,
+    trapezoid_weight,
+    window_residuals,
+)
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("report") / "run"
+    assert main(["calibrate", "--sim", "--sim-seed", "11", "--out", str(d), "--quiet"]) in (0, 3)
+    return d
+
+
+@pytest.fixture(scope="module")
+def extracted(run_dir):
+    from kit.commands.report import extract
+
+    rec = load_recording(run_dir / "recording")
+    return rec, extract(rec)
+
+
+def expected_names(rec):
+    names = {"overview.png", "rests.png", "residuals.png"}
+    for s in rec.segments:
+        if s.kind == "rotate":
+            names.add(f"turn-{s.index:02d}-servo{s.motor}-{'pos' if s.direction > 0 else 'neg'}"
+                      ".png")
+    return names
+
+
+def check_pngs(directory, names):
+    import matplotlib.image as mpimg
+
+    assert {p.name for p in directory.iterdir()} == names  # nothing else (no temporary files)
+    for name in names:
+        data = (directory / name).read_bytes()
+        assert data[:8] == PNG_MAGIC, name
+        img = mpimg.imread(directory / name)
+        assert img.ndim == 3 and img.shape[0] >= 400 and img.shape[1] >= 800, (name, img.shape)
+        assert img[..., :3].std() > 0.05, f"{name} looks blank"
+
+
+def index_paths(out):
+    lines = out.strip().splitlines()
+    assert lines[0].startswith("gyrocal report:")
+    return [line.split()[0] for line in lines[1:]]
+
+
+def test_report_with_calibration_one_plot_per_turn(run_dir, tmp_path, capsys):
+    rec = load_recording(run_dir / "recording")
+    out_dir = tmp_path / "plots"
+    code = main(["report", str(run_dir / "recording"), str(run_dir / "calibration.json"),
+                 "--out", str(out_dir)])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    names = expected_names(rec)
+    assert len(names) == 6 + 3  # three servos, each turned both ways
+    check_pngs(out_dir, names)
+    listed = index_paths(out)
+    assert sorted(listed) == sorted(str(out_dir / n) for n in names)
+    assert listed[0].endswith("overview.png") and listed[-1].endswith("residuals.png")
+    assert "calibration.json" in out
+
+
+def test_report_refuses_to_overwrite_then_estimates_with_force(run_dir, tmp_path, capsys):
+    rec = load_recording(run_dir / "recording")
+    out_dir = tmp_path / "plots"
+    out_dir.mkdir()
+    (out_dir / "residuals.png").write_bytes(b"keep me")
+    args = ["report", str(run_dir / "recording"), "--out", str(out_dir), "--method",
+            "iterative-ls"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "residuals.png" in err and "--force" in err
+    assert [p.name for p in out_dir.iterdir()] == ["residuals.png"]  # nothing written
+    assert (out_dir / "residuals.png").read_bytes() == b"keep me"
+    # with --force (and no CAL: an estimate from the recording) every plot is written
+    code = main([*args, "--force"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "iterative-ls estimate from the recording" in out
+    check_pngs(out_dir, expected_names(rec))
+
+
+def test_missing_recording_exits_2(tmp_path, capsys):
+    assert main(["report", str(tmp_path / "nope"), "--out", str(tmp_path / "p")]) == 2
+    assert "not a directory" in capsys.readouterr().err
+    assert not (tmp_path / "p").exists()
+
+
+def test_bad_calibration_exits_2(run_dir, tmp_path, capsys):
+    bad = tmp_path / "cal.json"
+    bad.write_text('{"format": "gyrocal-calibration", "version": 1, "scale": [1, 1]}')
+    assert main(["report", str(run_dir / "recording"), str(bad), "--out",
+                 str(tmp_path / "p")]) == 2
+    assert "scale" in capsys.readouterr().err
+    assert not (tmp_path / "p").exists()
+
+
+def test_missing_matplotlib_exits_2_with_the_install_hint(run_dir, tmp_path, capsys,
+                                                           monkeypatch):
+    # None in sys.modules makes "import matplotlib" raise ImportError, as if not installed
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    monkeypatch.setitem(sys.modules, "matplotlib.pyplot", None)
+    code = main(["report", str(run_dir / "recording"), "--out", str(tmp_path / "p")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "matplotlib" in err and "pip install 'gyrocal[plot]'" in err
+    assert not (tmp_path / "p").exists()
+
+
+# ------------------------------------------------------------------ the numbers behind the plots
+def truth_calibration(rec):
+    t = rec.truth
+    axes = {m: {"axis": u} for m, u in t["axes"].items()}
+    return GyroCalibration(scale=t["scale"], bias=t["bias"], axes=axes)
+
+
+def test_residuals_against_the_truth_are_standard_normal(extracted):
+    rec, ex = extracted
+    truth = truth_calibration(rec)
+    axes = servo_axes([1, 2, 3], truth, rec.manifest, ex.windows)
+    assert {a.source for a in axes.values()} == {"calibration"}
+    res = window_residuals(ex, truth, axes)
+    n = res.z.size
+    assert n == 3 * (len(ex.windows) + len(ex.rests))
+    lo, hi = stats.chi2.ppf([1e-3, 1 - 1e-3], n)
+    assert lo < res.chi2 < hi, (res.chi2, n)
+    assert res.labels[:2] == ["s1-", "s1+"] and res.labels[-1].startswith("rest")
+
+
+def test_residuals_of_the_fit_match_its_chi_square(run_dir, extracted):
+    rec, ex = extracted
+    cal = GyroCalibration.from_json((run_dir / "calibration.json").read_text())
+    res = window_residuals(ex, cal, servo_axes([1, 2, 3], cal, rec.manifest, ex.windows))
+    assert res.chi2 == pytest.approx(cal.consistency.chi2, rel=0.05)
+
+
+def test_fitted_axes_find_the_true_mount_and_residuals_catch_a_wrong_bias(extracted):
+    rec, ex = extracted
+    truth = truth_calibration(rec)
+    bare = GyroCalibration(scale=truth.scale, bias=truth.bias)  # no axes: fitted to the windows
+    axes = servo_axes([1, 2, 3], bare, rec.manifest, ex.windows)
+    assert {a.source for a in axes.values()} == {"fitted"}
+    for m, a in axes.items():
+        true_u = np.asarray(rec.truth["axes"][str(m)])
+        angle_deg = np.degrees(np.arccos(min(1.0, float(a.axis @ true_u))))
+        assert angle_deg < 0.05, (m, angle_deg)  # the mount is ~3 degrees off nominal
+    res = window_residuals(ex, bare, axes)
+    assert res.chi2 < stats.chi2.ppf(1 - 1e-3, res.z.size)
+    # a bias 1e-2 rad/s off on y (some 25 standard errors of a rest mean) shows in every rest
+    off = GyroCalibration(scale=truth.scale, bias=np.add(truth.bias, [0.0, 1e-2, 0.0]))
+    res_off = window_residuals(ex, off, axes)
+    rest = np.array([k == "rest" for k in res_off.kinds])
+    assert np.all(res_off.z[rest, 1] > 10) and np.all(np.abs(res_off.z[rest][:, [0, 2]]) < 5)
+    # without windows or calibration axes a servo takes its nominal axis from the manifest
+    nominal = servo_axes([2], bare, rec.manifest, ())
+    assert nominal[2].source == "nominal"
+    np.testing.assert_array_equal(nominal[2].axis, [0, 1, 0])
+
+
+def test_window_arithmetic():
+    w = trapezoid_weight(np.array([0.0, 1.0, 1.5, 2.0, 5.0, 6.5, 7.0, 8.0]), (1.0, 2.0, 6.0, 7.0))
+    np.testing.assert_allclose(w, [0, 0, 0.5, 1, 1, 0.5, 0, 0])
+    t = np.linspace(0, 10, 2001)
+    theta = 0.3 + 2.5 * t
+    np.testing.assert_allclose(encoder_rate(t, theta, np.array([5.0]), 0.25), [2.5])
+    assert np.isnan(encoder_rate(t, theta, np.array([0.1]), 0.25))[0]
+    x = 1.0 + 0.5 * t  # the boxcar mean of a line is its value at the centre
+    np.testing.assert_allclose(boxcar_mean(t, x, np.array([4.0, 6.0]), 0.25), [3.0, 4.0])
+    np.testing.assert_array_equal(nominal_axis("-y"), [0, -1, 0])
+    with pytest.raises(ValueError, match="not x, y or z"):
+        nominal_axis("w")
+
+
+def test_a_turn_with_a_gap_is_planned_without_a_window(run_dir, tmp_path):
+    import shutil
+
+    from kit.commands.report import extract
+    from kit.report_plots import _gaps, plan_report
+
+    rec_dir = tmp_path / "rec"
+    shutil.copytree(run_dir / "recording", rec_dir)
+    rec = load_recording(rec_dir)
+    seg = [s for s in rec.segments if s.kind == "rotate"][1]
+    mid = 0.5 * (seg.t_start + seg.t_end)
+    lines = (rec_dir / "imu.csv").read_text().splitlines()
+    kept = [lines[0]] + [ln for ln in lines[1:] if not mid < float(ln.split(",")[0]) < mid + 0.1]
+    (rec_dir / "imu.csv").write_text("\n".join(kept) + "\n")
+    gapped = load_recording(rec_dir)
+    ex = extract(gapped)
+    assert any(f"segment {seg.index}: gap" in w for w in ex.warnings)
+    plan = {p.name: p.description for p in plan_report(gapped, ex)}
+    name = f"turn-{seg.index:02d}-servo{seg.motor}-{'pos' if seg.direction > 0 else 'neg'}.png"
+    assert "no window" in plan[name]
+    assert sum("no window" in d for d in plan.values()) == 1
+    (a, b), = _gaps(gapped.imu_t)
+    assert a < mid + 0.01 and b > mid + 0.09
