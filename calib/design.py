@@ -191,25 +191,51 @@ def jig_time(
     return 2 * n_servos * (_turn_time(turns, speed, accel) + settle_s) + (2 * n_servos + 1) * rest_s
 
 
-def _window_model(
-    speed: float, turns: int, rest_s: float, accel: float, odr_hz: float
-) -> tuple[float, float]:
-    """``(mean rate, effective sample count)`` of the window a turn yields (calib.windows)."""
+@dataclass(frozen=True)
+class _TurnWindow:
+    """The window :mod:`calib.windows` would make of a turn, as a model."""
+
+    rate: float  # mean reference rate over the window, rad/s
+    n_eff: float  # effective gyro samples
+    wint: float  # ∫w, s
+    rest_to_rest: bool
+    ramp_rate_std: float  # reference std of a tapered window (rad/s); 0 for rest-to-rest
+
+
+def _turn_window(
+    speed: float, turns: int, rest_s: float, accel: float, odr_hz: float, noise_std: float,
+    encoder_ticks: int, jitter_s: float, sample_hz: float,
+) -> _TurnWindow:
+    """The window a turn yields: the candidate with the least predicted variance of the turning
+    axis's mean against its reference, as :func:`calib.windows.extract_observations` chooses."""
+    q = 2 * np.pi / encoder_ticks
     total = 2 * np.pi * turns
     ramp_angle = speed**2 / (2 * accel)
-    steady_revs = max(total - 2 * ramp_angle, 0.0) / (2 * np.pi)
-    if steady_revs >= 2.0:
-        K = int(np.floor(steady_revs)) - 1
-        period = 2 * np.pi / speed
-        L, Fl = period, (K - 1) * period
-        wint = L + Fl
-        w2 = 2 * L / 3 + Fl  # ∫w² of the trapezoid
-        return speed, odr_hz * wint**2 / w2
+    steady = max(total - 2 * ramp_angle, 0.0) / (2 * np.pi)  # steady revolutions
+    period = 2 * np.pi / speed
+    reading = np.hypot(q / np.sqrt(12), speed * jitter_s)  # one moving encoder reading
+    cands: list[tuple[float, _TurnWindow]] = []
+
+    def tapered(K: float, L: float) -> None:
+        # Ramps of L revolutions, flat K - L: ∫w = K revolutions, ∫w² = K - L/3.
+        wint = K * period
+        n_eff = odr_hz * wint**2 / ((K - L / 3) * period)
+        m = max(L * period * sample_hz, 1.0)
+        ref = np.sqrt(2) * reading / np.sqrt(m) / wint
+        cands.append((noise_std**2 / n_eff + ref**2,
+                      _TurnWindow(speed, n_eff, wint, False, float(ref))))
+
+    if steady >= 1:
+        tapered(float(np.floor(steady)), steady - np.floor(steady))
+    if steady >= 2:  # ramps of one revolution around K - 1 flat ones
+        tapered(float(np.floor(steady)) - 1, 1.0)
     t_turn = _turn_time(turns, speed, accel)
     margin = min(0.15, rest_s / 2)
     T = t_turn + margin  # two half-weight ramps of `margin` in the still time
-    w2 = t_turn + 2 * margin / 3
-    return total / T, odr_hz * T**2 / w2
+    n_eff = odr_hz * T**2 / (t_turn + 2 * margin / 3)
+    cands.append((noise_std**2 / n_eff + 2 * q**2 / 12 / T**2,
+                  _TurnWindow(total / T, n_eff, T, True, 0.0)))
+    return min(cands, key=lambda c: c[0])[1]
 
 
 def predict_uncertainty(
@@ -222,8 +248,19 @@ def predict_uncertainty(
     accel: float = 10.0,
     reference_rate: float = 1.0,
     rest_guard_s: float = 0.2,
+    encoder_ticks: int = 4096,
+    jitter_s: float = 1e-3,
+    sample_hz: float = 200.0,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Predicted paired-axis uncertainties of a protocol at nominal truth (k = 1, b = 0).
+
+    The windows, their noise and their references are modelled as :mod:`calib.windows` makes
+    them: a turn without two steady revolutions is windowed rest to rest, its reference resting
+    on still encoder angles (``q/√12`` each, shared between a servo's two turns); a longer turn
+    is windowed inside its steady revolutions, whose ramp-mean angles average the encoder's
+    quantisation and timestamp jitter (``jitter_s``) over the ramp's readings (taken at
+    ``sample_hz``); the window with the smaller predicted variance is used, as in
+    :mod:`calib.windows`.
 
     Returns
     -------
@@ -234,15 +271,28 @@ def predict_uncertainty(
     """
     from calib.estimators import paired_axis_batch
 
-    w, neff = _window_model(speed, turns, rest_s, accel, odr_hz)
+    win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
+                       jitter_s, sample_hz)
     motor = np.repeat(np.arange(3), 2)
     direction = np.tile([1, -1], 3)
-    rate = (w * direction)[None, :]
+    rate = (win.rate * direction)[None, :]
     mean = (rate[0][:, None] * np.eye(3)[motor])[None]
-    sd = noise_std / np.sqrt(neff)
-    mean_std = np.full((1, 6, 3), sd)
-    rate_std = np.full((1, 6), 1e-9)
-    margin = 0.15 if _window_model(speed, turns, rest_s, accel, odr_hz)[0] < speed else 0.0
+    mean_std = np.full((1, 6, 3), noise_std / np.sqrt(win.n_eff))
+    q = 2 * np.pi / encoder_ticks
+    if win.rest_to_rest:
+        # The reference is the change between still angles: start, shared, end per servo, each
+        # read to q/√12 (as calib.windows models it).
+        rate_std = np.full((1, 6), 1e-12)
+        G = np.zeros((6, 9))
+        for s in range(3):
+            G[2 * s, 3 * s], G[2 * s, 3 * s + 1] = -1 / win.wint, 1 / win.wint
+            G[2 * s + 1, 3 * s + 1], G[2 * s + 1, 3 * s + 2] = -1 / win.wint, 1 / win.wint
+        ref = {"ref_matrix": G, "still_std": q / np.sqrt(12)}
+        margin = 0.15
+    else:
+        rate_std = np.full((1, 6), max(win.ramp_rate_std, 1e-12))
+        ref = {}
+        margin = 0.0
     n_rest = max(int((rest_s - 2 * max(rest_guard_s, margin)) * odr_hz), 0)
     if n_rest >= 10:
         rest_mean = np.zeros((1, 7, 3))
@@ -250,7 +300,7 @@ def predict_uncertainty(
     else:
         rest_mean = np.zeros((1, 0, 3))
         rest_std = np.zeros((1, 0, 3))
-    res = paired_axis_batch(mean, rate, motor, mean_std, rate_std, rest_mean, rest_std)
+    res = paired_axis_batch(mean, rate, motor, mean_std, rate_std, rest_mean, rest_std, **ref)
     C = res.covariance[0, :6, :6]
     U = sphere_points(400) * reference_rate
     # Calibrated output error at true rate g: δ(k ∘ (m + b))_j = δk_j g_j + δb_j (k = 1, b = 0),

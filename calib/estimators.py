@@ -243,11 +243,13 @@ def _sq_jacobian(theta: np.ndarray, mean: np.ndarray, rate: np.ndarray | None = 
 
 
 def _sq_noise_cov(theta: np.ndarray, obs: ObservationSet) -> np.ndarray:
-    """``S``: variance of each squared-norm residual's noise, diagonal (windows independent)."""
+    """``S``: covariance of the squared-norm residuals' noise (n, n): the window means' noise
+    (independent) and the references' (correlated where windows share a still angle)."""
     k, b = theta[:3], theta[3:]
     g = 2 * k**2 * (obs.mean + b)
-    var = np.sum(g**2 * obs.mean_std**2, axis=1) + (2 * obs.rate * obs.rate_std) ** 2
-    return np.diag(var)
+    S = np.diag(np.sum(g**2 * obs.mean_std**2, axis=1))
+    two_w = 2 * obs.rate
+    return S + np.outer(two_w, two_w) * obs.reference_covariance()
 
 
 def _sq_consistency(e: np.ndarray, S: np.ndarray, H: np.ndarray) -> Consistency | None:
@@ -666,6 +668,8 @@ def paired_axis_batch(
     rest_mean: np.ndarray,
     rest_std: np.ndarray,
     *,
+    ref_matrix: np.ndarray | None = None,
+    still_std: float = 0.0,
     max_iter: int = 50,
     xtol: float = 1e-10,
 ) -> PairedAxisBatch:
@@ -685,6 +689,13 @@ def paired_axis_batch(
         Standard errors of the reference rates.
     rest_mean, rest_std : ndarray, shape (B, r, 3)
         Rest-window means and their standard errors (``r`` may be 0).
+    ref_matrix : ndarray, shape (n, A), optional
+        ``G``: how each window's reference rate changes per radian of error in each of ``A``
+        shared still encoder angles (:meth:`ObservationSet.reference_matrix`). Each still angle's
+        error becomes an unknown with prior standard deviation ``still_std``, so windows that
+        share a still angle get correlated reference errors, as they have.
+    still_std : float
+        Prior standard deviation of a still angle, rad.
     max_iter : int
         Most Levenberg-Marquardt steps.
     xtol : float
@@ -699,22 +710,28 @@ def paired_axis_batch(
     B, n, _ = mean.shape
     r = rest_mean.shape[1]
     S = int(motor_index.max()) + 1
-    P = 6 + 2 * S
+    G = np.zeros((n, 0)) if ref_matrix is None else np.asarray(ref_matrix, dtype=float)
+    n_still = G.shape[1]
+    if n_still and not still_std > 0:
+        raise CalibInputError("still_std must be positive when ref_matrix has still angles")
+    P = 6 + 2 * S + n_still
     k, b, u = _paired_initial(mean, rate, motor_index, S, rest_mean, rest_std)
-    w = rate[:, :, None]  # (B, n, 1)
+    z = np.zeros((B, n_still))  # still-angle errors (reading minus true), rad
     var_m = mean_std**2
     var_w = rate_std[:, :, None, None] ** 2
     eye3 = np.eye(3)
 
-    def evaluate(k, b, u, with_jac):
+    def evaluate(k, b, u, z, with_jac):
         ui = u[:, motor_index, :]  # (B, n, 3)
         ci = ui / k[:, None, :]
+        w = (rate - z @ G.T)[:, :, None]  # the true reference: measured minus its error
         e = mean - (w * ci - b[:, None, :])  # (B, n, 3)
         C = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
         L = np.linalg.cholesky(C)  # (B, n, 3, 3)
         ew = np.linalg.solve(L, e[..., None])[..., 0]  # whitened: L⁻¹ e
         er = (rest_mean + b[:, None, :]) / rest_std
-        E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r)], axis=1)
+        ez = z / still_std if n_still else z
+        E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r), ez], axis=1)
         if not with_jac:
             return E, None, None
         t1, t2 = _tangent_basis(u)  # (B, S, 3)
@@ -726,13 +743,19 @@ def paired_axis_batch(
         ar = np.arange(n)
         J[:, ar, :, cols] = np.moveaxis(-w * t1[:, motor_index, :] / k[:, None, :], 1, 0)
         J[:, ar, :, cols + 1] = np.moveaxis(-w * t2[:, motor_index, :] / k[:, None, :], 1, 0)
+        if n_still:  # d e_i / d z_a = G_ia c_i (the true rate falls by G z)
+            J[:, :, :, 6 + 2 * S:] = ci[..., None] * G[None, :, None, :]
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
         Jr = np.zeros((B, r, 3, P))
         Jr[:, :, idx, 3 + idx] = 1.0 / rest_std
-        J = np.concatenate([Jw, Jr.reshape(B, 3 * r, P)], axis=1)
+        Jz = np.zeros((B, n_still, P))
+        Jz[:, np.arange(n_still), 6 + 2 * S + np.arange(n_still)] = (
+            1.0 / still_std if n_still else 0.0
+        )
+        J = np.concatenate([Jw, Jr.reshape(B, 3 * r, P), Jz], axis=1)
         return E, J, (t1, t2)
 
-    E, J, tb = evaluate(k, b, u, True)
+    E, J, tb = evaluate(k, b, u, z, True)
     cost = np.sum(E**2, axis=1)
     lam = np.full(B, 1e-3)
     active = np.ones(B, dtype=bool)
@@ -750,13 +773,14 @@ def paired_axis_batch(
         t1, t2 = tb
         k_new = k + step[:, :3]
         b_new = b + step[:, 3:6]
-        da = step[:, 6::2][..., None]
-        db = step[:, 7::2][..., None]
+        da = step[:, 6 : 6 + 2 * S : 2][..., None]
+        db = step[:, 7 : 6 + 2 * S : 2][..., None]
+        z_new = z + step[:, 6 + 2 * S :]
         u_new = u + da * t1 + db * t2
         u_new /= np.linalg.norm(u_new, axis=2, keepdims=True)
         bad_k = np.any(k_new <= 0, axis=1)
         k_new = np.where(bad_k[:, None], k, k_new)
-        E_new, _, _ = evaluate(k_new, b_new, u_new, False)
+        E_new, _, _ = evaluate(k_new, b_new, u_new, z_new, False)
         cost_new = np.sum(E_new**2, axis=1)
         accept = active & ~bad_k & (cost_new <= cost)
         iterations += active
@@ -765,12 +789,13 @@ def paired_axis_batch(
         k = np.where(accept[:, None], k_new, k)
         b = np.where(accept[:, None], b_new, b)
         u = np.where(accept[:, None, None], u_new, u)
+        z = np.where(accept[:, None], z_new, z)
         lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
         done = active & (small | flat)
         converged |= done
         active &= ~done
         if accept.any():
-            E_acc, J_acc, tb_acc = evaluate(k, b, u, True)
+            E_acc, J_acc, tb_acc = evaluate(k, b, u, z, True)
             E = np.where(accept[:, None], E_acc, E)
             J = np.where(accept[:, None, None], J_acc, J)
             tb = (
@@ -778,7 +803,7 @@ def paired_axis_batch(
                 np.where(accept[:, None, None], tb_acc[1], tb[1]),
             )
             cost = np.sum(E**2, axis=1)
-    E, J, _ = evaluate(k, b, u, True)
+    E, J, _ = evaluate(k, b, u, z, True)
     cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
     return PairedAxisBatch(
         scale=k,
@@ -786,7 +811,7 @@ def paired_axis_batch(
         axes=u,
         covariance=cov,
         chi2=np.sum(E**2, axis=1),
-        dof=3 * n + 3 * r - P,
+        dof=3 * n + 3 * r + n_still - P,  # each still-angle unknown has a prior observation
         iterations=iterations,
         converged=converged,
         residuals=E,
@@ -840,6 +865,8 @@ def fit_paired_axis(
         obs.rate_std[None],
         r_mean[None],
         r_std[None],
+        ref_matrix=obs.reference_matrix(),
+        still_std=obs.still_angle_std,
         max_iter=max_iter,
     )
     k, b, cov = res.scale[0], res.bias[0], res.covariance[0]

@@ -112,6 +112,16 @@ class ObservationSet:
         The same for rest windows (shapes (r, 3), (r,), (r, 3), (r, 3)).
     temperature_c : float, optional
         Mean die temperature over the run.
+    ref_start, ref_end : array_like of int, shape (n,), optional
+        For a window whose reference is the change between two still encoder angles (a
+        rest-to-rest window), the index of the still angle it starts and ends at; -1 where the
+        reference does not rest on a still angle. Consecutive turns of one servo share the still
+        angle between them, so their reference errors are correlated; estimators model each still
+        angle's error as one shared unknown with prior ``still_angle_std``.
+    ref_gain : array_like, shape (n,), optional
+        Change of the reference rate per radian of error in a still angle (``1 / ∫w``).
+    still_angle_std : float, optional
+        Prior standard deviation of a still encoder angle, rad (``q/√12``).
 
     Raises
     ------
@@ -133,6 +143,10 @@ class ObservationSet:
     rest_noise: np.ndarray | None = None
     rest_mean_std: np.ndarray | None = None
     temperature_c: float | None = None
+    ref_start: np.ndarray | None = None
+    ref_end: np.ndarray | None = None
+    ref_gain: np.ndarray | None = None
+    still_angle_std: float = 0.0
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -192,6 +206,20 @@ class ObservationSet:
                 r_std = _arr(self.rest_mean_std, "rest_mean_std", (r, 3))
                 if np.any(r_std <= 0):
                     raise CalibInputError("rest_mean_std must be positive")
+        if self.ref_start is None and self.ref_end is None:
+            ref_start = ref_end = np.full(n, -1, dtype=np.int64)
+            ref_gain = np.zeros(n)
+        else:
+            if self.ref_start is None or self.ref_end is None or self.ref_gain is None:
+                raise CalibInputError("ref_start, ref_end and ref_gain go together")
+            ref_start = _arr(self.ref_start, "ref_start", (n,), dtype=np.int64)
+            ref_end = _arr(self.ref_end, "ref_end", (n,), dtype=np.int64)
+            ref_gain = _arr(self.ref_gain, "ref_gain", (n,))
+            if np.any(ref_start < -1) or np.any(ref_end < -1):
+                raise CalibInputError("ref_start and ref_end must be -1 or still-angle indices")
+            used = np.concatenate([ref_start[ref_start >= 0], ref_end[ref_end >= 0]])
+            if used.size and not (self.still_angle_std > 0):
+                raise CalibInputError("still_angle_std must be positive when still angles are used")
         temp = self.temperature_c
         if temp is not None:
             temp = float(temp)
@@ -201,10 +229,33 @@ class ObservationSet:
             ("mean", mean), ("rate", rate), ("motor", motor), ("direction", direction),
             ("count", count), ("noise", noise), ("mean_std", mean_std), ("rate_std", rate_std),
             ("rest_mean", r_mean), ("rest_count", r_count), ("rest_noise", r_noise),
-            ("rest_mean_std", r_std),
+            ("rest_mean_std", r_std), ("ref_start", ref_start), ("ref_end", ref_end),
+            ("ref_gain", ref_gain),
         ):
             object.__setattr__(self, name, _ro(v))
         object.__setattr__(self, "temperature_c", temp)
+
+    @property
+    def n_still_angles(self) -> int:
+        """Number of shared still angles the references rest on."""
+        m = max(int(self.ref_start.max(initial=-1)), int(self.ref_end.max(initial=-1)))  # type: ignore[union-attr]
+        return m + 1
+
+    def reference_covariance(self) -> np.ndarray:
+        """Covariance of the reference rates, (n, n): ``diag(rate_std²) + G Q Gᵀ`` with ``G`` the
+        rate change per still-angle error (±ref_gain) and ``Q = still_angle_std² I``."""
+        G = self.reference_matrix()
+        return np.diag(self.rate_std**2) + self.still_angle_std**2 * G @ G.T  # type: ignore[operator]
+
+    def reference_matrix(self) -> np.ndarray:
+        """``G`` (n, A): d(reference rate)/d(still-angle reading error)."""
+        n, A = self.n_windows, self.n_still_angles
+        G = np.zeros((n, A))
+        rows = np.arange(n)
+        s, e = self.ref_start, self.ref_end
+        G[rows[e >= 0], e[e >= 0]] += self.ref_gain[e >= 0]  # type: ignore[index]
+        G[rows[s >= 0], s[s >= 0]] -= self.ref_gain[s >= 0]  # type: ignore[index]
+        return G
 
     @property
     def n_windows(self) -> int:
@@ -240,7 +291,14 @@ class ObservationSet:
             mean=self.mean, rate=self.rate, motor=self.motor, direction=self.direction,
             count=self.count, noise=pooled[:n], mean_std=self.mean_std * ratio[:n],
             rate_std=self.rate_std, temperature_c=self.temperature_c, **rests,
+            **self._ref_kw(),
         )
+
+    def _ref_kw(self) -> dict[str, object]:
+        if self.n_still_angles == 0:
+            return {}
+        return dict(ref_start=self.ref_start, ref_end=self.ref_end, ref_gain=self.ref_gain,
+                    still_angle_std=self.still_angle_std)
 
     def without_rests(self) -> ObservationSet:
         """The same rotation windows with the rest windows dropped (the paper's six-observation
@@ -248,5 +306,5 @@ class ObservationSet:
         return ObservationSet(
             mean=self.mean, rate=self.rate, motor=self.motor, direction=self.direction,
             count=self.count, noise=self.noise, mean_std=self.mean_std, rate_std=self.rate_std,
-            temperature_c=self.temperature_c,
+            temperature_c=self.temperature_c, **self._ref_kw(),
         )

@@ -21,18 +21,21 @@ timestamps and the encoder's quantisation average over the ramps' samples, and s
 because gyro and encoder see the same motion through the same weight. Nothing uses a nominal figure
 (commanded speed, 2π over a nominal period, sample count over the nominal ODR).
 
-Placement:
+Placement. Each turn offers candidate windows, and the one predicting the smallest variance of
+the turning axis's mean against its reference (gyro noise over the window's effective samples,
+plus the reference's own error) is used:
 
-``tapered`` (the turn has at least two whole revolutions at steady speed)
-    ``a`` and the ramp ends at interpolated encoder crossings: ramps of one revolution and a span
-    of ``K + 1`` whole revolutions (``K >= 1``) centred in the steady part. The weight is a box of
-    one revolution convolved with a box of ``K``, so a once-per-revolution wobble of the mount and
-    its harmonics average out exactly (double zeros of its transform).
-``rest-to-rest`` (no two steady revolutions, as in the paper's one-turn protocol)
-    From still time before the motion to still time after it, ramping inside the still margins;
-    the reference is the change of the still angles over the window.
-``revolution`` (no still time either)
-    One whole steady revolution between interpolated crossings (a box).
+``tapered`` (at least one whole steady revolution)
+    Corners at interpolated encoder crossings inside the steady part of the turn: a box of ``K``
+    whole revolutions convolved with a box of the remaining fraction of the steady span (the
+    ramps), or, with two steady revolutions or more, ramps of one revolution and a span of
+    ``K + 1``. A ``K``-revolution box nulls a once-per-revolution wobble of the mount and every
+    harmonic exactly, and the ramp-mean angles average the encoder's quantisation and timestamp
+    jitter over the ramp's readings.
+``rest-to-rest`` (still time on both sides, as in the paper's one-turn protocol)
+    From still time before the motion to still time after it, ramping inside the still margins:
+    every sample of the turn is used, and the reference is the change of the still angles over
+    the window, each read to ``q/√12`` and shared with the window on its other side.
 
 Rest windows take the gyro samples of a rest segment, after a settling guard, while every encoder
 is still. Noise is estimated per axis from first differences; a correlation factor estimated on the
@@ -235,6 +238,7 @@ def extract_observations(
     still_margin_s: float = 0.15,
     rest_guard_s: float = 0.2,
     refit_time: bool = True,
+    window: str = "auto",
 ) -> ExtractedWindows:
     """Turn a calibration run's raw streams into observations (DESIGN.md fact 2).
 
@@ -265,6 +269,9 @@ def extract_observations(
     refit_time : bool
         Refit the gyro's time axis over the whole stream first (:mod:`calib.timebase`): a
         reader's early timestamps rest on a young estimate of the chip's period.
+    window : str
+        ``"auto"`` (the candidate with the least predicted variance), ``"tapered"`` or
+        ``"rest-to-rest"`` (that kind where the turn allows it, else whatever it allows).
 
     Returns
     -------
@@ -276,6 +283,9 @@ def extract_observations(
         On malformed arrays, a servo without encoder data, a turn the gyro stream does not cover
         (a truncated recording), a turn in the wrong direction, or a turn too short to window.
     """
+    if window not in ("auto", "tapered", "rest-to-rest"):
+        raise CalibInputError(
+            f"window must be 'auto', 'tapered' or 'rest-to-rest', got {window!r}")
     imu_t = np.asarray(imu_t, dtype=float)
     imu_rate = np.asarray(imu_rate, dtype=float)
     enc_t = np.asarray(enc_t, dtype=float)
@@ -311,6 +321,32 @@ def extract_observations(
         order = np.argsort(enc_t[sel], kind="stable")
         enc[int(m)] = (enc_t[sel][order], enc_angle[sel][order])
 
+    # Each servo's motion intervals (readings that moved by more than two ticks, merged across
+    # pauses shorter than 50 ms); the gaps between them are its still periods.
+    motion_intervals: dict[int, list[tuple[float, float]]] = {}
+    for m_id, (t_m, th_m) in enc.items():
+        moved = np.flatnonzero(np.abs(np.diff(th_m)) > 2 * q)
+        spans: list[tuple[float, float]] = []
+        for i in moved:
+            lo_t, hi_t = float(t_m[i]), float(t_m[i + 1])
+            if spans and lo_t - spans[-1][1] < 0.05:
+                spans[-1] = (spans[-1][0], hi_t)
+            else:
+                spans.append((lo_t, hi_t))
+        motion_intervals[m_id] = spans
+    still_ids: dict[tuple[int, int], int] = {}
+
+    def still_angle(motor: int, t_start: float, t_end: float) -> tuple[int, int]:
+        """Indices of the still periods of ``motor`` just before and just after its motion
+        ``[t_start, t_end]`` (one index per still period, shared by the windows around it)."""
+        spans = motion_intervals[motor]
+        first = next(i for i, sp in enumerate(spans) if sp[1] >= t_start)
+        last = max(i for i, sp in enumerate(spans) if sp[0] <= t_end)
+        ids = []
+        for key in ((motor, first), (motor, last + 1)):  # gap before span i is gap i
+            ids.append(still_ids.setdefault(key, len(still_ids)))
+        return ids[0], ids[1]
+
     def covers(a: float, b: float, what: str) -> None:
         if a < imu_t[0] or b > imu_t[-1]:
             raise CalibInputError(
@@ -333,6 +369,7 @@ def extract_observations(
     # ------------------------------------------------------------------ rotations
     windows: list[Window] = []
     rows: list[tuple[np.ndarray, float, int, int, int, np.ndarray, np.ndarray, float]] = []
+    refs: list[tuple[int, int, float]] = []  # (still angle before, after, 1/∫w) per window
     rot_segments = [s for s in segments if s.kind == "rotate"]
     for k_seg, seg in enumerate(rot_segments):
         if seg.motor not in enc:
@@ -407,45 +444,73 @@ def extract_observations(
         still_after = min(next_move, seg.t_end + 10.0) - t_move1
         kind = None
         tt, yy = ts[s0 : s1 + 1], ys[s0 : s1 + 1]
+        # Candidate windows (module docstring); each is scored by the variance it predicts for
+        # the turning axis's mean against its reference, and the least wins.
+        candidates: list[tuple[str, tuple[float, float, float, float], float]] = []
+        if steady_revs >= 1.0:
+            K = int(np.floor(steady_revs))
+            frac = steady_revs - K
+            c = [_crossing(tt, yy, yy[0] + d * TWO_PI * n, d) for n in (0, frac, K, K + frac)]
+            candidates.append(("tapered", (c[0], c[1], c[2], c[3]), float(K)))
         if steady_revs >= 2.0:
-            # K + 1 whole revolutions centred in the steady span, ramps of one revolution.
             K = int(np.floor(steady_revs)) - 1
             base = yy[0] + d * (steady_revs - (K + 1)) * TWO_PI / 2
             c = [_crossing(tt, yy, base + d * TWO_PI * n, d) for n in (0, 1, K, K + 1)]
-            corners = (c[0], c[1], c[2], c[3])
-            kind, revs = "tapered", float(K + 1)
-        elif min(still_before, still_after) >= 0.05:
+            candidates.append(("tapered", (c[0], c[1], c[2], c[3]), float(K)))
+        if min(still_before, still_after) >= 0.05:
             ma = min(still_margin_s, still_before)
             mb = min(still_margin_s, still_after)
-            corners = (t_move0 - ma, t_move0, t_move1, t_move1 + mb)
-            kind, revs = "rest-to-rest", abs(moved) / TWO_PI
-        elif steady_revs >= 1.0:
-            c1 = _crossing(tt, yy, yy[0] + d * TWO_PI, d)
-            corners = (float(tt[0]), float(tt[0]), c1, c1)
-            kind, revs = "revolution", 1.0
-        else:
+            candidates.append(("rest-to-rest", (t_move0 - ma, t_move0, t_move1, t_move1 + mb),
+                               abs(moved) / TWO_PI))
+        if window != "auto" and any(c[0] == window for c in candidates):
+            candidates = [c for c in candidates if c[0] == window]
+        if not candidates:
             raise CalibInputError(
                 f"segment {seg.index}: servo {seg.motor} made {steady_revs:.2f} steady "
                 "revolutions and has no still time around the turn; nothing to window "
                 "(turn more, or rest between turns)"
             )
-        a, a2, b2, b = corners
-        covers(a, b, f"the window of segment {seg.index}")
-        if gap_inside(a, b):
+        best = None
+        for kind, corners, revs in candidates:
+            a, a2, b2, b = corners
+            covers(a, b, f"the window of segment {seg.index}")
+            if gap_inside(a, b):
+                continue
+            mean, wint, qw = _weighted_mean(imu_t, imu_rate, corners)
+            sel = (imu_t >= a) & (imu_t <= b)
+            sensor_noise = float(np.min(_diff_noise(imu_rate[sel])))  # a non-turning axis
+            var_mean = sensor_noise**2 * float(np.sum(qw**2) / np.sum(qw) ** 2)
+            if kind == "rest-to-rest":
+                var_ref = 2 * q**2 / 12 / wint**2
+            else:
+                var_ref = (_ramp_angle_std(t, th, a, a2, q, False) ** 2
+                           + _ramp_angle_std(t, th, b2, b, q, False) ** 2) / wint**2
+            score = var_mean + var_ref
+            if best is None or score < best[0]:
+                best = (score, kind, corners, revs, mean, wint, qw)
+        if best is None:
             warnings.append(
                 f"segment {seg.index}: gap in the gyro stream inside the window; turn skipped"
             )
             continue
+        _, kind, corners, revs, mean, wint, qw = best
+        a, a2, b2, b = corners
         # Reference: (mean angle over the down ramp - over the up ramp) / ∫w.
-        still_edges = kind == "rest-to-rest"
         th_up = _ramp_mean(t, th, a, a2)
         th_dn = _ramp_mean(t, th, b2, b)
-        mean, wint, qw = _weighted_mean(imu_t, imu_rate, corners)
         rate = (th_dn - th_up) / wint
         if np.sign(rate) != d:
             raise CalibInputError(f"segment {seg.index}: reference rate has the wrong sign")
-        rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q, still_edges),
-                                  _ramp_angle_std(t, th, b2, b, q, still_edges)) / wint)
+        if kind == "rest-to-rest":
+            # The reference rests on two still angles, each shared with the window on its
+            # other side: their reading errors are modelled as shared unknowns (ref_* fields).
+            rate_std = 0.0
+            refs.append((*still_angle(int(seg.motor), float(t_move0), float(t_move1)),
+                         1.0 / wint))
+        else:
+            rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q, False),
+                                      _ramp_angle_std(t, th, b2, b, q, False)) / wint)
+            refs.append((-1, -1, 0.0))
         sel = (imu_t >= a) & (imu_t <= b)
         x = imu_rate[sel]
         noise = np.maximum(_diff_noise(x), 1e-12)
@@ -527,6 +592,16 @@ def extract_observations(
     t_mean = None
     if temp is not None and np.any(np.isfinite(temp)):
         t_mean = float(np.nanmean(temp))
+    ref_kw: dict[str, object] = {}
+    if any(r[0] >= 0 for r in refs):
+        used = sorted({i for r in refs for i in r[:2] if i >= 0})
+        renumber = {old: new for new, old in enumerate(used)}
+        ref_kw = dict(
+            ref_start=np.array([renumber.get(r[0], -1) for r in refs]),
+            ref_end=np.array([renumber.get(r[1], -1) for r in refs]),
+            ref_gain=np.array([r[2] for r in refs]),
+            still_angle_std=q / np.sqrt(12.0),
+        )
     obs = ObservationSet(
         mean=np.array([r[0] for r in rows]),
         rate=np.array([r[1] for r in rows]),
@@ -538,6 +613,7 @@ def extract_observations(
         rate_std=np.array([r[7] for r in rows]),
         temperature_c=t_mean,
         **rest_kw,
+        **ref_kw,
     )
     return ExtractedWindows(
         observations=obs,

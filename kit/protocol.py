@@ -5,7 +5,7 @@ recording and steps the plan: for each servo a rest, whole turns one way, a rest
 back (ending where it started), and a final rest. After each step the runner checks what it
 recorded:
 
-* a turn reached its commanded speed (the encoder's steady speed);
+* a turn held its commanded speed (the encoder's median speed over its middle half);
 * the gyro did not saturate;
 * no FIFO gap fell inside the step;
 * the sensor did not move during a rest (gyro and encoders).
@@ -188,6 +188,7 @@ class Runner:
         # Loop dither (see _tick); seeded so that runs repeat exactly.
         self._dither = np.random.default_rng(0x6779726F)
         self._rest_s = max((s.rest_s for s in self.steps if s.kind == "rest"), default=0.5)
+        self._segments: list[Segment] = []
         self.last_rate = np.zeros(3)
         self.last_speed = 0.0
 
@@ -251,6 +252,11 @@ class Runner:
         self._tick()  # one reading at rest after the stop
         return start, self.now(), motion
 
+    def _record(self, seg: Segment) -> None:
+        self.writer.append_segment(seg)
+        self._segments.append(seg)
+        self.segment_index += 1
+
     def _settle(self, turn: Step) -> None:
         """A rest before a repeated turn, recorded as a rest segment if it passes its check, so
         that the repeat has still time before it as every other turn does."""
@@ -258,9 +264,7 @@ class Runner:
         self._data = _StepData()
         t_start, t_end = self._run_rest(rest)
         if self._check_rest(rest, self._data) is None:
-            self.writer.append_segment(
-                Segment(self.segment_index, "rest", None, 0, 0.0, t_start, t_end))
-            self.segment_index += 1
+            self._record(Segment(self.segment_index, "rest", None, 0, 0.0, t_start, t_end))
 
     def _reposition(self, step: Step) -> None:
         """Undo a failed turn (turn back the same way it came), without recording a segment."""
@@ -285,19 +289,24 @@ class Runner:
                 "gimbal.sample_hz, lower imu.odr_hz, or use a faster I2C bus (400 kHz)",
             )
         j = self.ids.index(step.motor)
+        reached = 0.0
         if et.size >= 5:
+            # The speed held over the middle half of the turn (its median), so that a servo which
+            # reaches the speed but then drags is caught too.
             ang = ea[:, j]
             span = max(1, int(round(0.1 / max(np.median(np.diff(et)), 1e-6))))
             v = np.abs(ang[span:] - ang[:-span]) / np.maximum(et[span:] - et[:-span], 1e-9)
-            reached = float(v.max()) if v.size else 0.0
-        else:
-            reached = 0.0
+            tv = 0.5 * (et[span:] + et[:-span])
+            quarter = (et[-1] - et[0]) / 4
+            mid = (tv >= et[0] + quarter) & (tv <= et[-1] - quarter)
+            if mid.any():
+                reached = float(np.median(v[mid]))
         commanded = float(getattr(motion, "speed", step.speed))
         self.result.speeds[step.motor] = reached
         if reached < self.speed_fraction * commanded:
             return CheckFailure(
                 "speed", self.step_index,
-                f"servo {step.motor} reached only {reached:.2f} of {commanded:.2f} rad/s: lower "
+                f"servo {step.motor} held only {reached:.2f} of {commanded:.2f} rad/s: lower "
                 "the speed (protocol.speed_dps), check the supply voltage, or free the joint",
             )
         return None
@@ -337,6 +346,14 @@ class Runner:
             )
         return None
 
+    def turn_times(self) -> dict[int, list[float]]:
+        """Mid-times (recording clock) of each servo's recorded turns."""
+        out: dict[int, list[float]] = {}
+        for seg in self._segments:
+            if seg.kind == "rotate" and seg.motor is not None:
+                out.setdefault(seg.motor, []).append(0.5 * (seg.t_start + seg.t_end))
+        return out
+
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
         """Carry out every step; the recording gets every sample and segment.
@@ -364,11 +381,9 @@ class Runner:
                         t_start, t_end, motion = self._run_turn(step)
                         failure = self._check_turn(step, motion, self._data)
                     if failure is None:
-                        self.writer.append_segment(Segment(
-                            self.segment_index, step.kind, step.motor, step.direction,
-                            float(getattr(motion, "speed", step.speed)) if step.kind ==
-                            "rotate" else 0.0, t_start, t_end))
-                        self.segment_index += 1
+                        speed = float(motion.speed) if step.kind == "rotate" else 0.0
+                        self._record(Segment(self.segment_index, step.kind, step.motor,
+                                             step.direction, speed, t_start, t_end))
                         break
                     self.result.repeats.append(failure)
                     if attempt == 2:

@@ -57,6 +57,22 @@ class SimJig:
     imu_address: int
     truth: SensorTruth
 
+    def turn_axes(
+        self, ids: list[int], turn_times: dict[int, list[float]], t0: float
+    ) -> dict[str, list[float]]:
+        """Each servo's true axis in the sensor frame at the middle of its turns (the mean over
+        its turns), ``turn_times`` on the recording clock that starts at ``t0`` on the jig's."""
+        out = {}
+        for j, sid in enumerate(ids):
+            times = turn_times.get(sid)
+            if not times:
+                out[str(sid)] = self.jig.home_axes[sid].tolist()
+                continue
+            axes = self.jig.joint_axes_sensor(np.asarray(times) + t0)[:, j, :]
+            u = axes.mean(axis=0)
+            out[str(sid)] = (u / np.linalg.norm(u)).tolist()
+        return out
+
     @property
     def chip(self) -> Any:
         """The emulated IMU chip (fault knobs)."""
@@ -152,7 +168,9 @@ def axis_truth_deg(sim: SimJig) -> dict[str, float]:
 
 #: ``--sim-fault`` kinds: what each takes, what it does.
 FAULTS: dict[str, tuple[str, str]] = {
-    "stall": ("SERVO:AT[:FRACTION]", "servo reaches only FRACTION (default 0.5) of its speed"),
+    "stall": ("SERVO:AT[:FRACTION[:DURATION]]",
+              "servo reaches only FRACTION (default 0.5) of its speed, for DURATION s (default: "
+              "for good)"),
     "silent": ("SERVO:AT", "servo stops answering"),
     "alert": ("SERVO:AT[:BITS]", "servo raises a hardware error (default overload, 32)"),
     "slip": ("AT:DEG", "the sensor's mount slips by DEG degrees"),
@@ -208,7 +226,12 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
 
     if kind == "stall":
         frac = num(2, float, 0.5)
-        servo(0).stall_at(at(1), frac)
+        s = servo(0)
+        s.stall_at(at(1), frac)
+        if len(parts) > 3:
+            s.clear_stall_at(at(1) + num(3))
+            return (f"servo {parts[0]} stalls to {frac:.0%} of its speed at {num(1):g} s for "
+                    f"{num(3):g} s")
         return f"servo {parts[0]} stalls to {frac:.0%} of its speed at {num(1):g} s"
     if kind == "silent":
         servo(0).go_silent(at(1))

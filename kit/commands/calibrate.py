@@ -56,9 +56,10 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
-                   help="arm a fault of the emulated jig (repeatable): stall:SERVO:AT[:FRACTION],"
-                        " silent:SERVO:AT, alert:SERVO:AT[:BITS], slip:AT:DEG, fifo:CAPACITY, "
-                        "nack:PROBABILITY, imu-dead:AT (AT: seconds into the recording)")
+                   help="arm a fault of the emulated jig (repeatable): "
+                        "stall:SERVO:AT[:FRACTION[:S]], silent:SERVO:AT, alert:SERVO:AT[:BITS], "
+                        "slip:AT:DEG, fifo:CAPACITY, nack:PROBABILITY, imu-dead:AT "
+                        "(AT: seconds into the recording)")
     p.add_argument("--port", help="servo serial port (gimbal.port)")
     p.add_argument("--baud", type=int, help="servo bus speed (gimbal.baud)")
     p.add_argument("--imu-model", help="imu.model")
@@ -159,8 +160,30 @@ class Jig:
             self.imu.close()
 
 
-def choose_plan(cfg: Any, gimbal: Any, imu: Any) -> Any:
-    """The protocol: planned for this servo and gyro, or the paper's; fixed values override."""
+def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | None:
+    """The gyro's white noise per sample at rest (rad/s), from a short stream before the
+    protocol (first differences; the median over the axes), for the planner; None if the stream
+    gave too few samples."""
+    import numpy as np
+
+    imu.start()
+    try:
+        end = clock.monotonic() + seconds
+        rates = []
+        while clock.monotonic() < end:
+            clock.sleep(0.02)
+            rates.append(imu.read().rate)
+    finally:
+        imu.stop()
+    x = np.concatenate(rates) if rates else np.zeros((0, 3))
+    if x.shape[0] < 20:
+        return None
+    return float(np.median(np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0) / 2)))
+
+
+def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:
+    """The protocol: planned for this servo and gyro (and its measured noise), or the paper's;
+    fixed values override."""
     from dataclasses import replace
 
     from calib.design import jig_time, paper_plan, plan_protocol
@@ -168,12 +191,14 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any) -> Any:
 
     p = cfg["protocol"]
     accel = float(cfg["gimbal"]["acceleration"])
+    noise = {} if noise_std is None else {"noise_std": noise_std}
     if p["name"] == "paper":
-        plan = paper_plan(accel=accel)
+        plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
     else:
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
-                             time_budget_s=p["time_budget_s"], odr_hz=imu.odr_hz, accel=accel)
+                             time_budget_s=p["time_budget_s"], odr_hz=imu.odr_hz, accel=accel,
+                             **noise)
     fixed = {}
     if p["speed_dps"] > 0:
         fixed["speed"] = math.radians(p["speed_dps"])
@@ -222,7 +247,8 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
     quiet = getattr(args, "quiet", False)
     try:
         with jig.gimbal:
-            plan = choose_plan(cfg, jig.gimbal, jig.imu)
+            noise_std = measure_still_noise(jig.imu, jig.clock)
+            plan = choose_plan(cfg, jig.gimbal, jig.imu, noise_std)
             steps = build_steps(plan, cfg["gimbal"]["ids"])
             sensor = jig.imu.info.manifest()
             gimbal_info = {"motors": [
@@ -231,6 +257,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
             protocol = {"name": cfg["protocol"]["name"], "speed": plan.speed,
                         "turns": plan.turns, "rest_s": plan.rest_s, "acceleration": plan.accel,
                         "planned_jig_time_s": plan.jig_time_s,
+                        "planning_noise_std": noise_std,
                         "sample_hz": cfg["gimbal"]["sample_hz"]}
             truth = None
             if jig.sim is not None:
@@ -259,6 +286,12 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
                     runner.run()
                 finally:
                     progress.close()
+                if jig.sim is not None:
+                    # The true axis of each servo during its turns (the holding servos rest
+                    # somewhere within their ticks, which tilts the axes slightly off the
+                    # ideal home pose).
+                    writer.update_manifest(truth={**truth, "axes": jig.sim.turn_axes(
+                        cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
                 writer.finish()
     except (KeyboardInterrupt, TerminatedBySignal) as exc:
         interrupted = exc

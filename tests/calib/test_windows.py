@@ -18,6 +18,7 @@ def _run(seed, protocol, **kw):
 
 
 def _extract(run, **kw):
+    kw.setdefault("window", "auto")
     return extract_observations(run.imu_t, run.imu_rate, run.enc_t, run.enc_motor,
                                 run.enc_angle, run.segments, imu_temp=run.imu_temp, **kw)
 
@@ -38,7 +39,7 @@ def _true_mean(run, corners):
 def test_multi_turn_windows_are_tapered_and_exact(seed):
     # Accelerating and decelerating turns, 5 % ripple, 3 ms encoder jitter, IMU clock 1 % off.
     run = _run(seed, SimProtocol(speed=3.0, turns=4, rest_s=1.0, ripple=0.05))
-    ex = _extract(run)
+    ex = _extract(run, window="tapered")
     assert len(ex.windows) == 6 and ex.warnings == ()
     obs = ex.observations
     for i, w in enumerate(ex.windows):
@@ -61,13 +62,43 @@ def test_papers_one_turn_protocol_uses_rest_to_rest_windows(seed):
         # One revolution between still angles: the encoder's quantisation of the two still
         # angles (q/√12 each, q = 2π/4096) is a floor of about 1e-4 relative, which rate_std
         # reports.
-        rate_std = ex.observations.rate_std[i]
+        obs = ex.observations
+        rate_std = np.sqrt(obs.reference_covariance()[i, i])
         q = 2 * np.pi / 4096
         assert rate_std == pytest.approx(np.sqrt(2 / 12) * q * abs(w.rate) / (2 * np.pi), rel=0.01)
         assert abs(w.rate - truth) < 4 * rate_std
         assert abs(w.rate - truth) / abs(truth) < 3e-4
         z = (ex.observations.mean[i] - _true_mean(run, w.corners)) / ex.observations.mean_std[i]
         assert np.all(np.abs(z) < 4.5)
+
+
+def test_auto_chooses_the_window_with_the_least_predicted_variance():
+    protocol = SimProtocol(speed=3.0, turns=3, rest_s=1.0)
+    rng = np.random.default_rng(14)
+    k, b = draw_sensors(rng, 1)
+    axes = draw_mount_axes(rng, 1)[0]
+    kinds = {}
+    for noise in (0.0025, 0.2):
+        run = simulate_raw_run(np.random.default_rng(15), k[0], b[0], axes, protocol, noise,
+                               enc_rate_hz=200.0)
+        kinds[noise] = {w.kind for w in _extract(run).windows}
+    # A quiet gyro: the still angles' quantisation dominates, so the steady revolutions win.
+    # A noisy gyro: its noise dominates, so the window with every sample of the turn wins.
+    assert kinds == {0.0025: {"tapered"}, 0.2: {"rest-to-rest"}}
+
+
+def test_a_servos_two_turns_share_the_still_angle_between_them():
+    run = _run(3, SimProtocol(speed=np.radians(60), turns=1, rest_s=3.0))
+    obs = _extract(run).observations
+    # Per servo: start still, (turn -), shared still, (turn +), end still -> 3 angles a servo.
+    assert obs.n_still_angles == 9
+    for i in range(0, 6, 2):
+        assert obs.motor[i] == obs.motor[i + 1]
+        assert obs.ref_end[i] == obs.ref_start[i + 1]
+        assert len({obs.ref_start[i], obs.ref_end[i], obs.ref_end[i + 1]}) == 3
+    C = obs.reference_covariance()
+    # The shared angle correlates the two windows negatively (it ends one and starts the other).
+    assert C[0, 1] < 0 and C[0, 2] == 0
 
 
 def test_rests_measure_minus_the_bias():

@@ -8,6 +8,7 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.dynamixel.control_table import (
     ACCELERATION_UNIT_RAD_S2,
+    POSITION_UNIT_RAD,
     VELOCITY_UNIT_RAD_S,
 )
 from drivers.emulated.dxl import EmulatedServo, MotorParams
@@ -28,6 +29,28 @@ def w(s, name, value):
     return err
 
 
+def test_a_position_move_rests_somewhere_within_its_goal_tick():
+    # The position loop stops once Present Position reads the goal: the shaft ends within that
+    # tick, not on its centre (MotorParams.hold_band), and the encoder reads the goal exactly.
+    offsets = []
+    for seed in range(12):
+        clock, s = servo(seed=seed)
+        assert w(s, "Operating Mode", 4) == 0  # extended position
+        w(s, "Profile Velocity", 100)
+        w(s, "Profile Acceleration", 50)
+        w(s, "Torque Enable", 1)
+        goal = s.register("Present Position") + 4096
+        w(s, "Goal Position", goal)
+        run(clock, s, 6.0)
+        assert s.register("Present Position") == goal
+        angle, rate = s.true_motion(np.array([clock.monotonic()]))
+        true_ticks = s._abs0 + angle[0] / POSITION_UNIT_RAD  # the shaft, in encoder ticks
+        offsets.append(true_ticks - round(true_ticks))
+        assert abs(rate[0]) < 1e-9
+    offsets = np.array(offsets)
+    assert np.all(np.abs(offsets) <= 0.5) and offsets.std() > 0.1
+
+
 def run(clock, s, seconds, step=0.01):
     """Advance the clock, reading the servo now and then as a host would."""
     end = clock.monotonic() + seconds
@@ -37,7 +60,7 @@ def run(clock, s, seconds, step=0.01):
 
 
 def test_trapezoidal_profile_ends_exactly_on_goal_with_the_datasheet_timing():
-    clock, s = servo()
+    clock, s = servo(motor_params=MotorParams(hold_band=0.0))
     assert w(s, "Operating Mode", 4) == 0
     assert w(s, "Torque Enable", 1) == 0
     v_units, a_units = 42, 10

@@ -277,6 +277,11 @@ class MotorParams:
         How far ahead of a read the grid is computed in one block.
     history_s : float
         How much grid history is kept for late readers (the IMU's FIFO, tests).
+    hold_band : float
+        Where a position move comes to rest within the encoder tick of its goal, as a fraction
+        of a tick: the true angle ends at ``goal + U(-hold_band/2, +hold_band/2)`` ticks (the
+        position loop stops once Present Position reads the goal, so the shaft may rest
+        anywhere in the tick). 0 ends exactly on the tick's centre.
     """
 
     dt: float = 5e-4
@@ -287,6 +292,7 @@ class MotorParams:
     envelope_speed: float = 0.3
     lookahead_s: float = 0.1
     history_s: float = 120.0
+    hold_band: float = 1.0
 
 
 @dataclass

@@ -575,6 +575,9 @@ class EmulatedServo:
         elif mode in (OPERATING_MODES["position"], OPERATING_MODES["extended_position"],
                       OPERATING_MODES["current_based_position"]):
             goal = self._angle_for_register(self._get("Goal Position"))
+            band = self.motor.params.hold_band
+            if band:  # the shaft rests somewhere within the goal's tick (MotorParams.hold_band)
+                goal += float(self._rng.uniform(-band / 2, band / 2)) * POSITION_UNIT_RAD
             vmax, accel = self._profile()
             if self._mem[10] & 0x04:  # time-based profile: 112 = total ms, 108 = accel ms
                 total = self._get("Profile Velocity") * 1e-3
