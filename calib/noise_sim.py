@@ -40,6 +40,7 @@ import numpy as np
 
 from calib.errors import CalibInputError
 from calib.model import GyroCalibration
+from calib.validation import vec3
 
 __all__ = [
     "FLICKER_FLOOR",
@@ -56,20 +57,6 @@ FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 
 #: MPU-9250 temperature sensor resolution, °C per LSB (TEMP_OUT / 333.87 + 21).
 _TEMP_LSB_C = 1.0 / 333.87
-
-
-def _vec3(value: object, name: str, *, nonneg: bool = False, positive: bool = False) -> np.ndarray:
-    try:
-        a = np.broadcast_to(np.asarray(value, dtype=float), (3,)).copy()
-    except (TypeError, ValueError):
-        raise CalibInputError(f"{name} must be a number or 3 numbers, got {value!r}") from None
-    if not np.all(np.isfinite(a)):
-        raise CalibInputError(f"{name} must be finite, got {a.tolist()}")
-    if nonneg and np.any(a < 0):
-        raise CalibInputError(f"{name} must not be negative, got {a.tolist()}")
-    if positive and np.any(a <= 0):
-        raise CalibInputError(f"{name} must be positive, got {a.tolist()}")
-    return a
 
 
 def _positive(value: float, name: str) -> float:
@@ -105,7 +92,7 @@ class NoiseModel:
 
     def __post_init__(self) -> None:
         for name in ("noise_density", "rate_random_walk", "bias_instability"):
-            a = _vec3(getattr(self, name), name, nonneg=True)
+            a = vec3(getattr(self, name), name, nonneg=True)
             object.__setattr__(self, name, tuple(float(x) for x in a))
 
     def white_std(self, odr_hz: float) -> np.ndarray:
@@ -198,7 +185,7 @@ def flicker_noise(
     bias_instability : array_like, shape (3,)
         ``B`` per axis, rad/s.
     """
-    B = _vec3(bias_instability, "bias_instability", nonneg=True)
+    B = vec3(bias_instability, "bias_instability", nonneg=True)
     fs = _positive(odr_hz, "odr_hz")
     if n < 2:
         raise CalibInputError(f"n must be at least 2, got {n}")
@@ -270,8 +257,8 @@ def simulate_still(
     n = int(round(_positive(duration_s, "duration_s") * fs))
     if n < 16:
         raise CalibInputError(f"duration_s gives only {n} samples at {fs} Hz; give a longer one")
-    b0 = _vec3(bias, "bias")
-    k = _vec3(scale, "scale", positive=True)
+    b0 = vec3(bias, "bias")
+    k = vec3(scale, "scale", positive=True)
     walk, white = _bias_and_noise(rng, n, fs, model)
     true_bias = b0[None, :] + walk
     t = np.arange(n) / fs
@@ -387,9 +374,9 @@ def simulate_session(
         raise CalibInputError(f"ramp_s must be a non-negative number, got {ramp_s!r}")
     if not (0 <= ripple < 0.5):
         raise CalibInputError(f"ripple must be in [0, 0.5), got {ripple!r}")
-    b0 = _vec3(bias, "bias")
-    k = _vec3(scale, "scale", positive=True)
-    c = _vec3(tempco, "tempco")
+    b0 = vec3(bias, "bias")
+    k = vec3(scale, "scale", positive=True)
+    c = vec3(tempco, "tempco")
     if axes is None:
         u = np.array([1.0, 2.0, 3.0]) / math.sqrt(14.0)
         ang = 0.05
@@ -454,7 +441,7 @@ def simulate_session(
     step_t = None
     if bias_step is not None:
         step_t = float(bias_step[0])
-        delta = _vec3(bias_step[1], "bias_step delta")
+        delta = vec3(bias_step[1], "bias_step delta")
         true_bias = true_bias + (t >= step_t)[:, None] * delta[None, :]
     rate = true_rate / k[None, :] - true_bias + white
     return SimSession(

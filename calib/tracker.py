@@ -67,6 +67,7 @@ from scipy.stats import chi2
 from calib.errors import CalibInputError
 from calib.model import GyroCalibration
 from calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
+from calib.validation import vec3
 
 if TYPE_CHECKING:
     from calib.allan import NoiseCharacterisation
@@ -83,20 +84,6 @@ __all__ = [
 ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
 
 _KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
-
-
-def _vec3(value: Any, name: str, *, nonneg: bool = False, positive: bool = False) -> np.ndarray:
-    try:
-        a = np.broadcast_to(np.asarray(value, dtype=float), (3,)).copy()
-    except (TypeError, ValueError):
-        raise CalibInputError(f"{name} must be a number or 3 numbers, got {value!r}") from None
-    if not np.all(np.isfinite(a)):
-        raise CalibInputError(f"{name} must be finite, got {a.tolist()}")
-    if nonneg and np.any(a < 0):
-        raise CalibInputError(f"{name} must not be negative, got {a.tolist()}")
-    if positive and np.any(a <= 0):
-        raise CalibInputError(f"{name} must be positive, got {a.tolist()}")
-    return a
 
 
 def _pos(value: Any, name: str, *, allow_zero: bool = False) -> float:
@@ -177,7 +164,7 @@ class TrackerSettings:
             ("tempco_std", {"positive": True}),
             ("tempco_random_walk", {"nonneg": True}),
         ):
-            a = _vec3(getattr(self, name), name, **kw)
+            a = vec3(getattr(self, name), name, **kw)
             object.__setattr__(self, name, tuple(float(x) for x in a))
         if self.t_ref_c is not None and not math.isfinite(float(self.t_ref_c)):
             raise CalibInputError(f"t_ref_c must be a finite temperature, got {self.t_ref_c!r}")
@@ -383,13 +370,13 @@ class BiasTracker:
         self.settings = settings
         self.calibration = calibration
         if initial_bias is not None:
-            b0 = _vec3(initial_bias, "initial_bias")
+            b0 = vec3(initial_bias, "initial_bias")
         elif calibration is not None:
             b0 = np.asarray(calibration.bias)
         else:
             b0 = np.zeros(3)
         if initial_bias_std is not None:
-            b0_std = _vec3(initial_bias_std, "initial_bias_std", positive=True)
+            b0_std = vec3(initial_bias_std, "initial_bias_std", positive=True)
         elif calibration is not None:
             b0_std = np.asarray(calibration.bias_std)
             if not np.all(np.isfinite(b0_std) & (b0_std > 0)):

@@ -150,15 +150,9 @@ def _table(nc: Any, truth: Any) -> str:
 
 def plot_allan(nc: Any, path: str) -> None:
     """Draw the Allan deviation with its one-sigma band and the fitted noise model to ``path``."""
-    try:
-        import matplotlib
+    from kit.plots import require_matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise InputError(
-            "plotting needs matplotlib: pip install 'gyrocal[plot]' (or drop --plot)"
-        ) from None
+    plt = require_matplotlib()
     from calib.noise_sim import FLICKER_FLOOR
 
     tau = nc.tau_s

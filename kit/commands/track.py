@@ -745,15 +745,9 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
 
 def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
     """Draw the bias estimate of each axis with its 3-sigma band (and the truth of a --sim)."""
-    try:
-        import matplotlib
+    from kit.plots import require_matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise InputError(
-            "plotting needs matplotlib: pip install 'gyrocal[plot]' (or drop --plot)"
-        ) from None
+    plt = require_matplotlib()
     fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
     step = max(1, tr.t.size // 20000)
     t = tr.t[::step]
