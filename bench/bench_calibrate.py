@@ -86,6 +86,11 @@ def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     seeds = list(range(6 if quick else 30))
     workers = min(2, os.cpu_count() or 1)
+    # One run at a time first: the wall time a user sees.
+    alone = [_run((100 + s, "auto"))["wall_s"] for s in range(3)]
+    print_table(["runs", "wall s median", "wall s min", "wall s max"],
+                [[len(alone), float(np.median(alone)), min(alone), max(alone)]],
+                title="gyrocal calibrate --sim (default protocol), one run at a time")
     jobs = [(s, "auto") for s in seeds] + [(s, "paper") for s in seeds]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(workers) as pool:
