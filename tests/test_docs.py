@@ -1,0 +1,525 @@
+"""The documents are part of the product: every command in them must work.
+
+Every fenced block of ``hardware_docs/*.md`` and ``README.md`` is run, document by document, in the
+order it appears, in a fresh working directory per document, so a command can read the files an
+earlier command of the same document wrote:
+
+* ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
+  blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
+  through :func:`kit.cli.main` and must exit 0. Other shell lines (``pip``, ``sudo``, ``cd``,
+  ``i2cdetect``, ``udevadm``, ...) are not run.
+* ``python`` blocks run with ``exec`` in the document's directory; ``c`` blocks with a ``main`` are
+  compiled with ``-Wall -Wextra -Werror`` and run (skipped without a C compiler); ``toml`` blocks
+  must be valid gyrocal configurations, and ``json`` blocks valid JSON (a Calibration v1 document
+  must pass gyrocal's reader).
+
+An HTML comment right before a block changes what happens to it:
+
+``<!-- doctest: sim -->``
+    add ``--sim`` to the commands that would talk to the jig (``calibrate``, ``doctor``,
+    ``verify`` without ``--recording``, ``track --live``): the emulated jig stands in for it.
+``<!-- doctest: file NAME -->``
+    also write the block's text to ``NAME`` in the document's directory (a config the next
+    commands read).
+``<!-- doctest: exit N -->``
+    the block's commands must exit ``N`` instead of 0.
+``<!-- doctest: emulated-servo -->``
+    run the Python block as a script with ``PORT 2`` as arguments, ``PORT`` being a factory-new
+    servo emulated by ``gyrocal emulate --pty`` in a subprocess.
+``<!-- doctest: skip (needs hardware: why) -->``
+    do not run the block; the reason is required.
+
+Besides, the tables the documents promise to keep in step with the code are compared with it: the
+configuration keys with :data:`kit.config.SCHEMA`, the exit codes with
+:data:`kit.errors.EXIT_CODES`, the quoted error messages with the source, and the Recording v1 and
+Calibration v1 field lists with the files a real ``gyrocal calibrate --sim`` run wrote. Relative
+links and their anchors must resolve.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import re
+import select
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from calib.model import GyroCalibration
+from kit.cli import main as gyrocal_main
+from kit.config import SCHEMA, load_config
+from kit.errors import EXIT_CODES
+from kit.recording import ENCODER_HEADER, IMU_HEADER, SEGMENTS_HEADER
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC_DIR = ROOT / "hardware_docs"
+DOCS = [*sorted(DOC_DIR.glob("*.md")), ROOT / "README.md"]
+
+SHELL_LANGS = {"sh", "bash", "shell", "console"}
+FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
+MARKER = re.compile(r"^<!--\s*doctest:\s*(.*?)\s*-->$")
+SHELL_OPERATORS = {"|", "||", ";", "&", ">", ">>", "<", "2>", "2>&1"}
+#: The only directives a marker may carry (``skip`` needs a reason in parentheses).
+DIRECTIVE = re.compile(
+    r"^(sim|emulated-servo|file\s+(?P<file>[\w.\-]+)|exit\s+(?P<exit>\d+)"
+    r"|skip\s+\((?P<reason>[^)]+)\))$"
+)
+
+
+def _name(path: Path) -> str:
+    return str(path.relative_to(ROOT))
+
+
+# --------------------------------------------------------------------------------- parsing
+@dataclass(frozen=True)
+class Block:
+    """One fenced block of a document, with the marker that preceded it (if any)."""
+
+    doc: str
+    line: int
+    lang: str
+    text: str
+    directive: str | None
+
+    @property
+    def where(self) -> str:
+        return f"{self.doc}:{self.line}"
+
+
+def parse_blocks(path: Path) -> list[Block]:
+    """The fenced blocks of a Markdown file, in order; a marker binds to the next block only."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    blocks: list[Block] = []
+    pending: tuple[int, str] | None = None
+    i = 0
+    while i < len(lines):
+        stripped = lines[i].strip()
+        marker = MARKER.match(stripped)
+        fence = FENCE.match(lines[i])
+        if marker:
+            if pending is not None:
+                raise AssertionError(f"{_name(path)}:{pending[0]}: marker not followed by a block")
+            if not DIRECTIVE.match(marker.group(1)):
+                raise AssertionError(f"{_name(path)}:{i + 1}: unknown doctest directive "
+                                     f"{marker.group(1)!r}")
+            pending = (i + 1, marker.group(1))
+        elif fence:
+            indent, lang = len(fence.group(1)), fence.group(2)
+            body = []
+            i += 1
+            while i < len(lines) and lines[i].strip() != "```":
+                body.append(lines[i][indent:] if lines[i][:indent].strip() == "" else lines[i])
+                i += 1
+            if i == len(lines):
+                raise AssertionError(f"{_name(path)}: unterminated code block")
+            start = i - len(body)
+            blocks.append(Block(_name(path), start, lang, "\n".join(body) + "\n",
+                                pending[1] if pending else None))
+            pending = None
+        elif stripped and pending is not None:
+            raise AssertionError(f"{_name(path)}:{pending[0]}: a doctest marker must come right "
+                                 "before its code block")
+        i += 1
+    if pending is not None:
+        raise AssertionError(f"{_name(path)}:{pending[0]}: marker not followed by a block")
+    return blocks
+
+
+def shell_commands(block: Block) -> list[list[str]]:
+    """The ``gyrocal`` commands of a shell block, as argv lists without the ``gyrocal``."""
+    raw = block.text.splitlines()
+    if block.lang == "console":
+        raw = [line[2:] for line in raw if line.startswith("$ ")]
+    logical: list[str] = []
+    for line in raw:
+        if logical and logical[-1].endswith("\\"):
+            logical[-1] = logical[-1][:-1] + " " + line
+        else:
+            logical.append(line)
+    out = []
+    for line in logical:
+        tokens = shlex.split(line, comments=True)
+        part: list[str] = []
+        for tok in [*tokens, "&&"]:
+            if tok != "&&":
+                part.append(tok)
+                continue
+            if part and part[0] == "gyrocal":
+                bad = SHELL_OPERATORS.intersection(part)
+                if bad:
+                    raise AssertionError(f"{block.where}: a gyrocal command with shell operators "
+                                         f"{sorted(bad)} cannot be checked: {line!r}")
+                out.append(part[1:])
+            part = []
+    return out
+
+
+def needs_jig(argv: list[str]) -> bool:
+    """Whether a command talks to the jig (so that ``doctest: sim`` must add ``--sim``)."""
+    if not argv:
+        return False
+    if argv[0] in ("calibrate", "doctor"):
+        return True
+    if argv[0] == "verify":
+        return "--recording" not in argv
+    return argv[0] == "track" and "--live" in argv
+
+
+def table_rows(section: str) -> list[list[str]]:
+    """The body rows of the Markdown table(s) in ``section``, as lists of cells."""
+    rows = []
+    for line in section.splitlines():
+        line = line.strip()
+        if not (line.startswith("|") and line.endswith("|")):
+            continue
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line[1:-1])]
+        if all(re.fullmatch(r":?-+:?", c) for c in cells):
+            continue
+        rows.append(cells)
+    return rows[1:] if rows else rows  # drop the header row
+
+
+def code_spans(cell: str) -> list[str]:
+    """The contents of the inline code spans in a table cell (single or double backticks)."""
+    spans = re.findall(r"``\s?(.+?)\s?``|`([^`]+)`", cell)
+    return [a or b for a, b in spans]
+
+
+def section(path: Path, start: str, end: str) -> str:
+    """The text between two HTML-comment markers of a document."""
+    text = path.read_text(encoding="utf-8")
+    a, b = text.find(start), text.find(end)
+    assert a >= 0 and b > a, f"{_name(path)}: no section between {start!r} and {end!r}"
+    return text[a + len(start):b]
+
+
+# --------------------------------------------------------------------------------- running
+@dataclass
+class DocRun:
+    """What running one document's blocks produced."""
+
+    workdir: Path
+    log: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+@contextlib.contextmanager
+def _cwd(path: Path) -> Iterator[None]:
+    old = os.getcwd()
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
+def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str]) -> None:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = gyrocal_main(argv)
+    log.append(f"{where}: gyrocal {shlex.join(argv)} -> {code}")
+    if code != expect:
+        raise AssertionError(
+            f"{where}: `gyrocal {shlex.join(argv)}` exited {code}, expected {expect}\n"
+            f"--- stdout ---\n{out.getvalue()[-3000:]}\n--- stderr ---\n{err.getvalue()[-3000:]}"
+        )
+
+
+def _exec_python(block: Block, argv: list[str] | None = None) -> None:
+    code = compile(block.text, block.where, "exec")
+    old_argv = sys.argv
+    if argv is not None:
+        sys.argv = argv
+    out = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(out):
+            exec(code, {"__name__": "__main__"})  # the documents' own examples
+    except SystemExit as exc:
+        if exc.code not in (None, 0):
+            raise AssertionError(f"{block.where}: the script exited with {exc.code!r}\n"
+                                 f"{out.getvalue()}") from None
+    finally:
+        sys.argv = old_argv
+
+
+@contextlib.contextmanager
+def _emulated_servo() -> Iterator[str]:
+    """A factory-new servo (ID 1, 57 600 bps) behind a pseudo-terminal; yields its device."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "kit", "emulate", "--pty", "--ids", "1", "--baud", "57600",
+         "--duration", "60"],
+        cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 30)
+        assert ready, "gyrocal emulate --pty printed no device path within 30 s"
+        device = proc.stdout.readline().strip()  # type: ignore[union-attr]
+        assert device.startswith("/dev/"), f"gyrocal emulate --pty printed {device!r}"
+        yield device
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _run_c(block: Block, workdir: Path, run: DocRun) -> None:
+    cc = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+    if cc is None:
+        run.skipped.append(f"{block.where}: no C compiler")
+        return
+    src = workdir / f"example_{block.line}.c"
+    src.write_text(block.text, encoding="utf-8")
+    exe = workdir / f"example_{block.line}"
+    done = subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-o", str(exe),
+                           str(src), "-lm"], cwd=workdir, capture_output=True, text=True,
+                          check=False)
+    assert done.returncode == 0, f"{block.where}: does not compile:\n{done.stderr}"
+    ran = subprocess.run([str(exe)], cwd=workdir, capture_output=True, text=True, check=False,
+                         timeout=30)
+    assert ran.returncode == 0, f"{block.where}: exited {ran.returncode}:\n{ran.stderr}"
+    run.log.append(f"{block.where}: C example printed {ran.stdout.strip()!r}")
+
+
+def run_document(path: Path, workdir: Path) -> DocRun:
+    """Run every block of ``path`` in order in ``workdir``."""
+    run = DocRun(workdir)
+    t0 = time.perf_counter()
+    with _cwd(workdir):
+        for block in parse_blocks(path):
+            d = DIRECTIVE.match(block.directive) if block.directive else None
+            if d and d.group("reason"):
+                run.skipped.append(f"{block.where}: {d.group('reason')}")
+                continue
+            if d and d.group("file"):
+                (workdir / d.group("file")).write_text(block.text, encoding="utf-8")
+            expect = int(d.group("exit")) if d and d.group("exit") else 0
+            if block.lang in SHELL_LANGS:
+                commands = shell_commands(block)
+                if block.directive == "sim":
+                    assert any(needs_jig(c) for c in commands), (
+                        f"{block.where}: 'doctest: sim' on a block with no jig command")
+                for argv in commands:
+                    if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
+                        argv = [*argv, "--sim"]
+                    _run_gyrocal(argv, block.where, expect, run.log)
+            elif block.lang == "python":
+                if block.directive == "emulated-servo":
+                    with _emulated_servo() as device:
+                        _exec_python(block, ["script.py", device, "2"])
+                else:
+                    _exec_python(block)
+                run.log.append(f"{block.where}: python block ran")
+            elif block.lang == "c" and re.search(r"\bint\s+main\s*\(", block.text):
+                _run_c(block, workdir, run)
+            elif block.lang == "json":
+                doc = json.loads(block.text)
+                if isinstance(doc, dict) and doc.get("format") == "gyrocal-calibration":
+                    GyroCalibration.from_dict(doc)  # raises CalibrationFormatError
+            elif block.lang == "toml":
+                name = d.group("file") if d and d.group("file") else f"check_{block.line}.toml"
+                cfg_path = workdir / name
+                if not cfg_path.exists():
+                    cfg_path.write_text(block.text, encoding="utf-8")
+                load_config(cfg_path)  # raises InputError naming the bad key
+            else:
+                assert block.directive is None or (d and d.group("file")), (
+                    f"{block.where}: directive {block.directive!r} on a {block.lang or 'plain'} "
+                    "block does nothing")
+    run.seconds = time.perf_counter() - t0
+    return run
+
+
+class DocRunner:
+    """Runs each document once per test session and remembers what it produced."""
+
+    def __init__(self, factory: pytest.TempPathFactory) -> None:
+        self.factory = factory
+        self.runs: dict[str, DocRun] = {}
+        self.failures: dict[str, BaseException] = {}
+
+    def __call__(self, path: Path) -> DocRun:
+        key = _name(path)
+        if key in self.failures:
+            raise self.failures[key]
+        if key not in self.runs:
+            workdir = self.factory.mktemp(path.stem)
+            try:
+                self.runs[key] = run_document(path, workdir)
+            except BaseException as exc:  # remember, so a second caller sees the same failure
+                self.failures[key] = exc
+                raise
+        return self.runs[key]
+
+
+@pytest.fixture(scope="module")
+def docs(tmp_path_factory: pytest.TempPathFactory) -> DocRunner:
+    return DocRunner(tmp_path_factory)
+
+
+# --------------------------------------------------------------------------------- tests
+@pytest.mark.parametrize("path", DOCS, ids=_name)
+def test_every_command_in_the_document_works(path: Path, docs: DocRunner) -> None:
+    run = docs(path)
+    for reason in run.skipped:
+        assert "needs hardware" in reason or "no C compiler" in reason, (
+            f"a skipped block must say which hardware it needs: {reason}")
+
+
+def test_the_documents_run_gyrocal_commands_and_few_blocks_are_skipped(docs: DocRunner) -> None:
+    runs = [docs(p) for p in DOCS]
+    commands = sum(1 for r in runs for line in r.log if ": gyrocal " in line)
+    assert commands >= 15
+    skipped = [s for r in runs for s in r.skipped]
+    assert len(skipped) <= 3, skipped
+
+
+def test_config_table_lists_exactly_the_schema(docs: DocRunner) -> None:
+    rows = table_rows(section(DOC_DIR / "running.md", "<!-- config-table -->",
+                              "<!-- /config-table -->"))
+    keys = [code_spans(r[0])[0] for r in rows]
+    schema_keys = [f"{s}.{k}" for s, ks in SCHEMA.items() for k in ks]
+    assert keys == schema_keys, "the config table must list SCHEMA's keys in SCHEMA's order"
+    for row in rows:
+        dotted = code_spans(row[0])[0]
+        section_name, name = dotted.split(".")
+        key = SCHEMA[section_name][name]
+        (default_text,) = code_spans(row[1])
+        default = tomllib.loads(f"v = {default_text}")["v"]
+        assert default == key.default and type(default) is type(key.default), (
+            f"{dotted}: the table says {default_text}, the schema {key.default!r}")
+        if key.choices is not None:
+            allowed = tuple(tomllib.loads(f"v = {c}")["v"] for c in code_spans(row[2]))
+            assert allowed == key.choices, f"{dotted}: allowed {allowed} != {key.choices}"
+
+
+def test_exit_code_table_matches_the_code() -> None:
+    rows = table_rows(section(DOC_DIR / "running.md", "<!-- exit-codes -->",
+                              "<!-- /exit-codes -->"))
+    assert [int(r[0]) for r in rows] == list(EXIT_CODES)
+
+
+def test_quoted_messages_exist_in_the_code() -> None:
+    source = "\n".join(p.read_text(encoding="utf-8")
+                       for pkg in ("kit", "drivers", "calib") for p in (ROOT / pkg).rglob("*.py"))
+    checked = 0
+    for doc in DOCS:
+        text = doc.read_text(encoding="utf-8")
+        for part in text.split("<!-- messages -->")[1:]:
+            assert "<!-- /messages -->" in part, f"{_name(doc)}: unterminated messages table"
+            for row in table_rows(part.split("<!-- /messages -->")[0]):
+                for fragment in code_spans(row[0]):
+                    assert fragment in source, (
+                        f"{_name(doc)} quotes {fragment!r}, which no message in the code has")
+                    checked += 1
+                kind = row[1]
+                assert kind in ("FAIL", "warn") or int(kind) in EXIT_CODES, (
+                    f"{_name(doc)}: {kind!r} is neither an exit code nor a doctor line kind")
+    assert checked >= 40
+
+
+def _paths(obj: Any, prefix: str = "") -> set[str]:
+    """Field paths of a JSON document: ``a.b``, ``list[].field``, numeric keys as ``<id>``."""
+    out = {prefix} if prefix else set()
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            key = "<id>" if re.fullmatch(r"\d+", str(k)) else str(k)
+            out |= _paths(v, f"{prefix}.{key}" if prefix else key)
+    elif isinstance(obj, list) and obj and all(isinstance(x, dict) for x in obj):
+        for x in obj:
+            out |= _paths(x, f"{prefix}[]") - {f"{prefix}[]"}
+    return out
+
+
+def _check_fields(documented: list[str], real: set[str], what: str) -> None:
+    doc = set(documented)
+    assert len(doc) == len(documented), f"{what}: a field is listed twice"
+    leaves = {d for d in doc if not any(o.startswith((d + ".", d + "[]")) for o in doc)}
+    missing = sorted(
+        r for r in real
+        if r not in doc and not any(r.startswith((leaf + ".", leaf + "[]")) for leaf in leaves)
+    )
+    assert not missing, f"{what}: fields written by gyrocal but not documented: {missing}"
+    stale = sorted(doc - real)
+    assert not stale, f"{what}: documented fields gyrocal does not write: {stale}"
+
+
+def _field_table(name: str) -> list[str]:
+    rows = table_rows(section(DOC_DIR / "formats.md", f"<!-- fields: {name} -->",
+                              f"<!-- /fields: {name} -->"))
+    return [code_spans(r[0])[0] for r in rows]
+
+
+def _real_runs(docs: DocRunner) -> tuple[Path, Path]:
+    """A ``gyrocal calibrate --sim`` run (running.md) and a ``simulate-recording`` (formats.md)."""
+    cal_runs = sorted(docs(DOC_DIR / "running.md").workdir.glob("*/calibration.json"))
+    assert cal_runs, "running.md must make a calibration with gyrocal calibrate"
+    sims = [m.parent for m in docs(DOC_DIR / "formats.md").workdir.glob("*/manifest.json")
+            if json.loads(m.read_text())["protocol"].get("name") == "simulated"]
+    assert sims, "formats.md must write a recording with gyrocal simulate-recording"
+    return cal_runs[0].parent, sims[0]
+
+
+def test_recording_v1_fields_match_real_recordings(docs: DocRunner) -> None:
+    run, simulated = _real_runs(docs)
+    real: set[str] = set()
+    for rec in (run / "recording", simulated):
+        real |= _paths(json.loads((rec / "manifest.json").read_text()))
+    _check_fields(_field_table("manifest.json"), real, "formats.md manifest.json")
+    for name, header in (("imu.csv", IMU_HEADER), ("encoder.csv", ENCODER_HEADER),
+                         ("segments.csv", SEGMENTS_HEADER)):
+        assert _field_table(name) == header.split(","), f"formats.md {name} columns"
+        for rec in (run / "recording", simulated):
+            first = (rec / name).read_text().split("\n", 1)[0]
+            assert first == header, f"{rec / name} header"
+        assert f"`{header}`" in (DOC_DIR / "formats.md").read_text(), f"{name}: header line"
+
+
+def test_calibration_v1_fields_match_a_real_calibration(docs: DocRunner) -> None:
+    run, _ = _real_runs(docs)
+    real = _paths(json.loads((run / "calibration.json").read_text()))
+    _check_fields(_field_table("calibration"), real, "formats.md calibration")
+
+
+def _slug(heading: str) -> str:
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", heading.strip().lower())
+    text = re.sub(r"[^\w\- ]", "", text)
+    return text.replace(" ", "-")
+
+
+def test_relative_links_and_anchors_resolve() -> None:
+    anchors: dict[Path, set[str]] = {}
+
+    def slugs(path: Path) -> set[str]:
+        if path not in anchors:
+            text = re.sub(r"```.*?```", "", path.read_text(encoding="utf-8"), flags=re.S)
+            anchors[path] = {_slug(h) for h in re.findall(r"^#+\s+(.+)$", text, flags=re.M)}
+        return anchors[path]
+
+    for doc in DOCS:
+        text = re.sub(r"```.*?```", "", doc.read_text(encoding="utf-8"), flags=re.S)
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if re.match(r"[a-z]+:", target):
+                continue
+            file_part, _, anchor = target.partition("#")
+            dest = (doc.parent / file_part).resolve() if file_part else doc
+            assert dest.exists(), f"{_name(doc)}: broken link {target}"
+            if anchor and dest.suffix == ".md":
+                assert anchor in slugs(dest), (
+                    f"{_name(doc)}: no heading for #{anchor} in {dest.name}")
