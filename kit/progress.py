@@ -60,7 +60,7 @@ class Progress:
         t = runner.now()
         rate = np.asarray(runner.last_rate, dtype=float)
         line = (
-            f"step {runner.step_index + 1}/{len(runner.steps)} {runner.step_desc:<40.40} "
+            f"step {runner.step_index + 1}/{len(runner.steps)} {runner.step_desc:<44.44} "
             f"{t:5.1f}/{self.total_s:4.0f} s, {max(self.total_s - t, 0):4.1f} s left | gyro "
             f"[{rate[0]:+6.2f} {rate[1]:+6.2f} {rate[2]:+6.2f}] rad/s | servo "
             f"{runner.last_speed:4.2f} rad/s"

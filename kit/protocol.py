@@ -17,6 +17,7 @@ saying what to change.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ import numpy as np
 from calib.design import Plan
 from calib.segments import Segment
 from drivers.clock import Clock
+from drivers.errors import DriverError
 from kit.errors import ProtocolCheckError
 from kit.recording import RecordingWriter
 
@@ -394,7 +396,13 @@ class Runner:
                         self._settle(step)
                 self.result.steps += 1
             self._data = None
+        except BaseException:
+            # Stopping a failed IMU may fail too: that must not hide the error that stopped us.
+            with contextlib.suppress(DriverError):
+                self.imu.stop()
+            raise
+        else:
+            self.imu.stop()
         finally:
             self.result.jig_time_s = self.now()
-            self.imu.stop()
         return self.result

@@ -54,7 +54,7 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
             u = np.asarray(info["axis"])
             lines.append(
                 f"  servo {motor}: [{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]  nearest {info['nearest']}"
-                f", off by {info['misalignment_deg']:.2f}° ± {info['std_deg']:.2f}°"
+                f", off by {info['misalignment_deg']:.2f}° ± {info['std_deg']:.3f}°"
             )
     if cal.temperature_c is not None:
         lines.append(f"\nmean die temperature: {cal.temperature_c:.1f} °C")

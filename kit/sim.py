@@ -107,6 +107,13 @@ def sim_truth(
     return k, b
 
 
+def _chip_addresses(model: str) -> tuple[int, ...]:
+    """The I²C addresses a chip of ``model`` can answer at (hardware reference §1.1, §2.1)."""
+    from drivers.imu.chips import LSM9DS1, MPU9250
+
+    return LSM9DS1.addresses if model == "lsm9ds1" else MPU9250.addresses
+
+
 def build_sim(
     cfg: Config,
     *,
@@ -152,9 +159,15 @@ def build_sim(
         truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density_rad_s_sqrt_hz
     truth = SensorTruth(**truth_kw)
     imu_cfg = cfg["imu"]
-    imu_bus, address = make_emulated_imu(
-        imu_cfg["model"], clock, jig, truth, address=imu_cfg["address"], seed=run_seed,
-    )
+    # The chip sits where a real one of its model can (the configured address if the model
+    # allows it, else its default), so a config that names the wrong address fails as it would
+    # on hardware.
+    imu_bus, address = make_emulated_imu(imu_cfg["model"], clock, jig, truth, seed=run_seed)
+    if imu_cfg["address"] != address and imu_cfg["address"] in _chip_addresses(imu_cfg["model"]):
+        chip = imu_bus.device(address)
+        imu_bus.detach(address)
+        address = imu_cfg["address"]
+        imu_bus.attach(address, chip)
     return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth)
 
 

@@ -420,8 +420,9 @@ class Gimbal:
         name = self.port.getPortName()
         if self.port.getCFlagBaud(self.baudrate) <= 0:
             raise ConfigurationError(
-                f"baud rate {self.baudrate} is not supported by dynamixel-sdk; use one of 57600, "
-                "115200, 1000000, 2000000, 3000000 or 4000000 and set the servos to it")
+                f"baud rate {self.baudrate} is not supported by dynamixel-sdk; use one of 9600, "
+                "57600, 115200, 1000000, 2000000, 3000000 or 4000000 (the rates the X series "
+                "offers) and set the servos to it")
         try:
             if not getattr(self.port, "is_open", False):
                 self.port.baudrate = self.baudrate
@@ -905,23 +906,24 @@ class Gimbal:
         speed = abs(ticks - ticks_old) * POSITION_UNIT_RAD / (s.t - t_old)
         if speed < self.min_speed_fraction * m.speed:
             if self._read_item(i, "Bus Watchdog", allow_alert=True) == -1:
-                raise WatchdogTrippedError(
-                    f"servo {i} stopped: its Bus Watchdog expired because no packet reached it "
-                    f"for {self.watchdog_units * WATCHDOG_UNIT_S * 1000:.0f} ms. Poll the "
-                    "gimbal more often during a motion (or raise watchdog_s).")
+                raise self._watchdog_error(i)
             raise StallError(
                 f"servo {i} turns at {speed:.3f} rad/s but was commanded {m.speed:.3f} rad/s "
                 f"(below {self.min_speed_fraction:.0%} over {self.stall_timeout_s:g} s): it is "
                 "blocked or overloaded. Check that the gimbal turns freely and that no cable "
                 "pulls, lower the speed or the load; it has been stopped.")
 
+    def _watchdog_error(self, i: int) -> WatchdogTrippedError:
+        return WatchdogTrippedError(
+            f"servo {i} stopped: its Bus Watchdog expired because no packet reached it for "
+            f"{self.watchdog_units * WATCHDOG_UNIT_S * 1000:.0f} ms. Poll the gimbal more often "
+            "during a motion: keep the loop rate (gimbal.sample_hz) up and nothing else on the "
+            "bus; the host may be overloaded.")
+
     def _check_watchdog(self) -> None:
         for i in self.motion.servo_ids:
             if self._read_item(i, "Bus Watchdog", allow_alert=True) == -1:
-                raise WatchdogTrippedError(
-                    f"servo {i} stopped: its Bus Watchdog expired because no packet reached it "
-                    f"for {self.watchdog_units * WATCHDOG_UNIT_S * 1000:.0f} ms. Poll the "
-                    "gimbal more often during a motion (or raise watchdog_s).")
+                raise self._watchdog_error(i)
 
     def _check_limits(self, s: GimbalSample) -> None:
         margin = 0.05
@@ -1044,7 +1046,7 @@ class Gimbal:
                 unconfirmed.append((i, str(exc)))
         if unconfirmed:
             ids = ", ".join(str(i) for i, _ in unconfirmed)
-            why = "; ".join(f"servo {i}: {w}" for i, w in unconfirmed)
+            why = "; ".join(f"servo {i}: {w.rstrip('. ')}" for i, w in unconfirmed)
             raise ShutdownError(
                 f"could not confirm torque off on servo(s) {ids}: {why}. Switch the servo "
                 "power off before touching the gimbal.")
@@ -1113,8 +1115,9 @@ class Gimbal:
         if turns > self.max_turns + 1e-9:
             raise TurnLimitError(
                 f"turning servo {servo_id} to {turns:.2f} turns from home would pass the "
-                f"software cable-wrap limit of {self.max_turns:g} turns; return home first "
-                "(begin_return) or raise max_turns if the cabling allows it.")
+                f"software cable-wrap limit of {self.max_turns:g} turns (gimbal.max_turns): "
+                "use fewer turns (protocol.turns), or raise gimbal.max_turns if the cabling "
+                "allows it.")
 
     def _raise_alert(self, dxl_id: int) -> None:
         status = self._read_item(dxl_id, "Hardware Error Status", allow_alert=True)

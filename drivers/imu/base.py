@@ -299,6 +299,9 @@ class ImuReader(ABC):
             )
         self._owns_bus = isinstance(bus, (int, str))
         self._bus = open_bus(bus) if self._owns_bus else bus
+        #: How to scan this bus for the advice in error messages.
+        self._scan_hint = f"`i2cdetect -y {bus}`" if isinstance(bus, int) else (
+            "`i2cdetect -l` for the bus number, then `i2cdetect -y N`")
         self.address = address
         self._clock: Clock = clock if clock is not None else SystemClock()
         self.retries = retries
@@ -349,7 +352,7 @@ class ImuReader(ABC):
         return BusError(
             f"I²C error talking to the {self.family.title} at {_hex(self.address)}, register "
             f"{self._reg_name(register)}: [Errno {code}] {what}, after {attempts} attempt(s). "
-            "Check the wiring (SDA, SCL, GND, 3.3 V), the address (`i2cdetect -y 1`), the "
+            "Check the wiring (SDA, SCL, GND, 3.3 V), the address (" + self._scan_hint + "), the "
             "pull-ups and the cable length; the bus may need a slower clock.",
             errno=code,
             address=self.address,
@@ -431,7 +434,7 @@ class ImuReader(ABC):
             raise BusError(
                 f"no answer from {_hex(self.address)} on the I²C bus while looking for the "
                 f"{fam.title} ([Errno {e.errno}] {os.strerror(e.errno or 0)}). Check the wiring "
-                "and power, and list the devices that answer with `i2cdetect -y 1`; the "
+                "and power, and list the devices that answer with " + self._scan_hint + "; the "
                 f"{fam.title} answers at " + " or ".join(_hex(a) for a in fam.addresses) + ".",
                 errno=e.errno,
                 address=self.address,

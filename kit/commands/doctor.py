@@ -105,6 +105,22 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
         reader.close()
 
 
+def latency_timer_ms(port: str, sysfs: str = "/sys/bus/usb-serial/devices") -> int | None:
+    """The FTDI latency timer of a USB serial port (the U2D2), ms; None if it has none.
+
+    Linux exposes it as ``<sysfs>/ttyUSBn/latency_timer``; ``port`` may be a symlink such as
+    ``/dev/serial/by-id/...``.
+    """
+    import os
+
+    name = os.path.basename(os.path.realpath(port))
+    try:
+        with open(os.path.join(sysfs, name, "latency_timer"), encoding="ascii") as fh:
+            return int(fh.read().strip())
+    except (OSError, ValueError):
+        return None
+
+
 def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, port: Any,
                   baud: int) -> None:
     from drivers.dynamixel import Gimbal
@@ -113,6 +129,15 @@ def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, 
     g = cfg["gimbal"]
     rep.section(f"servos {g['ids']} on {'the emulated bus' if args.sim else g['port']} "
                 f"at {baud} baud")
+    if isinstance(port, str):
+        latency = latency_timer_ms(port)
+        if latency is not None and latency > 1:
+            rep.warn(f"the USB serial latency timer of {port} is {latency} ms: every servo read "
+                     "waits that long",
+                     "set it to 1 ms with the udev rule in hardware_docs/setup.md (FTDI "
+                     "0403:6014), then unplug and replug the U2D2")
+        elif latency == 1:
+            rep.ok(f"USB serial latency timer of {port}: 1 ms")
     if baud < 1_000_000:
         rep.warn(f"{baud} baud limits the position sampling rate (about 55-80 sync reads/s at "
                  "57600 for three servos)",

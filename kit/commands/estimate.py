@@ -37,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     for w in rec.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     if not rec.complete:
-        print("gyrocal: warning: the recording is marked incomplete (an interrupted run)",
+        print("gyrocal: warning: the recording is not marked complete (an interrupted run, or "
+              "a tool that does not mark it)",
               file=sys.stderr)
     est = estimate_recording(rec, args.method)
     for w in est.extracted.warnings:

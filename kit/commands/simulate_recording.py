@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
                          for m, ax in zip(runsim.motor_ids, "xyz", strict=True)]}
     protocol = {"name": "simulated", "speed": args.speed, "turns": args.turns,
                 "rest_s": args.rest, "seed": args.seed, "noise_std": args.noise}
-    truth = {"scale": k[0].tolist(), "bias": b[0].tolist(), "axes": axes.tolist()}
+    truth = {"scale": k[0].tolist(), "bias": b[0].tolist(),
+             "axes": {str(m): u.tolist() for m, u in zip(runsim.motor_ids, axes, strict=True)}}
     with RecordingWriter(args.out, sensor=sensor, gimbal=gimbal, protocol=protocol,
                          truth=truth, force=args.force) as w:
         w.append_imu(runsim.imu_t, runsim.imu_rate, runsim.imu_temp)

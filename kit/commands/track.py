@@ -115,6 +115,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="--live --turns: servo speed, degrees/s (default 90)")
     live.add_argument("--turn-every", type=float, default=10.0, metavar="S",
                       help="--live --turns: still time between turn pairs, s (default 10)")
+    live.add_argument("--record", metavar="DIR",
+                      help="--live (still sessions): also write the session as a Recording v1 "
+                           "(one rest), e.g. for `gyrocal noise DIR`")
     add_common_jig_arguments(live, sim_flag=False)  # type: ignore[arg-type]
 
 
@@ -502,6 +505,8 @@ class LiveSource:
         self._next = 0.0
         self._angles: np.ndarray | None = None
         self._dither = np.random.default_rng(0x74726B)
+        #: A RecordingWriter that receives every sample (``--record``), or None.
+        self.writer: Any = None
 
     def start(self) -> None:
         """Note the hold angles and start the IMU stream."""
@@ -518,6 +523,10 @@ class LiveSource:
     def _tick(self) -> tuple[Any, bool, Any]:
         b = self.jig.imu.read()
         s = self.jig.gimbal.poll()
+        if self.writer is not None:
+            if len(b):
+                self.writer.append_imu(b.t - self.t0, b.rate, b.temperature_c)
+            self.writer.append_encoder(s.t - self.t0, list(s.ids), s.angles)
         angles = np.asarray(s.angles, dtype=float)
         moved = bool(np.any(np.abs(angles - self._angles) > LIVE_MOVE_TOLERANCE_RAD))
         self._angles = angles
@@ -689,6 +698,15 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     cfg = load_cli_config(args)
     period = 1.0 / float(cfg["gimbal"]["sample_hz"])
     plan = _turn_plan(args, cfg)
+    if args.record and plan is not None:
+        raise InputError("--record writes still sessions: drop --turns (or --record)")
+    if args.record:
+        from pathlib import Path
+
+        rec_path = Path(args.record)
+        if rec_path.exists() and any(rec_path.iterdir()) and not args.force:
+            raise InputError(f"{rec_path} already holds files; choose another --record or "
+                             "pass --force")
     jig = Jig(cfg, args)
     where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
     if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
@@ -700,10 +718,23 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
                         turns=plan)
     interrupted: BaseException | None = None
     tr: Tracked | None = None
+    writer = None
     try:
         with jig.gimbal:
             print(f"gyrocal: tracking live on {where} for {duration:g} s of jig time: the servos "
                   "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
+            if args.record:
+                from kit.recording import RecordingWriter
+
+                truth = None if jig.sim is None else jig.sim.truth.manifest()
+                writer = RecordingWriter(
+                    args.record, sensor=jig.imu.info.manifest(),
+                    gimbal={"motors": [{"id": sid, "model": jig.gimbal.infos[sid].model_name,
+                                        "axis": cfg.axis_of()[sid]}
+                                       for sid in cfg["gimbal"]["ids"]]},
+                    protocol={"name": "still", "duration_s": duration}, truth=truth,
+                    force=args.force)
+                source.writer = writer
             source.start()
             warm = source.collect(LIVE_WARMUP_S)
             if warm is None or warm.t.size < 3:
@@ -713,10 +744,17 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
             tracker, _ = _build_tracker(args, odr, warm.rate, notes,
                                         f"the first {LIVE_WARMUP_S:g} s", where)
             tr = run_tracker(tracker, source.batches(warm, duration, LIVE_CHUNK_S))
+            if writer is not None:
+                from calib.segments import Segment
+
+                writer.append_segment(Segment(0, "rest", None, 0, 0.0, 0.0, source.elapsed_s))
+                writer.finish()
     except (KeyboardInterrupt, TerminatedBySignal) as exc:
         interrupted = exc
     finally:
         jig.close()
+        if writer is not None:
+            writer.close()  # incomplete unless finished above
     if interrupted is not None:
         signum = 15 if isinstance(interrupted, TerminatedBySignal) else 2
         raise InterruptedRun(

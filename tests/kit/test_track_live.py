@@ -208,3 +208,24 @@ def test_live_turns_with_wrong_axes_raise_nis_alarms(tmp_path, capsys):
 def test_live_turns_bad_usage_exits_2(capsys, argv, match):
     assert main(["track", "--live", "--sim", *argv]) == 2
     assert match in capsys.readouterr().err
+
+
+def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys):
+    from drivers.emulated.imu_chips import TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ
+    from kit.recording import load_recording
+
+    rec = tmp_path / "still"
+    assert main(["track", "--live", "--sim", "--duration", "30", "--record", str(rec),
+                 "--rows", "2"]) == 0
+    r = load_recording(rec)
+    assert r.complete and [s.kind for s in r.segments] == ["rest"]
+    assert r.imu_t.size > 0.95 * 30 * 200
+    capsys.readouterr()
+    assert main(["noise", str(rec), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    n = doc["noise_density"]
+    value, std = np.array(n["value"]), np.array(n["std"])
+    assert np.all(np.abs(value - TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ) < 4 * std)
+    assert main(["track", "--live", "--sim", "--duration", "5", "--record", str(rec)]) == 2
+    assert main(["track", "--live", "--sim", "--turns", "1", "--record", str(tmp_path / "x"),
+                 "--cal", "c.json"]) == 2
