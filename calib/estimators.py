@@ -613,7 +613,7 @@ class PairedAxisBatch:
     scale: np.ndarray  # (B, 3)
     bias: np.ndarray  # (B, 3)
     axes: np.ndarray  # (B, S, 3)
-    covariance: np.ndarray  # (B, P, P), P = 6 + 2S: k, b, then two angles per servo
+    covariance: np.ndarray  # (B, P, P): k, b, two angles per servo, then the still angles
     chi2: np.ndarray  # (B,)
     dof: int
     iterations: np.ndarray  # (B,)
@@ -818,9 +818,7 @@ def paired_axis_batch(
     )
 
 
-def fit_paired_axis(
-    obs: ObservationSet, *, use_rests: bool = True, max_iter: int = 50, pool: bool = True
-) -> FitResult:
+def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     r"""Paired-axis fit: scale, bias and each servo's axis from every window's full mean vector.
 
     Model (paper Eq. 1 inverted): a window of servo ``s`` at signed reference rate ``ω_i`` reads
@@ -829,20 +827,18 @@ def fit_paired_axis(
     share ``u_s``, so their off-axis components pin the bias, and every window informs every bias
     component (DESIGN.md fact 3). Residuals are whitened by each window's noise (module docstring)
     and minimised by Levenberg-Marquardt with an analytic Jacobian, starting from a closed-form
-    per-servo regression. Covariance ``(J̃ᵀJ̃)⁻¹``; consistency: ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``.
+    per-servo regression. Each axis's noise estimates are pooled over the windows where they are
+    homogeneous (:func:`calib.observations.pool_noise`), so the weights do not carry the
+    estimates' own scatter; each still encoder angle a reference rests on is a shared unknown
+    with its quantisation as prior. Covariance ``(J̃ᵀJ̃)⁻¹``; consistency:
+    ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``.
 
     Parameters
     ----------
     obs : ObservationSet
         Rotation windows of every servo in both directions covering ±x, ±y, ±z, and rest windows.
-    use_rests : bool
-        Use the rest windows (default). Without them the bias comes from the turns alone.
     max_iter : int
         Most Levenberg-Marquardt steps.
-    pool : bool
-        Pool each axis's noise estimate over the windows where they are homogeneous
-        (:func:`calib.observations.pool_noise`), so the weights do not carry the estimates' own
-        scatter.
 
     Returns
     -------
@@ -851,20 +847,17 @@ def fit_paired_axis(
     """
     motors = obs.motors
     _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
-    if pool:
-        obs = obs.with_pooled_noise()
-    sidx = np.searchsorted(np.array(sorted(motors)), obs.motor)
+    obs = obs.with_pooled_noise()
     order = sorted(motors)
-    r_mean = obs.rest_mean if use_rests else np.zeros((0, 3))
-    r_std = obs.rest_mean_std if use_rests else np.zeros((0, 3))
+    sidx = np.searchsorted(np.array(order), obs.motor)
     res = paired_axis_batch(
         obs.mean[None],
         obs.rate[None],
         sidx,
         obs.mean_std[None],
         obs.rate_std[None],
-        r_mean[None],
-        r_std[None],
+        obs.rest_mean[None],  # type: ignore[index]
+        obs.rest_mean_std[None],  # type: ignore[index]
         ref_matrix=obs.reference_matrix(),
         still_std=obs.still_angle_std,
         max_iter=max_iter,

@@ -8,13 +8,23 @@ every servo still: its mean reading is minus the bias.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from calib.errors import CalibInputError
 
-__all__ = ["ObservationSet", "pool_noise"]
+__all__ = ["ObservationSet", "diff_noise", "pool_noise"]
+
+
+def diff_noise(x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """White-noise standard deviation of one sample from first differences, ``std(Δx)/√2``.
+
+    Blind to slow motion (drift, a servo's low-frequency ripple); accumulated in float64.
+    """
+    d = np.diff(x, axis=axis)
+    d *= d
+    return np.sqrt(d.sum(axis=axis, dtype=np.float64) / (2.0 * d.shape[axis]))
 
 
 def pool_noise(
@@ -281,30 +291,7 @@ class ObservationSet:
         pooled, _ = pool_noise(noise_all, count_all, alpha)
         n = self.n_windows
         ratio = pooled / noise_all
-        rests = {}
-        if self.n_rests:
-            rests = dict(
-                rest_mean=self.rest_mean, rest_count=self.rest_count, rest_noise=pooled[n:],
-                rest_mean_std=self.rest_mean_std * ratio[n:],  # type: ignore[operator]
-            )
-        return ObservationSet(
-            mean=self.mean, rate=self.rate, motor=self.motor, direction=self.direction,
-            count=self.count, noise=pooled[:n], mean_std=self.mean_std * ratio[:n],
-            rate_std=self.rate_std, temperature_c=self.temperature_c, **rests,
-            **self._ref_kw(),
-        )
-
-    def _ref_kw(self) -> dict[str, object]:
-        if self.n_still_angles == 0:
-            return {}
-        return dict(ref_start=self.ref_start, ref_end=self.ref_end, ref_gain=self.ref_gain,
-                    still_angle_std=self.still_angle_std)
-
-    def without_rests(self) -> ObservationSet:
-        """The same rotation windows with the rest windows dropped (the paper's six-observation
-        view)."""
-        return ObservationSet(
-            mean=self.mean, rate=self.rate, motor=self.motor, direction=self.direction,
-            count=self.count, noise=self.noise, mean_std=self.mean_std, rate_std=self.rate_std,
-            temperature_c=self.temperature_c, **self._ref_kw(),
+        return replace(
+            self, noise=pooled[:n], mean_std=self.mean_std * ratio[:n], rest_noise=pooled[n:],
+            rest_mean_std=self.rest_mean_std * ratio[n:],  # type: ignore[operator]
         )

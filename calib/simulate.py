@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.errors import CalibInputError
-from calib.observations import ObservationSet
+from calib.observations import ObservationSet, diff_noise
 
 __all__ = [
     "SensorPreset",
@@ -225,13 +225,6 @@ class SimulatedRuns:
         )
 
 
-def _diff_std(x: np.ndarray, axis: int) -> np.ndarray:
-    """White-noise standard deviation from first differences, ``std(diff)/√2`` (robust to drift)."""
-    d = np.diff(x, axis=axis)
-    d *= d
-    return np.sqrt(d.sum(axis=axis, dtype=np.float64) / (2.0 * d.shape[axis]))
-
-
 def simulate_runs(
     rng: np.random.Generator,
     scale: np.ndarray,
@@ -317,7 +310,7 @@ def simulate_runs(
         x *= dtype(sigma[j])
         x += omega * c_vec[:, :, j, None]
         mean[:, :, j] = x.mean(axis=2, dtype=np.float64) - bias[:, None, j]
-        noise[:, :, j] = _diff_std(x, axis=2)
+        noise[:, :, j] = diff_noise(x, axis=2)
     r = protocol.n_rests
     nr = protocol.rest_samples
     rest_mean = np.empty((B, r, 3))
@@ -327,7 +320,7 @@ def simulate_runs(
             x = rng.standard_normal((B, r, nr), dtype=dtype)
             x *= dtype(sigma[j])
             rest_mean[:, :, j] = x.mean(axis=2, dtype=np.float64) - bias[:, None, j]
-            rest_noise[:, :, j] = _diff_std(x, axis=2)
+            rest_noise[:, :, j] = diff_noise(x, axis=2)
     return SimulatedRuns(
         mean=mean,
         rate=rate,

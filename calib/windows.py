@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.errors import CalibInputError
-from calib.observations import ObservationSet
+from calib.observations import ObservationSet, diff_noise
 from calib.segments import Segment
 from calib.timebase import TimebaseFit, refit_sample_times
 
@@ -165,21 +165,17 @@ def _ramp_mean(t: np.ndarray, th: np.ndarray, lo: float, hi: float) -> float:
     return float(np.sum(np.diff(g) * (v[:-1] + v[1:]) / 2) / (hi - lo))
 
 
-def _ramp_angle_std(
-    t: np.ndarray, th: np.ndarray, lo: float, hi: float, q: float, still: bool
-) -> float:
-    """Standard error of the mean angle over a ramp ``[lo, hi]``.
+def _ramp_angle_std(t: np.ndarray, th: np.ndarray, lo: float, hi: float, q: float) -> float:
+    """Standard error of the mean angle over a ramp ``[lo, hi]`` of a turning servo.
 
-    Still: the quantisation offset ``q/√12`` (it does not average). Moving: the per-reading
-    scatter (quantisation and timestamp jitter, independent from reading to reading) divided by the
-    square root of the readings averaged. The scatter is estimated from second differences of the
-    residual about a straight line, ``std(Δ²r)/√6``, which removes smooth speed ripple: ripple is
-    real motion that the gyro sees too and does not bias the reference. A zero-length ramp (one
-    interpolated angle) takes the scatter over ±0.1 s undivided.
+    The per-reading scatter (quantisation and timestamp jitter, independent from reading to
+    reading, never below ``q/√12``) divided by the square root of the readings averaged. The
+    scatter is estimated from second differences of the residual about a straight line,
+    ``std(Δ²r)/√6``, which removes smooth speed ripple: ripple is real motion that the gyro sees
+    too and does not bias the reference. A zero-length ramp (one interpolated angle) takes the
+    scatter over ±0.1 s undivided.
     """
     floor = q / np.sqrt(12.0)
-    if still:
-        return floor
     point = hi <= lo
     if point:
         lo, hi = lo - 0.1, hi + 0.1
@@ -191,12 +187,6 @@ def _ramp_angle_std(
     resid = ys - A @ np.linalg.lstsq(A, ys, rcond=None)[0]
     sd = max(float(np.sqrt(np.mean(np.diff(resid, 2) ** 2) / 6.0)), floor)
     return sd if point else sd / np.sqrt(sel.sum())
-
-
-def _diff_noise(x: np.ndarray) -> np.ndarray:
-    """Per-axis white-noise standard deviation from first differences, ``std(diff)/√2``."""
-    d = np.diff(x, axis=0)
-    return np.sqrt(np.mean(d**2, axis=0) / 2.0)
 
 
 def _correlation_factor(rest_samples: list[np.ndarray]) -> np.ndarray:
@@ -347,13 +337,6 @@ def extract_observations(
             ids.append(still_ids.setdefault(key, len(still_ids)))
         return ids[0], ids[1]
 
-    def covers(a: float, b: float, what: str) -> None:
-        if a < imu_t[0] or b > imu_t[-1]:
-            raise CalibInputError(
-                f"{what} spans {a:.3f}-{b:.3f} s but the gyro stream covers "
-                f"{imu_t[0]:.3f}-{imu_t[-1]:.3f} s: the recording is truncated"
-            )
-
     def gap_inside(a: float, b: float) -> bool:
         sel = (imu_t >= a) & (imu_t <= b)
         ts = imu_t[sel]
@@ -432,17 +415,14 @@ def extract_observations(
         # Still time around the turn: back to the last movement of any servo before it, and
         # on to the first movement after it (a repositioning turn is not a segment).
         last_move, next_move = lo, hi
-        for t_o, th_o in enc.values():
-            moves = t_o[1:][np.abs(np.diff(th_o)) > 2 * q]  # readings that found a movement
-            before = moves[moves < t_move0 - 0.02]
-            after = moves[moves > t_move1 + 0.02]
-            if before.size:
-                last_move = max(last_move, float(before.max()))
-            if after.size:
-                next_move = min(next_move, float(after.min()))
+        for spans in motion_intervals.values():
+            for m_lo, m_hi in spans:
+                if m_hi < t_move0 - 0.02:
+                    last_move = max(last_move, m_hi)
+                if m_lo > t_move1 + 0.02:
+                    next_move = min(next_move, m_lo)
         still_before = t_move0 - max(last_move, seg.t_start - 10.0)
         still_after = min(next_move, seg.t_end + 10.0) - t_move1
-        kind = None
         tt, yy = ts[s0 : s1 + 1], ys[s0 : s1 + 1]
         # Candidate windows (module docstring); each is scored by the variance it predicts for
         # the turning axis's mean against its reference, and the least wins.
@@ -470,21 +450,27 @@ def extract_observations(
                 "revolutions and has no still time around the turn; nothing to window "
                 "(turn more, or rest between turns)"
             )
+        covered = [c for c in candidates if c[1][0] >= imu_t[0] and c[1][3] <= imu_t[-1]]
+        if not covered:
+            a, b = candidates[0][1][0], candidates[0][1][3]
+            raise CalibInputError(
+                f"the window of segment {seg.index} spans {a:.3f}-{b:.3f} s but the gyro stream "
+                f"covers {imu_t[0]:.3f}-{imu_t[-1]:.3f} s: the recording is truncated"
+            )
         best = None
-        for kind, corners, revs in candidates:
+        for kind, corners, revs in covered:
             a, a2, b2, b = corners
-            covers(a, b, f"the window of segment {seg.index}")
             if gap_inside(a, b):
                 continue
             mean, wint, qw = _weighted_mean(imu_t, imu_rate, corners)
             sel = (imu_t >= a) & (imu_t <= b)
-            sensor_noise = float(np.min(_diff_noise(imu_rate[sel])))  # a non-turning axis
+            sensor_noise = float(np.min(diff_noise(imu_rate[sel])))  # a non-turning axis
             var_mean = sensor_noise**2 * float(np.sum(qw**2) / np.sum(qw) ** 2)
             if kind == "rest-to-rest":
                 var_ref = 2 * q**2 / 12 / wint**2
             else:
-                var_ref = (_ramp_angle_std(t, th, a, a2, q, False) ** 2
-                           + _ramp_angle_std(t, th, b2, b, q, False) ** 2) / wint**2
+                var_ref = (_ramp_angle_std(t, th, a, a2, q) ** 2
+                           + _ramp_angle_std(t, th, b2, b, q) ** 2) / wint**2
             score = var_mean + var_ref
             if best is None or score < best[0]:
                 best = (score, kind, corners, revs, mean, wint, qw)
@@ -508,12 +494,12 @@ def extract_observations(
             refs.append((*still_angle(int(seg.motor), float(t_move0), float(t_move1)),
                          1.0 / wint))
         else:
-            rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q, False),
-                                      _ramp_angle_std(t, th, b2, b, q, False)) / wint)
+            rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q),
+                                      _ramp_angle_std(t, th, b2, b, q)) / wint)
             refs.append((-1, -1, 0.0))
         sel = (imu_t >= a) & (imu_t <= b)
         x = imu_rate[sel]
-        noise = np.maximum(_diff_noise(x), 1e-12)
+        noise = np.maximum(diff_noise(x), 1e-12)
         neff_factor = float(np.sqrt(np.sum(qw**2)) / np.sum(qw))
         mean_std = noise * neff_factor  # white; the rests' correlation factor is applied below
         rows.append((mean, rate, int(seg.motor), d, int(x.shape[0]), noise, mean_std, rate_std))
@@ -569,7 +555,7 @@ def extract_observations(
     for j in range(3):
         var, dof = [], []
         for x in rest_samples:
-            var.append(float(_diff_noise(x)[j]) ** 2)
+            var.append(float(diff_noise(x)[j]) ** 2)
             dof.append(x.shape[0] - 1)
         for i, r in enumerate(rows):
             if dominant[i] != j:
@@ -584,7 +570,7 @@ def extract_observations(
         rest_kw = dict(
             rest_mean=np.array([w.mean for w in rest_windows]),
             rest_count=np.array([w.count for w in rest_windows]),
-            rest_noise=np.array([np.maximum(_diff_noise(x), 1e-12) for x in rest_samples]),
+            rest_noise=np.array([np.maximum(diff_noise(x), 1e-12) for x in rest_samples]),
         )
         rest_kw["rest_mean_std"] = (
             rest_kw["rest_noise"] / np.sqrt(rest_kw["rest_count"])[:, None] * np.sqrt(tau)
