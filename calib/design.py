@@ -25,6 +25,7 @@ import numpy as np
 from scipy import optimize
 
 from calib.errors import CalibInputError
+from calib.simulate import profile_duration
 
 __all__ = [
     "PAPER_DESIGN",
@@ -175,20 +176,13 @@ class Plan:
         return float(np.degrees(self.speed))
 
 
-def _turn_time(turns: int, speed: float, accel: float) -> float:
-    total = 2 * np.pi * turns
-    t_acc = speed / accel
-    if speed * t_acc >= total:
-        return 2 * np.sqrt(total / accel)
-    return 2 * t_acc + (total - speed * t_acc) / speed
-
-
 def jig_time(
     speed: float, turns: int, rest_s: float, accel: float, settle_s: float = 0.1,
     n_servos: int = 3,
 ) -> float:
     """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests."""
-    return 2 * n_servos * (_turn_time(turns, speed, accel) + settle_s) + (2 * n_servos + 1) * rest_s
+    turn = profile_duration(2 * np.pi * turns, speed, accel) + settle_s
+    return 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
 
 
 @dataclass(frozen=True)
@@ -229,7 +223,7 @@ def _turn_window(
         tapered(float(np.floor(steady)), steady - np.floor(steady))
     if steady >= 2:  # ramps of one revolution around K - 1 flat ones
         tapered(float(np.floor(steady)) - 1, 1.0)
-    t_turn = _turn_time(turns, speed, accel)
+    t_turn = profile_duration(2 * np.pi * turns, speed, accel)
     margin = min(0.15, rest_s / 2)
     T = t_turn + margin  # two half-weight ramps of `margin` in the still time
     n_eff = odr_hz * T**2 / (t_turn + 2 * margin / 3)
@@ -255,12 +249,11 @@ def predict_uncertainty(
     """Predicted paired-axis uncertainties of a protocol at nominal truth (k = 1, b = 0).
 
     The windows, their noise and their references are modelled as :mod:`calib.windows` makes
-    them: a turn without two steady revolutions is windowed rest to rest, its reference resting
-    on still encoder angles (``q/√12`` each, shared between a servo's two turns); a longer turn
-    is windowed inside its steady revolutions, whose ramp-mean angles average the encoder's
-    quantisation and timestamp jitter (``jitter_s``) over the ramp's readings (taken at
-    ``sample_hz``); the window with the smaller predicted variance is used, as in
-    :mod:`calib.windows`.
+    them (:func:`_turn_window`): each turn is windowed either rest to rest, its reference resting
+    on still encoder angles (``q/√12`` each, shared between a servo's two turns), or inside its
+    whole steady revolutions, whose ramp-mean angles average the encoder's quantisation and
+    timestamp jitter (``jitter_s``) over the ramp's readings (taken at ``sample_hz``); the one
+    with the smaller predicted variance is used, as in :mod:`calib.windows`.
 
     Returns
     -------
@@ -306,8 +299,8 @@ def predict_uncertainty(
     # Calibrated output error at true rate g: δ(k ∘ (m + b))_j = δk_j g_j + δb_j (k = 1, b = 0),
     # i.e. gradient row [g_j e_j, e_j] per axis; the error's variance is the sum over axes.
     eye = np.broadcast_to(np.eye(3), (U.shape[0], 3, 3))
-    G = np.concatenate([U[:, :, None] * eye, eye], axis=2)
-    var = np.einsum("nip,pq,niq->ni", G, C, G).sum(axis=1)
+    grad = np.concatenate([U[:, :, None] * eye, eye], axis=2)
+    var = np.einsum("nip,pq,niq->ni", grad, C, grad).sum(axis=1)
     scale_std = np.sqrt(np.diag(C)[:3])
     bias_std = np.sqrt(np.diag(C)[3:])
     return scale_std, bias_std, float(np.sqrt(var.max()))

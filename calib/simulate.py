@@ -23,6 +23,10 @@ import numpy as np
 
 from calib.errors import CalibInputError
 from calib.observations import ObservationSet, diff_noise
+from calib.segments import Segment
+from calib.windows import trapezoid_weight
+
+TWO_PI = 2.0 * np.pi
 
 __all__ = [
     "SensorPreset",
@@ -30,7 +34,6 @@ __all__ = [
     "SimulatedRuns",
     "draw_mount_axes",
     "draw_sensors",
-    "noise_std_from_density",
     "RawRun",
     "profile_duration",
     "simulate_raw_run",
@@ -105,11 +108,6 @@ def draw_mount_axes(
     ax /= np.linalg.norm(ax, axis=1, keepdims=True)
     R = _rotation_matrices(ax, rng.uniform(0.0, misalignment, size=n))
     return np.transpose(R, (0, 2, 1)) @ np.eye(3)  # rows: Rᵀ e_s
-
-
-def noise_std_from_density(density_rad_s_sqrt_hz: float, odr_hz: float) -> float:
-    """Per-sample standard deviation of white noise of the given density: ``N·sqrt(odr)``."""
-    return float(density_rad_s_sqrt_hz) * float(np.sqrt(odr_hz))
 
 
 @dataclass(frozen=True)
@@ -367,7 +365,7 @@ class RawRun:
     enc_t: np.ndarray
     enc_motor: np.ndarray
     enc_angle: np.ndarray
-    segments: tuple
+    segments: tuple[Segment, ...]
     scale: np.ndarray
     bias: np.ndarray
     axes: np.ndarray
@@ -380,11 +378,8 @@ class RawRun:
         """The true mean shaft rate of ``motor`` under a trapezoidal window (fine-grid quadrature),
         for checking window extraction against the truth."""
         s = self.motor_ids.index(motor)
-        a, a2, b2, b = corners
         t = self.grid_t
-        up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0, 1)
-        dn = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0, 1)
-        w = np.where((t >= a) & (t <= b), np.minimum(up, dn), 0.0)
+        w = trapezoid_weight(t, corners)
         return float(np.trapezoid(w * self.grid_rate[s], t) / np.trapezoid(w, t))
 
 
@@ -450,9 +445,7 @@ def simulate_raw_run(
     scale = np.asarray(scale, dtype=float).reshape(3)
     bias = np.asarray(bias, dtype=float).reshape(3)
     axes = np.asarray(axes, dtype=float).reshape(3, 3)
-    from calib.segments import Segment  # local: keeps the Monte Carlo path import-light
-
-    total = TWO_PI_SIM * protocol.turns
+    total = TWO_PI * protocol.turns
     t_turn = profile_duration(total, protocol.speed, accel)
     segs: list[Segment] = []
     starts = []
@@ -475,10 +468,10 @@ def simulate_raw_run(
     rate = np.zeros((3, g.size))
     for s, d, t0 in starts:
         p = _speed_profile(g - t0, total, protocol.speed, accel)
-        f_rev = protocol.speed / TWO_PI_SIM
+        f_rev = protocol.speed / TWO_PI
         freqs = [f_rev, 2 * f_rev, 3 * f_rev, rng.uniform(3.0, 6.0)]
         amp = protocol.ripple * np.sqrt(2.0 / len(freqs))
-        rip = sum(amp * np.sin(TWO_PI_SIM * f * (g - t0) + rng.uniform(0, TWO_PI_SIM))
+        rip = sum(amp * np.sin(TWO_PI * f * (g - t0) + rng.uniform(0, TWO_PI))
                   for f in freqs)
         rate[s] += d * p * (1.0 + rip)
     # Exact integral of the piecewise-linear rate on the grid.
@@ -495,7 +488,7 @@ def simulate_raw_run(
     m = g_sensor / scale - bias + rng.standard_normal(g_sensor.shape) * noise_std
     # Encoder: every servo read together at enc_rate_hz (a sync read), jittered timestamps.
     te = np.arange(0.0, t_total, 1.0 / enc_rate_hz)
-    q = TWO_PI_SIM / encoder_ticks
+    q = TWO_PI / encoder_ticks
     enc_t, enc_m, enc_a = [], [], []
     stamp = np.sort(te + rng.normal(0.0, enc_jitter_s, te.size)) if enc_jitter_s else te
     for s, motor in enumerate(motor_ids):
@@ -524,5 +517,3 @@ def simulate_raw_run(
         grid_angle=angle,
     )
 
-
-TWO_PI_SIM = 2.0 * np.pi

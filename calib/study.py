@@ -34,6 +34,7 @@ import numpy as np
 
 from calib.errors import CalibInputError
 from calib.estimators import (
+    estimate,
     fit_iterative_ls,
     iterative_ls_batch,
     lm_solve,
@@ -343,9 +344,7 @@ def demo_before_after(
     runs = simulate_runs(rng, k, b, draw_mount_axes(rng, 1),
                          SimProtocol(speed=1.0, turns=1, rest_s=3.0), noise)
     obs = runs.observation_set(0)
-    from calib.estimators import METHODS
-
-    fits = {m: METHODS[m](obs) for m in METHOD_ORDER}
+    fits = {m: estimate(obs, m) for m in METHOD_ORDER}
     t = np.arange(0, duration_s, 1 / odr_hz)
     amp = np.sin(2 * np.pi * 0.75 * t) * (1 + 0.05 * rng.standard_normal(t.size))
     u = np.ones(3) / np.sqrt(3)

@@ -58,7 +58,7 @@ from calib.observations import ObservationSet, diff_noise
 from calib.segments import Segment
 from calib.timebase import TimebaseFit, refit_sample_times
 
-__all__ = ["ExtractedWindows", "Window", "extract_observations"]
+__all__ = ["ExtractedWindows", "Window", "extract_observations", "trapezoid_weight"]
 
 TWO_PI = 2.0 * np.pi
 
@@ -116,8 +116,10 @@ def _crossing(t: np.ndarray, th: np.ndarray, target: float, direction: int) -> f
     return float(np.interp(direction * target, direction * th, t))
 
 
-def _weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
-    """The trapezoid ``w(t)``; a zero-length ramp is a vertical edge (the window includes it)."""
+def trapezoid_weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
+    """A window's weight ``w(t)``: 0 → 1 over ``[a, a + L_a]``, 1, then 1 → 0 over
+    ``[b - L_b, b]`` for ``corners = (a, a + L_a, b - L_b, b)``; a zero-length ramp is a vertical
+    edge (the window includes it)."""
     a, a2, b2, b = corners
     up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0.0, 1.0)
     down = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0.0, 1.0)
@@ -136,7 +138,7 @@ def _weighted_mean(
     """``∫ w x dt / ∫ w dt`` for piecewise-linear ``x`` (N, k); also ``∫w`` and the per-sample
     quadrature weights of the samples inside the window (for the standard error)."""
     g = _grid(t, corners)
-    w = _weight(g, corners)
+    w = trapezoid_weight(g, corners)
     xi = np.column_stack([np.interp(g, t, x[:, j]) for j in range(x.shape[1])])
     dt = np.diff(g)
     integ = np.sum(dt[:, None] * (w[:-1, None] * xi[:-1] + w[1:, None] * xi[1:]) / 2, axis=0)
@@ -150,7 +152,7 @@ def _weighted_mean(
         qw = np.zeros(ts.size)
         qw[:-1] += half
         qw[1:] += half
-        qw *= _weight(ts, corners)
+        qw *= trapezoid_weight(ts, corners)
     else:
         qw = np.zeros(0)
     return integ / wint, wint, qw

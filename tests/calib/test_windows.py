@@ -5,7 +5,7 @@ from calib.errors import CalibInputError
 from calib.estimators import fit_paired_axis
 from calib.segments import Segment
 from calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_raw_run
-from calib.windows import extract_observations
+from calib.windows import extract_observations, trapezoid_weight
 
 
 def _run(seed, protocol, **kw):
@@ -25,11 +25,8 @@ def _extract(run, **kw):
 
 def _true_mean(run, corners):
     """Noise-free weighted mean reading over a window, from the fine-grid truth (Eq. 1)."""
-    a, a2, b2, b = corners
     t = run.grid_t
-    up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0, 1)
-    dn = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0, 1)
-    w = np.where((t >= a) & (t <= b), np.minimum(up, dn), 0.0)
+    w = trapezoid_weight(t, corners)
     g = run.grid_rate.T @ run.axes  # sensor-frame true rate
     m = g / run.scale - run.bias
     return np.trapezoid(w[:, None] * m, t, axis=0) / np.trapezoid(w, t)
