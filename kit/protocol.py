@@ -20,19 +20,20 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from calib.design import Plan
+from calib.observations import diff_noise
 from calib.segments import Segment
 from drivers.clock import Clock
 from drivers.errors import DriverError
 from kit.errors import ProtocolCheckError
 from kit.recording import RecordingWriter
 
-__all__ = ["CheckFailure", "RunResult", "Runner", "Step", "build_steps"]
+__all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
 
 
 @dataclass(frozen=True)
@@ -70,24 +71,6 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
     return steps
 
 
-class ImuSource(Protocol):
-    """What the runner needs of an IMU reader (drivers.imu.ImuReader)."""
-
-    def start(self) -> None: ...
-    def read(self) -> Any: ...
-    def stop(self) -> None: ...
-
-
-class GimbalLike(Protocol):
-    """What the runner needs of a gimbal (drivers.dynamixel.Gimbal)."""
-
-    busy: bool
-    motion: Any
-
-    def begin_turn(self, servo_id: int, turns: int, speed: float, direction: int = 1) -> Any: ...
-    def poll(self) -> Any: ...
-
-
 @dataclass(frozen=True)
 class CheckFailure:
     """A runtime check that failed, with what to change."""
@@ -95,18 +78,6 @@ class CheckFailure:
     check: str
     step: int
     message: str
-
-
-@dataclass
-class RunResult:
-    """What a run produced besides the recording."""
-
-    steps: int = 0
-    repeats: list[CheckFailure] = field(default_factory=list)
-    jig_time_s: float = 0.0
-    imu_samples: int = 0
-    gaps: int = 0
-    speeds: dict[int, float] = field(default_factory=dict)
 
 
 class _StepData:
@@ -181,10 +152,8 @@ class Runner:
         self.rest_guard_s = rest_guard_s
         self.ids = tuple(gimbal.ids)
         self.t0 = 0.0
-        self.result = RunResult()
         self.step_index = 0
         self.step_desc = ""
-        self.segment_index = 0
         self._data: _StepData | None = None
         self._next = 0.0
         # Loop dither (see _tick); seeded so that runs repeat exactly.
@@ -205,14 +174,12 @@ class Runner:
         if len(batch):
             t = batch.t - self.t0
             self.writer.append_imu(t, batch.rate, batch.temperature_c)
-            self.result.imu_samples += len(batch)
             self.last_rate = batch.rate[-1]
             if d is not None:
                 d.imu_t.append(t)
                 d.imu_rate.append(batch.rate)
                 d.saturated += int(np.any(batch.saturated, axis=-1).sum())
         if batch.gaps:
-            self.result.gaps += len(batch.gaps)
             if d is not None:
                 d.gaps.extend(batch.gaps)
             for g in batch.gaps:
@@ -257,7 +224,6 @@ class Runner:
     def _record(self, seg: Segment) -> None:
         self.writer.append_segment(seg)
         self._segments.append(seg)
-        self.segment_index += 1
 
     def _settle(self, turn: Step) -> None:
         """A rest before a repeated turn, recorded as a rest segment if it passes its check, so
@@ -266,7 +232,7 @@ class Runner:
         self._data = _StepData()
         t_start, t_end = self._run_rest(rest)
         if self._check_rest(rest, self._data) is None:
-            self._record(Segment(self.segment_index, "rest", None, 0, 0.0, t_start, t_end))
+            self._record(Segment(len(self._segments), "rest", None, 0, 0.0, t_start, t_end))
 
     def _reposition(self, step: Step) -> None:
         """Undo a failed turn (turn back the same way it came), without recording a segment."""
@@ -304,7 +270,6 @@ class Runner:
             if mid.any():
                 reached = float(np.median(v[mid]))
         commanded = float(getattr(motion, "speed", step.speed))
-        self.result.speeds[step.motor] = reached
         if reached < self.speed_fraction * commanded:
             return CheckFailure(
                 "speed", self.step_index,
@@ -335,7 +300,7 @@ class Runner:
             return None
         dt = float(np.median(np.diff(it)))
         n = max(2, int(round(0.05 / dt)))
-        sigma = np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0) / 2)
+        sigma = diff_noise(x)
         kernel = np.ones(n) / n
         avg = np.column_stack([np.convolve(x[:, j], kernel, mode="valid") for j in range(3)])
         dev = np.abs(avg - np.median(x, axis=0))
@@ -357,7 +322,7 @@ class Runner:
         return out
 
     # ------------------------------------------------------------------ run
-    def run(self) -> RunResult:
+    def run(self) -> None:
         """Carry out every step; the recording gets every sample and segment.
 
         Raises
@@ -384,17 +349,15 @@ class Runner:
                         failure = self._check_turn(step, motion, self._data)
                     if failure is None:
                         speed = float(motion.speed) if step.kind == "rotate" else 0.0
-                        self._record(Segment(self.segment_index, step.kind, step.motor,
+                        self._record(Segment(len(self._segments), step.kind, step.motor,
                                              step.direction, speed, t_start, t_end))
                         break
-                    self.result.repeats.append(failure)
                     if attempt == 2:
                         raise ProtocolCheckError(f"{failure.message} (failed twice)")
                     self.on_event(f"check failed, repeating once: {failure.message}")
                     if step.kind == "rotate":
                         self._reposition(step)
                         self._settle(step)
-                self.result.steps += 1
             self._data = None
         except BaseException:
             # Stopping a failed IMU may fail too: that must not hide the error that stopped us.
@@ -403,6 +366,3 @@ class Runner:
             raise
         else:
             self.imu.stop()
-        finally:
-            self.result.jig_time_s = self.now()
-        return self.result

@@ -99,41 +99,43 @@ def load_cli_config(args: argparse.Namespace) -> Any:
     })
 
 
+def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, int, Any]:
+    """Where the devices are: ``(sim, clock, servo port, baud, I2C bus)`` of the emulated jig
+    with ``--sim`` (``sim`` is its :class:`~kit.sim.SimJig`), else of the configured hardware
+    (``sim`` is None)."""
+    if args.sim_fault and not args.sim:
+        from kit.errors import InputError
+
+        raise InputError("--sim-fault needs --sim")
+    if args.sim:
+        from kit.sim import SIM_BAUD, build_sim
+
+        sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
+                        realtime=args.realtime, noise_seed=args.sim_noise_seed)
+        return sim, sim.clock, sim.port, SIM_BAUD, sim.imu_bus
+    from drivers.clock import SystemClock
+
+    g = cfg["gimbal"]
+    return None, SystemClock(), g["port"], g["baud"], cfg["imu"]["bus"]
+
+
 class Jig:
     """The devices of one run: a gimbal driver and an IMU reader on one clock (real or sim)."""
 
     def __init__(self, cfg: Any, args: argparse.Namespace) -> None:
-        from drivers.clock import SystemClock
         from drivers.dynamixel import Gimbal
         from drivers.imu import open_imu
 
         self.cfg = cfg
-        self.sim = None
         self.faults: list[str] = []
-        self._fault_specs: list[str] = []
-        if args.sim_fault and not args.sim:
-            from kit.errors import InputError
+        self.sim, self.clock, port, baud, bus = jig_endpoints(cfg, args)
+        self._fault_specs: list[str] = list(args.sim_fault)
+        if self._fault_specs:
+            from kit.sim import apply_fault, build_sim
 
-            raise InputError("--sim-fault needs --sim")
-        g, imu = cfg["gimbal"], cfg["imu"]
-        if args.sim:
-            from kit.sim import SIM_BAUD, build_sim
-
-            self.sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale,
-                                 bias=args.sim_bias, realtime=args.realtime,
-                                 noise_seed=args.sim_noise_seed)
-            from kit.sim import apply_fault
-
-            self._fault_specs = list(args.sim_fault)
             for spec in self._fault_specs:  # validate now; armed when the protocol starts
                 apply_fault(build_sim(cfg, seed=args.sim_seed), spec)
-            self.clock = self.sim.clock
-            port: Any = self.sim.port
-            baud = SIM_BAUD
-            bus: Any = self.sim.imu_bus
-        else:
-            self.clock = SystemClock()
-            port, baud, bus = g["port"], g["baud"], imu["bus"]
+        g, imu = cfg["gimbal"], cfg["imu"]
         self.imu = open_imu(imu["model"], bus, imu["address"], clock=self.clock,
                             range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
@@ -166,6 +168,8 @@ def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | N
     gave too few samples."""
     import numpy as np
 
+    from calib.observations import diff_noise
+
     imu.start()
     try:
         end = clock.monotonic() + seconds
@@ -178,7 +182,7 @@ def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | N
     x = np.concatenate(rates) if rates else np.zeros((0, 3))
     if x.shape[0] < 20:
         return None
-    return float(np.median(np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0) / 2)))
+    return float(np.median(diff_noise(x)))
 
 
 def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:

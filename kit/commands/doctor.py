@@ -51,6 +51,7 @@ class _Report:
 def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus: Any) -> None:
     import numpy as np
 
+    from calib.observations import diff_noise
     from drivers.errors import DriverError
     from drivers.imu import open_imu
 
@@ -89,7 +90,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
                    + (f", chip clock {measured:.2f} Hz" if measured else ""))
         if gaps:
             rep.bad(f"{gaps} FIFO gap(s) while streaming", "a faster I2C bus, or a lower odr_hz")
-        sigma = np.sqrt(np.mean(np.diff(rate, axis=0) ** 2, axis=0) / 2)
+        sigma = diff_noise(rate)
         mean = rate.mean(axis=0)
         rep.ok(f"at rest: mean [{mean[0]:+.4f} {mean[1]:+.4f} {mean[2]:+.4f}] rad/s, noise "
                f"[{sigma[0]:.4f} {sigma[1]:.4f} {sigma[2]:.4f}] rad/s per sample, "
@@ -174,26 +175,16 @@ def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, 
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from drivers.clock import SystemClock
-    from kit.commands.calibrate import load_cli_config
+    from kit.commands.calibrate import jig_endpoints, load_cli_config
     from kit.errors import HardwareError
 
     cfg = load_cli_config(args)
-    if args.sim:
-        from kit.sim import SIM_BAUD, apply_fault, build_sim
+    sim, clock, port, baud, bus = jig_endpoints(cfg, args)
+    if sim is not None:
+        from kit.sim import apply_fault
 
-        sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
-                        realtime=args.realtime, noise_seed=args.sim_noise_seed)
         for spec in args.sim_fault:
-            apply_fault(sim, spec, sim.clock.monotonic())
-        clock, port, baud, bus = sim.clock, sim.port, SIM_BAUD, sim.imu_bus
-    else:
-        if args.sim_fault:
-            from kit.errors import InputError
-
-            raise InputError("--sim-fault needs --sim")
-        clock, port, baud = SystemClock(), cfg["gimbal"]["port"], cfg["gimbal"]["baud"]
-        bus = cfg["imu"]["bus"]
+            apply_fault(sim, spec, clock.monotonic())
     rep = _Report()
     print(f"gyrocal doctor ({'emulated jig' if args.sim else 'hardware'}; config: {cfg.source})")
     _check_imu(rep, cfg, args, clock, bus)
