@@ -15,9 +15,25 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drivers.imu import MODELS as IMU_MODELS
 from kit.errors import InputError
 
-__all__ = ["SCHEMA", "Config", "apply_overrides", "default_config", "load_config", "template"]
+__all__ = [
+    "METHODS",
+    "PROTOCOLS",
+    "SCHEMA",
+    "Config",
+    "apply_overrides",
+    "default_config",
+    "load_config",
+    "template",
+]
+
+#: The estimators a user may choose (the names of :data:`calib.estimators.METHODS`, kept here so
+#: the command line does not import scipy to show its help), the default first.
+METHODS = ("paired-axis", "iterative-ls", "levenberg-marquardt")
+#: The protocols: planned for the jig, or the paper's.
+PROTOCOLS = ("auto", "paper")
 
 
 @dataclass(frozen=True)
@@ -41,7 +57,7 @@ def _axes(v: Any) -> str | None:
     bad = [a for a in v if a.lstrip("+-") not in ("x", "y", "z") or len(a) > 2]
     if bad:
         return f"has unknown axes {bad}; use x, y, z with an optional sign"
-    if sorted(a.lstrip("+-") for a in v) != ["x", "y", "z"][: len(v)] and len(v) == 3:
+    if len(v) == 3 and sorted(a.lstrip("+-") for a in v) != ["x", "y", "z"]:
         return "must name each of x, y and z once"
     return None
 
@@ -76,7 +92,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
                          (int, float), check=_positive),
     },
     "imu": {
-        "model": Key("mpu9250", "sensor chip", str, ("mpu9250", "mpu9255", "mpu6500", "lsm9ds1")),
+        "model": Key("mpu9250", "sensor chip", str, IMU_MODELS),
         "bus": Key(1, "I2C bus number: /dev/i2c-N", int),
         "address": Key(0x68, "7-bit I2C address (MPU-9250: 0x68/0x69; LSM9DS1 A/G: 0x6A/0x6B)",
                        int, check=_address),
@@ -86,14 +102,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "protocol": {
         "name": Key("auto", "auto: planned for this servo and gyro; paper: 60 deg/s, one turn, "
-                    "3 s waits", str, ("auto", "paper")),
+                    "3 s waits", str, PROTOCOLS),
         "time_budget_s": Key(30.0, "longest jig time the planner may use, s", (int, float),
                              check=_positive),
         "speed_dps": Key(0.0, "fixed turn speed, deg/s (0: planned)", (int, float)),
         "turns": Key(0, "fixed whole turns per direction (0: planned)", int),
         "rest_s": Key(0.0, "fixed rest before each turn, s (0: planned)", (int, float)),
-        "method": Key("paired-axis", "estimator", str,
-                      ("paired-axis", "iterative-ls", "levenberg-marquardt")),
+        "method": Key(METHODS[0], "estimator", str, METHODS),
     },
 }
 

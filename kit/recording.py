@@ -305,9 +305,8 @@ def _floats(
     try:  # fast path: numpy parses the strings; any problem falls through to the exact report
         strs = [[row[c].strip() or ("nan" if empty_ok else "") for c in cols] for row in rows]
         out = np.array(strs, dtype=float).reshape(len(rows), len(cols))
-        if empty_ok or np.all(np.isfinite(out)):
-            if not empty_ok or not np.any(np.isinf(out)):
-                return out
+        if not np.any(np.isinf(out) if empty_ok else ~np.isfinite(out)):
+            return out
     except ValueError:
         pass
     out = np.empty((len(rows), len(cols)))

@@ -17,6 +17,7 @@ from calib.simulate import NORMAL, draw_sensors
 from drivers.clock import Clock, SystemClock, VirtualClock
 from drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
 from drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
+from drivers.imu import READERS
 from kit.config import Config
 from kit.errors import InputError
 
@@ -107,13 +108,6 @@ def sim_truth(
     return k, b
 
 
-def _chip_addresses(model: str) -> tuple[int, ...]:
-    """The I²C addresses a chip of ``model`` can answer at (hardware reference §1.1, §2.1)."""
-    from drivers.imu.chips import LSM9DS1, MPU9250
-
-    return LSM9DS1.addresses if model == "lsm9ds1" else MPU9250.addresses
-
-
 def build_sim(
     cfg: Config,
     *,
@@ -163,20 +157,13 @@ def build_sim(
     # allows it, else its default), so a config that names the wrong address fails as it would
     # on hardware.
     imu_bus, address = make_emulated_imu(imu_cfg["model"], clock, jig, truth, seed=run_seed)
-    if imu_cfg["address"] != address and imu_cfg["address"] in _chip_addresses(imu_cfg["model"]):
+    possible = READERS[imu_cfg["model"]].family.addresses  # hardware reference §1.1, §2.1
+    if imu_cfg["address"] != address and imu_cfg["address"] in possible:
         chip = imu_bus.device(address)
         imu_bus.detach(address)
         address = imu_cfg["address"]
         imu_bus.attach(address, chip)
     return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth)
-
-
-def axis_truth_deg(sim: SimJig) -> dict[str, float]:
-    """Each servo's true misalignment (degrees off the nearest sensor axis), for reports."""
-    out = {}
-    for sid, u in sim.jig.home_axes.items():
-        out[str(sid)] = math.degrees(math.acos(min(1.0, float(np.max(np.abs(u))))))
-    return out
 
 
 #: ``--sim-fault`` kinds: what each takes, what it does.

@@ -71,13 +71,15 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
+    from kit.config import METHODS, PROTOCOLS
+
     add_common_jig_arguments(p)
     p.add_argument("--out", metavar="DIR",
                    help="output directory (default: ./gyrocal-YYYYmmdd-HHMMSS)")
     p.add_argument("--force", action="store_true", help="replace files in DIR")
-    p.add_argument("--protocol", choices=("auto", "paper"),
+    p.add_argument("--protocol", choices=PROTOCOLS,
                    help="auto: planned for this jig (default); paper: 60°/s, one turn, 3 s waits")
-    p.add_argument("--method", choices=("paired-axis", "iterative-ls", "levenberg-marquardt"))
+    p.add_argument("--method", choices=METHODS)
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -133,8 +135,9 @@ class Jig:
         if self._fault_specs:
             from kit.sim import apply_fault, build_sim
 
+            scratch = build_sim(cfg, seed=args.sim_seed)
             for spec in self._fault_specs:  # validate now; armed when the protocol starts
-                apply_fault(build_sim(cfg, seed=args.sim_seed), spec)
+                apply_fault(scratch, spec)
         g, imu = cfg["gimbal"], cfg["imu"]
         self.imu = open_imu(imu["model"], bus, imu["address"], clock=self.clock,
                             range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])

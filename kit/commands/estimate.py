@@ -13,13 +13,14 @@ DESCRIPTION = (
     "table, or the Calibration v1 document with --json. Exits 3 if the fit is not consistent "
     "with the measured noise."
 )
-METHOD_CHOICES = ("paired-axis", "iterative-ls", "levenberg-marquardt")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
+    from kit.config import METHODS
+
     p.add_argument("recording", help="a Recording v1 directory")
-    p.add_argument("--method", choices=METHOD_CHOICES, default="paired-axis",
+    p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator (default: paired-axis)")
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the Calibration v1 document here")

@@ -23,13 +23,14 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
+    from kit.config import METHODS
+
     p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
     p.add_argument("cal", nargs="?", metavar="CAL",
                    help="Calibration v1 JSON (default: estimate one from the recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
     p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
-    p.add_argument("--method", choices=("paired-axis", "iterative-ls", "levenberg-marquardt"),
-                   default="paired-axis",
+    p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator when no CAL is given (default paired-axis)")
 
 

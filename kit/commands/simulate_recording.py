@@ -70,8 +70,7 @@ def run(args: argparse.Namespace) -> int:
     with RecordingWriter(args.out, sensor=sensor, gimbal=gimbal, protocol=protocol,
                          truth=truth, force=args.force) as w:
         w.append_imu(runsim.imu_t, runsim.imu_rate, runsim.imu_temp)
-        te = runsim.enc_t
-        w.append_encoder(te, runsim.enc_motor, runsim.enc_angle)
+        w.append_encoder(runsim.enc_t, runsim.enc_motor, runsim.enc_angle)
         for seg in runsim.segments:
             w.append_segment(seg)
         w.finish()

@@ -68,3 +68,10 @@ def test_init_writes_once(tmp_path, capsys):
     assert main(["init", str(p)]) == 2
     assert "already exists" in capsys.readouterr().err
     assert main(["init", str(p), "--force"]) == 0
+
+
+def test_the_method_choices_are_the_estimators():
+    from calib.estimators import METHODS as ESTIMATORS
+    from kit.config import METHODS
+
+    assert set(METHODS) == set(ESTIMATORS)
