@@ -7,6 +7,8 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 HELP = "reproduce the paper's simulation study (Monte Carlo, all estimators side by side)"
@@ -42,12 +44,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the numbers as JSON")
 
 
-def _pool(workers: int) -> Any:
+@contextmanager
+def _mapper(workers: int) -> Iterator[Callable[..., Any]]:
+    """``map`` over ``workers`` processes (the built-in ``map`` for one)."""
     if workers <= 1:
-        return None
+        yield map
+        return
     from concurrent.futures import ProcessPoolExecutor
 
-    return ProcessPoolExecutor(max_workers=workers)
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        yield pool.map
 
 
 def _stats_table(result: Any) -> str:
@@ -143,12 +149,8 @@ def run(args: argparse.Namespace) -> int:
             noise_levels=tuple(args.noise) if args.noise else base.noise_levels,
             protocol=base.protocol, misalignment=base.misalignment, seed=args.seed,
         )
-        pool = _pool(args.workers)
-        try:
-            result = study.run_study(cfg, map_fn=pool.map if pool else map, lm=not args.no_lm)
-        finally:
-            if pool:
-                pool.shutdown()
+        with _mapper(args.workers) as map_fn:
+            result = study.run_study(cfg, map_fn=map_fn, lm=not args.no_lm)
         text = _stats_table(result)
         doc = _stats_json(result)
         if plot_dir is not None:
@@ -164,13 +166,8 @@ def run(args: argparse.Namespace) -> int:
             name="speed-sweep", n_sensors=args.sensors or 30, reps=args.reps or 10,
             noise_levels=tuple(args.noise) if args.noise else (0.035, 0.2), seed=args.seed,
         )
-        pool = _pool(args.workers)
-        try:
-            sweep = study.speed_sweep(speeds, base=base, map_fn=pool.map if pool else map,
-                                      lm=not args.no_lm)
-        finally:
-            if pool:
-                pool.shutdown()
+        with _mapper(args.workers) as map_fn:
+            sweep = study.speed_sweep(speeds, base=base, map_fn=map_fn, lm=not args.no_lm)
         lines = []
         doc = {"preset": "speed-sweep", "levels": {}}
         for noise, by_speed in sweep.items():
