@@ -55,6 +55,7 @@ from scipy.stats import chi2
 
 from calib.errors import CalibInputError, CalibrationFormatError
 from calib.noise_sim import FLICKER_FLOOR
+from calib.validation import scalar
 
 __all__ = [
     "FORMAT",
@@ -96,16 +97,6 @@ def _as_rate(rate: Any, name: str = "rate") -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise CalibInputError(f"{name} contains NaN or inf; give a clean, gap-free still record")
     return a
-
-
-def _odr(odr_hz: Any) -> float:
-    try:
-        v = float(odr_hz)
-    except (TypeError, ValueError):
-        raise CalibInputError(f"odr_hz must be a positive number, got {odr_hz!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise CalibInputError(f"odr_hz must be a positive number, got {odr_hz!r}")
-    return v
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,7 +183,7 @@ def allan_deviation(
     AllanCurve
     """
     a = _as_rate(rate)
-    fs = _odr(odr_hz)
+    fs = scalar(odr_hz, "odr_hz", positive=True)
     n = a.shape[0]
     if m is None:
         ms = _taus_m(n)
@@ -541,9 +532,7 @@ def characterise_noise(
     curve = allan_deviation(a, odr_hz, m=m)
     fs = curve.odr_hz
     tau = curve.tau_s
-    min_tau = 10.0 / fs if min_tau_s is None else float(min_tau_s)
-    if not (math.isfinite(min_tau) and min_tau >= 0):
-        raise CalibInputError(f"min_tau_s must be a non-negative number, got {min_tau_s!r}")
+    min_tau = 10.0 / fs if min_tau_s is None else scalar(min_tau_s, "min_tau_s", nonneg=True)
     if tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
         raise CalibInputError(
             f"the record ({curve.n_samples} samples at {fs:g} Hz) is too short for a noise "

@@ -67,7 +67,7 @@ from scipy.stats import chi2
 from calib.errors import CalibInputError
 from calib.model import GyroCalibration
 from calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
-from calib.validation import vec3
+from calib.validation import scalar, vec3
 
 if TYPE_CHECKING:
     from calib.allan import NoiseCharacterisation
@@ -84,17 +84,6 @@ __all__ = [
 ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
 
 _KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
-
-
-def _pos(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise CalibInputError(f"{name} must be a positive number, got {value!r}") from None
-    ok = (v >= 0 if allow_zero else v > 0) and math.isfinite(v)
-    if not ok:
-        raise CalibInputError(f"{name} must be a positive number, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -156,7 +145,7 @@ class TrackerSettings:
     still: StillSettings = field(default_factory=StillSettings)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "odr_hz", _pos(self.odr_hz, "odr_hz"))
+        object.__setattr__(self, "odr_hz", scalar(self.odr_hz, "odr_hz", positive=True))
         for name, kw in (
             ("noise_density", {"positive": True}),
             ("rate_random_walk", {"nonneg": True}),
@@ -166,18 +155,18 @@ class TrackerSettings:
         ):
             a = vec3(getattr(self, name), name, **kw)
             object.__setattr__(self, name, tuple(float(x) for x in a))
-        if self.t_ref_c is not None and not math.isfinite(float(self.t_ref_c)):
-            raise CalibInputError(f"t_ref_c must be a finite temperature, got {self.t_ref_c!r}")
-        _pos(self.update_interval_s, "update_interval_s")
+        if self.t_ref_c is not None:
+            scalar(self.t_ref_c, "t_ref_c")
+        scalar(self.update_interval_s, "update_interval_s", positive=True)
         if isinstance(self.nis_window, bool) or not isinstance(self.nis_window, int):
             raise CalibInputError(f"nis_window must be a positive integer, got {self.nis_window!r}")
         if self.nis_window < 1:
             raise CalibInputError(f"nis_window must be a positive integer, got {self.nis_window!r}")
-        if not (0 < self.nis_alpha < 1):
+        if not (0 < scalar(self.nis_alpha, "nis_alpha") < 1):
             raise CalibInputError(f"nis_alpha must be in (0, 1), got {self.nis_alpha!r}")
-        _pos(self.stale_after_s, "stale_after_s")
-        _pos(self.reference_angle_std, "reference_angle_std", allow_zero=True)
-        _pos(self.reference_axis_std, "reference_axis_std", allow_zero=True)
+        scalar(self.stale_after_s, "stale_after_s", positive=True)
+        scalar(self.reference_angle_std, "reference_angle_std", nonneg=True)
+        scalar(self.reference_axis_std, "reference_axis_std", nonneg=True)
         if not isinstance(self.still, StillSettings):
             raise CalibInputError("still must be a StillSettings")
 

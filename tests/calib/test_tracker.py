@@ -273,6 +273,12 @@ def test_setup_errors_are_named():
         settings(noise_density=(0.0, 1e-4, 1e-4))
     with pytest.raises(CalibInputError, match="nis_alpha"):
         settings(nis_alpha=2.0)
+    with pytest.raises(CalibInputError, match="nis_alpha"):
+        settings(nis_alpha="small")
+    with pytest.raises(CalibInputError, match="t_ref_c"):
+        settings(t_ref_c="warm")
+    with pytest.raises(CalibInputError, match="reference_axis_std must be a non-negative"):
+        settings(reference_axis_std=-1e-3)
     tr = BiasTracker(settings(), initial_bias_std=1e-3)
     with pytest.raises(CalibInputError, match="temperature"):
         tr.process([0.0], np.zeros((1, 3)))
