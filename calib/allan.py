@@ -321,6 +321,16 @@ class NoiseCharacterisation:
         """Per-sample white-noise standard deviation at ``odr_hz``, ``N √odr``, rad/s."""
         return np.asarray(self.noise_density.value) * math.sqrt(self.odr_hz)
 
+    @property
+    def rate_random_walk_or_hi95(self) -> tuple[float, ...]:
+        """``K`` per axis where the record resolves it, else its 95 % upper bound, rad/s/√s.
+
+        What a Kalman filter's ``Q`` or a Kalibr file should take: an unresolved (near zero)
+        ``K`` would make the bias look frozen.
+        """
+        fig = self.rate_random_walk
+        return tuple(k if k > 0 else hi for k, hi in zip(fig.value, fig.hi95, strict=True))
+
     def with_meta(self, **fields: Any) -> NoiseCharacterisation:
         """A copy with ``sensor``, ``temperature_c``, ``created`` or ``source`` replaced."""
         allowed = {"sensor", "temperature_c", "created", "source"}

@@ -175,14 +175,13 @@ class TrackerSettings:
         """Settings whose ``R`` and ``Q`` come from a noise characterisation (Allan deviation).
 
         ``rate_random_walk`` is the characterisation's ``K``, or where that is unresolved
-        (near zero) its 95 % upper bound, so the filter never believes the bias is frozen.
+        (near zero) its 95 % upper bound (:attr:`NoiseCharacterisation.rate_random_walk_or_hi95`),
+        so the filter never believes the bias is frozen.
         """
-        k = np.asarray(noise.rate_random_walk.value)
-        k = np.where(k > 0, k, np.asarray(noise.rate_random_walk.hi95))
         kw: dict[str, Any] = {
             "odr_hz": noise.odr_hz,
             "noise_density": tuple(noise.noise_density.value),
-            "rate_random_walk": tuple(float(x) for x in k),
+            "rate_random_walk": noise.rate_random_walk_or_hi95,
         }
         kw.update(overrides)
         return cls(**kw)

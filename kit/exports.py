@@ -213,8 +213,7 @@ def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[
     notes: list[str] = []
     n_axes = list(nc.noise_density.value)
     k_axes = list(nc.rate_random_walk.value)
-    k_hi = list(nc.rate_random_walk.hi95)
-    k_used = [k if k > 0 else hi for k, hi in zip(k_axes, k_hi, strict=True)]
+    k_used = nc.rate_random_walk_or_hi95
     n_val = max(n_axes)
     k_val = max(k_used)
     if not (n_val > 0 and k_val > 0):

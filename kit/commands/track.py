@@ -340,8 +340,7 @@ def _build_tracker(
     if args.rate_random_walk is not None:
         k: Any = args.rate_random_walk
     elif noise is not None:
-        kv = np.asarray(noise.rate_random_walk.value)
-        k = tuple(float(x) for x in np.where(kv > 0, kv, noise.rate_random_walk.hi95))
+        k = noise.rate_random_walk_or_hi95
     else:
         k = DEFAULT_RATE_RANDOM_WALK
         notes.append(f"bias random walk not given: using {k:g} rad/s/sqrt(s) (conservative; "
