@@ -275,7 +275,8 @@ class NoiseCharacterisation:
     noise_density : NoiseFigure
         Angle random walk ``N``, rad/s/√Hz (Kalibr's ``gyroscope_noise_density``).
     bias_instability : NoiseFigure
-        ``B = min σ(τ) / 0.664``, rad/s.
+        ``B``, rad/s: the flicker floor ``(0.664 B)²`` of the fitted model read at the τ where
+        it is best determined (not the curve's minimum over 0.664; that is ``adev_min``).
     rate_random_walk : NoiseFigure
         ``K``, rad/s/√s (Kalibr's ``gyroscope_random_walk``, rad/s²/√Hz).
     tau_s : ndarray (M,)
