@@ -390,7 +390,7 @@ class NoiseCharacterisation:
                 f"reads version {VERSION})"
             )
         odr = doc.get("odr_hz")
-        if isinstance(odr, bool) or not isinstance(odr, (int, float)) or not odr > 0:
+        if isinstance(odr, bool) or not isinstance(odr, (int, float)) or not 0 < odr < math.inf:
             raise CalibrationFormatError("'odr_hz' must be a positive number")
         n = doc.get("n_samples")
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
@@ -422,7 +422,9 @@ class NoiseCharacterisation:
         if not isinstance(sensor, Mapping):
             raise CalibrationFormatError("'sensor' must be an object")
         temp = doc.get("temperature_c")
-        if temp is not None and (isinstance(temp, bool) or not isinstance(temp, (int, float))):
+        if temp is not None and (
+            isinstance(temp, bool) or not isinstance(temp, (int, float)) or not math.isfinite(temp)
+        ):
             raise CalibrationFormatError("'temperature_c' must be a number or null")
         return cls(
             noise_density=NoiseFigure.from_dict(doc.get("noise_density"), "noise_density", UNIT_N),
