@@ -22,7 +22,6 @@ whitens each window's mean against the calibration's prediction, and :func:`enco
 
 from __future__ import annotations
 
-import io
 import math
 import os
 from collections.abc import Mapping
@@ -36,7 +35,6 @@ from calib.model import GyroCalibration
 from calib.segments import Segment
 from calib.windows import ExtractedWindows, Window
 from kit.errors import InputError, OutputExistsError
-from kit.fileio import atomic_write_bytes
 from kit.recording import Recording
 
 __all__ = [
@@ -305,15 +303,6 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
     return plots
 
 
-def _save(fig: Any, plt: Any, path: Path, force: bool) -> None:
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=100)
-    finally:
-        plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue(), force=force)
-
-
 def _shade_weight(ax: Any, t: np.ndarray, corners: tuple[float, float, float, float],
                   color: str = "C3", label: str | None = None) -> None:
     """The trapezoid weight as a shaded area over the panel's height (axes-fraction y)."""
@@ -561,7 +550,7 @@ def write_report(
     InputError
         If matplotlib is missing, or ``out_dir`` cannot be created.
     """
-    from kit.plots import require_matplotlib
+    from kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     out = Path(out_dir)
@@ -594,6 +583,6 @@ def write_report(
             fig = _rests_plot(plt, extracted, cal, rec.truth)
         else:
             fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
-        _save(fig, plt, out / p.name, force)
+        save_png(fig, out / p.name, force=force, dpi=100)
         written.append((out / p.name, p.description))
     return written

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from kit.errors import InputError
+from kit.errors import InputError, OutputExistsError
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
@@ -95,7 +95,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print the per-sample JSON document")
     o.add_argument("--out", metavar="FILE", help="write the JSON document to FILE instead")
-    o.add_argument("--force", action="store_true", help="replace an existing --out file")
+    o.add_argument("--force", action="store_true",
+                   help="replace existing --out and --plot files (and a --record directory)")
     o.add_argument("--plot", metavar="FILE",
                    help="draw the bias and its 3-sigma band to FILE (PNG; 'plot' extra)")
     o.add_argument("--rows", type=int, default=12, help="rows of the text summary (default 12)")
@@ -700,12 +701,13 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     if args.record and plan is not None:
         raise InputError("--record writes still sessions: drop --turns (or --record)")
     if args.record:
-        from pathlib import Path
-
         rec_path = Path(args.record)
-        if rec_path.exists() and any(rec_path.iterdir()) and not args.force:
-            raise InputError(f"{rec_path} already holds files; choose another --record or "
-                             "pass --force")
+        if rec_path.exists() and not rec_path.is_dir():
+            raise OutputExistsError(f"{rec_path} exists and is not a directory; choose another "
+                                    "--record")
+        if rec_path.is_dir() and any(rec_path.iterdir()) and not args.force:
+            raise OutputExistsError(f"{rec_path} already holds files; choose another --record or "
+                                    "pass --force")
     jig = Jig(cfg, args)
     where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
     if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
@@ -780,9 +782,9 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     return tr, truth, f"live on {where}"  # type: ignore[return-value]
 
 
-def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
+def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False) -> None:
     """Draw the bias estimate of each axis with its 3-sigma band (and the truth of a --sim)."""
-    from kit.plots import require_matplotlib
+    from kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
@@ -802,12 +804,7 @@ def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
     axs[0].legend(loc="upper right", fontsize=8)
     axs[-1].set_xlabel("t, s")
     fig.suptitle("gyro bias (Calibration v1 convention); red lines: NIS alarms")
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        raise InputError(f"cannot write the plot to {path}: {exc}") from None
-    finally:
-        plt.close(fig)
+    save_png(fig, path, force=force)
 
 
 def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
@@ -880,11 +877,12 @@ def _check_modes(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
-    from kit.fileio import atomic_write_text
+    from kit.fileio import atomic_write_text, refuse_existing
 
     _check_modes(args)
     if args.rows < 2:
         raise InputError("--rows must be at least 2")
+    refuse_existing((args.out, args.plot), force=args.force)  # before a long (or live) run
     notes: list[str] = []
     if args.live:
         tr, truth, source = _run_live(args, notes)
@@ -901,7 +899,7 @@ def run(args: argparse.Namespace) -> int:
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.plot:
-        plot_track(tr, args.plot, truth)
+        plot_track(tr, args.plot, truth, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json or args.out:
         doc = {

@@ -227,5 +227,8 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
     value, std = np.array(n["value"]), np.array(n["std"])
     assert np.all(np.abs(value - TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ) < 4 * std)
     assert main(["track", "--live", "--sim", "--duration", "5", "--record", str(rec)]) == 2
+    (tmp_path / "a-file").write_text("")
+    assert main(["track", "--live", "--sim", "--duration", "5", "--record",
+                 str(tmp_path / "a-file"), "--force"]) == 2
     assert main(["track", "--live", "--sim", "--turns", "1", "--record", str(tmp_path / "x"),
                  "--cal", "c.json"]) == 2
