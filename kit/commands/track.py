@@ -243,6 +243,8 @@ def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[
     window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
     calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
     """
+    from kit.report_plots import encoder_rate
+
     n = rec.imu_t.size
     rr = np.full(n, np.nan)
     ra = np.full((n, 3), np.nan)
@@ -264,17 +266,14 @@ def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[
             raise InputError(f"--cal: axes[{seg.motor!r}].axis must be 3 finite numbers")
         u = u / np.linalg.norm(u)
         et, ea = rec.encoder(seg.motor)
-        sel = (rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end)
-        ti = rec.imu_t[sel]
-        inside = (ti - dt / 2 >= (et[0] if et.size else np.inf)) & (
-            ti + dt / 2 <= (et[-1] if et.size else -np.inf))
-        if et.size < 2 or not inside.any():
+        idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
+        rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
+        covered = np.isfinite(rate)
+        if not covered.any():
             notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
             continue
-        idx = np.flatnonzero(sel)[inside]
-        tt = rec.imu_t[idx]
-        rr[idx] = (np.interp(tt + dt / 2, et, ea) - np.interp(tt - dt / 2, et, ea)) / dt
-        ra[idx] = u
+        rr[idx[covered]] = rate[covered]
+        ra[idx[covered]] = u
     return rr, ra, notes
 
 
@@ -578,6 +577,8 @@ class LiveSource:
     def turn_pair(self, motor: int) -> Batch | None:
         """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
         with the encoder's reference rate and the servo's axis."""
+        from kit.report_plots import encoder_rate
+
         p = self.plan
         if p is None:
             raise InputError("no turns planned")
@@ -605,15 +606,11 @@ class LiveSource:
         if not parts:
             return None
         batch = self._batch(parts, planned=True)
-        et, ea = np.asarray(enc_t), np.asarray(enc_a)
         t = batch.t
         dt = 1.0 / float(self.jig.imu.odr_hz)
-        inside = (t - dt / 2 >= et[0]) & (t + dt / 2 <= et[-1])
-        rr = np.full(t.size, np.nan)
-        rr[inside] = (np.interp(t[inside] + dt / 2, et, ea)
-                      - np.interp(t[inside] - dt / 2, et, ea)) / dt
+        rr = encoder_rate(np.asarray(enc_t), np.asarray(enc_a), t, dt / 2)
         ra = np.full((t.size, 3), np.nan)
-        ra[inside] = p.axes[motor]
+        ra[np.isfinite(rr)] = p.axes[motor]
         return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
 
     def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
