@@ -34,6 +34,8 @@ import numpy as np
 from calib.model import GyroCalibration
 from calib.segments import Segment
 from calib.windows import ExtractedWindows, Window
+from calib.windows import _grid as _weight_grid  # the estimator's own weight: plot what it used
+from calib.windows import _weight as _window_weight
 from kit.errors import InputError, OutputExistsError
 from kit.recording import Recording
 
@@ -152,12 +154,9 @@ def servo_axes(
 
 def trapezoid_weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
     """The window weight ``w(t)``: 0 before ``a``, rising to 1 at ``a + L_a``, 1 until
-    ``b - L_b``, falling to 0 at ``b`` (a zero-length ramp is a vertical edge)."""
-    t = np.asarray(t, dtype=float)
-    a, a2, b2, b = corners
-    up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0.0, 1.0)
-    down = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0.0, 1.0)
-    return np.where((t >= a) & (t <= b), np.minimum(up, down), 0.0)
+    ``b - L_b``, falling to 0 at ``b`` (a zero-length ramp is a vertical edge): the weight
+    :func:`calib.windows.extract_observations` averages a window with."""
+    return _window_weight(np.asarray(t, dtype=float), corners)
 
 
 def encoder_rate(
@@ -306,8 +305,7 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
 def _shade_weight(ax: Any, t: np.ndarray, corners: tuple[float, float, float, float],
                   color: str = "C3", label: str | None = None) -> None:
     """The trapezoid weight as a shaded area over the panel's height (axes-fraction y)."""
-    a, b = corners[0], corners[3]
-    tg = np.unique(np.concatenate([np.asarray(corners), t[(t > a) & (t < b)]]))
+    tg = _weight_grid(t, corners)
     ax.fill_between(tg, 0.0, trapezoid_weight(tg, corners), transform=ax.get_xaxis_transform(),
                     color=color, alpha=0.12, lw=0, label=label)
 
