@@ -202,36 +202,18 @@ def _chunks(batch: Batch, size: int) -> Iterator[Batch]:
             batch.reference_axis)))
 
 
-def _read_json(path: str, what: str) -> Any:
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{what} {p} does not exist or is not a file")
-    try:
-        return json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{what} {p} is not readable JSON: {exc}") from None
-
-
 def load_calibration(path: str) -> Any:
-    """Read a Calibration v1 file (InputError naming the problem)."""
-    from calib.errors import CalibrationFormatError
-    from calib.model import GyroCalibration
+    """Read the --cal Calibration v1 file (InputError naming the problem)."""
+    from kit.exports import load_document
 
-    try:
-        return GyroCalibration.from_dict(_read_json(path, "--cal"))
-    except CalibrationFormatError as exc:
-        raise InputError(f"--cal {path}: {exc}") from None
+    return load_document(path, "gyrocal-calibration", "--cal")
 
 
 def load_noise(path: str) -> Any:
-    """Read a gyrocal-noise v1 file (InputError naming the problem)."""
-    from calib.allan import NoiseCharacterisation
-    from calib.errors import CalibrationFormatError
+    """Read the --noise gyrocal-noise v1 file (InputError naming the problem)."""
+    from kit.exports import load_document
 
-    try:
-        return NoiseCharacterisation.from_dict(_read_json(path, "--noise"))
-    except CalibrationFormatError as exc:
-        raise InputError(f"--noise {path}: {exc}") from None
+    return load_document(path, "gyrocal-noise", "--noise")
 
 
 def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
