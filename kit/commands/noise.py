@@ -54,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="draw the Allan deviation to FILE (PNG; needs the 'plot' extra)")
 
 
-def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], str]:
+def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], None]:
     from kit.recording import load_recording
 
     rec = load_recording(args.recording)
@@ -102,18 +102,18 @@ def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[s
     ok = np.isfinite(temp)
     if ok.any():
         meta["temperature_c"] = float(np.mean(temp[ok]))
-    return rate, odr, meta, str(rec.path)
+    return rate, odr, meta, None
 
 
 def _from_sim(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], Any]:
     from calib.noise_sim import NoiseModel, simulate_still
 
+    if not args.sim_noise_density > 0:
+        raise InputError("--sim-noise-density must be positive")
     try:
         model = NoiseModel(noise_density=args.sim_noise_density,
                            rate_random_walk=args.sim_rate_random_walk,
                            bias_instability=args.sim_bias_instability)
-        if not args.sim_noise_density > 0:
-            raise InputError("--sim-noise-density must be positive")
         s = simulate_still(np.random.default_rng(args.seed), args.duration, odr_hz=args.odr,
                            model=model)
     except ValueError as exc:
@@ -181,11 +181,7 @@ def run(args: argparse.Namespace) -> int:
     if args.sim == (args.recording is not None):
         raise InputError("give a RECORDING or --sim (one of them)")
     refuse_existing((args.out, args.plot), force=args.force)
-    truth = None
-    if args.sim:
-        rate, odr, meta, truth = _from_sim(args)
-    else:
-        rate, odr, meta, _ = _from_recording(args)
+    rate, odr, meta, truth = _from_sim(args) if args.sim else _from_recording(args)
     nc = characterise_noise(rate, odr, min_tau_s=args.min_tau)
     nc = nc.with_meta(created=now_iso(), **meta)
     doc = nc.to_dict()

@@ -268,7 +268,7 @@ def _rest_flags(rec: Any, trim_s: float = 0.5) -> np.ndarray:
     return still
 
 
-def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any, notes: list[str],
+def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
               axis_std: float | None) -> Any:
     from calib.stationarity import StillSettings
     from calib.tracker import TrackerSettings
@@ -333,7 +333,7 @@ def _build_tracker(
         stds = [s for s in stds if isinstance(s, (int, float)) and math.isfinite(s)]
         if stds:
             axis_std = math.radians(max(stds))
-    st = _settings(args, odr, n_density, k, notes, axis_std)
+    st = _settings(args, odr, n_density, k, axis_std)
     if cal is not None:
         try:
             return BiasTracker(st, cal), cal
@@ -402,8 +402,7 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
         notes.append("--cal is ignored with --sim (the simulation makes its own calibration)")
     n_density = args.noise_density if args.noise_density is not None else model.noise_density
     k = args.rate_random_walk if args.rate_random_walk is not None else model.rate_random_walk
-    st = _settings(args, s.odr_hz, n_density, k, notes,
-                   1e-5 if args.motion == "jig" else None)
+    st = _settings(args, s.odr_hz, n_density, k, 1e-5 if args.motion == "jig" else None)
     tracker = BiasTracker(st, cal)
     rr = ra = None
     if args.motion == "jig" and not args.no_reference:
@@ -836,7 +835,7 @@ def _check_modes(args: argparse.Namespace) -> None:
         raise InputError("give a RECORDING or --sim (a synthetic session), or --live to track "
                          "on the jig (--live --sim: the emulated jig)")
     given = [name for name, default in _JIG_FLAGS.items()
-             if getattr(args, name, default) not in (default,)]
+             if getattr(args, name, default) != default]
     given += [name for name, default in (("turns", 0), ("turn_speed_dps", 90.0),
                                          ("turn_every", 10.0))
               if getattr(args, name) != default]
