@@ -43,8 +43,6 @@ DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the flags."""
-    from kit.commands.calibrate import add_common_jig_arguments
-
     p.add_argument("recording", nargs="?", metavar="RECORDING", help="Recording v1 directory")
     src = p.add_argument_group("simulation (--sim)")
     src.add_argument("--sim", action="store_true",
@@ -108,6 +106,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--live", action="store_true",
                       help="track live on the jig (gyrocal.toml: gimbal, imu) instead of a "
                            "recording")
+    _add_live_only_arguments(live)
+
+
+def _add_live_only_arguments(live: Any) -> None:
+    """The flags that apply to --live only (an argument group, or a parser)."""
+    from kit.commands.calibrate import add_common_jig_arguments
+
     live.add_argument("--turns", type=int, default=0, metavar="N",
                       help="--live: every --turn-every seconds turn one servo N whole turns and "
                            "back, for reference-rate updates (needs --cal with the servo axes; "
@@ -119,7 +124,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--record", metavar="DIR",
                       help="--live (still sessions): also write the session as a Recording v1 "
                            "(one rest), e.g. for `gyrocal noise DIR`")
-    add_common_jig_arguments(live, sim_flag=False)  # type: ignore[arg-type]
+    add_common_jig_arguments(live, sim_flag=False)
+
+
+def _live_only_defaults() -> dict[str, Any]:
+    """Destination -> default of every flag that applies to --live only (read off the flags
+    themselves, so a new jig flag is refused without --live without anyone listing it)."""
+    p = argparse.ArgumentParser(add_help=False)
+    _add_live_only_arguments(p)
+    return vars(p.parse_args([]))
 
 
 @dataclass(frozen=True)
@@ -812,12 +825,6 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
     return "\n".join(out)
 
 
-#: Flags of the jig (``--live``) with their defaults, to refuse them elsewhere.
-_JIG_FLAGS = {"config": None, "sim_seed": 0, "sim_scale": None, "sim_bias": None,
-              "realtime": False, "port": None, "baud": None, "imu_model": None, "imu_bus": None,
-              "imu_address": None, "range_dps": None, "odr": None}
-
-
 def _check_modes(args: argparse.Namespace) -> None:
     """One source (RECORDING, --sim or --live) and only the flags that apply to it; fills in
     the defaults that depend on the mode."""
@@ -834,11 +841,8 @@ def _check_modes(args: argparse.Namespace) -> None:
     if args.sim == (args.recording is not None):
         raise InputError("give a RECORDING or --sim (a synthetic session), or --live to track "
                          "on the jig (--live --sim: the emulated jig)")
-    given = [name for name, default in _JIG_FLAGS.items()
-             if getattr(args, name, default) != default]
-    given += [name for name, default in (("turns", 0), ("turn_speed_dps", 90.0),
-                                         ("turn_every", 10.0))
-              if getattr(args, name) != default]
+    given = [name for name, default in _live_only_defaults().items()
+             if getattr(args, name) != default]
     if given:
         flags = ", ".join("--" + g.replace("_", "-") for g in given)
         raise InputError(f"{flags} applies to --live only")

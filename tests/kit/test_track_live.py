@@ -120,6 +120,9 @@ def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, capsys):
     (["--live", "--sim", "--duration", "1"], "--duration must be at least 2 s"),
     (["--sim", "--sim-seed", "3"], "--sim-seed applies to --live only"),
     (["--sim", "--port", "/dev/ttyUSB1"], "--port applies to --live only"),
+    (["--sim", "--sim-fault", "stall:1:3"], "--sim-fault applies to --live only"),
+    (["--sim", "--sim-noise-seed", "3"], "--sim-noise-seed applies to --live only"),
+    (["--sim", "--record", "x"], "--record applies to --live only"),
 ])
 def test_live_bad_usage_exits_2(capsys, argv, match):
     assert main(["track", *argv]) == 2
