@@ -44,6 +44,7 @@ __all__ = [
     "Residuals",
     "ServoAxis",
     "boxcar_mean",
+    "calibration_axis",
     "encoder_rate",
     "nominal_axis",
     "plan_report",
@@ -95,6 +96,30 @@ def nominal_axis(name: str) -> np.ndarray:
     return u
 
 
+def calibration_axis(cal: GyroCalibration, motor: int) -> np.ndarray | None:
+    """Servo ``motor``'s unit axis in the sensor frame from the calibration's ``axes``, or None
+    if the calibration has none for it.
+
+    Raises
+    ------
+    InputError
+        If the entry is there but is not 3 finite numbers, not all zero.
+    """
+    entry = (cal.axes or {}).get(str(motor))
+    if not isinstance(entry, Mapping) or "axis" not in entry:
+        return None
+    try:
+        u = np.asarray(entry["axis"], dtype=float)
+    except (TypeError, ValueError):
+        u = np.full(1, np.nan)
+    if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+        raise InputError(
+            f"the calibration's axes[{str(motor)!r}].axis must be 3 finite numbers, not all "
+            f"zero; got {entry['axis']!r}"
+        )
+    return u / np.linalg.norm(u)
+
+
 def servo_axes(
     motors: list[int], cal: GyroCalibration, manifest: Mapping[str, Any],
     windows: tuple[Window, ...] = (),
@@ -129,19 +154,13 @@ def servo_axes(
     b = np.asarray(cal.bias)
     out: dict[int, ServoAxis] = {}
     for motor in motors:
-        entry = (cal.axes or {}).get(str(motor))
+        u = calibration_axis(cal, motor)
         acc = np.zeros(3)
         for w in windows:
             if w.motor == motor:
                 acc += w.rate * k * (np.asarray(w.mean) + b)
-        if isinstance(entry, Mapping) and "axis" in entry:
-            u = np.asarray(entry["axis"], dtype=float)
-            if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
-                raise InputError(
-                    f"the calibration's axes[{str(motor)!r}].axis must be 3 finite numbers, "
-                    f"not all zero; got {entry['axis']!r}"
-                )
-            out[motor] = ServoAxis(motor, u / np.linalg.norm(u), "calibration")
+        if u is not None:
+            out[motor] = ServoAxis(motor, u, "calibration")
         elif np.any(acc):
             out[motor] = ServoAxis(motor, acc / np.linalg.norm(acc), "fitted")
         elif motor in nominal:

@@ -238,28 +238,23 @@ def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[
     window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
     calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
     """
-    from kit.report_plots import encoder_rate
+    from kit.report_plots import calibration_axis, encoder_rate
 
     n = rec.imu_t.size
     rr = np.full(n, np.nan)
     ra = np.full((n, 3), np.nan)
     notes: list[str] = []
-    axes = (cal.axes or {}) if cal is not None else {}
     if n < 2:
         return rr, ra, notes
     dt = float(np.median(np.diff(rec.imu_t)))
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue
-        entry = axes.get(str(seg.motor))
-        if not isinstance(entry, dict) or "axis" not in entry:
+        u = calibration_axis(cal, int(seg.motor))  # type: ignore[arg-type]
+        if u is None:
             notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
                          f"{seg.index} gives no reference-rate updates")
             continue
-        u = np.asarray(entry["axis"], dtype=float)
-        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
-            raise InputError(f"--cal: axes[{seg.motor!r}].axis must be 3 finite numbers")
-        u = u / np.linalg.norm(u)
         et, ea = rec.encoder(seg.motor)
         idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
         rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
@@ -654,17 +649,18 @@ def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
         raise InputError("--turns needs --cal: the reference-rate updates use the calibration's "
                          "scale and servo axes (a paired-axis calibration from 'gyrocal "
                          "calibrate')")
+    from kit.report_plots import calibration_axis
+
     cal = load_calibration(args.cal)
     if not np.all(np.isfinite(cal.scale_std)):
         raise InputError(f"--turns: the calibration {args.cal} has no scale_std")
     axes: dict[int, np.ndarray] = {}
     for sid in cfg["gimbal"]["ids"]:
-        entry = (cal.axes or {}).get(str(sid))
-        u = np.asarray(entry.get("axis") if isinstance(entry, dict) else np.nan, dtype=float)
-        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+        u = calibration_axis(cal, int(sid))
+        if u is None:
             raise InputError(f"--turns: the calibration {args.cal} has no axis for servo {sid} "
                              "(calibrate with the paired-axis method)")
-        axes[int(sid)] = u / np.linalg.norm(u)
+        axes[int(sid)] = u
     return TurnPlan(int(args.turns), math.radians(speed_dps), float(every), axes)
 
 
