@@ -1,7 +1,8 @@
 """Bias tracker vs xioTechnologies Fusion's gyroscope bias estimator, and tracker speed.
 
-Usage: ``python -m bench tracker [--sessions N] [--duration S]`` (needs the ``bench`` extra,
-``pip install '.[bench]'``, for ``imufusion``).
+Usage: ``python -m bench tracker [--sessions=N] [--duration=S]`` (with ``=``: the bench runner
+takes every bare word for a benchmark name; needs the ``bench`` extra, ``pip install '.[bench]'``,
+for ``imufusion``).
 
 Accuracy: the same simulated sessions (``calib.noise_sim.simulate_session``: 30 minutes, a
 10 °C warm-up, bias random walk, still periods of 2-5 s between smooth random motions; seeded)
@@ -76,6 +77,8 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--sessions", type=int, default=3)
     ap.add_argument("--duration", type=float, default=1800.0)
     args = ap.parse_args(argv)
+    if args.sessions < 1:
+        ap.error("--sessions must be at least 1")
     try:
         import imufusion
     except ImportError:

@@ -55,6 +55,7 @@ from scipy.stats import chi2
 
 from calib.errors import CalibInputError, CalibrationFormatError
 from calib.noise_sim import FLICKER_FLOOR
+from calib.validation import scalar
 
 __all__ = [
     "FORMAT",
@@ -96,16 +97,6 @@ def _as_rate(rate: Any, name: str = "rate") -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise CalibInputError(f"{name} contains NaN or inf; give a clean, gap-free still record")
     return a
-
-
-def _odr(odr_hz: Any) -> float:
-    try:
-        v = float(odr_hz)
-    except (TypeError, ValueError):
-        raise CalibInputError(f"odr_hz must be a positive number, got {odr_hz!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise CalibInputError(f"odr_hz must be a positive number, got {odr_hz!r}")
-    return v
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,7 +183,7 @@ def allan_deviation(
     AllanCurve
     """
     a = _as_rate(rate)
-    fs = _odr(odr_hz)
+    fs = scalar(odr_hz, "odr_hz", positive=True)
     n = a.shape[0]
     if m is None:
         ms = _taus_m(n)
@@ -284,7 +275,8 @@ class NoiseCharacterisation:
     noise_density : NoiseFigure
         Angle random walk ``N``, rad/s/√Hz (Kalibr's ``gyroscope_noise_density``).
     bias_instability : NoiseFigure
-        ``B = min σ(τ) / 0.664``, rad/s.
+        ``B``, rad/s: the flicker floor ``(0.664 B)²`` of the fitted model read at the τ where
+        it is best determined (not the curve's minimum over 0.664; that is ``adev_min``).
     rate_random_walk : NoiseFigure
         ``K``, rad/s/√s (Kalibr's ``gyroscope_random_walk``, rad/s²/√Hz).
     tau_s : ndarray (M,)
@@ -329,6 +321,16 @@ class NoiseCharacterisation:
     def white_std(self) -> np.ndarray:
         """Per-sample white-noise standard deviation at ``odr_hz``, ``N √odr``, rad/s."""
         return np.asarray(self.noise_density.value) * math.sqrt(self.odr_hz)
+
+    @property
+    def rate_random_walk_or_hi95(self) -> tuple[float, ...]:
+        """``K`` per axis where the record resolves it, else its 95 % upper bound, rad/s/√s.
+
+        What a Kalman filter's ``Q`` or a Kalibr file should take: an unresolved (near zero)
+        ``K`` would make the bias look frozen.
+        """
+        fig = self.rate_random_walk
+        return tuple(k if k > 0 else hi for k, hi in zip(fig.value, fig.hi95, strict=True))
 
     def with_meta(self, **fields: Any) -> NoiseCharacterisation:
         """A copy with ``sensor``, ``temperature_c``, ``created`` or ``source`` replaced."""
@@ -388,7 +390,7 @@ class NoiseCharacterisation:
                 f"reads version {VERSION})"
             )
         odr = doc.get("odr_hz")
-        if isinstance(odr, bool) or not isinstance(odr, (int, float)) or not odr > 0:
+        if isinstance(odr, bool) or not isinstance(odr, (int, float)) or not 0 < odr < math.inf:
             raise CalibrationFormatError("'odr_hz' must be a positive number")
         n = doc.get("n_samples")
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
@@ -420,7 +422,9 @@ class NoiseCharacterisation:
         if not isinstance(sensor, Mapping):
             raise CalibrationFormatError("'sensor' must be an object")
         temp = doc.get("temperature_c")
-        if temp is not None and (isinstance(temp, bool) or not isinstance(temp, (int, float))):
+        if temp is not None and (
+            isinstance(temp, bool) or not isinstance(temp, (int, float)) or not math.isfinite(temp)
+        ):
             raise CalibrationFormatError("'temperature_c' must be a number or null")
         return cls(
             noise_density=NoiseFigure.from_dict(doc.get("noise_density"), "noise_density", UNIT_N),
@@ -541,9 +545,7 @@ def characterise_noise(
     curve = allan_deviation(a, odr_hz, m=m)
     fs = curve.odr_hz
     tau = curve.tau_s
-    min_tau = 10.0 / fs if min_tau_s is None else float(min_tau_s)
-    if not (math.isfinite(min_tau) and min_tau >= 0):
-        raise CalibInputError(f"min_tau_s must be a non-negative number, got {min_tau_s!r}")
+    min_tau = 10.0 / fs if min_tau_s is None else scalar(min_tau_s, "min_tau_s", nonneg=True)
     if tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
         raise CalibInputError(
             f"the record ({curve.n_samples} samples at {fs:g} Hz) is too short for a noise "

@@ -40,7 +40,7 @@ import numpy as np
 
 from calib.errors import CalibInputError
 from calib.model import GyroCalibration
-from calib.validation import vec3
+from calib.validation import scalar, vec3
 
 __all__ = [
     "FLICKER_FLOOR",
@@ -59,14 +59,12 @@ FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 _TEMP_LSB_C = 1.0 / 333.87
 
 
-def _positive(value: float, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise CalibInputError(f"{name} must be a positive number, got {value!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise CalibInputError(f"{name} must be a positive number, got {value!r}")
-    return v
+def _sample_count(duration_s: float, fs: float) -> int:
+    """Samples in ``duration_s`` at ``fs`` Hz (at least 16)."""
+    n = int(round(scalar(duration_s, "duration_s", positive=True) * fs))
+    if n < 16:
+        raise CalibInputError(f"duration_s gives only {n} samples at {fs} Hz; give a longer one")
+    return n
 
 
 @dataclass(frozen=True)
@@ -97,7 +95,7 @@ class NoiseModel:
 
     def white_std(self, odr_hz: float) -> np.ndarray:
         """Per-sample standard deviation of the white noise at ``odr_hz``: ``N √odr``, rad/s."""
-        return np.asarray(self.noise_density) * math.sqrt(_positive(odr_hz, "odr_hz"))
+        return np.asarray(self.noise_density) * math.sqrt(scalar(odr_hz, "odr_hz", positive=True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,7 +184,7 @@ def flicker_noise(
         ``B`` per axis, rad/s.
     """
     B = vec3(bias_instability, "bias_instability", nonneg=True)
-    fs = _positive(odr_hz, "odr_hz")
+    fs = scalar(odr_hz, "odr_hz", positive=True)
     if n < 2:
         raise CalibInputError(f"n must be at least 2, got {n}")
     f = np.fft.rfftfreq(n, d=1.0 / fs)
@@ -253,10 +251,8 @@ def simulate_still(
     SimSession
     """
     model = model or NoiseModel()
-    fs = _positive(odr_hz, "odr_hz")
-    n = int(round(_positive(duration_s, "duration_s") * fs))
-    if n < 16:
-        raise CalibInputError(f"duration_s gives only {n} samples at {fs} Hz; give a longer one")
+    fs = scalar(odr_hz, "odr_hz", positive=True)
+    n = _sample_count(duration_s, fs)
     b0 = vec3(bias, "bias")
     k = vec3(scale, "scale", positive=True)
     walk, white = _bias_and_noise(rng, n, fs, model)
@@ -362,16 +358,15 @@ def simulate_session(
     SimSession
     """
     model = model or NoiseModel()
-    fs = _positive(odr_hz, "odr_hz")
-    n = int(round(_positive(duration_s, "duration_s") * fs))
+    fs = scalar(odr_hz, "odr_hz", positive=True)
+    n = _sample_count(duration_s, fs)
     if motion not in ("random", "jig"):
         raise CalibInputError(f"motion must be 'random' or 'jig', got {motion!r}")
     for name, (lo, hi) in (("still_s", still_s), ("motion_s", motion_s)):
         if not (0 < lo <= hi and math.isfinite(hi)):
             raise CalibInputError(f"{name} must be (lo, hi) with 0 < lo <= hi, got {(lo, hi)!r}")
-    peak = _positive(peak_rate, "peak_rate")
-    if not (0 <= ramp_s and math.isfinite(ramp_s)):
-        raise CalibInputError(f"ramp_s must be a non-negative number, got {ramp_s!r}")
+    peak = scalar(peak_rate, "peak_rate", positive=True)
+    ramp = scalar(ramp_s, "ramp_s", nonneg=True)
     if not (0 <= ripple < 0.5):
         raise CalibInputError(f"ripple must be in [0, 0.5), got {ripple!r}")
     b0 = vec3(bias, "bias")
@@ -394,7 +389,7 @@ def simulate_session(
     ref_rate = np.full(n, np.nan)
     ref_axis = np.full((n, 3), np.nan)
     ref_motor = np.zeros(n, dtype=np.int64)
-    n_ramp = int(round(ramp_s * fs))
+    n_ramp = int(round(ramp * fs))
     i = int(round(rng.uniform(*still_s) * fs))
     turn = 0
     while i < n:
@@ -488,8 +483,8 @@ def sim_calibration(
     -------
     GyroCalibration
     """
-    b_std = _positive(bias_std, "bias_std")
-    k_std = _positive(scale_std, "scale_std")
+    b_std = scalar(bias_std, "bias_std", positive=True)
+    k_std = scalar(scale_std, "scale_std", positive=True)
     b_true0 = session.true_bias[0] - session.tempco * (session.temperature_c[0] - session.t_ref_c)
     bias = b_true0 + rng.standard_normal(3) * b_std
     scale = session.scale + rng.standard_normal(3) * k_std

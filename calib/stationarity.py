@@ -31,6 +31,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy.stats import chi2
 
 from calib.errors import CalibInputError
+from calib.validation import scalar, vec3
 
 __all__ = [
     "StillDetector",
@@ -43,16 +44,6 @@ __all__ = [
 ]
 
 _BLOCK = 4096  # windows per vectorised block (bounds the temporary to ~4 MB at 40-sample windows)
-
-
-def _nonneg(v: float, name: str) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise CalibInputError(f"{name} must be a non-negative number, got {v!r}") from None
-    if not (f >= 0 and math.isfinite(f)):
-        raise CalibInputError(f"{name} must be a non-negative number, got {v!r}")
-    return f
 
 
 @dataclass(frozen=True)
@@ -83,14 +74,13 @@ class StillSettings:
     rate_threshold: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("window_s", "min_still_s", "lookahead_s", "rate_sigma"):
-            _nonneg(getattr(self, name), name)
-        if not self.window_s > 0:
-            raise CalibInputError("window_s must be positive")
-        if not (0 < self.variance_alpha < 1):
+        scalar(self.window_s, "window_s", positive=True)
+        for name in ("min_still_s", "lookahead_s", "rate_sigma"):
+            scalar(getattr(self, name), name, nonneg=True)
+        if not (0 < scalar(self.variance_alpha, "variance_alpha") < 1):
             raise CalibInputError(f"variance_alpha must be in (0, 1), got {self.variance_alpha!r}")
-        if self.rate_threshold is not None and not _nonneg(self.rate_threshold, "rate_threshold"):
-            raise CalibInputError("rate_threshold must be positive")
+        if self.rate_threshold is not None:
+            scalar(self.rate_threshold, "rate_threshold", positive=True)
 
 
 @dataclass(frozen=True)
@@ -135,17 +125,8 @@ class StillDetector:
         StillDetector
         """
         s = settings or StillSettings()
-        try:
-            sigma = np.broadcast_to(np.asarray(noise_std, dtype=float), (3,)).copy()
-        except (TypeError, ValueError):
-            raise CalibInputError(
-                f"noise_std must be 3 positive numbers, got {noise_std!r}"
-            ) from None
-        if not np.all((sigma > 0) & np.isfinite(sigma)):
-            raise CalibInputError(f"noise_std must be positive and finite, got {sigma.tolist()}")
-        fs = _nonneg(odr_hz, "odr_hz")
-        if not fs > 0:
-            raise CalibInputError("odr_hz must be positive")
+        sigma = vec3(noise_std, "noise_std", positive=True)
+        fs = scalar(odr_hz, "odr_hz", positive=True)
         n_w = max(2, int(round(s.window_s * fs)))
         n_min = max(1, int(round(s.min_still_s * fs)))
         n_la = int(round(s.lookahead_s * fs))
@@ -248,9 +229,7 @@ def detect_still(
     if not np.all(np.isfinite(m)):
         raise CalibInputError("rate contains NaN or inf")
     det = StillDetector.build(noise_std, odr_hz, settings)
-    b = np.zeros(3) if reference_bias is None else np.asarray(reference_bias, dtype=float)
-    if b.shape != (3,) or not np.all(np.isfinite(b)):
-        raise CalibInputError(f"reference_bias must be 3 finite numbers, got {reference_bias!r}")
+    b = np.zeros(3) if reference_bias is None else vec3(reference_bias, "reference_bias")
     quiet = quiet_windows(m + b, det, 0)
     run = run_lengths(quiet)
     n = m.shape[0]

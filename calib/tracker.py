@@ -67,7 +67,7 @@ from scipy.stats import chi2
 from calib.errors import CalibInputError
 from calib.model import GyroCalibration
 from calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
-from calib.validation import vec3
+from calib.validation import scalar, vec3
 
 if TYPE_CHECKING:
     from calib.allan import NoiseCharacterisation
@@ -84,17 +84,6 @@ __all__ = [
 ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
 
 _KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
-
-
-def _pos(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise CalibInputError(f"{name} must be a positive number, got {value!r}") from None
-    ok = (v >= 0 if allow_zero else v > 0) and math.isfinite(v)
-    if not ok:
-        raise CalibInputError(f"{name} must be a positive number, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -156,7 +145,7 @@ class TrackerSettings:
     still: StillSettings = field(default_factory=StillSettings)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "odr_hz", _pos(self.odr_hz, "odr_hz"))
+        object.__setattr__(self, "odr_hz", scalar(self.odr_hz, "odr_hz", positive=True))
         for name, kw in (
             ("noise_density", {"positive": True}),
             ("rate_random_walk", {"nonneg": True}),
@@ -166,18 +155,18 @@ class TrackerSettings:
         ):
             a = vec3(getattr(self, name), name, **kw)
             object.__setattr__(self, name, tuple(float(x) for x in a))
-        if self.t_ref_c is not None and not math.isfinite(float(self.t_ref_c)):
-            raise CalibInputError(f"t_ref_c must be a finite temperature, got {self.t_ref_c!r}")
-        _pos(self.update_interval_s, "update_interval_s")
+        if self.t_ref_c is not None:
+            scalar(self.t_ref_c, "t_ref_c")
+        scalar(self.update_interval_s, "update_interval_s", positive=True)
         if isinstance(self.nis_window, bool) or not isinstance(self.nis_window, int):
             raise CalibInputError(f"nis_window must be a positive integer, got {self.nis_window!r}")
         if self.nis_window < 1:
             raise CalibInputError(f"nis_window must be a positive integer, got {self.nis_window!r}")
-        if not (0 < self.nis_alpha < 1):
+        if not (0 < scalar(self.nis_alpha, "nis_alpha") < 1):
             raise CalibInputError(f"nis_alpha must be in (0, 1), got {self.nis_alpha!r}")
-        _pos(self.stale_after_s, "stale_after_s")
-        _pos(self.reference_angle_std, "reference_angle_std", allow_zero=True)
-        _pos(self.reference_axis_std, "reference_axis_std", allow_zero=True)
+        scalar(self.stale_after_s, "stale_after_s", positive=True)
+        scalar(self.reference_angle_std, "reference_angle_std", nonneg=True)
+        scalar(self.reference_axis_std, "reference_axis_std", nonneg=True)
         if not isinstance(self.still, StillSettings):
             raise CalibInputError("still must be a StillSettings")
 
@@ -186,14 +175,13 @@ class TrackerSettings:
         """Settings whose ``R`` and ``Q`` come from a noise characterisation (Allan deviation).
 
         ``rate_random_walk`` is the characterisation's ``K``, or where that is unresolved
-        (near zero) its 95 % upper bound, so the filter never believes the bias is frozen.
+        (near zero) its 95 % upper bound (:attr:`NoiseCharacterisation.rate_random_walk_or_hi95`),
+        so the filter never believes the bias is frozen.
         """
-        k = np.asarray(noise.rate_random_walk.value)
-        k = np.where(k > 0, k, np.asarray(noise.rate_random_walk.hi95))
         kw: dict[str, Any] = {
             "odr_hz": noise.odr_hz,
             "noise_density": tuple(noise.noise_density.value),
-            "rate_random_walk": tuple(float(x) for x in k),
+            "rate_random_walk": noise.rate_random_walk_or_hi95,
         }
         kw.update(overrides)
         return cls(**kw)
@@ -315,7 +303,6 @@ class TrackResult:
 class _OpenWindow:
     kind: int
     axis: tuple[float, float, float] | None
-    start: int
     last: int
     count: int
     sum_z: np.ndarray
@@ -423,14 +410,13 @@ class BiasTracker:
         # Streaming state.
         self._k = 0
         self._t_last: float | None = None
-        self._t_first: float | None = None
         self._t_state = 0.0
         self._t_update = 0.0
         self._hist = np.zeros((0, 3))
         self._run = 0
         self._pending: dict[str, np.ndarray] = {}
         self._open: _OpenWindow | None = None
-        self._nis_hist: deque[tuple[float, np.ndarray]] = deque(maxlen=s.nis_window)
+        self._nis_hist: deque[float] = deque(maxlen=s.nis_window)
         self._nis_ok = True
         self._nis_last = math.nan
         self._nis_sum = 0.0
@@ -439,7 +425,8 @@ class BiasTracker:
         self._n_updates = 0
         self._n_alarms = 0
         self._finished = False
-        self._last: dict[str, Any] = {}
+        # bias, bias_std and time since the last update at the latest sample (the prior before)
+        self._last: dict[str, Any] = {"bias": b0.astype(float), "bias_std": b0_std, "since": 0.0}
         self._last_decision: tuple[int, bool] | None = None
 
     # ------------------------------------------------------------------ public state
@@ -456,15 +443,11 @@ class BiasTracker:
     @property
     def bias(self) -> np.ndarray:
         """Bias estimate at the latest sample (its time and temperature), rad/s."""
-        if not self._last:
-            return self._bias_at(None)[0]
         return self._last["bias"].copy()
 
     @property
     def bias_std(self) -> np.ndarray:
         """One-sigma uncertainty of :attr:`bias`, rad/s."""
-        if not self._last:
-            return np.sqrt(self._bias_at(None)[1])
         return self._last["bias_std"].copy()
 
     @property
@@ -485,7 +468,7 @@ class BiasTracker:
     @property
     def health(self) -> Health:
         """Health flags after the latest sample."""
-        since = self._last.get("since", 0.0)
+        since = self._last["since"]
         return Health(
             nis=self._nis_last,
             nis_sum=self._nis_sum,
@@ -501,15 +484,6 @@ class BiasTracker:
     def last_decision(self) -> tuple[int, bool] | None:
         """``(sample index, still)`` of the most recent still decision, or None."""
         return self._last_decision
-
-    def _bias_at(self, temp: float | None) -> tuple[np.ndarray, np.ndarray]:
-        x, P = self.kf.x, self.kf.P
-        if not self._temp_model:
-            return x[:3].copy(), np.diag(P)[:3].copy()
-        dT = 0.0 if temp is None or self._t_ref is None else temp - self._t_ref
-        d = np.diag(P)
-        pbc = np.array([P[i, i + 3] for i in range(3)])
-        return x[:3] + x[3:] * dT, d[:3] + 2 * dT * pbc + dT * dT * d[3:]
 
     # ------------------------------------------------------------------ streaming
     def update(
@@ -686,8 +660,7 @@ class BiasTracker:
         )
         n = t.size
         if n:
-            if self._t_first is None:
-                self._t_first = float(t[0])
+            if self._k == 0:
                 self._t_state = float(t[0])
                 self._t_update = float(t[0])
             if self._t_ref is None and np.isfinite(temp[0]):
@@ -699,7 +672,7 @@ class BiasTracker:
             quiet = quiet_windows(centred, det, self._hist.shape[0])
             run = run_lengths(quiet, self._run)
             self._run = int(run[-1])
-            keep = det.n_window - 1
+            keep = det.history
             self._hist = centred[-keep:] if keep else centred[:0]
         else:
             run = np.zeros(0, dtype=np.int64)
@@ -838,8 +811,6 @@ class BiasTracker:
             for wi, b in enumerate(bounds_arr):
                 nxt = bounds_arr[wi + 1] if wi + 1 < bounds_arr.size else n_dec
                 e = int(min(nxt, run_end[b]))
-                if kind[b] == _KIND_NONE:
-                    continue
                 rows = slice(int(b), e)
                 cnt = e - int(b)
                 sum_z = z[rows].sum(axis=0)
@@ -857,7 +828,6 @@ class BiasTracker:
                     w = _OpenWindow(
                         kind=int(kind[b]),
                         axis=tuple(float(x) for x in ra[b]) if kind[b] == _KIND_REF else None,
-                        start=g0 + int(b),
                         last=g0 + e - 1,
                         count=cnt,
                         sum_z=sum_z,
@@ -927,9 +897,9 @@ class BiasTracker:
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
         self._n_updates += 1
-        self._nis_hist.append((nis, y))
+        self._nis_hist.append(nis)
         k = len(self._nis_hist)
-        total = float(sum(v for v, _ in self._nis_hist))
+        total = float(sum(self._nis_hist))
         bound = self._bound(k)
         alarm = total > bound
         self._nis_last, self._nis_sum, self._nis_bound = nis, total, bound

@@ -2,11 +2,32 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from calib.errors import CalibInputError
 
-__all__ = ["vec3"]
+__all__ = ["scalar", "vec3"]
+
+
+def scalar(value: object, name: str, *, nonneg: bool = False, positive: bool = False) -> float:
+    """``value`` as a finite float.
+
+    Raises
+    ------
+    CalibInputError
+        Naming ``name``, if ``value`` is not a number, not finite, or breaks ``nonneg`` /
+        ``positive``.
+    """
+    want = "a positive number" if positive else "a non-negative number" if nonneg else "a number"
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be {want}, got {value!r}") from None
+    if not math.isfinite(v) or (nonneg and v < 0) or (positive and v <= 0):
+        raise CalibInputError(f"{name} must be {want}, got {value!r}")
+    return v
 
 
 def vec3(value: object, name: str, *, nonneg: bool = False, positive: bool = False) -> np.ndarray:

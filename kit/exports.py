@@ -17,8 +17,10 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from calib.errors import CalibrationFormatError
@@ -31,6 +33,8 @@ __all__ = [
     "ExportOption",
     "Exporter",
     "export",
+    "load_document",
+    "read_json",
     "register",
     "validate_document",
 ]
@@ -139,6 +143,52 @@ def validate_document(doc: Any, where: str = "the document") -> str:
     return str(kind)
 
 
+def read_json(path: str, what: str = "document") -> Any:
+    """The JSON value in the file ``path`` (``-``: standard input).
+
+    Raises
+    ------
+    InputError
+        Naming ``what`` and ``path``: no such file, unreadable, or not JSON.
+    """
+    if path == "-":
+        text, where = sys.stdin.read(), f"{what} on standard input"
+    else:
+        p = Path(path)
+        where = f"{what} {p}"
+        if not p.is_file():
+            raise InputError(f"{where} does not exist or is not a file; give a gyrocal JSON "
+                             "document")
+        try:
+            text = p.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"cannot read {where}: {exc}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{where} is not valid JSON: {exc}") from None
+
+
+def load_document(path: str, kind: str, what: str) -> Any:
+    """Read a ``kind`` document (a key of :data:`DOCUMENT_KINDS`) from ``path``.
+
+    Returns
+    -------
+    GyroCalibration or NoiseCharacterisation
+        What the kind's reader makes of it.
+
+    Raises
+    ------
+    InputError
+        Naming ``what`` and ``path``: unreadable, not JSON, or not a valid document of ``kind``.
+    """
+    doc = read_json(path, what)
+    try:
+        return DOCUMENT_KINDS[kind](doc)
+    except CalibrationFormatError as exc:
+        raise InputError(f"{what} {path}: {exc}") from None
+
+
 def export(
     doc: Mapping[str, Any], fmt: str, options: Mapping[str, Any] | None = None
 ) -> tuple[str, list[str]]:
@@ -213,8 +263,7 @@ def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[
     notes: list[str] = []
     n_axes = list(nc.noise_density.value)
     k_axes = list(nc.rate_random_walk.value)
-    k_hi = list(nc.rate_random_walk.hi95)
-    k_used = [k if k > 0 else hi for k, hi in zip(k_axes, k_hi, strict=True)]
+    k_used = nc.rate_random_walk_or_hi95
     n_val = max(n_axes)
     k_val = max(k_used)
     if not (n_val > 0 and k_val > 0):

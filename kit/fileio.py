@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from kit.errors import InputError, OutputExistsError
 
-__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text"]
+__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text", "refuse_existing"]
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool = False) -> Path:
@@ -76,3 +77,21 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, *, force: bool = 
 def atomic_write_json(path: str | os.PathLike[str], doc: Any, *, force: bool = False) -> Path:
     """:func:`atomic_write_text` of ``doc`` as indented JSON with a final newline."""
     return atomic_write_text(path, json.dumps(doc, indent=2) + "\n", force=force)
+
+
+def refuse_existing(
+    paths: Iterable[str | os.PathLike[str] | None], *, force: bool = False
+) -> None:
+    """Refuse existing output files before any work is done (``None`` entries are skipped).
+
+    The refusal :func:`atomic_write_bytes` makes when it writes, made up front, so that a
+    command does not run for minutes (or drive the jig) only to find it may not write.
+
+    Raises
+    ------
+    OutputExistsError
+        If a path exists and ``force`` is false.
+    """
+    for p in paths:
+        if p is not None and Path(p).exists() and not force:
+            raise OutputExistsError(f"{p} already exists; pass --force to replace it")

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import io
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from kit.errors import InputError
+from kit.fileio import atomic_write_bytes
 
-__all__ = ["require_matplotlib", "study_boxplots", "speed_sweep_plot"]
+__all__ = ["require_matplotlib", "save_png", "study_boxplots", "speed_sweep_plot"]
 
 
 def require_matplotlib() -> Any:
@@ -24,6 +27,31 @@ def require_matplotlib() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_png(
+    fig: Any, path: str | os.PathLike[str], *, force: bool = False, dpi: int = 110
+) -> Path:
+    """Render ``fig`` as PNG, close it, and write it atomically (:mod:`kit.fileio`).
+
+    Raises
+    ------
+    OutputExistsError
+        If ``path`` exists and ``force`` is false.
+    InputError
+        If the file cannot be written.
+    """
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    try:
+        return atomic_write_bytes(path, buf.getvalue(), force=force)
+    except OSError as exc:
+        raise InputError(f"cannot write the plot to {path}: {exc}") from None
 
 
 def study_boxplots(errors: dict[str, np.ndarray], title: str, path: Path) -> Path:

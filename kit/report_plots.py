@@ -22,7 +22,6 @@ whitens each window's mean against the calibration's prediction, and :func:`enco
 
 from __future__ import annotations
 
-import io
 import math
 import os
 from collections.abc import Mapping
@@ -35,8 +34,9 @@ import numpy as np
 from calib.model import GyroCalibration
 from calib.segments import Segment
 from calib.windows import ExtractedWindows, Window
+from calib.windows import _grid as _weight_grid  # the estimator's own weight: plot what it used
+from calib.windows import _weight as _window_weight
 from kit.errors import InputError, OutputExistsError
-from kit.fileio import atomic_write_bytes
 from kit.recording import Recording
 
 __all__ = [
@@ -44,6 +44,7 @@ __all__ = [
     "Residuals",
     "ServoAxis",
     "boxcar_mean",
+    "calibration_axis",
     "encoder_rate",
     "nominal_axis",
     "plan_report",
@@ -95,6 +96,30 @@ def nominal_axis(name: str) -> np.ndarray:
     return u
 
 
+def calibration_axis(cal: GyroCalibration, motor: int) -> np.ndarray | None:
+    """Servo ``motor``'s unit axis in the sensor frame from the calibration's ``axes``, or None
+    if the calibration has none for it.
+
+    Raises
+    ------
+    InputError
+        If the entry is there but is not 3 finite numbers, not all zero.
+    """
+    entry = (cal.axes or {}).get(str(motor))
+    if not isinstance(entry, Mapping) or "axis" not in entry:
+        return None
+    try:
+        u = np.asarray(entry["axis"], dtype=float)
+    except (TypeError, ValueError):
+        u = np.full(1, np.nan)
+    if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+        raise InputError(
+            f"the calibration's axes[{str(motor)!r}].axis must be 3 finite numbers, not all "
+            f"zero; got {entry['axis']!r}"
+        )
+    return u / np.linalg.norm(u)
+
+
 def servo_axes(
     motors: list[int], cal: GyroCalibration, manifest: Mapping[str, Any],
     windows: tuple[Window, ...] = (),
@@ -129,19 +154,13 @@ def servo_axes(
     b = np.asarray(cal.bias)
     out: dict[int, ServoAxis] = {}
     for motor in motors:
-        entry = (cal.axes or {}).get(str(motor))
+        u = calibration_axis(cal, motor)
         acc = np.zeros(3)
         for w in windows:
             if w.motor == motor:
                 acc += w.rate * k * (np.asarray(w.mean) + b)
-        if isinstance(entry, Mapping) and "axis" in entry:
-            u = np.asarray(entry["axis"], dtype=float)
-            if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
-                raise InputError(
-                    f"the calibration's axes[{str(motor)!r}].axis must be 3 finite numbers, "
-                    f"not all zero; got {entry['axis']!r}"
-                )
-            out[motor] = ServoAxis(motor, u / np.linalg.norm(u), "calibration")
+        if u is not None:
+            out[motor] = ServoAxis(motor, u, "calibration")
         elif np.any(acc):
             out[motor] = ServoAxis(motor, acc / np.linalg.norm(acc), "fitted")
         elif motor in nominal:
@@ -154,12 +173,9 @@ def servo_axes(
 
 def trapezoid_weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
     """The window weight ``w(t)``: 0 before ``a``, rising to 1 at ``a + L_a``, 1 until
-    ``b - L_b``, falling to 0 at ``b`` (a zero-length ramp is a vertical edge)."""
-    t = np.asarray(t, dtype=float)
-    a, a2, b2, b = corners
-    up = np.ones_like(t) if a2 <= a else np.clip((t - a) / (a2 - a), 0.0, 1.0)
-    down = np.ones_like(t) if b <= b2 else np.clip((b - t) / (b - b2), 0.0, 1.0)
-    return np.where((t >= a) & (t <= b), np.minimum(up, down), 0.0)
+    ``b - L_b``, falling to 0 at ``b`` (a zero-length ramp is a vertical edge): the weight
+    :func:`calib.windows.extract_observations` averages a window with."""
+    return _window_weight(np.asarray(t, dtype=float), corners)
 
 
 def encoder_rate(
@@ -305,20 +321,10 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
     return plots
 
 
-def _save(fig: Any, plt: Any, path: Path, force: bool) -> None:
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=100)
-    finally:
-        plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue(), force=force)
-
-
 def _shade_weight(ax: Any, t: np.ndarray, corners: tuple[float, float, float, float],
                   color: str = "C3", label: str | None = None) -> None:
     """The trapezoid weight as a shaded area over the panel's height (axes-fraction y)."""
-    a, b = corners[0], corners[3]
-    tg = np.unique(np.concatenate([np.asarray(corners), t[(t > a) & (t < b)]]))
+    tg = _weight_grid(t, corners)
     ax.fill_between(tg, 0.0, trapezoid_weight(tg, corners), transform=ax.get_xaxis_transform(),
                     color=color, alpha=0.12, lw=0, label=label)
 
@@ -561,7 +567,7 @@ def write_report(
     InputError
         If matplotlib is missing, or ``out_dir`` cannot be created.
     """
-    from kit.plots import require_matplotlib
+    from kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     out = Path(out_dir)
@@ -594,6 +600,6 @@ def write_report(
             fig = _rests_plot(plt, extracted, cal, rec.truth)
         else:
             fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
-        _save(fig, plt, out / p.name, force)
+        save_png(fig, out / p.name, force=force, dpi=100)
         written.append((out / p.name, p.description))
     return written

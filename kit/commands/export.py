@@ -3,12 +3,7 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from pathlib import Path
-from typing import Any
-
-from kit.errors import InputError
 
 HELP = "write a calibration or noise document in another tool's format (json, kalibr, ...)"
 DESCRIPTION = (
@@ -40,31 +35,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                            help=opt.help)
 
 
-def _load(path: str) -> Any:
-    if path == "-":
-        text = sys.stdin.read()
-        where = "standard input"
-    else:
-        p = Path(path)
-        if not p.is_file():
-            raise InputError(f"{p} does not exist or is not a file; give a gyrocal JSON document")
-        try:
-            text = p.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read {p}: {exc}") from None
-        where = str(p)
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{where} is not valid JSON: {exc}") from None
-
-
 def run(args: argparse.Namespace) -> int:
     """Load, check the document kind against the format, render, write."""
-    from kit.exports import export
+    from kit.exports import export, read_json
     from kit.fileio import atomic_write_text
 
-    doc = _load(args.doc)
+    doc = read_json(args.doc)
     options = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_") and v is not None}
     text, notes = export(doc, args.format, options)
     for note in notes:

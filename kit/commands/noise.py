@@ -49,12 +49,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="shortest averaging time to read N at (default 10 samples)")
     p.add_argument("--json", action="store_true", help="print the gyrocal-noise v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the document to FILE (atomically)")
-    p.add_argument("--force", action="store_true", help="replace an existing --out file")
+    p.add_argument("--force", action="store_true", help="replace existing --out and --plot files")
     p.add_argument("--plot", metavar="FILE",
                    help="draw the Allan deviation to FILE (PNG; needs the 'plot' extra)")
 
 
-def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], str]:
+def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], None]:
     from kit.recording import load_recording
 
     rec = load_recording(args.recording)
@@ -102,18 +102,18 @@ def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[s
     ok = np.isfinite(temp)
     if ok.any():
         meta["temperature_c"] = float(np.mean(temp[ok]))
-    return rate, odr, meta, str(rec.path)
+    return rate, odr, meta, None
 
 
 def _from_sim(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], Any]:
     from calib.noise_sim import NoiseModel, simulate_still
 
+    if not args.sim_noise_density > 0:
+        raise InputError("--sim-noise-density must be positive")
     try:
         model = NoiseModel(noise_density=args.sim_noise_density,
                            rate_random_walk=args.sim_rate_random_walk,
                            bias_instability=args.sim_bias_instability)
-        if not args.sim_noise_density > 0:
-            raise InputError("--sim-noise-density must be positive")
         s = simulate_still(np.random.default_rng(args.seed), args.duration, odr_hz=args.odr,
                            model=model)
     except ValueError as exc:
@@ -148,9 +148,9 @@ def _table(nc: Any, truth: Any) -> str:
     return "\n".join(rows)
 
 
-def plot_allan(nc: Any, path: str) -> None:
+def plot_allan(nc: Any, path: str, *, force: bool = False) -> None:
     """Draw the Allan deviation with its one-sigma band and the fitted noise model to ``path``."""
-    from kit.plots import require_matplotlib
+    from kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     from calib.noise_sim import FLICKER_FLOOR
@@ -168,28 +168,20 @@ def plot_allan(nc: Any, path: str) -> None:
     ax.set_title("overlapping Allan deviation (band: 68 %; dashed: N, B, K model)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    try:
-        fig.savefig(path, dpi=120)
-    except OSError as exc:
-        raise InputError(f"cannot write the plot to {path}: {exc}") from None
-    finally:
-        plt.close(fig)
+    save_png(fig, path, force=force, dpi=120)
 
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, print, write and plot."""
     from calib.allan import characterise_noise
     from calib.noise_sim import FLICKER_FLOOR
-    from kit.fileio import atomic_write_json
+    from kit.fileio import atomic_write_json, refuse_existing
     from kit.recording import now_iso
 
     if args.sim == (args.recording is not None):
         raise InputError("give a RECORDING or --sim (one of them)")
-    truth = None
-    if args.sim:
-        rate, odr, meta, truth = _from_sim(args)
-    else:
-        rate, odr, meta, _ = _from_recording(args)
+    refuse_existing((args.out, args.plot), force=args.force)
+    rate, odr, meta, truth = _from_sim(args) if args.sim else _from_recording(args)
     nc = characterise_noise(rate, odr, min_tau_s=args.min_tau)
     nc = nc.with_meta(created=now_iso(), **meta)
     doc = nc.to_dict()
@@ -197,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
         atomic_write_json(args.out, doc, force=args.force)
         print(f"wrote {args.out}", file=sys.stderr)
     if args.plot:
-        plot_allan(nc, args.plot)
+        plot_allan(nc, args.plot, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json:
         print(json.dumps(doc, indent=2, allow_nan=False))

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from pathlib import Path
 from typing import Any
 
 from kit.errors import InputError
@@ -34,23 +32,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="estimator when no CAL is given (default paired-axis)")
 
 
-def load_calibration_file(path: str) -> Any:
-    """A Calibration v1 file as a GyroCalibration (InputError naming the problem)."""
-    from calib.errors import CalibrationFormatError
-    from calib.model import GyroCalibration
-
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"calibration {p} does not exist or is not a file; give a Calibration "
-                         "v1 JSON (from 'gyrocal calibrate' or 'gyrocal estimate --json')")
-    try:
-        return GyroCalibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"calibration {p} is not readable JSON: {exc}") from None
-    except CalibrationFormatError as exc:
-        raise InputError(f"calibration {p}: {exc}") from None
-
-
 def extract(rec: Any) -> Any:
     """The recording's windows, as ``gyrocal estimate`` takes them."""
     from calib.errors import CalibInputError
@@ -67,6 +48,7 @@ def extract(rec: Any) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Load, window (and estimate without CAL), draw, print the index."""
+    from kit.exports import load_document
     from kit.plots import require_matplotlib
     from kit.recording import load_recording
     from kit.report_plots import write_report
@@ -76,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     for w in rec.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     if args.cal:
-        cal = load_calibration_file(args.cal)
+        cal = load_document(args.cal, "gyrocal-calibration", "calibration")
         extracted = extract(rec)
         what = f"calibration {args.cal}"
     else:

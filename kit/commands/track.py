@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from kit.errors import InputError
+from kit.errors import InputError, OutputExistsError
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
@@ -43,8 +43,6 @@ DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the flags."""
-    from kit.commands.calibrate import add_common_jig_arguments
-
     p.add_argument("recording", nargs="?", metavar="RECORDING", help="Recording v1 directory")
     src = p.add_argument_group("simulation (--sim)")
     src.add_argument("--sim", action="store_true",
@@ -95,7 +93,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print the per-sample JSON document")
     o.add_argument("--out", metavar="FILE", help="write the JSON document to FILE instead")
-    o.add_argument("--force", action="store_true", help="replace an existing --out file")
+    o.add_argument("--force", action="store_true",
+                   help="replace existing --out and --plot files (and a --record directory)")
     o.add_argument("--plot", metavar="FILE",
                    help="draw the bias and its 3-sigma band to FILE (PNG; 'plot' extra)")
     o.add_argument("--rows", type=int, default=12, help="rows of the text summary (default 12)")
@@ -107,6 +106,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--live", action="store_true",
                       help="track live on the jig (gyrocal.toml: gimbal, imu) instead of a "
                            "recording")
+    _add_live_only_arguments(live)
+
+
+def _add_live_only_arguments(live: Any) -> None:
+    """The flags that apply to --live only (an argument group, or a parser)."""
+    from kit.commands.calibrate import add_common_jig_arguments
+
     live.add_argument("--turns", type=int, default=0, metavar="N",
                       help="--live: every --turn-every seconds turn one servo N whole turns and "
                            "back, for reference-rate updates (needs --cal with the servo axes; "
@@ -118,7 +124,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--record", metavar="DIR",
                       help="--live (still sessions): also write the session as a Recording v1 "
                            "(one rest), e.g. for `gyrocal noise DIR`")
-    add_common_jig_arguments(live, sim_flag=False)  # type: ignore[arg-type]
+    add_common_jig_arguments(live, sim_flag=False)
+
+
+def _live_only_defaults() -> dict[str, Any]:
+    """Destination -> default of every flag that applies to --live only (read off the flags
+    themselves, so a new jig flag is refused without --live without anyone listing it)."""
+    p = argparse.ArgumentParser(add_help=False)
+    _add_live_only_arguments(p)
+    return vars(p.parse_args([]))
 
 
 @dataclass(frozen=True)
@@ -201,36 +215,18 @@ def _chunks(batch: Batch, size: int) -> Iterator[Batch]:
             batch.reference_axis)))
 
 
-def _read_json(path: str, what: str) -> Any:
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{what} {p} does not exist or is not a file")
-    try:
-        return json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{what} {p} is not readable JSON: {exc}") from None
-
-
 def load_calibration(path: str) -> Any:
-    """Read a Calibration v1 file (InputError naming the problem)."""
-    from calib.errors import CalibrationFormatError
-    from calib.model import GyroCalibration
+    """Read the --cal Calibration v1 file (InputError naming the problem)."""
+    from kit.exports import load_document
 
-    try:
-        return GyroCalibration.from_dict(_read_json(path, "--cal"))
-    except CalibrationFormatError as exc:
-        raise InputError(f"--cal {path}: {exc}") from None
+    return load_document(path, "gyrocal-calibration", "--cal")
 
 
 def load_noise(path: str) -> Any:
-    """Read a gyrocal-noise v1 file (InputError naming the problem)."""
-    from calib.allan import NoiseCharacterisation
-    from calib.errors import CalibrationFormatError
+    """Read the --noise gyrocal-noise v1 file (InputError naming the problem)."""
+    from kit.exports import load_document
 
-    try:
-        return NoiseCharacterisation.from_dict(_read_json(path, "--noise"))
-    except CalibrationFormatError as exc:
-        raise InputError(f"--noise {path}: {exc}") from None
+    return load_document(path, "gyrocal-noise", "--noise")
 
 
 def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -242,38 +238,32 @@ def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[
     window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
     calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
     """
+    from kit.report_plots import calibration_axis, encoder_rate
+
     n = rec.imu_t.size
     rr = np.full(n, np.nan)
     ra = np.full((n, 3), np.nan)
     notes: list[str] = []
-    axes = (cal.axes or {}) if cal is not None else {}
     if n < 2:
         return rr, ra, notes
     dt = float(np.median(np.diff(rec.imu_t)))
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue
-        entry = axes.get(str(seg.motor))
-        if not isinstance(entry, dict) or "axis" not in entry:
+        u = calibration_axis(cal, int(seg.motor))  # type: ignore[arg-type]
+        if u is None:
             notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
                          f"{seg.index} gives no reference-rate updates")
             continue
-        u = np.asarray(entry["axis"], dtype=float)
-        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
-            raise InputError(f"--cal: axes[{seg.motor!r}].axis must be 3 finite numbers")
-        u = u / np.linalg.norm(u)
         et, ea = rec.encoder(seg.motor)
-        sel = (rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end)
-        ti = rec.imu_t[sel]
-        inside = (ti - dt / 2 >= (et[0] if et.size else np.inf)) & (
-            ti + dt / 2 <= (et[-1] if et.size else -np.inf))
-        if et.size < 2 or not inside.any():
+        idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
+        rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
+        covered = np.isfinite(rate)
+        if not covered.any():
             notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
             continue
-        idx = np.flatnonzero(sel)[inside]
-        tt = rec.imu_t[idx]
-        rr[idx] = (np.interp(tt + dt / 2, et, ea) - np.interp(tt - dt / 2, et, ea)) / dt
-        ra[idx] = u
+        rr[idx[covered]] = rate[covered]
+        ra[idx[covered]] = u
     return rr, ra, notes
 
 
@@ -286,7 +276,7 @@ def _rest_flags(rec: Any, trim_s: float = 0.5) -> np.ndarray:
     return still
 
 
-def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any, notes: list[str],
+def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
               axis_std: float | None) -> Any:
     from calib.stationarity import StillSettings
     from calib.tracker import TrackerSettings
@@ -340,8 +330,7 @@ def _build_tracker(
     if args.rate_random_walk is not None:
         k: Any = args.rate_random_walk
     elif noise is not None:
-        kv = np.asarray(noise.rate_random_walk.value)
-        k = tuple(float(x) for x in np.where(kv > 0, kv, noise.rate_random_walk.hi95))
+        k = noise.rate_random_walk_or_hi95
     else:
         k = DEFAULT_RATE_RANDOM_WALK
         notes.append(f"bias random walk not given: using {k:g} rad/s/sqrt(s) (conservative; "
@@ -352,7 +341,7 @@ def _build_tracker(
         stds = [s for s in stds if isinstance(s, (int, float)) and math.isfinite(s)]
         if stds:
             axis_std = math.radians(max(stds))
-    st = _settings(args, odr, n_density, k, notes, axis_std)
+    st = _settings(args, odr, n_density, k, axis_std)
     if cal is not None:
         try:
             return BiasTracker(st, cal), cal
@@ -421,8 +410,7 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
         notes.append("--cal is ignored with --sim (the simulation makes its own calibration)")
     n_density = args.noise_density if args.noise_density is not None else model.noise_density
     k = args.rate_random_walk if args.rate_random_walk is not None else model.rate_random_walk
-    st = _settings(args, s.odr_hz, n_density, k, notes,
-                   1e-5 if args.motion == "jig" else None)
+    st = _settings(args, s.odr_hz, n_density, k, 1e-5 if args.motion == "jig" else None)
     tracker = BiasTracker(st, cal)
     rr = ra = None
     if args.motion == "jig" and not args.no_reference:
@@ -578,6 +566,8 @@ class LiveSource:
     def turn_pair(self, motor: int) -> Batch | None:
         """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
         with the encoder's reference rate and the servo's axis."""
+        from kit.report_plots import encoder_rate
+
         p = self.plan
         if p is None:
             raise InputError("no turns planned")
@@ -605,15 +595,11 @@ class LiveSource:
         if not parts:
             return None
         batch = self._batch(parts, planned=True)
-        et, ea = np.asarray(enc_t), np.asarray(enc_a)
         t = batch.t
         dt = 1.0 / float(self.jig.imu.odr_hz)
-        inside = (t - dt / 2 >= et[0]) & (t + dt / 2 <= et[-1])
-        rr = np.full(t.size, np.nan)
-        rr[inside] = (np.interp(t[inside] + dt / 2, et, ea)
-                      - np.interp(t[inside] - dt / 2, et, ea)) / dt
+        rr = encoder_rate(np.asarray(enc_t), np.asarray(enc_a), t, dt / 2)
         ra = np.full((t.size, 3), np.nan)
-        ra[inside] = p.axes[motor]
+        ra[np.isfinite(rr)] = p.axes[motor]
         return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
 
     def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
@@ -663,17 +649,18 @@ def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
         raise InputError("--turns needs --cal: the reference-rate updates use the calibration's "
                          "scale and servo axes (a paired-axis calibration from 'gyrocal "
                          "calibrate')")
+    from kit.report_plots import calibration_axis
+
     cal = load_calibration(args.cal)
     if not np.all(np.isfinite(cal.scale_std)):
         raise InputError(f"--turns: the calibration {args.cal} has no scale_std")
     axes: dict[int, np.ndarray] = {}
     for sid in cfg["gimbal"]["ids"]:
-        entry = (cal.axes or {}).get(str(sid))
-        u = np.asarray(entry.get("axis") if isinstance(entry, dict) else np.nan, dtype=float)
-        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+        u = calibration_axis(cal, int(sid))
+        if u is None:
             raise InputError(f"--turns: the calibration {args.cal} has no axis for servo {sid} "
                              "(calibrate with the paired-axis method)")
-        axes[int(sid)] = u / np.linalg.norm(u)
+        axes[int(sid)] = u
     return TurnPlan(int(args.turns), math.radians(speed_dps), float(every), axes)
 
 
@@ -701,12 +688,13 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     if args.record and plan is not None:
         raise InputError("--record writes still sessions: drop --turns (or --record)")
     if args.record:
-        from pathlib import Path
-
         rec_path = Path(args.record)
-        if rec_path.exists() and any(rec_path.iterdir()) and not args.force:
-            raise InputError(f"{rec_path} already holds files; choose another --record or "
-                             "pass --force")
+        if rec_path.exists() and not rec_path.is_dir():
+            raise OutputExistsError(f"{rec_path} exists and is not a directory; choose another "
+                                    "--record")
+        if rec_path.is_dir() and any(rec_path.iterdir()) and not args.force:
+            raise OutputExistsError(f"{rec_path} already holds files; choose another --record or "
+                                    "pass --force")
     jig = Jig(cfg, args)
     where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
     if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
@@ -781,9 +769,9 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     return tr, truth, f"live on {where}"  # type: ignore[return-value]
 
 
-def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
+def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False) -> None:
     """Draw the bias estimate of each axis with its 3-sigma band (and the truth of a --sim)."""
-    from kit.plots import require_matplotlib
+    from kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
@@ -803,12 +791,7 @@ def plot_track(tr: Tracked, path: str, truth: Any = None) -> None:
     axs[0].legend(loc="upper right", fontsize=8)
     axs[-1].set_xlabel("t, s")
     fig.suptitle("gyro bias (Calibration v1 convention); red lines: NIS alarms")
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        raise InputError(f"cannot write the plot to {path}: {exc}") from None
-    finally:
-        plt.close(fig)
+    save_png(fig, path, force=force)
 
 
 def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
@@ -838,12 +821,6 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
     return "\n".join(out)
 
 
-#: Flags of the jig (``--live``) with their defaults, to refuse them elsewhere.
-_JIG_FLAGS = {"config": None, "sim_seed": 0, "sim_scale": None, "sim_bias": None,
-              "realtime": False, "port": None, "baud": None, "imu_model": None, "imu_bus": None,
-              "imu_address": None, "range_dps": None, "odr": None}
-
-
 def _check_modes(args: argparse.Namespace) -> None:
     """One source (RECORDING, --sim or --live) and only the flags that apply to it; fills in
     the defaults that depend on the mode."""
@@ -860,11 +837,8 @@ def _check_modes(args: argparse.Namespace) -> None:
     if args.sim == (args.recording is not None):
         raise InputError("give a RECORDING or --sim (a synthetic session), or --live to track "
                          "on the jig (--live --sim: the emulated jig)")
-    given = [name for name, default in _JIG_FLAGS.items()
-             if getattr(args, name, default) not in (default,)]
-    given += [name for name, default in (("turns", 0), ("turn_speed_dps", 90.0),
-                                         ("turn_every", 10.0))
-              if getattr(args, name) != default]
+    given = [name for name, default in _live_only_defaults().items()
+             if getattr(args, name) != default]
     if given:
         flags = ", ".join("--" + g.replace("_", "-") for g in given)
         raise InputError(f"{flags} applies to --live only")
@@ -881,11 +855,12 @@ def _check_modes(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
-    from kit.fileio import atomic_write_text
+    from kit.fileio import atomic_write_text, refuse_existing
 
     _check_modes(args)
     if args.rows < 2:
         raise InputError("--rows must be at least 2")
+    refuse_existing((args.out, args.plot), force=args.force)  # before a long (or live) run
     notes: list[str] = []
     if args.live:
         tr, truth, source = _run_live(args, notes)
@@ -902,7 +877,7 @@ def run(args: argparse.Namespace) -> int:
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.plot:
-        plot_track(tr, args.plot, truth)
+        plot_track(tr, args.plot, truth, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json or args.out:
         doc = {

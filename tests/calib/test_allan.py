@@ -113,6 +113,8 @@ def test_document_round_trip(tmp_path):
         (lambda d: d.update(version=2), "version 2 is not supported"),
         (lambda d: d["noise_density"].update(value=[1, 2]), "noise_density.value"),
         (lambda d: d.update(odr_hz=-1), "odr_hz"),
+        (lambda d: d.update(odr_hz=float("inf")), "odr_hz"),  # json.loads reads Infinity
+        (lambda d: d.update(temperature_c=float("nan")), "temperature_c"),
         (lambda d: d["allan"].update(adev=[[1, 2, 3]]), "allan"),
     ],
 )

@@ -224,7 +224,9 @@ def test_from_noise_uses_the_characterisation():
     st = TrackerSettings.from_noise(nc, temperature_model=True)
     assert st.odr_hz == ODR and st.temperature_model
     np.testing.assert_allclose(st.noise_density, nc.noise_density.value)
-    assert all(k > 0 for k in st.rate_random_walk)
+    np.testing.assert_allclose(st.rate_random_walk, nc.rate_random_walk_or_hi95)
+    # the simulated random walk (1e-5 rad/s/sqrt(s)) within the record's resolution
+    assert all(0.3e-5 < k < 3e-5 for k in st.rate_random_walk), st.rate_random_walk
     np.testing.assert_allclose(st.noise_std, np.array(nc.noise_density.value) * math.sqrt(ODR))
 
 
@@ -273,6 +275,12 @@ def test_setup_errors_are_named():
         settings(noise_density=(0.0, 1e-4, 1e-4))
     with pytest.raises(CalibInputError, match="nis_alpha"):
         settings(nis_alpha=2.0)
+    with pytest.raises(CalibInputError, match="nis_alpha"):
+        settings(nis_alpha="small")
+    with pytest.raises(CalibInputError, match="t_ref_c"):
+        settings(t_ref_c="warm")
+    with pytest.raises(CalibInputError, match="reference_axis_std must be a non-negative"):
+        settings(reference_axis_std=-1e-3)
     tr = BiasTracker(settings(), initial_bias_std=1e-3)
     with pytest.raises(CalibInputError, match="temperature"):
         tr.process([0.0], np.zeros((1, 3)))

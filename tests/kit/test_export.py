@@ -46,15 +46,30 @@ def test_kalibr_fields_units_and_values(files, noise_doc, capsys):
     assert set(y) == {"accelerometer_noise_density", "accelerometer_random_walk",
                       "gyroscope_noise_density", "gyroscope_random_walk", "rostopic",
                       "update_rate"}
-    assert float(y["gyroscope_noise_density"]) == pytest.approx(
-        max(noise_doc["noise_density"]["value"]), rel=1e-6)
-    k = noise_doc["rate_random_walk"]
-    k_used = [v if v > 0 else hi for v, hi in zip(k["value"], k["hi95"], strict=True)]
-    assert float(y["gyroscope_random_walk"]) == pytest.approx(max(k_used), rel=1e-6)
+    # Kalibr takes one figure per sensor: the largest axis of the document, which is the
+    # simulated sensor's (N = 1e-4, 2e-4, 1.5e-4 rad/s/sqrt(Hz); K = 2e-5 rad/s/sqrt(s)).
+    n_kalibr, k_kalibr = float(y["gyroscope_noise_density"]), float(y["gyroscope_random_walk"])
+    assert n_kalibr == pytest.approx(max(noise_doc["noise_density"]["value"]), rel=1e-6)
+    assert n_kalibr == pytest.approx(2e-4, rel=0.03)
+    assert k_kalibr == pytest.approx(max(noise_doc["rate_random_walk"]["value"]), rel=1e-6)
+    assert 2e-5 / 2 < k_kalibr < 2e-5 * 2
     assert y["rostopic"] == "/imu/data" and float(y["update_rate"]) == 200.0
     assert "rad/s/sqrt(Hz)" in out and "rad/s^2/sqrt(Hz)" in out
     assert "NOT MEASURED" in out and "placeholders" in err
     assert float(y["accelerometer_noise_density"]) > 0
+
+
+def test_kalibr_takes_the_upper_bound_of_an_unresolved_random_walk(tmp_path, noise_doc, capsys):
+    doc = json.loads(json.dumps(noise_doc))
+    k = doc["rate_random_walk"]
+    k["value"][1] = 0.0  # this record did not resolve K on y
+    k["hi95"][1] = 10 * max(k["value"])
+    p = tmp_path / "noise.json"
+    p.write_text(json.dumps(doc))
+    assert main(["export", str(p), "--format", "kalibr"]) == 0
+    out = capsys.readouterr().out
+    assert float(parse_yaml_scalars(out)["gyroscope_random_walk"]) == pytest.approx(k["hi95"][1])
+    assert "not resolved on axis y" in out
 
 
 def test_kalibr_with_accelerometer_figures(files, capsys):

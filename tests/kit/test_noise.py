@@ -29,6 +29,16 @@ def test_text_output_out_file_and_plot(tmp_path, capsys):
     assert png.stat().st_size > 10_000
     assert main(["noise", "--sim", "--duration", "300", "--out", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
+    # the plot is not overwritten without --force either, and the refusal comes first
+    out.unlink()
+    first = png.read_bytes()
+    assert main(["noise", "--sim", "--duration", "300", "--out", str(out),
+                 "--plot", str(png)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert png.read_bytes() == first and not out.exists()
+    assert main(["noise", "--sim", "--duration", "300", "--seed", "1", "--plot", str(png),
+                 "--force"]) == 0
+    assert png.read_bytes() != first
 
 
 def test_from_a_still_recording(tmp_path, capsys):

@@ -9,6 +9,7 @@ from scipy import stats
 
 from calib.model import GyroCalibration
 from kit.cli import main
+from kit.errors import InputError
 from kit.recording import load_recording
 from kit.report_plots import (
     boxcar_mean,
@@ -175,6 +176,11 @@ def test_fitted_axes_find_the_true_mount_and_residuals_catch_a_wrong_bias(extrac
     nominal = servo_axes([2], bare, rec.manifest, ())
     assert nominal[2].source == "nominal"
     np.testing.assert_array_equal(nominal[2].axis, [0, 1, 0])
+    # a malformed axis in the calibration is an input error, not a silent fallback
+    for axis in ([0.0, 0.0, 0.0], [1.0, "y", 0.0], [1.0, 0.0]):
+        broken = GyroCalibration(scale=truth.scale, bias=truth.bias, axes={"2": {"axis": axis}})
+        with pytest.raises(InputError, match=r"axes\['2'\]\.axis"):
+            servo_axes([2], broken, rec.manifest, ex.windows)
 
 
 def test_window_arithmetic():

@@ -113,6 +113,15 @@ def test_sim_text_and_plot(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "vs truth" in out and "NIS alarm(s) at t = 6" in out
     assert png.stat().st_size > 10_000
+    # an existing plot is refused up front (nothing tracked), and replaced with --force
+    first = png.read_bytes()
+    argv = ["track", "--sim", "--duration", "30", "--plot", str(png)]
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert "--force" in err and out == "" and png.read_bytes() == first
+    assert main([*argv, "--force"]) == 0
+    assert png.read_bytes() != first
+    assert [p.name for p in tmp_path.iterdir()] == ["bias.png"]  # no temporary file left
 
 
 def test_plot_without_matplotlib_says_what_to_install(random_rec, tmp_path, capsys, monkeypatch):

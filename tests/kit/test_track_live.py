@@ -120,6 +120,9 @@ def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, capsys):
     (["--live", "--sim", "--duration", "1"], "--duration must be at least 2 s"),
     (["--sim", "--sim-seed", "3"], "--sim-seed applies to --live only"),
     (["--sim", "--port", "/dev/ttyUSB1"], "--port applies to --live only"),
+    (["--sim", "--sim-fault", "stall:1:3"], "--sim-fault applies to --live only"),
+    (["--sim", "--sim-noise-seed", "3"], "--sim-noise-seed applies to --live only"),
+    (["--sim", "--record", "x"], "--record applies to --live only"),
 ])
 def test_live_bad_usage_exits_2(capsys, argv, match):
     assert main(["track", *argv]) == 2
@@ -227,5 +230,8 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
     value, std = np.array(n["value"]), np.array(n["std"])
     assert np.all(np.abs(value - TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ) < 4 * std)
     assert main(["track", "--live", "--sim", "--duration", "5", "--record", str(rec)]) == 2
+    (tmp_path / "a-file").write_text("")
+    assert main(["track", "--live", "--sim", "--duration", "5", "--record",
+                 str(tmp_path / "a-file"), "--force"]) == 2
     assert main(["track", "--live", "--sim", "--turns", "1", "--record", str(tmp_path / "x"),
                  "--cal", "c.json"]) == 2
