@@ -30,9 +30,9 @@ from bench.table import print_table
 def _run(args: tuple[int, str]) -> dict:
     """One emulated calibration; returns errors and timings (run in a worker process)."""
     from calib.estimators import estimate, paired_axis_batch
-    from calib.windows import extract_observations
     from kit.cli import main
     from kit.config import default_config
+    from kit.pipeline import extract_recording
     from kit.recording import load_recording
     from kit.sim import build_sim
 
@@ -47,8 +47,7 @@ def _run(args: tuple[int, str]) -> dict:
         cal = json.loads((out / "calibration.json").read_text())
         rec = load_recording(out / "recording")
         truth_k, truth_b = np.array(rec.truth["scale"]), np.array(rec.truth["bias"])
-        ex = extract_observations(rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor,
-                                  rec.enc_angle, rec.segments)
+        ex = extract_recording(rec)  # the windows the calibration was fitted to
         obs = ex.observations
         ils = estimate(obs, "iterative-ls")
         result = {

@@ -58,7 +58,13 @@ from calib.observations import ObservationSet, diff_noise
 from calib.segments import Segment
 from calib.timebase import TimebaseFit, refit_sample_times
 
-__all__ = ["ExtractedWindows", "Window", "extract_observations", "trapezoid_weight"]
+__all__ = [
+    "ExtractedWindows",
+    "Window",
+    "extract_observations",
+    "trapezoid_weight",
+    "weight_grid",
+]
 
 TWO_PI = 2.0 * np.pi
 
@@ -126,7 +132,9 @@ def trapezoid_weight(t: np.ndarray, corners: tuple[float, float, float, float]) 
     return np.where((t >= a) & (t <= b), np.minimum(up, down), 0.0)
 
 
-def _grid(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
+def weight_grid(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
+    """The sample times strictly inside a window plus its four corners, sorted: the nodes on
+    which the piecewise-linear product ``w(t) x(t)`` is integrated exactly."""
     a, b = corners[0], corners[3]
     inside = t[(t > a) & (t < b)]
     return np.unique(np.concatenate([inside, np.asarray(corners, dtype=float)]))
@@ -137,7 +145,7 @@ def _weighted_mean(
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """``∫ w x dt / ∫ w dt`` for piecewise-linear ``x`` (N, k); also ``∫w`` and the per-sample
     quadrature weights of the samples inside the window (for the standard error)."""
-    g = _grid(t, corners)
+    g = weight_grid(t, corners)
     w = trapezoid_weight(g, corners)
     xi = np.column_stack([np.interp(g, t, x[:, j]) for j in range(x.shape[1])])
     dt = np.diff(g)

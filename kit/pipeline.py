@@ -11,7 +11,7 @@ from calib.windows import ExtractedWindows, extract_observations
 from kit.errors import EstimationError, InputError
 from kit.recording import Recording, now_iso
 
-__all__ = ["Estimate", "estimate_recording"]
+__all__ = ["Estimate", "estimate_recording", "extract_recording"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -21,6 +21,23 @@ class Estimate:
     calibration: GyroCalibration
     fit: FitResult
     extracted: ExtractedWindows
+
+
+def extract_recording(rec: Recording) -> ExtractedWindows:
+    """The recording's windows (:func:`calib.windows.extract_observations`).
+
+    Raises
+    ------
+    InputError
+        If the recording cannot be windowed (truncated, a servo without encoder data, ...).
+    """
+    try:
+        return extract_observations(
+            rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
+            imu_temp=rec.imu_temp,
+        )
+    except CalibInputError as exc:
+        raise InputError(f"{rec.path}: {exc}") from None
 
 
 def estimate_recording(
@@ -35,13 +52,7 @@ def estimate_recording(
     EstimationError
         If the estimator fails (the message says why).
     """
-    try:
-        ex = extract_observations(
-            rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
-            imu_temp=rec.imu_temp,
-        )
-    except CalibInputError as exc:
-        raise InputError(f"{rec.path}: {exc}") from None
+    ex = extract_recording(rec)
     try:
         fit = estimate(ex.observations, method)
     except CalibInputError as exc:

@@ -33,9 +33,12 @@ import numpy as np
 
 from calib.model import GyroCalibration
 from calib.segments import Segment
-from calib.windows import ExtractedWindows, Window
-from calib.windows import _grid as _weight_grid  # the estimator's own weight: plot what it used
-from calib.windows import _weight as _window_weight
+from calib.windows import (  # the estimator's own weight and grid: plot what the fit used
+    ExtractedWindows,
+    Window,
+    trapezoid_weight,
+    weight_grid,
+)
 from kit.errors import InputError, OutputExistsError
 from kit.recording import Recording
 
@@ -49,7 +52,6 @@ __all__ = [
     "nominal_axis",
     "plan_report",
     "servo_axes",
-    "trapezoid_weight",
     "window_residuals",
     "write_report",
 ]
@@ -169,13 +171,6 @@ def servo_axes(
             raise InputError(f"servo {motor}: no axis in the calibration, no window and no axis "
                              "in the manifest; cannot tell which axis it turns about")
     return out
-
-
-def trapezoid_weight(t: np.ndarray, corners: tuple[float, float, float, float]) -> np.ndarray:
-    """The window weight ``w(t)``: 0 before ``a``, rising to 1 at ``a + L_a``, 1 until
-    ``b - L_b``, falling to 0 at ``b`` (a zero-length ramp is a vertical edge): the weight
-    :func:`calib.windows.extract_observations` averages a window with."""
-    return _window_weight(np.asarray(t, dtype=float), corners)
 
 
 def encoder_rate(
@@ -324,7 +319,7 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
 def _shade_weight(ax: Any, t: np.ndarray, corners: tuple[float, float, float, float],
                   color: str = "C3", label: str | None = None) -> None:
     """The trapezoid weight as a shaded area over the panel's height (axes-fraction y)."""
-    tg = _weight_grid(t, corners)
+    tg = weight_grid(t, corners)
     ax.fill_between(tg, 0.0, trapezoid_weight(tg, corners), transform=ax.get_xaxis_transform(),
                     color=color, alpha=0.12, lw=0, label=label)
 

@@ -17,10 +17,9 @@ import numpy as np
 from calib.model import GyroCalibration
 from kit.errors import InputError
 from kit.recording import Recording
+from kit.report_plots import encoder_rate, servo_axes
 
 __all__ = ["Verification", "verify_recording"]
-
-_NAMED = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -40,7 +39,8 @@ class Verification:
         Blocks compared.
     block_s : float
     axes_source : str
-        Where the servo axes came from (``calibration`` or ``nominal``).
+        Where the servo axes came from: ``calibration`` (its estimated axes), ``nominal
+        configuration`` (the axis names in the recording's manifest) or both.
     """
 
     rms_before: np.ndarray
@@ -82,23 +82,6 @@ class Verification:
         }
 
 
-def _axes(rec: Recording, cal: GyroCalibration) -> tuple[dict[int, np.ndarray], str]:
-    if cal.axes:
-        return {int(m): np.asarray(v["axis"], dtype=float) for m, v in cal.axes.items()}, \
-            "calibration"
-    out = {}
-    for motor in rec.manifest.get("gimbal", {}).get("motors", []):
-        name = str(motor.get("axis", ""))
-        sign = -1.0 if name.startswith("-") else 1.0
-        if name.lstrip("+-") not in _NAMED:
-            raise InputError(
-                f"servo {motor.get('id')}: the recording names no sensor axis and the "
-                "calibration has no estimated axes; verify needs one of them"
-            )
-        out[int(motor["id"])] = sign * np.array(_NAMED[name.lstrip("+-")])
-    return out, "nominal configuration"
-
-
 def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5) -> Verification:
     """Compare raw and calibrated readings with the encoder reference, block by block.
 
@@ -117,7 +100,13 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
     """
     if not block_s > 0:
         raise InputError(f"block length must be positive, got {block_s}")
-    axes, source = _axes(rec, cal)
+    motors = sorted({int(s.motor) for s in rec.segments
+                     if s.kind == "rotate" and s.motor is not None})
+    found = servo_axes(motors, cal, rec.manifest)  # the calibration's, else the nominal ones
+    axes = {motor: a.axis for motor, a in found.items()}
+    sources = {a.source for a in found.values()}
+    source = "calibration" if sources == {"calibration"} else (
+        "nominal configuration" if sources <= {"nominal"} else "calibration and nominal names")
     t, m = rec.imu_t, rec.imu_rate
     if t.size < 10:
         raise InputError(f"{rec.path}: too few gyro samples to verify")
@@ -134,12 +123,12 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
             ref = np.zeros(3)
             block = "rest"
             if seg.kind == "rotate":
-                if seg.motor not in axes:
-                    raise InputError(f"no axis known for servo {seg.motor}")
                 te, th = rec.encoder(seg.motor)
                 if te.size < 2:
                     raise InputError(f"{rec.path}: no encoder readings of servo {seg.motor}")
-                w = (np.interp(b, te, th) - np.interp(a, te, th)) / block_s
+                w = float(encoder_rate(te, th, np.array(a + block_s / 2), block_s / 2))
+                if not np.isfinite(w):
+                    continue  # the encoder readings do not cover this block
                 ref = w * axes[seg.motor]
                 block = "steady" if abs(w) >= 0.95 * seg.speed else "ramp"
             err_raw.append(raw - ref)

@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
-
-from kit.errors import InputError
 
 HELP = "plot a recording: raw and calibrated rates per turn against the encoder, windows, residuals"
 DESCRIPTION = (
@@ -32,23 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="estimator when no CAL is given (default paired-axis)")
 
 
-def extract(rec: Any) -> Any:
-    """The recording's windows, as ``gyrocal estimate`` takes them."""
-    from calib.errors import CalibInputError
-    from calib.windows import extract_observations
-
-    try:
-        return extract_observations(
-            rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
-            imu_temp=rec.imu_temp,
-        )
-    except CalibInputError as exc:
-        raise InputError(f"{rec.path}: {exc}") from None
-
-
 def run(args: argparse.Namespace) -> int:
     """Load, window (and estimate without CAL), draw, print the index."""
     from kit.exports import load_document
+    from kit.pipeline import extract_recording
     from kit.plots import require_matplotlib
     from kit.recording import load_recording
     from kit.report_plots import write_report
@@ -59,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     if args.cal:
         cal = load_document(args.cal, "gyrocal-calibration", "calibration")
-        extracted = extract(rec)
+        extracted = extract_recording(rec)
         what = f"calibration {args.cal}"
     else:
         from kit.pipeline import estimate_recording

@@ -209,3 +209,8 @@ def test_malformed_arrays(kwargs, message):
     args.update(kwargs)
     with pytest.raises(CalibInputError, match=message):
         extract_observations(**args)
+
+
+def test_trapezoid_weight_at_known_points():
+    w = trapezoid_weight(np.array([0.0, 1.0, 1.5, 2.0, 5.0, 6.5, 7.0, 8.0]), (1.0, 2.0, 6.0, 7.0))
+    np.testing.assert_allclose(w, [0, 0, 0.5, 1, 1, 0.5, 0, 0])

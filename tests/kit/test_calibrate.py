@@ -92,6 +92,18 @@ def test_verify_reports_a_large_improvement_on_a_fresh_run(runs, tmp_path, capsy
     assert np.max(bad["rms_after"]) > 5 * np.max(good["rms_after"])
 
 
+def test_verify_falls_back_to_the_nominal_axes(runs, tmp_path, capsys):
+    # Algorithm 1 estimates no servo axes: verify takes them from the recording's manifest.
+    rec = runs[3] / "recording"
+    ils = tmp_path / "ils.json"
+    assert main(["estimate", str(rec), "--method", "iterative-ls", "--out", str(ils)]) == 0
+    capsys.readouterr()
+    assert main(["verify", str(ils), "--recording", str(rec), "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)
+    assert v["axes_source"] == "nominal configuration"
+    assert np.all(np.array(v["rms_after"]) < 0.5 * np.array(v["rms_before"]))
+
+
 # ------------------------------------------------------------------ runtime checks and faults
 def test_a_servo_that_does_not_reach_its_speed_stops_the_run(tmp_path, capsys):
     assert calibrate(tmp_path, "--sim-fault", "stall:2:11:0.9") == 5

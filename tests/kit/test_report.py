@@ -16,7 +16,6 @@ from kit.report_plots import (
     encoder_rate,
     nominal_axis,
     servo_axes,
-    trapezoid_weight,
     window_residuals,
 )
 
@@ -32,7 +31,7 @@ def run_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def extracted(run_dir):
-    from kit.commands.report import extract
+    from kit.pipeline import extract_recording as extract
 
     rec = load_recording(run_dir / "recording")
     return rec, extract(rec)
@@ -184,8 +183,6 @@ def test_fitted_axes_find_the_true_mount_and_residuals_catch_a_wrong_bias(extrac
 
 
 def test_window_arithmetic():
-    w = trapezoid_weight(np.array([0.0, 1.0, 1.5, 2.0, 5.0, 6.5, 7.0, 8.0]), (1.0, 2.0, 6.0, 7.0))
-    np.testing.assert_allclose(w, [0, 0, 0.5, 1, 1, 0.5, 0, 0])
     t = np.linspace(0, 10, 2001)
     theta = 0.3 + 2.5 * t
     np.testing.assert_allclose(encoder_rate(t, theta, np.array([5.0]), 0.25), [2.5])
@@ -200,7 +197,7 @@ def test_window_arithmetic():
 def test_a_turn_with_a_gap_is_planned_without_a_window(run_dir, tmp_path):
     import shutil
 
-    from kit.commands.report import extract
+    from kit.pipeline import extract_recording as extract
     from kit.report_plots import _gaps, plan_report
 
     rec_dir = tmp_path / "rec"
