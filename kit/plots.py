@@ -54,7 +54,9 @@ def save_png(
         raise InputError(f"cannot write the plot to {path}: {exc}") from None
 
 
-def study_boxplots(errors: dict[str, np.ndarray], title: str, path: Path) -> Path:
+def study_boxplots(
+    errors: dict[str, np.ndarray], title: str, path: Path, *, force: bool = False
+) -> Path:
     """Box plots of estimation errors: one panel per parameter, one box per estimator."""
     plt = require_matplotlib()
     names = ["k_x", "k_y", "k_z", "b_x (rad/s)", "b_y (rad/s)", "b_z (rad/s)"]
@@ -69,12 +71,12 @@ def study_boxplots(errors: dict[str, np.ndarray], title: str, path: Path) -> Pat
         ax.set_title(f"error of {names[j]}")
         ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
     fig.suptitle(title)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_png(fig, path, force=force)
 
 
-def speed_sweep_plot(sweep: dict[float, dict[float, dict[str, np.ndarray]]], path: Path) -> Path:
+def speed_sweep_plot(
+    sweep: dict[float, dict[float, dict[str, np.ndarray]]], path: Path, *, force: bool = False
+) -> Path:
     """Mean squared error of scale factors and biases against speed (paper Fig. 5)."""
     plt = require_matplotlib()
     fig, axes = plt.subplots(1, len(sweep), figsize=(6 * len(sweep), 4.5), squeeze=False,
@@ -92,6 +94,4 @@ def speed_sweep_plot(sweep: dict[float, dict[float, dict[str, np.ndarray]]], pat
         ax.set_title(f"noise {noise} rad/s per sample")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_png(fig, path, force=force)

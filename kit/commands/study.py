@@ -41,6 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lm", action="store_true",
                    help="skip scipy Levenberg-Marquardt (one call per run, the slowest)")
     p.add_argument("--plot", metavar="DIR", help="write PNG plots to DIR (needs the plot extra)")
+    p.add_argument("--force", action="store_true", help="replace existing plots in --plot DIR")
     p.add_argument("--json", action="store_true", help="print the numbers as JSON")
 
 
@@ -122,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
 
     from calib import study
     from kit.errors import InputError
+    from kit.fileio import refuse_existing
 
     for name in ("sensors", "reps", "workers"):
         v = getattr(args, name)
@@ -149,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
             noise_levels=tuple(args.noise) if args.noise else base.noise_levels,
             protocol=base.protocol, misalignment=base.misalignment, seed=args.seed,
         )
+        paths = {} if plot_dir is None else {
+            noise: plot_dir / f"study-{cfg.name}-noise-{noise}.png" for noise in cfg.noise_levels}
+        refuse_existing(paths.values(), force=args.force)  # before minutes of Monte Carlo
         with _mapper(args.workers) as map_fn:
             result = study.run_study(cfg, map_fn=map_fn, lm=not args.no_lm)
         text = _stats_table(result)
@@ -157,8 +162,8 @@ def run(args: argparse.Namespace) -> int:
             from kit.plots import study_boxplots
 
             for noise, errs in result.errors.items():
-                path = plot_dir / f"study-{cfg.name}-noise-{noise}.png"
-                study_boxplots(errs, f"{cfg.name} conditions, noise {noise} rad/s", path)
+                path = study_boxplots(errs, f"{cfg.name} conditions, noise {noise} rad/s",
+                                      paths[noise], force=args.force)
                 text += f"\nwrote {path}"
     elif args.preset == "speed-sweep":
         speeds = np.round(np.arange(0.3, 3.0001, 0.1), 1)
@@ -166,6 +171,8 @@ def run(args: argparse.Namespace) -> int:
             name="speed-sweep", n_sensors=args.sensors or 30, reps=args.reps or 10,
             noise_levels=tuple(args.noise) if args.noise else (0.035, 0.2), seed=args.seed,
         )
+        sweep_path = None if plot_dir is None else plot_dir / "speed-sweep-mse.png"
+        refuse_existing([sweep_path], force=args.force)
         with _mapper(args.workers) as map_fn:
             sweep = study.speed_sweep(speeds, base=base, map_fn=map_fn, lm=not args.no_lm)
         lines = []
@@ -183,10 +190,10 @@ def run(args: argparse.Namespace) -> int:
                     for m in methods))
                 doc["levels"][str(noise)][str(s)] = {m: v.tolist() for m, v in by_m.items()}
         text = "\n".join(lines)
-        if plot_dir is not None:
+        if sweep_path is not None:
             from kit.plots import speed_sweep_plot
 
-            path = speed_sweep_plot(sweep, plot_dir / "speed-sweep-mse.png")
+            path = speed_sweep_plot(sweep, sweep_path, force=args.force)
             text += f"\nwrote {path}"
     elif args.preset == "convergence":
         rows = study.convergence_table(noise=(args.noise or [0.035])[0], seed=args.seed)

@@ -32,6 +32,15 @@ def test_text_table_and_plots(tmp_path, capsys):
     assert "whiskers" in out and "paired-axis" in out and "levenberg" not in out.split("\n")[2]
     png = tmp_path / "study-extreme-noise-0.2.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The plot is not replaced without --force, and the refusal comes before the Monte Carlo.
+    before = png.read_bytes()
+    again = ["study", "--preset", "extreme", "--sensors", "3", "--reps", "20", "--noise", "0.2",
+             "--workers", "1", "--no-lm", "--plot", str(tmp_path)]
+    assert main(again) == 2
+    out, err = capsys.readouterr()
+    assert "already exists" in err and "--force" in err and out == ""
+    assert png.read_bytes() == before
+    assert main([*again, "--force"]) == 0
 
 
 def test_convergence_and_demo_presets(capsys):
