@@ -281,7 +281,8 @@ class MotorParams:
         Where a position move comes to rest within the encoder tick of its goal, as a fraction
         of a tick: the true angle ends at ``goal + U(-hold_band/2, +hold_band/2)`` ticks (the
         position loop stops once Present Position reads the goal, so the shaft may rest
-        anywhere in the tick). 0 ends exactly on the tick's centre.
+        anywhere in the tick). 0 ends exactly on the tick's centre. A shaft already at rest on
+        its goal's tick (torque on with Goal Position = Present Position) stays where it is.
     """
 
     dt: float = 5e-4
