@@ -394,6 +394,7 @@ class Gimbal:
         """
         if self.is_open:
             return self.infos
+        self.notices.clear()
         self._open_port()
         try:
             for dxl_id in self.ids:
@@ -406,13 +407,18 @@ class Gimbal:
             self.is_open = True
             self._install_signal_handlers()
             self.last_sample = self.sample()
-        except BaseException:
-            self.is_open = True
-            self._safe_stop_quietly()
-            self.is_open = False
-            self._restore_signal_handlers()
-            if self._owns_port:
-                self._close_port()
+        except BaseException as exc:
+            # No with-block calls __exit__ for a failed open(): stop here, and do not let an
+            # unconfirmed stop pass silently (the same rule as __exit__).
+            try:
+                self.stop()
+            except ShutdownError as shutdown:
+                raise ShutdownError(f"{shutdown} (while handling: {exc!r})") from exc
+            finally:
+                self.is_open = False
+                self._restore_signal_handlers()
+                if self._owns_port:
+                    self._close_port()
             raise
         return self.infos
 

@@ -82,6 +82,22 @@ def test_a_missing_servo_is_named_with_the_baud_rate():
     assert all_torque_off(bus)
 
 
+def test_an_open_that_fails_half_way_stops_and_says_if_the_stop_is_unconfirmed():
+    # Servo 3 answers its PING, then goes silent while the servos are prepared (servos 1 and 2
+    # already hold with torque on). No with-block runs __exit__ for a failed open(), so open()
+    # itself must stop every servo and report a stop it could not confirm.
+    clock, port, bus, _ = emulated()
+    bus.servo(3).go_silent(at=clock.monotonic() + 0.005)
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(ShutdownError, match=r"servo\(s\) 3:.*while handling") as info:
+        with Gimbal(port, clock=clock):
+            pass
+    assert isinstance(info.value.__cause__, ServoCommunicationError)
+    assert bus.servo(1).packets_received > 5  # it did get as far as preparing servo 1
+    assert all_torque_off(bus)  # servo 3 still hears: the broadcast torque-off reached it
+    assert signal.getsignal(signal.SIGINT) == before
+
+
 def test_a_port_that_does_not_exist_is_a_clear_communication_error():
     with pytest.raises(CommunicationError, match="cannot open the servo port"):
         Gimbal("/dev/gyrocal-no-such-port", clock=VirtualClock()).open()
