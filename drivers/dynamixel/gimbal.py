@@ -447,22 +447,17 @@ class Gimbal:
                 f"cannot open the servo port {name!r} at {self.baudrate} bps")
 
     def _identify(self, dxl_id: int) -> None:
-        model_number = None
-        last = ""
-        for _ in range(self.retries + 1):
-            number, result, error = self.ph.ping(self.port, dxl_id)
-            self.port.is_using = False
-            if result == COMM_SUCCESS:
-                model_number = int(number)
-                break
-            last = self.ph.getTxRxResult(result)
-            self.retry_count += 1
-        if model_number is None:
+        try:
+            # a hardware alert is read and raised by name in _prepare
+            model_number = int(self._transact(dxl_id, "PING",
+                                              lambda: self.ph.ping(self.port, dxl_id),
+                                              allow_alert=True))
+        except ServoCommunicationError as exc:
             raise ServoIdentityError(
                 f"servo ID {dxl_id} did not answer a PING at {self.baudrate} bps on "
-                f"{self.port.getPortName()!r} ({last}). Check its power and cable, and that its "
-                "ID and baud rate match the configuration (factory servos: ID 1, 57600 bps; "
-                "Dynamixel Wizard can scan the bus).")
+                f"{self.port.getPortName()!r} ({exc.result_text}). Check its power and cable, and "
+                "that its ID and baud rate match the configuration (factory servos: ID 1, "
+                "57600 bps; Dynamixel Wizard can scan the bus).") from exc
         if model_number in MODELS:
             model = MODELS[model_number]
             supported = True
@@ -1073,15 +1068,8 @@ class Gimbal:
         """
         self._require_open()
         self._require_idle()
-        last = ""
-        for _ in range(self.retries + 1):
-            result, error = self.ph.reboot(self.port, servo_id)
-            self.port.is_using = False
-            if result == COMM_SUCCESS:
-                break
-            last = self.ph.getTxRxResult(result)
-        else:
-            raise ServoCommunicationError(servo_id, "REBOOT", last, self.retries + 1)
+        self._transact(servo_id, "REBOOT", lambda: ([], *self.ph.reboot(self.port, servo_id)),
+                       allow_alert=True)
         self.clock.sleep(0.5)  # boot time
         self._prepare(servo_id)
         self._tick_state.pop(servo_id, None)
@@ -1131,7 +1119,18 @@ class Gimbal:
 
     def _transact(self, dxl_id: int, instruction: str, fn, *, allow_alert: bool = False,
                   expect_len: int | None = None):
-        """Run ``fn() -> (data, result, error)`` with bounded retries; returns data."""
+        """Run ``fn() -> (data, result, error)`` with bounded retries; returns data.
+
+        Raises
+        ------
+        ServoCommunicationError
+            Every attempt failed (no status, a corrupt or short one, or a CRC error reported
+            by the servo).
+        ServoStatusError
+            The servo refused the instruction (status error other than CRC).
+        ServoHardwareError
+            The status carried the alert bit (unless ``allow_alert``).
+        """
         last = ""
         attempts = self.retries + 1
         for _ in range(attempts):
