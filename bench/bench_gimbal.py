@@ -23,16 +23,16 @@ from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler, PortHandle
 from bench.table import print_table
 from drivers.clock import SystemClock, VirtualClock
 from drivers.dynamixel import Gimbal
+from drivers.dynamixel.gimbal import SAMPLE_LAYOUTS
 from drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus, make_emulated_gimbal
 
 #: Time an IMU FIFO drain takes in the loop (emulated by a wait), s.
 IMU_DRAIN_S = 1.5e-3
-LAYOUTS = {"motion": (120, 16), "position": (132, 4)}
 
 
 def _sync_reads(port, n: int, layout: str, fast: bool = False) -> None:
     ph = PacketHandler(2.0)
-    sr = GroupSyncRead(port, ph, *LAYOUTS[layout])
+    sr = GroupSyncRead(port, ph, *SAMPLE_LAYOUTS[layout])
     for i in (1, 2, 3):
         sr.addParam(i)
     for _ in range(n):

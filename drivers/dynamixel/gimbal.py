@@ -88,11 +88,13 @@ SETTLE_S = 0.03
 _ERRNUM_CRC = 3
 _ALERT = 0x80
 
-#: Sync-read layouts: (start address, length). "motion" = Realtime Tick (120) .. Present
-#: Position (135): tick, Moving, Moving Status, PWM, current/load, velocity, position.
-SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, 16), "position": (132, 4)}
+# Realtime Tick (120) .. Present Position (135): tick u16, Moving u8, Moving Status u8, Present
+# PWM s16, Present Current/Load s16, Present Velocity s32, Present Position s32 (§5).
 _MOTION_STRUCT = struct.Struct("<HBBhhii")
 _POSITION_STRUCT = struct.Struct("<i")
+#: Sync-read layouts: (start address, length).
+SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, _MOTION_STRUCT.size),
+                                              "position": (132, _POSITION_STRUCT.size)}
 
 
 @dataclass(frozen=True)
@@ -503,7 +505,6 @@ class Gimbal:
         present = self._read_item(dxl_id, "Present Position")
         self.home_ticks[dxl_id] = present
         model_number, name, supported = self._identity[dxl_id]
-        t = self._table(dxl_id)
         vlimit = self._read_si(dxl_id, "Velocity Limit")
         volts = self._read_si(dxl_id, "Present Input Voltage")
         model = self.models[dxl_id]
@@ -522,14 +523,11 @@ class Gimbal:
             temperature_limit_c=self._read_si(dxl_id, "Temperature Limit"),
             voltage_limits_v=(self._read_si(dxl_id, "Min Voltage Limit"),
                               self._read_si(dxl_id, "Max Voltage Limit")),
-            return_delay_s=t["Return Delay Time"].to_si(
-                self._read_item(dxl_id, "Return Delay Time")),
+            return_delay_s=self._read_si(dxl_id, "Return Delay Time"),
             drive_mode=drive,
         )
         # hold where it is: Goal Position = Present Position before torque on (§6.1)
-        self._write_block(dxl_id, "Profile Acceleration",
-                          [("Profile Acceleration", self._accel_units()),
-                           ("Profile Velocity", 0), ("Goal Position", present)])
+        self._write_goal(dxl_id, 0, present)
         self._write_item(dxl_id, "Torque Enable", 1)
 
     def close(self) -> None:
@@ -642,8 +640,6 @@ class Gimbal:
         for k, dxl_id in enumerate(self.ids):
             data = blocks[dxl_id][1]
             if self.sample_layout == "motion":
-                # Realtime Tick u16, Moving u8, Moving Status u8, Present PWM s16,
-                # Present Current/Load s16, Present Velocity s32, Present Position s32 (§5)
                 tick, mov, _, _, _, v_raw, ticks[k] = _MOTION_STRUCT.unpack(data)
                 moving[k] = bool(mov)
                 vel[k] = v_raw * VELOCITY_UNIT_RAD_S
@@ -767,15 +763,12 @@ class Gimbal:
         start = int(s.ticks[self.ids.index(servo_id)])
         goal = start + direction * turns * TICKS_PER_TURN
         self._check_turn_limit(servo_id, goal)
-        accel_units = self._accel_units()
         self._write_item(servo_id, "Bus Watchdog", self.watchdog_units)
-        self._write_block(servo_id, "Profile Acceleration",
-                          [("Profile Acceleration", accel_units),
-                           ("Profile Velocity", speed_units), ("Goal Position", goal)])
+        self._write_goal(servo_id, speed_units, goal)
         home = self.home_ticks[servo_id]
         self.motion = Motion(
             kind="turn", servo_ids=(servo_id,), turns=turns, direction=direction, speed=speed_q,
-            acceleration=accel_units * ACCELERATION_UNIT_RAD_S2,
+            acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2,
             start_angles={servo_id: (start - home) * POSITION_UNIT_RAD},
             goal_angles={servo_id: (goal - home) * POSITION_UNIT_RAD},
             goal_ticks={servo_id: goal}, t_begin=self.clock.monotonic())
@@ -803,7 +796,6 @@ class Gimbal:
         if speed is None:
             speed = 0.5 * self.top_speed
         s = self.sample()
-        accel_units = self._accel_units()
         starts, goals, goal_ticks = {}, {}, {}
         speed_q = 0.0
         moving = []
@@ -816,13 +808,10 @@ class Gimbal:
             if now_ticks != self.home_ticks[i]:
                 moving.append(i)
                 self._write_item(i, "Bus Watchdog", self.watchdog_units)
-                self._write_block(i, "Profile Acceleration",
-                                  [("Profile Acceleration", accel_units),
-                                   ("Profile Velocity", units),
-                                   ("Goal Position", self.home_ticks[i])])
+                self._write_goal(i, units, self.home_ticks[i])
         self.motion = Motion(
             kind="return", servo_ids=tuple(ids), turns=0, direction=0, speed=speed_q,
-            acceleration=accel_units * ACCELERATION_UNIT_RAD_S2, start_angles=starts,
+            acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2, start_angles=starts,
             goal_angles=goals, goal_ticks=goal_ticks, t_begin=self.clock.monotonic())
         if not moving:
             self.motion.finished = True
@@ -990,28 +979,21 @@ class Gimbal:
         out = {}
         for i in self.ids:
             t = self._table(i)
-            ram = self._read_raw(i, 64, 7, "READ Torque Enable..Hardware Error Status",
-                                 allow_alert=True)
-            live = self._read_raw(i, 122, 25, "READ Moving..Present Temperature",
-                                  allow_alert=True)
-            hw = ram[6]
-            wd = t["Bus Watchdog"].from_bytes(self._read_raw(i, 98, 1, "READ Bus Watchdog",
-                                                             allow_alert=True))
+            ram = self._read_items(i, "Torque Enable", "Hardware Error Status")
+            live = self._read_items(i, "Moving", "Present Temperature")
+            hw = ram["Hardware Error Status"]
             out[i] = ServoStatus(
                 dxl_id=i,
-                torque_enabled=bool(ram[0]),
-                moving=bool(live[0]),
-                velocity=t["Present Velocity"].to_si(
-                    t["Present Velocity"].from_bytes(live[6:10])),
-                angle=(t["Present Position"].from_bytes(live[10:14]) - self.home_ticks[i])
-                * POSITION_UNIT_RAD,
-                voltage_v=t["Present Input Voltage"].to_si(
-                    t["Present Input Voltage"].from_bytes(live[22:24])),
-                temperature_c=t["Present Temperature"].to_si(live[24]),
+                torque_enabled=bool(ram["Torque Enable"]),
+                moving=bool(live["Moving"]),
+                velocity=t["Present Velocity"].to_si(live["Present Velocity"]),
+                angle=(live["Present Position"] - self.home_ticks[i]) * POSITION_UNIT_RAD,
+                voltage_v=t["Present Input Voltage"].to_si(live["Present Input Voltage"]),
+                temperature_c=t["Present Temperature"].to_si(live["Present Temperature"]),
                 hardware_error=hw,
                 hardware_error_names=tuple(b.name for b in HARDWARE_ERROR_BITS
                                            if hw & (1 << b.bit)),
-                bus_watchdog_tripped=wd == -1,
+                bus_watchdog_tripped=self._read_item(i, "Bus Watchdog", allow_alert=True) == -1,
             )
         return out
 
@@ -1030,9 +1012,9 @@ class Gimbal:
         self.port.is_using = False
         self.motion = None
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
-        for start, items in ((104, [("Goal Velocity", 0)]), (64, [("Torque Enable", 0)])):
+        for name in ("Goal Velocity", "Torque Enable"):
             try:
-                self._sync_write(start, items, known)
+                self._sync_write(name, 0, known)
             except CommunicationError:
                 pass
         unconfirmed = []
@@ -1176,6 +1158,16 @@ class Gimbal:
         return item.from_bytes(self._read_raw(dxl_id, item.address, item.size, f"READ {name}",
                                               allow_alert=allow_alert))
 
+    def _read_items(self, dxl_id: int, first: str, last: str) -> dict[str, int]:
+        """Every item from ``first`` to ``last`` in one READ (alerts reported, not raised),
+        decoded by name."""
+        table = self._table(dxl_id)
+        start, end = table[first].address, table[last].end
+        data = self._read_raw(dxl_id, start, end - start, f"READ {first}..{last}",
+                              allow_alert=True)
+        return {item.name: item.from_bytes(data[item.address - start: item.end - start])
+                for item in table.items if start <= item.address and item.end <= end}
+
     def _read_si(self, dxl_id: int, name: str) -> float:
         item = self._table(dxl_id)[name]
         return item.to_si(self._read_item(dxl_id, name))
@@ -1185,11 +1177,18 @@ class Gimbal:
         self._write_raw(dxl_id, item.address, item.to_bytes(raw), f"WRITE {name}={raw}",
                         allow_alert=allow_alert)
 
-    def _write_block(self, dxl_id: int, first: str, values: list[tuple[str, int]]) -> None:
+    def _write_goal(self, dxl_id: int, velocity_units: int, goal_ticks: int) -> None:
+        """Profile Acceleration, Profile Velocity (0 = the Velocity Limit) and Goal Position in
+        one WRITE, so the servo starts the new profile from one consistent set."""
+        self._write_block(dxl_id, [("Profile Acceleration", self._accel_units()),
+                                   ("Profile Velocity", velocity_units),
+                                   ("Goal Position", goal_ticks)])
+
+    def _write_block(self, dxl_id: int, values: list[tuple[str, int]]) -> None:
         """Write consecutive items in one WRITE packet (atomic on the servo)."""
         table = self._table(dxl_id)
         data = b""
-        address = table[first].address
+        address = table[values[0][0]].address
         for name, raw in values:
             item = table[name]
             if item.address != address + len(data):
@@ -1206,20 +1205,18 @@ class Gimbal:
 
         self._transact(dxl_id, instruction, fn, allow_alert=allow_alert)
 
-    def _sync_write(self, start: int, items: list[tuple[str, int]],
-                    ids: Sequence[int]) -> None:
-        """GroupSyncWrite of consecutive items from ``start`` to servos ``ids`` (no reply)."""
+    def _sync_write(self, name: str, raw: int, ids: Sequence[int]) -> None:
+        """GroupSyncWrite of one item to servos ``ids`` (no reply, so it reaches a servo that
+        cannot answer)."""
         if not ids:
             return
-        length = sum(self._table(ids[0])[n].size for n, _ in items)
-        group = GroupSyncWrite(self.port, self.ph, start, length)
+        item = self._table(ids[0])[name]
+        group = GroupSyncWrite(self.port, self.ph, item.address, item.size)
         for i in ids:
-            table = self._table(i)
-            data = b"".join(table[n].to_bytes(v) for n, v in items)
-            group.addParam(i, list(data))
+            group.addParam(i, list(self._table(i)[name].to_bytes(raw)))
         self.port.is_using = False
         result = group.txPacket()
         self.port.is_using = False
         if result != COMM_SUCCESS:
-            raise ServoCommunicationError(None, f"SYNC_WRITE at {start}",
+            raise ServoCommunicationError(None, f"SYNC_WRITE {name}={raw}",
                                           self.ph.getTxRxResult(result), 1)

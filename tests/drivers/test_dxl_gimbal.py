@@ -369,6 +369,8 @@ def test_status_report_for_doctor():
         assert not st[2].moving and st[2].velocity == 0
         assert st[1].voltage_v == pytest.approx(12.0, abs=0.5)
         assert st[3].temperature_c == 25 and st[3].hardware_error == 0
+        assert all(st[i].torque_enabled and not st[i].bus_watchdog_tripped for i in (1, 2, 3))
+        assert st[2].angle == 0.0 and 1.0 < st[1].angle < 4 * math.pi
 
 
 # ---- signals ------------------------------------------------------------------------------------
