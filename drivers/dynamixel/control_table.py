@@ -34,8 +34,10 @@ __all__ = [
 #: Goal/Present Velocity, Velocity Limit, Profile Velocity (velocity-based), Moving Threshold:
 #: 0.229 rpm per unit, in rad/s.
 VELOCITY_UNIT_RAD_S = 0.229 * 2.0 * math.pi / 60.0
-#: Goal/Present Position: 4096 pulses per revolution, in rad.
-POSITION_UNIT_RAD = 2.0 * math.pi / 4096.0
+#: Goal/Present Position: pulses (encoder ticks) per output revolution.
+TICKS_PER_TURN = 4096
+#: Goal/Present Position: one pulse, in rad.
+POSITION_UNIT_RAD = 2.0 * math.pi / TICKS_PER_TURN
 #: Profile Acceleration (velocity-based profile): 214.577 rev/min² per unit, in rad/s².
 ACCELERATION_UNIT_RAD_S2 = 214.577 * 2.0 * math.pi / 3600.0
 #: Present Input Voltage, voltage limits: 0.1 V per unit.

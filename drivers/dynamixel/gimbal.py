@@ -61,6 +61,7 @@ from drivers.dynamixel.control_table import (
     OPERATING_MODES,
     POSITION_UNIT_RAD,
     TICK_MODULUS,
+    TICKS_PER_TURN,
     VELOCITY_UNIT_RAD_S,
     WATCHDOG_UNIT_S,
     ControlTable,
@@ -82,7 +83,6 @@ from drivers.errors import CommunicationError, ConfigurationError, SafetyError
 
 __all__ = ["Gimbal", "GimbalSample", "Motion", "ServoInfo", "ServoStatus"]
 
-TICKS_PER_TURN = 4096
 #: A motion has finished once its servos' encoders have not changed for this long (s).
 SETTLE_S = 0.03
 _ERRNUM_CRC = 3

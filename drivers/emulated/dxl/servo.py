@@ -36,6 +36,7 @@ from drivers.dynamixel.control_table import (
     POSITION_UNIT_RAD,
     RETURN_DELAY_UNIT_S,
     TICK_MODULUS,
+    TICKS_PER_TURN,
     VELOCITY_UNIT_RAD_S,
     WATCHDOG_UNIT_S,
     ServoModel,
@@ -61,7 +62,6 @@ from drivers.emulated.dxl.protocol import (
 
 __all__ = ["EmulatedServo"]
 
-TICKS_PER_TURN = 4096
 _RAM_START = 64  # Torque Enable: the first RAM item
 _GOAL_ITEMS = ("Goal PWM", "Goal Current", "Goal Velocity", "Goal Position")
 _PROFILE_KIND = {"hold": 0, "step": 0, "rectangular": 1, "triangular": 2, "trapezoidal": 3,
@@ -610,8 +610,7 @@ class EmulatedServo:
         mem = self._mem
         torque = mem[64]
         d = self._dir
-        homing = int.from_bytes(mem[20:24], "little", signed=True)
-        present = d * round(self._abs0 + angle / POSITION_UNIT_RAD) + self._turn_offset + homing
+        present = self._position_register(angle)
         vel_units = round(d * rate / VELOCITY_UNIT_RAD_S)
         plan = self.motor.plan
         running = bool(torque) and plan.running(now)
