@@ -316,15 +316,6 @@ class ControlTable:
         """The item a byte address belongs to, or None for a gap between items."""
         return self._owner.get(address)
 
-    def items_in(self, address: int, length: int) -> list[ControlItem]:
-        """The items that any byte of ``address .. address+length-1`` belongs to."""
-        seen: list[ControlItem] = []
-        for a in range(address, address + length):
-            item = self._owner.get(a)
-            if item is not None and (not seen or seen[-1] is not item):
-                seen.append(item)
-        return seen
-
 
 @dataclass(frozen=True)
 class HardwareErrorBit:

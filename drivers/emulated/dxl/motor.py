@@ -362,11 +362,6 @@ class ServoMotor:
         self._append(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1))
 
     # ---- grid bookkeeping ----------------------------------------------------------------
-    @property
-    def computed_until(self) -> float:
-        """Time of the last computed grid point."""
-        return self.t_start + (self._grid.k0 + self._grid.n - 1) * self.dt
-
     def _append(self, p: np.ndarray, y1: np.ndarray, y2: np.ndarray, u: np.ndarray) -> None:
         g = self._grid
         m = p.size
