@@ -87,7 +87,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"gyrocal: {len(bus.servos)} emulated {model.name} servo(s), IDs "
               f"{','.join(map(str, args.ids))}, on {path}; stop with Ctrl-C", file=sys.stderr,
               flush=True)
-        stop.wait(args.duration)
+        # Wake now and then: a serving thread that died must end the command at once, not
+        # leave it serving nothing until Ctrl-C or the end of --duration.
+        end = None if args.duration is None else clock.monotonic() + args.duration
+        while not stop.is_set() and bridge.error is None:
+            left = 0.5 if end is None else min(0.5, end - clock.monotonic())
+            if left <= 0:
+                break
+            stop.wait(left)
         if bridge.error is not None:
             raise bridge.error
     finally:
