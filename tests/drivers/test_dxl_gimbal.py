@@ -177,6 +177,11 @@ def test_sample_is_timestamped_mid_transaction_and_unwraps_realtime_tick():
         s1 = g.sample()
         elapsed_ms = (s1.servo_time_ms - s0.servo_time_ms)
         np.testing.assert_allclose(elapsed_ms, (s1.t - s0.t) * 1000, atol=2.0)
+        # 70 s without a read: the tick wraps twice, which only the host clock can tell
+        clock.sleep(70.0)
+        s2 = g.sample()
+        np.testing.assert_allclose(s2.servo_time_ms - s1.servo_time_ms, (s2.t - s1.t) * 1000,
+                                   atol=2.0)
 
 
 @pytest.mark.parametrize(("layout", "fast"), [("position", False), ("position", True),
@@ -378,6 +383,8 @@ def test_status_report_for_doctor():
                                           (signal.SIGTERM, TerminatedBySignal)])
 def test_signals_end_with_every_servo_stopped(sig, exc):
     clock, port, bus, _ = emulated()
+    for s in bus.servos:  # a goal velocity left over from another program: the stop zeroes it
+        s.set_register("Goal Velocity", 50)
     before = signal.getsignal(sig)
     with pytest.raises(exc) as info:
         with Gimbal(port, clock=clock) as g:
