@@ -369,8 +369,6 @@ class Gimbal:
         self._old_handlers: dict[int, object] = {}
         self._last_poll_t: float | None = None
         self._identity: dict[int, tuple[int, str, bool]] = {}
-        #: True if a safe stop on an error path could not be confirmed.
-        self.stop_failed = False
 
     # =====================================================================================
     # opening and closing
@@ -847,8 +845,8 @@ class Gimbal:
                 if late:
                     self._check_watchdog()
                 self._track_motion(s)
-        except Exception:
-            self._safe_stop_quietly()
+        except Exception as exc:
+            self._safe_stop_quietly(exc)
             raise
         return s
 
@@ -959,11 +957,12 @@ class Gimbal:
             if m.finished:
                 break
             if self.clock.monotonic() > t_end:
-                self._safe_stop_quietly()
-                raise StallError(
+                error = StallError(
                     f"the {m.kind} of servo(s) {list(m.servo_ids)} did not finish within "
                     f"{timeout_s:g} s; the servos have been stopped. Check that the gimbal "
                     "turns freely.")
+                self._safe_stop_quietly(error)
+                raise error
             self.clock.sleep(period)
         return m
 
@@ -1034,13 +1033,15 @@ class Gimbal:
                 f"could not confirm torque off on servo(s) {ids}: {why}. Switch the servo "
                 "power off before touching the gimbal.")
 
-    def _safe_stop_quietly(self) -> None:
-        """Best-effort :meth:`stop` on an error path (its own failure must not hide the error)."""
+    def _safe_stop_quietly(self, error: BaseException) -> None:
+        """Best-effort :meth:`stop` on the way out with ``error``: a failure of the stop must not
+        replace ``error``, so it is added to it as a note (:meth:`close` tries the stop again
+        and raises :class:`ShutdownError` if it still cannot confirm torque off)."""
         try:
             if self.is_open:
                 self.stop()
-        except Exception:
-            self.stop_failed = True
+        except Exception as exc:
+            error.add_note(f"The safe stop after this error failed too: {exc}")
 
     def reboot(self, servo_id: int) -> None:
         """REBOOT one servo (clears a hardware error), then re-home and hold it.
