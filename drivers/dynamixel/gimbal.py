@@ -226,6 +226,8 @@ class Motion:
         The commanded (quantized) profile acceleration, rad/s².
     start_angles, goal_angles : dict
         Per servo, rad from home.
+    goal_ticks : dict
+        Per servo, the Goal Position written (multi-turn ticks).
     t_begin : float
         Clock time of the goal write.
     t_end : float or None
