@@ -239,8 +239,9 @@ def _x430_items(*, has_current: bool) -> tuple[ControlItem, ...]:
         ControlItem("Position P Gain", 84, 2, maximum=16383),
         ControlItem("Feedforward 2nd Gain", 88, 2, maximum=16383),
         ControlItem("Feedforward 1st Gain", 90, 2, maximum=16383),
-        # Bus Watchdog: 1..127 in 20 ms units, 0 off; reads -1 after it has tripped (§5).
-        ControlItem("Bus Watchdog", 98, 1, signed=True, unit=WATCHDOG_UNIT_S, minimum=-1,
+        # Bus Watchdog: writes 1..127 in 20 ms units, 0 off; signed because it reads -1 after
+        # it has tripped (§5), which a host cannot write.
+        ControlItem("Bus Watchdog", 98, 1, signed=True, unit=WATCHDOG_UNIT_S, minimum=0,
                     maximum=127),
         ControlItem("Goal PWM", 100, 2, signed=True, unit=PWM_UNIT, minimum=-885, maximum=885),
     ]

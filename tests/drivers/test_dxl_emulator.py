@@ -195,6 +195,7 @@ def test_bus_watchdog_stops_a_servo_whose_host_went_quiet():
     assert s.register("Present Velocity") == 0
     from drivers.emulated.dxl.protocol import ERR_DATA_RANGE
     assert w(s, "Goal Velocity", 10) == ERR_DATA_RANGE
+    assert w(s, "Bus Watchdog", -1) == ERR_DATA_RANGE  # it reads -1; a host may write 0..127
     assert w(s, "Bus Watchdog", 0) == 0
     assert w(s, "Goal Velocity", 10) == 0
 

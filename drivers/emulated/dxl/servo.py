@@ -494,8 +494,6 @@ class EmulatedServo:
     def _check(self, name: str, value: int, new: bytearray) -> int:
         item = self.table[name]
         lo, hi = item.raw_range()
-        if name == "Bus Watchdog":
-            lo = 0  # -1 is what it reads after tripping; a host may only write 0..127
         if not lo <= value <= hi:
             return ERR_DATA_RANGE
         if name == "Operating Mode" and value not in self.model.operating_modes:
