@@ -23,16 +23,16 @@ from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler, PortHandle
 from bench.table import print_table
 from drivers.clock import SystemClock, VirtualClock
 from drivers.dynamixel import Gimbal
-from drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus, make_emulated_gimbal
+from drivers.dynamixel.gimbal import SAMPLE_LAYOUTS
+from drivers.emulated.dxl import PtyServoBridge, make_emulated_gimbal, make_servo_bus
 
 #: Time an IMU FIFO drain takes in the loop (emulated by a wait), s.
 IMU_DRAIN_S = 1.5e-3
-LAYOUTS = {"motion": (120, 16), "position": (132, 4)}
 
 
 def _sync_reads(port, n: int, layout: str, fast: bool = False) -> None:
     ph = PacketHandler(2.0)
-    sr = GroupSyncRead(port, ph, *LAYOUTS[layout])
+    sr = GroupSyncRead(port, ph, *SAMPLE_LAYOUTS[layout])
     for i in (1, 2, 3):
         sr.addParam(i)
     for _ in range(n):
@@ -71,8 +71,7 @@ def table_round_trips(n: int) -> None:
         rows.append(["in-process, system clock", 1_000_000, "500", layout, n // 4,
                      (n // 4) / wall, wall / (n // 4) * 1e3, (n // 4) / wall])
     clock = SystemClock()
-    servos = [EmulatedServo(i, clock=clock, seed=i, baudrate=1_000_000) for i in (1, 2, 3)]
-    with PtyServoBridge(ServoBus(servos, clock)) as bridge:
+    with PtyServoBridge(make_servo_bus(clock, seed=1)) as bridge:
         port = PortHandler(bridge.path)
         port.openPort()
         port.setBaudRate(1_000_000)
@@ -103,9 +102,7 @@ def table_loop_rate(n: int) -> None:
             if make == "inproc":
                 port = _inprocess(clock, 1_000_000, None)
             else:
-                servos = [EmulatedServo(i, clock=clock, seed=i, baudrate=1_000_000)
-                          for i in (1, 2, 3)]
-                bridge = PtyServoBridge(ServoBus(servos, clock))
+                bridge = PtyServoBridge(make_servo_bus(clock, seed=1))
                 port = PortHandler(bridge.start())
             g = Gimbal(port, clock=clock, sample_layout=layout, handle_signals=False,
                        return_delay_us=delay)

@@ -34,8 +34,10 @@ __all__ = [
 #: Goal/Present Velocity, Velocity Limit, Profile Velocity (velocity-based), Moving Threshold:
 #: 0.229 rpm per unit, in rad/s.
 VELOCITY_UNIT_RAD_S = 0.229 * 2.0 * math.pi / 60.0
-#: Goal/Present Position: 4096 pulses per revolution, in rad.
-POSITION_UNIT_RAD = 2.0 * math.pi / 4096.0
+#: Goal/Present Position: pulses (encoder ticks) per output revolution.
+TICKS_PER_TURN = 4096
+#: Goal/Present Position: one pulse, in rad.
+POSITION_UNIT_RAD = 2.0 * math.pi / TICKS_PER_TURN
 #: Profile Acceleration (velocity-based profile): 214.577 rev/min² per unit, in rad/s².
 ACCELERATION_UNIT_RAD_S2 = 214.577 * 2.0 * math.pi / 3600.0
 #: Present Input Voltage, voltage limits: 0.1 V per unit.
@@ -237,8 +239,9 @@ def _x430_items(*, has_current: bool) -> tuple[ControlItem, ...]:
         ControlItem("Position P Gain", 84, 2, maximum=16383),
         ControlItem("Feedforward 2nd Gain", 88, 2, maximum=16383),
         ControlItem("Feedforward 1st Gain", 90, 2, maximum=16383),
-        # Bus Watchdog: 1..127 in 20 ms units, 0 off; reads -1 after it has tripped (§5).
-        ControlItem("Bus Watchdog", 98, 1, signed=True, unit=WATCHDOG_UNIT_S, minimum=-1,
+        # Bus Watchdog: writes 1..127 in 20 ms units, 0 off; signed because it reads -1 after
+        # it has tripped (§5), which a host cannot write.
+        ControlItem("Bus Watchdog", 98, 1, signed=True, unit=WATCHDOG_UNIT_S, minimum=0,
                     maximum=127),
         ControlItem("Goal PWM", 100, 2, signed=True, unit=PWM_UNIT, minimum=-885, maximum=885),
     ]
@@ -313,15 +316,6 @@ class ControlTable:
     def owner(self, address: int) -> ControlItem | None:
         """The item a byte address belongs to, or None for a gap between items."""
         return self._owner.get(address)
-
-    def items_in(self, address: int, length: int) -> list[ControlItem]:
-        """The items that any byte of ``address .. address+length-1`` belongs to."""
-        seen: list[ControlItem] = []
-        for a in range(address, address + length):
-            item = self._owner.get(a)
-            if item is not None and (not seen or seen[-1] is not item):
-                seen.append(item)
-        return seen
 
 
 @dataclass(frozen=True)

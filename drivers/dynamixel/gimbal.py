@@ -61,6 +61,7 @@ from drivers.dynamixel.control_table import (
     OPERATING_MODES,
     POSITION_UNIT_RAD,
     TICK_MODULUS,
+    TICKS_PER_TURN,
     VELOCITY_UNIT_RAD_S,
     WATCHDOG_UNIT_S,
     ControlTable,
@@ -82,17 +83,18 @@ from drivers.errors import CommunicationError, ConfigurationError, SafetyError
 
 __all__ = ["Gimbal", "GimbalSample", "Motion", "ServoInfo", "ServoStatus"]
 
-TICKS_PER_TURN = 4096
 #: A motion has finished once its servos' encoders have not changed for this long (s).
 SETTLE_S = 0.03
 _ERRNUM_CRC = 3
 _ALERT = 0x80
 
-#: Sync-read layouts: (start address, length). "motion" = Realtime Tick (120) .. Present
-#: Position (135): tick, Moving, Moving Status, PWM, current/load, velocity, position.
-SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, 16), "position": (132, 4)}
+# Realtime Tick (120) .. Present Position (135): tick u16, Moving u8, Moving Status u8, Present
+# PWM s16, Present Current/Load s16, Present Velocity s32, Present Position s32 (§5).
 _MOTION_STRUCT = struct.Struct("<HBBhhii")
 _POSITION_STRUCT = struct.Struct("<i")
+#: Sync-read layouts: (start address, length).
+SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, _MOTION_STRUCT.size),
+                                              "position": (132, _POSITION_STRUCT.size)}
 
 
 @dataclass(frozen=True)
@@ -224,6 +226,8 @@ class Motion:
         The commanded (quantized) profile acceleration, rad/s².
     start_angles, goal_angles : dict
         Per servo, rad from home.
+    goal_ticks : dict
+        Per servo, the Goal Position written (multi-turn ticks).
     t_begin : float
         Clock time of the goal write.
     t_end : float or None
@@ -367,8 +371,6 @@ class Gimbal:
         self._old_handlers: dict[int, object] = {}
         self._last_poll_t: float | None = None
         self._identity: dict[int, tuple[int, str, bool]] = {}
-        #: True if a safe stop on an error path could not be confirmed.
-        self.stop_failed = False
 
     # =====================================================================================
     # opening and closing
@@ -394,6 +396,7 @@ class Gimbal:
         """
         if self.is_open:
             return self.infos
+        self.notices.clear()
         self._open_port()
         try:
             for dxl_id in self.ids:
@@ -406,13 +409,18 @@ class Gimbal:
             self.is_open = True
             self._install_signal_handlers()
             self.last_sample = self.sample()
-        except BaseException:
-            self.is_open = True
-            self._safe_stop_quietly()
-            self.is_open = False
-            self._restore_signal_handlers()
-            if self._owns_port:
-                self._close_port()
+        except BaseException as exc:
+            # No with-block calls __exit__ for a failed open(): stop here, and do not let an
+            # unconfirmed stop pass silently (the same rule as __exit__).
+            try:
+                self.stop()
+            except ShutdownError as shutdown:
+                raise ShutdownError(f"{shutdown} (while handling: {exc!r})") from exc
+            finally:
+                self.is_open = False
+                self._restore_signal_handlers()
+                if self._owns_port:
+                    self._close_port()
             raise
         return self.infos
 
@@ -441,22 +449,17 @@ class Gimbal:
                 f"cannot open the servo port {name!r} at {self.baudrate} bps")
 
     def _identify(self, dxl_id: int) -> None:
-        model_number = None
-        last = ""
-        for _ in range(self.retries + 1):
-            number, result, error = self.ph.ping(self.port, dxl_id)
-            self.port.is_using = False
-            if result == COMM_SUCCESS:
-                model_number = int(number)
-                break
-            last = self.ph.getTxRxResult(result)
-            self.retry_count += 1
-        if model_number is None:
+        try:
+            # a hardware alert is read and raised by name in _prepare
+            model_number = int(self._transact(dxl_id, "PING",
+                                              lambda: self.ph.ping(self.port, dxl_id),
+                                              allow_alert=True))
+        except ServoCommunicationError as exc:
             raise ServoIdentityError(
                 f"servo ID {dxl_id} did not answer a PING at {self.baudrate} bps on "
-                f"{self.port.getPortName()!r} ({last}). Check its power and cable, and that its "
-                "ID and baud rate match the configuration (factory servos: ID 1, 57600 bps; "
-                "Dynamixel Wizard can scan the bus).")
+                f"{self.port.getPortName()!r} ({exc.result_text}). Check its power and cable, and "
+                "that its ID and baud rate match the configuration (factory servos: ID 1, "
+                "57600 bps; Dynamixel Wizard can scan the bus).") from exc
         if model_number in MODELS:
             model = MODELS[model_number]
             supported = True
@@ -502,7 +505,6 @@ class Gimbal:
         present = self._read_item(dxl_id, "Present Position")
         self.home_ticks[dxl_id] = present
         model_number, name, supported = self._identity[dxl_id]
-        t = self._table(dxl_id)
         vlimit = self._read_si(dxl_id, "Velocity Limit")
         volts = self._read_si(dxl_id, "Present Input Voltage")
         model = self.models[dxl_id]
@@ -521,14 +523,11 @@ class Gimbal:
             temperature_limit_c=self._read_si(dxl_id, "Temperature Limit"),
             voltage_limits_v=(self._read_si(dxl_id, "Min Voltage Limit"),
                               self._read_si(dxl_id, "Max Voltage Limit")),
-            return_delay_s=t["Return Delay Time"].to_si(
-                self._read_item(dxl_id, "Return Delay Time")),
+            return_delay_s=self._read_si(dxl_id, "Return Delay Time"),
             drive_mode=drive,
         )
         # hold where it is: Goal Position = Present Position before torque on (§6.1)
-        self._write_block(dxl_id, "Profile Acceleration",
-                          [("Profile Acceleration", self._accel_units()),
-                           ("Profile Velocity", 0), ("Goal Position", present)])
+        self._write_goal(dxl_id, 0, present)
         self._write_item(dxl_id, "Torque Enable", 1)
 
     def close(self) -> None:
@@ -641,8 +640,6 @@ class Gimbal:
         for k, dxl_id in enumerate(self.ids):
             data = blocks[dxl_id][1]
             if self.sample_layout == "motion":
-                # Realtime Tick u16, Moving u8, Moving Status u8, Present PWM s16,
-                # Present Current/Load s16, Present Velocity s32, Present Position s32 (§5)
                 tick, mov, _, _, _, v_raw, ticks[k] = _MOTION_STRUCT.unpack(data)
                 moving[k] = bool(mov)
                 vel[k] = v_raw * VELOCITY_UNIT_RAD_S
@@ -766,15 +763,12 @@ class Gimbal:
         start = int(s.ticks[self.ids.index(servo_id)])
         goal = start + direction * turns * TICKS_PER_TURN
         self._check_turn_limit(servo_id, goal)
-        accel_units = self._accel_units()
         self._write_item(servo_id, "Bus Watchdog", self.watchdog_units)
-        self._write_block(servo_id, "Profile Acceleration",
-                          [("Profile Acceleration", accel_units),
-                           ("Profile Velocity", speed_units), ("Goal Position", goal)])
+        self._write_goal(servo_id, speed_units, goal)
         home = self.home_ticks[servo_id]
         self.motion = Motion(
             kind="turn", servo_ids=(servo_id,), turns=turns, direction=direction, speed=speed_q,
-            acceleration=accel_units * ACCELERATION_UNIT_RAD_S2,
+            acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2,
             start_angles={servo_id: (start - home) * POSITION_UNIT_RAD},
             goal_angles={servo_id: (goal - home) * POSITION_UNIT_RAD},
             goal_ticks={servo_id: goal}, t_begin=self.clock.monotonic())
@@ -802,7 +796,6 @@ class Gimbal:
         if speed is None:
             speed = 0.5 * self.top_speed
         s = self.sample()
-        accel_units = self._accel_units()
         starts, goals, goal_ticks = {}, {}, {}
         speed_q = 0.0
         moving = []
@@ -815,13 +808,10 @@ class Gimbal:
             if now_ticks != self.home_ticks[i]:
                 moving.append(i)
                 self._write_item(i, "Bus Watchdog", self.watchdog_units)
-                self._write_block(i, "Profile Acceleration",
-                                  [("Profile Acceleration", accel_units),
-                                   ("Profile Velocity", units),
-                                   ("Goal Position", self.home_ticks[i])])
+                self._write_goal(i, units, self.home_ticks[i])
         self.motion = Motion(
             kind="return", servo_ids=tuple(ids), turns=0, direction=0, speed=speed_q,
-            acceleration=accel_units * ACCELERATION_UNIT_RAD_S2, start_angles=starts,
+            acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2, start_angles=starts,
             goal_angles=goals, goal_ticks=goal_ticks, t_begin=self.clock.monotonic())
         if not moving:
             self.motion.finished = True
@@ -857,8 +847,8 @@ class Gimbal:
                 if late:
                     self._check_watchdog()
                 self._track_motion(s)
-        except Exception:
-            self._safe_stop_quietly()
+        except Exception as exc:
+            self._safe_stop_quietly(exc)
             raise
         return s
 
@@ -969,11 +959,12 @@ class Gimbal:
             if m.finished:
                 break
             if self.clock.monotonic() > t_end:
-                self._safe_stop_quietly()
-                raise StallError(
+                error = StallError(
                     f"the {m.kind} of servo(s) {list(m.servo_ids)} did not finish within "
                     f"{timeout_s:g} s; the servos have been stopped. Check that the gimbal "
                     "turns freely.")
+                self._safe_stop_quietly(error)
+                raise error
             self.clock.sleep(period)
         return m
 
@@ -989,28 +980,21 @@ class Gimbal:
         out = {}
         for i in self.ids:
             t = self._table(i)
-            ram = self._read_raw(i, 64, 7, "READ Torque Enable..Hardware Error Status",
-                                 allow_alert=True)
-            live = self._read_raw(i, 122, 25, "READ Moving..Present Temperature",
-                                  allow_alert=True)
-            hw = ram[6]
-            wd = t["Bus Watchdog"].from_bytes(self._read_raw(i, 98, 1, "READ Bus Watchdog",
-                                                             allow_alert=True))
+            ram = self._read_items(i, "Torque Enable", "Hardware Error Status")
+            live = self._read_items(i, "Moving", "Present Temperature")
+            hw = ram["Hardware Error Status"]
             out[i] = ServoStatus(
                 dxl_id=i,
-                torque_enabled=bool(ram[0]),
-                moving=bool(live[0]),
-                velocity=t["Present Velocity"].to_si(
-                    t["Present Velocity"].from_bytes(live[6:10])),
-                angle=(t["Present Position"].from_bytes(live[10:14]) - self.home_ticks[i])
-                * POSITION_UNIT_RAD,
-                voltage_v=t["Present Input Voltage"].to_si(
-                    t["Present Input Voltage"].from_bytes(live[22:24])),
-                temperature_c=t["Present Temperature"].to_si(live[24]),
+                torque_enabled=bool(ram["Torque Enable"]),
+                moving=bool(live["Moving"]),
+                velocity=t["Present Velocity"].to_si(live["Present Velocity"]),
+                angle=(live["Present Position"] - self.home_ticks[i]) * POSITION_UNIT_RAD,
+                voltage_v=t["Present Input Voltage"].to_si(live["Present Input Voltage"]),
+                temperature_c=t["Present Temperature"].to_si(live["Present Temperature"]),
                 hardware_error=hw,
                 hardware_error_names=tuple(b.name for b in HARDWARE_ERROR_BITS
                                            if hw & (1 << b.bit)),
-                bus_watchdog_tripped=wd == -1,
+                bus_watchdog_tripped=self._read_item(i, "Bus Watchdog", allow_alert=True) == -1,
             )
         return out
 
@@ -1029,9 +1013,9 @@ class Gimbal:
         self.port.is_using = False
         self.motion = None
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
-        for start, items in ((104, [("Goal Velocity", 0)]), (64, [("Torque Enable", 0)])):
+        for name in ("Goal Velocity", "Torque Enable"):
             try:
-                self._sync_write(start, items, known)
+                self._sync_write(name, 0, known)
             except CommunicationError:
                 pass
         unconfirmed = []
@@ -1051,13 +1035,15 @@ class Gimbal:
                 f"could not confirm torque off on servo(s) {ids}: {why}. Switch the servo "
                 "power off before touching the gimbal.")
 
-    def _safe_stop_quietly(self) -> None:
-        """Best-effort :meth:`stop` on an error path (its own failure must not hide the error)."""
+    def _safe_stop_quietly(self, error: BaseException) -> None:
+        """Best-effort :meth:`stop` on the way out with ``error``: a failure of the stop must not
+        replace ``error``, so it is added to it as a note (:meth:`close` tries the stop again
+        and raises :class:`ShutdownError` if it still cannot confirm torque off)."""
         try:
             if self.is_open:
                 self.stop()
-        except Exception:
-            self.stop_failed = True
+        except Exception as exc:
+            error.add_note(f"The safe stop after this error failed too: {exc}")
 
     def reboot(self, servo_id: int) -> None:
         """REBOOT one servo (clears a hardware error), then re-home and hold it.
@@ -1067,15 +1053,8 @@ class Gimbal:
         """
         self._require_open()
         self._require_idle()
-        last = ""
-        for _ in range(self.retries + 1):
-            result, error = self.ph.reboot(self.port, servo_id)
-            self.port.is_using = False
-            if result == COMM_SUCCESS:
-                break
-            last = self.ph.getTxRxResult(result)
-        else:
-            raise ServoCommunicationError(servo_id, "REBOOT", last, self.retries + 1)
+        self._transact(servo_id, "REBOOT", lambda: ([], *self.ph.reboot(self.port, servo_id)),
+                       allow_alert=True)
         self.clock.sleep(0.5)  # boot time
         self._prepare(servo_id)
         self._tick_state.pop(servo_id, None)
@@ -1125,7 +1104,18 @@ class Gimbal:
 
     def _transact(self, dxl_id: int, instruction: str, fn, *, allow_alert: bool = False,
                   expect_len: int | None = None):
-        """Run ``fn() -> (data, result, error)`` with bounded retries; returns data."""
+        """Run ``fn() -> (data, result, error)`` with bounded retries; returns data.
+
+        Raises
+        ------
+        ServoCommunicationError
+            Every attempt failed (no status, a corrupt or short one, or a CRC error reported
+            by the servo).
+        ServoStatusError
+            The servo refused the instruction (status error other than CRC).
+        ServoHardwareError
+            The status carried the alert bit (unless ``allow_alert``).
+        """
         last = ""
         attempts = self.retries + 1
         for _ in range(attempts):
@@ -1171,6 +1161,16 @@ class Gimbal:
         return item.from_bytes(self._read_raw(dxl_id, item.address, item.size, f"READ {name}",
                                               allow_alert=allow_alert))
 
+    def _read_items(self, dxl_id: int, first: str, last: str) -> dict[str, int]:
+        """Every item from ``first`` to ``last`` in one READ (alerts reported, not raised),
+        decoded by name."""
+        table = self._table(dxl_id)
+        start, end = table[first].address, table[last].end
+        data = self._read_raw(dxl_id, start, end - start, f"READ {first}..{last}",
+                              allow_alert=True)
+        return {item.name: item.from_bytes(data[item.address - start: item.end - start])
+                for item in table.items if start <= item.address and item.end <= end}
+
     def _read_si(self, dxl_id: int, name: str) -> float:
         item = self._table(dxl_id)[name]
         return item.to_si(self._read_item(dxl_id, name))
@@ -1180,11 +1180,18 @@ class Gimbal:
         self._write_raw(dxl_id, item.address, item.to_bytes(raw), f"WRITE {name}={raw}",
                         allow_alert=allow_alert)
 
-    def _write_block(self, dxl_id: int, first: str, values: list[tuple[str, int]]) -> None:
+    def _write_goal(self, dxl_id: int, velocity_units: int, goal_ticks: int) -> None:
+        """Profile Acceleration, Profile Velocity (0 = the Velocity Limit) and Goal Position in
+        one WRITE, so the servo starts the new profile from one consistent set."""
+        self._write_block(dxl_id, [("Profile Acceleration", self._accel_units()),
+                                   ("Profile Velocity", velocity_units),
+                                   ("Goal Position", goal_ticks)])
+
+    def _write_block(self, dxl_id: int, values: list[tuple[str, int]]) -> None:
         """Write consecutive items in one WRITE packet (atomic on the servo)."""
         table = self._table(dxl_id)
         data = b""
-        address = table[first].address
+        address = table[values[0][0]].address
         for name, raw in values:
             item = table[name]
             if item.address != address + len(data):
@@ -1201,20 +1208,18 @@ class Gimbal:
 
         self._transact(dxl_id, instruction, fn, allow_alert=allow_alert)
 
-    def _sync_write(self, start: int, items: list[tuple[str, int]],
-                    ids: Sequence[int]) -> None:
-        """GroupSyncWrite of consecutive items from ``start`` to servos ``ids`` (no reply)."""
+    def _sync_write(self, name: str, raw: int, ids: Sequence[int]) -> None:
+        """GroupSyncWrite of one item to servos ``ids`` (no reply, so it reaches a servo that
+        cannot answer)."""
         if not ids:
             return
-        length = sum(self._table(ids[0])[n].size for n, _ in items)
-        group = GroupSyncWrite(self.port, self.ph, start, length)
+        item = self._table(ids[0])[name]
+        group = GroupSyncWrite(self.port, self.ph, item.address, item.size)
         for i in ids:
-            table = self._table(i)
-            data = b"".join(table[n].to_bytes(v) for n, v in items)
-            group.addParam(i, list(data))
+            group.addParam(i, list(self._table(i)[name].to_bytes(raw)))
         self.port.is_using = False
         result = group.txPacket()
         self.port.is_using = False
         if result != COMM_SUCCESS:
-            raise ServoCommunicationError(None, f"SYNC_WRITE at {start}",
+            raise ServoCommunicationError(None, f"SYNC_WRITE {name}={raw}",
                                           self.ph.getTxRxResult(result), 1)

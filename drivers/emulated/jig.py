@@ -47,20 +47,18 @@ class Joint(Protocol):
         ...
 
 
-def rotation_matrices(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rotations by ``angle`` (N,) about the unit ``axis`` (3,), shape (N, 3, 3) (Rodrigues)."""
-    a = np.asarray(axis, dtype=float)
-    th = np.asarray(angle, dtype=float).reshape(-1)
-    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-    kk = k @ k
-    s = np.sin(th)[:, None, None]
-    c = (1.0 - np.cos(th))[:, None, None]
-    return np.eye(3)[None] + s * k[None] + c * kk[None]
-
-
 def _skew(a: np.ndarray) -> np.ndarray:
     """The matrix ``K`` with ``K v = a × v``."""
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def rotation_matrices(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotations by ``angle`` (N,) about the unit ``axis`` (3,), shape (N, 3, 3) (Rodrigues)."""
+    k = _skew(np.asarray(axis, dtype=float))
+    th = np.asarray(angle, dtype=float).reshape(-1)
+    s = np.sin(th)[:, None, None]
+    c = (1.0 - np.cos(th))[:, None, None]
+    return np.eye(3)[None] + s * k[None] + c * (k @ k)[None]
 
 
 def _rotate_back(v: np.ndarray, axis: np.ndarray, skew_t: np.ndarray,
@@ -146,9 +144,9 @@ class GimbalJig:
             raise ValueError("a jig needs at least one joint")
         rng = np.random.default_rng([int(seed), 0x316])
         if axes is None:
-            axes = ["x", "y", "z"][:n] if n <= 3 else None
-            if axes is None:
+            if n > 3:
                 raise ValueError("give the axes of a jig with more than three joints")
+            axes = ["x", "y", "z"][:n]
         if len(axes) != n:
             raise ValueError(f"{n} joints need {n} axes, got {len(axes)}")
         nominal = []
@@ -240,14 +238,18 @@ class GimbalJig:
             out.append((rotation_matrices(slip.rotvec / angle, s * angle), ds, slip))
         return out
 
+    def _sensor_orientation(self, chain_end: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``R_sensor = R_1..n · M · S(t)`` from the chain's last rotation ``R_1..n``."""
+        r = chain_end @ self.mount
+        for m, _, _ in self._slip_matrices(t):
+            r = r @ m
+        return r
+
     def orientation(self, t: np.ndarray) -> np.ndarray:
         """The sensor's orientation ``R_sensor(t)`` (sensor → base), shape (N, 3, 3)."""
         t = np.asarray(t, dtype=float).reshape(-1)
         th, _ = self.joint_angles(t)
-        r = self._chain(th)[-1] @ self.mount
-        for m, _, _ in self._slip_matrices(t):
-            r = r @ m
-        return r
+        return self._sensor_orientation(self._chain(th)[-1], t)
 
     def rate(self, t: np.ndarray) -> np.ndarray:
         """True angular rate of the sensor in its own frame, rad/s, shape (len(t), 3)."""
@@ -272,9 +274,7 @@ class GimbalJig:
         t = np.asarray(t, dtype=float).reshape(-1)
         th, _ = self.joint_angles(t)
         cum = self._chain(th)
-        r_sensor = cum[-1] @ self.mount
-        for m, _, _ in self._slip_matrices(t):
-            r_sensor = r_sensor @ m
+        r_sensor = self._sensor_orientation(cum[-1], t)
         out = np.empty((t.size, len(self.joints), 3))
         for i in range(len(self.joints)):
             a_base = np.einsum("nij,j->ni", cum[i], self.axes[i])

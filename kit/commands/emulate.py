@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     """Serve until stopped; returns the exit code."""
     from drivers.clock import SystemClock
     from drivers.dynamixel.control_table import BAUD_RATES, model_by_name
-    from drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus
+    from drivers.emulated.dxl import PtyServoBridge, make_servo_bus
     from kit.errors import InputError
 
     if not args.pty:
@@ -67,9 +67,8 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
     clock = SystemClock()
-    servos = [EmulatedServo(i, model, clock=clock, seed=args.seed * 1000 + k, baudrate=args.baud)
-              for k, i in enumerate(args.ids)]
-    bridge = PtyServoBridge(ServoBus(servos, clock))
+    bus = make_servo_bus(clock, args.ids, model.name, args.seed, baudrate=args.baud)
+    bridge = PtyServoBridge(bus)
     path = bridge.start()
     stop = threading.Event()
     old = {}
@@ -85,10 +84,17 @@ def run(args: argparse.Namespace) -> int:
                               "baud": args.baud}), flush=True)
         else:
             print(path, flush=True)
-        print(f"gyrocal: {len(servos)} emulated {model.name} servo(s), IDs "
+        print(f"gyrocal: {len(bus.servos)} emulated {model.name} servo(s), IDs "
               f"{','.join(map(str, args.ids))}, on {path}; stop with Ctrl-C", file=sys.stderr,
               flush=True)
-        stop.wait(args.duration)
+        # Wake now and then: a serving thread that died must end the command at once, not
+        # leave it serving nothing until Ctrl-C or the end of --duration.
+        end = None if args.duration is None else clock.monotonic() + args.duration
+        while not stop.is_set() and bridge.error is None:
+            left = 0.5 if end is None else min(0.5, end - clock.monotonic())
+            if left <= 0:
+                break
+            stop.wait(left)
         if bridge.error is not None:
             raise bridge.error
     finally:

@@ -59,6 +59,30 @@ def run(clock, s, seconds, step=0.01):
         s.register("Present Position")
 
 
+def test_a_shaft_already_on_its_goal_tick_does_not_move_when_torque_comes_on():
+    # Torque on with Goal Position = Present Position (what a host does before every motion,
+    # hardware reference §6.1), or a write that leaves the goal where it is, must not move the
+    # shaft within its tick: a real position loop has nothing to correct.
+    clock, s = servo(seed=3)
+    assert w(s, "Operating Mode", 4) == 0
+    w(s, "Profile Velocity", 100)
+    w(s, "Profile Acceleration", 50)
+    w(s, "Goal Position", s.register("Present Position"))
+    for step in ("power-up", "after a move"):
+        if step == "after a move":
+            w(s, "Goal Position", s.register("Present Position") + 4096)
+            run(clock, s, 6.0)
+            w(s, "Torque Enable", 0)
+        t0 = clock.monotonic()
+        rest = s.true_motion(np.array([t0]))[0][0]
+        w(s, "Torque Enable", 1)
+        w(s, "Goal Velocity", 0)  # ignored in position modes
+        run(clock, s, 0.5)
+        angle, rate = s.true_motion(np.linspace(t0, clock.monotonic(), 500))
+        np.testing.assert_allclose(angle, rest, rtol=0, atol=1e-12, err_msg=step)
+        assert np.all(np.abs(rate) < 1e-9), step
+
+
 def test_trapezoidal_profile_ends_exactly_on_goal_with_the_datasheet_timing():
     clock, s = servo(motor_params=MotorParams(hold_band=0.0))
     assert w(s, "Operating Mode", 4) == 0
@@ -171,6 +195,7 @@ def test_bus_watchdog_stops_a_servo_whose_host_went_quiet():
     assert s.register("Present Velocity") == 0
     from drivers.emulated.dxl.protocol import ERR_DATA_RANGE
     assert w(s, "Goal Velocity", 10) == ERR_DATA_RANGE
+    assert w(s, "Bus Watchdog", -1) == ERR_DATA_RANGE  # it reads -1; a host may write 0..127
     assert w(s, "Bus Watchdog", 0) == 0
     assert w(s, "Goal Velocity", 10) == 0
 

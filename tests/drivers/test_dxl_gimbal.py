@@ -82,6 +82,22 @@ def test_a_missing_servo_is_named_with_the_baud_rate():
     assert all_torque_off(bus)
 
 
+def test_an_open_that_fails_half_way_stops_and_says_if_the_stop_is_unconfirmed():
+    # Servo 3 answers its PING, then goes silent while the servos are prepared (servos 1 and 2
+    # already hold with torque on). No with-block runs __exit__ for a failed open(), so open()
+    # itself must stop every servo and report a stop it could not confirm.
+    clock, port, bus, _ = emulated()
+    bus.servo(3).go_silent(at=clock.monotonic() + 0.005)
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(ShutdownError, match=r"servo\(s\) 3:.*while handling") as info:
+        with Gimbal(port, clock=clock):
+            pass
+    assert isinstance(info.value.__cause__, ServoCommunicationError)
+    assert bus.servo(1).packets_received > 5  # it did get as far as preparing servo 1
+    assert all_torque_off(bus)  # servo 3 still hears: the broadcast torque-off reached it
+    assert signal.getsignal(signal.SIGINT) == before
+
+
 def test_a_port_that_does_not_exist_is_a_clear_communication_error():
     with pytest.raises(CommunicationError, match="cannot open the servo port"):
         Gimbal("/dev/gyrocal-no-such-port", clock=VirtualClock()).open()
@@ -161,6 +177,11 @@ def test_sample_is_timestamped_mid_transaction_and_unwraps_realtime_tick():
         s1 = g.sample()
         elapsed_ms = (s1.servo_time_ms - s0.servo_time_ms)
         np.testing.assert_allclose(elapsed_ms, (s1.t - s0.t) * 1000, atol=2.0)
+        # 70 s without a read: the tick wraps twice, which only the host clock can tell
+        clock.sleep(70.0)
+        s2 = g.sample()
+        np.testing.assert_allclose(s2.servo_time_ms - s1.servo_time_ms, (s2.t - s1.t) * 1000,
+                                   atol=2.0)
 
 
 @pytest.mark.parametrize(("layout", "fast"), [("position", False), ("position", True),
@@ -255,7 +276,10 @@ def test_a_servo_that_stops_answering_mid_turn():
             while True:
                 g.poll()
                 clock.sleep(0.005)
-    assert isinstance(info.value.__cause__, ServoCommunicationError)
+    cause = info.value.__cause__
+    assert isinstance(cause, ServoCommunicationError)
+    # the stop poll() tried at once failed too, and the error says so
+    assert any("safe stop after this error failed" in n for n in getattr(cause, "__notes__", []))
     # the broadcast torque-off reached the silent servo too: every servo is off
     assert all_torque_off(bus)
 
@@ -353,6 +377,8 @@ def test_status_report_for_doctor():
         assert not st[2].moving and st[2].velocity == 0
         assert st[1].voltage_v == pytest.approx(12.0, abs=0.5)
         assert st[3].temperature_c == 25 and st[3].hardware_error == 0
+        assert all(st[i].torque_enabled and not st[i].bus_watchdog_tripped for i in (1, 2, 3))
+        assert st[2].angle == 0.0 and 1.0 < st[1].angle < 4 * math.pi
 
 
 # ---- signals ------------------------------------------------------------------------------------
@@ -360,6 +386,8 @@ def test_status_report_for_doctor():
                                           (signal.SIGTERM, TerminatedBySignal)])
 def test_signals_end_with_every_servo_stopped(sig, exc):
     clock, port, bus, _ = emulated()
+    for s in bus.servos:  # a goal velocity left over from another program: the stop zeroes it
+        s.set_register("Goal Velocity", 50)
     before = signal.getsignal(sig)
     with pytest.raises(exc) as info:
         with Gimbal(port, clock=clock) as g:

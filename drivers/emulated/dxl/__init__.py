@@ -7,7 +7,8 @@
 * :mod:`~drivers.emulated.dxl.port` — the in-process ``PortHandler`` (default transport).
 * :mod:`~drivers.emulated.dxl.pty` — the pseudo-terminal transport.
 
-:func:`make_emulated_gimbal` builds the whole emulated gimbal in one call.
+:func:`make_emulated_gimbal` builds the whole emulated gimbal in one call; :func:`make_servo_bus`
+only its servos on their bus (to serve them on a :class:`PtyServoBridge`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ __all__ = [
     "ServoBus",
     "ServoMotor",
     "make_emulated_gimbal",
+    "make_servo_bus",
 ]
 
 
@@ -44,6 +46,31 @@ class EmulatedGimbal(NamedTuple):
     port: EmulatedPortHandler
     bus: ServoBus
     jig: GimbalJig
+
+
+def make_servo_bus(
+    clock: Clock,
+    ids: Sequence[int] = (1, 2, 3),
+    model: str = "XM430-W350",
+    seed: int = 0,
+    *,
+    baudrate: int = 1_000_000,
+    velocity_limit: int | None = None,
+    return_delay_us: float | None = None,
+    motor_params: MotorParams | None = None,
+) -> ServoBus:
+    """Emulated servos of one model on one bus, with no transport yet.
+
+    The parameters are those of :func:`make_emulated_gimbal`; each servo gets its own random
+    stream from ``seed``.
+    """
+    servos = [
+        EmulatedServo(int(i), model, clock=clock, seed=int(seed) * 1000 + k, baudrate=baudrate,
+                      velocity_limit=velocity_limit, return_delay_us=return_delay_us,
+                      motor_params=motor_params)
+        for k, i in enumerate(ids)
+    ]
+    return ServoBus(servos, clock)
 
 
 def make_emulated_gimbal(
@@ -95,15 +122,10 @@ def make_emulated_gimbal(
         ``(port, bus, jig)``: pass ``port`` to :class:`drivers.dynamixel.Gimbal`, ``jig`` to the
         emulated IMU as its motion source; ``bus.servo(id)`` has the fault knobs.
     """
-    ids = [int(i) for i in ids]
-    servos = [
-        EmulatedServo(i, model, clock=clock, seed=int(seed) * 1000 + k, baudrate=baudrate,
-                      velocity_limit=velocity_limit, return_delay_us=return_delay_us,
-                      motor_params=motor_params)
-        for k, i in enumerate(ids)
-    ]
-    bus = ServoBus(servos, clock)
+    bus = make_servo_bus(clock, ids, model, seed, baudrate=baudrate,
+                         velocity_limit=velocity_limit, return_delay_us=return_delay_us,
+                         motor_params=motor_params)
     port = EmulatedPortHandler(bus, clock, model_timing=model_timing)
     port.baudrate = baudrate
-    jig = GimbalJig(servos, axes=axes, tilt_deg=tilt_deg, mount=mount, seed=seed)
+    jig = GimbalJig(bus.servos, axes=axes, tilt_deg=tilt_deg, mount=mount, seed=seed)
     return EmulatedGimbal(port, bus, jig)

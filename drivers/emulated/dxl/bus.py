@@ -95,11 +95,6 @@ class ServoBus:
         raise KeyError(f"no emulated servo with ID {dxl_id}; IDs on the bus: "
                        f"{[s.dxl_id for s in self.servos]}")
 
-    def reset_input(self) -> None:
-        """Forget a partially received instruction packet."""
-        with self.lock:
-            self._parser.reset()
-
     def receive(self, data: bytes, baudrate: int | None = None) -> list[PendingReply]:
         """Feed bytes sent by the host; return the replies of every packet they complete.
 
@@ -177,9 +172,8 @@ class ServoBus:
             err = s.action()
             return [self._reply(s, "other", lambda: (err, b""))]
         if code == REBOOT:
-            alert = s.error_byte(0)
-            s.reboot()
-            return [self._reply(s, "other", lambda: (alert & 0x7F, b""))]
+            s.reboot()  # clears the hardware error: the status carries no alert
+            return [self._reply(s, "other", lambda: (0, b""))]
         if code == FACTORY_RESET:
             err = s.factory_reset(p[0]) if len(p) == 1 else ERR_DATA_LENGTH
             return [self._reply(s, "other", lambda: (err, b""))]

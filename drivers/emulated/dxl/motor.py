@@ -281,7 +281,8 @@ class MotorParams:
         Where a position move comes to rest within the encoder tick of its goal, as a fraction
         of a tick: the true angle ends at ``goal + U(-hold_band/2, +hold_band/2)`` ticks (the
         position loop stops once Present Position reads the goal, so the shaft may rest
-        anywhere in the tick). 0 ends exactly on the tick's centre.
+        anywhere in the tick). 0 ends exactly on the tick's centre. A shaft already at rest on
+        its goal's tick (torque on with Goal Position = Present Position) stays where it is.
     """
 
     dt: float = 5e-4
@@ -361,11 +362,6 @@ class ServoMotor:
         self._append(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1))
 
     # ---- grid bookkeeping ----------------------------------------------------------------
-    @property
-    def computed_until(self) -> float:
-        """Time of the last computed grid point."""
-        return self.t_start + (self._grid.k0 + self._grid.n - 1) * self.dt
-
     def _append(self, p: np.ndarray, y1: np.ndarray, y2: np.ndarray, u: np.ndarray) -> None:
         g = self._grid
         m = p.size

@@ -24,7 +24,6 @@ __all__ = [
 
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
-MAX_ID = 0xFC
 STATUS = 0x55
 
 #: Instruction codes (hardware reference §4.4).
@@ -191,15 +190,6 @@ class InstructionParser:
 
     def __init__(self) -> None:
         self._buf = bytearray()
-
-    def reset(self) -> None:
-        """Forget any partial packet."""
-        self._buf.clear()
-
-    @property
-    def pending(self) -> int:
-        """Bytes held while waiting for the rest of a packet."""
-        return len(self._buf)
 
     def feed(self, data: bytes) -> Iterator[Instruction]:
         """Add ``data`` and yield every complete instruction packet it finishes."""

@@ -36,6 +36,7 @@ from drivers.dynamixel.control_table import (
     POSITION_UNIT_RAD,
     RETURN_DELAY_UNIT_S,
     TICK_MODULUS,
+    TICKS_PER_TURN,
     VELOCITY_UNIT_RAD_S,
     WATCHDOG_UNIT_S,
     ServoModel,
@@ -61,7 +62,6 @@ from drivers.emulated.dxl.protocol import (
 
 __all__ = ["EmulatedServo"]
 
-TICKS_PER_TURN = 4096
 _RAM_START = 64  # Torque Enable: the first RAM item
 _GOAL_ITEMS = ("Goal PWM", "Goal Current", "Goal Velocity", "Goal Position")
 _PROFILE_KIND = {"hold": 0, "step": 0, "rectangular": 1, "triangular": 2, "trapezoidal": 3,
@@ -494,8 +494,6 @@ class EmulatedServo:
     def _check(self, name: str, value: int, new: bytearray) -> int:
         item = self.table[name]
         lo, hi = item.raw_range()
-        if name == "Bus Watchdog":
-            lo = 0  # -1 is what it reads after tripping; a host may only write 0..127
         if not lo <= value <= hi:
             return ERR_DATA_RANGE
         if name == "Operating Mode" and value not in self.model.operating_modes:
@@ -541,7 +539,7 @@ class EmulatedServo:
                 wd = self._get("Bus Watchdog")
                 if wd > 0:
                     self._watchdog_deadline = now + wd * WATCHDOG_UNIT_S
-                self._replan(now, start=True)
+                self._replan(now)
             else:
                 self._torque_off(now)
         elif self._mem[64] and names & {"Goal Position", "Goal Velocity"}:
@@ -557,7 +555,7 @@ class EmulatedServo:
         accel = pa * ACCELERATION_UNIT_RAD_S2 if pa else math.inf
         return vmax * self._speed_cap, accel
 
-    def _replan(self, now: float, *, start: bool = False) -> None:
+    def _replan(self, now: float) -> None:
         """Give the motor a new plan for the current mode, goal and profile."""
         if not self._mem[64]:
             return
@@ -574,26 +572,30 @@ class EmulatedServo:
             self.motor.command(now, lambda t0, p0, v0: plan_velocity(t0, p0, v0, target, accel))
         elif mode in (OPERATING_MODES["position"], OPERATING_MODES["extended_position"],
                       OPERATING_MODES["current_based_position"]):
-            goal = self._angle_for_register(self._get("Goal Position"))
-            band = self.motor.params.hold_band
-            if band:  # the shaft rests somewhere within the goal's tick (MotorParams.hold_band)
-                goal += float(self._rng.uniform(-band / 2, band / 2)) * POSITION_UNIT_RAD
+            goal_register = self._get("Goal Position")
+            centre = self._angle_for_register(goal_register)
+            band = self.motor.params.hold_band * POSITION_UNIT_RAD
             vmax, accel = self._profile()
-            if self._mem[10] & 0x04:  # time-based profile: 112 = total ms, 108 = accel ms
+            time_based = bool(self._mem[10] & 0x04)  # 112 = total ms, 108 = accel ms
+
+            def make(t0: float, p0: float, v0: float) -> Plan:
+                if v0 == 0.0 and self._position_register(p0) == goal_register:
+                    # already resting where Present Position reads the goal (torque on with
+                    # Goal = Present, a rewrite of the same goal): the loop has nothing to do
+                    return plan_position(t0, p0, v0, p0, vmax, accel)
+                # the loop stops once the encoder reads the goal: anywhere in its tick
+                # (MotorParams.hold_band)
+                goal = centre + (float(self._rng.uniform(-band / 2, band / 2)) if band else 0.0)
+                if not time_based:
+                    return plan_position(t0, p0, v0, goal, vmax, accel)
                 total = self._get("Profile Velocity") * 1e-3
                 acc_t = min(self._get("Profile Acceleration") * 1e-3, total / 2.0)
+                if total <= 0 or goal == p0:
+                    return plan_position(t0, p0, v0, goal, vmax, math.inf)
+                v = min(abs(goal - p0) / (total - acc_t), self._max_speed())
+                return plan_position(t0, p0, v0, goal, v, v / acc_t if acc_t > 0 else math.inf)
 
-                def make(t0: float, p0: float, v0: float) -> Plan:
-                    dist = abs(goal - p0)
-                    if total <= 0 or dist == 0:
-                        return plan_position(t0, p0, v0, goal, self._profile()[0], math.inf)
-                    v = min(dist / (total - acc_t), self._max_speed())
-                    a = v / acc_t if acc_t > 0 else math.inf
-                    return plan_position(t0, p0, v0, goal, v, a)
-                self.motor.command(now, make)
-            else:
-                self.motor.command(now, lambda t0, p0, v0: plan_position(t0, p0, v0, goal, vmax,
-                                                                        accel))
+            self.motor.command(now, make)
         else:  # current / PWM modes: no position control is emulated; hold where it is
             self.motor.command(now, lambda t0, p0, v0: plan_stop(t0, p0, v0, _FREE_DECEL))
 
@@ -606,8 +608,7 @@ class EmulatedServo:
         mem = self._mem
         torque = mem[64]
         d = self._dir
-        homing = int.from_bytes(mem[20:24], "little", signed=True)
-        present = d * round(self._abs0 + angle / POSITION_UNIT_RAD) + self._turn_offset + homing
+        present = self._position_register(angle)
         vel_units = round(d * rate / VELOCITY_UNIT_RAD_S)
         plan = self.motor.plan
         running = bool(torque) and plan.running(now)
