@@ -10,7 +10,9 @@ Streaming (§1.7): FIFO_EN = TEMP | GYRO_XYZ gives 8-byte big-endian frames ``TE
 FIFO_COUNTH), pops the whole frames from the FIFO_R_W data port in one ``i2c_rdwr`` burst (or in
 32-byte block reads on a bus without it), then reads INT_STATUS. With FIFO_MODE = 1 a full FIFO
 drops only newer samples, so if FIFO_OFLOW_INT is set the frames just read are still delivered;
-the FIFO is then reset (as the kernel does) and the lost samples are reported as a gap.
+the FIFO is then reset (as the kernel does) and the lost samples are reported as a gap. Reading
+INT_STATUS clears it, so a failed read of it (other than a NACK) is not retried: an overflow
+cannot be ruled out, and the reader restarts the FIFO and reports a gap just the same.
 """
 
 from __future__ import annotations
@@ -140,7 +142,9 @@ class MPU9250Reader(ImuReader):
         return (((hi & 0x1F) << 8) | lo) // self._frame, False, self._clock.monotonic()
 
     def _overflowed(self) -> bool:
-        return bool(self._read_byte(R.INT_STATUS) & B.INT_STATUS_FIFO_OFLOW)  # clears it
+        # reading INT_STATUS clears it, so a read that failed after the byte moved is not
+        # retried (only NACKs are): the reader restarts the FIFO as after an overflow
+        return bool(self._read_byte(R.INT_STATUS, retry=False) & B.INT_STATUS_FIFO_OFLOW)
 
     def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
         chunk = (BLOCK_MAX // self._frame) * self._frame
