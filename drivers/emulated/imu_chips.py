@@ -259,7 +259,6 @@ class _EmulatedImu(ABC):
         self.faults = faults if faults is not None else ChipFaults()
         self._noise_rng = np.random.default_rng([seed, 0])
         self._fault_rng = np.random.default_rng([seed, 1])
-        self.samples_generated = 0
         self._power_on_reset()
 
     # -- I2CDevice ----------------------------------------------------------------------------
@@ -483,7 +482,6 @@ class _EmulatedImu(ABC):
         self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
-        self.samples_generated += len(ks)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -545,7 +543,6 @@ class EmulatedMPU9250(_EmulatedImu):
         self._fifo_last = 0
         self._latched: int | None = None
         self._int_status = 0
-        self.overflows = 0
 
     def _odr_hz(self) -> float | None:
         r = self._regs
@@ -610,7 +607,6 @@ class EmulatedMPU9250(_EmulatedImu):
         fifo = self._fifo
         if len(fifo) + len(data) > cap:
             self._int_status |= _MB.INT_STATUS_FIFO_OFLOW
-            self.overflows += 1
             if self._regs[_MR.CONFIG] & _MB.CONFIG_FIFO_MODE:
                 data = data[: max(0, cap - len(fifo))]
             else:
@@ -725,7 +721,6 @@ class EmulatedLSM9DS1(_EmulatedImu):
         self._fifo: deque[bytes] = deque()
         self._ovrn = False
         self._status = 0
-        self.overflows = 0
 
     @property
     def fifo_capacity(self) -> int:
@@ -791,7 +786,6 @@ class EmulatedLSM9DS1(_EmulatedImu):
         stop = self._mode() == _LB.FMODE_FIFO
         for row in rows:
             if len(self._fifo) >= cap:
-                self.overflows += 1
                 if stop:
                     return
                 self._fifo.popleft()
