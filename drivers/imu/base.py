@@ -785,8 +785,7 @@ class ImuReader(ABC):
         wide = gyro.astype(np.int32)
         saturated = np.abs(wide) >= self._sat_counts
         self._check_stuck(wide, saturated)
-        fam = self.family
-        temperature = fam.temperature_offset_c + temp_counts / fam.temperature_lsb_per_c
+        temperature = self.family.counts_to_celsius(temp_counts)
         t = self._sclock.time_of(index)
         if t[0] <= self._last_t:  # a refit moved the line back a hair: keep time increasing
             t = np.maximum(t, self._last_t + 0.5 * self._sclock.period_s)

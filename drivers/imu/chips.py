@@ -12,6 +12,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "LSM9DS1",
@@ -146,8 +150,8 @@ class ChipFamily:
                 return r
         return None
 
-    def counts_to_celsius(self, counts: float) -> float:
-        """Temperature in °C for a raw temperature reading."""
+    def counts_to_celsius(self, counts: float | np.ndarray) -> float | np.ndarray:
+        """Temperature in °C of raw temperature readings (a number or an array)."""
         return self.temperature_offset_c + counts / self.temperature_lsb_per_c
 
 
