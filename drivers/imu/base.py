@@ -850,9 +850,7 @@ class ImuReader(ABC):
             return
         self._closed = True
         try:
-            if self._streaming:
-                self._streaming = False
-                self._disable_fifo()
+            self.stop()
             self._power_down()
         finally:
             self._close_bus()
