@@ -627,6 +627,10 @@ class EmulatedMPU9250(_EmulatedImu):
 
     # registers -------------------------------------------------------------------------------
 
+    def _next_pointer(self, register: int) -> int:
+        # FIFO_R_W is a data port: a burst that reaches it keeps popping the FIFO (§1.7)
+        return register if register == _MR.FIFO_R_W else super()._next_pointer(register)
+
     def _read_fast(self, length: int) -> bytes | None:
         if self._ptr != _MR.FIFO_R_W:
             return None

@@ -124,6 +124,18 @@ def test_mpu_fifo_frames_count_latch_and_data_port():
     assert bus.read_byte_data(addr, USER_CTRL) == 0x40
 
 
+def test_mpu_a_burst_that_reaches_the_fifo_port_stays_on_it():
+    clock, bus, addr, chip = mpu(motion=ConstantRate((0.1, 0.2, 0.3)))
+    mpu_stream(bus, addr, div=9)  # 100 Hz, frames TEMP GX GY GZ = 8 bytes
+    clock.sleep(0.05 + 1e-6)
+    raw = bus.read_i2c_block_data(addr, FIFO_COUNTH, 2 + 16)  # COUNTH, COUNTL, then 0x74 (§1.7)
+    assert (raw[0] << 8) | raw[1] == 5 * 8
+    words = np.frombuffer(bytes(raw[2:]), ">i2").reshape(2, 4)
+    expect = [round(w / DEG * 131) for w in (0.1, 0.2, 0.3)]  # ±250 dps: 131 LSB/(°/s)
+    np.testing.assert_array_equal(words[:, 1:], [expect] * 2)
+    assert chip.fifo_level == 5 * 8 - 16
+
+
 def test_mpu_fifo_count_high_byte_latches_the_low_byte():
     clock, bus, addr, _ = mpu()
     mpu_stream(bus, addr)  # 1 kHz
