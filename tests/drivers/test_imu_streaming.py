@@ -362,9 +362,9 @@ def test_a_short_nack_burst_is_ridden_out_and_a_long_one_is_a_bus_error(model):
     with pytest.raises(BusError) as info:
         reader.read()
     e = info.value
-    fifo_level_register = 0x72 if model == "mpu9250" else 0x2F  # FIFO_COUNTH / FIFO_SRC
-    assert (e.errno, e.address, e.register) == (errno.EREMOTEIO, chip.family.addresses[0],
-                                                fifo_level_register)
+    # default address 0x68 / 0x6B; FIFO level register FIFO_COUNTH / FIFO_SRC (§1.2, §2.2)
+    address, level_register = (0x68, 0x72) if model == "mpu9250" else (0x6B, 0x2F)
+    assert (e.errno, e.address, e.register) == (errno.EREMOTEIO, address, level_register)
     assert "4 attempt" in str(e)
 
 
