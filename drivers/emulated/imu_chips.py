@@ -136,7 +136,7 @@ class SensorTruth:
             "bias_temp_coeff_rad_s_per_c",
             _vec3("bias_temp_coeff_rad_s_per_c", self.bias_temp_coeff_rad_s_per_c),
         )
-        if not math.isfinite(self.clock_ppm) or abs(self.clock_ppm) >= 1e6:
+        if not (math.isfinite(self.clock_ppm) and self.clock_ppm > -1e6):  # a positive rate
             raise ValueError(f"clock_ppm must be finite and above -1e6, got {self.clock_ppm!r}")
         if not callable(self.temperature_c) and not math.isfinite(self.temperature_c):
             raise ValueError(

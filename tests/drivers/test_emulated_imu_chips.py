@@ -216,6 +216,8 @@ def test_truth_validates_its_fields():
         SensorTruth(noise_density_rad_s_sqrt_hz=-1.0)
     with pytest.raises(ValueError, match="clock_ppm"):
         SensorTruth(clock_ppm=float("nan"))
+    with pytest.raises(ValueError, match="clock_ppm"):
+        SensorTruth(clock_ppm=-1e6)  # the chip would not sample at all
 
 
 def test_counts_follow_scale_bias_and_temperature_drift():
