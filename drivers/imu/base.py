@@ -759,6 +759,10 @@ class ImuReader(ABC):
             t_a = clock.monotonic()
             if sc.count_at(t_b - margin) == sc.count_at(t_a + margin):
                 break
+        if self._discard_pending:
+            # that sample is accounted for already: in the last restart's gap, or as the one
+            # dropped by design at the start
+            first_lost += 1
         produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
         lost = produced - first_lost
