@@ -745,7 +745,9 @@ class ImuReader(ABC):
         collected after the restart is the first grid point after the enabling write. The write
         is timed just after a predicted sample instant, so that the number of samples produced
         by then is known exactly from the fitted grid rather than guessed to within one; a write
-        that still straddles a sample instant is done again.
+        that still straddles a sample instant is done again. Where the fit is weak (restarts
+        at nearly every drain) the count can still be a sample off, so the clock fit starts a
+        new segment there and re-learns its offset rather than bend its period.
         """
         clock, sc = self._clock, self._sclock
         margin = 0.25 * sc.period_s
@@ -765,6 +767,7 @@ class ImuReader(ABC):
             first_lost += 1
         produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
+        sc.new_segment(produced)  # a miscount here must not bend the period fit
         lost = produced - first_lost
         if self.discard_first:
             self._discard_pending = True
