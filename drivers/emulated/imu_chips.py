@@ -22,7 +22,7 @@ import errno
 import math
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -136,7 +136,7 @@ class SensorTruth:
             "bias_temp_coeff_rad_s_per_c",
             _vec3("bias_temp_coeff_rad_s_per_c", self.bias_temp_coeff_rad_s_per_c),
         )
-        if not math.isfinite(self.clock_ppm) or abs(self.clock_ppm) >= 1e6:
+        if not (math.isfinite(self.clock_ppm) and self.clock_ppm > -1e6):  # a positive rate
             raise ValueError(f"clock_ppm must be finite and above -1e6, got {self.clock_ppm!r}")
         if not callable(self.temperature_c) and not math.isfinite(self.temperature_c):
             raise ValueError(
@@ -226,11 +226,18 @@ class _Sample:
 
 
 class _EmulatedImu(ABC):
-    """Shared machinery: register pointer, fault knobs, the sample clock and sample generation."""
+    """Shared machinery: register pointer, the write and reset rules, fault knobs, the sample
+    clock and sample generation."""
 
     family: ChipFamily
     default_who_am_i: int
     temperature_count_limits: tuple[int, int] = (-32768, 32767)
+    #: Register values after a power-on or software reset (the others are 0).
+    reset_values: Mapping[int, int]
+    #: Registers that ignore writes.
+    read_only: frozenset[int]
+    #: The self-clearing software-reset bit, as (register, mask).
+    soft_reset: tuple[int, int]
 
     def __init__(
         self,
@@ -252,7 +259,6 @@ class _EmulatedImu(ABC):
         self.faults = faults if faults is not None else ChipFaults()
         self._noise_rng = np.random.default_rng([seed, 0])
         self._fault_rng = np.random.default_rng([seed, 1])
-        self.samples_generated = 0
         self._power_on_reset()
 
     # -- I2CDevice ----------------------------------------------------------------------------
@@ -303,17 +309,62 @@ class _EmulatedImu(ABC):
     def _read_fast(self, length: int) -> bytes | None:
         return None
 
-    @abstractmethod
     def _power_on_reset(self) -> None:
-        """Restore the reset values (power-on and software reset)."""
+        """Restore the reset values (power-on and software reset); start a new sample grid."""
+        self._regs = bytearray(128)
+        for reg, value in self.reset_values.items():
+            self._regs[reg] = value
+        self._ptr = 0
+        self._latest = _Sample()
+        #: :attr:`samples_taken` at each FIFO enable: the FIFO's first sample is the next one.
+        self.fifo_enables: list[int] = []
+        self._reset_state()
+        self._restart_sampling()
+
+    def _write_register(self, register: int, value: int) -> None:
+        """Write one register. Read-only registers ignore it; the software-reset bit restores
+        the reset values; a write that changes the output data rate starts a new sample grid,
+        and one that turns the FIFO on records where the FIFO's samples begin."""
+        if register in self.read_only:
+            return
+        reset_register, reset_bit = self.soft_reset
+        if register == reset_register and value & reset_bit:
+            self._power_on_reset()  # the reset bit clears itself
+            return
+        fifo_was_on, odr_before = self._fifo_on(), self._odr_hz()
+        self._store(register, value)
+        if self._odr_hz() != odr_before:
+            self._restart_sampling()
+        if self._fifo_on() and not fifo_was_on:
+            self.fifo_enables.append(self._k)
+
+    @property
+    def fifo_capacity(self) -> int:
+        """FIFO size in bytes (MPU-9250) or slots (LSM9DS1): the datasheet's, or the knob's."""
+        cap = self.faults.fifo_capacity
+        return self.family.fifo_capacity if cap is None else cap
+
+    @property
+    def fifo_level(self) -> int:
+        """What the FIFO holds now, in the unit of :attr:`fifo_capacity`."""
+        self._sync()
+        return len(self._fifo)
+
+    @abstractmethod
+    def _reset_state(self) -> None:
+        """Empty the FIFO and clear the chip's flags and latches (part of a reset)."""
+
+    @abstractmethod
+    def _store(self, register: int, value: int) -> None:
+        """Store a written value, with the register's own side effects (FIFO reset...)."""
+
+    @abstractmethod
+    def _fifo_on(self) -> bool:
+        """Whether new samples go into the FIFO."""
 
     @abstractmethod
     def _read_register(self, register: int) -> int:
         """One register byte as the host reads it (with read side effects)."""
-
-    @abstractmethod
-    def _write_register(self, register: int, value: int) -> None:
-        """Write one register (with its side effects)."""
 
     @abstractmethod
     def _odr_hz(self) -> float | None:
@@ -431,7 +482,6 @@ class _EmulatedImu(ABC):
         self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
-        self.samples_generated += len(ks)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -441,9 +491,6 @@ _MR, _MB = MPU9250_REG, MPU9250_BITS
 _MPU_READ_ONLY = frozenset(
     {_MR.INT_STATUS, _MR.FIFO_COUNTH, _MR.FIFO_COUNTL, _MR.FIFO_R_W, _MR.WHO_AM_I}
     | set(range(_MR.ACCEL_XOUT_H, _MR.GYRO_XOUT_H + 6))
-)
-_MPU_RATE_REGISTERS = frozenset(
-    {_MR.SMPLRT_DIV, _MR.CONFIG, _MR.GYRO_CONFIG, _MR.PWR_MGMT_1, _MR.PWR_MGMT_2}
 )
 _MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
 
@@ -478,6 +525,9 @@ class EmulatedMPU9250(_EmulatedImu):
     """
 
     family = MPU9250
+    reset_values = {_MR.PWR_MGMT_1: 0x01}
+    read_only = _MPU_READ_ONLY
+    soft_reset = (_MR.PWR_MGMT_1, _MB.PWR_MGMT_1_H_RESET)
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
                  truth: SensorTruth | None = None, *, faults: ChipFaults | None = None,
@@ -488,30 +538,11 @@ class EmulatedMPU9250(_EmulatedImu):
         self.variant = variant
         super().__init__(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples)
 
-    def _power_on_reset(self) -> None:
-        self._regs = bytearray(128)
-        self._regs[_MR.PWR_MGMT_1] = 0x01
-        self._ptr = 0
+    def _reset_state(self) -> None:
         self._fifo = bytearray()
         self._fifo_last = 0
         self._latched: int | None = None
         self._int_status = 0
-        self._latest = _Sample()
-        self.fifo_enables: list[int] = []
-        self.overflows = 0
-        self._restart_sampling()
-
-    @property
-    def fifo_capacity(self) -> int:
-        """FIFO size in bytes."""
-        cap = self.faults.fifo_capacity
-        return self.family.fifo_capacity if cap is None else cap
-
-    @property
-    def fifo_level(self) -> int:
-        """Bytes in the FIFO now."""
-        self._sync()
-        return len(self._fifo)
 
     def _odr_hz(self) -> float | None:
         r = self._regs
@@ -576,7 +607,6 @@ class EmulatedMPU9250(_EmulatedImu):
         fifo = self._fifo
         if len(fifo) + len(data) > cap:
             self._int_status |= _MB.INT_STATUS_FIFO_OFLOW
-            self.overflows += 1
             if self._regs[_MR.CONFIG] & _MB.CONFIG_FIFO_MODE:
                 data = data[: max(0, cap - len(fifo))]
             else:
@@ -596,6 +626,10 @@ class EmulatedMPU9250(_EmulatedImu):
         self._push(self._frames(gyro[head:], accel[head:], temp[head:]))
 
     # registers -------------------------------------------------------------------------------
+
+    def _next_pointer(self, register: int) -> int:
+        # FIFO_R_W is a data port: a burst that reaches it keeps popping the FIFO (§1.7)
+        return register if register == _MR.FIFO_R_W else super()._next_pointer(register)
 
     def _read_fast(self, length: int) -> bytes | None:
         if self._ptr != _MR.FIFO_R_W:
@@ -630,29 +664,15 @@ class EmulatedMPU9250(_EmulatedImu):
             return words[register - r.ACCEL_XOUT_H]
         return self._regs[register]
 
-    def _write_register(self, register: int, value: int) -> None:
-        r, b = _MR, _MB
-        if register in _MPU_READ_ONLY:
-            return
-        if register == r.PWR_MGMT_1 and value & b.PWR_MGMT_1_H_RESET:
-            self._power_on_reset()  # H_RESET clears itself
-            return
-        if register == r.SIGNAL_PATH_RESET:
+    def _store(self, register: int, value: int) -> None:
+        if register == _MR.SIGNAL_PATH_RESET:
             return  # self-clearing; the emulated signal paths have no state to reset
-        if register == r.USER_CTRL:
-            was_on = self._fifo_on()
-            if value & b.USER_CTRL_FIFO_RST:
+        if register == _MR.USER_CTRL:
+            if value & _MB.USER_CTRL_FIFO_RST:
                 self._fifo.clear()
                 self._latched = None
-            value &= ~(b.USER_CTRL_FIFO_RST | 0x03)  # the reset bits clear themselves
-            self._regs[register] = value
-            if self._fifo_on() and not was_on:
-                self.fifo_enables.append(self._k)
-            return
-        old_odr = self._odr_hz()
+            value &= ~(_MB.USER_CTRL_FIFO_RST | 0x03)  # the reset bits clear themselves
         self._regs[register] = value
-        if register in _MPU_RATE_REGISTERS and self._odr_hz() != old_odr:
-            self._restart_sampling()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -697,33 +717,22 @@ class EmulatedLSM9DS1(_EmulatedImu):
     family = LSM9DS1
     default_who_am_i = 0x68
     temperature_count_limits = (-2048, 2047)  # 12 bits, sign-extended
+    reset_values = _LSM_DEFAULTS
+    read_only = _LSM_READ_ONLY
+    soft_reset = (_LR.CTRL_REG8, _LB.CTRL_REG8_SW_RESET)
 
-    def _power_on_reset(self) -> None:
-        self._regs = bytearray(128)
-        for reg, value in _LSM_DEFAULTS.items():
-            self._regs[reg] = value
-        self._ptr = 0
+    def _reset_state(self) -> None:
         self._fifo: deque[bytes] = deque()
         self._ovrn = False
         self._status = 0
-        self._latest = _Sample()
-        self.fifo_enables: list[int] = []
-        self.overflows = 0
-        self._restart_sampling()
 
     @property
     def fifo_capacity(self) -> int:
-        """FIFO depth in slots."""
-        cap = self.faults.fifo_capacity if self.faults.fifo_capacity is not None else 32
+        """FIFO depth in slots (at most FTH + 1 with CTRL_REG9.STOP_ON_FTH)."""
+        cap = super().fifo_capacity
         if self._regs[_LR.CTRL_REG9] & _LB.CTRL_REG9_STOP_ON_FTH:
             cap = min(cap, (self._regs[_LR.FIFO_CTRL] & _LB.FTH_MASK) + 1)
         return cap
-
-    @property
-    def fifo_level(self) -> int:
-        """Slots in the FIFO now."""
-        self._sync()
-        return len(self._fifo)
 
     def _mode(self) -> int:
         return self._regs[_LR.FIFO_CTRL] >> _LB.FMODE_SHIFT
@@ -781,7 +790,6 @@ class EmulatedLSM9DS1(_EmulatedImu):
         stop = self._mode() == _LB.FMODE_FIFO
         for row in rows:
             if len(self._fifo) >= cap:
-                self.overflows += 1
                 if stop:
                     return
                 self._fifo.popleft()
@@ -856,23 +864,13 @@ class EmulatedLSM9DS1(_EmulatedImu):
             return self._fifo_src()
         return self._regs[register]
 
-    def _write_register(self, register: int, value: int) -> None:
-        r, b = _LR, _LB
-        if register in _LSM_READ_ONLY:
-            return
-        if register == r.CTRL_REG8 and value & b.CTRL_REG8_SW_RESET:
-            self._power_on_reset()  # SW_RESET clears itself
-            return
-        was_on = self._fifo_on()
-        old_odr = self._odr_hz()
-        self._regs[register] = value & ~b.CTRL_REG8_BOOT if register == r.CTRL_REG8 else value
-        if register == r.FIFO_CTRL and self._mode() == b.FMODE_BYPASS:
+    def _store(self, register: int, value: int) -> None:
+        if register == _LR.CTRL_REG8:
+            value &= ~_LB.CTRL_REG8_BOOT  # BOOT clears itself
+        self._regs[register] = value
+        if register == _LR.FIFO_CTRL and self._mode() == _LB.FMODE_BYPASS:
             self._fifo.clear()
             self._ovrn = False
-        if register == r.CTRL_REG1_G and self._odr_hz() != old_odr:
-            self._restart_sampling()
-        if self._fifo_on() and not was_on:
-            self.fifo_enables.append(self._k)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -229,6 +229,11 @@ def _hex(v: int | None) -> str:
     return "none" if v is None else f"0x{v:02X}"
 
 
+def _bus_error_reason(e: OSError, during: str) -> str:
+    """The reason of a gap forced by a bus error."""
+    return f"bus error {during} ([Errno {e.errno}] {os.strerror(e.errno or 0)}); FIFO restarted"
+
+
 class ImuReader(ABC):
     """Base of the chip readers.
 
@@ -378,8 +383,12 @@ class ImuReader(ABC):
                     raise self._bus_error(e, register, attempt) from e
                 self._clock.sleep(self.retry_delay_s)
 
-    def _read_byte(self, register: int) -> int:
-        return int(self._xfer(register, lambda: self._bus.read_byte_data(self.address, register)))
+    def _read_byte(self, register: int, *, retry: bool = True) -> int:
+        return int(
+            self._xfer(
+                register, lambda: self._bus.read_byte_data(self.address, register), retry=retry
+            )
+        )
 
     def _write_byte(self, register: int, value: int) -> None:
         self._xfer(register, lambda: self._bus.write_byte_data(self.address, register, value))
@@ -617,7 +626,11 @@ class ImuReader(ABC):
 
     @abstractmethod
     def _overflowed(self) -> bool:
-        """Whether the chip reports a lost sample now (asked after each burst)."""
+        """Whether the chip reports a lost sample now (asked after each burst).
+
+        A chip whose flag clears when read lets transient errors other than NACKs propagate as
+        ``OSError``: the failed read may have cleared the flag, so a retry could not be trusted.
+        """
 
     @abstractmethod
     def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -666,8 +679,8 @@ class ImuReader(ABC):
         -------
         ImuBatch
             Times on the caller's clock, rates in rad/s (datasheet sensitivity only), °C,
-            saturation flags, and any gaps (FIFO overflow, or a bus error in mid-burst that
-            forced a FIFO restart).
+            saturation flags, and any gaps (FIFO overflow, or a bus error in mid-burst or
+            while reading a clear-on-read overflow flag, which forced a FIFO restart).
 
         Raises
         ------
@@ -682,25 +695,25 @@ class ImuReader(ABC):
             raise ImuStateError("the reader is not streaming: call configure() and start() first")
         t_b = self._clock.monotonic()
         n, overflow, t_a = self._fifo_level()
-        if overflow and not self.overflow_keeps_oldest:
-            return ImuBatch.empty((self._restart(self._next_index, "fifo overflow"),))
+        lost = "fifo overflow" if overflow else None  # why samples were lost, if they were
+        if lost and not self.overflow_keeps_oldest:
+            return ImuBatch.empty((self._restart(self._next_index, lost),))
         gyro = np.empty((0, 3), dtype=np.int16)
         temp: np.ndarray | None = None
         if n:
             try:
                 gyro, temp = self._fifo_read(n)
             except OSError as e:
-                reason = (f"bus error during FIFO read ([Errno {e.errno}] "
-                          f"{os.strerror(e.errno or 0)}); FIFO restarted")
+                reason = _bus_error_reason(e, "during FIFO read")
                 return ImuBatch.empty((self._restart(self._next_index, reason),))
             # A sample can be lost while the burst runs, too: ask the chip again.
-            late = self._overflowed()
+            late = self._late_overflow()
             if late and not self.overflow_keeps_oldest:
                 # the oldest unread slot was overwritten before the burst reached it, so the
                 # slots just read do not follow the last batch: drop them with the gap
-                return ImuBatch.empty((self._restart(self._next_index, "fifo overflow"),))
-            overflow = overflow or late
-        if not overflow:
+                return ImuBatch.empty((self._restart(self._next_index, late),))
+            lost = lost or late
+        if lost is None:
             self._sclock.observe(t_b, t_a, self._next_index + n)
         if temp is None:
             temp = np.full(n, self._temperature_counts() if n else 0, dtype=np.float64)
@@ -710,11 +723,20 @@ class ImuReader(ABC):
             gyro, temp, index = gyro[1:], temp[1:], index[1:]
             self._discard_pending = False
         gaps: tuple[FifoGap, ...] = ()
-        if overflow:
+        if lost:
             # a full FIFO that keeps its oldest samples drops only newer ones: the samples
             # just read follow the last batch, and the loss comes after them
-            gaps = (self._restart(self._next_index, "fifo overflow"),)
+            gaps = (self._restart(self._next_index, lost),)
         return self._make_batch(index, gyro, temp, gaps)
+
+    def _late_overflow(self) -> str | None:
+        """Ask the chip after a burst whether samples were lost: the gap's reason, or ``None``."""
+        try:
+            return "fifo overflow" if self._overflowed() else None
+        except OSError as e:
+            # the flag clears when read, and the failed read may have cleared it: an overflow
+            # cannot be ruled out, so the FIFO is restarted as after one
+            return _bus_error_reason(e, "reading the FIFO overflow flag")
 
     def _restart(self, first_lost: int, reason: str) -> FifoGap:
         """Restart the FIFO after data were lost and report the gap.
@@ -723,7 +745,9 @@ class ImuReader(ABC):
         collected after the restart is the first grid point after the enabling write. The write
         is timed just after a predicted sample instant, so that the number of samples produced
         by then is known exactly from the fitted grid rather than guessed to within one; a write
-        that still straddles a sample instant is done again.
+        that still straddles a sample instant is done again. Where the fit is weak (restarts
+        at nearly every drain) the count can still be a sample off, so the clock fit starts a
+        new segment there and re-learns its offset rather than bend its period.
         """
         clock, sc = self._clock, self._sclock
         margin = 0.25 * sc.period_s
@@ -737,8 +761,13 @@ class ImuReader(ABC):
             t_a = clock.monotonic()
             if sc.count_at(t_b - margin) == sc.count_at(t_a + margin):
                 break
+        if self._discard_pending:
+            # that sample is accounted for already: in the last restart's gap, or as the one
+            # dropped by design at the start
+            first_lost += 1
         produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
+        sc.new_segment(produced)  # a miscount here must not bend the period fit
         lost = produced - first_lost
         if self.discard_first:
             self._discard_pending = True
@@ -763,8 +792,7 @@ class ImuReader(ABC):
         wide = gyro.astype(np.int32)
         saturated = np.abs(wide) >= self._sat_counts
         self._check_stuck(wide, saturated)
-        fam = self.family
-        temperature = fam.temperature_offset_c + temp_counts / fam.temperature_lsb_per_c
+        temperature = self.family.counts_to_celsius(temp_counts)
         t = self._sclock.time_of(index)
         if t[0] <= self._last_t:  # a refit moved the line back a hair: keep time increasing
             t = np.maximum(t, self._last_t + 0.5 * self._sclock.period_s)
@@ -829,9 +857,7 @@ class ImuReader(ABC):
             return
         self._closed = True
         try:
-            if self._streaming:
-                self._streaming = False
-                self._disable_fifo()
+            self.stop()
             self._power_down()
         finally:
             self._close_bus()

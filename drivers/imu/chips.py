@@ -12,6 +12,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "LSM9DS1",
@@ -112,8 +116,6 @@ class ChipFamily:
         Temperature at zero counts.
     temperature_lsb_per_c : float
         Counts per °C.
-    max_bus_hz : int
-        Fastest I²C clock the chip supports.
     """
 
     name: str
@@ -129,7 +131,6 @@ class ChipFamily:
     startup_time_s: float
     temperature_offset_c: float
     temperature_lsb_per_c: float
-    max_bus_hz: int
     extra: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     def model_for(self, who_am_i: int) -> ChipModel | None:
@@ -146,8 +147,8 @@ class ChipFamily:
                 return r
         return None
 
-    def counts_to_celsius(self, counts: float) -> float:
-        """Temperature in °C for a raw temperature reading."""
+    def counts_to_celsius(self, counts: float | np.ndarray) -> float | np.ndarray:
+        """Temperature in °C of raw temperature readings (a number or an array)."""
         return self.temperature_offset_c + counts / self.temperature_lsb_per_c
 
 
@@ -253,7 +254,6 @@ MPU9250 = ChipFamily(
     startup_time_s=0.070,  # §1.3 step 4: kernel's MPU-6500 gyro start-up (datasheet: 35 ms)
     temperature_offset_c=21.0,  # §1.6
     temperature_lsb_per_c=333.87,
-    max_bus_hz=400_000,
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
@@ -373,7 +373,6 @@ LSM9DS1 = ChipFamily(
     startup_time_s=0.100,  # not in the hardware reference: a conservative wait (⚠)
     temperature_offset_c=25.0,  # §2.5: 16 LSB/°C, 0 at 25 °C
     temperature_lsb_per_c=16.0,
-    max_bus_hz=400_000,
 )
 
 

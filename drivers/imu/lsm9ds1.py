@@ -15,7 +15,10 @@ because the chip jumps from 0x1D to 0x28 and from 0x2D back to 0x18 while the gy
 OUT_TEMP is read once per drain (12 bits, 16 LSB/°C, 0 at 25 °C; §2.5). After an overrun the FIFO
 holds the newest 32 slots, whose sample numbers cannot be known exactly: they are dropped, the
 FIFO is restarted, and everything lost is reported as one gap. FIFO_SRC is read again after each
-burst, because a slot overwritten while the burst runs breaks the sequence the same way.
+burst, because a slot overwritten while the burst runs breaks the sequence the same way. A FIFO
+found full (FSS = 32, or the depth FSS showed at the last overrun) is treated as overrun too: the
+next sample may overwrite the oldest slot before the burst pops it, and popping clears OVRN, so
+that loss would never be flagged.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ class LSM9DS1Reader(ImuReader):
     ) -> None:
         super().__init__(bus, address, **kwargs)
         self.burst_wrap = bool(burst_wrap)
+        self._depth = self.family.fifo_capacity  # FIFO slots, as the chip last reported them
 
     def _register_names(self) -> dict[int, str]:
         return _REG_NAMES
@@ -121,7 +125,12 @@ class LSM9DS1Reader(ImuReader):
 
     def _fifo_level(self) -> tuple[int, bool, float]:
         src = self._read_byte(R.FIFO_SRC)
-        return src & B.FIFO_SRC_FSS_MASK, bool(src & B.FIFO_SRC_OVRN), self._clock.monotonic()
+        n, overrun = src & B.FIFO_SRC_FSS_MASK, bool(src & B.FIFO_SRC_OVRN)
+        if overrun and n:
+            self._depth = n  # an overrun FIFO is full: FSS is its depth
+        # A full FIFO may overwrite its oldest slot before the burst reaches it, and popping a
+        # slot clears OVRN, so the loss would never be flagged: treat full as overrun.
+        return n, overrun or n >= self._depth, self._clock.monotonic()
 
     def _overflowed(self) -> bool:
         return bool(self._read_byte(R.FIFO_SRC) & B.FIFO_SRC_OVRN)

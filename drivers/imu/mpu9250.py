@@ -10,7 +10,9 @@ Streaming (§1.7): FIFO_EN = TEMP | GYRO_XYZ gives 8-byte big-endian frames ``TE
 FIFO_COUNTH), pops the whole frames from the FIFO_R_W data port in one ``i2c_rdwr`` burst (or in
 32-byte block reads on a bus without it), then reads INT_STATUS. With FIFO_MODE = 1 a full FIFO
 drops only newer samples, so if FIFO_OFLOW_INT is set the frames just read are still delivered;
-the FIFO is then reset (as the kernel does) and the lost samples are reported as a gap.
+the FIFO is then reset (as the kernel does) and the lost samples are reported as a gap. Reading
+INT_STATUS clears it, so a failed read of it (other than a NACK) is not retried: an overflow
+cannot be ruled out, and the reader restarts the FIFO and reports a gap just the same.
 """
 
 from __future__ import annotations
@@ -60,15 +62,14 @@ class MPU9250Reader(ImuReader):
     ) -> None:
         super().__init__(bus, address, **kwargs)
         self.temperature_in_fifo = bool(temperature_in_fifo)
-        self._frame = 8 if self.temperature_in_fifo else 6
 
     def _register_names(self) -> dict[int, str]:
         return _REG_NAMES
 
     @property
     def frame_bytes(self) -> int:
-        """Bytes per FIFO frame."""
-        return self._frame
+        """Bytes per FIFO frame: TEMP (if in the FIFO) and GYRO X, Y, Z, 2 bytes each."""
+        return 8 if self.temperature_in_fifo else 6
 
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         base = MPU9250.extra["internal_rate_hz"]
@@ -137,15 +138,17 @@ class MPU9250Reader(ImuReader):
     def _fifo_level(self) -> tuple[int, bool, float]:
         hi, lo = self._read_block(R.FIFO_COUNTH, 2)  # reading COUNTH latches both bytes
         # FIFO_OFLOW_INT is asked after the burst (_overflowed), which also covers this drain
-        return (((hi & 0x1F) << 8) | lo) // self._frame, False, self._clock.monotonic()
+        return (((hi & 0x1F) << 8) | lo) // self.frame_bytes, False, self._clock.monotonic()
 
     def _overflowed(self) -> bool:
-        return bool(self._read_byte(R.INT_STATUS) & B.INT_STATUS_FIFO_OFLOW)  # clears it
+        # reading INT_STATUS clears it, so a read that failed after the byte moved is not
+        # retried (only NACKs are): the reader restarts the FIFO as after an overflow
+        return bool(self._read_byte(R.INT_STATUS, retry=False) & B.INT_STATUS_FIFO_OFLOW)
 
     def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
-        chunk = (BLOCK_MAX // self._frame) * self._frame
-        data = self._read_stream(R.FIFO_R_W, n * self._frame, chunk)
-        words = np.frombuffer(data, dtype=">i2").reshape(n, self._frame // 2)
+        frame = self.frame_bytes
+        data = self._read_stream(R.FIFO_R_W, n * frame, (BLOCK_MAX // frame) * frame)
+        words = np.frombuffer(data, dtype=">i2").reshape(n, frame // 2)
         if self.temperature_in_fifo:
             return words[:, 1:4], words[:, 0].astype(np.float64)
         return words, None

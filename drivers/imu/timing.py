@@ -6,6 +6,12 @@ reconstructed from its index: ``t_k = a + P·k``. The two numbers ``a`` (time of
 ``P`` (the chip's true sample period, measured on the host clock) are fitted to the drains: a
 drain that finds ``C`` samples produced so far at a host time ``T`` says that sample ``C-1`` was
 taken at or before ``T`` and sample ``C`` after it.
+
+After a FIFO restart the reader numbers the samples on from its own estimate of how many were
+lost, which can be a whole sample off. The fit therefore starts a new segment there: the period
+is estimated from the drains within each segment only, so a miscount cannot bend it, and the new
+segment's offset is re-estimated from its own drains, starting from the old line with the weight
+the old line deserves there.
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ class SampleClock:
     which say little about the period, fall back on the datasheet rate. A chip clock 1 % off
     nominal is followed within a few drains; afterwards timestamps are typically well under a
     millisecond from the chip's true sample times.
+
+    :meth:`new_segment` marks a restart of the sample numbering (see the module docstring).
 
     The sums of the fit are updated in O(1) per drain and kept relative to the latest
     observation, so they stay well conditioned however long the stream runs.
@@ -62,10 +70,18 @@ class SampleClock:
         self.nominal_period_s = float(nominal_period_s)
         self.window_s = float(window_s)
         self.period_tolerance = float(period_tolerance)
+        # the Gaussian prior on the period, as a weight (inverse variance)
+        self._prior = 1.0 / (self.period_tolerance * self.nominal_period_s) ** 2
         self._n = 0
-        # weighted sums about the reference point (xr, yr) = the latest observation
+        # weighted sums of the current segment's observations about the reference point
+        # (xr, yr) = the latest observation
         self._xr = self._yr = 0.0
         self._s0 = self._s1 = self._s2 = self._t1 = self._t2 = 0.0
+        # centred sums of the earlier segments (they only inform the period)
+        self._pxx = self._pxy = 0.0
+        # the current segment's anchor on the line before the restart, about (xr, yr): it
+        # informs the offset only, with weight wa
+        self._wa = self._xa = self._ya = 0.0
         self._alpha = 0.0  # the line at x = xr is yr + alpha
         self._p = self.nominal_period_s
 
@@ -101,17 +117,56 @@ class SampleClock:
             self._t1 = t1 - dy * s0
             self._t2 = t2 - dy * s1 - dx * t1 + dx * dy * s0
             self._s0 = s0
+            self._pxx, self._pxy, self._wa = f * self._pxx, f * self._pxy, f * self._wa
+            self._xa, self._ya = self._xa - dx, self._ya - dy
         self._xr, self._yr = x, y
         width = t_after - t_before
         self._s0 += 1.0 / (self._p**2 / 12.0 + width**2 / 12.0)
         self._n += 1
-        p0 = self.nominal_period_s
-        prior = 1.0 / (self.period_tolerance * p0) ** 2
-        xm, ym = self._s1 / self._s0, self._t1 / self._s0
-        sxx = self._s2 - self._s1 * xm
-        sxy = self._t2 - self._s1 * ym
-        self._p = (sxy + prior * p0) / (sxx + prior)
-        self._alpha = ym - self._p * xm
+        self._fit()
+
+    def _centred(self) -> tuple[float, float]:
+        """The current segment's centred sums Σw(x−x̄)² and Σw(x−x̄)(y−ȳ)."""
+        if not self._s0:
+            return 0.0, 0.0
+        return (self._s2 - self._s1**2 / self._s0, self._t2 - self._s1 * self._t1 / self._s0)
+
+    def _fit(self) -> None:
+        sxx, sxy = self._centred()
+        self._p = p = (self._pxy + sxy + self._prior * self.nominal_period_s) / (
+            self._pxx + sxx + self._prior
+        )
+        # the offset: the weighted mean of y − P·x over the segment and its anchor
+        self._alpha = ((self._t1 - p * self._s1) + self._wa * (self._ya - p * self._xa)) / (
+            self._s0 + self._wa
+        )
+
+    def new_segment(self, index: int) -> None:
+        """The sample numbering restarts at ``index``, which may be a whole sample off.
+
+        The line so far predicts the time of sample ``index``; it becomes the new segment's
+        anchor, weighted by how well the line knows that time. Later observations move the
+        offset away from it if they disagree, and only observations within one segment inform
+        the period.
+
+        Parameters
+        ----------
+        index : int
+            The stream index the reader gives the first sample after the restart.
+        """
+        if not self._n:
+            raise RuntimeError("SampleClock has no observation yet: observe the stream start first")
+        xa = float(index) - self._xr
+        weight = self._s0 + self._wa
+        x_mean = (self._s1 + self._wa * self._xa) / weight  # where the offset is known best
+        sxx, sxy = self._centred()
+        slope_weight = self._pxx + sxx + self._prior  # the period's inverse variance
+        variance = 1.0 / weight + (xa - x_mean) ** 2 / slope_weight
+        self._pxx += sxx
+        self._pxy += sxy
+        self._s0 = self._s1 = self._s2 = self._t1 = self._t2 = 0.0
+        self._wa, self._xa, self._ya = 1.0 / variance, xa, self._alpha + self._p * xa
+        self._fit()
 
     def time_of(self, index: np.ndarray | int) -> np.ndarray:
         """Host-clock times of samples ``index`` (array or scalar) under the current fit."""

@@ -73,10 +73,11 @@ def le16(lo, hi):
 def test_mpu_reset_values_and_identity():
     _, bus, addr, _ = mpu()
     assert addr == 0x68
-    regs = bus.read_i2c_block_data(addr, 0x00, 32) + bus.read_i2c_block_data(addr, 0x60, 21)
-    assert bus.read_byte_data(addr, PWR_MGMT_1) == 0x01
+    low = bus.read_i2c_block_data(addr, 0x00, 32)
+    high = bus.read_i2c_block_data(addr, 0x60, 21)  # 0x60..0x74
+    assert low == [0] * 32
+    assert high == [0x01 if 0x60 + i == PWR_MGMT_1 else 0 for i in range(21)]
     assert bus.read_byte_data(addr, WHO_AM_I) == 0x71
-    assert sum(regs[:32]) == 0
     for variant, who in (("mpu9255", 0x73), ("mpu6500", 0x70)):
         b, a = make_emulated_imu(variant, VirtualClock())
         assert b.read_byte_data(a, WHO_AM_I) == who
@@ -121,6 +122,18 @@ def test_mpu_fifo_frames_count_latch_and_data_port():
     bus.write_byte_data(addr, USER_CTRL, 0x44)  # FIFO_RST clears it and clears itself
     assert chip.fifo_level == 0
     assert bus.read_byte_data(addr, USER_CTRL) == 0x40
+
+
+def test_mpu_a_burst_that_reaches_the_fifo_port_stays_on_it():
+    clock, bus, addr, chip = mpu(motion=ConstantRate((0.1, 0.2, 0.3)))
+    mpu_stream(bus, addr, div=9)  # 100 Hz, frames TEMP GX GY GZ = 8 bytes
+    clock.sleep(0.05 + 1e-6)
+    raw = bus.read_i2c_block_data(addr, FIFO_COUNTH, 2 + 16)  # COUNTH, COUNTL, then 0x74 (§1.7)
+    assert (raw[0] << 8) | raw[1] == 5 * 8
+    words = np.frombuffer(bytes(raw[2:]), ">i2").reshape(2, 4)
+    expect = [round(w / DEG * 131) for w in (0.1, 0.2, 0.3)]  # ±250 dps: 131 LSB/(°/s)
+    np.testing.assert_array_equal(words[:, 1:], [expect] * 2)
+    assert chip.fifo_level == 5 * 8 - 16
 
 
 def test_mpu_fifo_count_high_byte_latches_the_low_byte():
@@ -203,6 +216,8 @@ def test_truth_validates_its_fields():
         SensorTruth(noise_density_rad_s_sqrt_hz=-1.0)
     with pytest.raises(ValueError, match="clock_ppm"):
         SensorTruth(clock_ppm=float("nan"))
+    with pytest.raises(ValueError, match="clock_ppm"):
+        SensorTruth(clock_ppm=-1e6)  # the chip would not sample at all
 
 
 def test_counts_follow_scale_bias_and_temperature_drift():

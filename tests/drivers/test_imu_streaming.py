@@ -42,8 +42,12 @@ def rig(model, truth, motion, faults=None, bus=None, seed=0, **reader_kw):
     return clock, bus, bus.device(addr), reader
 
 
-def collect(reader, clock, seconds, seed=1, step=(0.002, 0.025)):
-    """Drain at irregular intervals for ``seconds``; return the list of batches."""
+def collect(reader, clock, seconds, seed=1, step=(0.002, 0.02)):
+    """Drain at irregular intervals for ``seconds``; return the list of batches.
+
+    At most 20 ms apart by default: with the burst's own bus time, the LSM9DS1's 32 slots
+    (33.6 ms at 952 Hz) are then never full at a drain, which the reader must treat as overrun.
+    """
     rng = np.random.default_rng(seed)
     end = clock.monotonic() + seconds
     batches = []
@@ -86,7 +90,7 @@ def test_constant_rate_reads_back_within_quantization_and_noise(model):
     n = len(rate)
     sigma = truth.sigma_rad_s(odr)
     # the reading is m = omega/scale - bias (Eq. 1 inverted): no correction is applied
-    expect = truth.reading(omega[None, :], np.array([25.0]))[0]
+    expect = omega / np.array([1.02, 0.98, 1.01]) - np.array([0.015, -0.01, 0.02])
     assert np.all(np.abs(rate.mean(axis=0) - expect) < 5 * sigma / math.sqrt(n) + lsb / 2)
     assert rate.std(axis=0) == pytest.approx(np.hypot(sigma, lsb / math.sqrt(12)), rel=0.05)
     assert not np.any(np.all(rate == 0.0, axis=1))
@@ -111,10 +115,10 @@ def test_a_simulated_minute_delivers_every_sample_once_in_order_on_time(model):
     period = 1.0 / odr
     t0 = t[500] - period / 2
     assert np.count_nonzero((t >= t0) & (t < t0 + 60.0)) == round(odr * 60)
-    # nothing was left behind: every sample the chip took before the last drain was delivered
-    assert index[-1] + 1 + chip.fifo_level // (8 if model == "mpu9250" else 1) >= (
-        chip.samples_taken - chip.fifo_enables[0] - 1
-    )
+    # nothing was left behind: every sample the chip put in its FIFO was delivered (sample 0
+    # dropped by design) or is still there
+    in_fifo = chip.fifo_level // (8 if model == "mpu9250" else 1)  # TEMP GX GY GZ, or slots
+    assert index[-1] + 1 + in_fifo == chip.samples_taken - chip.fifo_enables[0]
 
 
 @pytest.mark.parametrize("model", SETUPS)
@@ -249,9 +253,10 @@ def test_mpu_frames_without_temperature():
 # ----------------------------------------------------------------------------- fault knobs
 
 
-def check_faulty_stream(model, truth, motion, chip, batches):
-    """Every delivered sample is one the chip took, and its index (hence its time) is right or,
-    after a gap whose size had to be estimated, one off at most.
+def check_faulty_stream(model, truth, motion, chip, batches, slack=1, max_error_s=None):
+    """Every delivered sample is one the chip took, and its index is right or, after gaps
+    whose sizes had to be estimated, at most ``slack`` off; its time is within
+    ``max_error_s`` of the instant the chip took it (by default a sample period + 0.5 ms).
 
     The samples between gaps are matched by value against the truth at the chip's sample
     numbers around the reader's; a smooth motion makes every sample distinct.
@@ -261,16 +266,29 @@ def check_faulty_stream(model, truth, motion, chip, batches):
     naive = grid_index(chip, batches)
     ks = naive.copy()
     for seg in np.split(np.arange(len(ks)), np.flatnonzero(np.diff(naive) != 1) + 1):
-        for d in (0, 1, -1):
+        for d in sorted(range(-slack, slack + 1), key=abs):
             expect = expected_rate(truth, motion, chip, naive[seg] + d, lsb)
             if np.allclose(rate[seg], expect, rtol=0, atol=1e-12):
                 ks[seg] += d
                 break
         else:
             raise AssertionError(f"samples {naive[seg][:3]}... are not the chip's")
-    assert np.max(np.abs(t - chip.sample_time(ks))) < 1.0 / odr + 0.5e-3
+    bound = 1.0 / odr + 0.5e-3 if max_error_s is None else max_error_s
+    assert np.max(np.abs(t - chip.sample_time(ks))) < bound
     assert np.all(np.diff(t) > 0) and np.all(np.diff(ks) > 0)
     return ks
+
+
+def reported_lost(batches):
+    """Samples the gaps say were lost, up to the last sample delivered."""
+    last = cat(batches, "index")[-1]
+    return sum(g.samples for b in batches for g in b.gaps if g.first_index <= last)
+
+
+def missing(chip, ks):
+    """Samples the chip put in the stream up to the last one delivered (chip sample ``ks[-1]``)
+    that were not delivered, besides sample 0, which the reader drops by design."""
+    return int(ks[-1] - (chip.fifo_enables[0] + 1)) - len(ks)
 
 
 @pytest.mark.parametrize("model", SETUPS)
@@ -296,12 +314,14 @@ def test_an_io_error_in_a_fifo_burst_restarts_the_fifo_and_reports_a_gap(model):
     reader.start()
     batches = collect(reader, clock, 20.0)
     gaps = [g for b in batches for g in b.gaps]
-    assert gaps and all("bus error during FIFO read" in g.reason for g in gaps)
+    # EIO can also hit the MPU-9250's clear-on-read INT_STATUS after a burst: a gap just the same
+    assert any("bus error during FIFO read" in g.reason for g in gaps)
+    assert all(g.reason.startswith("bus error") for g in gaps)
     assert all(g.samples >= 1 and g.t <= g.t_end for g in gaps)
     ks = check_faulty_stream(model, truth, motion, chip, batches)
-    # the samples the gaps say were lost are (within one) the ones missing
-    assert sum(g.samples for g in gaps) == pytest.approx(ks[-1] - ks[0] + 1 - len(ks),
-                                                         abs=len(gaps))
+    # the gaps account for every sample missing up to the last one delivered (sample 0 is
+    # dropped by design), within the one-sample slack check_faulty_stream allows
+    assert reported_lost(batches) == pytest.approx(missing(chip, ks), abs=1)
 
 
 @pytest.mark.parametrize("model", SETUPS)
@@ -320,25 +340,37 @@ def test_a_fifo_overflow_is_a_gap_of_the_right_size_and_time(model):
     ks = check_faulty_stream(model, truth, motion, chip, batches)
     missing = np.flatnonzero(np.diff(ks) > 1)
     assert len(missing) == 1
+    # the restart is timed between samples, so the count is exact and the times are those of
+    # the first and the last sample missing
     lost = ks[missing[0] + 1] - ks[missing[0]] - 1
-    assert abs(gap.samples - lost) <= 1
-    assert gap.t == pytest.approx(float(chip.sample_time(ks[missing[0]] + 1)), abs=1.5 / odr)
+    assert gap.samples == lost
+    assert gap.t == pytest.approx(float(chip.sample_time(ks[missing[0]] + 1)), abs=0.25 / odr)
+    assert gap.t_end == pytest.approx(float(chip.sample_time(ks[missing[0] + 1] - 1)),
+                                      abs=0.25 / odr)
     assert gap.samples == pytest.approx(0.25 * odr, rel=0.5)
     assert (reader.gap_count, reader.samples_lost) == (1, gap.samples)
     assert reader.samples_delivered == len(ks)
 
 
 @pytest.mark.parametrize("model", SETUPS)
-def test_a_small_fifo_knob_overflows_at_ordinary_drain_rates(model):
-    _, range_dps, _ = SETUPS[model]
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_small_fifo_knob_overflows_at_ordinary_drain_rates(model, seed):
+    # The FIFO overflows at most drains, so the stream restarts a few hundred times, and with a
+    # drain or two between restarts the count of lost samples is now and then a sample off.
+    # The timestamps must stay on their samples all the same (a miscount must not bend the
+    # clock fit, which made them drift by 0.1 s in 10 s) and the gaps must account for what is
+    # missing, miscounts aside.
+    odr, range_dps, _ = SETUPS[model]
     truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
     faults = ChipFaults(fifo_capacity=128 if model == "mpu9250" else 12)  # 16 or 12 samples
-    clock, _, chip, reader = rig(model, truth, motion, faults=faults)
+    clock, _, chip, reader = rig(model, truth, motion, faults=faults, seed=seed)
     reader.start()
-    batches = collect(reader, clock, 10.0, step=(0.003, 0.02))
+    batches = collect(reader, clock, 10.0, seed=seed + 1, step=(0.003, 0.02))
     gaps = [g for b in batches for g in b.gaps]
-    assert len(gaps) > 50 and {g.reason for g in gaps} == {"fifo overflow"}
-    check_faulty_stream(model, truth, motion, chip, batches)
+    assert len(gaps) > 150 and {g.reason for g in gaps} == {"fifo overflow"}
+    ks = check_faulty_stream(model, truth, motion, chip, batches, slack=50,
+                             max_error_s=0.8 / odr)
+    assert abs(reported_lost(batches) - missing(chip, ks)) <= len(gaps) // 10
 
 
 @pytest.mark.parametrize("model", SETUPS)
@@ -360,9 +392,9 @@ def test_a_short_nack_burst_is_ridden_out_and_a_long_one_is_a_bus_error(model):
     with pytest.raises(BusError) as info:
         reader.read()
     e = info.value
-    fifo_level_register = 0x72 if model == "mpu9250" else 0x2F  # FIFO_COUNTH / FIFO_SRC
-    assert (e.errno, e.address, e.register) == (errno.EREMOTEIO, chip.family.addresses[0],
-                                                fifo_level_register)
+    # default address 0x68 / 0x6B; FIFO level register FIFO_COUNTH / FIFO_SRC (§1.2, §2.2)
+    address, level_register = (0x68, 0x72) if model == "mpu9250" else (0x6B, 0x2F)
+    assert (e.errno, e.address, e.register) == (errno.EREMOTEIO, address, level_register)
     assert "4 attempt" in str(e)
 
 
@@ -404,3 +436,65 @@ def test_a_live_axis_at_rest_is_not_called_stuck():
     reader.start()
     batches = collect(reader, clock, 120.0, step=(0.5, 1.0))
     assert sum(len(b) for b in batches) > 400
+
+
+class FailAfterTheByteMoved:
+    """Delegates to an emulated bus; when armed, the next INT_STATUS read reaches the chip (so
+    its clear-on-read flags are cleared) and then fails with EIO, as a transfer that breaks
+    after the data byte moved."""
+
+    def __init__(self, bus):
+        self._bus = bus
+        self.armed = False
+
+    def __getattr__(self, name):
+        return getattr(self._bus, name)
+
+    def read_byte_data(self, addr, register, force=None):
+        value = self._bus.read_byte_data(addr, register)
+        if self.armed and register == 0x3A:  # INT_STATUS
+            self.armed = False
+            raise OSError(errno.EIO, "Input/output error")
+        return value
+
+
+def test_an_overflow_flag_lost_to_a_failed_read_is_still_a_gap():
+    odr, range_dps, _ = SETUPS["mpu9250"]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    clock = VirtualClock()
+    bus, addr = make_emulated_imu("mpu9250", clock, motion, truth, subsamples=1)
+    flaky = FailAfterTheByteMoved(bus)
+    chip = bus.device(addr)
+    reader = open_imu("mpu9250", flaky, addr, clock=clock, range_dps=range_dps, odr_hz=odr)
+    reader.start()
+    batches = collect(reader, clock, 1.0)
+    clock.sleep(0.25)  # the FIFO overflows; the read of its flag will fail after clearing it
+    flaky.armed = True
+    batches += collect(reader, clock, 1.0)
+    assert not flaky.armed
+    gaps = [g for b in batches for g in b.gaps]
+    assert len(gaps) == 1 and "overflow flag" in gaps[0].reason
+    ks = check_faulty_stream("mpu9250", truth, motion, chip, batches)
+    missing = np.flatnonzero(np.diff(ks) > 1)
+    assert len(missing) == 1
+    assert abs(gaps[0].samples - (ks[missing[0] + 1] - ks[missing[0]] - 1)) <= 1
+
+
+def test_a_full_lsm_fifo_is_not_trusted():
+    # The FIFO holds exactly 32 slots when the reader latches FIFO_SRC (no overrun yet), and
+    # the next sample overwrites the oldest slot before the burst pops it; popping then clears
+    # OVRN, so only the full count can tell. Trusting it would shift every later sample by one.
+    odr, range_dps, _ = SETUPS["lsm9ds1"]
+    truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
+    clock, bus, chip, reader = rig("lsm9ds1", truth, motion, stuck_after_s=None)
+    reader.start()
+    batches = collect(reader, clock, 0.5)
+    first_unread = chip.fifo_enables[0] + 1 + cat(batches, "index")[-1] + 1
+    t_overwrite = float(chip.sample_time(first_unread + 32))  # the 33rd unread sample
+    clock.sleep(t_overwrite - 100e-6 - clock.monotonic())  # latch ~30 µs before, pop ~70 µs after
+    batches.append(reader.read())
+    batches += collect(reader, clock, 0.5)
+    gaps = [g for b in batches for g in b.gaps]
+    assert len(gaps) == 1 and gaps[0].reason == "fifo overflow"
+    ks = check_faulty_stream("lsm9ds1", truth, motion, chip, batches)
+    assert reported_lost(batches) == missing(chip, ks)
