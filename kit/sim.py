@@ -156,13 +156,11 @@ def build_sim(
     # The chip sits where a real one of its model can (the configured address if the model
     # allows it, else its default), so a config that names the wrong address fails as it would
     # on hardware.
-    imu_bus, address = make_emulated_imu(imu_cfg["model"], clock, jig, truth, seed=run_seed)
     possible = READERS[imu_cfg["model"]].family.addresses  # hardware reference §1.1, §2.1
-    if imu_cfg["address"] != address and imu_cfg["address"] in possible:
-        chip = imu_bus.device(address)
-        imu_bus.detach(address)
-        address = imu_cfg["address"]
-        imu_bus.attach(address, chip)
+    imu_bus, address = make_emulated_imu(
+        imu_cfg["model"], clock, jig, truth, seed=run_seed,
+        address=imu_cfg["address"] if imu_cfg["address"] in possible else None,
+    )
     return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth)
 
 
