@@ -105,7 +105,8 @@ class EmulatedServo:
     motor_params : MotorParams or None
         Motor model parameters.
     initial_ticks : int or None
-        The absolute encoder reading at power-up (0..4095); None = random from ``seed``.
+        The absolute encoder reading at power-up (0..4095), with the shaft on that tick's
+        centre; None = a random shaft angle from ``seed`` (anywhere within its tick).
     """
 
     def __init__(
@@ -144,8 +145,12 @@ class EmulatedServo:
         now = clock.monotonic()
         self.motor = ServoMotor(now, self.model.gear_ratio, motor_params,
                                 seed=int(self._rng.integers(2**31)))
-        self._abs0 = float(self._rng.integers(TICKS_PER_TURN) if initial_ticks is None
-                           else int(initial_ticks) % TICKS_PER_TURN)
+        if initial_ticks is None:
+            # A shaft at power-up rests anywhere, not on a tick's centre: its reading errs by
+            # up to half a tick, like every other still angle.
+            self._abs0 = float(self._rng.integers(TICKS_PER_TURN)) + self._rng.uniform(-0.5, 0.5)
+        else:
+            self._abs0 = float(int(initial_ticks) % TICKS_PER_TURN)
         self._mem = bytearray(self.table.size)
         self._factory = {"ID": int(dxl_id), "Baud Rate": codes[baudrate],
                          "Firmware Version": int(firmware)}
