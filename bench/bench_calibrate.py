@@ -29,12 +29,12 @@ from bench.table import print_table
 
 def _run(args: tuple[int, str]) -> dict:
     """One emulated calibration; returns errors and timings (run in a worker process)."""
-    from calib.estimators import estimate, paired_axis_batch
-    from kit.cli import main
-    from kit.config import default_config
-    from kit.pipeline import extract_recording
-    from kit.recording import load_recording
-    from kit.sim import build_sim
+    from gyrocal.calib.estimators import estimate, paired_axis_batch
+    from gyrocal.kit.cli import main
+    from gyrocal.kit.config import default_config
+    from gyrocal.kit.pipeline import extract_recording
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.sim import build_sim
 
     seed, protocol = args
     with tempfile.TemporaryDirectory() as tmp:

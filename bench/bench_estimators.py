@@ -18,9 +18,9 @@ import numpy as np
 from scipy import optimize
 
 from bench.table import print_table
-from calib import estimators as E
-from calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_runs
-from calib.study import PARAMS, StudyConfig, run_study
+from gyrocal.calib import estimators as E
+from gyrocal.calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_runs
+from gyrocal.calib.study import PARAMS, StudyConfig, run_study
 
 
 def _per_call(fn, items, repeat: int) -> float:

@@ -21,10 +21,10 @@ import numpy as np
 from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler, PortHandler
 
 from bench.table import print_table
-from drivers.clock import SystemClock, VirtualClock
-from drivers.dynamixel import Gimbal
-from drivers.dynamixel.gimbal import SAMPLE_LAYOUTS
-from drivers.emulated.dxl import PtyServoBridge, make_emulated_gimbal, make_servo_bus
+from gyrocal.drivers.clock import SystemClock, VirtualClock
+from gyrocal.drivers.dynamixel import Gimbal
+from gyrocal.drivers.dynamixel.gimbal import SAMPLE_LAYOUTS
+from gyrocal.drivers.emulated.dxl import PtyServoBridge, make_emulated_gimbal, make_servo_bus
 
 #: Time an IMU FIFO drain takes in the loop (emulated by a wait), s.
 IMU_DRAIN_S = 1.5e-3

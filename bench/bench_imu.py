@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from bench.table import print_table
-from drivers.clock import VirtualClock
-from drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
-from drivers.emulated.motion import FunctionMotion
-from drivers.imu import open_imu
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
+from gyrocal.drivers.emulated.motion import FunctionMotion
+from gyrocal.drivers.imu import open_imu
 
 DEG = np.pi / 180
 PI4_SLOWDOWN = (3.0, 5.0)  # a Raspberry Pi 4 core against this machine's, roughly

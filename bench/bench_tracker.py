@@ -4,11 +4,12 @@ Usage: ``python -m bench tracker [--sessions=N] [--duration=S]`` (with ``=``: th
 takes every bare word for a benchmark name; needs the ``bench`` extra, ``pip install '.[bench]'``,
 for ``imufusion``).
 
-Accuracy: the same simulated sessions (``calib.noise_sim.simulate_session``: 30 minutes, a
+Accuracy: the same simulated sessions (``gyrocal.calib.noise_sim.simulate_session``: 30 minutes, a
 10 °C warm-up, bias random walk, still periods of 2-5 s between smooth random motions; seeded)
 go through
 
-* our tracker (``calib.tracker.BiasTracker``) seeded from a simulated offline calibration, with
+* our tracker (``gyrocal.calib.tracker.BiasTracker``) seeded from a simulated offline calibration,
+  with
   the true noise model, with and without the temperature state;
 * Fusion's ``imufusion.Bias`` (the FusionBias algorithm: after the rate stays under a threshold
   on every axis for a stationary period, the offset follows the reading through a first-order
@@ -33,8 +34,8 @@ import time
 import numpy as np
 
 from bench.table import print_table
-from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
-from calib.tracker import BiasTracker, TrackerSettings
+from gyrocal.calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+from gyrocal.calib.tracker import BiasTracker, TrackerSettings
 
 DEG = 180.0 / math.pi
 MODEL = NoiseModel(rate_random_walk=1e-5)

@@ -53,9 +53,9 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.stats import chi2
 
-from calib.errors import CalibInputError, CalibrationFormatError
-from calib.noise_sim import FLICKER_FLOOR
-from calib.validation import scalar
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+from gyrocal.calib.noise_sim import FLICKER_FLOOR
+from gyrocal.calib.validation import scalar
 
 __all__ = [
     "FORMAT",

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from calib.errors import CalibInputError
-from calib.simulate import profile_duration
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
     "PAPER_DESIGN",
@@ -187,7 +187,7 @@ def jig_time(
 
 @dataclass(frozen=True)
 class _TurnWindow:
-    """The window :mod:`calib.windows` would make of a turn, as a model."""
+    """The window :mod:`gyrocal.calib.windows` would make of a turn, as a model."""
 
     rate: float  # mean reference rate over the window, rad/s
     n_eff: float  # effective gyro samples
@@ -201,7 +201,8 @@ def _turn_window(
     encoder_ticks: int, jitter_s: float, sample_hz: float,
 ) -> _TurnWindow:
     """The window a turn yields: the candidate with the least predicted variance of the turning
-    axis's mean against its reference, as :func:`calib.windows.extract_observations` chooses."""
+    axis's mean against its reference, as :func:`gyrocal.calib.windows.extract_observations`
+    chooses."""
     q = 2 * np.pi / encoder_ticks
     total = 2 * np.pi * turns
     ramp_angle = speed**2 / (2 * accel)
@@ -248,12 +249,12 @@ def predict_uncertainty(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Predicted paired-axis uncertainties of a protocol at nominal truth (k = 1, b = 0).
 
-    The windows, their noise and their references are modelled as :mod:`calib.windows` makes
+    The windows, their noise and their references are modelled as :mod:`gyrocal.calib.windows` makes
     them (:func:`_turn_window`): each turn is windowed either rest to rest, its reference resting
     on still encoder angles (``q/√12`` each, shared between a servo's two turns), or inside its
     whole steady revolutions, whose ramp-mean angles average the encoder's quantisation and
     timestamp jitter (``jitter_s``) over the ramp's readings (taken at ``sample_hz``); the one
-    with the smaller predicted variance is used, as in :mod:`calib.windows`.
+    with the smaller predicted variance is used, as in :mod:`gyrocal.calib.windows`.
 
     Returns
     -------
@@ -262,7 +263,7 @@ def predict_uncertainty(
         ``max_u sqrt(var(k·(m + b) − g))`` over unit directions ``u`` at ``reference_rate``:
         the G-criterion of the paper, in rad/s, for the calibrated output.
     """
-    from calib.estimators import paired_axis_batch
+    from gyrocal.calib.estimators import paired_axis_batch
 
     win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
                        jitter_s, sample_hz)
@@ -274,7 +275,7 @@ def predict_uncertainty(
     q = 2 * np.pi / encoder_ticks
     if win.rest_to_rest:
         # The reference is the change between still angles: start, shared, end per servo, each
-        # read to q/√12 (as calib.windows models it).
+        # read to q/√12 (as gyrocal.calib.windows models it).
         rate_std = np.full((1, 6), 1e-12)
         G = np.zeros((6, 9))
         for s in range(3):

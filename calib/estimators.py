@@ -1,8 +1,9 @@
 r"""Estimators of the six calibration parameters from an observation set.
 
-Three methods over one :class:`~calib.observations.ObservationSet`, shaped like
+Three methods over one :class:`~gyrocal.calib.observations.ObservationSet`, shaped like
 ``scipy.optimize.least_squares``: arguments are validated up front with a
-:class:`~calib.errors.CalibInputError` that names what is wrong, and non-convergence is a status on
+:class:`~gyrocal.calib.errors.CalibInputError` that names what is wrong, and non-convergence is a
+status on
 the returned :class:`FitResult`, not an exception.
 
 ``iterative-ls``
@@ -18,7 +19,7 @@ Squared-norm residuals (paper Eq. 3-5), with ``θ = (k, b)`` and window means ``
 .. math:: r_i(θ) = \sum_j k_j^2 (\bar m_{ij} + b_j)^2 - ω_i^2
 
 All three pool each axis's noise estimates over the windows where they are homogeneous before
-using them as weights or for uncertainties (:func:`calib.observations.pool_noise`).
+using them as weights or for uncertainties (:func:`gyrocal.calib.observations.pool_noise`).
 
 Covariance of the squared-norm methods comes from first-order propagation of the window noise: a
 perturbation ``δm̄_ij`` of a mean and ``δω_i`` of a reference rate perturb ``r_i`` by
@@ -46,9 +47,9 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
-from calib.errors import CalibInputError
-from calib.model import Consistency, GyroCalibration
-from calib.observations import ObservationSet
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.model import Consistency, GyroCalibration
+from gyrocal.calib.observations import ObservationSet
 
 __all__ = [
     "CONSISTENCY_ALPHA",
@@ -137,7 +138,7 @@ class FitResult:
         created: str | None = None,
         source: str | None = None,
     ) -> GyroCalibration:
-        """The result as a :class:`~calib.model.GyroCalibration` (Calibration v1).
+        """The result as a :class:`~gyrocal.calib.model.GyroCalibration` (Calibration v1).
 
         Raises
         ------
@@ -828,7 +829,7 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     component (DESIGN.md fact 3). Residuals are whitened by each window's noise (module docstring)
     and minimised by Levenberg-Marquardt with an analytic Jacobian, starting from a closed-form
     per-servo regression. Each axis's noise estimates are pooled over the windows where they are
-    homogeneous (:func:`calib.observations.pool_noise`), so the weights do not carry the
+    homogeneous (:func:`gyrocal.calib.observations.pool_noise`), so the weights do not carry the
     estimates' own scatter; each still encoder angle a reference rests on is a shared unknown
     with its quantisation as prior. Covariance ``(J̃ᵀJ̃)⁻¹``; consistency:
     ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``.

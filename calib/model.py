@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.errors import CalibInputError, CalibrationFormatError
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
 __all__ = ["FORMAT", "VERSION", "Consistency", "GyroCalibration"]
 

@@ -26,7 +26,7 @@ Two kinds of session:
   axes at a known rate (``motion="jig"``: ``reference_rate``/``reference_axis`` hold what the
   encoders would report).
 
-This is a synthetic sensor, not the emulated jig of ``drivers.emulated``: no registers, no
+This is a synthetic sensor, not the emulated jig of ``gyrocal.drivers.emulated``: no registers, no
 buses, no servo dynamics beyond a speed profile with ripple. Everything is a pure function of its
 arguments and one ``numpy.random.Generator``.
 """
@@ -38,9 +38,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calib.errors import CalibInputError
-from calib.model import GyroCalibration
-from calib.validation import scalar, vec3
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.validation import scalar, vec3
 
 __all__ = [
     "FLICKER_FLOOR",

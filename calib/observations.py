@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from calib.errors import CalibInputError
+from gyrocal.calib.errors import CalibInputError
 
 __all__ = ["ObservationSet", "diff_noise", "pool_noise"]
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.errors import CalibInputError
+from gyrocal.calib.errors import CalibInputError
 
 __all__ = ["Segment"]
 

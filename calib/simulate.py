@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.errors import CalibInputError
-from calib.observations import ObservationSet, diff_noise
-from calib.segments import Segment
-from calib.windows import trapezoid_weight
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.observations import ObservationSet, diff_noise
+from gyrocal.calib.segments import Segment
+from gyrocal.calib.windows import trapezoid_weight
 
 TWO_PI = 2.0 * np.pi
 
@@ -207,7 +207,8 @@ class SimulatedRuns:
         return self.rest_noise / np.sqrt(self.rest_count)[None, :, None]
 
     def observation_set(self, i: int, motor_ids: tuple[int, ...] = (1, 2, 3)) -> ObservationSet:
-        """Run ``i`` as an :class:`~calib.observations.ObservationSet` (servo IDs ``motor_ids``)."""
+        """Run ``i`` as an :class:`~gyrocal.calib.observations.ObservationSet` (servo IDs
+        ``motor_ids``)."""
         r = self.rest_mean.shape[1]
         return ObservationSet(
             mean=self.mean[i],

@@ -17,7 +17,8 @@ taken for stillness). The decision on ``j`` is therefore known ``L`` samples lat
 users get it with that lag.
 
 :func:`quiet_windows` and :func:`run_lengths` are the vectorised pieces; the bias tracker
-(:mod:`calib.tracker`) uses them on batches of any size, carrying the last few samples across
+(:mod:`gyrocal.calib.tracker`) uses them on batches of any size, carrying the last few samples
+across
 batches, so a recording processed at once and a live stream fed sample by sample decide alike.
 """
 
@@ -30,8 +31,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.stats import chi2
 
-from calib.errors import CalibInputError
-from calib.validation import scalar, vec3
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.validation import scalar, vec3
 
 __all__ = [
     "StillDetector",

@@ -18,7 +18,8 @@ Presets:
     Before/after: a sine-wave rotation of 1 rad/s amplitude at 0.75 Hz with equal projection on
     the three axes, RMS error per axis of the raw and the calibrated readings.
 
-Every run is simulated at sample level (:func:`calib.simulate.simulate_runs`) and fitted by all
+Every run is simulated at sample level (:func:`gyrocal.calib.simulate.simulate_runs`) and fitted by
+all
 three estimators on the same data. Work is split into chunks with independent seeds from one
 :class:`numpy.random.SeedSequence`, so results do not depend on how chunks are scheduled; pass a
 parallel ``map`` (e.g. a process pool's) to :func:`run_study` to use several cores.
@@ -32,16 +33,16 @@ from typing import Any
 
 import numpy as np
 
-from calib.errors import CalibInputError
-from calib.estimators import (
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import (
     estimate,
     fit_iterative_ls,
     iterative_ls_batch,
     lm_solve,
     paired_axis_batch,
 )
-from calib.observations import pool_noise
-from calib.simulate import (
+from gyrocal.calib.observations import pool_noise
+from gyrocal.calib.simulate import (
     EXTREME,
     NORMAL,
     SensorPreset,

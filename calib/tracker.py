@@ -49,7 +49,8 @@ still (n,) or None, reference_rate, reference_axis)`` and carries everything a l
 (the detector's last window, the samples whose still decision is still open, the open update
 window), so a recording processed at once and the same samples fed one at a time through
 :meth:`BiasTracker.update` give the same estimates. The still decision on a sample comes
-``lookahead_s`` after it (see :mod:`calib.stationarity`); an external ``still`` flag overrides
+``lookahead_s`` after it (see :mod:`gyrocal.calib.stationarity`); an external ``still`` flag
+overrides
 the detector's decision for its sample.
 """
 
@@ -64,13 +65,13 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
-from calib.errors import CalibInputError
-from calib.model import GyroCalibration
-from calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
-from calib.validation import scalar, vec3
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
+from gyrocal.calib.validation import scalar, vec3
 
 if TYPE_CHECKING:
-    from calib.allan import NoiseCharacterisation
+    from gyrocal.calib.allan import NoiseCharacterisation
 
 __all__ = [
     "BiasTracker",

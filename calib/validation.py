@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from calib.errors import CalibInputError
+from gyrocal.calib.errors import CalibInputError
 
 __all__ = ["scalar", "vec3"]
 

@@ -2,7 +2,8 @@ r"""From raw streams to observations: steady windows, encoder reference, gyro me
 
 Input: the gyro samples ``(t, m)``, each servo's encoder angle ``θ(t)`` (cumulative, unwrapped),
 all on one clock, and the protocol segments. Output: an
-:class:`~calib.observations.ObservationSet` with one rotation window per turn and one rest window
+:class:`~gyrocal.calib.observations.ObservationSet` with one rotation window per turn and one rest
+window
 per rest, plus a record of every window used.
 
 A rotation window is a trapezoidal weight ``w(t)``: rising from 0 to 1 over ``[a, a+L_a]``, 1 until
@@ -53,10 +54,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.errors import CalibInputError
-from calib.observations import ObservationSet, diff_noise
-from calib.segments import Segment
-from calib.timebase import TimebaseFit, refit_sample_times
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.observations import ObservationSet, diff_noise
+from gyrocal.calib.segments import Segment
+from gyrocal.calib.timebase import TimebaseFit, refit_sample_times
 
 __all__ = [
     "ExtractedWindows",
@@ -267,7 +268,7 @@ def extract_observations(
     rest_guard_s : float
         Settling time skipped at each end of a rest.
     refit_time : bool
-        Refit the gyro's time axis over the whole stream first (:mod:`calib.timebase`): a
+        Refit the gyro's time axis over the whole stream first (:mod:`gyrocal.calib.timebase`): a
         reader's early timestamps rest on a young estimate of the chip's period.
     window : str
         ``"auto"`` (the candidate with the least predicted variance), ``"tapered"`` or

@@ -1,5 +1,5 @@
 """Talking to hardware: IMU readers over smbus2, the Dynamixel gimbal over dynamixel-sdk, and
-emulated hardware (``drivers.emulated``) for tests and dry runs.
+emulated hardware (``gyrocal.drivers.emulated``) for tests and dry runs.
 
 ``drivers`` never imports ``calib``; ``kit`` joins the two.
 """

@@ -1,7 +1,7 @@
-"""``python -m kit`` is the same as the ``gyrocal`` console script."""
+"""``python -m gyrocal.kit`` is the same as the ``gyrocal`` console script."""
 
 import sys
 
-from kit.cli import main
+from gyrocal.kit.cli import main
 
 sys.exit(main())

@@ -1,6 +1,6 @@
 """The ``gyrocal`` command line: one console script with subcommands.
 
-Each subcommand lives in a module of :mod:`kit.commands` that defines ``HELP`` (one line),
+Each subcommand lives in a module of :mod:`gyrocal.kit.commands` that defines ``HELP`` (one line),
 ``add_arguments(parser)`` and ``run(args) -> int``; :data:`COMMANDS` lists them in the order
 ``gyrocal --help`` shows them. Modules keep their top-level imports light so that ``--help`` is
 fast.
@@ -14,25 +14,25 @@ import sys
 import traceback
 from collections.abc import Sequence
 
-from kit import __version__
-from kit.errors import EXIT_CODES, exit_code_for
+from gyrocal.kit import __version__
+from gyrocal.kit.errors import EXIT_CODES, exit_code_for
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: (subcommand, module) in the order of ``gyrocal --help``.
 COMMANDS: tuple[tuple[str, str], ...] = (
-    ("init", "kit.commands.init"),
-    ("doctor", "kit.commands.doctor"),
-    ("calibrate", "kit.commands.calibrate"),
-    ("verify", "kit.commands.verify"),
-    ("estimate", "kit.commands.estimate"),
-    ("export", "kit.commands.export"),
-    ("report", "kit.commands.report"),
-    ("track", "kit.commands.track"),
-    ("noise", "kit.commands.noise"),
-    ("study", "kit.commands.study"),
-    ("simulate-recording", "kit.commands.simulate_recording"),
-    ("emulate", "kit.commands.emulate"),
+    ("init", "gyrocal.kit.commands.init"),
+    ("doctor", "gyrocal.kit.commands.doctor"),
+    ("calibrate", "gyrocal.kit.commands.calibrate"),
+    ("verify", "gyrocal.kit.commands.verify"),
+    ("estimate", "gyrocal.kit.commands.estimate"),
+    ("export", "gyrocal.kit.commands.export"),
+    ("report", "gyrocal.kit.commands.report"),
+    ("track", "gyrocal.kit.commands.track"),
+    ("noise", "gyrocal.kit.commands.noise"),
+    ("study", "gyrocal.kit.commands.study"),
+    ("simulate-recording", "gyrocal.kit.commands.simulate_recording"),
+    ("emulate", "gyrocal.kit.commands.emulate"),
 )
 
 

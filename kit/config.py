@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drivers.imu import MODELS as IMU_MODELS
-from kit.errors import InputError
+from gyrocal.drivers.imu import MODELS as IMU_MODELS
+from gyrocal.kit.errors import InputError
 
 __all__ = [
     "METHODS",
@@ -29,7 +29,8 @@ __all__ = [
     "template",
 ]
 
-#: The estimators a user may choose (the names of :data:`calib.estimators.METHODS`, kept here so
+#: The estimators a user may choose (the names of :data:`gyrocal.calib.estimators.METHODS`, kept
+#: here so
 #: the command line does not import scipy to show its help), the default first.
 METHODS = ("paired-axis", "iterative-ls", "levenberg-marquardt")
 #: The protocols: planned for the jig, or the paper's.

@@ -6,8 +6,8 @@ errors from ``drivers`` and ``calib`` are mapped onto these classes by :func:`ex
 
 from __future__ import annotations
 
-from calib.errors import CalibError, CalibInputError, CalibrationFormatError
-from drivers.errors import ConfigurationError, DriverError
+from gyrocal.calib.errors import CalibError, CalibInputError, CalibrationFormatError
+from gyrocal.drivers.errors import ConfigurationError, DriverError
 
 __all__ = [
     "EXIT_CODES",

@@ -7,9 +7,9 @@ that names the document kinds it accepts and renders one of them as text. A new 
 Document kinds (the ``format`` field of the JSON):
 
 ``gyrocal-calibration`` (v1)
-    Calibration v1 (:class:`calib.model.GyroCalibration`).
+    Calibration v1 (:class:`gyrocal.calib.model.GyroCalibration`).
 ``gyrocal-noise`` (v1)
-    Noise figures from ``gyrocal noise`` (:class:`calib.allan.NoiseCharacterisation`).
+    Noise figures from ``gyrocal noise`` (:class:`gyrocal.calib.allan.NoiseCharacterisation`).
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from calib.errors import CalibrationFormatError
-from kit import __version__
-from kit.errors import InputError
+from gyrocal.calib.errors import CalibrationFormatError
+from gyrocal.kit import __version__
+from gyrocal.kit.errors import InputError
 
 __all__ = [
     "DOCUMENT_KINDS",
@@ -41,13 +41,13 @@ __all__ = [
 
 
 def _read_calibration(doc: Mapping[str, Any]) -> Any:
-    from calib.model import GyroCalibration
+    from gyrocal.calib.model import GyroCalibration
 
     return GyroCalibration.from_dict(doc)
 
 
 def _read_noise(doc: Mapping[str, Any]) -> Any:
-    from calib.allan import NoiseCharacterisation
+    from gyrocal.calib.allan import NoiseCharacterisation
 
     return NoiseCharacterisation.from_dict(doc)
 
@@ -257,7 +257,7 @@ def _fmt(x: float) -> str:
 
 
 def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
-    from calib.allan import NoiseCharacterisation
+    from gyrocal.calib.allan import NoiseCharacterisation
 
     nc = NoiseCharacterisation.from_dict(doc)
     notes: list[str] = []
@@ -450,7 +450,7 @@ def _sensor_text(sensor: Mapping[str, Any]) -> str:
 
 # ---------------------------------------------------------------------------- yaml
 def _render_yaml(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
-    from calib.model import GyroCalibration
+    from gyrocal.calib.model import GyroCalibration
 
     cal = GyroCalibration.from_dict(doc)
     d = cal.to_dict()  # normalised: every field present, NaN as null
@@ -506,7 +506,7 @@ _ROS_FRAME = re.compile(r"[A-Za-z_/][A-Za-z0-9_/]*\Z")
 
 
 def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
-    from calib.model import GyroCalibration
+    from gyrocal.calib.model import GyroCalibration
 
     cal = GyroCalibration.from_dict(doc)
     frame = options.get("frame_id") or "imu_link"
@@ -613,7 +613,7 @@ def _c_comment(text: str) -> str:
 def _render_c_header(
     doc: Mapping[str, Any], options: Mapping[str, Any]
 ) -> tuple[str, list[str]]:
-    from calib.model import GyroCalibration
+    from gyrocal.calib.model import GyroCalibration
 
     cal = GyroCalibration.from_dict(doc)
     prefix = options.get("c_prefix") or "GYROCAL"

@@ -9,7 +9,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from kit.errors import InputError, OutputExistsError
+from gyrocal.kit.errors import InputError, OutputExistsError
 
 __all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text", "refuse_existing"]
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from calib.errors import CalibInputError
-from calib.estimators import FitResult, estimate
-from calib.model import GyroCalibration
-from calib.windows import ExtractedWindows, extract_observations
-from kit.errors import EstimationError, InputError
-from kit.recording import Recording, now_iso
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import FitResult, estimate
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.windows import ExtractedWindows, extract_observations
+from gyrocal.kit.errors import EstimationError, InputError
+from gyrocal.kit.recording import Recording, now_iso
 
 __all__ = ["Estimate", "estimate_recording", "extract_recording"]
 
@@ -24,7 +24,7 @@ class Estimate:
 
 
 def extract_recording(rec: Recording) -> ExtractedWindows:
-    """The recording's windows (:func:`calib.windows.extract_observations`).
+    """The recording's windows (:func:`gyrocal.calib.windows.extract_observations`).
 
     Raises
     ------

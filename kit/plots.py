@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from kit.errors import InputError
-from kit.fileio import atomic_write_bytes
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.fileio import atomic_write_bytes
 
 __all__ = ["require_matplotlib", "save_png", "study_boxplots", "speed_sweep_plot"]
 
@@ -32,7 +32,7 @@ def require_matplotlib() -> Any:
 def save_png(
     fig: Any, path: str | os.PathLike[str], *, force: bool = False, dpi: int = 110
 ) -> Path:
-    """Render ``fig`` as PNG, close it, and write it atomically (:mod:`kit.fileio`).
+    """Render ``fig`` as PNG, close it, and write it atomically (:mod:`gyrocal.kit.fileio`).
 
     Raises
     ------

@@ -6,7 +6,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from drivers.clock import SystemClock
+from gyrocal.drivers.clock import SystemClock
 
 __all__ = ["Progress"]
 

@@ -25,13 +25,13 @@ from typing import Any
 
 import numpy as np
 
-from calib.design import Plan
-from calib.observations import diff_noise
-from calib.segments import Segment
-from drivers.clock import Clock
-from drivers.errors import DriverError
-from kit.errors import ProtocolCheckError
-from kit.recording import RecordingWriter
+from gyrocal.calib.design import Plan
+from gyrocal.calib.observations import diff_noise
+from gyrocal.calib.segments import Segment
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.errors import DriverError
+from gyrocal.kit.errors import ProtocolCheckError
+from gyrocal.kit.recording import RecordingWriter
 
 __all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
 
@@ -104,9 +104,9 @@ class Runner:
 
     Parameters
     ----------
-    gimbal : drivers.dynamixel.Gimbal
+    gimbal : gyrocal.drivers.dynamixel.Gimbal
         Opened; its ``ids`` are the servos.
-    imu : drivers.imu.ImuReader
+    imu : gyrocal.drivers.imu.ImuReader
         Configured, not yet streaming.
     writer : RecordingWriter
         Receives every sample and each finished segment.

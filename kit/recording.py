@@ -30,9 +30,9 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from calib.segments import Segment
-from kit.errors import InputError, OutputExistsError
-from kit.fileio import atomic_write_json
+from gyrocal.calib.segments import Segment
+from gyrocal.kit.errors import InputError, OutputExistsError
+from gyrocal.kit.fileio import atomic_write_json
 
 __all__ = [
     "FORMAT",

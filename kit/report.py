@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.model import GyroCalibration
+from gyrocal.calib.model import GyroCalibration
 
 __all__ = ["calibration_table"]
 

@@ -31,16 +31,16 @@ from typing import Any
 
 import numpy as np
 
-from calib.model import GyroCalibration
-from calib.segments import Segment
-from calib.windows import (  # the estimator's own weight and grid: plot what the fit used
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.segments import Segment
+from gyrocal.calib.windows import (  # the estimator's own weight and grid: plot what the fit used
     ExtractedWindows,
     Window,
     trapezoid_weight,
     weight_grid,
 )
-from kit.errors import InputError, OutputExistsError
-from kit.recording import Recording
+from gyrocal.kit.errors import InputError, OutputExistsError
+from gyrocal.kit.recording import Recording
 
 __all__ = [
     "PlannedPlot",
@@ -562,7 +562,7 @@ def write_report(
     InputError
         If matplotlib is missing, or ``out_dir`` cannot be created.
     """
-    from kit.plots import require_matplotlib, save_png
+    from gyrocal.kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     out = Path(out_dir)

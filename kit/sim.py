@@ -13,13 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from calib.simulate import NORMAL, draw_sensors
-from drivers.clock import Clock, SystemClock, VirtualClock
-from drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
-from drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
-from drivers.imu import READERS
-from kit.config import Config
-from kit.errors import InputError
+from gyrocal.calib.simulate import NORMAL, draw_sensors
+from gyrocal.drivers.clock import Clock, SystemClock, VirtualClock
+from gyrocal.drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
+from gyrocal.drivers.imu import READERS
+from gyrocal.kit.config import Config
+from gyrocal.kit.errors import InputError
 
 __all__ = ["SimJig", "build_sim", "sim_truth"]
 
@@ -38,7 +38,7 @@ class SimJig:
     clock : Clock
         Virtual (default) or the system clock (``--realtime``).
     port : PortHandler
-        The in-process servo transport, for :class:`drivers.dynamixel.Gimbal`.
+        The in-process servo transport, for :class:`gyrocal.drivers.dynamixel.Gimbal`.
     servo_bus : ServoBus
         The emulated servos (``servo_bus.servo(id)`` has the fault knobs).
     jig : GimbalJig

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.model import GyroCalibration
-from kit.errors import InputError
-from kit.recording import Recording
-from kit.report_plots import encoder_rate, servo_axes
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.recording import Recording
+from gyrocal.kit.report_plots import encoder_rate, servo_axes
 
 __all__ = ["Verification", "verify_recording"]
 

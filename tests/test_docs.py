@@ -6,7 +6,8 @@ earlier command of the same document wrote:
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
-  through :func:`kit.cli.main` and must exit 0. Other shell lines (``pip``, ``sudo``, ``cd``,
+  through :func:`gyrocal.kit.cli.main` and must exit 0. Other shell lines (``pip``, ``sudo``,
+  ``cd``,
   ``i2cdetect``, ``udevadm``, ...) are not run.
 * ``python`` blocks run with ``exec`` in the document's directory; ``c`` blocks with a ``main`` are
   compiled with ``-Wall -Wextra -Werror`` and run (skipped without a C compiler); ``toml`` blocks
@@ -30,8 +31,9 @@ An HTML comment right before a block changes what happens to it:
     do not run the block; the reason is required.
 
 Besides, the tables the documents promise to keep in step with the code are compared with it: the
-configuration keys with :data:`kit.config.SCHEMA`, the exit codes with
-:data:`kit.errors.EXIT_CODES`, the quoted error messages with the source, and the Recording v1 and
+configuration keys with :data:`gyrocal.kit.config.SCHEMA`, the exit codes with
+:data:`gyrocal.kit.errors.EXIT_CODES`, the quoted error messages with the source, and the Recording
+v1 and
 Calibration v1 field lists with the files a real ``gyrocal calibrate --sim`` run wrote. Relative
 links and their anchors must resolve.
 """
@@ -57,11 +59,11 @@ from typing import Any
 
 import pytest
 
-from calib.model import GyroCalibration
-from kit.cli import main as gyrocal_main
-from kit.config import SCHEMA, load_config
-from kit.errors import EXIT_CODES
-from kit.recording import ENCODER_HEADER, IMU_HEADER, SEGMENTS_HEADER
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.kit.cli import main as gyrocal_main
+from gyrocal.kit.config import SCHEMA, load_config
+from gyrocal.kit.errors import EXIT_CODES
+from gyrocal.kit.recording import ENCODER_HEADER, IMU_HEADER, SEGMENTS_HEADER
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC_DIR = ROOT / "hardware_docs"
@@ -260,7 +262,7 @@ def _emulated_servo() -> Iterator[str]:
     """A factory-new servo (ID 1, 57 600 bps) behind a pseudo-terminal; yields its device."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "kit", "emulate", "--pty", "--ids", "1", "--baud", "57600",
+        [sys.executable, "-m", "gyrocal.kit", "emulate", "--pty", "--ids", "1", "--baud", "57600",
          "--duration", "60"],
         cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )

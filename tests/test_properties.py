@@ -4,8 +4,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from calib.model import Consistency, GyroCalibration
-from drivers.emulated.dxl.protocol import crc16, remove_stuffing, stuff
+from gyrocal.calib.model import Consistency, GyroCalibration
+from gyrocal.drivers.emulated.dxl.protocol import crc16, remove_stuffing, stuff
 
 bias_values = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False)  # rad/s
 positive = st.floats(min_value=1e-6, max_value=1e6, allow_nan=False)

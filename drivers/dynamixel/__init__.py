@@ -1,10 +1,11 @@
 """The gimbal of Dynamixel X-series servos, over dynamixel-sdk (Protocol 2.0).
 
-:class:`Gimbal` is what the kit uses; :mod:`~drivers.dynamixel.control_table` holds the control
-tables as data; :mod:`~drivers.dynamixel.errors` the named errors.
+:class:`Gimbal` is what the kit uses; :mod:`~gyrocal.drivers.dynamixel.control_table` holds the
+control
+tables as data; :mod:`~gyrocal.drivers.dynamixel.errors` the named errors.
 """
 
-from drivers.dynamixel.errors import (
+from gyrocal.drivers.dynamixel.errors import (
     ElectricalShockError,
     InputVoltageError,
     MotorEncoderError,
@@ -20,7 +21,7 @@ from drivers.dynamixel.errors import (
     TurnLimitError,
     WatchdogTrippedError,
 )
-from drivers.dynamixel.gimbal import Gimbal, GimbalSample, Motion, ServoInfo, ServoStatus
+from gyrocal.drivers.dynamixel.gimbal import Gimbal, GimbalSample, Motion, ServoInfo, ServoStatus
 
 __all__ = [
     "ElectricalShockError",

@@ -1,14 +1,15 @@
 """Errors of the Dynamixel gimbal driver, each saying what went wrong and what to do.
 
-They subclass the drivers' hierarchy (:mod:`drivers.errors`), so the kit maps them to exit codes
+They subclass the drivers' hierarchy (:mod:`gyrocal.drivers.errors`), so the kit maps them to exit
+codes
 without knowing them: communication and hardware alerts are hardware failures, refused motions are
 safety errors, and an unexpected servo is an identity error.
 """
 
 from __future__ import annotations
 
-from drivers.dynamixel.control_table import HARDWARE_ERROR_BITS
-from drivers.errors import (
+from gyrocal.drivers.dynamixel.control_table import HARDWARE_ERROR_BITS
+from gyrocal.drivers.errors import (
     CommunicationError,
     DeviceIdentityError,
     DriverError,

@@ -52,8 +52,8 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
-from drivers.clock import Clock, SystemClock
-from drivers.dynamixel.control_table import (
+from gyrocal.drivers.clock import Clock, SystemClock
+from gyrocal.drivers.dynamixel.control_table import (
     ACCELERATION_UNIT_RAD_S2,
     COMPATIBLE_MODELS,
     HARDWARE_ERROR_BITS,
@@ -68,7 +68,7 @@ from drivers.dynamixel.control_table import (
     ServoModel,
     model_by_name,
 )
-from drivers.dynamixel.errors import (
+from gyrocal.drivers.dynamixel.errors import (
     ServoCommunicationError,
     ServoIdentityError,
     ServoStatusError,
@@ -79,7 +79,7 @@ from drivers.dynamixel.errors import (
     WatchdogTrippedError,
     hardware_error_for,
 )
-from drivers.errors import CommunicationError, ConfigurationError, SafetyError
+from gyrocal.drivers.errors import CommunicationError, ConfigurationError, SafetyError
 
 __all__ = ["Gimbal", "GimbalSample", "Motion", "ServoInfo", "ServoStatus"]
 
@@ -259,7 +259,7 @@ class Gimbal:
     ----------
     port : str or PortHandler
         A serial device (``"/dev/ttyUSB0"``) or an existing ``dynamixel_sdk.PortHandler``
-        (for example the emulator's :class:`~drivers.emulated.dxl.EmulatedPortHandler`).
+        (for example the emulator's :class:`~gyrocal.drivers.emulated.dxl.EmulatedPortHandler`).
     ids : sequence of int
         Servo IDs, base to tip.
     baudrate : int
@@ -286,7 +286,7 @@ class Gimbal:
         If given, write Return Delay Time (EEPROM) at open; None leaves it as it is.
     accept_compatible : bool
         Accept models that share the X-430 control table (listed in
-        :data:`~drivers.dynamixel.control_table.COMPATIBLE_MODELS`) with a notice.
+        :data:`~gyrocal.drivers.dynamixel.control_table.COMPATIBLE_MODELS`) with a notice.
     handle_signals : bool
         Install SIGINT/SIGTERM handlers while open (main thread only).
     stall_timeout_s : float

@@ -1,12 +1,13 @@
 """Register-level emulated MPU-9250 and LSM9DS1 (accelerometer/gyroscope die) for an
-:class:`~drivers.emulated.smbus.EmulatedSMBus`.
+:class:`~gyrocal.drivers.emulated.smbus.EmulatedSMBus`.
 
 Each chip keeps a register file with the reset values of the hardware reference (§1.9, §2.8),
 answers WHO_AM_I, takes the configuration registers the readers write, and samples its gyro on its
 own clock: sample ``k`` of a configuration is taken at ``t0 + k / (odr · (1 + clock_ppm·1e-6))`` on
 the shared clock, where ``t0`` is when the rate was last set. Whenever the bus touches the chip at
 time ``T`` it generates every sample with time ``≤ T`` in one vectorised step: it asks the
-:class:`~drivers.emulated.motion.MotionSource` for the true rate at those times (in order, never
+:class:`~gyrocal.drivers.emulated.motion.MotionSource` for the true rate at those times (in order,
+never
 later than ``T``, as its contract requires), turns the rates into readings through
 :class:`SensorTruth`, quantizes and clips them to the configured range, and pushes them into the
 FIFO with the chip's FIFO semantics (size, overflow flag, stop-when-full or overwrite; §1.7,
@@ -28,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from drivers.clock import Clock
-from drivers.emulated.motion import ConstantRate, MotionSource
-from drivers.emulated.smbus import EmulatedSMBus
-from drivers.imu.chips import (
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
+from gyrocal.drivers.emulated.smbus import EmulatedSMBus
+from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
     LSM9DS1_ODR,
@@ -433,7 +434,7 @@ class _EmulatedImu(ABC):
         the output. The emulator stands in for that with the mean of ``subsamples`` evaluations
         spread over ``(t - period, t]`` (a boxcar, which nulls every multiple of the output
         rate). Sub-sample times are increasing across samples and calls, as the
-        :class:`~drivers.emulated.motion.MotionSource` contract requires.
+        :class:`~gyrocal.drivers.emulated.motion.MotionSource` contract requires.
         """
         S = self.subsamples
         if S == 1:

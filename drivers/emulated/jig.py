@@ -104,7 +104,7 @@ class Slip:
 
 
 class GimbalJig:
-    """Servo joints carrying the sensor: a :class:`~drivers.emulated.motion.MotionSource`.
+    """Servo joints carrying the sensor: a :class:`~gyrocal.drivers.emulated.motion.MotionSource`.
 
     Parameters
     ----------

@@ -21,7 +21,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-from drivers.clock import Clock, VirtualClock
+from gyrocal.drivers.clock import Clock, VirtualClock
 
 __all__ = ["I2C_SMBUS_BLOCK_MAX", "EmulatedSMBus", "I2CDevice", "Transaction"]
 

@@ -12,12 +12,17 @@ from __future__ import annotations
 import contextlib
 from typing import Any
 
-from drivers.clock import Clock
-from drivers.errors import ConfigurationError, DriverError
-from drivers.imu.base import ChipNotice, FifoGap, ImuBatch, ImuReader, SensorInfo, open_bus
-from drivers.imu.errors import BusOpenError, ChipIdentityError, ImuStateError, SensorFaultError
-from drivers.imu.lsm9ds1 import LSM9DS1Reader
-from drivers.imu.mpu9250 import MPU9250Reader
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.errors import ConfigurationError, DriverError
+from gyrocal.drivers.imu.base import ChipNotice, FifoGap, ImuBatch, ImuReader, SensorInfo, open_bus
+from gyrocal.drivers.imu.errors import (
+    BusOpenError,
+    ChipIdentityError,
+    ImuStateError,
+    SensorFaultError,
+)
+from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
+from gyrocal.drivers.imu.mpu9250 import MPU9250Reader
 
 __all__ = [
     "MODELS",

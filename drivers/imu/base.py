@@ -28,11 +28,16 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-from drivers.clock import Clock, SystemClock
-from drivers.errors import BusError, ConfigurationError, DeviceIdentityError
-from drivers.imu.chips import ChipFamily, ChipModel, GyroRange
-from drivers.imu.errors import BusOpenError, ChipIdentityError, ImuStateError, SensorFaultError
-from drivers.imu.timing import SampleClock
+from gyrocal.drivers.clock import Clock, SystemClock
+from gyrocal.drivers.errors import BusError, ConfigurationError, DeviceIdentityError
+from gyrocal.drivers.imu.chips import ChipFamily, ChipModel, GyroRange
+from gyrocal.drivers.imu.errors import (
+    BusOpenError,
+    ChipIdentityError,
+    ImuStateError,
+    SensorFaultError,
+)
+from gyrocal.drivers.imu.timing import SampleClock
 
 __all__ = [
     "BLOCK_MAX",
@@ -265,7 +270,7 @@ class ImuReader(ABC):
     discard_first : bool
         Drop the first sample after each FIFO (re)start, as the datasheets advise.
     clock_fit_window_s : float
-        Window of the sample-time fit (:class:`~drivers.imu.timing.SampleClock`).
+        Window of the sample-time fit (:class:`~gyrocal.drivers.imu.timing.SampleClock`).
     """
 
     family: ClassVar[ChipFamily]
@@ -471,7 +476,7 @@ class ImuReader(ABC):
 
     def _probe_other_families(self) -> str | None:
         """Name a chip of another supported family at this address, read-only, if one is there."""
-        from drivers.imu import READERS
+        from gyrocal.drivers.imu import READERS
 
         for other in {cls.family.name: cls.family for cls in READERS.values()}.values():
             if other is self.family:

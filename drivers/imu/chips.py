@@ -1,8 +1,10 @@
 """Per-chip facts as data: register addresses, identity values, ranges, rates, filters, timings.
 
 Every number here is transcribed from ``shared/hardware-reference.md`` (section given on each
-table). The readers (:mod:`drivers.imu.mpu9250`, :mod:`drivers.imu.lsm9ds1`) and the emulated chips
-(:mod:`drivers.emulated.imu_chips`) read them from here; the tests check them against the datasheet
+table). The readers (:mod:`gyrocal.drivers.imu.mpu9250`, :mod:`gyrocal.drivers.imu.lsm9ds1`) and
+the emulated chips
+(:mod:`gyrocal.drivers.emulated.imu_chips`) read them from here; the tests check them against the
+datasheet
 values written out independently.
 """
 

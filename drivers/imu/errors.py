@@ -1,8 +1,8 @@
-"""Errors of the IMU readers, refining :mod:`drivers.errors`."""
+"""Errors of the IMU readers, refining :mod:`gyrocal.drivers.errors`."""
 
 from __future__ import annotations
 
-from drivers.errors import BusError, DeviceIdentityError, DriverError
+from gyrocal.drivers.errors import BusError, DeviceIdentityError, DriverError
 
 __all__ = ["BusOpenError", "ChipIdentityError", "ImuStateError", "SensorFaultError"]
 

@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.errors import ConfigurationError
-from drivers.imu.base import BLOCK_MAX, ImuReader
-from drivers.imu.chips import (
+from gyrocal.drivers.errors import ConfigurationError
+from gyrocal.drivers.imu.base import BLOCK_MAX, ImuReader
+from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
     LSM9DS1_BW_G_CUTOFF_HZ,
@@ -52,7 +52,7 @@ class LSM9DS1Reader(ImuReader):
     Parameters
     ----------
     bus, address, clock, **kwargs
-        As for :class:`~drivers.imu.base.ImuReader` (default address 0x6B; 0x6A with SDO_A/G
+        As for :class:`~gyrocal.drivers.imu.base.ImuReader` (default address 0x6B; 0x6A with SDO_A/G
         low).
     burst_wrap : bool
         Read many FIFO slots in one burst from 0x18, relying on the register wrap of ST §3.3;

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.errors import ConfigurationError
-from drivers.imu.base import BLOCK_MAX, ImuReader
-from drivers.imu.chips import (
+from gyrocal.drivers.errors import ConfigurationError
+from gyrocal.drivers.imu.base import BLOCK_MAX, ImuReader
+from gyrocal.drivers.imu.chips import (
     MPU9250,
     MPU9250_BITS,
     MPU9250_DLPF,
@@ -44,7 +44,8 @@ class MPU9250Reader(ImuReader):
     Parameters
     ----------
     bus, address, clock, **kwargs
-        As for :class:`~drivers.imu.base.ImuReader` (default address 0x68; 0x69 with AD0 high).
+        As for :class:`~gyrocal.drivers.imu.base.ImuReader` (default address 0x68; 0x69 with AD0
+        high).
     temperature_in_fifo : bool
         Put TEMP_OUT in every FIFO frame (8-byte frames, 64 in the FIFO). With ``False`` the
         frames are 6 bytes (85 fit, 85 ms at 1 kHz) and TEMP_OUT is read once per drain.

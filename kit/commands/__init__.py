@@ -1,1 +1,1 @@
-"""One module per ``gyrocal`` subcommand (see :data:`kit.cli.COMMANDS`)."""
+"""One module per ``gyrocal`` subcommand (see :data:`gyrocal.kit.cli.COMMANDS`)."""

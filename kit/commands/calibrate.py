@@ -71,7 +71,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from kit.config import METHODS, PROTOCOLS
+    from gyrocal.kit.config import METHODS, PROTOCOLS
 
     add_common_jig_arguments(p)
     p.add_argument("--out", metavar="DIR",
@@ -86,7 +86,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def load_cli_config(args: argparse.Namespace) -> Any:
     """The config file (or defaults) with the command-line overrides applied."""
-    from kit.config import apply_overrides, load_config
+    from gyrocal.kit.config import apply_overrides, load_config
 
     path = args.config
     if path is None and Path("gyrocal.toml").exists():
@@ -103,19 +103,20 @@ def load_cli_config(args: argparse.Namespace) -> Any:
 
 def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, int, Any]:
     """Where the devices are: ``(sim, clock, servo port, baud, I2C bus)`` of the emulated jig
-    with ``--sim`` (``sim`` is its :class:`~kit.sim.SimJig`), else of the configured hardware
+    with ``--sim`` (``sim`` is its :class:`~gyrocal.kit.sim.SimJig`), else of the configured
+    hardware
     (``sim`` is None)."""
     if args.sim_fault and not args.sim:
-        from kit.errors import InputError
+        from gyrocal.kit.errors import InputError
 
         raise InputError("--sim-fault needs --sim")
     if args.sim:
-        from kit.sim import SIM_BAUD, build_sim
+        from gyrocal.kit.sim import SIM_BAUD, build_sim
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime, noise_seed=args.sim_noise_seed)
         return sim, sim.clock, sim.port, SIM_BAUD, sim.imu_bus
-    from drivers.clock import SystemClock
+    from gyrocal.drivers.clock import SystemClock
 
     g = cfg["gimbal"]
     return None, SystemClock(), g["port"], g["baud"], cfg["imu"]["bus"]
@@ -125,15 +126,15 @@ class Jig:
     """The devices of one run: a gimbal driver and an IMU reader on one clock (real or sim)."""
 
     def __init__(self, cfg: Any, args: argparse.Namespace) -> None:
-        from drivers.dynamixel import Gimbal
-        from drivers.imu import open_imu
+        from gyrocal.drivers.dynamixel import Gimbal
+        from gyrocal.drivers.imu import open_imu
 
         self.cfg = cfg
         self.faults: list[str] = []
         self.sim, self.clock, port, baud, bus = jig_endpoints(cfg, args)
         self._fault_specs: list[str] = list(args.sim_fault)
         if self._fault_specs:
-            from kit.sim import apply_fault, build_sim
+            from gyrocal.kit.sim import apply_fault, build_sim
 
             scratch = build_sim(cfg, seed=args.sim_seed)
             for spec in self._fault_specs:  # validate now; armed when the protocol starts
@@ -147,7 +148,7 @@ class Jig:
     def arm_faults(self) -> list[str]:
         """Arm the ``--sim-fault`` knobs with their times counted from now (the recording's
         start); returns their descriptions."""
-        from kit.sim import apply_fault
+        from gyrocal.kit.sim import apply_fault
 
         if self.sim is None:
             return []
@@ -159,7 +160,7 @@ class Jig:
         """Close the IMU (the gimbal closes through its context manager)."""
         from contextlib import suppress
 
-        from drivers.errors import DriverError
+        from gyrocal.drivers.errors import DriverError
 
         with suppress(DriverError):
             self.imu.close()
@@ -171,7 +172,7 @@ def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | N
     gave too few samples."""
     import numpy as np
 
-    from calib.observations import diff_noise
+    from gyrocal.calib.observations import diff_noise
 
     imu.start()
     try:
@@ -193,8 +194,8 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     fixed values override."""
     from dataclasses import replace
 
-    from calib.design import jig_time, paper_plan, plan_protocol
-    from kit.errors import InputError
+    from gyrocal.calib.design import jig_time, paper_plan, plan_protocol
+    from gyrocal.kit.errors import InputError
 
     p = cfg["protocol"]
     accel = float(cfg["gimbal"]["acceleration"])
@@ -233,7 +234,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
     """Run the protocol on the jig (or the emulated jig) into a Recording v1 at ``rec_dir``.
 
     Servos stop and torque goes off before the recording is closed, on success, error, Ctrl-C
-    or SIGTERM; an interrupted run raises :class:`~kit.errors.InterruptedRun` (exit 130/143)
+    or SIGTERM; an interrupted run raises :class:`~gyrocal.kit.errors.InterruptedRun` (exit 130/143)
     with the recording kept, marked incomplete. With ``--sim`` the emulated servos' final state
     is written to ``out/sim-state.json`` (what the emulator holds, not what the driver believes).
 
@@ -242,12 +243,12 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
     Jig
         The (closed) jig, for its sim truth.
     """
-    from drivers.dynamixel.errors import TerminatedBySignal
-    from kit.errors import InterruptedRun
-    from kit.fileio import atomic_write_json
-    from kit.progress import Progress
-    from kit.protocol import Runner, build_steps
-    from kit.recording import RecordingWriter
+    from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
+    from gyrocal.kit.errors import InterruptedRun
+    from gyrocal.kit.fileio import atomic_write_json
+    from gyrocal.kit.progress import Progress
+    from gyrocal.kit.protocol import Runner, build_steps
+    from gyrocal.kit.recording import RecordingWriter
 
     jig = Jig(cfg, args)
     interrupted: BaseException | None = None
@@ -317,11 +318,11 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from kit.errors import OutputExistsError
-    from kit.fileio import atomic_write_text
-    from kit.pipeline import estimate_recording
-    from kit.recording import load_recording
-    from kit.report import calibration_table
+    from gyrocal.kit.errors import OutputExistsError
+    from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.report import calibration_table
 
     cfg = load_cli_config(args)
     out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))

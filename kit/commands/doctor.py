@@ -18,7 +18,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from kit.commands.calibrate import add_common_jig_arguments
+    from gyrocal.kit.commands.calibrate import add_common_jig_arguments
 
     add_common_jig_arguments(p)
     p.add_argument("--seconds", type=float, default=1.0, help="IMU test stream, s (default 1)")
@@ -51,9 +51,9 @@ class _Report:
 def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus: Any) -> None:
     import numpy as np
 
-    from calib.observations import diff_noise
-    from drivers.errors import DriverError
-    from drivers.imu import open_imu
+    from gyrocal.calib.observations import diff_noise
+    from gyrocal.drivers.errors import DriverError
+    from gyrocal.drivers.imu import open_imu
 
     imu_cfg = cfg["imu"]
     where = "the emulated bus" if args.sim else f"/dev/i2c-{imu_cfg['bus']}"
@@ -124,8 +124,8 @@ def latency_timer_ms(port: str, sysfs: str = "/sys/bus/usb-serial/devices") -> i
 
 def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, port: Any,
                   baud: int) -> None:
-    from drivers.dynamixel import Gimbal
-    from drivers.errors import DriverError
+    from gyrocal.drivers.dynamixel import Gimbal
+    from gyrocal.drivers.errors import DriverError
 
     g = cfg["gimbal"]
     rep.section(f"servos {g['ids']} on {'the emulated bus' if args.sim else g['port']} "
@@ -175,13 +175,13 @@ def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, 
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from kit.commands.calibrate import jig_endpoints, load_cli_config
-    from kit.errors import HardwareError
+    from gyrocal.kit.commands.calibrate import jig_endpoints, load_cli_config
+    from gyrocal.kit.errors import HardwareError
 
     cfg = load_cli_config(args)
     sim, clock, port, baud, bus = jig_endpoints(cfg, args)
     if sim is not None:
-        from kit.sim import apply_fault
+        from gyrocal.kit.sim import apply_fault
 
         for spec in args.sim_fault:
             apply_fault(sim, spec, clock.monotonic())

@@ -50,10 +50,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until stopped; returns the exit code."""
-    from drivers.clock import SystemClock
-    from drivers.dynamixel.control_table import BAUD_RATES, model_by_name
-    from drivers.emulated.dxl import PtyServoBridge, make_servo_bus
-    from kit.errors import InputError
+    from gyrocal.drivers.clock import SystemClock
+    from gyrocal.drivers.dynamixel.control_table import BAUD_RATES, model_by_name
+    from gyrocal.drivers.emulated.dxl import PtyServoBridge, make_servo_bus
+    from gyrocal.kit.errors import InputError
 
     if not args.pty:
         raise InputError("gyrocal emulate needs --pty (the in-process emulator is used by "

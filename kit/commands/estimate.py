@@ -17,7 +17,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from kit.config import METHODS
+    from gyrocal.kit.config import METHODS
 
     p.add_argument("recording", help="a Recording v1 directory")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
@@ -29,10 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from kit.fileio import atomic_write_text
-    from kit.pipeline import estimate_recording
-    from kit.recording import load_recording
-    from kit.report import calibration_table
+    from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.report import calibration_table
 
     rec = load_recording(args.recording)
     for w in rec.warnings:

@@ -15,7 +15,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the flags (format options come from every registered exporter)."""
-    from kit.exports import EXPORTERS
+    from gyrocal.kit.exports import EXPORTERS
 
     p.add_argument("doc", metavar="DOC", help="gyrocal JSON document, or - for stdin")
     lines = [f"{name}: {e.description} (takes {', '.join(e.accepts)})"
@@ -37,8 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load, check the document kind against the format, render, write."""
-    from kit.exports import export, read_json
-    from kit.fileio import atomic_write_text
+    from gyrocal.kit.exports import export, read_json
+    from gyrocal.kit.fileio import atomic_write_text
 
     doc = read_json(args.doc)
     options = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_") and v is not None}

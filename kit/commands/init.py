@@ -20,8 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from kit.config import template
-    from kit.fileio import atomic_write_text
+    from gyrocal.kit.config import template
+    from gyrocal.kit.fileio import atomic_write_text
 
     atomic_write_text(args.path, template(), force=args.force)
     print(f"wrote {args.path}; edit it, then run `gyrocal doctor --config {args.path}`")

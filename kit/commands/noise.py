@@ -10,14 +10,14 @@ from typing import Any
 
 import numpy as np
 
-from kit.errors import InputError
+from gyrocal.kit.errors import InputError
 
 HELP = "noise figures of a still gyro: angle random walk, bias instability, rate random walk"
 DESCRIPTION = (
     "Characterise the gyro's noise from a still recording by the overlapping Allan deviation "
     "(IEEE Std 952): angle random walk N (rad/s/sqrt(Hz)), bias instability B (rad/s) and rate "
     "random walk K (rad/s/sqrt(s)), each with its uncertainty. --sim draws a synthetic still "
-    "sensor with known noise (calib.noise_sim; not the emulated jig). --json prints the "
+    "sensor with known noise (gyrocal.calib.noise_sim; not the emulated jig). --json prints the "
     "gyrocal-noise v1 document that 'gyrocal export --format kalibr' and 'gyrocal track --noise' "
     "read."
 )
@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], None]:
-    from kit.recording import load_recording
+    from gyrocal.kit.recording import load_recording
 
     rec = load_recording(args.recording)
     for w in rec.warnings:
@@ -106,7 +106,7 @@ def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[s
 
 
 def _from_sim(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], Any]:
-    from calib.noise_sim import NoiseModel, simulate_still
+    from gyrocal.calib.noise_sim import NoiseModel, simulate_still
 
     if not args.sim_noise_density > 0:
         raise InputError("--sim-noise-density must be positive")
@@ -150,10 +150,10 @@ def _table(nc: Any, truth: Any) -> str:
 
 def plot_allan(nc: Any, path: str, *, force: bool = False) -> None:
     """Draw the Allan deviation with its one-sigma band and the fitted noise model to ``path``."""
-    from kit.plots import require_matplotlib, save_png
+    from gyrocal.kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
-    from calib.noise_sim import FLICKER_FLOOR
+    from gyrocal.calib.noise_sim import FLICKER_FLOOR
 
     tau = nc.tau_s
     fig, ax = plt.subplots(figsize=(7, 5))
@@ -173,10 +173,10 @@ def plot_allan(nc: Any, path: str, *, force: bool = False) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, print, write and plot."""
-    from calib.allan import characterise_noise
-    from calib.noise_sim import FLICKER_FLOOR
-    from kit.fileio import atomic_write_json, refuse_existing
-    from kit.recording import now_iso
+    from gyrocal.calib.allan import characterise_noise
+    from gyrocal.calib.noise_sim import FLICKER_FLOOR
+    from gyrocal.kit.fileio import atomic_write_json, refuse_existing
+    from gyrocal.kit.recording import now_iso
 
     if args.sim == (args.recording is not None):
         raise InputError("give a RECORDING or --sim (one of them)")

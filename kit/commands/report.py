@@ -18,7 +18,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from kit.config import METHODS
+    from gyrocal.kit.config import METHODS
 
     p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
     p.add_argument("cal", nargs="?", metavar="CAL",
@@ -31,11 +31,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load, window (and estimate without CAL), draw, print the index."""
-    from kit.exports import load_document
-    from kit.pipeline import extract_recording
-    from kit.plots import require_matplotlib
-    from kit.recording import load_recording
-    from kit.report_plots import write_report
+    from gyrocal.kit.exports import load_document
+    from gyrocal.kit.pipeline import extract_recording
+    from gyrocal.kit.plots import require_matplotlib
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.report_plots import write_report
 
     require_matplotlib()  # before any work: a missing extra is the first thing to say
     rec = load_recording(args.recording)
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         extracted = extract_recording(rec)
         what = f"calibration {args.cal}"
     else:
-        from kit.pipeline import estimate_recording
+        from gyrocal.kit.pipeline import estimate_recording
 
         est = estimate_recording(rec, args.method)
         cal, extracted = est.calibration, est.extracted

@@ -9,7 +9,8 @@ DESCRIPTION = (
     "Simulate a calibration run at sample level — a sensor with scale, bias and a misaligned "
     "mount drawn from the paper's normal conditions, servo turns with acceleration ramps and "
     "speed ripple, a quantised and jittered encoder — and write it as a Recording v1 directory "
-    "whose manifest holds the truth. This is the numerical simulator (calib.simulate), not the "
+    "whose manifest holds the truth. This is the numerical simulator (gyrocal.calib.simulate), "
+    "not the "
     "emulated jig."
 )
 
@@ -45,13 +46,13 @@ def run(args: argparse.Namespace) -> int:
     """Run the command."""
     import numpy as np
 
-    from calib.simulate import (
+    from gyrocal.calib.simulate import (
         SimProtocol,
         draw_mount_axes,
         draw_sensors,
         simulate_raw_run,
     )
-    from kit.recording import RecordingWriter
+    from gyrocal.kit.recording import RecordingWriter
 
     rng = np.random.default_rng(args.seed)
     k, b = draw_sensors(rng, 1)

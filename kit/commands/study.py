@@ -58,7 +58,7 @@ def _mapper(workers: int) -> Iterator[Callable[..., Any]]:
 
 
 def _stats_table(result: Any) -> str:
-    from calib.study import METHOD_ORDER, PARAMS
+    from gyrocal.calib.study import METHOD_ORDER, PARAMS
 
     lines = []
     stats = result.stats()
@@ -121,9 +121,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the command."""
     import numpy as np
 
-    from calib import study
-    from kit.errors import InputError
-    from kit.fileio import refuse_existing
+    from gyrocal.calib import study
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.fileio import refuse_existing
 
     for name in ("sensors", "reps", "workers"):
         v = getattr(args, name)
@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from pathlib import Path
 
-        from kit.plots import require_matplotlib
+        from gyrocal.kit.plots import require_matplotlib
 
         require_matplotlib()
         plot_dir = Path(args.plot)
@@ -159,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
         text = _stats_table(result)
         doc = _stats_json(result)
         if plot_dir is not None:
-            from kit.plots import study_boxplots
+            from gyrocal.kit.plots import study_boxplots
 
             for noise, errs in result.errors.items():
                 path = study_boxplots(errs, f"{cfg.name} conditions, noise {noise} rad/s",
@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
                 doc["levels"][str(noise)][str(s)] = {m: v.tolist() for m, v in by_m.items()}
         text = "\n".join(lines)
         if sweep_path is not None:
-            from kit.plots import speed_sweep_plot
+            from gyrocal.kit.plots import speed_sweep_plot
 
             path = speed_sweep_plot(sweep, sweep_path, force=args.force)
             text += f"\nwrote {path}"

@@ -13,17 +13,17 @@ from typing import Any
 
 import numpy as np
 
-from kit.errors import InputError, OutputExistsError
+from gyrocal.kit.errors import InputError, OutputExistsError
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
-    "Replay a Recording v1 through the bias tracker (calib.tracker: a Kalman filter on the three "
-    "biases, optionally a temperature coefficient, with zero-rate updates when the sensor is "
+    "Replay a Recording v1 through the bias tracker (gyrocal.calib.tracker: a Kalman filter on the "
+    "three biases, optionally a temperature coefficient, with zero-rate updates when the sensor is "
     "still and reference-rate updates while a servo turns about an axis the calibration knows) "
     "and print or plot the bias over time with its uncertainty. --json prints "
     '{"t": [N], "bias": [N][3], "bias_std": [N][3], "still": [N]} in rad/s, one row per gyro '
     "sample, the bias in the Calibration v1 convention (g = scale * (m + bias), so a still "
-    "sensor reads -bias). --sim tracks a synthetic 30-minute session (calib.noise_sim: a "
+    "sensor reads -bias). --sim tracks a synthetic 30-minute session (gyrocal.calib.noise_sim: a "
     "synthetic sensor, not the emulated jig) and compares with its truth. --live tracks on the "
     "jig itself: the servos hold the sensor still (torque on) while the IMU FIFO is drained for "
     "--duration seconds; --live --sim does it on the emulated jig and compares with the emulated "
@@ -111,7 +111,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_live_only_arguments(live: Any) -> None:
     """The flags that apply to --live only (an argument group, or a parser)."""
-    from kit.commands.calibrate import add_common_jig_arguments
+    from gyrocal.kit.commands.calibrate import add_common_jig_arguments
 
     live.add_argument("--turns", type=int, default=0, metavar="N",
                       help="--live: every --turn-every seconds turn one servo N whole turns and "
@@ -163,7 +163,8 @@ class Tracked:
 
 
 def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
-    """Feed ``batches`` to a :class:`calib.tracker.BiasTracker` and collect per-sample output.
+    """Feed ``batches`` to a :class:`gyrocal.calib.tracker.BiasTracker` and collect per-sample
+    output.
 
     A live source (the jig's IMU FIFO) is one more iterable of :class:`Batch`. The last batch is
     processed with ``finish=True``; still decisions that arrive after their batch (the
@@ -217,14 +218,14 @@ def _chunks(batch: Batch, size: int) -> Iterator[Batch]:
 
 def load_calibration(path: str) -> Any:
     """Read the --cal Calibration v1 file (InputError naming the problem)."""
-    from kit.exports import load_document
+    from gyrocal.kit.exports import load_document
 
     return load_document(path, "gyrocal-calibration", "--cal")
 
 
 def load_noise(path: str) -> Any:
     """Read the --noise gyrocal-noise v1 file (InputError naming the problem)."""
-    from kit.exports import load_document
+    from gyrocal.kit.exports import load_document
 
     return load_document(path, "gyrocal-noise", "--noise")
 
@@ -238,7 +239,7 @@ def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[
     window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
     calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
     """
-    from kit.report_plots import calibration_axis, encoder_rate
+    from gyrocal.kit.report_plots import calibration_axis, encoder_rate
 
     n = rec.imu_t.size
     rr = np.full(n, np.nan)
@@ -278,8 +279,8 @@ def _rest_flags(rec: Any, trim_s: float = 0.5) -> np.ndarray:
 
 def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
               axis_std: float | None) -> Any:
-    from calib.stationarity import StillSettings
-    from calib.tracker import TrackerSettings
+    from gyrocal.calib.stationarity import StillSettings
+    from gyrocal.calib.tracker import TrackerSettings
 
     try:
         still = StillSettings(window_s=args.still_window, min_still_s=args.min_still,
@@ -309,8 +310,8 @@ def _build_tracker(
     -------
     (BiasTracker, GyroCalibration or None)
     """
-    from calib.stationarity import first_still_mean, white_noise_std
-    from calib.tracker import BiasTracker
+    from gyrocal.calib.stationarity import first_still_mean, white_noise_std
+    from gyrocal.calib.tracker import BiasTracker
 
     cal = load_calibration(args.cal) if args.cal else None
     noise = load_noise(args.noise) if args.noise else None
@@ -361,7 +362,7 @@ def _build_tracker(
 
 
 def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any]:
-    from kit.recording import load_recording
+    from gyrocal.kit.recording import load_recording
 
     rec = load_recording(args.recording)
     notes += list(rec.warnings)
@@ -393,8 +394,8 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
-    from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
-    from calib.tracker import BiasTracker
+    from gyrocal.calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+    from gyrocal.calib.tracker import BiasTracker
 
     model = NoiseModel(rate_random_walk=1e-5)
     step = None
@@ -416,7 +417,7 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
     if args.motion == "jig" and not args.no_reference:
         rr, ra = s.reference_rate, s.reference_axis
     batch = Batch(s.t, s.rate, s.temperature_c if args.tempco else None, None, rr, ra)
-    notes.append("synthetic sensor (calib.noise_sim), not the emulated jig: "
+    notes.append("synthetic sensor (gyrocal.calib.noise_sim), not the emulated jig: "
                  f"{args.duration:g} s, {args.motion} motions, 10 degC ramp")
     if not args.tempco:
         notes.append("the simulated die warms by 10 degC and its bias follows: without --tempco "
@@ -451,7 +452,8 @@ class LiveSource:
     """Batches from the jig: the servos hold the sensor still while the IMU FIFO is drained.
 
     One loop on the jig's clock, as the protocol runner's: drain the FIFO, one sync read of the
-    servos (:meth:`drivers.dynamixel.Gimbal.poll`, with its safety checks), wait for the next
+    servos (:meth:`gyrocal.drivers.dynamixel.Gimbal.poll`, with its safety checks), wait for the
+    next
     period (dithered by up to half a period, seeded, so drains fall at random phases of the
     chip's sample grid). Samples drained in a period in which a servo moved by more than
     :data:`LIVE_MOVE_TOLERANCE_RAD` are flagged not still.
@@ -463,7 +465,7 @@ class LiveSource:
 
     Parameters
     ----------
-    jig : kit.commands.calibrate.Jig
+    jig : gyrocal.kit.commands.calibrate.Jig
         Its gimbal open (inside ``with jig.gimbal``), its IMU configured.
     period_s : float
         Loop period (the config's ``gimbal.sample_hz``).
@@ -566,7 +568,7 @@ class LiveSource:
     def turn_pair(self, motor: int) -> Batch | None:
         """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
         with the encoder's reference rate and the servo's axis."""
-        from kit.report_plots import encoder_rate
+        from gyrocal.kit.report_plots import encoder_rate
 
         p = self.plan
         if p is None:
@@ -621,7 +623,7 @@ class LiveSource:
             if nxt is None:
                 continue
             if nxt.t[0] <= end:
-                from kit.errors import HardwareError
+                from gyrocal.kit.errors import HardwareError
 
                 raise HardwareError("the IMU reader returned samples out of time order; check "
                                     "the I2C bus and imu.odr_hz, and try again")
@@ -649,7 +651,7 @@ def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
         raise InputError("--turns needs --cal: the reference-rate updates use the calibration's "
                          "scale and servo axes (a paired-axis calibration from 'gyrocal "
                          "calibrate')")
-    from kit.report_plots import calibration_axis
+    from gyrocal.kit.report_plots import calibration_axis
 
     cal = load_calibration(args.cal)
     if not np.all(np.isfinite(cal.scale_std)):
@@ -674,9 +676,9 @@ class _LiveTruth:
 def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any, str]:
     """Hold the jig still, track, release: the servos stop and torque goes off at the end, on
     an error, Ctrl-C or SIGTERM (the gimbal's context), before anything else."""
-    from drivers.dynamixel.errors import TerminatedBySignal
-    from kit.commands.calibrate import Jig, load_cli_config
-    from kit.errors import InterruptedRun
+    from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
+    from gyrocal.kit.commands.calibrate import Jig, load_cli_config
+    from gyrocal.kit.errors import InterruptedRun
 
     duration = 60.0 if args.duration is None else float(args.duration)
     if not (math.isfinite(duration) and duration >= LIVE_WARMUP_S):
@@ -712,7 +714,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
             print(f"gyrocal: tracking live on {where} for {duration:g} s of jig time: the servos "
                   "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
             if args.record:
-                from kit.recording import RecordingWriter
+                from gyrocal.kit.recording import RecordingWriter
 
                 truth = None if jig.sim is None else jig.sim.truth.manifest()
                 writer = RecordingWriter(
@@ -733,7 +735,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
                                         f"the first {LIVE_WARMUP_S:g} s", where)
             tr = run_tracker(tracker, source.batches(warm, duration, LIVE_CHUNK_S))
             if writer is not None:
-                from calib.segments import Segment
+                from gyrocal.calib.segments import Segment
 
                 writer.append_segment(Segment(0, "rest", None, 0, 0.0, 0.0, source.elapsed_s))
                 writer.finish()
@@ -771,7 +773,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
 
 def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False) -> None:
     """Draw the bias estimate of each axis with its 3-sigma band (and the truth of a --sim)."""
-    from kit.plots import require_matplotlib, save_png
+    from gyrocal.kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     fig, axs = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
@@ -855,7 +857,7 @@ def _check_modes(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
-    from kit.fileio import atomic_write_text, refuse_existing
+    from gyrocal.kit.fileio import atomic_write_text, refuse_existing
 
     _check_modes(args)
     if args.rows < 2:

@@ -20,7 +20,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from kit.commands.calibrate import add_common_jig_arguments
+    from gyrocal.kit.commands.calibrate import add_common_jig_arguments
 
     p.add_argument("calibration", help="a Calibration v1 JSON file")
     p.add_argument("--recording", metavar="DIR",
@@ -38,12 +38,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from calib.errors import CalibrationFormatError
-    from calib.model import GyroCalibration
-    from kit.commands.calibrate import load_cli_config, run_jig
-    from kit.errors import InputError
-    from kit.recording import load_recording
-    from kit.verify import verify_recording
+    from gyrocal.calib.errors import CalibrationFormatError
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.commands.calibrate import load_cli_config, run_jig
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.verify import verify_recording
 
     path = Path(args.calibration)
     try:

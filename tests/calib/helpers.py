@@ -1,10 +1,11 @@
-"""Exact (noise-free) observation sets from first principles, independent of calib.simulate."""
+"""Exact (noise-free) observation sets from first principles, independent of
+gyrocal.calib.simulate."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from calib.observations import ObservationSet
+from gyrocal.calib.observations import ObservationSet
 
 
 def rotation(axis, angle):

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from calib.allan import NoiseCharacterisation, allan_deviation, characterise_noise
-from calib.errors import CalibInputError, CalibrationFormatError
-from calib.noise_sim import FLICKER_FLOOR, NoiseModel, simulate_still
+from gyrocal.calib.allan import NoiseCharacterisation, allan_deviation, characterise_noise
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+from gyrocal.calib.noise_sim import FLICKER_FLOOR, NoiseModel, simulate_still
 
 ODR = 200.0
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from calib.design import (
+from gyrocal.calib.design import (
     PAPER_DESIGN,
     jig_time,
     paper_plan,
@@ -9,10 +9,10 @@ from calib.design import (
     score_design,
     sphere_points,
 )
-from calib.errors import CalibInputError
-from calib.estimators import fit_paired_axis
-from calib.simulate import SimProtocol, simulate_raw_run
-from calib.windows import extract_observations
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import fit_paired_axis
+from gyrocal.calib.simulate import SimProtocol, simulate_raw_run
+from gyrocal.calib.windows import extract_observations
 
 
 def test_papers_six_point_design_is_g_optimal():

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from calib.errors import CalibInputError
-from calib.estimators import (
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import (
     METHODS,
     estimate,
     fit_iterative_ls,
@@ -12,8 +12,8 @@ from calib.estimators import (
     iterative_ls_batch,
     paired_axis_batch,
 )
-from calib.observations import ObservationSet
-from calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_runs
+from gyrocal.calib.observations import ObservationSet
+from gyrocal.calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_runs
 from tests.calib.helpers import exact_observations
 
 SCALE = np.array([1.07, 0.91, 1.15])
@@ -277,7 +277,7 @@ def test_algorithm1_reports_when_the_papers_convergence_condition_fails():
 
 
 def test_noise_pooling_follows_bartletts_test():
-    from calib.observations import pool_noise
+    from gyrocal.calib.observations import pool_noise
 
     rng = np.random.default_rng(4)
     count = np.full(8, 1000)

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from calib.errors import CalibInputError, CalibrationFormatError
-from calib.model import Consistency, GyroCalibration
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+from gyrocal.calib.model import Consistency, GyroCalibration
 
 
 def make_cal(**kw):

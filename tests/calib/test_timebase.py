@@ -1,6 +1,6 @@
 import numpy as np
 
-from calib.timebase import refit_sample_times
+from gyrocal.calib.timebase import refit_sample_times
 
 
 def test_a_stretched_start_is_straightened_with_hindsight():

@@ -1,15 +1,16 @@
-"""The bias tracker against simulated truth (calib.noise_sim): consistency, health, equivalence."""
+"""The bias tracker against simulated truth (gyrocal.calib.noise_sim): consistency, health,
+equivalence."""
 
 import math
 
 import numpy as np
 import pytest
 
-from calib.errors import CalibInputError
-from calib.model import GyroCalibration
-from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
-from calib.stationarity import StillSettings, detect_still
-from calib.tracker import BiasTracker, TrackerSettings
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+from gyrocal.calib.stationarity import StillSettings, detect_still
+from gyrocal.calib.tracker import BiasTracker, TrackerSettings
 
 ODR = 200.0
 MODEL = NoiseModel(rate_random_walk=1e-5)
@@ -215,8 +216,8 @@ def test_external_still_flags_override_the_detector():
 
 
 def test_from_noise_uses_the_characterisation():
-    from calib.allan import characterise_noise
-    from calib.noise_sim import simulate_still
+    from gyrocal.calib.allan import characterise_noise
+    from gyrocal.calib.noise_sim import simulate_still
 
     still = simulate_still(np.random.default_rng(15), 600.0, model=NoiseModel(
         noise_density=2e-4, rate_random_walk=1e-5))

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-from calib.errors import CalibInputError
-from calib.estimators import fit_paired_axis
-from calib.segments import Segment
-from calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_raw_run
-from calib.windows import extract_observations, trapezoid_weight
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import fit_paired_axis
+from gyrocal.calib.segments import Segment
+from gyrocal.calib.simulate import SimProtocol, draw_mount_axes, draw_sensors, simulate_raw_run
+from gyrocal.calib.windows import extract_observations, trapezoid_weight
 
 
 def _run(seed, protocol, **kw):

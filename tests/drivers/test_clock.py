@@ -2,7 +2,7 @@ import math
 
 import pytest
 
-from drivers.clock import Clock, SystemClock, VirtualClock
+from gyrocal.drivers.clock import Clock, SystemClock, VirtualClock
 
 
 def test_virtual_clock_moves_only_when_slept_on():

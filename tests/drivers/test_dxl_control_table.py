@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from drivers.dynamixel.control_table import (
+from gyrocal.drivers.dynamixel.control_table import (
     COMPATIBLE_MODELS,
     HARDWARE_ERROR_BITS,
     MODELS,

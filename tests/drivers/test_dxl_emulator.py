@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from drivers.clock import VirtualClock
-from drivers.dynamixel.control_table import (
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.dynamixel.control_table import (
     ACCELERATION_UNIT_RAD_S2,
     POSITION_UNIT_RAD,
     VELOCITY_UNIT_RAD_S,
 )
-from drivers.emulated.dxl import EmulatedServo, MotorParams
-from drivers.emulated.dxl.motor import plan_position
+from gyrocal.drivers.emulated.dxl import EmulatedServo, MotorParams
+from gyrocal.drivers.emulated.dxl.motor import plan_position
 
 TWO_PI = 2 * math.pi
 
@@ -209,7 +209,7 @@ def test_bus_watchdog_stops_a_servo_whose_host_went_quiet():
     clock.sleep(0.5)  # host silent
     assert s.register("Bus Watchdog") == -1
     assert s.register("Present Velocity") == 0
-    from drivers.emulated.dxl.protocol import ERR_DATA_RANGE
+    from gyrocal.drivers.emulated.dxl.protocol import ERR_DATA_RANGE
     assert w(s, "Goal Velocity", 10) == ERR_DATA_RANGE
     assert w(s, "Bus Watchdog", -1) == ERR_DATA_RANGE  # it reads -1; a host may write 0..127
     assert w(s, "Bus Watchdog", 0) == 0
@@ -235,7 +235,7 @@ def test_mode_switch_resets_profile_and_position_mode_rebases_the_turn_count():
 def test_eeprom_writes_need_torque_off():
     clock, s = servo()
     w(s, "Torque Enable", 1)
-    from drivers.emulated.dxl.protocol import ERR_ACCESS
+    from gyrocal.drivers.emulated.dxl.protocol import ERR_ACCESS
     assert w(s, "Velocity Limit", 100) == ERR_ACCESS
     assert w(s, "Torque Enable", 0) == 0
     assert w(s, "Velocity Limit", 100) == 0

@@ -11,8 +11,8 @@ import signal
 import numpy as np
 import pytest
 
-from drivers.clock import VirtualClock
-from drivers.dynamixel import (
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.dynamixel import (
     Gimbal,
     OverloadError,
     ServoCommunicationError,
@@ -25,9 +25,9 @@ from drivers.dynamixel import (
     TurnLimitError,
     WatchdogTrippedError,
 )
-from drivers.dynamixel.control_table import VELOCITY_UNIT_RAD_S
-from drivers.emulated.dxl import MotorParams, make_emulated_gimbal
-from drivers.errors import CommunicationError, ConfigurationError, SafetyError
+from gyrocal.drivers.dynamixel.control_table import VELOCITY_UNIT_RAD_S
+from gyrocal.drivers.emulated.dxl import MotorParams, make_emulated_gimbal
+from gyrocal.drivers.errors import CommunicationError, ConfigurationError, SafetyError
 
 TWO_PI = 2 * math.pi
 

@@ -11,8 +11,8 @@ from dynamixel_sdk import (
     PacketHandler,
 )
 
-from drivers.clock import VirtualClock
-from drivers.emulated.dxl import make_emulated_gimbal
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.dxl import make_emulated_gimbal
 
 PH = PacketHandler(2.0)
 
@@ -90,7 +90,7 @@ def test_a_silent_servo_breaks_the_sync_read_at_its_turn(emu):
 
 def test_an_instruction_with_a_bad_crc_gets_a_crc_error_status(emu):
     clock, port, bus = emu
-    from drivers.emulated.dxl.protocol import instruction_packet
+    from gyrocal.drivers.emulated.dxl.protocol import instruction_packet
 
     packet = bytearray(instruction_packet(1, 0x02, bytes([132, 0, 4, 0])))
     packet[-1] ^= 0x01

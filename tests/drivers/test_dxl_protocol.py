@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from dynamixel_sdk import PacketHandler
 
-from drivers.emulated.dxl.protocol import (
+from gyrocal.drivers.emulated.dxl.protocol import (
     Instruction,
     InstructionParser,
     crc16,

@@ -9,9 +9,9 @@ import sys
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler, PortHandler, port_handler
 
-from drivers.clock import SystemClock
-from drivers.dynamixel import Gimbal
-from drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus
+from gyrocal.drivers.clock import SystemClock
+from gyrocal.drivers.dynamixel import Gimbal
+from gyrocal.drivers.emulated.dxl import EmulatedServo, PtyServoBridge, ServoBus
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX pseudo-terminals")
 
@@ -42,7 +42,7 @@ def test_the_driver_opens_a_device_path_and_turns_a_servo_in_real_time():
 
 def test_gyrocal_emulate_pty_serves_the_sdk():
     proc = subprocess.Popen(
-        [sys.executable, "-m", "kit", "emulate", "--pty", "--json", "--ids", "4,5",
+        [sys.executable, "-m", "gyrocal.kit", "emulate", "--pty", "--json", "--ids", "4,5",
          "--model", "XL430-W250", "--duration", "60"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -65,6 +65,6 @@ def test_gyrocal_emulate_pty_serves_the_sdk():
 
 
 def test_gyrocal_emulate_without_pty_is_a_usage_error():
-    proc = subprocess.run([sys.executable, "-m", "kit", "emulate"], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "gyrocal.kit", "emulate"], capture_output=True,
                           text=True, timeout=60)
     assert proc.returncode == 2 and "--pty" in proc.stderr

@@ -18,9 +18,14 @@ from dynamixel_sdk import (
     port_handler,
 )
 
-from drivers.clock import SystemClock, VirtualClock
-from drivers.dynamixel.control_table import model_by_name
-from drivers.emulated.dxl import EmulatedPortHandler, EmulatedServo, PtyServoBridge, ServoBus
+from gyrocal.drivers.clock import SystemClock, VirtualClock
+from gyrocal.drivers.dynamixel.control_table import model_by_name
+from gyrocal.drivers.emulated.dxl import (
+    EmulatedPortHandler,
+    EmulatedServo,
+    PtyServoBridge,
+    ServoBus,
+)
 
 BAUD = 1_000_000
 XM = model_by_name("XM430-W350").table

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from smbus2 import i2c_msg
 
-from drivers.clock import VirtualClock
-from drivers.emulated.imu_chips import (
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.imu_chips import (
     ChipFaults,
     EmulatedLSM9DS1,
     EmulatedMPU9250,
     SensorTruth,
     make_emulated_imu,
 )
-from drivers.emulated.motion import ConstantRate, FunctionMotion
+from gyrocal.drivers.emulated.motion import ConstantRate, FunctionMotion
 
 DEG = math.pi / 180
 QUIET = SensorTruth(noise_density_rad_s_sqrt_hz=0.0)

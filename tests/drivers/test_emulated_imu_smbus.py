@@ -5,8 +5,8 @@ import errno
 import pytest
 from smbus2 import i2c_msg
 
-from drivers.clock import VirtualClock
-from drivers.emulated.smbus import EmulatedSMBus, I2CDevice
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 
 
 class RegisterFile:

@@ -1,7 +1,7 @@
 """Reader identity, configuration and scaling for every range and rate the readers offer.
 
 The datasheet values (WHO_AM_I, sensitivities, rates, register fields, temperature formulas) are
-written out here from shared/hardware-reference.md, not read from drivers.imu.chips.
+written out here from shared/hardware-reference.md, not read from gyrocal.drivers.imu.chips.
 """
 
 import errno
@@ -11,11 +11,11 @@ import warnings
 import numpy as np
 import pytest
 
-from drivers.clock import VirtualClock
-from drivers.emulated.imu_chips import ChipFaults, SensorTruth, make_emulated_imu
-from drivers.emulated.motion import ConstantRate
-from drivers.errors import BusError, ConfigurationError, DeviceIdentityError
-from drivers.imu import (
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.imu_chips import ChipFaults, SensorTruth, make_emulated_imu
+from gyrocal.drivers.emulated.motion import ConstantRate
+from gyrocal.drivers.errors import BusError, ConfigurationError, DeviceIdentityError
+from gyrocal.drivers.imu import (
     MODELS,
     BusOpenError,
     ChipIdentityError,

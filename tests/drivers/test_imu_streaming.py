@@ -11,11 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from drivers.clock import VirtualClock
-from drivers.emulated.imu_chips import ChipFaults, SensorTruth, make_emulated_imu
-from drivers.emulated.motion import ConstantRate, FunctionMotion
-from drivers.errors import BusError
-from drivers.imu import SensorFaultError, open_imu
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.imu_chips import ChipFaults, SensorTruth, make_emulated_imu
+from gyrocal.drivers.emulated.motion import ConstantRate, FunctionMotion
+from gyrocal.drivers.errors import BusError
+from gyrocal.drivers.imu import SensorFaultError, open_imu
 
 DEG = math.pi / 180
 # model -> (odr_hz, range_dps, rad/s per count from the datasheet)

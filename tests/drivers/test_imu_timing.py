@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.imu.timing import SampleClock
+from gyrocal.drivers.imu.timing import SampleClock
 
 
 def simulate(true_time_of, nominal_period, duration, rng, bracket=20e-6, **kw):

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from drivers.clock import VirtualClock
-from drivers.emulated.dxl import EmulatedServo
-from drivers.emulated.jig import GimbalJig, rotvec_to_matrix
-from drivers.emulated.motion import MotionSource
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.dxl import EmulatedServo
+from gyrocal.drivers.emulated.jig import GimbalJig, rotvec_to_matrix
+from gyrocal.drivers.emulated.motion import MotionSource
 
 
 def make(seed=1, **jig_kw):

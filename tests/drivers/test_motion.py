@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from drivers.emulated.motion import ConstantRate, FunctionMotion, MotionSource
+from gyrocal.drivers.emulated.motion import ConstantRate, FunctionMotion, MotionSource
 
 
 def test_constant_rate_repeats_its_vector():

@@ -1,11 +1,12 @@
-"""Write a simulated session (calib.noise_sim) as a Recording v1, with encoders and segments."""
+"""Write a simulated session (gyrocal.calib.noise_sim) as a Recording v1, with encoders and
+segments."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from calib.segments import Segment
-from kit.recording import RecordingWriter
+from gyrocal.calib.segments import Segment
+from gyrocal.kit.recording import RecordingWriter
 
 TICK = 2 * np.pi / 4096
 

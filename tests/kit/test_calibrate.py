@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kit.cli import COMMANDS, main
-from kit.recording import load_recording
+from gyrocal.kit.cli import COMMANDS, main
+from gyrocal.kit.recording import load_recording
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -163,7 +163,7 @@ def test_an_error_mid_turn_stops_the_servos_and_keeps_the_recording(tmp_path, ca
 def test_a_signal_stops_the_servos_and_keeps_an_incomplete_recording(tmp_path, sig, code):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "kit", "calibrate", "--sim", "--realtime", "--out",
+        [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim", "--realtime", "--out",
          str(tmp_path), "--quiet"],
         cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     manifest = tmp_path / "recording" / "manifest.json"
@@ -228,7 +228,7 @@ def test_doctor_on_the_emulated_jig(capsys):
 
 
 def test_doctor_reads_the_usb_latency_timer(tmp_path):
-    from kit.commands.doctor import latency_timer_ms
+    from gyrocal.kit.commands.doctor import latency_timer_ms
 
     sysfs = tmp_path / "sys"
     (sysfs / "ttyUSB0").mkdir(parents=True)

@@ -4,7 +4,7 @@ import shutil
 import numpy as np
 import pytest
 
-from kit.cli import main
+from gyrocal.kit.cli import main
 
 
 @pytest.fixture(scope="module")

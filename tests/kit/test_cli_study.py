@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from kit.cli import main
+from gyrocal.kit.cli import main
 
 
 def test_normal_preset_json_has_every_method_and_honest_coverage(capsys):

@@ -2,9 +2,9 @@ import tomllib
 
 import pytest
 
-from kit.cli import main
-from kit.config import SCHEMA, apply_overrides, default_config, load_config, template
-from kit.errors import InputError
+from gyrocal.kit.cli import main
+from gyrocal.kit.config import SCHEMA, apply_overrides, default_config, load_config, template
+from gyrocal.kit.errors import InputError
 
 
 def test_template_parses_back_to_the_defaults(tmp_path):
@@ -71,7 +71,7 @@ def test_init_writes_once(tmp_path, capsys):
 
 
 def test_the_method_choices_are_the_estimators():
-    from calib.estimators import METHODS as ESTIMATORS
-    from kit.config import METHODS
+    from gyrocal.calib.estimators import METHODS as ESTIMATORS
+    from gyrocal.kit.config import METHODS
 
     assert set(METHODS) == set(ESTIMATORS)

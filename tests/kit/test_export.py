@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from calib.allan import characterise_noise
-from calib.model import GyroCalibration
-from calib.noise_sim import NoiseModel, simulate_still
-from kit.cli import main
-from kit.errors import InputError
-from kit.exports import EXPORTERS, Exporter, export, register
+from gyrocal.calib.allan import characterise_noise
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.noise_sim import NoiseModel, simulate_still
+from gyrocal.kit.cli import main
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.exports import EXPORTERS, Exporter, export, register
 
 
 @pytest.fixture(scope="module")

@@ -8,10 +8,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from calib.allan import characterise_noise
-from calib.model import Consistency, GyroCalibration
-from calib.noise_sim import NoiseModel, simulate_still
-from kit.cli import main
+from gyrocal.calib.allan import characterise_noise
+from gyrocal.calib.model import Consistency, GyroCalibration
+from gyrocal.calib.noise_sim import NoiseModel, simulate_still
+from gyrocal.kit.cli import main
 
 
 def make_calibration():

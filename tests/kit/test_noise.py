@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from calib.noise_sim import NoiseModel, simulate_still
-from kit.cli import main
+from gyrocal.calib.noise_sim import NoiseModel, simulate_still
+from gyrocal.kit.cli import main
 from tests.kit.simrec import write_session
 
 

@@ -3,9 +3,9 @@ import json
 import numpy as np
 import pytest
 
-from calib.segments import Segment
-from kit.errors import OutputExistsError
-from kit.recording import RecordingError, RecordingWriter, load_recording
+from gyrocal.calib.segments import Segment
+from gyrocal.kit.errors import OutputExistsError
+from gyrocal.kit.recording import RecordingError, RecordingWriter, load_recording
 
 SENSOR = {"model": "mpu9250", "odr_hz": 200.0, "full_scale_dps": 500,
           "sensitivity_rad_s_per_lsb": 0.0002664624812}

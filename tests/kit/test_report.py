@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from calib.model import GyroCalibration
-from kit.cli import main
-from kit.errors import InputError
-from kit.recording import load_recording
-from kit.report_plots import (
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.kit.cli import main
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.recording import load_recording
+from gyrocal.kit.report_plots import (
     boxcar_mean,
     encoder_rate,
     nominal_axis,
@@ -31,7 +31,7 @@ def run_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def extracted(run_dir):
-    from kit.pipeline import extract_recording as extract
+    from gyrocal.kit.pipeline import extract_recording as extract
 
     rec = load_recording(run_dir / "recording")
     return rec, extract(rec)
@@ -197,8 +197,8 @@ def test_window_arithmetic():
 def test_a_turn_with_a_gap_is_planned_without_a_window(run_dir, tmp_path):
     import shutil
 
-    from kit.pipeline import extract_recording as extract
-    from kit.report_plots import _gaps, plan_report
+    from gyrocal.kit.pipeline import extract_recording as extract
+    from gyrocal.kit.report_plots import _gaps, plan_report
 
     rec_dir = tmp_path / "rec"
     shutil.copytree(run_dir / "recording", rec_dir)

@@ -1,9 +1,9 @@
 import pytest
 
-from drivers.errors import DriverError
-from drivers.imu import open_imu
-from kit.config import apply_overrides, default_config
-from kit.sim import build_sim
+from gyrocal.drivers.errors import DriverError
+from gyrocal.drivers.imu import open_imu
+from gyrocal.kit.config import apply_overrides, default_config
+from gyrocal.kit.sim import build_sim
 
 
 def _sim(**overrides):

@@ -6,8 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from calib.noise_sim import NoiseModel, sim_calibration, simulate_session
-from kit.cli import main
+from gyrocal.calib.noise_sim import NoiseModel, sim_calibration, simulate_session
+from gyrocal.kit.cli import main
 from tests.kit.simrec import write_session
 
 MODEL = NoiseModel(rate_random_walk=1e-5)

@@ -8,11 +8,11 @@ import re
 import numpy as np
 import pytest
 
-import kit.commands.calibrate as calibrate_cmd
-from calib.model import GyroCalibration
-from drivers.dynamixel.errors import TerminatedBySignal
-from kit.cli import main
-from kit.sim import sim_truth
+import gyrocal.kit.commands.calibrate as calibrate_cmd
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
+from gyrocal.kit.cli import main
+from gyrocal.kit.sim import sim_truth
 
 
 def run_json(capsys, *argv):
@@ -138,8 +138,8 @@ def test_real_sigint_on_the_wall_clock_jig_exits_130():
 
     root = Path(__file__).resolve().parents[2]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "kit", "track", "--live", "--sim", "--realtime", "--duration",
-         "60", "--json"],
+        [sys.executable, "-m", "gyrocal.kit", "track", "--live", "--sim", "--realtime",
+         "--duration", "60", "--json"],
         cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         first = proc.stderr.readline()  # printed once the servos hold
@@ -157,8 +157,8 @@ def test_real_sigint_on_the_wall_clock_jig_exits_130():
 
 def _truth_calibration(seed, path, flip_axes=False):
     """A Calibration v1 holding the emulated jig's true scale, bias and servo axes."""
-    from kit.config import load_config
-    from kit.sim import build_sim
+    from gyrocal.kit.config import load_config
+    from gyrocal.kit.sim import build_sim
 
     sim = build_sim(load_config(None), seed=seed)
     sign = -1.0 if flip_axes else 1.0
@@ -214,8 +214,8 @@ def test_live_turns_bad_usage_exits_2(capsys, argv, match):
 
 
 def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys):
-    from drivers.emulated.imu_chips import TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ
-    from kit.recording import load_recording
+    from gyrocal.drivers.emulated.imu_chips import TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ
+    from gyrocal.kit.recording import load_recording
 
     rec = tmp_path / "still"
     assert main(["track", "--live", "--sim", "--duration", "30", "--record", str(rec),

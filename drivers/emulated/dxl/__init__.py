@@ -1,11 +1,11 @@
 """Emulated Dynamixel X-series servos speaking Protocol 2.0, byte for byte.
 
-* :mod:`~drivers.emulated.dxl.protocol` — CRC-16, byte stuffing, packet framing.
-* :mod:`~drivers.emulated.dxl.servo` — one servo: control table, instructions, faults.
-* :mod:`~drivers.emulated.dxl.motor` — its motor dynamics on the shared clock.
-* :mod:`~drivers.emulated.dxl.bus` — several servos on one bus.
-* :mod:`~drivers.emulated.dxl.port` — the in-process ``PortHandler`` (default transport).
-* :mod:`~drivers.emulated.dxl.pty` — the pseudo-terminal transport.
+* :mod:`~gyrocal.drivers.emulated.dxl.protocol` — CRC-16, byte stuffing, packet framing.
+* :mod:`~gyrocal.drivers.emulated.dxl.servo` — one servo: control table, instructions, faults.
+* :mod:`~gyrocal.drivers.emulated.dxl.motor` — its motor dynamics on the shared clock.
+* :mod:`~gyrocal.drivers.emulated.dxl.bus` — several servos on one bus.
+* :mod:`~gyrocal.drivers.emulated.dxl.port` — the in-process ``PortHandler`` (default transport).
+* :mod:`~gyrocal.drivers.emulated.dxl.pty` — the pseudo-terminal transport.
 
 :func:`make_emulated_gimbal` builds the whole emulated gimbal in one call; :func:`make_servo_bus`
 only its servos on their bus (to serve them on a :class:`PtyServoBridge`).
@@ -16,13 +16,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
-from drivers.clock import Clock
-from drivers.emulated.dxl.bus import PendingReply, ServoBus
-from drivers.emulated.dxl.motor import MotorParams, RippleComponent, ServoMotor
-from drivers.emulated.dxl.port import EmulatedPortHandler
-from drivers.emulated.dxl.pty import PtyServoBridge
-from drivers.emulated.dxl.servo import EmulatedServo
-from drivers.emulated.jig import GimbalJig
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.dxl.bus import PendingReply, ServoBus
+from gyrocal.drivers.emulated.dxl.motor import MotorParams, RippleComponent, ServoMotor
+from gyrocal.drivers.emulated.dxl.port import EmulatedPortHandler
+from gyrocal.drivers.emulated.dxl.pty import PtyServoBridge
+from gyrocal.drivers.emulated.dxl.servo import EmulatedServo
+from gyrocal.drivers.emulated.jig import GimbalJig
 
 __all__ = [
     "EmulatedGimbal",
@@ -93,7 +93,7 @@ def make_emulated_gimbal(
     Parameters
     ----------
     clock : Clock
-        The shared clock (normally a :class:`~drivers.clock.VirtualClock`).
+        The shared clock (normally a :class:`~gyrocal.drivers.clock.VirtualClock`).
     ids : sequence of int
         Servo IDs from the base to the tip of the gimbal.
     model : str
@@ -109,7 +109,7 @@ def make_emulated_gimbal(
     return_delay_us : float or None
         Return Delay Time of every servo in µs; None = factory 500 µs.
     axes, tilt_deg, mount
-        The jig's geometry (see :class:`~drivers.emulated.jig.GimbalJig`); by default servo
+        The jig's geometry (see :class:`~gyrocal.drivers.emulated.jig.GimbalJig`); by default servo
         IDs ``ids[0..2]`` turn about sensor x, y, z with 0.3° tilts and a 3° mount error.
     motor_params : MotorParams or None
         Motor model parameters for every servo.
@@ -119,7 +119,8 @@ def make_emulated_gimbal(
     Returns
     -------
     EmulatedGimbal
-        ``(port, bus, jig)``: pass ``port`` to :class:`drivers.dynamixel.Gimbal`, ``jig`` to the
+        ``(port, bus, jig)``: pass ``port`` to :class:`gyrocal.drivers.dynamixel.Gimbal`, ``jig``
+        to the
         emulated IMU as its motion source; ``bus.servo(id)`` has the fault knobs.
     """
     bus = make_servo_bus(clock, ids, model, seed, baudrate=baudrate,

@@ -14,8 +14,8 @@ import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from drivers.clock import Clock
-from drivers.emulated.dxl.protocol import (
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.dxl.protocol import (
     BROADCAST_ID,
     ERR_CRC,
     ERR_DATA_LENGTH,
@@ -26,7 +26,7 @@ from drivers.emulated.dxl.protocol import (
     fast_status_packet,
     status_packet,
 )
-from drivers.emulated.dxl.servo import EmulatedServo
+from gyrocal.drivers.emulated.dxl.servo import EmulatedServo
 
 __all__ = ["PendingReply", "ServoBus"]
 

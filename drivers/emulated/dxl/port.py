@@ -19,8 +19,8 @@ from collections import deque
 
 from dynamixel_sdk import PortHandler
 
-from drivers.clock import Clock
-from drivers.emulated.dxl.bus import PendingReply, ServoBus
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.dxl.bus import PendingReply, ServoBus
 
 __all__ = ["EmulatedPortHandler"]
 

@@ -14,8 +14,8 @@ import select
 import threading
 import tty
 
-from drivers.clock import Clock, SystemClock
-from drivers.emulated.dxl.bus import ServoBus
+from gyrocal.drivers.clock import Clock, SystemClock
+from gyrocal.drivers.emulated.dxl.bus import ServoBus
 
 __all__ = ["PtyServoBridge"]
 
@@ -26,7 +26,8 @@ class PtyServoBridge:
     Parameters
     ----------
     bus : ServoBus
-        The emulated servos. Their clock should be a :class:`~drivers.clock.SystemClock`: the
+        The emulated servos. Their clock should be a :class:`~gyrocal.drivers.clock.SystemClock`:
+        the
         client on the other side measures its timeouts in real time.
     model_timing : bool
         Wait each servo's Return Delay Time before its reply (real time). Off by default: the

@@ -1,8 +1,10 @@
 """One emulated Dynamixel X-series servo: control table, instructions, motor, faults.
 
 The servo executes Protocol 2.0 instructions against its control table (hardware reference §4, §5)
-and drives a :class:`~drivers.emulated.dxl.motor.ServoMotor` on the shared clock. It does not
-frame bytes itself: :class:`~drivers.emulated.dxl.bus.ServoBus` parses instruction packets and
+and drives a :class:`~gyrocal.drivers.emulated.dxl.motor.ServoMotor` on the shared clock. It does
+not
+frame bytes itself: :class:`~gyrocal.drivers.emulated.dxl.bus.ServoBus` parses instruction packets
+and
 asks the servos on the bus for their replies.
 
 Behaviour modelled (hardware reference §5, §5.1, §5.2, §6):
@@ -28,8 +30,8 @@ import threading
 
 import numpy as np
 
-from drivers.clock import Clock
-from drivers.dynamixel.control_table import (
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.dynamixel.control_table import (
     ACCELERATION_UNIT_RAD_S2,
     BAUD_RATES,
     OPERATING_MODES,
@@ -42,7 +44,7 @@ from drivers.dynamixel.control_table import (
     ServoModel,
     model_by_name,
 )
-from drivers.emulated.dxl.motor import (
+from gyrocal.drivers.emulated.dxl.motor import (
     MotorParams,
     Plan,
     ServoMotor,
@@ -50,7 +52,7 @@ from drivers.emulated.dxl.motor import (
     plan_stop,
     plan_velocity,
 )
-from drivers.emulated.dxl.protocol import (
+from gyrocal.drivers.emulated.dxl.protocol import (
     ERR_ACCESS,
     ERR_DATA_LENGTH,
     ERR_DATA_LIMIT,
