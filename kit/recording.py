@@ -22,11 +22,12 @@ import io
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+import stat
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, BinaryIO, TextIO
 
 import numpy as np
 
@@ -40,7 +41,11 @@ __all__ = [
     "Recording",
     "RecordingError",
     "RecordingWriter",
+    "iter_imu",
     "load_recording",
+    "open_regular",
+    "read_manifest",
+    "read_segments",
 ]
 
 FORMAT = "gyrocal-recording"
@@ -269,67 +274,400 @@ class Recording:
         return float(np.mean(self.imu_temp[ok])) if ok.any() else None
 
 
-def _read_csv(path: Path, header: str, ncols: int, warnings: list[str]) -> list[list[str]]:
-    if not path.exists():
+# ---------------------------------------------------------------------------------------------
+# Reading. Input bounds (issue 17): only regular files are opened (a FIFO, a directory or a
+# device is refused before a byte is read, so nothing can block), every file has a size cap, a
+# line may not run longer than MAX_LINE_BYTES, a NUL byte is refused where it is met, and a
+# message quotes at most EXCERPT_CHARS of a row. Parsing (issue 16): blocks of about
+# BLOCK_BYTES go through numpy's C reader (numpy.loadtxt); a block it rejects is parsed again
+# line by line by the exact checker, which names the file, line and field of the fault.
+
+#: Largest manifest.json read, bytes.
+MAX_MANIFEST_BYTES = 1 << 20
+#: Largest imu.csv or encoder.csv read, bytes (about 16 hours at 1 kHz).
+MAX_CSV_BYTES = 4 << 30
+#: Largest segments.csv read, bytes (some 100 000 segments).
+MAX_SEGMENTS_BYTES = 16 << 20
+#: Longest line accepted in a CSV file, bytes (a Recording v1 row is under 100).
+MAX_LINE_BYTES = 4096
+#: Most characters of a row quoted in a message.
+EXCERPT_CHARS = 60
+#: Bytes parsed at a time by the block reader.
+BLOCK_BYTES = 1 << 22
+
+
+def _excerpt(text: str | bytes, quote: bool = True) -> str:
+    """``text`` (quoted), cut to :data:`EXCERPT_CHARS` characters with an ellipsis."""
+    if isinstance(text, bytes):
+        text = text.decode("ascii", errors="replace")
+    if len(text) <= EXCERPT_CHARS:
+        return repr(text) if quote else text
+    cut = text[:EXCERPT_CHARS]
+    return f"{cut!r}... ({len(text)} characters)" if quote else f"{cut}... ({len(text)} characters)"
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe (FIFO)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return kind
+    return "not a regular file"
+
+
+def open_regular(path: Path, max_bytes: int, what: str = "a Recording v1 directory") -> BinaryIO:
+    """Open ``path`` for reading if it is a regular file of at most ``max_bytes``.
+
+    The file is opened without blocking and checked with ``fstat`` before any read, so a FIFO,
+    a directory, a device such as ``/dev/zero`` (or a symlink to any of them) is refused at once
+    rather than read for ever.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    max_bytes : int
+        Size cap.
+    what : str
+        What the file belongs to, for the message when it is missing.
+
+    Returns
+    -------
+    BinaryIO
+        An unbuffered binary file; the caller closes it.
+
+    Raises
+    ------
+    RecordingError
+        Missing, unreadable, not a regular file, or larger than ``max_bytes``.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError:
         raise RecordingError(
-            f"{path.name} is missing from {path.parent}: not a complete Recording v1 directory"
+            f"{path.name} is missing from {path.parent}: not {what}"
+        ) from None
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise RecordingError(
+                f"{path} is {_file_kind(st.st_mode)}: a recording's files must be regular files; "
+                "copy the data into a file"
+            )
+        if st.st_size > max_bytes:
+            raise RecordingError(
+                f"{path} is {st.st_size} bytes, more than the {max_bytes} gyrocal reads from "
+                "such a file; split the session into shorter recordings"
+            )
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb", buffering=0)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_manifest(root: Path) -> dict[str, Any]:
+    """Read and check the ``manifest.json`` of the recording directory ``root``.
+
+    Raises
+    ------
+    RecordingError
+        Not a directory, manifest missing, too large, not JSON, or not Recording v1.
+    """
+    if not root.is_dir():
+        raise RecordingError(f"{root} is not a directory: give the recording directory")
+    mpath = root / "manifest.json"
+    with open_regular(mpath, MAX_MANIFEST_BYTES) as fh:
+        data = fh.read(MAX_MANIFEST_BYTES + 1)
+    if len(data) > MAX_MANIFEST_BYTES:
+        raise RecordingError(f"{mpath} is larger than {MAX_MANIFEST_BYTES} bytes")
+    try:
+        manifest = json.loads(data.decode("utf-8"))
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError, nesting
+        why = _excerpt(str(exc), quote=False)
+        raise RecordingError(f"{mpath} is not valid JSON: {why}") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        raise RecordingError(f"{mpath}: 'format' must be {FORMAT!r}")
+    if manifest.get("version") != VERSION:
+        raise RecordingError(
+            f"{mpath}: recording version {_excerpt(repr(manifest.get('version')), quote=False)} "
+            f"is not supported (this gyrocal reads version {VERSION})"
         )
-    text = path.read_text(encoding="ascii", errors="replace")
-    if not text:
-        raise RecordingError(f"{path} is empty: expected the header {header!r}")
-    lines = text.split("\n")
-    if lines[0].strip() != header:
-        raise RecordingError(f"{path}: header is {lines[0].strip()!r}, expected {header!r}")
-    body = lines[1:]
-    if body and body[-1] == "":
-        body.pop()
-    elif body:
-        warnings.append(f"{path.name}: dropped a partial last row {body[-1]!r} (interrupted run)")
-        body.pop()
+    for key in ("sensor", "gimbal", "protocol"):
+        if not isinstance(manifest.get(key, {}), dict):
+            raise RecordingError(f"{mpath}: {key!r} must be an object")
+    return manifest
+
+
+def _long_line(path: Path, buf: bytes, lo: int, hi: int, line_no: int) -> None:
+    """Refuse a line longer than :data:`MAX_LINE_BYTES` in ``buf[lo:hi]`` (line ``line_no`` at
+    ``lo``).
+
+    Such a line holds a newline-free window of half that length starting at a multiple of it,
+    so one ``find`` per half-line-length finds every candidate.
+    """
+    step = MAX_LINE_BYTES // 2
+    for w in range(lo, hi - step + 1, step):
+        if buf.find(b"\n", w, w + step) >= 0:
+            continue
+        start = buf.rfind(b"\n", lo, w) + 1 or lo
+        stop = buf.find(b"\n", w)
+        stop = len(buf) if stop < 0 else stop
+        if stop - start > MAX_LINE_BYTES:
+            bad = line_no + buf.count(b"\n", lo, start)
+            raise RecordingError(
+                f"{path}:{bad}: line longer than {MAX_LINE_BYTES} bytes "
+                f"({_excerpt(buf[start:start + EXCERPT_CHARS + 1])}); this is not a Recording "
+                "v1 row"
+            )
+
+
+def _lines(
+    path: Path, header: str, max_bytes: int, warnings: list[str]
+) -> Iterator[tuple[int, bytes, int]]:
+    """Blocks of whole lines of a CSV file after its header.
+
+    Yields ``(number of the block's first line, the block, how many lines it holds)``.
+    Each block ends with a newline. A last line without one (an interrupted run) is dropped with
+    a warning; a NUL byte or a line longer than :data:`MAX_LINE_BYTES` is an error.
+    """
+    with open_regular(path, max_bytes) as fh:
+        carry = b""
+        line_no = 1  # of the first line in carry
+        total = 0
+        header_done = False
+        while True:
+            chunk = fh.read(BLOCK_BYTES)
+            total += len(chunk)
+            if total > max_bytes:
+                raise RecordingError(f"{path} grew past {max_bytes} bytes while being read")
+            buf = carry + chunk if carry else chunk
+            nul = buf.find(b"\0")
+            if nul >= 0:
+                bad = line_no + buf.count(b"\n", 0, nul)
+                raise RecordingError(
+                    f"{path}:{bad}: NUL bytes (a power loss can leave zeros at the end of a "
+                    f"file); cut the file before line {bad} and read it again"
+                )
+            if not header_done:
+                end = buf.find(b"\n")
+                if end < 0 and chunk and len(buf) <= MAX_LINE_BYTES:
+                    carry = buf
+                    continue
+                first = buf[: end if end >= 0 else MAX_LINE_BYTES].decode("ascii", "replace")
+                if not buf:
+                    raise RecordingError(f"{path} is empty: expected the header {header!r}")
+                if first.strip() != header:
+                    raise RecordingError(
+                        f"{path}: header is {_excerpt(first.strip())}, expected {header!r}"
+                    )
+                header_done = True
+                buf = buf[end + 1:] if end >= 0 else b""
+                line_no = 2
+            end = buf.rfind(b"\n") + 1
+            if not chunk:  # end of file
+                _long_line(path, buf, 0, end, line_no)
+                if end:
+                    yield line_no, buf[:end], buf.count(b"\n", 0, end)
+                if buf[end:]:
+                    warnings.append(
+                        f"{path.name}: dropped a partial last row {_excerpt(buf[end:])} "
+                        "(interrupted run)"
+                    )
+                return
+            if len(buf) - end > MAX_LINE_BYTES:
+                _long_line(path, buf, 0, len(buf), line_no)
+            _long_line(path, buf, 0, end, line_no)
+            if end:
+                k = buf.count(b"\n", 0, end)
+                yield line_no, buf[:end], k
+                line_no += k
+            carry = buf[end:]
+
+
+def _split_rows(text: str, first: int, path: Path, ncols: int) -> list[list[str]]:
+    """The comma-separated fields of each line of ``text`` (lines numbered from ``first``)."""
     rows = []
-    for i, line in enumerate(body, start=2):
+    for i, line in enumerate(text.split("\n")[:-1], start=first):
         fields = line.split(",")
         if len(fields) != ncols:
             raise RecordingError(
                 f"{path}:{i}: expected {ncols} comma-separated fields, got {len(fields)}: "
-                f"{line[:80]!r}"
+                f"{_excerpt(line)}"
             )
         rows.append(fields)
     return rows
 
 
-def _floats(
-    rows: list[list[str]], cols: Sequence[int], path: Path, empty_ok: bool = False
-) -> np.ndarray:
-    """Parse columns ``cols`` of ``rows`` as finite floats (empty -> NaN if ``empty_ok``)."""
-    try:  # fast path: numpy parses the strings; any problem falls through to the exact report
-        strs = [[row[c].strip() or ("nan" if empty_ok else "") for c in cols] for row in rows]
-        out = np.array(strs, dtype=float).reshape(len(rows), len(cols))
-        if not np.any(np.isinf(out) if empty_ok else ~np.isfinite(out)):
-            return out
-    except ValueError:
-        pass
-    out = np.empty((len(rows), len(cols)))
+def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: bool) -> np.ndarray:
+    """Parse ``block`` line by line; the first fault raises with its file, line and field."""
+    rows = _split_rows(block.decode("ascii", errors="replace"), first, path, ncols)
+    out = np.empty((len(rows), ncols))
     for r, row in enumerate(rows):
-        for c, col in enumerate(cols):
-            s = row[col].strip()
-            if s == "" and empty_ok:
+        for c, field in enumerate(row):
+            s = field.strip()
+            last = empty_last and c == ncols - 1
+            if s == "" and last:
                 out[r, c] = math.nan
                 continue
             try:
                 v = float(s)
             except ValueError:
                 raise RecordingError(
-                    f"{path}:{r + 2}: field {col + 1} is {s!r}, not a number"
+                    f"{path}:{first + r}: field {c + 1} is {_excerpt(s)}, not a number"
                 ) from None
-            if not math.isfinite(v):
-                raise RecordingError(f"{path}:{r + 2}: field {col + 1} is {s!r}")
+            if math.isinf(v) or (math.isnan(v) and not last):
+                raise RecordingError(f"{path}:{first + r}: field {c + 1} is {_excerpt(s)}")
             out[r, c] = v
     return out
 
 
+def _parse_block(
+    block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_last: bool
+) -> np.ndarray:
+    """Parse a block of whole lines into an ``(n, ncols)`` array.
+
+    numpy's C reader takes the block first; anything it rejects, a blank line it would skip, or
+    a value out of domain sends the block to :func:`_parse_exact` for the located message.
+    """
+    fast = block
+    if b"\r" in fast:
+        fast = fast.replace(b"\r\n", b"\n")
+    if empty_last:
+        fast = fast.replace(b",\n", b",nan\n")
+    try:
+        out = np.loadtxt(io.BytesIO(fast), delimiter=",", dtype=float, comments=None, ndmin=2)
+    except ValueError:
+        out = None
+    if out is not None and out.shape == (nlines, ncols):
+        head = out[:, :-1] if empty_last else out
+        if np.isfinite(head).all() and not (empty_last and np.isinf(out[:, -1]).any()):
+            return out
+    return _parse_exact(block, first, path, ncols, empty_last)
+
+
+def _csv_blocks(
+    path: Path, header: str, ncols: int, warnings: list[str], *, empty_last: bool = False,
+    max_bytes: int = MAX_CSV_BYTES,
+) -> Iterator[np.ndarray]:
+    """``(n, ncols)`` float blocks of a numeric CSV file, its first column a non-decreasing time.
+
+    Raises
+    ------
+    RecordingError
+        Naming file and line: a malformed row, or a time smaller than the one before it.
+    """
+    last_t = -math.inf
+    for first, block, nlines in _lines(path, header, max_bytes, warnings):
+        arr = _parse_block(block, nlines, first, path, ncols, empty_last)
+        if arr.shape[0] == 0:
+            continue
+        t = arr[:, 0]
+        back = t[0] < last_t
+        if not back and t.size > 1:
+            steps = np.diff(t) < 0
+            back = bool(steps.any())
+        if back:
+            i = 0 if t[0] < last_t else int(np.flatnonzero(steps)[0]) + 1
+            before = last_t if i == 0 else t[i - 1]
+            raise RecordingError(
+                f"{path}:{first + i}: time goes backwards ({t[i]} < {before})"
+            )
+        last_t = float(t[-1])
+        yield arr
+
+
+def _count_lines(path: Path, max_bytes: int) -> int:
+    """Newlines in ``path`` (an upper bound on its rows, so arrays can be sized once)."""
+    n = 0
+    with open_regular(path, max_bytes) as fh:
+        while chunk := fh.read(BLOCK_BYTES):
+            n += chunk.count(b"\n")
+    return n
+
+
+def _read_columns(
+    path: Path, header: str, widths: Sequence[int], warnings: list[str], *,
+    empty_last: bool = False,
+) -> list[np.ndarray]:
+    """A numeric CSV file as contiguous float64 arrays, one per group of ``widths`` columns.
+
+    The rows are counted first so that each array is allocated once at its final size.
+    """
+    cap = _count_lines(path, MAX_CSV_BYTES)
+    out = [np.empty((cap, w)) if w > 1 else np.empty(cap) for w in widths]
+    edges = np.cumsum([0, *widths]).tolist()
+    n = 0
+    for arr in _csv_blocks(path, header, edges[-1], warnings, empty_last=empty_last):
+        k = arr.shape[0]
+        for a, lo, hi in zip(out, edges[:-1], edges[1:], strict=True):
+            a[n:n + k] = arr[:, lo:hi] if hi - lo > 1 else arr[:, lo]
+        n += k
+    return [a[:n] for a in out]
+
+
+def iter_imu(
+    path: str | os.PathLike[str], warnings: list[str] | None = None
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Stream ``imu.csv`` of a recording in blocks of some 60 000 rows.
+
+    For commands that need one pass over the samples (``noise``): memory stays bounded
+    whatever the recording's length. Every check of :func:`load_recording` applies.
+
+    Parameters
+    ----------
+    path : path-like
+        The recording directory (its manifest is checked first).
+    warnings : list of str, optional
+        Receives what the reader tolerated (a partial last row).
+
+    Yields
+    ------
+    t : ndarray (n,)
+    rate : ndarray (n, 3)
+        rad/s.
+    temp : ndarray (n,)
+        °C, NaN where absent.
+    """
+    root = Path(path)
+    read_manifest(root)
+    sink: list[str] = [] if warnings is None else warnings
+    for arr in _csv_blocks(root / "imu.csv", IMU_HEADER, 5, sink, empty_last=True):
+        yield arr[:, 0], arr[:, 1:4], arr[:, 4]
+
+
+def read_segments(root: Path, warnings: list[str]) -> tuple[Segment, ...]:
+    """The protocol segments listed in ``segments.csv`` of the recording ``root``."""
+    spath = root / "segments.csv"
+    segments = []
+    for first, block, _ in _lines(spath, SEGMENTS_HEADER, MAX_SEGMENTS_BYTES, warnings):
+        rows = _split_rows(block.decode("ascii", errors="replace"), first, spath, 7)
+        for i, row in enumerate(rows, start=first):
+            try:
+                motor = None if row[2].strip() == "" else int(row[2])
+                seg = Segment(
+                    index=int(row[0]),
+                    kind=row[1].strip(),
+                    motor=motor,
+                    direction=int(row[3]),
+                    speed=float(row[4]),
+                    t_start=float(row[5]),
+                    t_end=float(row[6]),
+                )
+            except ValueError as exc:
+                raise RecordingError(f"{spath}:{i}: {_excerpt(str(exc), quote=False)}") from None
+            segments.append(seg)
+    return tuple(segments)
+
+
 def load_recording(path: str | os.PathLike[str]) -> Recording:
     """Read a Recording v1 directory.
+
+    The numeric files are parsed in blocks by numpy's C reader straight into one float64
+    array per column (no per-row Python objects), so the memory beyond the returned arrays is
+    one block; :func:`iter_imu` streams the samples instead for one-pass analyses.
 
     Parameters
     ----------
@@ -343,67 +681,27 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     Raises
     ------
     RecordingError
-        If the directory or a file is missing, a manifest is not Recording v1, a header or row is
-        malformed (the message names the file and line), or times go backwards.
+        If the directory or a file is missing or not a regular file, a file is over its size
+        cap, a manifest is not Recording v1, a header or row is malformed (the message names
+        the file and line), or times go backwards.
     """
     root = Path(path)
-    if not root.is_dir():
-        raise RecordingError(f"{root} is not a directory: give the recording directory")
-    mpath = root / "manifest.json"
-    if not mpath.exists():
-        raise RecordingError(f"manifest.json is missing from {root}: not a Recording v1 directory")
-    try:
-        manifest = json.loads(mpath.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{mpath} is not valid JSON: {exc}") from None
-    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
-        raise RecordingError(f"{mpath}: 'format' must be {FORMAT!r}")
-    if manifest.get("version") != VERSION:
-        raise RecordingError(
-            f"{mpath}: recording version {manifest.get('version')!r} is not supported "
-            f"(this gyrocal reads version {VERSION})"
-        )
-    for key in ("sensor", "gimbal", "protocol"):
-        if not isinstance(manifest.get(key, {}), dict):
-            raise RecordingError(f"{mpath}: {key!r} must be an object")
+    manifest = read_manifest(root)
     warnings: list[str] = []
-    imu_rows = _read_csv(root / "imu.csv", IMU_HEADER, 5, warnings)
-    imu = _floats(imu_rows, (0, 1, 2, 3), root / "imu.csv")
-    temp = _floats(imu_rows, (4,), root / "imu.csv", empty_ok=True)[:, 0]
-    enc_rows = _read_csv(root / "encoder.csv", ENCODER_HEADER, 3, warnings)
-    enc = _floats(enc_rows, (0, 1, 2), root / "encoder.csv")
-    seg_rows = _read_csv(root / "segments.csv", SEGMENTS_HEADER, 7, warnings)
-    segments = []
-    for i, row in enumerate(seg_rows, start=2):
-        try:
-            motor = None if row[2].strip() == "" else int(row[2])
-            seg = Segment(
-                index=int(row[0]),
-                kind=row[1].strip(),
-                motor=motor,
-                direction=int(row[3]),
-                speed=float(row[4]),
-                t_start=float(row[5]),
-                t_end=float(row[6]),
-            )
-        except ValueError as exc:
-            raise RecordingError(f"{root / 'segments.csv'}:{i}: {exc}") from None
-        segments.append(seg)
-    for name, t in (("imu.csv", imu[:, 0]), ("encoder.csv", enc[:, 0])):
-        if t.size > 1 and np.any(np.diff(t) < 0):
-            i = int(np.flatnonzero(np.diff(t) < 0)[0])
-            raise RecordingError(
-                f"{root / name}:{i + 3}: time goes backwards ({t[i + 1]} < {t[i]})"
-            )
+    t, rate, temp = _read_columns(root / "imu.csv", IMU_HEADER, (1, 3, 1), warnings,
+                                  empty_last=True)
+    enc_t, enc_motor, enc_angle = _read_columns(root / "encoder.csv", ENCODER_HEADER, (1, 1, 1),
+                                                warnings)
+    segments = read_segments(root, warnings)
     return Recording(
         path=root,
         manifest=manifest,
-        imu_t=imu[:, 0],
-        imu_rate=imu[:, 1:4],
+        imu_t=t,
+        imu_rate=rate,
         imu_temp=temp,
-        enc_t=enc[:, 0],
-        enc_motor=enc[:, 1].astype(np.int64),
-        enc_angle=enc[:, 2],
-        segments=tuple(segments),
+        enc_t=enc_t,
+        enc_motor=enc_motor.astype(np.int64),
+        enc_angle=enc_angle,
+        segments=segments,
         warnings=tuple(warnings),
     )
