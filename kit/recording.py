@@ -580,11 +580,16 @@ def _csv_blocks(
 
 
 def _count_lines(path: Path, max_bytes: int) -> int:
-    """Newlines in ``path`` (an upper bound on its rows, so arrays can be sized once)."""
+    """Newlines in ``path`` (an upper bound on its rows, so arrays can be sized once).
+
+    Stops at a NUL byte: the file is damaged there and the parsing pass says so.
+    """
     n = 0
     with open_regular(path, max_bytes) as fh:
         while chunk := fh.read(BLOCK_BYTES):
             n += chunk.count(b"\n")
+            if b"\0" in chunk:
+                break
     return n
 
 

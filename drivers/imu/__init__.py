@@ -10,23 +10,34 @@ The kit names the sensor model as a string; :func:`open_imu` turns it into a con
 from __future__ import annotations
 
 import contextlib
-from typing import Any
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.errors import ConfigurationError, DriverError
-from gyrocal.drivers.imu.base import ChipNotice, FifoGap, ImuBatch, ImuReader, SensorInfo, open_bus
 from gyrocal.drivers.imu.errors import (
     BusOpenError,
     ChipIdentityError,
     ImuStateError,
     SensorFaultError,
 )
-from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
-from gyrocal.drivers.imu.mpu9250 import MPU9250Reader
+
+if TYPE_CHECKING:
+    from gyrocal.drivers.imu.base import (
+        ChipNotice,
+        FifoGap,
+        ImuBatch,
+        ImuReader,
+        SensorInfo,
+        open_bus,
+    )
+    from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
+    from gyrocal.drivers.imu.mpu9250 import MPU9250Reader
 
 __all__ = [
     "MODELS",
     "READERS",
+    "READER_CLASSES",
     "BusOpenError",
     "ChipIdentityError",
     "ChipNotice",
@@ -42,15 +53,41 @@ __all__ = [
     "open_imu",
 ]
 
-#: Reader class for each model name a config may give.
-READERS: dict[str, type[ImuReader]] = {
-    "mpu9250": MPU9250Reader,
-    "mpu9255": MPU9250Reader,
-    "mpu6500": MPU9250Reader,
-    "lsm9ds1": LSM9DS1Reader,
+#: The module and class of the reader for each model name a config may give. The readers
+#: (and numpy) are imported when first used, so that a list of names (the config's check, the
+#: command line's help) costs no import.
+READER_CLASSES: dict[str, tuple[str, str]] = {
+    "mpu9250": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
+    "mpu9255": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
+    "mpu6500": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
+    "lsm9ds1": ("gyrocal.drivers.imu.lsm9ds1", "LSM9DS1Reader"),
 }
 #: The model names :func:`open_imu` accepts.
-MODELS: tuple[str, ...] = tuple(READERS)
+MODELS: tuple[str, ...] = tuple(READER_CLASSES)
+
+_LAZY = {
+    **{name: "gyrocal.drivers.imu.base"
+       for name in ("ChipNotice", "FifoGap", "ImuBatch", "ImuReader", "SensorInfo", "open_bus")},
+    "LSM9DS1Reader": "gyrocal.drivers.imu.lsm9ds1",
+    "MPU9250Reader": "gyrocal.drivers.imu.mpu9250",
+}
+
+
+def _reader_class(key: str) -> type[ImuReader]:
+    module, cls = READER_CLASSES[key]
+    return getattr(importlib.import_module(module), cls)
+
+
+def __getattr__(name: str) -> Any:
+    """The readers and batch types, imported on first use (PEP 562).
+
+    ``READERS`` maps each of :data:`MODELS` to its reader class.
+    """
+    if name == "READERS":
+        return {key: _reader_class(key) for key in READER_CLASSES}
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def open_imu(
@@ -93,12 +130,11 @@ def open_imu(
         For an unknown model or settings the chip cannot do.
     """
     key = str(model).strip().lower().replace("-", "")
-    cls = READERS.get(key)
-    if cls is None:
+    if key not in READER_CLASSES:
         raise ConfigurationError(
             f"unknown IMU model {model!r}; choose one of {', '.join(MODELS)}"
         )
-    reader = cls(bus, address, clock=clock, **options)
+    reader = _reader_class(key)(bus, address, clock=clock, **options)
     try:
         reader.configure(range_dps=range_dps, odr_hz=odr_hz, lowpass_hz=lowpass_hz)
     except BaseException:
