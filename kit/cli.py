@@ -2,14 +2,17 @@
 
 Each subcommand lives in a module of :mod:`gyrocal.kit.commands` that defines ``HELP`` (one line),
 ``add_arguments(parser)`` and ``run(args) -> int``; :data:`COMMANDS` lists them in the order
-``gyrocal --help`` shows them. Modules keep their top-level imports light so that ``--help`` is
-fast.
+``gyrocal --help`` shows them. Only the command being run is imported; the others are listed
+with their ``HELP`` line read from the source, so ``gyrocal --help``, ``gyrocal CMD --help`` and
+argument errors import neither numpy nor scipy whatever a command module imports.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
+import importlib.util
 import sys
 import traceback
 from collections.abc import Sequence
@@ -42,8 +45,45 @@ def _epilog() -> str:
     return "\n".join(lines)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every subcommand of :data:`COMMANDS` registered."""
+def _summary(module_name: str) -> str:
+    """The ``HELP`` line of a command module, read from its source without importing it."""
+    spec = importlib.util.find_spec(module_name)
+    if spec is not None and spec.origin:
+        try:
+            with open(spec.origin, encoding="utf-8") as fh:
+                lines = fh.read().splitlines()
+        except OSError:
+            lines = []
+        for i, line in enumerate(lines):
+            if line.startswith("HELP = "):
+                for j in range(i + 1, min(i + 10, len(lines)) + 1):
+                    try:
+                        value = ast.literal_eval("\n".join(lines[i:j])[len("HELP = "):].strip())
+                    except (SyntaxError, ValueError):
+                        continue
+                    if isinstance(value, str):
+                        return value
+                break
+    return str(importlib.import_module(module_name).HELP)
+
+
+def _command_in(argv: Sequence[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word that is not an option), if a known one."""
+    names = {name for name, _ in COMMANDS}
+    for word in argv:
+        if word == "--":
+            return None
+        if not word.startswith("-"):
+            return word if word in names else None
+    return None
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser: every subcommand of :data:`COMMANDS`, the one ``argv`` names in full.
+
+    Without ``argv`` every subcommand is registered in full (all modules imported).
+    """
+    selected = None if argv is None else _command_in(argv)
     parser = argparse.ArgumentParser(
         prog="gyrocal",
         description=(
@@ -60,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, module_name in COMMANDS:
+        if argv is not None and name != selected:
+            sub.add_parser(name, help=_summary(module_name))
+            continue
         module = importlib.import_module(module_name)
         p = sub.add_parser(
             name,
@@ -75,7 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``gyrocal`` with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
-    parser = build_parser()
+    if argv is None:
+        argv = sys.argv[1:]
+    parser = build_parser(argv)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or bad usage (2)

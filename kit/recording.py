@@ -27,13 +27,15 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, BinaryIO, TextIO
+from typing import TYPE_CHECKING, Any, BinaryIO, TextIO
 
-import numpy as np
-
-from gyrocal.calib.segments import Segment
 from gyrocal.kit.errors import InputError, OutputExistsError
 from gyrocal.kit.fileio import atomic_write_json
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from gyrocal.calib.segments import Segment
 
 __all__ = [
     "FORMAT",
@@ -152,6 +154,8 @@ class RecordingWriter:
         self, t: np.ndarray, rate: np.ndarray, temperature_c: np.ndarray | None = None
     ) -> None:
         """Append gyro samples: ``t`` (N,), ``rate`` (N, 3) rad/s, ``temperature_c`` (N,)."""
+        import numpy as np
+
         t = np.asarray(t, dtype=float).reshape(-1)
         rate = np.asarray(rate, dtype=float).reshape(-1, 3)
         if rate.shape[0] != t.size:
@@ -171,6 +175,8 @@ class RecordingWriter:
     def append_encoder(self, t: float | np.ndarray, motor: Sequence[int] | np.ndarray,
                        angle: Sequence[float] | np.ndarray) -> None:
         """Append encoder readings: one time for several motors, or arrays of equal length."""
+        import numpy as np
+
         motor = np.asarray(motor, dtype=np.int64).reshape(-1)
         angle = np.asarray(angle, dtype=float).reshape(-1)
         t = np.broadcast_to(np.asarray(t, dtype=float), motor.shape)
@@ -264,12 +270,15 @@ class Recording:
 
     def encoder(self, motor: int) -> tuple[np.ndarray, np.ndarray]:
         """``(t, angle)`` of one servo."""
+
         sel = self.enc_motor == motor
         return self.enc_t[sel], self.enc_angle[sel]
 
     @property
     def temperature_c(self) -> float | None:
         """Mean die temperature, or None if no temperature was recorded."""
+        import numpy as np
+
         ok = np.isfinite(self.imu_temp)
         return float(np.mean(self.imu_temp[ok])) if ok.any() else None
 
@@ -293,6 +302,9 @@ MAX_LINE_BYTES = 4096
 #: Most characters of a row quoted in a message.
 EXCERPT_CHARS = 60
 #: Bytes parsed at a time by the block reader.
+#
+# numpy (and calib.segments, which imports it) are imported inside the functions that use
+# them, so that checking a recording's path and manifest costs no import.
 BLOCK_BYTES = 1 << 22
 
 
@@ -503,6 +515,8 @@ def _split_rows(text: str, first: int, path: Path, ncols: int) -> list[list[str]
 
 def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: bool) -> np.ndarray:
     """Parse ``block`` line by line; the first fault raises with its file, line and field."""
+    import numpy as np
+
     rows = _split_rows(block.decode("ascii", errors="replace"), first, path, ncols)
     out = np.empty((len(rows), ncols))
     for r, row in enumerate(rows):
@@ -532,6 +546,8 @@ def _parse_block(
     numpy's C reader takes the block first; anything it rejects, a blank line it would skip, or
     a value out of domain sends the block to :func:`_parse_exact` for the located message.
     """
+    import numpy as np
+
     fast = block
     if b"\r" in fast:
         fast = fast.replace(b"\r\n", b"\n")
@@ -559,6 +575,8 @@ def _csv_blocks(
     RecordingError
         Naming file and line: a malformed row, or a time smaller than the one before it.
     """
+    import numpy as np
+
     last_t = -math.inf
     for first, block, nlines in _lines(path, header, max_bytes, warnings):
         arr = _parse_block(block, nlines, first, path, ncols, empty_last)
@@ -601,6 +619,8 @@ def _read_columns(
 
     The rows are counted first so that each array is allocated once at its final size.
     """
+    import numpy as np
+
     cap = _count_lines(path, MAX_CSV_BYTES)
     out = [np.empty((cap, w)) if w > 1 else np.empty(cap) for w in widths]
     edges = np.cumsum([0, *widths]).tolist()
@@ -645,6 +665,8 @@ def iter_imu(
 
 def read_segments(root: Path, warnings: list[str]) -> tuple[Segment, ...]:
     """The protocol segments listed in ``segments.csv`` of the recording ``root``."""
+    from gyrocal.calib.segments import Segment
+
     spath = root / "segments.csv"
     segments = []
     for first, block, _ in _lines(spath, SEGMENTS_HEADER, MAX_SEGMENTS_BYTES, warnings):
@@ -705,7 +727,7 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         imu_rate=rate,
         imu_temp=temp,
         enc_t=enc_t,
-        enc_motor=enc_motor.astype(np.int64),
+        enc_motor=enc_motor.astype("int64"),
         enc_angle=enc_angle,
         segments=segments,
         warnings=tuple(warnings),

@@ -29,12 +29,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
+    from gyrocal.kit.recording import load_recording
+
+    rec = load_recording(args.recording)  # path and contents checked before scipy is imported
     from gyrocal.kit.fileio import atomic_write_text
     from gyrocal.kit.pipeline import estimate_recording
-    from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
 
-    rec = load_recording(args.recording)
     for w in rec.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     if not rec.complete:

@@ -6,11 +6,13 @@ import argparse
 import json
 import math
 import sys
-from typing import Any
-
-import numpy as np
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from gyrocal.kit.errors import InputError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 HELP = "noise figures of a still gyro: angle random walk, bias instability, rate random walk"
 DESCRIPTION = (
@@ -55,6 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], None]:
+    import numpy as np
+
     from gyrocal.kit.recording import load_recording
 
     rec = load_recording(args.recording)
@@ -106,6 +110,8 @@ def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[s
 
 
 def _from_sim(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], Any]:
+    import numpy as np
+
     from gyrocal.calib.noise_sim import NoiseModel, simulate_still
 
     if not args.sim_noise_density > 0:
@@ -153,6 +159,8 @@ def plot_allan(nc: Any, path: str, *, force: bool = False) -> None:
     from gyrocal.kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
+    import numpy as np
+
     from gyrocal.calib.noise_sim import FLICKER_FLOOR
 
     tau = nc.tau_s
@@ -173,15 +181,17 @@ def plot_allan(nc: Any, path: str, *, force: bool = False) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, print, write and plot."""
-    from gyrocal.calib.allan import characterise_noise
-    from gyrocal.calib.noise_sim import FLICKER_FLOOR
     from gyrocal.kit.fileio import atomic_write_json, refuse_existing
-    from gyrocal.kit.recording import now_iso
+    from gyrocal.kit.recording import now_iso, read_manifest
 
     if args.sim == (args.recording is not None):
         raise InputError("give a RECORDING or --sim (one of them)")
     refuse_existing((args.out, args.plot), force=args.force)
+    if not args.sim:
+        read_manifest(Path(args.recording))  # a bad path is said before any heavy import
     rate, odr, meta, truth = _from_sim(args) if args.sim else _from_recording(args)
+    from gyrocal.calib.allan import characterise_noise
+    from gyrocal.calib.noise_sim import FLICKER_FLOOR
     nc = characterise_noise(rate, odr, min_tau_s=args.min_tau)
     nc = nc.with_meta(created=now_iso(), **meta)
     doc = nc.to_dict()

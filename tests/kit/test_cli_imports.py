@@ -1,0 +1,64 @@
+"""The command line's help and argument/path errors import neither numpy nor scipy (issues 11,
+16), and the help lines read from source are the modules' own."""
+
+import importlib
+import json
+import subprocess
+import sys
+
+import pytest
+
+from gyrocal.kit import cli
+
+PROBE = (
+    "import sys, io, contextlib\n"
+    "from gyrocal.kit.cli import main\n"
+    "out = io.StringIO()\n"
+    "with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):\n"
+    "    code = main(sys.argv[1:])\n"
+    "heavy = sorted(m for m in sys.modules\n"
+    "            if m.split('.')[0] in ('numpy', 'scipy', 'matplotlib'))\n"
+    "print(__import__('json').dumps({'code': code, 'heavy': heavy[:5], 'out': out.getvalue()}))\n"
+)
+
+
+def probe(*argv):
+    out = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True,
+                         timeout=120, check=True)
+    return json.loads(out.stdout)
+
+
+@pytest.mark.parametrize("argv, code, says", [
+    (["--help"], 0, "simulate-recording"),
+    (["estimate", "--help"], 0, "--method"),
+    (["noise", "--help"], 0, "--span"),
+    (["report", "--help"], 0, "--out"),
+    (["estimate", "nope"], 2, "nope is not a directory"),
+    (["noise", "nope"], 2, "nope is not a directory"),
+    (["estimte", "x"], 2, "invalid choice: 'estimte'"),
+    (["estimate"], 2, "the following arguments are required"),
+])
+def test_help_and_bad_arguments_import_no_numpy_or_scipy(argv, code, says):
+    got = probe(*argv)
+    assert got["code"] == code and says in got["out"]
+    assert got["heavy"] == []
+
+
+def test_a_recording_with_a_bad_manifest_is_refused_before_heavy_imports(tmp_path):
+    (tmp_path / "manifest.json").write_text('{"format": "something else"}')
+    got = probe("estimate", str(tmp_path))
+    assert got["code"] == 2 and "'format' must be 'gyrocal-recording'" in got["out"]
+    assert got["heavy"] == []
+
+
+def test_help_lines_read_from_source_are_the_modules_own():
+    for _, module_name in cli.COMMANDS:
+        assert cli._summary(module_name) == importlib.import_module(module_name).HELP
+
+
+def test_every_command_is_still_registered_in_full():
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    assert list(sub.choices) == [name for name, _ in cli.COMMANDS]
+    for name, p in sub.choices.items():
+        assert callable(p.get_default("_run")), name
