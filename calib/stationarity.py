@@ -28,7 +28,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.stats import chi2
 
 from gyrocal.calib.errors import CalibInputError
@@ -44,7 +43,7 @@ __all__ = [
     "white_noise_std",
 ]
 
-_BLOCK = 4096  # windows per vectorised block (bounds the temporary to ~4 MB at 40-sample windows)
+_BLOCK = 8192  # windows per block of running sums (temporaries of a few hundred kB)
 
 
 @dataclass(frozen=True)
@@ -163,6 +162,12 @@ def quiet_windows(
     -------
     ndarray (n,) of bool
         False where the window would reach before the start of the data.
+
+    Notes
+    -----
+    O(N): each window's mean and sample variance come from running sums of the readings and
+    their squares, taken block by block about the block's mean (which keeps the subtraction
+    ``Σy² − (Σy)²/n`` free of cancellation), instead of being recomputed from the window.
     """
     nw = detector.n_window
     total = centred.shape[0]
@@ -171,14 +176,22 @@ def quiet_windows(
     first = max(0, nw - 1 - n_history)  # first batch row whose window is complete
     if first >= n:
         return out
-    views = sliding_window_view(centred, nw, axis=0)  # (total - nw + 1, 3, nw)
-    w0 = n_history + first - (nw - 1)
+    x = np.asarray(centred, dtype=float)
     for b in range(first, n, _BLOCK):
         e = min(n, b + _BLOCK)
-        v = views[w0 + (b - first) : w0 + (e - first)]
-        mean = v.mean(axis=-1)
-        dev = v - mean[..., None]
-        var = np.einsum("wan,wan->wa", dev, dev) / (nw - 1)
+        # rows of the windows ending at batch rows b..e-1, shifted by their mean so that the
+        # running sums stay small (no cancellation in the variance)
+        rows = x[n_history + b - (nw - 1) : n_history + e]
+        shift = rows.mean(axis=0)
+        y = rows - shift
+        c1 = np.zeros((rows.shape[0] + 1, 3))
+        c2 = np.zeros_like(c1)
+        np.cumsum(y, axis=0, out=c1[1:])
+        np.cumsum(y * y, axis=0, out=c2[1:])
+        s1 = c1[nw:] - c1[:-nw]
+        s2 = c2[nw:] - c2[:-nw]
+        mean = s1 / nw + shift
+        var = np.maximum(s2 - s1 * s1 / nw, 0.0) / (nw - 1)
         ok = (var <= detector.var_limit) & (np.abs(mean) <= detector.rate_limit)
         out[b:e] = ok.all(axis=1)
     return out
