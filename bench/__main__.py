@@ -2,7 +2,9 @@
 
 Usage: ``python -m bench`` (all) or ``python -m bench estimators imu`` (``bench/bench_<name>.py``).
 Each module defines ``main(argv: list[str]) -> None`` that prints one or more tables. Speed and
-accuracy targets are measured here, never as timed pass/fail tests.
+accuracy targets are measured here, never as timed pass/fail tests. A benchmark that fails is
+reported with its traceback and marked FAILED; the others still run, and the exit status is 1
+when any failed.
 """
 
 from __future__ import annotations
@@ -10,6 +12,8 @@ from __future__ import annotations
 import importlib
 import pkgutil
 import sys
+import time
+import traceback
 
 import bench
 
@@ -34,9 +38,22 @@ def main(argv: list[str]) -> int:
         print(f"unknown benchmark(s): {' '.join(unknown)}; available: {' '.join(available)}")
         return 2
     extra = [a for a in argv if a.startswith("-")]
+    failed = []
     for name in names:
         print(f"\n=== bench {name} ===", flush=True)
-        importlib.import_module(f"bench.bench_{name}").main(extra)
+        t0 = time.perf_counter()
+        try:
+            importlib.import_module(f"bench.bench_{name}").main(extra)
+        except KeyboardInterrupt:
+            raise
+        except BaseException:  # any failure, SystemExit included, is reported
+            traceback.print_exc(file=sys.stdout)
+            print(f"=== bench {name}: FAILED after {time.perf_counter() - t0:.1f} s ===",
+                  flush=True)
+            failed.append(name)
+    if failed:
+        print(f"\n{len(failed)} of {len(names)} benchmark(s) FAILED: {' '.join(failed)}")
+        return 1
     return 0
 
 
