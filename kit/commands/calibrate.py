@@ -10,6 +10,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from gyrocal.kit import argtypes
+
 HELP = "calibrate: spin the sensor on the jig, record, fit, write calibration.json"
 DESCRIPTION = (
     "Run the calibration protocol on the gimbal (or with --sim on the emulated jig): for each "
@@ -43,10 +45,10 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     if sim_flag:
         p.add_argument("--sim", action="store_true",
                        help="use the emulated jig instead of hardware")
-    p.add_argument("--sim-seed", type=int, default=0, metavar="S",
+    p.add_argument("--sim-seed", type=argtypes.seed, default=0, metavar="S",
                    help="seed of the emulated sensor's true errors and the jig's geometry "
                         "(default 0)")
-    p.add_argument("--sim-noise-seed", type=int, metavar="S",
+    p.add_argument("--sim-noise-seed", type=argtypes.seed, metavar="S",
                    help="seed of the emulated run's noise and ripple (default: --sim-seed; "
                         "verify uses a fresh one)")
     p.add_argument("--sim-scale", type=_floats3("--sim-scale"), nargs=3, metavar="K",
@@ -64,7 +66,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--baud", type=int, help="servo bus speed (gimbal.baud)")
     p.add_argument("--imu-model", help="imu.model")
     p.add_argument("--imu-bus", type=int, help="imu.bus: /dev/i2c-N")
-    p.add_argument("--imu-address", type=lambda s: int(s, 0), help="imu.address, e.g. 0x68")
+    p.add_argument("--imu-address", type=argtypes.i2c_address, help="imu.address, e.g. 0x68")
     p.add_argument("--range-dps", type=int, help="imu.range_dps")
     p.add_argument("--odr", type=float, help="imu.odr_hz")
 
@@ -319,7 +321,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
     from gyrocal.kit.errors import OutputExistsError
-    from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.fileio import atomic_write_text, make_output_dir
     from gyrocal.kit.pipeline import estimate_recording
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
@@ -329,7 +331,7 @@ def run(args: argparse.Namespace) -> int:
     cal_path = out / "calibration.json"
     if cal_path.exists() and not args.force:
         raise OutputExistsError(f"{cal_path} already exists; pass --force to replace it")
-    out.mkdir(parents=True, exist_ok=True)
+    make_output_dir(out, "--out")
     rec_dir = out / "recording"
     run_jig(cfg, args, out, rec_dir)
     rec = load_recording(rec_dir)
