@@ -117,6 +117,13 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime, noise_seed=args.sim_noise_seed)
+        from gyrocal.kit.config import default_config
+
+        g, default = cfg["gimbal"], default_config()["gimbal"]
+        if (g["baud"], g["port"]) != (default["baud"], default["port"]):  # the user set them
+            print(f"gyrocal: note: --sim runs the emulated servos on their own bus at {SIM_BAUD} "
+                  f"baud; gimbal.port ({g['port']}) and gimbal.baud ({g['baud']}) are not used",
+                  file=sys.stderr)
         return sim, sim.clock, sim.port, SIM_BAUD, sim.imu_bus
     from gyrocal.drivers.clock import SystemClock
 

@@ -123,3 +123,30 @@ def test_a_file_output_that_is_a_directory_is_refused(tmp_path, capsys):
 
     with pytest.raises(InputError, match="is a directory; give a file name"):
         atomic_write_text(tmp_path, "x", force=True)
+
+
+def test_doctor_sim_does_not_warn_about_its_own_emulator(capsys):
+    assert main(["doctor", "--sim"]) == 0
+    out = capsys.readouterr().out
+    assert "Return Delay" not in out and "warn" not in out
+    assert "`gyrocal calibrate --sim`" in out
+
+
+def test_sim_notes_the_bus_settings_it_does_not_use(tmp_path, capsys):
+    cfg = tmp_path / "g.toml"
+    cfg.write_text("[gimbal]\nbaud = 115200\n")
+    assert main(["doctor", "--sim", "--config", str(cfg)]) == 0
+    err = capsys.readouterr().err
+    assert "note: --sim runs the emulated servos" in err and "gimbal.baud (115200)" in err
+    assert main(["doctor", "--sim"]) == 0  # nothing set by the user: nothing to note
+    assert "note" not in capsys.readouterr().err
+
+
+def test_a_silent_servo_leads_with_the_cause_in_words(tmp_path, capsys):
+    code, err = run(["calibrate", "--sim", "--quiet", "--out", str(tmp_path / "o"),
+                     "--sim-fault", "silent:2:5"], capsys)
+    assert code == 4
+    message = err.split("gyrocal: error: ", 1)[1]
+    assert message.startswith("SYNC_READ") and "no status packet" in message
+    assert "The safe stop then could not confirm torque off on servo(s) 2" in message
+    assert "Error(" not in message  # no Python repr of the cause
