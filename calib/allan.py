@@ -68,6 +68,7 @@ __all__ = [
     "allan_deviation",
     "characterise_noise",
     "edf_greenhall",
+    "min_still_samples",
     "overlapping_avar",
 ]
 
@@ -623,6 +624,35 @@ def _read_off(
     return value, (hi68 - lo68) / 2.0, lo95, hi95, float(tau[i])
 
 
+#: Decades of averaging time the curve must span above the shortest τ read for ``N``, so that the
+#: three terms of the model (slopes −½, 0, +½) can be told apart.
+_SPAN_DECADES = 2
+
+
+def min_still_samples(odr_hz: float, min_tau_s: float | None = None) -> int:
+    """Samples a still record needs for :func:`characterise_noise` to separate its three terms.
+
+    The curve reaches ``τ_max = n/(4·odr)`` (Stable32's stop ratio for the overlapping Allan
+    deviation, as :func:`allan_deviation` uses) and must span ``_SPAN_DECADES`` decades above
+    the shortest averaging time ``N`` is read at (default 10 samples), so
+    ``n ≥ 4 · 10^decades · m_min``.
+
+    Parameters
+    ----------
+    odr_hz : float
+        Sample rate, Hz.
+    min_tau_s : float, optional
+        Shortest averaging time used for ``N``, s (default ``10/odr_hz``).
+
+    Returns
+    -------
+    int
+    """
+    fs = scalar(odr_hz, "odr_hz", positive=True)
+    m_min = 10 if min_tau_s is None else max(1, math.ceil(min_tau_s * fs - 1e-9))
+    return 4 * 10**_SPAN_DECADES * m_min
+
+
 def characterise_noise(
     rate: np.ndarray,
     odr_hz: float,
@@ -662,10 +692,15 @@ def characterise_noise(
     fs = curve.odr_hz
     tau = curve.tau_s
     min_tau = 10.0 / fs if min_tau_s is None else scalar(min_tau_s, "min_tau_s", nonneg=True)
-    if tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
+    need = min_still_samples(fs, min_tau)
+    if curve.n_samples < need or tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
         raise CalibInputError(
-            f"the record ({curve.n_samples} samples at {fs:g} Hz) is too short for a noise "
-            f"characterisation above min_tau_s={min_tau:g} s; record the sensor still for longer"
+            f"the still record is too short for noise figures: {curve.n_samples} samples "
+            f"({curve.n_samples / fs:.3g} s at {fs:g} Hz), and separating white noise, bias "
+            f"instability and rate random walk needs the Allan curve to span {_SPAN_DECADES} "
+            f"decades of averaging time above {min_tau:.3g} s, i.e. at least {need} samples "
+            f"({need / fs:.3g} s); record the sensor still for longer (many minutes for bias "
+            "instability)"
         )
     usable_n = tau >= min_tau
     out: dict[str, list[tuple[float, ...]]] = {"N": [], "B": [], "K": []}

@@ -41,6 +41,7 @@ from gyrocal.drivers.imu.timing import SampleClock
 
 __all__ = [
     "BLOCK_MAX",
+    "ODR_RELATIVE_TOLERANCE",
     "NACK_ERRNOS",
     "TRANSIENT_ERRNOS",
     "ChipNotice",
@@ -53,6 +54,11 @@ __all__ = [
 
 #: smbus2's I2C_SMBUS_BLOCK_MAX: the longest SMBus block transfer (hardware reference §3).
 BLOCK_MAX = 32
+
+#: How far a requested output data rate may be from one the chip can do and still be taken:
+#: enough for a rate typed to four significant digits (333.3 for 1000/3 Hz), not enough to run
+#: silently at another rate (201 Hz is refused, not run at 200).
+ODR_RELATIVE_TOLERANCE = 5e-4
 
 #: errnos worth retrying (hardware reference §3, "Driver guidance").
 TRANSIENT_ERRNOS = frozenset(

@@ -30,6 +30,10 @@ PAPER_FIGURES = {
 }
 
 
+#: The presets that draw plots with ``--plot``.
+PLOTTED_PRESETS = ("normal", "extreme", "speed-sweep")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     p.add_argument("--preset", choices=PRESET_CHOICES, default="normal")
@@ -134,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
     if args.noise is not None and any(not n > 0 for n in args.noise):
         raise InputError("--noise levels must be positive")
     plot_dir = None
+    if args.plot and args.preset not in PLOTTED_PRESETS:
+        raise InputError(
+            f"--plot: the {args.preset} preset draws no plots (only "
+            f"{', '.join(PLOTTED_PRESETS)} do); drop --plot or choose one of those presets"
+        )
     if args.plot:
 
         from gyrocal.kit.plots import require_matplotlib

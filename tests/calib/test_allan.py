@@ -197,3 +197,16 @@ def test_edf_greenhall_refuses_what_it_does_not_model():
         edf_greenhall(1, 4, 1000)
     with pytest.raises(CalibInputError, match="phase points"):
         edf_greenhall(0, 600, 1000)
+
+
+def test_a_record_too_short_for_three_terms_is_refused_saying_how_much_is_needed():
+    # 0.6 s of still data (a rest between turns) used to give B = 0 ± 0 and K = 0 ± 0.
+    from gyrocal.calib.allan import min_still_samples
+
+    assert min_still_samples(200.0) == 4000  # τ from 10 samples up to n/4: two decades
+    rng = np.random.default_rng(41)
+    with pytest.raises(CalibInputError, match=r"121 samples \(0.605 s at 200 Hz\).*at least 4000 "
+                                              r"samples \(20 s\)"):
+        characterise_noise(rng.normal(size=(121, 3)) * 1e-3, ODR)
+    nc = characterise_noise(rng.normal(size=(4000, 3)) * 1e-3, ODR)  # just enough: it runs
+    assert all(v > 0 for v in nc.noise_density.value)

@@ -327,3 +327,20 @@ def test_a_reader_closes_the_bus_it_opened(monkeypatch):
     r.close()
     with pytest.raises(OSError):
         bus.read_byte_data(addr, 0x75)
+
+
+@pytest.mark.parametrize(
+    ("model", "asked", "taken"),
+    [("mpu9250", 201.0, None), ("mpu9250", 333.3, 1000.0 / 3.0), ("mpu9250", 200.0, 200.0),
+     ("lsm9ds1", 120.0, None), ("lsm9ds1", 119.0, 119.0)],
+)
+def test_an_odr_the_chip_cannot_do_exactly_is_refused(model, asked, taken):
+    # MPU-9250: 1 kHz / (1 + SMPLRT_DIV) with the low-pass filter on; LSM9DS1: its ODR_G table.
+    # 201 Hz used to run silently at 200 Hz; a rate typed to four digits (333.3) is still taken.
+    clock, bus, addr = rig(model)
+    if taken is None:
+        with pytest.raises(ConfigurationError, match=f"odr_hz={asked!r} is not an"):
+            open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=asked)
+    else:
+        r = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=asked)
+        assert r.info.odr_hz == pytest.approx(taken, rel=1e-12)

@@ -150,3 +150,11 @@ def test_a_silent_servo_leads_with_the_cause_in_words(tmp_path, capsys):
     assert message.startswith("SYNC_READ") and "no status packet" in message
     assert "The safe stop then could not confirm torque off on servo(s) 2" in message
     assert "Error(" not in message  # no Python repr of the cause
+
+
+@pytest.mark.parametrize("preset", ["demo", "convergence"])
+def test_study_plot_on_a_preset_without_plots_says_so(preset, tmp_path, capsys):
+    code, err = run(["study", "--preset", preset, "--plot", str(tmp_path / "p")], capsys)
+    assert code == 2
+    assert f"the {preset} preset draws no plots (only normal, extreme, speed-sweep do)" in err
+    assert not (tmp_path / "p").exists()
