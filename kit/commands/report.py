@@ -11,7 +11,9 @@ DESCRIPTION = (
     "the calibrated rate about the servo's axis against the encoder reference, with the window "
     "the estimator used shaded by its weight; the rest windows against -bias; and each window's "
     "residual in standard deviations. With CAL (Calibration v1 JSON) the plots use that "
-    "calibration; without it one is estimated from the recording. Prints the list of files. "
+    "calibration; without it one is estimated from the recording. Also writes report.html, one "
+    "self-contained page (results, verdict, servo axes, verification, environment, the plots "
+    "inline) to read or send. Prints the list of files. "
     "Needs matplotlib: pip install 'gyrocal[plot]'."
 )
 
@@ -25,16 +27,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="Calibration v1 JSON (default: estimate one from the recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
     p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
+    p.add_argument("--verification", metavar="FILE",
+                   help="a `gyrocal verify --json` document to include in report.html")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator when no CAL is given (default paired-axis)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Load, window (and estimate without CAL), draw, print the index."""
+    from pathlib import Path
+
     from gyrocal.kit.exports import load_document
+    from gyrocal.kit.fileio import atomic_write_text, refuse_existing
     from gyrocal.kit.pipeline import extract_recording
     from gyrocal.kit.plots import require_matplotlib
     from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.report_html import environment, render_html
     from gyrocal.kit.report_plots import write_report
 
     require_matplotlib()  # before any work: a missing extra is the first thing to say
@@ -53,8 +61,19 @@ def run(args: argparse.Namespace) -> int:
         what = f"a {args.method} estimate from the recording (no CAL given)"
     for w in extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
+    verification = None
+    if args.verification:
+        from gyrocal.kit.exports import read_json
+
+        verification = read_json(args.verification, "verification")
+    html_path = Path(args.out) / "report.html"
+    refuse_existing([html_path], force=args.force)
     written = write_report(rec, cal, extracted, args.out, force=args.force)
-    print(f"gyrocal report: {len(written)} plots of {rec.path} with {what}")
+    page = render_html(cal, title=f"{rec.path} with {what}", plots=written, truth=rec.truth,
+                       verification=verification, env=environment(rec.manifest))
+    atomic_write_text(html_path, page, force=args.force)
+    written.append((html_path, "the whole report as one self-contained page"))
+    print(f"gyrocal report: {len(written) - 1} plots and a page of {rec.path} with {what}")
     width = max(len(str(p)) for p, _ in written)
     for path, desc in written:
         print(f"{str(path):<{width}}  {desc}")
