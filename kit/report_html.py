@@ -21,7 +21,7 @@ import numpy as np
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.kit import __version__
 
-__all__ = ["environment", "render_html"]
+__all__ = ["environment", "render_html", "write_run_report"]
 
 _CSS = """
 body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
@@ -174,3 +174,37 @@ def render_html(
         parts.append("</table>")
     parts.append("</body></html>\n")
     return "\n".join(parts)
+
+
+def write_run_report(
+    rec: Any,
+    cal: GyroCalibration,
+    extracted: Any,
+    out_dir: str | Path,
+    *,
+    title: str,
+    verification: Mapping[str, Any] | None = None,
+    html_path: str | Path | None = None,
+    force: bool = False,
+) -> list[tuple[Path, str]]:
+    """Draw the plots of a run into ``out_dir`` and write ``html_path`` (default
+    ``out_dir/report.html``) around them.
+
+    Nothing is written if ``report.html`` or a plot exists and ``force`` is false; every file is
+    written atomically. Needs matplotlib (the ``plot`` extra).
+
+    Returns
+    -------
+    list of (Path, str)
+        The plots with their descriptions, then the page.
+    """
+    from gyrocal.kit.fileio import atomic_write_text, refuse_existing
+    from gyrocal.kit.report_plots import write_report
+
+    html_path = Path(out_dir) / "report.html" if html_path is None else Path(html_path)
+    refuse_existing([html_path], force=force)
+    written = write_report(rec, cal, extracted, out_dir, force=force)
+    page = render_html(cal, title=title, plots=written, truth=rec.truth,
+                       verification=verification, env=environment(rec.manifest))
+    atomic_write_text(html_path, page, force=force)
+    return [*written, (html_path, "the whole report as one self-contained page")]

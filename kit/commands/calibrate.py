@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import sys
@@ -84,6 +85,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=METHODS)
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--no-report", action="store_true",
+                   help="do not write DIR/report.html and DIR/plots/ (written by default when "
+                        "the plot extra is installed)")
 
 
 def load_cli_config(args: argparse.Namespace) -> Any:
@@ -328,7 +332,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
     from gyrocal.kit.errors import OutputExistsError
-    from gyrocal.kit.fileio import atomic_write_text, make_output_dir
+    from gyrocal.kit.fileio import atomic_write_text, make_output_dir, refuse_existing
     from gyrocal.kit.pipeline import estimate_recording
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
@@ -338,6 +342,9 @@ def run(args: argparse.Namespace) -> int:
     cal_path = out / "calibration.json"
     if cal_path.exists() and not args.force:
         raise OutputExistsError(f"{cal_path} already exists; pass --force to replace it")
+    report = not args.no_report and importlib.util.find_spec("matplotlib") is not None
+    if report:
+        refuse_existing([out / "report.html", out / "plots"], force=args.force)
     make_output_dir(out, "--out")
     rec_dir = out / "recording"
     run_jig(cfg, args, out, rec_dir)
@@ -347,10 +354,16 @@ def run(args: argparse.Namespace) -> int:
     atomic_write_text(cal_path, cal.to_json() + "\n", force=args.force)
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
+    if report:
+        from gyrocal.kit.report_html import write_run_report
+
+        write_run_report(rec, cal, est.extracted, out / "plots", title=f"{out} (gyrocal calibrate)",
+                         html_path=out / "report.html", force=args.force)
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()
     else:
         print(calibration_table(cal, rec.truth))
-        print(f"\nwrote {cal_path} and {rec_dir}/")
+        print(f"\nwrote {cal_path} and {rec_dir}/"
+              + (f", and the report {out / 'report.html'}" if report else ""))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0

@@ -35,15 +35,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load, window (and estimate without CAL), draw, print the index."""
-    from pathlib import Path
-
     from gyrocal.kit.exports import load_document
-    from gyrocal.kit.fileio import atomic_write_text, refuse_existing
     from gyrocal.kit.pipeline import extract_recording
     from gyrocal.kit.plots import require_matplotlib
     from gyrocal.kit.recording import load_recording
-    from gyrocal.kit.report_html import environment, render_html
-    from gyrocal.kit.report_plots import write_report
+    from gyrocal.kit.report_html import write_run_report
 
     require_matplotlib()  # before any work: a missing extra is the first thing to say
     rec = load_recording(args.recording)
@@ -66,13 +62,8 @@ def run(args: argparse.Namespace) -> int:
         from gyrocal.kit.exports import read_json
 
         verification = read_json(args.verification, "verification")
-    html_path = Path(args.out) / "report.html"
-    refuse_existing([html_path], force=args.force)
-    written = write_report(rec, cal, extracted, args.out, force=args.force)
-    page = render_html(cal, title=f"{rec.path} with {what}", plots=written, truth=rec.truth,
-                       verification=verification, env=environment(rec.manifest))
-    atomic_write_text(html_path, page, force=args.force)
-    written.append((html_path, "the whole report as one self-contained page"))
+    written = write_run_report(rec, cal, extracted, args.out, title=f"{rec.path} with {what}",
+                               verification=verification, force=args.force)
     print(f"gyrocal report: {len(written) - 1} plots and a page of {rec.path} with {what}")
     width = max(len(str(p)) for p, _ in written)
     for path, desc in written:

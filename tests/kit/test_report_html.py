@@ -75,3 +75,19 @@ def test_a_headless_browser_renders_the_tables_and_decodes_every_plot(report, tm
                      user_data=tmp_path / "profile2")
     assert done.returncode == 0 and shot.stat().st_size > 20_000
     shutil.rmtree(tmp_path / "profile", ignore_errors=True)
+
+
+def test_calibrate_writes_the_page_when_the_plot_extra_is_installed(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    taken = tmp_path / "taken"
+    taken.mkdir()
+    (taken / "report.html").write_text("mine")
+    # an existing page is refused before the jig runs
+    assert main(["calibrate", "--sim", "--quiet", "--out", str(taken)]) == 2
+    assert "report.html already exists" in capsys.readouterr().err
+    assert [p.name for p in taken.iterdir()] == ["report.html"]
+    out = tmp_path / "run"
+    assert main(["calibrate", "--sim", "--quiet", "--out", str(out)]) == 0
+    assert "and the report" in capsys.readouterr().out
+    text = (out / "report.html").read_text(encoding="utf-8")
+    assert "id=result" in text and text.count("data:image/png;base64,") > 3
