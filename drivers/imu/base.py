@@ -55,10 +55,10 @@ __all__ = [
 #: smbus2's I2C_SMBUS_BLOCK_MAX: the longest SMBus block transfer (hardware reference §3).
 BLOCK_MAX = 32
 
-#: How far a requested output data rate may be from one the chip can do and still be taken:
-#: enough for a rate typed to four significant digits (333.3 for 1000/3 Hz), not enough to run
-#: silently at another rate (201 Hz is refused, not run at 200).
-ODR_RELATIVE_TOLERANCE = 5e-4
+#: How far a requested output data rate may be from one the chip can do and still be taken (the
+#: chip's rate is used: 333 -> 1000/3 Hz on an MPU-9250, 15 -> 14.9 Hz on an LSM9DS1); farther is
+#: refused. ``SensorInfo.odr_hz`` is the rate used, which callers report when it differs.
+ODR_RELATIVE_TOLERANCE = 0.01
 
 #: errnos worth retrying (hardware reference §3, "Driver guidance").
 TRANSIENT_ERRNOS = frozenset(

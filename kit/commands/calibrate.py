@@ -90,6 +90,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the plot extra is installed)")
 
 
+def note_rounded_odr(asked_hz: float, info: Any) -> None:
+    """Say on stderr when the chip runs at a rate other than the one configured (``--odr 201``
+    runs an MPU-9250 at 1000/(1 + 4) = 200 Hz)."""
+    if info.odr_hz != asked_hz:
+        print(f"gyrocal: note: imu.odr_hz {asked_hz:g} is not a rate the {info.model} can do; "
+              f"it runs at the nearest, {info.odr_hz:.6g} Hz (the recording says so)",
+              file=sys.stderr)
+
+
 def load_cli_config(args: argparse.Namespace) -> Any:
     """The config file (or defaults) with the command-line overrides applied."""
     from gyrocal.kit.config import apply_overrides, load_config
@@ -155,6 +164,7 @@ class Jig:
         g, imu = cfg["gimbal"], cfg["imu"]
         self.imu = open_imu(imu["model"], bus, imu["address"], clock=self.clock,
                             range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])
+        note_rounded_odr(imu["odr_hz"], self.imu.info)
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
                              max_turns=g["max_turns"], acceleration=g["acceleration"])
 

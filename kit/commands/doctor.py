@@ -54,6 +54,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
     from gyrocal.calib.observations import diff_noise
     from gyrocal.drivers.errors import DriverError
     from gyrocal.drivers.imu import open_imu
+    from gyrocal.kit.commands.calibrate import note_rounded_odr
 
     imu_cfg = cfg["imu"]
     where = "the emulated bus" if args.sim else f"/dev/i2c-{imu_cfg['bus']}"
@@ -66,6 +67,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
         return
     try:
         info = reader.info
+        note_rounded_odr(imu_cfg["odr_hz"], info)
         rep.ok(f"found {info.model} (WHO_AM_I 0x{info.who_am_i:02X}), ±{info.full_scale_dps:g} "
                f"°/s, {info.odr_hz:g} Hz, low-pass {info.lowpass_hz:g} Hz")
         if getattr(reader, "notice", None):

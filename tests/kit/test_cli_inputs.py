@@ -158,3 +158,13 @@ def test_study_plot_on_a_preset_without_plots_says_so(preset, tmp_path, capsys):
     assert code == 2
     assert f"the {preset} preset draws no plots (only normal, extreme, speed-sweep do)" in err
     assert not (tmp_path / "p").exists()
+
+
+def test_an_odr_the_chip_cannot_do_exactly_is_rounded_with_a_note(capsys):
+    # MPU-9250: 1 kHz/(1 + SMPLRT_DIV); 201 Hz runs at 200 Hz and the user is told.
+    assert main(["doctor", "--sim", "--odr", "201"]) == 0
+    out, err = capsys.readouterr()
+    assert "imu.odr_hz 201 is not a rate the mpu9250 can do; it runs at the nearest, 200 Hz" in err
+    assert "200 Hz" in out
+    assert main(["doctor", "--sim", "--odr", "200"]) == 0
+    assert "imu.odr_hz" not in capsys.readouterr().err
