@@ -6,9 +6,12 @@ eq. 11)
 
     σ²(τ) = 1 / (2 τ² (n − 2m)) · Σ_k (x_{k+2m} − 2 x_{k+m} + x_k)²,
 
-with ``x`` the integrated rate (angle). The computation is ``allantools.oadev``, a pure
-Python + numpy implementation kept in step with NIST SP 1065 and Stable32, with Greenhall's
-equivalent degrees of freedom (``allantools.edf_greenhall``) for its confidence intervals.
+with ``x`` the integrated rate (angle), computed here with numpy in one pass per axis. Its
+confidence intervals use Greenhall's equivalent degrees of freedom for the unmodified,
+overlapping Allan variance (C. A. Greenhall and W. J. Riley, "Uncertainty of stability variances
+based on finite differences", 35th PTTI, 2003; the algorithm NIST SP 1065 §5.3 refers to):
+:func:`edf_greenhall`. Both are checked against the ``allantools`` package in the test suite;
+the kit does not depend on it (it would pull matplotlib, sphinx and pytest into a plain install).
 
 Three IEEE Std 952 noise terms are read off the curve:
 
@@ -48,7 +51,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import allantools
 import numpy as np
 from scipy.optimize import nnls
 from scipy.stats import chi2
@@ -65,13 +67,17 @@ __all__ = [
     "NoiseFigure",
     "allan_deviation",
     "characterise_noise",
+    "edf_greenhall",
+    "min_still_samples",
+    "overlapping_avar",
 ]
 
 FORMAT = "gyrocal-noise"
 VERSION = 1
 METHOD = (
-    "overlapping Allan deviation (IEEE Std 952-1997 Annex C, IEEE Std 1554-2005; allantools "
-    "oadev, Greenhall edf); N, B and K each read at the one tau where best determined"
+    "overlapping Allan deviation (IEEE Std 952-1997 Annex C, IEEE Std 1554-2005, "
+    "NIST SP 1065 eq. 11; Greenhall-Riley edf); N, B and K each read at the one tau where best "
+    "determined"
 )
 
 #: Greenhall's alpha (fractional-frequency power law) of each term: white FM, flicker FM, RW FM.
@@ -154,13 +160,130 @@ def _taus_m(n: int, per_octave: int = 2) -> np.ndarray:
     return ms[ms >= 1]
 
 
+# Greenhall & Riley (2003), Table 2: (a0, a1) of the large-r approximation
+# 1/edf ≈ (a0 − a1/r)/r for unmodified variances, by alpha, at d = 2 (Allan variance).
+_GR_TABLE2_D2 = {0: (2.0 / 3.0, 1.0 / 3.0), -1: (0.852, 0.375), -2: (1.079, 0.368)}
+_GR_JMAX = 100
+
+
+def _gr_sw(t: np.ndarray, alpha: int) -> np.ndarray:
+    """Greenhall & Riley eq. 7: the generalised autocovariance ``sw(t)`` of power law ``alpha``.
+
+    ``−|t|``, ``t² ln|t|``, ``|t|³``, ``t⁴ ln|t|``, ``|t|⁵`` for alpha = 2, 1, 0, −1, −2
+    (the logarithmic forms are 0 at t = 0).
+    """
+    at = np.abs(np.asarray(t, dtype=float))
+    if alpha % 2 == 0:
+        return -at if alpha == 2 else at ** (3 - alpha)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = at ** (3 - alpha) * np.log(at)
+    return np.where(at == 0.0, 0.0, out)
+
+
+def _gr_sx(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
+    """Greenhall & Riley eq. 8: ``sx(t) = F² [2 sw(t) − sw(t − 1/F) − sw(t + 1/F)]``."""
+    if math.isinf(f):
+        return _gr_sw(t, alpha + 2)
+    h = 1.0 / f
+    return f * f * (2.0 * _gr_sw(t, alpha) - _gr_sw(t - h, alpha) - _gr_sw(t + h, alpha))
+
+
+def _gr_sz(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
+    """Greenhall & Riley eq. 9 at d = 2: the second difference of ``sx``, binomial (1 −4 6 −4 1)."""
+    return (
+        6.0 * _gr_sx(t, f, alpha)
+        - 4.0 * (_gr_sx(t - 1.0, f, alpha) + _gr_sx(t + 1.0, f, alpha))
+        + _gr_sx(t - 2.0, f, alpha)
+        + _gr_sx(t + 2.0, f, alpha)
+    )
+
+
+def _gr_basic_sum(j: int, big_m: float, s: float, f: float, alpha: int) -> float:
+    """Greenhall & Riley eq. 10: ``sz(0)² + (1 − J/M) sz(J/S)² + 2 Σ_{j<J} (1 − j/M) sz(j/S)²``."""
+    k = np.arange(1, j, dtype=float)
+    inner = 2.0 * np.sum((1.0 - k / big_m) * _gr_sz(k / s, f, alpha) ** 2)
+    first = float(_gr_sz(np.array(0.0), f, alpha)) ** 2
+    second = (1.0 - j / big_m) * float(_gr_sz(np.array(j / s), f, alpha)) ** 2
+    return first + second + float(inner)
+
+
+def edf_greenhall(alpha: int, m: int, n_phase: int) -> float:
+    """Equivalent degrees of freedom of the overlapping Allan variance (Greenhall & Riley 2003).
+
+    The unmodified, fully overlapping estimator (``d = 2``, filter factor ``F = m``, stride
+    factor ``S = m``), the paper's case 2 for ``alpha ≤ 0``: the exact sum of eq. 10 where it
+    has at most ``J_max = 100`` terms, otherwise the Table 2 approximation
+    ``1/edf = (a0 − a1/r)/r`` (``r = M/S > 3``) or the truncated sum.
+
+    Parameters
+    ----------
+    alpha : {0, -1, -2}
+        Power-law exponent of the fractional-frequency (rate) noise: 0 white rate noise (angle
+        random walk), −1 flicker (bias instability), −2 random-walk rate (rate random walk).
+    m : int
+        Averaging factor, ``τ = m/odr``.
+    n_phase : int
+        Number of phase (angle) points, one more than the number of rate samples.
+
+    Returns
+    -------
+    float
+        The edf; ``σ̂²·edf/σ²`` is close to chi-square with that many degrees of freedom
+        (NIST SP 1065 eq. 45).
+    """
+    if alpha not in _GR_TABLE2_D2:
+        raise CalibInputError(f"alpha must be 0, -1 or -2 (rate noise power law), not {alpha!r}")
+    m = int(m)
+    big_m = float(n_phase - 2 * m)  # number of second differences, M = 1 + floor(S(N − L)/m)
+    if m < 1 or big_m < 1:
+        raise CalibInputError(f"m={m} needs at least {2 * m + 1} phase points, got {n_phase}")
+    s = float(m)
+    j = int(min(big_m, 3 * m))
+    r = big_m / s
+    if j <= _GR_JMAX:
+        f = float(m) if 3 * m <= _GR_JMAX else math.inf
+        sz0 = float(_gr_sz(np.array(0.0), f, alpha))
+        inv = _gr_basic_sum(j, big_m, s, f, alpha) / (sz0**2 * big_m)
+    elif r > 3.0:
+        a0, a1 = _GR_TABLE2_D2[alpha]
+        inv = (a0 - a1 / r) / r
+    else:
+        sz0 = float(_gr_sz(np.array(0.0), math.inf, alpha))
+        inv = _gr_basic_sum(_GR_JMAX, _GR_JMAX, _GR_JMAX / r, math.inf, alpha) / (sz0**2 * _GR_JMAX)
+    return 1.0 / inv
+
+
+def overlapping_avar(rate: np.ndarray, odr_hz: float, ms: np.ndarray) -> np.ndarray:
+    """Overlapping Allan variance of a rate record at factors ``ms`` (NIST SP 1065 eq. 11).
+
+    Parameters
+    ----------
+    rate : ndarray (n,)
+        Uniformly sampled rate (fractional-frequency data), any unit.
+    odr_hz : float
+        Sample rate, Hz.
+    ms : ndarray of int
+        Averaging factors, each in ``[1, n // 2]``.
+
+    Returns
+    -------
+    ndarray, shaped like ``ms``
+        ``σ²(τ = m/odr)`` in the rate's unit squared.
+    """
+    tau0 = 1.0 / odr_hz
+    x = np.concatenate([[0.0], np.cumsum(np.asarray(rate, dtype=float)) * tau0])  # phase
+    out = np.empty(len(ms))
+    for i, m in enumerate(np.asarray(ms, dtype=np.int64)):
+        d2 = x[2 * m :] - 2.0 * x[m : x.size - m] + x[: x.size - 2 * m]
+        out[i] = np.dot(d2, d2) / (2.0 * (m * tau0) ** 2 * d2.size)
+    return out
+
+
 def _edf_table(ms: np.ndarray, n: int) -> np.ndarray:
     out = np.empty((ms.size, 3))
     for i, m in enumerate(ms):
         for j, alpha in enumerate(_ALPHA):
-            out[i, j] = allantools.edf_greenhall(
-                alpha=alpha, d=2, m=int(m), N=n + 1, overlapping=True, modified=False
-            )
+            out[i, j] = edf_greenhall(alpha, int(m), n + 1)
     return out
 
 
@@ -191,15 +314,9 @@ def allan_deviation(
         ms = np.unique(np.asarray(m, dtype=np.int64).reshape(-1))
         if ms.size == 0 or ms[0] < 1 or ms[-1] > (n - 1) // 2:
             raise CalibInputError(f"m must be averaging factors in [1, {(n - 1) // 2}]")
-    taus = ms / fs
-    adev = np.empty((ms.size, a.shape[1]))
-    for j in range(a.shape[1]):
-        t_used, ad, _, _ = allantools.oadev(a[:, j], rate=fs, data_type="freq", taus=taus)
-        if t_used.size != ms.size:
-            raise CalibInputError("the record is too short for the requested averaging times")
-        adev[:, j] = ad
+    adev = np.sqrt(np.column_stack([overlapping_avar(a[:, j], fs, ms) for j in range(a.shape[1])]))
     return AllanCurve(
-        tau_s=taus, m=ms, adev=adev, odr_hz=fs, n_samples=n, edf=_edf_table(ms, n)
+        tau_s=ms / fs, m=ms, adev=adev, odr_hz=fs, n_samples=n, edf=_edf_table(ms, n)
     )
 
 
@@ -507,6 +624,35 @@ def _read_off(
     return value, (hi68 - lo68) / 2.0, lo95, hi95, float(tau[i])
 
 
+#: Decades of averaging time the curve must span above the shortest τ read for ``N``, so that the
+#: three terms of the model (slopes −½, 0, +½) can be told apart.
+_SPAN_DECADES = 2
+
+
+def min_still_samples(odr_hz: float, min_tau_s: float | None = None) -> int:
+    """Samples a still record needs for :func:`characterise_noise` to separate its three terms.
+
+    The curve reaches ``τ_max = n/(4·odr)`` (Stable32's stop ratio for the overlapping Allan
+    deviation, as :func:`allan_deviation` uses) and must span ``_SPAN_DECADES`` decades above
+    the shortest averaging time ``N`` is read at (default 10 samples), so
+    ``n ≥ 4 · 10^decades · m_min``.
+
+    Parameters
+    ----------
+    odr_hz : float
+        Sample rate, Hz.
+    min_tau_s : float, optional
+        Shortest averaging time used for ``N``, s (default ``10/odr_hz``).
+
+    Returns
+    -------
+    int
+    """
+    fs = scalar(odr_hz, "odr_hz", positive=True)
+    m_min = 10 if min_tau_s is None else max(1, math.ceil(min_tau_s * fs - 1e-9))
+    return 4 * 10**_SPAN_DECADES * m_min
+
+
 def characterise_noise(
     rate: np.ndarray,
     odr_hz: float,
@@ -546,10 +692,15 @@ def characterise_noise(
     fs = curve.odr_hz
     tau = curve.tau_s
     min_tau = 10.0 / fs if min_tau_s is None else scalar(min_tau_s, "min_tau_s", nonneg=True)
-    if tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
+    need = min_still_samples(fs, min_tau)
+    if curve.n_samples < need or tau.size < 3 or np.count_nonzero(tau >= min_tau) < 2:
         raise CalibInputError(
-            f"the record ({curve.n_samples} samples at {fs:g} Hz) is too short for a noise "
-            f"characterisation above min_tau_s={min_tau:g} s; record the sensor still for longer"
+            f"the still record is too short for noise figures: {curve.n_samples} samples "
+            f"({curve.n_samples / fs:.3g} s at {fs:g} Hz), and separating white noise, bias "
+            f"instability and rate random walk needs the Allan curve to span {_SPAN_DECADES} "
+            f"decades of averaging time above {min_tau:.3g} s, i.e. at least {need} samples "
+            f"({need / fs:.3g} s); record the sensor still for longer (many minutes for bias "
+            "instability)"
         )
     usable_n = tau >= min_tau
     out: dict[str, list[tuple[float, ...]]] = {"N": [], "B": [], "K": []}

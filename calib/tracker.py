@@ -26,7 +26,7 @@ the axis uncertainty and the encoder resolution put on ``ω u ⊘ scale``). For 
 over the window this is exactly the result of ``n`` sequential per-sample updates (the sum of
 ``n`` identical-H information terms), at a fraction of the cost; averaging readings and the
 encoder rate over the same window is also what makes a reference rate right (speed ripple
-cancels). Each window is one textbook Kalman step on :class:`filterpy.kalman.KalmanFilter`
+cancels). Each window is one textbook Kalman step on :class:`gyrocal.calib.kalman.KalmanFilter`
 (``x, P, F, Q, H, R``):
 
     x⁻ = F x,  P⁻ = F P Fᵀ + Q,
@@ -62,10 +62,10 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
 from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.kalman import KalmanFilter
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
 from gyrocal.calib.validation import scalar, vec3
@@ -338,7 +338,7 @@ class BiasTracker:
 
     Attributes
     ----------
-    kf : filterpy.kalman.KalmanFilter
+    kf : gyrocal.calib.kalman.KalmanFilter
         The filter (``x``, ``P``, ``F``, ``Q``, ``H``, ``R`` in filterpy's names).
     detector : StillDetector
     """

@@ -30,6 +30,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("verify", "gyrocal.kit.commands.verify"),
     ("estimate", "gyrocal.kit.commands.estimate"),
     ("export", "gyrocal.kit.commands.export"),
+    ("apply", "gyrocal.kit.commands.apply"),
     ("report", "gyrocal.kit.commands.report"),
     ("track", "gyrocal.kit.commands.track"),
     ("noise", "gyrocal.kit.commands.noise"),

@@ -148,7 +148,8 @@ def _validate(section: str, name: str, value: Any) -> Any:
     if key.check is not None:
         problem = key.check(value)
         if problem:
-            raise InputError(f"config key {section}.{name} {problem} (got {value!r})")
+            shown = f"{value:#04x}" if name == "address" else repr(value)  # as i2cdetect shows it
+            raise InputError(f"config key {section}.{name} {problem} (got {shown})")
     return value
 
 
@@ -193,6 +194,14 @@ def load_config(path: str | os.PathLike[str] | None) -> Config:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"config file {p} not found; `gyrocal init` writes one") from None
+    except IsADirectoryError:
+        raise InputError(
+            f"--config {p} is a directory; give the config file itself (e.g. {p / 'gyrocal.toml'})"
+        ) from None
+    except UnicodeDecodeError:
+        raise InputError(f"{p} is not a text file; give a gyrocal.toml") from None
+    except PermissionError:
+        raise InputError(f"cannot read config file {p}: permission denied") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{p} is not valid TOML: {exc}") from None
     return _merge(default_config(), data, str(p))

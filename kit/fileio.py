@@ -11,7 +11,51 @@ from typing import Any
 
 from gyrocal.kit.errors import InputError, OutputExistsError
 
-__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text", "refuse_existing"]
+__all__ = [
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
+    "make_output_dir",
+    "refuse_existing",
+]
+
+
+def _file_in_the_way(path: Path) -> Path | None:
+    """The nearest ancestor of ``path`` (or ``path`` itself) that exists and is not a directory."""
+    for p in (path, *path.parents):
+        if p.exists() or p.is_symlink():
+            return None if p.is_dir() else p
+    return None
+
+
+def _no_directory_message(dest: Path, what: str) -> str:
+    blocker = _file_in_the_way(dest)
+    if blocker is None:
+        return f"cannot write {what}: directory {dest} does not exist"
+    if blocker == dest:
+        return f"cannot write {what}: {dest} is a file, not a directory"
+    return f"cannot write {what}: {blocker} is a file, so there is no directory {dest} under it"
+
+
+def make_output_dir(path: str | os.PathLike[str], flag: str) -> Path:
+    """Create the output directory ``path`` (and its parents) named by the option ``flag``.
+
+    Raises
+    ------
+    InputError
+        If ``path`` or one of its parents is an existing file, or the directory cannot be made;
+        the message names ``flag`` as the user typed it and what to do.
+    """
+    out = Path(path)
+    blocker = _file_in_the_way(out)
+    if blocker is not None:
+        where = "is a file" if blocker == out else f"is under {blocker}, which is a file"
+        raise InputError(f"{flag} {path} {where}; give a new or existing directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{flag} {path}: cannot create the directory ({exc.strerror})") from None
+    return out
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool = False) -> Path:
@@ -42,10 +86,12 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
         If the directory does not exist.
     """
     dest = Path(path)
+    if dest.is_dir():
+        raise InputError(f"cannot write {dest}: it is a directory; give a file name")
     if dest.exists() and not force:
         raise OutputExistsError(f"{dest} already exists; pass --force to replace it")
     if not dest.parent.is_dir():
-        raise InputError(f"cannot write {dest}: directory {dest.parent} does not exist")
+        raise InputError(_no_directory_message(dest.parent, str(dest)))
     fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual file mode

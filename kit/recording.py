@@ -107,7 +107,8 @@ class RecordingWriter:
                 raise OutputExistsError(f"{self.path} exists and is not a directory")
             if any(self.path.iterdir()) and not force:
                 raise OutputExistsError(
-                    f"{self.path} already holds files; choose another --out or pass --force"
+                    f"{self.path} already holds files; choose another directory or pass --force "
+                    "to replace them"
                 )
         else:
             try:

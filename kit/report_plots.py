@@ -562,13 +562,12 @@ def write_report(
     InputError
         If matplotlib is missing, or ``out_dir`` cannot be created.
     """
+    from gyrocal.kit.fileio import make_output_dir
     from gyrocal.kit.plots import require_matplotlib, save_png
 
     plt = require_matplotlib()
     out = Path(out_dir)
     plan = plan_report(rec, extracted)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out} exists and is not a directory; choose another --out")
     existing = [p.name for p in plan if (out / p.name).exists()]
     if existing and not force:
         raise OutputExistsError(
@@ -576,10 +575,7 @@ def write_report(
             + (f" and {len(existing) - 4} more" if len(existing) > 4 else "")
             + "; choose another --out or pass --force to replace them"
         )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create {out}: {exc.strerror}") from None
+    make_output_dir(out, "--out")
     motors = sorted({int(s.motor) for s in rec.segments if s.kind == "rotate"})  # type: ignore[arg-type]
     axes = servo_axes(motors, cal, rec.manifest, extracted.windows)
     index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}

@@ -1,8 +1,10 @@
 """The documents are part of the product: every command in them must work.
 
-Every fenced block of ``hardware_docs/*.md`` and ``README.md`` is run, document by document, in the
-order it appears, in a fresh working directory per document, so a command can read the files an
-earlier command of the same document wrote:
+Every fenced block of ``README.md`` and ``hardware_docs/*.md`` is run in ONE working directory, in
+the order a reader meets them: ``README.md``, then the index ``hardware_docs/README.md``, then the
+pages in the order of the index's table, each page's blocks in the order they appear. So a command
+reads the files any earlier command wrote, and two documents that make the same directory collide
+here as they would for the reader:
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
@@ -67,7 +69,18 @@ from gyrocal.kit.recording import ENCODER_HEADER, IMU_HEADER, SEGMENTS_HEADER
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC_DIR = ROOT / "hardware_docs"
-DOCS = [*sorted(DOC_DIR.glob("*.md")), ROOT / "README.md"]
+
+
+def reading_order() -> list[Path]:
+    """README.md, the index, then the pages in the order of the index's table."""
+    index = DOC_DIR / "README.md"
+    linked = re.findall(r"^\|\s*\[[^\]]+\]\(([\w\-]+\.md)\)", index.read_text("utf-8"), re.M)
+    pages = [DOC_DIR / name for name in dict.fromkeys(linked)]
+    rest = sorted(set(DOC_DIR.glob("*.md")) - {index, *pages})
+    return [ROOT / "README.md", index, *pages, *rest]
+
+
+DOCS = reading_order()
 
 SHELL_LANGS = {"sh", "bash", "shell", "console"}
 FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
@@ -349,25 +362,29 @@ def run_document(path: Path, workdir: Path) -> DocRun:
 
 
 class DocRunner:
-    """Runs each document once per test session and remembers what it produced."""
+    """Runs the documents once per test session, in :data:`DOCS` order in one directory (as a
+    reader would), and remembers what each produced."""
 
     def __init__(self, factory: pytest.TempPathFactory) -> None:
-        self.factory = factory
+        self.workdir = factory.mktemp("docs")
         self.runs: dict[str, DocRun] = {}
         self.failures: dict[str, BaseException] = {}
 
     def __call__(self, path: Path) -> DocRun:
-        key = _name(path)
-        if key in self.failures:
-            raise self.failures[key]
-        if key not in self.runs:
-            workdir = self.factory.mktemp(path.stem)
-            try:
-                self.runs[key] = run_document(path, workdir)
-            except BaseException as exc:  # remember, so a second caller sees the same failure
-                self.failures[key] = exc
-                raise
-        return self.runs[key]
+        for earlier in DOCS[: DOCS.index(path) + 1]:
+            key = _name(earlier)
+            if key in self.failures:
+                if earlier == path:
+                    raise self.failures[key]
+                raise AssertionError(f"{key}, read before {_name(path)}, failed: "
+                                     f"{self.failures[key]}")
+            if key not in self.runs:
+                try:
+                    self.runs[key] = run_document(earlier, self.workdir)
+                except BaseException as exc:  # remember, so a second caller sees the same failure
+                    self.failures[key] = exc
+                    raise
+        return self.runs[_name(path)]
 
 
 @pytest.fixture(scope="module")

@@ -415,7 +415,7 @@ class Gimbal:
             try:
                 self.stop()
             except ShutdownError as shutdown:
-                raise ShutdownError(f"{shutdown} (while handling: {exc!r})") from exc
+                raise _shutdown_after(exc, shutdown) from exc
             finally:
                 self.is_open = False
                 self._restore_signal_handlers()
@@ -565,7 +565,7 @@ class Gimbal:
             if exc is None:
                 raise
             # keep the original error; say that the stop could not be confirmed as well
-            raise ShutdownError(f"{shutdown} (while handling: {exc!r})") from exc
+            raise _shutdown_after(exc, shutdown) from exc
 
     # ---- signals -------------------------------------------------------------------------
     def _install_signal_handlers(self) -> None:
@@ -1223,3 +1223,12 @@ class Gimbal:
         if result != COMM_SUCCESS:
             raise ServoCommunicationError(None, f"SYNC_WRITE {name}={raw}",
                                           self.ph.getTxRxResult(result), 1)
+
+
+def _shutdown_after(cause: BaseException, shutdown: ShutdownError) -> ShutdownError:
+    """The error for a failed safe stop on the way out of ``cause``: the cause first, in words
+    (the user acts on it), then that torque off could not be confirmed."""
+    what = str(cause).strip() or type(cause).__name__
+    if not what.endswith("."):
+        what += "."
+    return ShutdownError(f"{what} The safe stop then {shutdown}")

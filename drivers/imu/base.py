@@ -41,6 +41,7 @@ from gyrocal.drivers.imu.timing import SampleClock
 
 __all__ = [
     "BLOCK_MAX",
+    "ODR_RELATIVE_TOLERANCE",
     "NACK_ERRNOS",
     "TRANSIENT_ERRNOS",
     "ChipNotice",
@@ -53,6 +54,11 @@ __all__ = [
 
 #: smbus2's I2C_SMBUS_BLOCK_MAX: the longest SMBus block transfer (hardware reference §3).
 BLOCK_MAX = 32
+
+#: How far a requested output data rate may be from one the chip can do and still be taken (the
+#: chip's rate is used: 333 -> 1000/3 Hz on an MPU-9250, 15 -> 14.9 Hz on an LSM9DS1); farther is
+#: refused. ``SensorInfo.odr_hz`` is the rate used, which callers report when it differs.
+ODR_RELATIVE_TOLERANCE = 0.01
 
 #: errnos worth retrying (hardware reference §3, "Driver guidance").
 TRANSIENT_ERRNOS = frozenset(

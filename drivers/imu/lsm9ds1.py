@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ImuReader
+from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
@@ -75,7 +75,7 @@ class LSM9DS1Reader(ImuReader):
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         rates = sorted(LSM9DS1_ODR)
         odr = min(rates, key=lambda r: abs(r - odr_hz))
-        if not (odr_hz > 0 and abs(odr - odr_hz) <= 0.01 * odr_hz):
+        if not (odr_hz > 0 and abs(odr - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
             raise ConfigurationError(
                 f"odr_hz={odr_hz!r} is not an LSM9DS1 gyro output data rate; choose one of "
                 + ", ".join(f"{r:g}" for r in rates)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ImuReader
+from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
 from gyrocal.drivers.imu.chips import (
     MPU9250,
     MPU9250_BITS,
@@ -77,7 +77,7 @@ class MPU9250Reader(ImuReader):
         div = round(base / odr_hz - 1.0) if odr_hz > 0 else -1
         div = min(max(div, 0), 255)
         actual = base / (1 + div)
-        if not (odr_hz > 0 and abs(actual - odr_hz) <= 0.01 * odr_hz):
+        if not (odr_hz > 0 and abs(actual - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
             examples = ", ".join(f"{base / (1 + d):.4g}" for d in (0, 1, 2, 3, 4, 7, 9, 19, 49, 99))
             raise ConfigurationError(
                 f"odr_hz={odr_hz!r} is not an MPU-9250 output data rate. With the gyro low-pass "

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import sys
 from datetime import datetime
 from pathlib import Path
 from typing import Any
+
+from gyrocal.kit import argtypes
 
 HELP = "calibrate: spin the sensor on the jig, record, fit, write calibration.json"
 DESCRIPTION = (
@@ -43,10 +46,10 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     if sim_flag:
         p.add_argument("--sim", action="store_true",
                        help="use the emulated jig instead of hardware")
-    p.add_argument("--sim-seed", type=int, default=0, metavar="S",
+    p.add_argument("--sim-seed", type=argtypes.seed, default=0, metavar="S",
                    help="seed of the emulated sensor's true errors and the jig's geometry "
                         "(default 0)")
-    p.add_argument("--sim-noise-seed", type=int, metavar="S",
+    p.add_argument("--sim-noise-seed", type=argtypes.seed, metavar="S",
                    help="seed of the emulated run's noise and ripple (default: --sim-seed; "
                         "verify uses a fresh one)")
     p.add_argument("--sim-scale", type=_floats3("--sim-scale"), nargs=3, metavar="K",
@@ -64,7 +67,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--baud", type=int, help="servo bus speed (gimbal.baud)")
     p.add_argument("--imu-model", help="imu.model")
     p.add_argument("--imu-bus", type=int, help="imu.bus: /dev/i2c-N")
-    p.add_argument("--imu-address", type=lambda s: int(s, 0), help="imu.address, e.g. 0x68")
+    p.add_argument("--imu-address", type=argtypes.i2c_address, help="imu.address, e.g. 0x68")
     p.add_argument("--range-dps", type=int, help="imu.range_dps")
     p.add_argument("--odr", type=float, help="imu.odr_hz")
 
@@ -82,6 +85,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=METHODS)
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--no-report", action="store_true",
+                   help="do not write DIR/report.html and DIR/plots/ (written by default when "
+                        "the plot extra is installed)")
+
+
+def note_rounded_odr(asked_hz: float, info: Any) -> None:
+    """Say on stderr when the chip runs at a rate other than the one configured (``--odr 201``
+    runs an MPU-9250 at 1000/(1 + 4) = 200 Hz)."""
+    if info.odr_hz != asked_hz:
+        print(f"gyrocal: note: imu.odr_hz {asked_hz:g} is not a rate the {info.model} can do; "
+              f"it runs at the nearest, {info.odr_hz:.6g} Hz (the recording says so)",
+              file=sys.stderr)
 
 
 def load_cli_config(args: argparse.Namespace) -> Any:
@@ -115,6 +130,13 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime, noise_seed=args.sim_noise_seed)
+        from gyrocal.kit.config import default_config
+
+        g, default = cfg["gimbal"], default_config()["gimbal"]
+        if (g["baud"], g["port"]) != (default["baud"], default["port"]):  # the user set them
+            print(f"gyrocal: note: --sim runs the emulated servos on their own bus at {SIM_BAUD} "
+                  f"baud; gimbal.port ({g['port']}) and gimbal.baud ({g['baud']}) are not used",
+                  file=sys.stderr)
         return sim, sim.clock, sim.port, SIM_BAUD, sim.imu_bus
     from gyrocal.drivers.clock import SystemClock
 
@@ -142,6 +164,7 @@ class Jig:
         g, imu = cfg["gimbal"], cfg["imu"]
         self.imu = open_imu(imu["model"], bus, imu["address"], clock=self.clock,
                             range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])
+        note_rounded_odr(imu["odr_hz"], self.imu.info)
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
                              max_turns=g["max_turns"], acceleration=g["acceleration"])
 
@@ -319,7 +342,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
     from gyrocal.kit.errors import OutputExistsError
-    from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.fileio import atomic_write_text, make_output_dir, refuse_existing
     from gyrocal.kit.pipeline import estimate_recording
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
@@ -329,7 +352,10 @@ def run(args: argparse.Namespace) -> int:
     cal_path = out / "calibration.json"
     if cal_path.exists() and not args.force:
         raise OutputExistsError(f"{cal_path} already exists; pass --force to replace it")
-    out.mkdir(parents=True, exist_ok=True)
+    report = not args.no_report and importlib.util.find_spec("matplotlib") is not None
+    if report:
+        refuse_existing([out / "report.html", out / "plots"], force=args.force)
+    make_output_dir(out, "--out")
     rec_dir = out / "recording"
     run_jig(cfg, args, out, rec_dir)
     rec = load_recording(rec_dir)
@@ -338,10 +364,16 @@ def run(args: argparse.Namespace) -> int:
     atomic_write_text(cal_path, cal.to_json() + "\n", force=args.force)
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
+    if report:
+        from gyrocal.kit.report_html import write_run_report
+
+        write_run_report(rec, cal, est.extracted, out / "plots", title=f"{out} (gyrocal calibrate)",
+                         html_path=out / "report.html", force=args.force)
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()
     else:
         print(calibration_table(cal, rec.truth))
-        print(f"\nwrote {cal_path} and {rec_dir}/")
+        print(f"\nwrote {cal_path} and {rec_dir}/"
+              + (f", and the report {out / 'report.html'}" if report else ""))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0

@@ -54,6 +54,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
     from gyrocal.calib.observations import diff_noise
     from gyrocal.drivers.errors import DriverError
     from gyrocal.drivers.imu import open_imu
+    from gyrocal.kit.commands.calibrate import note_rounded_odr
 
     imu_cfg = cfg["imu"]
     where = "the emulated bus" if args.sim else f"/dev/i2c-{imu_cfg['bus']}"
@@ -66,6 +67,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
         return
     try:
         info = reader.info
+        note_rounded_odr(imu_cfg["odr_hz"], info)
         rep.ok(f"found {info.model} (WHO_AM_I 0x{info.who_am_i:02X}), ±{info.full_scale_dps:g} "
                f"°/s, {info.odr_hz:g} Hz, low-pass {info.lowpass_hz:g} Hz")
         if getattr(reader, "notice", None):
@@ -166,7 +168,7 @@ def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, 
                 if st.hardware_error:
                     rep.bad(f"servo {sid} reports {', '.join(st.hardware_error_names)}",
                             "fix the cause, then power-cycle or reboot the servo")
-                if info.return_delay_s > 1e-4:
+                if info.return_delay_s > 1e-4 and not args.sim:  # not the emulator's own
                     rep.warn(f"servo {sid}: Return Delay Time {info.return_delay_s * 1e6:.0f} µs",
                              "0 µs (Dynamixel Wizard) gives the fastest position sampling")
     except DriverError as exc:
@@ -194,5 +196,8 @@ def run(args: argparse.Namespace) -> int:
     if rep.problems:
         print(f"\n{rep.problems} problem(s) found", file=sys.stderr)
         raise HardwareError(f"doctor found {rep.problems} problem(s); see above")
-    print("\nall checks passed: run `gyrocal calibrate`")
+    if args.sim:
+        print("\nall checks passed on the emulated jig: `gyrocal calibrate --sim` calibrates it")
+    else:
+        print("\nall checks passed: run `gyrocal calibrate`")
     return 0

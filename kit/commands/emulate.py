@@ -14,6 +14,8 @@ import signal
 import sys
 import threading
 
+from gyrocal.kit import argtypes
+
 HELP = "serve emulated Dynamixel servos on a pseudo-terminal (for any serial client)"
 DESCRIPTION = __doc__
 
@@ -41,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baud", type=int, default=1_000_000,
                         help="the servos' configured baud rate (a PTY ignores it, but clients "
                              "must set one dynamixel-sdk accepts; default 1000000)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=argtypes.seed, default=0, help="random seed (default 0)")
     parser.add_argument("--duration", type=float, default=None,
                         help="stop after this many seconds (default: until Ctrl-C or SIGTERM)")
     parser.add_argument("--json", action="store_true",

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gyrocal.kit import argtypes
 from gyrocal.kit.errors import InputError
 
 if TYPE_CHECKING:
@@ -37,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="--sim: length of the record, s (default 1800)")
     p.add_argument("--odr", type=float, default=200.0, metavar="HZ",
                    help="--sim: sample rate, Hz (default 200)")
-    p.add_argument("--seed", type=int, default=0, help="--sim: random seed (default 0)")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="--sim: random seed (default 0)")
     p.add_argument("--sim-noise-density", type=float, default=1.75e-4, metavar="N",
                    help="--sim: true angle random walk, rad/s/sqrt(Hz) (default 1.75e-4)")
     p.add_argument("--sim-rate-random-walk", type=float, default=2e-6, metavar="K",

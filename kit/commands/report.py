@@ -11,7 +11,9 @@ DESCRIPTION = (
     "the calibrated rate about the servo's axis against the encoder reference, with the window "
     "the estimator used shaded by its weight; the rest windows against -bias; and each window's "
     "residual in standard deviations. With CAL (Calibration v1 JSON) the plots use that "
-    "calibration; without it one is estimated from the recording. Prints the list of files. "
+    "calibration; without it one is estimated from the recording. Also writes report.html, one "
+    "self-contained page (results, verdict, servo axes, verification, environment, the plots "
+    "inline) to read or send. Prints the list of files. "
     "Needs matplotlib: pip install 'gyrocal[plot]'."
 )
 
@@ -25,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="Calibration v1 JSON (default: estimate one from the recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
     p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
+    p.add_argument("--verification", metavar="FILE",
+                   help="a `gyrocal verify --json` document to include in report.html")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator when no CAL is given (default paired-axis)")
 
@@ -35,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.pipeline import extract_recording
     from gyrocal.kit.plots import require_matplotlib
     from gyrocal.kit.recording import load_recording
-    from gyrocal.kit.report_plots import write_report
+    from gyrocal.kit.report_html import write_run_report
 
     require_matplotlib()  # before any work: a missing extra is the first thing to say
     rec = load_recording(args.recording)
@@ -53,8 +57,14 @@ def run(args: argparse.Namespace) -> int:
         what = f"a {args.method} estimate from the recording (no CAL given)"
     for w in extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
-    written = write_report(rec, cal, extracted, args.out, force=args.force)
-    print(f"gyrocal report: {len(written)} plots of {rec.path} with {what}")
+    verification = None
+    if args.verification:
+        from gyrocal.kit.exports import read_json
+
+        verification = read_json(args.verification, "verification")
+    written = write_run_report(rec, cal, extracted, args.out, title=f"{rec.path} with {what}",
+                               verification=verification, force=args.force)
+    print(f"gyrocal report: {len(written) - 1} plots and a page of {rec.path} with {what}")
     width = max(len(str(p)) for p, _ in written)
     for path, desc in written:
         print(f"{str(path):<{width}}  {desc}")

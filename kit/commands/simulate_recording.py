@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from gyrocal.kit import argtypes
+
 HELP = "write a synthetic recording (with its true parameters) for testing"
 DESCRIPTION = (
     "Simulate a calibration run at sample level — a sensor with scale, bias and a misaligned "
@@ -31,7 +33,7 @@ def _positive(kind: type) -> object:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     p.add_argument("out", help="the recording directory to create")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="random seed (default 0)")
     p.add_argument("--speed", type=_positive(float), default=3.0, help="rad/s (default 3.0)")
     p.add_argument("--turns", type=_positive(int), default=3,
                    help="whole revolutions per direction (default 3)")

@@ -11,6 +11,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from gyrocal.kit import argtypes
+
 HELP = "reproduce the paper's simulation study (Monte Carlo, all estimators side by side)"
 DESCRIPTION = (
     "Monte Carlo study of the estimators at sample level (200 Hz), as in the paper's Section "
@@ -28,6 +30,10 @@ PAPER_FIGURES = {
 }
 
 
+#: The presets that draw plots with ``--plot``.
+PLOTTED_PRESETS = ("normal", "extreme", "speed-sweep")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     p.add_argument("--preset", choices=PRESET_CHOICES, default="normal")
@@ -35,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reps", type=int, help="runs per sensor (default 500; speed-sweep 10)")
     p.add_argument("--noise", type=float, nargs="+", metavar="SIGMA",
                    help="noise levels per sample, rad/s (default 0.035 0.2)")
-    p.add_argument("--seed", type=int, default=2023)
+    p.add_argument("--seed", type=argtypes.seed, default=2023)
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
                    help="processes (default: up to 2)")
     p.add_argument("--no-lm", action="store_true",
@@ -123,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
 
     from gyrocal.calib import study
     from gyrocal.kit.errors import InputError
-    from gyrocal.kit.fileio import refuse_existing
+    from gyrocal.kit.fileio import make_output_dir, refuse_existing
 
     for name in ("sensors", "reps", "workers"):
         v = getattr(args, name)
@@ -132,14 +138,17 @@ def run(args: argparse.Namespace) -> int:
     if args.noise is not None and any(not n > 0 for n in args.noise):
         raise InputError("--noise levels must be positive")
     plot_dir = None
+    if args.plot and args.preset not in PLOTTED_PRESETS:
+        raise InputError(
+            f"--plot: the {args.preset} preset draws no plots (only "
+            f"{', '.join(PLOTTED_PRESETS)} do); drop --plot or choose one of those presets"
+        )
     if args.plot:
-        from pathlib import Path
 
         from gyrocal.kit.plots import require_matplotlib
 
         require_matplotlib()
-        plot_dir = Path(args.plot)
-        plot_dir.mkdir(parents=True, exist_ok=True)
+        plot_dir = make_output_dir(args.plot, "--plot")
     t0 = time.perf_counter()
     doc: dict[str, Any]
     text: str

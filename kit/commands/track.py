@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrocal.kit import argtypes
 from gyrocal.kit.errors import InputError, OutputExistsError
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
@@ -51,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--duration", type=float, default=None, metavar="S",
                      help="--sim or --live: session length, s (default 1800 for a synthetic "
                           "session, 60 live)")
-    src.add_argument("--seed", type=int, default=None,
+    src.add_argument("--seed", type=argtypes.seed, default=None,
                      help="--sim: random seed of the synthetic session (default 0; the emulated "
                           "jig of --live --sim takes --sim-seed)")
     src.add_argument("--motion", choices=("random", "jig"), default=None,

@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.calib.model import GyroCalibration
     from gyrocal.kit.commands.calibrate import load_cli_config, run_jig
     from gyrocal.kit.errors import InputError
+    from gyrocal.kit.fileio import make_output_dir
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.verify import verify_recording
 
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         if args.sim and args.sim_noise_seed is None:
             args.sim_noise_seed = args.sim_seed + 1  # the same sensor and jig, fresh noise
         out = Path(args.out or datetime.now().strftime("gyrocal-verify-%Y%m%d-%H%M%S"))
-        out.mkdir(parents=True, exist_ok=True)
+        make_output_dir(out, "--out")
         rec_dir = out / "recording"
         run_jig(cfg, args, out, rec_dir)
     rec = load_recording(rec_dir)

@@ -139,3 +139,74 @@ def test_bad_input_is_named():
         characterise_noise(np.zeros((1000, 3)), 0.0)
     with pytest.raises(CalibInputError, match="too short"):
         characterise_noise(np.random.default_rng(0).normal(size=(100, 3)), ODR, min_tau_s=1.0)
+
+
+# --- the in-house Allan variance and Greenhall edf, against allantools and against simulation ---
+
+
+def test_overlapping_avar_matches_allantools_oadev():
+    allantools = pytest.importorskip("allantools")
+    from gyrocal.calib.allan import overlapping_avar
+
+    rng = np.random.default_rng(21)
+    y = np.cumsum(rng.standard_normal(4000)) * 1e-3 + rng.standard_normal(4000)
+    ms = np.array([1, 2, 3, 7, 64, 500, 1333])
+    _, ref, _, _ = allantools.oadev(y, rate=ODR, data_type="freq", taus=ms / ODR)
+    np.testing.assert_allclose(np.sqrt(overlapping_avar(y, ODR, ms)), ref, rtol=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [0, -1, -2])
+def test_edf_greenhall_matches_allantools_in_every_branch(alpha):
+    # Covers the exact sum with F = m (3m ≤ 100) and F = ∞, the Table 2 approximation (J > 100,
+    # r > 3) and the truncated sum (J > 100, r ≤ 3).
+    allantools = pytest.importorskip("allantools")
+    from gyrocal.calib.allan import edf_greenhall
+
+    for n_phase in (65, 1001, 20001):
+        for m in (1, 2, 5, 33, 34, 50, 300, 4000):
+            if 2 * m + 1 > n_phase:
+                continue
+            ref = allantools.edf_greenhall(
+                alpha=alpha, d=2, m=m, N=n_phase, overlapping=True, modified=False
+            )
+            assert edf_greenhall(alpha, m, n_phase) == pytest.approx(ref, rel=1e-9), (n_phase, m)
+
+
+@pytest.mark.parametrize(("alpha", "m"), [(0, 16), (0, 64), (-2, 16), (-2, 64)])
+def test_edf_greenhall_matches_the_spread_of_simulated_allan_variances(alpha, m):
+    # Independent truth: for a chi-square estimate, edf = 2 E[σ̂²]² / Var(σ̂²). Simulate many
+    # white (alpha 0) or random-walk (alpha −2) rate records and measure it. (At m of a few
+    # samples Greenhall's model overstates the edf of sampled white noise, 400 against 341 at
+    # m = 1 here, as allantools does; the kit reads N at m ≥ 10.)
+    from gyrocal.calib.allan import edf_greenhall, overlapping_avar
+
+    rng = np.random.default_rng(31 + m - alpha)
+    n, reps = 512, 2000
+    y = rng.standard_normal((reps, n))
+    if alpha == -2:
+        y = np.cumsum(y, axis=1)
+    est = np.array([overlapping_avar(row, 1.0, np.array([m]))[0] for row in y])
+    measured = 2.0 * est.mean() ** 2 / est.var()
+    assert measured == pytest.approx(edf_greenhall(alpha, m, n + 1), rel=0.12)
+
+
+def test_edf_greenhall_refuses_what_it_does_not_model():
+    from gyrocal.calib.allan import edf_greenhall
+
+    with pytest.raises(CalibInputError, match="alpha"):
+        edf_greenhall(1, 4, 1000)
+    with pytest.raises(CalibInputError, match="phase points"):
+        edf_greenhall(0, 600, 1000)
+
+
+def test_a_record_too_short_for_three_terms_is_refused_saying_how_much_is_needed():
+    # 0.6 s of still data (a rest between turns) used to give B = 0 ± 0 and K = 0 ± 0.
+    from gyrocal.calib.allan import min_still_samples
+
+    assert min_still_samples(200.0) == 4000  # τ from 10 samples up to n/4: two decades
+    rng = np.random.default_rng(41)
+    with pytest.raises(CalibInputError, match=r"121 samples \(0.605 s at 200 Hz\).*at least 4000 "
+                                              r"samples \(20 s\)"):
+        characterise_noise(rng.normal(size=(121, 3)) * 1e-3, ODR)
+    nc = characterise_noise(rng.normal(size=(4000, 3)) * 1e-3, ODR)  # just enough: it runs
+    assert all(v > 0 for v in nc.noise_density.value)

@@ -327,3 +327,22 @@ def test_a_reader_closes_the_bus_it_opened(monkeypatch):
     r.close()
     with pytest.raises(OSError):
         bus.read_byte_data(addr, 0x75)
+
+
+@pytest.mark.parametrize(
+    ("model", "asked", "taken"),
+    [("mpu9250", 201.0, 200.0), ("mpu9250", 203.0, None), ("mpu9250", 150.0, None),
+     ("lsm9ds1", 120.0, 119.0), ("lsm9ds1", 125.0, None)],
+)
+def test_an_odr_within_one_percent_is_rounded_to_the_chips_and_farther_is_refused(
+    model, asked, taken
+):
+    # MPU-9250: 1 kHz / (1 + SMPLRT_DIV) with the low-pass filter on; LSM9DS1: its ODR_G table.
+    # The rate used is in info.odr_hz (the kit notes the rounding, test_cli_inputs.py).
+    clock, bus, addr = rig(model)
+    if taken is None:
+        with pytest.raises(ConfigurationError, match=f"odr_hz={asked!r} is not an"):
+            open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=asked)
+    else:
+        r = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=asked)
+        assert r.info.odr_hz == pytest.approx(taken, rel=1e-12)

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def calibrate(out, *extra):
-    return main(["calibrate", "--sim", "--out", str(out), "--quiet", *extra])
+    return main(["calibrate", "--sim", "--out", str(out), "--quiet", "--no-report", *extra])
 
 
 def sim_state(out):

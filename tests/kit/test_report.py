@@ -49,7 +49,8 @@ def expected_names(rec):
 def check_pngs(directory, names):
     import matplotlib.image as mpimg
 
-    assert {p.name for p in directory.iterdir()} == names  # nothing else (no temporary files)
+    # nothing else (no temporary files) but the HTML page (tests/kit/test_report_html.py)
+    assert {p.name for p in directory.iterdir()} == names | {"report.html"}
     for name in names:
         data = (directory / name).read_bytes()
         assert data[:8] == PNG_MAGIC, name
@@ -75,8 +76,9 @@ def test_report_with_calibration_one_plot_per_turn(run_dir, tmp_path, capsys):
     assert len(names) == 6 + 3  # three servos, each turned both ways
     check_pngs(out_dir, names)
     listed = index_paths(out)
-    assert sorted(listed) == sorted(str(out_dir / n) for n in names)
-    assert listed[0].endswith("overview.png") and listed[-1].endswith("residuals.png")
+    assert sorted(listed) == sorted(str(out_dir / n) for n in names | {"report.html"})
+    assert listed[0].endswith("overview.png") and listed[-2].endswith("residuals.png")
+    assert listed[-1].endswith("report.html")
     assert "calibration.json" in out
 
 

@@ -1,0 +1,73 @@
+"""The linear Kalman filter step the bias tracker runs, under filterpy's attribute names.
+
+A plain install must not pull matplotlib, and ``filterpy`` (1.4.5, unchanged since 2018) declares
+it as a requirement; the tracker needs only one predict and one update per window, so they live
+here (about thirty lines), and the test suite checks them against ``filterpy.kalman.KalmanFilter``
+(kept in the ``test`` extra). The equations are the textbook ones (Bar-Shalom, Li & Kirubarajan,
+*Estimation with Applications to Tracking and Navigation*, §5.2.4; the covariance update in
+Joseph form, §5.2.5):
+
+    x⁻ = F x,  P⁻ = F P Fᵀ + Q,
+    y = z − H x⁻,  S = H P⁻ Hᵀ + R,  K = P⁻ Hᵀ S⁻¹,
+    x = x⁻ + K y,  P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyrocal.calib.errors import CalibInputError
+
+__all__ = ["KalmanFilter"]
+
+
+class KalmanFilter:
+    """State ``x`` (n,) and covariance ``P`` of a linear Gaussian system with ``dim_z`` readings.
+
+    Attributes (filterpy's names)
+    -----------------------------
+    x : ndarray (n,)
+    P, F, Q : ndarray (n, n)
+        Covariance, transition and process noise (identity, identity, zero at construction).
+    H : ndarray (dim_z, n)
+    R : ndarray (dim_z, dim_z)
+    y : ndarray (dim_z,)
+        The last innovation ``z − H x⁻``.
+    S, SI : ndarray (dim_z, dim_z)
+        The last innovation covariance and its inverse.
+    K : ndarray (n, dim_z)
+        The last gain.
+    """
+
+    def __init__(self, dim_x: int, dim_z: int) -> None:
+        if dim_x < 1 or dim_z < 1:
+            raise CalibInputError(f"dim_x and dim_z must be >= 1, got {dim_x} and {dim_z}")
+        self.x = np.zeros(dim_x)
+        self.P = np.eye(dim_x)
+        self.F = np.eye(dim_x)
+        self.Q = np.zeros((dim_x, dim_x))
+        self.H = np.zeros((dim_z, dim_x))
+        self.R = np.eye(dim_z)
+        self.y = np.zeros(dim_z)
+        self.S = np.zeros((dim_z, dim_z))
+        self.SI = np.zeros((dim_z, dim_z))
+        self.K = np.zeros((dim_x, dim_z))
+
+    def predict(self) -> None:
+        """Time update: ``x = F x``, ``P = F P Fᵀ + Q``."""
+        self.x = self.F @ self.x
+        self.P = self.F @ self.P @ self.F.T + self.Q
+
+    def update(self, z: np.ndarray) -> None:
+        """Measurement update with reading ``z`` (dim_z,), covariance in Joseph form."""
+        x = np.asarray(self.x, dtype=float).reshape(-1)
+        z = np.asarray(z, dtype=float).reshape(-1)
+        H = np.asarray(self.H, dtype=float)
+        pht = self.P @ H.T
+        self.y = z - H @ x
+        self.S = H @ pht + self.R
+        self.SI = np.linalg.inv(self.S)
+        self.K = pht @ self.SI
+        self.x = x + self.K @ self.y
+        ikh = np.eye(x.size) - self.K @ H
+        self.P = ikh @ self.P @ ikh.T + self.K @ self.R @ self.K.T
