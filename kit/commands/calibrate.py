@@ -244,6 +244,12 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     if fixed:
         plan = replace(plan, **fixed)
         plan = replace(plan, jig_time_s=jig_time(plan.speed, plan.turns, plan.rest_s, accel))
+    if p["name"] == "auto" and plan.jig_time_s > p["time_budget_s"] * (1 + 1e-9):
+        raise InputError(
+            f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
+            f"protocol.time_budget_s = {p['time_budget_s']:g} s: raise the budget, or lower "
+            "protocol.turns or protocol.rest_s, or set protocol.speed_dps higher (0 lets the "
+            "planner choose within the budget)")
     if plan.speed > gimbal.top_speed:
         raise InputError(
             f"protocol speed {math.degrees(plan.speed):.0f}°/s exceeds the servos' top speed "

@@ -52,8 +52,8 @@ def test_a_failed_forced_rerun_leaves_the_old_run_whole(tmp_path, capsys):
 @pytest.mark.parametrize("argv", [
     ["init", "{dir}", "--force"],
     ["estimate", "{ok}", "--out", "{dir}", "--force"],
-    ["export", "{cal}", "--out", "{dir}", "--force"],
-    ["export", "{cal}", "--out", "/proc/version", "--force"],
+    ["export", "{cal}", "--format", "json", "--out", "{dir}", "--force"],
+    ["export", "{cal}", "--format", "json", "--out", "/proc/version", "--force"],
     ["calibrate", "--sim", "--out", "{file}"],
 ])
 def test_outputs_that_cannot_be_written_exit_2_without_traceback(contract, tmp_path, capsys,
@@ -91,3 +91,43 @@ def test_unit_mistakes_are_refused_with_their_cause(contract, tmp_path, capsys, 
     assert main(["estimate", str(contract[kind]), "--out", str(out),
                  "--allow-implausible"]) in (0, 3)
     assert out.exists() and cause in capsys.readouterr().err
+
+
+# ---- config: every number finite and in range, any file a clear exit 2 ---------------------
+BAD_CONFIGS = [
+    (b"[protocol]\nrest_s = inf\n", "protocol.rest_s must be a finite number"),
+    (b"[protocol]\nrest_s = 1e9\n", "protocol.rest_s must be in 0.1..600"),
+    (b"[protocol]\nspeed_dps = 1e-6\n", "protocol.speed_dps must be in 1..2000"),
+    (b"[protocol]\nspeed_dps = nan\n", "protocol.speed_dps must be a finite number"),
+    (b"[protocol]\nturns = -1\n", "protocol.turns must be in 1..256"),
+    (b"[protocol]\nturns = " + b"9" * 401 + b"\n", "an integer of 401 digits"),
+    (b"[protocol]\nturns = " + b"9" * 5000 + b"\n", "a value cannot be read"),
+    (b"[gimbal]\nids = " + b"[" * 3000 + b"]" * 3000 + b"\n", "nested too deeply"),
+    (b'[gimbal]\nport = "\xff\xfe"\n', "is not UTF-8 text"),
+    (b"[imu]\nodr_hz = -200.0\n", "imu.odr_hz must be in 1..8000"),
+    (b"[gimbal]\nmax_turns = 20\n[protocol]\nturns = 10\nspeed_dps = 30\n",
+     "more than protocol.time_budget_s"),
+]
+
+
+@pytest.mark.parametrize(("text", "message"), BAD_CONFIGS)
+def test_bad_config_values_exit_2_naming_the_problem(tmp_path, capsys, text, message):
+    cfg = tmp_path / "gyrocal.toml"
+    cfg.write_bytes(text)
+    assert calibrate(tmp_path / "out", "--config", str(cfg)) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err) < 600
+
+
+def test_odr_inf_on_the_command_line_exits_2(tmp_path, capsys):
+    assert calibrate(tmp_path / "out", "--odr", "inf") == 2
+    assert "imu.odr_hz must be a finite number" in capsys.readouterr().err
+
+
+def test_signed_axes_mean_the_same_to_the_validator_and_the_jig(tmp_path):
+    from gyrocal.kit.config import load_config
+
+    cfg = tmp_path / "gyrocal.toml"
+    cfg.write_text('[gimbal]\naxes = ["-x", "+y", "-z"]\n')
+    assert load_config(cfg)["gimbal"]["axes"] == ["-x", "y", "-z"]
+    assert calibrate(tmp_path / "out", "--config", str(cfg)) in (0, 3)
