@@ -367,6 +367,9 @@ class Gimbal:
         self.last_sample: GimbalSample | None = None
         #: Transactions that needed a retry (count), for reports.
         self.retry_count = 0
+        #: The longest time between two polls while a motion ran (s): the margin to the Bus
+        #: Watchdog (:attr:`watchdog_units` × 20 ms) that stops a servo whose host went silent.
+        self.worst_poll_interval_s = 0.0
         self.is_open = False
         self._tick_state: dict[int, tuple[int, float, float]] = {}
         self._group: GroupSyncRead | None = None
@@ -714,6 +717,11 @@ class Gimbal:
         return self.motion is not None and not self.motion.finished
 
     @property
+    def watchdog_s(self) -> float:
+        """The Bus Watchdog armed while a servo moves, s (20 ms units, hardware reference §5)."""
+        return self.watchdog_units * WATCHDOG_UNIT_S
+
+    @property
     def top_speed(self) -> float:
         """The highest speed every servo can be commanded, rad/s (from the devices' limits)."""
         self._require_open()
@@ -835,8 +843,9 @@ class Gimbal:
         """
         self._require_open()
         now = self.clock.monotonic()
-        late = (self.busy and self._last_poll_t is not None
-                and now - self._last_poll_t > self.watchdog_units * WATCHDOG_UNIT_S)
+        gap = now - self._last_poll_t if self.busy and self._last_poll_t is not None else 0.0
+        late = gap > self.watchdog_units * WATCHDOG_UNIT_S
+        self.worst_poll_interval_s = max(self.worst_poll_interval_s, gap)
         self._last_poll_t = now
         try:
             s = self.sample()

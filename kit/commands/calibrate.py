@@ -315,6 +315,15 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None
                     progress.event(f"fault armed: {f} (time in the recording)")
             try:
                 runner.run()
+                # The servo link's timing: the longest gap between polls while a servo moved,
+                # against the Bus Watchdog that would have stopped it (hardware reference §5).
+                timing = {"worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
+                          "bus_watchdog_s": jig.gimbal.watchdog_s}
+                writer.update_manifest(protocol={**protocol, **timing})
+                if not quiet:
+                    progress.event(f"servo link: worst poll interval during motion "
+                                   f"{timing['worst_poll_interval_s'] * 1e3:.0f} ms (Bus "
+                                   f"Watchdog {timing['bus_watchdog_s'] * 1e3:.0f} ms)")
             finally:
                 progress.close()
             if jig.sim is not None:
