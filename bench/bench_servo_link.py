@@ -6,7 +6,7 @@ longest gap between two gimbal polls while a servo moved (``protocol.worst_poll_
 and the Bus Watchdog armed during motion (``protocol.bus_watchdog_s``, 100 ms). A gap longer
 than the watchdog stops the servo (exit 4). Loads: idle, and two CPU-bound processes beside it.
 
-Usage: ``python -m bench servo_link [--runs N]`` (default 20 per load).
+Usage: ``python -m bench servo_link [--runs=N]`` (default 20 per load).
 """
 
 from __future__ import annotations
@@ -30,8 +30,9 @@ def _burn(stop) -> None:  # a CPU-bound process
 
 def main(argv: list[str]) -> None:
     runs = 20
-    if "--runs" in argv:
-        runs = int(argv[argv.index("--runs") + 1])
+    for a in argv:
+        if a.startswith("--runs="):
+            runs = int(a.split("=", 1)[1])
     rows = []
     for hogs in (0, 2):
         stop = mp.Event()
