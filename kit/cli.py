@@ -17,6 +17,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 
+from gyrocal.drivers import signals
 from gyrocal.kit import __version__
 from gyrocal.kit.errors import EXIT_CODES, exit_code_for
 
@@ -119,25 +120,46 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``gyrocal`` with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
+    # SIGINT, SIGTERM and SIGHUP end any command with a message and exit 130/143/129, at any
+    # phase: before the ports open, during the run (the gimbal installs the same handlers and
+    # stops the servos) and during the fit and the output.
+    old = signals.install()
     if argv is None:
         argv = sys.argv[1:]
-    parser = build_parser(argv)
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse: --help (0) or bad usage (2)
-        return int(exc.code or 0)
-    try:
-        return int(args._run(args) or 0)
-    except KeyboardInterrupt:
-        print("gyrocal: interrupted", file=sys.stderr)
+        show_traceback = False
+        try:
+            parser = build_parser(argv)
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as exc:  # argparse: --help (0) or bad usage (2)
+                return int(exc.code or 0)
+            show_traceback = args.traceback
+            return int(args._run(args) or 0)
+        except BaseException as exc:
+            with signals.shielded():  # a second signal cannot cut the report short
+                return _report(exc, show_traceback)
+    finally:
+        signals.restore(old)
+
+
+def _report(exc: BaseException, show_traceback: bool) -> int:
+    """Print the message of the exception that ended a command; return its exit code."""
+    if isinstance(exc, KeyboardInterrupt):
+        print("gyrocal: interrupted (SIGINT)", file=sys.stderr)
         return 130
-    except SystemExit as exc:  # a signal handler's exit (e.g. SIGTERM -> 143) after a safe stop
+    if isinstance(exc, signals.TerminatedBySignal):
+        name = {15: "terminated (SIGTERM)", 1: "hung up (SIGHUP)"}.get(exc.signum, "stopped")
+        print(f"gyrocal: {name}", file=sys.stderr)
+        return int(exc.code)
+    if isinstance(exc, SystemExit):  # a command's own exit
         code = exc.code if isinstance(exc.code, int) else 1
         print(f"gyrocal: stopped (exit {code})", file=sys.stderr)
         return code
-    except Exception as exc:  # every error becomes a message and a documented exit code
-        code = exit_code_for(exc)
-        if code == 1 or args.traceback:
-            traceback.print_exc()
-        print(f"gyrocal: error: {exc}", file=sys.stderr)
-        return code
+    if not isinstance(exc, Exception):
+        raise exc
+    code = exit_code_for(exc)  # every error becomes a message and a documented exit code
+    if code == 1 or show_traceback:
+        traceback.print_exception(exc)
+    print(f"gyrocal: error: {exc}", file=sys.stderr)
+    return code

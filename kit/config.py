@@ -8,6 +8,7 @@ file through :func:`apply_overrides`.
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from collections.abc import Callable, Mapping
@@ -37,6 +38,10 @@ METHODS = ("paired-axis", "iterative-ls", "levenberg-marquardt")
 PROTOCOLS = ("auto", "paper")
 
 
+#: A gyrocal.toml is a few kB; anything far larger is a wrong file.
+_MAX_CONFIG_BYTES = 1 << 20
+
+
 @dataclass(frozen=True)
 class Key:
     """One configuration key."""
@@ -48,8 +53,17 @@ class Key:
     check: Callable[[Any], str | None] | None = None
 
 
-def _positive(v: Any) -> str | None:
-    return None if v > 0 else "must be positive"
+def _within(lo: float, hi: float, *, zero: str | None = None) -> Callable[[Any], str | None]:
+    """A check: a finite number in ``lo..hi`` (or exactly 0 when ``zero`` says what 0 means)."""
+    def check(v: Any) -> str | None:
+        if isinstance(v, float) and not math.isfinite(v):
+            return f"must be a finite number in {lo:g}..{hi:g}"
+        if zero is not None and v == 0:
+            return None
+        if not lo <= v <= hi:  # exact for integers of any size
+            return f"must be in {lo:g}..{hi:g}" + (f" (or 0: {zero})" if zero else "")
+        return None
+    return check
 
 
 def _axes(v: Any) -> str | None:
@@ -85,30 +99,35 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "axes": Key(["x", "y", "z"],
                     "sensor axis each servo turns about in the home pose, same order as ids",
                     list, check=_axes),
-        "max_turns": Key(3.0, "software cable-wrap limit: turns from home, either way",
-                         (int, float), check=_positive),
-        "acceleration": Key(10.0, "profile acceleration of every turn, rad/s^2", (int, float),
-                            check=_positive),
-        "sample_hz": Key(200.0, "loop rate: IMU drains and servo sync reads per second",
-                         (int, float), check=_positive),
+        # Extended Position mode holds ±256 turns (hardware reference §5)
+        "max_turns": Key(3.0, "software cable-wrap limit: turns from home, either way (0.1..256)",
+                         (int, float), check=_within(0.1, 256)),
+        "acceleration": Key(10.0, "profile acceleration of every turn, rad/s^2 (0.5..500)",
+                            (int, float), check=_within(0.5, 500)),
+        "sample_hz": Key(200.0, "loop rate: IMU drains and servo sync reads per second (10..1000)",
+                         (int, float), check=_within(10, 1000)),
     },
     "imu": {
         "model": Key("mpu9250", "sensor chip", str, IMU_MODELS),
-        "bus": Key(1, "I2C bus number: /dev/i2c-N", int),
+        "bus": Key(1, "I2C bus number: /dev/i2c-N (0..1023)", int, check=_within(0, 1023)),
         "address": Key(0x68, "7-bit I2C address (MPU-9250: 0x68/0x69; LSM9DS1 A/G: 0x6A/0x6B)",
                        int, check=_address),
         "range_dps": Key(500, "gyro full-scale range, degrees per second", int,
                          (245, 250, 500, 1000, 2000)),
-        "odr_hz": Key(200.0, "gyro output data rate, Hz", (int, float), check=_positive),
+        "odr_hz": Key(200.0, "gyro output data rate, Hz (1..8000)", (int, float),
+                      check=_within(1, 8000)),
     },
     "protocol": {
         "name": Key("auto", "auto: planned for this servo and gyro; paper: 60 deg/s, one turn, "
                     "3 s waits", str, PROTOCOLS),
-        "time_budget_s": Key(30.0, "longest jig time the planner may use, s", (int, float),
-                             check=_positive),
-        "speed_dps": Key(0.0, "fixed turn speed, deg/s (0: planned)", (int, float)),
-        "turns": Key(0, "fixed whole turns per direction (0: planned)", int),
-        "rest_s": Key(0.0, "fixed rest before each turn, s (0: planned)", (int, float)),
+        "time_budget_s": Key(30.0, "longest jig time the planner may use, s (1..3600)",
+                             (int, float), check=_within(1, 3600)),
+        "speed_dps": Key(0.0, "fixed turn speed, deg/s (1..2000; 0: planned)", (int, float),
+                         check=_within(1, 2000, zero="planned")),
+        "turns": Key(0, "fixed whole turns per direction (1..256; 0: planned)", int,
+                     check=_within(1, 256, zero="planned")),
+        "rest_s": Key(0.0, "fixed rest before each turn, s (0.1..600; 0: planned)", (int, float),
+                      check=_within(0.1, 600, zero="planned")),
         "method": Key(METHODS[0], "estimator", str, METHODS),
     },
 }
@@ -135,20 +154,27 @@ def default_config() -> Config:
                   "defaults")
 
 
+def _excerpt(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters (a 400-digit number is not quoted whole)."""
+    text = repr(value) if not isinstance(value, int) or abs(value) < 10 ** 40 else (
+        f"an integer of {len(str(abs(value)))} digits")
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
 def _validate(section: str, name: str, value: Any) -> Any:
     key = SCHEMA[section][name]
     kinds = key.kind if isinstance(key.kind, tuple) else (key.kind,)
     ok = isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
     if not ok:
         want = " or ".join(k.__name__ for k in kinds)
-        raise InputError(f"config key {section}.{name} must be {want}, got {value!r}")
+        raise InputError(f"config key {section}.{name} must be {want}, got {_excerpt(value)}")
     if key.choices is not None and value not in key.choices:
         allowed = ", ".join(repr(c) for c in key.choices)
-        raise InputError(f"config key {section}.{name} is {value!r}; allowed: {allowed}")
+        raise InputError(f"config key {section}.{name} is {_excerpt(value)}; allowed: {allowed}")
     if key.check is not None:
         problem = key.check(value)
         if problem:
-            shown = f"{value:#04x}" if name == "address" else repr(value)  # as i2cdetect shows it
+            shown = f"{value:#04x}" if name == "address" else _excerpt(value)  # hex as i2cdetect
             raise InputError(f"config key {section}.{name} {problem} (got {shown})")
     return value
 
@@ -169,6 +195,8 @@ def _merge(base: Config, data: Mapping[str, Any], source: str) -> Config:
                     f"{', '.join(SCHEMA[section])}"
                 )
             sections[section][name] = _validate(section, name, value)
+    # "+y" means "y": one spelling for the validator and everything downstream
+    sections["gimbal"]["axes"] = [a.removeprefix("+") for a in sections["gimbal"]["axes"]]
     cfg = Config(sections, source)
     g = cfg["gimbal"]
     if len(g["ids"]) != len(g["axes"]):
@@ -190,7 +218,12 @@ def load_config(path: str | os.PathLike[str] | None) -> Config:
     if path is None:
         return default_config()
     p = Path(path)
+    if p.exists() and not p.is_file():
+        raise InputError(f"config file {p} is not a regular file; give the path of a TOML file")
     try:
+        if p.stat().st_size > _MAX_CONFIG_BYTES:
+            raise InputError(f"config file {p} is larger than {_MAX_CONFIG_BYTES} bytes: not a "
+                             "gyrocal.toml")
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"config file {p} not found; `gyrocal init` writes one") from None
@@ -198,12 +231,18 @@ def load_config(path: str | os.PathLike[str] | None) -> Config:
         raise InputError(
             f"--config {p} is a directory; give the config file itself (e.g. {p / 'gyrocal.toml'})"
         ) from None
-    except UnicodeDecodeError:
-        raise InputError(f"{p} is not a text file; give a gyrocal.toml") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{p} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     except PermissionError:
         raise InputError(f"cannot read config file {p}: permission denied") from None
+    except RecursionError:
+        raise InputError(f"{p}: arrays or tables nested too deeply; not a gyrocal.toml") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{p} is not valid TOML: {exc}") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise InputError(f"{p}: a value cannot be read ({str(exc)[:80]})") from None
+    except OSError as exc:
+        raise InputError(f"cannot read config file {p}: {exc.strerror or exc}") from None
     return _merge(default_config(), data, str(p))
 
 

@@ -31,8 +31,9 @@ EXIT_CODES: dict[int, str] = {
     4: "hardware or communication failure (I2C bus, servo bus, servo hardware alert)",
     5: "a runtime check of the protocol failed twice (speed, saturation, FIFO gap, movement)",
     6: "the estimation failed (too little data, no convergence)",
-    130: "interrupted by Ctrl-C (SIGINT); servos stopped, torque off, recording kept",
-    143: "terminated (SIGTERM); servos stopped, torque off, recording kept",
+    129: "hung up (SIGHUP); servos stopped, torque off, recording (if begun) kept",
+    130: "interrupted by Ctrl-C (SIGINT); servos stopped, torque off, recording (if begun) kept",
+    143: "terminated (SIGTERM); servos stopped, torque off, recording (if begun) kept",
 }
 
 
@@ -101,6 +102,8 @@ def exit_code_for(exc: BaseException) -> int:
         return exc.exit_code
     if isinstance(exc, KeyboardInterrupt):
         return 130
+    if isinstance(exc, SystemExit) and isinstance(exc.code, int):  # TerminatedBySignal
+        return exc.code
     if isinstance(exc, (CalibInputError, CalibrationFormatError, ConfigurationError)):
         return 2
     if isinstance(exc, CalibError):

@@ -17,6 +17,8 @@ __all__ = [
     "atomic_write_text",
     "make_output_dir",
     "refuse_existing",
+    "replace_dir",
+    "staging_dir",
 ]
 
 
@@ -87,12 +89,20 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
     """
     dest = Path(path)
     if dest.is_dir():
-        raise InputError(f"cannot write {dest}: it is a directory; give a file name")
+        raise InputError(f"cannot write {dest}: it is a directory; give a file name "
+                         f"(e.g. {dest / 'out'})")
     if dest.exists() and not force:
         raise OutputExistsError(f"{dest} already exists; pass --force to replace it")
+    if dest.exists() and not dest.is_file():
+        raise InputError(f"cannot write {dest}: it is not a regular file (a device, FIFO or "
+                         "socket); give the path of a file")
     if not dest.parent.is_dir():
         raise InputError(_no_directory_message(dest.parent, str(dest)))
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
+    except OSError as exc:
+        raise InputError(f"cannot write {dest}: {exc.strerror or exc}; choose a directory you "
+                         "may write to") from None
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual file mode
         with os.fdopen(fd, "wb") as fh:
@@ -100,11 +110,13 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, dest)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError):
+            raise InputError(f"cannot write {dest}: {exc.strerror or exc}") from None
         raise
     return dest
 
@@ -141,3 +153,55 @@ def refuse_existing(
     for p in paths:
         if p is not None and Path(p).exists() and not force:
             raise OutputExistsError(f"{p} already exists; pass --force to replace it")
+
+
+def staging_dir(dest: str | os.PathLike[str]) -> Path:
+    """A new, empty directory beside ``dest`` in which to build its replacement.
+
+    Named ``.NAME.new-XXXXXXXX`` in ``dest``'s parent (same file system, so :func:`replace_dir`
+    can rename it into place).
+
+    Raises
+    ------
+    InputError
+        If the parent directory cannot be written.
+    """
+    d = Path(dest)
+    try:
+        d.parent.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=f".{d.name}.new-", dir=d.parent))
+    except OSError as exc:
+        raise InputError(f"cannot create the output beside {d}: {exc.strerror or exc}") from None
+
+
+def replace_dir(staging: str | os.PathLike[str], dest: str | os.PathLike[str]) -> Path:
+    """Put the finished directory ``staging`` in the place of ``dest`` as a whole.
+
+    The old ``dest`` (if any) is renamed aside, ``staging`` renamed into place, and the old one
+    removed: a reader finds the old run or the new one, never a mix of both. Only a crash
+    between the two renames leaves ``dest`` missing, with the old run kept as ``.NAME.old-*``.
+
+    Raises
+    ------
+    InputError
+        If ``dest`` exists and is not a directory.
+    """
+    import shutil
+
+    src, d = Path(staging), Path(dest)
+    old = None
+    if d.exists() or d.is_symlink():
+        if not d.is_dir() or d.is_symlink():
+            raise InputError(f"cannot replace {d}: it is not a directory; give another --out")
+        old = Path(tempfile.mkdtemp(prefix=f".{d.name}.old-", dir=d.parent))
+        os.rename(d, old / d.name)
+    try:
+        os.rename(src, d)
+    except BaseException:
+        if old is not None:
+            os.rename(old / d.name, d)
+            old.rmdir()
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return d

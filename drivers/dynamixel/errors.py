@@ -16,6 +16,7 @@ from gyrocal.drivers.errors import (
     HardwareAlertError,
     SafetyError,
 )
+from gyrocal.drivers.signals import TerminatedBySignal  # re-exported: the driver raises it
 
 __all__ = [
     "ElectricalShockError",
@@ -192,14 +193,3 @@ class WatchdogTrippedError(SafetyError):
 
 class ShutdownError(SafetyError):
     """The safe stop could not confirm torque off on every servo."""
-
-
-class TerminatedBySignal(SystemExit):
-    """Raised by the driver's SIGTERM handler so that the safe stop runs on the way out.
-
-    Its exit code is ``128 + signum`` (143 for SIGTERM), as ``gyrocal`` documents.
-    """
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(128 + int(signum))
-        self.signum = int(signum)

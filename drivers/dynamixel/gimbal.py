@@ -21,7 +21,8 @@ step the protocol: :meth:`Gimbal.begin_turn` starts a turn, :meth:`Gimbal.poll` 
 (timestamped at the transaction's midpoint on the caller's clock), checks the safety limits and
 tells when the motion has finished. :meth:`Gimbal.run_turn` is a blocking convenience.
 
-Safety (hardware reference §6): the context manager and SIGINT/SIGTERM handlers end every run
+Safety (hardware reference §6): the context manager and SIGINT/SIGTERM/SIGHUP handlers (in
+place before the first packet of :meth:`Gimbal.open`, deferred during the stop) end every run
 with Goal Velocity 0 and Torque Enable 0 on every servo, confirmed by reading it back; the Bus
 Watchdog is armed while a servo moves; a software turn limit guards the cables; hardware-error
 alerts (status bit 0x80) are read from Hardware Error Status and raised as named errors;
@@ -35,9 +36,7 @@ is reported as an error, never as a zero reading.
 from __future__ import annotations
 
 import math
-import signal
 import struct
-import threading
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -52,6 +51,8 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
+from gyrocal.drivers import signals
+from gyrocal.drivers.buslock import lock_device
 from gyrocal.drivers.clock import Clock, SystemClock
 from gyrocal.drivers.dynamixel.control_table import (
     ACCELERATION_UNIT_RAD_S2,
@@ -74,7 +75,6 @@ from gyrocal.drivers.dynamixel.errors import (
     ServoStatusError,
     ShutdownError,
     StallError,
-    TerminatedBySignal,
     TurnLimitError,
     WatchdogTrippedError,
     hardware_error_for,
@@ -288,7 +288,9 @@ class Gimbal:
         Accept models that share the X-430 control table (listed in
         :data:`~gyrocal.drivers.dynamixel.control_table.COMPATIBLE_MODELS`) with a notice.
     handle_signals : bool
-        Install SIGINT/SIGTERM handlers while open (main thread only).
+        Turn SIGINT, SIGTERM and SIGHUP into exceptions from the start of :meth:`open` to the
+        end of :meth:`close` (main thread only; :mod:`gyrocal.drivers.signals`), so that the stop
+        runs; a signal during the stop is deferred until it has finished.
     stall_timeout_s : float
         Window over which a turning servo must keep at least ``min_speed_fraction`` of its
         commanded speed.
@@ -365,6 +367,9 @@ class Gimbal:
         self.last_sample: GimbalSample | None = None
         #: Transactions that needed a retry (count), for reports.
         self.retry_count = 0
+        #: The longest time between two polls while a motion ran (s): the margin to the Bus
+        #: Watchdog (:attr:`watchdog_units` × 20 ms) that stops a servo whose host went silent.
+        self.worst_poll_interval_s = 0.0
         self.is_open = False
         self._tick_state: dict[int, tuple[int, float, float]] = {}
         self._group: GroupSyncRead | None = None
@@ -387,6 +392,8 @@ class Gimbal:
         ------
         CommunicationError
             The port cannot be opened.
+        BusInUseError
+            Another process holds the servo bus (the message names it).
         ConfigurationError
             The baud rate is not one dynamixel-sdk supports.
         ServoIdentityError
@@ -397,8 +404,11 @@ class Gimbal:
         if self.is_open:
             return self.infos
         self.notices.clear()
-        self._open_port()
+        # Handlers first: from the first packet that can switch torque on (in _prepare) to the
+        # last of the stop, a signal becomes an exception that runs the stop, never a kill.
+        self._install_signal_handlers()
         try:
+            self._open_port()
             for dxl_id in self.ids:
                 self._identify(dxl_id)
             for dxl_id in self.ids:
@@ -407,20 +417,20 @@ class Gimbal:
             for dxl_id in self.ids:
                 self._group.addParam(dxl_id)
             self.is_open = True
-            self._install_signal_handlers()
             self.last_sample = self.sample()
         except BaseException as exc:
             # No with-block calls __exit__ for a failed open(): stop here, and do not let an
             # unconfirmed stop pass silently (the same rule as __exit__).
-            try:
-                self.stop()
-            except ShutdownError as shutdown:
-                raise _shutdown_after(exc, shutdown) from exc
-            finally:
-                self.is_open = False
-                self._restore_signal_handlers()
-                if self._owns_port:
-                    self._close_port()
+            with signals.shielded():
+                try:
+                    self.stop()
+                except ShutdownError as shutdown:
+                    raise _shutdown_after(exc, shutdown) from exc
+                finally:
+                    self.is_open = False
+                    self._restore_signal_handlers()
+                    if self._owns_port:
+                        self._close_port()
             raise
         return self.infos
 
@@ -447,6 +457,9 @@ class Gimbal:
         if not ok:
             raise CommunicationError(
                 f"cannot open the servo port {name!r} at {self.baudrate} bps")
+        ser = getattr(self.port, "ser", None)  # dynamixel-sdk's pyserial object (a real port)
+        if ser is not None and hasattr(ser, "fileno"):
+            lock_device(ser.fileno(), name)  # one process per bus (BusInUseError)
 
     def _identify(self, dxl_id: int) -> None:
         try:
@@ -538,14 +551,15 @@ class Gimbal:
         ShutdownError
             If torque off could not be confirmed on every servo (the message names them).
         """
-        try:
-            if self.is_open:
-                self.stop()
-        finally:
-            self.is_open = False
-            self._restore_signal_handlers()
-            if self._owns_port:
-                self._close_port()
+        with signals.shielded():  # a second signal cannot cut the stop short
+            try:
+                if self.is_open:
+                    self.stop()
+            finally:
+                self.is_open = False
+                self._restore_signal_handlers()
+                if self._owns_port:
+                    self._close_port()
 
     def _close_port(self) -> None:
         try:
@@ -569,25 +583,12 @@ class Gimbal:
 
     # ---- signals -------------------------------------------------------------------------
     def _install_signal_handlers(self) -> None:
-        if not self.handle_signals or threading.current_thread() is not threading.main_thread():
-            return
-
-        def on_sigint(signum: int, frame: object) -> None:
-            raise KeyboardInterrupt
-
-        def on_sigterm(signum: int, frame: object) -> None:
-            raise TerminatedBySignal(signum)
-
-        for sig, handler in ((signal.SIGINT, on_sigint), (signal.SIGTERM, on_sigterm)):
-            self._old_handlers[sig] = signal.signal(sig, handler)
+        """SIGINT, SIGTERM and SIGHUP become exceptions while open (main thread only)."""
+        if self.handle_signals and not self._old_handlers:
+            self._old_handlers = signals.install()
 
     def _restore_signal_handlers(self) -> None:
-        for sig, handler in self._old_handlers.items():
-            try:
-                signal.signal(sig, handler)
-            except (ValueError, TypeError):
-                pass
-        self._old_handlers.clear()
+        signals.restore(self._old_handlers)
 
     # =====================================================================================
     # sampling
@@ -716,6 +717,11 @@ class Gimbal:
         return self.motion is not None and not self.motion.finished
 
     @property
+    def watchdog_s(self) -> float:
+        """The Bus Watchdog armed while a servo moves, s (20 ms units, hardware reference §5)."""
+        return self.watchdog_units * WATCHDOG_UNIT_S
+
+    @property
     def top_speed(self) -> float:
         """The highest speed every servo can be commanded, rad/s (from the devices' limits)."""
         self._require_open()
@@ -837,8 +843,9 @@ class Gimbal:
         """
         self._require_open()
         now = self.clock.monotonic()
-        late = (self.busy and self._last_poll_t is not None
-                and now - self._last_poll_t > self.watchdog_units * WATCHDOG_UNIT_S)
+        gap = now - self._last_poll_t if self.busy and self._last_poll_t is not None else 0.0
+        late = gap > self.watchdog_units * WATCHDOG_UNIT_S
+        self.worst_poll_interval_s = max(self.worst_poll_interval_s, gap)
         self._last_poll_t = now
         try:
             s = self.sample()
@@ -1010,6 +1017,10 @@ class Gimbal:
             If a servo's torque could not be confirmed off (the message names it and says what
             to do).
         """
+        with signals.shielded():  # a signal during the stop waits until it has finished
+            self._stop()
+
+    def _stop(self) -> None:
         self.port.is_using = False
         self.motion = None
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)

@@ -63,7 +63,12 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                         "stall:SERVO:AT[:FRACTION[:S]], silent:SERVO:AT, alert:SERVO:AT[:BITS], "
                         "slip:AT:DEG, fifo:CAPACITY, nack:PROBABILITY, imu-dead:AT "
                         "(AT: seconds into the recording)")
-    p.add_argument("--port", help="servo serial port (gimbal.port)")
+    p.add_argument("--sim-imu", action="store_true",
+                   help="drive the real servos on --port (or gimbal.port) with an emulated IMU "
+                        "that sits still: tests a jig's servos before the sensor arrives, or "
+                        "the kit's whole servo path against 'gyrocal emulate --pty'. The run "
+                        "records but does not fit (the emulated IMU does not see the motion)")
+    p.add_argument("--port", help="servo serial port (gimbal.port; not with --sim)")
     p.add_argument("--baud", type=int, help="servo bus speed (gimbal.baud)")
     p.add_argument("--imu-model", help="imu.model")
     p.add_argument("--imu-bus", type=int, help="imu.bus: /dev/i2c-N")
@@ -79,7 +84,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_common_jig_arguments(p)
     p.add_argument("--out", metavar="DIR",
                    help="output directory (default: ./gyrocal-YYYYmmdd-HHMMSS)")
-    p.add_argument("--force", action="store_true", help="replace files in DIR")
+    p.add_argument("--force", action="store_true",
+                   help="replace the run in DIR as a whole (the new run is built beside it and "
+                        "swapped in only when it has finished)")
+    p.add_argument("--allow-implausible", action="store_true",
+                   help="write a calibration whose scale is outside 0.5..2 or whose bias is "
+                        "beyond the gyro's range (normally refused, exit 6: a unit mix-up)")
     p.add_argument("--protocol", choices=PROTOCOLS,
                    help="auto: planned for this jig (default); paper: 60°/s, one turn, 3 s waits")
     p.add_argument("--method", choices=METHODS)
@@ -117,19 +127,33 @@ def load_cli_config(args: argparse.Namespace) -> Any:
 
 
 def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, int, Any]:
-    """Where the devices are: ``(sim, clock, servo port, baud, I2C bus)`` of the emulated jig
-    with ``--sim`` (``sim`` is its :class:`~gyrocal.kit.sim.SimJig`), else of the configured
-    hardware
-    (``sim`` is None)."""
-    if args.sim_fault and not args.sim:
-        from gyrocal.kit.errors import InputError
+    """Where the devices are: ``(sim, clock, servo port, baud, I2C bus)``.
 
+    With ``--sim`` everything is the emulated jig (``sim`` is its
+    :class:`~gyrocal.kit.sim.SimJig`); with ``--sim-imu`` the servos are the configured port (real
+    servos, or ``gyrocal emulate --pty``) on the system clock and only the IMU is emulated, at
+    rest; otherwise everything is the configured hardware (``sim`` is None).
+    """
+    from gyrocal.kit.errors import InputError
+
+    sim_imu = getattr(args, "sim_imu", False)
+    if args.sim_fault and not args.sim:
         raise InputError("--sim-fault needs --sim")
-    if args.sim:
+    if args.sim and sim_imu:
+        raise InputError("--sim emulates the whole jig; --sim-imu emulates only the IMU and "
+                         "drives the servos on --port: give one of them")
+    if args.sim and args.port is not None:
+        raise InputError("--sim emulates the servos, so --port would be ignored; to drive "
+                         "servos on a port (or 'gyrocal emulate --pty') with an emulated IMU "
+                         "use --sim-imu --port PORT")
+    if args.sim or sim_imu:
         from gyrocal.kit.sim import SIM_BAUD, build_sim
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
-                        realtime=args.realtime, noise_seed=args.sim_noise_seed)
+                        realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed)
+        if sim_imu:
+            g = cfg["gimbal"]
+            return sim, sim.clock, g["port"], g["baud"], sim.imu_bus
         from gyrocal.kit.config import default_config
 
         g, default = cfg["gimbal"], default_config()["gimbal"]
@@ -153,7 +177,10 @@ class Jig:
 
         self.cfg = cfg
         self.faults: list[str] = []
-        self.sim, self.clock, port, baud, bus = jig_endpoints(cfg, args)
+        sim, self.clock, port, baud, bus = jig_endpoints(cfg, args)
+        # --sim-imu: only the IMU is emulated (``imu_sim``); the servos are real or on a PTY.
+        self.imu_sim = sim if getattr(args, "sim_imu", False) else None
+        self.sim = None if self.imu_sim is not None else sim
         self._fault_specs: list[str] = list(args.sim_fault)
         if self._fault_specs:
             from gyrocal.kit.sim import apply_fault, build_sim
@@ -240,6 +267,12 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     if fixed:
         plan = replace(plan, **fixed)
         plan = replace(plan, jig_time_s=jig_time(plan.speed, plan.turns, plan.rest_s, accel))
+    if p["name"] == "auto" and plan.jig_time_s > p["time_budget_s"] * (1 + 1e-9):
+        raise InputError(
+            f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
+            f"protocol.time_budget_s = {p['time_budget_s']:g} s: raise the budget, or lower "
+            "protocol.turns or protocol.rest_s, or set protocol.speed_dps higher (0 lets the "
+            "planner choose within the budget)")
     if plan.speed > gimbal.top_speed:
         raise InputError(
             f"protocol speed {math.degrees(plan.speed):.0f}°/s exceeds the servos' top speed "
@@ -253,122 +286,186 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     return plan
 
 
+def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
+                    ) -> tuple[dict, dict, dict, dict | None]:
+    """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of a run."""
+    sensor = jig.imu.info.manifest()
+    gimbal_info = {"motors": [
+        {"id": sid, "model": jig.gimbal.infos[sid].model_name,
+         "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
+    protocol = {"name": cfg["protocol"]["name"], "speed": plan.speed,
+                "turns": plan.turns, "rest_s": plan.rest_s, "acceleration": plan.accel,
+                "planned_jig_time_s": plan.jig_time_s,
+                "planning_noise_std": noise_std,
+                "sample_hz": cfg["gimbal"]["sample_hz"]}
+    truth = None
+    if jig.sim is not None:
+        truth = {**jig.sim.truth.manifest(),
+                 "axes": {str(k): v.tolist() for k, v in jig.sim.jig.home_axes.items()}}
+    return sensor, gimbal_info, protocol, truth
+
+
+def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None:
+    """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``."""
+    from gyrocal.kit.progress import Progress
+    from gyrocal.kit.protocol import Runner, build_steps
+    from gyrocal.kit.recording import RecordingWriter
+
+    quiet = getattr(args, "quiet", False)
+    with jig.gimbal:
+        noise_std = measure_still_noise(jig.imu, jig.clock)
+        plan = choose_plan(cfg, jig.gimbal, jig.imu, noise_std)
+        steps = build_steps(plan, cfg["gimbal"]["ids"])
+        sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std)
+        progress = Progress(sys.stderr, plan.jig_time_s, interactive=False if quiet else None)
+        if not quiet:
+            progress.event(
+                f"protocol {cfg['protocol']['name']}: {plan.turns} turn(s) each way at "
+                f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, about "
+                f"{plan.jig_time_s:.0f} s of jig time"
+                + (" (emulated jig)" if jig.sim is not None else "")
+                + (" (emulated IMU at rest)" if jig.imu_sim is not None else ""))
+        with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
+                             truth=truth, force=args.force) as writer:
+            runner = Runner(
+                jig.gimbal, jig.imu, writer, jig.clock, steps,
+                sample_hz=cfg["gimbal"]["sample_hz"],
+                on_progress=None if quiet else progress.update,
+                on_event=(lambda line: None) if quiet else progress.event,
+            )
+            for f in jig.arm_faults():
+                if not quiet:
+                    progress.event(f"fault armed: {f} (time in the recording)")
+            try:
+                runner.run()
+                # The servo link's timing: the longest gap between polls while a servo moved,
+                # against the Bus Watchdog that would have stopped it (hardware reference §5).
+                timing = {"worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
+                          "bus_watchdog_s": jig.gimbal.watchdog_s}
+                writer.update_manifest(protocol={**protocol, **timing})
+                if not quiet:
+                    progress.event(f"servo link: worst poll interval during motion "
+                                   f"{timing['worst_poll_interval_s'] * 1e3:.0f} ms (Bus "
+                                   f"Watchdog {timing['bus_watchdog_s'] * 1e3:.0f} ms)")
+            finally:
+                progress.close()
+            if jig.sim is not None:
+                # The true axis of each servo during its turns (the holding servos rest
+                # somewhere within their ticks, which tilts the axes slightly off the
+                # ideal home pose).
+                writer.update_manifest(truth={**truth, "axes": jig.sim.turn_axes(
+                    cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
+            writer.finish()
+
+
 def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any:
     """Run the protocol on the jig (or the emulated jig) into a Recording v1 at ``rec_dir``.
 
-    Servos stop and torque goes off before the recording is closed, on success, error, Ctrl-C
-    or SIGTERM; an interrupted run raises :class:`~gyrocal.kit.errors.InterruptedRun` (exit 130/143)
-    with the recording kept, marked incomplete. With ``--sim`` the emulated servos' final state
-    is written to ``out/sim-state.json`` (what the emulator holds, not what the driver believes).
+    Servos stop and torque goes off before the recording is closed, on success, error, or
+    SIGINT, SIGTERM or SIGHUP at any moment (:mod:`gyrocal.drivers.signals`: the gimbal's
+    handlers are in place from its first packet to its last, and a second signal cannot cut the
+    stop short). An interrupted run raises :class:`~gyrocal.kit.errors.InterruptedRun`
+    (exit 130/143/129) whose message says whether a recording was begun (then it is kept,
+    marked incomplete). With ``--sim`` the emulated servos' final state is written to
+    ``out/sim-state.json`` (what the emulator holds, not what the driver believes).
 
     Returns
     -------
     Jig
         The (closed) jig, for its sim truth.
     """
-    from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
+    from gyrocal.drivers.signals import TerminatedBySignal, shielded
     from gyrocal.kit.errors import InterruptedRun
     from gyrocal.kit.fileio import atomic_write_json
-    from gyrocal.kit.progress import Progress
-    from gyrocal.kit.protocol import Runner, build_steps
-    from gyrocal.kit.recording import RecordingWriter
 
     jig = Jig(cfg, args)
     interrupted: BaseException | None = None
-    quiet = getattr(args, "quiet", False)
     try:
-        with jig.gimbal:
-            noise_std = measure_still_noise(jig.imu, jig.clock)
-            plan = choose_plan(cfg, jig.gimbal, jig.imu, noise_std)
-            steps = build_steps(plan, cfg["gimbal"]["ids"])
-            sensor = jig.imu.info.manifest()
-            gimbal_info = {"motors": [
-                {"id": sid, "model": jig.gimbal.infos[sid].model_name,
-                 "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
-            protocol = {"name": cfg["protocol"]["name"], "speed": plan.speed,
-                        "turns": plan.turns, "rest_s": plan.rest_s, "acceleration": plan.accel,
-                        "planned_jig_time_s": plan.jig_time_s,
-                        "planning_noise_std": noise_std,
-                        "sample_hz": cfg["gimbal"]["sample_hz"]}
-            truth = None
-            if jig.sim is not None:
-                truth = {**jig.sim.truth.manifest(),
-                         "axes": {str(k): v.tolist() for k, v in jig.sim.jig.home_axes.items()}}
-            progress = Progress(sys.stderr, plan.jig_time_s,
-                                interactive=False if quiet else None)
-            if not quiet:
-                progress.event(
-                    f"protocol {cfg['protocol']['name']}: {plan.turns} turn(s) each way at "
-                    f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, about "
-                    f"{plan.jig_time_s:.0f} s of jig time"
-                    + (" (emulated jig)" if jig.sim is not None else ""))
-            with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
-                                 truth=truth, force=args.force) as writer:
-                runner = Runner(
-                    jig.gimbal, jig.imu, writer, jig.clock, steps,
-                    sample_hz=cfg["gimbal"]["sample_hz"],
-                    on_progress=None if quiet else progress.update,
-                    on_event=(lambda line: None) if quiet else progress.event,
-                )
-                for f in jig.arm_faults():
-                    if not quiet:
-                        progress.event(f"fault armed: {f} (time in the recording)")
-                try:
-                    runner.run()
-                finally:
-                    progress.close()
-                if jig.sim is not None:
-                    # The true axis of each servo during its turns (the holding servos rest
-                    # somewhere within their ticks, which tilts the axes slightly off the
-                    # ideal home pose).
-                    writer.update_manifest(truth={**truth, "axes": jig.sim.turn_axes(
-                        cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
-                writer.finish()
+        _record(cfg, args, jig, rec_dir)
     except (KeyboardInterrupt, TerminatedBySignal) as exc:
         interrupted = exc
     finally:
-        jig.close()
-        if jig.sim is not None:
-            atomic_write_json(out / "sim-state.json",
-                              {"servos": jig.sim.servo_state()}, force=True)
+        with shielded():
+            jig.close()
+            if jig.sim is not None:
+                atomic_write_json(out / "sim-state.json",
+                                  {"servos": jig.sim.servo_state()}, force=True)
     if interrupted is not None:
-        signum = 15 if isinstance(interrupted, TerminatedBySignal) else 2
-        raise InterruptedRun(
-            f"{'terminated' if signum == 15 else 'interrupted'}: servos stopped, torque off; the "
-            f"recording in {rec_dir} is kept, marked incomplete", signum)
+        signum = getattr(interrupted, "signum", 2)
+        what = {2: "interrupted", 15: "terminated", 1: "hung up"}.get(signum, "stopped")
+        kept = (f"the recording in {rec_dir} is kept, marked incomplete"
+                if (rec_dir / "manifest.json").exists() else "no recording was begun")
+        raise InterruptedRun(f"{what}: servos stopped, torque off; {kept}", signum)
     return jig
+
+
+def _output_dir(args: argparse.Namespace) -> tuple[Path, Path]:
+    """``(out, work)``: the run's directory, and where this run writes.
+
+    A new directory is written in place. With ``--force`` over an existing run, the new run is
+    built in a staging directory beside it and swapped in only when it has finished
+    (:func:`~gyrocal.kit.fileio.replace_dir`), so the old calibration never sits next to a new
+    recording.
+    """
+    from gyrocal.kit.errors import InputError, OutputExistsError
+    from gyrocal.kit.fileio import make_output_dir, staging_dir
+
+    out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} exists and is not a directory; give a directory")
+    if out.is_dir() and any(out.iterdir()):
+        if not args.force:
+            raise OutputExistsError(f"{out} already exists; pass --force to replace the run "
+                                    "in it as a whole")
+        return out, staging_dir(out)
+    make_output_dir(out, "--out")
+    return out, out
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from gyrocal.kit.errors import OutputExistsError
-    from gyrocal.kit.fileio import atomic_write_text, make_output_dir, refuse_existing
-    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.drivers.signals import shielded
+    from gyrocal.kit.fileio import atomic_write_text, refuse_existing, replace_dir
+    from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
 
     cfg = load_cli_config(args)
-    out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))
-    cal_path = out / "calibration.json"
-    if cal_path.exists() and not args.force:
-        raise OutputExistsError(f"{cal_path} already exists; pass --force to replace it")
+    out, work = _output_dir(args)
     report = not args.no_report and importlib.util.find_spec("matplotlib") is not None
-    if report:
+    if report and work == out:
         refuse_existing([out / "report.html", out / "plots"], force=args.force)
-    make_output_dir(out, "--out")
-    rec_dir = out / "recording"
-    run_jig(cfg, args, out, rec_dir)
-    rec = load_recording(rec_dir)
-    est = estimate_recording(rec, cfg["protocol"]["method"], source=str(rec_dir))
-    cal = est.calibration
-    atomic_write_text(cal_path, cal.to_json() + "\n", force=args.force)
+    try:
+        run_jig(cfg, args, work, work / "recording")
+        if getattr(args, "sim_imu", False):
+            cal = None
+        else:
+            rec = load_recording(work / "recording")
+            est = estimate_recording(rec, cfg["protocol"]["method"],
+                                     source=str(out / "recording"))
+            cal = est.calibration
+            check_plausible(cal, rec.sensor, allow=args.allow_implausible)
+            atomic_write_text(work / "calibration.json", cal.to_json() + "\n")
+            if report:
+                from gyrocal.kit.report_html import write_run_report
+
+                write_run_report(rec, cal, est.extracted, work / "plots",
+                                 title=f"{out} (gyrocal calibrate)",
+                                 html_path=work / "report.html", force=args.force)
+    except BaseException:
+        if work != out:
+            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
+                  f"{work}", file=sys.stderr)
+        raise
+    if work != out:
+        with shielded():
+            replace_dir(work, out)
+    rec_dir, cal_path = out / "recording", out / "calibration.json"
+    if cal is None:
+        print(f"wrote {rec_dir}/ (emulated IMU at rest: the servos were tested, nothing to fit)")
+        return 0
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
-    if report:
-        from gyrocal.kit.report_html import write_run_report
-
-        write_run_report(rec, cal, est.extracted, out / "plots", title=f"{out} (gyrocal calibrate)",
-                         html_path=out / "report.html", force=args.force)
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()

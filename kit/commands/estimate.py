@@ -25,15 +25,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the Calibration v1 document here")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    p.add_argument("--allow-implausible", action="store_true",
+                   help="accept a scale outside 0.5..2 or a bias beyond the gyro's range "
+                        "(normally refused, exit 6: a unit mix-up such as °/s for rad/s)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
+    from gyrocal.kit.fileio import refuse_existing
     from gyrocal.kit.recording import load_recording
 
+    if args.out:
+        refuse_existing([args.out], force=args.force)
     rec = load_recording(args.recording)  # path and contents checked before scipy is imported
     from gyrocal.kit.fileio import atomic_write_text
-    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.report import calibration_table
 
     for w in rec.warnings:
@@ -46,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     cal = est.calibration
+    for problem in check_plausible(cal, rec.sensor, allow=args.allow_implausible):
+        print(f"gyrocal: warning: {problem} (accepted: --allow-implausible)", file=sys.stderr)
     if args.out:
         atomic_write_text(args.out, cal.to_json() + "\n", force=args.force)
     if args.json:

@@ -53,6 +53,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"calibration file {path} not found") from None
     except CalibrationFormatError as exc:
         raise InputError(f"{path}: {exc}") from None
+    if getattr(args, "sim_imu", False):
+        raise InputError("verify needs a sensor that sees the motion; --sim-imu emulates one at "
+                         "rest (it tests the servos only): use --sim, or the real sensor")
     if args.recording:
         if args.sim:
             raise InputError("give either --recording (replay) or --sim (run), not both")

@@ -31,7 +31,7 @@ def test_values_override_defaults(tmp_path):
         ("[imu]\nmodle = 'x'\n", r"unknown key imu.modle; allowed in \[imu\]: model, bus"),
         ("[servo]\nport = 'x'\n", r"unknown section \[servo\]; allowed: gimbal, imu, protocol"),
         ("[imu]\nmodel = 'bmi160'\n", "imu.model is 'bmi160'; allowed: 'mpu9250'"),
-        ("[imu]\nodr_hz = -5\n", "imu.odr_hz must be positive"),
+        ("[imu]\nodr_hz = -5\n", "imu.odr_hz must be in 1..8000"),
         ("[imu]\nbus = 'one'\n", "imu.bus must be int"),
         ("[gimbal]\naxes = ['x', 'y', 'w']\n", "gimbal.axes has unknown axes"),
         ("[gimbal]\naxes = ['x', 'x', 'z']\n", "must name each of x, y and z once"),

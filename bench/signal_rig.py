@@ -1,0 +1,161 @@
+"""A rig that ends ``gyrocal calibrate`` with signals at chosen moments and reads the servos back.
+
+The servos are the kit's emulated X-series servos behind a pseudo-terminal (what ``gyrocal
+emulate --pty`` serves), in this process; the kit runs its real servo path against them in a
+subprocess (``gyrocal calibrate --sim-imu --port PTY``). A moment is "the K-th instruction packet
+the servos receive": the signal is sent from the serving thread before that packet is answered,
+so it lands inside a transaction, anywhere in ``Gimbal.open``, a turn, or the stop. Afterwards
+the servos' state is read through an unmodified ``dynamixel_sdk.PortHandler`` on the PTY.
+
+Used by ``tests/kit/test_signals.py`` and ``python -m bench faults``.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+from gyrocal.drivers.clock import SystemClock
+from gyrocal.drivers.emulated.dxl import PtyServoBridge, make_servo_bus
+
+__all__ = ["Outcome", "ServoRig", "write_config"]
+
+#: Control-table addresses read back (hardware reference §5): Torque Enable, Bus Watchdog,
+#: Moving, Present Velocity.
+TORQUE_ENABLE, BUS_WATCHDOG, MOVING, PRESENT_VELOCITY = 64, 98, 122, 128
+BAUD = 1_000_000
+
+
+@dataclass
+class Outcome:
+    """What one signalled run ended with."""
+
+    returncode: int | None  # None: it hung (killed after the timeout)
+    stderr: str
+    packets: int  # instruction packets the servos received in all
+    torque: dict[int, int | None] = field(default_factory=dict)  # read back; None: no answer
+    fired: bool = False  # the signal was sent (the run reached the moment)
+
+    @property
+    def torque_left_on(self) -> bool:
+        """A servo reads torque on, or did not answer the read-back."""
+        return any(v != 0 for v in self.torque.values())
+
+
+def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3)) -> Path:
+    """A ``gyrocal.toml`` for a short protocol on the PTY servos."""
+    axes = ["x", "y", "z"][: len(ids)]
+    path.write_text(
+        "[gimbal]\n"
+        f'port = "{port}"\nbaud = {BAUD}\nids = {list(ids)}\n'
+        f"axes = {axes!r}\n".replace("'", '"')
+        + "sample_hz = 100.0\n"
+        "[protocol]\nspeed_dps = 180\nturns = 1\nrest_s = 0.3\n",
+        encoding="utf-8")
+    return path
+
+
+class ServoRig:
+    """Emulated servos on a PTY that can signal a process at its K-th instruction packet."""
+
+    def __init__(self, ids: tuple[int, ...] = (1, 2, 3), seed: int = 0) -> None:
+        self.ids = tuple(ids)
+        self.bus = make_servo_bus(SystemClock(), self.ids, "XM430-W350", seed, baudrate=BAUD)
+        self._handle = self.bus.handle
+        self.bus.handle = self._count  # type: ignore[method-assign]
+        self.bridge = PtyServoBridge(self.bus)
+        self.path = self.bridge.start()
+        self.packets = 0
+        self._plan: list[tuple[int, int, float]] = []  # (packet, signal, delay after it)
+        self._pid: int | None = None
+        self.fired = threading.Event()
+
+    def close(self) -> None:
+        """Stop serving."""
+        self.bridge.stop()
+
+    def _count(self, instr, baudrate=None):  # the bus's handle, counting
+        self.packets += 1
+        while self._plan and self.packets >= self._plan[0][0] and self._pid is not None:
+            _, sig, delay = self._plan.pop(0)
+            if delay > 0:
+                time.sleep(delay)
+            try:
+                os.kill(self._pid, sig)
+                self.fired.set()
+            except ProcessLookupError:
+                pass
+        return self._handle(instr, baudrate)
+
+    def read(self, address: int, size: int, tries: int = 5) -> dict[int, int | None]:
+        """One control-table item of every servo, signed, through dynamixel-sdk on the PTY
+        (None: no answer after ``tries``)."""
+        port = PortHandler(self.path)
+        port.openPort()
+        port.setBaudRate(BAUD)
+        ph = PacketHandler(2.0)
+        fn = {1: ph.read1ByteTxRx, 2: ph.read2ByteTxRx, 4: ph.read4ByteTxRx}[size]
+        out: dict[int, int | None] = {}
+        try:
+            for i in self.ids:
+                out[i] = None
+                for _ in range(tries):
+                    value, result, error = fn(port, i, address)
+                    if result == COMM_SUCCESS:
+                        bits = 8 * size  # the SDK returns unsigned values (§6, point 5)
+                        out[i] = int(value) - (1 << bits) * (int(value) >> (bits - 1))
+                        break
+                    time.sleep(0.02)
+        finally:
+            port.closePort()
+        return out
+
+    def read_torque(self) -> dict[int, int | None]:
+        """Torque Enable (64) of every servo."""
+        return self.read(TORQUE_ENABLE, 1)
+
+    def run(self, config: Path, out: Path, plan: list[tuple[int, int, float]], *,
+            timeout_s: float = 60.0, extra: tuple[str, ...] = ()) -> Outcome:
+        """Run ``gyrocal calibrate --sim-imu`` and send ``plan``'s signals.
+
+        Parameters
+        ----------
+        plan : list of (packet, signal, delay)
+            Send ``signal`` when the servos receive instruction packet number ``packet`` of this
+            run (counted from 1), after waiting ``delay`` s.
+        """
+        self.packets = 0
+        self.fired.clear()
+        self._plan = sorted(plan)
+        cmd = [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu", "--config",
+               str(config), "--out", str(out), "--quiet", *extra]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True)
+        self._pid = proc.pid
+        try:
+            _, err = proc.communicate(timeout=timeout_s)
+            code: int | None = proc.returncode
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+            code = None
+        finally:
+            self._pid = None
+            self._plan = []
+        return Outcome(code, err, self.packets, self.read_torque(), self.fired.is_set())
+
+
+def expected_code(sig: int) -> int:
+    """The exit code of a run ended by ``sig``."""
+    return 128 + int(sig)
+
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)

@@ -1,0 +1,94 @@
+"""Signals at any moment of a run end with every servo's torque off, the message and 128+signum.
+
+The kit runs its real servo path (``calibrate --sim-imu``) in a subprocess against emulated
+servos on a pseudo-terminal; the signal lands while the servos receive a chosen instruction packet
+(inside ``Gimbal.open``, inside a turn, inside the stop); torque is read back through an
+unmodified ``dynamixel_sdk.PortHandler``. The larger matrix is ``python -m bench faults``.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from dynamixel_sdk import PortHandler
+
+from bench.signal_rig import BUS_WATCHDOG, PRESENT_VELOCITY, ServoRig, write_config
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
+                                reason="POSIX pseudo-terminals and /proc/locks")
+
+
+@pytest.fixture(scope="module")
+def rig():
+    r = ServoRig(ids=(1, 2))
+    yield r
+    r.close()
+
+
+@pytest.fixture
+def config(rig, tmp_path):
+    return write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids)
+
+
+# (first signal, packet it lands on, second signal one packet later or None)
+# Packet 2: the first servo's PING answered, nothing torqued yet; 12 and 25: inside
+# Gimbal.open, between one servo's torque-on and the next's; 200: inside a turn.
+CASES = [
+    (signal.SIGTERM, 2, None),
+    (signal.SIGHUP, 12, signal.SIGINT),
+    (signal.SIGINT, 25, signal.SIGTERM),
+    (signal.SIGTERM, 200, signal.SIGTERM),
+]
+
+
+@pytest.mark.parametrize(("sig", "packet", "second"), CASES)
+def test_a_signal_at_any_moment_ends_with_torque_off(rig, config, tmp_path, sig, packet,
+                                                     second):
+    plan = [(packet, sig, 0.0)] + ([(packet + 1, second, 0.0)] if second else [])
+    out = rig.run(config, tmp_path / "run", plan)
+    assert out.fired
+    assert out.returncode == 128 + sig, out.stderr  # the first signal decides
+    assert out.torque == {i: 0 for i in rig.ids}
+    assert "servos stopped, torque off" in out.stderr
+    assert "Traceback" not in out.stderr
+    rec = tmp_path / "run" / "recording" / "manifest.json"
+    if packet < 100:  # still in open: nothing recorded, and the message does not claim it
+        assert not rec.exists()
+        assert "no recording was begun" in out.stderr
+    else:
+        assert json.loads(rec.read_text())["complete"] is False
+        assert "is kept, marked incomplete" in out.stderr
+
+
+def test_kill_9_mid_turn_the_bus_watchdog_stops_the_servo(rig, config, tmp_path):
+    """No handler runs on SIGKILL: the servo's own Bus Watchdog (armed before the turn) stops
+    it (hardware reference §5, address 98, 20 ms units)."""
+    out = rig.run(config, tmp_path / "run", [(200, signal.SIGKILL, 0.0)])
+    assert out.returncode == -signal.SIGKILL
+    time.sleep(0.6)  # the watchdog (100 ms) expires and the servo decelerates
+    assert -1 in rig.read(BUS_WATCHDOG, 1).values()  # it tripped: the host went silent
+    assert rig.read(PRESENT_VELOCITY, 4) == {i: 0 for i in rig.ids}
+
+
+def test_a_second_process_on_the_bus_is_refused_naming_the_first(rig, tmp_path):
+    """flock on the device: the second run is refused and names the first one's PID."""
+    config = write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids)
+    holder = PortHandler(rig.path)
+    holder.openPort()
+    fcntl.flock(holder.ser.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    try:
+        r = subprocess.run([sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu",
+                            "--config", str(config), "--out", str(tmp_path / "b"), "--quiet"],
+                           capture_output=True, text=True, timeout=60)
+    finally:
+        holder.closePort()
+    assert r.returncode == 4
+    assert f"in use by process {os.getpid()}" in r.stderr
+    assert "Traceback" not in r.stderr
