@@ -30,8 +30,14 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.magnetometers import (
+    AuxPort,
+    EmulatedAK8963,
+    EmulatedLSM9DS1Mag,
+    MagneticField,
+)
 from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
-from gyrocal.drivers.emulated.smbus import EmulatedSMBus
+from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
@@ -483,6 +489,10 @@ class _EmulatedImu(ABC):
         self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
+        self._after_samples()
+
+    def _after_samples(self) -> None:  # noqa: B027 - a hook, empty unless a chip needs it
+        """Runs after new samples were taken (the MPU-9250's I²C master cycle)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -490,9 +500,13 @@ class _EmulatedImu(ABC):
 
 _MR, _MB = MPU9250_REG, MPU9250_BITS
 _MPU_READ_ONLY = frozenset(
-    {_MR.INT_STATUS, _MR.FIFO_COUNTH, _MR.FIFO_COUNTL, _MR.FIFO_R_W, _MR.WHO_AM_I}
+    {_MR.INT_STATUS, _MR.FIFO_COUNTH, _MR.FIFO_COUNTL, _MR.FIFO_R_W, _MR.WHO_AM_I,
+     _MR.I2C_SLV4_DI, _MR.I2C_MST_STATUS}
     | set(range(_MR.ACCEL_XOUT_H, _MR.GYRO_XOUT_H + 6))
+    | set(range(_MR.EXT_SENS_DATA_00, _MR.EXT_SENS_DATA_00 + 24))
 )
+#: Where the AK8963 sits on the MPU-9250's auxiliary bus (and on the host bus in bypass).
+AK8963_ADDRESS = 0x0C
 _MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
 
 
@@ -538,12 +552,74 @@ class EmulatedMPU9250(_EmulatedImu):
         self.default_who_am_i = _MPU_VARIANTS[variant]
         self.variant = variant
         super().__init__(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples)
+        #: Devices on the auxiliary I²C bus, by address: the AK8963 die (none on an MPU-6500).
+        self.aux: dict[int, I2CDevice] = {}
+        if variant != "mpu6500":
+            self.aux[AK8963_ADDRESS] = EmulatedAK8963(clock, MagneticField(self.motion),
+                                                      seed=seed)
+
+    @property
+    def bypass_open(self) -> bool:
+        """Whether the auxiliary bus is switched onto the host bus: INT_PIN_CFG.BYPASS_EN set
+        and the I²C master off (USER_CTRL.I2C_MST_EN clear) (Register Map §4.15, §4.24)."""
+        r = self._regs
+        return bool(r[_MR.INT_PIN_CFG] & _MB.INT_PIN_CFG_BYPASS_EN) and not (
+            r[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN)
+
+    def _after_samples(self) -> None:
+        """One I²C master cycle at the sample rate (Register Map §4.7–4.13): slaves 0–3 in
+        order, each reading LENG bytes into the next EXT_SENS_DATA bytes or writing its DO byte;
+        then slave 4's single transfer, which clears its enable and sets SLV4_DONE. A slave that
+        does not acknowledge sets its NACK bit in I2C_MST_STATUS."""
+        r = self._regs
+        if not r[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN:
+            return
+        ext = _MR.EXT_SENS_DATA_00
+        for n in range(4):
+            base = _MR.I2C_SLV0_ADDR + 3 * n
+            ctrl = r[base + 2]
+            if not ctrl & _MB.I2C_SLV_EN:
+                continue
+            length = ctrl & _MB.I2C_SLV_LENG_MASK
+            got = self._aux_transfer(n, r[base], r[base + 1], r[_MR.I2C_SLV0_DO + n], length,
+                                     no_register=bool(ctrl & _MB.I2C_SLV_REG_DIS))
+            if got is None or not length or not r[base] & _MB.I2C_SLV_READ:
+                continue
+            if ctrl & _MB.I2C_SLV_BYTE_SW:
+                got = b"".join(got[i : i + 2][::-1] for i in range(0, len(got), 2))
+            room = max(0, _MR.EXT_SENS_DATA_00 + 24 - ext)
+            r[ext : ext + min(room, len(got))] = got[:room]
+            ext += len(got)
+        ctrl4 = r[_MR.I2C_SLV4_CTRL]
+        if ctrl4 & _MB.I2C_SLV_EN:
+            got = self._aux_transfer(4, r[_MR.I2C_SLV4_ADDR], r[_MR.I2C_SLV4_REG],
+                                     r[_MR.I2C_SLV4_DO], 1,
+                                     no_register=bool(ctrl4 & _MB.I2C_SLV_REG_DIS))
+            if got:
+                r[_MR.I2C_SLV4_DI] = got[0]
+            r[_MR.I2C_SLV4_CTRL] = ctrl4 & ~_MB.I2C_SLV_EN
+            self._mst_status |= _MB.I2C_MST_STATUS_SLV4_DONE
+
+    def _aux_transfer(self, n: int, addr: int, register: int, out: int, length: int, *,
+                      no_register: bool) -> bytes | None:
+        """Slave ``n``'s transfer on the auxiliary bus: the bytes read, or ``None`` on a NACK."""
+        dev = self.aux.get(addr & 0x7F)
+        if dev is None or dev.i2c_ack() is not None:
+            self._mst_status |= 1 << n  # I2C_SLVn_NACK
+            return None
+        if addr & _MB.I2C_SLV_READ:
+            if not no_register:
+                dev.i2c_write(bytes([register]))
+            return bytes(dev.i2c_read(length)) if length else b""
+        dev.i2c_write(bytes([out]) if no_register else bytes([register, out]))
+        return b""
 
     def _reset_state(self) -> None:
         self._fifo = bytearray()
         self._fifo_last = 0
         self._latched: int | None = None
         self._int_status = 0
+        self._mst_status = 0
 
     def _odr_hz(self) -> float | None:
         r = self._regs
@@ -650,6 +726,9 @@ class EmulatedMPU9250(_EmulatedImu):
         if register == r.INT_STATUS:
             v, self._int_status = self._int_status, 0
             return v
+        if register == r.I2C_MST_STATUS:
+            v, self._mst_status = self._mst_status, 0
+            return v
         if register == r.FIFO_COUNTH:
             self._latched = len(self._fifo)
             return (self._latched >> 8) & 0x1F
@@ -721,6 +800,9 @@ class EmulatedLSM9DS1(_EmulatedImu):
     reset_values = _LSM_DEFAULTS
     read_only = _LSM_READ_ONLY
     soft_reset = (_LR.CTRL_REG8, _LB.CTRL_REG8_SW_RESET)
+
+    #: The magnetometer die beside it, once :func:`make_emulated_imu` has put one on the bus.
+    magnetometer: EmulatedLSM9DS1Mag | None = None
 
     def _reset_state(self) -> None:
         self._fifo: deque[bytes] = deque()
@@ -938,4 +1020,26 @@ def make_emulated_imu(
     if address is None:
         address = chip.family.addresses[0]
     bus.attach(address, chip)
+    _attach_magnetometer(bus, chip, address, seed)
     return bus, address
+
+
+def _attach_magnetometer(bus: EmulatedSMBus, chip: _EmulatedImu, address: int,
+                         seed: int) -> None:
+    """Put the chip's magnetometer die on the host bus where a real board has it: the AK8963
+    behind the MPU-9250's bypass switch at 0x0C; the LSM9DS1's magnetometer at 0x1E beside an
+    accel/gyro at 0x6B (SDO pins tied high, as on the common boards), 0x1C beside 0x6A. A die
+    whose address is already taken on a shared bus is left off."""
+    port: I2CDevice
+    if isinstance(chip, EmulatedMPU9250):
+        ak = chip.aux.get(AK8963_ADDRESS)
+        if ak is None or AK8963_ADDRESS in bus.addresses:
+            return
+        bus.attach(AK8963_ADDRESS, AuxPort(ak, lambda: chip.bypass_open))  # type: ignore[arg-type]
+        return
+    mag_address = 0x1E if address == 0x6B else 0x1C
+    if mag_address in bus.addresses:
+        return
+    chip.magnetometer = EmulatedLSM9DS1Mag(chip.clock, MagneticField(chip.motion), seed=seed)
+    port = chip.magnetometer
+    bus.attach(mag_address, port)

@@ -168,12 +168,22 @@ class _MPU9250Registers:
     ACCEL_CONFIG: int = 0x1C
     ACCEL_CONFIG_2: int = 0x1D
     FIFO_EN: int = 0x23
+    I2C_MST_CTRL: int = 0x24
+    I2C_SLV0_ADDR: int = 0x25  # SLVn_ADDR/REG/CTRL at 0x25 + 3n for n = 0..3
+    I2C_SLV4_ADDR: int = 0x31
+    I2C_SLV4_REG: int = 0x32
+    I2C_SLV4_DO: int = 0x33
+    I2C_SLV4_CTRL: int = 0x34
+    I2C_SLV4_DI: int = 0x35
+    I2C_MST_STATUS: int = 0x36
     INT_PIN_CFG: int = 0x37
     INT_ENABLE: int = 0x38
     INT_STATUS: int = 0x3A
     ACCEL_XOUT_H: int = 0x3B
     TEMP_OUT_H: int = 0x41
     GYRO_XOUT_H: int = 0x43
+    EXT_SENS_DATA_00: int = 0x49  # 24 bytes, to 0x60
+    I2C_SLV0_DO: int = 0x63  # SLVn_DO at 0x63 + n for n = 0..3
     SIGNAL_PATH_RESET: int = 0x68
     USER_CTRL: int = 0x6A
     PWR_MGMT_1: int = 0x6B
@@ -202,7 +212,15 @@ class _MPU9250Bits:
     INT_STATUS_FIFO_OFLOW: int = 0x10
     INT_STATUS_RAW_DATA_RDY: int = 0x01
     USER_CTRL_FIFO_EN: int = 0x40
+    USER_CTRL_I2C_MST_EN: int = 0x20
     USER_CTRL_FIFO_RST: int = 0x04
+    INT_PIN_CFG_BYPASS_EN: int = 0x02
+    I2C_SLV_READ: int = 0x80  # SLVn_ADDR bit 7: read (1) or write (0)
+    I2C_SLV_EN: int = 0x80  # SLVn_CTRL bits: enable, byte swap, no register, group, length
+    I2C_SLV_BYTE_SW: int = 0x40
+    I2C_SLV_REG_DIS: int = 0x20
+    I2C_SLV_LENG_MASK: int = 0x0F
+    I2C_MST_STATUS_SLV4_DONE: int = 0x40
     PWR_MGMT_1_H_RESET: int = 0x80
     PWR_MGMT_1_SLEEP: int = 0x40
     PWR_MGMT_1_CLKSEL_AUTO: int = 0x01
