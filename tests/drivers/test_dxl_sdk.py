@@ -247,6 +247,7 @@ def test_hardware_alert_reaches_every_status_until_reboot(rig):
     assert read_alerting(rig, 2, 64) == 0  # torque was switched off
     result, error = rig.ph.reboot(rig.port, 2)
     assert result == COMM_SUCCESS
+    rig.clock.sleep(servo.reboot_time_s)  # it hears nothing while it boots
     assert read(rig, 2, "Hardware Error Status") == 0
 
 
