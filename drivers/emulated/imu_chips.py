@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.signal import lfilter
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.magnetometers import (
@@ -41,6 +42,8 @@ from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
+    LSM9DS1_BW_G_CUTOFF_HZ,
+    LSM9DS1_LPF1_CUTOFF_HZ,
     LSM9DS1_ODR,
     LSM9DS1_REG,
     MPU9250,
@@ -473,7 +476,7 @@ class _EmulatedImu(ABC):
             )
             skipped = n - head - tail
         t = self._origin + period * ks
-        omega = self._true_rate(t, period)
+        omega = self._filtered(self._true_rate(t, period), head, skipped)
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         odr = 1.0 / period
@@ -490,6 +493,11 @@ class _EmulatedImu(ABC):
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
         self._after_samples()
+
+    def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
+        """The chip's digital low-pass filter applied to the true rates of new samples (the
+        first ``head`` rows, then ``skipped`` not generated, then the rest); none by default."""
+        return omega
 
     def _after_samples(self) -> None:  # noqa: B027 - a hook, empty unless a chip needs it
         """Runs after new samples were taken (the MPU-9250's I²C master cycle)."""
@@ -804,10 +812,59 @@ class EmulatedLSM9DS1(_EmulatedImu):
     #: The magnetometer die beside it, once :func:`make_emulated_imu` has put one on the bus.
     magnetometer: EmulatedLSM9DS1Mag | None = None
 
+    def __init__(self, clock: Clock, motion: MotionSource | None = None,
+                 truth: SensorTruth | None = None, *, output_filter: bool = True,
+                 **kwargs: Any) -> None:
+        #: Whether the gyro output path filters (see :meth:`cutoff_hz`); ``False`` passes the
+        #: per-sample mean rate through unfiltered.
+        self.output_filter = bool(output_filter)
+        self._lpf: tuple[float, np.ndarray] | None = None
+        super().__init__(clock, motion, truth, **kwargs)
+
+    def cutoff_hz(self) -> float | None:
+        """The gyro output's −3 dB bandwidth (datasheet Figure 28): the LPF1 cutoff of Table 46
+        with CTRL_REG2_G.OUT_SEL = 00, the LPF2 cutoff BW_G selects in Table 47 with OUT_SEL =
+        1x (01 adds only the high-pass, which is off here); ``None`` with the gyro off."""
+        odr = self._odr_hz()
+        if odr is None:
+            return None
+        if self._regs[_LR.CTRL_REG2_G] & _LB.OUT_SEL_LPF2:
+            return LSM9DS1_BW_G_CUTOFF_HZ[odr][self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK]
+        return LSM9DS1_LPF1_CUTOFF_HZ[odr]
+
+    def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
+        """A first-order low-pass at :meth:`cutoff_hz`, discretised at the output rate by the
+        bilinear transform prewarped to that cutoff (exactly −3 dB there); the chip's filter
+        order is not published, so this stands in with the datasheet's bandwidth ⚠. The state
+        carries across calls; it restarts (at rest on its first input) after skipped samples
+        and when the cutoff or rate changes."""
+        fc, odr = self.cutoff_hz(), self._odr_hz()
+        if not self.output_filter or fc is None or odr is None or omega.shape[0] == 0:
+            return omega
+        k = math.tan(math.pi * fc / odr)
+        b, a = k / (1 + k), (k - 1) / (k + 1)
+        out = np.empty_like(omega)
+        parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
+        for i, (lo, hi) in enumerate(parts):
+            if hi <= lo:
+                continue
+            x = omega[lo:hi]
+            state = self._lpf
+            if state is None or state[0] != fc or (i == 1 and skipped):
+                prev_x = prev_y = x[0]
+            else:
+                prev_x, prev_y = state[1][0], state[1][1]
+            y, _ = lfilter([b, b], [1.0, a], x, axis=0,
+                           zi=(b * prev_x - a * prev_y)[None, :])
+            out[lo:hi] = y
+            self._lpf = (fc, np.stack([x[-1], y[-1]]))
+        return out
+
     def _reset_state(self) -> None:
         self._fifo: deque[bytes] = deque()
         self._ovrn = False
         self._status = 0
+        self._lpf = None
 
     @property
     def fifo_capacity(self) -> int:
@@ -971,6 +1028,7 @@ def make_emulated_imu(
     bus: EmulatedSMBus | None = None,
     bus_hz: float = 400_000,
     subsamples: int = 8,
+    output_filter: bool = True,
 ) -> tuple[EmulatedSMBus, int]:
     """An emulated sensor on an emulated bus, ready for a reader, in one call.
 
@@ -997,6 +1055,9 @@ def make_emulated_imu(
     subsamples : int
         True-rate evaluations averaged into each output sample (the chip's low-pass filter and
         decimation; 1 samples the rate at the instant).
+    output_filter : bool
+        The LSM9DS1's output low-pass (:meth:`EmulatedLSM9DS1.cutoff_hz`); ``False`` turns it
+        off.
 
     Returns
     -------
@@ -1010,7 +1071,7 @@ def make_emulated_imu(
                                subsamples=subsamples)
     elif key == "lsm9ds1":
         chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed,
-                               subsamples=subsamples)
+                               subsamples=subsamples, output_filter=output_filter)
     else:
         raise ValueError(
             f"unknown IMU model {model!r}; choose one of {', '.join([*_MPU_VARIANTS, 'lsm9ds1'])}"

@@ -44,7 +44,7 @@ def mpu(truth=QUIET, motion=None, **kw):
 def lsm(truth=QUIET, motion=None, **kw):
     clock = VirtualClock()
     bus, addr = make_emulated_imu("lsm9ds1", clock, motion or ConstantRate(), truth,
-                                  **{"subsamples": 1, **kw})
+                                  **{"subsamples": 1, "output_filter": False, **kw})
     return clock, bus, addr, bus.device(addr)
 
 
