@@ -28,13 +28,22 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.signal import lfilter
 
 from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.magnetometers import (
+    AuxPort,
+    EmulatedAK8963,
+    EmulatedLSM9DS1Mag,
+    MagneticField,
+)
 from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
-from gyrocal.drivers.emulated.smbus import EmulatedSMBus
+from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
+    LSM9DS1_BW_G_CUTOFF_HZ,
+    LSM9DS1_LPF1_CUTOFF_HZ,
     LSM9DS1_ODR,
     LSM9DS1_REG,
     MPU9250,
@@ -467,7 +476,7 @@ class _EmulatedImu(ABC):
             )
             skipped = n - head - tail
         t = self._origin + period * ks
-        omega = self._true_rate(t, period)
+        omega = self._filtered(self._true_rate(t, period), head, skipped)
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         odr = 1.0 / period
@@ -483,6 +492,15 @@ class _EmulatedImu(ABC):
         self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
+        self._after_samples()
+
+    def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
+        """The chip's digital low-pass filter applied to the true rates of new samples (the
+        first ``head`` rows, then ``skipped`` not generated, then the rest); none by default."""
+        return omega
+
+    def _after_samples(self) -> None:  # noqa: B027 - a hook, empty unless a chip needs it
+        """Runs after new samples were taken (the MPU-9250's I²C master cycle)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -490,9 +508,13 @@ class _EmulatedImu(ABC):
 
 _MR, _MB = MPU9250_REG, MPU9250_BITS
 _MPU_READ_ONLY = frozenset(
-    {_MR.INT_STATUS, _MR.FIFO_COUNTH, _MR.FIFO_COUNTL, _MR.FIFO_R_W, _MR.WHO_AM_I}
+    {_MR.INT_STATUS, _MR.FIFO_COUNTH, _MR.FIFO_COUNTL, _MR.FIFO_R_W, _MR.WHO_AM_I,
+     _MR.I2C_SLV4_DI, _MR.I2C_MST_STATUS}
     | set(range(_MR.ACCEL_XOUT_H, _MR.GYRO_XOUT_H + 6))
+    | set(range(_MR.EXT_SENS_DATA_00, _MR.EXT_SENS_DATA_00 + 24))
 )
+#: Where the AK8963 sits on the MPU-9250's auxiliary bus (and on the host bus in bypass).
+AK8963_ADDRESS = 0x0C
 _MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
 
 
@@ -538,12 +560,74 @@ class EmulatedMPU9250(_EmulatedImu):
         self.default_who_am_i = _MPU_VARIANTS[variant]
         self.variant = variant
         super().__init__(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples)
+        #: Devices on the auxiliary I²C bus, by address: the AK8963 die (none on an MPU-6500).
+        self.aux: dict[int, I2CDevice] = {}
+        if variant != "mpu6500":
+            self.aux[AK8963_ADDRESS] = EmulatedAK8963(clock, MagneticField(self.motion),
+                                                      seed=seed)
+
+    @property
+    def bypass_open(self) -> bool:
+        """Whether the auxiliary bus is switched onto the host bus: INT_PIN_CFG.BYPASS_EN set
+        and the I²C master off (USER_CTRL.I2C_MST_EN clear) (Register Map §4.15, §4.24)."""
+        r = self._regs
+        return bool(r[_MR.INT_PIN_CFG] & _MB.INT_PIN_CFG_BYPASS_EN) and not (
+            r[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN)
+
+    def _after_samples(self) -> None:
+        """One I²C master cycle at the sample rate (Register Map §4.7–4.13): slaves 0–3 in
+        order, each reading LENG bytes into the next EXT_SENS_DATA bytes or writing its DO byte;
+        then slave 4's single transfer, which clears its enable and sets SLV4_DONE. A slave that
+        does not acknowledge sets its NACK bit in I2C_MST_STATUS."""
+        r = self._regs
+        if not r[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN:
+            return
+        ext = _MR.EXT_SENS_DATA_00
+        for n in range(4):
+            base = _MR.I2C_SLV0_ADDR + 3 * n
+            ctrl = r[base + 2]
+            if not ctrl & _MB.I2C_SLV_EN:
+                continue
+            length = ctrl & _MB.I2C_SLV_LENG_MASK
+            got = self._aux_transfer(n, r[base], r[base + 1], r[_MR.I2C_SLV0_DO + n], length,
+                                     no_register=bool(ctrl & _MB.I2C_SLV_REG_DIS))
+            if got is None or not length or not r[base] & _MB.I2C_SLV_READ:
+                continue
+            if ctrl & _MB.I2C_SLV_BYTE_SW:
+                got = b"".join(got[i : i + 2][::-1] for i in range(0, len(got), 2))
+            room = max(0, _MR.EXT_SENS_DATA_00 + 24 - ext)
+            r[ext : ext + min(room, len(got))] = got[:room]
+            ext += len(got)
+        ctrl4 = r[_MR.I2C_SLV4_CTRL]
+        if ctrl4 & _MB.I2C_SLV_EN:
+            got = self._aux_transfer(4, r[_MR.I2C_SLV4_ADDR], r[_MR.I2C_SLV4_REG],
+                                     r[_MR.I2C_SLV4_DO], 1,
+                                     no_register=bool(ctrl4 & _MB.I2C_SLV_REG_DIS))
+            if got:
+                r[_MR.I2C_SLV4_DI] = got[0]
+            r[_MR.I2C_SLV4_CTRL] = ctrl4 & ~_MB.I2C_SLV_EN
+            self._mst_status |= _MB.I2C_MST_STATUS_SLV4_DONE
+
+    def _aux_transfer(self, n: int, addr: int, register: int, out: int, length: int, *,
+                      no_register: bool) -> bytes | None:
+        """Slave ``n``'s transfer on the auxiliary bus: the bytes read, or ``None`` on a NACK."""
+        dev = self.aux.get(addr & 0x7F)
+        if dev is None or dev.i2c_ack() is not None:
+            self._mst_status |= 1 << n  # I2C_SLVn_NACK
+            return None
+        if addr & _MB.I2C_SLV_READ:
+            if not no_register:
+                dev.i2c_write(bytes([register]))
+            return bytes(dev.i2c_read(length)) if length else b""
+        dev.i2c_write(bytes([out]) if no_register else bytes([register, out]))
+        return b""
 
     def _reset_state(self) -> None:
         self._fifo = bytearray()
         self._fifo_last = 0
         self._latched: int | None = None
         self._int_status = 0
+        self._mst_status = 0
 
     def _odr_hz(self) -> float | None:
         r = self._regs
@@ -650,6 +734,9 @@ class EmulatedMPU9250(_EmulatedImu):
         if register == r.INT_STATUS:
             v, self._int_status = self._int_status, 0
             return v
+        if register == r.I2C_MST_STATUS:
+            v, self._mst_status = self._mst_status, 0
+            return v
         if register == r.FIFO_COUNTH:
             self._latched = len(self._fifo)
             return (self._latched >> 8) & 0x1F
@@ -722,10 +809,62 @@ class EmulatedLSM9DS1(_EmulatedImu):
     read_only = _LSM_READ_ONLY
     soft_reset = (_LR.CTRL_REG8, _LB.CTRL_REG8_SW_RESET)
 
+    #: The magnetometer die beside it, once :func:`make_emulated_imu` has put one on the bus.
+    magnetometer: EmulatedLSM9DS1Mag | None = None
+
+    def __init__(self, clock: Clock, motion: MotionSource | None = None,
+                 truth: SensorTruth | None = None, *, output_filter: bool = True,
+                 **kwargs: Any) -> None:
+        #: Whether the gyro output path filters (see :meth:`cutoff_hz`); ``False`` passes the
+        #: per-sample mean rate through unfiltered.
+        self.output_filter = bool(output_filter)
+        self._lpf: tuple[float, np.ndarray] | None = None
+        super().__init__(clock, motion, truth, **kwargs)
+
+    def cutoff_hz(self) -> float | None:
+        """The gyro output's −3 dB bandwidth (datasheet Figure 28): the LPF1 cutoff of Table 46
+        with CTRL_REG2_G.OUT_SEL = 00, the LPF2 cutoff BW_G selects in Table 47 with OUT_SEL =
+        1x (01 adds only the high-pass, which is off here); ``None`` with the gyro off."""
+        odr = self._odr_hz()
+        if odr is None:
+            return None
+        if self._regs[_LR.CTRL_REG2_G] & _LB.OUT_SEL_LPF2:
+            return LSM9DS1_BW_G_CUTOFF_HZ[odr][self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK]
+        return LSM9DS1_LPF1_CUTOFF_HZ[odr]
+
+    def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
+        """A first-order low-pass at :meth:`cutoff_hz`, discretised at the output rate by the
+        bilinear transform prewarped to that cutoff (exactly −3 dB there); the chip's filter
+        order is not published, so this stands in with the datasheet's bandwidth ⚠. The state
+        carries across calls; it restarts (at rest on its first input) after skipped samples
+        and when the cutoff or rate changes."""
+        fc, odr = self.cutoff_hz(), self._odr_hz()
+        if not self.output_filter or fc is None or odr is None or omega.shape[0] == 0:
+            return omega
+        k = math.tan(math.pi * fc / odr)
+        b, a = k / (1 + k), (k - 1) / (k + 1)
+        out = np.empty_like(omega)
+        parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
+        for i, (lo, hi) in enumerate(parts):
+            if hi <= lo:
+                continue
+            x = omega[lo:hi]
+            state = self._lpf
+            if state is None or state[0] != fc or (i == 1 and skipped):
+                prev_x = prev_y = x[0]
+            else:
+                prev_x, prev_y = state[1][0], state[1][1]
+            y, _ = lfilter([b, b], [1.0, a], x, axis=0,
+                           zi=(b * prev_x - a * prev_y)[None, :])
+            out[lo:hi] = y
+            self._lpf = (fc, np.stack([x[-1], y[-1]]))
+        return out
+
     def _reset_state(self) -> None:
         self._fifo: deque[bytes] = deque()
         self._ovrn = False
         self._status = 0
+        self._lpf = None
 
     @property
     def fifo_capacity(self) -> int:
@@ -889,6 +1028,7 @@ def make_emulated_imu(
     bus: EmulatedSMBus | None = None,
     bus_hz: float = 400_000,
     subsamples: int = 8,
+    output_filter: bool = True,
 ) -> tuple[EmulatedSMBus, int]:
     """An emulated sensor on an emulated bus, ready for a reader, in one call.
 
@@ -915,6 +1055,9 @@ def make_emulated_imu(
     subsamples : int
         True-rate evaluations averaged into each output sample (the chip's low-pass filter and
         decimation; 1 samples the rate at the instant).
+    output_filter : bool
+        The LSM9DS1's output low-pass (:meth:`EmulatedLSM9DS1.cutoff_hz`); ``False`` turns it
+        off.
 
     Returns
     -------
@@ -928,7 +1071,7 @@ def make_emulated_imu(
                                subsamples=subsamples)
     elif key == "lsm9ds1":
         chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed,
-                               subsamples=subsamples)
+                               subsamples=subsamples, output_filter=output_filter)
     else:
         raise ValueError(
             f"unknown IMU model {model!r}; choose one of {', '.join([*_MPU_VARIANTS, 'lsm9ds1'])}"
@@ -938,4 +1081,26 @@ def make_emulated_imu(
     if address is None:
         address = chip.family.addresses[0]
     bus.attach(address, chip)
+    _attach_magnetometer(bus, chip, address, seed)
     return bus, address
+
+
+def _attach_magnetometer(bus: EmulatedSMBus, chip: _EmulatedImu, address: int,
+                         seed: int) -> None:
+    """Put the chip's magnetometer die on the host bus where a real board has it: the AK8963
+    behind the MPU-9250's bypass switch at 0x0C; the LSM9DS1's magnetometer at 0x1E beside an
+    accel/gyro at 0x6B (SDO pins tied high, as on the common boards), 0x1C beside 0x6A. A die
+    whose address is already taken on a shared bus is left off."""
+    port: I2CDevice
+    if isinstance(chip, EmulatedMPU9250):
+        ak = chip.aux.get(AK8963_ADDRESS)
+        if ak is None or AK8963_ADDRESS in bus.addresses:
+            return
+        bus.attach(AK8963_ADDRESS, AuxPort(ak, lambda: chip.bypass_open))  # type: ignore[arg-type]
+        return
+    mag_address = 0x1E if address == 0x6B else 0x1C
+    if mag_address in bus.addresses:
+        return
+    chip.magnetometer = EmulatedLSM9DS1Mag(chip.clock, MagneticField(chip.motion), seed=seed)
+    port = chip.magnetometer
+    bus.attach(mag_address, port)

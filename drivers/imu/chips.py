@@ -23,6 +23,7 @@ __all__ = [
     "LSM9DS1",
     "LSM9DS1_BITS",
     "LSM9DS1_BW_G_CUTOFF_HZ",
+    "LSM9DS1_LPF1_CUTOFF_HZ",
     "LSM9DS1_ODR",
     "LSM9DS1_REG",
     "MPU9250",
@@ -168,12 +169,22 @@ class _MPU9250Registers:
     ACCEL_CONFIG: int = 0x1C
     ACCEL_CONFIG_2: int = 0x1D
     FIFO_EN: int = 0x23
+    I2C_MST_CTRL: int = 0x24
+    I2C_SLV0_ADDR: int = 0x25  # SLVn_ADDR/REG/CTRL at 0x25 + 3n for n = 0..3
+    I2C_SLV4_ADDR: int = 0x31
+    I2C_SLV4_REG: int = 0x32
+    I2C_SLV4_DO: int = 0x33
+    I2C_SLV4_CTRL: int = 0x34
+    I2C_SLV4_DI: int = 0x35
+    I2C_MST_STATUS: int = 0x36
     INT_PIN_CFG: int = 0x37
     INT_ENABLE: int = 0x38
     INT_STATUS: int = 0x3A
     ACCEL_XOUT_H: int = 0x3B
     TEMP_OUT_H: int = 0x41
     GYRO_XOUT_H: int = 0x43
+    EXT_SENS_DATA_00: int = 0x49  # 24 bytes, to 0x60
+    I2C_SLV0_DO: int = 0x63  # SLVn_DO at 0x63 + n for n = 0..3
     SIGNAL_PATH_RESET: int = 0x68
     USER_CTRL: int = 0x6A
     PWR_MGMT_1: int = 0x6B
@@ -202,7 +213,15 @@ class _MPU9250Bits:
     INT_STATUS_FIFO_OFLOW: int = 0x10
     INT_STATUS_RAW_DATA_RDY: int = 0x01
     USER_CTRL_FIFO_EN: int = 0x40
+    USER_CTRL_I2C_MST_EN: int = 0x20
     USER_CTRL_FIFO_RST: int = 0x04
+    INT_PIN_CFG_BYPASS_EN: int = 0x02
+    I2C_SLV_READ: int = 0x80  # SLVn_ADDR bit 7: read (1) or write (0)
+    I2C_SLV_EN: int = 0x80  # SLVn_CTRL bits: enable, byte swap, no register, group, length
+    I2C_SLV_BYTE_SW: int = 0x40
+    I2C_SLV_REG_DIS: int = 0x20
+    I2C_SLV_LENG_MASK: int = 0x0F
+    I2C_MST_STATUS_SLV4_DONE: int = 0x40
     PWR_MGMT_1_H_RESET: int = 0x80
     PWR_MGMT_1_SLEEP: int = 0x40
     PWR_MGMT_1_CLKSEL_AUTO: int = 0x01
@@ -276,6 +295,7 @@ class _LSM9DS1Registers:
 
     WHO_AM_I: int = 0x0F
     CTRL_REG1_G: int = 0x10
+    CTRL_REG2_G: int = 0x11
     CTRL_REG3_G: int = 0x12
     OUT_TEMP_L: int = 0x15
     STATUS_REG: int = 0x17
@@ -300,6 +320,10 @@ class _LSM9DS1Bits:
     ODR_G_SHIFT: int = 5
     FS_G_SHIFT: int = 3
     BW_G_MASK: int = 0x03
+    # CTRL_REG2_G.OUT_SEL (ST Table 48/49, Figure 28): 00 the data registers and FIFO carry the
+    # LPF1 output; 1x the LPF2 output, whose cutoff BW_G selects (Table 47)
+    OUT_SEL_MASK: int = 0x03
+    OUT_SEL_LPF2: int = 0x02
     FS_XL_SHIFT: int = 3
     CTRL_REG4_GYRO_AXES: int = 0x38
     CTRL_REG8_BOOT: int = 0x80
@@ -332,10 +356,16 @@ LSM9DS1_ODR: Mapping[float, int] = MappingProxyType(
     {14.9: 1, 59.5: 2, 119.0: 3, 238.0: 4, 476.0: 5, 952.0: 6}
 )
 
-#: Gyro low-pass cutoff in Hz for each ODR and BW_G code (ST Table 47), used only to report and
-#: choose the filter. The 238 Hz and 952 Hz rows are in the hardware reference (§2.3, ⚠ ST only);
-#: the other rows follow ST Table 47 but were not re-checked for the reference (⚠). At 14.9 Hz only
-#: LPF1 (5 Hz) acts.
+#: LPF1 cutoff in Hz for each gyro ODR (ST Table 46; hardware reference §2.3): the bandwidth of
+#: the output with CTRL_REG2_G.OUT_SEL = 00.
+LSM9DS1_LPF1_CUTOFF_HZ: Mapping[float, float] = MappingProxyType(
+    {14.9: 5.0, 59.5: 19.0, 119.0: 38.0, 238.0: 76.0, 476.0: 100.0, 952.0: 100.0}
+)
+
+#: Gyro low-pass cutoff in Hz for each ODR and BW_G code (ST Table 47): the bandwidth of the
+#: LPF2 output (CTRL_REG2_G.OUT_SEL = 1x), which the driver selects. The 238 Hz and 952 Hz
+#: rows are in the hardware reference (§2.3, ⚠ ST only); the other rows follow ST Table 47 but
+#: were not re-checked for the reference (⚠). At 14.9 Hz only LPF1 (5 Hz) acts.
 LSM9DS1_BW_G_CUTOFF_HZ: Mapping[float, tuple[float, float, float, float]] = MappingProxyType(
     {
         14.9: (5.0, 5.0, 5.0, 5.0),

@@ -2,7 +2,8 @@
 
 Bring-up (hardware reference §2.6, §2.2): CTRL_REG8 = SW_RESET | IF_ADD_INC, wait 10 ms;
 WHO_AM_I again; CTRL_REG8 = BDU | IF_ADD_INC (little-endian output); FIFO off; gyro axes on
-(CTRL_REG4); no high-pass (CTRL_REG3_G = 0); CTRL_REG1_G = ODR_G | FS_G | BW_G; wait for start-up.
+(CTRL_REG4); no high-pass (CTRL_REG3_G = 0); the LPF2 output (CTRL_REG2_G.OUT_SEL = 10);
+CTRL_REG1_G = ODR_G | FS_G | BW_G; wait for start-up.
 With the gyro on, the accelerometer runs at the gyro's rate and shares each FIFO slot (§2.3).
 
 Streaming (§2.7): CTRL_REG9.FIFO_EN and FIFO_CTRL.FMODE = continuous (32 slots, 34 ms at
@@ -104,6 +105,10 @@ class LSM9DS1Reader(ImuReader):
         self._write_byte(R.FIFO_CTRL, 0x00)
         self._write_byte(R.CTRL_REG4, B.CTRL_REG4_GYRO_AXES)
         self._write_byte(R.CTRL_REG3_G, 0x00)
+        # route the LPF2 output to the data registers and FIFO, so that BW_G (Table 47) is the
+        # bandwidth: with the reset OUT_SEL = 00 they carry LPF1 and BW_G does nothing (Fig. 28)
+        self._write_byte(R.CTRL_REG2_G, B.OUT_SEL_LPF2)
+        self._verify(R.CTRL_REG2_G, B.OUT_SEL_LPF2)
         ctrl1 = (odr_code << B.ODR_G_SHIFT) | (rng.code << B.FS_G_SHIFT) | bw
         self._write_byte(R.CTRL_REG1_G, ctrl1)
         self._verify(R.CTRL_REG1_G, ctrl1)

@@ -322,6 +322,7 @@ def test_each_hardware_error_bit_has_its_named_error(bits, name):
     with pytest.raises(ServoHardwareError):
         Gimbal(port, clock=clock).open()
     bus.servo(3).reboot()
+    clock.sleep(bus.servo(3).reboot_time_s)  # it hears nothing while it boots
     with Gimbal(port, clock=clock) as g2:
         assert g2.infos[3].model_number == 1020
 

@@ -68,3 +68,44 @@ def test_gyrocal_emulate_without_pty_is_a_usage_error():
     proc = subprocess.run([sys.executable, "-m", "gyrocal.kit", "emulate"], capture_output=True,
                           text=True, timeout=60)
     assert proc.returncode == 2 and "--pty" in proc.stderr
+
+
+def test_only_servos_at_the_clients_baud_rate_answer_over_the_pty():
+    # e-Manual, X-series, Baud Rate (8): host and servo must share the rate to communicate
+    clock = SystemClock()
+    bus = ServoBus([EmulatedServo(1, clock=clock, seed=1, baudrate=1_000_000),
+                    EmulatedServo(2, clock=clock, seed=2, baudrate=57600)], clock)
+    with PtyServoBridge(bus) as bridge:
+        port = PortHandler(bridge.path)
+        ph = PacketHandler(2.0)
+        assert port.openPort() and port.setBaudRate(57600)
+        assert ph.ping(port, 1)[1] != COMM_SUCCESS
+        assert ph.ping(port, 2)[:2] == (1020, COMM_SUCCESS)
+        assert port.setBaudRate(1_000_000)
+        assert ph.ping(port, 1)[:2] == (1020, COMM_SUCCESS)
+        assert ph.ping(port, 2)[1] != COMM_SUCCESS
+        port.closePort()
+    assert bridge.error is None
+
+
+class RecordingClock(SystemClock):
+    def __init__(self):
+        self.sleeps = []
+
+    def sleep(self, seconds):
+        self.sleeps.append(seconds)
+        super().sleep(seconds)
+
+
+def test_the_pty_bridge_waits_each_servos_return_delay_time():
+    # e-Manual, X-series, Return Delay Time (9): the servo waits this long (2 µs units) after
+    # an instruction packet before it sends its status packet
+    clock = SystemClock()
+    bus = ServoBus([EmulatedServo(1, clock=clock, seed=1, baudrate=1_000_000,
+                                  return_delay_us=300)], clock)
+    with PtyServoBridge(bus, clock=RecordingClock()) as bridge:
+        port = PortHandler(bridge.path)
+        assert port.openPort() and port.setBaudRate(1_000_000)
+        assert PacketHandler(2.0).ping(port, 1)[1] == COMM_SUCCESS
+        port.closePort()
+    assert bridge.clock.sleeps == [pytest.approx(300e-6)]

@@ -11,6 +11,7 @@ from dynamixel_sdk import (
     COMM_RX_TIMEOUT,
     COMM_SUCCESS,
     GroupBulkRead,
+    GroupBulkWrite,
     GroupSyncRead,
     GroupSyncWrite,
     PacketHandler,
@@ -247,6 +248,7 @@ def test_hardware_alert_reaches_every_status_until_reboot(rig):
     assert read_alerting(rig, 2, 64) == 0  # torque was switched off
     result, error = rig.ph.reboot(rig.port, 2)
     assert result == COMM_SUCCESS
+    rig.clock.sleep(servo.reboot_time_s)  # it hears nothing while it boots
     assert read(rig, 2, "Hardware Error Status") == 0
 
 
@@ -264,3 +266,20 @@ def test_clear_multi_turn_rebases_within_one_turn(rig):
     result, error = rig.ph.clearMultiTurn(rig.port, 1)
     assert (result, error) == (COMM_SUCCESS, 0)
     assert math.floor((read(rig, 1, "Present Position") - offset) / 4096) == 0
+
+
+def test_group_bulk_write_sets_different_items_on_different_servos(rig):
+    bw = GroupBulkWrite(rig.port, rig.ph)
+    lim, rdt = XM["Velocity Limit"], XM["Return Delay Time"]
+    assert bw.addParam(1, lim.address, lim.size, list(lim.to_bytes(150)))
+    assert bw.addParam(2, rdt.address, rdt.size, list(rdt.to_bytes(20)))
+    assert bw.txPacket() == COMM_SUCCESS
+    assert read(rig, 1, "Velocity Limit") == 150
+    assert read(rig, 2, "Return Delay Time") == 20
+
+
+def test_factory_reset_keeping_id_and_baud_over_the_sdk(rig):
+    # e-Manual, Protocol 2.0, Factory Reset (0x06), option 0x02: all but ID and Baud Rate
+    assert write(rig, 1, "Velocity Limit", 150) == (COMM_SUCCESS, 0)
+    assert rig.ph.factoryReset(rig.port, 1, 0x02) == (COMM_SUCCESS, 0)
+    assert read(rig, 1, "Velocity Limit") == 200  # XM430-W350's factory value

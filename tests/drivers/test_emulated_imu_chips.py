@@ -44,7 +44,7 @@ def mpu(truth=QUIET, motion=None, **kw):
 def lsm(truth=QUIET, motion=None, **kw):
     clock = VirtualClock()
     bus, addr = make_emulated_imu("lsm9ds1", clock, motion or ConstantRate(), truth,
-                                  **{"subsamples": 1, **kw})
+                                  **{"subsamples": 1, "output_filter": False, **kw})
     return clock, bus, addr, bus.device(addr)
 
 
@@ -442,7 +442,8 @@ def test_make_emulated_imu_rejects_unknown_models_and_shares_a_bus():
     clock = VirtualClock()
     bus, a = make_emulated_imu("mpu9250", clock)
     bus2, b = make_emulated_imu("lsm9ds1", clock, bus=bus)
-    assert bus2 is bus and bus.addresses == (0x68, 0x6B)
+    # each with its magnetometer die: the AK8963 behind the bypass, the LSM9DS1's at 0x1E
+    assert bus2 is bus and bus.addresses == (0x0C, 0x1E, 0x68, 0x6B)
     assert isinstance(bus.device(a), EmulatedMPU9250)
     assert isinstance(bus.device(b), EmulatedLSM9DS1)
     with pytest.raises(ValueError, match="variant"):

@@ -141,3 +141,131 @@ def test_attach_checks_its_arguments(bus):
     bus.detach(0x50)
     with pytest.raises(OSError):
         bus.read_byte_data(0x50, 0)
+
+
+# -- the whole smbus2 surface ---------------------------------------------------------------------
+
+
+def test_every_public_smbus2_method_exists_with_smbus2s_parameters():
+    import inspect
+
+    import smbus2
+
+    names = [n for n, f in vars(smbus2.SMBus).items() if callable(f) and not n.startswith("_")]
+    assert {"read_word_data", "block_process_call", "write_quick", "enable_pec"} <= set(names)
+    for name in names:
+        theirs = list(inspect.signature(getattr(smbus2.SMBus, name)).parameters)
+        ours = list(inspect.signature(getattr(EmulatedSMBus, name)).parameters)
+        assert ours == theirs, name
+    assert isinstance(vars(EmulatedSMBus)["pec"], property)
+
+
+def test_byte_and_word_calls_put_smbus_messages_on_the_wire(bus):
+    dev = bus.device(0x50)
+    bus.write_byte(0x50, 0x30)  # Send Byte: a register chip takes it as its pointer
+    assert bus.read_byte(0x50) == 0x30
+    assert bus.read_byte(0x50) == 0x31  # Receive Byte continues from the pointer
+    dev.regs[0x40:0x42] = bytes([0x34, 0x12])
+    assert bus.read_word_data(0x50, 0x40) == 0x1234  # low byte first
+    bus.write_word_data(0x50, 0x44, 0xBEEF)
+    assert dev.regs[0x44:0x46] == bytes([0xEF, 0xBE])
+    dev.regs[0x4A:0x4C] = bytes([0x78, 0x56])
+    assert bus.process_call(0x50, 0x48, 0x0102) == 0x5678  # write 2 bytes at 0x48, read on
+    assert dev.regs[0x48:0x4A] == bytes([0x02, 0x01])
+    assert bus.log[-1].op == "process_call"
+    bus.write_quick(0x50)
+    with pytest.raises(OSError) as info:
+        bus.write_quick(0x51)
+    assert info.value.errno == errno.EREMOTEIO
+
+
+def test_smbus_block_calls_carry_a_count(bus):
+    dev = bus.device(0x50)
+    dev.regs[0x60:0x64] = bytes([3, 9, 8, 7])
+    assert bus.read_block_data(0x50, 0x60) == [9, 8, 7]
+    bus.write_block_data(0x50, 0x70, [5, 6])
+    assert dev.regs[0x70:0x73] == bytes([2, 5, 6])
+    dev.regs[0x84:0x87] = bytes([2, 0xAA, 0xBB])
+    assert bus.block_process_call(0x50, 0x80, [1, 2, 3]) == [0xAA, 0xBB]
+    dev.regs[0x90] = 0
+    with pytest.raises(OSError) as info:
+        bus.read_block_data(0x50, 0x90)
+    assert info.value.errno == errno.EPROTO
+    dev.regs[0x90] = 33
+    with pytest.raises(OSError) as info:
+        bus.read_block_data(0x50, 0x90)
+    assert info.value.errno == errno.EPROTO
+    with pytest.raises(ValueError, match="32"):
+        bus.write_block_data(0x50, 0, list(range(33)))
+    with pytest.raises(ValueError, match="32"):
+        bus.block_process_call(0x50, 0, list(range(33)))
+
+
+def test_pec_is_the_smbus_crc8_and_is_sent_and_checked(bus):
+    from gyrocal.drivers.emulated.smbus import smbus_pec
+
+    assert smbus_pec(b"123456789") == 0xF4  # CRC-8/SMBUS check value
+    dev = bus.device(0x50)
+    bus.enable_pec()
+    assert bus.pec == 1
+    bus.write_byte_data(0x50, 0x20, 0x5A)  # the device takes the PEC byte as the next data
+    assert dev.regs[0x21] == smbus_pec(bytes([0xA0, 0x20, 0x5A]))
+    dev.regs[0x30] = 0x42
+    dev.regs[0x31] = smbus_pec(bytes([0xA0, 0x30, 0xA1, 0x42]))
+    assert bus.read_byte_data(0x50, 0x30) == 0x42
+    dev.regs[0x31] ^= 1
+    with pytest.raises(OSError) as info:
+        bus.read_byte_data(0x50, 0x30)
+    assert info.value.errno == errno.EBADMSG
+    assert bus.read_i2c_block_data(0x50, 0x30, 2) == [0x42, dev.regs[0x31]]  # no PEC there
+    bus.close()
+    assert bus.pec == 0  # smbus2 clears it on close
+    no_pec = EmulatedSMBus(VirtualClock(), pec_supported=False)
+    with pytest.raises(OSError, match="PEC"):
+        no_pec.enable_pec()
+
+
+def test_a_byte_write_takes_the_bit_times_of_the_bus():
+    # START + address(9) + register(9) + data(9) + STOP = 29 bit times: 72.5 µs at 400 kHz.
+    b = EmulatedSMBus(VirtualClock(), bus_hz=400_000)
+    b.attach(0x50, RegisterFile())
+    b.write_byte_data(0x50, 0, 1)
+    assert b.log[-1].duration_s == pytest.approx(29 / 400_000)
+    assert b.clock.monotonic() == pytest.approx(72.5e-6)
+
+
+def test_handles_share_the_adapter_and_close_only_themselves(bus):
+    other = bus.handle()
+    SMBus = bus.smbus_class()
+    third = SMBus(1)
+    with SMBus("/dev/i2c-1") as fourth:
+        fourth.write_byte_data(0x50, 0x05, 0x99)
+    assert fourth.fd is None
+    assert other.read_byte_data(0x50, 0x05) == 0x99
+    assert third.read_byte_data(0x50, 0x05) == 0x99
+    with pytest.raises(OSError) as info:
+        fourth.read_byte_data(0x50, 0x05)
+    assert info.value.errno == errno.EBADF
+    fourth.open(1)
+    assert fourth.read_byte_data(0x50, 0x05) == 0x99
+    bus.close()
+    assert other.read_byte_data(0x50, 0x05) == 0x99
+    assert bus.transactions == 5  # one adapter, one count
+    unopened = SMBus()
+    with pytest.raises(OSError):
+        unopened.read_byte(0x50)
+    with pytest.raises(FileNotFoundError, match="i2c-2"):
+        SMBus(2)
+    with pytest.raises(TypeError, match="type"):
+        SMBus(1.0)
+
+
+def test_bad_values_are_refused_before_any_io(bus):
+    for call in (lambda: bus.write_byte_data(0x50, 0, 256), lambda: bus.write_byte(0x50, -1),
+                 lambda: bus.write_word_data(0x50, 0, 0x10000)):
+        with pytest.raises(ValueError, match="0\\.\\.255|0\\.\\.65535"):
+            call()
+    assert len(bus.log) == 0
+    with pytest.raises(OSError) as info:
+        bus.read_byte(0x80)
+    assert info.value.errno == errno.EINVAL

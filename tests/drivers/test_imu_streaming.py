@@ -37,7 +37,8 @@ def rig(model, truth, motion, faults=None, bus=None, seed=0, **reader_kw):
     odr, range_dps, _ = SETUPS[model]
     clock = VirtualClock() if bus is None else bus.clock
     bus, addr = make_emulated_imu(model, clock, motion, truth, faults=faults, seed=seed, bus=bus,
-                                  subsamples=1)  # instant samples: the truth at each instant
+                                  subsamples=1,  # instant samples: the truth at each instant
+                                  output_filter=False)
     reader = open_imu(model, bus, addr, clock=clock, range_dps=range_dps, odr_hz=odr, **reader_kw)
     return clock, bus, bus.device(addr), reader
 
@@ -197,7 +198,7 @@ def test_a_bus_without_i2c_rdwr_still_works(model, how):
     odr, range_dps, lsb = SETUPS[model]
     truth, motion = SensorTruth(noise_density_rad_s_sqrt_hz=0.0), wave(range_dps)
     clock = VirtualClock()
-    bus, addr = make_emulated_imu(model, clock, motion, truth, subsamples=1)
+    bus, addr = make_emulated_imu(model, clock, motion, truth, subsamples=1, output_filter=False)
     if how == "no method":
         reader_bus = PlainSMBus(bus)
     else:

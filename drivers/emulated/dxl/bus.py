@@ -133,22 +133,32 @@ class ServoBus:
             return self._broadcast(listeners, instr, now)
 
     def _reply(self, servo: EmulatedServo, kind: str,
-               make: Callable[[], tuple[int, bytes]]) -> PendingReply:
-        """A normal (stuffed) status packet from ``servo``, produced when it is sent."""
+               make: Callable[[], tuple[int, bytes]],
+               then: Callable[[], None] | None = None) -> PendingReply:
+        """A normal (stuffed) status packet from ``servo``, produced when it is sent; ``then``
+        runs once it has been (an instruction that changes the servo's ID or baud rate acts
+        after its status packet, as the e-Manual's Factory Reset example shows)."""
 
         def produce() -> bytes:
             with self.lock:
-                now = self.clock.monotonic()
-                if not servo.answers(now) or not servo.status_level_allows(kind):
-                    return b""
-                error, params = make()
-                fault = servo.reply_fault()
-                if fault == "drop":
-                    return b""
-                packet = status_packet(servo.dxl_id, servo.error_byte(error), params)
-                if fault == "corrupt":
-                    packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
-                return packet
+                try:
+                    return packet()
+                finally:
+                    if then is not None:
+                        then()
+
+        def packet() -> bytes:
+            now = self.clock.monotonic()
+            if not servo.answers(now) or not servo.status_level_allows(kind):
+                return b""
+            error, params = make()
+            fault = servo.reply_fault()
+            if fault == "drop":
+                return b""
+            packet = status_packet(servo.dxl_id, servo.error_byte(error), params)
+            if fault == "corrupt":
+                packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
+            return packet
 
         return PendingReply(servo.return_delay_s, produce, servo.dxl_id)
 
@@ -175,8 +185,11 @@ class ServoBus:
             s.reboot()  # clears the hardware error: the status carries no alert
             return [self._reply(s, "other", lambda: (0, b""))]
         if code == FACTORY_RESET:
-            err = s.factory_reset(p[0]) if len(p) == 1 else ERR_DATA_LENGTH
-            return [self._reply(s, "other", lambda: (err, b""))]
+            if len(p) != 1:
+                return [self._reply(s, "other", lambda: (ERR_DATA_LENGTH, b""))]
+            err = s.factory_reset(p[0], dry_run=True)
+            return [self._reply(s, "other", lambda: (err, b""),
+                                then=None if err else lambda: s.factory_reset(p[0]))]
         if code == CLEAR:
             err = s.clear_multi_turn(p)
             return [self._reply(s, "other", lambda: (err, b""))]
@@ -205,6 +218,13 @@ class ServoBus:
         if code == REBOOT:
             for s in listeners:
                 s.reboot()
+            return []
+        if code == FACTORY_RESET and len(p) == 1 and p[0] != 0xFF:
+            # a broadcast Factory Reset acts with options 0x01 and 0x02 only, never with 0xFF
+            # (e-Manual, Protocol 2.0, Factory Reset: firmware v42 and above); no status
+            for s in listeners:
+                s.note_instruction(now)
+                s.factory_reset(p[0])
             return []
         if code in (SYNC_READ, FAST_SYNC_READ) and len(p) >= 5:
             addr, length = p[0] | p[1] << 8, p[2] | p[3] << 8

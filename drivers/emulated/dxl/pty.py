@@ -3,14 +3,20 @@
 :class:`PtyServoBridge` opens a pseudo-terminal (``os.openpty``), puts it in raw mode and serves
 the emulated bus from a thread, so any serial client, and in particular an unmodified
 ``dynamixel_sdk.PortHandler(path)``, talks to the emulated servos as to a U2D2 (hardware reference
-§4.7: pyserial ignores the modem-control errors a PTY gives; the baud rate has no effect on a
-PTY but must be one the SDK accepts). Linux and macOS only (POSIX pseudo-terminals).
+§4.7: pyserial ignores the modem-control errors a PTY gives). The baud rate moves no bytes slower
+on a PTY, but the bridge reads the one the client set on its side (Linux ``TCGETS2``, else the
+termios speed) and only servos configured for it hear the packet, as on a real bus; each servo
+waits its Return Delay Time before answering. Linux and macOS only (POSIX pseudo-terminals).
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import select
+import struct
+import sys
+import termios
 import threading
 import tty
 
@@ -18,6 +24,28 @@ from gyrocal.drivers.clock import Clock, SystemClock
 from gyrocal.drivers.emulated.dxl.bus import ServoBus
 
 __all__ = ["PtyServoBridge"]
+
+#: Linux's TCGETS2 (asm-generic, as on x86 and ARM): a ``struct termios2`` of 44 bytes whose
+#: ``c_ispeed`` and ``c_ospeed`` (offsets 36, 40) hold the baud rate in bit/s, custom rates too.
+_TCGETS2 = 0x802C542A
+_TERMIOS_SPEEDS = {getattr(termios, f"B{n}"): n for n in (
+    9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600, 1000000,
+    1152000, 1500000, 2000000, 2500000, 3000000, 3500000, 4000000) if hasattr(termios, f"B{n}")}
+
+
+def line_baudrate(fd: int) -> int | None:
+    """The baud rate set on the terminal ``fd`` in bit/s, or ``None`` if it cannot be told."""
+    if sys.platform.startswith("linux"):
+        buf = bytearray(44)
+        try:
+            fcntl.ioctl(fd, _TCGETS2, buf)
+            return int(struct.unpack_from("I", buf, 40)[0])
+        except OSError:
+            pass
+    try:
+        return _TERMIOS_SPEEDS.get(termios.tcgetattr(fd)[5])
+    except termios.error:
+        return None
 
 
 class PtyServoBridge:
@@ -30,8 +58,11 @@ class PtyServoBridge:
         the
         client on the other side measures its timeouts in real time.
     model_timing : bool
-        Wait each servo's Return Delay Time before its reply (real time). Off by default: the
-        PTY itself adds latency.
+        Wait each servo's Return Delay Time before its reply (real time), as the e-Manual's
+        Return Delay Time (9) says a servo does.
+    match_baudrate : bool
+        Deliver a packet only to servos set to the baud rate the client set on the PTY (a servo
+        at another rate cannot decode it). ``False``: every servo hears every packet.
 
     Examples
     --------
@@ -39,10 +70,11 @@ class PtyServoBridge:
     ...     port = dynamixel_sdk.PortHandler(bridge.path)
     """
 
-    def __init__(self, bus: ServoBus, *, model_timing: bool = False,
+    def __init__(self, bus: ServoBus, *, model_timing: bool = True, match_baudrate: bool = True,
                  clock: Clock | None = None) -> None:
         self.bus = bus
         self.model_timing = bool(model_timing)
+        self.match_baudrate = bool(match_baudrate)
         self.clock = clock if clock is not None else SystemClock()
         self._master: int | None = None
         self._slave: int | None = None
@@ -106,7 +138,8 @@ class PtyServoBridge:
                     continue
                 if not data:
                     continue
-                for reply in self.bus.receive(data, None):
+                baud = line_baudrate(self._slave) if self.match_baudrate else None  # type: ignore[arg-type]
+                for reply in self.bus.receive(data, baud):
                     if self.model_timing:
                         self.clock.sleep(reply.delay_s)
                     out = reply.produce()

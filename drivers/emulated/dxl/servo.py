@@ -70,7 +70,7 @@ _PROFILE_KIND = {"hold": 0, "step": 0, "rectangular": 1, "triangular": 2, "trape
                  "velocity": 0}
 #: Deceleration of a shaft whose torque has been switched off (gearbox friction), rad/s².
 _FREE_DECEL = 40.0
-#: Deceleration of a stop forced by the Bus Watchdog or a stall, rad/s².
+#: Deceleration of a stop forced by a stall, rad/s² (a Bus Watchdog trip stops at once).
 _STOP_DECEL = 20.0
 
 
@@ -109,6 +109,10 @@ class EmulatedServo:
     initial_ticks : int or None
         The absolute encoder reading at power-up (0..4095), with the shaft on that tick's
         centre; None = a random shaft angle from ``seed`` (anywhere within its tick).
+    reboot_time_s : float
+        How long the servo hears nothing after a REBOOT, whose status it sends at once. The
+        e-Manual gives no figure; 0.4 s is what an XC330 was measured to take ⚠ (ROBOTIS-GIT/
+        emanual issue 1698).
     """
 
     def __init__(
@@ -128,7 +132,12 @@ class EmulatedServo:
         thermal_time_constant_s: float = 300.0,
         motor_params: MotorParams | None = None,
         initial_ticks: int | None = None,
+        reboot_time_s: float = 0.4,
     ) -> None:
+        if not reboot_time_s >= 0:
+            raise ValueError(f"reboot_time_s must be >= 0, got {reboot_time_s!r}")
+        self.reboot_time_s = float(reboot_time_s)
+        self._booting_until = -math.inf
         self.model = model_by_name(model) if isinstance(model, str) else model
         self.table = self.model.table
         if not 0 <= int(dxl_id) <= 252:
@@ -212,12 +221,19 @@ class EmulatedServo:
         item = self.table[name]
         self._mem[item.address: item.end] = item.to_bytes(raw)
 
-    def _load_defaults(self, *, eeprom: bool, keep: tuple[str, ...] = ()) -> None:
+    def _load_defaults(self, *, eeprom: bool, keep: tuple[str, ...] = (),
+                       factory: bool = False) -> None:
+        """Load the power-up values (RAM, and EEPROM when ``eeprom``): the ones this servo was
+        built with, or with ``factory`` the model's factory values (FACTORY_RESET), keeping the
+        items named in ``keep``."""
         kept = {name: self._get(name) for name in keep}
+        built = self._factory
+        if factory:
+            built = {"Firmware Version": self._factory["Firmware Version"]}
         for item in self.table.items:
             if item.address < _RAM_START and not eeprom:
                 continue
-            value = self._factory.get(item.name, self.model.defaults.get(item.name, 0))
+            value = built.get(item.name, self.model.defaults.get(item.name, 0))
             self._mem[item.address: item.end] = item.to_bytes(value)
         # indirect addresses default to 224.. (their own data bytes' addresses are unused)
         for k in range(56):
@@ -312,7 +328,8 @@ class EmulatedServo:
         self._watchdog_deadline = None
         self._set("Bus Watchdog", -1)
         if self._get("Torque Enable"):
-            self.motor.command(t, lambda t0, p0, v0: plan_stop(t0, p0, v0, _STOP_DECEL))
+            # "the DYNAMIXEL stops" at once (e-Manual, X-series, Bus Watchdog (98)): no ramp
+            self.motor.command(t, lambda t0, p0, v0: plan_stop(t0, p0, v0, math.inf))
 
     def _hardware_error(self, t: float, bits: int, *, force: bool) -> None:
         if not force:
@@ -380,6 +397,8 @@ class EmulatedServo:
     def hears(self, now: float, baudrate: int | None) -> bool:
         """True if a packet sent at ``baudrate`` at time ``now`` reaches this servo."""
         if self.deaf_from is not None and now >= self.deaf_from:
+            return False
+        if now < self._booting_until:  # rebooting
             return False
         return baudrate is None or baudrate == self.baudrate
 
@@ -475,6 +494,7 @@ class EmulatedServo:
                 targets.append(a if t is None else t)
             new = bytearray(self._mem)
             touched = []
+            covered: dict[str, int] = {}
             for a, b in zip(targets, data, strict=True):
                 item = self.table.owner(a)
                 if item is None:
@@ -484,8 +504,13 @@ class EmulatedServo:
                 if item.eeprom and self._mem[64]:
                     return ERR_ACCESS
                 new[a] = b
+                covered[item.name] = covered.get(item.name, 0) + 1
                 if item not in touched:
                     touched.append(item)
+            # "Data Length Error: ... when you attempt to use only 2 bytes of an item that has
+            # been defined as 4 bytes" (e-Manual, Protocol 2.0, Status Packet, Error)
+            if any(covered[item.name] < item.size for item in touched):
+                return ERR_DATA_LENGTH
             for item in touched:
                 value = item.from_bytes(new[item.address: item.end])
                 err = self._check(item.name, value, new)
@@ -670,7 +695,8 @@ class EmulatedServo:
         return self.write(address, data)
 
     def reboot(self) -> None:
-        """REBOOT: torque off, hardware error cleared, RAM to defaults, position re-based."""
+        """REBOOT: torque off, hardware error cleared, RAM to defaults, position re-based; the
+        servo then hears nothing for :attr:`reboot_time_s`."""
         with self.lock:
             now = self.clock.monotonic()
             self.advance_to(now)
@@ -679,17 +705,25 @@ class EmulatedServo:
             self._registered = None
             self._watchdog_deadline = None
             self._boot_time = now
+            self._booting_until = now + self.reboot_time_s
             self._rebase()
             self._goal_to_present()
 
-    def factory_reset(self, option: int) -> int:
-        """FACTORY_RESET: 0xFF all, 0x01 all but ID, 0x02 all but ID and baud rate (§4.4)."""
+    def factory_reset(self, option: int, *, dry_run: bool = False) -> int:
+        """FACTORY_RESET: 0xFF all, 0x01 all but ID, 0x02 all but ID and baud rate (§4.4).
+
+        The control table returns to the model's factory values (e-Manual, Protocol 2.0,
+        Factory Reset): ID 1 and Baud Rate 57600 bps unless kept, whatever this servo was
+        configured with. ``dry_run`` only returns the error it would give.
+        """
         if option not in (0xFF, 0x01, 0x02):
             return ERR_DATA_RANGE
         if self._mem[64]:
             return ERR_ACCESS
+        if dry_run:
+            return 0
         keep = () if option == 0xFF else (("ID",) if option == 0x01 else ("ID", "Baud Rate"))
-        self._load_defaults(eeprom=True, keep=keep)
+        self._load_defaults(eeprom=True, keep=keep, factory=True)
         if option == 0xFF:
             self._set("ID", 1)
         return 0

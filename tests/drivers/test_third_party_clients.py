@@ -1,0 +1,196 @@
+"""Third-party drivers from PyPI, unmodified, against the emulated chips.
+
+Each client expects ``smbus2.SMBus(bus)`` (``smbus.SMBus`` for imusensor) and the wall clock; the
+tests hand it the emulated bus and the virtual clock by patching those imports in the client's
+module, never its code. Truth comes from the emulator's parameters and the datasheets.
+"""
+
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
+from gyrocal.drivers.emulated.magnetometers import MagneticField
+from gyrocal.drivers.emulated.motion import ConstantRate
+from gyrocal.drivers.emulated.smbus import EmulatedSMBus
+
+DEG = np.pi / 180
+FIELD = np.array([20.0, 5.0, -44.0])
+OMEGA = np.array([10.0, -20.0, 30.0]) * DEG
+BIAS = np.array([0.5, -0.25, 1.0]) * DEG
+
+
+def fake_time(clock):
+    """A stand-in for the ``time`` module on the virtual clock."""
+    return types.SimpleNamespace(sleep=clock.sleep, time=clock.monotonic,
+                                 monotonic=clock.monotonic, perf_counter=clock.monotonic,
+                                 monotonic_ns=lambda: int(clock.monotonic() * 1e9))
+
+
+def emulated(model, *, noise=0.0, omega=OMEGA):
+    clock = VirtualClock()
+    truth = SensorTruth(bias=BIAS, noise_density_rad_s_sqrt_hz=noise, temperature_c=31.0)
+    bus, addr = make_emulated_imu(model, clock, ConstantRate(omega), truth, seed=4)
+    return clock, truth, bus, addr
+
+
+def expected_reading_dps(truth, omega=OMEGA):
+    return truth.reading(omega[None, :], np.array([31.0]))[0] / DEG
+
+
+# -- mpu9250-jmdev --------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def jmdev(monkeypatch):
+    mod = pytest.importorskip("mpu9250_jmdev.mpu_9250")
+    clock, truth, bus, addr = emulated("mpu9250")
+    bus.device(addr).aux[0x0C].field = MagneticField(None, FIELD)
+    monkeypatch.setattr(mod.smbus, "SMBus", bus.smbus_class())
+    monkeypatch.setattr(mod, "time", fake_time(clock))
+    reg = pytest.importorskip("mpu9250_jmdev.registers")
+    mpu = mod.MPU9250(address_ak=reg.AK8963_ADDRESS, address_mpu_master=reg.MPU9050_ADDRESS_68,
+                      bus=1, gfs=reg.GFS_250, afs=reg.AFS_2G, mfs=reg.AK8963_BIT_16,
+                      mode=reg.AK8963_MODE_C100HZ)
+    return mpu, truth, bus, addr
+
+
+def test_mpu9250_jmdev_configures_and_reads_every_sensor(jmdev):
+    mpu, truth, bus, addr = jmdev
+    mpu.configure()
+    assert mpu.searchMPUDevice()
+    counts = np.rint(expected_reading_dps(truth) * 131)  # 131 LSB/(°/s) at ±250 °/s
+    np.testing.assert_allclose(mpu.readGyroscopeMaster(), counts * mpu.gres, atol=1e-9)
+    np.testing.assert_allclose(mpu.readAccelerometerMaster(), [0, 0, 1], atol=1e-3)
+    assert mpu.readTemperatureMaster() == pytest.approx(31.0, abs=0.01)
+    mag = mpu.readMagnetometerMaster()  # µT in the AK8963's axes: (y, x, -z) of the sensor
+    np.testing.assert_allclose(mag, [FIELD[1], FIELD[0], -FIELD[2]], atol=0.3)
+    ak = bus.device(addr).aux[0x0C]
+    np.testing.assert_allclose(mpu.magCalibration, ak.adjustment())
+
+
+class TumbleThenRest:
+    """Turning at ``w`` about the fixed unit axis ``u`` until ``t_stop``, then at rest:
+    ``R(t) = exp(w·min(t, t_stop)·[u]×)`` (Rodrigues), rate ``w·u`` in the sensor frame."""
+
+    def __init__(self, u, w, t_stop):
+        self.u, self.w, self.t_stop = np.asarray(u) / np.linalg.norm(u), w, t_stop
+
+    def orientation(self, t):
+        th = self.w * np.minimum(np.asarray(t, dtype=float), self.t_stop)
+        k = np.array([[0, -self.u[2], self.u[1]], [self.u[2], 0, -self.u[0]],
+                      [-self.u[1], self.u[0], 0]])
+        return (np.eye(3) + np.sin(th)[:, None, None] * k
+                + (1 - np.cos(th))[:, None, None] * (k @ k))
+
+    def rate(self, t):
+        t = np.asarray(t, dtype=float)
+        return np.where((t < self.t_stop)[:, None], self.w * self.u, 0.0)
+
+
+def test_mpu9250_jmdev_calibrate_sweeps_the_field_and_averages_the_fifo(monkeypatch, capsys):
+    mod = pytest.importorskip("mpu9250_jmdev.mpu_9250")
+    reg = pytest.importorskip("mpu9250_jmdev.registers")
+    clock = VirtualClock()
+    motion = TumbleThenRest((1.0, 2.0, 3.0), 0.6, t_stop=17.0)
+    truth = SensorTruth(bias=BIAS, noise_density_rad_s_sqrt_hz=0.0)
+    bus, addr = make_emulated_imu("mpu9250", clock, motion, truth, seed=4)
+    bus.device(addr).aux[0x0C].field = MagneticField(motion, FIELD)
+    monkeypatch.setattr(mod.smbus, "SMBus", bus.smbus_class())
+    monkeypatch.setattr(mod, "time", fake_time(clock))
+    mpu = mod.MPU9250(bus=1, gfs=reg.GFS_250, afs=reg.AFS_2G, mfs=reg.AK8963_BIT_16,
+                      mode=reg.AK8963_MODE_C100HZ)
+    mpu.configure()
+    mpu.calibrate()  # a 15 s min/max sweep of the AK8963 while it turns, then a FIFO average
+    assert clock.monotonic() > motion.t_stop  # the FIFO part ran at rest
+    assert not bus.device(addr)._int_status & 0x10  # 40 ms at 1 kHz fits the 512-byte FIFO
+    # at rest the client's gyro "bias" is the chip's reading of zero rate, -bias
+    np.testing.assert_allclose(np.array(mpu.gbias) * DEG, -np.array(truth.bias),
+                               atol=1.5 * DEG / 131)
+    np.testing.assert_allclose(mpu.abias, [0, 0, 0], atol=1e-3)
+    # its hard-iron estimate is the mid-range of the field it swept, in the AK8963's axes
+    t = np.arange(0.0, motion.t_stop, 1e-3)
+    b = np.einsum("nji,j->ni", motion.orientation(t), FIELD)
+    die = np.stack([b[:, 1], b[:, 0], -b[:, 2]], axis=1)
+    np.testing.assert_allclose(mpu.mbias, (die.max(0) + die.min(0)) / 2, atol=0.5)
+
+
+# -- imusensor ------------------------------------------------------------------------------------
+
+
+def test_imusensor_reads_gyro_accel_and_the_magnetometer_through_the_i2c_master(monkeypatch,
+                                                                                capsys):
+    monkeypatch.setitem(sys.modules, "smbus", types.SimpleNamespace(SMBus=EmulatedSMBus))
+    mod = pytest.importorskip("imusensor.MPU9250.MPU9250")
+    clock, truth, bus, addr = emulated("mpu9250", omega=np.zeros(3))
+    bus.device(addr).aux[0x0C].field = MagneticField(None, FIELD)
+    monkeypatch.setattr(mod, "time", fake_time(clock))
+    imu = mod.MPU9250(bus.handle(), addr)
+    imu.begin()  # includes its gyro calibration at rest
+    assert "did not write" not in capsys.readouterr().out
+    imu.readSensor()
+    np.testing.assert_allclose(imu.GyroVals, 0.0, atol=2 * 2000 / 32768 * DEG)
+    # imusensor turns accel (x, y, z) into (y, x, -z) and reports m/s²
+    np.testing.assert_allclose(imu.AccelVals, [0, 0, -9.807], atol=0.02)
+    ak = bus.device(addr).aux[0x0C]
+    # begin() reads ASAX..Z after leaving fuse-ROM mode, where the die hides them (⚠ AK8963
+    # datasheet §8.3.11): its MagScale (own formula, (ASA − 128)/257 · 4912/32760) sees ASA = 0
+    np.testing.assert_allclose(imu.MagScale, (0 - 128) / 257 * (4912 / 32760))
+    counts = np.rint(np.array([FIELD[1], FIELD[0], -FIELD[2]]) / (0.15 * ak.adjustment()))
+    np.testing.assert_allclose(imu.MagVals, counts * imu.MagScale, rtol=1e-12)
+
+
+# -- LSM9DS1 clients ------------------------------------------------------------------------------
+
+
+def test_melopero_lsm9ds1_reads_gyro_accel_and_magnetometer(monkeypatch, capsys):
+    mod = pytest.importorskip("melopero_lsm9ds1.LSM9DS1")
+    clock, truth, bus, addr = emulated("lsm9ds1")
+    bus.device(0x1E).field = MagneticField(None, FIELD)
+    monkeypatch.setattr(mod.smbus2, "SMBus", bus.smbus_class())
+    dev = mod.LSM9DS1()
+    dev.use_i2c()
+    dev.reset_settings()
+    dev.set_gyro_odr(dev.ODR_119Hz if hasattr(dev, "ODR_119Hz") else 0b011)
+    dev.set_acc_odr(0b011)
+    dev.set_mag_odr(dev.MAG_ODR_80Hz)
+    dev.set_mag_range(dev.MAGNETIC_4G_RANGE)
+    clock.sleep(0.1)
+    np.testing.assert_allclose(dev.get_gyro(), expected_reading_dps(truth), atol=0.00875 * 1.01)
+    np.testing.assert_allclose(dev.get_acc(), [0, 0, 1], atol=1e-3)
+    gauss = np.array(dev.get_mag())
+    np.testing.assert_allclose(gauss * 100, [-FIELD[1], -FIELD[0], FIELD[2]], atol=0.02)
+    dev.close()
+
+
+def test_lsm9ds1_rjg_opens_a_bus_per_call_and_reads_everything(monkeypatch):
+    # its I²C transport imports RPi.GPIO for an optional data-ready pin: stand it in
+    gpio = types.ModuleType("RPi.GPIO")
+    rpi = types.ModuleType("RPi")
+    rpi.GPIO = gpio
+    monkeypatch.setitem(sys.modules, "RPi", rpi)
+    monkeypatch.setitem(sys.modules, "RPi.GPIO", gpio)
+    lsm = pytest.importorskip("lsm9ds1_rjg")
+    transport = pytest.importorskip("lsm9ds1_rjg.i2c_transport")
+    driver_mod = pytest.importorskip("lsm9ds1_rjg.driver")
+    clock, truth, bus, addr = emulated("lsm9ds1")
+    bus.device(0x1E).field = MagneticField(None, FIELD)
+    monkeypatch.setattr(transport, "SMBus", bus.smbus_class())
+    monkeypatch.setattr(driver_mod, "time", fake_time(clock))
+    drv = lsm.Driver(lsm.I2CTransport(1, 0x6B), lsm.I2CTransport(1, 0x1E))
+    drv.configure()  # 500 °/s at 238 Hz; magnetometer ±4 gauss continuous
+    clock.sleep(0.1)
+    assert drv.read_ag_status().gyroscope_data_available
+    # the driver flips x to turn the chip's left-handed frame into a right-handed one
+    expect = np.rint(expected_reading_dps(truth) / 0.0175)  # 17.5 m°/s per LSB at ±500 °/s
+    np.testing.assert_array_equal(drv.read_gyroscope(), [-expect[0], expect[1], expect[2]])
+    np.testing.assert_array_equal(drv.read_acceleration(), [0, 0, round(1 / 0.061e-3)])
+    assert drv.read_temperature() == round((31.0 - 25.0) * 16)  # 16 LSB/°C, 0 at 25 °C
+    assert drv.read_magnetometer_status().data_available
+    mag = np.array(drv.read_magnetometer())
+    field_die = np.array([-FIELD[1], -FIELD[0], FIELD[2]]) * 10 / 0.14
+    np.testing.assert_allclose(mag, field_die, atol=1)  # read_magnetometer does not flip
+    assert bus.transactions > 10  # every call opened and closed its own SMBus handle
