@@ -97,8 +97,10 @@ class TrackerSettings:
         Gyro sample rate, Hz.
     noise_density : tuple of 3 float
         White-noise density ``N``, rad/s/√Hz (per-sample variance ``N²·odr``: ``R``).
-    rate_random_walk : tuple of 3 float
-        ``K``, rad/s/√s: the bias random walk (``Q = K² Δt``).
+    rate_random_walk : tuple of 3 float or None
+        ``K``, rad/s/√s: the bias random walk (``Q = K² Δt``). None (the default): estimated
+        from the data as the tracker goes (see "Process noise from the data" in the module
+        docstring), starting from ``rate_random_walk_prior``; a figure given here is used as is.
     temperature_model : bool
         Also estimate a linear temperature coefficient per axis (needs temperatures).
     tempco : tuple of 3 float
@@ -126,11 +128,22 @@ class TrackerSettings:
         Angular uncertainty of a servo axis, rad.
     still : StillSettings
         The still detector's tuning.
+    rate_random_walk_prior : tuple of 3 float
+        Starting value of the estimated ``K`` (worth one observation), rad/s/√s.
+    adapt_memory_s : float
+        Time constant of the exponential forgetting of the ``K`` estimate, s.
+    cusum_k, cusum_h : float
+        Reference value and decision threshold of the per-axis two-sided CUSUM test on the
+        normalised innovations (in units of their standard deviation); ``cusum_h = inf`` turns
+        the test off.
+    detector_refresh_s : float
+        The still detector's rate test is centred on the tracker's own bias estimate, refreshed
+        at every multiple of this many seconds of samples.
     """
 
     odr_hz: float
     noise_density: tuple[float, float, float]
-    rate_random_walk: tuple[float, float, float]
+    rate_random_walk: tuple[float, float, float] | None = None
     temperature_model: bool = False
     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0)
     tempco_std: tuple[float, float, float] = (1e-3, 1e-3, 1e-3)
@@ -144,16 +157,24 @@ class TrackerSettings:
     reference_angle_std: float = ENCODER_TICK_RAD
     reference_axis_std: float = 2e-3
     still: StillSettings = field(default_factory=StillSettings)
+    rate_random_walk_prior: tuple[float, float, float] = (1e-4, 1e-4, 1e-4)
+    adapt_memory_s: float = 600.0
+    cusum_k: float = 0.5
+    cusum_h: float = 10.0
+    detector_refresh_s: float = 1.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "odr_hz", scalar(self.odr_hz, "odr_hz", positive=True))
         for name, kw in (
             ("noise_density", {"positive": True}),
             ("rate_random_walk", {"nonneg": True}),
+            ("rate_random_walk_prior", {"positive": True}),
             ("tempco", {}),
             ("tempco_std", {"positive": True}),
             ("tempco_random_walk", {"nonneg": True}),
         ):
+            if getattr(self, name) is None and name == "rate_random_walk":
+                continue
             a = vec3(getattr(self, name), name, **kw)
             object.__setattr__(self, name, tuple(float(x) for x in a))
         if self.t_ref_c is not None:
@@ -168,6 +189,12 @@ class TrackerSettings:
         scalar(self.stale_after_s, "stale_after_s", positive=True)
         scalar(self.reference_angle_std, "reference_angle_std", nonneg=True)
         scalar(self.reference_axis_std, "reference_axis_std", nonneg=True)
+        scalar(self.adapt_memory_s, "adapt_memory_s", positive=True)
+        scalar(self.cusum_k, "cusum_k", nonneg=True)
+        if not (isinstance(self.cusum_h, (int, float)) and self.cusum_h > 0):
+            raise CalibInputError(f"cusum_h must be a positive number (inf: off), got "
+                                  f"{self.cusum_h!r}")
+        scalar(self.detector_refresh_s, "detector_refresh_s", positive=True)
         if not isinstance(self.still, StillSettings):
             raise CalibInputError("still must be a StillSettings")
 
@@ -247,6 +274,8 @@ class UpdateLog:
         Whether the NIS test failed at this update.
     applied_at : ndarray (W,) of int
         Index (from the tracker's first sample) of the sample at which it took effect.
+    shift : ndarray (W,) of bool
+        Whether the CUSUM test on the mean innovation detected a shift at this update.
     """
 
     t: np.ndarray
@@ -257,6 +286,7 @@ class UpdateLog:
     nis_bound: np.ndarray
     alarm: np.ndarray
     applied_at: np.ndarray
+    shift: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -384,16 +414,28 @@ class BiasTracker:
         self._temp_model = bool(s.temperature_model)
         dim = 6 if self._temp_model else 3
         kf = KalmanFilter(dim_x=dim, dim_z=3)
+        self._adaptive = s.rate_random_walk is None
+        k_rw = np.asarray(s.rate_random_walk_prior if self._adaptive else s.rate_random_walk)
         if self._temp_model:
             kf.x = np.concatenate([b0, np.asarray(s.tempco)])
             kf.P = np.diag(np.concatenate([b0_std**2, np.asarray(s.tempco_std) ** 2]))
-            self._q = np.concatenate(
-                [np.asarray(s.rate_random_walk) ** 2, np.asarray(s.tempco_random_walk) ** 2]
-            )
+            self._q = np.concatenate([k_rw**2, np.asarray(s.tempco_random_walk) ** 2])
         else:
             kf.x = b0.astype(float).copy()
             kf.P = np.diag(b0_std**2)
-            self._q = np.asarray(s.rate_random_walk) ** 2
+            self._q = k_rw**2
+        # Process-noise estimate: information-weighted sums of the innovations' excess over
+        # their predicted variance, the prior worth one observation (B₀ = 1/(2 q₀²)).
+        q0 = np.asarray(s.rate_random_walk_prior) ** 2
+        self._qa = q0 * (0.5 / q0**2)
+        self._qb = 0.5 / q0**2
+        self._q_hat = q0.copy()
+        # CUSUM state per axis: upper and lower sums, and the innovations summed since each
+        # last left zero (their mean sizes a detected shift).
+        self._cu = np.zeros((2, 3))
+        self._cu_sum = np.zeros((2, 3))
+        self._cu_n = np.zeros((2, 3))
+        self._n_shifts = 0
         kf.F = np.eye(dim)
         kf.Q = np.zeros((dim, dim))
         self.kf = kf
@@ -402,6 +444,8 @@ class BiasTracker:
         self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
         self._det_bias = b0.copy()
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
+        self._refresh = max(1, int(round(s.detector_refresh_s * s.odr_hz)))
+        self._temp_last = math.nan
         if s.t_ref_c is not None:
             self._t_ref: float | None = float(s.t_ref_c)
         elif calibration is not None and calibration.temperature_c is not None:
@@ -656,10 +700,47 @@ class BiasTracker:
         """
         if self._finished:
             raise CalibInputError("this tracker has finished; start a new one")
-        t, m, temp, ext, rr, ra = self._validate(
-            t, rate, temperature, still, reference_rate, reference_axis
-        )
+        cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
+        # The detector's rate test is centred on the bias estimate, refreshed at every multiple
+        # of D samples counted from the first: cut the batch there, so that any way of
+        # feeding the same samples refreshes it at the same samples.
+        D = self._refresh
+        n = cols[0].size
+        cuts = [0, *range((-self._k) % D or D, n, D), n] if n else [0, 0]
+        if len(cuts) == 2:
+            return self._process(*cols, finish=finish)
+        parts = []
+        g_first = self._k
+        for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:], strict=True)):
+            if b > a:
+                parts.append(self._process(*(c[a:b] for c in cols),
+                                           finish=finish and j == len(cuts) - 2))
+        return _concat(parts, g_first)
+
+    def _refresh_detector_bias(self) -> None:
+        """Centre the detector's rate test on the current bias estimate (at the latest
+        sample's temperature with the temperature model)."""
+        x = self.kf.x.reshape(-1)
+        b = x[:3].copy()
+        if self._temp_model and self._t_ref is not None and math.isfinite(self._temp_last):
+            b += x[3:] * (self._temp_last - self._t_ref)
+        self._det_bias = b
+
+    def _process(
+        self,
+        t: np.ndarray,
+        m: np.ndarray,
+        temp: np.ndarray,
+        ext: np.ndarray,
+        rr: np.ndarray,
+        ra: np.ndarray,
+        *,
+        finish: bool,
+    ) -> TrackResult:
+        """:meth:`process` on validated columns that do not cross a detector refresh."""
         n = t.size
+        if n and self._k and self._k % self._refresh == 0:
+            self._refresh_detector_bias()
         if n:
             if self._k == 0:
                 self._t_state = float(t[0])
@@ -721,6 +802,7 @@ class BiasTracker:
         if n:
             self._k += n
             self._t_last = float(t[-1])
+            self._temp_last = float(temp[-1])
             self._last = {
                 "bias": out["bias"][-1],
                 "bias_std": out["bias_std"][-1],
@@ -761,7 +843,8 @@ class BiasTracker:
         U = self._U
         snaps = [self._snapshot(-1)]
         log: dict[str, list[Any]] = {
-            k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at")
+            k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at",
+                            "shift")
         }
 
         def apply(w: _OpenWindow, close: int) -> None:
@@ -856,6 +939,7 @@ class BiasTracker:
             nis_bound=np.array(log["nis_bound"], dtype=float),
             alarm=np.array(log["alarm"], dtype=bool),
             applied_at=np.array(log["at"], dtype=np.int64),
+            shift=np.array(log["shift"], dtype=bool),
         )
 
     def _bound(self, k: int) -> float:
@@ -884,17 +968,22 @@ class BiasTracker:
                 + (math.sqrt(2.0) * s.reference_angle_std / dur * u / self.scale) ** 2
             )
         dt = max(w.t_last - self._t_state, 0.0)
-        kf.Q = np.diag(self._q * dt)
-        kf.predict()
         if self._temp_model:
             dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0)
             kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
         else:
             kf.H = -np.eye(3)
+        hph = np.diag(kf.H @ kf.P @ kf.H.T).copy()  # before the prediction adds Q
+        kf.Q = np.diag(self._q * dt)
+        kf.predict()
         kf.R = np.diag(R)
         kf.update(zbar)
         y = np.asarray(kf.y, dtype=float).reshape(-1)
         nis = float(y @ np.asarray(kf.SI) @ y)
+        s_diag = np.diag(np.asarray(kf.S, dtype=float))
+        if self._adaptive:
+            self._adapt_q(y, s_diag, hph, R, dt)
+        shift = self._cusum(y, s_diag)
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
         self._n_updates += 1
@@ -912,6 +1001,7 @@ class BiasTracker:
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
+        log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
         log["count"].append(n)
@@ -920,6 +1010,65 @@ class BiasTracker:
         log["nis_bound"].append(bound)
         log["alarm"].append(alarm)
         log["at"].append(close)
+
+    def _adapt_q(
+        self, y: np.ndarray, s_diag: np.ndarray, hph: np.ndarray, R: np.ndarray, dt: float
+    ) -> None:
+        """One step of the bias random walk's estimate from this update's innovation.
+
+        ``E[y²] = HPHᵀ + R + q·Δt`` per axis (``P`` before the prediction), so
+        ``y² − HPHᵀ − R`` observes ``q·Δt`` with variance ``2S²``: the information-weighted
+        mean ``q̂ = Σ Δt (y² − HPHᵀ − R)/(2S²) / Σ Δt²/(2S²)`` is a Fisher-scoring step of the
+        maximum-likelihood estimate of ``q`` (covariance matching of the innovations, Mehra
+        1970; Myers & Tapley 1976), with exponential forgetting over ``adapt_memory_s``. The
+        filter then uses ``q̂`` plus one standard error ``1/√(ΣΔt²/(2S²))`` (never below the
+        smallest positive value), so a young estimate errs on the side of a wider band.
+        """
+        if dt <= 0:
+            return
+        forget = math.exp(-dt / self.settings.adapt_memory_s)
+        w = dt / (2.0 * s_diag**2)
+        self._qa = forget * self._qa + w * (y**2 - hph[:3] - R)
+        self._qb = forget * self._qb + w * dt
+        q_hat = np.maximum(self._qa / self._qb, 0.0)
+        self._q_hat = q_hat
+        self._q[:3] = np.maximum(q_hat + 1.0 / np.sqrt(self._qb), 1e-300)
+
+    def _cusum(self, y: np.ndarray, s_diag: np.ndarray) -> bool:
+        """Two-sided CUSUM (Page 1954) on each axis's normalised innovation ``e = y/√S``.
+
+        ``g⁺ ← max(0, g⁺ + e − k)``, ``g⁻ ← max(0, g⁻ − e − k)``; a sum above ``h`` says the
+        innovations' mean has shifted (a bias step the NIS window is too short or too coarse
+        to see). With ``recover``, the axis's bias variance is then widened by four times the
+        squared mean innovation since the sum last left zero (the size of the shift the filter
+        has not yet followed), so the next updates move the estimate to the new bias.
+        """
+        s = self.settings
+        if not math.isfinite(s.cusum_h):
+            return False
+        e = y / np.sqrt(s_diag)
+        step = np.stack([e - s.cusum_k, -e - s.cusum_k])
+        g = np.maximum(self._cu + step, 0.0)
+        restart = self._cu <= 0.0
+        self._cu_sum = np.where(restart, 0.0, self._cu_sum) + y[None, :]
+        self._cu_n = np.where(restart, 0.0, self._cu_n) + 1.0
+        self._cu = g
+        hit = g > s.cusum_h
+        if not hit.any():
+            return False
+        axes = np.flatnonzero(hit.any(axis=0))
+        self._n_shifts += 1
+        if s.recover:
+            P = self.kf.P.copy()
+            for i in axes:
+                side = 0 if hit[0, i] else 1
+                mean_y = self._cu_sum[side, i] / self._cu_n[side, i]
+                P[i, i] += 4.0 * mean_y**2
+            self.kf.P = P
+        self._cu[:, axes] = 0.0
+        self._cu_sum[:, axes] = 0.0
+        self._cu_n[:, axes] = 0.0
+        return True
 
     def _outputs(
         self,
@@ -958,3 +1107,35 @@ class BiasTracker:
             "since": t - tu[j],
             "nis_ok": ok[j],
         }
+
+
+def _concat(parts: list[TrackResult], g_first: int) -> TrackResult:
+    """One :class:`TrackResult` from consecutive ones (whose first sample has global index
+    ``g_first``): a still decision made by a later part lands on its row in an earlier one."""
+    def cat(get: Any) -> np.ndarray:
+        return np.concatenate([get(p) for p in parts])
+
+    u = [p.updates for p in parts]
+    log = UpdateLog(**{f: np.concatenate([getattr(x, f) for x in u])
+                       for f in UpdateLog.__dataclass_fields__})
+    t = cat(lambda p: p.t)
+    di, ds = cat(lambda p: p.decision_index), cat(lambda p: p.decision_still)
+    rows = di - g_first
+    sel = (rows >= 0) & (rows < t.size)
+    still = np.zeros(t.size, dtype=bool)
+    decided = np.zeros(t.size, dtype=bool)
+    still[rows[sel]] = ds[sel]
+    decided[rows[sel]] = True
+    return TrackResult(
+        t=t,
+        bias=np.vstack([p.bias for p in parts]),
+        bias_std=np.vstack([p.bias_std for p in parts]),
+        corrected=np.vstack([p.corrected for p in parts]),
+        still=still,
+        decided=decided,
+        since_update_s=cat(lambda p: p.since_update_s),
+        nis_ok=cat(lambda p: p.nis_ok),
+        updates=log,
+        decision_index=di,
+        decision_still=ds,
+    )
