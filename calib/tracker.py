@@ -50,8 +50,39 @@ still (n,) or None, reference_rate, reference_axis)`` and carries everything a l
 window), so a recording processed at once and the same samples fed one at a time through
 :meth:`BiasTracker.update` give the same estimates. The still decision on a sample comes
 ``lookahead_s`` after it (see :mod:`gyrocal.calib.stationarity`); an external ``still`` flag
-overrides
-the detector's decision for its sample.
+overrides the detector's decision for its sample. The detector's rate test is centred on the
+tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (counted from the
+first, so any way of cutting the stream into batches refreshes it at the same samples), so a
+drifting bias does not hide still periods.
+
+:meth:`BiasTracker.update` pays a whole :meth:`process` call per sample (about 150 µs). For
+fast streams :meth:`BiasTracker.feed` fuses samples into blocks of ``stream_block_s``: each
+sample is corrected at once with the latest estimate (the estimate only changes at update
+windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
+and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
+of a batch run and ends in the same state; a corrected sample uses an estimate at most one block
+older than the batch run's.
+
+Process noise from the data
+---------------------------
+Without a given ``rate_random_walk`` the tracker estimates ``q = K²`` per axis from its own
+innovations as it goes: each update's ``y² − HPHᵀ − R`` observes ``q·Δt`` (``E[y²] = S``), and
+their mean weighted by the Fisher information ``Δt²/(2S²)`` is one scoring step of the
+maximum-likelihood estimate of ``q`` (covariance matching, Mehra 1970; Myers & Tapley 1976),
+forgotten exponentially over ``adapt_memory_s``, starting from ``rate_random_walk_prior`` worth
+one observation. The filter uses the estimate plus one standard error, so a young estimate errs
+wide. An unmodelled drift (a temperature coefficient left out) shows up here as a larger ``q``,
+so the band stays honest; with the temperature model the coefficient is a state, and
+:attr:`BiasTracker.tempco` with :attr:`BiasTracker.tempco_std` says whether it matters.
+
+Bias steps
+----------
+A step in the bias shifts the innovations' mean. The NIS test sums squared innovations over a
+few updates and misses a step smaller than their spread; a two-sided CUSUM (Page 1954) on each
+axis's normalised innovation ``e = y/√S`` accumulates the shift instead (``g⁺ ← max(0, g⁺ + e −
+k)``, ``g⁻ ← max(0, g⁻ − e − k)``, alarm above ``h``; with ``k = 0.5, h = 10`` a consistent
+filter raises a false alarm about once in 10⁵ updates per axis and side). On an alarm the axis's
+bias variance is widened (``recover``), so the filter follows the new bias within a few updates.
 """
 
 from __future__ import annotations
@@ -139,6 +170,8 @@ class TrackerSettings:
     detector_refresh_s : float
         The still detector's rate test is centred on the tracker's own bias estimate, refreshed
         at every multiple of this many seconds of samples.
+    stream_block_s : float
+        Samples fused per :meth:`BiasTracker.feed` block, s.
     """
 
     odr_hz: float
@@ -162,6 +195,7 @@ class TrackerSettings:
     cusum_k: float = 0.5
     cusum_h: float = 10.0
     detector_refresh_s: float = 1.0
+    stream_block_s: float = 0.25
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "odr_hz", scalar(self.odr_hz, "odr_hz", positive=True))
@@ -195,6 +229,7 @@ class TrackerSettings:
             raise CalibInputError(f"cusum_h must be a positive number (inf: off), got "
                                   f"{self.cusum_h!r}")
         scalar(self.detector_refresh_s, "detector_refresh_s", positive=True)
+        scalar(self.stream_block_s, "stream_block_s", positive=True)
         if not isinstance(self.still, StillSettings):
             raise CalibInputError("still must be a StillSettings")
 
@@ -445,6 +480,12 @@ class BiasTracker:
         self._det_bias = b0.copy()
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
         self._refresh = max(1, int(round(s.detector_refresh_s * s.odr_hz)))
+        # feed(): the block buffer and the estimate it corrects with
+        self._nbuf = 0
+        self._buf_m: np.ndarray | None = None
+        self._fed = False
+        self._fx = np.asarray(kf.x, dtype=float).reshape(-1).copy()
+        self._fscale = self.scale.copy()
         self._temp_last = math.nan
         if s.t_ref_c is not None:
             self._t_ref: float | None = float(s.t_ref_c)
@@ -499,6 +540,22 @@ class BiasTracker:
     def bias_covariance(self) -> np.ndarray:
         """Covariance of :attr:`bias` (3×3; axes are independent in this model), (rad/s)²."""
         return np.diag(self.bias_std**2)
+
+    @property
+    def rate_random_walk(self) -> np.ndarray:
+        """The bias random walk ``K`` the filter uses now, rad/s/√s (the estimate plus one
+        standard error when it is estimated)."""
+        return np.sqrt(self._q[:3])
+
+    @property
+    def rate_random_walk_estimate(self) -> np.ndarray | None:
+        """The estimated ``K``, rad/s/√s (None when ``rate_random_walk`` was given)."""
+        return np.sqrt(self._q_hat) if self._adaptive else None
+
+    @property
+    def shifts(self) -> int:
+        """Bias shifts the CUSUM test has detected so far."""
+        return self._n_shifts
 
     @property
     def tempco(self) -> np.ndarray | None:
@@ -578,6 +635,88 @@ class BiasTracker:
             else np.asarray(reference_axis, dtype=float).reshape(1, -1),
         )
         return res.corrected[0]
+
+    def feed(
+        self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None
+    ) -> np.ndarray:
+        """Fast streaming: buffer one reading, return it corrected with the latest estimate.
+
+        Every ``stream_block_s`` of samples the block goes through :meth:`process` (see
+        "Batches and streams" in the module docstring); :meth:`flush` processes a partial block.
+        Bad values are refused when their block is processed, naming the problem.
+
+        Parameters
+        ----------
+        sample : array_like (3,)
+            The reading ``m``, rad/s.
+        t : float
+            Its time, s (strictly increasing).
+        temperature : float, optional
+            Die temperature, °C (required with the temperature model).
+        still : bool, optional
+            External still flag; None lets the detector decide.
+
+        Returns
+        -------
+        ndarray (3,)
+            ``scale ∘ (m + bias)`` with the bias estimate at the end of the last processed
+            block (at this sample's temperature with the temperature model).
+        """
+        i = self._nbuf
+        if i == 0 and self._buf_m is None:
+            B = max(1, int(round(self.settings.stream_block_s * self.settings.odr_hz)))
+            self._buf_t = np.empty(B)
+            self._buf_m = np.empty((B, 3))
+            self._buf_temp = np.full(B, np.nan)
+            self._buf_still = np.full(B, np.nan)
+        m = self._buf_m[i]
+        m[:] = sample
+        self._buf_t[i] = t
+        if temperature is not None:
+            self._buf_temp[i] = temperature
+        if still is not None:
+            self._buf_still[i] = 1.0 if still else 0.0
+        self._nbuf = i + 1
+        x = self._fx
+        if self._temp_model and temperature is not None and self._t_ref is not None:
+            out = self._fscale * (m + x[:3] + x[3:] * (temperature - self._t_ref))
+        else:
+            out = self._fscale * (m + x[:3])
+        if self._nbuf == self._buf_t.size:
+            self.flush()
+        return out
+
+    def flush(self, *, finish: bool = False) -> TrackResult | None:
+        """Process the samples :meth:`feed` has buffered (and end the stream with ``finish``).
+
+        Returns
+        -------
+        TrackResult or None
+            Their per-sample estimates (None when nothing was buffered and ``finish`` is off).
+        """
+        n = self._nbuf
+        if n == 0 and not finish:
+            return None
+        self._nbuf = 0
+        assert self._buf_m is not None or n == 0
+        if n:
+            cols = (self._buf_t[:n].copy(), self._buf_m[:n].copy(),
+                    self._buf_temp[:n].copy() if self._temp_model else None,
+                    self._buf_still[:n].copy())
+            self._buf_temp[:n] = np.nan
+            self._buf_still[:n] = np.nan
+        else:
+            cols = (np.zeros(0), np.zeros((0, 3)), None, None)
+        res = self._process_fed(cols, finish)
+        return res
+
+    def _process_fed(self, cols: tuple[Any, ...], finish: bool) -> TrackResult:
+        self._fed = True
+        try:
+            return self.process(*cols, finish=finish)
+        finally:
+            self._fed = False
+            self._fx = self.kf.x.reshape(-1).copy()
 
     # ------------------------------------------------------------------ batches
     def _validate(
@@ -700,6 +839,9 @@ class BiasTracker:
         """
         if self._finished:
             raise CalibInputError("this tracker has finished; start a new one")
+        if self._nbuf and not self._fed:
+            raise CalibInputError("samples given to feed() are waiting: call flush() before "
+                                  "process() or update()")
         cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
         # The detector's rate test is centred on the bias estimate, refreshed at every multiple
         # of D samples counted from the first: cut the batch there, so that any way of

@@ -54,6 +54,7 @@ class Tracked:
     update_t: np.ndarray
     update_kind: np.ndarray
     alarm_t: np.ndarray
+    shift_t: np.ndarray
 
 
 def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
@@ -65,7 +66,7 @@ def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
     detector's look-ahead) are placed by the sample index the tracker reports with them.
     """
     parts: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "di", "ds")
+        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "sh", "di", "ds")
     }
     it = iter(batches)
     current = next(it, None)
@@ -82,6 +83,7 @@ def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
                        ("nis", res.nis_ok), ("since", res.since_update_s),
                        ("ut", res.updates.t), ("uk", res.updates.kind),
                        ("al", res.updates.t[res.updates.alarm]),
+                       ("sh", res.updates.t[res.updates.shift]),
                        ("di", res.decision_index), ("ds", res.decision_still)):
             parts[key].append(v)
         current = nxt
@@ -98,6 +100,7 @@ def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
         update_t=np.concatenate(parts["ut"]),
         update_kind=np.concatenate(parts["uk"]),
         alarm_t=np.concatenate(parts["al"]),
+        shift_t=np.concatenate(parts["sh"]),
     )
 
 
@@ -163,12 +166,41 @@ def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[
     return rr, ra, notes
 
 
-def rest_flags(rec: Any, trim_s: float = 0.5) -> np.ndarray:
-    """True on samples inside rest segments (less ``trim_s`` at each end)."""
-    still = np.zeros(rec.imu_t.size)
+def rest_flags(
+    rec: Any,
+    trim_s: float = 0.5,
+    outside: float = 0.0,
+    *,
+    check: Any = None,
+    notes: list[str] | None = None,
+) -> np.ndarray:
+    """Still flags from the recording's rest segments: 1 on samples inside a rest (less
+    ``trim_s`` at each end), ``outside`` elsewhere (0: not still; NaN: the detector decides).
+
+    With ``check`` (a :class:`gyrocal.calib.stationarity.StillDetector`), a rest is trusted only
+    when at least 95 % of its windows pass the detector's variance test (the rate test is left
+    out: the bias is what is being tracked); a rest that fails gets ``outside`` and a line in
+    ``notes`` (a recording whose "rest" moved, e.g. one not made on the jig).
+    """
+    still = np.full(rec.imu_t.size, float(outside))
+    loose = None
+    if check is not None:
+        from gyrocal.calib.stationarity import StillDetector, quiet_windows
+
+        loose = StillDetector(check.n_window, check.n_min, check.n_lookahead, check.var_limit,
+                              np.full(3, np.inf))
     for seg in rec.segments:
-        if seg.kind == "rest" and seg.duration > 2 * trim_s:
-            still[(rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)] = 1.0
+        if seg.kind != "rest" or seg.duration <= 2 * trim_s:
+            continue
+        sel = (rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)
+        if loose is not None:
+            quiet = quiet_windows(rec.imu_rate[sel], loose, 0)[loose.n_window - 1:]
+            if quiet.size == 0 or quiet.mean() < 0.95:
+                if notes is not None:
+                    notes.append(f"rest segment {seg.index} ({seg.t_start:.1f}-{seg.t_end:.1f} "
+                                 "s) shows motion in the gyro readings: left to the detector")
+                continue
+        still[sel] = 1.0
     return still
 
 
@@ -481,3 +513,23 @@ def live_truth(jig: Any, source: LiveSource, tr: Tracked) -> LiveTruth | None:
     return LiveTruth(np.asarray(st.bias)[None, :]
                      + coeff[None, :] * (temp[:, None] - st.reference_temperature_c))
 
+
+
+def tracker_notes(tracker: Any) -> list[str]:
+    """What the tracker learnt from the data that the user should know: the bias random walk
+    it estimated (when none was given) and whether the temperature coefficient matters."""
+    out: list[str] = []
+    k = tracker.rate_random_walk_estimate
+    if k is not None:
+        out.append("bias random walk estimated from the innovations: "
+                   + ", ".join(f"{x:.2g}" for x in k) + " rad/s/sqrt(s) (x, y, z; pass "
+                   "--rate-random-walk or --noise to fix it)")
+    c, c_std = tracker.tempco, tracker.tempco_std
+    if c is not None:
+        sig = [name for name, a, b in zip("xyz", c, c_std, strict=True) if abs(a) > 3 * b]
+        out.append("temperature coefficient "
+                   + ", ".join(f"{a:.2g} +- {b:.1g}" for a, b in zip(c, c_std, strict=True))
+                   + " rad/s/degC: "
+                   + (f"it matters on {', '.join(sig)} (beyond 3 sigma)" if sig
+                      else "not distinguishable from zero (--no-tempco would do)"))
+    return out

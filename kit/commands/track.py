@@ -28,6 +28,7 @@ from gyrocal.kit.tracking import (
     rest_flags,
     run_live,
     run_tracker,
+    tracker_notes,
 )
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
@@ -77,18 +78,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="white noise density, rad/s/sqrt(Hz) (default: --noise, else estimated "
                         "from the recording)")
     m.add_argument("--rate-random-walk", type=float, default=None, metavar="K",
-                   help="bias random walk, rad/s/sqrt(s) (default: --noise, else "
+                   help="bias random walk, rad/s/sqrt(s) (default: --noise, else estimated "
+                        "from the data as the tracker goes, starting from "
                         f"{DEFAULT_RATE_RANDOM_WALK:g})")
-    m.add_argument("--tempco", action="store_true",
-                   help="also estimate a linear temperature coefficient per axis")
+    m.add_argument("--tempco", action=argparse.BooleanOptionalAction, default=None,
+                   help="also estimate a linear temperature coefficient per axis (default: on "
+                        "when every sample of a recording has a temperature; off live)")
     m.add_argument("--tempco-std", type=float, default=1e-3, metavar="RAD_S_PER_C",
                    help="prior std of the temperature coefficient (default 1e-3)")
     m.add_argument("--initial-bias-std", type=float, default=0.1, metavar="RAD_S",
                    help="prior bias std without --cal (default 0.1)")
     d = p.add_argument_group("still detection and updates")
-    d.add_argument("--still", choices=("detect", "segments"), default="detect",
-                   help="decide stillness by the detector, or from the recording's rest "
-                        "segments (--live: every sample while no servo moves) (default detect)")
+    d.add_argument("--still", choices=("auto", "detect", "segments"), default="auto",
+                   help="auto: the recording's rest segments are still, the detector decides "
+                        "elsewhere; detect: the detector everywhere; segments: only the rest "
+                        "segments (--live: every sample while no servo moves) (default auto; "
+                        "live, auto = detect)")
     d.add_argument("--no-reference", action="store_true",
                    help="no reference-rate updates during servo turns")
     d.add_argument("--still-window", type=float, default=0.2, metavar="S")
@@ -154,7 +159,7 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
                               rate_threshold=args.still_rate_threshold)
         kw: dict[str, Any] = dict(
             odr_hz=odr, noise_density=n_density, rate_random_walk=k,
-            temperature_model=args.tempco, tempco_std=args.tempco_std,
+            temperature_model=bool(args.tempco), tempco_std=args.tempco_std,
             update_interval_s=args.update_interval, still=still,
         )
         if axis_std is not None:
@@ -199,9 +204,7 @@ def _build_tracker(
     elif noise is not None:
         k = noise.rate_random_walk_or_hi95
     else:
-        k = DEFAULT_RATE_RANDOM_WALK
-        notes.append(f"bias random walk not given: using {k:g} rad/s/sqrt(s) (conservative; "
-                     "measure it with 'gyrocal noise' and pass --noise)")
+        k = None  # estimated from the innovations (see tracker_notes for the result)
     axis_std = None
     if cal is not None and cal.axes:
         stds = [v.get("std_deg") for v in cal.axes.values() if isinstance(v, dict)]
@@ -237,11 +240,17 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
         raise InputError(f"{rec.path}: only {n} gyro samples")
     odr = 1.0 / float(np.median(np.diff(rec.imu_t)))
     temp = rec.imu_temp
+    if args.tempco is None:
+        args.tempco = bool(np.all(np.isfinite(temp)))
     if args.tempco and not np.all(np.isfinite(temp)):
         raise InputError(f"{rec.path}: --tempco needs a temperature on every sample (imu.csv "
                          "temp column); this recording lacks some")
     tracker, cal = _build_tracker(args, odr, rec.imu_rate, notes, "the recording", str(rec.path))
-    still = rest_flags(rec) if args.still == "segments" else None
+    still = None
+    if args.still == "segments":
+        still = rest_flags(rec)
+    elif args.still == "auto" and any(seg.kind == "rest" for seg in rec.segments):
+        still = rest_flags(rec, outside=math.nan, check=tracker.detector, notes=notes)
     rr = ra = None
     if not args.no_reference and cal is not None and any(
         s.kind == "rotate" for s in rec.segments
@@ -264,6 +273,8 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
     from gyrocal.calib.tracker import BiasTracker
 
     model = NoiseModel(rate_random_walk=1e-5)
+    if args.tempco is None:
+        args.tempco = True
     step = None
     if args.step_at is not None:
         step = (args.step_at, (args.step, 0.0, 0.0))
@@ -357,7 +368,8 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
         raise InputError(f"--turn-speed-dps {args.turn_speed_dps:g} is too close to the gyro's "
                          f"range of {jig.imu.full_scale_dps:g} dps; lower it or raise "
                          "imu.range_dps")
-    source = LiveSource(jig, period, temperature=args.tempco, trust_jig=args.still == "segments",
+    source = LiveSource(jig, period, temperature=bool(args.tempco),
+                        trust_jig=args.still == "segments",
                         turns=plan)
 
     def make_writer() -> Any:
@@ -378,11 +390,16 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     def build(warm: Batch) -> Any:
         tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
                                     f"the first {LIVE_WARMUP_S:g} s", where)
+        built.append(tracker)
         return tracker
+
+    built: list[Any] = []
 
     tr = run_live(jig, source, duration, build, make_writer=make_writer if args.record else None,
                   announce=announce, where=where)
     notes += source.notes
+    if built:
+        notes += tracker_notes(built[0])
     if plan is not None:
         notes.append(f"{source.turn_pairs} turn pair(s) of {plan.turns} turn(s) at "
                      f"{args.turn_speed_dps:g} deg/s gave reference-rate updates")
@@ -430,6 +447,9 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
            f"still {100 * tr.still.mean():.1f} % of samples",
            f"health: {tr.alarm_t.size} NIS alarm(s)"
            + (f" at t = {', '.join(f'{x:.1f}' for x in tr.alarm_t[:5])} s" if tr.alarm_t.size
+              else "")
+           + f"; {tr.shift_t.size} bias shift(s) found by the CUSUM test"
+           + (f" at t = {', '.join(f'{x:.1f}' for x in tr.shift_t[:5])} s" if tr.shift_t.size
               else "")
            + f"; longest time without an update {tr.since_update_s.max():.1f} s",
            f"{'t s':>9}  {'bias x':>11} {'bias y':>11} {'bias z':>11}   "
@@ -501,6 +521,7 @@ def run(args: argparse.Namespace) -> int:
             tracker, batch, truth, source = _replay(args, notes)
             batches = [batch]
         tr = run_tracker(tracker, batches)
+        notes += tracker_notes(tracker)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.plot:

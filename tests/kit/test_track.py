@@ -53,11 +53,13 @@ def test_json_document_per_sample_in_calibration_sign_convention(random_rec, cap
 def test_defaults_without_noise_flags_still_track(random_rec, capsys):
     s, rec, cal = random_rec
     doc, err = run_json(capsys, str(rec), "--cal", str(cal))
-    assert "noise density estimated" in err and "bias random walk not given" in err
+    assert "noise density estimated" in err
+    assert "bias random walk estimated from the innovations" in err
+    assert "temperature coefficient" in err  # on by default: the recording has temperatures
     bias, std = np.array(doc["bias"]), np.array(doc["bias_std"])
     z = (bias - s.true_bias) / std
-    # no temperature model, but the conservative default random walk keeps the band honest
-    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.97)
+    # nothing given but the calibration: the estimated random walk keeps the band honest
+    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
 
 
 def test_without_calibration_starts_from_the_first_still_second(random_rec, capsys):
