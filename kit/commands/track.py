@@ -181,7 +181,7 @@ def _build_tracker(
     -------
     (BiasTracker, GyroCalibration or None)
     """
-    from gyrocal.calib.stationarity import first_still_mean, white_noise_std
+    from gyrocal.calib.stationarity import first_still_mean, quiet_noise_std
     from gyrocal.calib.tracker import BiasTracker
 
     cal = load_calibration(args.cal) if args.cal else None
@@ -192,11 +192,12 @@ def _build_tracker(
         n_density = tuple(noise.noise_density.value)
     else:
         try:
-            sigma = white_noise_std(rate)
+            sigma = quiet_noise_std(rate, max(8, int(round(odr))))
         except ValueError as exc:
             raise InputError(f"{where}: {exc}") from None
         n_density = tuple(float(x) for x in sigma / math.sqrt(odr))
-        notes.append(f"noise density estimated from the sample-to-sample scatter of {what}: "
+        notes.append("noise density estimated from the sample-to-sample scatter of the "
+                     f"quietest seconds of {what}: "
                      + ", ".join(f"{x:.3g}" for x in n_density) + " rad/s/sqrt(Hz) "
                      "(measure it with 'gyrocal noise' and pass --noise)")
     if args.rate_random_walk is not None:
