@@ -533,3 +533,38 @@ def tracker_notes(tracker: Any) -> list[str]:
                    + (f"it matters on {', '.join(sig)} (beyond 3 sigma)" if sig
                       else "not distinguishable from zero (--no-tempco would do)"))
     return out
+
+
+def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tuple[
+        np.ndarray, float | None]:
+    """Which samples the ``--json`` document keeps.
+
+    Parameters
+    ----------
+    t : ndarray (n,)
+        Sample times, s.
+    every_s : float or None
+        One row per ``every_s`` seconds (the last sample of each interval, and the last sample
+        of all); 0 or None: every sample.
+    max_rows : int or None
+        Without ``every_s``, decimate to at most this many rows (None: never).
+
+    Returns
+    -------
+    (rows, every)
+        Indices of the rows kept, and the interval used (None when nothing was dropped).
+    """
+    n = t.size
+    span = float(t[-1] - t[0]) if n else 0.0
+    every = every_s if every_s else None
+    if every is None and max_rows is not None and n > max_rows and span > 0:
+        raw = span / max_rows
+        unit = 10.0 ** (math.floor(math.log10(raw)) - 1)
+        every = math.ceil(raw / unit * (1 + 1e-9)) * unit  # rounded up to two digits
+    if every is None or n < 2:
+        return np.arange(n), None
+    cell = np.floor((t - t[0]) / every).astype(np.int64)
+    last = np.flatnonzero(np.append(cell[1:] != cell[:-1], True))
+    if last.size == n:
+        return np.arange(n), None
+    return last, float(every)

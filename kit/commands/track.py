@@ -22,6 +22,7 @@ from gyrocal.kit.tracking import (
     TurnPlan,
     chunks,
     encoder_reference,
+    json_rows,
     live_truth,
     load_calibration,
     load_noise,
@@ -30,6 +31,10 @@ from gyrocal.kit.tracking import (
     run_tracker,
     tracker_notes,
 )
+
+#: Rows of the --json document beyond which it is decimated unless --every is given
+#: (153 B per row: about 30 MB).
+JSON_MAX_ROWS = 200_000
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
@@ -105,6 +110,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print the per-sample JSON document")
     o.add_argument("--out", metavar="FILE", help="write the JSON document to FILE instead")
+    o.add_argument("--every", type=float, default=None, metavar="S",
+                   help="one JSON row every S seconds (the estimate at that sample) instead of "
+                        f"one per sample; by default a session longer than {JSON_MAX_ROWS:,} "
+                        "samples is decimated to at most that many rows, and says so; 0 keeps "
+                        "every sample")
     o.add_argument("--force", action="store_true",
                    help="replace existing --out and --plot files (and a --record directory)")
     o.add_argument("--plot", metavar="FILE",
@@ -508,6 +518,8 @@ def run(args: argparse.Namespace) -> int:
     _check_modes(args)
     if args.rows < 2:
         raise InputError("--rows must be at least 2")
+    if args.every is not None and not (math.isfinite(args.every) and args.every >= 0):
+        raise InputError(f"--every must be a number of seconds >= 0, got {args.every!r}")
     refuse_existing((args.out, args.plot), force=args.force)  # before a long (or live) run
     notes: list[str] = []
     if args.live:
@@ -529,12 +541,22 @@ def run(args: argparse.Namespace) -> int:
         plot_track(tr, args.plot, truth, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json or args.out:
-        doc = {
-            "t": tr.t.tolist(),
-            "bias": tr.bias.tolist(),
-            "bias_std": tr.bias_std.tolist(),
-            "still": tr.still.tolist(),
+        rows, every = json_rows(tr.t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        if every is not None:
+            print(f"gyrocal: note: the JSON document is decimated to one row every {every:g} s "
+                  f"({rows.size} of {tr.t.size} samples; each row the estimate at that sample, "
+                  "still true if any sample since the previous row was); --every sets the "
+                  "interval, --every 0 keeps every sample", file=sys.stderr)
+        still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
+            if every is not None else tr.still
+        doc: dict[str, Any] = {
+            "t": tr.t[rows].tolist(),
+            "bias": tr.bias[rows].tolist(),
+            "bias_std": tr.bias_std[rows].tolist(),
+            "still": still.tolist(),
         }
+        if every is not None:
+            doc["decimated_every_s"] = every
         text = json.dumps(doc, allow_nan=False) + "\n"
         if args.out:
             atomic_write_text(args.out, text, force=args.force)
