@@ -50,8 +50,39 @@ still (n,) or None, reference_rate, reference_axis)`` and carries everything a l
 window), so a recording processed at once and the same samples fed one at a time through
 :meth:`BiasTracker.update` give the same estimates. The still decision on a sample comes
 ``lookahead_s`` after it (see :mod:`gyrocal.calib.stationarity`); an external ``still`` flag
-overrides
-the detector's decision for its sample.
+overrides the detector's decision for its sample. The detector's rate test is centred on the
+tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (counted from the
+first, so any way of cutting the stream into batches refreshes it at the same samples), so a
+drifting bias does not hide still periods.
+
+:meth:`BiasTracker.update` pays a whole :meth:`process` call per sample (about 150 µs). For
+fast streams :meth:`BiasTracker.feed` fuses samples into blocks of ``stream_block_s``: each
+sample is corrected at once with the latest estimate (the estimate only changes at update
+windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
+and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
+of a batch run and ends in the same state; a corrected sample uses an estimate at most one block
+older than the batch run's.
+
+Process noise from the data
+---------------------------
+Without a given ``rate_random_walk`` the tracker estimates ``q = K²`` per axis from its own
+innovations as it goes: each update's ``y² − HPHᵀ − R`` observes ``q·Δt`` (``E[y²] = S``), and
+their mean weighted by the Fisher information ``Δt²/(2S²)`` is one scoring step of the
+maximum-likelihood estimate of ``q`` (covariance matching, Mehra 1970; Myers & Tapley 1976),
+forgotten exponentially over ``adapt_memory_s``, starting from ``rate_random_walk_prior`` worth
+one observation. The filter uses the estimate plus one standard error, so a young estimate errs
+wide. An unmodelled drift (a temperature coefficient left out) shows up here as a larger ``q``,
+so the band stays honest; with the temperature model the coefficient is a state, and
+:attr:`BiasTracker.tempco` with :attr:`BiasTracker.tempco_std` says whether it matters.
+
+Bias steps
+----------
+A step in the bias shifts the innovations' mean. The NIS test sums squared innovations over a
+few updates and misses a step smaller than their spread; a two-sided CUSUM (Page 1954) on each
+axis's normalised innovation ``e = y/√S`` accumulates the shift instead (``g⁺ ← max(0, g⁺ + e −
+k)``, ``g⁻ ← max(0, g⁻ − e − k)``, alarm above ``h``; with ``k = 0.5, h = 10`` a consistent
+filter raises a false alarm about once in 10⁵ updates per axis and side). On an alarm the axis's
+bias variance is widened (``recover``), so the filter follows the new bias within a few updates.
 """
 
 from __future__ import annotations
@@ -97,8 +128,10 @@ class TrackerSettings:
         Gyro sample rate, Hz.
     noise_density : tuple of 3 float
         White-noise density ``N``, rad/s/√Hz (per-sample variance ``N²·odr``: ``R``).
-    rate_random_walk : tuple of 3 float
-        ``K``, rad/s/√s: the bias random walk (``Q = K² Δt``).
+    rate_random_walk : tuple of 3 float or None
+        ``K``, rad/s/√s: the bias random walk (``Q = K² Δt``). None (the default): estimated
+        from the data as the tracker goes (see "Process noise from the data" in the module
+        docstring), starting from ``rate_random_walk_prior``; a figure given here is used as is.
     temperature_model : bool
         Also estimate a linear temperature coefficient per axis (needs temperatures).
     tempco : tuple of 3 float
@@ -126,11 +159,24 @@ class TrackerSettings:
         Angular uncertainty of a servo axis, rad.
     still : StillSettings
         The still detector's tuning.
+    rate_random_walk_prior : tuple of 3 float
+        Starting value of the estimated ``K`` (worth one observation), rad/s/√s.
+    adapt_memory_s : float
+        Time constant of the exponential forgetting of the ``K`` estimate, s.
+    cusum_k, cusum_h : float
+        Reference value and decision threshold of the per-axis two-sided CUSUM test on the
+        normalised innovations (in units of their standard deviation); ``cusum_h = inf`` turns
+        the test off.
+    detector_refresh_s : float
+        The still detector's rate test is centred on the tracker's own bias estimate, refreshed
+        at every multiple of this many seconds of samples.
+    stream_block_s : float
+        Samples fused per :meth:`BiasTracker.feed` block, s.
     """
 
     odr_hz: float
     noise_density: tuple[float, float, float]
-    rate_random_walk: tuple[float, float, float]
+    rate_random_walk: tuple[float, float, float] | None = None
     temperature_model: bool = False
     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0)
     tempco_std: tuple[float, float, float] = (1e-3, 1e-3, 1e-3)
@@ -144,16 +190,25 @@ class TrackerSettings:
     reference_angle_std: float = ENCODER_TICK_RAD
     reference_axis_std: float = 2e-3
     still: StillSettings = field(default_factory=StillSettings)
+    rate_random_walk_prior: tuple[float, float, float] = (1e-4, 1e-4, 1e-4)
+    adapt_memory_s: float = 600.0
+    cusum_k: float = 0.5
+    cusum_h: float = 10.0
+    detector_refresh_s: float = 1.0
+    stream_block_s: float = 0.25
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "odr_hz", scalar(self.odr_hz, "odr_hz", positive=True))
         for name, kw in (
             ("noise_density", {"positive": True}),
             ("rate_random_walk", {"nonneg": True}),
+            ("rate_random_walk_prior", {"positive": True}),
             ("tempco", {}),
             ("tempco_std", {"positive": True}),
             ("tempco_random_walk", {"nonneg": True}),
         ):
+            if getattr(self, name) is None and name == "rate_random_walk":
+                continue
             a = vec3(getattr(self, name), name, **kw)
             object.__setattr__(self, name, tuple(float(x) for x in a))
         if self.t_ref_c is not None:
@@ -168,6 +223,13 @@ class TrackerSettings:
         scalar(self.stale_after_s, "stale_after_s", positive=True)
         scalar(self.reference_angle_std, "reference_angle_std", nonneg=True)
         scalar(self.reference_axis_std, "reference_axis_std", nonneg=True)
+        scalar(self.adapt_memory_s, "adapt_memory_s", positive=True)
+        scalar(self.cusum_k, "cusum_k", nonneg=True)
+        if not (isinstance(self.cusum_h, (int, float)) and self.cusum_h > 0):
+            raise CalibInputError(f"cusum_h must be a positive number (inf: off), got "
+                                  f"{self.cusum_h!r}")
+        scalar(self.detector_refresh_s, "detector_refresh_s", positive=True)
+        scalar(self.stream_block_s, "stream_block_s", positive=True)
         if not isinstance(self.still, StillSettings):
             raise CalibInputError("still must be a StillSettings")
 
@@ -247,6 +309,8 @@ class UpdateLog:
         Whether the NIS test failed at this update.
     applied_at : ndarray (W,) of int
         Index (from the tracker's first sample) of the sample at which it took effect.
+    shift : ndarray (W,) of bool
+        Whether the CUSUM test on the mean innovation detected a shift at this update.
     """
 
     t: np.ndarray
@@ -257,6 +321,7 @@ class UpdateLog:
     nis_bound: np.ndarray
     alarm: np.ndarray
     applied_at: np.ndarray
+    shift: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -384,16 +449,28 @@ class BiasTracker:
         self._temp_model = bool(s.temperature_model)
         dim = 6 if self._temp_model else 3
         kf = KalmanFilter(dim_x=dim, dim_z=3)
+        self._adaptive = s.rate_random_walk is None
+        k_rw = np.asarray(s.rate_random_walk_prior if self._adaptive else s.rate_random_walk)
         if self._temp_model:
             kf.x = np.concatenate([b0, np.asarray(s.tempco)])
             kf.P = np.diag(np.concatenate([b0_std**2, np.asarray(s.tempco_std) ** 2]))
-            self._q = np.concatenate(
-                [np.asarray(s.rate_random_walk) ** 2, np.asarray(s.tempco_random_walk) ** 2]
-            )
+            self._q = np.concatenate([k_rw**2, np.asarray(s.tempco_random_walk) ** 2])
         else:
             kf.x = b0.astype(float).copy()
             kf.P = np.diag(b0_std**2)
-            self._q = np.asarray(s.rate_random_walk) ** 2
+            self._q = k_rw**2
+        # Process-noise estimate: information-weighted sums of the innovations' excess over
+        # their predicted variance, the prior worth one observation (B₀ = 1/(2 q₀²)).
+        q0 = np.asarray(s.rate_random_walk_prior) ** 2
+        self._qa = q0 * (0.5 / q0**2)
+        self._qb = 0.5 / q0**2
+        self._q_hat = q0.copy()
+        # CUSUM state per axis: upper and lower sums, and the innovations summed since each
+        # last left zero (their mean sizes a detected shift).
+        self._cu = np.zeros((2, 3))
+        self._cu_sum = np.zeros((2, 3))
+        self._cu_n = np.zeros((2, 3))
+        self._n_shifts = 0
         kf.F = np.eye(dim)
         kf.Q = np.zeros((dim, dim))
         self.kf = kf
@@ -402,6 +479,14 @@ class BiasTracker:
         self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
         self._det_bias = b0.copy()
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
+        self._refresh = max(1, int(round(s.detector_refresh_s * s.odr_hz)))
+        # feed(): the block buffer and the estimate it corrects with
+        self._nbuf = 0
+        self._buf_m: np.ndarray | None = None
+        self._fed = False
+        self._fx = np.asarray(kf.x, dtype=float).reshape(-1).copy()
+        self._fscale = self.scale.copy()
+        self._temp_last = math.nan
         if s.t_ref_c is not None:
             self._t_ref: float | None = float(s.t_ref_c)
         elif calibration is not None and calibration.temperature_c is not None:
@@ -455,6 +540,22 @@ class BiasTracker:
     def bias_covariance(self) -> np.ndarray:
         """Covariance of :attr:`bias` (3×3; axes are independent in this model), (rad/s)²."""
         return np.diag(self.bias_std**2)
+
+    @property
+    def rate_random_walk(self) -> np.ndarray:
+        """The bias random walk ``K`` the filter uses now, rad/s/√s (the estimate plus one
+        standard error when it is estimated)."""
+        return np.sqrt(self._q[:3])
+
+    @property
+    def rate_random_walk_estimate(self) -> np.ndarray | None:
+        """The estimated ``K``, rad/s/√s (None when ``rate_random_walk`` was given)."""
+        return np.sqrt(self._q_hat) if self._adaptive else None
+
+    @property
+    def shifts(self) -> int:
+        """Bias shifts the CUSUM test has detected so far."""
+        return self._n_shifts
 
     @property
     def tempco(self) -> np.ndarray | None:
@@ -534,6 +635,88 @@ class BiasTracker:
             else np.asarray(reference_axis, dtype=float).reshape(1, -1),
         )
         return res.corrected[0]
+
+    def feed(
+        self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None
+    ) -> np.ndarray:
+        """Fast streaming: buffer one reading, return it corrected with the latest estimate.
+
+        Every ``stream_block_s`` of samples the block goes through :meth:`process` (see
+        "Batches and streams" in the module docstring); :meth:`flush` processes a partial block.
+        Bad values are refused when their block is processed, naming the problem.
+
+        Parameters
+        ----------
+        sample : array_like (3,)
+            The reading ``m``, rad/s.
+        t : float
+            Its time, s (strictly increasing).
+        temperature : float, optional
+            Die temperature, °C (required with the temperature model).
+        still : bool, optional
+            External still flag; None lets the detector decide.
+
+        Returns
+        -------
+        ndarray (3,)
+            ``scale ∘ (m + bias)`` with the bias estimate at the end of the last processed
+            block (at this sample's temperature with the temperature model).
+        """
+        i = self._nbuf
+        if i == 0 and self._buf_m is None:
+            B = max(1, int(round(self.settings.stream_block_s * self.settings.odr_hz)))
+            self._buf_t = np.empty(B)
+            self._buf_m = np.empty((B, 3))
+            self._buf_temp = np.full(B, np.nan)
+            self._buf_still = np.full(B, np.nan)
+        m = self._buf_m[i]
+        m[:] = sample
+        self._buf_t[i] = t
+        if temperature is not None:
+            self._buf_temp[i] = temperature
+        if still is not None:
+            self._buf_still[i] = 1.0 if still else 0.0
+        self._nbuf = i + 1
+        x = self._fx
+        if self._temp_model and temperature is not None and self._t_ref is not None:
+            out = self._fscale * (m + x[:3] + x[3:] * (temperature - self._t_ref))
+        else:
+            out = self._fscale * (m + x[:3])
+        if self._nbuf == self._buf_t.size:
+            self.flush()
+        return out
+
+    def flush(self, *, finish: bool = False) -> TrackResult | None:
+        """Process the samples :meth:`feed` has buffered (and end the stream with ``finish``).
+
+        Returns
+        -------
+        TrackResult or None
+            Their per-sample estimates (None when nothing was buffered and ``finish`` is off).
+        """
+        n = self._nbuf
+        if n == 0 and not finish:
+            return None
+        self._nbuf = 0
+        assert self._buf_m is not None or n == 0
+        if n:
+            cols = (self._buf_t[:n].copy(), self._buf_m[:n].copy(),
+                    self._buf_temp[:n].copy() if self._temp_model else None,
+                    self._buf_still[:n].copy())
+            self._buf_temp[:n] = np.nan
+            self._buf_still[:n] = np.nan
+        else:
+            cols = (np.zeros(0), np.zeros((0, 3)), None, None)
+        res = self._process_fed(cols, finish)
+        return res
+
+    def _process_fed(self, cols: tuple[Any, ...], finish: bool) -> TrackResult:
+        self._fed = True
+        try:
+            return self.process(*cols, finish=finish)
+        finally:
+            self._fed = False
+            self._fx = self.kf.x.reshape(-1).copy()
 
     # ------------------------------------------------------------------ batches
     def _validate(
@@ -656,10 +839,50 @@ class BiasTracker:
         """
         if self._finished:
             raise CalibInputError("this tracker has finished; start a new one")
-        t, m, temp, ext, rr, ra = self._validate(
-            t, rate, temperature, still, reference_rate, reference_axis
-        )
+        if self._nbuf and not self._fed:
+            raise CalibInputError("samples given to feed() are waiting: call flush() before "
+                                  "process() or update()")
+        cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
+        # The detector's rate test is centred on the bias estimate, refreshed at every multiple
+        # of D samples counted from the first: cut the batch there, so that any way of
+        # feeding the same samples refreshes it at the same samples.
+        D = self._refresh
+        n = cols[0].size
+        cuts = [0, *range((-self._k) % D or D, n, D), n] if n else [0, 0]
+        if len(cuts) == 2:
+            return self._process(*cols, finish=finish)
+        parts = []
+        g_first = self._k
+        for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:], strict=True)):
+            if b > a:
+                parts.append(self._process(*(c[a:b] for c in cols),
+                                           finish=finish and j == len(cuts) - 2))
+        return _concat(parts, g_first)
+
+    def _refresh_detector_bias(self) -> None:
+        """Centre the detector's rate test on the current bias estimate (at the latest
+        sample's temperature with the temperature model)."""
+        x = self.kf.x.reshape(-1)
+        b = x[:3].copy()
+        if self._temp_model and self._t_ref is not None and math.isfinite(self._temp_last):
+            b += x[3:] * (self._temp_last - self._t_ref)
+        self._det_bias = b
+
+    def _process(
+        self,
+        t: np.ndarray,
+        m: np.ndarray,
+        temp: np.ndarray,
+        ext: np.ndarray,
+        rr: np.ndarray,
+        ra: np.ndarray,
+        *,
+        finish: bool,
+    ) -> TrackResult:
+        """:meth:`process` on validated columns that do not cross a detector refresh."""
         n = t.size
+        if n and self._k and self._k % self._refresh == 0:
+            self._refresh_detector_bias()
         if n:
             if self._k == 0:
                 self._t_state = float(t[0])
@@ -721,6 +944,7 @@ class BiasTracker:
         if n:
             self._k += n
             self._t_last = float(t[-1])
+            self._temp_last = float(temp[-1])
             self._last = {
                 "bias": out["bias"][-1],
                 "bias_std": out["bias_std"][-1],
@@ -761,7 +985,8 @@ class BiasTracker:
         U = self._U
         snaps = [self._snapshot(-1)]
         log: dict[str, list[Any]] = {
-            k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at")
+            k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at",
+                            "shift")
         }
 
         def apply(w: _OpenWindow, close: int) -> None:
@@ -856,6 +1081,7 @@ class BiasTracker:
             nis_bound=np.array(log["nis_bound"], dtype=float),
             alarm=np.array(log["alarm"], dtype=bool),
             applied_at=np.array(log["at"], dtype=np.int64),
+            shift=np.array(log["shift"], dtype=bool),
         )
 
     def _bound(self, k: int) -> float:
@@ -884,17 +1110,22 @@ class BiasTracker:
                 + (math.sqrt(2.0) * s.reference_angle_std / dur * u / self.scale) ** 2
             )
         dt = max(w.t_last - self._t_state, 0.0)
-        kf.Q = np.diag(self._q * dt)
-        kf.predict()
         if self._temp_model:
             dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0)
             kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
         else:
             kf.H = -np.eye(3)
+        hph = np.diag(kf.H @ kf.P @ kf.H.T).copy()  # before the prediction adds Q
+        kf.Q = np.diag(self._q * dt)
+        kf.predict()
         kf.R = np.diag(R)
         kf.update(zbar)
         y = np.asarray(kf.y, dtype=float).reshape(-1)
         nis = float(y @ np.asarray(kf.SI) @ y)
+        s_diag = np.diag(np.asarray(kf.S, dtype=float))
+        if self._adaptive:
+            self._adapt_q(y, s_diag, hph, R, dt)
+        shift = self._cusum(y, s_diag)
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
         self._n_updates += 1
@@ -912,6 +1143,7 @@ class BiasTracker:
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
+        log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
         log["count"].append(n)
@@ -920,6 +1152,65 @@ class BiasTracker:
         log["nis_bound"].append(bound)
         log["alarm"].append(alarm)
         log["at"].append(close)
+
+    def _adapt_q(
+        self, y: np.ndarray, s_diag: np.ndarray, hph: np.ndarray, R: np.ndarray, dt: float
+    ) -> None:
+        """One step of the bias random walk's estimate from this update's innovation.
+
+        ``E[y²] = HPHᵀ + R + q·Δt`` per axis (``P`` before the prediction), so
+        ``y² − HPHᵀ − R`` observes ``q·Δt`` with variance ``2S²``: the information-weighted
+        mean ``q̂ = Σ Δt (y² − HPHᵀ − R)/(2S²) / Σ Δt²/(2S²)`` is a Fisher-scoring step of the
+        maximum-likelihood estimate of ``q`` (covariance matching of the innovations, Mehra
+        1970; Myers & Tapley 1976), with exponential forgetting over ``adapt_memory_s``. The
+        filter then uses ``q̂`` plus one standard error ``1/√(ΣΔt²/(2S²))`` (never below the
+        smallest positive value), so a young estimate errs on the side of a wider band.
+        """
+        if dt <= 0:
+            return
+        forget = math.exp(-dt / self.settings.adapt_memory_s)
+        w = dt / (2.0 * s_diag**2)
+        self._qa = forget * self._qa + w * (y**2 - hph[:3] - R)
+        self._qb = forget * self._qb + w * dt
+        q_hat = np.maximum(self._qa / self._qb, 0.0)
+        self._q_hat = q_hat
+        self._q[:3] = np.maximum(q_hat + 1.0 / np.sqrt(self._qb), 1e-300)
+
+    def _cusum(self, y: np.ndarray, s_diag: np.ndarray) -> bool:
+        """Two-sided CUSUM (Page 1954) on each axis's normalised innovation ``e = y/√S``.
+
+        ``g⁺ ← max(0, g⁺ + e − k)``, ``g⁻ ← max(0, g⁻ − e − k)``; a sum above ``h`` says the
+        innovations' mean has shifted (a bias step the NIS window is too short or too coarse
+        to see). With ``recover``, the axis's bias variance is then widened by four times the
+        squared mean innovation since the sum last left zero (the size of the shift the filter
+        has not yet followed), so the next updates move the estimate to the new bias.
+        """
+        s = self.settings
+        if not math.isfinite(s.cusum_h):
+            return False
+        e = y / np.sqrt(s_diag)
+        step = np.stack([e - s.cusum_k, -e - s.cusum_k])
+        g = np.maximum(self._cu + step, 0.0)
+        restart = self._cu <= 0.0
+        self._cu_sum = np.where(restart, 0.0, self._cu_sum) + y[None, :]
+        self._cu_n = np.where(restart, 0.0, self._cu_n) + 1.0
+        self._cu = g
+        hit = g > s.cusum_h
+        if not hit.any():
+            return False
+        axes = np.flatnonzero(hit.any(axis=0))
+        self._n_shifts += 1
+        if s.recover:
+            P = self.kf.P.copy()
+            for i in axes:
+                side = 0 if hit[0, i] else 1
+                mean_y = self._cu_sum[side, i] / self._cu_n[side, i]
+                P[i, i] += 4.0 * mean_y**2
+            self.kf.P = P
+        self._cu[:, axes] = 0.0
+        self._cu_sum[:, axes] = 0.0
+        self._cu_n[:, axes] = 0.0
+        return True
 
     def _outputs(
         self,
@@ -958,3 +1249,35 @@ class BiasTracker:
             "since": t - tu[j],
             "nis_ok": ok[j],
         }
+
+
+def _concat(parts: list[TrackResult], g_first: int) -> TrackResult:
+    """One :class:`TrackResult` from consecutive ones (whose first sample has global index
+    ``g_first``): a still decision made by a later part lands on its row in an earlier one."""
+    def cat(get: Any) -> np.ndarray:
+        return np.concatenate([get(p) for p in parts])
+
+    u = [p.updates for p in parts]
+    log = UpdateLog(**{f: np.concatenate([getattr(x, f) for x in u])
+                       for f in UpdateLog.__dataclass_fields__})
+    t = cat(lambda p: p.t)
+    di, ds = cat(lambda p: p.decision_index), cat(lambda p: p.decision_still)
+    rows = di - g_first
+    sel = (rows >= 0) & (rows < t.size)
+    still = np.zeros(t.size, dtype=bool)
+    decided = np.zeros(t.size, dtype=bool)
+    still[rows[sel]] = ds[sel]
+    decided[rows[sel]] = True
+    return TrackResult(
+        t=t,
+        bias=np.vstack([p.bias for p in parts]),
+        bias_std=np.vstack([p.bias_std for p in parts]),
+        corrected=np.vstack([p.corrected for p in parts]),
+        still=still,
+        decided=decided,
+        since_update_s=cat(lambda p: p.since_update_s),
+        nis_ok=cat(lambda p: p.nis_ok),
+        updates=log,
+        decision_index=di,
+        decision_still=ds,
+    )

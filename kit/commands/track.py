@@ -6,8 +6,7 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +14,28 @@ import numpy as np
 
 from gyrocal.kit import argtypes
 from gyrocal.kit.errors import InputError, OutputExistsError
+from gyrocal.kit.tracking import (
+    DEFAULT_RATE_RANDOM_WALK,
+    LIVE_WARMUP_S,
+    Batch,
+    LiveSource,
+    Tracked,
+    TurnPlan,
+    chunks,
+    encoder_reference,
+    json_rows,
+    live_truth,
+    load_calibration,
+    load_noise,
+    rest_flags,
+    run_live,
+    run_tracker,
+    tracker_notes,
+)
+
+#: Rows of the --json document beyond which it is decimated unless --every is given
+#: (153 B per row: about 30 MB).
+JSON_MAX_ROWS = 200_000
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
@@ -23,8 +44,12 @@ DESCRIPTION = (
     "still and reference-rate updates while a servo turns about an axis the calibration knows) "
     "and print or plot the bias over time with its uncertainty. --json prints "
     '{"t": [N], "bias": [N][3], "bias_std": [N][3], "still": [N]} in rad/s, one row per gyro '
-    "sample, the bias in the Calibration v1 convention (g = scale * (m + bias), so a still "
-    "sensor reads -bias). --sim tracks a synthetic 30-minute session (gyrocal.calib.noise_sim: a "
+    "sample (or per --every seconds, with \"decimated_every_s\"; sessions longer than "
+    f"{JSON_MAX_ROWS:,} samples are decimated by default), the bias in the Calibration v1 "
+    "convention (g = scale * (m + bias), so a still sensor reads -bias). Nothing needs tuning: "
+    "the white noise comes from the still seconds, the bias random walk from the filter's "
+    "innovations, the temperature state is on when every sample has a temperature; figures "
+    "given as flags win. --sim tracks a synthetic 30-minute session (gyrocal.calib.noise_sim: a "
     "synthetic sensor, not the emulated jig) and compares with its truth. --live tracks on the "
     "jig itself: the servos hold the sensor still (torque on) while the IMU FIFO is drained for "
     "--duration seconds; --live --sim does it on the emulated jig and compares with the emulated "
@@ -32,14 +57,6 @@ DESCRIPTION = (
     "the error's code."
 )
 
-#: Seconds of live data the tracker is built from (noise estimate, first still second).
-LIVE_WARMUP_S = 2.0
-#: Seconds of live data handed to the tracker at a time.
-LIVE_CHUNK_S = 1.0
-#: A servo that moves more than this between two polls marks its samples as not still, rad.
-LIVE_MOVE_TOLERANCE_RAD = 2 * 2 * math.pi / 4096
-
-DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS gyros
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -71,18 +88,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="white noise density, rad/s/sqrt(Hz) (default: --noise, else estimated "
                         "from the recording)")
     m.add_argument("--rate-random-walk", type=float, default=None, metavar="K",
-                   help="bias random walk, rad/s/sqrt(s) (default: --noise, else "
+                   help="bias random walk, rad/s/sqrt(s) (default: --noise, else estimated "
+                        "from the data as the tracker goes, starting from "
                         f"{DEFAULT_RATE_RANDOM_WALK:g})")
-    m.add_argument("--tempco", action="store_true",
-                   help="also estimate a linear temperature coefficient per axis")
+    m.add_argument("--tempco", action=argparse.BooleanOptionalAction, default=None,
+                   help="also estimate a linear temperature coefficient per axis (default: on "
+                        "when every sample of a recording has a temperature; off live)")
     m.add_argument("--tempco-std", type=float, default=1e-3, metavar="RAD_S_PER_C",
                    help="prior std of the temperature coefficient (default 1e-3)")
     m.add_argument("--initial-bias-std", type=float, default=0.1, metavar="RAD_S",
                    help="prior bias std without --cal (default 0.1)")
     d = p.add_argument_group("still detection and updates")
-    d.add_argument("--still", choices=("detect", "segments"), default="detect",
-                   help="decide stillness by the detector, or from the recording's rest "
-                        "segments (--live: every sample while no servo moves) (default detect)")
+    d.add_argument("--still", choices=("auto", "detect", "segments"), default="auto",
+                   help="auto: the recording's rest segments are still, the detector decides "
+                        "elsewhere; detect: the detector everywhere; segments: only the rest "
+                        "segments (--live: every sample while no servo moves) (default auto; "
+                        "live, auto = detect)")
     d.add_argument("--no-reference", action="store_true",
                    help="no reference-rate updates during servo turns")
     d.add_argument("--still-window", type=float, default=0.2, metavar="S")
@@ -94,6 +115,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print the per-sample JSON document")
     o.add_argument("--out", metavar="FILE", help="write the JSON document to FILE instead")
+    o.add_argument("--every", type=float, default=None, metavar="S",
+                   help="one JSON row every S seconds (the estimate at that sample) instead of "
+                        f"one per sample; by default a session longer than {JSON_MAX_ROWS:,} "
+                        "samples is decimated to at most that many rows, and says so; 0 keeps "
+                        "every sample")
     o.add_argument("--force", action="store_true",
                    help="replace existing --out and --plot files (and a --record directory)")
     o.add_argument("--plot", metavar="FILE",
@@ -136,147 +162,6 @@ def _live_only_defaults() -> dict[str, Any]:
     return vars(p.parse_args([]))
 
 
-@dataclass(frozen=True)
-class Batch:
-    """What a source hands the tracker: a run of samples (a recording, a FIFO drain, ...)."""
-
-    t: np.ndarray
-    rate: np.ndarray
-    temperature: np.ndarray | None = None
-    still: np.ndarray | None = None
-    reference_rate: np.ndarray | None = None
-    reference_axis: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class Tracked:
-    """Per-sample output of a whole run."""
-
-    t: np.ndarray
-    bias: np.ndarray
-    bias_std: np.ndarray
-    still: np.ndarray
-    nis_ok: np.ndarray
-    since_update_s: np.ndarray
-    update_t: np.ndarray
-    update_kind: np.ndarray
-    alarm_t: np.ndarray
-
-
-def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
-    """Feed ``batches`` to a :class:`gyrocal.calib.tracker.BiasTracker` and collect per-sample
-    output.
-
-    A live source (the jig's IMU FIFO) is one more iterable of :class:`Batch`. The last batch is
-    processed with ``finish=True``; still decisions that arrive after their batch (the
-    detector's look-ahead) are placed by the sample index the tracker reports with them.
-    """
-    parts: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "di", "ds")
-    }
-    it = iter(batches)
-    current = next(it, None)
-    if current is None:
-        raise InputError("no samples to track")
-    while current is not None:
-        nxt = next(it, None)
-        res = tracker.process(
-            current.t, current.rate, current.temperature, current.still,
-            reference_rate=current.reference_rate, reference_axis=current.reference_axis,
-            finish=nxt is None,
-        )
-        for key, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
-                       ("nis", res.nis_ok), ("since", res.since_update_s),
-                       ("ut", res.updates.t), ("uk", res.updates.kind),
-                       ("al", res.updates.t[res.updates.alarm]),
-                       ("di", res.decision_index), ("ds", res.decision_still)):
-            parts[key].append(v)
-        current = nxt
-    t = np.concatenate(parts["t"])
-    still = np.zeros(t.size, dtype=bool)
-    still[np.concatenate(parts["di"])] = np.concatenate(parts["ds"])
-    return Tracked(
-        t=t,
-        bias=np.vstack(parts["bias"]),
-        bias_std=np.vstack(parts["std"]),
-        still=still,
-        nis_ok=np.concatenate(parts["nis"]),
-        since_update_s=np.concatenate(parts["since"]),
-        update_t=np.concatenate(parts["ut"]),
-        update_kind=np.concatenate(parts["uk"]),
-        alarm_t=np.concatenate(parts["al"]),
-    )
-
-
-def _chunks(batch: Batch, size: int) -> Iterator[Batch]:
-    n = batch.t.size
-    for a in range(0, n, size):
-        sl = slice(a, min(a + size, n))
-        yield Batch(*(None if x is None else x[sl] for x in (
-            batch.t, batch.rate, batch.temperature, batch.still, batch.reference_rate,
-            batch.reference_axis)))
-
-
-def load_calibration(path: str) -> Any:
-    """Read the --cal Calibration v1 file (InputError naming the problem)."""
-    from gyrocal.kit.exports import load_document
-
-    return load_document(path, "gyrocal-calibration", "--cal")
-
-
-def load_noise(path: str) -> Any:
-    """Read the --noise gyrocal-noise v1 file (InputError naming the problem)."""
-    from gyrocal.kit.exports import load_document
-
-    return load_document(path, "gyrocal-noise", "--noise")
-
-
-def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Per-sample reference rate and axis over the recording's rotate segments.
-
-    The rate of sample ``i`` is the encoder angle's change across the sample's own interval
-    ``[t_i − dt/2, t_i + dt/2]`` (linear interpolation of the encoder), so the mean over any
-    run of samples is the angle change across the run divided by its length: the reference a
-    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
-    calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
-    """
-    from gyrocal.kit.report_plots import calibration_axis, encoder_rate
-
-    n = rec.imu_t.size
-    rr = np.full(n, np.nan)
-    ra = np.full((n, 3), np.nan)
-    notes: list[str] = []
-    if n < 2:
-        return rr, ra, notes
-    dt = float(np.median(np.diff(rec.imu_t)))
-    for seg in rec.segments:
-        if seg.kind != "rotate":
-            continue
-        u = calibration_axis(cal, int(seg.motor))  # type: ignore[arg-type]
-        if u is None:
-            notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
-                         f"{seg.index} gives no reference-rate updates")
-            continue
-        et, ea = rec.encoder(seg.motor)
-        idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
-        rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
-        covered = np.isfinite(rate)
-        if not covered.any():
-            notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
-            continue
-        rr[idx[covered]] = rate[covered]
-        ra[idx[covered]] = u
-    return rr, ra, notes
-
-
-def _rest_flags(rec: Any, trim_s: float = 0.5) -> np.ndarray:
-    """True on samples inside rest segments (less ``trim_s`` at each end)."""
-    still = np.zeros(rec.imu_t.size)
-    for seg in rec.segments:
-        if seg.kind == "rest" and seg.duration > 2 * trim_s:
-            still[(rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)] = 1.0
-    return still
-
 
 def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
               axis_std: float | None) -> Any:
@@ -289,7 +174,7 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
                               rate_threshold=args.still_rate_threshold)
         kw: dict[str, Any] = dict(
             odr_hz=odr, noise_density=n_density, rate_random_walk=k,
-            temperature_model=args.tempco, tempco_std=args.tempco_std,
+            temperature_model=bool(args.tempco), tempco_std=args.tempco_std,
             update_interval_s=args.update_interval, still=still,
         )
         if axis_std is not None:
@@ -311,7 +196,7 @@ def _build_tracker(
     -------
     (BiasTracker, GyroCalibration or None)
     """
-    from gyrocal.calib.stationarity import first_still_mean, white_noise_std
+    from gyrocal.calib.stationarity import first_still_mean, quiet_noise_std
     from gyrocal.calib.tracker import BiasTracker
 
     cal = load_calibration(args.cal) if args.cal else None
@@ -322,11 +207,12 @@ def _build_tracker(
         n_density = tuple(noise.noise_density.value)
     else:
         try:
-            sigma = white_noise_std(rate)
+            sigma = quiet_noise_std(rate, max(8, int(round(odr))))
         except ValueError as exc:
             raise InputError(f"{where}: {exc}") from None
         n_density = tuple(float(x) for x in sigma / math.sqrt(odr))
-        notes.append(f"noise density estimated from the sample-to-sample scatter of {what}: "
+        notes.append("noise density estimated from the sample-to-sample scatter of the "
+                     f"quietest seconds of {what}: "
                      + ", ".join(f"{x:.3g}" for x in n_density) + " rad/s/sqrt(Hz) "
                      "(measure it with 'gyrocal noise' and pass --noise)")
     if args.rate_random_walk is not None:
@@ -334,9 +220,7 @@ def _build_tracker(
     elif noise is not None:
         k = noise.rate_random_walk_or_hi95
     else:
-        k = DEFAULT_RATE_RANDOM_WALK
-        notes.append(f"bias random walk not given: using {k:g} rad/s/sqrt(s) (conservative; "
-                     "measure it with 'gyrocal noise' and pass --noise)")
+        k = None  # estimated from the innovations (see tracker_notes for the result)
     axis_std = None
     if cal is not None and cal.axes:
         stds = [v.get("std_deg") for v in cal.axes.values() if isinstance(v, dict)]
@@ -372,11 +256,17 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
         raise InputError(f"{rec.path}: only {n} gyro samples")
     odr = 1.0 / float(np.median(np.diff(rec.imu_t)))
     temp = rec.imu_temp
+    if args.tempco is None:
+        args.tempco = bool(np.all(np.isfinite(temp)))
     if args.tempco and not np.all(np.isfinite(temp)):
         raise InputError(f"{rec.path}: --tempco needs a temperature on every sample (imu.csv "
                          "temp column); this recording lacks some")
     tracker, cal = _build_tracker(args, odr, rec.imu_rate, notes, "the recording", str(rec.path))
-    still = _rest_flags(rec) if args.still == "segments" else None
+    still = None
+    if args.still == "segments":
+        still = rest_flags(rec)
+    elif args.still == "auto" and any(seg.kind == "rest" for seg in rec.segments):
+        still = rest_flags(rec, outside=math.nan, check=tracker.detector, notes=notes)
     rr = ra = None
     if not args.no_reference and cal is not None and any(
         s.kind == "rotate" for s in rec.segments
@@ -399,6 +289,8 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
     from gyrocal.calib.tracker import BiasTracker
 
     model = NoiseModel(rate_random_walk=1e-5)
+    if args.tempco is None:
+        args.tempco = True
     step = None
     if args.step_at is not None:
         step = (args.step_at, (args.step, 0.0, 0.0))
@@ -425,211 +317,6 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
                      "that drift is unmodelled (the NIS alarms may say so)")
     return tracker, batch, s, "simulation"
 
-
-@dataclass(frozen=True)
-class TurnPlan:
-    """Turns that give the tracker reference-rate updates during a live run.
-
-    Attributes
-    ----------
-    turns : int
-        Whole turns each way (positive, then back).
-    speed : float
-        rad/s.
-    every_s : float
-        Still time between two turn pairs, s.
-    axes : dict
-        Servo id -> unit axis in the sensor frame (from the calibration); the servos turn in
-        this order, round robin.
-    """
-
-    turns: int
-    speed: float
-    every_s: float
-    axes: dict[int, np.ndarray]
-
-
-class LiveSource:
-    """Batches from the jig: the servos hold the sensor still while the IMU FIFO is drained.
-
-    One loop on the jig's clock, as the protocol runner's: drain the FIFO, one sync read of the
-    servos (:meth:`gyrocal.drivers.dynamixel.Gimbal.poll`, with its safety checks), wait for the
-    next
-    period (dithered by up to half a period, seeded, so drains fall at random phases of the
-    chip's sample grid). Samples drained in a period in which a servo moved by more than
-    :data:`LIVE_MOVE_TOLERANCE_RAD` are flagged not still.
-
-    With a :class:`TurnPlan`, every ``every_s`` of still time one servo turns ``turns`` whole
-    turns and back; the samples of the turn pair go to the tracker as one batch with the
-    encoder's reference rate per sample (the angle change across the sample's own interval, as
-    a replay computes it) and the servo's axis.
-
-    Parameters
-    ----------
-    jig : gyrocal.kit.commands.calibrate.Jig
-        Its gimbal open (inside ``with jig.gimbal``), its IMU configured.
-    period_s : float
-        Loop period (the config's ``gimbal.sample_hz``).
-    temperature : bool
-        Hand the die temperature to the tracker (``--tempco``).
-    trust_jig : bool
-        Flag every sample still unless a servo moved (``--still segments``); otherwise leave the
-        decision to the detector.
-    turns : TurnPlan, optional
-    """
-
-    def __init__(self, jig: Any, period_s: float, *, temperature: bool = False,
-                 trust_jig: bool = False, turns: TurnPlan | None = None) -> None:
-        self.jig = jig
-        self.clock = jig.clock
-        self.period_s = float(period_s)
-        self.temperature = temperature
-        self.trust_jig = trust_jig
-        self.plan = turns
-        self.notes: list[str] = []
-        self.t0 = math.nan
-        self.samples = 0
-        self.lost = 0
-        self.moved_samples = 0
-        self.turn_pairs = 0
-        self.temperatures: list[np.ndarray] = []
-        self._next = 0.0
-        self._angles: np.ndarray | None = None
-        self._dither = np.random.default_rng(0x74726B)
-        #: A RecordingWriter that receives every sample (``--record``), or None.
-        self.writer: Any = None
-
-    def start(self) -> None:
-        """Note the hold angles and start the IMU stream."""
-        self._angles = np.asarray(self.jig.gimbal.poll().angles, dtype=float)
-        self.t0 = self.clock.monotonic()
-        self._next = self.t0
-        self.jig.imu.start()
-
-    @property
-    def elapsed_s(self) -> float:
-        """Time since :meth:`start` on the jig's clock, s."""
-        return self.clock.monotonic() - self.t0 if math.isfinite(self.t0) else 0.0
-
-    def _tick(self) -> tuple[Any, bool, Any]:
-        b = self.jig.imu.read()
-        s = self.jig.gimbal.poll()
-        if self.writer is not None:
-            if len(b):
-                self.writer.append_imu(b.t - self.t0, b.rate, b.temperature_c)
-            self.writer.append_encoder(s.t - self.t0, list(s.ids), s.angles)
-        angles = np.asarray(s.angles, dtype=float)
-        moved = bool(np.any(np.abs(angles - self._angles) > LIVE_MOVE_TOLERANCE_RAD))
-        self._angles = angles
-        for g in b.gaps:
-            self.lost += int(g.samples)
-            self.notes.append(f"lost {g.samples} gyro samples at {g.t - self.t0:.2f} s "
-                              f"({g.reason})")
-        self._next += self.period_s * (1.0 + self._dither.uniform(-0.5, 0.5))
-        wait = self._next - self.clock.monotonic()
-        if wait > 0:
-            self.clock.sleep(wait)
-        else:
-            self._next = self.clock.monotonic()
-        return b, moved, s
-
-    def _batch(self, parts: list[tuple[Any, bool]], planned: bool = False) -> Batch:
-        t = np.concatenate([b.t for b, _ in parts]) - self.t0
-        rate = np.vstack([b.rate for b, _ in parts])
-        temp = np.concatenate([np.asarray(b.temperature_c, dtype=float) for b, _ in parts])
-        moved = np.concatenate([np.full(len(b), mv) for b, mv in parts])
-        self.samples += t.size
-        if not planned:
-            self.moved_samples += int(moved.sum())
-        self.temperatures.append(temp)
-        if self.trust_jig:
-            still = np.where(moved, 0.0, 1.0)
-        else:
-            still = np.where(moved, 0.0, np.nan)
-        return Batch(t, rate, temp if self.temperature else None, still)
-
-    def collect(self, until_s: float) -> Batch | None:
-        """Drain until ``until_s`` after :meth:`start`; the samples as one batch (or None)."""
-        parts: list[tuple[Any, bool]] = []
-        while self.elapsed_s < until_s:
-            b, moved, _ = self._tick()
-            if len(b):
-                parts.append((b, moved))
-        return self._batch(parts) if parts else None
-
-    def turn_time_s(self) -> float:
-        """Jig time of one turn pair with its settling, s (an upper estimate)."""
-        p = self.plan
-        if p is None:
-            return 0.0
-        accel = float(self.jig.gimbal.acceleration)
-        one = p.turns * 2 * math.pi / p.speed + p.speed / accel
-        return 2 * (one + 0.5) + 0.5
-
-    def turn_pair(self, motor: int) -> Batch | None:
-        """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
-        with the encoder's reference rate and the servo's axis."""
-        from gyrocal.kit.report_plots import encoder_rate
-
-        p = self.plan
-        if p is None:
-            raise InputError("no turns planned")
-        gimbal = self.jig.gimbal
-        k = gimbal.ids.index(motor)
-        parts: list[tuple[Any, bool]] = []
-        enc_t: list[float] = []
-        enc_a: list[float] = []
-        for direction in (1, -1):
-            gimbal.begin_turn(motor, p.turns, p.speed, direction)
-            while gimbal.busy:
-                b, moved, smp = self._tick()
-                enc_t.append(smp.t - self.t0)
-                enc_a.append(float(smp.angles[k]))
-                if len(b):
-                    parts.append((b, moved))
-        settle_end = self.elapsed_s + 0.3  # encoder readings past the last gyro sample
-        while self.elapsed_s < settle_end:
-            b, moved, smp = self._tick()
-            enc_t.append(smp.t - self.t0)
-            enc_a.append(float(smp.angles[k]))
-            if len(b):
-                parts.append((b, True))
-        self.turn_pairs += 1
-        if not parts:
-            return None
-        batch = self._batch(parts, planned=True)
-        t = batch.t
-        dt = 1.0 / float(self.jig.imu.odr_hz)
-        rr = encoder_rate(np.asarray(enc_t), np.asarray(enc_a), t, dt / 2)
-        ra = np.full((t.size, 3), np.nan)
-        ra[np.isfinite(rr)] = p.axes[motor]
-        return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
-
-    def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
-        """``first``, then a batch every ``chunk_s`` (and the turn pairs of the plan) until
-        ``duration_s``."""
-        yield first
-        end = float(first.t[-1])
-        order = list(self.plan.axes) if self.plan is not None else []
-        next_turn = self.elapsed_s + self.plan.every_s if self.plan is not None else math.inf
-        while self.elapsed_s < duration_s:
-            now = self.elapsed_s
-            if now >= next_turn and now + self.turn_time_s() < duration_s:
-                nxt = self.turn_pair(order[self.turn_pairs % len(order)])
-                next_turn = self.elapsed_s + self.plan.every_s  # type: ignore[union-attr]
-            else:
-                if now >= next_turn:  # no time left for another turn pair
-                    next_turn = math.inf
-                nxt = self.collect(min(now + chunk_s, duration_s, next_turn))
-            if nxt is None:
-                continue
-            if nxt.t[0] <= end:
-                from gyrocal.kit.errors import HardwareError
-
-                raise HardwareError("the IMU reader returned samples out of time order; check "
-                                    "the I2C bus and imu.odr_hz, and try again")
-            end = float(nxt.t[-1])
-            yield nxt
 
 
 def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
@@ -667,19 +354,11 @@ def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
     return TurnPlan(int(args.turns), math.radians(speed_dps), float(every), axes)
 
 
-@dataclass(frozen=True)
-class _LiveTruth:
-    """The emulated sensor's true bias at each tracked sample (for the summary and the plot)."""
-
-    true_bias: np.ndarray
-
 
 def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any, str]:
     """Hold the jig still, track, release: the servos stop and torque goes off at the end, on
     an error, Ctrl-C or SIGTERM (the gimbal's context), before anything else."""
-    from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
     from gyrocal.kit.commands.calibrate import Jig, load_cli_config
-    from gyrocal.kit.errors import InterruptedRun
 
     duration = 60.0 if args.duration is None else float(args.duration)
     if not (math.isfinite(duration) and duration >= LIVE_WARMUP_S):
@@ -705,54 +384,38 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
         raise InputError(f"--turn-speed-dps {args.turn_speed_dps:g} is too close to the gyro's "
                          f"range of {jig.imu.full_scale_dps:g} dps; lower it or raise "
                          "imu.range_dps")
-    source = LiveSource(jig, period, temperature=args.tempco, trust_jig=args.still == "segments",
+    source = LiveSource(jig, period, temperature=bool(args.tempco),
+                        trust_jig=args.still == "segments",
                         turns=plan)
-    interrupted: BaseException | None = None
-    tr: Tracked | None = None
-    writer = None
-    try:
-        with jig.gimbal:
-            print(f"gyrocal: tracking live on {where} for {duration:g} s of jig time: the servos "
-                  "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
-            if args.record:
-                from gyrocal.kit.recording import RecordingWriter
 
-                truth = None if jig.sim is None else jig.sim.truth.manifest()
-                writer = RecordingWriter(
-                    args.record, sensor=jig.imu.info.manifest(),
-                    gimbal={"motors": [{"id": sid, "model": jig.gimbal.infos[sid].model_name,
-                                        "axis": cfg.axis_of()[sid]}
-                                       for sid in cfg["gimbal"]["ids"]]},
-                    protocol={"name": "still", "duration_s": duration}, truth=truth,
-                    force=args.force)
-                source.writer = writer
-            source.start()
-            warm = source.collect(LIVE_WARMUP_S)
-            if warm is None or warm.t.size < 3:
-                raise InputError(f"{where}: the IMU delivered no samples in the first "
-                                 f"{LIVE_WARMUP_S:g} s; check imu.odr_hz and the I2C bus")
-            odr = float(jig.imu.odr_hz)
-            tracker, _ = _build_tracker(args, odr, warm.rate, notes,
-                                        f"the first {LIVE_WARMUP_S:g} s", where)
-            tr = run_tracker(tracker, source.batches(warm, duration, LIVE_CHUNK_S))
-            if writer is not None:
-                from gyrocal.calib.segments import Segment
+    def make_writer() -> Any:
+        from gyrocal.kit.recording import RecordingWriter
 
-                writer.append_segment(Segment(0, "rest", None, 0, 0.0, 0.0, source.elapsed_s))
-                writer.finish()
-    except (KeyboardInterrupt, TerminatedBySignal) as exc:
-        interrupted = exc
-    finally:
-        jig.close()
-        if writer is not None:
-            writer.close()  # incomplete unless finished above
-    if interrupted is not None:
-        signum = 15 if isinstance(interrupted, TerminatedBySignal) else 2
-        raise InterruptedRun(
-            f"{'terminated' if signum == 15 else 'interrupted'} after "
-            f"{source.elapsed_s:.1f} s of live tracking: servos stopped, torque off; nothing "
-            "was printed", signum)
+        truth = None if jig.sim is None else jig.sim.truth.manifest()
+        return RecordingWriter(
+            args.record, sensor=jig.imu.info.manifest(),
+            gimbal={"motors": [{"id": sid, "model": jig.gimbal.infos[sid].model_name,
+                                "axis": cfg.axis_of()[sid]}
+                               for sid in cfg["gimbal"]["ids"]]},
+            protocol={"name": "still", "duration_s": duration}, truth=truth, force=args.force)
+
+    def announce() -> None:
+        print(f"gyrocal: tracking live on {where} for {duration:g} s of jig time: the servos "
+              "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
+
+    def build(warm: Batch) -> Any:
+        tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
+                                    f"the first {LIVE_WARMUP_S:g} s", where)
+        built.append(tracker)
+        return tracker
+
+    built: list[Any] = []
+
+    tr = run_live(jig, source, duration, build, make_writer=make_writer if args.record else None,
+                  announce=announce, where=where)
     notes += source.notes
+    if built:
+        notes += tracker_notes(built[0])
     if plan is not None:
         notes.append(f"{source.turn_pairs} turn pair(s) of {plan.turns} turn(s) at "
                      f"{args.turn_speed_dps:g} deg/s gave reference-rate updates")
@@ -762,14 +425,8 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     if source.lost:
         notes.append(f"{source.lost} gyro samples were lost (FIFO overflow): raise "
                      "gimbal.sample_hz or lower imu.odr_hz")
-    truth = None
-    if jig.sim is not None and tr is not None:
-        st = jig.sim.truth
-        temp = np.concatenate(source.temperatures)[: tr.t.size]
-        coeff = np.asarray(st.bias_temp_coeff_rad_s_per_c, dtype=float)
-        truth = _LiveTruth(np.asarray(st.bias)[None, :]
-                           + coeff[None, :] * (temp[:, None] - st.reference_temperature_c))
-    return tr, truth, f"live on {where}"  # type: ignore[return-value]
+    truth = live_truth(jig, source, tr)
+    return tr, truth, f"live on {where}"
 
 
 def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False) -> None:
@@ -806,6 +463,9 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
            f"still {100 * tr.still.mean():.1f} % of samples",
            f"health: {tr.alarm_t.size} NIS alarm(s)"
            + (f" at t = {', '.join(f'{x:.1f}' for x in tr.alarm_t[:5])} s" if tr.alarm_t.size
+              else "")
+           + f"; {tr.shift_t.size} bias shift(s) found by the CUSUM test"
+           + (f" at t = {', '.join(f'{x:.1f}' for x in tr.shift_t[:5])} s" if tr.shift_t.size
               else "")
            + f"; longest time without an update {tr.since_update_s.max():.1f} s",
            f"{'t s':>9}  {'bias x':>11} {'bias y':>11} {'bias z':>11}   "
@@ -863,6 +523,8 @@ def run(args: argparse.Namespace) -> int:
     _check_modes(args)
     if args.rows < 2:
         raise InputError("--rows must be at least 2")
+    if args.every is not None and not (math.isfinite(args.every) and args.every >= 0):
+        raise InputError(f"--every must be a number of seconds >= 0, got {args.every!r}")
     refuse_existing((args.out, args.plot), force=args.force)  # before a long (or live) run
     notes: list[str] = []
     if args.live:
@@ -871,24 +533,35 @@ def run(args: argparse.Namespace) -> int:
         if args.sim:
             tracker, batch, truth, source = _simulate(args, notes)
             # fed one second at a time, as a live source would
-            batches: Iterable[Batch] = _chunks(batch,
+            batches: Iterable[Batch] = chunks(batch,
                                                max(1, int(round(tracker.settings.odr_hz))))
         else:
             tracker, batch, truth, source = _replay(args, notes)
             batches = [batch]
         tr = run_tracker(tracker, batches)
+        notes += tracker_notes(tracker)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.plot:
         plot_track(tr, args.plot, truth, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json or args.out:
-        doc = {
-            "t": tr.t.tolist(),
-            "bias": tr.bias.tolist(),
-            "bias_std": tr.bias_std.tolist(),
-            "still": tr.still.tolist(),
+        rows, every = json_rows(tr.t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        if every is not None:
+            print(f"gyrocal: note: the JSON document is decimated to one row every {every:g} s "
+                  f"({rows.size} of {tr.t.size} samples; each row the estimate at that sample, "
+                  "still true if any sample since the previous row was); --every sets the "
+                  "interval, --every 0 keeps every sample", file=sys.stderr)
+        still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
+            if every is not None else tr.still
+        doc: dict[str, Any] = {
+            "t": tr.t[rows].tolist(),
+            "bias": tr.bias[rows].tolist(),
+            "bias_std": tr.bias_std[rows].tolist(),
+            "still": still.tolist(),
         }
+        if every is not None:
+            doc["decimated_every_s"] = every
         text = json.dumps(doc, allow_nan=False) + "\n"
         if args.out:
             atomic_write_text(args.out, text, force=args.force)
@@ -898,3 +571,4 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         print(_summary(tr, args.rows, source, truth))
     return 0
+

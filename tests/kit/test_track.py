@@ -53,11 +53,13 @@ def test_json_document_per_sample_in_calibration_sign_convention(random_rec, cap
 def test_defaults_without_noise_flags_still_track(random_rec, capsys):
     s, rec, cal = random_rec
     doc, err = run_json(capsys, str(rec), "--cal", str(cal))
-    assert "noise density estimated" in err and "bias random walk not given" in err
+    assert "noise density estimated" in err
+    assert "bias random walk estimated from the innovations" in err
+    assert "temperature coefficient" in err  # on by default: the recording has temperatures
     bias, std = np.array(doc["bias"]), np.array(doc["bias_std"])
     z = (bias - s.true_bias) / std
-    # no temperature model, but the conservative default random walk keeps the band honest
-    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.97)
+    # nothing given but the calibration: the estimated random walk keeps the band honest
+    assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
 
 
 def test_without_calibration_starts_from_the_first_still_second(random_rec, capsys):
@@ -164,3 +166,30 @@ def test_tempco_needs_temperatures(tmp_path, capsys):
     rec = write_session(tmp_path / "rec", s, temperature=False)
     assert main(["track", str(rec), "--tempco"]) == 2
     assert "--tempco needs a temperature" in capsys.readouterr().err
+
+
+def test_json_decimates_on_request_and_on_long_sessions_and_says_so(random_rec, capsys,
+                                                                    monkeypatch):
+    s, rec, cal = random_rec
+    full, _ = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5")
+    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5",
+                        "--every", "2")
+    assert "decimated to one row every 2 s" in err and doc["decimated_every_s"] == 2.0
+    assert len(doc["t"]) == 150
+    # each row is the full document's row at the same sample
+    idx = np.searchsorted(full["t"], doc["t"])
+    np.testing.assert_allclose(np.array(full["bias"])[idx], doc["bias"], rtol=0, atol=0)
+    # still: true when any sample of the interval was still
+    fs = np.array(full["still"])
+    assert doc["still"][0] == bool(fs[: idx[0] + 1].any())
+    # long sessions are decimated by default, and say so
+    import gyrocal.kit.commands.track as cmd
+
+    monkeypatch.setattr(cmd, "JSON_MAX_ROWS", 1000)
+    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5")
+    assert "decimated" in err and 500 < len(doc["t"]) <= 1000
+    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5",
+                        "--every", "0")
+    assert "decimated" not in err and len(doc["t"]) == s.n
+    assert main(["track", str(rec), "--every", "-1"]) == 2
+    assert "--every must be" in capsys.readouterr().err

@@ -1,0 +1,570 @@
+"""Tracking the gyro bias through the kit: batches from a recording or the live jig, fed to
+:class:`gyrocal.calib.tracker.BiasTracker`, collected per sample.
+
+The command (:mod:`gyrocal.kit.commands.track`) parses arguments and calls this module:
+:class:`Batch` is what a source hands the tracker, :func:`run_tracker` feeds batches and collects
+a :class:`Tracked`, :func:`encoder_reference` and :func:`rest_flags` turn a Recording v1 into
+reference-rate and still flags, and :class:`LiveSource` with :func:`run_live` is the live loop on
+the jig (the protocol runner's loop of :mod:`gyrocal.kit.protocol`, holding the servos still).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gyrocal.kit.errors import InputError
+
+#: Seconds of live data the tracker is built from (noise estimate, first still second).
+LIVE_WARMUP_S = 2.0
+#: Seconds of live data handed to the tracker at a time.
+LIVE_CHUNK_S = 1.0
+#: A servo that moves more than this between two polls marks its samples as not still, rad.
+LIVE_MOVE_TOLERANCE_RAD = 2 * 2 * math.pi / 4096
+
+DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS gyros
+
+
+@dataclass(frozen=True)
+class Batch:
+    """What a source hands the tracker: a run of samples (a recording, a FIFO drain, ...)."""
+
+    t: np.ndarray
+    rate: np.ndarray
+    temperature: np.ndarray | None = None
+    still: np.ndarray | None = None
+    reference_rate: np.ndarray | None = None
+    reference_axis: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Tracked:
+    """Per-sample output of a whole run."""
+
+    t: np.ndarray
+    bias: np.ndarray
+    bias_std: np.ndarray
+    still: np.ndarray
+    nis_ok: np.ndarray
+    since_update_s: np.ndarray
+    update_t: np.ndarray
+    update_kind: np.ndarray
+    alarm_t: np.ndarray
+    shift_t: np.ndarray
+
+
+def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
+    """Feed ``batches`` to a :class:`gyrocal.calib.tracker.BiasTracker` and collect per-sample
+    output.
+
+    A live source (the jig's IMU FIFO) is one more iterable of :class:`Batch`. The last batch is
+    processed with ``finish=True``; still decisions that arrive after their batch (the
+    detector's look-ahead) are placed by the sample index the tracker reports with them.
+    """
+    parts: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "sh", "di", "ds")
+    }
+    it = iter(batches)
+    current = next(it, None)
+    if current is None:
+        raise InputError("no samples to track")
+    while current is not None:
+        nxt = next(it, None)
+        res = tracker.process(
+            current.t, current.rate, current.temperature, current.still,
+            reference_rate=current.reference_rate, reference_axis=current.reference_axis,
+            finish=nxt is None,
+        )
+        for key, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
+                       ("nis", res.nis_ok), ("since", res.since_update_s),
+                       ("ut", res.updates.t), ("uk", res.updates.kind),
+                       ("al", res.updates.t[res.updates.alarm]),
+                       ("sh", res.updates.t[res.updates.shift]),
+                       ("di", res.decision_index), ("ds", res.decision_still)):
+            parts[key].append(v)
+        current = nxt
+    t = np.concatenate(parts["t"])
+    still = np.zeros(t.size, dtype=bool)
+    still[np.concatenate(parts["di"])] = np.concatenate(parts["ds"])
+    return Tracked(
+        t=t,
+        bias=np.vstack(parts["bias"]),
+        bias_std=np.vstack(parts["std"]),
+        still=still,
+        nis_ok=np.concatenate(parts["nis"]),
+        since_update_s=np.concatenate(parts["since"]),
+        update_t=np.concatenate(parts["ut"]),
+        update_kind=np.concatenate(parts["uk"]),
+        alarm_t=np.concatenate(parts["al"]),
+        shift_t=np.concatenate(parts["sh"]),
+    )
+
+
+def chunks(batch: Batch, size: int) -> Iterator[Batch]:
+    """``batch`` in runs of ``size`` samples (as a live source would hand them over)."""
+    n = batch.t.size
+    for a in range(0, n, size):
+        sl = slice(a, min(a + size, n))
+        yield Batch(*(None if x is None else x[sl] for x in (
+            batch.t, batch.rate, batch.temperature, batch.still, batch.reference_rate,
+            batch.reference_axis)))
+
+
+def load_calibration(path: str) -> Any:
+    """Read the --cal Calibration v1 file (InputError naming the problem)."""
+    from gyrocal.kit.exports import load_document
+
+    return load_document(path, "gyrocal-calibration", "--cal")
+
+
+def load_noise(path: str) -> Any:
+    """Read the --noise gyrocal-noise v1 file (InputError naming the problem)."""
+    from gyrocal.kit.exports import load_document
+
+    return load_document(path, "gyrocal-noise", "--noise")
+
+
+def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Per-sample reference rate and axis over the recording's rotate segments.
+
+    The rate of sample ``i`` is the encoder angle's change across the sample's own interval
+    ``[t_i − dt/2, t_i + dt/2]`` (linear interpolation of the encoder), so the mean over any
+    run of samples is the angle change across the run divided by its length: the reference a
+    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
+    calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
+    """
+    from gyrocal.kit.report_plots import calibration_axis, encoder_rate
+
+    n = rec.imu_t.size
+    rr = np.full(n, np.nan)
+    ra = np.full((n, 3), np.nan)
+    notes: list[str] = []
+    if n < 2:
+        return rr, ra, notes
+    dt = float(np.median(np.diff(rec.imu_t)))
+    for seg in rec.segments:
+        if seg.kind != "rotate":
+            continue
+        u = calibration_axis(cal, int(seg.motor))  # type: ignore[arg-type]
+        if u is None:
+            notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
+                         f"{seg.index} gives no reference-rate updates")
+            continue
+        et, ea = rec.encoder(seg.motor)
+        idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
+        rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
+        covered = np.isfinite(rate)
+        if not covered.any():
+            notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
+            continue
+        rr[idx[covered]] = rate[covered]
+        ra[idx[covered]] = u
+    return rr, ra, notes
+
+
+def rest_flags(
+    rec: Any,
+    trim_s: float = 0.5,
+    outside: float = 0.0,
+    *,
+    check: Any = None,
+    notes: list[str] | None = None,
+) -> np.ndarray:
+    """Still flags from the recording's rest segments: 1 on samples inside a rest (less
+    ``trim_s`` at each end), ``outside`` elsewhere (0: not still; NaN: the detector decides).
+
+    With ``check`` (a :class:`gyrocal.calib.stationarity.StillDetector`), a rest is trusted only
+    when at least 95 % of its windows pass the detector's variance test (the rate test is left
+    out: the bias is what is being tracked); a rest that fails gets ``outside`` and a line in
+    ``notes`` (a recording whose "rest" moved, e.g. one not made on the jig).
+    """
+    still = np.full(rec.imu_t.size, float(outside))
+    loose = None
+    if check is not None:
+        from gyrocal.calib.stationarity import StillDetector, quiet_windows
+
+        loose = StillDetector(check.n_window, check.n_min, check.n_lookahead, check.var_limit,
+                              np.full(3, np.inf))
+    for seg in rec.segments:
+        if seg.kind != "rest" or seg.duration <= 2 * trim_s:
+            continue
+        sel = (rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)
+        if loose is not None:
+            quiet = quiet_windows(rec.imu_rate[sel], loose, 0)[loose.n_window - 1:]
+            if quiet.size == 0 or quiet.mean() < 0.95:
+                if notes is not None:
+                    notes.append(f"rest segment {seg.index} ({seg.t_start:.1f}-{seg.t_end:.1f} "
+                                 "s) shows motion in the gyro readings: left to the detector")
+                continue
+        still[sel] = 1.0
+    return still
+
+
+
+@dataclass(frozen=True)
+class TurnPlan:
+    """Turns that give the tracker reference-rate updates during a live run.
+
+    Attributes
+    ----------
+    turns : int
+        Whole turns each way (positive, then back).
+    speed : float
+        rad/s.
+    every_s : float
+        Still time between two turn pairs, s.
+    axes : dict
+        Servo id -> unit axis in the sensor frame (from the calibration); the servos turn in
+        this order, round robin.
+    """
+
+    turns: int
+    speed: float
+    every_s: float
+    axes: dict[int, np.ndarray]
+
+
+class LiveSource:
+    """Batches from the jig: the servos hold the sensor still while the IMU FIFO is drained.
+
+    One loop on the jig's clock, as the protocol runner's: drain the FIFO, one sync read of the
+    servos (:meth:`gyrocal.drivers.dynamixel.Gimbal.poll`, with its safety checks), wait for the
+    next
+    period (dithered by up to half a period, seeded, so drains fall at random phases of the
+    chip's sample grid). Samples drained in a period in which a servo moved by more than
+    :data:`LIVE_MOVE_TOLERANCE_RAD` are flagged not still.
+
+    With a :class:`TurnPlan`, every ``every_s`` of still time one servo turns ``turns`` whole
+    turns and back; the samples of the turn pair go to the tracker as one batch with the
+    encoder's reference rate per sample (the angle change across the sample's own interval, as
+    a replay computes it) and the servo's axis.
+
+    Parameters
+    ----------
+    jig : gyrocal.kit.commands.calibrate.Jig
+        Its gimbal open (inside ``with jig.gimbal``), its IMU configured.
+    period_s : float
+        Loop period (the config's ``gimbal.sample_hz``).
+    temperature : bool
+        Hand the die temperature to the tracker (``--tempco``).
+    trust_jig : bool
+        Flag every sample still unless a servo moved (``--still segments``); otherwise leave the
+        decision to the detector.
+    turns : TurnPlan, optional
+    """
+
+    def __init__(self, jig: Any, period_s: float, *, temperature: bool = False,
+                 trust_jig: bool = False, turns: TurnPlan | None = None) -> None:
+        self.jig = jig
+        self.clock = jig.clock
+        self.period_s = float(period_s)
+        self.temperature = temperature
+        self.trust_jig = trust_jig
+        self.plan = turns
+        self.notes: list[str] = []
+        self.t0 = math.nan
+        self.samples = 0
+        self.lost = 0
+        self.moved_samples = 0
+        self.turn_pairs = 0
+        self.temperatures: list[np.ndarray] = []
+        self._next = 0.0
+        self._angles: np.ndarray | None = None
+        self._dither = np.random.default_rng(0x74726B)
+        #: A RecordingWriter that receives every sample (``--record``), or None.
+        self.writer: Any = None
+
+    def start(self) -> None:
+        """Note the hold angles and start the IMU stream."""
+        self._angles = np.asarray(self.jig.gimbal.poll().angles, dtype=float)
+        self.t0 = self.clock.monotonic()
+        self._next = self.t0
+        self.jig.imu.start()
+
+    @property
+    def elapsed_s(self) -> float:
+        """Time since :meth:`start` on the jig's clock, s."""
+        return self.clock.monotonic() - self.t0 if math.isfinite(self.t0) else 0.0
+
+    def _tick(self) -> tuple[Any, bool, Any]:
+        b = self.jig.imu.read()
+        s = self.jig.gimbal.poll()
+        if self.writer is not None:
+            if len(b):
+                self.writer.append_imu(b.t - self.t0, b.rate, b.temperature_c)
+            self.writer.append_encoder(s.t - self.t0, list(s.ids), s.angles)
+        angles = np.asarray(s.angles, dtype=float)
+        moved = bool(np.any(np.abs(angles - self._angles) > LIVE_MOVE_TOLERANCE_RAD))
+        self._angles = angles
+        for g in b.gaps:
+            self.lost += int(g.samples)
+            self.notes.append(f"lost {g.samples} gyro samples at {g.t - self.t0:.2f} s "
+                              f"({g.reason})")
+        self._next += self.period_s * (1.0 + self._dither.uniform(-0.5, 0.5))
+        wait = self._next - self.clock.monotonic()
+        if wait > 0:
+            self.clock.sleep(wait)
+        else:
+            self._next = self.clock.monotonic()
+        return b, moved, s
+
+    def _batch(self, parts: list[tuple[Any, bool]], planned: bool = False) -> Batch:
+        t = np.concatenate([b.t for b, _ in parts]) - self.t0
+        rate = np.vstack([b.rate for b, _ in parts])
+        temp = np.concatenate([np.asarray(b.temperature_c, dtype=float) for b, _ in parts])
+        moved = np.concatenate([np.full(len(b), mv) for b, mv in parts])
+        self.samples += t.size
+        if not planned:
+            self.moved_samples += int(moved.sum())
+        self.temperatures.append(temp)
+        if self.trust_jig:
+            still = np.where(moved, 0.0, 1.0)
+        else:
+            still = np.where(moved, 0.0, np.nan)
+        return Batch(t, rate, temp if self.temperature else None, still)
+
+    def collect(self, until_s: float) -> Batch | None:
+        """Drain until ``until_s`` after :meth:`start`; the samples as one batch (or None)."""
+        parts: list[tuple[Any, bool]] = []
+        while self.elapsed_s < until_s:
+            b, moved, _ = self._tick()
+            if len(b):
+                parts.append((b, moved))
+        return self._batch(parts) if parts else None
+
+    def turn_time_s(self) -> float:
+        """Jig time of one turn pair with its settling, s (an upper estimate)."""
+        p = self.plan
+        if p is None:
+            return 0.0
+        accel = float(self.jig.gimbal.acceleration)
+        one = p.turns * 2 * math.pi / p.speed + p.speed / accel
+        return 2 * (one + 0.5) + 0.5
+
+    def turn_pair(self, motor: int) -> Batch | None:
+        """Turn ``motor`` the plan's turns positive and back, draining all along; the samples
+        with the encoder's reference rate and the servo's axis."""
+        from gyrocal.kit.report_plots import encoder_rate
+
+        p = self.plan
+        if p is None:
+            raise InputError("no turns planned")
+        gimbal = self.jig.gimbal
+        k = gimbal.ids.index(motor)
+        parts: list[tuple[Any, bool]] = []
+        enc_t: list[float] = []
+        enc_a: list[float] = []
+        for direction in (1, -1):
+            gimbal.begin_turn(motor, p.turns, p.speed, direction)
+            while gimbal.busy:
+                b, moved, smp = self._tick()
+                enc_t.append(smp.t - self.t0)
+                enc_a.append(float(smp.angles[k]))
+                if len(b):
+                    parts.append((b, moved))
+        settle_end = self.elapsed_s + 0.3  # encoder readings past the last gyro sample
+        while self.elapsed_s < settle_end:
+            b, moved, smp = self._tick()
+            enc_t.append(smp.t - self.t0)
+            enc_a.append(float(smp.angles[k]))
+            if len(b):
+                parts.append((b, True))
+        self.turn_pairs += 1
+        if not parts:
+            return None
+        batch = self._batch(parts, planned=True)
+        t = batch.t
+        dt = 1.0 / float(self.jig.imu.odr_hz)
+        rr = encoder_rate(np.asarray(enc_t), np.asarray(enc_a), t, dt / 2)
+        ra = np.full((t.size, 3), np.nan)
+        ra[np.isfinite(rr)] = p.axes[motor]
+        return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
+
+    def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
+        """``first``, then a batch every ``chunk_s`` (and the turn pairs of the plan) until
+        ``duration_s``."""
+        yield first
+        end = float(first.t[-1])
+        order = list(self.plan.axes) if self.plan is not None else []
+        next_turn = self.elapsed_s + self.plan.every_s if self.plan is not None else math.inf
+        while self.elapsed_s < duration_s:
+            now = self.elapsed_s
+            if now >= next_turn and now + self.turn_time_s() < duration_s:
+                nxt = self.turn_pair(order[self.turn_pairs % len(order)])
+                next_turn = self.elapsed_s + self.plan.every_s  # type: ignore[union-attr]
+            else:
+                if now >= next_turn:  # no time left for another turn pair
+                    next_turn = math.inf
+                nxt = self.collect(min(now + chunk_s, duration_s, next_turn))
+            if nxt is None:
+                continue
+            if nxt.t[0] <= end:
+                from gyrocal.kit.errors import HardwareError
+
+                raise HardwareError("the IMU reader returned samples out of time order; check "
+                                    "the I2C bus and imu.odr_hz, and try again")
+            end = float(nxt.t[-1])
+            yield nxt
+
+
+
+@dataclass(frozen=True)
+class LiveTruth:
+    """The emulated sensor's true bias at each tracked sample (for the summary and the plot)."""
+
+    true_bias: np.ndarray
+
+
+def run_live(
+    jig: Any,
+    source: LiveSource,
+    duration_s: float,
+    build: Callable[[Batch], Any],
+    *,
+    make_writer: Callable[[], Any] | None = None,
+    announce: Callable[[], None] | None = None,
+    where: str = "the jig",
+) -> Tracked:
+    """Hold the jig still, track, release.
+
+    The servos stop and torque goes off at the end, on an error, Ctrl-C or SIGTERM (the
+    gimbal's context), before anything else.
+
+    Parameters
+    ----------
+    jig : gyrocal.kit.commands.calibrate.Jig
+        Not yet opened; closed on return, whatever happens.
+    source : LiveSource
+        Built on ``jig``.
+    duration_s : float
+        Jig time to track for, s (at least :data:`LIVE_WARMUP_S`).
+    build : callable
+        Makes the :class:`gyrocal.calib.tracker.BiasTracker` from the first
+        :data:`LIVE_WARMUP_S` seconds of samples.
+    make_writer : callable, optional
+        Opens a :class:`gyrocal.kit.recording.RecordingWriter` once the gimbal is open; the
+        session is written to it as one rest and finished, or left incomplete on a failure.
+    announce : callable, optional
+        Called once the gimbal holds the sensor (the command says what happens).
+    where : str
+        Names the jig in errors.
+
+    Returns
+    -------
+    Tracked
+
+    Raises
+    ------
+    InterruptedRun
+        On Ctrl-C or SIGTERM (exit 130 or 143), after the servos are stopped.
+    """
+    from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
+    from gyrocal.kit.errors import InterruptedRun
+
+    interrupted: BaseException | None = None
+    tr: Tracked | None = None
+    writer = None
+    try:
+        with jig.gimbal:
+            if announce is not None:
+                announce()
+            if make_writer is not None:
+                writer = make_writer()
+                source.writer = writer
+            source.start()
+            warm = source.collect(LIVE_WARMUP_S)
+            if warm is None or warm.t.size < 3:
+                raise InputError(f"{where}: the IMU delivered no samples in the first "
+                                 f"{LIVE_WARMUP_S:g} s; check imu.odr_hz and the I2C bus")
+            tracker = build(warm)
+            tr = run_tracker(tracker, source.batches(warm, duration_s, LIVE_CHUNK_S))
+            if writer is not None:
+                from gyrocal.calib.segments import Segment
+
+                writer.append_segment(Segment(0, "rest", None, 0, 0.0, 0.0, source.elapsed_s))
+                writer.finish()
+    except (KeyboardInterrupt, TerminatedBySignal) as exc:
+        interrupted = exc
+    finally:
+        jig.close()
+        if writer is not None:
+            writer.close()  # incomplete unless finished above
+    if interrupted is not None:
+        signum = 15 if isinstance(interrupted, TerminatedBySignal) else 2
+        raise InterruptedRun(
+            f"{'terminated' if signum == 15 else 'interrupted'} after "
+            f"{source.elapsed_s:.1f} s of live tracking: servos stopped, torque off; nothing "
+            "was printed", signum)
+    assert tr is not None
+    return tr
+
+
+def live_truth(jig: Any, source: LiveSource, tr: Tracked) -> LiveTruth | None:
+    """The emulated sensor's true bias at each tracked sample (None on a real jig)."""
+    if jig.sim is None:
+        return None
+    st = jig.sim.truth
+    temp = np.concatenate(source.temperatures)[: tr.t.size]
+    coeff = np.asarray(st.bias_temp_coeff_rad_s_per_c, dtype=float)
+    return LiveTruth(np.asarray(st.bias)[None, :]
+                     + coeff[None, :] * (temp[:, None] - st.reference_temperature_c))
+
+
+
+def tracker_notes(tracker: Any) -> list[str]:
+    """What the tracker learnt from the data that the user should know: the bias random walk
+    it estimated (when none was given) and whether the temperature coefficient matters."""
+    out: list[str] = []
+    k = tracker.rate_random_walk_estimate
+    if k is not None:
+        out.append("bias random walk estimated from the innovations: "
+                   + ", ".join(f"{x:.2g}" for x in k) + " rad/s/sqrt(s) (x, y, z; pass "
+                   "--rate-random-walk or --noise to fix it)")
+    c, c_std = tracker.tempco, tracker.tempco_std
+    if c is not None:
+        sig = [name for name, a, b in zip("xyz", c, c_std, strict=True) if abs(a) > 3 * b]
+        out.append("temperature coefficient "
+                   + ", ".join(f"{a:.2g} +- {b:.1g}" for a, b in zip(c, c_std, strict=True))
+                   + " rad/s/degC: "
+                   + (f"it matters on {', '.join(sig)} (beyond 3 sigma)" if sig
+                      else "not distinguishable from zero (--no-tempco would do)"))
+    return out
+
+
+def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tuple[
+        np.ndarray, float | None]:
+    """Which samples the ``--json`` document keeps.
+
+    Parameters
+    ----------
+    t : ndarray (n,)
+        Sample times, s.
+    every_s : float or None
+        One row per ``every_s`` seconds (the last sample of each interval, and the last sample
+        of all); 0 or None: every sample.
+    max_rows : int or None
+        Without ``every_s``, decimate to at most this many rows (None: never).
+
+    Returns
+    -------
+    (rows, every)
+        Indices of the rows kept, and the interval used (None when nothing was dropped).
+    """
+    n = t.size
+    span = float(t[-1] - t[0]) if n else 0.0
+    every = every_s if every_s else None
+    if every is None and max_rows is not None and n > max_rows and span > 0:
+        raw = span / max_rows
+        unit = 10.0 ** (math.floor(math.log10(raw)) - 1)
+        every = math.ceil(raw / unit * (1 + 1e-9)) * unit  # rounded up to two digits
+    if every is None or n < 2:
+        return np.arange(n), None
+    cell = np.floor((t - t[0]) / every).astype(np.int64)
+    last = np.flatnonzero(np.append(cell[1:] != cell[:-1], True))
+    if last.size == n:
+        return np.arange(n), None
+    return last, float(every)
