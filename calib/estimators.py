@@ -1277,13 +1277,11 @@ def fit_full_matrix(
     CalibInputError
         If ``obs`` has no chain and pose, or a servo turned in one direction only.
     """
-    if not isinstance(obs, ObservationSet):
-        raise CalibInputError(f"obs must be an ObservationSet, got {type(obs).__name__}")
+    _validate_common(obs, "full-matrix", 6)
     if obs.chain is None or obs.pose is None:
         raise CalibInputError(
             "full-matrix needs the gimbal chain and each window's pose (a recording whose "
             "manifest lists the servos in chain order, with their encoder angles)")
-    _validate_common(obs, "full-matrix", 6)
     never = [m for m in obs.chain if m not in obs.motors]
     if never:
         raise CalibInputError(
