@@ -67,6 +67,7 @@ __all__ = [
     "fit_paired_axis",
     "iterative_ls_batch",
     "lm_solve",
+    "matrix_in_frame",
     "paired_axis_batch",
 ]
 
@@ -953,6 +954,28 @@ def estimate(obs: ObservationSet, method: str = "paired-axis", **options: Any) -
 FULL_FRAME = "gyro-x-xy"
 
 _TRIL = (np.array([0, 1, 1, 2, 2, 2]), np.array([0, 0, 1, 0, 1, 2]))
+
+
+def matrix_in_frame(sensing: np.ndarray) -> np.ndarray:
+    """``A`` in the frame :data:`FULL_FRAME` of a sensor whose reading is ``m = C g − b``.
+
+    ``C`` (rows: the sensing axes divided by their scales, in any frame) is written ``C = L Q``
+    with ``L`` lower triangular with a positive diagonal and ``Q`` a rotation or reflection (its LQ
+    decomposition); ``A = L⁻¹``. For the emulated sensor, ``C = diag(1/scale) @ misalignment``.
+
+    Raises
+    ------
+    CalibInputError
+        If ``sensing`` is not a finite invertible 3×3 matrix.
+    """
+    C = np.asarray(sensing, dtype=float)
+    if C.shape != (3, 3) or not np.all(np.isfinite(C)):
+        raise CalibInputError(f"sensing must be a finite 3×3 matrix, got shape {C.shape}")
+    _, r = np.linalg.qr(C.T)
+    L = r.T * np.sign(np.diag(r))[None, :]
+    if np.min(np.abs(np.diag(L))) <= 1e-12 * np.max(np.abs(L)):
+        raise CalibInputError("sensing matrix is singular: two sensing axes are parallel")
+    return np.linalg.inv(L)
 
 
 @dataclass(frozen=True, eq=False)
