@@ -31,8 +31,11 @@ __all__ = [
     "PAPER_DESIGN",
     "DesignScore",
     "Plan",
+    "candidate_pose_sets",
+    "full_schedule",
     "paper_plan",
     "plan_protocol",
+    "predict_full_uncertainty",
     "predict_uncertainty",
     "score_design",
     "sphere_points",
@@ -158,6 +161,13 @@ class Plan:
         rad/s (the planner's objective).
     reference_rate : float
         rad/s.
+    poses : tuple of (int, int, float)
+        The full model's posed pairs of turns, after the home-pose turns: ``(turning servo,
+        moved servo, angle)``, servos as chain positions (base = 0), the angle in rad from home.
+        Each pair: move the servo to the angle, turn the other both ways, move it back. Empty
+        for the diagonal model.
+    matrix_std : tuple of 3 tuples of 3 float, or None
+        Predicted one-sigma uncertainty of the full model's matrix (None for the diagonal one).
     """
 
     speed: float
@@ -169,6 +179,13 @@ class Plan:
     bias_std: tuple[float, float, float]
     rate_error_std: float
     reference_rate: float
+    poses: tuple[tuple[int, int, float], ...] = ()
+    matrix_std: tuple[tuple[float, ...], ...] | None = None
+
+    @property
+    def model(self) -> str:
+        """``"full"`` when the plan has posed turns, else ``"diagonal"``."""
+        return "full" if self.poses else "diagonal"
 
     @property
     def speed_dps(self) -> float:
@@ -178,11 +195,48 @@ class Plan:
 
 def jig_time(
     speed: float, turns: int, rest_s: float, accel: float, settle_s: float = 0.1,
-    n_servos: int = 3,
+    n_servos: int = 3, move_angles: tuple[float, ...] = (),
 ) -> float:
-    """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests."""
+    """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests, and
+    for each posed pair (its move angle in ``move_angles``) two turns, three rests and two moves
+    (there and back) at ``speed``."""
     turn = profile_duration(2 * np.pi * turns, speed, accel) + settle_s
-    return 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
+    home = 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
+    posed = sum(2 * turn + 3 * rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
+                for a in move_angles)
+    return home + posed
+
+
+def full_schedule(
+    poses: tuple[tuple[int, int, float], ...], n_servos: int = 3
+) -> list[tuple[int, np.ndarray, int]]:
+    """The turns of a full-model protocol in the order :func:`gyrocal.kit.protocol.build_steps`
+    runs them: ``(turning servo's chain position, every servo's angle from home (S,), direction)``;
+    first each servo −, + at home, then each posed pair −, +."""
+    out = []
+    for s in range(n_servos):
+        for d in (-1, 1):
+            out.append((s, np.zeros(n_servos), d))
+    for turn, moved, angle in poses:
+        pose = np.zeros(n_servos)
+        pose[moved] = angle
+        for d in (-1, 1):
+            out.append((turn, pose, d))
+    return out
+
+
+def candidate_pose_sets(n_servos: int = 3) -> list[tuple[tuple[int, int, float], ...]]:
+    """Posed pairs the planner considers: two of (middle with inner at θ, base with middle at θ,
+    base with inner at θ) for θ = 45° or 90°, and all three at 90° (hardware_docs/method.md §9:
+    any two make the twelve terms observable on a square gimbal). Needs three servos."""
+    if n_servos != 3:
+        raise CalibInputError(f"the full-model planner needs a three-servo chain, got {n_servos}")
+    sets = []
+    for a in (np.pi / 4, np.pi / 2):
+        pairs = [(1, 2, a), (0, 1, a), (0, 2, a)]
+        sets += [(pairs[i], pairs[j]) for i, j in ((0, 1), (0, 2), (1, 2))]
+    sets.append(((1, 2, np.pi / 2), (0, 1, np.pi / 2), (0, 2, np.pi / 2)))
+    return sets  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -307,6 +361,101 @@ def predict_uncertainty(
     return scale_std, bias_std, float(np.sqrt(var.max()))
 
 
+def predict_full_uncertainty(
+    candidates: list[tuple[float, int, float]],
+    poses: tuple[tuple[int, int, float], ...],
+    *,
+    noise_std: float,
+    odr_hz: float,
+    accel: float = 10.0,
+    reference_rate: float = 1.0,
+    axes: np.ndarray | None = None,
+    rest_guard_s: float = 0.2,
+    encoder_ticks: int = 4096,
+    jitter_s: float = 1e-3,
+    sample_hz: float = 200.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Predicted full-matrix uncertainties of protocols at nominal truth (A = I, b = 0).
+
+    The windows are modelled as in :func:`predict_uncertainty` (:func:`_turn_window`); the turns
+    follow :func:`full_schedule`, each servo's turns sharing their still angles in sequence, and
+    the fit is :func:`gyrocal.calib.estimators.full_matrix_batch` on noise-free observations of a
+    gimbal with the nominal ``axes`` (chain order; default x, y, z), all candidates at once.
+
+    Parameters
+    ----------
+    candidates : list of (speed, turns, rest_s)
+        The protocols to score.
+    poses : tuple of (int, int, float)
+        Their posed pairs (:attr:`Plan.poses`).
+
+    Returns
+    -------
+    matrix_std : ndarray, shape (B, 3, 3)
+    bias_std : ndarray, shape (B, 3)
+    rate_error_std : ndarray, shape (B,)
+        Worst-direction standard deviation of ``A (m + b)`` at ``reference_rate`` (the
+        G-criterion for the calibrated output, as in :func:`predict_uncertainty`).
+    """
+    from gyrocal.calib.estimators import full_matrix_batch
+    from gyrocal.calib.kinematics import chain_axes
+
+    ax = np.eye(3) if axes is None else np.asarray(axes, dtype=float)
+    S = ax.shape[0]
+    sched = full_schedule(poses, S)
+    n = len(sched)
+    midx = np.array([t[0] for t in sched])
+    pose = np.array([t[1] for t in sched])
+    direction = np.array([t[2] for t in sched], dtype=float)
+    u = chain_axes(ax, np.zeros(S), pose)[np.arange(n), midx]
+    q = 2 * np.pi / encoder_ticks
+    B = len(candidates)
+    rate = np.zeros((B, n))
+    mean_std = np.zeros((B, n, 3))
+    rate_std = np.zeros((B, n))
+    n_still = n + S
+    G = np.zeros((B, n, n_still))
+    n_rest = 2 * S + 1 + 3 * len(poses)
+    rest_std = np.zeros((B, n_rest, 3))
+    # Still angles: one before each servo's first turn (0..S-1), then one after every turn.
+    still_of = {int(s): k for k, s in enumerate(dict.fromkeys(midx.tolist()))}
+    for c, (speed, turns, rest_s) in enumerate(candidates):
+        win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
+                           jitter_s, sample_hz)
+        rate[c] = win.rate * direction
+        mean_std[c] = noise_std / np.sqrt(win.n_eff)
+        margin = 0.0
+        if win.rest_to_rest:
+            rate_std[c] = 1e-12
+            cur = dict(still_of)
+            k = len(still_of)
+            for i, s in enumerate(midx):
+                G[c, i, cur[s]] = -1 / win.wint
+                G[c, i, k] = 1 / win.wint
+                cur[s] = k
+                k += 1
+            margin = 0.15
+        else:
+            rate_std[c] = max(win.ramp_rate_std, 1e-12)
+        m_rest = max(int((rest_s - 2 * max(rest_guard_s, margin)) * odr_hz), 1)
+        rest_std[c] = noise_std / np.sqrt(m_rest)
+    mean = rate[..., None] * u[None]
+    rest_mean = np.zeros_like(rest_std)
+    ref = {"ref_matrix": G, "still_std": q / np.sqrt(12)} if np.any(G) else {}
+    res = full_matrix_batch(mean, rate, midx, pose, mean_std, rate_std, rest_mean, rest_std,
+                            n_servos=S, reference=np.zeros(S), **ref)  # type: ignore[arg-type]
+    cov = res.covariance
+    U = sphere_points(400) * reference_rate
+    grad = np.zeros((U.shape[0], 3, 12))
+    for i in range(3):
+        grad[:, i, 3 * i : 3 * i + 3] = U
+        grad[:, i, 9 + i] = 1.0
+    var = np.einsum("nip,bpq,niq->bn", grad, cov, grad)
+    matrix_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, :9], 0, None))
+    bias_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, 9:], 0, None))
+    return matrix_std.reshape(B, 3, 3), bias_std, np.sqrt(var.max(axis=1))
+
+
 def plan_protocol(
     *,
     servo_max_speed: float,
@@ -318,8 +467,16 @@ def plan_protocol(
     reference_rate: float = 1.0,
     min_rest_s: float = 0.6,
     max_scale_error: float = 1.25,
+    model: str = "diagonal",
+    axes: np.ndarray | None = None,
 ) -> Plan:
-    """Choose speed, turns and rest length for the paired-axis estimator within a time budget.
+    """Choose speed, turns and rest length (and, for the full model, poses) within a time budget.
+
+    For ``model="diagonal"`` the paired-axis estimator's six parameters are scored
+    (:func:`predict_uncertainty`); for ``model="full"`` the full-matrix estimator's twelve
+    (:func:`predict_full_uncertainty`), over the pose sets of :func:`candidate_pose_sets`, with
+    the moves' time counted (:func:`jig_time`). Either way the plan minimises the worst-direction
+    standard deviation of a calibrated rate at ``reference_rate``.
 
     Parameters
     ----------
@@ -344,6 +501,11 @@ def plan_protocol(
         Shortest rest (settling plus a bias measurement).
     max_scale_error : float
         Largest ``1/k`` to allow for when avoiding saturation.
+    model : str
+        ``"diagonal"`` (the paper's model) or ``"full"`` (g = A (m + b); three servos).
+    axes : ndarray, shape (3, 3), optional
+        Full model: the servos' nominal axes in the sensor frame, chain order, for planning only
+        (default x, y, z); the estimate never uses them.
 
     Returns
     -------
@@ -359,10 +521,20 @@ def plan_protocol(
                     ("odr_hz", odr_hz), ("accel", accel), ("reference_rate", reference_rate)):
         if not (v > 0 and np.isfinite(v)):
             raise CalibInputError(f"{name} must be a positive number, got {v!r}")
+    if model not in ("diagonal", "full"):
+        raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
+    if model == "full":
+        best = _plan_full(top, time_budget_s, noise_std, odr_hz, accel, reference_rate,
+                          min_rest_s, axes)
+        if best is None:
+            raise CalibInputError(
+                f"no full-model protocol fits {time_budget_s:g} s with speeds up to "
+                f"{top:.2f} rad/s; raise the time budget")
+        return best
     speeds = np.unique(np.concatenate([np.linspace(0.5, top, 12), [top]]))
     speeds = speeds[speeds <= top]
-    best: Plan | None = None
+    best = None
     for speed in speeds:
         for turns in range(1, 9):
             for rest in (min_rest_s, 1.0, 1.5, 2.0, 3.0):
@@ -385,6 +557,39 @@ def plan_protocol(
         raise CalibInputError(
             f"no protocol fits {time_budget_s:g} s with speeds up to {top:.2f} rad/s; "
             "raise the time budget"
+        )
+    return best
+
+
+def _plan_full(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float, axes: np.ndarray | None,
+) -> Plan | None:
+    """The best full-model plan over pose sets × speeds × turns × rests within ``budget``."""
+    speeds = np.unique(np.concatenate([np.linspace(min(1.0, top), top, 6), [top]]))
+    best: Plan | None = None
+    for poses in candidate_pose_sets(3):
+        angles = tuple(abs(p[2]) for p in poses)
+        cands = [
+            (float(sp), t, float(r)) for sp in speeds for t in (1, 2, 3)
+            for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s
+            and jig_time(sp, t, r, accel, move_angles=angles) <= budget
+        ]
+        if not cands:
+            continue
+        ms, bs, err = predict_full_uncertainty(
+            cands, poses, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
+            reference_rate=reference_rate, axes=axes)
+        i = int(np.argmin(err))
+        if best is not None and not err[i] < best.rate_error_std * (1 - 1e-9):
+            continue
+        sp, t, r = cands[i]
+        best = Plan(
+            sp, t, r, float(accel), float(jig_time(sp, t, r, accel, move_angles=angles)),
+            tuple(float(x) for x in np.diag(ms[i])), tuple(float(x) for x in bs[i]),  # type: ignore[arg-type]
+            float(err[i]), float(reference_rate),
+            poses=tuple((int(a), int(b), float(c)) for a, b, c in poses),
+            matrix_std=tuple(tuple(float(x) for x in row) for row in ms[i]),
         )
     return best
 

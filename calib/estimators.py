@@ -1082,8 +1082,10 @@ def full_matrix_batch(
         Turning servo of each window as its position in the chain (base = 0).
     pose : ndarray, shape (n, S) or (B, n, S)
         Every servo's encoder angle over each window, chain order, rad.
-    mean_std, rate_std, rest_mean, rest_std, ref_matrix, still_std, max_iter :
+    mean_std, rate_std, rest_mean, rest_std, still_std, max_iter :
         As in :func:`paired_axis_batch`.
+    ref_matrix : ndarray, shape (n, A) or (B, n, A), optional
+        As in :func:`paired_axis_batch`, shared by every run or one per run.
     n_servos : int, optional
         Servos in the chain (default: ``pose.shape[-1]``).
     reference : ndarray, shape (S,), optional
@@ -1103,7 +1105,8 @@ def full_matrix_batch(
     ref = pose.reshape(-1, n, S)[0, 0] if reference is None else np.asarray(reference, float)
     delta = np.broadcast_to(pose - ref, (B, n, S))
     G = np.zeros((n, 0)) if ref_matrix is None else np.asarray(ref_matrix, dtype=float)
-    n_still = G.shape[1]
+    G = np.broadcast_to(G, (B,) + G.shape[-2:])  # one per run, or shared
+    n_still = G.shape[-1]
     if n_still and not still_std > 0:
         raise CalibInputError("still_std must be positive when ref_matrix has still angles")
     P = 9 + 2 * S + n_still
@@ -1122,7 +1125,7 @@ def full_matrix_batch(
         C = _tril(c)
         ui = axes_in_windows(u)
         ci = np.einsum("bpq,bnq->bnp", C, ui)
-        w = (rate - z @ G.T)[:, :, None]
+        w = (rate - np.einsum("bna,ba->bn", G, z))[:, :, None]
         e = mean - (w * ci - b[:, None, :])
         cov = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
         L = np.linalg.cholesky(cov)
@@ -1147,7 +1150,7 @@ def full_matrix_batch(
                 du = (axes_in_windows(dp) - axes_in_windows(dm)) / (2 * h)
                 J[:, :, :, 9 + 2 * s + t_i] = -w * np.einsum("bpq,bnq->bnp", C, du)
         if n_still:
-            J[:, :, :, 9 + 2 * S :] = ci[..., None] * G[None, :, None, :]
+            J[:, :, :, 9 + 2 * S :] = ci[..., None] * G[:, :, None, :]
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
         Jr = np.zeros((B, r, 3, P))
         Jr[:, :, np.arange(3), 6 + np.arange(3)] = 1.0 / rest_std

@@ -105,7 +105,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "protocol": {
         "name": Key("auto", "auto: planned for this servo and gyro; paper: 60 deg/s, one turn, "
                     "3 s waits", str, PROTOCOLS),
-        "time_budget_s": Key(30.0, "longest jig time the planner may use, s", (int, float),
+        "time_budget_s": Key(45.0, "longest jig time the planner may use, s", (int, float),
                              check=_positive),
         "speed_dps": Key(0.0, "fixed turn speed, deg/s (0: planned)", (int, float)),
         "turns": Key(0, "fixed whole turns per direction (0: planned)", int),

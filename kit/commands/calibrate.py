@@ -193,6 +193,16 @@ def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | N
     return float(np.median(diff_noise(x)))
 
 
+def _nominal_axes(names: list[str]) -> Any:
+    """Unit vectors of the configured signed sensor axes (``"x"``, ``"-z"``, ...)."""
+    import numpy as np
+
+    out = np.zeros((len(names), 3))
+    for i, name in enumerate(names):
+        out[i, "xyz".index(name[-1])] = -1.0 if name.startswith("-") else 1.0
+    return out
+
+
 def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:
     """The protocol: planned for this servo and gyro (and its measured noise), or the paper's;
     fixed values override."""
@@ -207,9 +217,14 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
     else:
+        # Three servos: plan the full model's posed turns (hardware_docs/method.md §9), with the
+        # configured axes as the nominal gimbal for planning only.
+        full = len(cfg["gimbal"]["ids"]) == 3
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
                              time_budget_s=p["time_budget_s"], odr_hz=imu.odr_hz, accel=accel,
+                             model="full" if full else "diagonal",
+                             axes=_nominal_axes(cfg["gimbal"]["axes"]) if full else None,
                              **noise)
     fixed = {}
     if p["speed_dps"] > 0:
@@ -220,7 +235,9 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
         fixed["rest_s"] = float(p["rest_s"])
     if fixed:
         plan = replace(plan, **fixed)
-        plan = replace(plan, jig_time_s=jig_time(plan.speed, plan.turns, plan.rest_s, accel))
+        plan = replace(plan, jig_time_s=jig_time(
+            plan.speed, plan.turns, plan.rest_s, accel,
+            move_angles=tuple(abs(a) for _, _, a in plan.poses)))
     if plan.speed > gimbal.top_speed:
         raise InputError(
             f"protocol speed {math.degrees(plan.speed):.0f}°/s exceeds the servos' top speed "
@@ -266,8 +283,12 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
             gimbal_info = {"motors": [
                 {"id": sid, "model": jig.gimbal.infos[sid].model_name,
                  "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
-            protocol = {"name": cfg["protocol"]["name"], "speed": plan.speed,
-                        "turns": plan.turns, "rest_s": plan.rest_s, "acceleration": plan.accel,
+            ids = cfg["gimbal"]["ids"]
+            protocol = {"name": cfg["protocol"]["name"], "model": plan.model,
+                        "speed": plan.speed, "turns": plan.turns, "rest_s": plan.rest_s,
+                        "poses": [{"turn": ids[t], "moved": ids[m], "angle_rad": a}
+                                  for t, m, a in plan.poses],
+                        "acceleration": plan.accel,
                         "planned_jig_time_s": plan.jig_time_s,
                         "planning_noise_std": noise_std,
                         "sample_hz": cfg["gimbal"]["sample_hz"]}
@@ -280,8 +301,9 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
             if not quiet:
                 progress.event(
                     f"protocol {cfg['protocol']['name']}: {plan.turns} turn(s) each way at "
-                    f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, about "
-                    f"{plan.jig_time_s:.0f} s of jig time"
+                    f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, "
+                    + (f"{len(plan.poses)} posed pairs for the full matrix, " if plan.poses
+                       else "") + f"about {plan.jig_time_s:.0f} s of jig time"
                     + (" (emulated jig)" if jig.sim is not None else ""))
             with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
                                  truth=truth, force=args.force) as writer:
