@@ -378,7 +378,9 @@ def predict_full_uncertainty(
     """Predicted full-matrix uncertainties of protocols at nominal truth (A = I, b = 0).
 
     The windows are modelled as in :func:`predict_uncertainty` (:func:`_turn_window`); the turns
-    follow :func:`full_schedule`, each servo's turns sharing their still angles in sequence, and
+    follow :func:`full_schedule`; every still period of every servo is one unknown reading error
+    (``q/√12``) shared by the references that rest on it and the poses it holds (a servo holds
+    anywhere within its tick, which tilts the axes outside it), as the estimator models it; and
     the fit is :func:`gyrocal.calib.estimators.full_matrix_batch` on noise-free observations of a
     gimbal with the nominal ``axes`` (chain order; default x, y, z), all candidates at once.
 
@@ -413,12 +415,29 @@ def predict_full_uncertainty(
     rate = np.zeros((B, n))
     mean_std = np.zeros((B, n, 3))
     rate_std = np.zeros((B, n))
-    n_still = n + S
+    # Still angles, numbered as gyrocal.calib.windows does: one per still period of each servo
+    # (a turn or a move of that servo ends it). A turn's rest-to-rest reference rests on its
+    # servo's periods before and after; every other servo's period carries its pose.
+    period = dict.fromkeys(range(S), 0)
+    ids: dict[tuple[int, int], int] = {}
+    before, after = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    pose_still = np.full((n, S), -1, dtype=np.int64)
+    moves_at = {2 * S + 2 * j: m for j, (_, m, _) in enumerate(poses)}  # moved before turn i
+    for i, sv in enumerate(midx):
+        if i in moves_at:
+            period[moves_at[i]] += 1
+        for k in range(S):
+            pose_still[i, k] = ids.setdefault((k, period[k]), len(ids))
+        before[i] = pose_still[i, sv]
+        pose_still[i, sv] = -1
+        period[sv] += 1
+        after[i] = ids.setdefault((sv, period[sv]), len(ids))
+        if i - 2 * S >= 0 and (i - 2 * S) % 2 == 1:  # the move back after a posed pair
+            period[poses[(i - 2 * S) // 2][1]] += 1
+    n_still = len(ids)
     G = np.zeros((B, n, n_still))
     n_rest = 2 * S + 1 + 3 * len(poses)
     rest_std = np.zeros((B, n_rest, 3))
-    # Still angles: one before each servo's first turn (0..S-1), then one after every turn.
-    still_of = {int(s): k for k, s in enumerate(dict.fromkeys(midx.tolist()))}
     for c, (speed, turns, rest_s) in enumerate(candidates):
         win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
                            jitter_s, sample_hz)
@@ -427,13 +446,8 @@ def predict_full_uncertainty(
         margin = 0.0
         if win.rest_to_rest:
             rate_std[c] = 1e-12
-            cur = dict(still_of)
-            k = len(still_of)
-            for i, s in enumerate(midx):
-                G[c, i, cur[s]] = -1 / win.wint
-                G[c, i, k] = 1 / win.wint
-                cur[s] = k
-                k += 1
+            G[c, np.arange(n), before] = -1 / win.wint
+            G[c, np.arange(n), after] = 1 / win.wint
             margin = 0.15
         else:
             rate_std[c] = max(win.ramp_rate_std, 1e-12)
@@ -441,9 +455,9 @@ def predict_full_uncertainty(
         rest_std[c] = noise_std / np.sqrt(m_rest)
     mean = rate[..., None] * u[None]
     rest_mean = np.zeros_like(rest_std)
-    ref = {"ref_matrix": G, "still_std": q / np.sqrt(12)} if np.any(G) else {}
     res = full_matrix_batch(mean, rate, midx, pose, mean_std, rate_std, rest_mean, rest_std,
-                            n_servos=S, reference=np.zeros(S), **ref)  # type: ignore[arg-type]
+                            n_servos=S, reference=np.zeros(S), ref_matrix=G,
+                            still_std=q / np.sqrt(12), pose_still=pose_still)
     cov = res.covariance
     U = sphere_points(400) * reference_rate
     grad = np.zeros((U.shape[0], 3, 12))

@@ -1067,6 +1067,7 @@ def full_matrix_batch(
     reference: np.ndarray | None = None,
     ref_matrix: np.ndarray | None = None,
     still_std: float = 0.0,
+    pose_still: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-12,
 ) -> FullMatrixBatch:
@@ -1085,7 +1086,12 @@ def full_matrix_batch(
     mean_std, rate_std, rest_mean, rest_std, still_std, max_iter :
         As in :func:`paired_axis_batch`.
     ref_matrix : ndarray, shape (n, A) or (B, n, A), optional
-        As in :func:`paired_axis_batch`, shared by every run or one per run.
+        As in :func:`paired_axis_batch`, shared by every run or one per run; its ``A`` columns
+        are every still angle, those the poses rest on included.
+    pose_still : ndarray of int, shape (n, S), optional
+        The still angle (column of ``ref_matrix``) each held servo's pose rests on, -1 where the
+        pose is exact (:attr:`ObservationSet.pose_still`): its reading error is the same shared
+        unknown, so a servo's sub-tick hold error tilts every axis outside it consistently.
     n_servos : int, optional
         Servos in the chain (default: ``pose.shape[-1]``).
     reference : ndarray, shape (S,), optional
@@ -1117,13 +1123,26 @@ def full_matrix_batch(
     eye3 = np.eye(3)
     ar = np.arange(n)
     h = 1e-6
+    ps = np.full((n, S), -1, dtype=np.int64) if pose_still is None else np.asarray(pose_still)
+    held = ps >= 0
+    if np.any(held) and not (still_std > 0 and ps.max() < n_still):
+        raise CalibInputError("pose_still needs still_std > 0 and indices below ref_matrix's "
+                              "column count")
 
-    def axes_in_windows(u: np.ndarray) -> np.ndarray:
-        return kinematics.chain_axes(u[:, None], 0.0, delta)[:, ar, midx]  # (B, n, 3)
+    def true_delta(z: np.ndarray) -> np.ndarray:
+        """The poses less their still angles' reading errors (reading − true)."""
+        if not np.any(held):
+            return delta
+        zp = np.where(held, z[:, np.where(held, ps, 0)], 0.0)  # (B, n, S)
+        return delta - zp
+
+    def axes_in_windows(u: np.ndarray, d: np.ndarray) -> np.ndarray:
+        return kinematics.chain_axes(u[:, None], 0.0, d)[:, ar, midx]  # (B, n, 3)
 
     def evaluate(c, b, u, z, with_jac):
         C = _tril(c)
-        ui = axes_in_windows(u)
+        d = true_delta(z)
+        ui = axes_in_windows(u, d)
         ci = np.einsum("bpq,bnq->bnp", C, ui)
         w = (rate - np.einsum("bna,ba->bn", G, z))[:, :, None]
         e = mean - (w * ci - b[:, None, :])
@@ -1147,10 +1166,17 @@ def full_matrix_batch(
                 dm[:, s] -= h * t[:, s]
                 dp[:, s] /= np.linalg.norm(dp[:, s], axis=1, keepdims=True)
                 dm[:, s] /= np.linalg.norm(dm[:, s], axis=1, keepdims=True)
-                du = (axes_in_windows(dp) - axes_in_windows(dm)) / (2 * h)
+                du = (axes_in_windows(dp, d) - axes_in_windows(dm, d)) / (2 * h)
                 J[:, :, :, 9 + 2 * s + t_i] = -w * np.einsum("bpq,bnq->bnp", C, du)
         if n_still:
             J[:, :, :, 9 + 2 * S :] = ci[..., None] * G[:, :, None, :]
+        for k in np.flatnonzero(held.any(axis=0)):  # held poses: d e / d z = w C dU/dΔ_k
+            step = np.zeros(S)
+            step[k] = h
+            dU = (axes_in_windows(u, d + step) - axes_in_windows(u, d - step)) / (2 * h)
+            contrib = w * np.einsum("bpq,bnq->bnp", C, dU)  # (B, n, 3)
+            for i in np.flatnonzero(held[:, k]):
+                J[:, i, :, 9 + 2 * S + ps[i, k]] += contrib[:, i]
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
         Jr = np.zeros((B, r, 3, P))
         Jr[:, :, np.arange(3), 6 + np.arange(3)] = 1.0 / rest_std
@@ -1318,7 +1344,7 @@ def fit_full_matrix(
         obs.mean[None], obs.rate[None], obs.motor_index, obs.pose, obs.mean_std[None],
         obs.rate_std[None], obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
         n_servos=len(obs.chain), ref_matrix=obs.reference_matrix(),
-        still_std=obs.still_angle_std, max_iter=max_iter,
+        still_std=obs.still_angle_std, pose_still=obs.pose_still, max_iter=max_iter,
     )
     A, b, cov = res.matrix[0], res.bias[0], res.covariance[0]
     it = int(res.iterations[0])

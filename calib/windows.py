@@ -300,6 +300,15 @@ class EncoderTracks:
                for key in ((motor, first), (motor, last + 1))]  # gap before span i is gap i
         return ids[0], ids[1]
 
+    def still_index(self, motor: int, a: float, b: float) -> int:
+        """Index of the still period of ``motor`` that holds over ``[a, b]`` (the numbering of
+        :meth:`still_angles`); -1 if the servo moves within it."""
+        spans = self.motion[motor]
+        gap = sum(1 for sp in spans if sp[1] < a)
+        if gap < len(spans) and spans[gap][0] <= b:
+            return -1
+        return self._still_ids.setdefault((motor, gap), len(self._still_ids))
+
     def still_all(self, a: float, b: float) -> bool:
         """Whether every servo holds within four ticks over ``[a, b]``."""
         for t, th in self.track.values():
@@ -320,15 +329,16 @@ class EncoderTracks:
                     next_move = min(next_move, m_lo)
         return t0 - last_move, next_move - t1
 
-    def pose(self, chain: Sequence[int], a: float, b: float) -> np.ndarray:
-        """Mean angle of each servo of ``chain`` over ``[a, b]``, rad (chain order).
+    def pose(self, chain: Sequence[int], a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+        """Mean angle of each servo of ``chain`` over ``[a, b]``, rad (chain order), and the
+        index of the still period each holds (:meth:`still_index`; -1 for one that moves).
 
         Raises
         ------
         CalibInputError
             If a servo of the chain has no encoder readings.
         """
-        out = []
+        out, still = [], []
         for m in chain:
             if m not in self.track:
                 raise CalibInputError(
@@ -336,7 +346,8 @@ class EncoderTracks:
                     "carries the axes of the servos outside it")
             t, th = self.track[m]
             out.append(_ramp_mean(t, th, a, b))
-        return np.array(out)
+            still.append(self.still_index(m, a, b))
+        return np.array(out), np.array(still, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -606,7 +617,7 @@ def _assemble(
     turns: Sequence[_Turn], noise: np.ndarray, mean_std: np.ndarray,
     rest_windows: Sequence[Window], rest_samples: Sequence[np.ndarray], tau: np.ndarray,
     temp: np.ndarray | None, q: float, chain: tuple[int, ...] | None,
-    pose: np.ndarray | None,
+    pose: np.ndarray | None, pose_still: np.ndarray | None,
 ) -> ObservationSet:
     """Stage 6: the observation set (rests with the correlation factor, shared still angles
     renumbered, the chain and poses when asked for)."""
@@ -624,15 +635,22 @@ def _assemble(
         t_mean = float(np.nanmean(temp))
     refs = [w.ref for w in turns]
     ref_kw: dict[str, object] = {}
+    # Still angles used by a reference or a pose, renumbered 0.. (one unknown each).
+    used = {i for r in refs for i in r[:2] if i >= 0}
+    if pose_still is not None:
+        used |= {int(i) for i in pose_still.ravel() if i >= 0}
+    renumber = {old: new for new, old in enumerate(sorted(used))}
     if any(r[0] >= 0 for r in refs):
-        used = sorted({i for r in refs for i in r[:2] if i >= 0})
-        renumber = {old: new for new, old in enumerate(used)}
         ref_kw = dict(
             ref_start=np.array([renumber.get(r[0], -1) for r in refs]),
             ref_end=np.array([renumber.get(r[1], -1) for r in refs]),
             ref_gain=np.array([r[2] for r in refs]),
-            still_angle_std=q / np.sqrt(12.0),
         )
+    if used:
+        ref_kw["still_angle_std"] = q / np.sqrt(12.0)
+    if pose_still is not None:
+        pose_still = np.vectorize(lambda i: renumber.get(int(i), -1), otypes=[np.int64])(
+            pose_still)
     return ObservationSet(
         mean=np.array([w.mean for w in turns]),
         rate=np.array([w.rate for w in turns]),
@@ -645,6 +663,7 @@ def _assemble(
         temperature_c=t_mean,
         chain=chain,
         pose=pose,
+        pose_still=pose_still,
         **rest_kw,  # type: ignore[arg-type]
         **ref_kw,  # type: ignore[arg-type]
     )
@@ -755,13 +774,16 @@ def extract_observations(
     if not turns:
         raise CalibInputError("no rotation windows: the recording has no usable turns")
     noise, mean_std = _turning_axis_noise(turns, rest_samples)
-    pose = None
+    pose = pose_still = None
     chain_t = None if chain is None else tuple(int(c) for c in chain)
     if chain_t is not None:
-        pose = np.array([tracks.pose(chain_t, w.window.corners[0], w.window.corners[3])
-                         for w in turns])
+        got = [tracks.pose(chain_t, w.window.corners[0], w.window.corners[3]) for w in turns]
+        pose = np.array([g[0] for g in got])
+        pose_still = np.array([g[1] for g in got])
+        for i, w in enumerate(turns):  # the turning servo's own angle does not carry its axis
+            pose_still[i, chain_t.index(int(w.window.motor))] = -1  # type: ignore[arg-type]
     obs = _assemble(turns, noise, mean_std, rest_windows, rest_samples, tau, temp, q, chain_t,
-                    pose)
+                    pose, pose_still)
     return ExtractedWindows(
         observations=obs,
         windows=tuple(w.window for w in turns),
