@@ -33,9 +33,11 @@ __all__ = [
     "Plan",
     "candidate_pose_sets",
     "full_schedule",
+    "general_motion_rms",
     "paper_plan",
     "plan_protocol",
     "predict_full_uncertainty",
+    "predicted_general_motion_rms",
     "predict_uncertainty",
     "score_design",
     "sphere_points",
@@ -468,6 +470,35 @@ def predict_full_uncertainty(
     matrix_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, :9], 0, None))
     bias_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, 9:], 0, None))
     return matrix_std.reshape(B, 3, 3), bias_std, np.sqrt(var.max(axis=1))
+
+
+def general_motion_rms(matrix: np.ndarray, bias: np.ndarray, sensing: np.ndarray,
+                       true_bias: np.ndarray, rate: float = 1.0) -> float:
+    """RMS error of a calibrated rate over all directions at ``rate``, per rad/s, that no choice
+    of output frame removes.
+
+    With the sensor reading ``m = C ω − b`` and the calibration ``ĝ = M (m + b̂)``, the error is
+    ``(M C − R) ω + M (b̂ − b)`` for the output frame ``R`` (a rotation); over directions
+    uniform on the sphere ``E|Eω|² = rate² ‖E‖²_F / 3`` and the bias term adds
+    ``|M (b̂ − b)|²``. ``R`` is the rotation nearest ``M C`` (its polar factor), so a correct
+    calibration in any frame scores its own error only. The paper's diagonal model is
+    ``M = diag(scale)``.
+    """
+    MC = np.asarray(matrix, float) @ np.asarray(sensing, float)
+    U, _, Vt = np.linalg.svd(MC)
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    db = np.asarray(matrix, float) @ (np.asarray(bias, float) - np.asarray(true_bias, float))
+    ms = np.sum((MC - R) ** 2) / 3.0 + float(db @ db) / rate**2
+    return float(np.sqrt(ms))
+
+
+def predicted_general_motion_rms(covariance: np.ndarray, rate: float = 1.0) -> float:
+    """The RMS :func:`general_motion_rms` a calibration's own covariance predicts (at nominal
+    ``C ≈ I``): ``sqrt(tr Cov(A)/3 + tr Cov(b)/rate²)``; a 6×6 covariance is the diagonal
+    model's (scale, bias), a 12×12 the full one's (matrix row-major, bias)."""
+    c = np.diag(np.asarray(covariance, dtype=float))
+    n = 3 if c.size == 6 else 9
+    return float(np.sqrt(c[:n].sum() / 3.0 + c[n:].sum() / rate**2))
 
 
 def plan_protocol(
