@@ -28,6 +28,7 @@ from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
+    "FULL_TIME_BUDGET_S",
     "PAPER_DESIGN",
     "DesignScore",
     "Plan",
@@ -207,6 +208,11 @@ def jig_time(
     posed = sum(2 * turn + 3 * rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
                 for a in move_angles)
     return home + posed
+
+
+#: Shortest time budget the full-model protocol is planned within, s (issue 10's target: the
+#: twelve parameters in at most 45 s of jig time).
+FULL_TIME_BUDGET_S = 45.0
 
 
 def full_schedule(

@@ -1299,8 +1299,9 @@ def fit_full_matrix(
     gimbal square). The global rotation of the sensor frame is not observable; it is fixed by
     :data:`FULL_FRAME` (``C`` and hence ``A`` lower triangular, positive diagonal). Residuals are
     whitened by each window's covariance ``diag(σ²_ij) + σ²_{ω,i} (C u)(C u)ᵀ``, each still
-    encoder angle a reference rests on is a shared unknown with its quantisation as prior (as in
-    :func:`fit_paired_axis`), and the sum of squares is minimised by Levenberg-Marquardt.
+    encoder angle a reference rests on or a held servo's pose reads (``obs.pose_still``) is a
+    shared unknown with its quantisation as prior (as in :func:`fit_paired_axis`), and the sum of
+    squares is minimised by Levenberg-Marquardt.
     Covariance ``(J̃ᵀJ̃)⁻¹`` propagated to ``A`` by ``dA = −A dC A``; consistency
     ``Σẽ² ~ χ²(3n + 3r − 9 − 2S)``.
 

@@ -34,8 +34,9 @@ __all__ = [
 #: :data:`gyrocal.calib.estimators.METHODS` (kept here so the command line does not import scipy
 #: to show its help).
 METHODS = ("auto", "paired-axis", "iterative-ls", "levenberg-marquardt", "full-matrix")
-#: The protocols: planned for the jig, or the paper's.
-PROTOCOLS = ("auto", "paper")
+#: The protocols: planned for the jig (the paper's diagonal model), planned with poses for the
+#: full matrix (hardware_docs/method.md §9), or the paper's.
+PROTOCOLS = ("auto", "full", "paper")
 
 
 @dataclass(frozen=True)
@@ -103,9 +104,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "odr_hz": Key(200.0, "gyro output data rate, Hz", (int, float), check=_positive),
     },
     "protocol": {
-        "name": Key("auto", "auto: planned for this servo and gyro; paper: 60 deg/s, one turn, "
-                    "3 s waits", str, PROTOCOLS),
-        "time_budget_s": Key(45.0, "longest jig time the planner may use, s", (int, float),
+        "name": Key("auto", "auto: planned for this servo and gyro; full: planned with poses "
+                    "for the full matrix (three servos, at least 45 s); paper: 60 deg/s, one "
+                    "turn, 3 s waits", str, PROTOCOLS),
+        "time_budget_s": Key(30.0, "longest jig time the planner may use, s", (int, float),
                              check=_positive),
         "speed_dps": Key(0.0, "fixed turn speed, deg/s (0: planned)", (int, float)),
         "turns": Key(0, "fixed whole turns per direction (0: planned)", int),

@@ -53,9 +53,9 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
-    p.add_argument("--sim-cross-axis", type=float, default=0.02, metavar="FRACTION",
+    p.add_argument("--sim-cross-axis", type=float, default=0.0, metavar="FRACTION",
                    help="largest cross-axis term of the emulated sensor, drawn by seed (default "
-                        "0.02, the MPU-9250 datasheet's ±2 %%; 0 = the paper's sensor)")
+                        "0 = the paper's sensor; 0.02 is the MPU-9250 datasheet's ±2 %%)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -208,7 +208,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     fixed values override."""
     from dataclasses import replace
 
-    from gyrocal.calib.design import jig_time, paper_plan, plan_protocol
+    from gyrocal.calib.design import FULL_TIME_BUDGET_S, jig_time, paper_plan, plan_protocol
     from gyrocal.kit.errors import InputError
 
     p = cfg["protocol"]
@@ -217,12 +217,16 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
     else:
-        # Three servos: plan the full model's posed turns (hardware_docs/method.md §9), with the
-        # configured axes as the nominal gimbal for planning only.
-        full = len(cfg["gimbal"]["ids"]) == 3
+        # protocol "full": plan the full model's posed turns (hardware_docs/method.md §9) within
+        # at least FULL_TIME_BUDGET_S, with the configured axes as the nominal gimbal for
+        # planning only.
+        full = p["name"] == "full"
+        if full and len(cfg["gimbal"]["ids"]) != 3:
+            raise InputError("protocol 'full' needs a three-servo gimbal (gimbal.ids)")
+        budget = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if full else p["time_budget_s"]
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
-                             time_budget_s=p["time_budget_s"], odr_hz=imu.odr_hz, accel=accel,
+                             time_budget_s=budget, odr_hz=imu.odr_hz, accel=accel,
                              model="full" if full else "diagonal",
                              axes=_nominal_axes(cfg["gimbal"]["axes"]) if full else None,
                              **noise)

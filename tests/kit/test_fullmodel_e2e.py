@@ -19,8 +19,8 @@ from tests.calib.fullmodel_truth import truth_in_frame
 @pytest.fixture(scope="module")
 def rec(tmp_path_factory):
     d = tmp_path_factory.mktemp("full")
-    assert main(["calibrate", "--sim", "--sim-seed", "4", "--out", str(d), "--quiet",
-                 "--json"]) == 0
+    assert main(["calibrate", "--sim", "--sim-seed", "4", "--sim-cross-axis", "0.02",
+                 "--protocol", "full", "--out", str(d), "--quiet", "--json"]) == 0
     return load_recording(d / "recording")
 
 
