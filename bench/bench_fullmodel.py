@@ -1,9 +1,9 @@
 """The full model g = A (m + b) (issue 10): accuracy in general motion, honest uncertainty.
 
 1. Emulated MPU-9250s with ±2 % cross-axis (``gyrocal calibrate --sim --sim-cross-axis 0.02
-   --protocol full``) against the paper's protocol with Algorithm 1 on the same sensors: RMS general-motion
-   rate error per rad/s (:func:`gyrocal.calib.design.general_motion_rms`), jig time, χ² verdicts,
-   and the 12 parameters' errors in their own σ.
+   --protocol full``) against the paper's protocol with Algorithm 1 on the same sensors: RMS
+   general-motion rate error per rad/s (:func:`gyrocal.calib.design.general_motion_rms`), jig
+   time, χ² verdicts, and the 12 parameters' errors in their own σ.
 2. Monte Carlo (vectorised, window level) on the windows, poses and noise of one emulated default
    run: coverage of each of the 12 parameters' 95 % intervals, the χ² test's false-alarm rate
    against its 1 % level, and the error variance against the Cramér–Rao bound (the inverse

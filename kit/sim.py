@@ -21,7 +21,8 @@ from gyrocal.drivers.imu import READERS
 from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
-__all__ = ["DATASHEET_CROSS_AXIS", "SIM_CROSS_AXIS", "SimJig", "build_sim", "sim_misalignment", "sim_truth"]
+__all__ = ["DATASHEET_CROSS_AXIS", "SIM_CROSS_AXIS", "SimJig", "build_sim", "sim_misalignment",
+           "sim_truth"]
 
 #: Servo model of the emulated jig.
 SIM_SERVO_MODEL = "XM430-W350"
