@@ -189,7 +189,8 @@ def independent_mc(B: int) -> None:
     err, std = np.array(errs), np.array(stds)
     free = np.all(std > 0, axis=0)
     cover = np.mean(np.abs(err) <= 1.96 * np.where(std > 0, std, np.inf), axis=0)
-    eff = np.mean(std**2, axis=0) / err.var(axis=0)
+    var = err.var(axis=0)
+    eff = np.mean(std**2, axis=0) / np.where(var > 0, var, np.inf)  # 0 where the frame fixes it
     print_table(["parameter", "95 % interval coverage", "CRB / error variance"],
                 [[NAMES[j], float(cover[j]), float(eff[j])] for j in range(12) if free[j]],
                 title=f"Independent generator (scipy rotations, 90° poses, σ = 0.03 rad/s per "
