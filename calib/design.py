@@ -28,11 +28,17 @@ from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
+    "FULL_TIME_BUDGET_S",
     "PAPER_DESIGN",
     "DesignScore",
     "Plan",
+    "candidate_pose_sets",
+    "full_schedule",
+    "general_motion_rms",
     "paper_plan",
     "plan_protocol",
+    "predict_full_uncertainty",
+    "predicted_general_motion_rms",
     "predict_uncertainty",
     "score_design",
     "sphere_points",
@@ -158,6 +164,13 @@ class Plan:
         rad/s (the planner's objective).
     reference_rate : float
         rad/s.
+    poses : tuple of (int, int, float)
+        The full model's posed pairs of turns, after the home-pose turns: ``(turning servo,
+        moved servo, angle)``, servos as chain positions (base = 0), the angle in rad from home.
+        Each pair: move the servo to the angle, turn the other both ways, move it back. Empty
+        for the diagonal model.
+    matrix_std : tuple of 3 tuples of 3 float, or None
+        Predicted one-sigma uncertainty of the full model's matrix (None for the diagonal one).
     """
 
     speed: float
@@ -169,6 +182,13 @@ class Plan:
     bias_std: tuple[float, float, float]
     rate_error_std: float
     reference_rate: float
+    poses: tuple[tuple[int, int, float], ...] = ()
+    matrix_std: tuple[tuple[float, ...], ...] | None = None
+
+    @property
+    def model(self) -> str:
+        """``"full"`` when the plan has posed turns, else ``"diagonal"``."""
+        return "full" if self.poses else "diagonal"
 
     @property
     def speed_dps(self) -> float:
@@ -178,11 +198,53 @@ class Plan:
 
 def jig_time(
     speed: float, turns: int, rest_s: float, accel: float, settle_s: float = 0.1,
-    n_servos: int = 3,
+    n_servos: int = 3, move_angles: tuple[float, ...] = (),
 ) -> float:
-    """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests."""
+    """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests, and
+    for each posed pair (its move angle in ``move_angles``) two turns, three rests and two moves
+    (there and back) at ``speed``."""
     turn = profile_duration(2 * np.pi * turns, speed, accel) + settle_s
-    return 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
+    home = 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
+    posed = sum(2 * turn + 3 * rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
+                for a in move_angles)
+    return home + posed
+
+
+#: Shortest time budget the full-model protocol is planned within, s (issue 10's target: the
+#: twelve parameters in at most 45 s of jig time).
+FULL_TIME_BUDGET_S = 45.0
+
+
+def full_schedule(
+    poses: tuple[tuple[int, int, float], ...], n_servos: int = 3
+) -> list[tuple[int, np.ndarray, int]]:
+    """The turns of a full-model protocol in the order :func:`gyrocal.kit.protocol.build_steps`
+    runs them: ``(turning servo's chain position, every servo's angle from home (S,), direction)``;
+    first each servo −, + at home, then each posed pair −, +."""
+    out = []
+    for s in range(n_servos):
+        for d in (-1, 1):
+            out.append((s, np.zeros(n_servos), d))
+    for turn, moved, angle in poses:
+        pose = np.zeros(n_servos)
+        pose[moved] = angle
+        for d in (-1, 1):
+            out.append((turn, pose, d))
+    return out
+
+
+def candidate_pose_sets(n_servos: int = 3) -> list[tuple[tuple[int, int, float], ...]]:
+    """Posed pairs the planner considers: two of (middle with inner at θ, base with middle at θ,
+    base with inner at θ) for θ = 45° or 90°, and all three at 90° (hardware_docs/method.md §9:
+    any two make the twelve terms observable on a square gimbal). Needs three servos."""
+    if n_servos != 3:
+        raise CalibInputError(f"the full-model planner needs a three-servo chain, got {n_servos}")
+    sets = []
+    for a in (np.pi / 4, np.pi / 2):
+        pairs = [(1, 2, a), (0, 1, a), (0, 2, a)]
+        sets += [(pairs[i], pairs[j]) for i, j in ((0, 1), (0, 2), (1, 2))]
+    sets.append(((1, 2, np.pi / 2), (0, 1, np.pi / 2), (0, 2, np.pi / 2)))
+    return sets  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -307,6 +369,144 @@ def predict_uncertainty(
     return scale_std, bias_std, float(np.sqrt(var.max()))
 
 
+def predict_full_uncertainty(
+    candidates: list[tuple[float, int, float]],
+    poses: tuple[tuple[int, int, float], ...],
+    *,
+    noise_std: float,
+    odr_hz: float,
+    accel: float = 10.0,
+    reference_rate: float = 1.0,
+    axes: np.ndarray | None = None,
+    rest_guard_s: float = 0.2,
+    encoder_ticks: int = 4096,
+    jitter_s: float = 1e-3,
+    sample_hz: float = 200.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Predicted full-matrix uncertainties of protocols at nominal truth (A = I, b = 0).
+
+    The windows are modelled as in :func:`predict_uncertainty` (:func:`_turn_window`); the turns
+    follow :func:`full_schedule`; every still period of every servo is one unknown reading error
+    (``q/√12``) shared by the references that rest on it and the poses it holds (a servo holds
+    anywhere within its tick, which tilts the axes outside it), as the estimator models it; and
+    the fit is :func:`gyrocal.calib.estimators.full_matrix_batch` on noise-free observations of a
+    gimbal with the nominal ``axes`` (chain order; default x, y, z), all candidates at once.
+
+    Parameters
+    ----------
+    candidates : list of (speed, turns, rest_s)
+        The protocols to score.
+    poses : tuple of (int, int, float)
+        Their posed pairs (:attr:`Plan.poses`).
+
+    Returns
+    -------
+    matrix_std : ndarray, shape (B, 3, 3)
+    bias_std : ndarray, shape (B, 3)
+    rate_error_std : ndarray, shape (B,)
+        Worst-direction standard deviation of ``A (m + b)`` at ``reference_rate`` (the
+        G-criterion for the calibrated output, as in :func:`predict_uncertainty`).
+    """
+    from gyrocal.calib.estimators import full_matrix_batch
+    from gyrocal.calib.kinematics import chain_axes
+
+    ax = np.eye(3) if axes is None else np.asarray(axes, dtype=float)
+    S = ax.shape[0]
+    sched = full_schedule(poses, S)
+    n = len(sched)
+    midx = np.array([t[0] for t in sched])
+    pose = np.array([t[1] for t in sched])
+    direction = np.array([t[2] for t in sched], dtype=float)
+    u = chain_axes(ax, np.zeros(S), pose)[np.arange(n), midx]
+    q = 2 * np.pi / encoder_ticks
+    B = len(candidates)
+    rate = np.zeros((B, n))
+    mean_std = np.zeros((B, n, 3))
+    rate_std = np.zeros((B, n))
+    # Still angles, numbered as gyrocal.calib.windows does: one per still period of each servo
+    # (a turn or a move of that servo ends it). A turn's rest-to-rest reference rests on its
+    # servo's periods before and after; every other servo's period carries its pose.
+    period = dict.fromkeys(range(S), 0)
+    ids: dict[tuple[int, int], int] = {}
+    before, after = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    pose_still = np.full((n, S), -1, dtype=np.int64)
+    moves_at = {2 * S + 2 * j: m for j, (_, m, _) in enumerate(poses)}  # moved before turn i
+    for i, sv in enumerate(midx):
+        if i in moves_at:
+            period[moves_at[i]] += 1
+        for k in range(S):
+            pose_still[i, k] = ids.setdefault((k, period[k]), len(ids))
+        before[i] = pose_still[i, sv]
+        pose_still[i, sv] = -1
+        period[sv] += 1
+        after[i] = ids.setdefault((sv, period[sv]), len(ids))
+        if i - 2 * S >= 0 and (i - 2 * S) % 2 == 1:  # the move back after a posed pair
+            period[poses[(i - 2 * S) // 2][1]] += 1
+    n_still = len(ids)
+    G = np.zeros((B, n, n_still))
+    n_rest = 2 * S + 1 + 3 * len(poses)
+    rest_std = np.zeros((B, n_rest, 3))
+    for c, (speed, turns, rest_s) in enumerate(candidates):
+        win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
+                           jitter_s, sample_hz)
+        rate[c] = win.rate * direction
+        mean_std[c] = noise_std / np.sqrt(win.n_eff)
+        margin = 0.0
+        if win.rest_to_rest:
+            rate_std[c] = 1e-12
+            G[c, np.arange(n), before] = -1 / win.wint
+            G[c, np.arange(n), after] = 1 / win.wint
+            margin = 0.15
+        else:
+            rate_std[c] = max(win.ramp_rate_std, 1e-12)
+        m_rest = max(int((rest_s - 2 * max(rest_guard_s, margin)) * odr_hz), 1)
+        rest_std[c] = noise_std / np.sqrt(m_rest)
+    mean = rate[..., None] * u[None]
+    rest_mean = np.zeros_like(rest_std)
+    res = full_matrix_batch(mean, rate, midx, pose, mean_std, rate_std, rest_mean, rest_std,
+                            n_servos=S, reference=np.zeros(S), ref_matrix=G,
+                            still_std=q / np.sqrt(12), pose_still=pose_still)
+    cov = res.covariance
+    U = sphere_points(400) * reference_rate
+    grad = np.zeros((U.shape[0], 3, 12))
+    for i in range(3):
+        grad[:, i, 3 * i : 3 * i + 3] = U
+        grad[:, i, 9 + i] = 1.0
+    var = np.einsum("nip,bpq,niq->bn", grad, cov, grad)
+    matrix_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, :9], 0, None))
+    bias_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, 9:], 0, None))
+    return matrix_std.reshape(B, 3, 3), bias_std, np.sqrt(var.max(axis=1))
+
+
+def general_motion_rms(matrix: np.ndarray, bias: np.ndarray, sensing: np.ndarray,
+                       true_bias: np.ndarray, rate: float = 1.0) -> float:
+    """RMS error of a calibrated rate over all directions at ``rate``, per rad/s, that no choice
+    of output frame removes.
+
+    With the sensor reading ``m = C ω − b`` and the calibration ``ĝ = M (m + b̂)``, the error is
+    ``(M C − R) ω + M (b̂ − b)`` for the output frame ``R`` (a rotation); over directions
+    uniform on the sphere ``E|Eω|² = rate² ‖E‖²_F / 3`` and the bias term adds
+    ``|M (b̂ − b)|²``. ``R`` is the rotation nearest ``M C`` (its polar factor), so a correct
+    calibration in any frame scores its own error only. The paper's diagonal model is
+    ``M = diag(scale)``.
+    """
+    MC = np.asarray(matrix, float) @ np.asarray(sensing, float)
+    U, _, Vt = np.linalg.svd(MC)
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    db = np.asarray(matrix, float) @ (np.asarray(bias, float) - np.asarray(true_bias, float))
+    ms = np.sum((MC - R) ** 2) / 3.0 + float(db @ db) / rate**2
+    return float(np.sqrt(ms))
+
+
+def predicted_general_motion_rms(covariance: np.ndarray, rate: float = 1.0) -> float:
+    """The RMS :func:`general_motion_rms` a calibration's own covariance predicts (at nominal
+    ``C ≈ I``): ``sqrt(tr Cov(A)/3 + tr Cov(b)/rate²)``; a 6×6 covariance is the diagonal
+    model's (scale, bias), a 12×12 the full one's (matrix row-major, bias)."""
+    c = np.diag(np.asarray(covariance, dtype=float))
+    n = 3 if c.size == 6 else 9
+    return float(np.sqrt(c[:n].sum() / 3.0 + c[n:].sum() / rate**2))
+
+
 def plan_protocol(
     *,
     servo_max_speed: float,
@@ -318,8 +518,16 @@ def plan_protocol(
     reference_rate: float = 1.0,
     min_rest_s: float = 0.6,
     max_scale_error: float = 1.25,
+    model: str = "diagonal",
+    axes: np.ndarray | None = None,
 ) -> Plan:
-    """Choose speed, turns and rest length for the paired-axis estimator within a time budget.
+    """Choose speed, turns and rest length (and, for the full model, poses) within a time budget.
+
+    For ``model="diagonal"`` the paired-axis estimator's six parameters are scored
+    (:func:`predict_uncertainty`); for ``model="full"`` the full-matrix estimator's twelve
+    (:func:`predict_full_uncertainty`), over the pose sets of :func:`candidate_pose_sets`, with
+    the moves' time counted (:func:`jig_time`). Either way the plan minimises the worst-direction
+    standard deviation of a calibrated rate at ``reference_rate``.
 
     Parameters
     ----------
@@ -344,6 +552,11 @@ def plan_protocol(
         Shortest rest (settling plus a bias measurement).
     max_scale_error : float
         Largest ``1/k`` to allow for when avoiding saturation.
+    model : str
+        ``"diagonal"`` (the paper's model) or ``"full"`` (g = A (m + b); three servos).
+    axes : ndarray, shape (3, 3), optional
+        Full model: the servos' nominal axes in the sensor frame, chain order, for planning only
+        (default x, y, z); the estimate never uses them.
 
     Returns
     -------
@@ -359,10 +572,20 @@ def plan_protocol(
                     ("odr_hz", odr_hz), ("accel", accel), ("reference_rate", reference_rate)):
         if not (v > 0 and np.isfinite(v)):
             raise CalibInputError(f"{name} must be a positive number, got {v!r}")
+    if model not in ("diagonal", "full"):
+        raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
+    if model == "full":
+        best = _plan_full(top, time_budget_s, noise_std, odr_hz, accel, reference_rate,
+                          min_rest_s, axes)
+        if best is None:
+            raise CalibInputError(
+                f"no full-model protocol fits {time_budget_s:g} s with speeds up to "
+                f"{top:.2f} rad/s; raise the time budget")
+        return best
     speeds = np.unique(np.concatenate([np.linspace(0.5, top, 12), [top]]))
     speeds = speeds[speeds <= top]
-    best: Plan | None = None
+    best = None
     for speed in speeds:
         for turns in range(1, 9):
             for rest in (min_rest_s, 1.0, 1.5, 2.0, 3.0):
@@ -385,6 +608,39 @@ def plan_protocol(
         raise CalibInputError(
             f"no protocol fits {time_budget_s:g} s with speeds up to {top:.2f} rad/s; "
             "raise the time budget"
+        )
+    return best
+
+
+def _plan_full(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float, axes: np.ndarray | None,
+) -> Plan | None:
+    """The best full-model plan over pose sets × speeds × turns × rests within ``budget``."""
+    speeds = np.unique(np.concatenate([np.linspace(min(1.0, top), top, 6), [top]]))
+    best: Plan | None = None
+    for poses in candidate_pose_sets(3):
+        angles = tuple(abs(p[2]) for p in poses)
+        cands = [
+            (float(sp), t, float(r)) for sp in speeds for t in (1, 2, 3)
+            for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s
+            and jig_time(sp, t, r, accel, move_angles=angles) <= budget
+        ]
+        if not cands:
+            continue
+        ms, bs, err = predict_full_uncertainty(
+            cands, poses, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
+            reference_rate=reference_rate, axes=axes)
+        i = int(np.argmin(err))
+        if best is not None and not err[i] < best.rate_error_std * (1 - 1e-9):
+            continue
+        sp, t, r = cands[i]
+        best = Plan(
+            sp, t, r, float(accel), float(jig_time(sp, t, r, accel, move_angles=angles)),
+            tuple(float(x) for x in np.diag(ms[i])), tuple(float(x) for x in bs[i]),  # type: ignore[arg-type]
+            float(err[i]), float(reference_rate),
+            poses=tuple((int(a), int(b), float(c)) for a, b, c in poses),
+            matrix_std=tuple(tuple(float(x) for x in row) for row in ms[i]),
         )
     return best
 

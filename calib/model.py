@@ -1,16 +1,25 @@
 """The calibration model and its result document.
 
-The model is the paper's Eq. (1): the true rate ``g`` and the reading ``m`` (both rad/s) satisfy
+The paper's Eq. (1) relates the true rate ``g`` and the reading ``m`` (both rad/s) elementwise,
 
     g = scale ∘ (m + bias),
 
-elementwise per sensor axis. :class:`GyroCalibration` holds the six parameters with their
-uncertainty and how they were obtained, applies them to readings, and round-trips through the
-Calibration v1 JSON document (DESIGN.md, "Contracts").
+and the full model of issue 10 generalises it to a 3×3 matrix ``A`` (scale on the diagonal,
+cross-axis sensitivity off it):
+
+    g = A (m + bias).
+
+:class:`GyroCalibration` holds either with its uncertainty and how it was obtained, applies it to
+readings, and round-trips through the Calibration document: version 1 for the diagonal model,
+version 2 when ``matrix`` is set (DESIGN.md, "Contracts"; hardware_docs/formats.md). Loading is
+strict: an unknown field, or a number outside its domain (:data:`LIMITS`), is refused with a
+message naming the field and what to do.
 """
 
 from __future__ import annotations
 
+import copy
+import difflib
 import json
 import math
 from collections.abc import Mapping
@@ -21,11 +30,98 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
-__all__ = ["FORMAT", "VERSION", "Consistency", "GyroCalibration"]
+__all__ = ["FORMAT", "LIMITS", "VERSION", "VERSION_FULL", "Consistency", "GyroCalibration"]
 
 FORMAT = "gyrocal-calibration"
 VERSION = 1
+VERSION_FULL = 2
 MODEL = "g = scale * (m + bias)"
+MODEL_FULL = "g = matrix @ (m + bias)"
+
+#: The domain a loaded calibration's numbers must lie in. A scale of 0.1 or 10 is already a unit
+#: mistake (°/s read as rad/s gives ≈ 0.017, encoder degrees as radians ≈ 57); no MEMS gyro
+#: measures beyond ±4000 °/s ≈ 70 rad/s, so a larger bias is not a bias; a die outside
+#: −100…200 °C is not operating.
+LIMITS: dict[str, tuple[float, float]] = {
+    "scale": (0.1, 10.0),
+    "cross_axis": (-1.0, 1.0),
+    "bias": (-100.0, 100.0),
+    "temperature_c": (-100.0, 200.0),
+    "count": (0, 10**9),
+}
+
+_CONSISTENCY_FIELDS = ("chi2", "dof", "p_value", "ok")
+_V1_FIELDS = (
+    "format", "version", "model", "scale", "bias", "scale_std", "bias_std", "covariance",
+    "method", "iterations", "consistency", "sensor", "temperature_c", "created", "source", "axes",
+)
+_V2_FIELDS = ("matrix", "matrix_std", "frame", "kinematics")
+_KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
+_ACTION = "correct or remove it (see hardware_docs/formats.md)"
+
+
+def _refuse_unknown(doc: Mapping[str, Any], known: tuple[str, ...], where: str) -> None:
+    """Raise naming the first field of ``doc`` not in ``known``, with the nearest known name."""
+    for key in doc:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        hint = f"; did you mean {close[0]!r}?" if close else f"; {_ACTION}"
+        raise CalibrationFormatError(f"unknown field {key!r} in {where}{hint}")
+
+
+def _number(x: Any, name: str, lo: float = -math.inf, hi: float = math.inf) -> float:
+    """``x`` as a finite float within ``[lo, hi]``, or raise naming ``name``."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise CalibrationFormatError(f"{name!r} must be a number, got {_excerpt(x)}")
+    try:
+        v = float(x)
+    except OverflowError:
+        raise CalibrationFormatError(
+            f"{name!r} is an integer of {len(str(x))} digits, outside its domain "
+            f"[{lo:g}, {hi:g}]; {_ACTION}"
+        ) from None
+    if not math.isfinite(v):
+        raise CalibrationFormatError(
+            f"{name!r} must be a finite number, got {_excerpt(x)}; write null for an unknown value"
+        )
+    if not lo <= v <= hi:
+        raise CalibrationFormatError(
+            f"{name!r} is {v:g}, outside its domain [{lo:g}, {hi:g}]; {_ACTION}"
+        )
+    return v
+
+
+def _excerpt(x: Any) -> str:
+    r = repr(x)
+    return r if len(r) <= 40 else r[:37] + "..."
+
+
+def _array(v: Any, name: str, shape: tuple[int, ...], *, nullable: bool = False,
+           lo: float = -math.inf, hi: float = math.inf) -> np.ndarray:
+    """A nested JSON list of ``shape`` as floats (null → NaN if ``nullable``), domain-checked."""
+    def walk(x: Any, dims: tuple[int, ...], where: str) -> Any:
+        if not dims:
+            if x is None and nullable:
+                return math.nan
+            return _number(x, where, lo, hi)
+        if not isinstance(x, list) or len(x) != dims[0]:
+            kind = (f"a list of {shape[0]} numbers" if len(shape) == 1 else
+                    f"a {shape[0]}×{shape[1]} list of lists of numbers")
+            raise CalibrationFormatError(f"{name!r} must be {kind}")
+        return [walk(e, dims[1:], f"{where}[{i}]") for i, e in enumerate(x)]
+
+    return np.array(walk(v, shape, name), dtype=float)
+
+
+def _matrix3(value: Any, name: str) -> tuple[tuple[float, ...], ...]:
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibInputError(f"{name} must be 3x3 numbers, got {value!r}") from None
+    if a.shape != (3, 3):
+        raise CalibInputError(f"{name} must be 3x3, got shape {a.shape}")
+    return tuple(tuple(float(x) for x in r) for r in a)
 
 
 @dataclass(frozen=True)
@@ -55,21 +151,25 @@ class Consistency:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Consistency:
-        """Inverse of :meth:`to_dict`; raises :class:`CalibrationFormatError` on bad fields."""
+        """Inverse of :meth:`to_dict`; raises :class:`CalibrationFormatError` on bad fields.
+
+        ``chi2`` must be non-negative, ``p_value`` within [0, 1], ``dof`` a non-negative integer.
+        """
         if not isinstance(d, Mapping):
             raise CalibrationFormatError("'consistency' must be an object")
-        try:
-            chi2, dof, p, ok = d["chi2"], d["dof"], d["p_value"], d["ok"]
-        except KeyError as exc:
-            raise CalibrationFormatError(f"'consistency' lacks the field {exc.args[0]!r}") from None
+        _refuse_unknown(d, _CONSISTENCY_FIELDS, "'consistency'")
+        for name in _CONSISTENCY_FIELDS:
+            if name not in d:
+                raise CalibrationFormatError(f"'consistency' lacks the field {name!r}")
+        ok, dof = d["ok"], d["dof"]
         if not isinstance(ok, bool):
             raise CalibrationFormatError("'consistency.ok' must be true or false")
-        if isinstance(dof, bool) or not isinstance(dof, int) or dof < 0:
+        if isinstance(dof, bool) or not isinstance(dof, int):
             raise CalibrationFormatError("'consistency.dof' must be a non-negative integer")
-        for name, v in (("chi2", chi2), ("p_value", p)):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise CalibrationFormatError(f"'consistency.{name}' must be a finite number")
-        return cls(chi2=float(chi2), dof=int(dof), p_value=float(p), ok=ok)
+        _number(dof, "consistency.dof", *LIMITS["count"])
+        chi2 = _number(d["chi2"], "consistency.chi2", 0.0)
+        p = _number(d["p_value"], "consistency.p_value", 0.0, 1.0)
+        return cls(chi2=chi2, dof=int(dof), p_value=p, ok=ok)
 
 
 def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, float, float]:
@@ -86,20 +186,34 @@ def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, floa
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
+def _std3(value: Any, name: str) -> tuple[float, float, float]:
+    a = np.asarray(value, dtype=float)
+    if a.shape != (3,):
+        raise CalibInputError(f"{name} must be 3 numbers, got shape {a.shape}")
+    return (float(a[0]), float(a[1]), float(a[2]))
+
+
+def _same(a: tuple[float, ...], b: np.ndarray) -> bool:
+    return bool(np.allclose(a, b, rtol=1e-12, atol=0.0, equal_nan=True))
+
+
 @dataclass(frozen=True)
 class GyroCalibration:
-    """Scale factors and biases of a triaxial gyroscope, ``g = scale ∘ (m + bias)`` (paper Eq. 1).
+    """A triaxial gyroscope's calibration: ``g = scale ∘ (m + bias)`` (paper Eq. 1), or the full
+    model ``g = matrix @ (m + bias)`` when ``matrix`` is set (Calibration v2).
 
     Attributes
     ----------
     scale : tuple of 3 float
-        Dimensionless scale factors ``k_x, k_y, k_z``.
+        Dimensionless scale factors ``k_x, k_y, k_z``; with ``matrix``, its diagonal.
     bias : tuple of 3 float
         Biases ``b_x, b_y, b_z`` in rad/s, added to the reading before scaling.
     scale_std, bias_std : tuple of 3 float
-        One-sigma uncertainties.
-    covariance : tuple of 6 tuples of 6 float
-        Covariance of ``(k_x, k_y, k_z, b_x, b_y, b_z)``.
+        One-sigma uncertainties (NaN where unknown); with ``matrix_std``, ``scale_std`` is its
+        diagonal.
+    covariance : tuple of tuples of float or None
+        6×6 covariance of ``(k_x, k_y, k_z, b_x, b_y, b_z)``; with ``matrix``, 12×12 covariance of
+        the matrix row-major then the bias.
     method : str
         The estimator (``iterative-ls``, ``levenberg-marquardt``, ``paired-axis``, ...).
     iterations : int
@@ -116,6 +230,16 @@ class GyroCalibration:
         Where the data came from (a recording path, ``simulation``, ...).
     axes : dict or None
         Optional diagnostics: each servo's estimated rotation axis in the sensor frame.
+    matrix : tuple of 3 tuples of 3 float or None
+        The full model's 3×3 matrix ``A``, row-major; None for the diagonal (v1) model.
+    matrix_std : tuple of 3 tuples of 3 float or None
+        One-sigma uncertainty of each entry of ``matrix``.
+    frame : str or None
+        Identifier of the frame convention the matrix is expressed in (hardware_docs/method.md).
+    kinematics : dict or None
+        The gimbal as the full-model fit estimated it: ``chain`` (servo IDs, base first),
+        ``axes`` (one unit vector per servo in the sensor frame at the reference angles) and
+        ``reference_angles_rad``; input of ``calib.kinematics``.
     """
 
     scale: tuple[float, float, float]
@@ -131,24 +255,64 @@ class GyroCalibration:
     created: str | None = None
     source: str | None = None
     axes: dict[str, Any] | None = field(default=None, hash=False)
+    matrix: tuple[tuple[float, ...], ...] | None = None
+    matrix_std: tuple[tuple[float, ...], ...] | None = None
+    frame: str | None = None
+    kinematics: dict[str, Any] | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
         object.__setattr__(self, "bias", _vec3(self.bias, "bias"))
         for name in ("scale_std", "bias_std"):
-            a = np.asarray(getattr(self, name), dtype=float)
-            if a.shape != (3,):
-                raise CalibInputError(f"{name} must be 3 numbers, got shape {a.shape}")
-            object.__setattr__(self, name, tuple(float(x) for x in a))
+            object.__setattr__(self, name, _std3(getattr(self, name), name))
+        if self.matrix is None:
+            if self.matrix_std is not None or self.kinematics is not None:
+                raise CalibInputError("matrix_std and kinematics need a matrix (the full model)")
+        else:
+            self._init_matrix()
+        if self.kinematics is not None:
+            try:
+                object.__setattr__(self, "kinematics", _read_kinematics(self.kinematics))
+            except CalibrationFormatError as exc:
+                raise CalibInputError(str(exc)) from None
         if self.covariance is not None:
+            n = 6 if self.matrix is None else 12
             c = np.asarray(self.covariance, dtype=float)
-            if c.shape != (6, 6):
-                raise CalibInputError(f"covariance must be 6x6, got shape {c.shape}")
+            if c.shape != (n, n):
+                raise CalibInputError(f"covariance must be {n}x{n}, got shape {c.shape}")
             object.__setattr__(self, "covariance", tuple(tuple(float(x) for x in r) for r in c))
 
+    def _init_matrix(self) -> None:
+        """Check ``matrix``/``matrix_std`` and keep ``scale``/``scale_std`` their diagonals."""
+        a = _matrix3(self.matrix, "matrix")
+        if not np.all(np.isfinite(a)):
+            raise CalibInputError("matrix must be finite")
+        if not _same(self.scale, np.diag(a)):
+            raise CalibInputError(f"scale {list(self.scale)} must be the diagonal of matrix")
+        object.__setattr__(self, "matrix", a)
+        if self.matrix_std is not None:
+            s = _matrix3(self.matrix_std, "matrix_std")
+            if not (np.all(np.isnan(self.scale_std)) or _same(self.scale_std, np.diag(s))):
+                raise CalibInputError("scale_std must be the diagonal of matrix_std")
+            object.__setattr__(self, "matrix_std", s)
+            object.__setattr__(self, "scale_std", tuple(float(x) for x in np.diag(s)))
+
     # ------------------------------------------------------------------ use
+    @property
+    def full_matrix(self) -> np.ndarray:
+        """The model's 3×3 matrix ``A`` (a copy): ``matrix``, or ``diag(scale)`` for v1."""
+        return np.diag(self.scale) if self.matrix is None else np.array(self.matrix)
+
+    @property
+    def is_full(self) -> bool:
+        """Whether this is the full model (Calibration v2), with cross-axis terms."""
+        return self.matrix is not None
+
     def apply(self, m: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
-        """Calibrated rate ``scale ∘ (m + bias)`` (paper Eq. 1) for one reading or many.
+        """Calibrated rate ``A (m + bias)`` for one reading or many.
+
+        ``A`` is :attr:`full_matrix`, so a v1 calibration gives the paper's Eq. (1),
+        ``scale ∘ (m + bias)``.
 
         Parameters
         ----------
@@ -165,31 +329,40 @@ class GyroCalibration:
             raise CalibInputError(f"readings must have shape (3,) or (N, 3), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise CalibInputError("readings contain NaN or inf; drop or repair those samples first")
-        return np.asarray(self.scale) * (a + np.asarray(self.bias))
+        if self.matrix is None:
+            return np.asarray(self.scale) * (a + np.asarray(self.bias))
+        return (a + np.asarray(self.bias)) @ self.full_matrix.T
 
     @property
     def covariance_matrix(self) -> np.ndarray | None:
-        """The covariance as a 6×6 array (a copy), or None."""
+        """The covariance as an array (a copy; 6×6 for v1, 12×12 for v2), or None."""
         return None if self.covariance is None else np.array(self.covariance)
 
-    # ------------------------------------------------------------------ Calibration v1
+    # ------------------------------------------------------------------ the document
     def to_dict(self) -> dict[str, Any]:
-        """The Calibration v1 document as a JSON-ready dict (NaN becomes null)."""
+        """The Calibration document as a JSON-ready dict (NaN becomes null).
+
+        Version 1 for the diagonal model; version 2, with ``matrix``, ``matrix_std``, ``frame``
+        and ``kinematics``, for the full one (``scale``/``scale_std`` still written as their
+        diagonals for version 1 readers).
+        """
 
         def num(x: float) -> float | None:
             return None if not math.isfinite(x) else x
 
+        def grid(rows: tuple[tuple[float, ...], ...] | None) -> list[list[float | None]] | None:
+            return None if rows is None else [[num(x) for x in r] for r in rows]
+
+        full = self.matrix is not None
         doc: dict[str, Any] = {
             "format": FORMAT,
-            "version": VERSION,
-            "model": MODEL,
+            "version": VERSION_FULL if full else VERSION,
+            "model": MODEL_FULL if full else MODEL,
             "scale": list(self.scale),
             "bias": list(self.bias),
             "scale_std": [num(x) for x in self.scale_std],
             "bias_std": [num(x) for x in self.bias_std],
-            "covariance": None
-            if self.covariance is None
-            else [[num(x) for x in r] for r in self.covariance],
+            "covariance": grid(self.covariance),
             "method": self.method,
             "iterations": self.iterations,
             "consistency": None if self.consistency is None else self.consistency.to_dict(),
@@ -199,113 +372,174 @@ class GyroCalibration:
             "source": self.source,
         }
         if self.axes is not None:
-            doc["axes"] = self.axes
+            doc["axes"] = copy.deepcopy(self.axes)
+        if full:
+            doc["matrix"] = grid(self.matrix)
+            doc["matrix_std"] = grid(self.matrix_std)
+            doc["frame"] = self.frame
+            doc["kinematics"] = copy.deepcopy(self.kinematics)
         return doc
 
     def to_json(self) -> str:
-        """The Calibration v1 document as indented JSON text."""
+        """The Calibration document (:meth:`to_dict`) as indented JSON text."""
         return json.dumps(self.to_dict(), indent=2, allow_nan=False)
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> GyroCalibration:
-        """Read a Calibration v1 document.
+        """Read a Calibration document, version 1 or 2, strictly.
 
         Raises
         ------
         CalibrationFormatError
-            If the format or version is not ``gyrocal-calibration`` v1, or a field is missing or
-            malformed; the message names the field.
+            If the format or version is not ``gyrocal-calibration`` v1/v2, a field is unknown
+            (the message suggests the nearest known name), missing or malformed, or a number is
+            outside its domain (:data:`LIMITS`; probabilities in [0, 1], standard deviations and
+            variances non-negative, everything finite); the message names the field.
         """
         if not isinstance(doc, Mapping):
             raise CalibrationFormatError("a calibration document must be a JSON object")
-        if doc.get("format") != FORMAT:
-            raise CalibrationFormatError(
-                f"not a gyrocal calibration: 'format' is {doc.get('format')!r}, "
-                f"expected {FORMAT!r}"
-            )
-        version = doc.get("version")
-        if version != VERSION or isinstance(version, bool):
-            raise CalibrationFormatError(
-                f"calibration version {version!r} is not supported (this gyrocal reads version "
-                f"{VERSION}); upgrade gyrocal or re-export the calibration"
-            )
-        if "model" in doc and doc["model"] != MODEL:
-            raise CalibrationFormatError(f"'model' is {doc['model']!r}, expected {MODEL!r}")
-
-        def vec(name: str, required: bool = True) -> tuple[float, ...]:
-            if name not in doc or doc[name] is None:
-                if required:
-                    raise CalibrationFormatError(f"the calibration lacks the field {name!r}")
-                return (math.nan,) * 3
-            v = doc[name]
-            if not isinstance(v, list) or len(v) != 3:
-                raise CalibrationFormatError(f"{name!r} must be a list of 3 numbers")
-            out = []
-            for x in v:
-                if x is None and not required:
-                    out.append(math.nan)
-                elif isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                    raise CalibrationFormatError(f"{name!r} must be a list of 3 finite numbers")
-                else:
-                    out.append(float(x))
-            return tuple(out)
-
-        scale, bias = vec("scale"), vec("bias")
-        if not all(s > 0 for s in scale):
-            raise CalibrationFormatError("'scale' must be positive")
-        cov = doc.get("covariance")
-        if cov is not None:
-            ok = isinstance(cov, list) and len(cov) == 6
-            ok = ok and all(isinstance(r, list) and len(r) == 6 for r in cov)
-            ok = ok and all(
-                x is None or (isinstance(x, (int, float)) and not isinstance(x, bool))
-                for r in cov
-                for x in r
-            )
-            if not ok:
-                raise CalibrationFormatError("'covariance' must be a 6x6 list of numbers")
-            cov = tuple(tuple(math.nan if x is None else float(x) for x in r) for r in cov)
-        method = doc.get("method", "unknown")
-        if not isinstance(method, str):
-            raise CalibrationFormatError("'method' must be a string")
-        iterations = doc.get("iterations", 0)
-        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
-            raise CalibrationFormatError("'iterations' must be a non-negative integer")
-        cons = doc.get("consistency")
-        consistency = None if cons is None else Consistency.from_dict(cons)
-        sensor = doc.get("sensor") or {}
-        if not isinstance(sensor, Mapping):
-            raise CalibrationFormatError("'sensor' must be an object")
-        temp = doc.get("temperature_c")
-        if temp is not None and (isinstance(temp, bool) or not isinstance(temp, (int, float))):
-            raise CalibrationFormatError("'temperature_c' must be a number or null")
-        for name in ("created", "source"):
-            if doc.get(name) is not None and not isinstance(doc[name], str):
-                raise CalibrationFormatError(f"{name!r} must be a string or null")
-        axes = doc.get("axes")
-        if axes is not None and not isinstance(axes, Mapping):
-            raise CalibrationFormatError("'axes' must be an object")
-        return cls(
-            scale=scale,  # type: ignore[arg-type]
-            bias=bias,  # type: ignore[arg-type]
-            scale_std=vec("scale_std", required=False),  # type: ignore[arg-type]
-            bias_std=vec("bias_std", required=False),  # type: ignore[arg-type]
-            covariance=cov,
-            method=method,
-            iterations=iterations,
-            consistency=consistency,
-            sensor=dict(sensor),
-            temperature_c=None if temp is None else float(temp),
-            created=doc.get("created"),
-            source=doc.get("source"),
-            axes=None if axes is None else dict(axes),
-        )
+        full = _check_header(doc)
+        _refuse_unknown(doc, _V1_FIELDS + (_V2_FIELDS if full else ()),
+                        f"a version {VERSION_FULL if full else VERSION} calibration")
+        kw = _read_model(doc, full)
+        try:
+            return cls(**kw, **_read_about(doc))
+        except CalibInputError as exc:
+            raise CalibrationFormatError(str(exc)) from None
 
     @classmethod
     def from_json(cls, text: str) -> GyroCalibration:
-        """Parse Calibration v1 JSON text (see :meth:`from_dict`)."""
+        """Parse Calibration JSON text (see :meth:`from_dict`)."""
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as exc:
             raise CalibrationFormatError(f"not valid JSON: {exc}") from None
+        except (ValueError, RecursionError) as exc:  # 5000-digit integers, deep nesting
+            raise CalibrationFormatError(f"not a usable JSON document: {str(exc)[:80]}") from None
         return cls.from_dict(doc)
+
+
+def _check_header(doc: Mapping[str, Any]) -> bool:
+    """Check ``format``, ``version`` and ``model``; True for version 2 (the full model)."""
+    if doc.get("format") != FORMAT:
+        raise CalibrationFormatError(
+            f"not a gyrocal calibration: 'format' is {_excerpt(doc.get('format'))}, "
+            f"expected {FORMAT!r}"
+        )
+    version = doc.get("version")
+    if isinstance(version, bool) or version not in (VERSION, VERSION_FULL):
+        raise CalibrationFormatError(
+            f"calibration version {_excerpt(version)} is not supported (this gyrocal reads "
+            f"versions {VERSION} and {VERSION_FULL}); upgrade gyrocal or re-export the calibration"
+        )
+    full = version == VERSION_FULL
+    if full and doc.get("matrix") is None:
+        raise CalibrationFormatError("a version 2 calibration lacks the field 'matrix'")
+    model = MODEL_FULL if full else MODEL
+    if "model" in doc and doc["model"] != model:
+        raise CalibrationFormatError(
+            f"'model' is {_excerpt(doc['model'])}, expected {model!r} in a version {version} "
+            "calibration"
+        )
+    return full
+
+
+def _read_model(doc: Mapping[str, Any], full: bool) -> dict[str, Any]:
+    """The model's numbers: scale, bias, their uncertainties, covariance, matrix, kinematics."""
+    def optional(name: str, shape: tuple[int, ...], **kw: Any) -> np.ndarray | None:
+        return None if doc.get(name) is None else _array(doc[name], name, shape, **kw)
+
+    kw: dict[str, Any] = {}
+    for name in ("scale", "bias"):
+        value = optional(name, (3,), lo=LIMITS[name][0], hi=LIMITS[name][1])
+        if value is None:
+            raise CalibrationFormatError(f"the calibration lacks the field {name!r}")
+        kw[name] = tuple(value)
+    scale = np.array(kw["scale"])
+    for name in ("scale_std", "bias_std"):
+        std = optional(name, (3,), nullable=True, lo=0.0)
+        kw[name] = (math.nan,) * 3 if std is None else tuple(std)
+    n = 12 if full else 6
+    cov = optional("covariance", (n, n), nullable=True)
+    if cov is not None and np.any(np.diag(cov) < 0):
+        raise CalibrationFormatError("'covariance' has a negative variance on its diagonal; "
+                                     "a covariance matrix's diagonal is never negative")
+    kw["covariance"] = cov
+    if full:
+        matrix = _array(doc["matrix"], "matrix", (3, 3), lo=-LIMITS["scale"][1],
+                        hi=LIMITS["scale"][1])
+        off = matrix[~np.eye(3, dtype=bool)]
+        if np.any(np.abs(off) > LIMITS["cross_axis"][1]):
+            raise CalibrationFormatError(
+                f"'matrix' has a cross-axis term beyond ±{LIMITS['cross_axis'][1]:g} "
+                f"({np.max(np.abs(off)):g}): the sensor axes would be mislabelled; {_ACTION}")
+        if not _same(tuple(scale), np.diag(matrix)):
+            raise CalibrationFormatError("'scale' must be the diagonal of 'matrix'")
+        kw["matrix"] = matrix
+        kw["matrix_std"] = optional("matrix_std", (3, 3), nullable=True, lo=0.0)
+        if kw["matrix_std"] is not None:
+            kw["scale_std"] = (math.nan,) * 3
+        frame = doc.get("frame")
+        if frame is not None and not isinstance(frame, str):
+            raise CalibrationFormatError("'frame' must be a string or null")
+        kw["frame"] = frame
+        kw["kinematics"] = doc.get("kinematics")
+    return kw
+
+
+def _read_kinematics(k: Any) -> dict[str, Any] | None:
+    """Check a ``kinematics`` object (chain, unit axes, reference angles); None stays None."""
+    if k is None:
+        return None
+    if not isinstance(k, Mapping):
+        raise CalibrationFormatError("'kinematics' must be an object or null")
+    _refuse_unknown(k, _KINEMATICS_FIELDS, "'kinematics'")
+    for name in _KINEMATICS_FIELDS:
+        if name not in k:
+            raise CalibrationFormatError(f"'kinematics' lacks the field {name!r}")
+    chain = k["chain"]
+    if (not isinstance(chain, list) or not chain or len(chain) > 16 or
+            any(isinstance(i, bool) or not isinstance(i, int) or not 0 <= i <= 252 for i in chain)
+            or len(set(chain)) != len(chain)):
+        raise CalibrationFormatError(
+            "'kinematics.chain' must list 1 to 16 distinct servo IDs (0-252), base first")
+    s = len(chain)
+    axes = _array(k["axes"], "kinematics.axes", (s, 3))
+    if np.any(np.abs(np.linalg.norm(axes, axis=1) - 1.0) > 1e-3):
+        raise CalibrationFormatError("'kinematics.axes' must be unit vectors, one per servo")
+    angles = _array(k["reference_angles_rad"], "kinematics.reference_angles_rad", (s,))
+    return {"chain": list(chain), "axes": axes.tolist(), "reference_angles_rad": angles.tolist()}
+
+
+def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:
+    """The descriptive fields: method, iterations, consistency, sensor, temperature, provenance."""
+    method = doc.get("method", "unknown")
+    if not isinstance(method, str):
+        raise CalibrationFormatError("'method' must be a string")
+    iterations = doc.get("iterations", 0)
+    if isinstance(iterations, bool) or not isinstance(iterations, int):
+        raise CalibrationFormatError("'iterations' must be a non-negative integer")
+    _number(iterations, "iterations", *LIMITS["count"])
+    cons = doc.get("consistency")
+    sensor = doc.get("sensor") or {}
+    if not isinstance(sensor, Mapping):
+        raise CalibrationFormatError("'sensor' must be an object")
+    temp = doc.get("temperature_c")
+    if temp is not None:
+        temp = _number(temp, "temperature_c", *LIMITS["temperature_c"])
+    for name in ("created", "source"):
+        if doc.get(name) is not None and not isinstance(doc[name], str):
+            raise CalibrationFormatError(f"{name!r} must be a string or null")
+    axes = doc.get("axes")
+    if axes is not None and not isinstance(axes, Mapping):
+        raise CalibrationFormatError("'axes' must be an object")
+    return {
+        "method": method,
+        "iterations": iterations,
+        "consistency": None if cons is None else Consistency.from_dict(cons),
+        "sensor": dict(sensor),
+        "temperature_c": temp,
+        "created": doc.get("created"),
+        "source": doc.get("source"),
+        "axes": None if axes is None else dict(axes),
+    }

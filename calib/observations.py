@@ -132,6 +132,17 @@ class ObservationSet:
         Change of the reference rate per radian of error in a still angle (``1 / ∫w``).
     still_angle_std : float, optional
         Prior standard deviation of a still encoder angle, rad (``q/√12``).
+    chain : sequence of int, optional
+        The gimbal's servo IDs in chain order, base first (Recording v1 ``gimbal.motors``).
+    pose : array_like, shape (n, S), optional
+        Encoder angle of every servo of ``chain`` over each window (its mean over the window),
+        rad, cumulative: the pose that carries the turning servo's axis in the sensor frame
+        (:mod:`gyrocal.calib.kinematics`). Given together with ``chain``.
+    pose_still : array_like of int, shape (n, S), optional
+        For each window and servo of the chain, the index of the still angle that servo held
+        during the window (the same numbering as ``ref_start``/``ref_end``: one still period of
+        one servo is one unknown, its reading error with prior ``still_angle_std``); -1 for the
+        turning servo, or where the pose is taken as exact. Default: all -1.
 
     Raises
     ------
@@ -157,6 +168,9 @@ class ObservationSet:
     ref_end: np.ndarray | None = None
     ref_gain: np.ndarray | None = None
     still_angle_std: float = 0.0
+    chain: tuple[int, ...] | None = None
+    pose: np.ndarray | None = None
+    pose_still: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -230,6 +244,7 @@ class ObservationSet:
             used = np.concatenate([ref_start[ref_start >= 0], ref_end[ref_end >= 0]])
             if used.size and not (self.still_angle_std > 0):
                 raise CalibInputError("still_angle_std must be positive when still angles are used")
+        chain, pose, pose_still = self._chain_pose(n, motor)
         temp = self.temperature_c
         if temp is not None:
             temp = float(temp)
@@ -244,11 +259,59 @@ class ObservationSet:
         ):
             object.__setattr__(self, name, _ro(v))
         object.__setattr__(self, "temperature_c", temp)
+        object.__setattr__(self, "chain", chain)
+        object.__setattr__(self, "pose", None if pose is None else _ro(pose))
+        object.__setattr__(self, "pose_still", None if pose_still is None else _ro(pose_still))
+        if pose_still is not None and np.any(pose_still >= 0) and not self.still_angle_std > 0:
+            raise CalibInputError("still_angle_std must be positive when pose_still is used")
+
+    def _chain_pose(
+        self, n: int, motor: np.ndarray
+    ) -> tuple[tuple[int, ...] | None, np.ndarray | None, np.ndarray | None]:
+        if self.chain is None and self.pose is None:
+            if self.pose_still is not None:
+                raise CalibInputError("pose_still needs chain and pose")
+            return None, None, None
+        if self.chain is None or self.pose is None:
+            raise CalibInputError("chain and pose go together")
+        try:
+            chain = tuple(int(c) for c in self.chain)
+        except (TypeError, ValueError):
+            raise CalibInputError(f"chain must be servo IDs, got {self.chain!r}") from None
+        if not chain or len(set(chain)) != len(chain):
+            raise CalibInputError(f"chain must list distinct servo IDs, got {chain}")
+        missing = sorted(set(motor.tolist()) - set(chain))
+        if missing:
+            raise CalibInputError(f"servos {missing} turned but are not in the chain {chain}")
+        pose = _arr(self.pose, "pose", (n, len(chain)))
+        if self.pose_still is None:
+            still = np.full(pose.shape, -1, dtype=np.int64)
+        else:
+            still = _arr(self.pose_still, "pose_still", pose.shape, dtype=np.int64)
+            if np.any(still < -1):
+                raise CalibInputError("pose_still must be -1 or still-angle indices")
+        return chain, pose, still
+
+    @property
+    def motor_index(self) -> np.ndarray:
+        """Each window's servo as its position in :attr:`chain` (base = 0).
+
+        Raises
+        ------
+        CalibInputError
+            If the set has no chain.
+        """
+        if self.chain is None:
+            raise CalibInputError("the observations carry no gimbal chain")
+        order = {m: i for i, m in enumerate(self.chain)}
+        return np.array([order[int(m)] for m in self.motor], dtype=np.int64)
 
     @property
     def n_still_angles(self) -> int:
-        """Number of shared still angles the references rest on."""
+        """Number of shared still angles the references and poses rest on."""
         m = max(int(self.ref_start.max(initial=-1)), int(self.ref_end.max(initial=-1)))  # type: ignore[union-attr]
+        if self.pose_still is not None:
+            m = max(m, int(self.pose_still.max(initial=-1)))
         return m + 1
 
     def reference_covariance(self) -> np.ndarray:

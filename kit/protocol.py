@@ -2,8 +2,9 @@
 
 Each iteration drains the IMU FIFO, does one sync read of the servos, appends both to the
 recording and steps the plan: for each servo a rest, whole turns one way, a rest, the same turns
-back (ending where it started), and a final rest. After each step the runner checks what it
-recorded:
+back (ending where it started), and a final rest; for the full model, then each posed pair (a
+servo moved to a pose, recorded as a ``move`` segment, the turns of another servo, the move
+back). After each turn or rest the runner checks what it recorded:
 
 * a turn held its commanded speed (the encoder's median speed over its middle half);
 * the gyro did not saturate;
@@ -40,34 +41,58 @@ __all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
 class Step:
     """One step of the protocol."""
 
-    kind: str  # "rest" or "rotate"
+    kind: str  # "rest", "rotate" or "move"
     motor: int | None = None
     direction: int = 0
     turns: int = 0
     speed: float = 0.0
     rest_s: float = 0.0
+    angle: float = 0.0  # a move's goal, rad from home
 
     def describe(self) -> str:
         """Human-readable, e.g. ``turn servo 2, 2 turns at 200°/s, negative``."""
         if self.kind == "rest":
             return f"rest {self.rest_s:.1f} s"
+        if self.kind == "move":
+            return f"move servo {self.motor} to {math.degrees(self.angle):+.0f}°"
         sign = "positive" if self.direction > 0 else "negative"
         return (f"turn servo {self.motor}, {self.turns} turn{'s' * (self.turns != 1)} at "
                 f"{math.degrees(self.speed):.0f}°/s, {sign}")
 
 
 def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
-    """The plan as steps: per servo rest, turn −, rest, turn +; then a final rest.
+    """The plan as steps: per servo rest, turn −, rest, turn +; then a final rest; then, for
+    each posed pair of the full model (:attr:`~gyrocal.calib.design.Plan.poses`), move a servo
+    to its pose, rest, turn the other −, rest, +, rest, and move the first back home
+    (:func:`gyrocal.calib.design.full_schedule` is the same order).
 
-    Turning the negative way first and back again ends every servo where it started.
+    Turning the negative way first and back again ends every servo where it started; every
+    move is undone, so the run ends in the home pose.
+
+    Raises
+    ------
+    ValueError
+        If a pose names a chain position beyond ``ids``.
     """
+    def turns(motor: int) -> list[Step]:
+        out = []
+        for d in (-1, 1):
+            out.append(Step("rest", rest_s=plan.rest_s))
+            out.append(Step("rotate", motor=int(motor), direction=d, turns=plan.turns,
+                            speed=plan.speed))
+        return out
+
     steps: list[Step] = []
     for motor in ids:
-        for d in (-1, 1):
-            steps.append(Step("rest", rest_s=plan.rest_s))
-            steps.append(Step("rotate", motor=int(motor), direction=d, turns=plan.turns,
-                              speed=plan.speed))
+        steps += turns(motor)
     steps.append(Step("rest", rest_s=plan.rest_s))
+    for turn, moved, angle in plan.poses:
+        if max(turn, moved) >= len(ids):
+            raise ValueError(f"pose ({turn}, {moved}) names a servo beyond the chain {ids}")
+        steps.append(Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed))
+        steps += turns(ids[turn])[1:]
+        steps.append(Step("rest", rest_s=plan.rest_s))
+        steps.append(Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed))
     return steps
 
 
@@ -160,6 +185,8 @@ class Runner:
         self._dither = np.random.default_rng(0x6779726F)
         self._rest_s = max((s.rest_s for s in self.steps if s.kind == "rest"), default=0.5)
         self._segments: list[Segment] = []
+        self._pose: dict[int, float] = {}  # servo -> angle of its last move (0 = home)
+        self._posed: set[int] = set()  # indices of the segments turned in a pose
         self.last_rate = np.zeros(3)
         self.last_speed = 0.0
 
@@ -214,8 +241,12 @@ class Runner:
         return start, self.now()
 
     def _run_turn(self, step: Step) -> tuple[float, float, Any]:
+        """A turn, or a move to a pose: start it, loop until the driver finds it finished."""
         start = self.now()
-        motion = self.gimbal.begin_turn(step.motor, step.turns, step.speed, step.direction)
+        if step.kind == "move":
+            motion = self.gimbal.begin_move(step.motor, step.angle, step.speed)
+        else:
+            motion = self.gimbal.begin_turn(step.motor, step.turns, step.speed, step.direction)
         while self.gimbal.busy:
             self._tick()
         self._tick()  # one reading at rest after the stop
@@ -314,10 +345,10 @@ class Runner:
         return None
 
     def turn_times(self) -> dict[int, list[float]]:
-        """Mid-times (recording clock) of each servo's recorded turns."""
+        """Mid-times (recording clock) of each servo's recorded turns in the home pose."""
         out: dict[int, list[float]] = {}
         for seg in self._segments:
-            if seg.kind == "rotate" and seg.motor is not None:
+            if seg.kind == "rotate" and seg.motor is not None and seg.index not in self._posed:
                 out.setdefault(seg.motor, []).append(0.5 * (seg.t_start + seg.t_end))
         return out
 
@@ -341,16 +372,26 @@ class Runner:
                     self._data = _StepData()
                     self.on_event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}"
                                   + (" (repeat)" if attempt == 2 else ""))
+                    motion = None
                     if step.kind == "rest":
                         t_start, t_end = self._run_rest(step)
                         failure = self._check_rest(step, self._data)
+                    elif step.kind == "move":
+                        t_start, t_end, motion = self._run_turn(step)
+                        failure = None  # the driver finished it on its goal, still
+                        self._pose[step.motor] = step.angle
                     else:
                         t_start, t_end, motion = self._run_turn(step)
                         failure = self._check_turn(step, motion, self._data)
                     if failure is None:
-                        speed = float(motion.speed) if step.kind == "rotate" else 0.0
+                        speed = float(motion.speed) if motion is not None else 0.0
+                        direction = step.direction
+                        if step.kind == "move":
+                            direction = motion.direction or 1  # type: ignore[union-attr]
+                        elif step.kind == "rotate" and any(self._pose.values()):
+                            self._posed.add(len(self._segments))
                         self._record(Segment(len(self._segments), step.kind, step.motor,
-                                             step.direction, speed, t_start, t_end))
+                                             direction, speed, t_start, t_end))
                         break
                     if attempt == 2:
                         raise ProtocolCheckError(f"{failure.message} (failed twice)")

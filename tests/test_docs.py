@@ -516,6 +516,19 @@ def test_calibration_v1_fields_match_a_real_calibration(docs: DocRunner) -> None
     _check_fields(_field_table("calibration"), real, "formats.md calibration")
 
 
+def test_calibration_v2_fields_match_a_v2_document() -> None:
+    eye = [[float(i == j) for j in range(3)] for i in range(3)]
+    cal = GyroCalibration(
+        scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0), matrix=eye, matrix_std=eye,
+        covariance=[[0.0] * 12] * 12, frame="gyro-x-xy",
+        kinematics={"chain": [1], "axes": [[1.0, 0.0, 0.0]], "reference_angles_rad": [0.0]},
+    )
+    v1 = _paths(GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0)).to_dict())
+    real = _paths(cal.to_dict()) - v1
+    _check_fields([f for f in _field_table("calibration v2") if f != "covariance"], real,
+                  "formats.md calibration v2")
+
+
 def _slug(heading: str) -> str:
     text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", heading.strip().lower())
     text = re.sub(r"[^\w\- ]", "", text)

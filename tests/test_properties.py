@@ -7,12 +7,14 @@ from hypothesis import strategies as st
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.drivers.emulated.dxl.protocol import crc16, remove_stuffing, stuff
 
-bias_values = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False)  # rad/s
+# Within the domain a calibration document may hold (calib.model.LIMITS).
+bias_values = st.floats(min_value=-100, max_value=100, allow_nan=False)  # rad/s
+scales = st.floats(min_value=0.1, max_value=10, allow_nan=False)
 positive = st.floats(min_value=1e-6, max_value=1e6, allow_nan=False)
 
 
 @settings(max_examples=200, deadline=None)
-@given(scale=st.tuples(positive, positive, positive),
+@given(scale=st.tuples(scales, scales, scales),
        bias=st.tuples(bias_values, bias_values, bias_values),
        std=st.tuples(positive, positive, positive), p=st.floats(0, 1))
 def test_calibration_v1_round_trips_exactly(scale, bias, std, p):
@@ -23,6 +25,27 @@ def test_calibration_v1_round_trips_exactly(scale, bias, std, p):
     assert back.to_dict() == cal.to_dict()
     m = np.array([0.5, -1.0, 2.0])
     np.testing.assert_array_equal(back.apply(m), cal.apply(m))
+
+
+cross = st.floats(min_value=-0.05, max_value=0.05, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(diag=st.tuples(scales, scales, scales), off=st.lists(cross, min_size=6, max_size=6),
+       bias=st.tuples(bias_values, bias_values, bias_values),
+       m=st.lists(st.floats(-50, 50, allow_nan=False), min_size=3, max_size=3),
+       var=st.floats(0, 1e-3))
+def test_calibration_v2_round_trips_and_applies_the_matrix(diag, off, bias, m, var):
+    a = np.diag(diag)
+    a[~np.eye(3, dtype=bool)] = off
+    cal = GyroCalibration(scale=diag, bias=bias, matrix=a, matrix_std=np.full((3, 3), var),
+                          covariance=np.eye(12) * var, frame="f")
+    back = GyroCalibration.from_json(cal.to_json())
+    assert back.to_dict() == cal.to_dict()
+    np.testing.assert_array_equal(back.full_matrix, a)
+    # Eq. g = A (m + b) written out, row by row.
+    g = [sum(a[i, j] * (m[j] + bias[j]) for j in range(3)) for i in range(3)]
+    np.testing.assert_allclose(back.apply(m), g, rtol=1e-12, atol=1e-12)
 
 
 def _bitwise_crc(data: bytes) -> int:

@@ -213,13 +213,13 @@ class Motion:
     Attributes
     ----------
     kind : str
-        ``"turn"`` or ``"return"``.
+        ``"turn"``, ``"move"`` (one servo to a pose) or ``"return"``.
     servo_ids : tuple of int
         The servos that move.
     turns : int
         Whole turns of a turn (0 for a return).
     direction : int
-        +1 or -1 for a turn (0 for a return).
+        +1 or -1 for a turn or a move (0 for a return or a move to where the servo is).
     speed : float
         The commanded (quantized) profile speed, rad/s.
     acceleration : float
@@ -779,6 +779,60 @@ class Gimbal:
             goal_angles={servo_id: (goal - home) * POSITION_UNIT_RAD},
             goal_ticks={servo_id: goal}, t_begin=self.clock.monotonic())
         self.motion._history.append((s.t, start))
+        self._last_poll_t = self.clock.monotonic()
+        return self.motion
+
+    def begin_move(self, servo_id: int, angle: float, speed: float) -> Motion:
+        """Start moving one servo to ``angle`` rad from its home position (a pose); the others
+        hold. Non-blocking; poll until ``motion.finished`` as for a turn.
+
+        Parameters
+        ----------
+        servo_id : int
+            The servo to move.
+        angle : float
+            Goal, rad from home (rounded to the nearest encoder tick).
+        speed : float
+            Cruise speed, rad/s (> 0, at most :attr:`top_speed`).
+
+        Returns
+        -------
+        Motion
+            ``kind`` ``"move"``; finished at once when the servo is already there.
+
+        Raises
+        ------
+        ConfigurationError
+            Bad arguments.
+        TurnLimitError
+            The goal lies beyond :attr:`max_turns` from home.
+        SafetyError
+            Another motion is still running.
+        """
+        self._require_open()
+        if servo_id not in self.ids:
+            raise ConfigurationError(f"servo {servo_id!r} is not on this gimbal (IDs {self.ids})")
+        if not math.isfinite(angle):
+            raise ConfigurationError(f"angle must be a finite number of rad, got {angle!r}")
+        speed_units, speed_q = self._speed_units(servo_id, speed)
+        self._require_idle()
+        s = self.sample()
+        start = int(s.ticks[self.ids.index(servo_id)])
+        home = self.home_ticks[servo_id]
+        goal = home + int(round(angle / POSITION_UNIT_RAD))
+        self._check_turn_limit(servo_id, goal)
+        self.motion = Motion(
+            kind="move", servo_ids=(servo_id,), turns=0, direction=int(np.sign(goal - start)),
+            speed=speed_q, acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2,
+            start_angles={servo_id: (start - home) * POSITION_UNIT_RAD},
+            goal_angles={servo_id: (goal - home) * POSITION_UNIT_RAD},
+            goal_ticks={servo_id: goal}, t_begin=self.clock.monotonic())
+        if goal == start:
+            self.motion.finished = True
+            self.motion.t_end = self.motion.t_begin
+        else:
+            self._write_item(servo_id, "Bus Watchdog", self.watchdog_units)
+            self._write_goal(servo_id, speed_units, goal)
         self._last_poll_t = self.clock.monotonic()
         return self.motion
 

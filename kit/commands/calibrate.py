@@ -56,6 +56,9 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
+    p.add_argument("--sim-cross-axis", type=float, default=0.0, metavar="FRACTION",
+                   help="largest cross-axis term of the emulated sensor, drawn by seed (default "
+                        "0 = the paper's sensor; 0.02 is the MPU-9250 datasheet's ±2 %%)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -150,7 +153,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
         from gyrocal.kit.sim import SIM_BAUD, build_sim
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
-                        realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed)
+                        realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
+                        cross_axis=getattr(args, "sim_cross_axis", 0.0))
         if sim_imu:
             g = cfg["gimbal"]
             return sim, sim.clock, g["port"], g["baud"], sim.imu_bus
@@ -239,12 +243,22 @@ def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | N
     return float(np.median(diff_noise(x)))
 
 
+def _nominal_axes(names: list[str]) -> Any:
+    """Unit vectors of the configured signed sensor axes (``"x"``, ``"-z"``, ...)."""
+    import numpy as np
+
+    out = np.zeros((len(names), 3))
+    for i, name in enumerate(names):
+        out[i, "xyz".index(name[-1])] = -1.0 if name.startswith("-") else 1.0
+    return out
+
+
 def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:
     """The protocol: planned for this servo and gyro (and its measured noise), or the paper's;
     fixed values override."""
     from dataclasses import replace
 
-    from gyrocal.calib.design import jig_time, paper_plan, plan_protocol
+    from gyrocal.calib.design import FULL_TIME_BUDGET_S, jig_time, paper_plan, plan_protocol
     from gyrocal.kit.errors import InputError
 
     p = cfg["protocol"]
@@ -253,9 +267,18 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
     else:
+        # protocol "full": plan the full model's posed turns (hardware_docs/method.md §9) within
+        # at least FULL_TIME_BUDGET_S, with the configured axes as the nominal gimbal for
+        # planning only.
+        full = p["name"] == "full"
+        if full and len(cfg["gimbal"]["ids"]) != 3:
+            raise InputError("protocol 'full' needs a three-servo gimbal (gimbal.ids)")
+        budget = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if full else p["time_budget_s"]
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
-                             time_budget_s=p["time_budget_s"], odr_hz=imu.odr_hz, accel=accel,
+                             time_budget_s=budget, odr_hz=imu.odr_hz, accel=accel,
+                             model="full" if full else "diagonal",
+                             axes=_nominal_axes(cfg["gimbal"]["axes"]) if full else None,
                              **noise)
     fixed = {}
     if p["speed_dps"] > 0:
@@ -266,7 +289,9 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
         fixed["rest_s"] = float(p["rest_s"])
     if fixed:
         plan = replace(plan, **fixed)
-        plan = replace(plan, jig_time_s=jig_time(plan.speed, plan.turns, plan.rest_s, accel))
+        plan = replace(plan, jig_time_s=jig_time(
+            plan.speed, plan.turns, plan.rest_s, accel,
+            move_angles=tuple(abs(a) for _, _, a in plan.poses)))
     if p["name"] == "auto" and plan.jig_time_s > p["time_budget_s"] * (1 + 1e-9):
         raise InputError(
             f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
@@ -293,8 +318,12 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
     gimbal_info = {"motors": [
         {"id": sid, "model": jig.gimbal.infos[sid].model_name,
          "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
-    protocol = {"name": cfg["protocol"]["name"], "speed": plan.speed,
-                "turns": plan.turns, "rest_s": plan.rest_s, "acceleration": plan.accel,
+    ids = cfg["gimbal"]["ids"]
+    protocol = {"name": cfg["protocol"]["name"], "model": plan.model, "speed": plan.speed,
+                "turns": plan.turns, "rest_s": plan.rest_s,
+                "poses": [{"turn": ids[t], "moved": ids[m], "angle_rad": a}
+                          for t, m, a in plan.poses],
+                "acceleration": plan.accel,
                 "planned_jig_time_s": plan.jig_time_s,
                 "planning_noise_std": noise_std,
                 "sample_hz": cfg["gimbal"]["sample_hz"]}
@@ -321,8 +350,9 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None
         if not quiet:
             progress.event(
                 f"protocol {cfg['protocol']['name']}: {plan.turns} turn(s) each way at "
-                f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, about "
-                f"{plan.jig_time_s:.0f} s of jig time"
+                f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, "
+                + (f"{len(plan.poses)} posed pairs for the full matrix, " if plan.poses else "")
+                + f"about {plan.jig_time_s:.0f} s of jig time"
                 + (" (emulated jig)" if jig.sim is not None else "")
                 + (" (emulated IMU at rest)" if jig.imu_sim is not None else ""))
         with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
@@ -466,6 +496,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
+    for note in est.notes:
+        print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()

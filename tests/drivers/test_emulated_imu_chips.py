@@ -204,7 +204,8 @@ def test_truth_model_is_eq1_inverted_with_misalignment_first():
     m = truth.reading(g, np.array([25.0]))
     # g = scale * (m + bias) holds for the misaligned rate M g
     np.testing.assert_allclose(np.array(truth.scale) * (m + truth.bias), (mis @ g.T).T)
-    assert truth.manifest() == {"scale": [1.02, 0.97, 1.0], "bias": [0.01, -0.02, 0.03]}
+    assert truth.manifest() == {"scale": [1.02, 0.97, 1.0], "bias": [0.01, -0.02, 0.03],
+                                "misalignment": mis.tolist()}
 
 
 def test_truth_validates_its_fields():

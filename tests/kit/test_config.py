@@ -38,7 +38,7 @@ def test_values_override_defaults(tmp_path):
         ("[gimbal]\nids = [1, 1, 2]\n", "gimbal.ids must be distinct"),
         ("[gimbal]\nids = [1, 2]\n", "gimbal.ids has 2 servos but gimbal.axes names 3"),
         ("[imu]\naddress = 0x90\n", "7-bit I2C address"),
-        ("[protocol]\nname = 'fast'\n", "allowed: 'auto', 'paper'"),
+        ("[protocol]\nname = 'fast'\n", "allowed: 'auto', 'full', 'paper'"),
         ("[imu\n", "not valid TOML"),
     ],
 )
@@ -74,4 +74,5 @@ def test_the_method_choices_are_the_estimators():
     from gyrocal.calib.estimators import METHODS as ESTIMATORS
     from gyrocal.kit.config import METHODS
 
-    assert set(METHODS) == set(ESTIMATORS)
+    assert METHODS[0] == "auto"  # kit.pipeline's choice between the full and diagonal models
+    assert set(METHODS[1:]) == set(ESTIMATORS)
