@@ -47,20 +47,27 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
+from gyrocal.calib import kinematics
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.calib.observations import ObservationSet
 
 __all__ = [
     "CONSISTENCY_ALPHA",
+    "FULL_FRAME",
+    "MAX_MATRIX_STD",
     "METHODS",
+    "FullMatrixBatch",
     "FitResult",
     "estimate",
+    "fit_full_matrix",
+    "full_matrix_batch",
     "fit_iterative_ls",
     "fit_levenberg_marquardt",
     "fit_paired_axis",
     "iterative_ls_batch",
     "lm_solve",
+    "matrix_in_frame",
     "paired_axis_batch",
 ]
 
@@ -104,6 +111,14 @@ class FitResult:
     extra : dict
         Method-specific details (Algorithm 1: ``beta``, ``beta0``, ``condition_met``, and
         ``history`` of the (k, b) iterates).
+    matrix : numpy.ndarray, shape (3, 3), or None
+        Full-matrix only: ``A`` of ``g = A (m + b)`` in the frame ``frame``; ``scale`` is then its
+        diagonal and ``covariance`` is 12×12 over ``(A row-major, b)``.
+    frame : str or None
+        Full-matrix only: the frame convention (:data:`FULL_FRAME`).
+    kinematics : dict or None
+        Full-matrix only: the gimbal as fitted, ``{"chain", "axes", "reference_angles_rad"}``
+        (:mod:`gyrocal.calib.kinematics`).
     """
 
     method: str
@@ -119,16 +134,27 @@ class FitResult:
     axes: dict[int, np.ndarray] | None = None
     axes_std_rad: dict[int, float] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    matrix: np.ndarray | None = None
+    frame: str | None = None
+    kinematics: dict[str, Any] | None = None
 
     @property
     def scale_std(self) -> np.ndarray:
-        """One-sigma uncertainty of ``scale``."""
-        return np.sqrt(np.clip(np.diag(self.covariance)[:3], 0, None))
+        """One-sigma uncertainty of ``scale`` (the matrix's diagonal for the full model)."""
+        idx = [0, 4, 8] if self.matrix is not None else [0, 1, 2]
+        return np.sqrt(np.clip(np.diag(self.covariance)[idx], 0, None))
 
     @property
     def bias_std(self) -> np.ndarray:
         """One-sigma uncertainty of ``bias``."""
-        return np.sqrt(np.clip(np.diag(self.covariance)[3:], 0, None))
+        return np.sqrt(np.clip(np.diag(self.covariance)[-3:], 0, None))
+
+    @property
+    def matrix_std(self) -> np.ndarray | None:
+        """One-sigma uncertainty of each element of ``matrix`` (None for the diagonal model)."""
+        if self.matrix is None:
+            return None
+        return np.sqrt(np.clip(np.diag(self.covariance)[:9], 0, None)).reshape(3, 3)
 
     def to_calibration(
         self,
@@ -158,7 +184,16 @@ class FitResult:
                 }
                 for m, u in self.axes.items()
             }
+        full: dict[str, Any] = {}
+        if self.matrix is not None:
+            full = dict(
+                matrix=tuple(tuple(float(x) for x in row) for row in self.matrix),
+                matrix_std=tuple(tuple(float(x) for x in row) for row in self.matrix_std),  # type: ignore[union-attr]
+                frame=self.frame,
+                kinematics=self.kinematics,
+            )
         return GyroCalibration(
+            **full,
             scale=tuple(self.scale),  # type: ignore[arg-type]
             bias=tuple(self.bias),  # type: ignore[arg-type]
             scale_std=tuple(self.scale_std),  # type: ignore[arg-type]
@@ -910,3 +945,424 @@ def estimate(obs: ObservationSet, method: str = "paired-axis", **options: Any) -
             f"unknown method {method!r}; choose one of {', '.join(METHODS)}"
         ) from None
     return fn(obs, **options)
+
+
+# ---------------------------------------------------------------------------------- full matrix
+#: Identifier of the frame convention of the full model (``hardware_docs/method.md``): x along
+#: the gyro's x sensing axis, y in the plane of its x and y sensing axes, z completing a
+#: right-handed frame. In it the matrix ``A`` of ``g = A (m + b)`` is lower triangular.
+FULL_FRAME = "gyro-x-xy"
+
+_TRIL = (np.array([0, 1, 1, 2, 2, 2]), np.array([0, 0, 1, 0, 1, 2]))
+
+
+def matrix_in_frame(sensing: np.ndarray) -> np.ndarray:
+    """``A`` in the frame :data:`FULL_FRAME` of a sensor whose reading is ``m = C g − b``.
+
+    ``C`` (rows: the sensing axes divided by their scales, in any frame) is written ``C = L Q``
+    with ``L`` lower triangular with a positive diagonal and ``Q`` a rotation or reflection (its LQ
+    decomposition); ``A = L⁻¹``. For the emulated sensor, ``C = diag(1/scale) @ misalignment``.
+
+    Raises
+    ------
+    CalibInputError
+        If ``sensing`` is not a finite invertible 3×3 matrix.
+    """
+    C = np.asarray(sensing, dtype=float)
+    if C.shape != (3, 3) or not np.all(np.isfinite(C)):
+        raise CalibInputError(f"sensing must be a finite 3×3 matrix, got shape {C.shape}")
+    _, r = np.linalg.qr(C.T)
+    L = r.T * np.sign(np.diag(r))[None, :]
+    if np.min(np.abs(np.diag(L))) <= 1e-12 * np.max(np.abs(L)):
+        raise CalibInputError("sensing matrix is singular: two sensing axes are parallel")
+    return np.linalg.inv(L)
+
+
+@dataclass(frozen=True, eq=False)
+class FullMatrixBatch:
+    """Results of :func:`full_matrix_batch` for ``B`` independent runs.
+
+    ``matrix`` is ``A`` of ``g = A (m + b)`` in the frame :data:`FULL_FRAME`; ``covariance`` is
+    the 12×12 covariance of ``(A row-major, b)`` (zero rows and columns for the three elements
+    the frame fixes at 0); ``axes`` are the servos' axes in that frame at ``reference``.
+    """
+
+    matrix: np.ndarray  # (B, 3, 3)
+    bias: np.ndarray  # (B, 3)
+    axes: np.ndarray  # (B, S, 3)
+    axes_std_rad: np.ndarray  # (B, S)
+    covariance: np.ndarray  # (B, 12, 12)
+    chi2: np.ndarray  # (B,)
+    dof: int
+    iterations: np.ndarray  # (B,)
+    converged: np.ndarray  # (B,) bool
+    residuals: np.ndarray  # (B, 3n + 3r + A) whitened
+    rank_deficiency: np.ndarray  # (B,) int: unobservable directions of the 9 + 2S model terms
+
+
+def _inner_unrotate(u0: np.ndarray, delta: np.ndarray, j: int, v: np.ndarray) -> np.ndarray:
+    """Undo the rotations of the servos inside ``j``: ``v = Rot_{S-1}(−Δ)…Rot_{j+1}(−Δ) x`` →
+    ``x``. Shapes: ``u0`` (B, S, 3), ``delta`` (B, n, S), ``v`` (B, n, 3)."""
+    for k in range(u0.shape[1] - 1, j, -1):
+        v = kinematics.rotate(u0[:, None, k, :], delta[..., k], v)
+    return v
+
+
+def _full_initial(
+    mean: np.ndarray, rate: np.ndarray, midx: np.ndarray, delta: np.ndarray, S: int,
+    rest_mean: np.ndarray, rest_std: np.ndarray, mean_std: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A closed-form start: bias from the rests, each axis from its windows' mean directions
+    (innermost servo first, so each outer window can be carried back to the reference pose), then
+    ``(C, b)`` by weighted linear least squares given those axes."""
+    B, n, _ = mean.shape
+    if rest_mean.shape[1]:
+        wr = 1.0 / rest_std**2
+        b0 = -np.sum(wr * rest_mean, axis=1) / np.sum(wr, axis=1)
+    else:
+        b0 = np.zeros((B, 3))
+    v = (mean + b0[:, None, :]) / rate[..., None]
+    v /= np.linalg.norm(v, axis=2, keepdims=True)
+    u0 = np.zeros((B, S, 3))
+    for j in range(S - 1, -1, -1):
+        sel = midx == j
+        x = _inner_unrotate(u0, delta[:, sel], j, v[:, sel])
+        s = x.sum(axis=1)
+        u0[:, j] = s / np.linalg.norm(s, axis=1, keepdims=True)
+    ui = kinematics.chain_axes(u0[:, None], 0.0, delta)[:, np.arange(n), midx]
+    # m̄ = C u w − b, rests −b: linear in the six entries of C and b.
+    r = rest_mean.shape[1]
+    X = np.zeros((B, 3 * n + 3 * r, 9))
+    for col, (p, q) in enumerate(zip(*_TRIL, strict=True)):
+        X[:, p : 3 * n : 3, col] = ui[..., q] * rate
+    for j in range(3):
+        X[:, j : 3 * n : 3, 6 + j] = -1.0
+        X[:, 3 * n + j :: 3, 6 + j] = -1.0
+    y = np.concatenate([mean.reshape(B, -1), rest_mean.reshape(B, -1)], axis=1)
+    w = 1.0 / np.concatenate([mean_std.reshape(B, -1), rest_std.reshape(B, -1)], axis=1)
+    Xw, yw = X * w[..., None], y * w
+    beta = np.linalg.solve(Xw.transpose(0, 2, 1) @ Xw, (Xw.transpose(0, 2, 1) @ yw[..., None]))
+    c0 = beta[:, :6, 0]
+    b0 = beta[:, 6:, 0]
+    return c0, b0, u0
+
+
+def _tril(c: np.ndarray) -> np.ndarray:
+    C = np.zeros(c.shape[:-1] + (3, 3))
+    C[..., _TRIL[0], _TRIL[1]] = c
+    return C
+
+
+def full_matrix_batch(
+    mean: np.ndarray,
+    rate: np.ndarray,
+    motor_index: np.ndarray,
+    pose: np.ndarray,
+    mean_std: np.ndarray,
+    rate_std: np.ndarray,
+    rest_mean: np.ndarray,
+    rest_std: np.ndarray,
+    *,
+    n_servos: int | None = None,
+    reference: np.ndarray | None = None,
+    ref_matrix: np.ndarray | None = None,
+    still_std: float = 0.0,
+    max_iter: int = 50,
+    xtol: float = 1e-12,
+) -> FullMatrixBatch:
+    r"""The full-matrix fit for ``B`` runs at once (vectorised); model in :func:`fit_full_matrix`.
+
+    Parameters
+    ----------
+    mean : ndarray, shape (B, n, 3)
+        Window mean readings.
+    rate : ndarray, shape (B, n)
+        Signed reference rates of the turning servo.
+    motor_index : ndarray of int, shape (n,)
+        Turning servo of each window as its position in the chain (base = 0).
+    pose : ndarray, shape (n, S) or (B, n, S)
+        Every servo's encoder angle over each window, chain order, rad.
+    mean_std, rate_std, rest_mean, rest_std, ref_matrix, still_std, max_iter :
+        As in :func:`paired_axis_batch`.
+    n_servos : int, optional
+        Servos in the chain (default: ``pose.shape[-1]``).
+    reference : ndarray, shape (S,), optional
+        Reference angles of the returned axes (default: the first window's pose).
+    xtol : float
+        Convergence threshold on the largest parameter step.
+
+    Returns
+    -------
+    FullMatrixBatch
+    """
+    B, n, _ = mean.shape
+    r = rest_mean.shape[1]
+    pose = np.asarray(pose, dtype=float)
+    S = int(n_servos if n_servos is not None else pose.shape[-1])
+    midx = np.asarray(motor_index, dtype=np.int64)
+    ref = pose.reshape(-1, n, S)[0, 0] if reference is None else np.asarray(reference, float)
+    delta = np.broadcast_to(pose - ref, (B, n, S))
+    G = np.zeros((n, 0)) if ref_matrix is None else np.asarray(ref_matrix, dtype=float)
+    n_still = G.shape[1]
+    if n_still and not still_std > 0:
+        raise CalibInputError("still_std must be positive when ref_matrix has still angles")
+    P = 9 + 2 * S + n_still
+    c, b, u0 = _full_initial(mean, rate, midx, delta, S, rest_mean, rest_std, mean_std)
+    z = np.zeros((B, n_still))
+    var_m = mean_std**2
+    var_w = rate_std[:, :, None, None] ** 2
+    eye3 = np.eye(3)
+    ar = np.arange(n)
+    h = 1e-6
+
+    def axes_in_windows(u: np.ndarray) -> np.ndarray:
+        return kinematics.chain_axes(u[:, None], 0.0, delta)[:, ar, midx]  # (B, n, 3)
+
+    def evaluate(c, b, u, z, with_jac):
+        C = _tril(c)
+        ui = axes_in_windows(u)
+        ci = np.einsum("bpq,bnq->bnp", C, ui)
+        w = (rate - z @ G.T)[:, :, None]
+        e = mean - (w * ci - b[:, None, :])
+        cov = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
+        L = np.linalg.cholesky(cov)
+        ew = np.linalg.solve(L, e[..., None])[..., 0]
+        er = (rest_mean + b[:, None, :]) / rest_std
+        ez = z / still_std if n_still else z
+        E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r), ez], axis=1)
+        if not with_jac:
+            return E, None, None
+        t1, t2 = _tangent_basis(u)
+        J = np.zeros((B, n, 3, P))
+        for col, (p, q) in enumerate(zip(*_TRIL, strict=True)):
+            J[:, :, p, col] = -w[..., 0] * ui[..., q]
+        J[:, :, np.arange(3), 6 + np.arange(3)] = 1.0
+        for s in range(S):  # axis directions: central differences along the tangent basis
+            for t_i, t in enumerate((t1, t2)):
+                dp, dm = u.copy(), u.copy()
+                dp[:, s] += h * t[:, s]
+                dm[:, s] -= h * t[:, s]
+                dp[:, s] /= np.linalg.norm(dp[:, s], axis=1, keepdims=True)
+                dm[:, s] /= np.linalg.norm(dm[:, s], axis=1, keepdims=True)
+                du = (axes_in_windows(dp) - axes_in_windows(dm)) / (2 * h)
+                J[:, :, :, 9 + 2 * s + t_i] = -w * np.einsum("bpq,bnq->bnp", C, du)
+        if n_still:
+            J[:, :, :, 9 + 2 * S :] = ci[..., None] * G[None, :, None, :]
+        Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
+        Jr = np.zeros((B, r, 3, P))
+        Jr[:, :, np.arange(3), 6 + np.arange(3)] = 1.0 / rest_std
+        Jz = np.zeros((B, n_still, P))
+        if n_still:
+            Jz[:, np.arange(n_still), 9 + 2 * S + np.arange(n_still)] = 1.0 / still_std
+        return E, np.concatenate([Jw, Jr.reshape(B, 3 * r, P), Jz], axis=1), (t1, t2)
+
+    def retract(state, step, tb):
+        c, b, u, z = state
+        t1, t2 = tb
+        da = step[:, 9 : 9 + 2 * S : 2][..., None]
+        db = step[:, 10 : 9 + 2 * S : 2][..., None]
+        u_new = u + da * t1 + db * t2
+        u_new /= np.linalg.norm(u_new, axis=2, keepdims=True)
+        c_new = c + step[:, :6]
+        ok = np.all(c_new[:, [0, 2, 5]] > 0, axis=1)  # the diagonal stays positive
+        return (c_new, b + step[:, 6:9], u_new, z + step[:, 9 + 2 * S :]), ok
+
+    state, E, J, iterations, converged = _lm_batch(
+        evaluate, retract, (c, b, u0, z), max_iter=max_iter, xtol=xtol)
+    c, b, u0, z = state
+    JtJ = J.transpose(0, 2, 1) @ J
+    cov = np.linalg.pinv(JtJ, hermitian=True)
+    # Observability of the model terms (C, b, axes) by the singular values of the whitened
+    # Jacobian with its columns normalised (the still angles always have their priors).
+    Jm = J[:, :, : 9 + 2 * S]
+    Jn = Jm / np.maximum(np.linalg.norm(Jm, axis=1, keepdims=True), 1e-300)
+    sv = np.linalg.svd(Jn, compute_uv=False)
+    deficiency = np.sum(sv < 1e-7 * sv[:, :1], axis=1)
+    C = _tril(c)
+    A = np.linalg.inv(C)
+    # d vec(A) / d c: dA = −A dC A; then the bias.
+    T = np.zeros((B, 12, P))
+    for col, (p, q) in enumerate(zip(*_TRIL, strict=True)):
+        T[:, :9, col] = -(A[:, :, p, None] * A[:, None, q, :]).reshape(B, 9)
+    T[:, 9:, 6:9] = eye3
+    cov12 = T @ cov @ T.transpose(0, 2, 1)
+    ax_std = np.zeros((B, S))
+    for s in range(S):
+        blk = cov[:, 9 + 2 * s : 11 + 2 * s, 9 + 2 * s : 11 + 2 * s]
+        ax_std[:, s] = np.sqrt(np.clip(np.linalg.eigvalsh(blk)[:, -1], 0.0, None))
+    return FullMatrixBatch(
+        matrix=A, bias=b, axes=u0, axes_std_rad=ax_std, covariance=cov12,
+        chi2=np.sum(E**2, axis=1), dof=3 * n + 3 * r + n_still - P, iterations=iterations,
+        converged=converged, residuals=E, rank_deficiency=deficiency,
+    )
+
+
+def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float):  # type: ignore[no-untyped-def]
+    """Levenberg-Marquardt over a batch of independent problems.
+
+    ``evaluate(*state, with_jac)`` returns whitened residuals ``E`` (B, M), their Jacobian
+    (B, M, P) and a tangent basis for ``retract``; ``retract(state, step, tb)`` returns the
+    stepped state and which runs' steps are admissible. A run has converged when its largest
+    step is below ``xtol`` or a step changes the cost by less than ``1e-10`` relative.
+    """
+    E, J, tb = evaluate(*state, True)
+    B, _, P = J.shape
+    cost = np.sum(E**2, axis=1)
+    lam = np.full(B, 1e-3)
+    active = np.ones(B, dtype=bool)
+    iterations = np.zeros(B, dtype=np.int64)
+    converged = np.zeros(B, dtype=bool)
+
+    def pick(mask, new, old):
+        return tuple(np.where(mask.reshape((-1,) + (1,) * (o.ndim - 1)), nw, o)
+                     for nw, o in zip(new, old, strict=True))
+
+    for _ in range(int(max_iter)):
+        if not active.any():
+            break
+        Jt = J.transpose(0, 2, 1)
+        JtJ = Jt @ J
+        g = (Jt @ E[..., None])[..., 0]
+        D = np.einsum("bpp->bp", JtJ)
+        M = JtJ + (lam[:, None] * np.maximum(D, 1e-300))[:, :, None] * np.eye(P)
+        step = -np.linalg.solve(M, g[..., None])[..., 0]
+        new_state, ok = retract(state, step, tb)
+        E_new, _, _ = evaluate(*new_state, False)
+        cost_new = np.sum(E_new**2, axis=1)
+        accept = active & ok & (cost_new <= cost)
+        iterations += active
+        small = np.max(np.abs(step), axis=1) <= xtol
+        flat = np.abs(cost - cost_new) <= 1e-10 * (1.0 + cost)
+        state = pick(accept, new_state, state)
+        lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
+        done = active & ok & (small | flat)
+        converged |= done
+        active &= ~done
+        if accept.any():
+            E_acc, J_acc, tb_acc = evaluate(*state, True)
+            E = np.where(accept[:, None], E_acc, E)
+            J = np.where(accept[:, None, None], J_acc, J)
+            tb = pick(accept, tb_acc, tb)
+            cost = np.sum(E**2, axis=1)
+    E, J, _ = evaluate(*state, True)
+    return state, E, J, iterations, converged
+
+
+#: Largest one-sigma uncertainty of a matrix element for which the full model counts as
+#: determined: a twentieth of the ±2 % cross-axis sensitivity the MPU-9250 datasheet allows.
+MAX_MATRIX_STD = 1e-3
+
+
+def fit_full_matrix(
+    obs: ObservationSet, *, max_iter: int = 50, max_matrix_std: float = MAX_MATRIX_STD
+) -> FitResult:
+    r"""Full-matrix fit: ``g = A (m + b)`` with ``A`` a full 3×3 matrix, from a posed protocol.
+
+    Model (derived in ``hardware_docs/method.md``): a window of servo ``s`` at signed reference
+    rate ``ω_i``, with every servo of the chain at the encoder angles ``θ_i`` (``obs.pose``),
+    reads
+
+    .. math:: E[\bar m_i] = ω_i\, C\, u_s(θ_i) − b, \qquad C = A^{-1},
+
+    where ``u_s(θ)`` is the servo's axis carried into the sensor frame by the servos inside it
+    (:func:`gyrocal.calib.kinematics.chain_axes`), and a rest reads ``E[\bar m_r] = −b``. The
+    joint axes at the reference pose are nuisance parameters (two angles each; nothing assumes the
+    gimbal square). The global rotation of the sensor frame is not observable; it is fixed by
+    :data:`FULL_FRAME` (``C`` and hence ``A`` lower triangular, positive diagonal). Residuals are
+    whitened by each window's covariance ``diag(σ²_ij) + σ²_{ω,i} (C u)(C u)ᵀ``, each still
+    encoder angle a reference rests on is a shared unknown with its quantisation as prior (as in
+    :func:`fit_paired_axis`), and the sum of squares is minimised by Levenberg-Marquardt.
+    Covariance ``(J̃ᵀJ̃)⁻¹`` propagated to ``A`` by ``dA = −A dC A``; consistency
+    ``Σẽ² ~ χ²(3n + 3r − 9 − 2S)``.
+
+    Parameters
+    ----------
+    obs : ObservationSet
+        With ``chain`` and ``pose``: windows of every servo in both directions, in poses that make
+        the model observable (a servo turned with the servos inside it at two or more angles),
+        and rest windows.
+    max_iter : int
+        Most Levenberg-Marquardt steps.
+    max_matrix_std : float
+        The fit succeeds only if every matrix element's one-sigma uncertainty is at most this
+        (:data:`MAX_MATRIX_STD`): a schedule whose poses leave a direction unobservable on a
+        square gimbal sees it only through the gimbal's small tilts, with a huge uncertainty.
+
+    Returns
+    -------
+    FitResult
+        ``method`` ``"full-matrix"``, with ``matrix``, ``frame``, ``kinematics``; ``scale`` is
+        ``diag(A)``, ``covariance`` 12×12. ``success`` is false with status ``not-determined``
+        when the poses cannot determine the full matrix (the message says how far off).
+
+    Raises
+    ------
+    CalibInputError
+        If ``obs`` has no chain and pose, or a servo turned in one direction only.
+    """
+    _validate_common(obs, "full-matrix", 6)
+    if obs.chain is None or obs.pose is None:
+        raise CalibInputError(
+            "full-matrix needs the gimbal chain and each window's pose (a recording whose "
+            "manifest lists the servos in chain order, with their encoder angles)")
+    never = [m for m in obs.chain if m not in obs.motors]
+    if never:
+        raise CalibInputError(
+            f"servos {never} of the chain never turn; full-matrix needs a turn of every servo "
+            "(its axis carries the axes of the servos outside it)")
+    obs = obs.with_pooled_noise()
+    res = full_matrix_batch(
+        obs.mean[None], obs.rate[None], obs.motor_index, obs.pose, obs.mean_std[None],
+        obs.rate_std[None], obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
+        n_servos=len(obs.chain), ref_matrix=obs.reference_matrix(),
+        still_std=obs.still_angle_std, max_iter=max_iter,
+    )
+    A, b, cov = res.matrix[0], res.bias[0], res.covariance[0]
+    it = int(res.iterations[0])
+    deficiency = int(res.rank_deficiency[0])
+    worst = float(np.sqrt(np.max(np.diag(cov)[:9]))) if np.all(np.isfinite(cov)) else np.inf
+    determined = deficiency == 0 and worst <= max_matrix_std
+    ok = bool(res.converged[0]) and bool(np.all(np.isfinite(A))) and determined
+    if not determined:
+        status = "not-determined"
+        how = (f"leave {deficiency} combination(s) of the matrix and the servo axes undetermined"
+               if deficiency else
+               f"determine the matrix only to ±{worst:.1e} (one sigma; limit {max_matrix_std:g})")
+        message = (
+            f"the poses {how}: turn outer servos with the servos inside them at other angles "
+            "(two posed pairs of turns at least; hardware_docs/method.md, observability)")
+    elif ok:
+        status, message = "converged", f"converged in {it} steps"
+    else:
+        status, message = "max-iterations", f"no convergence in {max_iter} steps"
+    consistency = None
+    if res.dof > 0:
+        chi2 = float(res.chi2[0])
+        p = float(stats.chi2.sf(chi2, res.dof))
+        consistency = Consistency(chi2=chi2, dof=res.dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
+    ref = obs.pose[0]
+    kin = {
+        "chain": list(obs.chain),
+        "axes": [[float(x) for x in u] for u in res.axes[0]],
+        "reference_angles_rad": [float(x) for x in ref],
+    }
+    return FitResult(
+        method="full-matrix",
+        scale=np.diag(A).copy(),
+        bias=b.copy(),
+        covariance=cov.copy(),
+        iterations=it,
+        success=ok,
+        status=status,
+        message=message,
+        consistency=consistency,
+        residuals=res.residuals[0].copy(),
+        axes={m: res.axes[0, i].copy() for i, m in enumerate(obs.chain)},
+        axes_std_rad={m: float(res.axes_std_rad[0, i]) for i, m in enumerate(obs.chain)},
+        matrix=A.copy(),
+        frame=FULL_FRAME,
+        kinematics=kin,
+    )
+
+
+METHODS["full-matrix"] = fit_full_matrix

@@ -132,6 +132,12 @@ class ObservationSet:
         Change of the reference rate per radian of error in a still angle (``1 / ∫w``).
     still_angle_std : float, optional
         Prior standard deviation of a still encoder angle, rad (``q/√12``).
+    chain : sequence of int, optional
+        The gimbal's servo IDs in chain order, base first (Recording v1 ``gimbal.motors``).
+    pose : array_like, shape (n, S), optional
+        Encoder angle of every servo of ``chain`` over each window (its mean over the window),
+        rad, cumulative: the pose that carries the turning servo's axis in the sensor frame
+        (:mod:`gyrocal.calib.kinematics`). Given together with ``chain``.
 
     Raises
     ------
@@ -157,6 +163,8 @@ class ObservationSet:
     ref_end: np.ndarray | None = None
     ref_gain: np.ndarray | None = None
     still_angle_std: float = 0.0
+    chain: tuple[int, ...] | None = None
+    pose: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -230,6 +238,7 @@ class ObservationSet:
             used = np.concatenate([ref_start[ref_start >= 0], ref_end[ref_end >= 0]])
             if used.size and not (self.still_angle_std > 0):
                 raise CalibInputError("still_angle_std must be positive when still angles are used")
+        chain, pose = self._chain_pose(n, motor)
         temp = self.temperature_c
         if temp is not None:
             temp = float(temp)
@@ -244,6 +253,40 @@ class ObservationSet:
         ):
             object.__setattr__(self, name, _ro(v))
         object.__setattr__(self, "temperature_c", temp)
+        object.__setattr__(self, "chain", chain)
+        object.__setattr__(self, "pose", None if pose is None else _ro(pose))
+
+    def _chain_pose(
+        self, n: int, motor: np.ndarray
+    ) -> tuple[tuple[int, ...] | None, np.ndarray | None]:
+        if self.chain is None and self.pose is None:
+            return None, None
+        if self.chain is None or self.pose is None:
+            raise CalibInputError("chain and pose go together")
+        try:
+            chain = tuple(int(c) for c in self.chain)
+        except (TypeError, ValueError):
+            raise CalibInputError(f"chain must be servo IDs, got {self.chain!r}") from None
+        if not chain or len(set(chain)) != len(chain):
+            raise CalibInputError(f"chain must list distinct servo IDs, got {chain}")
+        missing = sorted(set(motor.tolist()) - set(chain))
+        if missing:
+            raise CalibInputError(f"servos {missing} turned but are not in the chain {chain}")
+        return chain, _arr(self.pose, "pose", (n, len(chain)))
+
+    @property
+    def motor_index(self) -> np.ndarray:
+        """Each window's servo as its position in :attr:`chain` (base = 0).
+
+        Raises
+        ------
+        CalibInputError
+            If the set has no chain.
+        """
+        if self.chain is None:
+            raise CalibInputError("the observations carry no gimbal chain")
+        order = {m: i for i, m in enumerate(self.chain)}
+        return np.array([order[int(m)] for m in self.motor], dtype=np.int64)
 
     @property
     def n_still_angles(self) -> int:

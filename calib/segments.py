@@ -8,7 +8,10 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError
 
-__all__ = ["Segment"]
+__all__ = ["KINDS", "Segment"]
+
+#: The segment kinds of Recording v1.
+KINDS = ("rotate", "rest", "move")
 
 
 @dataclass(frozen=True)
@@ -20,11 +23,12 @@ class Segment:
     index : int
         Position in the protocol.
     kind : str
-        ``"rotate"`` or ``"rest"``.
+        ``"rotate"``, ``"rest"`` or ``"move"`` (a positioning move of one servo to a pose; same
+        columns as a rotation, never windowed as a turn).
     motor : int or None
-        Dynamixel ID of the turning servo; None for a rest.
+        Dynamixel ID of the turning (or moving) servo; None for a rest.
     direction : int
-        +1 or -1 for a rotation (the servo's positive direction is +1); 0 for a rest.
+        +1 or -1 for a rotation or move (the servo's positive direction is +1); 0 for a rest.
     speed : float
         Commanded speed, rad/s (positive); 0 for a rest.
     t_start, t_end : float
@@ -40,9 +44,9 @@ class Segment:
     t_end: float
 
     def __post_init__(self) -> None:
-        if self.kind not in ("rotate", "rest"):
+        if self.kind not in KINDS:
             raise CalibInputError(
-                f"segment {self.index}: kind must be 'rotate' or 'rest', got {self.kind!r}"
+                f"segment {self.index}: kind must be 'rotate', 'rest' or 'move', got {self.kind!r}"
             )
         if not (np.isfinite(self.t_start) and np.isfinite(self.t_end)):
             raise CalibInputError(f"segment {self.index}: t_start and t_end must be finite")
@@ -50,9 +54,9 @@ class Segment:
             raise CalibInputError(
                 f"segment {self.index}: t_end {self.t_end} is before t_start {self.t_start}"
             )
-        if self.kind == "rotate":
+        if self.kind in ("rotate", "move"):
             if self.motor is None:
-                raise CalibInputError(f"segment {self.index}: a rotation needs a motor id")
+                raise CalibInputError(f"segment {self.index}: a {self.kind} needs a motor id")
             if self.direction not in (-1, 1):
                 raise CalibInputError(
                     f"segment {self.index}: direction must be +1 or -1, got {self.direction!r}"

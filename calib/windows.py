@@ -225,6 +225,431 @@ def _correlation_factor(rest_samples: list[np.ndarray]) -> np.ndarray:
     return np.where(np.abs(tau - 1.0) > 3 * se, np.clip(tau, 0.25, 25.0), 1.0)
 
 
+def _check_streams(
+    imu_t: np.ndarray, imu_rate: np.ndarray, enc_t: np.ndarray, enc_motor: np.ndarray,
+    enc_angle: np.ndarray, imu_temp: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Stage 1: the raw streams as float arrays of matching shapes, finite, gyro times rising."""
+    imu_t = np.asarray(imu_t, dtype=float)
+    imu_rate = np.asarray(imu_rate, dtype=float)
+    enc_t = np.asarray(enc_t, dtype=float)
+    enc_motor = np.asarray(enc_motor)
+    enc_angle = np.asarray(enc_angle, dtype=float)
+    if imu_t.ndim != 1 or imu_rate.shape != (imu_t.size, 3):
+        raise CalibInputError(
+            f"imu_t must be (N,) and imu_rate (N, 3); got {imu_t.shape} and {imu_rate.shape}"
+        )
+    if not (enc_t.shape == enc_motor.shape == enc_angle.shape) or enc_t.ndim != 1:
+        raise CalibInputError("enc_t, enc_motor and enc_angle must be 1-D arrays of one length")
+    if imu_t.size < 2:
+        raise CalibInputError("the gyro stream is empty")
+    for name, a in (("imu_t", imu_t), ("imu_rate", imu_rate), ("enc_t", enc_t),
+                    ("enc_angle", enc_angle)):
+        if not np.all(np.isfinite(a)):
+            raise CalibInputError(f"{name} contains NaN or inf")
+    if np.any(np.diff(imu_t) <= 0):
+        raise CalibInputError("imu_t must be strictly increasing")
+    temp = None if imu_temp is None else np.asarray(imu_temp, dtype=float)
+    if temp is not None and temp.shape != imu_t.shape:
+        raise CalibInputError(f"imu_temp must have shape {imu_t.shape}, got {temp.shape}")
+    return imu_t, imu_rate, enc_t, enc_motor, enc_angle, temp
+
+
+class EncoderTracks:
+    """Stage 2: each servo's encoder track, its motion intervals and its still periods.
+
+    A servo's motion intervals are its readings that moved by more than two ticks, merged across
+    pauses shorter than 50 ms; the gaps between them are its still periods, numbered once each so
+    that the windows on both sides of one still angle share it.
+
+    Parameters
+    ----------
+    enc_t, enc_motor, enc_angle : ndarray, shape (M,)
+        Encoder readings: time, servo ID, cumulative angle in rad.
+    q : float
+        One encoder tick, rad.
+    """
+
+    def __init__(self, enc_t: np.ndarray, enc_motor: np.ndarray, enc_angle: np.ndarray,
+                 q: float) -> None:
+        self.q = q
+        self.track: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for m in np.unique(enc_motor):
+            sel = enc_motor == m
+            order = np.argsort(enc_t[sel], kind="stable")
+            self.track[int(m)] = (enc_t[sel][order], enc_angle[sel][order])
+        self.motion: dict[int, list[tuple[float, float]]] = {}
+        for m_id, (t_m, th_m) in self.track.items():
+            spans: list[tuple[float, float]] = []
+            for i in np.flatnonzero(np.abs(np.diff(th_m)) > 2 * q):
+                lo_t, hi_t = float(t_m[i]), float(t_m[i + 1])
+                if spans and lo_t - spans[-1][1] < 0.05:
+                    spans[-1] = (spans[-1][0], hi_t)
+                else:
+                    spans.append((lo_t, hi_t))
+            self.motion[m_id] = spans
+        self._still_ids: dict[tuple[int, int], int] = {}
+
+    def still_angles(self, motor: int, t_start: float, t_end: float) -> tuple[int, int]:
+        """Indices of the still periods of ``motor`` just before and just after its motion
+        ``[t_start, t_end]`` (one index per still period, shared by the windows around it)."""
+        spans = self.motion[motor]
+        first = next(i for i, sp in enumerate(spans) if sp[1] >= t_start)
+        last = max(i for i, sp in enumerate(spans) if sp[0] <= t_end)
+        ids = [self._still_ids.setdefault(key, len(self._still_ids))
+               for key in ((motor, first), (motor, last + 1))]  # gap before span i is gap i
+        return ids[0], ids[1]
+
+    def still_all(self, a: float, b: float) -> bool:
+        """Whether every servo holds within four ticks over ``[a, b]``."""
+        for t, th in self.track.values():
+            sel = (t >= a) & (t <= b)
+            if sel.any() and np.ptp(th[sel]) > 4 * self.q:
+                return False
+        return True
+
+    def still_around(self, t0: float, t1: float, lo: float, hi: float) -> tuple[float, float]:
+        """Still time before ``t0`` and after ``t1``: back to the last movement of any servo
+        (turns and pose moves alike), on to the next one, within ``[lo, hi]``."""
+        last_move, next_move = lo, hi
+        for spans in self.motion.values():
+            for m_lo, m_hi in spans:
+                if m_hi < t0 - 0.02:
+                    last_move = max(last_move, m_hi)
+                if m_lo > t1 + 0.02:
+                    next_move = min(next_move, m_lo)
+        return t0 - last_move, next_move - t1
+
+    def pose(self, chain: Sequence[int], a: float, b: float) -> np.ndarray:
+        """Mean angle of each servo of ``chain`` over ``[a, b]``, rad (chain order).
+
+        Raises
+        ------
+        CalibInputError
+            If a servo of the chain has no encoder readings.
+        """
+        out = []
+        for m in chain:
+            if m not in self.track:
+                raise CalibInputError(
+                    f"no encoder readings of servo {m}, listed in the gimbal chain; its angle "
+                    "carries the axes of the servos outside it")
+            t, th = self.track[m]
+            out.append(_ramp_mean(t, th, a, b))
+        return np.array(out)
+
+
+@dataclass(frozen=True)
+class _Turn:
+    """A turn's window and its reduced row (stage 3's output)."""
+
+    window: Window
+    mean: np.ndarray
+    rate: float
+    count: int
+    noise: np.ndarray
+    mean_std: np.ndarray
+    rate_std: float
+    ref: tuple[int, int, float]  # still angle before, after, 1/∫w (-1, -1, 0 when unused)
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """Where a turn's servo moved: encoder readings around the turn, motion start and end,
+    its steady span and the still time around it."""
+
+    ts: np.ndarray
+    ys: np.ndarray
+    moved: float
+    t_move0: float
+    t_move1: float
+    tt: np.ndarray  # steady readings
+    yy: np.ndarray
+    steady_revs: float
+    still_before: float
+    still_after: float
+
+
+def _turn_motion(seg: Segment, tracks: EncoderTracks, lo: float, hi: float,
+                 steady_tolerance: float) -> _Motion:
+    """Stage 3a: find the turn's motion, its steady span and the still time around it."""
+    q = tracks.q
+    if seg.motor not in tracks.track:
+        raise CalibInputError(
+            f"segment {seg.index}: no encoder readings of servo {seg.motor} in the recording"
+        )
+    t, th = tracks.track[seg.motor]
+    sel = (t >= lo) & (t <= hi)
+    ts, ys = t[sel], th[sel]
+    if ts.size < 6:
+        raise CalibInputError(
+            f"segment {seg.index}: only {ts.size} encoder readings of servo {seg.motor}"
+        )
+    inseg = (ts >= seg.t_start) & (ts <= seg.t_end)
+    if inseg.sum() < 3:
+        raise CalibInputError(f"segment {seg.index}: no encoder readings during the turn")
+    th0 = float(ys[inseg][0])
+    th1 = float(ys[inseg][-1])
+    moved = th1 - th0
+    if abs(moved) < np.pi:
+        raise CalibInputError(
+            f"segment {seg.index}: servo {seg.motor} turned only {abs(moved):.2f} rad; "
+            "it may have stalled (check power and the velocity limit)"
+        )
+    if np.sign(moved) != seg.direction:
+        raise CalibInputError(
+            f"segment {seg.index}: servo {seg.motor} turned {moved:+.2f} rad against its "
+            f"command (direction {seg.direction:+d}); check the encoder sign convention"
+        )
+    d = seg.direction
+    # Motion start/stop: the angle leaves its start / reaches its end by more than 3 ticks.
+    # (only inside the segment: earlier motion, e.g. a failed attempt and its reversal
+    # before a repeated turn, is not this turn)
+    moving = (d * (ys - th0) > 3 * q) & (d * (th1 - ys) > 3 * q)
+    moving &= (ts >= seg.t_start - 0.05) & (ts <= seg.t_end + 0.05)
+    if not moving.any():
+        raise CalibInputError(f"segment {seg.index}: no motion found in the encoder data")
+    i0, i1 = int(np.argmax(moving)), int(moving.size - 1 - np.argmax(moving[::-1]))
+    t_move0, t_move1 = float(ts[max(i0 - 1, 0)]), float(ts[min(i1 + 1, ts.size - 1)])
+    # Smoothed speed over about 0.1 s, plateau = median speed while moving.
+    span = max(1, int(round(0.05 / max(np.median(np.diff(ts)), 1e-6))))
+    j = np.arange(ts.size)
+    jl, jh = np.clip(j - span, 0, ts.size - 1), np.clip(j + span, 0, ts.size - 1)
+    v = d * (ys[jh] - ys[jl]) / np.maximum(ts[jh] - ts[jl], 1e-9)
+    plateau = float(np.median(v[i0 : i1 + 1]))
+    # Steady span: from the first to the last reading at plateau speed. Ripple dips in between
+    # are real motion that gyro and encoder share; only the acceleration ramps are excluded.
+    fast = (v >= (1.0 - steady_tolerance) * plateau) & (j >= i0) & (j <= i1)
+    if fast.any():
+        s0 = int(np.argmax(fast))
+        s1 = int(fast.size - 1 - np.argmax(fast[::-1]))
+    else:
+        s0, s1 = 0, -1
+    steady_revs = abs(ys[s1] - ys[s0]) / TWO_PI if s1 > s0 else 0.0
+    # Still time around the turn (a pose move or a turn of any servo ends it).
+    before, after = tracks.still_around(t_move0, t_move1, lo, hi)
+    before = min(before, t_move0 - (seg.t_start - 10.0))
+    after = min(after, seg.t_end + 10.0 - t_move1)
+    return _Motion(ts, ys, moved, t_move0, t_move1, ts[s0 : s1 + 1], ys[s0 : s1 + 1],
+                   float(steady_revs), float(before), float(after))
+
+
+def _candidates(seg: Segment, mo: _Motion, still_margin_s: float, window: str
+                ) -> list[tuple[str, tuple[float, float, float, float], float]]:
+    """Stage 3b: the turn's candidate windows (module docstring, "Placement")."""
+    d, tt, yy, steady_revs = seg.direction, mo.tt, mo.yy, mo.steady_revs
+    candidates: list[tuple[str, tuple[float, float, float, float], float]] = []
+    if steady_revs >= 1.0:
+        K = int(np.floor(steady_revs))
+        frac = steady_revs - K
+        c = [_crossing(tt, yy, yy[0] + d * TWO_PI * n, d) for n in (0, frac, K, K + frac)]
+        candidates.append(("tapered", (c[0], c[1], c[2], c[3]), float(K)))
+    if steady_revs >= 2.0:
+        K = int(np.floor(steady_revs)) - 1
+        base = yy[0] + d * (steady_revs - (K + 1)) * TWO_PI / 2
+        c = [_crossing(tt, yy, base + d * TWO_PI * n, d) for n in (0, 1, K, K + 1)]
+        candidates.append(("tapered", (c[0], c[1], c[2], c[3]), float(K)))
+    if min(mo.still_before, mo.still_after) >= 0.05:
+        ma = min(still_margin_s, mo.still_before)
+        mb = min(still_margin_s, mo.still_after)
+        candidates.append(("rest-to-rest", (mo.t_move0 - ma, mo.t_move0, mo.t_move1,
+                                            mo.t_move1 + mb), abs(mo.moved) / TWO_PI))
+    if window != "auto" and any(c[0] == window for c in candidates):
+        candidates = [c for c in candidates if c[0] == window]
+    if not candidates:
+        raise CalibInputError(
+            f"segment {seg.index}: servo {seg.motor} made {steady_revs:.2f} steady "
+            "revolutions and has no still time around the turn; nothing to window "
+            "(turn more, or rest between turns)"
+        )
+    return candidates
+
+
+def _gap_inside(imu_t: np.ndarray, a: float, b: float, dt_med: float) -> bool:
+    ts = imu_t[(imu_t >= a) & (imu_t <= b)]
+    return ts.size < 2 or bool(np.any(np.diff(ts) > 2.5 * dt_med))
+
+
+def _turn_window(
+    seg: Segment, tracks: EncoderTracks, imu_t: np.ndarray, imu_rate: np.ndarray,
+    lo: float, hi: float, dt_med: float, *, steady_tolerance: float, still_margin_s: float,
+    window: str,
+) -> _Turn | None:
+    """Stage 3: one turn's window, the candidate predicting the least variance of the turning
+    axis's mean against its reference, reduced to a row; None if a gyro gap spoils every
+    candidate."""
+    q = tracks.q
+    mo = _turn_motion(seg, tracks, lo, hi, steady_tolerance)
+    candidates = _candidates(seg, mo, still_margin_s, window)
+    covered = [c for c in candidates if c[1][0] >= imu_t[0] and c[1][3] <= imu_t[-1]]
+    if not covered:
+        a, b = candidates[0][1][0], candidates[0][1][3]
+        raise CalibInputError(
+            f"the window of segment {seg.index} spans {a:.3f}-{b:.3f} s but the gyro stream "
+            f"covers {imu_t[0]:.3f}-{imu_t[-1]:.3f} s: the recording is truncated"
+        )
+    t, th = tracks.track[seg.motor]  # type: ignore[index]
+    best = None
+    for kind, corners, revs in covered:
+        a, a2, b2, b = corners
+        if _gap_inside(imu_t, a, b, dt_med):
+            continue
+        mean, wint, qw = _weighted_mean(imu_t, imu_rate, corners)
+        sel = (imu_t >= a) & (imu_t <= b)
+        sensor_noise = float(np.min(diff_noise(imu_rate[sel])))  # a non-turning axis
+        var_mean = sensor_noise**2 * float(np.sum(qw**2) / np.sum(qw) ** 2)
+        if kind == "rest-to-rest":
+            var_ref = 2 * q**2 / 12 / wint**2
+        else:
+            var_ref = (_ramp_angle_std(t, th, a, a2, q) ** 2
+                       + _ramp_angle_std(t, th, b2, b, q) ** 2) / wint**2
+        score = var_mean + var_ref
+        if best is None or score < best[0]:
+            best = (score, kind, corners, revs, mean, wint, qw)
+    if best is None:
+        return None
+    _, kind, corners, revs, mean, wint, qw = best
+    a, a2, b2, b = corners
+    d = seg.direction
+    # Reference: (mean angle over the down ramp - over the up ramp) / ∫w.
+    rate = (_ramp_mean(t, th, b2, b) - _ramp_mean(t, th, a, a2)) / wint
+    if np.sign(rate) != d:
+        raise CalibInputError(f"segment {seg.index}: reference rate has the wrong sign")
+    if kind == "rest-to-rest":
+        # The reference rests on two still angles, each shared with the window on its other
+        # side: their reading errors are modelled as shared unknowns (ref_* fields).
+        rate_std = 0.0
+        ref = (*tracks.still_angles(int(seg.motor), mo.t_move0, mo.t_move1),  # type: ignore[arg-type]
+               1.0 / wint)
+    else:
+        rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q),
+                                  _ramp_angle_std(t, th, b2, b, q)) / wint)
+        ref = (-1, -1, 0.0)
+    x = imu_rate[(imu_t >= a) & (imu_t <= b)]
+    noise = np.maximum(diff_noise(x), 1e-12)
+    mean_std = noise * float(np.sqrt(np.sum(qw**2)) / np.sum(qw))  # white; see _pool_noise
+    win = Window(kind, seg.index, int(seg.motor), d, corners, revs, float(rate),  # type: ignore[arg-type]
+                 tuple(float(v) for v in mean), int(x.shape[0]))  # type: ignore[arg-type]
+    return _Turn(win, mean, float(rate), int(x.shape[0]), noise, mean_std, rate_std,
+                 ref)  # type: ignore[arg-type]
+
+
+def _rest_windows(
+    segments: Sequence[Segment], turns: Sequence[_Turn], tracks: EncoderTracks,
+    imu_t: np.ndarray, imu_rate: np.ndarray, dt_med: float, rest_guard_s: float,
+    warnings: list[str],
+) -> tuple[list[Window], list[np.ndarray]]:
+    """Stage 4: one window per rest, after a settling guard, clear of every rotation window and
+    pose move, while every encoder is still."""
+    # Keep clear of every rotation window (a rest-to-rest window's still margins) and every pose
+    # move, so that no sample enters two windows (their errors are then independent) and no
+    # rest spans a move.
+    busy = [(w.window.corners[0], w.window.corners[3]) for w in turns]
+    busy += [(s.t_start, s.t_end) for s in segments if s.kind == "move"]
+    rest_windows: list[Window] = []
+    rest_samples: list[np.ndarray] = []
+    for seg in segments:
+        if seg.kind != "rest":
+            continue
+        a, b = seg.t_start + rest_guard_s, seg.t_end - rest_guard_s
+        for wa, wb in busy:
+            if wb <= a or wa >= b:
+                continue
+            if wa <= a:
+                a = wb
+            elif wb >= b:
+                b = wa
+            else:  # a window inside the rest: keep the longer side
+                a, b = (a, wa) if wa - a >= b - wb else (wb, b)
+        if b - a < 10 * dt_med:
+            continue
+        if a < imu_t[0] or b > imu_t[-1]:
+            warnings.append(f"rest {seg.index} is not covered by the gyro stream; skipped")
+            continue
+        if not tracks.still_all(a, b):
+            warnings.append(f"rest {seg.index}: a servo moved during the rest; skipped")
+            continue
+        if _gap_inside(imu_t, a, b, dt_med):
+            warnings.append(f"rest {seg.index}: gap in the gyro stream; skipped")
+            continue
+        x = imu_rate[(imu_t >= a) & (imu_t <= b)]
+        rest_samples.append(x)
+        rest_windows.append(
+            Window("rest", seg.index, None, 0, (a, a, b, b), 0.0, 0.0,
+                   tuple(float(v) for v in x.mean(axis=0)), int(x.shape[0]))  # type: ignore[arg-type]
+        )
+    return rest_windows, rest_samples
+
+
+def _turning_axis_noise(turns: Sequence[_Turn], rest_samples: Sequence[np.ndarray]
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 5: the turning axis's noise of each window, pooled from the rests and the windows
+    turning other axes (module docstring); returns per-window noise and standard errors."""
+    noise_rows = np.array([w.noise for w in turns])
+    neff = np.array([w.mean_std for w in turns]) / noise_rows  # 1/sqrt(n_eff) per window, axis
+    dominant = np.argmax(np.abs(np.array([w.mean for w in turns])), axis=1)
+    for j in range(3):
+        var, dof = [], []
+        for x in rest_samples:
+            var.append(float(diff_noise(x)[j]) ** 2)
+            dof.append(x.shape[0] - 1)
+        for i, w in enumerate(turns):
+            if dominant[i] != j:
+                var.append(float(noise_rows[i, j]) ** 2)
+                dof.append(w.count - 1)
+        if dof:
+            noise_rows[dominant == j, j] = float(np.sqrt(np.dot(var, dof) / np.sum(dof)))
+    return noise_rows, noise_rows * neff
+
+
+def _assemble(
+    turns: Sequence[_Turn], noise: np.ndarray, mean_std: np.ndarray,
+    rest_windows: Sequence[Window], rest_samples: Sequence[np.ndarray], tau: np.ndarray,
+    temp: np.ndarray | None, q: float, chain: tuple[int, ...] | None,
+    pose: np.ndarray | None,
+) -> ObservationSet:
+    """Stage 6: the observation set (rests with the correlation factor, shared still angles
+    renumbered, the chain and poses when asked for)."""
+    rest_kw: dict[str, object] = {}
+    if rest_windows:
+        r_noise = np.array([np.maximum(diff_noise(x), 1e-12) for x in rest_samples])
+        r_count = np.array([w.count for w in rest_windows])
+        rest_kw = dict(
+            rest_mean=np.array([w.mean for w in rest_windows]), rest_count=r_count,
+            rest_noise=r_noise,
+            rest_mean_std=r_noise / np.sqrt(r_count)[:, None] * np.sqrt(tau),
+        )
+    t_mean = None
+    if temp is not None and np.any(np.isfinite(temp)):
+        t_mean = float(np.nanmean(temp))
+    refs = [w.ref for w in turns]
+    ref_kw: dict[str, object] = {}
+    if any(r[0] >= 0 for r in refs):
+        used = sorted({i for r in refs for i in r[:2] if i >= 0})
+        renumber = {old: new for new, old in enumerate(used)}
+        ref_kw = dict(
+            ref_start=np.array([renumber.get(r[0], -1) for r in refs]),
+            ref_end=np.array([renumber.get(r[1], -1) for r in refs]),
+            ref_gain=np.array([r[2] for r in refs]),
+            still_angle_std=q / np.sqrt(12.0),
+        )
+    return ObservationSet(
+        mean=np.array([w.mean for w in turns]),
+        rate=np.array([w.rate for w in turns]),
+        motor=np.array([w.window.motor for w in turns]),
+        direction=np.array([w.window.direction for w in turns]),
+        count=np.array([w.count for w in turns]),
+        noise=noise,
+        mean_std=mean_std * np.sqrt(tau),
+        rate_std=np.array([w.rate_std for w in turns]),
+        temperature_c=t_mean,
+        chain=chain,
+        pose=pose,
+        **rest_kw,  # type: ignore[arg-type]
+        **ref_kw,  # type: ignore[arg-type]
+    )
+
+
 def extract_observations(
     imu_t: np.ndarray,
     imu_rate: np.ndarray,
@@ -240,8 +665,17 @@ def extract_observations(
     rest_guard_s: float = 0.2,
     refit_time: bool = True,
     window: str = "auto",
+    chain: Sequence[int] | None = None,
 ) -> ExtractedWindows:
     """Turn a calibration run's raw streams into observations (DESIGN.md fact 2).
+
+    Stages, each its own function: (1) check the streams and refit the gyro's time axis;
+    (2) the encoder tracks, each servo's motion intervals and still periods
+    (:class:`EncoderTracks`); (3) one window per turn (:func:`_turn_window`: the turn's motion and
+    steady span, the candidate windows, the least predicted variance); (4) one window per rest,
+    clear of turns and pose moves; (5) the turning axis's noise pooled from where the servo cannot
+    reach it; (6) the observation set. Segments of kind ``move`` are never windowed as turns, and
+    no rest window spans one.
 
     Parameters
     ----------
@@ -252,7 +686,7 @@ def extract_observations(
     enc_t, enc_motor, enc_angle : ndarray, shape (M,)
         Encoder readings: time, servo ID, cumulative angle in rad.
     segments : sequence of Segment
-        The protocol's rotate and rest segments.
+        The protocol's rotate, rest and move segments.
     imu_temp : ndarray, shape (N,), optional
         Die temperature, °C (NaN where absent).
     encoder_ticks : int
@@ -273,6 +707,9 @@ def extract_observations(
     window : str
         ``"auto"`` (the candidate with the least predicted variance), ``"tapered"`` or
         ``"rest-to-rest"`` (that kind where the turn allows it, else whatever it allows).
+    chain : sequence of int, optional
+        The gimbal's servo IDs, base first. When given, each window's pose (every chain servo's
+        mean encoder angle over the window) goes into the observations, for the full model.
 
     Returns
     -------
@@ -287,334 +724,47 @@ def extract_observations(
     if window not in ("auto", "tapered", "rest-to-rest"):
         raise CalibInputError(
             f"window must be 'auto', 'tapered' or 'rest-to-rest', got {window!r}")
-    imu_t = np.asarray(imu_t, dtype=float)
-    imu_rate = np.asarray(imu_rate, dtype=float)
-    enc_t = np.asarray(enc_t, dtype=float)
-    enc_motor = np.asarray(enc_motor)
-    enc_angle = np.asarray(enc_angle, dtype=float)
-    if imu_t.ndim != 1 or imu_rate.shape != (imu_t.size, 3):
-        raise CalibInputError(
-            f"imu_t must be (N,) and imu_rate (N, 3); got {imu_t.shape} and {imu_rate.shape}"
-        )
-    if not (enc_t.shape == enc_motor.shape == enc_angle.shape) or enc_t.ndim != 1:
-        raise CalibInputError("enc_t, enc_motor and enc_angle must be 1-D arrays of one length")
-    if imu_t.size < 2:
-        raise CalibInputError("the gyro stream is empty")
-    for name, a in (("imu_t", imu_t), ("imu_rate", imu_rate), ("enc_t", enc_t),
-                    ("enc_angle", enc_angle)):
-        if not np.all(np.isfinite(a)):
-            raise CalibInputError(f"{name} contains NaN or inf")
-    if np.any(np.diff(imu_t) <= 0):
-        raise CalibInputError("imu_t must be strictly increasing")
+    imu_t, imu_rate, enc_t, enc_motor, enc_angle, temp = _check_streams(
+        imu_t, imu_rate, enc_t, enc_motor, enc_angle, imu_temp)
     timebase = None
     if refit_time:
         imu_t, timebase = refit_sample_times(imu_t)
-    temp = None if imu_temp is None else np.asarray(imu_temp, dtype=float)
-    if temp is not None and temp.shape != imu_t.shape:
-        raise CalibInputError(f"imu_temp must have shape {imu_t.shape}, got {temp.shape}")
     q = TWO_PI / int(encoder_ticks)
     dt_med = float(np.median(np.diff(imu_t)))
     warnings: list[str] = []
+    tracks = EncoderTracks(enc_t, enc_motor, enc_angle, q)
 
-    enc: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for m in np.unique(enc_motor):
-        sel = enc_motor == m
-        order = np.argsort(enc_t[sel], kind="stable")
-        enc[int(m)] = (enc_t[sel][order], enc_angle[sel][order])
-
-    # Each servo's motion intervals (readings that moved by more than two ticks, merged across
-    # pauses shorter than 50 ms); the gaps between them are its still periods.
-    motion_intervals: dict[int, list[tuple[float, float]]] = {}
-    for m_id, (t_m, th_m) in enc.items():
-        moved = np.flatnonzero(np.abs(np.diff(th_m)) > 2 * q)
-        spans: list[tuple[float, float]] = []
-        for i in moved:
-            lo_t, hi_t = float(t_m[i]), float(t_m[i + 1])
-            if spans and lo_t - spans[-1][1] < 0.05:
-                spans[-1] = (spans[-1][0], hi_t)
-            else:
-                spans.append((lo_t, hi_t))
-        motion_intervals[m_id] = spans
-    still_ids: dict[tuple[int, int], int] = {}
-
-    def still_angle(motor: int, t_start: float, t_end: float) -> tuple[int, int]:
-        """Indices of the still periods of ``motor`` just before and just after its motion
-        ``[t_start, t_end]`` (one index per still period, shared by the windows around it)."""
-        spans = motion_intervals[motor]
-        first = next(i for i, sp in enumerate(spans) if sp[1] >= t_start)
-        last = max(i for i, sp in enumerate(spans) if sp[0] <= t_end)
-        ids = []
-        for key in ((motor, first), (motor, last + 1)):  # gap before span i is gap i
-            ids.append(still_ids.setdefault(key, len(still_ids)))
-        return ids[0], ids[1]
-
-    def gap_inside(a: float, b: float) -> bool:
-        sel = (imu_t >= a) & (imu_t <= b)
-        ts = imu_t[sel]
-        return ts.size < 2 or bool(np.any(np.diff(ts) > 2.5 * dt_med))
-
-    def still_all(a: float, b: float) -> bool:
-        for t, th in enc.values():
-            sel = (t >= a) & (t <= b)
-            if sel.any() and np.ptp(th[sel]) > 4 * q:
-                return False
-        return True
-
-    # ------------------------------------------------------------------ rotations
-    windows: list[Window] = []
-    rows: list[tuple[np.ndarray, float, int, int, int, np.ndarray, np.ndarray, float]] = []
-    refs: list[tuple[int, int, float]] = []  # (still angle before, after, 1/∫w) per window
+    turns: list[_Turn] = []
     rot_segments = [s for s in segments if s.kind == "rotate"]
     for k_seg, seg in enumerate(rot_segments):
-        if seg.motor not in enc:
-            raise CalibInputError(
-                f"segment {seg.index}: no encoder readings of servo {seg.motor} in the recording"
-            )
-        t, th = enc[seg.motor]
         # Neighbouring time for still margins: up to the previous/next rotation of any servo.
         prev_end = max([s.t_end for s in rot_segments[:k_seg]], default=-np.inf)
         next_start = min([s.t_start for s in rot_segments[k_seg + 1:]], default=np.inf)
-        lo = max(prev_end, seg.t_start - 10.0)
-        hi = min(next_start, seg.t_end + 10.0)
-        sel = (t >= lo) & (t <= hi)
-        ts, ys = t[sel], th[sel]
-        if ts.size < 6:
-            raise CalibInputError(
-                f"segment {seg.index}: only {ts.size} encoder readings of servo {seg.motor}"
-            )
-        inseg = (ts >= seg.t_start) & (ts <= seg.t_end)
-        if inseg.sum() < 3:
-            raise CalibInputError(f"segment {seg.index}: no encoder readings during the turn")
-        th0 = float(ys[inseg][0])
-        th1 = float(ys[inseg][-1])
-        moved = th1 - th0
-        if abs(moved) < np.pi:
-            raise CalibInputError(
-                f"segment {seg.index}: servo {seg.motor} turned only {abs(moved):.2f} rad; "
-                "it may have stalled (check power and the velocity limit)"
-            )
-        if np.sign(moved) != seg.direction:
-            raise CalibInputError(
-                f"segment {seg.index}: servo {seg.motor} turned {moved:+.2f} rad against its "
-                f"command (direction {seg.direction:+d}); check the encoder sign convention"
-            )
-        d = seg.direction
-        # Motion start/stop: the angle leaves its start / reaches its end by more than 3 ticks.
-        # (only inside the segment: earlier motion, e.g. a failed attempt and its reversal
-        # before a repeated turn, is not this turn)
-        moving = (d * (ys - th0) > 3 * q) & (d * (th1 - ys) > 3 * q)
-        moving &= (ts >= seg.t_start - 0.05) & (ts <= seg.t_end + 0.05)
-        if not moving.any():
-            raise CalibInputError(f"segment {seg.index}: no motion found in the encoder data")
-        i0, i1 = int(np.argmax(moving)), int(moving.size - 1 - np.argmax(moving[::-1]))
-        t_move0, t_move1 = ts[max(i0 - 1, 0)], ts[min(i1 + 1, ts.size - 1)]
-        # Smoothed speed over about 0.1 s, plateau = median speed while moving.
-        span = max(1, int(round(0.05 / max(np.median(np.diff(ts)), 1e-6))))
-        j = np.arange(ts.size)
-        jl, jh = np.clip(j - span, 0, ts.size - 1), np.clip(j + span, 0, ts.size - 1)
-        v = d * (ys[jh] - ys[jl]) / np.maximum(ts[jh] - ts[jl], 1e-9)
-        plateau = float(np.median(v[i0 : i1 + 1]))
-        # Steady span: from the first to the last reading at plateau speed. Ripple dips in between
-        # are real motion that gyro and encoder share; only the acceleration ramps are excluded.
-        fast = (v >= (1.0 - steady_tolerance) * plateau) & (j >= i0) & (j <= i1)
-        if fast.any():
-            s0 = int(np.argmax(fast))
-            s1 = int(fast.size - 1 - np.argmax(fast[::-1]))
-        else:
-            s0, s1 = 0, -1
-        steady_revs = abs(ys[s1] - ys[s0]) / TWO_PI if s1 > s0 else 0.0
-        # Still time around the turn: back to the last movement of any servo before it, and
-        # on to the first movement after it (a repositioning turn is not a segment).
-        last_move, next_move = lo, hi
-        for spans in motion_intervals.values():
-            for m_lo, m_hi in spans:
-                if m_hi < t_move0 - 0.02:
-                    last_move = max(last_move, m_hi)
-                if m_lo > t_move1 + 0.02:
-                    next_move = min(next_move, m_lo)
-        still_before = t_move0 - max(last_move, seg.t_start - 10.0)
-        still_after = min(next_move, seg.t_end + 10.0) - t_move1
-        tt, yy = ts[s0 : s1 + 1], ys[s0 : s1 + 1]
-        # Candidate windows (module docstring); each is scored by the variance it predicts for
-        # the turning axis's mean against its reference, and the least wins.
-        candidates: list[tuple[str, tuple[float, float, float, float], float]] = []
-        if steady_revs >= 1.0:
-            K = int(np.floor(steady_revs))
-            frac = steady_revs - K
-            c = [_crossing(tt, yy, yy[0] + d * TWO_PI * n, d) for n in (0, frac, K, K + frac)]
-            candidates.append(("tapered", (c[0], c[1], c[2], c[3]), float(K)))
-        if steady_revs >= 2.0:
-            K = int(np.floor(steady_revs)) - 1
-            base = yy[0] + d * (steady_revs - (K + 1)) * TWO_PI / 2
-            c = [_crossing(tt, yy, base + d * TWO_PI * n, d) for n in (0, 1, K, K + 1)]
-            candidates.append(("tapered", (c[0], c[1], c[2], c[3]), float(K)))
-        if min(still_before, still_after) >= 0.05:
-            ma = min(still_margin_s, still_before)
-            mb = min(still_margin_s, still_after)
-            candidates.append(("rest-to-rest", (t_move0 - ma, t_move0, t_move1, t_move1 + mb),
-                               abs(moved) / TWO_PI))
-        if window != "auto" and any(c[0] == window for c in candidates):
-            candidates = [c for c in candidates if c[0] == window]
-        if not candidates:
-            raise CalibInputError(
-                f"segment {seg.index}: servo {seg.motor} made {steady_revs:.2f} steady "
-                "revolutions and has no still time around the turn; nothing to window "
-                "(turn more, or rest between turns)"
-            )
-        covered = [c for c in candidates if c[1][0] >= imu_t[0] and c[1][3] <= imu_t[-1]]
-        if not covered:
-            a, b = candidates[0][1][0], candidates[0][1][3]
-            raise CalibInputError(
-                f"the window of segment {seg.index} spans {a:.3f}-{b:.3f} s but the gyro stream "
-                f"covers {imu_t[0]:.3f}-{imu_t[-1]:.3f} s: the recording is truncated"
-            )
-        best = None
-        for kind, corners, revs in covered:
-            a, a2, b2, b = corners
-            if gap_inside(a, b):
-                continue
-            mean, wint, qw = _weighted_mean(imu_t, imu_rate, corners)
-            sel = (imu_t >= a) & (imu_t <= b)
-            sensor_noise = float(np.min(diff_noise(imu_rate[sel])))  # a non-turning axis
-            var_mean = sensor_noise**2 * float(np.sum(qw**2) / np.sum(qw) ** 2)
-            if kind == "rest-to-rest":
-                var_ref = 2 * q**2 / 12 / wint**2
-            else:
-                var_ref = (_ramp_angle_std(t, th, a, a2, q) ** 2
-                           + _ramp_angle_std(t, th, b2, b, q) ** 2) / wint**2
-            score = var_mean + var_ref
-            if best is None or score < best[0]:
-                best = (score, kind, corners, revs, mean, wint, qw)
-        if best is None:
+        turn = _turn_window(
+            seg, tracks, imu_t, imu_rate, max(prev_end, seg.t_start - 10.0),
+            min(next_start, seg.t_end + 10.0), dt_med, steady_tolerance=steady_tolerance,
+            still_margin_s=still_margin_s, window=window)
+        if turn is None:
             warnings.append(
-                f"segment {seg.index}: gap in the gyro stream inside the window; turn skipped"
-            )
-            continue
-        _, kind, corners, revs, mean, wint, qw = best
-        a, a2, b2, b = corners
-        # Reference: (mean angle over the down ramp - over the up ramp) / ∫w.
-        th_up = _ramp_mean(t, th, a, a2)
-        th_dn = _ramp_mean(t, th, b2, b)
-        rate = (th_dn - th_up) / wint
-        if np.sign(rate) != d:
-            raise CalibInputError(f"segment {seg.index}: reference rate has the wrong sign")
-        if kind == "rest-to-rest":
-            # The reference rests on two still angles, each shared with the window on its
-            # other side: their reading errors are modelled as shared unknowns (ref_* fields).
-            rate_std = 0.0
-            refs.append((*still_angle(int(seg.motor), float(t_move0), float(t_move1)),
-                         1.0 / wint))
+                f"segment {seg.index}: gap in the gyro stream inside the window; turn skipped")
         else:
-            rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q),
-                                      _ramp_angle_std(t, th, b2, b, q)) / wint)
-            refs.append((-1, -1, 0.0))
-        sel = (imu_t >= a) & (imu_t <= b)
-        x = imu_rate[sel]
-        noise = np.maximum(diff_noise(x), 1e-12)
-        neff_factor = float(np.sqrt(np.sum(qw**2)) / np.sum(qw))
-        mean_std = noise * neff_factor  # white; the rests' correlation factor is applied below
-        rows.append((mean, rate, int(seg.motor), d, int(x.shape[0]), noise, mean_std, rate_std))
-        windows.append(
-            Window(kind, seg.index, int(seg.motor), d, corners, revs, float(rate),
-                   tuple(float(v) for v in mean), int(x.shape[0]))  # type: ignore[arg-type]
-        )
-    # ------------------------------------------------------------------ rests
-    rest_windows: list[Window] = []
-    rest_samples: list[np.ndarray] = []
-    for seg in segments:
-        if seg.kind != "rest":
-            continue
-        a, b = seg.t_start + rest_guard_s, seg.t_end - rest_guard_s
-        # Keep clear of every rotation window (a rest-to-rest window's still margins), so that
-        # no sample enters two windows: the windows' errors are then independent.
-        for w in windows:
-            wa, wb = w.corners[0], w.corners[3]
-            if wb <= a or wa >= b:
-                continue
-            if wa <= a:
-                a = wb
-            elif wb >= b:
-                b = wa
-            else:  # a window inside the rest: keep the longer side
-                a, b = (a, wa) if wa - a >= b - wb else (wb, b)
-        if b - a < 10 * dt_med:
-            continue
-        if a < imu_t[0] or b > imu_t[-1]:
-            warnings.append(f"rest {seg.index} is not covered by the gyro stream; skipped")
-            continue
-        if not still_all(a, b):
-            warnings.append(f"rest {seg.index}: a servo moved during the rest; skipped")
-            continue
-        if gap_inside(a, b):
-            warnings.append(f"rest {seg.index}: gap in the gyro stream; skipped")
-            continue
-        sel = (imu_t >= a) & (imu_t <= b)
-        x = imu_rate[sel]
-        rest_samples.append(x)
-        rest_windows.append(
-            Window("rest", seg.index, None, 0, (a, a, b, b), 0.0, 0.0,
-                   tuple(float(v) for v in x.mean(axis=0)), int(x.shape[0]))  # type: ignore[arg-type]
-        )
+            turns.append(turn)
+    rest_windows, rest_samples = _rest_windows(
+        segments, turns, tracks, imu_t, imu_rate, dt_med, rest_guard_s, warnings)
     tau = _correlation_factor(rest_samples)
-
-    if not rows:
+    if not turns:
         raise CalibInputError("no rotation windows: the recording has no usable turns")
-    # The turning axis's noise: pooled from the rests and the windows turning other axes.
-    noise_rows = np.array([r[5] for r in rows])
-    neff = np.array([r[6] for r in rows]) / noise_rows  # 1/sqrt(n_eff) per window and axis
-    dominant = np.argmax(np.abs(np.array([r[0] for r in rows])), axis=1)
-    for j in range(3):
-        var, dof = [], []
-        for x in rest_samples:
-            var.append(float(diff_noise(x)[j]) ** 2)
-            dof.append(x.shape[0] - 1)
-        for i, r in enumerate(rows):
-            if dominant[i] != j:
-                var.append(float(noise_rows[i, j]) ** 2)
-                dof.append(r[4] - 1)
-        if dof:
-            pooled = float(np.sqrt(np.dot(var, dof) / np.sum(dof)))
-            noise_rows[dominant == j, j] = pooled
-    rows = [(*r[:5], noise_rows[i], noise_rows[i] * neff[i], r[7]) for i, r in enumerate(rows)]
-    rest_kw = {}
-    if rest_windows:
-        rest_kw = dict(
-            rest_mean=np.array([w.mean for w in rest_windows]),
-            rest_count=np.array([w.count for w in rest_windows]),
-            rest_noise=np.array([np.maximum(diff_noise(x), 1e-12) for x in rest_samples]),
-        )
-        rest_kw["rest_mean_std"] = (
-            rest_kw["rest_noise"] / np.sqrt(rest_kw["rest_count"])[:, None] * np.sqrt(tau)
-        )
-    t_mean = None
-    if temp is not None and np.any(np.isfinite(temp)):
-        t_mean = float(np.nanmean(temp))
-    ref_kw: dict[str, object] = {}
-    if any(r[0] >= 0 for r in refs):
-        used = sorted({i for r in refs for i in r[:2] if i >= 0})
-        renumber = {old: new for new, old in enumerate(used)}
-        ref_kw = dict(
-            ref_start=np.array([renumber.get(r[0], -1) for r in refs]),
-            ref_end=np.array([renumber.get(r[1], -1) for r in refs]),
-            ref_gain=np.array([r[2] for r in refs]),
-            still_angle_std=q / np.sqrt(12.0),
-        )
-    obs = ObservationSet(
-        mean=np.array([r[0] for r in rows]),
-        rate=np.array([r[1] for r in rows]),
-        motor=np.array([r[2] for r in rows]),
-        direction=np.array([r[3] for r in rows]),
-        count=np.array([r[4] for r in rows]),
-        noise=np.array([r[5] for r in rows]),
-        mean_std=np.array([r[6] for r in rows]) * np.sqrt(tau),
-        rate_std=np.array([r[7] for r in rows]),
-        temperature_c=t_mean,
-        **rest_kw,
-        **ref_kw,
-    )
+    noise, mean_std = _turning_axis_noise(turns, rest_samples)
+    pose = None
+    chain_t = None if chain is None else tuple(int(c) for c in chain)
+    if chain_t is not None:
+        pose = np.array([tracks.pose(chain_t, w.window.corners[0], w.window.corners[3])
+                         for w in turns])
+    obs = _assemble(turns, noise, mean_std, rest_windows, rest_samples, tau, temp, q, chain_t,
+                    pose)
     return ExtractedWindows(
         observations=obs,
-        windows=tuple(windows),
+        windows=tuple(w.window for w in turns),
         rests=tuple(rest_windows),
         warnings=tuple(warnings),
         noise_correlation=tau,

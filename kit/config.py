@@ -29,10 +29,11 @@ __all__ = [
     "template",
 ]
 
-#: The estimators a user may choose (the names of :data:`gyrocal.calib.estimators.METHODS`, kept
-#: here so
-#: the command line does not import scipy to show its help), the default first.
-METHODS = ("paired-axis", "iterative-ls", "levenberg-marquardt")
+#: The estimators a user may choose, the default first: ``auto`` (the full model when the
+#: recording's poses determine it, else paired-axis; :mod:`gyrocal.kit.pipeline`) and the names of
+#: :data:`gyrocal.calib.estimators.METHODS` (kept here so the command line does not import scipy
+#: to show its help).
+METHODS = ("auto", "paired-axis", "iterative-ls", "levenberg-marquardt", "full-matrix")
 #: The protocols: planned for the jig, or the paper's.
 PROTOCOLS = ("auto", "paper")
 

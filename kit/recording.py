@@ -253,6 +253,18 @@ class Recording:
         return dict(self.manifest.get("sensor") or {})
 
     @property
+    def chain(self) -> tuple[int, ...] | None:
+        """The gimbal's servo IDs in chain order, base first (``gimbal.motors``), or None if the
+        manifest does not list them."""
+        motors = (self.manifest.get("gimbal") or {}).get("motors")
+        if not isinstance(motors, list) or not motors:
+            return None
+        try:
+            return tuple(int(m["id"]) for m in motors)
+        except (TypeError, KeyError, ValueError):
+            return None
+
+    @property
     def truth(self) -> dict[str, Any] | None:
         """The true parameters of a simulated recording, else None."""
         return self.manifest.get("truth")

@@ -18,8 +18,50 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
     With ``truth`` (a simulated recording's ``{"scale", "bias"}``) each row also shows the error
     in units of its own standard deviation.
     """
-    lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)",
-             "model: g = scale * (m + bias), rad/s", ""]
+    lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
+    if cal.matrix is not None:
+        lines += _matrix_rows(cal, truth)
+    else:
+        lines += _diagonal_rows(cal, truth)
+    _verdict(cal, lines)
+    return "\n".join(lines)
+
+
+def _truth_matrix(truth: Mapping[str, Any]) -> np.ndarray:
+    """The simulated sensor's true ``A`` in the calibration's frame (hardware_docs/method.md §9);
+    a truth without ``misalignment`` is the paper's sensor."""
+    from gyrocal.calib.estimators import matrix_in_frame
+
+    mis = np.asarray(truth.get("misalignment", np.eye(3)), dtype=float)
+    return matrix_in_frame(np.diag(1.0 / np.asarray(truth["scale"], dtype=float)) @ mis)
+
+
+def _matrix_rows(cal: GyroCalibration, truth: Mapping[str, Any] | None) -> list[str]:
+    A = np.asarray(cal.matrix)
+    S = np.asarray(cal.matrix_std) if cal.matrix_std is not None else np.full((3, 3), np.nan)
+    lines = [f"model: g = A (m + bias), rad/s; frame {cal.frame} (A lower triangular: "
+             "x along the gyro's x axis, y in its x-y plane)", ""]
+    head = f"{'row':<5}" + "".join(f"{'A_' + c:>13}{'± std':>10}" for c in "xyz")
+    head += f"{'bias rad/s':>14}{'± std':>10}"
+    lines.append(head)
+    At = _truth_matrix(truth) if truth is not None else None
+    for j, ax in enumerate("xyz"):
+        row = f"{ax:<5}" + "".join(f"{A[j, i]:>13.6f}{S[j, i]:>10.1e}" for i in range(3))
+        row += f"{cal.bias[j]:>14.6f}{cal.bias_std[j]:>10.1e}"
+        lines.append(row)
+    if At is not None and truth is not None:
+        free = S > 0
+        z = np.where(free, (A - At) / np.where(free, S, 1.0), 0.0)
+        zb = (np.asarray(cal.bias) - np.asarray(truth["bias"])) / np.asarray(cal.bias_std)
+        lines.append(f"error against the simulated truth, in σ: matrix "
+                     f"max |err/σ| = {np.max(np.abs(z)):.2f}, bias "
+                     + " ".join(f"{v:+.2f}" for v in zb))
+    lines.append("")
+    return lines
+
+
+def _diagonal_rows(cal: GyroCalibration, truth: Mapping[str, Any] | None) -> list[str]:
+    lines = ["model: g = scale * (m + bias), rad/s", ""]
     head = f"{'axis':<5}{'scale':>12}{'± std':>11}{'bias rad/s':>14}{'± std':>11}"
     if truth is not None:
         head += f"{'scale err/σ':>13}{'bias err/σ':>12}"
@@ -33,6 +75,10 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
             row += f"{ks:>13.2f}{bs:>12.2f}"
         lines.append(row)
     lines.append("")
+    return lines
+
+
+def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
     c = cal.consistency
     if c is None:
         lines.append("consistency: not tested (no redundant observations)")
@@ -58,4 +104,3 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
             )
     if cal.temperature_c is not None:
         lines.append(f"\nmean die temperature: {cal.temperature_c:.1f} °C")
-    return "\n".join(lines)

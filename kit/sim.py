@@ -21,7 +21,7 @@ from gyrocal.drivers.imu import READERS
 from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
-__all__ = ["SimJig", "build_sim", "sim_truth"]
+__all__ = ["SIM_CROSS_AXIS", "SimJig", "build_sim", "sim_misalignment", "sim_truth"]
 
 #: Servo model of the emulated jig.
 SIM_SERVO_MODEL = "XM430-W350"
@@ -91,6 +91,30 @@ class SimJig:
         return out
 
 
+#: Default largest cross-axis term of the emulated sensor: the MPU-9250 datasheet's ±2 %
+#: (PS-MPU-9250A-01 §3.1, Gyroscope Specifications, "Cross-Axis Sensitivity").
+SIM_CROSS_AXIS = 0.02
+
+
+def sim_misalignment(seed: int, cross_axis: float = SIM_CROSS_AXIS) -> np.ndarray:
+    """The emulated sensor's cross-axis matrix (``SensorTruth.misalignment``): the identity plus
+    off-diagonal terms drawn by ``seed`` and scaled so that the largest is ``±cross_axis``
+    (0 gives the paper's sensor, the identity).
+
+    Raises
+    ------
+    InputError
+        If ``cross_axis`` is negative, not finite or 0.2 or more (beyond any datasheet).
+    """
+    if not (np.isfinite(cross_axis) and 0.0 <= cross_axis < 0.2):
+        raise InputError(
+            f"--sim-cross-axis must be a fraction in [0, 0.2), got {cross_axis!r} "
+            "(0.02 is the MPU-9250 datasheet's ±2 %)")
+    off = np.random.default_rng([int(seed), 0xC055]).uniform(-1.0, 1.0, (3, 3))
+    off *= 1.0 - np.eye(3)
+    return np.eye(3) + cross_axis * off / np.max(np.abs(off))
+
+
 def sim_truth(
     seed: int, scale: list[float] | None = None, bias: list[float] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -118,6 +142,7 @@ def build_sim(
     noise_density_rad_s_sqrt_hz: float | None = None,
     mount_deg: float = 3.0,
     noise_seed: int | None = None,
+    cross_axis: float = SIM_CROSS_AXIS,
 ) -> SimJig:
     """Assemble the emulated jig described by ``cfg`` (IDs, axes, IMU model and address).
 
@@ -138,6 +163,9 @@ def build_sim(
         Gyro white-noise density; the chip's typical figure when omitted.
     mount_deg : float
         Misalignment of the sensor's mount, degrees (random axis).
+    cross_axis : float
+        Largest off-diagonal term of the sensor's cross-axis matrix, drawn by ``seed``
+        (:func:`sim_misalignment`; 0 = the paper's sensor).
     """
     clock: Clock = SystemClock() if realtime else VirtualClock()
     k, b = sim_truth(seed, scale, bias)
@@ -148,7 +176,8 @@ def build_sim(
         mount=mount_deg,
     )
     jig = GimbalJig(servo_bus.servos, axes=g["axes"], mount=mount_deg, seed=seed)
-    truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b)}
+    truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b),
+                                "misalignment": sim_misalignment(seed, cross_axis)}
     if noise_density_rad_s_sqrt_hz is not None:
         truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density_rad_s_sqrt_hz
     truth = SensorTruth(**truth_kw)

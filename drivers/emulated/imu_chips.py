@@ -172,9 +172,11 @@ class SensorTruth:
         mis_t, scale = self._mis_t, self._scale_a  # type: ignore[attr-defined]
         return (np.asarray(omega) @ mis_t) / scale - self.bias_at(temperature_c)
 
-    def manifest(self) -> dict[str, list[float]]:
-        """The ``"truth"`` object of a simulated Recording v1 manifest."""
-        return {"scale": list(self.scale), "bias": list(self.bias)}
+    def manifest(self) -> dict[str, list[Any]]:
+        """The ``"truth"`` object of a simulated Recording v1 manifest (``misalignment`` in this
+        class's convention, rows of the 3×3 matrix)."""
+        return {"scale": list(self.scale), "bias": list(self.bias),
+                "misalignment": [list(r) for r in self.misalignment]}
 
 
 @dataclass

@@ -53,6 +53,9 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
+    p.add_argument("--sim-cross-axis", type=float, default=0.02, metavar="FRACTION",
+                   help="largest cross-axis term of the emulated sensor, drawn by seed (default "
+                        "0.02, the MPU-9250 datasheet's ±2 %%; 0 = the paper's sensor)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -114,7 +117,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
         from gyrocal.kit.sim import SIM_BAUD, build_sim
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
-                        realtime=args.realtime, noise_seed=args.sim_noise_seed)
+                        realtime=args.realtime, noise_seed=args.sim_noise_seed,
+                        cross_axis=args.sim_cross_axis)
         return sim, sim.clock, sim.port, SIM_BAUD, sim.imu_bus
     from gyrocal.drivers.clock import SystemClock
 
@@ -338,6 +342,8 @@ def run(args: argparse.Namespace) -> int:
     atomic_write_text(cal_path, cal.to_json() + "\n", force=args.force)
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
+    for note in est.notes:
+        print(f"gyrocal: note: {note}", file=sys.stderr)
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()

@@ -9,9 +9,10 @@ import sys
 HELP = "estimate a calibration from a recording directory"
 DESCRIPTION = (
     "Window a Recording v1 directory (whole revolutions at steady speed, encoder reference over "
-    "the same windows, rests as bias windows) and fit the six parameters. Prints the result "
-    "table, or the Calibration v1 document with --json. Exits 3 if the fit is not consistent "
-    "with the measured noise."
+    "the same windows, rests as bias windows) and fit the full model g = A (m + b) when the "
+    "recording's poses determine it, else the paper's six parameters (and say that cross-axis "
+    "terms were not calibrated). Prints the result table, or the Calibration document with "
+    "--json. Exits 3 if the fit is not consistent with the measured noise."
 )
 
 
@@ -21,7 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("recording", help="a Recording v1 directory")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
-                   help="estimator (default: paired-axis)")
+                   help="estimator (default: auto = full-matrix when the poses determine it, "
+                   "else paired-axis)")
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the Calibration v1 document here")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
@@ -44,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
     est = estimate_recording(rec, args.method)
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
+    for note in est.notes:
+        print(f"gyrocal: note: {note}", file=sys.stderr)
     cal = est.calibration
     if args.out:
         atomic_write_text(args.out, cal.to_json() + "\n", force=args.force)

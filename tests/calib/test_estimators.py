@@ -20,7 +20,7 @@ SCALE = np.array([1.07, 0.91, 1.15])
 BIAS = np.array([0.06, -0.08, 0.025])
 
 
-@pytest.mark.parametrize("method", list(METHODS))
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "full-matrix"])  # unposed data
 @pytest.mark.parametrize("turns", [1, 3])
 def test_noise_free_data_recover_the_truth_to_1e9(method, turns):
     obs, axes = exact_observations(

@@ -1,0 +1,168 @@
+r"""Serial-chain kinematics of the gimbal: each joint's axis and the rate in the sensor frame.
+
+The gimbal is a chain of servos from the base to the sensor. Servo ``j`` (``j = 0`` the base,
+``S - 1`` the innermost, carrying the sensor) turns about a unit axis ``u_j⁰`` given in the
+calibrated sensor frame with every servo at its reference angle ``θ_j^ref``. With
+``Δ_j = θ_j - θ_j^ref`` the orientation of the sensor relative to the base is the product of
+exponentials (every axis written in the reference sensor frame)
+
+.. math:: R(θ) = \operatorname{Rot}(u_0⁰, Δ_0)\,\operatorname{Rot}(u_1⁰, Δ_1)\cdots
+          \operatorname{Rot}(u_{S-1}⁰, Δ_{S-1}),
+
+and the angular velocity in the sensor frame, ``ω = Rᵀ Σ_j (∏_{k<j} Rot_k) u_j⁰ θ̇_j``, is
+
+.. math:: ω = \sum_j u_j(θ)\, \dot θ_j, \qquad
+          u_j(θ) = \operatorname{Rot}(u_{S-1}⁰, -Δ_{S-1}) \cdots
+                   \operatorname{Rot}(u_{j+1}⁰, -Δ_{j+1})\, u_j⁰ :
+
+the innermost servo's axis is constant in the sensor frame, and each outer axis is carried by the
+rotations of the servos inside it (never by its own angle or those of servos outside it). Angles
+are the encoders' cumulative angles, so whole turns drop out. ``Rot(u, φ)`` is Rodrigues'
+rotation by ``φ`` about ``u``, right-handed: positive angles are the servo's positive direction
+when ``u`` points along its positive axis.
+
+The ``kinematics`` mapping is the one Calibration v2 stores (DESIGN.md, "Calibration v1 and v2"):
+``{"chain": [servo ids, base first], "axes": [[ux, uy, uz] per servo], "reference_angles_rad":
+[one per servo]}``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from gyrocal.calib.errors import CalibInputError
+
+__all__ = ["axes_at", "chain_axes", "rotate", "sensor_rate"]
+
+
+def rotate(axis: np.ndarray, angle: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: ``v`` rotated by ``angle`` about the unit ``axis``.
+
+    ``v cos φ + (u × v) sin φ + u (u·v)(1 − cos φ)``; all arguments broadcast (vectors on the
+    last axis, of length 3).
+    """
+    axis = np.asarray(axis, dtype=float)
+    v = np.asarray(v, dtype=float)
+    phi = np.asarray(angle, dtype=float)[..., None]
+    c, s = np.cos(phi), np.sin(phi)
+    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=-1, keepdims=True) * (1 - c)
+
+
+def chain_axes(axes: np.ndarray, reference: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Each joint's axis in the sensor frame at the given encoder angles (array form).
+
+    Parameters
+    ----------
+    axes : ndarray, shape (..., S, 3)
+        Unit axes ``u_j⁰`` in the sensor frame at the reference angles, base first (may carry
+        leading batch dimensions that broadcast against ``angles``).
+    reference : ndarray, shape (S,) or (..., S)
+        Reference angles, rad.
+    angles : ndarray, shape (..., S)
+        Encoder angles, rad.
+
+    Returns
+    -------
+    ndarray, shape (..., S, 3)
+        ``u_j(θ)`` (module docstring).
+    """
+    axes = np.asarray(axes, dtype=float)
+    delta = np.asarray(angles, dtype=float) - np.asarray(reference, dtype=float)
+    S = axes.shape[-2]
+    shape = np.broadcast_shapes(axes.shape, delta.shape[:-1] + (S, 3))
+    out = np.array(np.broadcast_to(axes, shape))
+    # u_j(θ): apply the inner rotations Rot(u_k⁰, −Δ_k) from k = j+1 outwards to k = S−1 last.
+    for j in range(S - 1):
+        v = out[..., j, :]
+        for k in range(j + 1, S):
+            v = rotate(axes[..., k, :], -delta[..., k], v)
+        out[..., j, :] = v
+    return out
+
+
+def _parse(kinematics: Mapping[str, Any], angles: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if not isinstance(kinematics, Mapping):
+        raise CalibInputError(f"kinematics must be a mapping, got {type(kinematics).__name__}")
+    try:
+        chain = list(kinematics["chain"])
+        axes = np.asarray(kinematics["axes"], dtype=float)
+        ref = np.asarray(kinematics["reference_angles_rad"], dtype=float)
+    except KeyError as exc:
+        raise CalibInputError(f"kinematics lacks {exc.args[0]!r}") from None
+    except (TypeError, ValueError):
+        raise CalibInputError(
+            "kinematics 'axes' and 'reference_angles_rad' must be numeric") from None
+    S = len(chain)
+    if S == 0 or axes.shape != (S, 3) or ref.shape != (S,):
+        raise CalibInputError(
+            f"kinematics needs one axis (3 numbers) and one reference angle per servo of the "
+            f"chain ({S} servos); got axes {axes.shape} and reference angles {ref.shape}"
+        )
+    if not (np.all(np.isfinite(axes)) and np.all(np.isfinite(ref))):
+        raise CalibInputError("kinematics contains NaN or inf")
+    norms = np.linalg.norm(axes, axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-6):
+        raise CalibInputError(f"kinematics axes must be unit vectors; their norms are {norms}")
+    th = np.asarray(angles, dtype=float)
+    if th.ndim != 2 or th.shape[1] != S:
+        raise CalibInputError(
+            f"angles must have shape (N, {S}), one column per servo; got {th.shape}")
+    if not np.all(np.isfinite(th)):
+        raise CalibInputError("angles contain NaN or inf")
+    return axes, ref, th
+
+
+def axes_at(kinematics: Mapping[str, Any], angles: np.ndarray) -> np.ndarray:
+    """Each joint's axis in the sensor frame at encoder angles ``angles``.
+
+    Parameters
+    ----------
+    kinematics : mapping
+        ``{"chain", "axes", "reference_angles_rad"}`` (module docstring).
+    angles : array_like, shape (N, S)
+        Encoder angles of the servos in chain order, rad.
+
+    Returns
+    -------
+    ndarray, shape (N, S, 3)
+
+    Raises
+    ------
+    CalibInputError
+        On a malformed mapping (missing keys, wrong shapes, axes that are not unit vectors) or
+        angles of the wrong shape.
+    """
+    axes, ref, th = _parse(kinematics, angles)
+    return chain_axes(axes, ref, th)
+
+
+def sensor_rate(kinematics: Mapping[str, Any], angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """Angular velocity in the sensor frame, ``ω = Σ_j u_j(θ) θ̇_j``.
+
+    Parameters
+    ----------
+    kinematics : mapping
+        ``{"chain", "axes", "reference_angles_rad"}`` (module docstring).
+    angles, rates : array_like, shape (N, S)
+        Encoder angles (rad) and rates (rad/s) of the servos in chain order.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        rad/s in the sensor frame.
+
+    Raises
+    ------
+    CalibInputError
+        As :func:`axes_at`, or ``rates`` of another shape than ``angles``.
+    """
+    axes, ref, th = _parse(kinematics, angles)
+    w = np.asarray(rates, dtype=float)
+    if w.shape != th.shape:
+        raise CalibInputError(f"rates must have the shape of angles {th.shape}, got {w.shape}")
+    if not np.all(np.isfinite(w)):
+        raise CalibInputError("rates contain NaN or inf")
+    return np.einsum("nsk,ns->nk", chain_axes(axes, ref, th), w)
