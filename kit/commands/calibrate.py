@@ -234,13 +234,18 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     return plan
 
 
-def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any:
+def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
+            extend: Any = None) -> Any:
     """Run the protocol on the jig (or the emulated jig) into a Recording v1 at ``rec_dir``.
 
     Servos stop and torque goes off before the recording is closed, on success, error, Ctrl-C
     or SIGTERM; an interrupted run raises :class:`~gyrocal.kit.errors.InterruptedRun` (exit 130/143)
     with the recording kept, marked incomplete. With ``--sim`` the emulated servos' final state
     is written to ``out/sim-state.json`` (what the emulator holds, not what the driver believes).
+
+    ``extend``, if given, is ``(runner_class, extra_steps)``: a :class:`Runner` subclass and
+    ``extra_steps(plan, ids) -> steps`` run after the protocol (``gyrocal verify``'s general
+    motion).
 
     Returns
     -------
@@ -262,6 +267,10 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
             noise_std = measure_still_noise(jig.imu, jig.clock)
             plan = choose_plan(cfg, jig.gimbal, jig.imu, noise_std)
             steps = build_steps(plan, cfg["gimbal"]["ids"])
+            runner_class = Runner
+            if extend is not None:
+                runner_class, extra = extend
+                steps += extra(plan, cfg["gimbal"]["ids"])
             sensor = jig.imu.info.manifest()
             gimbal_info = {"motors": [
                 {"id": sid, "model": jig.gimbal.infos[sid].model_name,
@@ -285,7 +294,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
                     + (" (emulated jig)" if jig.sim is not None else ""))
             with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
                                  truth=truth, force=args.force) as writer:
-                runner = Runner(
+                runner = runner_class(
                     jig.gimbal, jig.imu, writer, jig.clock, steps,
                     sample_hz=cfg["gimbal"]["sample_hz"],
                     on_progress=None if quiet else progress.update,
