@@ -76,9 +76,10 @@ class Sweep(Step):
 
 def general_motion_steps(plan: Any, ids: list[int]) -> list[Step]:
     """Two sweeps, every servo one turn at once at :data:`SWEEP_SPEEDS` of the plan's speed,
-    forwards then back (so every servo ends where it started), each after a rest."""
+    the negative way first and back (so every servo ends where it started and the cables never
+    twist further than the protocol's turns), each after a rest."""
     steps: list[Step] = []
-    for d in (1, -1):
+    for d in (-1, 1):
         moves = tuple((int(i), 1, plan.speed * f, d) for i, f in zip(ids, SWEEP_SPEEDS,
                                                                        strict=False))
         steps.append(Step("rest", rest_s=plan.rest_s))
