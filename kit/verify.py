@@ -204,8 +204,8 @@ class Verification:
             f"last three columns split '{after}' by what the jig was doing.",
             f"{self.blocks['ramp_excluded']} blocks on acceleration ramps are left out: there "
             "the gyro's filter delay against the encoder is an error of the timing, not of the "
-            f"calibration. That delay, fitted, is {self.delay_s * 1e3:.1f} ms; the reference is "
-            "compared as delayed by it.",
+            f"calibration. That delay, fitted on the several-servo blocks, is "
+            f"{self.delay_s * 1e3:.1f} ms; the reference is compared as delayed by it.",
         ]
         return "\n".join(lines)
 
@@ -303,6 +303,8 @@ def _reference_variance(te: np.ndarray, ang: np.ndarray, a: float, b: float) -> 
     return var
 
 
+#: Blocks of several servos turning needed to fit the gyro's delay (else it is taken as 0).
+_MIN_DELAY_BLOCKS = 3
 #: Span over which the rate's slope is taken at each end of a block, s.
 _EDGE_S = 0.05
 
@@ -397,8 +399,10 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
     # rates linear in ω change sign with the direction of the sweeps, dω/dt does not) and
     # compare with the reference as a gyro with that delay sees it.
     first = cal.apply(raw) - np.array([r[2] for r in used])
-    ss = float(np.sum(slope * slope))
-    delay = -float(np.sum(first * slope)) / ss if ss > 0 else 0.0
+    turning = kinds == "several_servos"  # where the rate's direction changes
+    ss = float(np.sum(slope[turning] ** 2))
+    delay = (-float(np.sum(first[turning] * slope[turning])) / ss
+             if turning.sum() >= _MIN_DELAY_BLOCKS and ss > 0 else 0.0)
     ref = np.array([r[2] for r in used]) - delay * slope
     rest = [r[3] for r in used if r[0] == "rest" and r[4] >= 3]
     sigma = (np.sqrt(np.mean([diff_noise(x) ** 2 for x in rest], axis=0)) if rest
