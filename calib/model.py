@@ -505,7 +505,7 @@ def _read_kinematics(k: Any) -> dict[str, Any] | None:
             "'kinematics.chain' must list 1 to 16 distinct servo IDs (0-252), base first")
     s = len(chain)
     axes = _array(k["axes"], "kinematics.axes", (s, 3))
-    if np.any(np.abs(np.linalg.norm(axes, axis=1) - 1.0) > 1e-3):
+    if np.any(np.abs(np.linalg.norm(axes, axis=1) - 1.0) > 1e-6):  # as calib.kinematics
         raise CalibrationFormatError("'kinematics.axes' must be unit vectors, one per servo")
     angles = _array(k["reference_angles_rad"], "kinematics.reference_angles_rad", (s,))
     return {"chain": list(chain), "axes": axes.tolist(), "reference_angles_rad": angles.tolist()}

@@ -27,7 +27,8 @@ EXIT_CODES: dict[int, str] = {
     0: "success",
     1: "internal error (a bug: please report it with the traceback)",
     2: "bad usage or bad input (flags, config, files)",
-    3: "the calibration finished but is not consistent with the measured noise",
+    3: "the calibration finished but is not consistent with the measured noise, or verify "
+       "found its error beyond what its uncertainty predicts",
     4: "hardware or communication failure (I2C bus, servo bus, servo hardware alert)",
     5: "a runtime check of the protocol failed twice (speed, saturation, FIFO gap, movement)",
     6: "the estimation failed (too little data, no convergence)",

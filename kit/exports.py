@@ -256,7 +256,33 @@ def _fmt(x: float) -> str:
     return f"{x:.6e}"
 
 
+_ROS_TOPIC = re.compile(r"[A-Za-z_/~][A-Za-z0-9_/]*\Z")
+
+
+def _kalibr_topic_and_rate(options: Mapping[str, Any], odr_hz: Any) -> tuple[str, float | None]:
+    """``--rostopic`` (checked: a ROS name) and ``--update-rate`` (default ``odr_hz`` when it is
+    a number; None when there is none)."""
+    rostopic = options.get("rostopic") or "/imu0"
+    if not _ROS_TOPIC.match(rostopic):
+        raise InputError(f"--rostopic {_one_line(rostopic, 60)!r} is not a ROS topic name "
+                         "(letters, digits, _, /; e.g. /imu0)")
+    rate = options.get("update_rate")
+    if rate is None:
+        return rostopic, float(odr_hz) if _num_text(odr_hz) is not None and odr_hz > 0 else None
+    if not (float(rate) > 0 and math.isfinite(float(rate))):
+        raise InputError(f"--update-rate must be a positive number of Hz, got {rate!r}")
+    return rostopic, float(rate)
+
+
 def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    if doc.get("format") == "gyrocal-calibration":
+        return _render_kalibr_intrinsics(doc, options)
+    return _render_kalibr_noise(doc, options)
+
+
+def _render_kalibr_noise(
+    doc: Mapping[str, Any], options: Mapping[str, Any]
+) -> tuple[str, list[str]]:
     from gyrocal.calib.allan import NoiseCharacterisation
 
     nc = NoiseCharacterisation.from_dict(doc)
@@ -270,11 +296,9 @@ def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[
         raise InputError(
             "the noise document has no positive noise density or random walk; Kalibr needs both"
         )
-    rostopic = options.get("rostopic") or "/imu0"
-    rate = options.get("update_rate")
-    rate = float(nc.odr_hz if rate is None else rate)
-    if not (rate > 0 and math.isfinite(rate)):
-        raise InputError(f"--update-rate must be a positive number of Hz, got {rate!r}")
+    rostopic, rate = _kalibr_topic_and_rate(options, nc.odr_hz)
+    if rate is None:
+        raise InputError("the noise document has no usable odr_hz; give --update-rate HZ")
     acc_n = options.get("accel_noise_density")
     acc_w = options.get("accel_random_walk")
     for name, v in (("--accel-noise-density", acc_n), ("--accel-random-walk", acc_w)):
@@ -290,7 +314,7 @@ def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[
     acc_n = KALIBR_ACCEL_NOISE_DENSITY if acc_n is None else float(acc_n)
     acc_w = KALIBR_ACCEL_RANDOM_WALK if acc_w is None else float(acc_w)
     unresolved = [ax for ax, k in zip("xyz", k_axes, strict=True) if not k > 0]
-    sensor = nc.sensor.get("model", "unknown") if nc.sensor else "unknown"
+    sensor = _one_line(nc.sensor.get("model", "unknown") if nc.sensor else "unknown")
 
     def axes(vals: list[float]) -> str:
         return " ".join(f"{a}={_fmt(v)}" for a, v in zip("xyz", vals, strict=True))
@@ -298,8 +322,9 @@ def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[
     lines = [
         f"# Kalibr IMU configuration (imu.yaml), written by gyrocal {__version__} from a "
         "gyrocal-noise v1 document.",
-        f"# Sensor: {sensor}; source: {nc.source or 'unknown'}; record: "
-        f"{nc.duration_s:.0f} s at {nc.odr_hz:g} Hz; created: {nc.created or 'unknown'}.",
+        f"# Sensor: {sensor}; source: {_one_line(nc.source or 'unknown')}; record: "
+        f"{nc.duration_s:.0f} s at {nc.odr_hz:g} Hz; created: "
+        f"{_one_line(nc.created or 'unknown')}.",
         "# Gyroscope: measured by overlapping Allan deviation (IEEE Std 952). Kalibr takes one",
         "# value per sensor: each is the largest of the three axes.",
         "#   gyroscope_noise_density: white rate noise N, rad/s/sqrt(Hz) (continuous time);",
@@ -338,11 +363,85 @@ def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[
     return "\n".join(lines) + "\n", notes
 
 
+def _render_kalibr_intrinsics(
+    doc: Mapping[str, Any], options: Mapping[str, Any]
+) -> tuple[str, list[str]]:
+    """A calibration in the layout of Kalibr's ``scale-misalignment`` IMU model.
+
+    Kalibr (ethz-asl/kalibr, ``kalibr_imu_camera_calibration/IccSensors.py``,
+    ``IccScaledMisalignedImu``) models the gyro reading as ``w_meas = M C_gyro_i w_i + A a_i + b``
+    and writes its intrinsics as ``model: scale-misalignment``, ``gyroscopes: {M, A, C_gyro_i}``,
+    ``accelerometers: {M}`` (``setIntrisicsMatrices``). gyrocal's ``g = matrix (m + bias)`` is
+    ``m = matrix⁻¹ g − bias``: so ``M = matrix⁻¹`` with ``C_gyro_i`` the identity (Kalibr's IMU
+    frame is gyrocal's calibrated frame). Kalibr has no place for a fixed bias (it estimates the
+    bias as a random walk) and gyrocal measures neither ``A`` nor the accelerometer: notes say so.
+    """
+    from gyrocal.calib.model import GyroCalibration
+
+    cal = GyroCalibration.from_dict(doc)
+    for name in ("accel_noise_density", "accel_random_walk"):
+        if options.get(name) is not None:
+            raise InputError(f"--{name.replace('_', '-')} applies to a gyrocal-noise document, "
+                             "not a calibration")
+    rostopic, rate = _kalibr_topic_and_rate(options, cal.sensor.get("odr_hz"))
+    inverse = _inverse3(cal.full_matrix.tolist())
+    eye = [[float(i == j) for j in range(3)] for i in range(3)]
+    notes = [
+        "Kalibr's IMU file has no place for a fixed gyro bias (Kalibr estimates it as a random "
+        f"walk): the bias {[float(b) for b in cal.bias]} rad/s is not in the file",
+        "gyroscopes.A (g-sensitivity) and accelerometers.M are identity/zero placeholders: "
+        "gyrocal does not measure them",
+        "the noise fields Kalibr also needs are not in a calibration: export the gyrocal-noise "
+        "document of `gyrocal noise` with --format kalibr and merge the two files",
+    ]
+    if not cal.is_full:
+        notes.append("a version 1 calibration has no cross-axis terms: M is diagonal")
+    lines = [
+        f"# Kalibr IMU intrinsics (model scale-misalignment), written by gyrocal {__version__} "
+        f"from a Calibration v{2 if cal.is_full else 1} document.",
+        "# Kalibr's gyro model (kalibr_imu_camera_calibration/IccSensors.py):",
+        "#     w_meas = M * C_gyro_i * w_i + A * a_i + b",
+        "# gyrocal's model g = matrix @ (m + bias) gives M = inverse(matrix), C_gyro_i = identity",
+        "# (Kalibr's IMU frame is gyrocal's calibrated frame, convention "
+        f"{_one_line(cal.frame or 'not stated')}).",
+        "# NOT in this file: the bias (Kalibr has no field for a fixed bias; gyrocal's bias, ADDED",
+        "# to the reading, rad/s: " + ", ".join(f"{a}={_fmt(b)}" for a, b in zip("xyz", cal.bias,
+                                                                            strict=True)) + ").",
+        "# Placeholders, not measured by gyrocal: gyroscopes.A (zero) and accelerometers.M",
+        "# (identity). Noise fields: export a gyrocal-noise document with --format kalibr.",
+        f"# Sensor: {_sensor_text(cal.sensor)}.",
+        f"# Consistency: {_verdict(cal)}.",
+        "model: scale-misalignment",
+        *_yaml_block("gyroscopes", {"M": inverse, "A": [[0.0] * 3] * 3, "C_gyro_i": eye}),
+        *_yaml_block("accelerometers", {"M": eye}),
+        f"rostopic: {rostopic}",
+    ]
+    if rate is None:
+        notes.append("update_rate left out: the calibration has no numeric sensor.odr_hz; "
+                     "give --update-rate HZ")
+    else:
+        lines.append(f"update_rate: {rate:g}")
+    return "\n".join(lines) + "\n", notes
+
+
+def _inverse3(a: list[list[float]]) -> list[list[float]]:
+    """The inverse of a 3×3 matrix by its adjugate (Cramer's rule)."""
+    (p, q, r), (s, t, u), (v, w, x) = a
+    cof = [[t * x - u * w, -(s * x - u * v), s * w - t * v],
+           [-(q * x - r * w), p * x - r * v, -(p * w - q * v)],
+           [q * u - r * t, -(p * u - r * s), p * t - q * s]]
+    det = p * cof[0][0] + q * cof[0][1] + r * cof[0][2]
+    if det == 0.0:
+        raise InputError("the calibration's matrix is singular: it cannot be inverted for Kalibr")
+    return [[cof[j][i] / det for j in range(3)] for i in range(3)]
+
+
 register(
     Exporter(
         name="kalibr",
-        accepts=("gyrocal-noise",),
-        description="Kalibr IMU YAML (gyroscope_noise_density, gyroscope_random_walk)",
+        accepts=("gyrocal-noise", "gyrocal-calibration"),
+        description="Kalibr IMU YAML: noise (gyroscope_noise_density, gyroscope_random_walk) or "
+                    "a calibration's scale-misalignment intrinsics",
         render=_render_kalibr,
         options=(
             ExportOption("rostopic", str, "kalibr: the IMU's ROS topic (default /imu0)"),
@@ -437,15 +536,59 @@ def _verdict(cal: Any) -> str:
             f"({'consistent' if c.ok else 'NOT consistent'} with the measured noise)")
 
 
+def _one_line(text: Any, limit: int = 200) -> str:
+    """``text`` as one line of printable ASCII, safe inside a YAML ``#`` comment or C comment.
+
+    Every line break a YAML or C reader knows (``\\n``, ``\\r``, U+0085, U+2028, U+2029), every
+    other control character and every non-ASCII character is written as a backslash escape, so a
+    hostile string (``sensor.model`` comes from a recording's manifest) stays in its comment. At
+    most ``limit`` characters.
+    """
+    out = str(text).encode("ascii", "backslashreplace").decode("ascii")
+    out = _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", out)
+    return out if len(out) <= limit else out[: limit - 3] + "..."
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _num_text(v: Any) -> str | None:
+    """A finite JSON number as ``%g`` text; None for anything else (a string, NaN, bool)."""
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+    if not ok:
+        return None
+    try:
+        return f"{float(v):g}" if math.isfinite(float(v)) else None
+    except OverflowError:
+        return None
+
+
 def _sensor_text(sensor: Mapping[str, Any]) -> str:
+    """The sensor as one safe comment line: model, ODR, full scale (non-numbers quoted)."""
     if not sensor:
         return "unknown"
     parts = [str(sensor.get("model", "unknown model"))]
-    if sensor.get("odr_hz") is not None:
-        parts.append(f"{sensor['odr_hz']:g} Hz")
-    if sensor.get("full_scale_dps") is not None:
-        parts.append(f"+-{sensor['full_scale_dps']:g} dps full scale")
-    return ", ".join(parts)
+    for key, fmt in (("odr_hz", "{} Hz"), ("full_scale_dps", "+-{} dps full scale")):
+        v = sensor.get(key)
+        if v is not None:
+            text = _num_text(v)
+            parts.append(fmt.format(text) if text is not None else f"{key} {v!r} (not a number)")
+    return _one_line(", ".join(parts))
+
+
+def _model_lines(cal: Any, prefix: str) -> list[str]:
+    """Comment lines stating the model the calibration holds (v1 diagonal or v2 full matrix)."""
+    if not cal.is_full:
+        return [f"{prefix}Model (paper Eq. 1), elementwise per sensor axis x, y, z:",
+                f"{prefix}    g = scale * (m + bias)"]
+    return [
+        f"{prefix}Model (Calibration v2, the full matrix), with i, j over the axes x, y, z:",
+        f"{prefix}    g = matrix @ (m + bias)",
+        f"{prefix}    g[i] = sum over j of matrix[i][j] * (m[j] + bias[j])",
+        f"{prefix}  matrix  3x3, row by row, dimensionless: scale factors on the diagonal,",
+        f"{prefix}          cross-axis sensitivities off it; frame convention "
+        f"{_one_line(cal.frame or 'not stated')}",
+    ]
 
 
 # ---------------------------------------------------------------------------- yaml
@@ -454,20 +597,22 @@ def _render_yaml(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[st
 
     cal = GyroCalibration.from_dict(doc)
     d = cal.to_dict()  # normalised: every field present, NaN as null
+    v = d["version"]
     lines = [
-        f"# gyrocal calibration (Calibration v1) as YAML, written by gyrocal {__version__}.",
+        f"# gyrocal calibration (Calibration v{v}) as YAML, written by gyrocal {__version__}.",
         "# The same fields as the JSON document; converted back to JSON it is a valid",
-        "# Calibration v1 (gyrocal export --format json reads only JSON).",
+        f"# Calibration v{v} (gyrocal export --format json reads only JSON).",
         "#",
-        "# Model (paper Eq. 1), elementwise per sensor axis x, y, z:",
-        "#     g = scale * (m + bias)",
+        *_model_lines(cal, "# "),
         "#   m      raw gyro reading, rad/s (raw counts times the datasheet sensitivity, nothing",
         "#          else)",
         "#   g      calibrated angular rate, rad/s",
-        "#   scale  scale factors, dimensionless",
+        "#   scale  scale factors, dimensionless" + (" (the diagonal of matrix)" if v == 2 else ""),
         "#   bias   rad/s, ADDED to the reading before scaling: a still sensor reads m = -bias",
         "#   scale_std, bias_std  one-sigma uncertainties (dimensionless; rad/s)",
-        "#   covariance  6x6, of (scale_x, scale_y, scale_z, bias_x, bias_y, bias_z), row by row",
+        "#   covariance  " + (
+            "12x12, of (matrix row by row, bias_x, bias_y, bias_z)" if v == 2
+            else "6x6, of (scale_x, scale_y, scale_z, bias_x, bias_y, bias_z), row by row"),
         f"# Sensor: {_sensor_text(cal.sensor)}.",
         f"# Consistency: {_verdict(cal)}.",
     ]
@@ -476,11 +621,16 @@ def _render_yaml(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[st
         "bias": "# biases, rad/s (added to the reading before scaling)",
         "scale_std": "# one-sigma, dimensionless",
         "bias_std": "# one-sigma, rad/s",
-        "covariance": "# order (scale_x, scale_y, scale_z, bias_x, bias_y, bias_z); "
+        "covariance": "# order (matrix row by row, bias_x, bias_y, bias_z); units 1 and rad/s"
+                      if v == 2 else "# order (scale_x, scale_y, scale_z, bias_x, bias_y, bias_z); "
                       "units 1 and rad/s",
         "temperature_c": "# mean die temperature during the calibration, degrees C",
         "axes": "# each servo's rotation axis in the sensor frame (unit vector), its angle to\n"
                 "# the nearest sensor axis and that angle's one-sigma, degrees",
+        "matrix": "# g = matrix @ (m + bias); row i gives axis i of g, dimensionless",
+        "matrix_std": "# one-sigma of each entry of matrix",
+        "kinematics": "# the gimbal as the fit estimated it: servo IDs base first, their axes in\n"
+                      "# the sensor frame at the reference encoder angles (rad)",
     }
     for key, value in d.items():
         if key in comments:
@@ -505,37 +655,37 @@ _ROS_NODE = re.compile(r"(/\*\*|/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*
 _ROS_FRAME = re.compile(r"[A-Za-z_/][A-Za-z0-9_/]*\Z")
 
 
-def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
-    from gyrocal.calib.model import GyroCalibration
+def _finite_list(rows: Any) -> list[float] | None:
+    """``rows`` (a vector or a matrix) flattened row by row, or None if any entry is unknown."""
+    flat = [float(x) for r in rows for x in (r if isinstance(r, (list, tuple)) else [r])]
+    return flat if all(math.isfinite(x) for x in flat) else None
 
-    cal = GyroCalibration.from_dict(doc)
-    frame = options.get("frame_id") or "imu_link"
-    if not _ROS_FRAME.match(frame):
-        raise InputError(f"--frame-id {frame!r} is not a ROS frame name (letters, digits, _, /)")
-    node = options.get("ros_node")
-    if node is not None and not _ROS_NODE.match(node):
-        raise InputError(f"--ros-node {node!r} is not a ROS node name (e.g. imu_filter, or /**)")
-    notes: list[str] = []
+
+def _ros_params(cal: Any, frame: str) -> tuple[dict[str, Any], list[str]]:
+    """The ``gyro_calibration`` parameters (flat arrays: ROS 2 parameters cannot nest lists),
+    and the names of the uncertainties left out because the calibration does not have them."""
+    full = cal.is_full
     params: dict[str, Any] = {
         "frame_id": frame,
-        "model": "omega = scale * (omega_raw + bias)",
+        "model": "omega = matrix * (omega_raw + bias)" if full
+        else "omega = scale * (omega_raw + bias)",
         "bias_convention": "add",
         "units": "rad/s",
-        "scale": list(cal.scale),
-        "bias": list(cal.bias),
     }
+    if full:
+        params["matrix"] = _finite_list(cal.matrix)
+        params["matrix_frame_convention"] = cal.frame or "unknown"
+    params["scale"] = list(cal.scale)
+    params["bias"] = list(cal.bias)
     missing = []
-    for name in ("scale_std", "bias_std"):
-        v = getattr(cal, name)
-        if all(math.isfinite(x) for x in v):
-            params[name] = list(v)
-        else:
+    stds = ("matrix_std", "bias_std") if full else ("scale_std", "bias_std")
+    for name in (*stds, "covariance"):
+        value = getattr(cal, name)
+        flat = None if value is None else _finite_list(value)
+        if flat is None:
             missing.append(name)
-    cov = cal.covariance
-    if cov is not None and all(math.isfinite(x) for row in cov for x in row):
-        params["covariance"] = [x for row in cov for x in row]
-    else:
-        missing.append("covariance")
+        else:
+            params[name] = flat
     params["method"] = cal.method
     if cal.consistency is not None:
         params["consistent"] = bool(cal.consistency.ok)
@@ -546,21 +696,50 @@ def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     for name in ("created", "source"):
         if getattr(cal, name) is not None:
             params[name] = getattr(cal, name)
+    return params, missing
+
+
+def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    from gyrocal.calib.model import GyroCalibration
+
+    cal = GyroCalibration.from_dict(doc)
+    frame = options.get("frame_id") or "imu_link"
+    if not _ROS_FRAME.match(frame):
+        raise InputError(f"--frame-id {frame!r} is not a ROS frame name (letters, digits, _, /)")
+    node = options.get("ros_node")
+    if node is not None and not _ROS_NODE.match(node):
+        raise InputError(f"--ros-node {node!r} is not a ROS node name (e.g. imu_filter, or /**)")
+    params, missing = _ros_params(cal, frame)
+    notes = []
     if missing:
         notes.append(f"the calibration has no {', '.join(missing)}: left out of the ROS file")
+    if cal.is_full:
+        model = [
+            "# Model, the full matrix, with i, j over the axes x, y, z of that frame:",
+            "#     omega[i] = sum over j of matrix[3*i + j] * (omega_raw[j] + bias[j])",
+            "#   matrix     9 numbers, the 3x3 matrix row by row, dimensionless: scale factors on",
+            "#              the diagonal (also given as scale), cross-axis terms off it; its frame",
+            "#              convention is matrix_frame_convention; matrix_std its one-sigma",
+        ]
+        cov = "#   covariance row-major 12x12 of (matrix row by row, bias_x, bias_y, bias_z)"
+    else:
+        model = [
+            "# Model, elementwise per axis x, y, z of that frame:",
+            "#     omega = scale * (omega_raw + bias)",
+            "#   scale      dimensionless; scale_std its one-sigma",
+        ]
+        cov = "#   covariance row-major 6x6 of (scale_x, scale_y, scale_z, bias_x, bias_y, bias_z)"
     lines = [
-        f"# Gyroscope calibration for ROS, written by gyrocal {__version__} from a Calibration v1 "
-        "document.",
+        f"# Gyroscope calibration for ROS, written by gyrocal {__version__} from a Calibration "
+        f"v{2 if cal.is_full else 1} document.",
         f"# Frame: {frame} (the IMU's frame_id); rates in rad/s as in sensor_msgs/Imu (REP 103).",
-        "# Model, elementwise per axis x, y, z of that frame:",
-        "#     omega = scale * (omega_raw + bias)",
+        *model,
         "#   omega_raw  the driver's angular_velocity before correction, rad/s",
         "#   omega      the corrected angular_velocity, rad/s",
-        "#   scale      dimensionless; scale_std its one-sigma",
         "#   bias       rad/s, ADDED to the raw reading (bias_convention: add); a still sensor",
         "#              reads -bias. A node that subtracts an offset must subtract -bias.",
         "#   bias_std   one-sigma, rad/s",
-        "#   covariance row-major 6x6 of (scale_x, scale_y, scale_z, bias_x, bias_y, bias_z)",
+        cov,
         f"# Sensor: {_sensor_text(cal.sensor)}.",
         f"# Consistency: {_verdict(cal)}.",
     ]
@@ -605,9 +784,111 @@ def _c_float(x: float) -> str:
     return f"({s}f)" if s.startswith("-") else s + "f"
 
 
-def _c_comment(text: str) -> str:
-    """Text that cannot end a C comment early."""
-    return str(text).replace("*/", "* /").replace("\n", " ")
+def _c_comment(text: Any) -> str:
+    """Text that stays inside a C block comment: one line (:func:`_one_line`), no ``*/``, and no
+    ``??`` (a trigraph under ``-std=c99``)."""
+    return _one_line(text).replace("*/", "* /").replace("??", "? ?")
+
+
+_AXES = "XYZ"
+
+
+def _c_header_comment(cal: Any, P: str, sens_ok: bool) -> list[str]:
+    """The header's opening comment: model, units, provenance, uncertainties."""
+    k_std = "  ".join(f"k_{a} {_std_text(s)}" for a, s in zip("xyz", cal.scale_std, strict=True))
+    b_std = "  ".join(f"b_{a} {_std_text(s)}" for a, s in zip("xyz", cal.bias_std, strict=True))
+    if cal.is_full:
+        model = [
+            " * Model (Calibration v2, the full matrix), with i, j over the axes x, y, z:",
+            " *",
+            " *     g[i] = sum over j of A[i][j] * (m[j] + b[j])",
+            " *",
+            f" *   A  3x3 matrix, dimensionless ({P}_MATRIX_XX, _XY, ... _ZZ: row, column):",
+            " *      scale factors on the diagonal, cross-axis sensitivities off it; frame",
+            f" *      convention {_c_comment(cal.frame or 'not stated')}",
+        ]
+    else:
+        model = [
+            " * Model (Calibration v1, the paper's Eq. 1), per sensor axis i = x, y, z:",
+            " *",
+            " *     g[i] = k[i] * (m[i] + b[i])",
+            " *",
+            f" *   k  scale factor, dimensionless ({P}_SCALE_X, _Y, _Z)",
+        ]
+    lines = [
+        "/*",
+        f" * Gyroscope calibration for firmware, written by gyrocal {__version__} from a "
+        f"Calibration v{2 if cal.is_full else 1} document.",
+        " *",
+        *model,
+        " *   m  raw gyro reading in rad/s: raw counts times the datasheet sensitivity, nothing",
+        " *      else" + (f" ({P}_SENSITIVITY_RAD_S_PER_LSB below)" if sens_ok else ""),
+        " *   g  calibrated angular rate, rad/s",
+        f" *   b  bias in rad/s ({P}_BIAS_X, _Y, _Z), ADDED to the reading before scaling:",
+        " *      a still sensor reads m = -b",
+        " *",
+        f" * Sensor: {_c_comment(_sensor_text(cal.sensor))}",
+        f" * Method: {_c_comment(cal.method)} ({cal.iterations} iterations)",
+        f" * Consistency: {_c_comment(_verdict(cal))}",
+    ]
+    if cal.temperature_c is not None:
+        lines.append(f" * Mean die temperature during the calibration: "
+                     f"{cal.temperature_c:.1f} degrees C")
+    return lines + [
+        f" * Created: {_c_comment(cal.created or 'unknown')}",
+        f" * Source: {_c_comment(cal.source or 'unknown')}",
+        " *",
+        " * One-sigma standard deviations:",
+        f" *   {k_std}  (dimensionless" + (", the diagonal of A)" if cal.is_full else ")"),
+        f" *   {b_std}  (rad/s)",
+        " */",
+    ]
+
+
+def _c_constants(cal: Any, P: str) -> list[str]:
+    """``#define``s of the scale factors (v1) or the matrix (v2), then the biases."""
+    if cal.is_full:
+        lines = [f"/* The matrix A, dimensionless: {P}_MATRIX_<row><column>. */"]
+        std = cal.matrix_std or ((math.nan,) * 3,) * 3
+        for i, row in enumerate(cal.matrix):
+            for j, a in enumerate(row):
+                lines.append(f"#define {P}_MATRIX_{_AXES[i]}{_AXES[j]} {_c_float(a)} "
+                             f"/* std {_std_text(std[i][j])} */")
+    else:
+        lines = ["/* Scale factors k, dimensionless. */"]
+        for a, k, s in zip(_AXES, cal.scale, cal.scale_std, strict=True):
+            lines.append(f"#define {P}_SCALE_{a} {_c_float(k)} /* std {_std_text(s)} */")
+    lines += ["", "/* Biases b, rad/s, added to the reading before scaling. */"]
+    for a, b, s in zip(_AXES, cal.bias, cal.bias_std, strict=True):
+        lines.append(f"#define {P}_BIAS_{a} {_c_float(b)} /* rad/s, std {_std_text(s)} */")
+    return lines
+
+
+def _c_apply(cal: Any, P: str, fn: str) -> list[str]:
+    """The inline apply function: ``g = A (m + b)``, or ``g = k * (m + b)`` per axis."""
+    if cal.is_full:
+        what = "g = A * (m + b)"
+        body = [f"    const float {c} = m_rad_s[{i}] + {P}_BIAS_{a};"
+                for i, (c, a) in enumerate(zip("xyz", _AXES, strict=True))]
+        body += [
+            f"    g_rad_s[{i}] = {P}_MATRIX_{r}X * x + {P}_MATRIX_{r}Y * y + {P}_MATRIX_{r}Z * z;"
+            for i, r in enumerate(_AXES)
+        ]
+    else:
+        what = "g = k * (m + b) on each axis"
+        body = [f"    const float {c} = {P}_SCALE_{a} * (m_rad_s[{i}] + {P}_BIAS_{a});"
+                for i, (c, a) in enumerate(zip("xyz", _AXES, strict=True))]
+        body += [f"    g_rad_s[{i}] = {c};" for i, c in enumerate("xyz")]
+    return [
+        "/*",
+        f" * Apply the calibration: {what}. m_rad_s and g_rad_s are",
+        " * {x, y, z} in rad/s; they may be the same array (in place).",
+        " */",
+        f"static inline void {fn}(const float m_rad_s[3], float g_rad_s[3])",
+        "{",
+        *body,
+        "}",
+    ]
 
 
 def _render_c_header(
@@ -622,75 +903,16 @@ def _render_c_header(
     P, fn = prefix.upper(), prefix.lower() + "_apply"
     guard = f"{P}_CALIBRATION_H"
     sens = cal.sensor.get("sensitivity_rad_s_per_lsb")
-    sens_ok = isinstance(sens, (int, float)) and not isinstance(sens, bool) and sens > 0
-    k_std = "  ".join(f"k_{a} {_std_text(s)}" for a, s in zip("xyz", cal.scale_std, strict=True))
-    b_std = "  ".join(f"b_{a} {_std_text(s)}" for a, s in zip("xyz", cal.bias_std, strict=True))
-    lines = [
-        "/*",
-        f" * Gyroscope calibration for firmware, written by gyrocal {__version__} from a "
-        "Calibration v1 document.",
-        " *",
-        " * Model (Calibration v1, the paper's Eq. 1), per sensor axis i = x, y, z:",
-        " *",
-        " *     g[i] = k[i] * (m[i] + b[i])",
-        " *",
-        " *   m  raw gyro reading in rad/s: raw counts times the datasheet sensitivity, nothing",
-        " *      else" + (f" ({P}_SENSITIVITY_RAD_S_PER_LSB below)" if sens_ok else ""),
-        " *   g  calibrated angular rate, rad/s",
-        f" *   k  scale factor, dimensionless ({P}_SCALE_X, _Y, _Z)",
-        f" *   b  bias in rad/s ({P}_BIAS_X, _Y, _Z), ADDED to the reading before scaling:",
-        " *      a still sensor reads m = -b",
-        " *",
-        f" * Sensor: {_c_comment(_sensor_text(cal.sensor))}",
-        f" * Method: {_c_comment(cal.method)} ({cal.iterations} iterations)",
-        f" * Consistency: {_c_comment(_verdict(cal))}",
-    ]
-    if cal.temperature_c is not None:
-        lines.append(f" * Mean die temperature during the calibration: "
-                     f"{cal.temperature_c:.1f} degrees C")
-    lines += [
-        f" * Created: {_c_comment(cal.created or 'unknown')}",
-        f" * Source: {_c_comment(cal.source or 'unknown')}",
-        " *",
-        " * One-sigma standard deviations:",
-        f" *   {k_std}  (dimensionless)",
-        f" *   {b_std}  (rad/s)",
-        " */",
-        f"#ifndef {guard}",
-        f"#define {guard}",
-        "",
-        "/* Scale factors k, dimensionless. */",
-    ]
-    for a, k, s in zip("XYZ", cal.scale, cal.scale_std, strict=True):
-        lines.append(f"#define {P}_SCALE_{a} {_c_float(k)} /* std {_std_text(s)} */")
-    lines.append("")
-    lines.append("/* Biases b, rad/s, added to the reading before scaling. */")
-    for a, b, s in zip("XYZ", cal.bias, cal.bias_std, strict=True):
-        lines.append(f"#define {P}_BIAS_{a} {_c_float(b)} /* rad/s, std {_std_text(s)} */")
+    sens_ok = _num_text(sens) is not None and sens > 0
+    lines = [*_c_header_comment(cal, P, sens_ok), f"#ifndef {guard}", f"#define {guard}", "",
+             *_c_constants(cal, P)]
     if sens_ok:
         lines += [
             "",
             "/* Datasheet sensitivity the readings were converted with: m = counts * this. */",
             f"#define {P}_SENSITIVITY_RAD_S_PER_LSB {_c_float(float(sens))}",
         ]
-    lines += [
-        "",
-        "/*",
-        " * Apply the calibration: g = k * (m + b) on each axis. m_rad_s and g_rad_s are",
-        " * {x, y, z} in rad/s; they may be the same array (in place).",
-        " */",
-        f"static inline void {fn}(const float m_rad_s[3], float g_rad_s[3])",
-        "{",
-        f"    const float x = {P}_SCALE_X * (m_rad_s[0] + {P}_BIAS_X);",
-        f"    const float y = {P}_SCALE_Y * (m_rad_s[1] + {P}_BIAS_Y);",
-        f"    const float z = {P}_SCALE_Z * (m_rad_s[2] + {P}_BIAS_Z);",
-        "    g_rad_s[0] = x;",
-        "    g_rad_s[1] = y;",
-        "    g_rad_s[2] = z;",
-        "}",
-        "",
-        f"#endif /* {guard} */",
-    ]
+    lines += ["", *_c_apply(cal, P, fn), "", f"#endif /* {guard} */"]
     return "\n".join(lines) + "\n", []
 
 
@@ -698,7 +920,7 @@ register(
     Exporter(
         name="c-header",
         accepts=("gyrocal-calibration",),
-        description="a C header for firmware: the six constants and an inline apply function",
+        description="a C header for firmware: the constants and an inline apply function",
         render=_render_c_header,
         options=(
             ExportOption("c_prefix", str,

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import struct
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -876,6 +876,60 @@ class Gimbal:
         if not moving:
             self.motion.finished = True
             self.motion.t_end = self.motion.t_begin
+        self._last_poll_t = self.clock.monotonic()
+        return self.motion
+
+    def begin_turns(self, turns: Mapping[int, tuple[int, float, int]]) -> Motion:
+        """Start turning several servos at once, each by whole turns at its own speed (the
+        general motion of ``gyrocal verify``). Non-blocking; servos not named hold.
+
+        Parameters
+        ----------
+        turns : mapping
+            ``{servo_id: (turns, speed, direction)}`` as for :meth:`begin_turn`.
+
+        Returns
+        -------
+        Motion
+            Of kind ``"turns"``, also in :attr:`motion`; ``speed`` is the highest quantized
+            speed; poll until ``motion.finished``.
+
+        Raises
+        ------
+        ConfigurationError, TurnLimitError, SafetyError
+            As :meth:`begin_turn`, checked for every servo before any moves.
+        """
+        self._require_open()
+        if not turns:
+            raise ConfigurationError("begin_turns needs at least one servo")
+        plan: dict[int, tuple[int, int, float]] = {}
+        for servo_id, (n, speed, direction) in turns.items():
+            if servo_id not in self.ids:
+                raise ConfigurationError(
+                    f"servo {servo_id!r} is not on this gimbal (IDs {self.ids})")
+            if isinstance(n, bool) or not float(n).is_integer() or int(n) < 1:
+                raise ConfigurationError(f"turns must be a whole number >= 1, got {n!r}")
+            if direction not in (1, -1):
+                raise ConfigurationError(f"direction must be +1 or -1, got {direction!r}")
+            units, speed_q = self._speed_units(servo_id, speed)
+            plan[servo_id] = (int(n) * direction, units, speed_q)
+        self._require_idle()
+        s = self.sample()
+        home = self.home_ticks
+        starts = {i: int(s.ticks[self.ids.index(i)]) for i in plan}
+        goals = {i: starts[i] + plan[i][0] * TICKS_PER_TURN for i in plan}
+        for i in plan:
+            self._check_turn_limit(i, goals[i])
+        for i in plan:
+            self._write_item(i, "Bus Watchdog", self.watchdog_units)
+            self._write_goal(i, plan[i][1], goals[i])
+        self.motion = Motion(
+            kind="turns", servo_ids=tuple(plan), turns=max(abs(p[0]) for p in plan.values()),
+            direction=0, speed=max(p[2] for p in plan.values()),
+            acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2,
+            start_angles={i: (starts[i] - home[i]) * POSITION_UNIT_RAD for i in plan},
+            goal_angles={i: (goals[i] - home[i]) * POSITION_UNIT_RAD for i in plan},
+            goal_ticks=goals, t_begin=self.clock.monotonic())
         self._last_poll_t = self.clock.monotonic()
         return self.motion
 

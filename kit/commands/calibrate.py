@@ -334,8 +334,10 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
     return sensor, gimbal_info, protocol, truth
 
 
-def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None:
-    """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``."""
+def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
+            extend: Any = None) -> None:
+    """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``
+    (``extend``: see :func:`run_jig`)."""
     from gyrocal.kit.progress import Progress
     from gyrocal.kit.protocol import Runner, build_steps
     from gyrocal.kit.recording import RecordingWriter
@@ -345,6 +347,10 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None
         noise_std = measure_still_noise(jig.imu, jig.clock)
         plan = choose_plan(cfg, jig.gimbal, jig.imu, noise_std)
         steps = build_steps(plan, cfg["gimbal"]["ids"])
+        runner_class = Runner
+        if extend is not None:
+            runner_class, extra = extend
+            steps += extra(plan, cfg["gimbal"]["ids"])
         sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std)
         progress = Progress(sys.stderr, plan.jig_time_s, interactive=False if quiet else None)
         if not quiet:
@@ -357,7 +363,7 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None
                 + (" (emulated IMU at rest)" if jig.imu_sim is not None else ""))
         with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
                              truth=truth, force=args.force) as writer:
-            runner = Runner(
+            runner = runner_class(
                 jig.gimbal, jig.imu, writer, jig.clock, steps,
                 sample_hz=cfg["gimbal"]["sample_hz"],
                 on_progress=None if quiet else progress.update,
@@ -388,7 +394,8 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path) -> None
             writer.finish()
 
 
-def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any:
+def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
+            extend: Any = None) -> Any:
     """Run the protocol on the jig (or the emulated jig) into a Recording v1 at ``rec_dir``.
 
     Servos stop and torque goes off before the recording is closed, on success, error, or
@@ -398,6 +405,10 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
     (exit 130/143/129) whose message says whether a recording was begun (then it is kept,
     marked incomplete). With ``--sim`` the emulated servos' final state is written to
     ``out/sim-state.json`` (what the emulator holds, not what the driver believes).
+
+    ``extend``, if given, is ``(runner_class, extra_steps)``: a :class:`Runner` subclass and
+    ``extra_steps(plan, ids) -> steps`` run after the protocol (``gyrocal verify``'s general
+    motion).
 
     Returns
     -------
@@ -411,7 +422,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path) -> Any
     jig = Jig(cfg, args)
     interrupted: BaseException | None = None
     try:
-        _record(cfg, args, jig, rec_dir)
+        _record(cfg, args, jig, rec_dir, extend)
     except (KeyboardInterrupt, TerminatedBySignal) as exc:
         interrupted = exc
     finally:

@@ -12,9 +12,11 @@ HELP = "verify a calibration: RMS rate error before/after against the encoder re
 DESCRIPTION = (
     "Repeat the protocol's turns on the jig (or --sim) with the calibration applied, or replay a "
     "recording (--recording), and report each axis's RMS rate error before and after "
-    "calibration against the servo encoders: during a turn the true rate is the encoder's rate "
-    "along the servo's axis, at rest it is zero (like the paper's Tables V and VI, with the servo "
-    "as the reference instead of a second gyroscope)."
+    "calibration against the servo encoders: the true rate is the servos' encoder rates along "
+    "their axes (the calibration's kinematics, or the home-pose axes of a version 1 "
+    "calibration), at rest it is zero (like the paper's Tables V and VI, with the servos as the "
+    "reference instead of a second gyroscope). Exits 3 when the calibration's error exceeds "
+    "3 times what its own uncertainty predicts."
 )
 
 
@@ -22,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     from gyrocal.kit.commands.calibrate import add_common_jig_arguments
 
-    p.add_argument("calibration", help="a Calibration v1 JSON file")
+    p.add_argument("calibration", help="a Calibration JSON file (version 1 or 2)")
     p.add_argument("--recording", metavar="DIR",
                    help="replay this recording instead of running the jig")
     p.add_argument("--block", type=float, default=0.5, metavar="S",
@@ -41,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.calib.errors import CalibrationFormatError
     from gyrocal.calib.model import GyroCalibration
     from gyrocal.kit.commands.calibrate import load_cli_config, run_jig
-    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.errors import InconsistentCalibrationError, InputError
     from gyrocal.kit.fileio import make_output_dir
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.verify import verify_recording
@@ -51,8 +53,10 @@ def run(args: argparse.Namespace) -> int:
         cal = GyroCalibration.from_json(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"calibration file {path} not found") from None
-    except CalibrationFormatError as exc:
-        raise InputError(f"{path}: {exc}") from None
+    except (CalibrationFormatError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: {str(exc)[:200]}") from None
+    except IsADirectoryError:
+        raise InputError(f"calibration file {path} is a directory; give a JSON file") from None
     if getattr(args, "sim_imu", False):
         raise InputError("verify needs a sensor that sees the motion; --sim-imu emulates one at "
                          "rest (it tests the servos only): use --sim, or the real sensor")
@@ -67,7 +71,9 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out or datetime.now().strftime("gyrocal-verify-%Y%m%d-%H%M%S"))
         make_output_dir(out, "--out")
         rec_dir = out / "recording"
-        run_jig(cfg, args, out, rec_dir)
+        from gyrocal.kit.verify import GeneralMotionRunner, general_motion_steps
+
+        run_jig(cfg, args, out, rec_dir, extend=(GeneralMotionRunner, general_motion_steps))
     rec = load_recording(rec_dir)
     v = verify_recording(rec, cal, args.block)
     if args.json:
@@ -77,4 +83,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(v.table())
         print(f"\nrecording: {rec_dir}")
+    if not v.ok:
+        raise InconsistentCalibrationError(
+            f"the calibration is worse than its own uncertainty predicts: {v.verdict()}. Its "
+            "model does not hold for this sensor or jig (a version 1 calibration cannot correct "
+            "cross-axis sensitivity: calibrate the full model), or the sensor changed since; "
+            "calibrate again")
     return 0

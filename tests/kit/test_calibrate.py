@@ -74,22 +74,27 @@ def test_calibration_is_not_overwritten_without_force(runs, capsys):
 
 
 def test_verify_reports_a_large_improvement_on_a_fresh_run(runs, tmp_path, capsys):
+    # The emulated sensor has up to ±2 % cross-axis terms (the default): a version 1 calibration
+    # removes most of the raw error but not the part general motion exposes, and verify says so
+    # with exit 3.
     capsys.readouterr()
     cal = runs[3] / "calibration.json"
     assert main(["verify", str(cal), "--sim", "--sim-seed", "3", "--out", str(tmp_path),
-                 "--quiet", "--json"]) == 0
-    v = json.loads(capsys.readouterr().out)
-    assert v["axes_source"] == "calibration"
-    assert np.all(np.array(v["rms_after"]) < 0.1 * np.array(v["rms_before"]))
-    # Replaying the calibration's own recording works too.
-    assert main(["verify", str(cal), "--recording", str(runs[3] / "recording"), "--json"]) == 0
-    # A calibration of another sensor does not fit this one: verify shows it.
-    other = runs[1] / "calibration.json"
-    assert main(["verify", str(other), "--recording", str(runs[3] / "recording"),
-                 "--json"]) == 0
+                 "--quiet", "--json"]) == 3
+    out, err = capsys.readouterr()
+    v = json.loads(out)
+    assert v["reference"] == "calibration" and v["ok"] is False
+    assert v["blocks"]["several_servos"] > 0 and v["blocks"]["ramp_excluded"] > 0
+    assert np.all(np.array(v["rms_diagonal"]) < 0.2 * np.array(v["rms_before"]))
+    assert np.max(v["rms_several_servos"]) > 3 * np.max(v["rms_one_servo"])
+    assert "worse than its own uncertainty predicts" in err
+    # Replaying a recording works too; a calibration of another sensor does worse on it.
+    rec = str(runs[3] / "recording")
+    main(["verify", str(cal), "--recording", rec, "--json"])
+    main(["verify", str(runs[1] / "calibration.json"), "--recording", rec, "--json"])
     lines = capsys.readouterr().out.split("\n}\n")
     good, bad = json.loads(lines[0] + "\n}"), json.loads(lines[1] + "\n}")
-    assert np.max(bad["rms_after"]) > 5 * np.max(good["rms_after"])
+    assert np.max(bad["rms_diagonal"]) > 5 * np.max(good["rms_diagonal"])
 
 
 def test_verify_falls_back_to_the_nominal_axes(runs, tmp_path, capsys):
@@ -98,10 +103,10 @@ def test_verify_falls_back_to_the_nominal_axes(runs, tmp_path, capsys):
     ils = tmp_path / "ils.json"
     assert main(["estimate", str(rec), "--method", "iterative-ls", "--out", str(ils)]) == 0
     capsys.readouterr()
-    assert main(["verify", str(ils), "--recording", str(rec), "--json"]) == 0
+    main(["verify", str(ils), "--recording", str(rec), "--json"])
     v = json.loads(capsys.readouterr().out)
-    assert v["axes_source"] == "nominal configuration"
-    assert np.all(np.array(v["rms_after"]) < 0.5 * np.array(v["rms_before"]))
+    assert v["reference"] == "nominal configuration"
+    assert np.all(np.array(v["rms_diagonal"]) < 0.5 * np.array(v["rms_before"]))
 
 
 # ------------------------------------------------------------------ runtime checks and faults

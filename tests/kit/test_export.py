@@ -91,9 +91,9 @@ def test_json_reemits_either_document(files, noise_doc, capsys):
 
 
 def test_kind_is_checked_against_the_format(files, capsys):
-    _, c = files
-    assert main(["export", str(c), "--format", "kalibr"]) == 2
-    assert "takes a gyrocal-noise document, not gyrocal-calibration" in capsys.readouterr().err
+    n, _ = files
+    assert main(["export", str(n), "--format", "yaml"]) == 2
+    assert "takes a gyrocal-calibration document, not gyrocal-noise" in capsys.readouterr().err
 
 
 def test_option_of_another_format_is_refused(files, capsys):
