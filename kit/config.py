@@ -221,6 +221,9 @@ def load_config(path: str | os.PathLike[str] | None) -> Config:
     if path is None:
         return default_config()
     p = Path(path)
+    if p.is_dir():
+        raise InputError(
+            f"--config {p} is a directory; give the config file itself (e.g. {p / 'gyrocal.toml'})")
     if p.exists() and not p.is_file():
         raise InputError(f"config file {p} is not a regular file; give the path of a TOML file")
     try:
@@ -230,10 +233,6 @@ def load_config(path: str | os.PathLike[str] | None) -> Config:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"config file {p} not found; `gyrocal init` writes one") from None
-    except IsADirectoryError:
-        raise InputError(
-            f"--config {p} is a directory; give the config file itself (e.g. {p / 'gyrocal.toml'})"
-        ) from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{p} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     except PermissionError:

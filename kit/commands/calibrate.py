@@ -448,12 +448,10 @@ def _output_dir(args: argparse.Namespace) -> tuple[Path, Path]:
     (:func:`~gyrocal.kit.fileio.replace_dir`), so the old calibration never sits next to a new
     recording.
     """
-    from gyrocal.kit.errors import InputError, OutputExistsError
+    from gyrocal.kit.errors import OutputExistsError
     from gyrocal.kit.fileio import make_output_dir, staging_dir
 
     out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} exists and is not a directory; give a directory")
     if out.is_dir() and any(out.iterdir()):
         if not args.force:
             raise OutputExistsError(f"{out} already exists; pass --force to replace the run "

@@ -82,9 +82,9 @@ def test_calibrate_writes_the_page_when_the_plot_extra_is_installed(tmp_path, ca
     taken = tmp_path / "taken"
     taken.mkdir()
     (taken / "report.html").write_text("mine")
-    # an existing page is refused before the jig runs
+    # a directory holding a page (or anything) is refused as a whole before the jig runs
     assert main(["calibrate", "--sim", "--quiet", "--out", str(taken)]) == 2
-    assert "report.html already exists" in capsys.readouterr().err
+    assert "already exists; pass --force to replace the run" in capsys.readouterr().err
     assert [p.name for p in taken.iterdir()] == ["report.html"]
     out = tmp_path / "run"
     assert main(["calibrate", "--sim", "--quiet", "--out", str(out)]) == 0
