@@ -26,7 +26,6 @@ LIVE_CHUNK_S = 1.0
 #: A servo that moves more than this between two polls marks its samples as not still, rad.
 LIVE_MOVE_TOLERANCE_RAD = 2 * 2 * math.pi / 4096
 
-DEFAULT_RATE_RANDOM_WALK = 1e-4  # rad/s/sqrt(s): conservative for consumer MEMS gyros
 
 
 @dataclass(frozen=True)

@@ -8,34 +8,22 @@ import math
 import sys
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
+
+    from gyrocal.kit.tracking import Batch, Tracked, TurnPlan
 
 from gyrocal.kit import argtypes
 from gyrocal.kit.errors import InputError, OutputExistsError
-from gyrocal.kit.tracking import (
-    DEFAULT_RATE_RANDOM_WALK,
-    LIVE_WARMUP_S,
-    Batch,
-    LiveSource,
-    Tracked,
-    TurnPlan,
-    chunks,
-    encoder_reference,
-    json_rows,
-    live_truth,
-    load_calibration,
-    load_noise,
-    rest_flags,
-    run_live,
-    run_tracker,
-    tracker_notes,
-)
 
 #: Rows of the --json document beyond which it is decimated unless --every is given
 #: (153 B per row: about 30 MB).
 JSON_MAX_ROWS = 200_000
+
+#: The --live bias random walk when none is given, rad/s/√s: conservative for consumer MEMS gyros.
+DEFAULT_RATE_RANDOM_WALK = 1e-4
 
 HELP = "track the gyro bias with a Kalman filter: over a recording, or live on the jig (--live)"
 DESCRIPTION = (
@@ -198,6 +186,7 @@ def _build_tracker(
     """
     from gyrocal.calib.stationarity import first_still_mean, quiet_noise_std
     from gyrocal.calib.tracker import BiasTracker
+    from gyrocal.kit.tracking import load_calibration, load_noise
 
     cal = load_calibration(args.cal) if args.cal else None
     noise = load_noise(args.noise) if args.noise else None
@@ -247,7 +236,10 @@ def _build_tracker(
 
 
 def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any]:
+    import numpy as np
+
     from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.tracking import Batch, encoder_reference, rest_flags
 
     rec = load_recording(args.recording)
     notes += list(rec.warnings)
@@ -285,8 +277,11 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
+    import numpy as np
+
     from gyrocal.calib.noise_sim import NoiseModel, sim_calibration, simulate_session
     from gyrocal.calib.tracker import BiasTracker
+    from gyrocal.kit.tracking import Batch
 
     model = NoiseModel(rate_random_walk=1e-5)
     if args.tempco is None:
@@ -321,6 +316,10 @@ def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, A
 
 def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
     """The --turns plan, checked against the calibration and the config (None without turns)."""
+    import numpy as np
+
+    from gyrocal.kit.tracking import TurnPlan, load_calibration
+
     if args.turns == 0:
         return None
     if args.turns < 0:
@@ -359,6 +358,13 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     """Hold the jig still, track, release: the servos stop and torque goes off at the end, on
     an error, Ctrl-C or SIGTERM (the gimbal's context), before anything else."""
     from gyrocal.kit.commands.calibrate import Jig, load_cli_config
+    from gyrocal.kit.tracking import (
+        LIVE_WARMUP_S,
+        LiveSource,
+        live_truth,
+        run_live,
+        tracker_notes,
+    )
 
     duration = 60.0 if args.duration is None else float(args.duration)
     if not (math.isfinite(duration) and duration >= LIVE_WARMUP_S):
@@ -455,6 +461,8 @@ def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False
 
 
 def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
+    import numpy as np
+
     n = tr.t.size
     out = [f"gyrocal track: {source}, {n} samples over {tr.t[-1] - tr.t[0]:.1f} s; "
            f"{tr.update_t.size} updates "
@@ -518,7 +526,10 @@ def _check_modes(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
+    import numpy as np
+
     from gyrocal.kit.fileio import atomic_write_text, refuse_existing
+    from gyrocal.kit.tracking import chunks, json_rows, run_tracker, tracker_notes
 
     _check_modes(args)
     if args.rows < 2:

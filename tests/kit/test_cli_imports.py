@@ -44,6 +44,13 @@ def test_help_and_bad_arguments_import_no_numpy_or_scipy(argv, code, says):
     assert got["heavy"] == []
 
 
+@pytest.mark.parametrize("command", [name for name, _ in cli.COMMANDS])
+def test_every_commands_help_imports_no_numpy_or_scipy(command):
+    got = probe(command, "--help")
+    assert got["code"] == 0 and f"gyrocal {command}" in got["out"]
+    assert got["heavy"] == []
+
+
 def test_a_recording_with_a_bad_manifest_is_refused_before_heavy_imports(tmp_path):
     (tmp_path / "manifest.json").write_text('{"format": "something else"}')
     got = probe("estimate", str(tmp_path))
