@@ -97,6 +97,11 @@ SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, _MOTION_STRUCT.siz
                                               "position": (132, _POSITION_STRUCT.size)}
 
 
+#: How long a cut-short transaction's status packet may still take to arrive, s: the longest
+#: Return Delay Time (254 × 2 µs) plus a 30-byte status packet at 57600 baud (5.2 ms), rounded up.
+STALE_REPLY_WAIT_S = 0.01
+
+
 @dataclass(frozen=True)
 class ServoInfo:
     """What :meth:`Gimbal.open` learned about one servo.
@@ -1113,6 +1118,20 @@ class Gimbal:
             )
         return out
 
+    def _discard_stale_replies(self) -> None:
+        """Drop a status packet still in flight from a transaction cut short.
+
+        A signal (or an error) can end a transaction after its instruction went out and before
+        its status packet came back. That packet then arrives later: read as the reply to the
+        stop's first transaction, it shifts every later reply by one, so a torque read-back
+        decodes the previous write's CRC as its value. Waiting out the longest status packet
+        (the Return Delay Time, at most 508 µs, e-Manual §2.4.8, plus the packet at the slowest
+        baud rate) and clearing the input (dynamixel-sdk ``clearPort``: ``reset_input_buffer``)
+        removes it.
+        """
+        self.clock.sleep(STALE_REPLY_WAIT_S)
+        self.port.clearPort()
+
     def stop(self) -> None:
         """Stop every servo: Goal Velocity 0, Torque Enable 0, confirmed by read-back.
 
@@ -1131,6 +1150,7 @@ class Gimbal:
     def _stop(self) -> None:
         self.port.is_using = False
         self.motion = None
+        self._discard_stale_replies()
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
         for name in ("Goal Velocity", "Torque Enable"):
             try:
