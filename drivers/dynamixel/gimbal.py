@@ -1129,6 +1129,8 @@ class Gimbal:
         baud rate) and clearing the input (dynamixel-sdk ``clearPort``: ``reset_input_buffer``)
         removes it.
         """
+        if not getattr(self.port, "is_open", False):  # never opened: nothing can be in flight
+            return
         self.clock.sleep(STALE_REPLY_WAIT_S)
         self.port.clearPort()
 
