@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -15,6 +16,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
+    "emit_text",
     "make_output_dir",
     "refuse_existing",
     "replace_dir",
@@ -130,6 +132,21 @@ def _umask() -> int:
 def atomic_write_text(path: str | os.PathLike[str], text: str, *, force: bool = False) -> Path:
     """:func:`atomic_write_bytes` for UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"), force=force)
+
+
+def emit_text(text: str, out: str | os.PathLike[str] | None, *, force: bool = False) -> None:
+    """A command's output: written atomically to ``out`` (``--out``, said on stderr), or to stdout.
+
+    Raises
+    ------
+    OutputExistsError, InputError
+        As :func:`atomic_write_bytes`.
+    """
+    if out:
+        atomic_write_text(out, text, force=force)
+        print(f"wrote {out}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
 
 
 def atomic_write_json(path: str | os.PathLike[str], doc: Any, *, force: bool = False) -> Path:

@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit import apply
     from gyrocal.kit.errors import InputError
     from gyrocal.kit.exports import load_document
-    from gyrocal.kit.fileio import atomic_write_text, refuse_existing
+    from gyrocal.kit.fileio import emit_text, refuse_existing
 
     if args.source == "-" and args.out:
         raise InputError("a stream (-) goes to standard output; --out goes with a recording")
@@ -56,9 +56,5 @@ def run(args: argparse.Namespace) -> int:
     else:
         raise InputError(f"{src} is neither a recording directory nor a file; give the "
                          "directory gyrocal calibrate wrote (e.g. run1/recording) or -")
-    if args.out:
-        atomic_write_text(args.out, text, force=args.force)
-        print(f"wrote {args.out}", file=sys.stderr)
-    else:
-        sys.stdout.write(text)
+    emit_text(text, args.out, force=args.force)
     return 0

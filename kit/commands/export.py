@@ -38,16 +38,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Load, check the document kind against the format, render, write."""
     from gyrocal.kit.exports import export, read_json
-    from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.fileio import emit_text
 
     doc = read_json(args.doc)
     options = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_") and v is not None}
     text, notes = export(doc, args.format, options)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
-    if args.out:
-        atomic_write_text(args.out, text, force=args.force)
-        print(f"wrote {args.out}", file=sys.stderr)
-    else:
-        sys.stdout.write(text)
+    emit_text(text, args.out, force=args.force)
     return 0

@@ -528,7 +528,7 @@ def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
     import numpy as np
 
-    from gyrocal.kit.fileio import atomic_write_text, refuse_existing
+    from gyrocal.kit.fileio import emit_text, refuse_existing
     from gyrocal.kit.tracking import chunks, json_rows, run_tracker, tracker_notes
 
     _check_modes(args)
@@ -574,11 +574,7 @@ def run(args: argparse.Namespace) -> int:
         if every is not None:
             doc["decimated_every_s"] = every
         text = json.dumps(doc, allow_nan=False) + "\n"
-        if args.out:
-            atomic_write_text(args.out, text, force=args.force)
-            print(f"wrote {args.out}", file=sys.stderr)
-        else:
-            sys.stdout.write(text)
+        emit_text(text, args.out, force=args.force)
     if not args.json:
         print(_summary(tr, args.rows, source, truth))
     return 0
