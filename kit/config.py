@@ -92,6 +92,20 @@ def _address(v: Any) -> str | None:
     return None if 0x03 <= v <= 0x77 else "must be a 7-bit I2C address (0x03..0x77)"
 
 
+def _history(what: str) -> Callable[[Any], str | None]:
+    """A check of a ``[history]`` value by :mod:`gyrocal.kit.history` ("" is always allowed)."""
+    def check(v: Any) -> str | None:
+        from gyrocal.kit.history import HistoryError, check_label, check_url
+
+        try:
+            if v:
+                (check_url if what == "url" else check_label)(v, "")
+        except HistoryError as exc:
+            return str(exc).strip()
+        return None
+    return check
+
+
 SCHEMA: dict[str, dict[str, Key]] = {
     "gimbal": {
         "port": Key("/dev/ttyUSB0", "serial device of the U2D2 (or any Dynamixel interface)", str),
@@ -132,6 +146,14 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rest_s": Key(0.0, "fixed rest before each turn, s (0.1..600; 0: planned)", (int, float),
                       check=_within(0.1, 600, zero="planned")),
         "method": Key(METHODS[0], "estimator", str, METHODS),
+    },
+    "history": {
+        "url": Key("", "calibration history (kit/history.py): sqlite:///PATH or "
+                   "postgresql://USER@HOST/DB; calibrate stores every calibration there "
+                   "(\"\": only with --history)", str, check=_history("url")),
+        "sensor_label": Key("", "the label of the sensor on the jig, its key in the history "
+                            "(\"\": give --sensor-label)", str, check=_history("label")),
+        "jig": Key("", "this jig's name in the history (\"\": the host name)", str),
     },
 }
 

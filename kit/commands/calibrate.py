@@ -101,6 +101,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-report", action="store_true",
                    help="do not write DIR/report.html and DIR/plots/ (written by default when "
                         "the plot extra is installed)")
+    from gyrocal.kit.commands.history import add_history_arguments
+
+    add_history_arguments(p)
 
 
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
@@ -464,12 +467,14 @@ def _output_dir(args: argparse.Namespace) -> tuple[Path, Path]:
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
     from gyrocal.drivers.signals import shielded
+    from gyrocal.kit.commands.history import history_target_from, store_and_say
     from gyrocal.kit.fileio import atomic_write_text, refuse_existing, replace_dir
     from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
 
     cfg = load_cli_config(args)
+    history = history_target_from(args, cfg["history"])
     out, work = _output_dir(args)
     report = not args.no_report and importlib.util.find_spec("matplotlib") is not None
     if report and work == out:
@@ -507,6 +512,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     for note in est.notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
+    store_and_say(history, cal_path.read_text(encoding="utf-8"), str(out.resolve()))
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()

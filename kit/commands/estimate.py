@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+from typing import Any
 
 HELP = "estimate a calibration from a recording directory"
 DESCRIPTION = (
@@ -30,6 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-implausible", action="store_true",
                    help="accept a scale outside 0.5..2 or a bias beyond the gyro's range "
                         "(normally refused, exit 6: a unit mix-up such as °/s for rad/s)")
+    from gyrocal.kit.commands.history import add_history_arguments
+
+    add_history_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +44,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out:
         refuse_existing([args.out], force=args.force)
+    history = _history(args)
     rec = load_recording(args.recording)  # path and contents checked before scipy is imported
+    from gyrocal.kit.commands.history import store_and_say
     from gyrocal.kit.fileio import atomic_write_text
     from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.report import calibration_table
@@ -60,9 +67,24 @@ def run(args: argparse.Namespace) -> int:
         print(f"gyrocal: warning: {problem} (accepted: --allow-implausible)", file=sys.stderr)
     if args.out:
         atomic_write_text(args.out, cal.to_json() + "\n", force=args.force)
+    store_and_say(history, cal.to_json() + "\n",
+                  str(Path(args.out or args.recording).resolve()))
     if args.json:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()
     else:
         print(calibration_table(cal, rec.truth))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0
+
+
+def _history(args: argparse.Namespace) -> Any:
+    """Where to store the calibration (``--history``; the config's ``[history]`` is read, from
+    ./gyrocal.toml, only then), or None."""
+    from gyrocal.kit.commands.history import history_target_from
+    from gyrocal.kit.config import default_config, load_config
+
+    if args.history is None and args.sensor_label is None:
+        return None
+    path = "gyrocal.toml" if Path("gyrocal.toml").is_file() else None
+    cfg = load_config(path) if args.history is not None else default_config()
+    return history_target_from(args, cfg["history"])
