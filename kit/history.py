@@ -464,7 +464,7 @@ class PostgresDialect(Dialect):
         self.url = ""
 
     def connect(self, url: str, *, create: bool, timeout_s: float) -> Any:
-        self.url = url.split("@")[-1]  # never echo a password
+        self.url = "postgresql://" + url.split("://", 1)[1].split("@")[-1]  # no password shown
         try:
             conn = self.module.connect(url, autocommit=True, connect_timeout=int(timeout_s))
             conn.execute(f"SET lock_timeout = {int(timeout_s * 1000)}")
@@ -514,7 +514,7 @@ class HistoryStore:
     def __init__(self, conn: Any, dialect: Dialect, url: str) -> None:
         self._conn = conn
         self.dialect = dialect
-        self.url = url if dialect.name == "sqlite" else f"postgresql://{dialect.url}"
+        self.url = url if dialect.name == "sqlite" else getattr(dialect, "url", "postgresql")
 
     def __enter__(self) -> HistoryStore:
         return self

@@ -153,9 +153,23 @@ def _all_whole(url):
     for r in recs:
         assert H.content_hash(json.loads(r.document)) == r.content_hash
         GyroCalibration.from_json(r.document)
-    path = url[len("sqlite:///"):]
-    assert sqlite3.connect(path).execute("PRAGMA integrity_check").fetchone() == ("ok",)
+    if url.startswith("sqlite:"):
+        path = url[len("sqlite:///"):]
+        assert sqlite3.connect(path).execute("PRAGMA integrity_check").fetchone() == ("ok",)
     return recs
+
+
+PG_URL = os.environ.get("GYROCAL_TEST_POSTGRES_URL")
+needs_pg = pytest.mark.skipif(not PG_URL, reason="set GYROCAL_TEST_POSTGRES_URL to a scratch "
+                              "PostgreSQL database (its gyrocal tables are dropped)")
+
+
+def _scratch_pg():
+    psycopg = pytest.importorskip("psycopg")
+    with psycopg.connect(PG_URL, autocommit=True) as con:
+        for table in ("calibrations", "sensors", "gyrocal_schema"):
+            con.execute(f"DROP TABLE IF EXISTS {table}")
+    return PG_URL
 
 
 def test_a_process_killed_inside_the_write_leaves_no_record(tmp_path, url):
@@ -191,7 +205,10 @@ def test_a_writer_killed_at_a_random_moment_leaves_only_whole_records(tmp_path, 
     assert committed + 1 <= len(recs) <= committed + 2
 
 
-def test_two_writers_at_once_lose_nothing(tmp_path, url):
+@pytest.mark.parametrize("backend", ["sqlite", pytest.param("postgresql", marks=needs_pg)])
+def test_two_writers_at_once_lose_nothing(tmp_path, url, backend):
+    if backend == "postgresql":
+        url = _scratch_pg()
     H.open_history(url).close()
     children = [_child(tmp_path, url, f"writer:40:{seed}") for seed in (1, 2)]
     for c in children:
@@ -252,16 +269,9 @@ def test_every_statement_is_portable_sql():
     assert sorted(H.MIGRATIONS) == list(range(1, H.SCHEMA_VERSION + 1))
 
 
-@pytest.mark.skipif(not os.environ.get("GYROCAL_TEST_POSTGRES_URL"),
-                    reason="set GYROCAL_TEST_POSTGRES_URL to a scratch PostgreSQL database")
+@needs_pg
 def test_round_trip_on_a_postgresql_server():
-    pytest.importorskip("psycopg")
-    pg_url = os.environ["GYROCAL_TEST_POSTGRES_URL"]
-    import psycopg
-
-    with psycopg.connect(pg_url, autocommit=True) as con:
-        for table in ("calibrations", "sensors", "gyrocal_schema"):
-            con.execute(f"DROP TABLE IF EXISTS {table}")
+    pg_url = _scratch_pg()
     docs = [make_doc(11), make_doc(12, full=True, temperature=30.0)]
     with H.open_history(pg_url) as store:
         ids = [store.add(d, label="imu-pg", jig="j").id for d in docs]
