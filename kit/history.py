@@ -202,7 +202,7 @@ def default_url() -> str:
 def sensor_identity(sensor: Mapping[str, Any]) -> dict[str, Any]:
     """What a Calibration's ``sensor`` object says of the chip (:data:`IDENTITY_KEYS`)."""
     ident = {k: sensor[k] for k in IDENTITY_KEYS if sensor.get(k) is not None}
-    ident.setdefault("model", "unknown")
+    ident["model"] = str(ident.get("model", "unknown"))[:MAX_LABEL]
     return {k: (v if isinstance(v, (str, int, float)) else str(v)) for k, v in ident.items()}
 
 

@@ -251,6 +251,26 @@ def test_the_schema_is_versioned_and_a_newer_one_is_left_alone(tmp_path, url):
     assert con.execute("SELECT version FROM gyrocal_schema").fetchall() == [(99,)]
 
 
+def test_an_older_schema_is_migrated_keeping_its_records(url, monkeypatch):
+    with H.open_history(url) as store:
+        store.add(make_doc(9), label="old")
+    monkeypatch.setattr(H, "MIGRATIONS", {
+        **H.MIGRATIONS, 2: ("ALTER TABLE calibrations ADD COLUMN note TEXT",)})
+    monkeypatch.setattr(H, "SCHEMA_VERSION", 2)
+    with H.open_history(url) as store:
+        assert store.migrate() == 2  # done on open: already up to date
+        assert store.records("old")[0].document == make_doc(9)
+    con = sqlite3.connect(url[len("sqlite:///"):])
+    assert con.execute("SELECT version FROM gyrocal_schema").fetchall() == [(2,)]
+    assert con.execute("SELECT note FROM calibrations").fetchall() == [(None,)]
+
+
+def test_a_server_url_without_psycopg_says_what_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "psycopg", None)  # import psycopg raises ImportError
+    with pytest.raises(H.HistoryDatabaseError, match=r"pip install 'gyrocal\[postgres\]'"):
+        H.open_history("postgresql://lab@db.example/gyrocal")
+
+
 def test_every_statement_is_portable_sql():
     """No SQLite-only syntax in the statements; PostgreSQL's placeholders replace every ``?``.
 
