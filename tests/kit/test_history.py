@@ -47,6 +47,25 @@ def make_doc(seed: int, *, full: bool = False, temperature: float | None = 25.0,
     return cal.to_json() + "\n"
 
 
+def contract_doc(seed: int, *, full: bool) -> str:
+    """A Calibration v1 or v2 document written from the contract in hardware_docs/formats.md
+    with plain dicts: no gyrocal code makes it (an independent generator)."""
+    rng = np.random.default_rng(seed)
+    k = [float(1 + 0.01 * x) for x in rng.standard_normal(3)]
+    doc = {"format": "gyrocal-calibration", "version": 2 if full else 1,
+           "model": "g = matrix @ (m + bias)" if full else "g = scale * (m + bias)",
+           "scale": k, "bias": [float(0.01 * x) for x in rng.standard_normal(3)],
+           "scale_std": [4e-5] * 3, "bias_std": [4e-5] * 3, "covariance": None,
+           "method": "other-tool", "iterations": 5,
+           "consistency": {"chi2": 2.0, "dof": 3, "p_value": 0.57, "ok": True},
+           "sensor": {"model": "mpu9250"}, "temperature_c": 22.5,
+           "created": "2025-12-01T08:00:00Z", "source": "another tool"}
+    if full:
+        doc["matrix"] = [[k[i] if i == j else 0.001 * (i - j) for j in range(3)]
+                         for i in range(3)]
+    return json.dumps(doc, indent=1)
+
+
 @pytest.fixture
 def url(tmp_path):
     return f"sqlite:///{tmp_path / 'h.sqlite'}"
@@ -315,15 +334,21 @@ def test_import_a_directory_of_v1_v2_and_a_bad_file(tmp_path, url, capsys):
     (d / "run1").mkdir()
     (d / "run1" / "calibration.json").write_text(make_doc(23, temperature=28.0))
     (d / "copy.json").write_text(json.dumps(json.loads(make_doc(21)), indent=4))
+    (d / "other-v1.json").write_text(contract_doc(24, full=False))
+    (d / "other-v2.json").write_text(contract_doc(25, full=True))
     code = main(["history", "import", str(d), "--sensor-label", "imu-9", "--history", url])
     out, err = capsys.readouterr()
     assert code == 2, "a refused file makes the import exit 2"
     assert "bad.json" in err and "lacks the field 'scale'" in err and "Traceback" not in err
-    assert "3 stored, 1 already in the history, 1 refused" in out
+    assert "5 stored, 1 already in the history, 1 refused" in out
     with H.open_history(url) as store:
         recs = store.records("imu-9")
-    assert sorted(r.format_version for r in recs) == [1, 1, 2]
-    assert {Path(r.source).name for r in recs} == {"a.json", "b.json", "calibration.json"}
+    assert sorted(r.format_version for r in recs) == [1, 1, 1, 2, 2]
+    assert {Path(r.source).name for r in recs} == {"a.json", "b.json", "calibration.json",
+                                                    "other-v1.json", "other-v2.json"}
+    other = {Path(r.source).name: r for r in recs}["other-v2.json"]
+    assert other.document == contract_doc(25, full=True) and other.temperature_c == 22.5
+    assert other.created == "2025-12-01T08:00:00+00:00" and other.method == "other-tool"
     assert all(r.jig is None for r in recs)  # an imported file's jig is not known
 
 
