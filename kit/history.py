@@ -117,6 +117,8 @@ MIGRATIONS: dict[int, tuple[str, ...]] = {
 _RECORD_COLUMNS = ("c.id, s.label, s.model, s.identity, c.created, c.stored_at, c.temperature_c, "
                    "c.method, c.verdict, c.format_version, c.jig, c.source, c.content_hash, "
                    "c.document")
+#: Oldest first, undated last, on both backends (their NULLs sort differently by default).
+_BY_TIME = "CASE WHEN c.created IS NULL THEN 1 ELSE 0 END, c.created, c.id"
 #: Every query the store runs, in the SQL both backends accept, ``?`` placeholders.
 QUERIES: dict[str, str] = {
     "version": "SELECT version FROM gyrocal_schema",
@@ -132,9 +134,9 @@ QUERIES: dict[str, str] = {
                        "ON CONFLICT (content_hash) DO NOTHING",
     "records_of": f"SELECT {_RECORD_COLUMNS} FROM calibrations c "
                   "JOIN sensors s ON s.id = c.sensor_id WHERE s.label = ? "
-                  "ORDER BY c.created, c.id",
+                  f"ORDER BY {_BY_TIME}",
     "all_records": f"SELECT {_RECORD_COLUMNS} FROM calibrations c "
-                   "JOIN sensors s ON s.id = c.sensor_id ORDER BY s.label, c.created, c.id",
+                   f"JOIN sensors s ON s.id = c.sensor_id ORDER BY s.label, {_BY_TIME}",
     "record": f"SELECT {_RECORD_COLUMNS} FROM calibrations c "
               "JOIN sensors s ON s.id = c.sensor_id WHERE c.id = ?",
     "sensors": "SELECT s.label, s.model, s.identity, COUNT(c.id), MIN(c.created), "

@@ -71,6 +71,19 @@ def url(tmp_path):
     return f"sqlite:///{tmp_path / 'h.sqlite'}"
 
 
+PG_URL = os.environ.get("GYROCAL_TEST_POSTGRES_URL")
+needs_pg = pytest.mark.skipif(not PG_URL, reason="set GYROCAL_TEST_POSTGRES_URL to a scratch "
+                              "PostgreSQL database (its gyrocal tables are dropped)")
+
+
+def _scratch_pg():
+    psycopg = pytest.importorskip("psycopg")
+    with psycopg.connect(PG_URL, autocommit=True) as con:
+        for table in ("calibrations", "sensors", "gyrocal_schema"):
+            con.execute(f"DROP TABLE IF EXISTS {table}")
+    return PG_URL
+
+
 @pytest.fixture(autouse=True)
 def _no_home_database(tmp_path, monkeypatch):
     """Nothing in these tests may touch the user's own history."""
@@ -102,6 +115,19 @@ def test_round_trip_keeps_the_document_verbatim_and_its_facts(url):
         (s,) = store.sensors()
     assert (s.label, s.model, s.count) == ("imu-07", "mpu9250", 3)
     assert (s.temperature_min_c, s.temperature_max_c) == (25.0, 31.5)
+
+
+@pytest.mark.parametrize("backend", ["sqlite", pytest.param("postgresql", marks=needs_pg)])
+def test_records_are_oldest_first_and_undated_last(url, backend):
+    url = _scratch_pg() if backend == "postgresql" else url
+    undated = json.loads(make_doc(14))
+    undated["created"] = None
+    with H.open_history(url) as store:
+        store.add(json.dumps(undated), label="u")
+        store.add(make_doc(15, created="2026-05-01T00:00:00Z"), label="u")
+        store.add(make_doc(16, created="2026-04-01T00:00:00Z"), label="u")
+        assert [r.created for r in store.records("u")] == [
+            "2026-04-01T00:00:00+00:00", "2026-05-01T00:00:00+00:00", None]
 
 
 def test_a_document_is_stored_once_whatever_its_layout_or_label(url):
@@ -178,17 +204,6 @@ def _all_whole(url):
     return recs
 
 
-PG_URL = os.environ.get("GYROCAL_TEST_POSTGRES_URL")
-needs_pg = pytest.mark.skipif(not PG_URL, reason="set GYROCAL_TEST_POSTGRES_URL to a scratch "
-                              "PostgreSQL database (its gyrocal tables are dropped)")
-
-
-def _scratch_pg():
-    psycopg = pytest.importorskip("psycopg")
-    with psycopg.connect(PG_URL, autocommit=True) as con:
-        for table in ("calibrations", "sensors", "gyrocal_schema"):
-            con.execute(f"DROP TABLE IF EXISTS {table}")
-    return PG_URL
 
 
 def test_a_process_killed_inside_the_write_leaves_no_record(tmp_path, url):
@@ -408,6 +423,29 @@ def test_trend_plot(tmp_path, url, capsys):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["history", "trend", "p", "--history", url, "--plot", str(png)]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def test_trend_plot_without_matplotlib_says_what_to_install(url, monkeypatch, capsys):
+    with H.open_history(url) as store:
+        store.add(make_doc(52), label="p")
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    assert main(["history", "trend", "p", "--history", url, "--plot", "t.png"]) == 2
+    assert "pip install 'gyrocal[plot]'" in capsys.readouterr().err
+    assert not Path("t.png").exists()
+
+
+def test_where_a_calibration_is_stored(monkeypatch):
+    monkeypatch.setattr(H.socket, "gethostname", lambda: "pi-jig")
+    cfg = {"url": "sqlite:///cfg.sqlite", "sensor_label": "imu-1", "jig": ""}
+    assert H.history_target(None, None, {"url": "", "sensor_label": "", "jig": ""}) is None
+    assert H.history_target(None, None, cfg) == H.HistoryTarget(
+        "sqlite:///cfg.sqlite", "imu-1", "pi-jig")  # history.url alone stores
+    assert H.history_target("sqlite:///flag.sqlite", "imu-2", cfg) == H.HistoryTarget(
+        "sqlite:///flag.sqlite", "imu-2", "pi-jig")  # flags win
+    assert H.history_target("", None, {**cfg, "url": "", "jig": "j1"}) == H.HistoryTarget(
+        H.default_url(), "imu-1", "j1")  # --history without URL and no history.url
+    with pytest.raises(H.HistoryError, match="history.sensor_label"):
+        H.history_target("", None, {"url": "", "sensor_label": "", "jig": ""})
 
 
 # --------------------------------------------------------------------------- CLI errors
