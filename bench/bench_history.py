@@ -7,7 +7,7 @@ sensor's records, to read every record, to compute one sensor's trend, and the f
 The documents are built here from seeded numbers with :class:`GyroCalibration`, the way the
 kit writes them.
 
-Options: ``--quick`` stores 1,000 records instead of 10,000; ``--url URL`` runs on another
+Options: ``--quick`` stores 1,000 records instead of 10,000; ``--url=URL`` runs on another
 database (e.g. a scratch PostgreSQL database; its gyrocal tables must not exist yet).
 """
 

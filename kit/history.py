@@ -35,6 +35,7 @@ only when it is added.
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import hashlib
 import json
@@ -337,11 +338,13 @@ class AddResult:
 
 
 # --------------------------------------------------------------------------- dialects
-class Dialect:
+class Dialect(abc.ABC):
     """What differs between the backends; the statements themselves do not.
 
     Subclasses set :attr:`name`, :attr:`paramstyle_marker` and :attr:`id_column` and implement
-    :meth:`connect`, :meth:`table_exists`, :meth:`begin_write` and :meth:`insert`.
+    :meth:`connect`, :meth:`table_exists`, :meth:`begin_write` and :meth:`insert`: SQLite and
+    PostgreSQL today; another server (MariaDB: ``INSERT IGNORE`` instead of ``ON CONFLICT``)
+    would need its own statements, not only a dialect.
     """
 
     name = "abstract"
@@ -360,21 +363,21 @@ class Dialect:
         """A migration statement with the dialect's key type."""
         return statement.replace("{id}", self.id_column)
 
-    def connect(self, url: str, *, create: bool, timeout_s: float) -> Any:  # pragma: no cover
+    @abc.abstractmethod
+    def connect(self, url: str, *, create: bool, timeout_s: float) -> Any:
         """A DB-API connection in autocommit mode (transactions are explicit)."""
-        raise NotImplementedError
 
-    def table_exists(self, cur: Any, name: str) -> bool:  # pragma: no cover
+    @abc.abstractmethod
+    def table_exists(self, cur: Any, name: str) -> bool:
         """Whether the table ``name`` exists."""
-        raise NotImplementedError
 
-    def begin_write(self, cur: Any) -> None:  # pragma: no cover
+    @abc.abstractmethod
+    def begin_write(self, cur: Any) -> None:
         """Begin a write transaction that serialises with other writers."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def insert(self, cur: Any, statement: str, params: Sequence[Any]) -> int | None:
         """Run an ``INSERT ... ON CONFLICT DO NOTHING``; the new row's id, None if it conflicted."""
-        raise NotImplementedError  # pragma: no cover
 
     def describe(self, exc: BaseException) -> str | None:
         """A user's message for a backend error, or None if not one of the backend's."""
