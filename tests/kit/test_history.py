@@ -514,6 +514,21 @@ def test_estimate_stores_its_calibration(recording, tmp_path, url, capsys):
     assert "0 stored, 1 already in the history" in capsys.readouterr().out
 
 
+def test_nothing_is_stored_when_the_estimate_fails(recording, tmp_path, url, monkeypatch,
+                                                  capsys):
+    import gyrocal.kit.pipeline as pipeline
+    from gyrocal.kit.errors import EstimationError
+
+    def fail(*a, **k):
+        raise EstimationError("no convergence")
+
+    monkeypatch.setattr(pipeline, "estimate_recording", fail)
+    assert main(["estimate", str(recording), "--history", url, "--sensor-label", "s"]) == 6
+    assert "stored" not in capsys.readouterr().err
+    with H.open_history(url) as store:
+        assert store.count() == 0
+
+
 @pytest.mark.parametrize("argv, says", [
     (["--history", "{url}"], "needs the sensor's label"),
     (["--sensor-label", "x"], "add --history"),
