@@ -153,7 +153,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                    "(\"\": only with --history)", str, check=_history("url")),
         "sensor_label": Key("", "the label of the sensor on the jig, its key in the history "
                             "(\"\": give --sensor-label)", str, check=_history("label")),
-        "jig": Key("", "this jig's name in the history (\"\": the host name)", str),
+        "jig": Key("", "this jig's name in the history (\"\": the host name)", str,
+                   check=_history("label")),
     },
 }
 

@@ -87,14 +87,16 @@ MAX_DOCUMENT_BYTES = 1 << 20
 IDENTITY_KEYS = ("model", "who_am_i", "serial", "unique_id")
 
 #: ``{version: statements}`` bringing a database from ``version - 1`` to ``version``. ``{id}`` is
-#: the dialect's auto-numbered primary key. Append a new version; never edit an old one.
+#: the dialect's auto-numbered primary key. Append a new version; never edit an old one. Text a
+#: document brings (method, model, source) is TEXT: PostgreSQL enforces a VARCHAR's length,
+#: SQLite does not, so a bounded column would store on one backend what the other refuses.
 MIGRATIONS: dict[int, tuple[str, ...]] = {
     1: (
         "CREATE TABLE gyrocal_schema (version INTEGER NOT NULL)",
         "CREATE TABLE sensors ("
         " id {id},"
         " label VARCHAR(64) NOT NULL UNIQUE,"
-        " model VARCHAR(64) NOT NULL,"
+        " model TEXT NOT NULL,"
         " identity TEXT NOT NULL,"
         " first_stored VARCHAR(40) NOT NULL)",
         "CREATE TABLE calibrations ("
@@ -104,10 +106,10 @@ MIGRATIONS: dict[int, tuple[str, ...]] = {
         " created VARCHAR(40),"
         " stored_at VARCHAR(40) NOT NULL,"
         " temperature_c DOUBLE PRECISION,"
-        " method VARCHAR(64) NOT NULL,"
+        " method TEXT NOT NULL,"
         " verdict VARCHAR(16) NOT NULL,"
         " format_version INTEGER NOT NULL,"
-        " jig VARCHAR(255),"
+        " jig TEXT,"
         " source TEXT,"
         " document TEXT NOT NULL)",
         "CREATE INDEX calibrations_by_sensor ON calibrations (sensor_id, created)",

@@ -78,7 +78,7 @@ def _url(args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
     from gyrocal.kit import history_view as view
-    from gyrocal.kit.history import open_history
+    from gyrocal.kit.history import check_label, open_history
 
     url = _url(args)
     with open_history(url, create=args.action == "import") as store:
@@ -99,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
                    if args.json else f"wrote {len(written)} calibration(s) of {args.sensor} "
                    f"into {args.dir}/\n")
         else:
-            report = view.import_dir(store, args.dir, label=args.sensor_label, jig=args.jig)
+            jig = None if args.jig is None else check_label(args.jig, "--jig")
+            report = view.import_dir(store, args.dir, label=args.sensor_label, jig=jig)
             out = view.import_text(report, as_json=args.json)
             for path, why in report.refused:
                 print(f"gyrocal: error: {path}: {why}", file=sys.stderr)
