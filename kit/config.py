@@ -187,6 +187,12 @@ def _excerpt(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
+def _cut(name: str, limit: int = 60) -> str:
+    """A key or section name as typed, cut to ``limit`` characters (a damaged file's 5000-
+    character "key" is not quoted whole)."""
+    return name if len(name) <= limit else name[: limit - 1] + "…"
+
+
 def _validate(section: str, name: str, value: Any) -> Any:
     key = SCHEMA[section][name]
     kinds = key.kind if isinstance(key.kind, tuple) else (key.kind,)
@@ -210,14 +216,14 @@ def _merge(base: Config, data: Mapping[str, Any], source: str) -> Config:
     for section, values in data.items():
         if section not in SCHEMA:
             raise InputError(
-                f"{source}: unknown section [{section}]; allowed: {', '.join(SCHEMA)}"
+                f"{source}: unknown section [{_cut(section)}]; allowed: {', '.join(SCHEMA)}"
             )
         if not isinstance(values, Mapping):
             raise InputError(f"{source}: [{section}] must be a table of keys")
         for name, value in values.items():
             if name not in SCHEMA[section]:
                 raise InputError(
-                    f"{source}: unknown key {section}.{name}; allowed in [{section}]: "
+                    f"{source}: unknown key {section}.{_cut(name)}; allowed in [{section}]: "
                     f"{', '.join(SCHEMA[section])}"
                 )
             sections[section][name] = _validate(section, name, value)
