@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import nnls
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.noise_sim import FLICKER_FLOOR
@@ -148,8 +148,8 @@ class AllanCurve:
         """
         edf = np.broadcast_to(np.asarray(edf, dtype=float), self.adev.shape)
         lo_q, hi_q = (1.0 - ci) / 2.0, (1.0 + ci) / 2.0
-        lo = self.adev * np.sqrt(edf / chi2.ppf(hi_q, edf))
-        hi = self.adev * np.sqrt(edf / chi2.ppf(lo_q, edf))
+        lo = self.adev * np.sqrt(edf / chdtri(edf, 1.0 - hi_q))
+        hi = self.adev * np.sqrt(edf / chdtri(edf, 1.0 - lo_q))
         return lo, hi
 
 
@@ -589,7 +589,7 @@ def _fit_axis(avar: np.ndarray, tau: np.ndarray, edf: np.ndarray) -> tuple[np.nd
 def _chi2_interval(avar: float, edf: float, level: float) -> tuple[float, float]:
     """Interval of a true Allan variance given its estimate and edf (NIST SP 1065 eq. 45)."""
     q = (1.0 - level) / 2.0
-    return avar * edf / chi2.ppf(1.0 - q, edf), avar * edf / chi2.ppf(q, edf)
+    return avar * edf / chdtri(edf, q), avar * edf / chdtri(edf, 1.0 - q)
 
 
 def _read_off(

@@ -45,7 +45,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
+from scipy.special import chdtrc
 
 from gyrocal.calib import kinematics
 from gyrocal.calib.errors import CalibInputError
@@ -297,7 +298,7 @@ def _sq_consistency(e: np.ndarray, S: np.ndarray, H: np.ndarray) -> Consistency 
     R = np.eye(n) - H
     cov_e = R @ S @ R.T
     chi2 = float(e @ np.linalg.pinv(cov_e, rcond=1e-10, hermitian=True) @ e)
-    p = float(stats.chi2.sf(chi2, dof))
+    p = float(chdtrc(dof, chi2))
     return Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
 
 
@@ -904,7 +905,7 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     consistency = None
     if dof > 0:
         chi2 = float(res.chi2[0])
-        p = float(stats.chi2.sf(chi2, dof))
+        p = float(chdtrc(dof, chi2))
         consistency = Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
     axes = {m: res.axes[0, i].copy() for i, m in enumerate(order)}
     axes_std = {}
@@ -1368,7 +1369,7 @@ def fit_full_matrix(
     consistency = None
     if res.dof > 0:
         chi2 = float(res.chi2[0])
-        p = float(stats.chi2.sf(chi2, res.dof))
+        p = float(chdtrc(res.dof, chi2))
         consistency = Consistency(chi2=chi2, dof=res.dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
     ref = obs.pose[0]
     kin = {
