@@ -444,85 +444,40 @@ def simulate_raw_run(
     recorded timestamps may carry jitter too (``imu_jitter_s``, clipped to a third of a period so
     the order is kept).
 
+    The run is built by :func:`stream_raw_run` and gathered whole; for long runs use that
+    directly.
+
     Returns
     -------
     RawRun
     """
-    scale = np.asarray(scale, dtype=float).reshape(3)
-    bias = np.asarray(bias, dtype=float).reshape(3)
-    axes = np.asarray(axes, dtype=float).reshape(3, 3)
-    total = TWO_PI * protocol.turns
-    t_turn = profile_duration(total, protocol.speed, accel)
-    segs: list[Segment] = []
-    starts = []
-    t = 0.0
-    idx = 0
-    for s, motor in enumerate(motor_ids):
-        for d in (1, -1):
-            segs.append(Segment(idx, "rest", None, 0, 0.0, t, t + protocol.rest_s))
-            t += protocol.rest_s
-            idx += 1
-            segs.append(Segment(idx, "rotate", motor, d, protocol.speed, t,
-                                t + t_turn + settle_s))
-            starts.append((s, d, t))
-            t += t_turn + settle_s
-            idx += 1
-    segs.append(Segment(idx, "rest", None, 0, 0.0, t, t + protocol.rest_s))
-    t_total = t + protocol.rest_s
-
-    g = np.arange(0.0, t_total + 1.0 / grid_hz, 1.0 / grid_hz)
-    rate = np.zeros((3, g.size))
-    for s, d, t0 in starts:
-        p = _speed_profile(g - t0, total, protocol.speed, accel)
-        f_rev = protocol.speed / TWO_PI
-        freqs = [f_rev, 2 * f_rev, 3 * f_rev, rng.uniform(3.0, 6.0)]
-        amp = protocol.ripple * np.sqrt(2.0 / len(freqs))
-        rip = sum(amp * np.sin(TWO_PI * f * (g - t0) + rng.uniform(0, TWO_PI))
-                  for f in freqs)
-        rate[s] += d * p * (1.0 + rip)
-    # Exact integral of the piecewise-linear rate on the grid.
-    angle = np.concatenate(
-        [np.zeros((3, 1)), np.cumsum((rate[:, 1:] + rate[:, :-1]) / 2 / grid_hz, axis=1)], axis=1
+    stream = stream_raw_run(
+        rng, scale, bias, axes, protocol, noise_std, accel=accel,
+        imu_clock_error=imu_clock_error, enc_rate_hz=enc_rate_hz, enc_jitter_s=enc_jitter_s,
+        imu_jitter_s=imu_jitter_s, encoder_ticks=encoder_ticks, motor_ids=motor_ids,
+        settle_s=settle_s, grid_hz=grid_hz, temperature_c=temperature_c,
     )
-
-    # Gyro: true sampling instants of a chip whose clock runs (1 + err) fast.
-    period = 1.0 / (protocol.odr_hz * (1.0 + imu_clock_error))
-    imu_t = np.arange(0.0, t_total, period) + rng.uniform(0, period)
-    imu_t = imu_t[imu_t <= g[-1]]
-    w_true = np.stack([np.interp(imu_t, g, rate[s]) for s in range(3)], axis=1)  # shaft rates
-    g_sensor = w_true @ axes  # Σ_s ω_s u_s, sensor frame
-    m = g_sensor / scale - bias + rng.standard_normal(g_sensor.shape) * noise_std
-    # Encoder: every servo read together at enc_rate_hz (a sync read), jittered timestamps.
-    te = np.arange(0.0, t_total, 1.0 / enc_rate_hz)
-    q = TWO_PI / encoder_ticks
-    enc_t, enc_m, enc_a = [], [], []
-    stamp = np.sort(te + rng.normal(0.0, enc_jitter_s, te.size)) if enc_jitter_s else te
-    for s, motor in enumerate(motor_ids):
-        th = np.interp(te, g, angle[s])
-        enc_t.append(stamp)
-        enc_m.append(np.full(te.size, motor))
-        enc_a.append(np.round(th / q) * q)
-    order = np.argsort(np.concatenate(enc_t), kind="stable")
-    if imu_jitter_s:
-        lim = period / 3
-        imu_t = imu_t + np.clip(rng.normal(0.0, imu_jitter_s, imu_t.size), -lim, lim)
+    imu = [np.concatenate(c) for c in zip(*stream.imu_chunks(), strict=True)]
+    enc = [np.concatenate(c) for c in zip(*stream.encoder_chunks(), strict=True)]
+    pieces = list(stream._grid())  # each piece starts at the last point of the one before
+    grid = [np.concatenate([pieces[0][k], *(p[k][..., 1:] for p in pieces[1:])], axis=-1)
+            for k in range(3)]
     return RawRun(
-        imu_t=imu_t,
-        imu_rate=m,
-        imu_temp=np.full(imu_t.size, float(temperature_c)),
-        enc_t=np.concatenate(enc_t)[order],
-        enc_motor=np.concatenate(enc_m)[order],
-        enc_angle=np.concatenate(enc_a)[order],
-        segments=tuple(segs),
-        scale=scale,
-        bias=bias,
-        axes=axes,
-        motor_ids=tuple(motor_ids),
-        grid_t=g,
-        grid_rate=rate,
-        grid_angle=angle,
+        imu_t=imu[0],
+        imu_rate=imu[1],
+        imu_temp=imu[2],
+        enc_t=enc[0],
+        enc_motor=enc[1],
+        enc_angle=enc[2],
+        segments=stream.segments,
+        scale=stream.scale,
+        bias=stream.bias,
+        axes=stream.axes,
+        motor_ids=stream.motor_ids,
+        grid_t=grid[0],
+        grid_rate=grid[1],
+        grid_angle=grid[2],
     )
-
 
 
 def _count_below(n_max: int, step: float, offset: float, limit: float, strict: bool) -> int:
