@@ -42,16 +42,18 @@ squares is minimised by Levenberg-Marquardt with an analytic Jacobian; the covar
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import optimize
 from scipy.special import chdtrc
 
 from gyrocal.calib import kinematics
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.calib.observations import ObservationSet
+
+if TYPE_CHECKING:
+    from scipy import optimize
 
 __all__ = [
     "CONSISTENCY_ALPHA",
@@ -557,6 +559,8 @@ def lm_solve(
     """The bare ``scipy.optimize.least_squares(method="lm")`` call on the Eq. (3) residuals of
     window means ``mean`` (n, 3) and references ``rate`` (n,), from ``x0`` (default k = 1, b = 0).
     No validation: :func:`fit_levenberg_marquardt` is the checked entry point."""
+    from scipy import optimize  # only this baseline needs it (about 1 s of import, issue 16)
+
     if x0 is None:
         x0 = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     return optimize.least_squares(
