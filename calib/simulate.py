@@ -532,6 +532,8 @@ class RawRunStream:
             g = np.arange(i0, i1, dtype=float) * h
             rate = np.zeros((3, g.size))
             for s, d, t0, freqs, phases in p["turns"]:
+                if g[-1] - t0 < 0.0 or g[0] - t0 > p["t_turn"] + 1e-6:
+                    continue  # the profile is 0 here: adding d·0 would change nothing
                 prof = _speed_profile(g - t0, p["total"], p["speed"], p["accel"])
                 rip = sum(p["amp"] * np.sin(TWO_PI * f * (g - t0) + ph)
                           for f, ph in zip(freqs, phases, strict=True))
@@ -707,7 +709,8 @@ def stream_raw_run(
     params = {
         "h": h, "ng": ng, "g_last": g_last, "grid_hz": grid_hz, "grid_chunk": grid_chunk,
         "piece_ends": piece_ends, "turns": turns, "total": total, "speed": protocol.speed,
-        "accel": accel, "amp": protocol.ripple * np.sqrt(2.0 / 4), "period": period,
+        "accel": accel, "t_turn": t_turn, "amp": protocol.ripple * np.sqrt(2.0 / 4),
+        "period": period,
         "offset": offset, "noise_std": noise_std, "noise_state": noise_state,
         "imu_jitter_s": imu_jitter_s, "imu_jitter_state": imu_jitter_state,
         "temperature_c": float(temperature_c), "enc_step": 1.0 / enc_rate_hz,
