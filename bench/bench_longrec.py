@@ -154,6 +154,7 @@ def main(argv: list[str]) -> None:
             else:
                 cells.append("(skipped)")
             cmd_rows.append(cells)
+            print("longrec:", *read_rows[-1], "|", *cells, file=sys.stderr, flush=True)
             if minutes == 1 and wall_rec is None:
                 wall_rec = rec
             else:
