@@ -1,35 +1,42 @@
-"""Long recordings: what reading a Recording v1 and ``gyrocal noise`` cost in CPU and memory.
+"""Long recordings: what reading a Recording v1 and the analysis commands cost in CPU and memory.
 
-``python -m bench longrec`` (``--quick``: 1 and 10 minutes at 200 Hz only). Each recording is a
-still sensor (white noise about a bias, temperature, three servos' encoders at 200 Hz each) of
-1, 10 and 60 minutes at 200 Hz and 10 and 60 minutes at 1 kHz, written block by block in
-bounded memory. Each measurement runs in its own process (CPU seconds user+system and peak
-resident memory from ``/usr/bin/time`` or ``getrusage``):
+``python -m bench longrec`` (``--quick``: 1 and 10 minutes at 200 Hz only). Each recording is
+written by ``gyrocal simulate-recording`` (streamed, bounded memory; its own CPU and peak memory
+are a column) with enough turns and long rests to last 1, 10 and 60 minutes at 200 Hz and 10
+and 60 minutes at 1 kHz. Each measurement runs in its own process (CPU seconds user+system and
+peak resident memory from ``getrusage`` of the child):
 
-* the Recording v1 reader before issue 16 (taken from git history, commit ``BEFORE``) and now;
-* ``gyrocal noise RECORDING --json`` (the whole record at once).
+* the reader before issue 16 (``kit/recording.py`` of commit ``BEFORE``, from git history), the
+  numpy block reader (``GYROCAL_CSV_PARSER=numpy``) and the default (pandas' parser when the
+  ``fast`` extra is installed and the file is large);
+* ``gyrocal estimate``, ``noise --json`` (streamed), ``track --json`` and ``report`` with the
+  default parser (``report`` only with matplotlib, and only up to 10 minutes: its plots of
+  every sample dominate and are not issue 16's subject).
 
-``estimate``, ``report`` and ``track --json`` need turns, which a still recording lacks; their
-cost on long sessions is not measured here yet.
+A second table compares wall times of ``gyrocal --help`` and ``gyrocal estimate`` on the
+1-minute recording with a bare ``python -c pass``, medians of 5 runs.
 """
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
-import numpy as np
-
 from bench.table import print_table
-from gyrocal.kit.recording import RecordingWriter
 
 #: The commit whose ``kit/recording.py`` is the reader before issue 16.
 BEFORE = "2b3e916"
 SIZES_FULL = ((1, 200), (10, 200), (60, 200), (10, 1000), (60, 1000))
 SIZES_QUICK = ((1, 200), (10, 200))
+#: Longest recording ``report`` is run on, minutes.
+REPORT_MAX_MIN = 10
 
 PROBE = """
 import resource, sys, time
@@ -45,52 +52,70 @@ ru = resource.getrusage(resource.RUSAGE_SELF)
 print(cpu, ru.ru_maxrss * 1024, rec.imu_t.size, rec.enc_t.size)
 """
 
-
-def write_still(path: Path, minutes: float, odr: float, seed: int = 0) -> None:
-    """A still recording, written in blocks of 10 s."""
-    rng = np.random.default_rng(seed)
-    bias = np.array([0.01, -0.02, 0.005])
-    n = int(minutes * 60 * odr)
-    block = int(10 * odr)
-    enc_every = max(1, int(round(odr / 200)))
-    with RecordingWriter(path, sensor={"model": "simulated", "odr_hz": odr},
-                         gimbal={"motors": []}, protocol={"name": "still"}) as w:
-        for a in range(0, n, block):
-            i = np.arange(a, min(n, a + block))
-            t = i / odr
-            w.append_imu(t, bias + rng.normal(scale=0.002, size=(i.size, 3)),
-                         25.0 + 0.01 * rng.normal(size=i.size))
-            te = t[::enc_every]
-            w.append_encoder(np.repeat(te, 3), np.tile([1, 2, 3], te.size),
-                             np.zeros(3 * te.size))
-        from gyrocal.calib.segments import Segment
-
-        w.append_segment(Segment(0, "rest", None, 0, 0.0, 0.0, (n - 1) / odr))
-        w.finish()
+WRAPPER = ("import resource, subprocess, sys\n"
+           "rc = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL,\n"
+           "                    stderr=subprocess.DEVNULL).returncode\n"
+           "r = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+           "print(r.ru_utime + r.ru_stime, r.ru_maxrss * 1024, rc)\n")
 
 
-def _reader(rec: Path, old_dir: Path, which: str) -> tuple[float, float]:
-    out = subprocess.run([sys.executable, "-c", PROBE, str(rec), str(old_dir), which],
-                         capture_output=True, text=True, check=True)
-    cpu, rss, *_ = out.stdout.split()
-    return float(cpu), float(rss) / 2**20
+def _env(parser: str | None = None) -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("GYROCAL_CSV_PARSER", None)
+    if parser:
+        env["GYROCAL_CSV_PARSER"] = parser
+    return env
 
 
-def _command(argv: list[str]) -> tuple[float, float, int]:
-    """CPU s and peak MiB of one child process (getrusage of the children, via a wrapper)."""
-    wrapper = ("import resource, subprocess, sys\n"
-               "rc = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL).returncode\n"
-               "r = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
-               "print(r.ru_utime + r.ru_stime, r.ru_maxrss * 1024, rc)\n")
-    out = subprocess.run([sys.executable, "-c", wrapper, *argv], capture_output=True,
-                         text=True, check=True)
+def _command(argv: list[str], parser: str | None = None) -> tuple[float, float, int]:
+    """CPU s, peak MiB and exit code of one child process."""
+    out = subprocess.run([sys.executable, "-c", WRAPPER, *argv], capture_output=True,
+                         text=True, check=True, env=_env(parser))
     cpu, rss, rc = out.stdout.split()
     return float(cpu), float(rss) / 2**20, int(rc)
 
 
+def _gyrocal(*args: str) -> list[str]:
+    return [sys.executable, "-m", "gyrocal.kit", *args]
+
+
+def write_session(path: Path, minutes: float, odr: float) -> tuple[float, float, int]:
+    """A simulated calibration session of about ``minutes``: turns of ``minutes`` revolutions
+    each way about each axis at 3 rad/s, the rest of the time in seven equal rests."""
+    from gyrocal.calib.simulate import profile_duration
+
+    turns = max(1, round(minutes))
+    turn_s = profile_duration(2 * 3.141592653589793 * turns, 3.0, 8.0) + 0.1
+    rest = max(1.0, (minutes * 60 - 6 * turn_s) / 7)
+    return _command(_gyrocal("simulate-recording", str(path), "--turns", str(turns),
+                             "--rest", f"{rest:.3f}", "--odr", str(odr)))
+
+
+def _reader(rec: Path, old_dir: Path, which: str, parser: str | None) -> tuple[float, float]:
+    out = subprocess.run([sys.executable, "-c", PROBE, str(rec), str(old_dir), which],
+                         capture_output=True, text=True, check=True, env=_env(parser))
+    cpu, rss, *_ = out.stdout.split()
+    return float(cpu), float(rss) / 2**20
+
+
+def _wall(argv: list[str], runs: int = 5) -> float:
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def _cell(cpu: float, rss: float, rc: int) -> str:
+    return f"{cpu:.2f} s / {rss:.0f} MiB" + ("" if rc == 0 else f" (exit {rc})")
+
+
 def main(argv: list[str]) -> None:
-    """Generate the recordings, measure, print the table."""
+    """Generate the recordings, measure, print the tables."""
     sizes = SIZES_QUICK if "--quick" in argv else SIZES_FULL
+    have_plot = importlib.util.find_spec("matplotlib") is not None
+    have_fast = importlib.util.find_spec("pandas") is not None
     work = Path(tempfile.mkdtemp(prefix="gyrocal-longrec-"))
     try:
         old = subprocess.run(["git", "show", f"{BEFORE}:kit/recording.py"],
@@ -99,31 +124,59 @@ def main(argv: list[str]) -> None:
         have_old = old.returncode == 0
         if have_old:
             (work / "old_recording.py").write_text(old.stdout)
-        base_cpu, base_rss = _command([sys.executable, "-c", "import numpy"])[:2]
-        rows = []
+        read_rows, cmd_rows = [], []
+        wall_rec = None
         for minutes, odr in sizes:
             rec = work / f"rec-{minutes}min-{odr}hz"
-            write_still(rec, minutes, odr)
+            sim = write_session(rec, minutes, odr)
             mb = sum(f.stat().st_size for f in rec.iterdir()) / 2**20
             n_rows = sum(sum(1 for _ in open(rec / f)) - 1 for f in ("imu.csv", "encoder.csv"))
-            new_cpu, new_rss = _reader(rec, work, "new")
+            label = f"{minutes} min @ {odr} Hz"
+            np_cpu, np_rss = _reader(rec, work, "new", "numpy")
+            new_cpu, new_rss = _reader(rec, work, "new", None)
             if have_old:
-                old_cpu, old_rss = _reader(rec, work, "old")
-                old_cols = [old_cpu, old_rss, f"{old_cpu / new_cpu:.1f}x"]
+                old_cpu, old_rss = _reader(rec, work, "old", None)
+                old_cols = [f"{old_cpu:.2f} s / {old_rss:.0f} MiB", f"{old_cpu / np_cpu:.1f}x",
+                            f"{old_cpu / new_cpu:.1f}x"]
             else:
                 old_cols = ["(no git)", "", ""]
-            n_cpu, n_rss, rc = _command([sys.executable, "-m", "gyrocal.kit", "noise", str(rec),
-                                         "--json"])
-            rows.append([f"{minutes} min @ {odr} Hz", f"{mb:.0f}", n_rows, *old_cols, new_cpu,
-                         new_rss, new_cpu / n_rows * 1e6, n_cpu, n_rss,
-                         "ok" if rc == 0 else f"exit {rc}"])
-            shutil.rmtree(rec)
+            read_rows.append([label, f"{mb:.0f}", n_rows, *old_cols[:1],
+                              f"{np_cpu:.2f} s / {np_rss:.0f} MiB",
+                              f"{new_cpu:.2f} s / {new_rss:.0f} MiB", *old_cols[1:],
+                              f"{new_cpu / n_rows * 1e6:.2f}"])
+            cells = [label, _cell(*sim)]
+            cells.append(_cell(*_command(_gyrocal("estimate", str(rec)))))
+            cells.append(_cell(*_command(_gyrocal("noise", str(rec), "--json"))))
+            cells.append(_cell(*_command(_gyrocal("track", str(rec), "--json"))))
+            if have_plot and minutes <= REPORT_MAX_MIN:
+                cells.append(_cell(*_command(_gyrocal("report", str(rec), "--out",
+                                                      str(work / "report"), "--force"))))
+            else:
+                cells.append("(skipped)")
+            cmd_rows.append(cells)
+            print("longrec:", *read_rows[-1], "|", *cells, file=sys.stderr, flush=True)
+            if minutes == 1 and wall_rec is None:
+                wall_rec = rec
+            else:
+                shutil.rmtree(rec)
         print_table(
-            ["recording", "MiB", "CSV rows", "old read CPU s", "old peak MiB", "speed-up",
-             "new read CPU s", "new peak MiB", "new CPU s / M rows", "noise CPU s",
-             "noise peak MiB", "noise"], rows,
-            f"Reading a still Recording v1 (imu.csv + encoder.csv), each in a fresh process; "
-            f"bare 'import numpy' costs {base_cpu:.2f} CPU s and {base_rss:.0f} MiB",
+            ["recording", "MiB", "CSV rows", f"reader {BEFORE} CPU/peak", "numpy blocks",
+             "default" + (" (pandas)" if have_fast else " (numpy)"), "speed-up numpy",
+             "speed-up default", "default CPU s / M rows"], read_rows,
+            "Reading a Recording v1 (imu.csv + encoder.csv), each in a fresh process "
+            "(CPU s user+system / peak RSS)",
         )
+        print_table(
+            ["recording", "simulate-recording", "estimate", "noise --json", "track --json",
+             "report"], cmd_rows,
+            "Commands on the same recordings, default parser (CPU s user+system / peak RSS)",
+        )
+        if wall_rec is not None:
+            py = _wall([sys.executable, "-c", "pass"])
+            rows = [["python -c pass", f"{py:.3f}"],
+                    ["gyrocal --help", f"{_wall(_gyrocal('--help')):.3f}"],
+                    ["gyrocal estimate (1 min @ 200 Hz)",
+                     f"{_wall(_gyrocal('estimate', str(wall_rec))):.3f}"]]
+            print_table(["command", "wall s (median of 5)"], rows, "Start-up")
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -47,13 +47,13 @@ Results are frozen dataclasses; :class:`NoiseCharacterisation` round-trips throu
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from scipy.optimize import nnls
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.noise_sim import FLICKER_FLOOR
@@ -65,11 +65,14 @@ __all__ = [
     "AllanCurve",
     "NoiseCharacterisation",
     "NoiseFigure",
+    "PhaseRecord",
     "allan_deviation",
     "characterise_noise",
     "edf_greenhall",
     "min_still_samples",
     "overlapping_avar",
+    "overlapping_avar_blocks",
+    "phase_blocks",
 ]
 
 FORMAT = "gyrocal-noise"
@@ -148,8 +151,8 @@ class AllanCurve:
         """
         edf = np.broadcast_to(np.asarray(edf, dtype=float), self.adev.shape)
         lo_q, hi_q = (1.0 - ci) / 2.0, (1.0 + ci) / 2.0
-        lo = self.adev * np.sqrt(edf / chi2.ppf(hi_q, edf))
-        hi = self.adev * np.sqrt(edf / chi2.ppf(lo_q, edf))
+        lo = self.adev * np.sqrt(edf / chdtri(edf, 1.0 - hi_q))
+        hi = self.adev * np.sqrt(edf / chdtri(edf, 1.0 - lo_q))
         return lo, hi
 
 
@@ -279,6 +282,100 @@ def overlapping_avar(rate: np.ndarray, odr_hz: float, ms: np.ndarray) -> np.ndar
     return out
 
 
+@dataclass(frozen=True)
+class PhaseRecord:
+    """A still record too long to hold, given as random access to its phase.
+
+    The phase of axis ``j`` is ``x_0 = 0``, ``x_i = τ0 Σ_{k<i} y_k`` (the integrated rate, NIST
+    SP 1065 §4 "phase data"), for ``i = 0 … n_samples``.
+
+    Attributes
+    ----------
+    n_samples : int
+        Rate samples per axis (one fewer than phase points).
+    read : callable
+        ``read(start, stop)`` returns the phase points ``[start, stop)`` as an array of shape
+        ``(stop - start, A)``; the caller keeps them wherever it likes (a file, a memory map).
+    """
+
+    n_samples: int
+    read: Callable[[int, int], np.ndarray]
+
+
+def phase_blocks(blocks: Iterable[np.ndarray], odr_hz: float) -> Iterator[np.ndarray]:
+    """Turn rate blocks into phase blocks, exactly as :func:`overlapping_avar` integrates.
+
+    Parameters
+    ----------
+    blocks : iterable of ndarray (k, A)
+        Consecutive rate samples.
+    odr_hz : float
+        Sample rate, Hz.
+
+    Yields
+    ------
+    ndarray (k, A)
+        The phase points after each sample of the block (the leading ``x_0 = 0`` is not
+        yielded): a running sum carried across blocks, so the values equal those of one
+        ``cumsum`` over the whole record bit for bit.
+    """
+    tau0 = 1.0 / scalar(odr_hz, "odr_hz", positive=True)
+    carry = None
+    for block in blocks:
+        y = np.asarray(block, dtype=float)
+        if y.ndim == 1:
+            y = y[:, None]
+        if y.shape[0] == 0:
+            continue
+        if carry is None:
+            cs = np.cumsum(y, axis=0)
+        else:
+            cs = np.cumsum(np.concatenate([carry, y]), axis=0)[1:]
+        carry = cs[-1:].copy()
+        yield cs * tau0
+
+
+def overlapping_avar_blocks(
+    record: PhaseRecord, odr_hz: float, ms: np.ndarray, block: int = 1 << 16
+) -> np.ndarray:
+    """:func:`overlapping_avar` of a record held outside memory (NIST SP 1065 eq. 11).
+
+    The second differences ``x_{k+2m} − 2 x_{k+m} + x_k`` are formed ``block`` at a time from
+    three reads of the phase, so memory stays a few blocks whatever the record's length; the
+    result equals :func:`overlapping_avar` of the whole record up to the order of summation
+    (relative differences of order 1e-15).
+
+    Parameters
+    ----------
+    record : PhaseRecord
+    odr_hz : float
+        Sample rate, Hz.
+    ms : ndarray of int
+        Averaging factors, each in ``[1, n // 2]``.
+    block : int
+        Second differences formed at a time.
+
+    Returns
+    -------
+    ndarray (len(ms), A)
+        ``σ²(τ = m/odr)``.
+    """
+    tau0 = 1.0 / odr_hz
+    n_phase = record.n_samples + 1
+    rows = []
+    for m in np.asarray(ms, dtype=np.int64).tolist():
+        count = n_phase - 2 * m
+        acc = None
+        for k in range(0, count, block):
+            stop = min(count, k + block)
+            d2 = record.read(k + 2 * m, stop + 2 * m) - 2.0 * record.read(k + m, stop + m)
+            d2 += record.read(k, stop)
+            part = np.einsum("ij,ij->j", d2, d2)
+            acc = part if acc is None else acc + part
+        rows.append(acc / (2.0 * (m * tau0) ** 2 * count))
+    return np.array(rows)
+
+
 def _edf_table(ms: np.ndarray, n: int) -> np.ndarray:
     out = np.empty((ms.size, 3))
     for i, m in enumerate(ms):
@@ -288,14 +385,15 @@ def _edf_table(ms: np.ndarray, n: int) -> np.ndarray:
 
 
 def allan_deviation(
-    rate: np.ndarray, odr_hz: float, *, m: np.ndarray | None = None
+    rate: np.ndarray | PhaseRecord, odr_hz: float, *, m: np.ndarray | None = None
 ) -> AllanCurve:
     """Overlapping Allan deviation of each column of ``rate`` (IEEE Std 952, NIST SP 1065 eq. 11).
 
     Parameters
     ----------
-    rate : array_like, shape (n,) or (n, A)
-        A gap-free, uniformly sampled still record, rad/s.
+    rate : array_like, shape (n,) or (n, A), or PhaseRecord
+        A gap-free, uniformly sampled still record, rad/s; a :class:`PhaseRecord` for one too
+        long to hold (computed by :func:`overlapping_avar_blocks` in bounded memory).
     odr_hz : float
         Its sample rate, Hz.
     m : array_like of int, optional
@@ -305,16 +403,29 @@ def allan_deviation(
     -------
     AllanCurve
     """
-    a = _as_rate(rate)
     fs = scalar(odr_hz, "odr_hz", positive=True)
-    n = a.shape[0]
+    if isinstance(rate, PhaseRecord):
+        a = None
+        n = rate.n_samples
+        if n < _MIN_SAMPLES:
+            raise CalibInputError(
+                f"rate has {n} samples; an Allan deviation needs at least {_MIN_SAMPLES}"
+            )
+    else:
+        a = _as_rate(rate)
+        n = a.shape[0]
     if m is None:
         ms = _taus_m(n)
     else:
         ms = np.unique(np.asarray(m, dtype=np.int64).reshape(-1))
         if ms.size == 0 or ms[0] < 1 or ms[-1] > (n - 1) // 2:
             raise CalibInputError(f"m must be averaging factors in [1, {(n - 1) // 2}]")
-    adev = np.sqrt(np.column_stack([overlapping_avar(a[:, j], fs, ms) for j in range(a.shape[1])]))
+    if a is None:
+        adev = np.sqrt(overlapping_avar_blocks(rate, fs, ms))
+    else:
+        adev = np.sqrt(
+            np.column_stack([overlapping_avar(a[:, j], fs, ms) for j in range(a.shape[1])])
+        )
     return AllanCurve(
         tau_s=ms / fs, m=ms, adev=adev, odr_hz=fs, n_samples=n, edf=_edf_table(ms, n)
     )
@@ -589,7 +700,7 @@ def _fit_axis(avar: np.ndarray, tau: np.ndarray, edf: np.ndarray) -> tuple[np.nd
 def _chi2_interval(avar: float, edf: float, level: float) -> tuple[float, float]:
     """Interval of a true Allan variance given its estimate and edf (NIST SP 1065 eq. 45)."""
     q = (1.0 - level) / 2.0
-    return avar * edf / chi2.ppf(1.0 - q, edf), avar * edf / chi2.ppf(q, edf)
+    return avar * edf / chdtri(edf, q), avar * edf / chdtri(edf, 1.0 - q)
 
 
 def _read_off(
@@ -654,7 +765,7 @@ def min_still_samples(odr_hz: float, min_tau_s: float | None = None) -> int:
 
 
 def characterise_noise(
-    rate: np.ndarray,
+    rate: np.ndarray | PhaseRecord,
     odr_hz: float,
     *,
     min_tau_s: float | None = None,
@@ -664,9 +775,10 @@ def characterise_noise(
 
     Parameters
     ----------
-    rate : array_like, shape (n, 3)
+    rate : array_like, shape (n, 3), or PhaseRecord
         A gap-free, uniformly sampled record of the sensor at rest, rad/s, at a steady
-        temperature (a temperature drift shows up as rate random walk and rate ramp).
+        temperature (a temperature drift shows up as rate random walk and rate ramp); a
+        :class:`PhaseRecord` of three axes for a record too long to hold in memory.
     odr_hz : float
         Its sample rate, Hz.
     min_tau_s : float, optional
@@ -685,10 +797,12 @@ def characterise_noise(
     -----
     See the module docstring for the method (IEEE Std 952-1997 Annex C).
     """
-    a = _as_rate(rate)
-    if a.shape[1] != 3:
+    a = rate if isinstance(rate, PhaseRecord) else _as_rate(rate)
+    if not isinstance(a, PhaseRecord) and a.shape[1] != 3:
         raise CalibInputError(f"rate must have shape (n, 3), got {a.shape}")
     curve = allan_deviation(a, odr_hz, m=m)
+    if curve.adev.shape[1] != 3:
+        raise CalibInputError(f"rate must have shape (n, 3), got {curve.adev.shape[1]} axes")
     fs = curve.odr_hz
     tau = curve.tau_s
     min_tau = 10.0 / fs if min_tau_s is None else scalar(min_tau_s, "min_tau_s", nonneg=True)

@@ -54,7 +54,7 @@ def pool_noise(
     pooled : ndarray of bool, shape (..., 3)
         Which axes were pooled.
     """
-    from scipy import stats
+    from scipy.special import chdtrc
 
     nu = np.broadcast_to(np.asarray(count, dtype=float) - 1.0, noise.shape[:-1])[..., None]
     k = noise.shape[-2]
@@ -65,7 +65,7 @@ def pool_noise(
     sp2 = (nu * s2).sum(axis=-2) / nsum
     M = nsum * np.log(sp2) - (nu * np.log(s2)).sum(axis=-2)
     C = 1.0 + ((1.0 / nu).sum(axis=-2) - 1.0 / nsum) / (3.0 * (k - 1))
-    p = stats.chi2.sf(M / C, k - 1)
+    p = chdtrc(k - 1, M / C)
     pooled = p >= alpha
     out = np.where(pooled[..., None, :], np.sqrt(sp2)[..., None, :], noise)
     return out, pooled

@@ -17,7 +17,10 @@ Everything is a pure function of its arguments and a ``numpy.random.Generator``.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -35,9 +38,11 @@ __all__ = [
     "draw_mount_axes",
     "draw_sensors",
     "RawRun",
+    "RawRunStream",
     "profile_duration",
     "simulate_raw_run",
     "simulate_runs",
+    "stream_raw_run",
 ]
 
 
@@ -439,9 +444,212 @@ def simulate_raw_run(
     recorded timestamps may carry jitter too (``imu_jitter_s``, clipped to a third of a period so
     the order is kept).
 
+    The run is built by :func:`stream_raw_run` and gathered whole; for long runs use that
+    directly.
+
     Returns
     -------
     RawRun
+    """
+    stream = stream_raw_run(
+        rng, scale, bias, axes, protocol, noise_std, accel=accel,
+        imu_clock_error=imu_clock_error, enc_rate_hz=enc_rate_hz, enc_jitter_s=enc_jitter_s,
+        imu_jitter_s=imu_jitter_s, encoder_ticks=encoder_ticks, motor_ids=motor_ids,
+        settle_s=settle_s, grid_hz=grid_hz, temperature_c=temperature_c,
+    )
+    imu = [np.concatenate(c) for c in zip(*stream.imu_chunks(), strict=True)]
+    enc = [np.concatenate(c) for c in zip(*stream.encoder_chunks(), strict=True)]
+    pieces = list(stream._grid())  # each piece starts at the last point of the one before
+    grid = [np.concatenate([pieces[0][k], *(p[k][..., 1:] for p in pieces[1:])], axis=-1)
+            for k in range(3)]
+    return RawRun(
+        imu_t=imu[0],
+        imu_rate=imu[1],
+        imu_temp=imu[2],
+        enc_t=enc[0],
+        enc_motor=enc[1],
+        enc_angle=enc[2],
+        segments=stream.segments,
+        scale=stream.scale,
+        bias=stream.bias,
+        axes=stream.axes,
+        motor_ids=stream.motor_ids,
+        grid_t=grid[0],
+        grid_rate=grid[1],
+        grid_angle=grid[2],
+    )
+
+
+def _count_below(n_max: int, step: float, offset: float, limit: float, strict: bool) -> int:
+    """How many of ``i·step + offset`` (``i < n_max``, as ``np.arange(0, ·, step) + offset``
+    computes them) are below ``limit`` (``strict``) or at most it."""
+    k = min(n_max, max(0, int((limit - offset) / step) + 2))
+
+    def inside(i: int) -> bool:
+        v = float(i) * step + offset
+        return v < limit if strict else v <= limit
+
+    while k > 0 and not inside(k - 1):
+        k -= 1
+    while k < n_max and inside(k):
+        k += 1
+    return k
+
+
+def _arange_len(stop: float, step: float) -> int:
+    """``len(np.arange(0.0, stop, step))`` without building it."""
+    return max(0, math.ceil(stop / step))
+
+
+@dataclass(frozen=True)
+class RawRunStream:
+    """:func:`simulate_raw_run`'s run, produced in time-ordered chunks in bounded memory.
+
+    Built by :func:`stream_raw_run`; :meth:`imu_chunks` and :meth:`encoder_chunks` each
+    regenerate the fine grid chunk by chunk, so either may be iterated (once each) without
+    holding the run. The values equal :func:`simulate_raw_run`'s for the same generator state
+    (see the test ``tests/calib/test_simulate_stream.py``).
+    """
+
+    segments: tuple[Segment, ...]
+    motor_ids: tuple[int, ...]
+    scale: np.ndarray
+    bias: np.ndarray
+    axes: np.ndarray
+    n_imu: int
+    n_encoder_times: int
+    _p: dict[str, Any]
+
+    def _grid(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Consecutive grid pieces ``(g, rate (3, k), angle (3, k))``; each starts at the last
+        point of the one before, and the values equal the whole grid's bit for bit."""
+        p = self._p
+        h, ng, size = p["h"], p["ng"], p["grid_chunk"]
+        carry = np.zeros((3, 1))
+        i0 = 0
+        while i0 < ng - 1 or i0 == 0:
+            i1 = min(ng, i0 + size)
+            g = np.arange(i0, i1, dtype=float) * h
+            rate = np.zeros((3, g.size))
+            for s, d, t0, freqs, phases in p["turns"]:
+                if g[-1] - t0 < 0.0 or g[0] - t0 > p["t_turn"] + 1e-6:
+                    continue  # the profile is 0 here: adding d·0 would change nothing
+                prof = _speed_profile(g - t0, p["total"], p["speed"], p["accel"])
+                rip = sum(p["amp"] * np.sin(TWO_PI * f * (g - t0) + ph)
+                          for f, ph in zip(freqs, phases, strict=True))
+                rate[s] += d * prof * (1.0 + rip)
+            inc = (rate[:, 1:] + rate[:, :-1]) / 2 / p["grid_hz"]
+            angle = np.cumsum(np.concatenate([carry, inc], axis=1), axis=1)
+            carry = angle[:, -1:]
+            yield g, rate, angle
+            if i1 >= ng:
+                return
+            i0 = i1 - 1
+
+    def imu_chunks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``(t, rate (k, 3), temperature (k,))`` in time order, as the run's ``imu_*``."""
+        p = self._p
+        noise = np.random.Generator(np.random.PCG64())
+        noise.bit_generator.state = p["noise_state"]
+        jit = np.random.Generator(np.random.PCG64())
+        jit.bit_generator.state = p["imu_jitter_state"]
+        done = 0
+        g_last = p["g_last"]
+        for g, rate, _ in self._grid():
+            last = g[-1] >= g_last
+            upto = _count_below(self.n_imu, p["period"], p["offset"], g[-1], strict=not last)
+            if upto > done:
+                t = np.arange(done, upto, dtype=float) * p["period"] + p["offset"]
+                w = np.stack([np.interp(t, g, rate[s]) for s in range(3)], axis=1)
+                gs = w @ self.axes
+                m = gs / self.scale - self.bias + noise.standard_normal(gs.shape) * p["noise_std"]
+                if p["imu_jitter_s"]:
+                    lim = p["period"] / 3
+                    t = t + np.clip(jit.normal(0.0, p["imu_jitter_s"], t.size), -lim, lim)
+                yield t, m, np.full(t.size, p["temperature_c"])
+                done = upto
+
+    def encoder_chunks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``(t, motor, angle)`` rows in the run's order (a sync read of every servo per time)."""
+        p = self._p
+        step, n = p["enc_step"], self.n_encoder_times
+        bounds = self._encoder_bounds()
+        jit = np.random.Generator(np.random.PCG64())
+        jit.bit_generator.state = p["enc_jitter_state"]
+        # Sorting jittered stamps chunk by chunk: a stamp is final once below every later one.
+        later_min = [math.inf] * (len(bounds) + 1)
+        if p["enc_jitter_s"]:
+            pre = np.random.Generator(np.random.PCG64())
+            pre.bit_generator.state = p["enc_jitter_state"]
+            mins = []
+            for a, b in bounds:
+                te = np.arange(a, b, dtype=float) * step
+                mins.append(float(np.min(te + pre.normal(0.0, p["enc_jitter_s"], te.size)))
+                            if b > a else math.inf)
+            for c in range(len(bounds) - 1, -1, -1):
+                later_min[c] = min(mins[c], later_min[c + 1])
+        q = TWO_PI / p["ticks"]
+        pool = np.empty(0)
+        angles = np.empty((3, 0))
+        ids = np.asarray(self.motor_ids)
+        for c, (g, _, angle) in enumerate(self._grid()):
+            a, b = bounds[c]
+            te = np.arange(a, b, dtype=float) * step
+            th = np.stack([np.round(np.interp(te, g, angle[s]) / q) * q for s in range(3)])
+            angles = np.concatenate([angles, th], axis=1)
+            stamp = te + jit.normal(0.0, p["enc_jitter_s"], te.size) if p["enc_jitter_s"] else te
+            pool = np.sort(np.concatenate([pool, stamp]))
+            k = int(np.searchsorted(pool, later_min[c + 1], side="left"))
+            if k:
+                ts, pool = pool[:k], pool[k:]
+                ang, angles = angles[:, :k], angles[:, k:]
+                yield np.repeat(ts, 3), np.tile(ids, k), ang.T.reshape(-1)
+        assert pool.size == 0 and n == bounds[-1][1]
+
+    def _encoder_bounds(self) -> list[tuple[int, int]]:
+        """The encoder times ``[a, b)`` that fall in each grid piece (as :meth:`_grid` cuts)."""
+        p = self._p
+        out = []
+        done = 0
+        for i1 in p["piece_ends"]:
+            last = i1 == p["ng"] - 1
+            upto = _count_below(self.n_encoder_times, p["enc_step"], 0.0, float(i1) * p["h"],
+                                strict=not last)
+            out.append((done, upto))
+            done = upto
+        return out
+
+
+def stream_raw_run(
+    rng: np.random.Generator,
+    scale: np.ndarray,
+    bias: np.ndarray,
+    axes: np.ndarray,
+    protocol: SimProtocol,
+    noise_std: float,
+    *,
+    accel: float = 8.0,
+    imu_clock_error: float = 0.0,
+    enc_rate_hz: float = 100.0,
+    enc_jitter_s: float = 0.0,
+    imu_jitter_s: float = 0.0,
+    encoder_ticks: int = 4096,
+    motor_ids: tuple[int, ...] = (1, 2, 3),
+    settle_s: float = 0.1,
+    grid_hz: float = 10_000.0,
+    temperature_c: float = 25.0,
+    grid_chunk: int = 1 << 16,
+) -> RawRunStream:
+    """:func:`simulate_raw_run` for runs of any length: the same model and the same values for
+    the same ``rng`` state, produced in chunks of ``grid_chunk`` fine-grid points.
+
+    ``rng`` is left where :func:`simulate_raw_run` leaves it: the draws of each stream (gyro
+    noise, encoder jitter, gyro jitter) are located by advancing copies of the generator
+    through the earlier streams, in chunks, without keeping them.
+
+    Returns
+    -------
+    RawRunStream
     """
     scale = np.asarray(scale, dtype=float).reshape(3)
     bias = np.asarray(bias, dtype=float).reshape(3)
@@ -464,57 +672,48 @@ def simulate_raw_run(
             idx += 1
     segs.append(Segment(idx, "rest", None, 0, 0.0, t, t + protocol.rest_s))
     t_total = t + protocol.rest_s
-
-    g = np.arange(0.0, t_total + 1.0 / grid_hz, 1.0 / grid_hz)
-    rate = np.zeros((3, g.size))
-    for s, d, t0 in starts:
-        p = _speed_profile(g - t0, total, protocol.speed, accel)
-        f_rev = protocol.speed / TWO_PI
+    h = 1.0 / grid_hz
+    ng = _arange_len(t_total + 1.0 / grid_hz, 1.0 / grid_hz)
+    g_last = float(ng - 1) * h
+    f_rev = protocol.speed / TWO_PI
+    turns = []
+    for s, d, t0 in starts:  # the ripple draws, in simulate_raw_run's order
         freqs = [f_rev, 2 * f_rev, 3 * f_rev, rng.uniform(3.0, 6.0)]
-        amp = protocol.ripple * np.sqrt(2.0 / len(freqs))
-        rip = sum(amp * np.sin(TWO_PI * f * (g - t0) + rng.uniform(0, TWO_PI))
-                  for f in freqs)
-        rate[s] += d * p * (1.0 + rip)
-    # Exact integral of the piecewise-linear rate on the grid.
-    angle = np.concatenate(
-        [np.zeros((3, 1)), np.cumsum((rate[:, 1:] + rate[:, :-1]) / 2 / grid_hz, axis=1)], axis=1
-    )
-
-    # Gyro: true sampling instants of a chip whose clock runs (1 + err) fast.
+        phases = [rng.uniform(0, TWO_PI) for _ in freqs]
+        turns.append((s, d, t0, freqs, phases))
     period = 1.0 / (protocol.odr_hz * (1.0 + imu_clock_error))
-    imu_t = np.arange(0.0, t_total, period) + rng.uniform(0, period)
-    imu_t = imu_t[imu_t <= g[-1]]
-    w_true = np.stack([np.interp(imu_t, g, rate[s]) for s in range(3)], axis=1)  # shaft rates
-    g_sensor = w_true @ axes  # Σ_s ω_s u_s, sensor frame
-    m = g_sensor / scale - bias + rng.standard_normal(g_sensor.shape) * noise_std
-    # Encoder: every servo read together at enc_rate_hz (a sync read), jittered timestamps.
-    te = np.arange(0.0, t_total, 1.0 / enc_rate_hz)
-    q = TWO_PI / encoder_ticks
-    enc_t, enc_m, enc_a = [], [], []
-    stamp = np.sort(te + rng.normal(0.0, enc_jitter_s, te.size)) if enc_jitter_s else te
-    for s, motor in enumerate(motor_ids):
-        th = np.interp(te, g, angle[s])
-        enc_t.append(stamp)
-        enc_m.append(np.full(te.size, motor))
-        enc_a.append(np.round(th / q) * q)
-    order = np.argsort(np.concatenate(enc_t), kind="stable")
-    if imu_jitter_s:
-        lim = period / 3
-        imu_t = imu_t + np.clip(rng.normal(0.0, imu_jitter_s, imu_t.size), -lim, lim)
-    return RawRun(
-        imu_t=imu_t,
-        imu_rate=m,
-        imu_temp=np.full(imu_t.size, float(temperature_c)),
-        enc_t=np.concatenate(enc_t)[order],
-        enc_motor=np.concatenate(enc_m)[order],
-        enc_angle=np.concatenate(enc_a)[order],
-        segments=tuple(segs),
-        scale=scale,
-        bias=bias,
-        axes=axes,
-        motor_ids=tuple(motor_ids),
-        grid_t=g,
-        grid_rate=rate,
-        grid_angle=angle,
-    )
+    offset = rng.uniform(0, period)
+    n_imu = _count_below(_arange_len(t_total, period), period, offset, g_last, strict=False)
+    n_te = _arange_len(t_total, 1.0 / enc_rate_hz)
 
+    def skip(count: int, width: int = 1) -> None:
+        for a in range(0, count, 1 << 16):
+            rng.standard_normal((min(count, a + (1 << 16)) - a, width))
+
+    noise_state = rng.bit_generator.state
+    skip(n_imu, 3)
+    enc_state = rng.bit_generator.state
+    if enc_jitter_s:
+        skip(n_te)
+    imu_jitter_state = rng.bit_generator.state
+    if imu_jitter_s:
+        skip(n_imu)
+    piece_ends = []
+    i0 = 0
+    while True:
+        i1 = min(ng, i0 + grid_chunk)
+        piece_ends.append(i1 - 1)
+        if i1 >= ng:
+            break
+        i0 = i1 - 1
+    params = {
+        "h": h, "ng": ng, "g_last": g_last, "grid_hz": grid_hz, "grid_chunk": grid_chunk,
+        "piece_ends": piece_ends, "turns": turns, "total": total, "speed": protocol.speed,
+        "accel": accel, "t_turn": t_turn, "amp": protocol.ripple * np.sqrt(2.0 / 4),
+        "period": period,
+        "offset": offset, "noise_std": noise_std, "noise_state": noise_state,
+        "imu_jitter_s": imu_jitter_s, "imu_jitter_state": imu_jitter_state,
+        "temperature_c": float(temperature_c), "enc_step": 1.0 / enc_rate_hz,
+        "enc_jitter_s": enc_jitter_s, "enc_jitter_state": enc_state, "ticks": encoder_ticks,
+    }
+    return RawRunStream(tuple(segs), tuple(motor_ids), scale, bias, axes, n_imu, n_te, params)

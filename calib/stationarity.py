@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.validation import scalar, vec3
@@ -132,7 +132,7 @@ class StillDetector:
         n_min = max(1, int(round(s.min_still_s * fs)))
         n_la = int(round(s.lookahead_s * fs))
         dof = n_w - 1
-        var_limit = sigma**2 * chi2.ppf(1.0 - s.variance_alpha, dof) / dof
+        var_limit = sigma**2 * chdtri(dof, s.variance_alpha) / dof
         if s.rate_threshold is not None:
             rate_limit = np.full(3, float(s.rate_threshold))
         else:

@@ -201,9 +201,9 @@ class StudyResult:
 
     def coverage(self, noise: float, level: float = 0.95) -> np.ndarray:
         """Fraction of runs whose paired-axis ``level`` interval holds the truth, per parameter."""
-        from scipy import stats as st
+        from scipy.special import ndtri
 
-        z = st.norm.ppf(0.5 + level / 2)
+        z = ndtri(0.5 + level / 2)
         e = self.errors[noise]["paired-axis"]
         s = self.extra[noise]["paired-axis:std"]
         return np.mean(np.abs(e) <= z * s, axis=0)

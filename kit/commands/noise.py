@@ -57,59 +57,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="draw the Allan deviation to FILE (PNG; needs the 'plot' extra)")
 
 
-def _from_recording(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], None]:
-    import numpy as np
-
-    from gyrocal.kit.recording import load_recording
-
-    rec = load_recording(args.recording)
-    for w in rec.warnings:
-        print(f"gyrocal: note: {w}", file=sys.stderr)
-    t, rate, temp = rec.imu_t, rec.imu_rate, rec.imu_temp
-    has_rot = any(s.kind == "rotate" for s in rec.segments)
-    span = args.span
-    if span == "auto":
-        span = "longest-rest" if has_rot else "all"
-    if span == "longest-rest":
-        rests = [s for s in rec.segments if s.kind == "rest"]
-        if not rests:
-            raise InputError(
-                f"{rec.path} has no rest segment; record the sensor still, or pass --span all"
-            )
-        seg = max(rests, key=lambda s: s.duration)
-        sel = (t >= seg.t_start) & (t <= seg.t_end)
-        t, rate, temp = t[sel], rate[sel], temp[sel]
-        print(f"gyrocal: note: using rest segment {seg.index} ({seg.duration:.1f} s)",
-              file=sys.stderr)
-    if t.size < 64:
-        raise InputError(
-            f"{rec.path}: only {t.size} samples to analyse; an Allan deviation needs a still "
-            "record of many minutes"
-        )
-    dt = np.diff(t)
-    period = float(np.median(dt))
-    if not period > 0:
-        raise InputError(f"{rec.path}: sample times do not advance")
-    gaps = np.flatnonzero(dt > 1.5 * period)
-    if gaps.size:
-        i = int(gaps[0])
-        raise InputError(
-            f"{rec.path}: {gaps.size} gap(s) in the samples, the first {dt[i]:.4f} s long at "
-            f"t={t[i]:.3f} s (a FIFO overflow?); the Allan deviation needs uniform sampling: "
-            "record again, or cut the recording at the gap"
-        )
-    odr = 1.0 / period
-    manifest_odr = rec.sensor.get("odr_hz")
-    if isinstance(manifest_odr, (int, float)) and abs(manifest_odr - odr) > 0.01 * odr:
-        print(f"gyrocal: note: the samples arrive at {odr:.3f} Hz, the manifest says "
-              f"{manifest_odr} Hz; using the measured rate", file=sys.stderr)
-    meta = {"sensor": rec.sensor, "source": str(rec.path)}
-    ok = np.isfinite(temp)
-    if ok.any():
-        meta["temperature_c"] = float(np.mean(temp[ok]))
-    return rate, odr, meta, None
-
-
 def _from_sim(args: argparse.Namespace) -> tuple[np.ndarray, float, dict[str, Any], Any]:
     import numpy as np
 
@@ -190,10 +137,20 @@ def run(args: argparse.Namespace) -> int:
     refuse_existing((args.out, args.plot), force=args.force)
     if not args.sim:
         read_manifest(Path(args.recording))  # a bad path is said before any heavy import
-    rate, odr, meta, truth = _from_sim(args) if args.sim else _from_recording(args)
     from gyrocal.calib.allan import characterise_noise
+
+    if args.sim:
+        rate, odr, meta, truth = _from_sim(args)
+        nc = characterise_noise(rate, odr, min_tau_s=args.min_tau)
+    else:
+        from gyrocal.kit.still import open_still
+
+        truth = None
+        with open_still(args.recording, args.span) as still:  # streamed: bounded memory
+            odr, meta = still.odr_hz, still.meta
+            nc = characterise_noise(still.phase, odr, min_tau_s=args.min_tau)
     from gyrocal.calib.noise_sim import FLICKER_FLOOR
-    nc = characterise_noise(rate, odr, min_tau_s=args.min_tau)
+
     nc = nc.with_meta(created=now_iso(), **meta)
     doc = nc.to_dict()
     if args.out:

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         SimProtocol,
         draw_mount_axes,
         draw_sensors,
-        simulate_raw_run,
+        stream_raw_run,
     )
     from gyrocal.kit.recording import RecordingWriter
 
@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     k, b = draw_sensors(rng, 1)
     axes = draw_mount_axes(rng, 1)[0]
     proto = SimProtocol(speed=args.speed, turns=args.turns, odr_hz=args.odr, rest_s=args.rest)
-    runsim = simulate_raw_run(rng, k[0], b[0], axes, proto, args.noise,
+    runsim = stream_raw_run(rng, k[0], b[0], axes, proto, args.noise,
                               imu_clock_error=0.002, enc_rate_hz=200.0, enc_jitter_s=0.001)
     sensor = {"model": "simulated", "odr_hz": args.odr, "full_scale_dps": None,
               "sensitivity_rad_s_per_lsb": None}
@@ -72,10 +72,12 @@ def run(args: argparse.Namespace) -> int:
              "axes": {str(m): u.tolist() for m, u in zip(runsim.motor_ids, axes, strict=True)}}
     with RecordingWriter(args.out, sensor=sensor, gimbal=gimbal, protocol=protocol,
                          truth=truth, force=args.force) as w:
-        w.append_imu(runsim.imu_t, runsim.imu_rate, runsim.imu_temp)
-        w.append_encoder(runsim.enc_t, runsim.enc_motor, runsim.enc_angle)
+        for chunk in runsim.imu_chunks():  # written as generated: bounded memory
+            w.append_imu(*chunk)
+        for chunk in runsim.encoder_chunks():
+            w.append_encoder(*chunk)
         for seg in runsim.segments:
             w.append_segment(seg)
         w.finish()
-    print(f"wrote {args.out}: {runsim.imu_t.size} gyro samples, {len(runsim.segments)} segments")
+    print(f"wrote {args.out}: {runsim.n_imu} gyro samples, {len(runsim.segments)} segments")
     return 0

@@ -210,3 +210,55 @@ def test_a_record_too_short_for_three_terms_is_refused_saying_how_much_is_needed
         characterise_noise(rng.normal(size=(121, 3)) * 1e-3, ODR)
     nc = characterise_noise(rng.normal(size=(4000, 3)) * 1e-3, ODR)  # just enough: it runs
     assert all(v > 0 for v in nc.noise_density.value)
+
+
+def _phase_record(rate, odr, chunk):
+    """A PhaseRecord over phase points built block by block with phase_blocks (as the kit
+    builds its spill file), read back through a function so the computation never sees the
+    whole array at once."""
+    from gyrocal.calib.allan import PhaseRecord, phase_blocks
+
+    blocks = (rate[i:i + chunk] for i in range(0, rate.shape[0], chunk))
+    x = np.concatenate([np.zeros((1, rate.shape[1])), *phase_blocks(blocks, odr)])
+    reads = []
+
+    def read(start, stop):
+        reads.append(stop - start)
+        return x[start:stop].copy()
+
+    return PhaseRecord(rate.shape[0], read), x, reads
+
+
+@pytest.mark.parametrize("chunk", [1, 777, 10**6])
+def test_phase_blocks_equal_one_cumsum_bit_for_bit(chunk):
+    rate = np.random.default_rng(3).normal(0.01, 0.02, size=(5000, 3))
+    _, x, _ = _phase_record(rate, 200.0, chunk)
+    tau0 = 1.0 / 200.0
+    for j in range(3):
+        assert np.array_equal(x[1:, j], np.cumsum(rate[:, j]) * tau0)
+
+
+def test_blocked_allan_deviation_equals_the_in_memory_one_and_allantools():
+    allantools = pytest.importorskip("allantools")
+    odr = 100.0
+    s = simulate_still(np.random.default_rng(11), 300.0, odr_hz=odr,
+                       model=NoiseModel(1e-3, 1e-4, 2e-5))
+    rec, _, reads = _phase_record(s.rate, odr, 4096)
+    block = allan_deviation(rec, odr)
+    from gyrocal.calib.allan import overlapping_avar_blocks
+
+    small = overlapping_avar_blocks(rec, odr, block.m, block=1000)
+    whole = allan_deviation(s.rate, odr)
+    assert np.array_equal(block.m, whole.m) and np.array_equal(block.edf, whole.edf)
+    np.testing.assert_allclose(block.adev, whole.adev, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(np.sqrt(small), whole.adev, rtol=1e-12, atol=0)
+    assert max(reads) <= 1 << 16  # never the whole record at once
+    _, ad, _, _ = allantools.oadev(s.rate[:, 1], rate=odr, data_type="freq",
+                                   taus=whole.tau_s)
+    np.testing.assert_allclose(block.adev[:, 1], ad, rtol=1e-9)
+    nc_block = characterise_noise(rec, odr)
+    nc_whole = characterise_noise(s.rate, odr)
+    np.testing.assert_allclose(nc_block.noise_density.value, nc_whole.noise_density.value,
+                               rtol=1e-10)
+    np.testing.assert_allclose(nc_block.rate_random_walk.value,
+                               nc_whole.rate_random_walk.value, rtol=1e-9)

@@ -69,3 +69,30 @@ def test_every_command_is_still_registered_in_full():
     assert list(sub.choices) == [name for name, _ in cli.COMMANDS]
     for name, p in sub.choices.items():
         assert callable(p.get_default("_run")), name
+
+
+STATS_PROBE = (
+    "import sys, io, contextlib\n"
+    "from gyrocal.kit.cli import main\n"
+    "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
+    "    code = main(sys.argv[1:])\n"
+    "print(code, 'scipy.stats' in sys.modules, 'scipy.optimize' in sys.modules)\n"
+)
+
+
+def test_estimate_and_noise_do_not_import_scipy_stats(tmp_path):
+    """Only the chi-square tail is needed, which scipy.special has (issue 16: scipy.stats costs
+    seconds to import on a Pi); estimate's default method does not import scipy.optimize."""
+    rec = tmp_path / "rec"
+    from gyrocal.kit.cli import main
+
+    assert main(["simulate-recording", str(rec), "--turns", "1", "--rest", "2"]) == 0
+    for argv in (["estimate", str(rec)], ["noise", str(rec), "--span", "all", "--min-tau",
+                                            "0.005"]):
+        out = subprocess.run([sys.executable, "-c", STATS_PROBE, *argv], capture_output=True,
+                             text=True, timeout=120, check=True)
+        code, stats, optimize = out.stdout.split()
+        assert stats == "False", (argv, out.stdout)
+        if argv[0] == "estimate":  # the default method needs no optimiser
+            assert optimize == "False", out.stdout
+        assert code in ("0", "2"), (argv, out.stdout)

@@ -67,3 +67,47 @@ def test_gaps_are_refused_with_the_time(tmp_path, capsys):
 def test_needs_a_source(capsys):
     assert main(["noise"]) == 2
     assert "RECORDING or --sim" in capsys.readouterr().err
+
+
+def test_a_recording_is_streamed_with_the_figures_of_the_whole_array(tmp_path, capsys,
+                                                                     monkeypatch):
+    """noise reads the recording block by block into a phase file; its curve and figures equal
+    those of the whole record in memory (calib.allan on load_recording's arrays)."""
+    from gyrocal.calib.allan import characterise_noise
+    from gyrocal.kit import recording, still
+
+    model = NoiseModel(noise_density=2e-4, rate_random_walk=1e-5)
+    s = simulate_still(np.random.default_rng(8), 700.0, model=model)  # 140 000 samples
+    rec = write_session(tmp_path / "rec", s)
+    monkeypatch.setattr(recording, "BLOCK_BYTES", 1 << 16)  # many blocks
+    monkeypatch.setattr(still, "PERIOD_SAMPLES", 140_000)  # the median of every interval
+    assert main(["noise", str(rec), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    whole = recording.load_recording(rec)
+    odr = 1.0 / float(np.median(np.diff(whole.imu_t)))
+    ref = characterise_noise(whole.imu_rate, odr)
+    assert doc["n_samples"] == whole.imu_t.size and doc["odr_hz"] == odr
+    np.testing.assert_allclose(doc["allan"]["adev"], ref.adev, rtol=1e-12)
+    np.testing.assert_allclose(doc["noise_density"]["value"], ref.noise_density.value,
+                               rtol=1e-10)
+    assert doc["temperature_c"] == pytest.approx(float(np.mean(whole.imu_temp)), rel=1e-12)
+
+
+def test_a_gap_in_a_later_block_and_a_record_too_short_are_refused(tmp_path, capsys,
+                                                                   monkeypatch):
+    from gyrocal.kit import recording
+
+    monkeypatch.setattr(recording, "BLOCK_BYTES", 1 << 14)
+    s = simulate_still(np.random.default_rng(6), 120.0)
+    rec = write_session(tmp_path / "rec", s)
+    p = rec / "imu.csv"
+    lines = p.read_text().split("\n")
+    del lines[20001:20003]  # two samples lost at t = 100 s, far past the first block
+    p.write_text("\n".join(lines))
+    assert main(["noise", str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert "gap" in err and "t=99.99" in err and "Traceback" not in err
+    del lines[40:]
+    p.write_text("\n".join(lines) + "\n")
+    assert main(["noise", str(rec)]) == 2
+    assert "only 39 samples to analyse" in capsys.readouterr().err

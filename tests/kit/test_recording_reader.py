@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from gyrocal.kit import recording
+from gyrocal.kit.errors import InputError
 from gyrocal.kit.recording import RecordingError, iter_imu, load_recording
 
 MANIFEST = {"format": "gyrocal-recording", "version": 1, "created": "2026-01-01T00:00:00+00:00",
@@ -48,10 +49,19 @@ def write_rec(root, imu_lines, *, enc_lines=("0.0,1,0.0", "0.5,1,0.25"), eol="\n
     return root
 
 
-@pytest.fixture(params=[200, 1 << 22], ids=["tiny-blocks", "default-blocks"])
+@pytest.fixture(
+    params=[(200, "numpy"), (1 << 22, "numpy"), (200, "pandas"), (1 << 22, "pandas")],
+    ids=["tiny-blocks", "default-blocks", "tiny-blocks-pandas", "default-blocks-pandas"],
+)
 def block_bytes(request, monkeypatch):
-    monkeypatch.setattr(recording, "BLOCK_BYTES", request.param)
-    return request.param
+    """Every reader test on small and default blocks, through numpy's and (with the ``fast``
+    extra) pandas' C parser."""
+    size, parser = request.param
+    if parser == "pandas":
+        pytest.importorskip("pandas")
+    monkeypatch.setattr(recording, "BLOCK_BYTES", size)
+    monkeypatch.setenv("GYROCAL_CSV_PARSER", parser)
+    return size
 
 
 @pytest.mark.parametrize("eol", ["\n", "\r\n"])
@@ -232,3 +242,55 @@ def test_reader_memory_does_not_grow_with_rows_beyond_the_arrays(tmp_path, monke
         extra.append(peak - arrays)
         del rec
     assert extra[1] < 2e6 and extra[1] - extra[0] < 0.2e6, extra
+
+
+ODD_FIELDS = ["1_000", "0x10", " 1.5", "1.5 ", "+1", "1e5", "1.", ".", "-", "1d5", "1.5.3", "inf",
+              "-Infinity", "nan", "NaN", "NA", "null", "'1'", '"1"', "1e400", "1e-400", "\u0661",
+              "1.5\t", "", "#1", "1#"]
+
+
+@pytest.mark.parametrize("parser", ["numpy", "pandas"])
+@pytest.mark.parametrize("column", [1, 4], ids=["gx", "temp"])
+@pytest.mark.parametrize("field", ODD_FIELDS)
+def test_a_fast_parser_accepts_exactly_what_python_float_accepts(tmp_path, monkeypatch, parser,
+                                                                column, field):
+    """The truth is the contract read with Python's float(): a field is a number if it is ASCII
+    (the files are) and float() of it, stripped, is finite; an empty or NaN field is allowed
+    only as the temperature."""
+    if parser == "pandas":
+        pytest.importorskip("pandas")
+    monkeypatch.setenv("GYROCAL_CSV_PARSER", parser)
+    lines, *_ = make_rows(20, empty_temp_every=1000)
+    row = lines[10].split(",")
+    row[column] = field
+    lines[10] = ",".join(row)
+    write_rec(tmp_path / "r", lines)
+    try:
+        v = float(field.strip()) if field.strip() else float("nan")
+        ok = field.isascii() and (np.isfinite(v) or (column == 4 and np.isnan(v)))
+    except ValueError:
+        ok = False
+    if ok:
+        rec = load_recording(tmp_path / "r")
+        got = rec.imu_temp[10] if column == 4 else rec.imu_rate[10, 0]
+        np.testing.assert_array_equal(got, v)
+    else:
+        with pytest.raises(RecordingError, match=rf"imu.csv:12: field {column + 1} is"):
+            load_recording(tmp_path / "r")
+
+
+def test_the_parser_choice(monkeypatch):
+    """auto: numpy for small files (no pandas import), pandas for large ones when installed."""
+    import importlib.util
+
+    monkeypatch.delenv("GYROCAL_CSV_PARSER", raising=False)
+    assert recording._choose_parser(100) is recording._numpy_parse
+    have_pandas = importlib.util.find_spec("pandas") is not None
+    big = recording._choose_parser(recording.FAST_MIN_BYTES)
+    assert big is (recording._pandas_parse if have_pandas else recording._numpy_parse)
+    monkeypatch.setenv("GYROCAL_CSV_PARSER", "numpy")
+    assert recording._choose_parser(1 << 40) is recording._numpy_parse
+    monkeypatch.setenv("GYROCAL_CSV_PARSER", "fastest")
+    with pytest.raises(InputError,
+                       match="GYROCAL_CSV_PARSER is 'fastest'; use auto, numpy or pandas"):
+        recording._choose_parser(1)
