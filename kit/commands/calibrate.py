@@ -367,7 +367,7 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 jig.gimbal, jig.imu, writer, jig.clock, steps,
                 sample_hz=cfg["gimbal"]["sample_hz"],
                 on_progress=None if quiet else progress.update,
-                on_event=(lambda line: None) if quiet else progress.event,
+                on_event=None if quiet else progress.event,
             )
             for f in jig.arm_faults():
                 if not quiet:
@@ -378,7 +378,7 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 # against the Bus Watchdog that would have stopped it (hardware reference §5).
                 timing = {"worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
                           "bus_watchdog_s": jig.gimbal.watchdog_s}
-                writer.update_manifest(protocol={**protocol, **timing})
+                writer.update_manifest(protocol={**writer.manifest["protocol"], **timing})
                 if not quiet:
                     progress.event(f"servo link: worst poll interval during motion "
                                    f"{timing['worst_poll_interval_s'] * 1e3:.0f} ms (Bus "
