@@ -211,5 +211,7 @@ def test_a_slow_disk_does_not_delay_the_servo_polls(tmp_path, monkeypatch):
     assert jig.gimbal.worst_poll_interval_s < 0.15
     assert all(d["check"] == "poll-gap" for d in runner.discarded)
     r = load_recording(rec)
-    assert [s.kind for s in r.segments] == ["rest", "rotate"]
+    kinds = [s.kind for s in r.segments]  # a repeat adds a settling rest before the turn
+    assert kinds[-1] == "rotate" and kinds.count("rotate") == 1 and set(kinds) == {"rest",
+                                                                                  "rotate"}
     assert r.enc_t.size > 100
