@@ -314,7 +314,7 @@ class Gimbal:
         clock: Clock | None = None,
         max_turns: float = 3.0,
         acceleration: float = 3.0,
-        watchdog_s: float = 0.1,
+        watchdog_s: float = 0.3,
         retries: int = 3,
         sample_layout: str = "motion",
         fast_sync_read: bool = False,

@@ -138,9 +138,9 @@ def _servos(tmp_path: Path) -> dict:
 
 
 def test_a_turn_disturbed_by_a_host_stall_is_repeated_and_never_fitted(tmp_path, capsys):
-    # Servo 1's first turn runs 0.4..~2.5 s; the host stalls 70 ms at 1.5 s (no poll, no
-    # drain): more than half the 100 ms Bus Watchdog, less than all of it.
-    assert _calibrate(tmp_path, "--sim-fault", "pause:1.5:0.07") == 0
+    # Servo 1's first turn runs 0.4..~2.5 s; the host stalls 200 ms at 1.5 s (no poll, no
+    # drain): more than half the default 300 ms Bus Watchdog, less than all of it.
+    assert _calibrate(tmp_path, "--sim-fault", "pause:1.5:0.2") == 0
     cal = json.loads(capsys.readouterr().out)
     rec = load_recording(tmp_path / "out" / "recording")
     discarded = rec.manifest["protocol"]["discarded"]
@@ -157,9 +157,9 @@ def test_a_turn_disturbed_by_a_host_stall_is_repeated_and_never_fitted(tmp_path,
 
 
 def test_a_stall_past_the_bus_watchdog_stops_the_servo_by_itself(tmp_path, capsys):
-    # 150 ms without a packet: the emulated servo's own watchdog stops it (exit 4), and the
-    # kit still leaves torque off.
-    assert _calibrate(tmp_path, "--sim-fault", "pause:1.5:0.15") == 4
+    # 400 ms without a packet: the emulated servo's own watchdog (300 ms) stops it (exit 4),
+    # and the kit still leaves torque off.
+    assert _calibrate(tmp_path, "--sim-fault", "pause:1.5:0.4") == 4
     assert "Bus Watchdog expired" in capsys.readouterr().err
     assert all(s["torque_enable"] == 0 for s in _servos(tmp_path).values())
 
@@ -174,9 +174,9 @@ def test_a_pause_fault_is_refused_on_the_wall_clock_or_out_of_range(tmp_path, ca
 
 
 def test_a_slow_disk_does_not_delay_the_servo_polls(tmp_path, monkeypatch):
-    # Wall clock (--sim --realtime): four encoder writes stall 150 ms each, past the whole Bus
-    # Watchdog. Inline, each poll would wait for it and the servo would stop itself; behind
-    # the queue the loop polls on time and the run ends cleanly.
+    # Wall clock (--sim --realtime): four encoder writes stall 400 ms each, past the whole Bus
+    # Watchdog (300 ms). Inline, a poll would wait for it and the servo would stop itself;
+    # behind the queue the loop polls on time and the run ends cleanly.
     from gyrocal.kit.recording import RecordingWriter
 
     slow = RecordingWriter.append_encoder
@@ -185,7 +185,7 @@ def test_a_slow_disk_does_not_delay_the_servo_polls(tmp_path, monkeypatch):
     def stalled(self, *a, **k):
         if len(stalls) < 4:
             stalls.append(1)
-            time.sleep(0.15)
+            time.sleep(0.4)
         return slow(self, *a, **k)
 
     monkeypatch.setattr(RecordingWriter, "append_encoder", stalled)
@@ -206,12 +206,22 @@ def test_a_slow_disk_does_not_delay_the_servo_polls(tmp_path, monkeypatch):
             w.finish()
     jig.close()
     assert len(stalls) == 4
-    # The 150 ms stalls never reached the loop (inline, every stalled write would have delayed
-    # a poll by 150 ms; CPU load alone may still cost some tens of ms).
-    assert jig.gimbal.worst_poll_interval_s < 0.15
+    # The 400 ms stalls never reached the loop (inline, every stalled write would have delayed
+    # a poll by 400 ms; CPU load alone may still cost some tens of ms).
+    assert jig.gimbal.worst_poll_interval_s < 0.3
     assert all(d["check"] == "poll-gap" for d in runner.discarded)
     r = load_recording(rec)
     kinds = [s.kind for s in r.segments]  # a repeat adds a settling rest before the turn
     assert kinds[-1] == "rotate" and kinds.count("rotate") == 1 and set(kinds) == {"rest",
                                                                                   "rotate"}
     assert r.enc_t.size > 100
+
+
+def test_the_kit_and_the_driver_default_to_the_same_bus_watchdog():
+    import inspect
+
+    from gyrocal.drivers.dynamixel import Gimbal
+    from gyrocal.kit.config import default_config
+
+    assert default_config()["gimbal"]["watchdog_s"] == (
+        inspect.signature(Gimbal).parameters["watchdog_s"].default)
