@@ -10,7 +10,11 @@ emulated servos on a pseudo-terminal (:mod:`bench.signal_rig`). Two worst gaps a
   watchdog measures: a gap longer than it stops the servo (exit 4).
 
 Loads: none of ours (the host's own load average is printed), and two CPU-bound processes
-beside it. Repeats of disturbed turns are counted from the manifests' ``protocol.discarded``.
+beside it. The emulated servos serve from this process at 10 nice levels above the kit and the
+hogs (when allowed): a real servo answers from its own MCU, so only the kit's lateness may fail a
+run (without the head start, a starved emulator missed the SDK's reply timeout: exit 4, "There is
+no status packet!"). Repeats of disturbed turns are counted from the manifests'
+``protocol.discarded``.
 
 Usage: ``python -m bench servo_link [--runs=N] [--watchdog=S]`` (default 20 per load, the
 configured default watchdog).
@@ -31,7 +35,8 @@ from bench.signal_rig import ServoRig, write_config
 from bench.table import print_table
 
 
-def _burn(stop) -> None:  # a CPU-bound process
+def _burn(stop, niceness: int) -> None:  # a CPU-bound process, at the kit's niceness
+    os.setpriority(os.PRIO_PROCESS, 0, niceness)
     x = 0
     while not stop.is_set():
         for _ in range(100_000):
@@ -45,13 +50,26 @@ def main(argv: list[str]) -> None:
             runs = int(a.split("=", 1)[1])
         elif a.startswith("--watchdog="):
             watchdog_s = float(a.split("=", 1)[1])
-    rows = []
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    try:  # needs the privilege to lower niceness; without it the servos share the host's lot
+        os.setpriority(os.PRIO_PROCESS, 0, base - 10)
+        head_start = 10
+    except PermissionError:
+        head_start = 0
+        print("note: cannot raise the emulated servos' priority; their lateness under load "
+              "counts against the kit")
+    rows: list[list[str]] = []
+    failures: list[list[str]] = []
     for hogs in (0, 2):
         stop = mp.Event()
-        procs = [mp.Process(target=_burn, args=(stop,), daemon=True) for _ in range(hogs)]
+        procs = [mp.Process(target=_burn, args=(stop, base), daemon=True) for _ in range(hogs)]
         for p in procs:
             p.start()
-        rig = ServoRig(ids=(1, 2))
+        # The emulated servos serve from this process; a real servo has its own MCU, which
+        # host load cannot starve. Give the servos' process a head start of 10 nice levels
+        # over the kit and the hogs (which share the default), so that a run fails only for
+        # the kit's own lateness, not because the emulated servo answered late.
+        rig = ServoRig(ids=(1, 2), kit_niceness=head_start)
         tmp = Path(tempfile.mkdtemp(prefix="gyrocal-link-"))
         cfg = write_config(tmp / "gyrocal.toml", rig.path, ids=rig.ids)
         if watchdog_s is not None:
@@ -65,6 +83,10 @@ def main(argv: list[str]) -> None:
                 o = rig.run(cfg, tmp / f"run{k}", [], timeout_s=120)
                 codes[o.returncode] = codes.get(o.returncode, 0) + 1
                 done += o.returncode == 0
+                if o.returncode != 0:  # what stopped it, for the table below
+                    why = [ln for ln in o.stderr.splitlines() if "error" in ln][-1:]
+                    failures.append([f"{hogs} CPU hogs", str(o.returncode),
+                                     (why[0] if why else o.stderr[-200:])[:160]])
                 servo_gaps.append(o.armed_gap_s)
                 m = tmp / f"run{k}" / "recording" / "manifest.json"
                 if m.exists():
@@ -88,3 +110,6 @@ def main(argv: list[str]) -> None:
                      f"{time.perf_counter() - t:.0f}"])
     print_table(["load", "loadavg", "completed", "exit codes", "repeats", "kit poll ms",
                  "servo gap ms", "median run's ms", "watchdog ms", "margin ms", "s"], rows)
+    if failures:
+        print()
+        print_table(["load", "exit", "message"], failures)

@@ -69,7 +69,11 @@ def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3)) -> Pat
 class ServoRig:
     """Emulated servos on a PTY that can signal a process at its K-th instruction packet."""
 
-    def __init__(self, ids: tuple[int, ...] = (1, 2, 3), seed: int = 0) -> None:
+    def __init__(self, ids: tuple[int, ...] = (1, 2, 3), seed: int = 0,
+                 kit_niceness: int = 0) -> None:
+        #: Run the kit this much nicer than the servos' process (``bench servo_link``: the
+        #: servos' own CPU must not starve with the host; real servos have their own MCU).
+        self.kit_niceness = int(kit_niceness)
         self.ids = tuple(ids)
         self.bus = make_servo_bus(SystemClock(), self.ids, "XM430-W350", seed, baudrate=BAUD)
         self._handle = self.bus.handle
@@ -154,8 +158,10 @@ class ServoRig:
         self._plan = sorted(plan)
         cmd = [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu", "--config",
                str(config), "--out", str(out), "--quiet", *extra]
+        nice = os.getpriority(os.PRIO_PROCESS, 0) + self.kit_niceness
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True)
+                                text=True, preexec_fn=lambda: os.setpriority(
+                                    os.PRIO_PROCESS, 0, nice) if self.kit_niceness else None)
         self._pid = proc.pid
         try:
             _, err = proc.communicate(timeout=timeout_s)

@@ -124,7 +124,7 @@ class _StepData:
         self.imu_rate: list[np.ndarray] = []
         self.saturated = 0
         self.gaps: list[Any] = []
-        self.max_poll_gap = 0.0  # longest interval between two servo polls, s (host clock)
+        self.max_poll_gap = 0.0  # longest gap the servos went without a packet in motion, s
         self.enc_t: list[float] = []
         self.enc_angles: list[np.ndarray] = []
 
@@ -217,7 +217,6 @@ class Runner:
             on_status=on_progress)
         #: Failed attempts of steps (never segments): one manifest entry each.
         self.discarded: list[dict[str, Any]] = []
-        self._last_poll_t0: float | None = None
         self.ids = tuple(gimbal.ids)
         self.t0 = 0.0
         self.step_index = 0
@@ -257,9 +256,8 @@ class Runner:
         if batch.gaps and d is not None:
             d.gaps.extend(batch.gaps)
         s = self.gimbal.poll()
-        if self._last_poll_t0 is not None and d is not None:
-            d.max_poll_gap = max(d.max_poll_gap, s.t_start - self._last_poll_t0)
-        self._last_poll_t0 = s.t_start
+        if d is not None:
+            d.max_poll_gap = max(d.max_poll_gap, self.gimbal.last_poll_gap_s)
         ts = s.t - self.t0
         self.backlog.put_samples(imu_rows, (ts, list(s.ids), s.angles))
         for g in batch.gaps:

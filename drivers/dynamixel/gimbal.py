@@ -375,6 +375,8 @@ class Gimbal:
         #: The longest time between two polls while a motion ran (s): the margin to the Bus
         #: Watchdog (:attr:`watchdog_units` × 20 ms) that stops a servo whose host went silent.
         self.worst_poll_interval_s = 0.0
+        #: The time since the previous packet of the motion at the latest poll, s (0 at rest).
+        self.last_poll_gap_s = 0.0
         self.is_open = False
         self._tick_state: dict[int, tuple[int, float, float]] = {}
         self._group: GroupSyncRead | None = None
@@ -958,6 +960,7 @@ class Gimbal:
         now = self.clock.monotonic()
         gap = now - self._last_poll_t if self.busy and self._last_poll_t is not None else 0.0
         late = gap > self.watchdog_units * WATCHDOG_UNIT_S
+        self.last_poll_gap_s = gap
         self.worst_poll_interval_s = max(self.worst_poll_interval_s, gap)
         self._last_poll_t = now
         try:

@@ -328,7 +328,8 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
                 "acceleration": plan.accel,
                 "planned_jig_time_s": plan.jig_time_s,
                 "planning_noise_std": noise_std,
-                "sample_hz": cfg["gimbal"]["sample_hz"]}
+                "sample_hz": cfg["gimbal"]["sample_hz"],
+                "discarded": []}  # attempts repeated after a failed check (the runner's)
     truth = None
     if jig.sim is not None:
         truth = {**jig.sim.truth.manifest(),
