@@ -278,8 +278,10 @@ class Gimbal:
     acceleration : float
         Profile acceleration of every motion, rad/s².
     watchdog_s : float
-        Bus Watchdog armed while a servo moves, s (20 ms units, 0.02..2.54 s). Poll at least
-        this often while a motion runs.
+        Bus Watchdog armed while a servo moves, s (20 ms units, 0.02..2.54 s; e-Manual,
+        X-series Bus Watchdog (98)). Poll at least this often while a motion runs. The default
+        0.3 s is the kit's ``gimbal.watchdog_s``, chosen from ``bench servo_link``
+        (hardware_docs/running.md, "The servo link under load").
     retries : int
         Extra attempts of a failed transaction before it is raised.
     sample_layout : str
