@@ -17,6 +17,7 @@ Usage: ``python -m bench faults [--quick]`` (``--quick``: 12 signal cases, 40 in
 
 from __future__ import annotations
 
+import os
 import signal
 import tempfile
 import time
@@ -29,7 +30,7 @@ from bench.fuzz_inputs import copy_tree, damage, run_command
 from bench.signal_rig import SIGNALS, ServoRig, write_config
 from bench.table import print_table
 
-MOMENTS = (1, 2, 3, 5, 8, 12, 16, 20, 25, 30, 40, 55, 80, 120, 200, 350, 600)
+MOMENTS = (1, 2, 3, 5, 8, 12, 16, 20, 25, 30, 40, 55, 80, 120, 200, 350, 600, 900, 1200)
 
 
 def signal_matrix(quick: bool) -> Counter:
@@ -132,8 +133,10 @@ def main(argv: list[str]) -> None:
     print_table(["inputs", "runs", "ok", "refused", "silent wrong", "traceback", "hang", "s"],
                 rows)
     t = time.perf_counter()
+    load = os.getloadavg()[0]
     s = signal_matrix(quick)
-    print()
+    print(f"\nsignals: host load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at "
+          f"the end ({os.cpu_count()} CPUs)")
     keys = ["cases", "aborts", "torque left on", "no message", "traceback", "hang"]
     print_table(keys + ["s"], [[s[k] for k in keys] + [f"{time.perf_counter() - t:.0f}"]])
     other = sorted(k for k in s if k.startswith(("ended before", "other exit")))

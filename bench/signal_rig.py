@@ -43,6 +43,9 @@ class Outcome:
     packets: int  # instruction packets the servos received in all
     torque: dict[int, int | None] = field(default_factory=dict)  # read back; None: no answer
     fired: bool = False  # the signal was sent (the run reached the moment)
+    #: The longest time between two instruction packets arriving while a servo's Bus Watchdog
+    #: was armed, s, as the servos saw it (what their watchdog measures).
+    armed_gap_s: float = 0.0
 
     @property
     def torque_left_on(self) -> bool:
@@ -66,7 +69,11 @@ def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3)) -> Pat
 class ServoRig:
     """Emulated servos on a PTY that can signal a process at its K-th instruction packet."""
 
-    def __init__(self, ids: tuple[int, ...] = (1, 2, 3), seed: int = 0) -> None:
+    def __init__(self, ids: tuple[int, ...] = (1, 2, 3), seed: int = 0,
+                 kit_niceness: int = 0) -> None:
+        #: Run the kit this much nicer than the servos' process (``bench servo_link``: the
+        #: servos' own CPU must not starve with the host; real servos have their own MCU).
+        self.kit_niceness = int(kit_niceness)
         self.ids = tuple(ids)
         self.bus = make_servo_bus(SystemClock(), self.ids, "XM430-W350", seed, baudrate=BAUD)
         self._handle = self.bus.handle
@@ -74,6 +81,8 @@ class ServoRig:
         self.bridge = PtyServoBridge(self.bus)
         self.path = self.bridge.start()
         self.packets = 0
+        self.armed_gap_s = 0.0
+        self._armed_since: float | None = None
         self._plan: list[tuple[int, int, float]] = []  # (packet, signal, delay after it)
         self._pid: int | None = None
         self.fired = threading.Event()
@@ -84,6 +93,16 @@ class ServoRig:
 
     def _count(self, instr, baudrate=None):  # the bus's handle, counting
         self.packets += 1
+        now = time.monotonic()
+        if self._armed_since is not None:
+            self.armed_gap_s = max(self.armed_gap_s, now - self._armed_since)
+        try:
+            return self._serve(instr, baudrate)
+        finally:
+            armed = any(s.register("Bus Watchdog") > 0 for s in self.bus.servos)
+            self._armed_since = now if armed else None
+
+    def _serve(self, instr, baudrate):
         while self._plan and self.packets >= self._plan[0][0] and self._pid is not None:
             _, sig, delay = self._plan.pop(0)
             if delay > 0:
@@ -133,12 +152,16 @@ class ServoRig:
             run (counted from 1), after waiting ``delay`` s.
         """
         self.packets = 0
+        self.armed_gap_s = 0.0
+        self._armed_since = None
         self.fired.clear()
         self._plan = sorted(plan)
         cmd = [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu", "--config",
                str(config), "--out", str(out), "--quiet", *extra]
+        nice = os.getpriority(os.PRIO_PROCESS, 0) + self.kit_niceness
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True)
+                                text=True, preexec_fn=lambda: os.setpriority(
+                                    os.PRIO_PROCESS, 0, nice) if self.kit_niceness else None)
         self._pid = proc.pid
         try:
             _, err = proc.communicate(timeout=timeout_s)
@@ -150,7 +173,8 @@ class ServoRig:
         finally:
             self._pid = None
             self._plan = []
-        return Outcome(code, err, self.packets, self.read_torque(), self.fired.is_set())
+        gap = self.armed_gap_s
+        return Outcome(code, err, self.packets, self.read_torque(), self.fired.is_set(), gap)
 
 
 def expected_code(sig: int) -> int:

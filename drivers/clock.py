@@ -7,6 +7,7 @@ directly: it takes a :class:`Clock` and asks it.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Protocol, runtime_checkable
 
@@ -69,6 +70,7 @@ class VirtualClock:
 
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)
+        self._stalls: list[tuple[float, float]] = []
 
     def monotonic(self) -> float:
         """The current virtual time in seconds."""
@@ -86,8 +88,26 @@ class VirtualClock:
         if not seconds >= 0.0 or seconds == float("inf"):
             raise ValueError(f"sleep needs a finite, non-negative duration, got {seconds!r}")
         self._t += seconds
+        while self._stalls and self._stalls[0][0] <= self._t:
+            self._t += self._stalls.pop(0)[1]
 
     advance = sleep
+
+    def stall_at(self, t: float, seconds: float) -> None:
+        """Model a host that stops running for ``seconds`` at time ``t`` (a scheduler stall
+        under load): the first sleep that reaches ``t`` lasts ``seconds`` longer, so nothing
+        the process does (a servo poll, a FIFO drain) happens in between.
+
+        Raises
+        ------
+        ValueError
+            If ``seconds`` is negative or not finite, or ``t`` is not finite.
+        """
+        if not (math.isfinite(t) and math.isfinite(seconds) and seconds >= 0):
+            raise ValueError(f"stall_at needs a finite time and duration >= 0, got {t!r}, "
+                             f"{seconds!r}")
+        self._stalls.append((float(t), float(seconds)))
+        self._stalls.sort()
 
     def __repr__(self) -> str:
         return f"VirtualClock(t={self._t:.6f})"

@@ -122,6 +122,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                             (int, float), check=_within(0.5, 500)),
         "sample_hz": Key(200.0, "loop rate: IMU drains and servo sync reads per second (10..1000)",
                          (int, float), check=_within(10, 1000)),
+        "watchdog_s": Key(0.3, "Bus Watchdog armed while a servo moves: a servo that gets no "
+                          "packet this long stops by itself, s (0.02..2.54, 20 ms steps)",
+                          (int, float), check=_within(0.02, 2.54)),
     },
     "imu": {
         "model": Key("mpu9250", "sensor chip", str, IMU_MODELS),

@@ -30,7 +30,8 @@ EXIT_CODES: dict[int, str] = {
     3: "the calibration finished but is not consistent with the measured noise, or verify "
        "found its error beyond what its uncertainty predicts",
     4: "hardware or communication failure (I2C bus, servo bus, servo hardware alert)",
-    5: "a runtime check of the protocol failed twice (speed, saturation, FIFO gap, movement)",
+    5: "a runtime check of the protocol failed twice (speed, saturation, movement), or a step "
+       "was disturbed by host load four times in a row (FIFO gap, late servo polls)",
     6: "the estimation failed (too little data, no convergence)",
     129: "hung up (SIGHUP); servos stopped, torque off, recording (if begun) kept",
     130: "interrupted by Ctrl-C (SIGINT); servos stopped, torque off, recording (if begun) kept",
@@ -67,7 +68,7 @@ class HardwareError(GyrocalError):
 
 
 class ProtocolCheckError(GyrocalError):
-    """A runtime check of the protocol failed twice."""
+    """A runtime check of the protocol failed twice, or host load disturbed a step too often."""
 
     exit_code = 5
 

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any, TextIO
+from typing import TextIO
 
 import numpy as np
 
 from gyrocal.drivers.clock import SystemClock
+from gyrocal.kit.backlog import RunStatus
 
 __all__ = ["Progress"]
 
@@ -35,35 +36,36 @@ class Progress:
         self.interactive = stream.isatty() if interactive is None else bool(interactive)
         self._wall = SystemClock()
         self._last_draw = -1.0
-        self._runner: Any = None
+        self._t = 0.0
         self._width = 0
 
-    def _jig_time(self) -> float:
-        return 0.0 if self._runner is None else float(self._runner.now())
-
-    def event(self, line: str) -> None:
-        """A step boundary, a repeat or a warning."""
+    def event(self, line: str, t: float | None = None) -> None:
+        """A step boundary, a repeat or a warning, at jig time ``t`` (default: the last time
+        seen)."""
+        if t is not None:
+            self._t = float(t)
         if self.interactive:
             self.stream.write("\r" + " " * self._width + "\r")
-        self.stream.write(f"[{self._jig_time():6.1f} s] {line}\n")
+        self.stream.write(f"[{self._t:6.1f} s] {line}\n")
         self.stream.flush()
 
-    def update(self, runner: Any, batch: Any, sample: Any) -> None:
-        """Called by the runner after every loop iteration."""
-        self._runner = runner
+    def update(self, status: RunStatus) -> None:
+        """Redraw the status line from the runner's latest snapshot (from its consumer
+        thread, :mod:`gyrocal.kit.backlog`)."""
+        self._t = status.t
         if not self.interactive:
             return
         now = self._wall.monotonic()
         if now - self._last_draw < 0.1:
             return
         self._last_draw = now
-        t = runner.now()
-        rate = np.asarray(runner.last_rate, dtype=float)
+        t = status.t
+        rate = np.asarray(status.rate, dtype=float)
         line = (
-            f"step {runner.step_index + 1}/{len(runner.steps)} {runner.step_desc:<44.44} "
+            f"step {status.step_index + 1}/{status.n_steps} {status.step_desc:<44.44} "
             f"{t:5.1f}/{self.total_s:4.0f} s, {max(self.total_s - t, 0):4.1f} s left | gyro "
             f"[{rate[0]:+6.2f} {rate[1]:+6.2f} {rate[2]:+6.2f}] rad/s | servo "
-            f"{runner.last_speed:4.2f} rad/s"
+            f"{status.speed:4.2f} rad/s"
         )
         self._width = max(self._width, len(line))
         self.stream.write("\r" + line.ljust(self._width))

@@ -8,12 +8,20 @@ back). After each turn or rest the runner checks what it recorded:
 
 * a turn held its commanded speed (the encoder's median speed over its middle half);
 * the gyro did not saturate;
-* no FIFO gap fell inside the step;
-* the sensor did not move during a rest (gyro and encoders).
+* the sensor did not move during a rest (gyro and encoders);
+* the host kept the loop on time: no FIFO gap fell inside the step, and no gap between two
+  servo polls during a turn exceeded ``gap_limit_s`` (half the servos' Bus Watchdog by default).
 
-A failed check repeats the step once (a failed turn is first reversed, so the cables never wind
-past the plan's excursion); a second failure stops the run with a :class:`ProtocolCheckError`
-saying what to change.
+A step that fails the last check was *disturbed* by host load, not by the jig: it is repeated
+up to ``max_repeats`` times before the run stops. A step that fails one of the others is repeated
+once; a second failure stops the run with a :class:`ProtocolCheckError` saying what to change.
+A failed turn is first reversed, so the cables never wind past the plan's excursion. A failed
+attempt is never a segment of the recording (so it is never fitted); it is listed in the
+manifest's ``protocol.discarded`` with its times and the check that failed.
+
+The loop itself only drains the FIFO, polls the servos and steps the plan. Writing the recording
+and drawing progress run in a consumer thread behind a bounded queue (:mod:`gyrocal.kit.backlog`),
+so a slow disk or terminal cannot delay a servo poll.
 """
 
 from __future__ import annotations
@@ -29,8 +37,9 @@ import numpy as np
 from gyrocal.calib.design import Plan
 from gyrocal.calib.observations import diff_noise
 from gyrocal.calib.segments import Segment
-from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.clock import Clock, VirtualClock
 from gyrocal.drivers.errors import DriverError
+from gyrocal.kit.backlog import Backlog, RunStatus
 from gyrocal.kit.errors import ProtocolCheckError
 from gyrocal.kit.recording import RecordingWriter
 
@@ -98,11 +107,13 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
 
 @dataclass(frozen=True)
 class CheckFailure:
-    """A runtime check that failed, with what to change."""
+    """A runtime check that failed, with what to change; ``disturbed`` when the cause was the
+    host (a FIFO gap, a late servo poll), not the jig."""
 
     check: str
     step: int
     message: str
+    disturbed: bool = False
 
 
 class _StepData:
@@ -113,6 +124,7 @@ class _StepData:
         self.imu_rate: list[np.ndarray] = []
         self.saturated = 0
         self.gaps: list[Any] = []
+        self.max_poll_gap = 0.0  # longest gap the servos went without a packet in motion, s
         self.enc_t: list[float] = []
         self.enc_angles: list[np.ndarray] = []
 
@@ -142,13 +154,24 @@ class Runner:
     sample_hz : float
         Loop rate.
     on_progress : callable, optional
-        Called as ``on_progress(runner, batch_rate, sample)`` after every iteration.
+        Called as ``on_progress(status)`` with a :class:`~gyrocal.kit.backlog.RunStatus`, from
+        the consumer thread, at most once per queue drain.
     on_event : callable, optional
-        Called with a line of text at each step boundary and repeat.
+        Called as ``on_event(line, t)`` (``t`` the jig time) at each step boundary and repeat,
+        from the consumer thread.
     speed_fraction : float
         A turn must reach this fraction of its commanded speed.
     rest_guard_s : float
         Settling time at each end of a rest that the movement check skips.
+    max_repeats : int
+        How many times a step disturbed by host load is repeated before the run stops.
+    gap_limit_s : float or None
+        A gap between two servo polls during a turn longer than this marks the turn disturbed;
+        default half the gimbal's Bus Watchdog (``gimbal.watchdog_s``), which stops the servo
+        at the full period.
+    backlog_s : float
+        Loop iterations the recording and progress may fall behind, in seconds of loop time,
+        before the run stops with :class:`~gyrocal.kit.backlog.BacklogError`.
     """
 
     def __init__(
@@ -164,6 +187,9 @@ class Runner:
         on_event: Callable[[str], None] | None = None,
         speed_fraction: float = 0.95,
         rest_guard_s: float = 0.2,
+        max_repeats: int = 3,
+        gap_limit_s: float | None = None,
+        backlog_s: float = 5.0,
     ) -> None:
         self.gimbal = gimbal
         self.imu = imu
@@ -172,9 +198,25 @@ class Runner:
         self.steps = list(steps)
         self.period = 1.0 / float(sample_hz)
         self.on_progress = on_progress
-        self.on_event = on_event or (lambda line: None)
+        self.on_event = on_event
         self.speed_fraction = speed_fraction
         self.rest_guard_s = rest_guard_s
+        if int(max_repeats) < 0:
+            raise ValueError(f"max_repeats must be >= 0, got {max_repeats!r}")
+        self.max_repeats = int(max_repeats)
+        if gap_limit_s is None:
+            gap_limit_s = 0.5 * float(getattr(gimbal, "watchdog_s", 0.1))
+        if not (math.isfinite(gap_limit_s) and gap_limit_s > 0):
+            raise ValueError(f"gap_limit_s must be a positive number of s, got {gap_limit_s!r}")
+        self.gap_limit_s = float(gap_limit_s)
+        # The slow part (recording, progress) runs behind a bounded queue; on an emulated clock
+        # the loop waits for room rather than fail, as nothing there is due in wall time.
+        self.backlog = Backlog(
+            writer, capacity=math.ceil(backlog_s / self.period) + 256,
+            realtime=not isinstance(clock, VirtualClock), on_event=on_event,
+            on_status=on_progress)
+        #: Failed attempts of steps (never segments): one manifest entry each.
+        self.discarded: list[dict[str, Any]] = []
         self.ids = tuple(gimbal.ids)
         self.t0 = 0.0
         self.step_index = 0
@@ -195,33 +237,39 @@ class Runner:
         """Time on the recording clock, s."""
         return self.clock.monotonic() - self.t0
 
+    def _event(self, line: str) -> None:
+        """A line for the user, through the consumer thread (in order with the samples)."""
+        self.backlog.put_event(line, self.now())
+
     def _tick(self) -> None:
         batch = self.imu.read()
         d = self._data
+        imu_rows = None
         if len(batch):
             t = batch.t - self.t0
-            self.writer.append_imu(t, batch.rate, batch.temperature_c)
+            imu_rows = (t, batch.rate, batch.temperature_c)
             self.last_rate = batch.rate[-1]
             if d is not None:
                 d.imu_t.append(t)
                 d.imu_rate.append(batch.rate)
                 d.saturated += int(np.any(batch.saturated, axis=-1).sum())
-        if batch.gaps:
-            if d is not None:
-                d.gaps.extend(batch.gaps)
-            for g in batch.gaps:
-                self.on_event(f"lost {g.samples} gyro samples at {g.t - self.t0:.2f} s "
-                              f"({g.reason})")
+        if batch.gaps and d is not None:
+            d.gaps.extend(batch.gaps)
         s = self.gimbal.poll()
+        if d is not None:
+            d.max_poll_gap = max(d.max_poll_gap, self.gimbal.last_poll_gap_s)
         ts = s.t - self.t0
-        self.writer.append_encoder(ts, list(s.ids), s.angles)
+        self.backlog.put_samples(imu_rows, (ts, list(s.ids), s.angles))
+        for g in batch.gaps:
+            self._event(f"lost {g.samples} gyro samples at {g.t - self.t0:.2f} s ({g.reason})")
         if d is not None:
             d.enc_t.append(ts)
             d.enc_angles.append(np.asarray(s.angles, dtype=float))
         if s.velocities is not None:
             self.last_speed = float(np.max(np.abs(s.velocities)))
         if self.on_progress is not None:
-            self.on_progress(self, batch, s)
+            self.backlog.set_status(RunStatus(ts, self.step_index, len(self.steps),
+                                              self.step_desc, self.last_rate, self.last_speed))
         # Dither each period by up to ±half a period: drains then fall at random phases of the
         # chip's sample grid, as the reader's clock fit assumes. A loop locked to the output data
         # rate would creep through the phase over many seconds and bias the fitted sample period
@@ -253,7 +301,7 @@ class Runner:
         return start, self.now(), motion
 
     def _record(self, seg: Segment) -> None:
-        self.writer.append_segment(seg)
+        self.backlog.put_segment(seg)
         self._segments.append(seg)
 
     def _settle(self, turn: Step) -> None:
@@ -262,7 +310,7 @@ class Runner:
         rest = Step("rest", rest_s=max(self._rest_s, 0.3))
         self._data = _StepData()
         t_start, t_end = self._run_rest(rest)
-        if self._check_rest(rest, self._data) is None:
+        if (self._check_disturbed(rest, self._data) or self._check_rest(rest, self._data)) is None:
             self._record(Segment(len(self._segments), "rest", None, 0, 0.0, t_start, t_end))
 
     def _reposition(self, step: Step) -> None:
@@ -272,6 +320,28 @@ class Runner:
             self._tick()
 
     # ------------------------------------------------------------------ checks
+    def _check_disturbed(self, step: Step, d: _StepData) -> CheckFailure | None:
+        """The host's part: gyro samples lost from the FIFO, or (in a turn or move) a gap
+        between two servo polls beyond :attr:`gap_limit_s`. Either leaves the step's data with
+        a hole the windows cannot be trusted across, though the jig did nothing wrong."""
+        if d.gaps:
+            lost = sum(g.samples for g in d.gaps)
+            return CheckFailure(
+                "fifo-gap", self.step_index,
+                f"{lost} gyro samples were lost during '{step.describe()}' (FIFO overflow): raise "
+                "gimbal.sample_hz, lower imu.odr_hz, use a faster I2C bus (400 kHz), or lower "
+                "the host's load", disturbed=True,
+            )
+        if step.kind != "rest" and d.max_poll_gap > self.gap_limit_s:
+            return CheckFailure(
+                "poll-gap", self.step_index,
+                f"the servos went {d.max_poll_gap * 1e3:.0f} ms without a poll during "
+                f"'{step.describe()}' (limit {self.gap_limit_s * 1e3:.0f} ms, half the Bus "
+                "Watchdog): the host is overloaded; stop other programs or lower "
+                "gimbal.sample_hz", disturbed=True,
+            )
+        return None
+
     def _check_turn(self, step: Step, motion: Any, d: _StepData) -> CheckFailure | None:
         it, ir, et, ea = d.arrays()
         if d.saturated:
@@ -279,13 +349,6 @@ class Runner:
                 "saturation", self.step_index,
                 f"the gyro saturated during '{step.describe()}' ({d.saturated} samples at full "
                 "scale): raise imu.range_dps or lower the speed (protocol.speed_dps)",
-            )
-        if d.gaps:
-            lost = sum(g.samples for g in d.gaps)
-            return CheckFailure(
-                "fifo-gap", self.step_index,
-                f"{lost} gyro samples were lost during '{step.describe()}' (FIFO overflow): raise "
-                "gimbal.sample_hz, lower imu.odr_hz, or use a faster I2C bus (400 kHz)",
             )
         j = self.ids.index(step.motor)
         reached = 0.0
@@ -311,12 +374,6 @@ class Runner:
 
     def _check_rest(self, step: Step, d: _StepData) -> CheckFailure | None:
         it, ir, et, ea = d.arrays()
-        if d.gaps:
-            return CheckFailure(
-                "fifo-gap", self.step_index,
-                "gyro samples were lost during a rest (FIFO overflow): raise gimbal.sample_hz or "
-                "lower imu.odr_hz",
-            )
         if et.size and ea.size and np.any(np.ptp(ea, axis=0) > 6 * 2 * np.pi / 4096):
             return CheckFailure(
                 "moved", self.step_index,
@@ -353,57 +410,112 @@ class Runner:
         return out
 
     # ------------------------------------------------------------------ run
+    def _discard(self, step: Step, t_start: float, t_end: float,
+                 failure: CheckFailure) -> None:
+        """List a failed attempt in the manifest's ``protocol.discarded`` (it is no segment)."""
+        self.discarded.append({
+            "step": failure.step, "kind": step.kind, "motor": step.motor,
+            "direction": step.direction, "t_start": t_start, "t_end": t_end,
+            "check": failure.check, "disturbed": failure.disturbed})
+        self.backlog.put_manifest(protocol={"discarded": list(self.discarded)})
+
+    def _run_step(self, step: Step) -> tuple[float, float, Any, CheckFailure | None]:
+        """One attempt at a step: ``(t_start, t_end, motion or None, failure or None)``."""
+        self._data = _StepData()
+        if step.kind == "rest":
+            t_start, t_end = self._run_rest(step)
+            return t_start, t_end, None, (self._check_disturbed(step, self._data)
+                                          or self._check_rest(step, self._data))
+        t_start, t_end, motion = self._run_turn(step)
+        failure = self._check_disturbed(step, self._data)
+        if step.kind == "move":
+            self._pose[step.motor] = step.angle  # the driver finished it on its goal, still
+        elif failure is None:
+            failure = self._check_turn(step, motion, self._data)
+        return t_start, t_end, motion, failure
+
+    def _segment(self, step: Step, t_start: float, t_end: float, motion: Any) -> Segment:
+        speed = float(motion.speed) if motion is not None else 0.0
+        direction = step.direction
+        if step.kind == "move":
+            direction = motion.direction or 1
+        elif step.kind == "rotate" and any(self._pose.values()):
+            self._posed.add(len(self._segments))
+        return Segment(len(self._segments), step.kind, step.motor, direction, speed, t_start,
+                       t_end)
+
+    def _do_step(self, i: int, step: Step) -> None:
+        """Run a step until it passes its checks: a disturbed attempt is repeated up to
+        :attr:`max_repeats` times, a failed one once."""
+        failed = disturbed = 0
+        while True:
+            self._event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}"
+                        + (" (repeat)" if failed + disturbed else ""))
+            t_start, t_end, motion, failure = self._run_step(step)
+            if failure is None:
+                self._record(self._segment(step, t_start, t_end, motion))
+                return
+            self._discard(step, t_start, t_end, failure)
+            if failure.disturbed:
+                disturbed += 1
+                if disturbed > self.max_repeats:
+                    raise ProtocolCheckError(
+                        f"{failure.message} (disturbed {disturbed} times in a row)")
+                self._event(f"disturbed by the host, repeating ({disturbed}/"
+                            f"{self.max_repeats}): {failure.message}")
+            else:
+                failed += 1
+                if failed == 2:
+                    raise ProtocolCheckError(f"{failure.message} (failed twice)")
+                self._event(f"check failed, repeating once: {failure.message}")
+            if step.kind == "rotate":
+                self._reposition(step)
+                self._settle(step)
+
     def run(self) -> None:
         """Carry out every step; the recording gets every sample and segment.
 
         Raises
         ------
         ProtocolCheckError
-            When a step fails its check twice.
+            When a step fails its check twice, or is disturbed more than
+            :attr:`max_repeats` times.
+        BacklogError
+            When the recording falls too far behind.
         """
         self.t0 = self.clock.monotonic()
         self._next = self.t0
+        self.backlog.start()
         self.imu.start()
         try:
             for i, step in enumerate(self.steps):
                 self.step_index = i
                 self.step_desc = step.describe()
-                for attempt in (1, 2):
-                    self._data = _StepData()
-                    self.on_event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}"
-                                  + (" (repeat)" if attempt == 2 else ""))
-                    motion = None
-                    if step.kind == "rest":
-                        t_start, t_end = self._run_rest(step)
-                        failure = self._check_rest(step, self._data)
-                    elif step.kind == "move":
-                        t_start, t_end, motion = self._run_turn(step)
-                        failure = None  # the driver finished it on its goal, still
-                        self._pose[step.motor] = step.angle
-                    else:
-                        t_start, t_end, motion = self._run_turn(step)
-                        failure = self._check_turn(step, motion, self._data)
-                    if failure is None:
-                        speed = float(motion.speed) if motion is not None else 0.0
-                        direction = step.direction
-                        if step.kind == "move":
-                            direction = motion.direction or 1  # type: ignore[union-attr]
-                        elif step.kind == "rotate" and any(self._pose.values()):
-                            self._posed.add(len(self._segments))
-                        self._record(Segment(len(self._segments), step.kind, step.motor,
-                                             direction, speed, t_start, t_end))
-                        break
-                    if attempt == 2:
-                        raise ProtocolCheckError(f"{failure.message} (failed twice)")
-                    self.on_event(f"check failed, repeating once: {failure.message}")
-                    if step.kind == "rotate":
-                        self._reposition(step)
-                        self._settle(step)
+                self._do_step(i, step)
             self._data = None
-        except BaseException:
+        except BaseException as exc:
+            self._abort(exc)
+            raise
+        self.imu.stop()
+        self.backlog.close()
+
+    def _abort(self, exc: BaseException) -> None:
+        """On the way out with ``exc``: stop the servos first (the queue may take a while),
+        then stop the IMU and write what the queue holds, within a bound."""
+        from gyrocal.drivers.signals import shielded
+
+        with shielded():
+            if getattr(self.gimbal, "is_open", False):
+                try:
+                    self.gimbal.stop()
+                except Exception as stop_exc:  # the gimbal's close tries again and reports it
+                    exc.add_note(f"The safe stop after this error failed too: {stop_exc}")
             # Stopping a failed IMU may fail too: that must not hide the error that stopped us.
             with contextlib.suppress(DriverError):
                 self.imu.stop()
-            raise
-        else:
-            self.imu.stop()
+            try:
+                if not self.backlog.close(timeout_s=5.0):
+                    exc.add_note("The recording's last rows could not be written within 5 s.")
+            except Exception as write_exc:
+                if write_exc is not exc:
+                    exc.add_note(f"Writing the recording failed too: {write_exc}")

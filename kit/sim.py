@@ -207,6 +207,8 @@ FAULTS: dict[str, tuple[str, str]] = {
     "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU) or slots (LSM): overflows"),
     "nack": ("PROBABILITY", "the IMU refuses I2C messages at random"),
     "imu-dead": ("AT", "the IMU stops answering"),
+    "pause": ("AT:SECONDS", "the host stalls for SECONDS at AT: no servo poll, no FIFO drain "
+              "(the emulated clock only)"),
 }
 
 
@@ -274,6 +276,14 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
         axis = np.array([1.0, 1.0, 1.0]) / math.sqrt(3.0)
         sim.jig.slip_at(at(0), axis * math.radians(deg), 0.05)
         return f"the mount slips by {deg:g}° at {num(0):g} s"
+    if kind == "pause":
+        if not hasattr(sim.clock, "stall_at"):
+            raise InputError(f"--sim-fault {spec!r}: a pause needs the emulated clock (drop "
+                             "--realtime)")
+        if not (math.isfinite(at(0)) and math.isfinite(num(1)) and 0 <= num(1) <= 60):
+            raise InputError(f"--sim-fault {spec!r}: AT must be finite and SECONDS in 0..60")
+        sim.clock.stall_at(at(0), num(1))
+        return f"the host stalls for {num(1):g} s at {num(0):g} s"
     chip = sim.chip
     if kind == "fifo":
         chip.faults.fifo_capacity = num(0, int)

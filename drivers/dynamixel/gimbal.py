@@ -278,8 +278,10 @@ class Gimbal:
     acceleration : float
         Profile acceleration of every motion, rad/s².
     watchdog_s : float
-        Bus Watchdog armed while a servo moves, s (20 ms units, 0.02..2.54 s). Poll at least
-        this often while a motion runs.
+        Bus Watchdog armed while a servo moves, s (20 ms units, 0.02..2.54 s; e-Manual,
+        X-series Bus Watchdog (98)). Poll at least this often while a motion runs. The default
+        0.3 s is the kit's ``gimbal.watchdog_s``, chosen from ``bench servo_link``
+        (hardware_docs/running.md, "The servo link under load").
     retries : int
         Extra attempts of a failed transaction before it is raised.
     sample_layout : str
@@ -314,7 +316,7 @@ class Gimbal:
         clock: Clock | None = None,
         max_turns: float = 3.0,
         acceleration: float = 3.0,
-        watchdog_s: float = 0.1,
+        watchdog_s: float = 0.3,
         retries: int = 3,
         sample_layout: str = "motion",
         fast_sync_read: bool = False,
@@ -375,6 +377,8 @@ class Gimbal:
         #: The longest time between two polls while a motion ran (s): the margin to the Bus
         #: Watchdog (:attr:`watchdog_units` × 20 ms) that stops a servo whose host went silent.
         self.worst_poll_interval_s = 0.0
+        #: The time since the previous packet of the motion at the latest poll, s (0 at rest).
+        self.last_poll_gap_s = 0.0
         self.is_open = False
         self._tick_state: dict[int, tuple[int, float, float]] = {}
         self._group: GroupSyncRead | None = None
@@ -958,6 +962,7 @@ class Gimbal:
         now = self.clock.monotonic()
         gap = now - self._last_poll_t if self.busy and self._last_poll_t is not None else 0.0
         late = gap > self.watchdog_units * WATCHDOG_UNIT_S
+        self.last_poll_gap_s = gap
         self.worst_poll_interval_s = max(self.worst_poll_interval_s, gap)
         self._last_poll_t = now
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.util
 import json
 import math
@@ -200,7 +201,8 @@ class Jig:
                             range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])
         note_rounded_odr(imu["odr_hz"], self.imu.info)
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
-                             max_turns=g["max_turns"], acceleration=g["acceleration"])
+                             max_turns=g["max_turns"], acceleration=g["acceleration"],
+                             watchdog_s=g["watchdog_s"])
 
     def arm_faults(self) -> list[str]:
         """Arm the ``--sim-fault`` knobs with their times counted from now (the recording's
@@ -329,7 +331,8 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
                 "acceleration": plan.accel,
                 "planned_jig_time_s": plan.jig_time_s,
                 "planning_noise_std": noise_std,
-                "sample_hz": cfg["gimbal"]["sample_hz"]}
+                "sample_hz": cfg["gimbal"]["sample_hz"],
+                "discarded": []}  # attempts repeated after a failed check (the runner's)
     truth = None
     if jig.sim is not None:
         truth = {**jig.sim.truth.manifest(),
@@ -370,24 +373,27 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 jig.gimbal, jig.imu, writer, jig.clock, steps,
                 sample_hz=cfg["gimbal"]["sample_hz"],
                 on_progress=None if quiet else progress.update,
-                on_event=(lambda line: None) if quiet else progress.event,
+                on_event=None if quiet else progress.event,
             )
             for f in jig.arm_faults():
                 if not quiet:
                     progress.event(f"fault armed: {f} (time in the recording)")
             try:
                 runner.run()
-                # The servo link's timing: the longest gap between polls while a servo moved,
-                # against the Bus Watchdog that would have stopped it (hardware reference §5).
-                timing = {"worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
-                          "bus_watchdog_s": jig.gimbal.watchdog_s}
-                writer.update_manifest(protocol={**protocol, **timing})
                 if not quiet:
                     progress.event(f"servo link: worst poll interval during motion "
-                                   f"{timing['worst_poll_interval_s'] * 1e3:.0f} ms (Bus "
-                                   f"Watchdog {timing['bus_watchdog_s'] * 1e3:.0f} ms)")
+                                   f"{jig.gimbal.worst_poll_interval_s * 1e3:.0f} ms (Bus "
+                                   f"Watchdog {jig.gimbal.watchdog_s * 1e3:.0f} ms)")
             finally:
                 progress.close()
+                # The servo link's timing, on a failed run too: the longest gap between polls
+                # while a servo moved, against the Bus Watchdog that would have stopped it
+                # (hardware reference §5). A failed write must not hide the run's own error.
+                with contextlib.suppress(OSError):
+                    writer.update_manifest(protocol={
+                        **writer.manifest["protocol"],
+                        "worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
+                        "bus_watchdog_s": jig.gimbal.watchdog_s})
             if jig.sim is not None:
                 # The true axis of each servo during its turns (the holding servos rest
                 # somewhere within their ticks, which tilts the axes slightly off the
