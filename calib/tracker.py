@@ -2,8 +2,9 @@
 
 Model
 -----
-The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, so a reading is
-``m = g ⊘ scale − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
+The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, or with the full model of a
+Calibration v2 ``g = A (m + b)`` (``A = diag(scale)`` for v1), so a reading is
+``m = A⁻¹ g − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
 ``b`` (Calibration v1 convention: added to the reading) is the state; optionally a linear
 temperature coefficient ``c`` joins it, ``b(T) = b_ref + c ∘ (T − T_ref)``:
 
@@ -17,12 +18,13 @@ Measurements
 ------------
 *Zero-rate*: while the sensor is still, ``m = −b(T) + v``. *Reference-rate*: while a servo of
 the jig turns at a known rate ``ω`` (from its encoder) about a known axis ``u`` (unit, sensor
-frame), ``m − ω u ⊘ scale = −b(T) + v``. Both have ``H = [−I]`` or ``[−I, −(T − T_ref) I]``.
+frame), ``m − A⁻¹ ω u = −b(T) + v``. Both have ``H = [−I]`` or ``[−I, −(T − T_ref) I]``.
 
 Consecutive samples of one kind are pooled into update windows of at most
 ``update_interval_s``: the window mean ``z̄`` with ``H̄`` at the mean temperature and
 ``R = σ²/n`` (plus, for reference windows, the variance the calibration's scale uncertainty,
-the axis uncertainty and the encoder resolution put on ``ω u ⊘ scale``). For a bias constant
+the axis uncertainty and the encoder resolution put on ``A⁻¹ ω u``, to first order in
+``d(A⁻¹) = −A⁻¹ dA A⁻¹``). For a bias constant
 over the window this is exactly the result of ``n`` sequential per-sample updates (the sum of
 ``n`` identical-H information terms), at a fraction of the cost; averaging readings and the
 encoder rate over the same window is also what makes a reference rate right (speed ripple
@@ -336,7 +338,7 @@ class TrackResult:
     bias_std : ndarray (n, 3)
         Its one-sigma uncertainty.
     corrected : ndarray (n, 3)
-        ``scale ∘ (m + bias)``.
+        ``A (m + bias)`` (``scale ∘ (m + bias)`` for a v1 calibration).
     still : ndarray (n,) of bool
         Still decision on each sample (False where not yet decided).
     decided : ndarray (n,) of bool
@@ -400,6 +402,8 @@ class BiasTracker:
         reference temperature.
     initial_bias, initial_bias_std : array_like (3,), optional
         The prior without a calibration (or overriding it), rad/s.
+    keep_states : bool
+        Keep the filtered state of every update (about 0.7 kB each) for :meth:`smoothed`.
 
     Attributes
     ----------
@@ -415,11 +419,12 @@ class BiasTracker:
         *,
         initial_bias: Any = None,
         initial_bias_std: Any = None,
+        keep_states: bool = False,
     ) -> None:
         if not isinstance(settings, TrackerSettings):
             raise CalibInputError("settings must be a TrackerSettings")
         if calibration is not None and not isinstance(calibration, GyroCalibration):
-            raise CalibInputError("calibration must be a GyroCalibration (Calibration v1)")
+            raise CalibInputError("calibration must be a GyroCalibration")
         self.settings = settings
         self.calibration = calibration
         if initial_bias is not None:
@@ -441,9 +446,16 @@ class BiasTracker:
         if calibration is not None:
             self.scale = np.asarray(calibration.scale)
             self.scale_std = np.asarray(calibration.scale_std)
+            # the model's matrix A (diag(scale) for v1), its inverse and entry uncertainties
+            self._A = calibration.full_matrix
+            a_std = calibration.matrix_std
+            self._A_std = np.diag(self.scale_std) if a_std is None else np.array(a_std)
         else:
             self.scale = np.ones(3)
             self.scale_std = np.full(3, np.nan)
+            self._A = np.eye(3)
+            self._A_std = np.diag(self.scale_std)
+        self._A_inv = np.linalg.inv(self._A)
 
         s = settings
         self._temp_model = bool(s.temperature_model)
@@ -485,7 +497,6 @@ class BiasTracker:
         self._buf_m: np.ndarray | None = None
         self._fed = False
         self._fx = np.asarray(kf.x, dtype=float).reshape(-1).copy()
-        self._fscale = self.scale.copy()
         self._temp_last = math.nan
         if s.t_ref_c is not None:
             self._t_ref: float | None = float(s.t_ref_c)
@@ -514,6 +525,11 @@ class BiasTracker:
         # bias, bias_std and time since the last update at the latest sample (the prior before)
         self._last: dict[str, Any] = {"bias": b0.astype(float), "bias_std": b0_std, "since": 0.0}
         self._last_decision: tuple[int, bool] | None = None
+        # keep_states: time, state, covariance and the process noise into each update
+        self._states: dict[str, list[Any]] | None = (
+            {"t": [], "x": [], "P": [], "Q": []} if keep_states else None
+        )
+        self._smooth_cache: tuple[int, tuple[np.ndarray, ...]] | None = None
 
     # ------------------------------------------------------------------ public state
     @property
@@ -598,7 +614,7 @@ class BiasTracker:
         reference_rate: float | None = None,
         reference_axis: Any = None,
     ) -> np.ndarray:
-        """Feed one reading; returns its corrected rate ``scale ∘ (m + bias)``, rad/s.
+        """Feed one reading; returns its corrected rate ``A (m + bias)``, rad/s.
 
         Parameters
         ----------
@@ -659,7 +675,7 @@ class BiasTracker:
         Returns
         -------
         ndarray (3,)
-            ``scale ∘ (m + bias)`` with the bias estimate at the end of the last processed
+            ``A (m + bias)`` with the bias estimate at the end of the last processed
             block (at this sample's temperature with the temperature model).
         """
         i = self._nbuf
@@ -679,9 +695,9 @@ class BiasTracker:
         self._nbuf = i + 1
         x = self._fx
         if self._temp_model and temperature is not None and self._t_ref is not None:
-            out = self._fscale * (m + x[:3] + x[3:] * (temperature - self._t_ref))
+            out = self._A @ (m + x[:3] + x[3:] * (temperature - self._t_ref))
         else:
-            out = self._fscale * (m + x[:3])
+            out = self._A @ (m + x[:3])
         if self._nbuf == self._buf_t.size:
             self.flush()
         return out
@@ -887,6 +903,7 @@ class BiasTracker:
             if self._k == 0:
                 self._t_state = float(t[0])
                 self._t_update = float(t[0])
+                self._keep_state(np.zeros((self._dim, self._dim)))
             if self._t_ref is None and np.isfinite(temp[0]):
                 self._t_ref = float(temp[0])
         det = self.detector
@@ -994,11 +1011,11 @@ class BiasTracker:
             snaps.append(self._snapshot(close))
 
         ra = S["ra"][:n_dec]
-        # z_i: the reading, less the reference's ω u ⊘ scale where a servo turns
+        # z_i: the reading, less the reference's A⁻¹ ω u where a servo turns
         z = S["m"][:n_dec].copy()
         is_ref = kind == _KIND_REF
         if is_ref.any():
-            z[is_ref] -= S["rr"][:n_dec][is_ref, None] * ra[is_ref] / self.scale[None, :]
+            z[is_ref] -= (S["rr"][:n_dec][is_ref, None] * ra[is_ref]) @ self._A_inv.T
         # run starts: kind changes, or a different servo axis within reference samples
         new_run = np.ones(n_dec, dtype=bool)
         if n_dec > 1:
@@ -1101,13 +1118,15 @@ class BiasTracker:
         if w.kind == _KIND_REF:
             omega = w.sum_omega / n
             u = np.asarray(w.axis)
-            g = omega * u / self.scale  # the reference's contribution ω u ⊘ scale
+            g = self._A_inv @ (omega * u)  # the reference's contribution A⁻¹ ω u
             dur = n / s.odr_hz
+            ai2 = self._A_inv**2
+            # first order: d(A⁻¹) = −A⁻¹ dA A⁻¹, entries of A independent
             R = (
                 R
-                + g**2 * (self.scale_std / self.scale) ** 2
-                + (omega * s.reference_axis_std / self.scale) ** 2
-                + (math.sqrt(2.0) * s.reference_angle_std / dur * u / self.scale) ** 2
+                + ai2 @ self._A_std**2 @ g**2
+                + (omega * s.reference_axis_std) ** 2 * ai2.sum(axis=1)
+                + (math.sqrt(2.0) * s.reference_angle_std / dur * (self._A_inv @ u)) ** 2
             )
         dt = max(w.t_last - self._t_state, 0.0)
         if self._temp_model:
@@ -1143,6 +1162,7 @@ class BiasTracker:
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
+        self._keep_state(kf.Q)
         log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
@@ -1152,6 +1172,118 @@ class BiasTracker:
         log["nis_bound"].append(bound)
         log["alarm"].append(alarm)
         log["at"].append(close)
+
+    def _keep_state(self, Q: np.ndarray) -> None:
+        """Store the state after an update (and the process noise its prediction added)."""
+        if self._states is None:
+            return
+        st = self._states
+        st["t"].append(self._t_state)
+        st["x"].append(np.asarray(self.kf.x, dtype=float).reshape(-1).copy())
+        st["P"].append(np.asarray(self.kf.P, dtype=float).copy())
+        st["Q"].append(np.asarray(Q, dtype=float).copy())
+
+    def _smoother_states(self) -> tuple[np.ndarray, ...]:
+        """Per kept update: time, filtered state and covariance, smoothed state and covariance,
+        the inverse of the next prediction's covariance, and the process-noise rate from each
+        update to the next (cached until a new update arrives)."""
+        from gyrocal.calib.kalman import rts_smooth
+
+        assert self._states is not None
+        st = self._states
+        N = len(st["t"])
+        if self._smooth_cache is not None and self._smooth_cache[0] == N:
+            return self._smooth_cache[1]
+        T = np.array(st["t"], dtype=float)
+        X = np.array(st["x"]).reshape(N, self._dim)
+        P = np.array(st["P"]).reshape(N, self._dim, self._dim)
+        Q_into = np.array(st["Q"]).reshape(N, self._dim, self._dim)
+        Q_next = np.concatenate([Q_into[1:], np.zeros((1, self._dim, self._dim))])
+        Xs, Ps, _ = rts_smooth(X, P, Q_next)
+        Pp = P + Q_next
+        Pp_inv = np.zeros_like(P)
+        Pp_inv[:-1] = np.linalg.inv(Pp[:-1])
+        dtk = np.diff(T)
+        rate = np.empty((N, self._dim))
+        rate[-1] = self._q
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate[:-1] = np.where(dtk[:, None] > 0,
+                                 np.diagonal(Q_next[:-1], axis1=1, axis2=2) / dtk[:, None], 0.0)
+        dx = np.zeros_like(X)
+        dx[:-1] = Xs[1:] - X[:-1]
+        dP = np.zeros_like(P)
+        dP[:-1] = Ps[1:] - Pp[:-1]
+        out = (T, X, P, Pp_inv, rate, dx, dP)
+        self._smooth_cache = (N, out)
+        return out
+
+    def smoothed(
+        self, t: Any, temperature: Any = None, *, chunk: int = 16384
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Fixed-interval smoothed bias and its one-sigma uncertainty at times ``t``.
+
+        The Rauch-Tung-Striebel smoother (:func:`gyrocal.calib.kalman.rts_smooth`) runs back
+        over the kept updates (``keep_states=True``); between two updates ``k`` and ``k + 1`` the
+        bias walks with no measurement, so a time ``τ`` after update ``k`` the filtered state is
+        ``x_k`` with ``P_k + q τ`` and one more smoother step towards update ``k + 1`` gives
+
+            C = (P_k + q τ)(P_k + Q_k)⁻¹,  x̂ = x_k + C (x̂_{k+1} − x_k),
+            P̂ = P_k + q τ + C (P̂_{k+1} − P_k − Q_k) Cᵀ
+
+        (after the last update, the filter's prediction). Every measurement of the session
+        informs every estimate: what a replay of a whole recording can use and a live stream
+        cannot. ``t`` may be given in pieces (``chunk`` samples are worked at a time).
+
+        Parameters
+        ----------
+        t : array_like (n,)
+            Times, s (those of the samples processed, or any others).
+        temperature : array_like (n,), optional
+            Die temperature at ``t``, °C (required with the temperature model).
+        chunk : int
+            Samples per vectorised step (bounds the working memory).
+
+        Returns
+        -------
+        bias, bias_std : ndarray (n, 3)
+        """
+        if self._states is None:
+            raise CalibInputError("smoothed() needs a tracker built with keep_states=True")
+        if not self._states["t"]:
+            raise CalibInputError("smoothed() needs processed samples")
+        t = np.asarray(t, dtype=float).reshape(-1)
+        if self._temp_model:
+            if temperature is None:
+                raise CalibInputError("the temperature model needs the temperature at t")
+            temp = np.asarray(temperature, dtype=float).reshape(-1)
+            if temp.shape != t.shape or not np.all(np.isfinite(temp)):
+                raise CalibInputError("temperature must be finite and match t")
+        T, X, P, Pp_inv, rate, dx, dP = self._smoother_states()
+        n = t.size
+        bias = np.empty((n, 3))
+        std = np.empty((n, 3))
+        t_ref = self._t_ref if self._t_ref is not None else 0.0
+        for a in range(0, n, max(1, int(chunk))):
+            sl = slice(a, min(a + chunk, n))
+            k = np.clip(np.searchsorted(T, t[sl], side="right") - 1, 0, T.size - 1)
+            tau = np.maximum(t[sl] - T[k], 0.0)
+            Pf = P[k].copy()
+            idx = np.arange(self._dim)
+            Pf[:, idx, idx] += rate[k] * tau[:, None]
+            C = Pf @ Pp_inv[k]
+            xs = X[k] + np.einsum("mij,mj->mi", C, dx[k])
+            Ps = Pf + C @ dP[k] @ np.swapaxes(C, 1, 2)
+            if self._temp_model:
+                dT = (temp[sl] - t_ref)[:, None]
+                i3 = np.arange(3)
+                bias[sl] = xs[:, :3] + xs[:, 3:] * dT
+                var = (Ps[:, i3, i3] + 2 * dT * Ps[:, i3, i3 + 3]
+                       + dT * dT * Ps[:, i3 + 3, i3 + 3])
+            else:
+                bias[sl] = xs
+                var = np.diagonal(Ps, axis1=1, axis2=2)
+            std[sl] = np.sqrt(np.maximum(var, 0.0))
+        return bias, std
 
     def _adapt_q(
         self, y: np.ndarray, s_diag: np.ndarray, hph: np.ndarray, R: np.ndarray, dt: float
@@ -1245,7 +1377,7 @@ class BiasTracker:
         return {
             "bias": bias,
             "bias_std": np.sqrt(np.maximum(var, 0.0)),
-            "corrected": self.scale[None, :] * (m + bias),
+            "corrected": (m + bias) @ self._A.T,
             "since": t - tu[j],
             "nis_ok": ok[j],
         }
