@@ -354,3 +354,22 @@ def test_setup_errors_are_named():
     tr.process([1.0], np.zeros((1, 3)))
     with pytest.raises(CalibInputError, match="not after"):
         tr.process([0.5], np.zeros((1, 3)))
+
+
+def test_smoothed_beats_the_filter_and_works_in_pieces():
+    s = simulate_session(np.random.default_rng(31), 240.0, model=MODEL)
+    cal = sim_calibration(np.random.default_rng(32), s)
+    tr = BiasTracker(settings(), cal, keep_states=True)
+    r = tr.process(s.t, s.rate, s.temperature_c, finish=True)
+    b, sd = tr.smoothed(s.t, s.temperature_c)
+    e_f = np.sqrt(np.mean((r.bias - s.true_bias) ** 2))
+    e_s = np.sqrt(np.mean((b - s.true_bias) ** 2))
+    assert e_s < 0.8 * e_f
+    assert np.mean(np.abs(b - s.true_bias) <= 3 * sd) > 0.99
+    b7, sd7 = tr.smoothed(s.t, s.temperature_c, chunk=997)
+    np.testing.assert_allclose(b7, b, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(sd7, sd, rtol=1e-12)
+    # after the last update the smoother is the filter
+    np.testing.assert_allclose(b[-1], r.bias[-1], atol=1e-12)
+    with pytest.raises(CalibInputError, match="keep_states"):
+        BiasTracker(settings(), cal).smoothed(s.t, s.temperature_c)
