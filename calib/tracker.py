@@ -67,15 +67,25 @@ older than the batch run's.
 
 Process noise from the data
 ---------------------------
-Without a given ``rate_random_walk`` the tracker estimates ``q = K²`` per axis from its own
-innovations as it goes: each update's ``y² − HPHᵀ − R`` observes ``q·Δt`` (``E[y²] = S``), and
-their mean weighted by the Fisher information ``Δt²/(2S²)`` is one scoring step of the
-maximum-likelihood estimate of ``q`` (covariance matching, Mehra 1970; Myers & Tapley 1976),
-forgotten exponentially over ``adapt_memory_s``, starting from ``rate_random_walk_prior`` worth
-one observation. The filter uses the estimate plus one standard error, so a young estimate errs
-wide. An unmodelled drift (a temperature coefficient left out) shows up here as a larger ``q``,
-so the band stays honest; with the temperature model the coefficient is a state, and
-:attr:`BiasTracker.tempco` with :attr:`BiasTracker.tempco_std` says whether it matters.
+Without a given ``rate_random_walk`` the tracker estimates ``q = K²`` per axis as it goes, by
+multiple-model adaptive estimation (Magill 1965; Bar-Shalom, Li & Kirubarajan §11.6): a bank of
+filters of the same model on a log grid of ``K`` (:class:`_QBank`, 10⁻⁷ to 3·10⁻³ rad/s/√s) sees
+every update window; each filter's innovation likelihood, forgotten over ``adapt_memory_s``,
+weighs its ``K`` (flat prior on ``log K``), and the tracker uses the posterior mean of ``q``
+plus its posterior standard deviation (the band must hold where few rests leave ``q`` loose).
+Every model's likelihood is computed with its own covariance, so the estimate is not biased by
+the ``q`` the tracker happens to run with (matching one filter's innovation covariance is: its
+``P`` is wrong exactly when its ``q`` is). An unmodelled drift (a temperature coefficient left
+out) shows up as a larger ``q``, so the band stays honest; with the temperature model the
+coefficient is a state, and :attr:`BiasTracker.tempco` with :attr:`BiasTracker.tempco_std`
+says whether it matters.
+
+Replay
+------
+With ``keep_states=True`` the tracker keeps every update's state, and :meth:`BiasTracker.smoothed`
+runs the Rauch-Tung-Striebel smoother back over them, so a replayed recording's estimate at each
+sample uses the whole session (live tracking cannot). No smoothing crosses an update where the
+health tests found a break (a bias step).
 
 Bias steps
 ----------
@@ -162,7 +172,7 @@ class TrackerSettings:
     still : StillSettings
         The still detector's tuning.
     rate_random_walk_prior : tuple of 3 float
-        Starting value of the estimated ``K`` (worth one observation), rad/s/√s.
+        The ``K`` used until the first update gives an estimate, rad/s/√s.
     adapt_memory_s : float
         Time constant of the exponential forgetting of the ``K`` estimate, s.
     cusum_k, cusum_h : float
@@ -389,6 +399,75 @@ class _Snapshot:
     nis_ok: bool
 
 
+class _QBank:
+    """The bias random walk from the data: a bank of filters over a grid of ``K`` (multiple-model
+    adaptive estimation, Magill 1965; Bar-Shalom et al. §11.6).
+
+    Each axis is its own model (the bias, and with the temperature model its coefficient), so
+    the bank is ``G`` grid values × 3 axes of one- or two-state scalar-measurement Kalman
+    filters fed the same update windows as the tracker. Each filter's innovation likelihood
+    ``ℓ = −½ (log S + y²/S)`` accumulates, forgotten exponentially over ``adapt_memory_s``;
+    with a flat prior on ``log K`` the posterior weight of grid value ``g`` is
+    ``∝ exp(Σ ℓ_g)``. The tracker uses the posterior mean of ``q = K²`` plus its posterior
+    standard deviation, so that its band also holds where the data pin ``q`` down poorly (rare
+    rests), while a well-observed ``q`` gets a narrow posterior and no margin to speak of.
+    Unlike matching the innovations' covariance of a single filter, the likelihood of each
+    model is computed with that model's own ``P``, so a wrong ``q`` in the tracker biases
+    nothing; a young bank spreads its weight over the grid, which errs towards a large ``q``
+    (a wide band) by itself.
+    """
+
+    #: Grid of K, rad/s/√s: consumer MEMS gyros lie within it with a decade to spare.
+    GRID = np.logspace(-7.0, -2.5, 28)
+
+    def __init__(self, b0: np.ndarray, b0_std: np.ndarray, s: TrackerSettings,
+                 c0: np.ndarray | None) -> None:
+        G = self.GRID.size
+        d = 1 if c0 is None else 2
+        self.qg = self.GRID**2
+        self.x = np.zeros((G, 3, d))
+        self.x[:, :, 0] = b0
+        self.P = np.zeros((G, 3, d, d))
+        self.P[:, :, 0, 0] = b0_std**2
+        if c0 is not None:
+            self.x[:, :, 1] = c0
+            self.P[:, :, 1, 1] = np.asarray(s.tempco_std) ** 2
+            self.qc = np.asarray(s.tempco_random_walk) ** 2
+        self.memory = s.adapt_memory_s
+        self.loglik = np.zeros((G, 3))
+        self.q = np.asarray(s.rate_random_walk_prior, dtype=float) ** 2
+        self.q_std = np.zeros(3)
+
+    def step(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float) -> np.ndarray:
+        """Predict by ``dt``, update every filter with window mean ``z`` (variance ``R``);
+        return the ``q`` per axis the tracker should use: the posterior mean plus the posterior
+        standard deviation."""
+        P = self.P
+        P[:, :, 0, 0] += self.qg[:, None] * dt
+        if dT is None:
+            h = np.array([-1.0])
+        else:
+            P[:, :, 1, 1] += self.qc[None, :] * dt
+            h = np.array([-1.0, -dT])
+        y = z[None, :] - self.x @ h
+        Ph = P @ h
+        S = Ph @ h + R[None, :]
+        K = Ph / S[..., None]
+        self.x += K * y[..., None]
+        self.P = P - K[..., :, None] * Ph[..., None, :]
+        lam = math.exp(-dt / self.memory) if dt > 0 else 1.0
+        self.loglik = lam * self.loglik - 0.5 * (np.log(S) + y * y / S)
+        w = np.exp(self.loglik - self.loglik.max(axis=0))
+        w /= w.sum(axis=0)
+        self.q = (w * self.qg[:, None]).sum(axis=0)
+        self.q_std = np.sqrt((w * (self.qg[:, None] - self.q) ** 2).sum(axis=0))
+        return self.q + self.q_std
+
+    def widen(self, extra: np.ndarray) -> None:
+        """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
+        self.P[:, :, 0, 0] += extra[None, :]
+
+
 class BiasTracker:
     """Kalman-filter tracker of a gyro's bias (see the module docstring for the equations).
 
@@ -471,12 +550,11 @@ class BiasTracker:
             kf.x = b0.astype(float).copy()
             kf.P = np.diag(b0_std**2)
             self._q = k_rw**2
-        # Process-noise estimate: information-weighted sums of the innovations' excess over
-        # their predicted variance, the prior worth one observation (B₀ = 1/(2 q₀²)).
-        q0 = np.asarray(s.rate_random_walk_prior) ** 2
-        self._qa = q0 * (0.5 / q0**2)
-        self._qb = 0.5 / q0**2
-        self._q_hat = q0.copy()
+        # Process-noise estimate: a bank of filters over a grid of K (see _QBank)
+        self._bank = (
+            _QBank(b0, b0_std, s, kf.x[3:] if self._temp_model else None) if self._adaptive
+            else None
+        )
         # CUSUM state per axis: upper and lower sums, and the innovations summed since each
         # last left zero (their mean sizes a detected shift).
         self._cu = np.zeros((2, 3))
@@ -527,7 +605,7 @@ class BiasTracker:
         self._last_decision: tuple[int, bool] | None = None
         # keep_states: time, state, covariance and the process noise into each update
         self._states: dict[str, list[Any]] | None = (
-            {"t": [], "x": [], "P": [], "Q": []} if keep_states else None
+            {"t": [], "x": [], "P": [], "Q": [], "break": []} if keep_states else None
         )
         self._smooth_cache: tuple[int, tuple[np.ndarray, ...]] | None = None
 
@@ -559,14 +637,15 @@ class BiasTracker:
 
     @property
     def rate_random_walk(self) -> np.ndarray:
-        """The bias random walk ``K`` the filter uses now, rad/s/√s (the estimate plus one
-        standard error when it is estimated)."""
+        """The bias random walk ``K`` the filter uses now, rad/s/√s (when estimated: from the
+        posterior mean of ``q = K²`` plus its posterior standard deviation)."""
         return np.sqrt(self._q[:3])
 
     @property
     def rate_random_walk_estimate(self) -> np.ndarray | None:
-        """The estimated ``K``, rad/s/√s (None when ``rate_random_walk`` was given)."""
-        return np.sqrt(self._q_hat) if self._adaptive else None
+        """The estimated ``K`` (from the posterior mean of ``q = K²``), rad/s/√s (None when
+        ``rate_random_walk`` was given)."""
+        return None if self._bank is None else np.sqrt(self._bank.q)
 
     @property
     def shifts(self) -> int:
@@ -1134,16 +1213,16 @@ class BiasTracker:
             kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
         else:
             kf.H = -np.eye(3)
-        hph = np.diag(kf.H @ kf.P @ kf.H.T).copy()  # before the prediction adds Q
         kf.Q = np.diag(self._q * dt)
         kf.predict()
         kf.R = np.diag(R)
         kf.update(zbar)
+        if self._bank is not None:
+            self._q[:3] = self._bank.step(zbar, R, -kf.H[0, 3] if self._temp_model else None,
+                                          dt)
         y = np.asarray(kf.y, dtype=float).reshape(-1)
         nis = float(y @ np.asarray(kf.SI) @ y)
         s_diag = np.diag(np.asarray(kf.S, dtype=float))
-        if self._adaptive:
-            self._adapt_q(y, s_diag, hph, R, dt)
         shift = self._cusum(y, s_diag)
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
@@ -1159,10 +1238,12 @@ class BiasTracker:
             if s.recover:
                 P = kf.P.copy()
                 P[np.arange(3), np.arange(3)] += y**2
+                if self._bank is not None:
+                    self._bank.widen(y**2)
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
-        self._keep_state(kf.Q)
+        self._keep_state(kf.Q, brk=bool(alarm and s.recover) or (shift and s.recover))
         log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
@@ -1173,8 +1254,9 @@ class BiasTracker:
         log["alarm"].append(alarm)
         log["at"].append(close)
 
-    def _keep_state(self, Q: np.ndarray) -> None:
-        """Store the state after an update (and the process noise its prediction added)."""
+    def _keep_state(self, Q: np.ndarray, brk: bool = False) -> None:
+        """Store the state after an update (and the process noise its prediction added); ``brk``:
+        the health tests found a break of the model (a bias step) at this update."""
         if self._states is None:
             return
         st = self._states
@@ -1182,6 +1264,7 @@ class BiasTracker:
         st["x"].append(np.asarray(self.kf.x, dtype=float).reshape(-1).copy())
         st["P"].append(np.asarray(self.kf.P, dtype=float).copy())
         st["Q"].append(np.asarray(Q, dtype=float).copy())
+        st["break"].append(brk)
 
     def _smoother_states(self) -> tuple[np.ndarray, ...]:
         """Per kept update: time, filtered state and covariance, smoothed state and covariance,
@@ -1199,10 +1282,18 @@ class BiasTracker:
         P = np.array(st["P"]).reshape(N, self._dim, self._dim)
         Q_into = np.array(st["Q"]).reshape(N, self._dim, self._dim)
         Q_next = np.concatenate([Q_into[1:], np.zeros((1, self._dim, self._dim))])
-        Xs, Ps, _ = rts_smooth(X, P, Q_next)
+        # no smoothing across a break the health tests found (a bias step): the model did not
+        # hold there, so the updates after it must not pull the estimates before it
+        brk = np.flatnonzero(np.array(st["break"], dtype=bool))
+        bounds = [0, *[int(b) for b in brk if b > 0], N]
+        Xs, Ps = X.copy(), P.copy()
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if b > a:
+                Xs[a:b], Ps[a:b], _ = rts_smooth(X[a:b], P[a:b], Q_next[a:b])
         Pp = P + Q_next
         Pp_inv = np.zeros_like(P)
         Pp_inv[:-1] = np.linalg.inv(Pp[:-1])
+        Pp_inv[np.array([b - 1 for b in bounds[1:-1]], dtype=np.int64)] = 0.0
         dtk = np.diff(T)
         rate = np.empty((N, self._dim))
         rate[-1] = self._q
@@ -1213,6 +1304,9 @@ class BiasTracker:
         dx[:-1] = Xs[1:] - X[:-1]
         dP = np.zeros_like(P)
         dP[:-1] = Ps[1:] - Pp[:-1]
+        cut = np.array([b - 1 for b in bounds[1:-1]], dtype=np.int64)
+        dx[cut] = 0.0
+        dP[cut] = 0.0
         out = (T, X, P, Pp_inv, rate, dx, dP)
         self._smooth_cache = (N, out)
         return out
@@ -1285,29 +1379,6 @@ class BiasTracker:
             std[sl] = np.sqrt(np.maximum(var, 0.0))
         return bias, std
 
-    def _adapt_q(
-        self, y: np.ndarray, s_diag: np.ndarray, hph: np.ndarray, R: np.ndarray, dt: float
-    ) -> None:
-        """One step of the bias random walk's estimate from this update's innovation.
-
-        ``E[y²] = HPHᵀ + R + q·Δt`` per axis (``P`` before the prediction), so
-        ``y² − HPHᵀ − R`` observes ``q·Δt`` with variance ``2S²``: the information-weighted
-        mean ``q̂ = Σ Δt (y² − HPHᵀ − R)/(2S²) / Σ Δt²/(2S²)`` is a Fisher-scoring step of the
-        maximum-likelihood estimate of ``q`` (covariance matching of the innovations, Mehra
-        1970; Myers & Tapley 1976), with exponential forgetting over ``adapt_memory_s``. The
-        filter then uses ``q̂`` plus one standard error ``1/√(ΣΔt²/(2S²))`` (never below the
-        smallest positive value), so a young estimate errs on the side of a wider band.
-        """
-        if dt <= 0:
-            return
-        forget = math.exp(-dt / self.settings.adapt_memory_s)
-        w = dt / (2.0 * s_diag**2)
-        self._qa = forget * self._qa + w * (y**2 - hph[:3] - R)
-        self._qb = forget * self._qb + w * dt
-        q_hat = np.maximum(self._qa / self._qb, 0.0)
-        self._q_hat = q_hat
-        self._q[:3] = np.maximum(q_hat + 1.0 / np.sqrt(self._qb), 1e-300)
-
     def _cusum(self, y: np.ndarray, s_diag: np.ndarray) -> bool:
         """Two-sided CUSUM (Page 1954) on each axis's normalised innovation ``e = y/√S``.
 
@@ -1338,6 +1409,8 @@ class BiasTracker:
                 side = 0 if hit[0, i] else 1
                 mean_y = self._cu_sum[side, i] / self._cu_n[side, i]
                 P[i, i] += 4.0 * mean_y**2
+                if self._bank is not None:
+                    self._bank.widen(4.0 * mean_y**2 * (np.arange(3) == i))
             self.kf.P = P
         self._cu[:, axes] = 0.0
         self._cu_sum[:, axes] = 0.0

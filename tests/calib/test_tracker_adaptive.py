@@ -63,9 +63,9 @@ def test_no_false_shift_on_a_consistent_stream():
 
 
 def test_random_walk_estimated_from_the_data():
-    """No K given. A strong walk (3e-4, three times the prior) is found within a factor 2 from
-    20 minutes of 0.25 s windows; a weak one (3e-5) is below what 20 minutes can resolve, and
-    the filter keeps using the estimate plus its standard error, above the truth: the band
+    """No K given. The bank of filters over a grid of K finds a strong walk (3e-4, three times
+    the prior) and a weak one (3e-5) within a factor 2 from 20 minutes of 0.25 s windows; the
+    filter runs at or above the estimate (posterior mean plus posterior std of q), and the band
     stays honest both ways."""
     t, m, b = still_session(4, 1200.0, k_rw=3e-4)
     tr = tracker()
@@ -76,8 +76,9 @@ def test_random_walk_estimated_from_the_data():
     t, m, b = still_session(4, 1200.0, k_rw=3e-5)
     tr = tracker()
     r = tr.process(t, m, None, np.ones(t.size), finish=True)
-    assert np.all(tr.rate_random_walk_estimate < 1e-4)
-    assert np.all(tr.rate_random_walk >= 3e-5)
+    est = tr.rate_random_walk_estimate
+    assert np.all((est > 1.5e-5) & (est < 6e-5)), est
+    assert np.all((tr.rate_random_walk >= est) & (tr.rate_random_walk < 2 * est))
     assert np.mean(np.abs(r.bias - b) <= 3 * r.bias_std) > 0.99
     # a given figure wins
     fixed = tracker(rate_random_walk=1e-4)
