@@ -22,6 +22,9 @@ from gyrocal.kit.errors import InputError, OutputExistsError
 #: (153 B per row: about 30 MB).
 JSON_MAX_ROWS = 200_000
 
+#: Samples handed to the tracker at a time on a replay (bounds its working memory).
+REPLAY_CHUNK = 65_536
+
 #: The --live bias random walk when none is given, rad/s/√s: conservative for consumer MEMS gyros.
 DEFAULT_RATE_RANDOM_WALK = 1e-4
 
@@ -564,7 +567,9 @@ def run(args: argparse.Namespace) -> int:
                                                max(1, int(round(tracker.settings.odr_hz))))
         else:
             tracker, batch, truth, source = _replay(args, notes)
-            batches = [batch]
+            # in pieces: the tracker's working arrays stay a piece long (the estimates are
+            # the same however the samples are cut)
+            batches = chunks(batch, REPLAY_CHUNK)
         tr = run_tracker(tracker, batches)
         if not args.sim and not args.causal:
             tr = smooth_tracked(tracker, tr, batch.temperature)
