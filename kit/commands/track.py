@@ -75,7 +75,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help="--sim: size of the step on the x axis, rad/s (default 2e-3)")
     m = p.add_argument_group("model")
     m.add_argument("--cal", metavar="CAL",
-                   help="Calibration v1 JSON: initial bias and bias_std, scale, servo axes")
+                   help="Calibration JSON (v1, or v2: its full matrix is applied): initial bias "
+                        "and bias_std, scale, servo axes")
     m.add_argument("--noise", metavar="NOISE",
                    help="gyrocal-noise v1 JSON (from 'gyrocal noise'): sets R and Q")
     m.add_argument("--noise-density", type=float, default=None, metavar="N",
