@@ -2,8 +2,9 @@
 
 Model
 -----
-The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, so a reading is
-``m = g ⊘ scale − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
+The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, or with the full model of a
+Calibration v2 ``g = A (m + b)`` (``A = diag(scale)`` for v1), so a reading is
+``m = A⁻¹ g − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
 ``b`` (Calibration v1 convention: added to the reading) is the state; optionally a linear
 temperature coefficient ``c`` joins it, ``b(T) = b_ref + c ∘ (T − T_ref)``:
 
@@ -17,12 +18,13 @@ Measurements
 ------------
 *Zero-rate*: while the sensor is still, ``m = −b(T) + v``. *Reference-rate*: while a servo of
 the jig turns at a known rate ``ω`` (from its encoder) about a known axis ``u`` (unit, sensor
-frame), ``m − ω u ⊘ scale = −b(T) + v``. Both have ``H = [−I]`` or ``[−I, −(T − T_ref) I]``.
+frame), ``m − A⁻¹ ω u = −b(T) + v``. Both have ``H = [−I]`` or ``[−I, −(T − T_ref) I]``.
 
 Consecutive samples of one kind are pooled into update windows of at most
 ``update_interval_s``: the window mean ``z̄`` with ``H̄`` at the mean temperature and
 ``R = σ²/n`` (plus, for reference windows, the variance the calibration's scale uncertainty,
-the axis uncertainty and the encoder resolution put on ``ω u ⊘ scale``). For a bias constant
+the axis uncertainty and the encoder resolution put on ``A⁻¹ ω u``, to first order in
+``d(A⁻¹) = −A⁻¹ dA A⁻¹``). For a bias constant
 over the window this is exactly the result of ``n`` sequential per-sample updates (the sum of
 ``n`` identical-H information terms), at a fraction of the cost; averaging readings and the
 encoder rate over the same window is also what makes a reference rate right (speed ripple
@@ -65,15 +67,25 @@ older than the batch run's.
 
 Process noise from the data
 ---------------------------
-Without a given ``rate_random_walk`` the tracker estimates ``q = K²`` per axis from its own
-innovations as it goes: each update's ``y² − HPHᵀ − R`` observes ``q·Δt`` (``E[y²] = S``), and
-their mean weighted by the Fisher information ``Δt²/(2S²)`` is one scoring step of the
-maximum-likelihood estimate of ``q`` (covariance matching, Mehra 1970; Myers & Tapley 1976),
-forgotten exponentially over ``adapt_memory_s``, starting from ``rate_random_walk_prior`` worth
-one observation. The filter uses the estimate plus one standard error, so a young estimate errs
-wide. An unmodelled drift (a temperature coefficient left out) shows up here as a larger ``q``,
-so the band stays honest; with the temperature model the coefficient is a state, and
-:attr:`BiasTracker.tempco` with :attr:`BiasTracker.tempco_std` says whether it matters.
+Without a given ``rate_random_walk`` the tracker estimates ``q = K²`` per axis as it goes, by
+multiple-model adaptive estimation (Magill 1965; Bar-Shalom, Li & Kirubarajan §11.6): a bank of
+filters of the same model on a log grid of ``K`` (:class:`_QBank`, 10⁻⁷ to 3·10⁻³ rad/s/√s) sees
+every update window; each filter's innovation likelihood, forgotten over ``adapt_memory_s``,
+weighs its ``K`` (flat prior on ``log K``), and the tracker uses the posterior mean of ``q``
+plus its posterior standard deviation (the band must hold where few rests leave ``q`` loose).
+Every model's likelihood is computed with its own covariance, so the estimate is not biased by
+the ``q`` the tracker happens to run with (matching one filter's innovation covariance is: its
+``P`` is wrong exactly when its ``q`` is). An unmodelled drift (a temperature coefficient left
+out) shows up as a larger ``q``, so the band stays honest; with the temperature model the
+coefficient is a state, and :attr:`BiasTracker.tempco` with :attr:`BiasTracker.tempco_std`
+says whether it matters.
+
+Replay
+------
+With ``keep_states=True`` the tracker keeps every update's state, and :meth:`BiasTracker.smoothed`
+runs the Rauch-Tung-Striebel smoother back over them, so a replayed recording's estimate at each
+sample uses the whole session (live tracking cannot). No smoothing crosses an update where the
+health tests found a break (a bias step).
 
 Bias steps
 ----------
@@ -160,7 +172,7 @@ class TrackerSettings:
     still : StillSettings
         The still detector's tuning.
     rate_random_walk_prior : tuple of 3 float
-        Starting value of the estimated ``K`` (worth one observation), rad/s/√s.
+        The ``K`` used until the first update gives an estimate, rad/s/√s.
     adapt_memory_s : float
         Time constant of the exponential forgetting of the ``K`` estimate, s.
     cusum_k, cusum_h : float
@@ -336,7 +348,7 @@ class TrackResult:
     bias_std : ndarray (n, 3)
         Its one-sigma uncertainty.
     corrected : ndarray (n, 3)
-        ``scale ∘ (m + bias)``.
+        ``A (m + bias)`` (``scale ∘ (m + bias)`` for a v1 calibration).
     still : ndarray (n,) of bool
         Still decision on each sample (False where not yet decided).
     decided : ndarray (n,) of bool
@@ -387,6 +399,75 @@ class _Snapshot:
     nis_ok: bool
 
 
+class _QBank:
+    """The bias random walk from the data: a bank of filters over a grid of ``K`` (multiple-model
+    adaptive estimation, Magill 1965; Bar-Shalom et al. §11.6).
+
+    Each axis is its own model (the bias, and with the temperature model its coefficient), so
+    the bank is ``G`` grid values × 3 axes of one- or two-state scalar-measurement Kalman
+    filters fed the same update windows as the tracker. Each filter's innovation likelihood
+    ``ℓ = −½ (log S + y²/S)`` accumulates, forgotten exponentially over ``adapt_memory_s``;
+    with a flat prior on ``log K`` the posterior weight of grid value ``g`` is
+    ``∝ exp(Σ ℓ_g)``. The tracker uses the posterior mean of ``q = K²`` plus its posterior
+    standard deviation, so that its band also holds where the data pin ``q`` down poorly (rare
+    rests), while a well-observed ``q`` gets a narrow posterior and no margin to speak of.
+    Unlike matching the innovations' covariance of a single filter, the likelihood of each
+    model is computed with that model's own ``P``, so a wrong ``q`` in the tracker biases
+    nothing; a young bank spreads its weight over the grid, which errs towards a large ``q``
+    (a wide band) by itself.
+    """
+
+    #: Grid of K, rad/s/√s: consumer MEMS gyros lie within it with a decade to spare.
+    GRID = np.logspace(-7.0, -2.5, 28)
+
+    def __init__(self, b0: np.ndarray, b0_std: np.ndarray, s: TrackerSettings,
+                 c0: np.ndarray | None) -> None:
+        G = self.GRID.size
+        d = 1 if c0 is None else 2
+        self.qg = self.GRID**2
+        self.x = np.zeros((G, 3, d))
+        self.x[:, :, 0] = b0
+        self.P = np.zeros((G, 3, d, d))
+        self.P[:, :, 0, 0] = b0_std**2
+        if c0 is not None:
+            self.x[:, :, 1] = c0
+            self.P[:, :, 1, 1] = np.asarray(s.tempco_std) ** 2
+            self.qc = np.asarray(s.tempco_random_walk) ** 2
+        self.memory = s.adapt_memory_s
+        self.loglik = np.zeros((G, 3))
+        self.q = np.asarray(s.rate_random_walk_prior, dtype=float) ** 2
+        self.q_std = np.zeros(3)
+
+    def step(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float) -> np.ndarray:
+        """Predict by ``dt``, update every filter with window mean ``z`` (variance ``R``);
+        return the ``q`` per axis the tracker should use: the posterior mean plus the posterior
+        standard deviation."""
+        P = self.P
+        P[:, :, 0, 0] += self.qg[:, None] * dt
+        if dT is None:
+            h = np.array([-1.0])
+        else:
+            P[:, :, 1, 1] += self.qc[None, :] * dt
+            h = np.array([-1.0, -dT])
+        y = z[None, :] - self.x @ h
+        Ph = P @ h
+        S = Ph @ h + R[None, :]
+        K = Ph / S[..., None]
+        self.x += K * y[..., None]
+        self.P = P - K[..., :, None] * Ph[..., None, :]
+        lam = math.exp(-dt / self.memory) if dt > 0 else 1.0
+        self.loglik = lam * self.loglik - 0.5 * (np.log(S) + y * y / S)
+        w = np.exp(self.loglik - self.loglik.max(axis=0))
+        w /= w.sum(axis=0)
+        self.q = (w * self.qg[:, None]).sum(axis=0)
+        self.q_std = np.sqrt((w * (self.qg[:, None] - self.q) ** 2).sum(axis=0))
+        return self.q + self.q_std
+
+    def widen(self, extra: np.ndarray) -> None:
+        """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
+        self.P[:, :, 0, 0] += extra[None, :]
+
+
 class BiasTracker:
     """Kalman-filter tracker of a gyro's bias (see the module docstring for the equations).
 
@@ -400,6 +481,8 @@ class BiasTracker:
         reference temperature.
     initial_bias, initial_bias_std : array_like (3,), optional
         The prior without a calibration (or overriding it), rad/s.
+    keep_states : bool
+        Keep the filtered state of every update (about 0.7 kB each) for :meth:`smoothed`.
 
     Attributes
     ----------
@@ -415,11 +498,12 @@ class BiasTracker:
         *,
         initial_bias: Any = None,
         initial_bias_std: Any = None,
+        keep_states: bool = False,
     ) -> None:
         if not isinstance(settings, TrackerSettings):
             raise CalibInputError("settings must be a TrackerSettings")
         if calibration is not None and not isinstance(calibration, GyroCalibration):
-            raise CalibInputError("calibration must be a GyroCalibration (Calibration v1)")
+            raise CalibInputError("calibration must be a GyroCalibration")
         self.settings = settings
         self.calibration = calibration
         if initial_bias is not None:
@@ -441,9 +525,16 @@ class BiasTracker:
         if calibration is not None:
             self.scale = np.asarray(calibration.scale)
             self.scale_std = np.asarray(calibration.scale_std)
+            # the model's matrix A (diag(scale) for v1), its inverse and entry uncertainties
+            self._A = calibration.full_matrix
+            a_std = calibration.matrix_std
+            self._A_std = np.diag(self.scale_std) if a_std is None else np.array(a_std)
         else:
             self.scale = np.ones(3)
             self.scale_std = np.full(3, np.nan)
+            self._A = np.eye(3)
+            self._A_std = np.diag(self.scale_std)
+        self._A_inv = np.linalg.inv(self._A)
 
         s = settings
         self._temp_model = bool(s.temperature_model)
@@ -459,12 +550,11 @@ class BiasTracker:
             kf.x = b0.astype(float).copy()
             kf.P = np.diag(b0_std**2)
             self._q = k_rw**2
-        # Process-noise estimate: information-weighted sums of the innovations' excess over
-        # their predicted variance, the prior worth one observation (B₀ = 1/(2 q₀²)).
-        q0 = np.asarray(s.rate_random_walk_prior) ** 2
-        self._qa = q0 * (0.5 / q0**2)
-        self._qb = 0.5 / q0**2
-        self._q_hat = q0.copy()
+        # Process-noise estimate: a bank of filters over a grid of K (see _QBank)
+        self._bank = (
+            _QBank(b0, b0_std, s, kf.x[3:] if self._temp_model else None) if self._adaptive
+            else None
+        )
         # CUSUM state per axis: upper and lower sums, and the innovations summed since each
         # last left zero (their mean sizes a detected shift).
         self._cu = np.zeros((2, 3))
@@ -485,7 +575,6 @@ class BiasTracker:
         self._buf_m: np.ndarray | None = None
         self._fed = False
         self._fx = np.asarray(kf.x, dtype=float).reshape(-1).copy()
-        self._fscale = self.scale.copy()
         self._temp_last = math.nan
         if s.t_ref_c is not None:
             self._t_ref: float | None = float(s.t_ref_c)
@@ -514,6 +603,11 @@ class BiasTracker:
         # bias, bias_std and time since the last update at the latest sample (the prior before)
         self._last: dict[str, Any] = {"bias": b0.astype(float), "bias_std": b0_std, "since": 0.0}
         self._last_decision: tuple[int, bool] | None = None
+        # keep_states: time, state, covariance and the process noise into each update
+        self._states: dict[str, list[Any]] | None = (
+            {"t": [], "x": [], "P": [], "Q": [], "break": []} if keep_states else None
+        )
+        self._smooth_cache: tuple[int, tuple[np.ndarray, ...]] | None = None
 
     # ------------------------------------------------------------------ public state
     @property
@@ -543,14 +637,15 @@ class BiasTracker:
 
     @property
     def rate_random_walk(self) -> np.ndarray:
-        """The bias random walk ``K`` the filter uses now, rad/s/√s (the estimate plus one
-        standard error when it is estimated)."""
+        """The bias random walk ``K`` the filter uses now, rad/s/√s (when estimated: from the
+        posterior mean of ``q = K²`` plus its posterior standard deviation)."""
         return np.sqrt(self._q[:3])
 
     @property
     def rate_random_walk_estimate(self) -> np.ndarray | None:
-        """The estimated ``K``, rad/s/√s (None when ``rate_random_walk`` was given)."""
-        return np.sqrt(self._q_hat) if self._adaptive else None
+        """The estimated ``K`` (from the posterior mean of ``q = K²``), rad/s/√s (None when
+        ``rate_random_walk`` was given)."""
+        return None if self._bank is None else np.sqrt(self._bank.q)
 
     @property
     def shifts(self) -> int:
@@ -598,7 +693,7 @@ class BiasTracker:
         reference_rate: float | None = None,
         reference_axis: Any = None,
     ) -> np.ndarray:
-        """Feed one reading; returns its corrected rate ``scale ∘ (m + bias)``, rad/s.
+        """Feed one reading; returns its corrected rate ``A (m + bias)``, rad/s.
 
         Parameters
         ----------
@@ -659,7 +754,7 @@ class BiasTracker:
         Returns
         -------
         ndarray (3,)
-            ``scale ∘ (m + bias)`` with the bias estimate at the end of the last processed
+            ``A (m + bias)`` with the bias estimate at the end of the last processed
             block (at this sample's temperature with the temperature model).
         """
         i = self._nbuf
@@ -679,9 +774,9 @@ class BiasTracker:
         self._nbuf = i + 1
         x = self._fx
         if self._temp_model and temperature is not None and self._t_ref is not None:
-            out = self._fscale * (m + x[:3] + x[3:] * (temperature - self._t_ref))
+            out = self._A @ (m + x[:3] + x[3:] * (temperature - self._t_ref))
         else:
-            out = self._fscale * (m + x[:3])
+            out = self._A @ (m + x[:3])
         if self._nbuf == self._buf_t.size:
             self.flush()
         return out
@@ -887,6 +982,7 @@ class BiasTracker:
             if self._k == 0:
                 self._t_state = float(t[0])
                 self._t_update = float(t[0])
+                self._keep_state(np.zeros((self._dim, self._dim)))
             if self._t_ref is None and np.isfinite(temp[0]):
                 self._t_ref = float(temp[0])
         det = self.detector
@@ -994,11 +1090,11 @@ class BiasTracker:
             snaps.append(self._snapshot(close))
 
         ra = S["ra"][:n_dec]
-        # z_i: the reading, less the reference's ω u ⊘ scale where a servo turns
+        # z_i: the reading, less the reference's A⁻¹ ω u where a servo turns
         z = S["m"][:n_dec].copy()
         is_ref = kind == _KIND_REF
         if is_ref.any():
-            z[is_ref] -= S["rr"][:n_dec][is_ref, None] * ra[is_ref] / self.scale[None, :]
+            z[is_ref] -= (S["rr"][:n_dec][is_ref, None] * ra[is_ref]) @ self._A_inv.T
         # run starts: kind changes, or a different servo axis within reference samples
         new_run = np.ones(n_dec, dtype=bool)
         if n_dec > 1:
@@ -1101,13 +1197,15 @@ class BiasTracker:
         if w.kind == _KIND_REF:
             omega = w.sum_omega / n
             u = np.asarray(w.axis)
-            g = omega * u / self.scale  # the reference's contribution ω u ⊘ scale
+            g = self._A_inv @ (omega * u)  # the reference's contribution A⁻¹ ω u
             dur = n / s.odr_hz
+            ai2 = self._A_inv**2
+            # first order: d(A⁻¹) = −A⁻¹ dA A⁻¹, entries of A independent
             R = (
                 R
-                + g**2 * (self.scale_std / self.scale) ** 2
-                + (omega * s.reference_axis_std / self.scale) ** 2
-                + (math.sqrt(2.0) * s.reference_angle_std / dur * u / self.scale) ** 2
+                + ai2 @ self._A_std**2 @ g**2
+                + (omega * s.reference_axis_std) ** 2 * ai2.sum(axis=1)
+                + (math.sqrt(2.0) * s.reference_angle_std / dur * (self._A_inv @ u)) ** 2
             )
         dt = max(w.t_last - self._t_state, 0.0)
         if self._temp_model:
@@ -1115,16 +1213,16 @@ class BiasTracker:
             kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
         else:
             kf.H = -np.eye(3)
-        hph = np.diag(kf.H @ kf.P @ kf.H.T).copy()  # before the prediction adds Q
         kf.Q = np.diag(self._q * dt)
         kf.predict()
         kf.R = np.diag(R)
         kf.update(zbar)
+        if self._bank is not None:
+            self._q[:3] = self._bank.step(zbar, R, -kf.H[0, 3] if self._temp_model else None,
+                                          dt)
         y = np.asarray(kf.y, dtype=float).reshape(-1)
         nis = float(y @ np.asarray(kf.SI) @ y)
         s_diag = np.diag(np.asarray(kf.S, dtype=float))
-        if self._adaptive:
-            self._adapt_q(y, s_diag, hph, R, dt)
         shift = self._cusum(y, s_diag)
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
@@ -1140,9 +1238,12 @@ class BiasTracker:
             if s.recover:
                 P = kf.P.copy()
                 P[np.arange(3), np.arange(3)] += y**2
+                if self._bank is not None:
+                    self._bank.widen(y**2)
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
+        self._keep_state(kf.Q, brk=bool(alarm and s.recover) or (shift and s.recover))
         log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
@@ -1153,28 +1254,130 @@ class BiasTracker:
         log["alarm"].append(alarm)
         log["at"].append(close)
 
-    def _adapt_q(
-        self, y: np.ndarray, s_diag: np.ndarray, hph: np.ndarray, R: np.ndarray, dt: float
-    ) -> None:
-        """One step of the bias random walk's estimate from this update's innovation.
-
-        ``E[y²] = HPHᵀ + R + q·Δt`` per axis (``P`` before the prediction), so
-        ``y² − HPHᵀ − R`` observes ``q·Δt`` with variance ``2S²``: the information-weighted
-        mean ``q̂ = Σ Δt (y² − HPHᵀ − R)/(2S²) / Σ Δt²/(2S²)`` is a Fisher-scoring step of the
-        maximum-likelihood estimate of ``q`` (covariance matching of the innovations, Mehra
-        1970; Myers & Tapley 1976), with exponential forgetting over ``adapt_memory_s``. The
-        filter then uses ``q̂`` plus one standard error ``1/√(ΣΔt²/(2S²))`` (never below the
-        smallest positive value), so a young estimate errs on the side of a wider band.
-        """
-        if dt <= 0:
+    def _keep_state(self, Q: np.ndarray, brk: bool = False) -> None:
+        """Store the state after an update (and the process noise its prediction added); ``brk``:
+        the health tests found a break of the model (a bias step) at this update."""
+        if self._states is None:
             return
-        forget = math.exp(-dt / self.settings.adapt_memory_s)
-        w = dt / (2.0 * s_diag**2)
-        self._qa = forget * self._qa + w * (y**2 - hph[:3] - R)
-        self._qb = forget * self._qb + w * dt
-        q_hat = np.maximum(self._qa / self._qb, 0.0)
-        self._q_hat = q_hat
-        self._q[:3] = np.maximum(q_hat + 1.0 / np.sqrt(self._qb), 1e-300)
+        st = self._states
+        st["t"].append(self._t_state)
+        st["x"].append(np.asarray(self.kf.x, dtype=float).reshape(-1).copy())
+        st["P"].append(np.asarray(self.kf.P, dtype=float).copy())
+        st["Q"].append(np.asarray(Q, dtype=float).copy())
+        st["break"].append(brk)
+
+    def _smoother_states(self) -> tuple[np.ndarray, ...]:
+        """Per kept update: time, filtered state and covariance, smoothed state and covariance,
+        the inverse of the next prediction's covariance, and the process-noise rate from each
+        update to the next (cached until a new update arrives)."""
+        from gyrocal.calib.kalman import rts_smooth
+
+        assert self._states is not None
+        st = self._states
+        N = len(st["t"])
+        if self._smooth_cache is not None and self._smooth_cache[0] == N:
+            return self._smooth_cache[1]
+        T = np.array(st["t"], dtype=float)
+        X = np.array(st["x"]).reshape(N, self._dim)
+        P = np.array(st["P"]).reshape(N, self._dim, self._dim)
+        Q_into = np.array(st["Q"]).reshape(N, self._dim, self._dim)
+        Q_next = np.concatenate([Q_into[1:], np.zeros((1, self._dim, self._dim))])
+        # no smoothing across a break the health tests found (a bias step): the model did not
+        # hold there, so the updates after it must not pull the estimates before it
+        brk = np.flatnonzero(np.array(st["break"], dtype=bool))
+        bounds = [0, *[int(b) for b in brk if b > 0], N]
+        Xs, Ps = X.copy(), P.copy()
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if b > a:
+                Xs[a:b], Ps[a:b], _ = rts_smooth(X[a:b], P[a:b], Q_next[a:b])
+        Pp = P + Q_next
+        Pp_inv = np.zeros_like(P)
+        Pp_inv[:-1] = np.linalg.inv(Pp[:-1])
+        Pp_inv[np.array([b - 1 for b in bounds[1:-1]], dtype=np.int64)] = 0.0
+        dtk = np.diff(T)
+        rate = np.empty((N, self._dim))
+        rate[-1] = self._q
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate[:-1] = np.where(dtk[:, None] > 0,
+                                 np.diagonal(Q_next[:-1], axis1=1, axis2=2) / dtk[:, None], 0.0)
+        dx = np.zeros_like(X)
+        dx[:-1] = Xs[1:] - X[:-1]
+        dP = np.zeros_like(P)
+        dP[:-1] = Ps[1:] - Pp[:-1]
+        cut = np.array([b - 1 for b in bounds[1:-1]], dtype=np.int64)
+        dx[cut] = 0.0
+        dP[cut] = 0.0
+        out = (T, X, P, Pp_inv, rate, dx, dP)
+        self._smooth_cache = (N, out)
+        return out
+
+    def smoothed(
+        self, t: Any, temperature: Any = None, *, chunk: int = 16384
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Fixed-interval smoothed bias and its one-sigma uncertainty at times ``t``.
+
+        The Rauch-Tung-Striebel smoother (:func:`gyrocal.calib.kalman.rts_smooth`) runs back
+        over the kept updates (``keep_states=True``); between two updates ``k`` and ``k + 1`` the
+        bias walks with no measurement, so a time ``τ`` after update ``k`` the filtered state is
+        ``x_k`` with ``P_k + q τ`` and one more smoother step towards update ``k + 1`` gives
+
+            C = (P_k + q τ)(P_k + Q_k)⁻¹,  x̂ = x_k + C (x̂_{k+1} − x_k),
+            P̂ = P_k + q τ + C (P̂_{k+1} − P_k − Q_k) Cᵀ
+
+        (after the last update, the filter's prediction). Every measurement of the session
+        informs every estimate: what a replay of a whole recording can use and a live stream
+        cannot. ``t`` may be given in pieces (``chunk`` samples are worked at a time).
+
+        Parameters
+        ----------
+        t : array_like (n,)
+            Times, s (those of the samples processed, or any others).
+        temperature : array_like (n,), optional
+            Die temperature at ``t``, °C (required with the temperature model).
+        chunk : int
+            Samples per vectorised step (bounds the working memory).
+
+        Returns
+        -------
+        bias, bias_std : ndarray (n, 3)
+        """
+        if self._states is None:
+            raise CalibInputError("smoothed() needs a tracker built with keep_states=True")
+        if not self._states["t"]:
+            raise CalibInputError("smoothed() needs processed samples")
+        t = np.asarray(t, dtype=float).reshape(-1)
+        if self._temp_model:
+            if temperature is None:
+                raise CalibInputError("the temperature model needs the temperature at t")
+            temp = np.asarray(temperature, dtype=float).reshape(-1)
+            if temp.shape != t.shape or not np.all(np.isfinite(temp)):
+                raise CalibInputError("temperature must be finite and match t")
+        T, X, P, Pp_inv, rate, dx, dP = self._smoother_states()
+        n = t.size
+        bias = np.empty((n, 3))
+        std = np.empty((n, 3))
+        t_ref = self._t_ref if self._t_ref is not None else 0.0
+        for a in range(0, n, max(1, int(chunk))):
+            sl = slice(a, min(a + chunk, n))
+            k = np.clip(np.searchsorted(T, t[sl], side="right") - 1, 0, T.size - 1)
+            tau = np.maximum(t[sl] - T[k], 0.0)
+            Pf = P[k].copy()
+            idx = np.arange(self._dim)
+            Pf[:, idx, idx] += rate[k] * tau[:, None]
+            C = Pf @ Pp_inv[k]
+            xs = X[k] + np.einsum("mij,mj->mi", C, dx[k])
+            Ps = Pf + C @ dP[k] @ np.swapaxes(C, 1, 2)
+            if self._temp_model:
+                dT = (temp[sl] - t_ref)[:, None]
+                i3 = np.arange(3)
+                bias[sl] = xs[:, :3] + xs[:, 3:] * dT
+                var = (Ps[:, i3, i3] + 2 * dT * Ps[:, i3, i3 + 3]
+                       + dT * dT * Ps[:, i3 + 3, i3 + 3])
+            else:
+                bias[sl] = xs
+                var = np.diagonal(Ps, axis1=1, axis2=2)
+            std[sl] = np.sqrt(np.maximum(var, 0.0))
+        return bias, std
 
     def _cusum(self, y: np.ndarray, s_diag: np.ndarray) -> bool:
         """Two-sided CUSUM (Page 1954) on each axis's normalised innovation ``e = y/√S``.
@@ -1206,6 +1409,8 @@ class BiasTracker:
                 side = 0 if hit[0, i] else 1
                 mean_y = self._cu_sum[side, i] / self._cu_n[side, i]
                 P[i, i] += 4.0 * mean_y**2
+                if self._bank is not None:
+                    self._bank.widen(4.0 * mean_y**2 * (np.arange(3) == i))
             self.kf.P = P
         self._cu[:, axes] = 0.0
         self._cu_sum[:, axes] = 0.0
@@ -1245,7 +1450,7 @@ class BiasTracker:
         return {
             "bias": bias,
             "bias_std": np.sqrt(np.maximum(var, 0.0)),
-            "corrected": self.scale[None, :] * (m + bias),
+            "corrected": (m + bias) @ self._A.T,
             "since": t - tu[j],
             "nis_ok": ok[j],
         }

@@ -103,6 +103,16 @@ def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
     )
 
 
+def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None) -> Tracked:
+    """``tr`` with each sample's bias and uncertainty smoothed over the whole run
+    (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`; the tracker was built with
+    ``keep_states=True``): for a replayed recording, where every sample is at hand."""
+    from dataclasses import replace
+
+    bias, std = tracker.smoothed(tr.t, temperature)
+    return replace(tr, bias=bias, bias_std=std)
+
+
 def chunks(batch: Batch, size: int) -> Iterator[Batch]:
     """``batch`` in runs of ``size`` samples (as a live source would hand them over)."""
     n = batch.t.size

@@ -22,6 +22,9 @@ from gyrocal.kit.errors import InputError, OutputExistsError
 #: (153 B per row: about 30 MB).
 JSON_MAX_ROWS = 200_000
 
+#: Samples handed to the tracker at a time on a replay (bounds its working memory).
+REPLAY_CHUNK = 65_536
+
 #: The --live bias random walk when none is given, rad/s/√s: conservative for consumer MEMS gyros.
 DEFAULT_RATE_RANDOM_WALK = 1e-4
 
@@ -37,7 +40,10 @@ DESCRIPTION = (
     "convention (g = scale * (m + bias), so a still sensor reads -bias). Nothing needs tuning: "
     "the white noise comes from the still seconds, the bias random walk from the filter's "
     "innovations, the temperature state is on when every sample has a temperature; figures "
-    "given as flags win. --sim tracks a synthetic 30-minute session (gyrocal.calib.noise_sim: a "
+    "given as flags win. A recording is replayed whole, so each sample's estimate is smoothed "
+    "(Rauch-Tung-Striebel: every update of the session informs it, before and after); --causal "
+    "gives the filter's own estimate instead, what a live tracker would have said at that "
+    "sample. --sim tracks a synthetic 30-minute session (gyrocal.calib.noise_sim: a "
     "synthetic sensor, not the emulated jig) and compares with its truth. --live tracks on the "
     "jig itself: the servos hold the sensor still (torque on) while the IMU FIFO is drained for "
     "--duration seconds; --live --sim does it on the emulated jig and compares with the emulated "
@@ -69,7 +75,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help="--sim: size of the step on the x axis, rad/s (default 2e-3)")
     m = p.add_argument_group("model")
     m.add_argument("--cal", metavar="CAL",
-                   help="Calibration v1 JSON: initial bias and bias_std, scale, servo axes")
+                   help="Calibration JSON (v1, or v2: its full matrix is applied): initial bias "
+                        "and bias_std, scale, servo axes")
     m.add_argument("--noise", metavar="NOISE",
                    help="gyrocal-noise v1 JSON (from 'gyrocal noise'): sets R and Q")
     m.add_argument("--noise-density", type=float, default=None, metavar="N",
@@ -100,6 +107,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d.add_argument("--still-rate-threshold", type=float, default=None, metavar="RAD_S",
                    help="rate gate of the detector (default 5 sigma of the white noise)")
     d.add_argument("--update-interval", type=float, default=0.25, metavar="S")
+    d.add_argument("--causal", action="store_true",
+                   help="a recording: the filter's causal estimate at each sample (as live) "
+                        "instead of the smoothed one over the whole recording")
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print the per-sample JSON document")
     o.add_argument("--out", metavar="FILE", help="write the JSON document to FILE instead")
@@ -174,7 +184,7 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
 
 def _build_tracker(
     args: argparse.Namespace, odr: float, rate: np.ndarray, notes: list[str], what: str,
-    where: str,
+    where: str, *, keep_states: bool = False,
 ) -> tuple[Any, Any]:
     """The tracker from the flags: calibration, noise model (``rate`` gives the estimates the
     flags leave open: the white noise, and without --cal the first still second's bias).
@@ -219,7 +229,7 @@ def _build_tracker(
     st = _settings(args, odr, n_density, k, axis_std)
     if cal is not None:
         try:
-            return BiasTracker(st, cal), cal
+            return BiasTracker(st, cal, keep_states=keep_states), cal
         except ValueError as exc:
             raise InputError(f"--cal {args.cal}: {exc}") from None
     guess = first_still_mean(rate, st.noise_std, odr, st.still)
@@ -229,7 +239,8 @@ def _build_tracker(
                  f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- "
                  f"{args.initial_bias_std:g}")
     try:
-        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std)
+        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std,
+                              keep_states=keep_states)
     except ValueError as exc:
         raise InputError(str(exc)) from None
     return tracker, None
@@ -253,7 +264,8 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
     if args.tempco and not np.all(np.isfinite(temp)):
         raise InputError(f"{rec.path}: --tempco needs a temperature on every sample (imu.csv "
                          "temp column); this recording lacks some")
-    tracker, cal = _build_tracker(args, odr, rec.imu_rate, notes, "the recording", str(rec.path))
+    tracker, cal = _build_tracker(args, odr, rec.imu_rate, notes, "the recording", str(rec.path),
+                                  keep_states=not args.causal)
     still = None
     if args.still == "segments":
         still = rest_flags(rec)
@@ -495,6 +507,8 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
 def _check_modes(args: argparse.Namespace) -> None:
     """One source (RECORDING, --sim or --live) and only the flags that apply to it; fills in
     the defaults that depend on the mode."""
+    if args.causal and args.recording is None:
+        raise InputError("--causal applies to a recording (live and --sim are causal already)")
     if args.live:
         if args.recording is not None:
             raise InputError("give a RECORDING or --live, not both")
@@ -529,7 +543,13 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from gyrocal.kit.fileio import emit_text, refuse_existing
-    from gyrocal.kit.tracking import chunks, json_rows, run_tracker, tracker_notes
+    from gyrocal.kit.tracking import (
+        chunks,
+        json_rows,
+        run_tracker,
+        smooth_tracked,
+        tracker_notes,
+    )
 
     _check_modes(args)
     if args.rows < 2:
@@ -548,8 +568,12 @@ def run(args: argparse.Namespace) -> int:
                                                max(1, int(round(tracker.settings.odr_hz))))
         else:
             tracker, batch, truth, source = _replay(args, notes)
-            batches = [batch]
+            # in pieces: the tracker's working arrays stay a piece long (the estimates are
+            # the same however the samples are cut)
+            batches = chunks(batch, REPLAY_CHUNK)
         tr = run_tracker(tracker, batches)
+        if not args.sim and not args.causal:
+            tr = smooth_tracked(tracker, tr, batch.temperature)
         notes += tracker_notes(tracker)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)

@@ -183,6 +183,64 @@ def test_reference_measurement_model_sign():
     np.testing.assert_allclose(tr.bias, b, atol=1e-5)
 
 
+def _full_cal(A, bias_std=0.05, a_std=1e-6):
+    A = np.asarray(A)
+    return GyroCalibration(scale=tuple(np.diag(A)), bias=(0.0, 0.0, 0.0),
+                           scale_std=(a_std,) * 3, bias_std=(bias_std,) * 3,
+                           matrix=tuple(map(tuple, A)), matrix_std=((a_std,) * 3,) * 3)
+
+
+def test_v2_calibration_applies_the_full_matrix():
+    # Noise-free, the full model g = A (m + b) with cross-axis terms (Calibration v2): servo
+    # turns about three axes give reference-rate updates m − A⁻¹ ω u = −b. The tracker must find
+    # b and correct to the true rate; the v1 diagonal of the same A must not.
+    A = np.array([[1.02, 0.015, -0.01], [-0.012, 0.98, 0.02], [0.008, -0.018, 1.01]])
+    b = np.array([0.01, -0.02, 0.005])
+    n = 300
+    axes = np.eye(3)
+    omega = np.tile(np.repeat([1.5, -1.2, 0.9], n), 1)
+    u = np.repeat(axes, n, axis=0)
+    g = omega[:, None] * u
+    m = g @ np.linalg.inv(A).T - b
+    st = TrackerSettings(odr_hz=ODR, noise_density=1e-6, rate_random_walk=0.0,
+                         reference_axis_std=0.0, reference_angle_std=0.0)
+    t = np.arange(3 * n) / ODR
+    full = BiasTracker(st, _full_cal(A))
+    r = full.process(t, m, reference_rate=omega, reference_axis=u, finish=True)
+    np.testing.assert_allclose(full.bias, b, atol=1e-6)
+    np.testing.assert_allclose(r.corrected[-n // 2:], g[-n // 2:], atol=1e-5)
+    diag = GyroCalibration(scale=tuple(np.diag(A)), bias=(0.0, 0.0, 0.0),
+                           scale_std=(1e-6,) * 3, bias_std=(0.05,) * 3)
+    v1 = BiasTracker(st, diag)
+    v1.process(t, m, reference_rate=omega, reference_axis=u, finish=True)
+    assert np.max(np.abs(v1.bias - b)) > 5e-3  # the cross-axis terms it dropped
+
+
+def test_v2_reference_variance_matches_monte_carlo_of_the_matrix():
+    # One reference window, noise-free readings: the bias error is (A⁻¹ − Â⁻¹) ω u for a
+    # calibrated matrix Â drawn around the true A with its stated entry std. Over many draws its
+    # spread must match the tracker's bias_std (R to first order; the prior is loose).
+    rng = np.random.default_rng(7)
+    A = np.array([[1.01, 0.01, 0.0], [-0.01, 0.99, 0.012], [0.0, 0.01, 1.0]])
+    b = np.array([-0.004, 0.006, 0.002])
+    a_std = 1e-3
+    n = 50
+    omega = np.full(n, 2.0)
+    u = np.ones(3) / math.sqrt(3.0)
+    m = (omega[:, None] * u) @ np.linalg.inv(A).T - b
+    st = TrackerSettings(odr_hz=ODR, noise_density=1e-9, rate_random_walk=0.0,
+                         reference_axis_std=0.0, reference_angle_std=0.0, update_interval_s=1.0)
+    errs, stds = [], []
+    for _ in range(400):
+        A_est = A + rng.standard_normal((3, 3)) * a_std
+        tr = BiasTracker(st, _full_cal(A_est, bias_std=1.0, a_std=a_std))
+        tr.process(np.arange(n) / ODR, m, reference_rate=omega, reference_axis=u, finish=True)
+        errs.append(tr.kf.x - b)  # the state after the window's update
+        stds.append(np.sqrt(np.diag(tr.kf.P)))
+    ratio = np.std(errs, axis=0) / np.mean(stds, axis=0)
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio
+
+
 def test_seeded_from_calibration_and_sign_convention():
     cal = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.01, -0.02, 0.03),
                           bias_std=(1e-3, 2e-3, 3e-3), temperature_c=30.0)
@@ -296,3 +354,22 @@ def test_setup_errors_are_named():
     tr.process([1.0], np.zeros((1, 3)))
     with pytest.raises(CalibInputError, match="not after"):
         tr.process([0.5], np.zeros((1, 3)))
+
+
+def test_smoothed_beats_the_filter_and_works_in_pieces():
+    s = simulate_session(np.random.default_rng(31), 240.0, model=MODEL)
+    cal = sim_calibration(np.random.default_rng(32), s)
+    tr = BiasTracker(settings(), cal, keep_states=True)
+    r = tr.process(s.t, s.rate, s.temperature_c, finish=True)
+    b, sd = tr.smoothed(s.t, s.temperature_c)
+    e_f = np.sqrt(np.mean((r.bias - s.true_bias) ** 2))
+    e_s = np.sqrt(np.mean((b - s.true_bias) ** 2))
+    assert e_s < 0.8 * e_f
+    assert np.mean(np.abs(b - s.true_bias) <= 3 * sd) > 0.99
+    b7, sd7 = tr.smoothed(s.t, s.temperature_c, chunk=997)
+    np.testing.assert_allclose(b7, b, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(sd7, sd, rtol=1e-12)
+    # after the last update the smoother is the filter
+    np.testing.assert_allclose(b[-1], r.bias[-1], atol=1e-12)
+    with pytest.raises(CalibInputError, match="keep_states"):
+        BiasTracker(settings(), cal).smoothed(s.t, s.temperature_c)

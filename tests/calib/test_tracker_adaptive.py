@@ -54,6 +54,27 @@ def test_cusum_catches_a_step_the_nis_test_misses_and_the_filter_recovers(seed):
     assert errs[math.inf] > 0.4 * 2.5e-4  # without the test the filter is still far off
 
 
+def test_smoother_does_not_cross_a_detected_step():
+    # A 2e-3 rad/s step at 120 s, the random walk estimated: the CUSUM finds it, and the
+    # smoothed replay must not drag the estimates before the step towards the new bias (nor
+    # the ones after it back): before 110 s and after 135 s it is at least as good as the
+    # causal filter, and its band holds the truth. (The first seconds are left out of the
+    # error bound: the young bank of random walks is wide there, and so is the band.)
+    step = np.array([2e-3, 0.0, -2e-3])
+    t, m, b = still_session(4, 240.0, k_rw=2e-5, step_at=120.0, step=step)
+    tr = BiasTracker(TrackerSettings(odr_hz=FS, noise_density=SIG / math.sqrt(FS)),
+                     initial_bias=[0.01, -0.02, 0.005], initial_bias_std=1e-3, keep_states=True)
+    r = tr.process(t, m, None, np.ones(t.size), finish=True)
+    assert (r.updates.shift | r.updates.alarm).any()
+    bs, sd = tr.smoothed(t)
+    for sel in ((t > 5.0) & (t < 110.0), t > 135.0):
+        e_s = np.sqrt(np.mean((bs - b)[sel] ** 2))
+        e_f = np.sqrt(np.mean((r.bias - b)[sel] ** 2))
+        assert e_s <= e_f, (e_s, e_f)
+        assert np.max(np.abs(bs - b)[sel]) < 0.1 * 2e-3
+    assert np.mean(np.abs(bs - b) <= 3 * sd) > 0.99
+
+
 def test_no_false_shift_on_a_consistent_stream():
     t, m, _ = still_session(3, 600.0)
     r = tracker(rate_random_walk=1e-6).process(t, m, None, np.ones(t.size), finish=True)
@@ -63,9 +84,9 @@ def test_no_false_shift_on_a_consistent_stream():
 
 
 def test_random_walk_estimated_from_the_data():
-    """No K given. A strong walk (3e-4, three times the prior) is found within a factor 2 from
-    20 minutes of 0.25 s windows; a weak one (3e-5) is below what 20 minutes can resolve, and
-    the filter keeps using the estimate plus its standard error, above the truth: the band
+    """No K given. The bank of filters over a grid of K finds a strong walk (3e-4, three times
+    the prior) and a weak one (3e-5) within a factor 2 from 20 minutes of 0.25 s windows; the
+    filter runs at or above the estimate (posterior mean plus posterior std of q), and the band
     stays honest both ways."""
     t, m, b = still_session(4, 1200.0, k_rw=3e-4)
     tr = tracker()
@@ -76,8 +97,9 @@ def test_random_walk_estimated_from_the_data():
     t, m, b = still_session(4, 1200.0, k_rw=3e-5)
     tr = tracker()
     r = tr.process(t, m, None, np.ones(t.size), finish=True)
-    assert np.all(tr.rate_random_walk_estimate < 1e-4)
-    assert np.all(tr.rate_random_walk >= 3e-5)
+    est = tr.rate_random_walk_estimate
+    assert np.all((est > 1.5e-5) & (est < 6e-5)), est
+    assert np.all((tr.rate_random_walk >= est) & (tr.rate_random_walk < 2 * est))
     assert np.mean(np.abs(r.bias - b) <= 3 * r.bias_std) > 0.99
     # a given figure wins
     fixed = tracker(rate_random_walk=1e-4)

@@ -62,6 +62,22 @@ def test_defaults_without_noise_flags_still_track(random_rec, capsys):
     assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
 
 
+def test_replay_is_smoothed_unless_causal(random_rec, capsys):
+    # A whole recording is at hand: the smoothed estimate (default) must beat the causal
+    # filter's against the simulated truth, with a band that still holds it.
+    s, rec, cal = random_rec
+    smooth, err = run_json(capsys, str(rec), "--cal", str(cal))
+    causal, _ = run_json(capsys, str(rec), "--cal", str(cal), "--causal")
+    rms = {}
+    for name, doc in (("smooth", smooth), ("causal", causal)):
+        e = np.array(doc["bias"]) - s.true_bias
+        rms[name] = float(np.sqrt(np.mean(e**2)))
+        assert np.mean(np.abs(e) <= 3 * np.array(doc["bias_std"])) > 0.99, name
+    assert rms["smooth"] < 0.8 * rms["causal"], rms
+    # the smoothed band is narrower on average (information from after each sample)
+    assert np.mean(smooth["bias_std"]) < np.mean(causal["bias_std"])
+
+
 def test_without_calibration_starts_from_the_first_still_second(random_rec, capsys):
     s, rec, _ = random_rec
     doc, err = run_json(capsys, str(rec))
@@ -149,6 +165,7 @@ def test_out_file_is_atomic_and_not_overwritten(random_rec, tmp_path, capsys):
     [
         ([], "RECORDING or --sim"),
         (["--sim", "REC"], "RECORDING or --sim"),
+        (["--sim", "--causal"], "--causal applies to a recording"),
         (["{rec}", "--cal", "{missing}"], "does not exist"),
         (["{rec}", "--update-interval", "0"], "update_interval_s"),
         (["{rec}", "--noise", "{rec}/manifest.json"], "not a gyrocal noise document"),
