@@ -834,7 +834,9 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     homogeneous (:func:`gyrocal.calib.observations.pool_noise`), so the weights do not carry the
     estimates' own scatter; each still encoder angle a reference rests on is a shared unknown
     with its quantisation as prior. Covariance ``(J̃ᵀJ̃)⁻¹``; consistency:
-    ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``.
+    ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``. A servo turned in several gimbal poses (the full model's
+    protocol) has one axis per pose (:meth:`ObservationSet.pose_groups`; ``S`` counts them) and
+    ``axes`` reports the first.
 
     Parameters
     ----------
@@ -851,12 +853,15 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     motors = obs.motors
     _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
     obs = obs.with_pooled_noise()
+    # One axis per servo and gimbal pose: a servo turned with the gimbal posed turns about
+    # another sensor-frame axis (a recording of the full model's protocol).
+    groups = obs.pose_groups()
+    first = {int(m): int(groups[i]) for i, m in reversed(list(enumerate(obs.motor)))}
     order = sorted(motors)
-    sidx = np.searchsorted(np.array(order), obs.motor)
     res = paired_axis_batch(
         obs.mean[None],
         obs.rate[None],
-        sidx,
+        groups,
         obs.mean_std[None],
         obs.rate_std[None],
         obs.rest_mean[None],  # type: ignore[index]
@@ -873,9 +878,11 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
         chi2 = float(res.chi2[0])
         p = float(stats.chi2.sf(chi2, dof))
         consistency = Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
-    axes = {m: res.axes[0, i].copy() for i, m in enumerate(order)}
+    # each servo's axis in the first pose it turned in (the home pose of gyrocal's protocols)
+    axes = {m: res.axes[0, first[m]].copy() for m in order}
     axes_std = {}
-    for i, m in enumerate(order):
+    for m in order:
+        i = first[m]
         blk = cov[6 + 2 * i : 8 + 2 * i, 6 + 2 * i : 8 + 2 * i]
         axes_std[m] = float(np.sqrt(max(np.linalg.eigvalsh(blk).max(), 0.0)))
     it = int(res.iterations[0])
