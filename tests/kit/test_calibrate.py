@@ -136,8 +136,9 @@ def test_saturation_is_caught(tmp_path, capsys):
 def test_a_failed_check_repeats_the_turn_once_and_the_run_still_calibrates(tmp_path, capsys):
     # Servo 2 drags for 3 s during its first turn (10.2-14.4 s): the speed check fails, the turn
     # is reversed, rested and repeated, and the repeat is clean.
+    # (the diagonal protocol, whose timings these are; --protocol auto)
     code = main(["calibrate", "--sim", "--out", str(tmp_path), "--sim-fault",
-                 "stall:2:11:0.9:3", "--json"])
+                 "stall:2:11:0.9:3", "--json", "--protocol", "auto", "--sim-cross-axis", "0"])
     captured = capsys.readouterr()
     assert "servo 2 held only" in captured.err and "repeating once" in captured.err
     assert code == 0, captured.err
@@ -153,7 +154,9 @@ def test_a_fifo_gap_is_caught(tmp_path, capsys):
 
 
 def test_movement_during_a_rest_is_caught(tmp_path, capsys):
-    code = calibrate(tmp_path, "--sim-fault", "slip:5.1:1", "--sim-fault", "slip:5.7:1")
+    # two slips in the diagonal protocol's second rest (4.8-5.4 s and its repeat)
+    code = calibrate(tmp_path, "--sim-fault", "slip:5.1:1", "--sim-fault", "slip:5.7:1",
+                     "--protocol", "auto")
     assert code == 5
     assert "the sensor moved during a rest" in capsys.readouterr().err
 
