@@ -300,10 +300,14 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
         plan = replace(plan, jig_time_s=jig_time(
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses)))
-    if p["name"] == "auto" and plan.jig_time_s > p["time_budget_s"] * (1 + 1e-9):
+    # the planned protocols stay within their budget (the full one's is at least
+    # FULL_TIME_BUDGET_S) also when fixed values override the plan
+    limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (
+        p["time_budget_s"])
+    if p["name"] != "paper" and plan.jig_time_s > limit * (1 + 1e-9):
         raise InputError(
             f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
-            f"protocol.time_budget_s = {p['time_budget_s']:g} s: raise the budget, or lower "
+            f"protocol.time_budget_s = {limit:g} s: raise the budget, or lower "
             "protocol.turns or protocol.rest_s, or set protocol.speed_dps higher (0 lets the "
             "planner choose within the budget)")
     if plan.speed > gimbal.top_speed:
