@@ -61,7 +61,7 @@ def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3)) -> Pat
         f'port = "{port}"\nbaud = {BAUD}\nids = {list(ids)}\n'
         f"axes = {axes!r}\n".replace("'", '"')
         + "sample_hz = 100.0\n"
-        "[protocol]\nspeed_dps = 180\nturns = 1\nrest_s = 0.3\n",
+        '[protocol]\nname = "auto"\nspeed_dps = 180\nturns = 1\nrest_s = 0.3\n',  # no poses
         encoding="utf-8")
     return path
 

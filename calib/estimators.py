@@ -796,55 +796,22 @@ def paired_axis_batch(
         J = np.concatenate([Jw, Jr.reshape(B, 3 * r, P), Jz], axis=1)
         return E, J, (t1, t2)
 
-    E, J, tb = evaluate(k, b, u, z, True)
-    cost = np.sum(E**2, axis=1)
-    lam = np.full(B, 1e-3)
-    active = np.ones(B, dtype=bool)
-    iterations = np.zeros(B, dtype=np.int64)
-    converged = np.zeros(B, dtype=bool)
-    for _ in range(int(max_iter)):
-        if not active.any():
-            break
-        Jt = J.transpose(0, 2, 1)
-        JtJ = Jt @ J
-        g = (Jt @ E[..., None])[..., 0]
-        D = np.einsum("bpp->bp", JtJ)
-        A = JtJ + (lam[:, None] * D)[:, :, None] * np.eye(P)
-        step = -np.linalg.solve(A, g[..., None])[..., 0]
+    def retract(state, step, tb):
+        k, b, u, z = state
         t1, t2 = tb
-        k_new = k + step[:, :3]
-        b_new = b + step[:, 3:6]
         da = step[:, 6 : 6 + 2 * S : 2][..., None]
         db = step[:, 7 : 6 + 2 * S : 2][..., None]
-        z_new = z + step[:, 6 + 2 * S :]
         u_new = u + da * t1 + db * t2
         u_new /= np.linalg.norm(u_new, axis=2, keepdims=True)
-        bad_k = np.any(k_new <= 0, axis=1)
-        k_new = np.where(bad_k[:, None], k, k_new)
-        E_new, _, _ = evaluate(k_new, b_new, u_new, z_new, False)
-        cost_new = np.sum(E_new**2, axis=1)
-        accept = active & ~bad_k & (cost_new <= cost)
-        iterations += active
-        small = np.max(np.abs(step), axis=1) <= xtol * (1.0 + np.max(np.abs(k), axis=1))
-        flat = np.abs(cost - cost_new) <= 1e-10 * (1.0 + cost)  # at rounding level either way
-        k = np.where(accept[:, None], k_new, k)
-        b = np.where(accept[:, None], b_new, b)
-        u = np.where(accept[:, None, None], u_new, u)
-        z = np.where(accept[:, None], z_new, z)
-        lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
-        done = active & (small | flat)
-        converged |= done
-        active &= ~done
-        if accept.any():
-            E_acc, J_acc, tb_acc = evaluate(k, b, u, z, True)
-            E = np.where(accept[:, None], E_acc, E)
-            J = np.where(accept[:, None, None], J_acc, J)
-            tb = (
-                np.where(accept[:, None, None], tb_acc[0], tb[0]),
-                np.where(accept[:, None, None], tb_acc[1], tb[1]),
-            )
-            cost = np.sum(E**2, axis=1)
-    E, J, _ = evaluate(k, b, u, z, True)
+        k_new = k + step[:, :3]
+        ok = np.all(k_new > 0, axis=1)  # scale factors stay positive
+        k_new = np.where(ok[:, None], k_new, k)
+        return (k_new, b + step[:, 3:6], u_new, z + step[:, 6 + 2 * S :]), ok
+
+    state, E, J, iterations, converged = _lm_batch(
+        evaluate, retract, (k, b, u, z), max_iter=max_iter, xtol=xtol,
+        step_scale=lambda state: 1.0 + np.max(np.abs(state[0]), axis=1))
+    k, b, u, z = state
     cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
     return PairedAxisBatch(
         scale=k,
@@ -872,7 +839,9 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     homogeneous (:func:`gyrocal.calib.observations.pool_noise`), so the weights do not carry the
     estimates' own scatter; each still encoder angle a reference rests on is a shared unknown
     with its quantisation as prior. Covariance ``(J̃ᵀJ̃)⁻¹``; consistency:
-    ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``.
+    ``Σẽ² ~ χ²(3n + 3r − 6 − 2S)``. A servo turned in several gimbal poses (the full model's
+    protocol) has one axis per pose (:meth:`ObservationSet.pose_groups`; ``S`` counts them) and
+    ``axes`` reports the first.
 
     Parameters
     ----------
@@ -889,12 +858,15 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     motors = obs.motors
     _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
     obs = obs.with_pooled_noise()
+    # One axis per servo and gimbal pose: a servo turned with the gimbal posed turns about
+    # another sensor-frame axis (a recording of the full model's protocol).
+    groups = obs.pose_groups()
+    first = {int(m): int(groups[i]) for i, m in reversed(list(enumerate(obs.motor)))}
     order = sorted(motors)
-    sidx = np.searchsorted(np.array(order), obs.motor)
     res = paired_axis_batch(
         obs.mean[None],
         obs.rate[None],
-        sidx,
+        groups,
         obs.mean_std[None],
         obs.rate_std[None],
         obs.rest_mean[None],  # type: ignore[index]
@@ -911,9 +883,11 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
         chi2 = float(res.chi2[0])
         p = float(chdtrc(dof, chi2))
         consistency = Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
-    axes = {m: res.axes[0, i].copy() for i, m in enumerate(order)}
+    # each servo's axis in the first pose it turned in (the home pose of gyrocal's protocols)
+    axes = {m: res.axes[0, first[m]].copy() for m in order}
     axes_std = {}
-    for i, m in enumerate(order):
+    for m in order:
+        i = first[m]
         blk = cov[6 + 2 * i : 8 + 2 * i, 6 + 2 * i : 8 + 2 * i]
         axes_std[m] = float(np.sqrt(max(np.linalg.eigvalsh(blk).max(), 0.0)))
     it = int(res.iterations[0])
@@ -1231,13 +1205,18 @@ def full_matrix_batch(
     )
 
 
-def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float):  # type: ignore[no-untyped-def]
-    """Levenberg-Marquardt over a batch of independent problems.
+def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: ignore[no-untyped-def]
+              step_scale=None):
+    """Levenberg-Marquardt over a batch of independent problems (the paired-axis and the
+    full-matrix fits).
 
     ``evaluate(*state, with_jac)`` returns whitened residuals ``E`` (B, M), their Jacobian
     (B, M, P) and a tangent basis for ``retract``; ``retract(state, step, tb)`` returns the
-    stepped state and which runs' steps are admissible. A run has converged when its largest
-    step is below ``xtol`` or a step changes the cost by less than ``1e-10`` relative.
+    stepped state and which runs' steps are admissible. Marquardt's damping scales the
+    diagonal of ``JᵀJ`` (floored at 1e-300 so a parameter no residual sees still gets damped).
+    A run has converged when an admissible step is below ``xtol`` (times
+    ``step_scale(state)``, per run, when given) or changes the cost by less than ``1e-10``
+    relative, up or down (rounding level).
     """
     E, J, tb = evaluate(*state, True)
     B, _, P = J.shape
@@ -1265,7 +1244,8 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float):  # type:
         cost_new = np.sum(E_new**2, axis=1)
         accept = active & ok & (cost_new <= cost)
         iterations += active
-        small = np.max(np.abs(step), axis=1) <= xtol
+        tol = xtol if step_scale is None else xtol * step_scale(state)
+        small = np.max(np.abs(step), axis=1) <= tol
         flat = np.abs(cost - cost_new) <= 1e-10 * (1.0 + cost)
         state = pick(accept, new_state, state)
         lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))

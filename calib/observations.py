@@ -14,7 +14,7 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError
 
-__all__ = ["ObservationSet", "diff_noise", "pool_noise"]
+__all__ = ["POSE_TOLERANCE_RAD", "ObservationSet", "diff_noise", "pool_noise"]
 
 
 def diff_noise(x: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -93,6 +93,12 @@ def _arr(
         bad = np.argwhere(~np.isfinite(a))[0].tolist()
         raise CalibInputError(f"{name} contains NaN or inf (first at index {bad})")
     return a
+
+
+#: Two turns of one servo share a gimbal pose when every other servo's angle agrees within this,
+#: rad, modulo whole turns (:meth:`ObservationSet.pose_groups`): 14 encoder ticks of an X-series
+#: servo (4096 a turn), far below any pose step a protocol makes.
+POSE_TOLERANCE_RAD = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -291,6 +297,35 @@ class ObservationSet:
             if np.any(still < -1):
                 raise CalibInputError("pose_still must be -1 or still-angle indices")
         return chain, pose, still
+
+    def pose_groups(self, tolerance_rad: float = POSE_TOLERANCE_RAD) -> np.ndarray:
+        """A group number per rotation window: one group per servo and gimbal pose.
+
+        Two windows are in one group when the same servo turned with every other servo of
+        :attr:`chain` at the same angle, within ``tolerance_rad`` and modulo whole turns (the
+        servo then turned about one axis in the sensor frame); without poses, one group per
+        servo. Groups are numbered in the order of their first window.
+
+        Returns
+        -------
+        ndarray of int, shape (n,)
+        """
+        chain = [int(c) for c in (self.chain or ())]
+        reps: list[tuple[int, np.ndarray | None]] = []
+        out = np.zeros(self.n_windows, dtype=np.int64)
+        for i, m in enumerate(int(x) for x in self.motor):
+            pose = None
+            if self.pose is not None and m in chain:
+                pose = np.delete(np.asarray(self.pose[i], dtype=float), chain.index(m))
+            for g, (motor, rep) in enumerate(reps):
+                if motor == m and (pose is None or rep is None or np.all(
+                        np.abs((pose - rep + np.pi) % (2 * np.pi) - np.pi) < tolerance_rad)):
+                    out[i] = g
+                    break
+            else:
+                out[i] = len(reps)
+                reps.append((m, pose))
+        return out
 
     @property
     def motor_index(self) -> np.ndarray:

@@ -35,9 +35,9 @@ __all__ = [
 #: :data:`gyrocal.calib.estimators.METHODS` (kept here so the command line does not import scipy
 #: to show its help).
 METHODS = ("auto", "paired-axis", "iterative-ls", "levenberg-marquardt", "full-matrix")
-#: The protocols: planned for the jig (the paper's diagonal model), planned with poses for the
-#: full matrix (hardware_docs/method.md §9), or the paper's.
-PROTOCOLS = ("auto", "full", "paper")
+#: The protocols, the default first: planned with poses for the full matrix (hardware_docs/method.md
+#: §9), planned for the jig without poses (the paper's diagonal model), or the paper's.
+PROTOCOLS = ("full", "auto", "paper")
 
 
 #: A gyrocal.toml is a few kB; anything far larger is a wrong file.
@@ -137,9 +137,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                       check=_within(1, 8000)),
     },
     "protocol": {
-        "name": Key("auto", "auto: planned for this servo and gyro; full: planned with poses "
-                    "for the full matrix (three servos, at least 45 s); paper: 60 deg/s, one "
-                    "turn, 3 s waits", str, PROTOCOLS),
+        "name": Key(PROTOCOLS[0], "full: planned with poses for the full matrix (three "
+                    "servos, at least 45 s); auto: planned for this servo and gyro, diagonal "
+                    "model only; paper: 60 deg/s, one turn, 3 s waits", str, PROTOCOLS),
         "time_budget_s": Key(30.0, "longest jig time the planner may use, s (1..3600)",
                              (int, float), check=_within(1, 3600)),
         "speed_dps": Key(0.0, "fixed turn speed, deg/s (1..2000; 0: planned)", (int, float),

@@ -2,8 +2,11 @@
 
 Numbers first (no matplotlib needed): :func:`servo_axes` decides each servo's rotation axis in the
 sensor frame (the calibration's ``axes`` where present, else fitted to the servo's windows under
-the calibration, else the nominal axis of the recording's manifest), :func:`window_residuals`
-whitens each window's mean against the calibration's prediction, and :func:`encoder_rate` /
+the calibration, else the nominal axis of the recording's manifest); :func:`window_axes` gives
+each turn its own axis as measured (a servo turned in several gimbal poses turns about a
+different sensor-frame axis in each: the calibration's kinematics at the window's encoder angles,
+else fitted per pose); :func:`window_residuals` whitens each window's mean against the
+calibration's prediction (the full model's ``A`` where it has one), and :func:`encoder_rate` /
 :func:`boxcar_mean` put the gyro and the encoder on the same averaging weight. Then the figures
 (need the ``plot`` extra), each written atomically:
 
@@ -31,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrocal.calib.kinematics import axes_at
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.segments import Segment
 from gyrocal.calib.windows import (  # the estimator's own weight and grid: plot what the fit used
@@ -52,6 +56,7 @@ __all__ = [
     "nominal_axis",
     "plan_report",
     "servo_axes",
+    "window_axes",
     "window_residuals",
     "write_report",
 ]
@@ -71,13 +76,20 @@ class ServoAxis:
     axis : ndarray (3,)
         Unit vector: a positive turn of the servo is a positive rotation about it.
     source : str
-        ``calibration`` (the fit's estimate), ``fitted`` (to the servo's windows under the
-        calibration's scale and bias) or ``nominal`` (the manifest's axis name).
+        ``calibration`` (the fit's estimate), ``kinematics`` (the full model's chain at the
+        turn's encoder angles), ``fitted`` (to the servo's windows under the calibration's
+        model; per pose when the servo turned in several) or ``nominal`` (the manifest's axis
+        name).
+    pose_terms : ndarray (K, 3), optional
+        For an axis carried by the held servos' encoder angles (``kinematics``): its change
+        per standard deviation of each held angle's reading (a servo holds anywhere within its
+        encoder tick, ``q/√12``), so the residuals can count that uncertainty.
     """
 
     motor: int
     axis: np.ndarray
     source: str
+    pose_terms: np.ndarray | None = None
 
 
 def nominal_axis(name: str) -> np.ndarray:
@@ -152,15 +164,10 @@ def servo_axes(
     for m in (manifest.get("gimbal") or {}).get("motors") or []:
         if isinstance(m, Mapping) and "id" in m and isinstance(m.get("axis"), str):
             nominal[int(m["id"])] = m["axis"]
-    k = np.asarray(cal.scale)
-    b = np.asarray(cal.bias)
     out: dict[int, ServoAxis] = {}
     for motor in motors:
         u = calibration_axis(cal, motor)
-        acc = np.zeros(3)
-        for w in windows:
-            if w.motor == motor:
-                acc += w.rate * k * (np.asarray(w.mean) + b)
+        acc = _fitted_direction(cal, [w for w in windows if w.motor == motor])
         if u is not None:
             out[motor] = ServoAxis(motor, u, "calibration")
         elif np.any(acc):
@@ -171,6 +178,91 @@ def servo_axes(
             raise InputError(f"servo {motor}: no axis in the calibration, no window and no axis "
                              "in the manifest; cannot tell which axis it turns about")
     return out
+
+
+def _fitted_direction(cal: GyroCalibration, windows: list[Window]) -> np.ndarray:
+    """``Σ ω_i A (m̄_i + b)`` over ``windows``: the least-squares direction of their calibrated
+    means (not normalised; zero without windows)."""
+    acc = np.zeros(3)
+    for w in windows:
+        acc += w.rate * cal.apply(w.mean)
+    return acc
+
+
+def _kinematic_axes(extracted: ExtractedWindows, cal: GyroCalibration
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Each rotation window's axis from the calibration's kinematics at the window's encoder
+    angles (:func:`gyrocal.calib.kinematics.axes_at`) and its change per standard deviation of
+    each held servo's angle (``ServoAxis.pose_terms``, by central differences); None when the
+    calibration has no kinematics or the observations no poses of its chain."""
+    obs = extracted.observations
+    kin = cal.kinematics
+    if kin is None or obs.pose is None or not obs.chain or not extracted.windows:
+        return None
+    chain = [int(c) for c in kin["chain"]]
+    have = [int(c) for c in obs.chain]
+    if not set(chain) <= set(have) or any(int(w.motor) not in chain  # type: ignore[arg-type]
+                                          for w in extracted.windows):
+        return None
+    angles = np.asarray(obs.pose)[:, [have.index(c) for c in chain]]
+    n, S = angles.shape
+    rows = np.arange(n)
+    idx = np.array([chain.index(int(w.motor)) for w in extracted.windows])  # type: ignore[arg-type]
+    axes = axes_at(kin, angles)[rows, idx]
+    terms = np.zeros((n, S, 3))
+    sigma, h = float(obs.still_angle_std), 1e-6
+    if sigma > 0:
+        for k in range(S):
+            step = np.zeros(S)
+            step[k] = h
+            d = (axes_at(kin, angles + step)[rows, idx] - axes_at(kin, angles - step)[rows, idx])
+            terms[:, k] = np.where((idx == k)[:, None], 0.0, d / (2 * h) * sigma)
+    return axes, terms
+
+
+def window_axes(
+    extracted: ExtractedWindows, cal: GyroCalibration, manifest: Mapping[str, Any],
+) -> tuple[ServoAxis, ...]:
+    """Each rotation window's turning axis in the sensor frame, as the calibration sees it.
+
+    A servo turned with the gimbal in several poses (the full model's protocol,
+    hardware_docs/method.md §9) turns about a different sensor-frame axis in each. In order of
+    preference: the calibration's kinematics at the window's encoder angles (a full-model
+    calibration; :mod:`gyrocal.calib.kinematics`); else, for a servo turned in one pose only,
+    :func:`servo_axes`; else the least-squares direction of the calibrated window means of
+    each pose (``fitted``).
+
+    Returns
+    -------
+    tuple of ServoAxis
+        One per ``extracted.windows``, in order.
+
+    Raises
+    ------
+    InputError
+        As :func:`servo_axes`.
+    """
+    windows = extracted.windows
+    kin = _kinematic_axes(extracted, cal)
+    if kin is not None:
+        return tuple(ServoAxis(int(w.motor), kin[0][i], "kinematics",  # type: ignore[arg-type]
+                               kin[1][i]) for i, w in enumerate(windows))
+    groups = [int(g) for g in extracted.observations.pose_groups()]
+    per_motor: dict[int, set[int]] = {}
+    for w, g in zip(windows, groups, strict=True):
+        per_motor.setdefault(int(w.motor), set()).add(g)  # type: ignore[arg-type]
+    single = sorted(m for m, gs in per_motor.items() if len(gs) == 1)
+    home = servo_axes(single, cal, manifest, windows)
+    fitted: dict[int, ServoAxis] = {}
+    for g in set(groups):
+        members = [w for w, h in zip(windows, groups, strict=True) if h == g]
+        motor = int(members[0].motor)  # type: ignore[arg-type]
+        if motor in home:
+            fitted[g] = home[motor]
+        else:
+            acc = _fitted_direction(cal, members)
+            fitted[g] = ServoAxis(motor, acc / np.linalg.norm(acc), "fitted")
+    return tuple(fitted[g] for g in groups)
 
 
 def encoder_rate(
@@ -233,40 +325,52 @@ class Residuals:
 
 
 def window_residuals(
-    extracted: ExtractedWindows, cal: GyroCalibration, axes: Mapping[int, ServoAxis]
+    extracted: ExtractedWindows, cal: GyroCalibration,
+    axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...],
 ) -> Residuals:
     """Each window's mean minus what the calibration predicts, in units of its deviation.
 
-    A rotation window of servo ``s`` at reference rate ``ω`` predicts ``ω u_s ⊘ k − b`` (the model
-    ``g = k ∘ (m + b)`` inverted, with ``g = ω u_s``); a rest predicts ``−b``. The deviation of
-    each component is ``sqrt(σ_m² + (σ_ω u_s/k)²)``: the window mean's standard error (the noise
-    pooled over the windows where it is homogeneous, as the paired-axis fit does) and the
-    reference rate's. With the calibration fitted on these windows, ``Σ z²`` is close to the fit's
-    chi-square. Axes fitted to the windows (:func:`servo_axes`) take two degrees of freedom per
-    servo from the residuals; nominal axes leave the mount's misalignment in them.
+    A rotation window at reference rate ``ω`` about the axis ``u`` predicts ``A⁻¹ ω u − b`` (the
+    model ``g = A (m + b)`` inverted, with ``g = ω u``; ``A = diag(k)`` for the paper's model,
+    ``ω u ⊘ k − b``); a rest predicts ``−b``. The deviation of each component is
+    ``sqrt(σ_m² + (σ_ω A⁻¹u)²)``: the window mean's standard error (the noise pooled over the
+    windows where it is homogeneous, as the fits do) and the reference rate's; for an axis from
+    the kinematics also ``Σ_k (ω A⁻¹ ∂u/∂θ_k σ_q)²`` for every held servo ``k`` (it holds
+    anywhere within its encoder tick, ``σ_q = q/√12``; the fit estimates these hold errors as
+    shared unknowns, the report does not). With the
+    calibration fitted on these windows, ``Σ z²`` is close to the fit's chi-square. Axes fitted
+    to the windows (:func:`servo_axes`, :func:`window_axes`) take two degrees of freedom per
+    servo and pose from the residuals; nominal axes leave the mount's misalignment in them.
 
     Parameters
     ----------
     extracted : ExtractedWindows
     cal : GyroCalibration
-    axes : mapping
-        From :func:`servo_axes`.
+    axes : mapping or tuple
+        Per servo (from :func:`servo_axes`: one axis for all its turns) or per window (from
+        :func:`window_axes`).
 
     Returns
     -------
     Residuals
     """
     obs = extracted.observations.with_pooled_noise()
-    k = np.asarray(cal.scale)
+    per_window = (tuple(axes[int(w.motor)] for w in extracted.windows)  # type: ignore[arg-type]
+                  if isinstance(axes, Mapping) else tuple(axes))
+    if len(per_window) != len(extracted.windows):
+        raise InputError(f"{len(per_window)} axes for {len(extracted.windows)} windows")
+    a_inv = np.linalg.inv(cal.full_matrix)
     b = np.asarray(cal.bias)
     labels: list[str] = []
     kinds: list[str] = []
     err, sig = [], []
     for i, w in enumerate(extracted.windows):
-        u = axes[int(w.motor)].axis  # type: ignore[arg-type]
-        pred = obs.rate[i] * u / k - b
-        err.append(obs.mean[i] - pred)
-        sig.append(np.sqrt(obs.mean_std[i] ** 2 + (obs.rate_std[i] * u / k) ** 2))
+        v = a_inv @ per_window[i].axis
+        err.append(obs.mean[i] - (obs.rate[i] * v - b))
+        var = obs.mean_std[i] ** 2 + (obs.rate_std[i] * v) ** 2
+        if per_window[i].pose_terms is not None:
+            var = var + np.sum((obs.rate[i] * per_window[i].pose_terms @ a_inv.T) ** 2, axis=0)
+        sig.append(np.sqrt(var))
         labels.append(f"s{w.motor}{'+' if w.direction > 0 else '-'}")
         kinds.append("rotate")
     for i, w in enumerate(extracted.rests):
@@ -276,8 +380,10 @@ def window_residuals(
         kinds.append("rest")
     error = np.array(err).reshape(-1, 3)
     sigma = np.array(sig).reshape(-1, 3)
-    return Residuals(labels, kinds, error / sigma, error, sigma,
-                     {m: a.source for m, a in axes.items()})
+    sources: dict[int, str] = {}
+    for a in per_window:
+        sources[a.motor] = a.source
+    return Residuals(labels, kinds, error / sigma, error, sigma, sources)
 
 
 # ============================================================================ the report
@@ -350,7 +456,6 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
     t, m = rec.imu_t[sel], rec.imu_rate[sel]
     et, ea = rec.encoder(int(seg.motor))  # type: ignore[arg-type]
     u = axis.axis
-    k = np.asarray(cal.scale)
     g = cal.apply(m) if m.shape[0] else np.zeros((0, 3))
     fig, axs = plt.subplots(3, 1, sharex=True, figsize=(10, 8.5), constrained_layout=True,
                             gridspec_kw={"height_ratios": [1.3, 1.0, 1.0]})
@@ -393,9 +498,9 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
             ax.set_ylim(-2.5 * span, 2.5 * span)
     if window is not None and window_index is not None:
         obs = extracted.observations.with_pooled_noise()
-        gm = k * (np.asarray(window.mean) + np.asarray(cal.bias))
-        e = float(gm @ u - window.rate)
-        s = float(math.hypot(np.linalg.norm(k * u * obs.mean_std[window_index]),
+        e = float(cal.apply(window.mean) @ u - window.rate)
+        s = float(math.hypot(np.linalg.norm((cal.full_matrix.T @ u)
+                                            * obs.mean_std[window_index]),
                              obs.rate_std[window_index]))
         a, b = window.corners[0], window.corners[3]
         ax.hlines(e, a, b, color="C3", lw=2.0,
@@ -517,7 +622,7 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
         text += (f"; the fit: χ² = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g} "
                  f"({'consistent' if c.ok else 'NOT consistent'})")
     sources = set(res.axis_sources.values())
-    if sources != {"calibration"}:
+    if not sources <= {"calibration", "kinematics"}:
         text += "\nservo axes: " + ", ".join(f"servo {m} {s}" for m, s in
                                              sorted(res.axis_sources.items()))
         if "fitted" in sources:
@@ -577,7 +682,8 @@ def write_report(
         )
     make_output_dir(out, "--out")
     motors = sorted({int(s.motor) for s in rec.segments if s.kind == "rotate"})  # type: ignore[arg-type]
-    axes = servo_axes(motors, cal, rec.manifest, extracted.windows)
+    home = servo_axes(motors, cal, rec.manifest, extracted.windows)
+    axes = window_axes(extracted, cal, rec.manifest)
     index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}
     written: list[tuple[Path, str]] = []
     for p in plan:
@@ -586,7 +692,10 @@ def write_report(
         elif p.kind == "turn":
             seg = p.segment
             i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
-            fig = _turn_plot(plt, rec, cal, seg, w, axes[int(seg.motor)], extracted, i)  # type: ignore[union-attr,arg-type]
+            # a turn with no window (skipped by the extraction) is drawn about the servo's
+            # home axis
+            axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
+            fig = _turn_plot(plt, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
         elif p.kind == "rests":
             fig = _rests_plot(plt, extracted, cal, rec.truth)
         else:

@@ -510,10 +510,25 @@ def test_recording_v1_fields_match_real_recordings(docs: DocRunner) -> None:
         assert f"`{header}`" in (DOC_DIR / "formats.md").read_text(), f"{name}: header line"
 
 
+def _real_calibrations(docs: DocRunner) -> dict[int, dict]:
+    """The calibration documents running.md makes, by version (its ``gyrocal calibrate`` writes a
+    version 2, its diagonal ``gyrocal estimate --out`` a version 1)."""
+    out: dict[int, dict] = {}
+    for path in sorted(docs(DOC_DIR / "running.md").workdir.glob("*/*.json")):
+        doc = json.loads(path.read_text())
+        if isinstance(doc, dict) and doc.get("format") == "gyrocal-calibration":
+            out.setdefault(doc["version"], doc)
+    return out
+
+
 def test_calibration_v1_fields_match_a_real_calibration(docs: DocRunner) -> None:
-    run, _ = _real_runs(docs)
-    real = _paths(json.loads((run / "calibration.json").read_text()))
-    _check_fields(_field_table("calibration"), real, "formats.md calibration")
+    _real_runs(docs)
+    real = _real_calibrations(docs)
+    assert set(real) == {1, 2}, "running.md must make a version 1 and a version 2 calibration"
+    _check_fields(_field_table("calibration"), _paths(real[1]), "formats.md calibration")
+    # the real version 2 document: what it adds to version 1 is in the version 2 table
+    _check_fields([f for f in _field_table("calibration v2") if f != "covariance"],
+                  _paths(real[2]) - _paths(real[1]), "formats.md calibration v2")
 
 
 def test_calibration_v2_fields_match_a_v2_document() -> None:

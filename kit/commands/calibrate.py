@@ -17,9 +17,11 @@ from gyrocal.kit import argtypes
 HELP = "calibrate: spin the sensor on the jig, record, fit, write calibration.json"
 DESCRIPTION = (
     "Run the calibration protocol on the gimbal (or with --sim on the emulated jig): for each "
-    "servo whole turns one way and back with rests, the IMU drained and the servos sampled in "
-    "one loop, every sample recorded. Then window the recording, fit the six parameters, write "
-    "DIR/recording/ (Recording v1) and DIR/calibration.json (Calibration v1), and print the "
+    "servo whole turns one way and back with rests, and (protocol full, the default) the same "
+    "turns with an inner servo moved to a pose, the IMU drained and the servos sampled in one "
+    "loop, every sample recorded. Then window the recording, fit the full model g = A (m + b) "
+    "(or the six parameters of the diagonal one), write DIR/recording/ (Recording v1) and "
+    "DIR/calibration.json (Calibration v2, or v1 for the diagonal model), and print the "
     "result. Exits 3 if the calibration is not consistent with the measured noise. On an error, "
     "Ctrl-C or SIGTERM the servos stop and torque goes off first; the recording is kept, "
     "marked incomplete."
@@ -57,9 +59,9 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
-    p.add_argument("--sim-cross-axis", type=float, default=0.0, metavar="FRACTION",
+    p.add_argument("--sim-cross-axis", type=float, metavar="FRACTION",
                    help="largest cross-axis term of the emulated sensor, drawn by seed (default "
-                        "0 = the paper's sensor; 0.02 is the MPU-9250 datasheet's ±2 %%)")
+                        "0.02, the MPU-9250 datasheet's ±2 %%; 0 = the paper's sensor)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -95,9 +97,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write a calibration whose scale is outside 0.5..2 or whose bias is "
                         "beyond the gyro's range (normally refused, exit 6: a unit mix-up)")
     p.add_argument("--protocol", choices=PROTOCOLS,
-                   help="auto: planned for this jig (default); paper: 60°/s, one turn, 3 s waits")
+                   help="full: planned with gimbal poses for the full matrix, three servos "
+                        "(default); auto: planned for this jig, diagonal model; paper: 60°/s, "
+                        "one turn, 3 s waits")
     p.add_argument("--method", choices=METHODS)
-    p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
+    p.add_argument("--json", action="store_true", help="print the calibration document")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--no-report", action="store_true",
                    help="do not write DIR/report.html and DIR/plots/ (written by default when "
@@ -154,11 +158,12 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
                          "servos on a port (or 'gyrocal emulate --pty') with an emulated IMU "
                          "use --sim-imu --port PORT")
     if args.sim or sim_imu:
-        from gyrocal.kit.sim import SIM_BAUD, build_sim
+        from gyrocal.kit.sim import SIM_BAUD, SIM_CROSS_AXIS, build_sim
 
+        cross_axis = getattr(args, "sim_cross_axis", None)
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
-                        cross_axis=getattr(args, "sim_cross_axis", 0.0))
+                        cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis)
         if sim_imu:
             g = cfg["gimbal"]
             return sim, sim.clock, g["port"], g["baud"], sim.imu_bus
@@ -277,7 +282,10 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
         # planning only.
         full = p["name"] == "full"
         if full and len(cfg["gimbal"]["ids"]) != 3:
-            raise InputError("protocol 'full' needs a three-servo gimbal (gimbal.ids)")
+            raise InputError(
+                f"protocol 'full' (the default) needs a three-servo gimbal; gimbal.ids lists "
+                f"{len(cfg['gimbal']['ids'])}: set protocol.name = \"auto\" (or --protocol auto) "
+                "to calibrate the diagonal model with fewer servos")
         budget = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if full else p["time_budget_s"]
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
@@ -297,10 +305,14 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
         plan = replace(plan, jig_time_s=jig_time(
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses)))
-    if p["name"] == "auto" and plan.jig_time_s > p["time_budget_s"] * (1 + 1e-9):
+    # the planned protocols stay within their budget (the full one's is at least
+    # FULL_TIME_BUDGET_S) also when fixed values override the plan
+    limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (
+        p["time_budget_s"])
+    if p["name"] != "paper" and plan.jig_time_s > limit * (1 + 1e-9):
         raise InputError(
             f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
-            f"protocol.time_budget_s = {p['time_budget_s']:g} s: raise the budget, or lower "
+            f"protocol.time_budget_s = {limit:g} s: raise the budget, or lower "
             "protocol.turns or protocol.rest_s, or set protocol.speed_dps higher (0 lets the "
             "planner choose within the budget)")
     if plan.speed > gimbal.top_speed:

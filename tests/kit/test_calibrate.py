@@ -27,11 +27,14 @@ def sim_state(out):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """Three seeded calibrations of three different emulated sensors."""
+    """Three seeded calibrations of three different emulated sensors of the paper's kind (no
+    cross-axis terms) with the diagonal protocol, the paper's model (the default, the full
+    model on a ±2 % sensor, is tests/kit/test_fullmodel_e2e.py's)."""
     out = {}
     for seed in (1, 2, 3):
         d = tmp_path_factory.mktemp(f"cal{seed}")
-        assert calibrate(d, "--sim-seed", str(seed), "--json") == 0
+        assert calibrate(d, "--sim-seed", str(seed), "--protocol", "auto", "--sim-cross-axis",
+                         "0", "--json") == 0
         out[seed] = d
     return out
 
@@ -79,8 +82,11 @@ def test_verify_reports_a_large_improvement_on_a_fresh_run(runs, tmp_path, capsy
     # says so with exit 3.
     capsys.readouterr()
     cal = runs[3] / "calibration.json"
+    short = tmp_path / "short.toml"  # the protocol's turns before the sweeps: 18 s of them
+    short.write_text('[protocol]\nname = "auto"\ntime_budget_s = 18.0\n')
     assert main(["verify", str(cal), "--sim", "--sim-seed", "3", "--sim-cross-axis", "0.02",
-                 "--out", str(tmp_path), "--quiet", "--json"]) == 3
+                 "--config", str(short), "--out", str(tmp_path / "v"), "--quiet",
+                 "--json"]) == 3
     out, err = capsys.readouterr()
     v = json.loads(out)
     assert v["reference"] == "calibration" and v["ok"] is False
@@ -130,8 +136,9 @@ def test_saturation_is_caught(tmp_path, capsys):
 def test_a_failed_check_repeats_the_turn_once_and_the_run_still_calibrates(tmp_path, capsys):
     # Servo 2 drags for 3 s during its first turn (10.2-14.4 s): the speed check fails, the turn
     # is reversed, rested and repeated, and the repeat is clean.
+    # (the diagonal protocol, whose timings these are; --protocol auto)
     code = main(["calibrate", "--sim", "--out", str(tmp_path), "--sim-fault",
-                 "stall:2:11:0.9:3", "--json"])
+                 "stall:2:11:0.9:3", "--json", "--protocol", "auto", "--sim-cross-axis", "0"])
     captured = capsys.readouterr()
     assert "servo 2 held only" in captured.err and "repeating once" in captured.err
     assert code == 0, captured.err
@@ -149,7 +156,9 @@ def test_a_fifo_gap_is_caught(tmp_path, capsys):
 
 
 def test_movement_during_a_rest_is_caught(tmp_path, capsys):
-    code = calibrate(tmp_path, "--sim-fault", "slip:5.1:1", "--sim-fault", "slip:5.7:1")
+    # two slips in the diagonal protocol's second rest (4.8-5.4 s and its repeat)
+    code = calibrate(tmp_path, "--sim-fault", "slip:5.1:1", "--sim-fault", "slip:5.7:1",
+                     "--protocol", "auto")
     assert code == 5
     assert "the sensor moved during a rest" in capsys.readouterr().err
 

@@ -38,7 +38,7 @@ def test_values_override_defaults(tmp_path):
         ("[gimbal]\nids = [1, 1, 2]\n", "gimbal.ids must be distinct"),
         ("[gimbal]\nids = [1, 2]\n", "gimbal.ids has 2 servos but gimbal.axes names 3"),
         ("[imu]\naddress = 0x90\n", "7-bit I2C address"),
-        ("[protocol]\nname = 'fast'\n", "allowed: 'auto', 'full', 'paper'"),
+        ("[protocol]\nname = 'fast'\n", "allowed: 'full', 'auto', 'paper'"),
         ("[imu\n", "not valid TOML"),
     ],
 )

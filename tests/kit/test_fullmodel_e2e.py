@@ -10,17 +10,18 @@ import numpy as np
 import pytest
 
 from gyrocal.calib.design import general_motion_rms, predicted_general_motion_rms
-from gyrocal.kit.cli import main
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.kit.cli import build_parser
 from gyrocal.kit.pipeline import estimate_recording
 from gyrocal.kit.recording import load_recording
 from tests.calib.fullmodel_truth import truth_in_frame
 
 
 @pytest.fixture(scope="module")
-def rec(tmp_path_factory):
-    d = tmp_path_factory.mktemp("full")
-    assert main(["calibrate", "--sim", "--sim-seed", "4", "--sim-cross-axis", "0.02",
-                 "--protocol", "full", "--out", str(d), "--quiet", "--json"]) == 0
+def rec(full_run):
+    """The shared ``gyrocal calibrate --sim`` at the defaults (tests/kit/conftest.py)."""
+    d, code = full_run
+    assert code == 0
     return load_recording(d / "recording")
 
 
@@ -28,13 +29,40 @@ def _sensing(truth):
     return np.diag(1 / np.asarray(truth["scale"])) @ np.asarray(truth["misalignment"])
 
 
-def test_sim_draws_cross_axis_terms_within_the_datasheet_bound(rec):
+def test_the_default_run_is_the_full_model_on_a_datasheet_sensor(rec, full_run):
+    # --sim draws cross-axis terms within the MPU-9250 datasheet's ±2 % (PS-MPU-9250A-01 §3.1)
     mis = np.asarray(rec.truth["misalignment"])
     off = mis[~np.eye(3, dtype=bool)]
     assert np.isclose(np.max(np.abs(off)), 0.02) and np.allclose(np.diag(mis), 1.0)
+    # and the default protocol poses the gimbal for the full matrix, within 45 s of jig time
+    assert rec.manifest["protocol"]["name"] == "full"
     assert rec.manifest["protocol"]["model"] == "full"
     assert any(s.kind == "move" for s in rec.segments)
     assert rec.manifest["protocol"]["planned_jig_time_s"] <= 45.0
+    last = max(s.t_end for s in rec.segments)
+    assert last - min(s.t_start for s in rec.segments) <= 45.0 + 1.0
+    cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
+    assert cal.is_full and cal.method == "full-matrix" and cal.frame == "gyro-x-xy"
+    C, b = _sensing(rec.truth), np.asarray(rec.truth["bias"])
+    std = np.sqrt(np.diag(cal.covariance_matrix))
+    free = std[:9] > 0
+    z = (cal.full_matrix - truth_in_frame(C)).ravel()[free] / std[:9][free]
+    assert np.all(np.abs(z) < 4), z
+    assert np.all(np.abs(np.asarray(cal.bias) - b) < 4 * std[9:])
+
+
+@pytest.mark.parametrize(("flag", "largest"), [((), 0.02), (("--sim-cross-axis", "0"), 0.0),
+                                               (("--sim-cross-axis", "0.01"), 0.01)])
+def test_sim_cross_axis_flag_and_default(flag, largest):
+    from gyrocal.kit.commands.calibrate import jig_endpoints, load_cli_config
+    from gyrocal.kit.sim import DATASHEET_CROSS_AXIS
+
+    assert DATASHEET_CROSS_AXIS == 0.02  # MPU-9250 PS §3.1: cross-axis sensitivity ±2 %
+    p = build_parser()
+    args = p.parse_args(["calibrate", "--sim", "--sim-seed", "7", *flag])
+    sim = jig_endpoints(load_cli_config(args), args)[0]
+    mis = np.asarray(sim.truth.misalignment)
+    assert np.max(np.abs(mis - np.eye(3))) == pytest.approx(largest, abs=1e-15)
 
 
 def test_full_model_recovers_the_matrix_and_holds_in_general_motion(rec):

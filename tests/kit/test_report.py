@@ -16,6 +16,7 @@ from gyrocal.kit.report_plots import (
     encoder_rate,
     nominal_axis,
     servo_axes,
+    window_axes,
     window_residuals,
 )
 
@@ -24,8 +25,11 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
+    # The paper's sensor and the diagonal protocol: one axis per servo, a version 1 calibration
+    # (the full model's posed turns are tested on the shared default run below).
     d = tmp_path_factory.mktemp("report") / "run"
-    assert main(["calibrate", "--sim", "--sim-seed", "11", "--out", str(d), "--quiet"]) in (0, 3)
+    assert main(["calibrate", "--sim", "--sim-seed", "11", "--protocol", "auto",
+                 "--sim-cross-axis", "0", "--out", str(d), "--quiet"]) in (0, 3)
     return d
 
 
@@ -219,3 +223,63 @@ def test_a_turn_with_a_gap_is_planned_without_a_window(run_dir, tmp_path):
     assert sum("no window" in d for d in plan.values()) == 1
     (a, b), = _gaps(gapped.imu_t)
     assert a < mid + 0.01 and b > mid + 0.09
+
+
+# ------------------------------------------------------------------ the full model's posed turns
+@pytest.fixture(scope="module")
+def full(full_run):
+    """The shared default run (full protocol, ±2 % cross-axis sensor) and its windows."""
+    from gyrocal.kit.pipeline import extract_recording as extract
+
+    d, code = full_run
+    assert code == 0
+    rec = load_recording(d / "recording")
+    cal = GyroCalibration.from_json((d / "calibration.json").read_text())
+    return d, rec, extract(rec), cal
+
+
+def test_report_of_a_full_calibration_draws_every_posed_turn(full, tmp_path, capsys):
+    d, rec, _, _ = full
+    out_dir = tmp_path / "plots"
+    assert main(["report", str(d / "recording"), str(d / "calibration.json"), "--out",
+                 str(out_dir)]) == 0, capsys.readouterr().err
+    names = expected_names(rec)
+    assert len(names) == 10 + 3  # six home turns and two posed pairs
+    check_pngs(out_dir, names)
+
+
+def test_posed_turns_take_their_axis_from_the_calibration_kinematics(full):
+    _, rec, ex, cal = full
+    axes = window_axes(ex, cal, rec.manifest)
+    assert {a.source for a in axes} == {"kinematics"}
+    # The calibration's own residuals: their chi-square is the fit's (up to the still-angle
+    # unknowns the fit also carries, a few of its degrees of freedom).
+    res = window_residuals(ex, cal, axes)
+    assert res.chi2 == pytest.approx(cal.consistency.chi2, rel=0.25), (res.chi2, cal.consistency)
+    # One axis per servo (the home one) for every turn leaves the posed turns far off.
+    home = window_residuals(ex, cal, servo_axes([1, 2, 3], cal, rec.manifest, ex.windows))
+    assert home.chi2 > 100 * res.chi2
+
+
+def test_a_diagonal_calibration_of_a_posed_run_gets_one_axis_per_pose(full):
+    from gyrocal.kit.pipeline import estimate_recording
+
+    _, rec, ex, _ = full
+    diag = estimate_recording(rec, "paired-axis").calibration
+    assert not diag.is_full
+    axes = window_axes(ex, diag, rec.manifest)
+    poses = rec.manifest["protocol"]["poses"]
+    for motor in {p["turn"] for p in poses}:
+        turned = [i for i, w in enumerate(ex.windows) if w.motor == motor]
+        assert all(axes[i].source == "fitted" for i in turned)
+        distinct = []
+        for i in turned:
+            if not any(np.allclose(axes[i].axis, u) for u in distinct):
+                distinct.append(axes[i].axis)
+        mine = [p for p in poses if p["turn"] == motor]
+        assert len(distinct) == 1 + len(mine)  # home first, then one axis per pose
+        # the moved servo turned the axis by the pose angle (a square gimbal within the
+        # mount's few degrees: the axes are nearly orthogonal)
+        for p, u in zip(mine, distinct[1:], strict=True):
+            angle = np.arccos(np.clip(distinct[0] @ u, -1, 1))
+            assert angle == pytest.approx(abs(p["angle_rad"]), abs=np.radians(3)), p

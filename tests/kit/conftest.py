@@ -1,0 +1,64 @@
+"""Session-wide emulated runs shared by the kit tests (each costs tens of seconds of CPU).
+
+``full_run`` is one ``gyrocal calibrate --sim`` at the defaults (the full model's protocol, an
+emulated sensor with the datasheet's ±2 % cross-axis terms); ``verify_run`` is one
+``gyrocal verify --sim`` of that calibration on the same emulated sensor and jig, with a short
+diagonal protocol (18 s) before its general-motion sweeps. Under pytest-xdist the workers share
+them: the first to arrive runs the command under a file lock, the others read its output.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from gyrocal.kit.cli import main
+
+#: The emulated sensor and jig of the shared runs (seed of ``--sim-seed``).
+SHARED_SEED = 5
+
+
+def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
+          make: Callable[[Path], int]) -> tuple[Path, int]:
+    """Run ``make(directory)`` once per test session (across xdist workers, whose base
+    temporary directories share a parent); its exit code is kept beside the directory."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    d = root / f"shared-{name}"
+    with open(root / f"shared-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            done = root / f"shared-{name}.json"
+            if not done.exists():
+                code = make(d)
+                done.write_text(json.dumps({"exit": code}))
+            return d, json.loads(done.read_text())["exit"]
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+@pytest.fixture(scope="session")
+def full_run(tmp_path_factory):
+    """``(directory, exit code)`` of ``gyrocal calibrate --sim`` at the defaults."""
+    return _once(tmp_path_factory, "calibrate", lambda d: main(
+        ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), "--out", str(d), "--quiet",
+         "--no-report"]))
+
+
+@pytest.fixture(scope="session")
+def verify_run(tmp_path_factory, full_run):
+    """``(directory, exit code)`` of ``gyrocal verify`` of ``full_run``'s calibration on the same
+    emulated sensor (fresh noise), its protocol the planner's diagonal one in 18 s."""
+    def make(d: Path) -> int:
+        d.mkdir()
+        (d / "gyrocal.toml").write_text('[protocol]\nname = "auto"\ntime_budget_s = 18.0\n')
+        return main(["verify", str(full_run[0] / "calibration.json"), "--sim", "--sim-seed",
+                     str(SHARED_SEED), "--config", str(d / "gyrocal.toml"), "--out",
+                     str(d / "run"), "--quiet", "--json"])
+    return _once(tmp_path_factory, "verify", make)

@@ -1,0 +1,170 @@
+"""An independent sample-level Recording v1 generator for the full model g = A (m + b).
+
+Written from the contract alone (DESIGN.md "Recording v1", hardware_docs/formats.md: the
+manifest's ``gimbal.motors`` in chain order, base first; ``move`` segments for pose changes;
+encoder angles cumulative and unwrapped), with scipy's rotations and plain numpy: nothing from
+gyrocal's kit, drivers or calib (no writer, no emulator, no kinematics, no planner).
+
+The gimbal is three servos in a serial chain, base to sensor, each turning about a link axis
+``a_j`` given in the frame of the link before it (tilted off x, y, z: a gimbal that is not
+machined square), and a sensor mount ``M``. The sensor's orientation in the base frame is
+``Rot(a_0, θ_0) Rot(a_1, θ_1) Rot(a_2, θ_2) M``, so its angular velocity in the sensor frame is
+
+    ω = Σ_j (Rot(a_{j+1}, θ_{j+1}) … Rot(a_2, θ_2) M)ᵀ a_j θ̇_j,
+
+evaluated at every gyro sample from the servos' exact angles and rates. The gyro reads
+``m = C ω − b`` plus white noise, with ``C = diag(1/scale) @ misalignment`` (the emulator's
+``SensorTruth`` convention, so ``truth`` in the manifest has the same meaning), rounded to the
+MPU-9250's 500 °/s LSB unless ``lsb`` is 0. The encoders read the true angle rounded to 4096
+ticks a turn unless ``ticks`` is 0.
+
+The pose schedule differs from gyrocal's planner (which poses at 45° or 90°, turns negative first
+and moves one servo per pair): here every servo turns positive first, the poses are at
+``pose_deg`` (default 60°) and ``-pose_deg``, and a pose may move two servos at once.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from tests.kit.contract_recording import _profile
+
+TICKS = 4096
+#: MPU-9250 at ±500 °/s: 65.5 LSB per °/s (PS-MPU-9250A-01 §3.1).
+LSB_500DPS = np.radians(1 / 65.5)
+
+
+def draw_sensor(seed: int, cross: float = 0.02, tilt_rad: float = 0.02, mount_rad: float = 0.05
+                ) -> dict:
+    """A sensor and a skewed gimbal: off-diagonal terms up to ``cross`` (the largest exactly
+    ``cross``), scale 0.9–1.1, bias up to 0.1 rad/s, link axes tilted by up to ``tilt_rad``,
+    the mount rotated by up to ``mount_rad``."""
+    rng = np.random.default_rng([seed, 0x1DE])
+    off = rng.uniform(-1, 1, (3, 3)) * (1 - np.eye(3))
+    mis = np.eye(3) + cross * off / np.max(np.abs(off)) if cross else np.eye(3)
+    links = [np.eye(3)[j] + rng.uniform(-tilt_rad, tilt_rad, 3) for j in range(3)]
+    return {
+        "scale": rng.uniform(0.9, 1.1, 3),
+        "bias": rng.uniform(-0.1, 0.1, 3),
+        "misalignment": mis,
+        "links": [v / np.linalg.norm(v) for v in links],
+        "mount": Rotation.from_rotvec(rng.uniform(-mount_rad, mount_rad, 3)).as_matrix(),
+    }
+
+
+def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.ndarray
+                ) -> np.ndarray:
+    """Angular velocity in the sensor frame (module docstring) for angles and rates (N, 3)."""
+    n = angles.shape[0]
+    out = np.zeros((n, 3))
+    inner = np.broadcast_to(mount, (n, 3, 3)).copy()  # Rot_{j+1} … Rot_2 M, built inside out
+    for j in (2, 1, 0):
+        out += np.einsum("nki,k->ni", inner, links[j]) * rates[:, j:j + 1]
+        rot = Rotation.from_rotvec(angles[:, j:j + 1] * links[j][None, :]).as_matrix()
+        inner = rot @ inner
+    return out
+
+
+def schedule(pose_deg: float) -> list[tuple]:
+    """``(kind, servo position or positions, direction or target angles, )`` steps."""
+    p = np.radians(pose_deg)
+    steps: list[tuple] = []
+    for s in range(3):  # home turns, positive first
+        steps += [("rotate", s, 1), ("rotate", s, -1)]
+    # posed turns: the middle servo with the inner one at +pose; the base with the middle at
+    # -pose and the inner at +pose (two servos moved at once); back home after each
+    for turn, target in ((1, (0.0, 0.0, p)), (0, (0.0, -p, p))):
+        steps.append(("move", target))
+        steps += [("rotate", turn, 1), ("rotate", turn, -1)]
+        steps.append(("move", (0.0, 0.0, 0.0)))
+    return steps
+
+
+def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 2.5e-3,
+                    odr: float = 200.0, enc_hz: float = 100.0, speed: float = 4.0,
+                    turns: int = 2, accel: float = 10.0, rest: float = 0.8,
+                    move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
+                    lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13)) -> dict:
+    """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``)."""
+    truth = draw_sensor(seed, cross)
+    rng = np.random.default_rng([seed, 0x5A3])
+    path = Path(path)
+    path.mkdir(parents=True)
+    segs: list[tuple] = []  # (kind, motor index or None, direction, speed, t0, t1, [(j, Δθ)])
+    t = 0.0
+    pose = np.zeros(3)
+    _, _, turn_time = _profile(np.zeros(1), speed, turns, accel)
+    for step in schedule(pose_deg):
+        segs.append(("rest", None, 0, 0.0, t, t + rest, []))
+        t += rest
+        if step[0] == "rotate":
+            _, s, d = step
+            segs.append(("rotate", s, d, speed, t, t + turn_time, [(s, d * 2 * np.pi * turns)]))
+            t += turn_time
+        else:
+            target = np.asarray(step[1])
+            moving = [(j, target[j] - pose[j]) for j in range(3) if target[j] != pose[j]]
+            durations = []
+            for j, delta in moving:
+                turns_j = abs(delta) / (2 * np.pi)
+                _, _, dur = _profile(np.zeros(1), move_speed, turns_j, accel)
+                segs.append(("move", j, int(np.sign(delta)), move_speed, t, t + dur,
+                             [(j, delta)]))
+                durations.append(dur)
+            t += max(durations)
+            pose = target
+    segs.append(("rest", None, 0, 0.0, t, t + rest, []))
+    t_end = t + rest
+    ts = np.arange(0.0, t_end, 1 / odr)
+    te = np.arange(0.0, t_end, 1 / enc_hz)
+
+    def motion(times):
+        ang = np.zeros((times.size, 3))
+        rate = np.zeros((times.size, 3))
+        for _, _, _, sp, t0, _, parts in segs:
+            for j, delta in parts:
+                a, r, _ = _profile(times - t0, sp, abs(delta) / (2 * np.pi), accel)
+                ang[:, j] += np.sign(delta) * np.where(times >= t0, a, 0.0)
+                rate[:, j] += np.sign(delta) * r
+        return ang, rate
+
+    ang, rate = motion(ts)
+    omega = sensor_rate(truth["links"], truth["mount"], ang, rate)
+    C = np.diag(1 / truth["scale"]) @ truth["misalignment"]
+    m = omega @ C.T - truth["bias"] + noise * rng.standard_normal(omega.shape)
+    if lsb:
+        m = np.round(m / lsb) * lsb
+    enc, _ = motion(te)
+    if ticks:
+        enc = np.round(enc / (2 * np.pi / ticks)) * (2 * np.pi / ticks)
+    with open(path / "imu.csv", "w") as f:
+        f.write("t,gx,gy,gz,temp\n")
+        for ti, row in zip(ts, m, strict=True):
+            f.write(f"{ti:.6f},{row[0]:.10g},{row[1]:.10g},{row[2]:.10g},\n")
+    with open(path / "encoder.csv", "w") as f:
+        f.write("t,motor,angle\n")
+        for i in range(te.size):
+            for j in range(3):
+                f.write(f"{te[i]:.6f},{ids[j]},{enc[i, j]:.12g}\n")
+    with open(path / "segments.csv", "w") as f:
+        f.write("index,kind,motor,direction,speed,t_start,t_end\n")
+        for i, (kind, j, d, sp, t0, t1, _) in enumerate(segs):
+            motor = "" if j is None else ids[j]
+            f.write(f"{i},{kind},{motor},{d},{sp},{t0:.6f},{t1:.6f}\n")
+    manifest = {
+        "format": "gyrocal-recording", "version": 1, "created": "2026-01-01T00:00:00Z",
+        "sensor": {"model": "mpu9250", "odr_hz": odr, "full_scale_dps": 500,
+                   "sensitivity_rad_s_per_lsb": lsb or LSB_500DPS},
+        "gimbal": {"motors": [{"id": ids[j], "model": "XM430-W350", "axis": "xyz"[j]}
+                              for j in range(3)]},
+        "protocol": {"name": "contract-full", "model": "full"},
+        "complete": True,
+        "truth": {"scale": truth["scale"].tolist(), "bias": truth["bias"].tolist(),
+                  "misalignment": truth["misalignment"].tolist()},
+    }
+    (path / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    return truth
