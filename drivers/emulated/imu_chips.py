@@ -351,6 +351,7 @@ class _EmulatedImu(ABC):
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
                                        np.random.default_rng([seed, 2]))
         self._lpf: tuple[float, np.ndarray] | None = None
+        self._created = clock.monotonic()
         self._power_on_reset()
 
     # -- I2CDevice ----------------------------------------------------------------------------
@@ -559,8 +560,10 @@ class _EmulatedImu(ABC):
             )
             skipped = n - head - tail
         t = self._origin + period * ks
-        t_eval = t - self._pure_delay_s(period)
-        omega = self._filtered(self._true_rate(t_eval, period), head, skipped)
+        # a delayed output reaches no further back than the chip's power-on
+        t_eval = np.maximum(t - self._pure_delay_s(period), self._created)
+        omega = self._filtered(self._true_rate(t_eval, self._average_window_s(period)), head,
+                               skipped)
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         force = self._specific_force(t_eval)
@@ -608,6 +611,11 @@ class _EmulatedImu(ABC):
         """A delay of the output beyond its filter's, s (the chip's datasheet delay less the
         filter's and the sub-sample average's group delays)."""
         return 0.0
+
+    def _average_window_s(self, period: float) -> float:
+        """The span the true rate is averaged over for one output sample (see
+        :meth:`_true_rate`): the output period unless the chip says otherwise."""
+        return period
 
     def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
         """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples (the
@@ -787,13 +795,20 @@ class EmulatedMPU9250(_EmulatedImu):
     def _lowpass_hz(self) -> float | None:
         return self.cutoff_hz() if self.truth.realism.dlpf_delay else None
 
+    def _average_window_s(self, period: float) -> float:
+        """With the DLPF emulated, the true rate is averaged over one internal (1 kHz) sample
+        only: the DLPF, not the decimation, is the chip's anti-alias filter (§1.4)."""
+        if self._lowpass_hz() is None:
+            return period
+        return min(period, 1.0 / self.family.extra["internal_rate_hz"])
+
     def _pure_delay_s(self, period: float) -> float:
         """The CONFIG table's delay less the filter's DC group delay and the sub-sample
-        average's (half a period) — what a first-order filter alone does not delay."""
+        average's (half its window) — what a first-order filter alone does not delay."""
         total, filt = self.delay_s(), self.filter_delay_s()
         if total is None or filt is None:
             return 0.0
-        boxcar = 0.5 * period if self.subsamples > 1 else 0.0
+        boxcar = 0.5 * self._average_window_s(period) if self.subsamples > 1 else 0.0
         return max(0.0, total - filt - boxcar)
 
     def _reset_state(self) -> None:

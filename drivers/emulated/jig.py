@@ -336,8 +336,10 @@ class GimbalJig:
         force = self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
         r = self.lever_arm_m
         if t.size and np.any(r):
-            both = self.rate(np.column_stack([t - dt, t]).reshape(-1)).reshape(t.size, 2, 3)
-            w, alpha = both[:, 1], (both[:, 1] - both[:, 0]) / dt
+            before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
+            both = self.rate(np.column_stack([before, t]).reshape(-1)).reshape(t.size, 2, 3)
+            step = np.where(t > before, t - before, np.inf)[:, None]
+            w, alpha = both[:, 1], (both[:, 1] - both[:, 0]) / step
             acc = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
             force = force + acc / STANDARD_GRAVITY
         return force
