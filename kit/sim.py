@@ -23,7 +23,7 @@ from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
 __all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SimJig", "build_sim",
-           "sim_misalignment", "sim_realism", "sim_truth"]
+           "realism_sizes", "sim_misalignment", "sim_realism", "sim_truth"]
 
 #: Servo model of the emulated jig.
 SIM_SERVO_MODEL = "XM430-W350"
@@ -175,6 +175,22 @@ SIM_LEVER_ARM_M = (0.02, -0.015, 0.03)
 SIM_WOBBLE_DEG = 0.05
 #: Largest chip clock error drawn, ppm ⚠.
 SIM_CLOCK_PPM = 300.0
+
+
+def realism_sizes(family: str = "mpu9250") -> dict[str, str]:
+    """Each realism effect's size in ``--sim``, in words with its figures (⚠: assumed)."""
+    fig = SIM_REALISM_FIGURES.get(family, SIM_REALISM_FIGURES["mpu9250"])
+    arm = math.hypot(*SIM_LEVER_ARM_M) * 1000
+    return {
+        "coloured-noise": f"B {fig['bias_instability_deg_h']:g} °/h, "
+                          f"K {fig['rate_random_walk_rad_s_sqrt_s']:g} rad/s/√s ⚠",
+        "dlpf": "92 Hz, 3.9 ms at 200 Hz (CONFIG table)" if family == "mpu9250" else "none",
+        "g-sensitivity": f"±{fig['g_sensitivity_deg_s_per_g']:g} °/s/g per term (datasheet)",
+        "gravity": f"1 g in the true pose, lever arm {arm:.0f} mm ⚠",
+        "wobble": f"{SIM_WOBBLE_DEG:g}° once per revolution ⚠",
+        "clock": f"±{SIM_CLOCK_PPM:g} ppm ⚠",
+        "encoder-latency": f"instruction + 500 µs RDT + packets at {SIM_BAUD / 1e6:g} Mbps",
+    }
 
 
 def sim_realism(family: str, seed: int, effects: Collection[str]) -> tuple[SensorRealism, float]:
