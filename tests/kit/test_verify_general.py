@@ -22,7 +22,8 @@ def general_run(tmp_path_factory):
     d = tmp_path_factory.mktemp("verify")
     diag = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0))
     (d / "unit.json").write_text(diag.to_json())
-    main(["verify", str(d / "unit.json"), "--sim", "--sim-seed", "5", "--sim-cross-axis",
+    main(["verify", str(d / "unit.json"), "--sim", "--sim-seed", "5", "--sim-realism", "off",
+          "--sim-cross-axis",
           "0.02", "--out", str(d / "run"), "--quiet", "--json"])
     return load_recording(d / "run" / "recording")
 
