@@ -71,7 +71,12 @@ class SimJig:
                                "rate_random_walk_rad_s_sqrt_s": r.rate_random_walk_rad_s_sqrt_s},
             "dlpf": {"cutoff_hz": self.chip.cutoff_hz(), "delay_s": getattr(
                 self.chip, "delay_s", lambda: None)()} if r.dlpf_delay else "off",
-            "g-sensitivity": [list(x) for x in r.g_sensitivity_rad_s_per_g],
+            "g-sensitivity": {
+                "matrix_rad_s_per_g": [list(x) for x in r.g_sensitivity_rad_s_per_g],
+                # what it adds to the bias in the home pose, where a calibration's rests are
+                "home_bias_shift_rad_s": (np.asarray(r.g_sensitivity_rad_s_per_g) @ self.chip
+                                          ._specific_force(np.array([self.jig.home_time]))[0]
+                                          ).tolist()},
             "gravity": {"lever_arm_m": self.jig.lever_arm_m.tolist()},
             "wobble": {"amplitude_rad": self.jig.wobble_rad,
                        "axes": self.jig.wobble_axes.tolist()},
