@@ -8,11 +8,13 @@ cannot tell from the chips).
 3. Third-party clients run unmodified against the emulators: which pass, which fail and why
    (the test suite's ``tests/drivers/test_third_party_clients.py``, run here with ``-rA``).
 
-Not measured yet: the calibration error each realism effect causes (coloured noise,
-g-sensitivity, gravity and lever arm, wobble, chip clock, encoder latency), which needs those
-effects in the emulated sensor first.
+4. The cost of each realism effect of the emulated sensor (``gyrocal calibrate --sim --protocol
+   full --sim-cross-axis 0.02``): every effect alone, none, and all, on the same sensors
+   (``--seeds=N``, default 30): RMS errors of the fitted scale (diagonal of A), cross-axis
+   (off-diagonal) and bias against the emulator's truth, the RMS of the bias error in its own σ,
+   and how many fits pass the χ² consistency test.
 
-Usage: ``python -m bench realism [--quick]``.
+Usage: ``python -m bench realism [--quick] [--seeds=N] [--effects-only]``.
 """
 
 from __future__ import annotations
@@ -124,8 +126,83 @@ def clients() -> None:
                 title="Third-party clients, unmodified, against the emulators")
 
 
+def _effect_run(job: tuple[int, str]) -> dict:
+    """One emulated calibration with only the effects named in ``job[1]`` on ("none", "all",
+    one effect, or "all but E1 & E2"): the fit's errors against the manifest's truth."""
+    import io
+    import tempfile
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from gyrocal.calib.estimators import matrix_in_frame
+    from gyrocal.kit.cli import main as cli
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.sim import REALISM_EFFECTS
+
+    seed, which = job
+    if which == "all":
+        flags = ["--sim-realism", "on"]
+    elif which == "none":
+        flags = ["--sim-realism", "off"]
+    elif which.startswith("all but "):
+        flags = [x for e in which[len("all but "):].split(" & ") for x in ("--sim-without", e)]
+    else:
+        flags = [x for e in REALISM_EFFECTS if e != which for x in ("--sim-without", e)]
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp) / "run"
+        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            cli(["calibrate", "--sim", "--sim-seed", str(seed), "--out", str(d), "--quiet",
+                 "--no-report", "--protocol", "full", "--sim-cross-axis", "0.02", *flags])
+        rec = load_recording(d / "recording")
+        t = rec.truth
+        C = matrix_in_frame(np.diag(1 / np.asarray(t["scale"])) @ np.asarray(t["misalignment"]))
+        fit = estimate_recording(rec).fit
+    dA = fit.matrix - C
+    db = fit.bias - np.asarray(t["bias"])
+    bstd = np.sqrt(np.diag(fit.covariance))[9:12]
+    off = ~np.eye(3, dtype=bool) & (np.abs(C) > 0)  # the free off-diagonal terms
+    return {"which": which, "scale": np.diag(dA), "cross": dA[off], "bias": db,
+            "bias_z": db / bstd, "ok": bool(fit.consistency.ok)}
+
+
+def _rms(xs: list[np.ndarray]) -> float:
+    return float(np.sqrt(np.mean(np.concatenate(xs) ** 2)))
+
+
+def effect_costs(seeds: int) -> None:
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    from gyrocal.kit.sim import REALISM_EFFECTS, realism_sizes
+
+    sizes = realism_sizes()
+    # the last two rows: what is left without the effects the kit cannot correct (see below)
+    cases = ["none", *REALISM_EFFECTS, "all", "all but g-sensitivity",
+             "all but g-sensitivity & wobble"]
+    jobs = [(s, c) for c in cases for s in range(seeds)]
+    with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
+        results = list(pool.map(_effect_run, jobs))
+    base = [r for r in results if r["which"] == "none"]
+    b_scale, b_cross, b_bias = (_rms([r[k] for r in base]) for k in ("scale", "cross", "bias"))
+    rows = []
+    for c in cases:
+        rs = [r for r in results if r["which"] == c]
+        sc, cr, bi = (_rms([r[k] for r in rs]) for k in ("scale", "cross", "bias"))
+        size = sizes.get(c, "")
+        rows.append([c, size, sc, sc - b_scale, cr, cr - b_cross, bi, bi - b_bias,
+                     _rms([r["bias_z"] for r in rs]), f"{sum(r['ok'] for r in rs)}/{len(rs)}"])
+    print_table(["effect", "size", "scale RMS", "Δ", "cross RMS", "Δ", "bias RMS rad/s", "Δ",
+                 "bias err/σ RMS", "χ² ok"], rows,
+                title=f"Cost of each realism effect alone (emulated MPU-9250, protocol full, "
+                      f"±2 % cross-axis, seeds 0..{seeds - 1}; Δ against none)")
+
+
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
-    bus_timing(300 if quick else 3000)
-    lsm_bandwidth()
-    clients()
+    seeds = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--seeds=")),
+                 3 if quick else 30)
+    if "--effects-only" not in argv:
+        bus_timing(300 if quick else 3000)
+        lsm_bandwidth()
+        clients()
+    effect_costs(seeds)

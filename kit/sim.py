@@ -8,7 +8,8 @@ emulated chip on an emulated SMBus. Only the bus objects and the clock differ.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Collection
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -16,13 +17,13 @@ import numpy as np
 from gyrocal.calib.simulate import NORMAL, draw_sensors
 from gyrocal.drivers.clock import Clock, SystemClock, VirtualClock
 from gyrocal.drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
-from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
+from gyrocal.drivers.emulated.imu_chips import SensorRealism, SensorTruth, make_emulated_imu
 from gyrocal.drivers.imu import READERS
 from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
-__all__ = ["DATASHEET_CROSS_AXIS", "SIM_CROSS_AXIS", "SimJig", "build_sim", "sim_misalignment",
-           "sim_truth"]
+__all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SimJig", "build_sim",
+           "realism_sizes", "sim_misalignment", "sim_realism", "sim_truth"]
 
 #: Servo model of the emulated jig.
 SIM_SERVO_MODEL = "XM430-W350"
@@ -58,6 +59,32 @@ class SimJig:
     imu_bus: Any
     imu_address: int
     truth: SensorTruth
+    realism: frozenset[str] = field(default_factory=frozenset)
+
+    def truth_manifest(self) -> dict[str, Any]:
+        """The manifest's ``truth``: the sensor's errors, the axes, and one line per realism
+        effect (its size, or ``"off"``)."""
+        r = self.truth.realism
+        on = self.realism
+        lines: dict[str, Any] = {
+            "coloured-noise": {"bias_instability_rad_s": r.bias_instability_rad_s,
+                               "rate_random_walk_rad_s_sqrt_s": r.rate_random_walk_rad_s_sqrt_s},
+            "dlpf": {"cutoff_hz": self.chip.cutoff_hz(), "delay_s": getattr(
+                self.chip, "delay_s", lambda: None)()} if r.dlpf_delay else "off",
+            "g-sensitivity": {
+                "matrix_rad_s_per_g": [list(x) for x in r.g_sensitivity_rad_s_per_g],
+                # what it adds to the bias in the home pose, where a calibration's rests are
+                "home_bias_shift_rad_s": (np.asarray(r.g_sensitivity_rad_s_per_g) @ self.chip
+                                          ._specific_force(np.array([self.jig.home_time]))[0]
+                                          ).tolist()},
+            "gravity": {"lever_arm_m": self.jig.lever_arm_m.tolist()},
+            "wobble": {"amplitude_rad": self.jig.wobble_rad,
+                       "axes": self.jig.wobble_axes.tolist()},
+            "clock": {"clock_ppm": self.truth.clock_ppm},
+            "encoder-latency": {"model_timing": bool(self.port.model_timing)},
+        }
+        realism = {k: (v if k in on else "off") for k, v in lines.items()}
+        return {**self.truth.manifest(), "realism": realism}
 
     def turn_axes(
         self, ids: list[int], turn_times: dict[int, list[float]], t0: float
@@ -118,6 +145,89 @@ def sim_misalignment(seed: int, cross_axis: float = SIM_CROSS_AXIS) -> np.ndarra
     return np.eye(3) + cross_axis * off / np.max(np.abs(off))
 
 
+#: The realism effects of the emulated sensor and jig, all on in ``--sim`` unless turned off
+#: (``--sim-realism off``, ``--sim-without EFFECT``): name → what it is and its size's source.
+#: ⚠ marks a size assumed for lack of a datasheet figure.
+REALISM_EFFECTS: dict[str, str] = {
+    "coloured-noise": "bias instability (flicker: Gauss–Markov sum) and rate random walk, per "
+                      "SIM_REALISM_FIGURES ⚠ (no datasheet gives them)",
+    "dlpf": "MPU-9250 DLPF at the configured bandwidth with the CONFIG table's delay "
+            "(92 Hz: 3.9 ms at 200 Hz)",
+    "g-sensitivity": "rate error per g of specific force, each term drawn by seed within "
+                     "the datasheet's typical figure (MPU-9250: 0.1 °/s/g)",
+    "gravity": "the accelerometer sees gravity in the true orientation and the lever-arm "
+               "accelerations of a sensor SIM_LEVER_ARM_M off the axes ⚠ (jig geometry)",
+    "wobble": "each turning link nods SIM_WOBBLE_DEG once per revolution ⚠ (assumed)",
+    "clock": "chip clock off by up to SIM_CLOCK_PPM, drawn by seed ⚠ (assumed)",
+    "encoder-latency": "Present Position sampled at the servo's reply (after the instruction, "
+                       "Return Delay Time and earlier replies at the bus baud), not at the "
+                       "host's timestamp",
+}
+#: Coloured-noise and g-sensitivity figures per chip family. The white noise (angle random
+#: walk) is the datasheet's 0.01 °/s/√Hz (MPU-9250 PS §3.1). Bias instability and rate random
+#: walk are not in either datasheet; the values are assumed typical of consumer MEMS gyros ⚠
+#: (a flat floor of 0.664·B near 10-100 s, RRW crossing it near 1000 s). The LSM9DS1 datasheet
+#: gives no g-sensitivity figure, so it is 0 there.
+SIM_REALISM_FIGURES: dict[str, dict[str, float]] = {
+    "mpu9250": {"bias_instability_deg_h": 10.0, "rate_random_walk_rad_s_sqrt_s": 2e-6,
+                "g_sensitivity_deg_s_per_g": 0.1},
+    "lsm9ds1": {"bias_instability_deg_h": 10.0, "rate_random_walk_rad_s_sqrt_s": 2e-6,
+                "g_sensitivity_deg_s_per_g": 0.0},
+}
+#: The sensor's offset from the meeting point of the gimbal's axes, m (sensor frame) ⚠.
+SIM_LEVER_ARM_M = (0.02, -0.015, 0.03)
+#: Once-per-revolution tilt of each turning link, degrees ⚠.
+SIM_WOBBLE_DEG = 0.05
+#: Largest chip clock error drawn, ppm ⚠.
+SIM_CLOCK_PPM = 300.0
+
+
+def realism_sizes(family: str = "mpu9250") -> dict[str, str]:
+    """Each realism effect's size in ``--sim``, in words with its figures (⚠: assumed)."""
+    fig = SIM_REALISM_FIGURES.get(family, SIM_REALISM_FIGURES["mpu9250"])
+    arm = math.hypot(*SIM_LEVER_ARM_M) * 1000
+    return {
+        "coloured-noise": f"B {fig['bias_instability_deg_h']:g} °/h, "
+                          f"K {fig['rate_random_walk_rad_s_sqrt_s']:g} rad/s/√s ⚠",
+        "dlpf": "92 Hz, 3.9 ms at 200 Hz (CONFIG table)" if family == "mpu9250" else "none",
+        "g-sensitivity": f"±{fig['g_sensitivity_deg_s_per_g']:g} °/s/g per term (datasheet)",
+        "gravity": f"1 g in the true pose, lever arm {arm:.0f} mm ⚠",
+        "wobble": f"{SIM_WOBBLE_DEG:g}° once per revolution ⚠",
+        "clock": f"±{SIM_CLOCK_PPM:g} ppm ⚠",
+        "encoder-latency": f"instruction + 500 µs RDT + packets at {SIM_BAUD / 1e6:g} Mbps",
+    }
+
+
+def sim_realism(family: str, seed: int, effects: Collection[str]) -> tuple[SensorRealism, float]:
+    """The emulated chip's realism and clock error (ppm) for the ``effects`` that are on,
+    drawn by ``seed`` (the g-sensitivity terms and the clock error).
+
+    Raises
+    ------
+    InputError
+        If an effect is not one of :data:`REALISM_EFFECTS`.
+    """
+    unknown = set(effects) - set(REALISM_EFFECTS)
+    if unknown:
+        raise InputError(f"unknown realism effect {sorted(unknown)[0]!r}; choose from "
+                         + ", ".join(REALISM_EFFECTS))
+    fig = SIM_REALISM_FIGURES.get(family, SIM_REALISM_FIGURES["mpu9250"])
+    rng = np.random.default_rng([int(seed), 0x4EA1])
+    g_sens = rng.uniform(-1.0, 1.0, (3, 3)) * math.radians(fig["g_sensitivity_deg_s_per_g"])
+    ppm = float(rng.uniform(-1.0, 1.0)) * SIM_CLOCK_PPM
+    on = set(effects)
+    realism = SensorRealism(
+        bias_instability_rad_s=(math.radians(fig["bias_instability_deg_h"]) / 3600.0
+                                if "coloured-noise" in on else 0.0),
+        rate_random_walk_rad_s_sqrt_s=(fig["rate_random_walk_rad_s_sqrt_s"]
+                                       if "coloured-noise" in on else 0.0),
+        dlpf_delay="dlpf" in on,
+        g_sensitivity_rad_s_per_g=g_sens if "g-sensitivity" in on else np.zeros((3, 3)),
+        specific_force="gravity" in on,
+    )
+    return realism, (ppm if "clock" in on else 0.0)
+
+
 def sim_truth(
     seed: int, scale: list[float] | None = None, bias: list[float] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -146,6 +256,7 @@ def build_sim(
     mount_deg: float = 3.0,
     noise_seed: int | None = None,
     cross_axis: float = SIM_CROSS_AXIS,
+    realism: Collection[str] | None = None,
 ) -> SimJig:
     """Assemble the emulated jig described by ``cfg`` (IDs, axes, IMU model and address).
 
@@ -169,31 +280,39 @@ def build_sim(
     cross_axis : float
         Largest off-diagonal term of the sensor's cross-axis matrix, drawn by ``seed``
         (:func:`sim_misalignment`; 0 = the paper's sensor).
+    realism : collection of str, optional
+        The :data:`REALISM_EFFECTS` that are on; all of them when omitted, none with ``()``.
     """
     clock: Clock = SystemClock() if realtime else VirtualClock()
     k, b = sim_truth(seed, scale, bias)
     g = cfg["gimbal"]
     run_seed = seed if noise_seed is None else noise_seed
+    effects = frozenset(REALISM_EFFECTS if realism is None else realism)
+    imu_cfg = cfg["imu"]
+    family = READERS[imu_cfg["model"]].family
+    sensor_realism, ppm = sim_realism(family.name, seed, effects)
     port, servo_bus, _ = make_emulated_gimbal(
         clock, g["ids"], SIM_SERVO_MODEL, run_seed, baudrate=SIM_BAUD, axes=g["axes"],
-        mount=mount_deg,
+        mount=mount_deg, model_timing="encoder-latency" in effects,
     )
-    jig = GimbalJig(servo_bus.servos, axes=g["axes"], mount=mount_deg, seed=seed)
+    jig = GimbalJig(servo_bus.servos, axes=g["axes"], mount=mount_deg, seed=seed,
+                    wobble_deg=SIM_WOBBLE_DEG if "wobble" in effects else 0.0,
+                    lever_arm_m=SIM_LEVER_ARM_M if "gravity" in effects else (0.0, 0.0, 0.0))
     truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b),
-                                "misalignment": sim_misalignment(seed, cross_axis)}
+                                "misalignment": sim_misalignment(seed, cross_axis),
+                                "realism": sensor_realism, "clock_ppm": ppm}
     if noise_density_rad_s_sqrt_hz is not None:
         truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density_rad_s_sqrt_hz
     truth = SensorTruth(**truth_kw)
-    imu_cfg = cfg["imu"]
     # The chip sits where a real one of its model can (the configured address if the model
     # allows it, else its default), so a config that names the wrong address fails as it would
     # on hardware.
-    possible = READERS[imu_cfg["model"]].family.addresses  # hardware reference §1.1, §2.1
+    possible = family.addresses  # hardware reference §1.1, §2.1
     imu_bus, address = make_emulated_imu(
         imu_cfg["model"], clock, jig, truth, seed=run_seed,
         address=imu_cfg["address"] if imu_cfg["address"] in possible else None,
     )
-    return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth)
+    return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth, effects)
 
 
 #: ``--sim-fault`` kinds: what each takes, what it does.

@@ -11,7 +11,11 @@ never
 later than ``T``, as its contract requires), turns the rates into readings through
 :class:`SensorTruth`, quantizes and clips them to the configured range, and pushes them into the
 FIFO with the chip's FIFO semantics (size, overflow flag, stop-when-full or overwrite; §1.7,
-§2.7). The accelerometer reads a constant 1 g along +z (a motion source gives rates only).
+§2.7). :class:`SensorRealism` adds what makes a chip imperfect beyond its calibration errors:
+coloured noise, the MPU-9250's DLPF delay, g-sensitivity and an accelerometer that sees the
+specific force of a motion source that has one (:meth:`GimbalJig.specific_force
+<gyrocal.drivers.emulated.jig.GimbalJig.specific_force>`); without it the accelerometer reads a
+constant 1 g along +z.
 
 :class:`ChipFaults` holds the fault knobs: NACKs at random or in bursts, a chip that stops
 answering, a smaller FIFO (to provoke overflows), a wrong WHO_AM_I and a stuck axis.
@@ -38,6 +42,7 @@ from gyrocal.drivers.emulated.magnetometers import (
     MagneticField,
 )
 from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
+from gyrocal.drivers.emulated.noise import ColouredNoise
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
@@ -48,6 +53,8 @@ from gyrocal.drivers.imu.chips import (
     LSM9DS1_REG,
     MPU9250,
     MPU9250_BITS,
+    MPU9250_DLPF,
+    MPU9250_DLPF_DELAY_S,
     MPU9250_REG,
     RAD_PER_DEG,
     ChipFamily,
@@ -57,6 +64,7 @@ __all__ = [
     "ChipFaults",
     "EmulatedLSM9DS1",
     "EmulatedMPU9250",
+    "SensorRealism",
     "SensorTruth",
     "make_emulated_imu",
 ]
@@ -72,6 +80,66 @@ def _vec3(name: str, value: Any) -> _Vec3:
     if not np.all(np.isfinite(v)):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return (float(v[0]), float(v[1]), float(v[2]))
+
+
+_ZERO33 = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class SensorRealism:
+    """The imperfections of a real chip beyond its calibration errors, each off by default.
+
+    Parameters
+    ----------
+    bias_instability_rad_s : float
+        Bias instability ``B`` (rad/s): a flat Allan floor of ``0.664 B``, generated as a sum of
+        Gauss–Markov processes (:mod:`gyrocal.drivers.emulated.noise`).
+    rate_random_walk_rad_s_sqrt_s : float
+        Rate random walk ``K`` (rad/s/√s): ``σ_A(τ) = K sqrt(τ/3)``.
+    dlpf_delay : bool
+        The MPU-9250's DLPF as the register map's CONFIG table gives it: a low-pass at the
+        configured bandwidth with the table's delay (a first-order filter at the cutoff plus a
+        pure delay making up the rest; the filter's order is not published ⚠). The LSM9DS1's
+        output filter is its own knob (``output_filter``); its delay is not published.
+    g_sensitivity_rad_s_per_g : (3, 3)
+        Rate error per g of specific force, ``m += G f`` (MPU-9250 datasheet: typical
+        0.1 °/s/g, "Linear Acceleration Sensitivity").
+    specific_force : bool
+        The accelerometer (and the g-sensitivity) see the motion source's specific force,
+        gravity in the sensor's true orientation plus the lever-arm accelerations, when the
+        motion source has ``specific_force(t)``; otherwise +1 g on z.
+    """
+
+    bias_instability_rad_s: float = 0.0
+    rate_random_walk_rad_s_sqrt_s: float = 0.0
+    dlpf_delay: bool = False
+    g_sensitivity_rad_s_per_g: Any = _ZERO33
+    specific_force: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("bias_instability_rad_s", "rate_random_walk_rad_s_sqrt_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        g = np.asarray(self.g_sensitivity_rad_s_per_g, dtype=float)
+        if g.shape != (3, 3) or not np.all(np.isfinite(g)):
+            raise ValueError("g_sensitivity_rad_s_per_g must be a finite 3×3 matrix, got "
+                             f"{self.g_sensitivity_rad_s_per_g!r}")
+        object.__setattr__(self, "g_sensitivity_rad_s_per_g",
+                           tuple(tuple(float(x) for x in row) for row in g))
+
+    @property
+    def needs_force(self) -> bool:
+        """Whether the specific force must be evaluated (for the accelerometer or G)."""
+        return self.specific_force or self.g_sensitivity_rad_s_per_g != _ZERO33
+
+    def manifest(self) -> dict[str, Any]:
+        """The realism lines of a simulated manifest's ``truth``."""
+        return {"bias_instability_rad_s": self.bias_instability_rad_s,
+                "rate_random_walk_rad_s_sqrt_s": self.rate_random_walk_rad_s_sqrt_s,
+                "dlpf_delay": self.dlpf_delay,
+                "g_sensitivity_rad_s_per_g": [list(r) for r in self.g_sensitivity_rad_s_per_g],
+                "specific_force": self.specific_force}
 
 
 @dataclass(frozen=True)
@@ -112,6 +180,8 @@ class SensorTruth:
         Chip temperature: a constant, or ``f(t) -> °C`` vectorised over an array of clock times.
     clock_ppm : float
         The chip oscillator's error: it samples at ``odr · (1 + clock_ppm·1e-6)``.
+    realism : SensorRealism
+        Coloured noise, DLPF delay, g-sensitivity, specific force (all off by default).
     """
 
     scale: Any = (1.0, 1.0, 1.0)
@@ -123,6 +193,7 @@ class SensorTruth:
     reference_temperature_c: float = 25.0
     temperature_c: float | Callable[[np.ndarray], np.ndarray] = 25.0
     clock_ppm: float = 0.0
+    realism: SensorRealism = SensorRealism()
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -186,6 +257,11 @@ class SensorTruth:
         class's convention, rows of the 3×3 matrix)."""
         return {"scale": list(self.scale), "bias": list(self.bias),
                 "misalignment": [list(r) for r in self.misalignment]}
+
+    def accel_reading(self, force_g: np.ndarray) -> np.ndarray:
+        """The accelerometer's reading (N, 3) in g for the true specific force ``force_g``: the
+        hook for accelerometer errors (scale, cross-axis, bias), none yet."""
+        return np.asarray(force_g, dtype=float)
 
 
 @dataclass
@@ -271,6 +347,11 @@ class _EmulatedImu(ABC):
         self.faults = faults if faults is not None else ChipFaults()
         self._noise_rng = np.random.default_rng([seed, 0])
         self._fault_rng = np.random.default_rng([seed, 1])
+        r = self.truth.realism
+        self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
+                                       np.random.default_rng([seed, 2]))
+        self._lpf: tuple[float, np.ndarray] | None = None
+        self._created = clock.monotonic()
         self._power_on_reset()
 
     # -- I2CDevice ----------------------------------------------------------------------------
@@ -436,6 +517,7 @@ class _EmulatedImu(ABC):
         self._k = 0
         odr = self._odr_hz()
         self._period = None if odr is None else 1.0 / (odr * (1.0 + self.truth.clock_ppm * 1e-6))
+        self._t_last = self._origin
 
     def _true_rate(self, t: np.ndarray, period: float) -> np.ndarray:
         """The true rate each output sample carries: its mean over the sample period.
@@ -478,28 +560,100 @@ class _EmulatedImu(ABC):
             )
             skipped = n - head - tail
         t = self._origin + period * ks
-        omega = self._filtered(self._true_rate(t, period), head, skipped)
+        # a delayed output reaches no further back than the chip's power-on
+        t_eval = np.maximum(t - self._pure_delay_s(period), self._created)
+        omega = self._filtered(self._true_rate(t_eval, self._average_window_s(period)), head,
+                               skipped)
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
+        force = self._specific_force(t_eval)
+        realism = self.truth.realism
+        if realism.needs_force:
+            m = m + force @ np.asarray(realism.g_sensitivity_rad_s_per_g).T
         odr = 1.0 / period
         m = m + self._noise_rng.standard_normal(m.shape) * self.truth.sigma_rad_s(odr)
+        if self._coloured.active:
+            m = m + self._coloured.draw(np.diff(t, prepend=self._t_last))
+        self._t_last = float(t[-1])
         gyro = np.clip(np.rint(m / self._sensitivity_rad_s_per_lsb()), -32768, 32767)
         gyro = gyro.astype(np.int64)
         f = self.faults
         if f.stuck_axis is not None:
             gyro[t >= f.stuck_from_s, f.stuck_axis] = f.stuck_counts
-        accel = np.zeros_like(gyro)
-        accel[:, 2] = self._accel_counts_1g()
+        accel = np.clip(np.rint(self.truth.accel_reading(force) * self._accel_counts_1g()),
+                        -32768, 32767).astype(np.int64)
         temp = self._temperature_counts(temperature)
         self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
         self._after_samples()
 
+    def _specific_force(self, t: np.ndarray) -> np.ndarray:
+        """The true specific force (N, 3) in g at ``t``: the motion source's when
+        :attr:`SensorRealism.specific_force` is on and it has one, else +1 g on z."""
+        spf = getattr(self.motion, "specific_force", None)
+        if self.truth.realism.specific_force and spf is not None:
+            return np.asarray(spf(t), dtype=float).reshape(t.size, 3)
+        force = np.zeros((t.size, 3))
+        force[:, 2] = 1.0
+        return force
+
+    def cutoff_hz(self) -> float | None:
+        """The gyro output filter's −3 dB bandwidth, ``None`` for no filter (the chip's
+        datasheet figure; each chip says which)."""
+        return None
+
+    def _lowpass_hz(self) -> float | None:
+        """The cutoff the emulated output path filters at (``None``: it does not filter)."""
+        return None
+
+    def _pure_delay_s(self, period: float) -> float:
+        """A delay of the output beyond its filter's, s (the chip's datasheet delay less the
+        filter's and the sub-sample average's group delays)."""
+        return 0.0
+
+    def _average_window_s(self, period: float) -> float:
+        """The span the true rate is averaged over for one output sample (see
+        :meth:`_true_rate`): the output period unless the chip says otherwise."""
+        return period
+
     def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
-        """The chip's digital low-pass filter applied to the true rates of new samples (the
-        first ``head`` rows, then ``skipped`` not generated, then the rest); none by default."""
-        return omega
+        """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples (the
+        first ``head`` rows, then ``skipped`` not generated, then the rest), discretised at the
+        output rate by the bilinear transform prewarped to that cutoff (exactly −3 dB there).
+        The chips' filter orders are not published, so this stands in with the datasheet's
+        bandwidth ⚠. The state carries across calls; it restarts (at rest on its first input)
+        after skipped samples and when the cutoff or rate changes."""
+        fc, odr = self._lowpass_hz(), self._odr_hz()
+        if fc is None or odr is None or omega.shape[0] == 0:
+            return omega
+        k = math.tan(math.pi * fc / odr)
+        b, a = k / (1 + k), (k - 1) / (k + 1)
+        out = np.empty_like(omega)
+        parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
+        for i, (lo, hi) in enumerate(parts):
+            if hi <= lo:
+                continue
+            x = omega[lo:hi]
+            state = self._lpf
+            if state is None or state[0] != fc or (i == 1 and skipped):
+                prev_x = prev_y = x[0]
+            else:
+                prev_x, prev_y = state[1][0], state[1][1]
+            y, _ = lfilter([b, b], [1.0, a], x, axis=0,
+                           zi=(b * prev_x - a * prev_y)[None, :])
+            out[lo:hi] = y
+            self._lpf = (fc, np.stack([x[-1], y[-1]]))
+        return out
+
+    def filter_delay_s(self) -> float | None:
+        """Group delay at DC of the emulated output filter, s: ``1 / (2 k · odr)`` with
+        ``k = tan(π fc / odr)`` for the bilinear first-order low-pass (its numerator's half
+        sample plus its pole's ``(1 − k) / 2k`` samples); ``None`` without a filter."""
+        fc, odr = self._lowpass_hz(), self._odr_hz()
+        if fc is None or odr is None:
+            return None
+        return 1.0 / (2.0 * math.tan(math.pi * fc / odr) * odr)
 
     def _after_samples(self) -> None:  # noqa: B027 - a hook, empty unless a chip needs it
         """Runs after new samples were taken (the MPU-9250's I²C master cycle)."""
@@ -518,6 +672,7 @@ _MPU_READ_ONLY = frozenset(
 #: Where the AK8963 sits on the MPU-9250's auxiliary bus (and on the host bus in bypass).
 AK8963_ADDRESS = 0x0C
 _MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
+_MPU_DLPF_BY_CFG = {cfg: hz for hz, cfg in MPU9250_DLPF.items()}
 
 
 class EmulatedMPU9250(_EmulatedImu):
@@ -624,7 +779,40 @@ class EmulatedMPU9250(_EmulatedImu):
         dev.i2c_write(bytes([out]) if no_register else bytes([register, out]))
         return b""
 
+    def cutoff_hz(self) -> float | None:
+        """The gyro DLPF bandwidth CONFIG.DLPF_CFG selects (register map CONFIG table,
+        hardware reference §1.4), for DLPF_CFG 1..6 with FCHOICE_B = 00; ``None`` otherwise."""
+        r = self._regs
+        if r[_MR.GYRO_CONFIG] & _MB.GYRO_FCHOICE_B_MASK or self._odr_hz() is None:
+            return None
+        return _MPU_DLPF_BY_CFG.get(r[_MR.CONFIG] & _MB.CONFIG_DLPF_MASK)
+
+    def delay_s(self) -> float | None:
+        """The datasheet's gyro delay for the configured DLPF (CONFIG table), s."""
+        fc = self.cutoff_hz()
+        return None if fc is None else MPU9250_DLPF_DELAY_S[fc]
+
+    def _lowpass_hz(self) -> float | None:
+        return self.cutoff_hz() if self.truth.realism.dlpf_delay else None
+
+    def _average_window_s(self, period: float) -> float:
+        """With the DLPF emulated, the true rate is averaged over one internal (1 kHz) sample
+        only: the DLPF, not the decimation, is the chip's anti-alias filter (§1.4)."""
+        if self._lowpass_hz() is None:
+            return period
+        return min(period, 1.0 / self.family.extra["internal_rate_hz"])
+
+    def _pure_delay_s(self, period: float) -> float:
+        """The CONFIG table's delay less the filter's DC group delay and the sub-sample
+        average's (half its window) — what a first-order filter alone does not delay."""
+        total, filt = self.delay_s(), self.filter_delay_s()
+        if total is None or filt is None:
+            return 0.0
+        boxcar = 0.5 * self._average_window_s(period) if self.subsamples > 1 else 0.0
+        return max(0.0, total - filt - boxcar)
+
     def _reset_state(self) -> None:
+        self._lpf = None
         self._fifo = bytearray()
         self._fifo_last = 0
         self._latched: int | None = None
@@ -820,7 +1008,6 @@ class EmulatedLSM9DS1(_EmulatedImu):
         #: Whether the gyro output path filters (see :meth:`cutoff_hz`); ``False`` passes the
         #: per-sample mean rate through unfiltered.
         self.output_filter = bool(output_filter)
-        self._lpf: tuple[float, np.ndarray] | None = None
         super().__init__(clock, motion, truth, **kwargs)
 
     def cutoff_hz(self) -> float | None:
@@ -834,33 +1021,8 @@ class EmulatedLSM9DS1(_EmulatedImu):
             return LSM9DS1_BW_G_CUTOFF_HZ[odr][self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK]
         return LSM9DS1_LPF1_CUTOFF_HZ[odr]
 
-    def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
-        """A first-order low-pass at :meth:`cutoff_hz`, discretised at the output rate by the
-        bilinear transform prewarped to that cutoff (exactly −3 dB there); the chip's filter
-        order is not published, so this stands in with the datasheet's bandwidth ⚠. The state
-        carries across calls; it restarts (at rest on its first input) after skipped samples
-        and when the cutoff or rate changes."""
-        fc, odr = self.cutoff_hz(), self._odr_hz()
-        if not self.output_filter or fc is None or odr is None or omega.shape[0] == 0:
-            return omega
-        k = math.tan(math.pi * fc / odr)
-        b, a = k / (1 + k), (k - 1) / (k + 1)
-        out = np.empty_like(omega)
-        parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
-        for i, (lo, hi) in enumerate(parts):
-            if hi <= lo:
-                continue
-            x = omega[lo:hi]
-            state = self._lpf
-            if state is None or state[0] != fc or (i == 1 and skipped):
-                prev_x = prev_y = x[0]
-            else:
-                prev_x, prev_y = state[1][0], state[1][1]
-            y, _ = lfilter([b, b], [1.0, a], x, axis=0,
-                           zi=(b * prev_x - a * prev_y)[None, :])
-            out[lo:hi] = y
-            self._lpf = (fc, np.stack([x[-1], y[-1]]))
-        return out
+    def _lowpass_hz(self) -> float | None:
+        return self.cutoff_hz() if self.output_filter else None
 
     def _reset_state(self) -> None:
         self._fifo: deque[bytes] = deque()

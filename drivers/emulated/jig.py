@@ -13,6 +13,16 @@ With only servo ``i`` turning and the joints after it at home, ``ω_sensor = u_i
 constant axis ``u_i = (R_i+1..n M S)ᵀ a_i``: in the home pose ``u_i = Mᵀ a_i`` (:attr:`home_axes`),
 which is the truth a calibration test compares with.
 
+**Wobble** (``wobble_deg``): each joint's link is tilted by ``ψ_i = ε sin θ_i`` about an axis
+``e_i ⊥ a_i`` fixed to the turning link, so the joint's rotation is ``R(a_i, θ_i) R(e_i, ψ_i)``:
+the turning platform nods once per revolution and is level again in the home pose
+(``θ_i = 0``), so :attr:`home_axes` stay the truth (to ``ε²/4`` over a whole turn).
+
+**Specific force** (:meth:`specific_force`): what an accelerometer at the sensor reads, in g, in
+the sensor frame: gravity (+1 g along the base's +z) in the sensor's true orientation plus the
+lever-arm acceleration ``α × r + ω × (ω × r)`` of a sensor ``r`` (``lever_arm_m``, sensor frame)
+away from the point where the joint axes meet.
+
 Joint angles and rates come from the servos' motor models (:meth:`EmulatedServo.true_motion`),
 whose angle is the exact integral of their rate, so the sensor's true rate and the encoders are
 consistent to the last bit. Everything is vectorised over the requested times.
@@ -20,13 +30,18 @@ consistent to the last bit. Everything is vectorised over the requested times.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
-__all__ = ["GimbalJig", "Joint", "Slip", "rotation_matrices", "rotvec_to_matrix"]
+__all__ = ["STANDARD_GRAVITY", "GimbalJig", "Joint", "Slip", "rotation_matrices",
+           "rotvec_to_matrix"]
+
+#: Standard gravity, m/s² (the "g" of :meth:`GimbalJig.specific_force`).
+STANDARD_GRAVITY = 9.80665
 
 _NAMED_AXES = {
     "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
@@ -79,6 +94,13 @@ def rotvec_to_matrix(rotvec: Sequence[float] | np.ndarray) -> np.ndarray:
     return rotation_matrices(rv / angle, np.array([angle]))[0]
 
 
+def _perpendicular(a: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A random unit vector perpendicular to the unit vector ``a``."""
+    v = rng.standard_normal(3)
+    v -= (v @ a) * a
+    return v / np.linalg.norm(v)
+
+
 def _random_rotvec(rng: np.random.Generator, angle_rad: float) -> np.ndarray:
     v = rng.standard_normal(3)
     return v / np.linalg.norm(v) * angle_rad
@@ -126,6 +148,12 @@ class GimbalJig:
     home_time : float or None
         The time whose joint angles define the home pose (joint angle 0); default the present
         time of the first joint's clock (or 0 for joints without a clock).
+    wobble_deg : float
+        Once-per-revolution tilt amplitude ``ε`` of every joint's link, degrees (0 = none);
+        the tilt axes ``e_i ⊥ a_i`` are drawn from ``seed``.
+    lever_arm_m : 3-vector
+        The sensor's position relative to the meeting point of the joint axes, in the sensor
+        frame, m (for :meth:`specific_force`).
     """
 
     def __init__(
@@ -137,6 +165,8 @@ class GimbalJig:
         mount: float | Sequence[float] = 3.0,
         seed: int = 0,
         home_time: float | None = None,
+        wobble_deg: float = 0.0,
+        lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0),
     ) -> None:
         self.joints = list(joints)
         n = len(self.joints)
@@ -177,6 +207,15 @@ class GimbalJig:
         else:
             self.mount_rotvec = np.asarray(mount, dtype=float).reshape(3)
         self.mount = rotvec_to_matrix(self.mount_rotvec)
+        if not (np.isfinite(wobble_deg) and 0.0 <= wobble_deg < 10.0):
+            raise ValueError(f"wobble_deg must be in [0, 10), got {wobble_deg!r}")
+        self.wobble_rad = math.radians(float(wobble_deg))
+        wob_rng = np.random.default_rng([int(seed), 0x30B])  # its own stream: geometry unchanged
+        self.wobble_axes = np.array([_perpendicular(a, wob_rng) for a in self.axes])
+        self._wobble_skew_t = [_skew(e).T for e in self.wobble_axes]
+        self.lever_arm_m = np.asarray(lever_arm_m, dtype=float).reshape(3)
+        if not np.all(np.isfinite(self.lever_arm_m)):
+            raise ValueError(f"lever_arm_m must be finite, got {lever_arm_m!r}")
         self.slips: list[Slip] = []
         t_home = home_time
         if t_home is None:
@@ -225,7 +264,10 @@ class GimbalJig:
         n_t = th.shape[0]
         cum = [np.broadcast_to(np.eye(3), (n_t, 3, 3))]
         for i in range(len(self.joints)):
-            cum.append(cum[-1] @ rotation_matrices(self.axes[i], th[:, i]))
+            r = cum[-1] @ rotation_matrices(self.axes[i], th[:, i])
+            if self.wobble_rad:
+                r = r @ rotation_matrices(self.wobble_axes[i], self.wobble_rad * np.sin(th[:, i]))
+            cum.append(r)
         return cum
 
     def _slip_matrices(self, t: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, Slip]]:
@@ -264,6 +306,10 @@ class GimbalJig:
             a = self.axes[i]
             w += np.outer(dth[:, i], a)
             w = _rotate_back(w, a, self._skew_t[i], th[:, i])
+            if self.wobble_rad:  # the link's tilt R(e, ψ): w ← R(e, ψ)ᵀ w + e ψ̇
+                e, eps = self.wobble_axes[i], self.wobble_rad
+                w = _rotate_back(w, e, self._wobble_skew_t[i], eps * np.sin(th[:, i]))
+                w += np.outer(eps * np.cos(th[:, i]) * dth[:, i], e)
         w = w @ self.mount  # Mᵀ w for each row
         for m, ds, slip in self._slip_matrices(t):
             w = np.einsum("nji,nj->ni", m, w) + ds[:, None] * slip.rotvec[None, :]
@@ -280,3 +326,20 @@ class GimbalJig:
             a_base = np.einsum("nij,j->ni", cum[i], self.axes[i])
             out[:, i, :] = np.einsum("nji,nj->ni", r_sensor, a_base)
         return out
+
+    def specific_force(self, t: np.ndarray, dt: float = 2e-4) -> np.ndarray:
+        """The specific force at the sensor in its own frame, in g, shape (N, 3): gravity
+        ``R_sensorᵀ (0, 0, 1)`` plus ``(α × r + ω × (ω × r)) / g₀`` with ``r`` the lever arm
+        and ``α`` the backward difference of the rate over ``dt`` (α and ω in the sensor frame:
+        ``r`` is fixed there, and ``dω/dt`` is the same in both frames)."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        force = self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
+        r = self.lever_arm_m
+        if t.size and np.any(r):
+            before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
+            both = self.rate(np.column_stack([before, t]).reshape(-1)).reshape(t.size, 2, 3)
+            step = np.where(t > before, t - before, np.inf)[:, None]
+            w, alpha = both[:, 1], (both[:, 1] - both[:, 0]) / step
+            acc = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
+            force = force + acc / STANDARD_GRAVITY
+        return force

@@ -29,6 +29,7 @@ __all__ = [
     "MPU9250",
     "MPU9250_BITS",
     "MPU9250_DLPF",
+    "MPU9250_DLPF_DELAY_S",
     "MPU9250_REG",
     "ChipFamily",
     "ChipModel",
@@ -238,6 +239,11 @@ MPU9250_BITS = _MPU9250Bits()
 #: than a 400 kHz I²C bus can carry out of the FIFO, and are not offered.
 MPU9250_DLPF: Mapping[float, int] = MappingProxyType(
     {184.0: 1, 92.0: 2, 41.0: 3, 20.0: 4, 10.0: 5, 5.0: 6}
+)
+#: The gyro's delay for each DLPF bandwidth of :data:`MPU9250_DLPF`, s (register map, CONFIG
+#: DLPF_CFG table; hardware reference §1.4).
+MPU9250_DLPF_DELAY_S: Mapping[float, float] = MappingProxyType(
+    {184.0: 2.9e-3, 92.0: 3.9e-3, 41.0: 5.9e-3, 20.0: 9.9e-3, 10.0: 17.85e-3, 5.0: 33.48e-3}
 )
 
 MPU6500_NOTICE = (

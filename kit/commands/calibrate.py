@@ -62,6 +62,13 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--sim-cross-axis", type=float, metavar="FRACTION",
                    help="largest cross-axis term of the emulated sensor, drawn by seed (default "
                         "0.02, the MPU-9250 datasheet's ±2 %%; 0 = the paper's sensor)")
+    p.add_argument("--sim-realism", choices=("on", "off"), default="on",
+                   help="the emulated sensor's imperfections beyond its calibration errors "
+                        "(coloured noise, DLPF delay, g-sensitivity, gravity and lever arm, "
+                        "wobble, chip clock, encoder latency): on (default) or off")
+    p.add_argument("--sim-without", action="append", default=[], metavar="EFFECT",
+                   help="turn one realism effect off (repeatable): coloured-noise, dlpf, "
+                        "g-sensitivity, gravity, wobble, clock, encoder-latency")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -137,6 +144,16 @@ def load_cli_config(args: argparse.Namespace) -> Any:
     })
 
 
+def sim_effects(args: argparse.Namespace) -> list[str]:
+    """The realism effects ``--sim-realism`` and ``--sim-without`` leave on."""
+    from gyrocal.kit.sim import REALISM_EFFECTS
+
+    without = list(getattr(args, "sim_without", []))
+    if getattr(args, "sim_realism", "on") == "off":
+        return []
+    return [e for e in REALISM_EFFECTS if e not in without]
+
+
 def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, int, Any]:
     """Where the devices are: ``(sim, clock, servo port, baud, I2C bus)``.
 
@@ -150,6 +167,13 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
     sim_imu = getattr(args, "sim_imu", False)
     if args.sim_fault and not args.sim:
         raise InputError("--sim-fault needs --sim")
+    if getattr(args, "sim_without", []):
+        from gyrocal.kit.sim import REALISM_EFFECTS
+
+        bad = [e for e in args.sim_without if e not in REALISM_EFFECTS]
+        if bad:
+            raise InputError(f"--sim-without {bad[0]!r}: not a realism effect; choose from "
+                             + ", ".join(REALISM_EFFECTS))
     if args.sim and sim_imu:
         raise InputError("--sim emulates the whole jig; --sim-imu emulates only the IMU and "
                          "drives the servos on --port: give one of them")
@@ -163,7 +187,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
         cross_axis = getattr(args, "sim_cross_axis", None)
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
-                        cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis)
+                        cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis,
+                        realism=sim_effects(args))
         if sim_imu:
             g = cfg["gimbal"]
             return sim, sim.clock, g["port"], g["baud"], sim.imu_bus
@@ -347,7 +372,7 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
                 "discarded": []}  # attempts repeated after a failed check (the runner's)
     truth = None
     if jig.sim is not None:
-        truth = {**jig.sim.truth.manifest(),
+        truth = {**jig.sim.truth_manifest(),
                  "axes": {str(k): v.tolist() for k, v in jig.sim.jig.home_axes.items()}}
     return sensor, gimbal_info, protocol, truth
 

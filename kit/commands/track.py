@@ -409,7 +409,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     def make_writer() -> Any:
         from gyrocal.kit.recording import RecordingWriter
 
-        truth = None if jig.sim is None else jig.sim.truth.manifest()
+        truth = None if jig.sim is None else jig.sim.truth_manifest()
         return RecordingWriter(
             args.record, sensor=jig.imu.info.manifest(),
             gimbal={"motors": [{"id": sid, "model": jig.gimbal.infos[sid].model_name,
