@@ -1,4 +1,4 @@
-"""IMU readers for the MPU-9250 family and the LSM9DS1 over any smbus2-compatible bus.
+"""IMU readers (MPU-9250 family, LSM9DS1, ICM-42688-P) over any smbus2-compatible bus.
 
 The kit names the sensor model as a string; :func:`open_imu` turns it into a configured reader::
 
@@ -31,6 +31,7 @@ if TYPE_CHECKING:
         SensorInfo,
         open_bus,
     )
+    from gyrocal.drivers.imu.icm42688p import ICM42688PReader
     from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
     from gyrocal.drivers.imu.mpu9250 import MPU9250Reader
 
@@ -42,6 +43,7 @@ __all__ = [
     "ChipIdentityError",
     "ChipNotice",
     "FifoGap",
+    "ICM42688PReader",
     "ImuBatch",
     "ImuReader",
     "ImuStateError",
@@ -61,6 +63,7 @@ READER_CLASSES: dict[str, tuple[str, str]] = {
     "mpu9255": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
     "mpu6500": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
     "lsm9ds1": ("gyrocal.drivers.imu.lsm9ds1", "LSM9DS1Reader"),
+    "icm42688p": ("gyrocal.drivers.imu.icm42688p", "ICM42688PReader"),
 }
 #: The model names :func:`open_imu` accepts.
 MODELS: tuple[str, ...] = tuple(READER_CLASSES)
@@ -69,6 +72,7 @@ _LAZY = {
     **{name: "gyrocal.drivers.imu.base"
        for name in ("ChipNotice", "FifoGap", "ImuBatch", "ImuReader", "SensorInfo", "open_bus")},
     "LSM9DS1Reader": "gyrocal.drivers.imu.lsm9ds1",
+    "ICM42688PReader": "gyrocal.drivers.imu.icm42688p",
     "MPU9250Reader": "gyrocal.drivers.imu.mpu9250",
 }
 

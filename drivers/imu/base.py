@@ -724,21 +724,49 @@ class ImuReader(ABC):
                 # slots just read do not follow the last batch: drop them with the gap
                 return ImuBatch.empty((self._restart(self._next_index, late),))
             lost = lost or late
+        index = self._stream_index(n)
+        jumps = self._jump_gaps(index)
+        if n:
+            self._next_index = int(index[-1]) + 1
         if lost is None:
-            self._sclock.observe(t_b, t_a, self._next_index + n)
+            self._sclock.observe(t_b, t_a, self._next_index)
         if temp is None:
             temp = np.full(n, self._temperature_counts() if n else 0, dtype=np.float64)
-        index = np.arange(self._next_index, self._next_index + n, dtype=np.int64)
-        self._next_index += n
         if self._discard_pending and n:
             gyro, temp, index = gyro[1:], temp[1:], index[1:]
             self._discard_pending = False
-        gaps: tuple[FifoGap, ...] = ()
+        gaps: tuple[FifoGap, ...] = jumps
         if lost:
             # a full FIFO that keeps its oldest samples drops only newer ones: the samples
             # just read follow the last batch, and the loss comes after them
-            gaps = (self._restart(self._next_index, lost),)
+            gaps += (self._restart(self._next_index, lost),)
         return self._make_batch(index, gyro, temp, gaps)
+
+    def _stream_index(self, n: int) -> np.ndarray:
+        """Stream indices of the ``n`` samples just popped: consecutive from the next expected.
+
+        A reader whose FIFO packets carry the chip's own sample timestamps (ICM-42688-P)
+        numbers them from the timestamps instead; a jump is then a gap of known size.
+        """
+        return np.arange(self._next_index, self._next_index + n, dtype=np.int64)
+
+    def _jump_gaps(self, index: np.ndarray) -> tuple[FifoGap, ...]:
+        """Gaps where ``index`` skips samples (only readers with timestamps can see them).
+
+        An index below the expected one (a restart that counted one sample too many as lost)
+        takes that sample back out of :attr:`samples_lost`.
+        """
+        if index.size == 0:
+            return ()
+        starts = np.concatenate(([self._next_index], index[:-1] + 1))
+        skipped = index - starts
+        if skipped[0] < 0:
+            self.samples_lost = max(0, self.samples_lost + int(skipped[0]))
+        return tuple(
+            self._gap(int(starts[i]), int(skipped[i]), "samples missing from the FIFO stream "
+                      "(the chip's timestamps jump)")
+            for i in np.flatnonzero(skipped > 0)
+        )
 
     def _late_overflow(self) -> str | None:
         """Ask the chip after a burst whether samples were lost: the gap's reason, or ``None``."""

@@ -20,6 +20,12 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
+    "ICM42688P",
+    "ICM42688P_BITS",
+    "ICM42688P_MAX_READER_ODR_HZ",
+    "ICM42688P_ODR",
+    "ICM42688P_REG",
+    "ICM42688P_UI_FILT_DIVISOR",
     "LSM9DS1",
     "LSM9DS1_BITS",
     "LSM9DS1_BW_G_CUTOFF_HZ",
@@ -34,6 +40,7 @@ __all__ = [
     "ChipModel",
     "GyroRange",
     "RAD_PER_DEG",
+    "icm42688p_bandwidth_hz",
     "register_names",
 ]
 
@@ -411,3 +418,189 @@ LSM9DS1 = ChipFamily(
 def register_names(registers: object) -> dict[int, str]:
     """Address → name for a register table (``MPU9250_REG`` or ``LSM9DS1_REG``), for messages."""
     return {addr: name for name, addr in asdict(registers).items()}  # type: ignore[call-overload]
+
+
+# ---------------------------------------------------------------------------------------------
+# TDK InvenSense ICM-42688-P (datasheet DS-000347; hardware_docs/chips.md)
+#
+# Sources: TDK, "ICM-42688-P Datasheet", DS-000347 (tables and registers named below), checked
+# against the Linux kernel's drivers/iio/imu/inv_icm42600 (inv_icm42600.h,
+# inv_icm42600_buffer.c) and PX4's InvenSense_ICM42688P_registers.hpp. Facts found in one source
+# only are marked ⚠.
+
+
+@dataclass(frozen=True)
+class _ICM42688PRegisters:
+    """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
+    kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank."""
+
+    DEVICE_CONFIG: int = 0x11
+    INT_CONFIG: int = 0x14
+    FIFO_CONFIG: int = 0x16
+    TEMP_DATA1: int = 0x1D  # big-endian TEMP_DATA1/0, then ACCEL X/Y/Z, GYRO X/Y/Z
+    ACCEL_DATA_X1: int = 0x1F
+    GYRO_DATA_X1: int = 0x25
+    INT_STATUS: int = 0x2D
+    FIFO_COUNTH: int = 0x2E
+    FIFO_COUNTL: int = 0x2F
+    FIFO_DATA: int = 0x30
+    SIGNAL_PATH_RESET: int = 0x4B
+    INTF_CONFIG0: int = 0x4C
+    PWR_MGMT0: int = 0x4E
+    GYRO_CONFIG0: int = 0x4F
+    ACCEL_CONFIG0: int = 0x50
+    GYRO_CONFIG1: int = 0x51
+    GYRO_ACCEL_CONFIG0: int = 0x52
+    TMST_CONFIG: int = 0x54
+    FIFO_CONFIG1: int = 0x5F
+    FIFO_CONFIG2: int = 0x60  # FIFO_WM[7:0]
+    INT_SOURCE0: int = 0x65
+    WHO_AM_I: int = 0x75
+    REG_BANK_SEL: int = 0x76
+
+
+@dataclass(frozen=True)
+class _ICM42688PBits:
+    """ICM-42688-P register bits and fields (DS-000347 register map and FIFO packet
+    structure; kernel inv_icm42600.h)."""
+
+    DEVICE_CONFIG_SOFT_RESET: int = 0x01
+    FIFO_MODE_SHIFT: int = 6
+    FIFO_MODE_BYPASS: int = 0b00
+    FIFO_MODE_STREAM: int = 0b01
+    FIFO_MODE_STOP_ON_FULL: int = 0b10
+    INT_STATUS_DATA_RDY: int = 0x08
+    INT_STATUS_FIFO_FULL: int = 0x02
+    SIGNAL_PATH_RESET_FIFO_FLUSH: int = 0x02
+    # INTF_CONFIG0 reset 0x30: FIFO count and sensor data big-endian, FIFO count in bytes
+    INTF_CONFIG0_FIFO_COUNT_REC: int = 0x40
+    INTF_CONFIG0_FIFO_COUNT_ENDIAN: int = 0x20
+    INTF_CONFIG0_SENSOR_DATA_ENDIAN: int = 0x10
+    PWR_MGMT0_TEMP_DIS: int = 0x20
+    PWR_MGMT0_GYRO_MODE_SHIFT: int = 2
+    PWR_MGMT0_GYRO_MODE_MASK: int = 0x0C
+    PWR_MGMT0_ACCEL_MODE_MASK: int = 0x03
+    MODE_LOW_NOISE: int = 0b11
+    FS_SEL_SHIFT: int = 5
+    ODR_MASK: int = 0x0F
+    GYRO_UI_FILT_BW_MASK: int = 0x0F
+    # TMST_CONFIG reset 0x23 (⚠ TDK sample code only): TMST_FSYNC_EN | TMST_EN
+    TMST_TO_REGS_EN: int = 0x10
+    TMST_RES_16US: int = 0x08
+    TMST_DELTA_EN: int = 0x04
+    TMST_FSYNC_EN: int = 0x02
+    TMST_EN: int = 0x01
+    FIFO_CONFIG1_RESUME_PARTIAL_RD: int = 0x40
+    FIFO_CONFIG1_TMST_FSYNC_EN: int = 0x08
+    FIFO_CONFIG1_TEMP_EN: int = 0x04
+    FIFO_CONFIG1_GYRO_EN: int = 0x02
+    FIFO_CONFIG1_ACCEL_EN: int = 0x01
+    # FIFO packet header (DS-000347 FIFO packet structure; kernel
+    # inv_icm42600_buffer.c)
+    HEADER_MSG: int = 0x80  # set: the FIFO is empty, the packet is not valid
+    HEADER_ACCEL: int = 0x40
+    HEADER_GYRO: int = 0x20
+    HEADER_20: int = 0x10
+    HEADER_TMST_MASK: int = 0x0C
+    HEADER_TMST_ODR: int = 0x08  # 10: the packet carries the ODR timestamp
+    HEADER_TMST_FSYNC: int = 0x0C  # 11: the packet carries the FSYNC time
+    HEADER_ODR_ACCEL: int = 0x02
+    HEADER_ODR_GYRO: int = 0x01
+
+
+ICM42688P_REG = _ICM42688PRegisters()
+ICM42688P_BITS = _ICM42688PBits()
+
+#: GYRO_CONFIG0.GYRO_ODR code for each output data rate in Hz (DS-000347 register GYRO_CONFIG0;
+#: kernel enum inv_icm42600_odr). Codes 12-14 are low-power accelerometer rates.
+ICM42688P_ODR: Mapping[float, int] = MappingProxyType(
+    {12.5: 0b1011, 25.0: 0b1010, 50.0: 0b1001, 100.0: 0b1000, 200.0: 0b0111, 500.0: 0b1111,
+     1000.0: 0b0110, 2000.0: 0b0101, 4000.0: 0b0100, 8000.0: 0b0011, 16000.0: 0b0010,
+     32000.0: 0b0001}
+)
+#: The fastest rate the reader offers: a 16-byte packet per sample is 1.4 Mbit/s of FIFO
+#: traffic at 2 kHz, more than a 400 kHz I²C bus carries.
+ICM42688P_MAX_READER_ODR_HZ = 1000.0
+
+#: GYRO_ACCEL_CONFIG0.GYRO_UI_FILT_BW code → the UI filter bandwidth as a function of the ODR
+#: (DS-000347 "UI filter block" and register GYRO_ACCEL_CONFIG0): 0 is ODR/2, 1..7 are
+#: max(400 Hz, ODR) divided by 4, 5, 8, 10, 16, 20, 40. The reset value is 1. ⚠ The filter's
+#: order (GYRO_CONFIG1.GYRO_UI_FILT_ORD, reset value 0x16) is emulated as a
+#: first-order low-pass at this bandwidth, as for the LSM9DS1.
+ICM42688P_UI_FILT_DIVISOR: Mapping[int, float] = MappingProxyType(
+    {1: 4.0, 2: 5.0, 3: 8.0, 4: 10.0, 5: 16.0, 6: 20.0, 7: 40.0}
+)
+
+
+def icm42688p_bandwidth_hz(odr_hz: float, code: int) -> float:
+    """The gyro UI filter bandwidth for GYRO_UI_FILT_BW ``code`` at ``odr_hz`` (DS-000347, register
+    GYRO_ACCEL_CONFIG0).
+
+    Parameters
+    ----------
+    odr_hz : float
+        The output data rate.
+    code : int
+        GYRO_UI_FILT_BW, 0..7.
+
+    Returns
+    -------
+    float
+        The −3 dB bandwidth in Hz.
+    """
+    if code == 0:
+        return odr_hz / 2.0
+    return max(400.0, odr_hz) / ICM42688P_UI_FILT_DIVISOR[code]
+
+
+ICM42688P = ChipFamily(
+    name="icm42688p",
+    title="ICM-42688-P",
+    addresses=(0x68, 0x69),  # DS-000347 I²C address: AP_AD0 low / high
+    who_am_i_register=ICM42688P_REG.WHO_AM_I,
+    models=(ChipModel("icm42688p", 0x47, "ICM-42688-P"),),
+    siblings=MappingProxyType(
+        {
+            0x40: "an ICM-42600 (WHO_AM_I 0x40), a sibling of the ICM-42688-P with another "
+            "noise and range specification; gyrocal does not drive it",
+            0x41: "an ICM-42602 (WHO_AM_I 0x41); gyrocal does not drive it",
+            0x42: "an ICM-42605 (WHO_AM_I 0x42), the ICM-42688-P's older sibling (same register "
+            "map, higher noise); gyrocal does not drive it",
+            0x44: "an ICM-42686-P (WHO_AM_I 0x44), the ±4000 °/s sibling; gyrocal does not "
+            "drive it",
+            0x46: "an ICM-42622 (WHO_AM_I 0x46); gyrocal does not drive it",
+            0x5C: "an ICM-42631 (WHO_AM_I 0x5C); gyrocal does not drive it",
+        }
+    ),
+    # GYRO_CONFIG0.GYRO_FS_SEL (DS-000347 Table 1 and the register): 000 = ±2000 °/s
+    # (16.4 LSB/°/s) ... 111 = ±15.625 °/s (2097.2 LSB/°/s)
+    gyro_ranges=(
+        GyroRange(0b000, 2000.0, 16.4),
+        GyroRange(0b001, 1000.0, 32.8),
+        GyroRange(0b010, 500.0, 65.5),
+        GyroRange(0b011, 250.0, 131.0),
+        GyroRange(0b100, 125.0, 262.0),
+        GyroRange(0b101, 62.5, 524.3),
+        GyroRange(0b110, 31.25, 1048.6),
+        GyroRange(0b111, 15.625, 2097.2),
+    ),
+    fifo_capacity=2048,  # DS-000347 FIFO: 2 kB (kernel: INV_ICM42600_FIFO_WATERMARK_MAX)
+    fifo_capacity_unit="bytes",
+    reset_time_s=0.001,  # DS-000347 DEVICE_CONFIG: wait 1 ms after SOFT_RESET (kernel 1 ms)
+    # DS-000347 Table 1: gyro start-up 30 ms from sleep; the kernel waits 60 ms
+    # (INV_ICM42600_GYRO_STARTUP_TIME_MS), as gyrocal does
+    startup_time_s=0.060,
+    # FIFO temperature, 8 bits: T = FIFO_TEMP_DATA / 2.07 + 25 (DS-000347 register TEMP_DATA)
+    temperature_offset_c=25.0,
+    temperature_lsb_per_c=2.07,
+    extra=MappingProxyType(
+        {
+            "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
+            "packet_bytes": 16.0,  # FIFO packet 3: header, accel, gyro, temp, timestamp
+            "timestamp_resolution_s": 16e-6,  # TMST_CONFIG.TMST_RES = 1 (kernel: 16 µs)
+            "timestamp_modulus": 65536.0,  # 16-bit ODR timestamp in the packet
+            "mode_change_wait_s": 200e-6,  # no register writes for 200 µs after PWR_MGMT0
+            "accel_lsb_per_g_2g": 16384.0,  # Table 2: ±2 g, 16384 LSB/g
+        }
+    ),
+)
