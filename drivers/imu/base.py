@@ -284,6 +284,10 @@ class ImuReader(ABC):
     #: stream and are delivered; otherwise it holds the newest, whose sample numbers cannot be
     #: known exactly, and they are dropped with the gap.
     overflow_keeps_oldest: ClassVar[bool] = True
+    #: The FIFO's packets carry the chip's sample timestamps, from which :meth:`_stream_index`
+    #: numbers the samples exactly, also after a restart: the clock fit then needs no new
+    #: segment there (see :meth:`_restart`).
+    numbers_from_timestamps: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -806,7 +810,8 @@ class ImuReader(ABC):
             first_lost += 1
         produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
-        sc.new_segment(produced)  # a miscount here must not bend the period fit
+        if not self.numbers_from_timestamps:
+            sc.new_segment(produced)  # a miscount here must not bend the period fit
         lost = produced - first_lost
         if self.discard_first:
             self._discard_pending = True

@@ -79,6 +79,7 @@ class ICM42688PReader(ImuReader):
     """
 
     family = ICM42688P
+    numbers_from_timestamps = True
 
     def __init__(self, bus: Any, address: int | None = None, **kwargs: Any) -> None:
         self._stamps = np.empty(0, dtype=np.int64)
