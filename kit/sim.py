@@ -207,6 +207,7 @@ FAULTS: dict[str, tuple[str, str]] = {
     "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU) or slots (LSM): overflows"),
     "nack": ("PROBABILITY", "the IMU refuses I2C messages at random"),
     "imu-dead": ("AT", "the IMU stops answering"),
+    "imu-chip": ("MODEL", "the board carries a MODEL chip instead of the configured one"),
 }
 
 
@@ -274,6 +275,8 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
         axis = np.array([1.0, 1.0, 1.0]) / math.sqrt(3.0)
         sim.jig.slip_at(at(0), axis * math.radians(deg), 0.05)
         return f"the mount slips by {deg:g}° at {num(0):g} s"
+    if kind == "imu-chip":
+        return _swap_imu(sim, spec, parts[0] if parts else "")
     chip = sim.chip
     if kind == "fifo":
         chip.faults.fifo_capacity = num(0, int)
@@ -283,3 +286,19 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
         return f"the IMU refuses {num(0):.1%} of I2C messages"
     chip.faults.dead_after_s = at(0)
     return f"the IMU stops answering at {num(0):g} s"
+
+
+def _swap_imu(sim: SimJig, spec: str, model: str) -> str:
+    """Replace the emulated IMU (and any magnetometer die) by a ``model`` chip with the same
+    motion and truth, at the configured address if that model can have it, else its default."""
+    key = model.strip().lower().replace("-", "")
+    if key not in READERS:
+        raise InputError(f"--sim-fault {spec!r}: unknown IMU model {model!r}; choose one of "
+                         + ", ".join(READERS))
+    old = sim.chip
+    for address in sim.imu_bus.addresses:
+        sim.imu_bus.detach(address)
+    possible = READERS[key].family.addresses
+    address = sim.imu_address if sim.imu_address in possible else possible[0]
+    make_emulated_imu(key, old.clock, old.motion, old.truth, bus=sim.imu_bus, address=address)
+    return f"the board carries an {READERS[key].family.title} at 0x{address:02X}"
