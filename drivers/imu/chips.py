@@ -518,8 +518,8 @@ ICM42688P_ODR: Mapping[float, int] = MappingProxyType(
      1000.0: 0b0110, 2000.0: 0b0101, 4000.0: 0b0100, 8000.0: 0b0011, 16000.0: 0b0010,
      32000.0: 0b0001}
 )
-#: The fastest rate the reader offers: a 16-byte packet per sample is 1.4 Mbit/s of FIFO
-#: traffic at 2 kHz, more than a 400 kHz I²C bus carries.
+#: The fastest rate the reader offers: at 2 kHz the 16-byte packets alone are 288 kbit/s on
+#: the wire (9 bits a byte), most of a 400 kHz I²C bus before any addressing or other transfer.
 ICM42688P_MAX_READER_ODR_HZ = 1000.0
 
 #: GYRO_ACCEL_CONFIG0.GYRO_UI_FILT_BW code → the UI filter bandwidth as a function of the ODR
