@@ -1023,6 +1023,7 @@ class EmulatedLSM9DS1(_EmulatedImu):
 #: (module, class), imported when first used.
 EMULATED_CHIP_MODULES: dict[str, tuple[str, str]] = {
     "icm42688p": ("gyrocal.drivers.emulated.icm42688p", "EmulatedICM42688P"),
+    "lsm6dsox": ("gyrocal.drivers.emulated.lsm6dsox", "EmulatedLSM6DSOX"),
 }
 
 

@@ -1,4 +1,4 @@
-"""IMU readers (MPU-9250 family, LSM9DS1, ICM-42688-P) over any smbus2-compatible bus.
+"""IMU readers (MPU-9250 family, LSM9DS1, ICM-42688-P, LSM6DSOX) over any smbus2-compatible bus.
 
 The kit names the sensor model as a string; :func:`open_imu` turns it into a configured reader::
 
@@ -32,6 +32,7 @@ if TYPE_CHECKING:
         open_bus,
     )
     from gyrocal.drivers.imu.icm42688p import ICM42688PReader
+    from gyrocal.drivers.imu.lsm6dsox import LSM6DSOXReader
     from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
     from gyrocal.drivers.imu.mpu9250 import MPU9250Reader
 
@@ -47,6 +48,7 @@ __all__ = [
     "ImuBatch",
     "ImuReader",
     "ImuStateError",
+    "LSM6DSOXReader",
     "LSM9DS1Reader",
     "MPU9250Reader",
     "SensorFaultError",
@@ -64,6 +66,7 @@ READER_CLASSES: dict[str, tuple[str, str]] = {
     "mpu6500": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
     "lsm9ds1": ("gyrocal.drivers.imu.lsm9ds1", "LSM9DS1Reader"),
     "icm42688p": ("gyrocal.drivers.imu.icm42688p", "ICM42688PReader"),
+    "lsm6dsox": ("gyrocal.drivers.imu.lsm6dsox", "LSM6DSOXReader"),
 }
 #: The model names :func:`open_imu` accepts.
 MODELS: tuple[str, ...] = tuple(READER_CLASSES)
@@ -73,6 +76,7 @@ _LAZY = {
        for name in ("ChipNotice", "FifoGap", "ImuBatch", "ImuReader", "SensorInfo", "open_bus")},
     "LSM9DS1Reader": "gyrocal.drivers.imu.lsm9ds1",
     "ICM42688PReader": "gyrocal.drivers.imu.icm42688p",
+    "LSM6DSOXReader": "gyrocal.drivers.imu.lsm6dsox",
     "MPU9250Reader": "gyrocal.drivers.imu.mpu9250",
 }
 

@@ -673,6 +673,7 @@ class ImuReader(ABC):
         self.samples_delivered = self.samples_lost = self.gap_count = 0
         self._next_index = 0
         self._discard_pending = self.discard_first
+        self._pending_gap: tuple[int, str] | None = None  # (first lost, reason), see _restart
         self._last_t = -math.inf
         self._run_value = np.zeros(3, dtype=np.int32)  # last counts of each axis
         self._run_length = np.zeros(3, dtype=np.int64)  # how many samples they have lasted
@@ -712,7 +713,7 @@ class ImuReader(ABC):
         n, overflow, t_a = self._fifo_level()
         lost = "fifo overflow" if overflow else None  # why samples were lost, if they were
         if lost and not self.overflow_keeps_oldest:
-            return ImuBatch.empty((self._restart(self._next_index, lost),))
+            return ImuBatch.empty(self._restart(self._next_index, lost))
         gyro = np.empty((0, 3), dtype=np.int16)
         temp: np.ndarray | None = None
         if n:
@@ -720,13 +721,13 @@ class ImuReader(ABC):
                 gyro, temp = self._fifo_read(n)
             except OSError as e:
                 reason = _bus_error_reason(e, "during FIFO read")
-                return ImuBatch.empty((self._restart(self._next_index, reason),))
+                return ImuBatch.empty(self._restart(self._next_index, reason))
             # A sample can be lost while the burst runs, too: ask the chip again.
             late = self._late_overflow()
             if late and not self.overflow_keeps_oldest:
                 # the oldest unread slot was overwritten before the burst reached it, so the
                 # slots just read do not follow the last batch: drop them with the gap
-                return ImuBatch.empty((self._restart(self._next_index, late),))
+                return ImuBatch.empty(self._restart(self._next_index, late))
             lost = lost or late
         index = self._stream_index(n)
         jumps = self._jump_gaps(index)
@@ -743,7 +744,7 @@ class ImuReader(ABC):
         if lost:
             # a full FIFO that keeps its oldest samples drops only newer ones: the samples
             # just read follow the last batch, and the loss comes after them
-            gaps += (self._restart(self._next_index, lost),)
+            gaps += self._restart(self._next_index, lost)
         return self._make_batch(index, gyro, temp, gaps)
 
     def _stream_index(self, n: int) -> np.ndarray:
@@ -755,22 +756,29 @@ class ImuReader(ABC):
         return np.arange(self._next_index, self._next_index + n, dtype=np.int64)
 
     def _jump_gaps(self, index: np.ndarray) -> tuple[FifoGap, ...]:
-        """Gaps where ``index`` skips samples (only readers with timestamps can see them).
+        """Gaps where ``index`` skips samples (only readers with timestamps can see them),
+        including the loss of a FIFO restart, now of known size (see :meth:`_restart`).
 
-        An index below the expected one (a restart that counted one sample too many as lost)
-        takes that sample back out of :attr:`samples_lost`.
+        The first sample after a restart is dropped (``discard_first``) and counted in the
+        restart's gap.
         """
         if index.size == 0:
             return ()
-        starts = np.concatenate(([self._next_index], index[:-1] + 1))
+        gaps = []
+        start = self._next_index
+        if self._pending_gap is not None:
+            first, reason = self._pending_gap
+            self._pending_gap = None
+            start = int(index[0])
+            lost = start - first + (1 if self._discard_pending else 0)
+            if lost > 0:
+                gaps.append(self._gap(first, lost, reason))
+        starts = np.concatenate(([start], index[:-1] + 1))
         skipped = index - starts
-        if skipped[0] < 0:
-            self.samples_lost = max(0, self.samples_lost + int(skipped[0]))
-        return tuple(
-            self._gap(int(starts[i]), int(skipped[i]), "samples missing from the FIFO stream "
-                      "(the chip's timestamps jump)")
-            for i in np.flatnonzero(skipped > 0)
-        )
+        jump = "samples missing from the FIFO stream (the chip's timestamps jump)"
+        gaps += [self._gap(int(starts[i]), int(skipped[i]), jump)
+                 for i in np.flatnonzero(skipped > 0)]
+        return tuple(gaps)
 
     def _late_overflow(self) -> str | None:
         """Ask the chip after a burst whether samples were lost: the gap's reason, or ``None``."""
@@ -781,7 +789,7 @@ class ImuReader(ABC):
             # cannot be ruled out, so the FIFO is restarted as after one
             return _bus_error_reason(e, "reading the FIFO overflow flag")
 
-    def _restart(self, first_lost: int, reason: str) -> FifoGap:
+    def _restart(self, first_lost: int, reason: str) -> tuple[FifoGap, ...]:
         """Restart the FIFO after data were lost and report the gap.
 
         The chip keeps sampling on its own grid while its FIFO is reset, so the first sample
@@ -810,13 +818,20 @@ class ImuReader(ABC):
             first_lost += 1
         produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
-        if not self.numbers_from_timestamps:
-            sc.new_segment(produced)  # a miscount here must not bend the period fit
+        if self.numbers_from_timestamps:
+            # the first sample's timestamp will tell exactly how many were lost: the gap is
+            # reported with the batch that brings it (see _jump_gaps), and the clock fit needs
+            # no new segment; produced is only the estimate that resolves a timestamp's wrap
+            if self._pending_gap is None:
+                self._pending_gap = (first_lost, reason)
+            self._discard_pending = self.discard_first
+            return ()
+        sc.new_segment(produced)  # a miscount here must not bend the period fit
         lost = produced - first_lost
         if self.discard_first:
             self._discard_pending = True
             lost += 1  # the first sample after the restart is dropped too
-        return self._gap(first_lost, lost, reason)
+        return (self._gap(first_lost, lost, reason),)
 
     def _gap(self, first: int, samples: int, reason: str) -> FifoGap:
         self.samples_lost += samples

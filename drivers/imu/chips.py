@@ -26,6 +26,11 @@ __all__ = [
     "ICM42688P_ODR",
     "ICM42688P_REG",
     "ICM42688P_UI_FILT_DIVISOR",
+    "LSM6DSOX",
+    "LSM6DSOX_BITS",
+    "LSM6DSOX_MAX_READER_ODR_HZ",
+    "LSM6DSOX_ODR",
+    "LSM6DSOX_REG",
     "LSM9DS1",
     "LSM9DS1_BITS",
     "LSM9DS1_BW_G_CUTOFF_HZ",
@@ -398,7 +403,6 @@ LSM9DS1 = ChipFamily(
             "different register map; gyrocal does not drive it",
             0x69: "an LSM6DS3 (WHO_AM_I 0x69); gyrocal does not drive it",
             0x6A: "an LSM6DSL or LSM6DS3C (WHO_AM_I 0x6A); gyrocal does not drive it",
-            0x6C: "an LSM6DSO (WHO_AM_I 0x6C); gyrocal does not drive it",
         }
     ),
     gyro_ranges=(
@@ -601,6 +605,151 @@ ICM42688P = ChipFamily(
             "timestamp_modulus": 65536.0,  # 16-bit ODR timestamp in the packet
             "mode_change_wait_s": 200e-6,  # no register writes for 200 µs after PWR_MGMT0
             "accel_lsb_per_g_2g": 16384.0,  # Table 2: ±2 g, 16384 LSB/g
+        }
+    ),
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# ST LSM6DSOX (datasheet DS12814; hardware_docs/chips.md)
+#
+# Sources: ST, "LSM6DSOX" datasheet DS12814 (tables and registers named below) and application
+# note AN5272 (FIFO); checked against the Linux kernel's drivers/iio/imu/st_lsm6dsx
+# (st_lsm6dsx_core.c settings for WHO_AM_I 0x6C, st_lsm6dsx_buffer.c tagged FIFO) and ST's
+# lsm6dsox_reg.h (STMems standard C drivers). Facts found in one source only are marked ⚠.
+
+
+@dataclass(frozen=True)
+class _LSM6DSOXRegisters:
+    """LSM6DSOX register addresses (DS12814 register map; kernel st_lsm6dsx; lsm6dsox_reg.h)."""
+
+    FUNC_CFG_ACCESS: int = 0x01  # bit 7 embedded-functions page, bit 6 sensor-hub page
+    FIFO_CTRL1: int = 0x07
+    FIFO_CTRL2: int = 0x08
+    FIFO_CTRL3: int = 0x09  # BDR_GY[7:4], BDR_XL[3:0]
+    FIFO_CTRL4: int = 0x0A  # DEC_TS_BATCH[7:6], ODR_T_BATCH[5:4], FIFO_MODE[2:0]
+    WHO_AM_I: int = 0x0F
+    CTRL1_XL: int = 0x10
+    CTRL2_G: int = 0x11
+    CTRL3_C: int = 0x12
+    CTRL4_C: int = 0x13
+    CTRL6_C: int = 0x15
+    CTRL7_G: int = 0x16
+    CTRL10_C: int = 0x19
+    STATUS_REG: int = 0x1E
+    OUT_TEMP_L: int = 0x20
+    OUTX_L_G: int = 0x22
+    OUTX_L_A: int = 0x28
+    FIFO_STATUS1: int = 0x3A  # DIFF_FIFO[7:0]
+    FIFO_STATUS2: int = 0x3B
+    TIMESTAMP0: int = 0x40  # 32 bits, little-endian, to 0x43
+    FIFO_DATA_OUT_TAG: int = 0x78
+    FIFO_DATA_OUT_Z_H: int = 0x7E
+
+
+@dataclass(frozen=True)
+class _LSM6DSOXBits:
+    """LSM6DSOX register bits and fields (DS12814 register descriptions; lsm6dsox_reg.h)."""
+
+    FUNC_CFG_PAGES: int = 0xC0
+    ODR_SHIFT: int = 4
+    FS_G_SHIFT: int = 2
+    FS_G_MASK: int = 0x0C
+    FS_125: int = 0x02
+    FS_XL_SHIFT: int = 2
+    CTRL3_C_BOOT: int = 0x80
+    CTRL3_C_BDU: int = 0x40
+    CTRL3_C_IF_INC: int = 0x04
+    CTRL3_C_SW_RESET: int = 0x01
+    CTRL10_C_TIMESTAMP_EN: int = 0x20
+    BDR_GY_SHIFT: int = 4
+    DEC_TS_BATCH_SHIFT: int = 6
+    DEC_TS_EVERY_BATCH: int = 0b01  # a timestamp word with every batch data rate event
+    FIFO_MODE_MASK: int = 0x07
+    FIFO_MODE_BYPASS: int = 0b000
+    FIFO_MODE_FIFO: int = 0b001  # stop collecting when full
+    FIFO_MODE_CONTINUOUS: int = 0b110  # overwrite the oldest
+    FIFO_STATUS2_WTM_IA: int = 0x80
+    FIFO_STATUS2_OVR_IA: int = 0x40
+    FIFO_STATUS2_FULL_IA: int = 0x20
+    FIFO_STATUS2_OVR_LATCHED: int = 0x08  # cleared when FIFO_STATUS2 is read
+    FIFO_STATUS2_DIFF_HIGH_MASK: int = 0x03  # DIFF_FIFO[9:8]
+    TAG_SENSOR_SHIFT: int = 3  # FIFO_DATA_OUT_TAG: TAG_SENSOR[7:3], TAG_CNT[2:1], TAG_PARITY[0]
+    TAG_GYRO: int = 0x01
+    TAG_ACCEL: int = 0x02
+    TAG_TEMPERATURE: int = 0x03
+    TAG_TIMESTAMP: int = 0x04
+    TAG_CFG_CHANGE: int = 0x05
+
+
+LSM6DSOX_REG = _LSM6DSOXRegisters()
+LSM6DSOX_BITS = _LSM6DSOXBits()
+
+#: The chip's internal time base: ODR = 6667 Hz / ODR_coeff and the timestamp's 25 µs LSB both
+#: come from one oscillator (AN5192/AN5272 "ODR_Actual" and "TS_Res" ⚠); 40 kHz / 6 makes the
+#: sample period a whole number of timestamp LSBs, as the two formulas imply.
+LSM6DSOX_BASE_RATE_HZ = 40000.0 / 6.0
+
+#: CTRL2_G.ODR_G code → (the datasheet's nominal rate, the actual rate) in Hz (DS12814 CTRL2_G
+#: table; kernel odr_avl; the actual rates are 6667 Hz / 2^k ⚠ application notes only). The
+#: reader does not offer 12.5 Hz (code 1), which this rule makes 13 Hz ⚠.
+LSM6DSOX_ODR: Mapping[int, tuple[float, float]] = MappingProxyType(
+    {code: (nominal, LSM6DSOX_BASE_RATE_HZ / 2 ** (10 - code))
+     for code, nominal in ((1, 12.5), (2, 26.0), (3, 52.0), (4, 104.0), (5, 208.0), (6, 416.0),
+                           (7, 833.0), (8, 1666.0), (9, 3333.0), (10, 6667.0))}
+)
+#: The fastest rate the reader streams: two 7-byte FIFO words (timestamp, gyro) per sample are
+#: 210 kbit/s on the wire at 1666 Hz, too much of a 400 kHz bus.
+LSM6DSOX_MAX_READER_ODR_HZ = 834.0
+
+LSM6DSO_NOTICE = (
+    "WHO_AM_I 0x6C: ST gives the LSM6DSO, LSM6DSOX, LSM6DSO32 and LSM6DSO32X one identity, so "
+    "the chip cannot tell which it is (the Linux kernel too takes the name from the device "
+    "tree). Their gyros, registers and tagged FIFOs are the same, so gyrocal reads any of them "
+    "as 'lsm6dsox'; they differ in the accelerometer (the LSM6DSO32's ±32 g) and the machine "
+    "learning core, which gyrocal does not use."
+)
+
+LSM6DSOX = ChipFamily(
+    name="lsm6dsox",
+    title="LSM6DSOX",
+    addresses=(0x6A, 0x6B),  # DS12814 I²C interface: SA0/SDO low / high
+    who_am_i_register=LSM6DSOX_REG.WHO_AM_I,
+    models=(ChipModel("lsm6dsox", 0x6C, "LSM6DSOX (or LSM6DSO)", LSM6DSO_NOTICE),),
+    siblings=MappingProxyType(
+        {
+            0x69: "an LSM6DS3 or LSM6DS3H (WHO_AM_I 0x69), an older ST part with an untagged "
+            "FIFO; gyrocal does not drive it",
+            0x6A: "an LSM6DSL, LSM6DSM, ISM330DLC or LSM6DS3TR-C (WHO_AM_I 0x6A), older ST parts "
+            "with an untagged FIFO; gyrocal does not drive them",
+            0x6B: "an LSM6DSR, LSM6DSRX, ISM330DHCX or ASM330LHH (WHO_AM_I 0x6B), the LSM6DSOX's "
+            "±4000 °/s and industrial siblings; gyrocal does not drive them",
+            0x6D: "an LSM6DST (WHO_AM_I 0x6D); gyrocal does not drive it",
+            0x70: "an LSM6DSV or LSM6DSV16X (WHO_AM_I 0x70), a newer ST part with another "
+            "register map; gyrocal does not drive it",
+        }
+    ),
+    # CTRL2_G.FS_G (and FS_125) with the sensitivities of DS12814 Table 2 (mechanical
+    # characteristics): 4.375, 8.75, 17.50, 35, 70 mdps/LSB. Code 0b100 stands for FS_125.
+    gyro_ranges=(
+        GyroRange(0b100, 125.0, 1000.0 / 4.375),
+        GyroRange(0b00, 250.0, 1000.0 / 8.75),
+        GyroRange(0b01, 500.0, 1000.0 / 17.50),
+        GyroRange(0b10, 1000.0, 1000.0 / 35.0),
+        GyroRange(0b11, 2000.0, 1000.0 / 70.0),
+    ),
+    fifo_capacity=512,  # 7-byte words (kernel max_fifo_size ⚠: DS12814 gives the size in kB)
+    fifo_capacity_unit="words",
+    reset_time_s=0.050,  # ⚠ the kernel waits after SW_RESET/BOOT; DS12814 gives no figure here
+    startup_time_s=0.100,  # ⚠ a conservative wait for the gyro to settle (cf. LSM9DS1)
+    temperature_offset_c=25.0,  # DS12814 Table 4: 256 LSB/°C, 0 LSB at 25 °C
+    temperature_lsb_per_c=256.0,
+    extra=MappingProxyType(
+        {
+            "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
+            "timestamp_modulus": 2.0**32,
+            "word_bytes": 7.0,  # FIFO_DATA_OUT_TAG + 6 data bytes
+            "accel_mg_per_lsb_2g": 0.061,  # DS12814 Table 2
         }
     ),
 )
