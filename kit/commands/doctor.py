@@ -110,7 +110,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
         rep.ok(f"found {info.model} (WHO_AM_I 0x{info.who_am_i:02X}), ±{info.full_scale_dps:g} "
                f"°/s, {info.odr_hz:g} Hz, low-pass {info.lowpass_hz:g} Hz")
         if getattr(reader, "notice", None):
-            rep.warn(str(reader.notice), "fine for gyro calibration; the magnetometer is absent")
+            rep.warn(str(reader.notice), "fine for gyro calibration")
         reader.start()
         end = clock.monotonic() + args.seconds
         batches = []
