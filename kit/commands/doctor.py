@@ -80,8 +80,8 @@ def _scan_imus(rep: _Report, cfg: Any, args: argparse.Namespace, bus: Any) -> bo
     if any((c.model, c.address) == wanted for c in supported) or not supported:
         return True
     other = supported[0]
-    rep.bad(f"the configured {imu_cfg['model']} at 0x{imu_cfg['address']:02X} is not on the "
-            f"bus, but an {other.title} is at 0x{other.address:02X}",
+    rep.bad(f"the configured {imu_cfg['model']} at 0x{imu_cfg['address']:02X} "
+            f"is not on the bus, but an {other.title} is at 0x{other.address:02X}",
             f"set imu.model = \"{other.model}\" and imu.address = 0x{other.address:02X} in "
             f"the config (or --imu-model {other.model} --imu-address 0x{other.address:02X})")
     return False
