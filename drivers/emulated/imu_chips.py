@@ -1024,6 +1024,7 @@ class EmulatedLSM9DS1(_EmulatedImu):
 EMULATED_CHIP_MODULES: dict[str, tuple[str, str]] = {
     "icm42688p": ("gyrocal.drivers.emulated.icm42688p", "EmulatedICM42688P"),
     "lsm6dsox": ("gyrocal.drivers.emulated.lsm6dsox", "EmulatedLSM6DSOX"),
+    "icm20948": ("gyrocal.drivers.emulated.icm20948", "EmulatedICM20948"),
 }
 
 

@@ -1,4 +1,5 @@
-"""IMU readers (MPU-9250 family, LSM9DS1, ICM-42688-P, LSM6DSOX) over any smbus2-compatible bus.
+"""IMU readers (MPU-9250 family, LSM9DS1, ICM-20948, ICM-42688-P, LSM6DSOX) over any bus like
+smbus2's.
 
 The kit names the sensor model as a string; :func:`open_imu` turns it into a configured reader::
 
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
         SensorInfo,
         open_bus,
     )
+    from gyrocal.drivers.imu.icm20948 import ICM20948Reader
     from gyrocal.drivers.imu.icm42688p import ICM42688PReader
     from gyrocal.drivers.imu.lsm6dsox import LSM6DSOXReader
     from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
@@ -44,6 +46,7 @@ __all__ = [
     "ChipIdentityError",
     "ChipNotice",
     "FifoGap",
+    "ICM20948Reader",
     "ICM42688PReader",
     "ImuBatch",
     "ImuReader",
@@ -67,6 +70,7 @@ READER_CLASSES: dict[str, tuple[str, str]] = {
     "lsm9ds1": ("gyrocal.drivers.imu.lsm9ds1", "LSM9DS1Reader"),
     "icm42688p": ("gyrocal.drivers.imu.icm42688p", "ICM42688PReader"),
     "lsm6dsox": ("gyrocal.drivers.imu.lsm6dsox", "LSM6DSOXReader"),
+    "icm20948": ("gyrocal.drivers.imu.icm20948", "ICM20948Reader"),
 }
 #: The model names :func:`open_imu` accepts.
 MODELS: tuple[str, ...] = tuple(READER_CLASSES)
@@ -76,6 +80,7 @@ _LAZY = {
        for name in ("ChipNotice", "FifoGap", "ImuBatch", "ImuReader", "SensorInfo", "open_bus")},
     "LSM9DS1Reader": "gyrocal.drivers.imu.lsm9ds1",
     "ICM42688PReader": "gyrocal.drivers.imu.icm42688p",
+    "ICM20948Reader": "gyrocal.drivers.imu.icm20948",
     "LSM6DSOXReader": "gyrocal.drivers.imu.lsm6dsox",
     "MPU9250Reader": "gyrocal.drivers.imu.mpu9250",
 }

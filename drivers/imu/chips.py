@@ -20,6 +20,11 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
+    "ICM20948",
+    "ICM20948_BITS",
+    "ICM20948_DLPF",
+    "ICM20948_REG",
+    "ICM20948_REG2",
     "ICM42688P",
     "ICM42688P_BITS",
     "ICM42688P_MAX_READER_ODR_HZ",
@@ -750,6 +755,120 @@ LSM6DSOX = ChipFamily(
             "timestamp_modulus": 2.0**32,
             "word_bytes": 7.0,  # FIFO_DATA_OUT_TAG + 6 data bytes
             "accel_mg_per_lsb_2g": 0.061,  # DS12814 Table 2
+        }
+    ),
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# TDK InvenSense ICM-20948 (datasheet DS-000189; hardware_docs/chips.md)
+#
+# Sources: TDK, "ICM-20948 Datasheet", DS-000189 (register map by user bank, Table 1 gyroscope
+# specification, the GYRO_CONFIG_1 DLPF table); checked against SparkFun's ICM-20948 Arduino
+# library (ICM_20948_ENUMERATIONS.h) and other open drivers. The Linux kernel has no ICM-20948
+# driver, so facts the datasheet and one open driver do not both give are marked ⚠.
+
+
+@dataclass(frozen=True)
+class _ICM20948Bank0:
+    """ICM-20948 user bank 0 registers (DS-000189 register map, bank 0)."""
+
+    WHO_AM_I: int = 0x00
+    USER_CTRL: int = 0x03
+    PWR_MGMT_1: int = 0x06
+    PWR_MGMT_2: int = 0x07
+    INT_STATUS_2: int = 0x1B  # FIFO_OVERFLOW_INT[4:0], cleared when read
+    ACCEL_XOUT_H: int = 0x2D
+    GYRO_XOUT_H: int = 0x33
+    TEMP_OUT_H: int = 0x39
+    FIFO_EN_2: int = 0x67
+    FIFO_RST: int = 0x68
+    FIFO_MODE: int = 0x69
+    FIFO_COUNTH: int = 0x70
+    FIFO_COUNTL: int = 0x71
+    FIFO_R_W: int = 0x72
+    REG_BANK_SEL: int = 0x7F  # in every bank: USER_BANK[5:4]
+
+
+@dataclass(frozen=True)
+class _ICM20948Bank2:
+    """ICM-20948 user bank 2 registers (DS-000189 register map, bank 2)."""
+
+    GYRO_SMPLRT_DIV: int = 0x00
+    GYRO_CONFIG_1: int = 0x01
+    ACCEL_CONFIG: int = 0x14
+
+
+@dataclass(frozen=True)
+class _ICM20948Bits:
+    """ICM-20948 register bits and fields (DS-000189 register descriptions)."""
+
+    BANK_SHIFT: int = 4
+    BANK_MASK: int = 0x30
+    USER_CTRL_FIFO_EN: int = 0x40
+    PWR_MGMT_1_DEVICE_RESET: int = 0x80
+    PWR_MGMT_1_SLEEP: int = 0x40
+    PWR_MGMT_1_CLKSEL_AUTO: int = 0x01
+    PWR_MGMT_2_DISABLE_GYRO: int = 0x07
+    GYRO_DLPFCFG_SHIFT: int = 3
+    GYRO_FS_SEL_SHIFT: int = 1
+    GYRO_FS_SEL_MASK: int = 0x06
+    GYRO_FCHOICE: int = 0x01  # 1: the DLPF is on and the rate is 1125/(1 + GYRO_SMPLRT_DIV)
+    ACCEL_FS_SEL_SHIFT: int = 1
+    FIFO_EN_2_ACCEL: int = 0x10
+    FIFO_EN_2_GYRO_Z: int = 0x08
+    FIFO_EN_2_GYRO_Y: int = 0x04
+    FIFO_EN_2_GYRO_X: int = 0x02
+    FIFO_EN_2_TEMP: int = 0x01
+    FIFO_RST_ALL: int = 0x1F
+    FIFO_MODE_SNAPSHOT: int = 0x01  # 1: stop writing when full; 0: stream, overwrite ⚠
+    INT_STATUS_2_FIFO_OVERFLOW: int = 0x1F
+
+
+ICM20948_REG = _ICM20948Bank0()
+ICM20948_REG2 = _ICM20948Bank2()
+ICM20948_BITS = _ICM20948Bits()
+
+#: Gyro DLPF bandwidth (3 dB, Hz) for each GYRO_DLPFCFG with GYRO_FCHOICE = 1, the internal
+#: rate then 1125 Hz (DS-000189 GYRO_CONFIG_1 table; SparkFun's gyr_d196bw6 ... names):
+#: maps the bandwidth to GYRO_DLPFCFG.
+ICM20948_DLPF: Mapping[float, int] = MappingProxyType(
+    {196.6: 0, 151.8: 1, 119.5: 2, 51.2: 3, 23.9: 4, 11.6: 5, 5.7: 6, 361.4: 7}
+)
+
+ICM20948 = ChipFamily(
+    name="icm20948",
+    title="ICM-20948",
+    addresses=(0x68, 0x69),  # DS-000189 I²C interface: AD0 low / high
+    who_am_i_register=ICM20948_REG.WHO_AM_I,  # in bank 0
+    models=(ChipModel("icm20948", 0xEA, "ICM-20948"),),
+    siblings=MappingProxyType(
+        {
+            0xE0: "an ICM-20648 (WHO_AM_I 0xE0 ⚠), the ICM-20948 without the magnetometer; "
+            "gyrocal does not drive it",
+            0xE1: "an ICM-20649 (WHO_AM_I 0xE1 ⚠), the ±4000 °/s sibling; gyrocal does not "
+            "drive it",
+        }
+    ),
+    # GYRO_CONFIG_1.GYRO_FS_SEL (DS-000189 Table 1): 131, 65.5, 32.8, 16.4 LSB/(°/s)
+    gyro_ranges=(
+        GyroRange(0, 250.0, 131.0),
+        GyroRange(1, 500.0, 65.5),
+        GyroRange(2, 1000.0, 32.8),
+        GyroRange(3, 2000.0, 16.4),
+    ),
+    fifo_capacity=512,  # bytes ⚠ (the 13-bit FIFO_COUNT allows more; the DMP's FIFO is larger)
+    fifo_capacity_unit="bytes",
+    reset_time_s=0.100,  # ⚠ open drivers wait 50-100 ms after DEVICE_RESET; none in DS-000189
+    startup_time_s=0.035,  # DS-000189 Table 1: gyro start-up time 35 ms
+    temperature_offset_c=21.0,  # DS-000189: T = (TEMP_OUT − RoomTemp_Offset)/333.87 + 21
+    temperature_lsb_per_c=333.87,
+    extra=MappingProxyType(
+        {
+            "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)
+            "dlpf_off_rate_hz": 9000.0,  # GYRO_FCHOICE = 0 ⚠
+            "wake_time_s": 0.010,  # ⚠ as for the MPU-9250
+            "accel_lsb_per_g_2g": 16384.0,  # DS-000189 Table 2
         }
     ),
 )
