@@ -29,3 +29,13 @@ def test_a_sibling_is_named_and_not_given_a_model():
 
 def test_an_empty_bus_finds_nothing():
     assert scan_bus(EmulatedSMBus(VirtualClock())) == []
+
+
+def test_the_banked_and_tagged_chips_are_named_too():
+    clock = VirtualClock()
+    bus = EmulatedSMBus(clock)
+    make_emulated_imu("icm20948", clock, bus=bus, address=0x69)  # WHO_AM_I at 0x00, bank 0
+    make_emulated_imu("lsm6dsox", clock, bus=bus, address=0x6A)
+    make_emulated_imu("icm42688p", clock, bus=bus, address=0x68)
+    assert [(c.address, c.model) for c in scan_bus(bus)] == [
+        (0x68, "icm42688p"), (0x69, "icm20948"), (0x6A, "lsm6dsox")]

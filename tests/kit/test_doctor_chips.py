@@ -5,9 +5,10 @@ import pytest
 from gyrocal.kit.cli import main
 
 
-@pytest.mark.parametrize("model", ["icm42688p", "lsm9ds1"])
+@pytest.mark.parametrize("model", ["icm42688p", "lsm9ds1", "icm20948", "lsm6dsox"])
 def test_doctor_names_another_supported_chip_and_says_what_to_set(model, capsys):
-    address = {"icm42688p": "0x68", "lsm9ds1": "0x6B"}[model]
+    address = {"icm42688p": "0x68", "lsm9ds1": "0x6B", "icm20948": "0x68",
+               "lsm6dsox": "0x6A"}[model]
     assert main(["doctor", "--sim", "--imu-model", "mpu9250",
                  "--sim-fault", f"imu-chip:{model}"]) == 4
     out = capsys.readouterr().out
