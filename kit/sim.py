@@ -204,7 +204,8 @@ FAULTS: dict[str, tuple[str, str]] = {
     "silent": ("SERVO:AT", "servo stops answering"),
     "alert": ("SERVO:AT[:BITS]", "servo raises a hardware error (default overload, 32)"),
     "slip": ("AT:DEG", "the sensor's mount slips by DEG degrees"),
-    "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU) or slots (LSM): overflows"),
+    "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU, ICM), slots (LSM9DS1) or words "
+             "(LSM6DSOX): overflows"),
     "nack": ("PROBABILITY", "the IMU refuses I2C messages at random"),
     "imu-dead": ("AT", "the IMU stops answering"),
     "imu-chip": ("MODEL", "the board carries a MODEL chip instead of the configured one"),

@@ -127,7 +127,7 @@ class ChipFamily:
     fifo_capacity : int
         FIFO size in the unit of ``fifo_capacity_unit``.
     fifo_capacity_unit : str
-        ``"bytes"`` or ``"samples"``.
+        ``"bytes"``, ``"samples"`` or ``"words"`` (the LSM6DSOX's 7-byte tagged words).
     reset_time_s : float
         Wait after a software reset.
     startup_time_s : float
