@@ -154,13 +154,17 @@ class EmulatedICM42688P(_EmulatedImu):
         return super()._temperature_counts(temperature_c)
 
     def cutoff_hz(self) -> float | None:
-        """The gyro output's bandwidth: the UI filter's (GYRO_ACCEL_CONFIG0.GYRO_UI_FILT_BW
-        codes 0..7; the low-latency codes are treated as ODR/2), ``None`` with the gyro off."""
+        """The emulated output filter's bandwidth: the UI filter's (GYRO_ACCEL_CONFIG0.
+        GYRO_UI_FILT_BW codes 0..7; the low-latency codes are treated as ODR/2); ``None`` with
+        the gyro off or a bandwidth of ODR/2 or more (no filter beyond the per-sample mean)."""
         odr = self._odr_hz()
         if odr is None:
             return None
         code = self._regs[_R.GYRO_ACCEL_CONFIG0] & _B.GYRO_UI_FILT_BW_MASK
-        return icm42688p_bandwidth_hz(odr, code if code <= 7 else 0)
+        bandwidth = icm42688p_bandwidth_hz(odr, code if code <= 7 else 0)
+        # a first-order stand-in at or above Nyquist would be a pole at z = -1 (undamped):
+        # there the per-sample mean is the only filter emulated
+        return bandwidth if bandwidth < 0.5 * odr else None
 
     #: The LSM9DS1's first-order output filter, driven by this chip's :meth:`cutoff_hz`.
     _filtered = EmulatedLSM9DS1._filtered

@@ -240,3 +240,13 @@ def test_rates_and_filters_offered_and_refused():
         open_imu("icm42688p", bus, addr, clock=clock, range_dps=2000, odr_hz=8000)
     with pytest.raises(ConfigurationError, match="bandwidth"):
         open_imu("icm42688p", bus, addr, clock=clock, range_dps=2000, odr_hz=1000, lowpass_hz=7)
+
+
+def test_the_output_filter_stands_in_below_nyquist_only():
+    clock, bus, addr, chip = icm(output_filter=True)
+    gyro_on(bus, addr)  # 1 kHz, GYRO_UI_FILT_BW reset value 1: max(400, 1000)/4 = 250 Hz
+    assert chip.cutoff_hz() == 250.0
+    bus.write_byte_data(addr, 0x52, 0x17)  # code 7: 1000/40 = 25 Hz
+    assert chip.cutoff_hz() == 25.0
+    bus.write_byte_data(addr, 0x52, 0x10)  # code 0: ODR/2, no first-order stand-in there
+    assert chip.cutoff_hz() is None
