@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import importlib
 import importlib.util
 import sys
 import traceback
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from typing import Any
 
 from gyrocal.drivers import signals
 from gyrocal.kit import __version__
@@ -119,6 +122,25 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _chip_notices_as_notes() -> Iterator[None]:
+    """Say a chip accepted with a caveat (the drivers' ``ChipNotice``: an MPU-6500, an LSM6DSO)
+    as a ``gyrocal: note:`` line rather than as a Python warning with a source location."""
+    original = warnings.showwarning
+
+    def show(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if category.__name__ == "ChipNotice":
+            print(f"gyrocal: note: {message}", file=sys.stderr)
+        else:
+            original(message, category, *args, **kwargs)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = original
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``gyrocal`` with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
     # SIGINT, SIGTERM and SIGHUP end any command with a message and exit 130/143/129, at any
@@ -136,7 +158,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             except SystemExit as exc:  # argparse: --help (0) or bad usage (2)
                 return int(exc.code or 0)
             show_traceback = args.traceback
-            return int(args._run(args) or 0)
+            with _chip_notices_as_notes():
+                return int(args._run(args) or 0)
         except BaseException as exc:
             with signals.shielded():  # a second signal cannot cut the report short
                 return _report(exc, show_traceback)

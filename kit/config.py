@@ -129,7 +129,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "imu": {
         "model": Key("mpu9250", "sensor chip", str, IMU_MODELS),
         "bus": Key(1, "I2C bus number: /dev/i2c-N (0..1023)", int, check=_within(0, 1023)),
-        "address": Key(0x68, "7-bit I2C address (MPU-9250: 0x68/0x69; LSM9DS1 A/G: 0x6A/0x6B)",
+        "address": Key(0x68, "7-bit I2C address (MPU-9250, ICM-20948, ICM-42688-P: 0x68/0x69; "
+                       "LSM9DS1 A/G, LSM6DSOX: 0x6A/0x6B)",
                        int, check=_address),
         "range_dps": Key(500, "gyro full-scale range, degrees per second", int,
                          (245, 250, 500, 1000, 2000)),

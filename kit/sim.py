@@ -323,11 +323,13 @@ FAULTS: dict[str, tuple[str, str]] = {
     "silent": ("SERVO:AT", "servo stops answering"),
     "alert": ("SERVO:AT[:BITS]", "servo raises a hardware error (default overload, 32)"),
     "slip": ("AT:DEG", "the sensor's mount slips by DEG degrees"),
-    "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU) or slots (LSM): overflows"),
+    "fifo": ("CAPACITY", "a FIFO of CAPACITY bytes (MPU, ICM), slots (LSM9DS1) or words "
+             "(LSM6DSOX): overflows"),
     "nack": ("PROBABILITY", "the IMU refuses I2C messages at random"),
     "imu-dead": ("AT", "the IMU stops answering"),
     "pause": ("AT:SECONDS", "the host stalls for SECONDS at AT: no servo poll, no FIFO drain "
               "(the emulated clock only)"),
+    "imu-chip": ("MODEL", "the board carries a MODEL chip instead of the configured one"),
 }
 
 
@@ -403,6 +405,8 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
             raise InputError(f"--sim-fault {spec!r}: AT must be finite and SECONDS in 0..60")
         sim.clock.stall_at(at(0), num(1))
         return f"the host stalls for {num(1):g} s at {num(0):g} s"
+    if kind == "imu-chip":
+        return _swap_imu(sim, spec, parts[0] if parts else "")
     chip = sim.chip
     if kind == "fifo":
         chip.faults.fifo_capacity = num(0, int)
@@ -412,3 +416,19 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
         return f"the IMU refuses {num(0):.1%} of I2C messages"
     chip.faults.dead_after_s = at(0)
     return f"the IMU stops answering at {num(0):g} s"
+
+
+def _swap_imu(sim: SimJig, spec: str, model: str) -> str:
+    """Replace the emulated IMU (and any magnetometer die) by a ``model`` chip with the same
+    motion and truth, at the configured address if that model can have it, else its default."""
+    key = model.strip().lower().replace("-", "")
+    if key not in READERS:
+        raise InputError(f"--sim-fault {spec!r}: unknown IMU model {model!r}; choose one of "
+                         + ", ".join(READERS))
+    old = sim.chip
+    for address in sim.imu_bus.addresses:
+        sim.imu_bus.detach(address)
+    possible = READERS[key].family.addresses
+    address = sim.imu_address if sim.imu_address in possible else possible[0]
+    make_emulated_imu(key, old.clock, old.motion, old.truth, bus=sim.imu_bus, address=address)
+    return f"the board carries an {READERS[key].family.title} at 0x{address:02X}"

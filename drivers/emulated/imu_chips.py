@@ -24,6 +24,7 @@ answering, a smaller FIFO (to provoke overflows), a wrong WHO_AM_I and a stuck a
 from __future__ import annotations
 
 import errno
+import importlib
 import math
 from abc import ABC, abstractmethod
 from collections import deque
@@ -1180,6 +1181,15 @@ class EmulatedLSM9DS1(_EmulatedImu):
 # ---------------------------------------------------------------------------------------------
 
 
+#: Emulated chips in their own modules (they subclass :class:`_EmulatedImu`), by model name:
+#: (module, class), imported when first used.
+EMULATED_CHIP_MODULES: dict[str, tuple[str, str]] = {
+    "icm42688p": ("gyrocal.drivers.emulated.icm42688p", "EmulatedICM42688P"),
+    "lsm6dsox": ("gyrocal.drivers.emulated.lsm6dsox", "EmulatedLSM6DSOX"),
+    "icm20948": ("gyrocal.drivers.emulated.icm20948", "EmulatedICM20948"),
+}
+
+
 def make_emulated_imu(
     model: str,
     clock: Clock,
@@ -1199,7 +1209,8 @@ def make_emulated_imu(
     Parameters
     ----------
     model : str
-        ``"mpu9250"``, ``"mpu9255"``, ``"mpu6500"`` or ``"lsm9ds1"``.
+        ``"mpu9250"``, ``"mpu9255"``, ``"mpu6500"``, ``"lsm9ds1"`` or one of
+        :data:`EMULATED_CHIP_MODULES`.
     clock : Clock
         The shared clock.
     motion : MotionSource, optional
@@ -1236,10 +1247,14 @@ def make_emulated_imu(
     elif key == "lsm9ds1":
         chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed,
                                subsamples=subsamples, output_filter=output_filter)
+    elif key in EMULATED_CHIP_MODULES:
+        module, name = EMULATED_CHIP_MODULES[key]
+        cls = getattr(importlib.import_module(module), name)
+        chip = cls(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples,
+                   output_filter=output_filter)
     else:
-        raise ValueError(
-            f"unknown IMU model {model!r}; choose one of {', '.join([*_MPU_VARIANTS, 'lsm9ds1'])}"
-        )
+        names = [*_MPU_VARIANTS, "lsm9ds1", *EMULATED_CHIP_MODULES]
+        raise ValueError(f"unknown IMU model {model!r}; choose one of {', '.join(names)}")
     if bus is None:
         bus = EmulatedSMBus(clock, bus_hz=bus_hz)
     if address is None:
@@ -1262,6 +1277,8 @@ def _attach_magnetometer(bus: EmulatedSMBus, chip: _EmulatedImu, address: int,
             return
         bus.attach(AK8963_ADDRESS, AuxPort(ak, lambda: chip.bypass_open))  # type: ignore[arg-type]
         return
+    if not isinstance(chip, EmulatedLSM9DS1):
+        return  # a chip without a magnetometer die
     mag_address = 0x1E if address == 0x6B else 0x1C
     if mag_address in bus.addresses:
         return

@@ -1,4 +1,5 @@
-"""IMU readers for the MPU-9250 family and the LSM9DS1 over any smbus2-compatible bus.
+"""IMU readers (MPU-9250 family, LSM9DS1, ICM-20948, ICM-42688-P, LSM6DSOX) over any bus like
+smbus2's.
 
 The kit names the sensor model as a string; :func:`open_imu` turns it into a configured reader::
 
@@ -31,6 +32,9 @@ if TYPE_CHECKING:
         SensorInfo,
         open_bus,
     )
+    from gyrocal.drivers.imu.icm20948 import ICM20948Reader
+    from gyrocal.drivers.imu.icm42688p import ICM42688PReader
+    from gyrocal.drivers.imu.lsm6dsox import LSM6DSOXReader
     from gyrocal.drivers.imu.lsm9ds1 import LSM9DS1Reader
     from gyrocal.drivers.imu.mpu9250 import MPU9250Reader
 
@@ -42,9 +46,12 @@ __all__ = [
     "ChipIdentityError",
     "ChipNotice",
     "FifoGap",
+    "ICM20948Reader",
+    "ICM42688PReader",
     "ImuBatch",
     "ImuReader",
     "ImuStateError",
+    "LSM6DSOXReader",
     "LSM9DS1Reader",
     "MPU9250Reader",
     "SensorFaultError",
@@ -61,6 +68,9 @@ READER_CLASSES: dict[str, tuple[str, str]] = {
     "mpu9255": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
     "mpu6500": ("gyrocal.drivers.imu.mpu9250", "MPU9250Reader"),
     "lsm9ds1": ("gyrocal.drivers.imu.lsm9ds1", "LSM9DS1Reader"),
+    "icm42688p": ("gyrocal.drivers.imu.icm42688p", "ICM42688PReader"),
+    "lsm6dsox": ("gyrocal.drivers.imu.lsm6dsox", "LSM6DSOXReader"),
+    "icm20948": ("gyrocal.drivers.imu.icm20948", "ICM20948Reader"),
 }
 #: The model names :func:`open_imu` accepts.
 MODELS: tuple[str, ...] = tuple(READER_CLASSES)
@@ -69,6 +79,9 @@ _LAZY = {
     **{name: "gyrocal.drivers.imu.base"
        for name in ("ChipNotice", "FifoGap", "ImuBatch", "ImuReader", "SensorInfo", "open_bus")},
     "LSM9DS1Reader": "gyrocal.drivers.imu.lsm9ds1",
+    "ICM42688PReader": "gyrocal.drivers.imu.icm42688p",
+    "ICM20948Reader": "gyrocal.drivers.imu.icm20948",
+    "LSM6DSOXReader": "gyrocal.drivers.imu.lsm6dsox",
     "MPU9250Reader": "gyrocal.drivers.imu.mpu9250",
 }
 

@@ -284,6 +284,10 @@ class ImuReader(ABC):
     #: stream and are delivered; otherwise it holds the newest, whose sample numbers cannot be
     #: known exactly, and they are dropped with the gap.
     overflow_keeps_oldest: ClassVar[bool] = True
+    #: The FIFO's packets carry the chip's sample timestamps, from which :meth:`_stream_index`
+    #: numbers the samples exactly, also after a restart: the clock fit then needs no new
+    #: segment there (see :meth:`_restart`).
+    numbers_from_timestamps: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -669,6 +673,7 @@ class ImuReader(ABC):
         self.samples_delivered = self.samples_lost = self.gap_count = 0
         self._next_index = 0
         self._discard_pending = self.discard_first
+        self._pending_gap: tuple[int, str] | None = None  # (first lost, reason), see _restart
         self._last_t = -math.inf
         self._run_value = np.zeros(3, dtype=np.int32)  # last counts of each axis
         self._run_length = np.zeros(3, dtype=np.int64)  # how many samples they have lasted
@@ -708,7 +713,7 @@ class ImuReader(ABC):
         n, overflow, t_a = self._fifo_level()
         lost = "fifo overflow" if overflow else None  # why samples were lost, if they were
         if lost and not self.overflow_keeps_oldest:
-            return ImuBatch.empty((self._restart(self._next_index, lost),))
+            return ImuBatch.empty(self._restart(self._next_index, lost))
         gyro = np.empty((0, 3), dtype=np.int16)
         temp: np.ndarray | None = None
         if n:
@@ -716,29 +721,64 @@ class ImuReader(ABC):
                 gyro, temp = self._fifo_read(n)
             except OSError as e:
                 reason = _bus_error_reason(e, "during FIFO read")
-                return ImuBatch.empty((self._restart(self._next_index, reason),))
+                return ImuBatch.empty(self._restart(self._next_index, reason))
             # A sample can be lost while the burst runs, too: ask the chip again.
             late = self._late_overflow()
             if late and not self.overflow_keeps_oldest:
                 # the oldest unread slot was overwritten before the burst reached it, so the
                 # slots just read do not follow the last batch: drop them with the gap
-                return ImuBatch.empty((self._restart(self._next_index, late),))
+                return ImuBatch.empty(self._restart(self._next_index, late))
             lost = lost or late
+        index = self._stream_index(n)
+        jumps = self._jump_gaps(index)
+        if n:
+            self._next_index = int(index[-1]) + 1
         if lost is None:
-            self._sclock.observe(t_b, t_a, self._next_index + n)
+            self._sclock.observe(t_b, t_a, self._next_index)
         if temp is None:
             temp = np.full(n, self._temperature_counts() if n else 0, dtype=np.float64)
-        index = np.arange(self._next_index, self._next_index + n, dtype=np.int64)
-        self._next_index += n
         if self._discard_pending and n:
             gyro, temp, index = gyro[1:], temp[1:], index[1:]
             self._discard_pending = False
-        gaps: tuple[FifoGap, ...] = ()
+        gaps: tuple[FifoGap, ...] = jumps
         if lost:
             # a full FIFO that keeps its oldest samples drops only newer ones: the samples
             # just read follow the last batch, and the loss comes after them
-            gaps = (self._restart(self._next_index, lost),)
+            gaps += self._restart(self._next_index, lost)
         return self._make_batch(index, gyro, temp, gaps)
+
+    def _stream_index(self, n: int) -> np.ndarray:
+        """Stream indices of the ``n`` samples just popped: consecutive from the next expected.
+
+        A reader whose FIFO packets carry the chip's own sample timestamps (ICM-42688-P)
+        numbers them from the timestamps instead; a jump is then a gap of known size.
+        """
+        return np.arange(self._next_index, self._next_index + n, dtype=np.int64)
+
+    def _jump_gaps(self, index: np.ndarray) -> tuple[FifoGap, ...]:
+        """Gaps where ``index`` skips samples (only readers with timestamps can see them),
+        including the loss of a FIFO restart, now of known size (see :meth:`_restart`).
+
+        The first sample after a restart is dropped (``discard_first``) and counted in the
+        restart's gap.
+        """
+        if index.size == 0:
+            return ()
+        gaps = []
+        start = self._next_index
+        if self._pending_gap is not None:
+            first, reason = self._pending_gap
+            self._pending_gap = None
+            start = int(index[0])
+            lost = start - first + (1 if self._discard_pending else 0)
+            if lost > 0:
+                gaps.append(self._gap(first, lost, reason))
+        starts = np.concatenate(([start], index[:-1] + 1))
+        skipped = index - starts
+        jump = "samples missing from the FIFO stream (the chip's timestamps jump)"
+        gaps += [self._gap(int(starts[i]), int(skipped[i]), jump)
+                 for i in np.flatnonzero(skipped > 0)]
+        return tuple(gaps)
 
     def _late_overflow(self) -> str | None:
         """Ask the chip after a burst whether samples were lost: the gap's reason, or ``None``."""
@@ -749,7 +789,7 @@ class ImuReader(ABC):
             # cannot be ruled out, so the FIFO is restarted as after one
             return _bus_error_reason(e, "reading the FIFO overflow flag")
 
-    def _restart(self, first_lost: int, reason: str) -> FifoGap:
+    def _restart(self, first_lost: int, reason: str) -> tuple[FifoGap, ...]:
         """Restart the FIFO after data were lost and report the gap.
 
         The chip keeps sampling on its own grid while its FIFO is reset, so the first sample
@@ -778,12 +818,20 @@ class ImuReader(ABC):
             first_lost += 1
         produced = max(sc.count_at(0.5 * (t_b + t_a)), first_lost)
         self._next_index = produced
+        if self.numbers_from_timestamps:
+            # the first sample's timestamp will tell exactly how many were lost: the gap is
+            # reported with the batch that brings it (see _jump_gaps), and the clock fit needs
+            # no new segment; produced is only the estimate that resolves a timestamp's wrap
+            if self._pending_gap is None:
+                self._pending_gap = (first_lost, reason)
+            self._discard_pending = self.discard_first
+            return ()
         sc.new_segment(produced)  # a miscount here must not bend the period fit
         lost = produced - first_lost
         if self.discard_first:
             self._discard_pending = True
             lost += 1  # the first sample after the restart is dropped too
-        return self._gap(first_lost, lost, reason)
+        return (self._gap(first_lost, lost, reason),)
 
     def _gap(self, first: int, samples: int, reason: str) -> FifoGap:
         self.samples_lost += samples

@@ -20,6 +20,22 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
+    "ICM20948",
+    "ICM20948_BITS",
+    "ICM20948_DLPF",
+    "ICM20948_REG",
+    "ICM20948_REG2",
+    "ICM42688P",
+    "ICM42688P_BITS",
+    "ICM42688P_MAX_READER_ODR_HZ",
+    "ICM42688P_ODR",
+    "ICM42688P_REG",
+    "ICM42688P_UI_FILT_DIVISOR",
+    "LSM6DSOX",
+    "LSM6DSOX_BITS",
+    "LSM6DSOX_MAX_READER_ODR_HZ",
+    "LSM6DSOX_ODR",
+    "LSM6DSOX_REG",
     "LSM9DS1",
     "LSM9DS1_BITS",
     "LSM9DS1_BW_G_CUTOFF_HZ",
@@ -35,6 +51,7 @@ __all__ = [
     "ChipModel",
     "GyroRange",
     "RAD_PER_DEG",
+    "icm42688p_bandwidth_hz",
     "register_names",
 ]
 
@@ -111,7 +128,7 @@ class ChipFamily:
     fifo_capacity : int
         FIFO size in the unit of ``fifo_capacity_unit``.
     fifo_capacity_unit : str
-        ``"bytes"`` or ``"samples"``.
+        ``"bytes"``, ``"samples"`` or ``"words"`` (the LSM6DSOX's 7-byte tagged words).
     reset_time_s : float
         Wait after a software reset.
     startup_time_s : float
@@ -397,7 +414,6 @@ LSM9DS1 = ChipFamily(
             "different register map; gyrocal does not drive it",
             0x69: "an LSM6DS3 (WHO_AM_I 0x69); gyrocal does not drive it",
             0x6A: "an LSM6DSL or LSM6DS3C (WHO_AM_I 0x6A); gyrocal does not drive it",
-            0x6C: "an LSM6DSO (WHO_AM_I 0x6C); gyrocal does not drive it",
         }
     ),
     gyro_ranges=(
@@ -417,3 +433,448 @@ LSM9DS1 = ChipFamily(
 def register_names(registers: object) -> dict[int, str]:
     """Address → name for a register table (``MPU9250_REG`` or ``LSM9DS1_REG``), for messages."""
     return {addr: name for name, addr in asdict(registers).items()}  # type: ignore[call-overload]
+
+
+# ---------------------------------------------------------------------------------------------
+# TDK InvenSense ICM-42688-P (datasheet DS-000347; hardware_docs/chips.md)
+#
+# Sources: TDK, "ICM-42688-P Datasheet", DS-000347 (tables and registers named below), checked
+# against the Linux kernel's drivers/iio/imu/inv_icm42600 (inv_icm42600.h,
+# inv_icm42600_buffer.c) and PX4's InvenSense_ICM42688P_registers.hpp. Facts found in one source
+# only are marked ⚠.
+
+
+@dataclass(frozen=True)
+class _ICM42688PRegisters:
+    """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
+    kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank."""
+
+    DEVICE_CONFIG: int = 0x11
+    INT_CONFIG: int = 0x14
+    FIFO_CONFIG: int = 0x16
+    TEMP_DATA1: int = 0x1D  # big-endian TEMP_DATA1/0, then ACCEL X/Y/Z, GYRO X/Y/Z
+    ACCEL_DATA_X1: int = 0x1F
+    GYRO_DATA_X1: int = 0x25
+    INT_STATUS: int = 0x2D
+    FIFO_COUNTH: int = 0x2E
+    FIFO_COUNTL: int = 0x2F
+    FIFO_DATA: int = 0x30
+    SIGNAL_PATH_RESET: int = 0x4B
+    INTF_CONFIG0: int = 0x4C
+    PWR_MGMT0: int = 0x4E
+    GYRO_CONFIG0: int = 0x4F
+    ACCEL_CONFIG0: int = 0x50
+    GYRO_CONFIG1: int = 0x51
+    GYRO_ACCEL_CONFIG0: int = 0x52
+    TMST_CONFIG: int = 0x54
+    FIFO_CONFIG1: int = 0x5F
+    FIFO_CONFIG2: int = 0x60  # FIFO_WM[7:0]
+    INT_SOURCE0: int = 0x65
+    WHO_AM_I: int = 0x75
+    REG_BANK_SEL: int = 0x76
+
+
+@dataclass(frozen=True)
+class _ICM42688PBits:
+    """ICM-42688-P register bits and fields (DS-000347 register map and FIFO packet
+    structure; kernel inv_icm42600.h)."""
+
+    DEVICE_CONFIG_SOFT_RESET: int = 0x01
+    FIFO_MODE_SHIFT: int = 6
+    FIFO_MODE_BYPASS: int = 0b00
+    FIFO_MODE_STREAM: int = 0b01
+    FIFO_MODE_STOP_ON_FULL: int = 0b10
+    INT_STATUS_DATA_RDY: int = 0x08
+    INT_STATUS_FIFO_FULL: int = 0x02
+    SIGNAL_PATH_RESET_FIFO_FLUSH: int = 0x02
+    # INTF_CONFIG0 reset 0x30: FIFO count and sensor data big-endian, FIFO count in bytes
+    INTF_CONFIG0_FIFO_COUNT_REC: int = 0x40
+    INTF_CONFIG0_FIFO_COUNT_ENDIAN: int = 0x20
+    INTF_CONFIG0_SENSOR_DATA_ENDIAN: int = 0x10
+    PWR_MGMT0_TEMP_DIS: int = 0x20
+    PWR_MGMT0_GYRO_MODE_SHIFT: int = 2
+    PWR_MGMT0_GYRO_MODE_MASK: int = 0x0C
+    PWR_MGMT0_ACCEL_MODE_MASK: int = 0x03
+    MODE_LOW_NOISE: int = 0b11
+    FS_SEL_SHIFT: int = 5
+    ODR_MASK: int = 0x0F
+    GYRO_UI_FILT_BW_MASK: int = 0x0F
+    # TMST_CONFIG reset 0x23 (⚠ TDK sample code only): TMST_FSYNC_EN | TMST_EN
+    TMST_TO_REGS_EN: int = 0x10
+    TMST_RES_16US: int = 0x08
+    TMST_DELTA_EN: int = 0x04
+    TMST_FSYNC_EN: int = 0x02
+    TMST_EN: int = 0x01
+    FIFO_CONFIG1_RESUME_PARTIAL_RD: int = 0x40
+    FIFO_CONFIG1_TMST_FSYNC_EN: int = 0x08
+    FIFO_CONFIG1_TEMP_EN: int = 0x04
+    FIFO_CONFIG1_GYRO_EN: int = 0x02
+    FIFO_CONFIG1_ACCEL_EN: int = 0x01
+    # FIFO packet header (DS-000347 FIFO packet structure; kernel
+    # inv_icm42600_buffer.c)
+    HEADER_MSG: int = 0x80  # set: the FIFO is empty, the packet is not valid
+    HEADER_ACCEL: int = 0x40
+    HEADER_GYRO: int = 0x20
+    HEADER_20: int = 0x10
+    HEADER_TMST_MASK: int = 0x0C
+    HEADER_TMST_ODR: int = 0x08  # 10: the packet carries the ODR timestamp
+    HEADER_TMST_FSYNC: int = 0x0C  # 11: the packet carries the FSYNC time
+    HEADER_ODR_ACCEL: int = 0x02
+    HEADER_ODR_GYRO: int = 0x01
+
+
+ICM42688P_REG = _ICM42688PRegisters()
+ICM42688P_BITS = _ICM42688PBits()
+
+#: GYRO_CONFIG0.GYRO_ODR code for each output data rate in Hz (DS-000347 register GYRO_CONFIG0;
+#: kernel enum inv_icm42600_odr). Codes 12-14 are low-power accelerometer rates.
+ICM42688P_ODR: Mapping[float, int] = MappingProxyType(
+    {12.5: 0b1011, 25.0: 0b1010, 50.0: 0b1001, 100.0: 0b1000, 200.0: 0b0111, 500.0: 0b1111,
+     1000.0: 0b0110, 2000.0: 0b0101, 4000.0: 0b0100, 8000.0: 0b0011, 16000.0: 0b0010,
+     32000.0: 0b0001}
+)
+#: The fastest rate the reader offers: at 2 kHz the 16-byte packets alone are 288 kbit/s on
+#: the wire (9 bits a byte), most of a 400 kHz I²C bus before any addressing or other transfer.
+ICM42688P_MAX_READER_ODR_HZ = 1000.0
+
+#: GYRO_ACCEL_CONFIG0.GYRO_UI_FILT_BW code → the UI filter bandwidth as a function of the ODR
+#: (DS-000347 "UI filter block" and register GYRO_ACCEL_CONFIG0): 0 is ODR/2, 1..7 are
+#: max(400 Hz, ODR) divided by 4, 5, 8, 10, 16, 20, 40. The reset value is 1. ⚠ The filter's
+#: order (GYRO_CONFIG1.GYRO_UI_FILT_ORD, reset value 0x16) is emulated as a
+#: first-order low-pass at this bandwidth, as for the LSM9DS1.
+ICM42688P_UI_FILT_DIVISOR: Mapping[int, float] = MappingProxyType(
+    {1: 4.0, 2: 5.0, 3: 8.0, 4: 10.0, 5: 16.0, 6: 20.0, 7: 40.0}
+)
+
+
+def icm42688p_bandwidth_hz(odr_hz: float, code: int) -> float:
+    """The gyro UI filter bandwidth for GYRO_UI_FILT_BW ``code`` at ``odr_hz`` (DS-000347, register
+    GYRO_ACCEL_CONFIG0).
+
+    Parameters
+    ----------
+    odr_hz : float
+        The output data rate.
+    code : int
+        GYRO_UI_FILT_BW, 0..7.
+
+    Returns
+    -------
+    float
+        The −3 dB bandwidth in Hz.
+    """
+    if code == 0:
+        return odr_hz / 2.0
+    return max(400.0, odr_hz) / ICM42688P_UI_FILT_DIVISOR[code]
+
+
+ICM42688P = ChipFamily(
+    name="icm42688p",
+    title="ICM-42688-P",
+    addresses=(0x68, 0x69),  # DS-000347 I²C address: AP_AD0 low / high
+    who_am_i_register=ICM42688P_REG.WHO_AM_I,
+    models=(ChipModel("icm42688p", 0x47, "ICM-42688-P"),),
+    siblings=MappingProxyType(
+        {
+            0x40: "an ICM-42600 (WHO_AM_I 0x40), a sibling of the ICM-42688-P with another "
+            "noise and range specification; gyrocal does not drive it",
+            0x41: "an ICM-42602 (WHO_AM_I 0x41); gyrocal does not drive it",
+            0x42: "an ICM-42605 (WHO_AM_I 0x42), the ICM-42688-P's older sibling (same register "
+            "map, higher noise); gyrocal does not drive it",
+            0x44: "an ICM-42686-P (WHO_AM_I 0x44), the ±4000 °/s sibling; gyrocal does not "
+            "drive it",
+            0x46: "an ICM-42622 (WHO_AM_I 0x46); gyrocal does not drive it",
+            0x5C: "an ICM-42631 (WHO_AM_I 0x5C); gyrocal does not drive it",
+        }
+    ),
+    # GYRO_CONFIG0.GYRO_FS_SEL (DS-000347 Table 1 and the register): 000 = ±2000 °/s
+    # (16.4 LSB/°/s) ... 111 = ±15.625 °/s (2097.2 LSB/°/s)
+    gyro_ranges=(
+        GyroRange(0b000, 2000.0, 16.4),
+        GyroRange(0b001, 1000.0, 32.8),
+        GyroRange(0b010, 500.0, 65.5),
+        GyroRange(0b011, 250.0, 131.0),
+        GyroRange(0b100, 125.0, 262.0),
+        GyroRange(0b101, 62.5, 524.3),
+        GyroRange(0b110, 31.25, 1048.6),
+        GyroRange(0b111, 15.625, 2097.2),
+    ),
+    fifo_capacity=2048,  # DS-000347 FIFO: 2 kB (kernel: INV_ICM42600_FIFO_WATERMARK_MAX)
+    fifo_capacity_unit="bytes",
+    reset_time_s=0.001,  # DS-000347 DEVICE_CONFIG: wait 1 ms after SOFT_RESET (kernel 1 ms)
+    # DS-000347 Table 1: gyro start-up 30 ms from sleep; the kernel waits 60 ms
+    # (INV_ICM42600_GYRO_STARTUP_TIME_MS), as gyrocal does
+    startup_time_s=0.060,
+    # FIFO temperature, 8 bits: T = FIFO_TEMP_DATA / 2.07 + 25 (DS-000347 register TEMP_DATA)
+    temperature_offset_c=25.0,
+    temperature_lsb_per_c=2.07,
+    extra=MappingProxyType(
+        {
+            "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
+            "packet_bytes": 16.0,  # FIFO packet 3: header, accel, gyro, temp, timestamp
+            "timestamp_resolution_s": 16e-6,  # TMST_CONFIG.TMST_RES = 1 (kernel: 16 µs)
+            "timestamp_modulus": 65536.0,  # 16-bit ODR timestamp in the packet
+            "mode_change_wait_s": 200e-6,  # no register writes for 200 µs after PWR_MGMT0
+            "accel_lsb_per_g_2g": 16384.0,  # Table 2: ±2 g, 16384 LSB/g
+        }
+    ),
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# ST LSM6DSOX (datasheet DS12814; hardware_docs/chips.md)
+#
+# Sources: ST, "LSM6DSOX" datasheet DS12814 (tables and registers named below) and application
+# note AN5272 (FIFO); checked against the Linux kernel's drivers/iio/imu/st_lsm6dsx
+# (st_lsm6dsx_core.c settings for WHO_AM_I 0x6C, st_lsm6dsx_buffer.c tagged FIFO) and ST's
+# lsm6dsox_reg.h (STMems standard C drivers). Facts found in one source only are marked ⚠.
+
+
+@dataclass(frozen=True)
+class _LSM6DSOXRegisters:
+    """LSM6DSOX register addresses (DS12814 register map; kernel st_lsm6dsx; lsm6dsox_reg.h)."""
+
+    FUNC_CFG_ACCESS: int = 0x01  # bit 7 embedded-functions page, bit 6 sensor-hub page
+    FIFO_CTRL1: int = 0x07
+    FIFO_CTRL2: int = 0x08
+    FIFO_CTRL3: int = 0x09  # BDR_GY[7:4], BDR_XL[3:0]
+    FIFO_CTRL4: int = 0x0A  # DEC_TS_BATCH[7:6], ODR_T_BATCH[5:4], FIFO_MODE[2:0]
+    WHO_AM_I: int = 0x0F
+    CTRL1_XL: int = 0x10
+    CTRL2_G: int = 0x11
+    CTRL3_C: int = 0x12
+    CTRL4_C: int = 0x13
+    CTRL6_C: int = 0x15
+    CTRL7_G: int = 0x16
+    CTRL10_C: int = 0x19
+    STATUS_REG: int = 0x1E
+    OUT_TEMP_L: int = 0x20
+    OUTX_L_G: int = 0x22
+    OUTX_L_A: int = 0x28
+    FIFO_STATUS1: int = 0x3A  # DIFF_FIFO[7:0]
+    FIFO_STATUS2: int = 0x3B
+    TIMESTAMP0: int = 0x40  # 32 bits, little-endian, to 0x43
+    FIFO_DATA_OUT_TAG: int = 0x78
+    FIFO_DATA_OUT_Z_H: int = 0x7E
+
+
+@dataclass(frozen=True)
+class _LSM6DSOXBits:
+    """LSM6DSOX register bits and fields (DS12814 register descriptions; lsm6dsox_reg.h)."""
+
+    FUNC_CFG_PAGES: int = 0xC0
+    ODR_SHIFT: int = 4
+    FS_G_SHIFT: int = 2
+    FS_G_MASK: int = 0x0C
+    FS_125: int = 0x02
+    FS_XL_SHIFT: int = 2
+    CTRL3_C_BOOT: int = 0x80
+    CTRL3_C_BDU: int = 0x40
+    CTRL3_C_IF_INC: int = 0x04
+    CTRL3_C_SW_RESET: int = 0x01
+    CTRL10_C_TIMESTAMP_EN: int = 0x20
+    BDR_GY_SHIFT: int = 4
+    DEC_TS_BATCH_SHIFT: int = 6
+    DEC_TS_EVERY_BATCH: int = 0b01  # a timestamp word with every batch data rate event
+    FIFO_MODE_MASK: int = 0x07
+    FIFO_MODE_BYPASS: int = 0b000
+    FIFO_MODE_FIFO: int = 0b001  # stop collecting when full
+    FIFO_MODE_CONTINUOUS: int = 0b110  # overwrite the oldest
+    FIFO_STATUS2_WTM_IA: int = 0x80
+    FIFO_STATUS2_OVR_IA: int = 0x40
+    FIFO_STATUS2_FULL_IA: int = 0x20
+    FIFO_STATUS2_OVR_LATCHED: int = 0x08  # cleared when FIFO_STATUS2 is read
+    FIFO_STATUS2_DIFF_HIGH_MASK: int = 0x03  # DIFF_FIFO[9:8]
+    TAG_SENSOR_SHIFT: int = 3  # FIFO_DATA_OUT_TAG: TAG_SENSOR[7:3], TAG_CNT[2:1], TAG_PARITY[0]
+    TAG_GYRO: int = 0x01
+    TAG_ACCEL: int = 0x02
+    TAG_TEMPERATURE: int = 0x03
+    TAG_TIMESTAMP: int = 0x04
+    TAG_CFG_CHANGE: int = 0x05
+
+
+LSM6DSOX_REG = _LSM6DSOXRegisters()
+LSM6DSOX_BITS = _LSM6DSOXBits()
+
+#: The chip's internal time base: ODR = 6667 Hz / ODR_coeff and the timestamp's 25 µs LSB both
+#: come from one oscillator (AN5192/AN5272 "ODR_Actual" and "TS_Res" ⚠); 40 kHz / 6 makes the
+#: sample period a whole number of timestamp LSBs, as the two formulas imply.
+LSM6DSOX_BASE_RATE_HZ = 40000.0 / 6.0
+
+#: CTRL2_G.ODR_G code → (the datasheet's nominal rate, the actual rate) in Hz (DS12814 CTRL2_G
+#: table; kernel odr_avl; the actual rates are 6667 Hz / 2^k ⚠ application notes only). The
+#: reader does not offer 12.5 Hz (code 1), which this rule makes 13 Hz ⚠.
+LSM6DSOX_ODR: Mapping[int, tuple[float, float]] = MappingProxyType(
+    {code: (nominal, LSM6DSOX_BASE_RATE_HZ / 2 ** (10 - code))
+     for code, nominal in ((1, 12.5), (2, 26.0), (3, 52.0), (4, 104.0), (5, 208.0), (6, 416.0),
+                           (7, 833.0), (8, 1666.0), (9, 3333.0), (10, 6667.0))}
+)
+#: The fastest rate the reader streams: two 7-byte FIFO words (timestamp, gyro) per sample are
+#: 210 kbit/s on the wire at 1666 Hz, too much of a 400 kHz bus.
+LSM6DSOX_MAX_READER_ODR_HZ = 834.0
+
+LSM6DSO_NOTICE = (
+    "WHO_AM_I 0x6C: ST gives the LSM6DSO, LSM6DSOX, LSM6DSO32 and LSM6DSO32X one identity, so "
+    "the chip cannot tell which it is (the Linux kernel too takes the name from the device "
+    "tree). Their gyros, registers and tagged FIFOs are the same, so gyrocal reads any of them "
+    "as 'lsm6dsox'; they differ in the accelerometer (the LSM6DSO32's ±32 g) and the machine "
+    "learning core, which gyrocal does not use."
+)
+
+LSM6DSOX = ChipFamily(
+    name="lsm6dsox",
+    title="LSM6DSOX",
+    addresses=(0x6A, 0x6B),  # DS12814 I²C interface: SA0/SDO low / high
+    who_am_i_register=LSM6DSOX_REG.WHO_AM_I,
+    models=(ChipModel("lsm6dsox", 0x6C, "LSM6DSOX (or LSM6DSO)", LSM6DSO_NOTICE),),
+    siblings=MappingProxyType(
+        {
+            0x69: "an LSM6DS3 or LSM6DS3H (WHO_AM_I 0x69), an older ST part with an untagged "
+            "FIFO; gyrocal does not drive it",
+            0x6A: "an LSM6DSL, LSM6DSM, ISM330DLC or LSM6DS3TR-C (WHO_AM_I 0x6A), older ST parts "
+            "with an untagged FIFO; gyrocal does not drive them",
+            0x6B: "an LSM6DSR, LSM6DSRX, ISM330DHCX or ASM330LHH (WHO_AM_I 0x6B), the LSM6DSOX's "
+            "±4000 °/s and industrial siblings; gyrocal does not drive them",
+            0x6D: "an LSM6DST (WHO_AM_I 0x6D); gyrocal does not drive it",
+            0x70: "an LSM6DSV or LSM6DSV16X (WHO_AM_I 0x70), a newer ST part with another "
+            "register map; gyrocal does not drive it",
+        }
+    ),
+    # CTRL2_G.FS_G (and FS_125) with the sensitivities of DS12814 Table 2 (mechanical
+    # characteristics): 4.375, 8.75, 17.50, 35, 70 mdps/LSB. Code 0b100 stands for FS_125.
+    gyro_ranges=(
+        GyroRange(0b100, 125.0, 1000.0 / 4.375),
+        GyroRange(0b00, 250.0, 1000.0 / 8.75),
+        GyroRange(0b01, 500.0, 1000.0 / 17.50),
+        GyroRange(0b10, 1000.0, 1000.0 / 35.0),
+        GyroRange(0b11, 2000.0, 1000.0 / 70.0),
+    ),
+    fifo_capacity=512,  # 7-byte words (kernel max_fifo_size ⚠: DS12814 gives the size in kB)
+    fifo_capacity_unit="words",
+    reset_time_s=0.050,  # ⚠ the kernel waits after SW_RESET/BOOT; DS12814 gives no figure here
+    startup_time_s=0.100,  # ⚠ a conservative wait for the gyro to settle (cf. LSM9DS1)
+    temperature_offset_c=25.0,  # DS12814 Table 4: 256 LSB/°C, 0 LSB at 25 °C
+    temperature_lsb_per_c=256.0,
+    extra=MappingProxyType(
+        {
+            "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
+            "timestamp_modulus": 2.0**32,
+            "word_bytes": 7.0,  # FIFO_DATA_OUT_TAG + 6 data bytes
+            "accel_mg_per_lsb_2g": 0.061,  # DS12814 Table 2
+        }
+    ),
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# TDK InvenSense ICM-20948 (datasheet DS-000189; hardware_docs/chips.md)
+#
+# Sources: TDK, "ICM-20948 Datasheet", DS-000189 (register map by user bank, Table 1 gyroscope
+# specification, the GYRO_CONFIG_1 DLPF table); checked against SparkFun's ICM-20948 Arduino
+# library (ICM_20948_ENUMERATIONS.h) and other open drivers. The Linux kernel has no ICM-20948
+# driver, so facts the datasheet and one open driver do not both give are marked ⚠.
+
+
+@dataclass(frozen=True)
+class _ICM20948Bank0:
+    """ICM-20948 user bank 0 registers (DS-000189 register map, bank 0)."""
+
+    WHO_AM_I: int = 0x00
+    USER_CTRL: int = 0x03
+    PWR_MGMT_1: int = 0x06
+    PWR_MGMT_2: int = 0x07
+    INT_STATUS_2: int = 0x1B  # FIFO_OVERFLOW_INT[4:0], cleared when read
+    ACCEL_XOUT_H: int = 0x2D
+    GYRO_XOUT_H: int = 0x33
+    TEMP_OUT_H: int = 0x39
+    FIFO_EN_2: int = 0x67
+    FIFO_RST: int = 0x68
+    FIFO_MODE: int = 0x69
+    FIFO_COUNTH: int = 0x70
+    FIFO_COUNTL: int = 0x71
+    FIFO_R_W: int = 0x72
+    REG_BANK_SEL: int = 0x7F  # in every bank: USER_BANK[5:4]
+
+
+@dataclass(frozen=True)
+class _ICM20948Bank2:
+    """ICM-20948 user bank 2 registers (DS-000189 register map, bank 2)."""
+
+    GYRO_SMPLRT_DIV: int = 0x00
+    GYRO_CONFIG_1: int = 0x01
+    ACCEL_CONFIG: int = 0x14
+
+
+@dataclass(frozen=True)
+class _ICM20948Bits:
+    """ICM-20948 register bits and fields (DS-000189 register descriptions)."""
+
+    BANK_SHIFT: int = 4
+    BANK_MASK: int = 0x30
+    USER_CTRL_FIFO_EN: int = 0x40
+    PWR_MGMT_1_DEVICE_RESET: int = 0x80
+    PWR_MGMT_1_SLEEP: int = 0x40
+    PWR_MGMT_1_CLKSEL_AUTO: int = 0x01
+    PWR_MGMT_2_DISABLE_GYRO: int = 0x07
+    GYRO_DLPFCFG_SHIFT: int = 3
+    GYRO_FS_SEL_SHIFT: int = 1
+    GYRO_FS_SEL_MASK: int = 0x06
+    GYRO_FCHOICE: int = 0x01  # 1: the DLPF is on and the rate is 1125/(1 + GYRO_SMPLRT_DIV)
+    ACCEL_FS_SEL_SHIFT: int = 1
+    FIFO_EN_2_ACCEL: int = 0x10
+    FIFO_EN_2_GYRO_Z: int = 0x08
+    FIFO_EN_2_GYRO_Y: int = 0x04
+    FIFO_EN_2_GYRO_X: int = 0x02
+    FIFO_EN_2_TEMP: int = 0x01
+    FIFO_RST_ALL: int = 0x1F
+    FIFO_MODE_SNAPSHOT: int = 0x01  # 1: stop writing when full; 0: stream, overwrite ⚠
+    INT_STATUS_2_FIFO_OVERFLOW: int = 0x1F
+
+
+ICM20948_REG = _ICM20948Bank0()
+ICM20948_REG2 = _ICM20948Bank2()
+ICM20948_BITS = _ICM20948Bits()
+
+#: Gyro DLPF bandwidth (3 dB, Hz) for each GYRO_DLPFCFG with GYRO_FCHOICE = 1, the internal
+#: rate then 1125 Hz (DS-000189 GYRO_CONFIG_1 table; SparkFun's gyr_d196bw6 ... names):
+#: maps the bandwidth to GYRO_DLPFCFG.
+ICM20948_DLPF: Mapping[float, int] = MappingProxyType(
+    {196.6: 0, 151.8: 1, 119.5: 2, 51.2: 3, 23.9: 4, 11.6: 5, 5.7: 6, 361.4: 7}
+)
+
+ICM20948 = ChipFamily(
+    name="icm20948",
+    title="ICM-20948",
+    addresses=(0x68, 0x69),  # DS-000189 I²C interface: AD0 low / high
+    who_am_i_register=ICM20948_REG.WHO_AM_I,  # in bank 0
+    models=(ChipModel("icm20948", 0xEA, "ICM-20948"),),
+    siblings=MappingProxyType(
+        {
+            0xE0: "an ICM-20648 (WHO_AM_I 0xE0 ⚠), the ICM-20948 without the magnetometer; "
+            "gyrocal does not drive it",
+            0xE1: "an ICM-20649 (WHO_AM_I 0xE1 ⚠), the ±4000 °/s sibling; gyrocal does not "
+            "drive it",
+        }
+    ),
+    # GYRO_CONFIG_1.GYRO_FS_SEL (DS-000189 Table 1): 131, 65.5, 32.8, 16.4 LSB/(°/s)
+    gyro_ranges=(
+        GyroRange(0, 250.0, 131.0),
+        GyroRange(1, 500.0, 65.5),
+        GyroRange(2, 1000.0, 32.8),
+        GyroRange(3, 2000.0, 16.4),
+    ),
+    fifo_capacity=512,  # bytes ⚠ (the 13-bit FIFO_COUNT allows more; the DMP's FIFO is larger)
+    fifo_capacity_unit="bytes",
+    reset_time_s=0.100,  # ⚠ open drivers wait 50-100 ms after DEVICE_RESET; none in DS-000189
+    startup_time_s=0.035,  # DS-000189 Table 1: gyro start-up time 35 ms
+    temperature_offset_c=21.0,  # DS-000189: T = (TEMP_OUT − RoomTemp_Offset)/333.87 + 21
+    temperature_lsb_per_c=333.87,
+    extra=MappingProxyType(
+        {
+            "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)
+            "dlpf_off_rate_hz": 9000.0,  # GYRO_FCHOICE = 0 ⚠
+            "wake_time_s": 0.010,  # ⚠ as for the MPU-9250
+            "accel_lsb_per_g_2g": 16384.0,  # DS-000189 Table 2
+        }
+    ),
+)

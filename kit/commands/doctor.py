@@ -48,6 +48,45 @@ class _Report:
         self.lines.clear()
 
 
+def _scan_imus(rep: _Report, cfg: Any, args: argparse.Namespace, bus: Any) -> bool:
+    """List the supported chips on the bus; False when the configured one is not there but
+    another supported chip is (the fix is then said, and the configured check is skipped)."""
+    from gyrocal.drivers.imu import open_bus
+    from gyrocal.drivers.imu.detect import scan_bus
+    from gyrocal.drivers.imu.errors import BusOpenError
+
+    imu_cfg = cfg["imu"]
+    try:
+        handle = open_bus(bus) if isinstance(bus, (int, str)) else bus
+    except BusOpenError:
+        return True  # the configured check says what is wrong with the bus
+    try:
+        found = scan_bus(handle)
+    finally:
+        if handle is not bus:
+            handle.close()
+    rep.section("IMUs on the bus (WHO_AM_I at every address a supported chip can have)")
+    if not found:
+        rep.bad("no device answers at any supported IMU address",
+                "check the wiring (SDA, SCL, GND, 3.3 V) and list the bus with `i2cdetect -y N`")
+        return True
+    for chip in found:
+        what = chip.title if chip.model else chip.title.removeprefix("an ").removeprefix("a ")
+        who = f" (WHO_AM_I 0x{chip.who_am_i:02X})" if chip.who_am_i is not None else ""
+        rep.ok(f"0x{chip.address:02X}: {what}{who}"
+               + (f", model '{chip.model}'" if chip.model else ""))
+    supported = [c for c in found if c.model]
+    wanted = (str(imu_cfg["model"]).replace("-", "").lower(), imu_cfg["address"])
+    if any((c.model, c.address) == wanted for c in supported) or not supported:
+        return True
+    other = supported[0]
+    rep.bad(f"the configured {imu_cfg['model']} at 0x{imu_cfg['address']:02X} "
+            f"is not on the bus, but an {other.title} is at 0x{other.address:02X}",
+            f"set imu.model = \"{other.model}\" and imu.address = 0x{other.address:02X} in "
+            f"the config (or --imu-model {other.model} --imu-address 0x{other.address:02X})")
+    return False
+
+
 def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus: Any) -> None:
     import numpy as np
 
@@ -71,7 +110,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
         rep.ok(f"found {info.model} (WHO_AM_I 0x{info.who_am_i:02X}), ±{info.full_scale_dps:g} "
                f"°/s, {info.odr_hz:g} Hz, low-pass {info.lowpass_hz:g} Hz")
         if getattr(reader, "notice", None):
-            rep.warn(str(reader.notice), "fine for gyro calibration; the magnetometer is absent")
+            rep.warn(str(reader.notice), "fine for gyro calibration")
         reader.start()
         end = clock.monotonic() + args.seconds
         batches = []
@@ -189,7 +228,8 @@ def run(args: argparse.Namespace) -> int:
             apply_fault(sim, spec, clock.monotonic())
     rep = _Report()
     print(f"gyrocal doctor ({'emulated jig' if args.sim else 'hardware'}; config: {cfg.source})")
-    _check_imu(rep, cfg, args, clock, bus)
+    if _scan_imus(rep, cfg, args, bus):
+        _check_imu(rep, cfg, args, clock, bus)
     rep.flush()
     _check_servos(rep, cfg, args, clock, port, baud)
     rep.flush()

@@ -1,0 +1,221 @@
+"""Register-level emulated TDK ICM-20948 for an
+:class:`~gyrocal.drivers.emulated.smbus.EmulatedSMBus` (datasheet DS-000189; facts in
+:data:`gyrocal.drivers.imu.chips.ICM20948`).
+
+What it models:
+
+- Four user banks of 128 registers; REG_BANK_SEL (0x7F, USER_BANK in bits 5:4) is in every bank
+  and selects the one the other addresses reach. Bank 0 holds identity, power, data, interrupt
+  status and FIFO; bank 2 the gyro and accelerometer configuration; banks 1 and 3 are plain
+  memory here.
+- WHO_AM_I (bank 0, 0x00) = 0xEA. Reset values PWR_MGMT_1 = 0x41 (asleep, clock auto), GYRO_
+  CONFIG_1 = 0x01 (DLPF on, ±250 °/s), the rest 0; PWR_MGMT_1.DEVICE_RESET restores them and
+  selects bank 0.
+- The gyro samples while awake and not disabled (PWR_MGMT_2), at 1125 Hz / (1 + GYRO_SMPLRT_DIV)
+  with GYRO_FCHOICE = 1, 9 kHz with it 0 (⚠), on the chip's own clock.
+- Data registers (bank 0) big-endian: ACCEL_XOUT_H 0x2D, GYRO_XOUT_H 0x33, TEMP_OUT_H 0x39
+  (333.87 LSB/°C, 0 at 21 °C).
+- FIFO (512 bytes ⚠): frames of the sources FIFO_EN_2 enables, in register order (accelerometer,
+  gyro X/Y/Z, temperature ⚠), big-endian, written while USER_CTRL.FIFO_EN is set; FIFO_RST
+  empties it; FIFO_MODE bit 0 set (snapshot) drops new frames when full, clear (stream)
+  overwrites the oldest; either way INT_STATUS_2.FIFO_OVERFLOW_INT is set, cleared when read.
+  Reading FIFO_COUNTH latches the 13-bit count for FIFO_COUNTL; FIFO_R_W (0x72) is a data port
+  that a burst keeps popping, and an empty FIFO repeats the last byte.
+- The AK09916 magnetometer behind the chip's I²C master is not emulated.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
+from gyrocal.drivers.emulated.motion import MotionSource
+from gyrocal.drivers.imu.chips import ICM20948, ICM20948_BITS, ICM20948_REG, ICM20948_REG2
+
+__all__ = ["EmulatedICM20948"]
+
+_R, _R2, _B = ICM20948_REG, ICM20948_REG2, ICM20948_BITS
+_READ_ONLY = frozenset(
+    {_R.WHO_AM_I, _R.INT_STATUS_2, _R.FIFO_COUNTH, _R.FIFO_COUNTL, _R.FIFO_R_W}
+    | set(range(_R.ACCEL_XOUT_H, _R.TEMP_OUT_H + 2))
+)
+_GYRO_ORDER = ((_B.FIFO_EN_2_GYRO_X, 0), (_B.FIFO_EN_2_GYRO_Y, 1), (_B.FIFO_EN_2_GYRO_Z, 2))
+
+
+class EmulatedICM20948(_EmulatedImu):
+    """An ICM-20948 on the I²C bus (see the module docstring for what is modelled).
+
+    Parameters
+    ----------
+    clock, motion, truth, faults, seed, subsamples
+        As for :class:`~gyrocal.drivers.emulated.imu_chips.EmulatedMPU9250`.
+    output_filter : bool
+        Accepted for a uniform interface; the DLPF is stood in for by the per-sample mean.
+    """
+
+    family = ICM20948
+    default_who_am_i = 0xEA
+    reset_values = {_R.PWR_MGMT_1: 0x41}
+    read_only = _READ_ONLY
+    soft_reset = (_R.PWR_MGMT_1, _B.PWR_MGMT_1_DEVICE_RESET)
+
+    def __init__(self, clock: Clock, motion: MotionSource | None = None,
+                 truth: SensorTruth | None = None, *, output_filter: bool = True,
+                 **kwargs: Any) -> None:
+        self.output_filter = bool(output_filter)
+        self._bank = 0
+        self._banks = {b: bytearray(128) for b in (1, 2, 3)}
+        super().__init__(clock, motion, truth, **kwargs)
+
+    @property
+    def bank(self) -> int:
+        """The user bank REG_BANK_SEL selects."""
+        return self._bank
+
+    def _power_on_reset(self) -> None:
+        self._bank = 0
+        self._banks = {b: bytearray(128) for b in (1, 2, 3)}
+        self._banks[2][_R2.GYRO_CONFIG_1] = _B.GYRO_FCHOICE
+        super()._power_on_reset()
+
+    def _write_register(self, register: int, value: int) -> None:
+        if register == _R.REG_BANK_SEL:
+            self._bank = (value & _B.BANK_MASK) >> _B.BANK_SHIFT
+            return
+        if not self._bank:
+            super()._write_register(register, value)
+            return
+        odr_before = self._odr_hz()
+        self._banks[self._bank][register] = value
+        if self._odr_hz() != odr_before:
+            self._restart_sampling()
+
+    def _reset_state(self) -> None:
+        self._fifo = bytearray()
+        self._fifo_last = 0
+        self._latched: int | None = None
+        self._overflow = False
+
+    # -- configuration --------------------------------------------------------------------------
+
+    def _odr_hz(self) -> float | None:
+        r, b2 = self._regs, self._banks[2]
+        if r[_R.PWR_MGMT_1] & _B.PWR_MGMT_1_SLEEP:
+            return None
+        if r[_R.PWR_MGMT_2] & _B.PWR_MGMT_2_DISABLE_GYRO == _B.PWR_MGMT_2_DISABLE_GYRO:
+            return None
+        if not b2[_R2.GYRO_CONFIG_1] & _B.GYRO_FCHOICE:
+            return self.family.extra["dlpf_off_rate_hz"]
+        return self.family.extra["internal_rate_hz"] / (1 + b2[_R2.GYRO_SMPLRT_DIV])
+
+    def _sensitivity_rad_s_per_lsb(self) -> float:
+        fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT
+        return self.family.gyro_ranges[fs].sensitivity_rad_s_per_lsb
+
+    def _accel_counts_1g(self) -> int:
+        fs = (self._banks[2][_R2.ACCEL_CONFIG] >> _B.ACCEL_FS_SEL_SHIFT) & 0x03
+        return int(self.family.extra["accel_lsb_per_g_2g"]) >> fs
+
+    # -- FIFO -----------------------------------------------------------------------------------
+
+    def _fifo_on(self) -> bool:
+        return bool(self._regs[_R.USER_CTRL] & _B.USER_CTRL_FIFO_EN)
+
+    def _frame_bytes(self) -> int:
+        en = self._regs[_R.FIFO_EN_2]
+        n = 6 if en & _B.FIFO_EN_2_ACCEL else 0
+        n += sum(2 for bit, _ in _GYRO_ORDER if en & bit)
+        return n + (2 if en & _B.FIFO_EN_2_TEMP else 0)
+
+    def _head_tail(self, n: int) -> tuple[int, int]:
+        frame = self._frame_bytes()
+        if not self._fifo_on() or frame == 0:
+            return 0, 1
+        if self._regs[_R.FIFO_MODE] & _B.FIFO_MODE_SNAPSHOT:
+            return max(0, self.fifo_capacity - len(self._fifo)) // frame + 2, 1
+        return 0, self.fifo_capacity // frame + 2
+
+    def _frames(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray) -> bytes:
+        en = self._regs[_R.FIFO_EN_2]
+        cols = [accel] if en & _B.FIFO_EN_2_ACCEL else []
+        cols += [gyro[:, axis:axis + 1] for bit, axis in _GYRO_ORDER if en & bit]
+        if en & _B.FIFO_EN_2_TEMP:
+            cols.append(temp[:, None])
+        return np.hstack(cols).astype(">i2").tobytes() if cols else b""
+
+    def _push(self, data: bytes) -> None:
+        if not data:
+            return
+        cap, fifo = self.fifo_capacity, self._fifo
+        if len(fifo) + len(data) > cap:
+            self._overflow = True
+            if self._regs[_R.FIFO_MODE] & _B.FIFO_MODE_SNAPSHOT:
+                frame = self._frame_bytes()
+                data = data[: max(0, cap - len(fifo)) // frame * frame]
+            else:
+                fifo += data
+                del fifo[: len(fifo) - cap]
+                return
+        fifo += data
+
+    def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
+                skipped: int) -> None:
+        if not self._fifo_on() or self._regs[_R.FIFO_RST]:
+            return
+        self._push(self._frames(gyro[:head], accel[:head], temp[:head]))
+        if skipped:
+            self._push(b"\x00" * (skipped * self._frame_bytes()))  # dropped or overwritten
+        self._push(self._frames(gyro[head:], accel[head:], temp[head:]))
+
+    # -- registers ------------------------------------------------------------------------------
+
+    def _next_pointer(self, register: int) -> int:
+        if register == _R.FIFO_R_W and not self._bank:
+            return register  # a data port
+        return super()._next_pointer(register)
+
+    def _read_fast(self, length: int) -> bytes | None:
+        if self._ptr != _R.FIFO_R_W or self._bank:
+            return None
+        take = min(length, len(self._fifo))
+        out = bytes(self._fifo[:take])
+        del self._fifo[:take]
+        if take:
+            self._fifo_last = out[-1]
+        return out + bytes([self._fifo_last]) * (length - take)
+
+    def _read_register(self, register: int) -> int:
+        if register == _R.REG_BANK_SEL:
+            return self._bank << _B.BANK_SHIFT
+        if self._bank:
+            return self._banks[self._bank][register]
+        r = _R
+        if register == r.WHO_AM_I:
+            return self.who_am_i
+        if register == r.INT_STATUS_2:
+            v = _B.INT_STATUS_2_FIFO_OVERFLOW if self._overflow else 0
+            self._overflow = False
+            return v
+        if register == r.FIFO_COUNTH:
+            self._latched = len(self._fifo)
+            return (self._latched >> 8) & 0x1F
+        if register == r.FIFO_COUNTL:
+            count = self._latched if self._latched is not None else len(self._fifo)
+            self._latched = None
+            return count & 0xFF
+        if register == r.FIFO_R_W:
+            return self._read_fast(1)[0]  # type: ignore[index]
+        if r.ACCEL_XOUT_H <= register < r.TEMP_OUT_H + 2:
+            s = self._latest
+            words = np.concatenate((s.accel, s.gyro, [s.temp])).astype(">i2").tobytes()
+            return words[register - r.ACCEL_XOUT_H]
+        return self._regs[register]
+
+    def _store(self, register: int, value: int) -> None:
+        if register == _R.FIFO_RST and value & _B.FIFO_RST_ALL:
+            self._fifo.clear()
+            self._latched = None
+        self._regs[register] = value

@@ -1,0 +1,161 @@
+"""Reader for the TDK ICM-20948 gyro, the MPU-9250's successor (datasheet DS-000189; facts in
+:data:`gyrocal.drivers.imu.chips.ICM20948`).
+
+Register banks: the ICM-20948 spreads its registers over four user banks selected by
+REG_BANK_SEL (0x7F, in every bank). Identity, power, data and FIFO are in bank 0; the gyro's
+rate divider and configuration in bank 2. The reader selects bank 2 only to configure the gyro
+and returns to bank 0 before anything else, so that every other access reaches bank 0.
+
+Identification: WHO_AM_I (bank 0, register 0x00) = 0xEA. A chip left in another bank by an
+earlier program answers something else at 0x00; REG_BANK_SEL then tells, and the reader selects
+bank 0 and asks again. The MPU-9250 reader, finding an ICM-20948 where it expected its own chip,
+names it ("use model 'icm20948'").
+
+Bring-up: PWR_MGMT_1 = DEVICE_RESET, wait; PWR_MGMT_1 = clock auto (awake), wait; WHO_AM_I
+again; PWR_MGMT_2 = all sensors on; bank 2: GYRO_SMPLRT_DIV, GYRO_CONFIG_1 = DLPFCFG | FS_SEL |
+FCHOICE (read back); bank 0; wait for the gyro to start (35 ms, DS-000189 Table 1).
+
+Streaming: FIFO_MODE = snapshot (a full FIFO keeps its oldest frames), FIFO_EN_2 = GYRO X/Y/Z |
+TEMP gives 8-byte big-endian frames ``GX GY GZ TEMP`` (64 in 512 bytes ⚠, 57 ms at 1125 Hz);
+USER_CTRL.FIFO_EN starts collection. ``read()`` latches FIFO_COUNT (2 bytes at 0x70), pops the
+whole frames from FIFO_R_W (0x72) in one ``i2c_rdwr`` burst (or 32-byte block reads), then reads
+INT_STATUS_2 (FIFO_OVERFLOW_INT, cleared when read: a failed read of it is not retried), as the
+MPU-9250 reader does.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gyrocal.drivers.errors import ConfigurationError
+from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
+from gyrocal.drivers.imu.chips import (
+    ICM20948,
+    ICM20948_BITS,
+    ICM20948_DLPF,
+    ICM20948_REG,
+    ICM20948_REG2,
+    ChipModel,
+    GyroRange,
+    register_names,
+)
+from gyrocal.drivers.imu.errors import ChipIdentityError
+
+__all__ = ["ICM20948Reader"]
+
+R, R2, B = ICM20948_REG, ICM20948_REG2, ICM20948_BITS
+_REG_NAMES = register_names(R)
+_FRAME = 8  # GX GY GZ TEMP, 2 bytes each
+_FIFO_SOURCES = B.FIFO_EN_2_GYRO_X | B.FIFO_EN_2_GYRO_Y | B.FIFO_EN_2_GYRO_Z | B.FIFO_EN_2_TEMP
+
+
+class ICM20948Reader(ImuReader):
+    """ICM-20948 gyro reader over an smbus2-compatible bus.
+
+    Parameters
+    ----------
+    bus, address, clock, **kwargs
+        As for :class:`~gyrocal.drivers.imu.base.ImuReader` (default address 0x68; 0x69 with
+        AD0 high).
+    """
+
+    family = ICM20948
+
+    def _register_names(self) -> dict[int, str]:
+        return _REG_NAMES
+
+    def _bank(self, bank: int) -> None:
+        self._write_byte(R.REG_BANK_SEL, bank << B.BANK_SHIFT)
+
+    def _identify(self) -> ChipModel:
+        try:
+            return super()._identify()
+        except ChipIdentityError:
+            bank = self._read_byte(R.REG_BANK_SEL)
+            if not bank & B.BANK_MASK or bank & ~B.BANK_MASK:
+                raise
+            self._bank(0)  # left in another user bank: back to bank 0
+            return super()._identify()
+
+    def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
+        base = ICM20948.extra["internal_rate_hz"]
+        div = round(base / odr_hz - 1.0) if odr_hz > 0 else -1
+        div = min(max(div, 0), 255)
+        actual = base / (1 + div)
+        if not (odr_hz > 0 and abs(actual - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
+            examples = ", ".join(f"{base / (1 + d):.4g}" for d in (0, 1, 2, 4, 9, 24, 99))
+            raise ConfigurationError(
+                f"odr_hz={odr_hz!r} is not an ICM-20948 output data rate. With the gyro low-pass "
+                f"filter on, the rate is {base:g}/(1 + GYRO_SMPLRT_DIV) Hz for GYRO_SMPLRT_DIV "
+                f"0..255, that is {examples}, ... down to {base / 256:.4g} Hz."
+            )
+        bands = sorted(ICM20948_DLPF, reverse=True)
+        if lowpass_hz is None:
+            lp = next((b for b in bands if b <= actual / 2), bands[-1])
+        else:
+            lp = next((b for b in bands if abs(b - float(lowpass_hz)) <= 0.5), None)
+            if lp is None:
+                raise ConfigurationError(
+                    f"lowpass_hz={lowpass_hz!r} is not an ICM-20948 gyro filter bandwidth; "
+                    "choose one of " + ", ".join(f"{b:g}" for b in bands) + " Hz"
+                )
+        return actual, lp, (div, ICM20948_DLPF[lp])
+
+    def _bring_up(self, rng: GyroRange, setting: Any) -> None:
+        div, dlpf = setting
+        fam, clock = self.family, self._clock
+        self._bank(0)
+        self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_DEVICE_RESET)
+        clock.sleep(fam.reset_time_s)
+        self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_CLKSEL_AUTO)
+        clock.sleep(fam.extra["wake_time_s"])
+        self._check_identity_again()
+        self._write_byte(R.PWR_MGMT_2, 0x00)
+        config = (dlpf << B.GYRO_DLPFCFG_SHIFT) | (rng.code << B.GYRO_FS_SEL_SHIFT) | (
+            B.GYRO_FCHOICE)
+        self._bank(2)
+        try:
+            self._write_byte(R2.GYRO_SMPLRT_DIV, div)
+            self._write_byte(R2.GYRO_CONFIG_1, config)
+            self._verify(R2.GYRO_SMPLRT_DIV, div)
+            self._verify(R2.GYRO_CONFIG_1, config)
+        finally:
+            self._bank(0)
+        clock.sleep(fam.startup_time_s)
+
+    def _fifo_prepare(self) -> None:
+        self._write_byte(R.USER_CTRL, 0x00)
+        self._write_byte(R.FIFO_RST, B.FIFO_RST_ALL)
+        self._write_byte(R.FIFO_RST, 0x00)
+        self._write_byte(R.FIFO_MODE, B.FIFO_MODE_SNAPSHOT)
+        self._write_byte(R.FIFO_EN_2, _FIFO_SOURCES)
+        self._read_byte(R.INT_STATUS_2)  # clears an overflow left from before
+
+    def _fifo_go(self) -> None:
+        self._write_byte(R.USER_CTRL, B.USER_CTRL_FIFO_EN)
+
+    def _disable_fifo(self) -> None:
+        self._write_byte(R.FIFO_EN_2, 0x00)
+        self._write_byte(R.USER_CTRL, 0x00)
+
+    def _power_down(self) -> None:
+        self._write_byte(R.PWR_MGMT_1, B.PWR_MGMT_1_SLEEP | B.PWR_MGMT_1_CLKSEL_AUTO)
+
+    def _fifo_level(self) -> tuple[int, bool, float]:
+        hi, lo = self._read_block(R.FIFO_COUNTH, 2)
+        return (((hi & 0x1F) << 8) | lo) // _FRAME, False, self._clock.monotonic()
+
+    def _overflowed(self) -> bool:
+        status = self._read_byte(R.INT_STATUS_2, retry=False)
+        return bool(status & B.INT_STATUS_2_FIFO_OVERFLOW)
+
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+        data = self._read_stream(R.FIFO_R_W, n * _FRAME, (BLOCK_MAX // _FRAME) * _FRAME)
+        words = np.frombuffer(data, dtype=">i2").reshape(n, 4)
+        return words[:, :3], words[:, 3].astype(np.float64)
+
+    def _temperature_counts(self) -> int:
+        hi, lo = self._read_block(R.TEMP_OUT_H, 2)
+        return int.from_bytes(bytes((hi, lo)), "big", signed=True)
