@@ -59,6 +59,14 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--sim-cross-axis", type=float, default=0.0, metavar="FRACTION",
                    help="largest cross-axis term of the emulated sensor, drawn by seed (default "
                         "0 = the paper's sensor; 0.02 is the MPU-9250 datasheet's ±2 %%)")
+    p.add_argument("--sim-temperature", metavar="PROFILE",
+                   help="ambient temperature of the emulated sensor, °C: T, ramp:T0:T1:SECONDS "
+                        "or soak:T0:T1:TAU (from power-on). Turns on the die's self-heating "
+                        "warm-up and temperature coefficients drawn by seed within the "
+                        "datasheet (default: a constant 25 °C, no temperature terms)")
+    p.add_argument("--sim-self-heating", metavar="DT[:TAU]",
+                   help="self-heating of the emulated die above ambient, °C, and its time "
+                        "constant, s (default 4:180; turns the thermal sensor on too)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -154,7 +162,9 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
 
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
-                        cross_axis=getattr(args, "sim_cross_axis", 0.0))
+                        cross_axis=getattr(args, "sim_cross_axis", 0.0),
+                        temperature=getattr(args, "sim_temperature", None),
+                        self_heating=getattr(args, "sim_self_heating", None))
         if sim_imu:
             g = cfg["gimbal"]
             return sim, sim.clock, g["port"], g["baud"], sim.imu_bus
