@@ -458,3 +458,79 @@ def apply_thermal(model: ThermalModel, matrix: np.ndarray, m: np.ndarray,
             "model is not extrapolated); calibrate over a wider temperature range",
             ThermalRangeWarning, stacklevel=3)
     return out.reshape(a.shape)
+
+
+#: Smallest change of the die temperature across one run's windows that :func:`correct_drift`
+#: models (the MPU-9250's register resolves 0.003 °C, the LSM9DS1's 0.06 °C).
+DRIFT_MIN_SPAN_C = 0.05
+#: Rest windows needed to measure the drift (a line through them, with one to spare).
+DRIFT_MIN_RESTS = 3
+
+
+def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
+                  ) -> tuple[Any, str | None]:
+    """Refer one run's windows to its mean die temperature (issue 13, "within one run").
+
+    A run whose die warms while it records sees a different bias in every window, which the
+    paper's constant-bias model (Eq. 1) cannot absorb. The rest windows measure the bias
+    directly (``rest_mean = −b(T)`` for a still sensor), so a weighted line through them
+    against their temperatures gives the drift ``β = d(rest_mean)/dT`` per axis with its
+    standard deviation ``σ_β``. Every window's mean (turns and rests) is then moved to the run's
+    mean temperature ``T̄`` (``obs.temperature_c``): ``mean − β (T_w − T̄)``, and its variance
+    grows by ``(σ_β (T_w − T̄))²``, so the fit reports the bias at ``T̄`` with the drift's
+    uncertainty in it rather than a false tight figure. The scale's own temperature change
+    within a run is not modelled (it averages out across a run's clockwise and
+    counter-clockwise turns to first order).
+
+    Parameters
+    ----------
+    obs : ObservationSet
+    window_temp_c, rest_temp_c : ndarray
+        Mean die temperature over each rotation window and each rest window, °C (NaN unknown).
+
+    Returns
+    -------
+    (ObservationSet, str or None)
+        The corrected set (``obs`` itself when nothing was done) and a note for the user: what
+        was corrected, or why a temperature change could not be modelled; None when the die
+        temperature was steady or unknown.
+    """
+    from dataclasses import replace
+
+    tw = np.asarray(window_temp_c, dtype=float)
+    tr = np.asarray(rest_temp_c, dtype=float)
+    t_bar = obs.temperature_c
+    known = np.concatenate([tw, tr])
+    known = known[np.isfinite(known)]
+    if t_bar is None or known.size == 0:
+        return obs, None
+    span = float(known.max() - known.min())
+    if span < DRIFT_MIN_SPAN_C:
+        return obs, None
+    ok = np.isfinite(tr)
+    if (obs.rest_mean is None or int(ok.sum()) < DRIFT_MIN_RESTS or np.any(~np.isfinite(tw))
+            or float(np.ptp(tr[ok])) < 0.5 * span):
+        return obs, (
+            f"the die temperature changed by {span:.2f} °C during the run, but the run has too "
+            f"few rests spread over it (at least {DRIFT_MIN_RESTS} needed) to measure the bias "
+            "drift: the bias is an average over the run and its uncertainty does not include "
+            "the drift; let the sensor warm up first or calibrate with gyrocal thermal")
+    x = tr[ok] - t_bar
+    beta, beta_std = np.zeros(3), np.zeros(3)
+    for j in range(3):
+        c, cov, _ = _wls(x, obs.rest_mean[ok, j], obs.rest_mean_std[ok, j] ** 2, 1)
+        beta[j], beta_std[j] = c[1], math.sqrt(cov[1, 1])
+    dw, dr = (tw - t_bar)[:, None], np.where(ok, tr - t_bar, 0.0)[:, None]
+    fixed = replace(
+        obs,
+        mean=obs.mean - beta * dw,
+        mean_std=np.hypot(obs.mean_std, beta_std * dw),
+        rest_mean=obs.rest_mean - beta * dr,
+        rest_mean_std=np.hypot(obs.rest_mean_std, beta_std * dr),
+    )
+    drift = ", ".join(f"{-b:+.2e} ± {s:.1e}" for b, s in zip(beta, beta_std, strict=True))
+    return fixed, (
+        f"the die temperature changed by {span:.2f} °C during the run; the bias drift measured "
+        f"on {int(ok.sum())} rests (x, y, z: {drift} rad/s per °C) was removed and its "
+        f"uncertainty added, so the bias is reported at the run's mean temperature "
+        f"{t_bar:.2f} °C")

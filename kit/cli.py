@@ -34,6 +34,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("apply", "gyrocal.kit.commands.apply"),
     ("report", "gyrocal.kit.commands.report"),
     ("track", "gyrocal.kit.commands.track"),
+    ("thermal", "gyrocal.kit.commands.thermal"),
     ("noise", "gyrocal.kit.commands.noise"),
     ("study", "gyrocal.kit.commands.study"),
     ("simulate-recording", "gyrocal.kit.commands.simulate_recording"),

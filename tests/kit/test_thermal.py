@@ -1,0 +1,133 @@
+"""gyrocal thermal (issue 13) on data from the independent Recording v1 generator
+(tests/kit/contract_recording.py, which shares no code with gyrocal): calibrations of a sensor
+warming up, with known temperature coefficients, fitted back to those coefficients.
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gyrocal.kit.cli import main
+from gyrocal.kit.pipeline import estimate_recording
+from gyrocal.kit.recording import load_recording
+from tests.kit.contract_recording import write_recording
+
+# datasheet-typical magnitudes (MPU-9250: up to ~4e-3 rad/s/°C, ±4 % sensitivity over 125 °C)
+BIAS_COEFFS = np.array([[0.010, 2.0e-3, 3.0e-5], [-0.020, -1.5e-3, 0.0], [0.005, 8.0e-4, -2e-5]])
+SCALE = np.array([1.01, 0.99, 1.02])
+SCALE_TC = np.array([3.0e-4, -2.0e-4, 1.0e-4])
+
+
+def die(t):
+    """A warm-up: 18 °C at power-on, 10 °C of rise with a 250 s time constant."""
+    return 18.0 + 10.0 * (1.0 - np.exp(-np.asarray(t) / 250.0))
+
+
+def truth_bias(T):
+    d = np.asarray(T, dtype=float)[..., None] - 25.0
+    return BIAS_COEFFS[:, 0] + BIAS_COEFFS[:, 1] * d + BIAS_COEFFS[:, 2] * d**2
+
+
+def truth_scale(T):
+    return SCALE * (1.0 + SCALE_TC * (np.asarray(T, dtype=float)[..., None] - 25.0))
+
+
+def calibrate(path, t0, seed):
+    thermal = {"die": die, "t0": t0, "bias_coeffs": BIAS_COEFFS, "scale_coeff": SCALE_TC}
+    rec = load_recording(write_recording(path, scale=SCALE, thermal=thermal, seed=seed,
+                                         noise=0.005))
+    return estimate_recording(rec, "paired-axis")
+
+
+@pytest.fixture(scope="module")
+def warmup(tmp_path_factory):
+    """Six calibrations, one every 70 s of a warm-up, as JSON files in one directory."""
+    root = tmp_path_factory.mktemp("warmup")
+    (root / "cals").mkdir()
+    ests = []
+    for i in range(6):
+        est = calibrate(root / f"rec{i}", 70.0 * i, seed=100 + i)
+        (root / "cals" / f"cal{i}.json").write_text(est.calibration.to_json())
+        ests.append(est)
+    (root / "cals" / "other.json").write_text('{"not": "a calibration"}')  # passed over
+    return root, ests
+
+
+def run_thermal(capsys, *argv):
+    code = main(["thermal", *map(str, argv)])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_within_one_run_the_drift_is_modelled_and_the_bias_is_at_the_mean_temperature(warmup):
+    _, ests = warmup
+    first = ests[0]  # the die warms by about 2.4 °C during the first run
+    assert any("die temperature changed" in w for w in first.extracted.warnings)
+    for est in ests:
+        cal = est.calibration
+        z = (np.asarray(cal.bias) - truth_bias(cal.temperature_c)) / np.asarray(cal.bias_std)
+        assert np.all(np.abs(z) < 4.0), (cal.temperature_c, z)
+        assert cal.consistency.ok
+
+
+def test_thermal_from_files_holds_the_truth_and_beats_one_calibration(warmup, capsys):
+    root, ests = warmup
+    code, out, _ = run_thermal(capsys, root / "cals", "--json")
+    assert code == 0
+    from gyrocal.calib.model import GyroCalibration
+
+    cal = GyroCalibration.from_dict(json.loads(out))
+    model = cal.temperature_model
+    lo, hi = model.range_c
+    temps = [e.calibration.temperature_c for e in ests]
+    assert (lo, hi) == (pytest.approx(min(temps)), pytest.approx(max(temps)))
+    assert model.points == 6 and model.consistency.ok
+    single = ests[0].calibration  # one calibration at the start temperature
+    g = np.array([0.7, -0.5, 0.3])  # a true rate, rad/s
+    for T in np.linspace(lo, hi, 21):
+        st = model.at(T)
+        assert np.all(np.abs(st.bias - truth_bias(T)) <= 4 * st.bias_std)
+        assert np.all(np.abs(np.diag(st.gain) - truth_scale(T)) <= 4 * np.diag(st.gain_std))
+        m = g / truth_scale(T) - truth_bias(T)  # what the sensor reads at T
+        err_model = np.linalg.norm(cal.apply(m, temperature_c=T) - g)
+        err_single = np.linalg.norm(single.apply(m) - g)
+        if T > single.temperature_c + 0.5:  # away from where the single one was made
+            assert err_model < err_single
+    # across the range the model's bias error is a small fraction of the single one's
+    grid = np.linspace(lo, hi, 50)
+    rms_model = math.sqrt(np.mean([(model.at(T).bias - truth_bias(T)) ** 2 for T in grid]))
+    rms_single = math.sqrt(np.mean([(np.asarray(single.bias) - truth_bias(T)) ** 2
+                                    for T in grid]))
+    assert rms_model < 0.1 * rms_single
+
+
+def test_thermal_table_names_the_order_and_the_range(warmup, capsys):
+    root, _ = warmup
+    code, out, _ = run_thermal(capsys, *sorted((root / "cals").glob("cal*.json")))
+    assert code == 0
+    assert "chosen by BIC" in out and "consistent" in out and "cal5.json" in out
+
+
+@pytest.mark.parametrize("argv, what", [
+    (["nowhere.json"], "does not exist"),
+    (["EMPTY"], "holds no gyrocal calibration"),
+    (["ONE", "ONE"], "span only"),
+    (["ONE", "--sim"], "not both"),
+])
+def test_bad_inputs_exit_2_with_a_reason(warmup, capsys, tmp_path, argv, what):
+    root, _ = warmup
+    (tmp_path / "empty").mkdir()
+    sub = {"EMPTY": tmp_path / "empty", "ONE": root / "cals" / "cal0.json"}
+    code, _, err = run_thermal(capsys, *[sub.get(a, a) for a in argv])
+    assert code == 2 and what in err and "Traceback" not in err
+
+
+def test_a_calibration_without_temperature_is_refused(warmup, capsys, tmp_path):
+    root, _ = warmup
+    doc = json.loads((root / "cals" / "cal0.json").read_text())
+    doc["temperature_c"] = None
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    code, _, err = run_thermal(capsys, tmp_path / "c.json", root / "cals" / "cal1.json")
+    assert code == 2 and "no temperature_c" in err
