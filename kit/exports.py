@@ -995,3 +995,7 @@ register(
         suffix=".h",
     )
 )
+
+
+# ---------------------------------------------------------------------------- flight stacks
+from gyrocal.kit import exports_thermal  # noqa: E402,F401 - registers px4-/ardupilot-thermal

@@ -99,3 +99,89 @@ class _no_warning:
 
     def __exit__(self, *exc):
         return self._cm.__exit__(*exc)
+
+
+def export_text(capsys, tmp_path, cal, fmt, *options):
+    (tmp_path / "cal.json").write_text(cal.to_json())
+    code = main(["export", str(tmp_path / "cal.json"), "--format", fmt, *options])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return out, err
+
+
+def px4_correct(params, raw, T, n=0):
+    """PX4's TemperatureCompensation::calc_thermal_offsets_3D and Gyroscope::Correct (without
+    CAL_GYRO offsets), written out from PX4-Autopilot's source."""
+    p = {k[len(f"TC_G{n}_"):]: v for k, v in params.items() if k.startswith(f"TC_G{n}_")}
+    t = min(max(T, p["TMIN"]), p["TMAX"])
+    d = t - p["TREF"]
+    off = [p[f"X0_{i}"] + p[f"X1_{i}"] * d + p[f"X2_{i}"] * d**2 + p[f"X3_{i}"] * d**3
+           for i in range(3)]
+    return np.asarray(raw) - off
+
+
+def ardupilot_correct(params, raw, T, n=1):
+    """ArduPilot's TCal::correct_sensor (TEMP_REFERENCE 35 °C, coefficients ×1e6) and then
+    ``gyro -= INS_GYROFFS``, written out from AP_InertialSensor_tempcal.cpp."""
+    t = f"INS_TCAL{n}_"
+    lo, hi = params[t + "TMIN"], params[t + "TMAX"]
+
+    def poly(x):
+        c = [np.array([params[f"{t}GYR{k}_{a}"] for a in "XYZ"]) for k in (1, 2, 3)]
+        return (c[0] + (c[1] + c[2] * x) * x) * x * 1e-6
+
+    temp = min(max(T, lo), hi)
+    cal_temp = min(max(params[f"INS_GYR{n}_CALTEMP"], lo), hi)
+    v = np.asarray(raw) - poly(temp - 35.0) + poly(cal_temp - 35.0)
+    offs = "INS_GYROFFS_" if n == 1 else f"INS_GYR{n}OFFS_"
+    return v - np.array([params[offs + a] for a in "XYZ"])
+
+
+def gyrocal_bias_corrected(raw, T):
+    """What gyrocal's model adds before the gain: raw + b(clamp(T)) (the model above)."""
+    t = min(max(T, 20.0), 30.0)
+    d = t - 25.0
+    return np.asarray(raw) + C[:, 0] + C[:, 1] * d + C[:, 2] * d**2
+
+
+@pytest.mark.parametrize("full", [True, False])
+def test_px4_thermal_parameters_remove_the_same_bias(full, capsys, tmp_path):
+    out, err = export_text(capsys, tmp_path, make_cal(full), "px4-thermal", "--imu-index", "1")
+    rows = [line.split("\t") for line in out.splitlines() if not line.startswith("#")]
+    assert all(r[:2] == ["1", "1"] and len(r) == 5 for r in rows)
+    params = {r[2]: float(r[3]) for r in rows}
+    assert params["TC_G_ENABLE"] == 1 and params["TC_G1_ID"] == 0
+    assert {r[4] for r in rows if r[2].startswith("TC_G1_X")} == {"9"}  # REAL32
+    assert (params["TC_G1_TMIN"], params["TC_G1_TMAX"], params["TC_G1_TREF"]) == (20, 30, 25)
+    raw = np.array([0.3, -0.2, 0.1])
+    for T in (15.0, 20.0, 22.5, 27.0, 30.0, 45.0):
+        np.testing.assert_allclose(px4_correct(params, raw, T, n=1),
+                                   gyrocal_bias_corrected(raw, T), atol=1e-7)
+    assert "set it to the gyro's device ID" in err and "scale" in err
+    out, err = export_text(capsys, tmp_path, make_cal(full), "px4-thermal", "--device-id", "7")
+    assert "1\t1\tTC_G0_ID\t7\t6" in out and "device ID" not in err
+
+
+def test_ardupilot_thermal_parameters_remove_the_same_bias(capsys, tmp_path):
+    out, err = export_text(capsys, tmp_path, make_cal(), "ardupilot-thermal")
+    params = dict(line.split(",") for line in out.splitlines() if not line.startswith("#"))
+    params = {k: float(v) for k, v in params.items()}
+    assert params["INS_TCAL1_ENABLE"] == 1 and params["INS_GYR1_CALTEMP"] == 25.0
+    raw = np.array([0.3, -0.2, 0.1])
+    for T in (12.0, 20.0, 24.0, 29.5, 30.0, 50.0):
+        np.testing.assert_allclose(ardupilot_correct(params, raw, T),
+                                   gyrocal_bias_corrected(raw, T), atol=1e-7)
+    out, _ = export_text(capsys, tmp_path, make_cal(), "ardupilot-thermal", "--imu-index", "2")
+    assert "INS_TCAL2_GYR1_X," in out and "INS_GYR2OFFS_X," in out
+
+
+def test_flight_stack_exports_need_a_temperature_model(capsys, tmp_path):
+    cal = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0))
+    (tmp_path / "cal.json").write_text(cal.to_json())
+    for fmt, extra in (("px4-thermal", []), ("ardupilot-thermal", ["--imu-index", "0"])):
+        code = main(["export", str(tmp_path / "cal.json"), "--format", fmt, *extra])
+        assert code == 2 and "temperature_model" in capsys.readouterr().err
+    (tmp_path / "t.json").write_text(make_cal().to_json())
+    code = main(["export", str(tmp_path / "t.json"), "--format", "ardupilot-thermal",
+                 "--imu-index", "0"])
+    assert code == 2 and "outside 1..3" in capsys.readouterr().err
