@@ -323,3 +323,23 @@ def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
             replace_dir(work, out)
     truth = None if jig.sim is None else jig.sim.truth.manifest()
     return cal, list(zip(names, cals, strict=True)), truth
+
+
+def tracker_tempco(cal: GyroCalibration) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+    """The bias tracker's temperature-coefficient prior from ``cal``'s thermal model: the
+    slope ``db/dT`` at the calibration's temperature (the tracker's reference) and its standard
+    deviation, widened by the curvature over half the covered range (the tracker's coefficient
+    is linear); None without a model or a bias slope."""
+    tm = cal.temperature_model
+    if tm is None or tm.bias_order < 1:
+        return None
+    d = (cal.temperature_c if cal.temperature_c is not None else tm.reference_c) - tm.reference_c
+    k = np.arange(1, tm.bias_order + 1)
+    v = np.zeros(tm.bias_order + 1)
+    v[1:] = k * d ** (k - 1)  # d/dT of the powers at d
+    slope = tm.bias_coeffs @ v
+    std = np.sqrt(np.einsum("i,aij,j->a", v, tm.bias_coeffs_covariance, v))
+    half = 0.5 * (tm.range_c[1] - tm.range_c[0])
+    curve = np.abs(tm.bias_coeffs[:, 2]) * 2 * half if tm.bias_order >= 2 else np.zeros(3)
+    std = np.maximum(np.hypot(std, curve), 1e-9)
+    return tuple(float(x) for x in slope), tuple(float(x) for x in std)

@@ -131,3 +131,20 @@ def test_a_calibration_without_temperature_is_refused(warmup, capsys, tmp_path):
     (tmp_path / "c.json").write_text(json.dumps(doc))
     code, _, err = run_thermal(capsys, tmp_path / "c.json", root / "cals" / "cal1.json")
     assert code == 2 and "no temperature_c" in err
+
+
+def test_track_seeds_its_temperature_coefficient_from_the_thermal_model(warmup, capsys):
+    root, _ = warmup
+    code, out, _ = run_thermal(capsys, root / "cals", "--json")
+    (root / "thermal.json").write_text(out)
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.thermal import tracker_tempco
+
+    cal = GyroCalibration.from_json(out)
+    slope, std = tracker_tempco(cal)
+    d = cal.temperature_c - 25.0  # the truth's derivative at the calibration's temperature
+    truth = BIAS_COEFFS[:, 1] + 2 * BIAS_COEFFS[:, 2] * d
+    assert np.all(np.abs(np.array(slope) - truth) <= 3 * np.array(std))
+    assert main(["track", str(root / "rec3"), "--cal", str(root / "thermal.json"), "--tempco",
+                 "--json"]) == 0
+    assert "seeded from the calibration's thermal model" in capsys.readouterr().err
