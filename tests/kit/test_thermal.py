@@ -148,3 +148,48 @@ def test_track_seeds_its_temperature_coefficient_from_the_thermal_model(warmup, 
     assert main(["track", str(root / "rec3"), "--cal", str(root / "thermal.json"), "--tempco",
                  "--json"]) == 0
     assert "seeded from the calibration's thermal model" in capsys.readouterr().err
+
+
+def test_apply_outside_the_covered_range_clamps_and_says_so(warmup, capsys, tmp_path):
+    root, _ = warmup
+    code, out, _ = run_thermal(capsys, root / "cals", "--json")
+    (tmp_path / "thermal.json").write_text(out)
+    (tmp_path / "rows.csv").write_text("t,gx,gy,gz,temp\n0.0,0.1,0.2,0.3,24.0\n"
+                                       "0.005,0.1,0.2,0.3,60.0\n")
+    assert main(["apply", str(tmp_path / "thermal.json"), str(tmp_path / "rows.csv")]) == 0
+    res = capsys.readouterr()
+    assert "gyrocal: warning: 1 reading(s) at die temperatures outside" in res.err
+    rows = [list(map(float, r.split(","))) for r in res.out.splitlines()[1:]]
+    from gyrocal.calib.model import GyroCalibration
+
+    cal = GyroCalibration.from_json(out)
+    hot = cal.temperature_model.range_c[1]
+    m = np.array([0.1, 0.2, 0.3])
+    np.testing.assert_allclose(rows[1][1:4], cal.apply(m, temperature_c=hot), rtol=1e-8)
+
+
+def test_thermal_on_the_emulated_jig_recovers_the_drawn_coefficients(tmp_path, capsys):
+    """`gyrocal thermal --sim`: three short runs of a warming emulated MPU-9250; the model holds
+    the manifest's truth within its stated uncertainty over the covered range. (Three runs allow
+    a line only, p <= n - 2, so the span is kept to about 2 °C, where the drawn curvature stays
+    below the bias's uncertainty; the bench runs the 10 °C warm-up with eight.)"""
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.thermal import truth_at
+
+    (tmp_path / "fast.toml").write_text("[protocol]\ntime_budget_s = 18\n")
+    code, out, err = run_thermal(capsys, "--sim", "--sim-seed", "4", "--config",
+                                 tmp_path / "fast.toml", "--sim-temperature", "ramp:20:22:240",
+                                 "--sim-self-heating", "0.5:120", "--runs", "3", "--wait", "60", "--out", tmp_path / "w", "--json")
+    assert code == 0, err
+    cal = GyroCalibration.from_json(out)
+    assert json.loads((tmp_path / "w" / "calibration.json").read_text()) == json.loads(out)
+    truth = json.loads((tmp_path / "w" / "run-01" / "recording" / "manifest.json").read_text())
+    truth = truth["truth"]
+    assert truth["temperature"]["die"]["ambient"] == "ramp:20:22:240"
+    m = cal.temperature_model
+    lo, hi = m.range_c
+    assert hi - lo > 1.0 and m.points == 3
+    for T in np.linspace(lo, hi, 7):
+        st, tt = m.at(T), truth_at(truth, T)
+        assert np.all(np.abs(st.bias - tt["bias"]) <= 4 * st.bias_std + 1e-12)
+        assert np.all(np.abs(np.diag(st.gain) - tt["scale"]) <= 4 * np.diag(st.gain_std))
