@@ -179,7 +179,8 @@ def test_thermal_on_the_emulated_jig_recovers_the_drawn_coefficients(tmp_path, c
     (tmp_path / "fast.toml").write_text("[protocol]\ntime_budget_s = 18\n")
     code, out, err = run_thermal(capsys, "--sim", "--sim-seed", "4", "--config",
                                  tmp_path / "fast.toml", "--sim-temperature", "ramp:20:22:240",
-                                 "--sim-self-heating", "0.5:120", "--runs", "3", "--wait", "60", "--out", tmp_path / "w", "--json")
+                                 "--sim-self-heating", "0.5:120", "--runs", "3", "--wait", "60",
+                                 "--out", tmp_path / "w", "--json")
     assert code == 0, err
     cal = GyroCalibration.from_json(out)
     assert json.loads((tmp_path / "w" / "calibration.json").read_text()) == json.loads(out)
