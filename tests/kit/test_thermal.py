@@ -194,3 +194,34 @@ def test_thermal_on_the_emulated_jig_recovers_the_drawn_coefficients(tmp_path, c
         st, tt = m.at(T), truth_at(truth, T)
         assert np.all(np.abs(st.bias - tt["bias"]) <= 4 * st.bias_std + 1e-12)
         assert np.all(np.abs(np.diag(st.gain) - tt["scale"]) <= 4 * np.diag(st.gain_std))
+
+
+def test_static_warmup_fits_bias_only_and_keeps_the_spin_scale(tmp_path, capsys):
+    """--static: one spin calibration, then the still sensor while it warms (PX4/ArduPilot)."""
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.thermal import truth_at
+
+    (tmp_path / "fast.toml").write_text("[protocol]\ntime_budget_s = 18\n")
+    code, out, err = run_thermal(capsys, "--sim", "--sim-seed", "5", "--config",
+                                 tmp_path / "fast.toml", "--sim-temperature", "ramp:20:24:120",
+                                 "--static", "120", "--out", tmp_path / "s", "--json")
+    assert code == 0, err
+    cal = GyroCalibration.from_json(out)
+    doc = json.loads(out)["temperature_model"]
+    assert doc["kind"] == "static" and "scale_coeffs" not in doc and "matrix_coeffs" not in doc
+    spin = GyroCalibration.from_json((tmp_path / "s" / "run-01" / "calibration.json").read_text())
+    np.testing.assert_allclose(cal.scale, spin.scale)  # the gain is the spin calibration's
+    truth = json.loads((tmp_path / "s" / "run-01" / "recording" / "manifest.json").read_text())
+    m = cal.temperature_model
+    for T in np.linspace(*m.range_c, 5):
+        st = m.at(T)
+        assert np.all(np.abs(st.bias - truth_at(truth["truth"], T)["bias"])
+                      <= 4 * st.bias_std)
+
+
+def test_bad_sim_temperature_exits_2(capsys, tmp_path):
+    for flag, value, what in (("--sim-temperature", "warm", "not numbers"),
+                              ("--sim-self-heating", "4:x", "DT or DT:TAU")):
+        code = main(["calibrate", "--sim", flag, value, "--out", str(tmp_path / "x"), "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and what in err and "Traceback" not in err
