@@ -146,11 +146,12 @@ def thermal_calibration(cals: Sequence[GyroCalibration], model: ThermalModel,
     st = model.at(ref)
     kw: dict[str, Any] = {"bias": tuple(st.bias), "bias_std": tuple(st.bias_std)}
     if st.gain is not None:
-        if base.is_full:
+        if not model.diagonal:
             kw.update(matrix=st.gain, matrix_std=st.gain_std,
                       scale=tuple(np.diag(st.gain)), scale_std=(math.nan,) * 3)
-        else:
-            kw.update(scale=tuple(np.diag(st.gain)), scale_std=tuple(np.diag(st.gain_std)))
+        else:  # the paper's diagonal model (a set that was not all full-model): version 1
+            kw.update(scale=tuple(np.diag(st.gain)), scale_std=tuple(np.diag(st.gain_std)),
+                      matrix=None, matrix_std=None, frame=None, kinematics=None)
     return replace(base, **kw, covariance=None, temperature_c=ref, consistency=model.consistency,
                    method=f"thermal ({model.kind}; {base.method})", iterations=0, source=source,
                    created=created, temperature_model=model)

@@ -101,8 +101,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give calibration files, or run the jig (--sim, --static), not both")
     if args.wait < 0 or (args.static is not None and not args.static > 0):
         raise InputError("--wait must be >= 0 and --static a positive number of seconds")
-    if not 1 <= args.runs <= 1000:
-        raise InputError(f"--runs must be 1..1000, got {args.runs}")
+    if not (1 if args.static is not None else 2) <= args.runs <= 1000:
+        raise InputError(f"--runs must be 2..1000 (a thermal model needs calibrations at two "
+                         f"temperatures at least; 5 or more let it find a curvature), got "
+                         f"{args.runs}")
     truth = None
     if jig_mode:
         from gyrocal.kit.commands.calibrate import _output_dir, load_cli_config

@@ -115,6 +115,8 @@ def test_thermal_table_names_the_order_and_the_range(warmup, capsys):
     (["EMPTY"], "holds no gyrocal calibration"),
     (["ONE", "ONE"], "span only"),
     (["ONE", "--sim"], "not both"),
+    (["--sim", "--runs", "1"], "--runs must be 2..1000"),
+    (["--sim", "--static", "-5"], "--static a positive number"),
 ])
 def test_bad_inputs_exit_2_with_a_reason(warmup, capsys, tmp_path, argv, what):
     root, _ = warmup
