@@ -150,3 +150,55 @@ def test_static_bias_only_model_keeps_the_calibrations_matrix():
     np.testing.assert_allclose(cal.apply(m, temperature_c=24.0),
                                a @ (m + truth_bias([24.0])[0]), atol=1e-6)
     assert ThermalModel.from_dict(model.to_dict()).gain_coeffs is None
+
+
+def _run_obs(temps_turn, temps_rest, slope, seed=0, rest_std=2e-5):
+    """A run's windows with a bias b(T) = b0 + slope (T - 25) (readings m = g - b)."""
+    from gyrocal.calib.observations import ObservationSet
+
+    rng = np.random.default_rng(seed)
+    b0 = np.array([0.01, -0.02, 0.03])
+    n, r = len(temps_turn), len(temps_rest)
+    rate = np.array([1.0, -1.0] * (n // 2))
+    g = np.zeros((n, 3))
+    g[np.arange(n), np.arange(n) // 2 % 3] = rate
+    bias_t = b0 + slope * (np.asarray(temps_turn)[:, None] - 25.0)
+    bias_r = b0 + slope * (np.asarray(temps_rest)[:, None] - 25.0)
+    obs = ObservationSet(
+        mean=g - bias_t + rng.normal(0, 2e-5, (n, 3)), rate=rate,
+        motor=np.arange(n) // 2 + 1, direction=rate.astype(int), count=np.full(n, 1000),
+        noise=np.full((n, 3), 5e-3), mean_std=np.full((n, 3), 2e-5),
+        rest_mean=-bias_r + rng.normal(0, rest_std, (r, 3)), rest_count=np.full(r, 400),
+        rest_noise=np.full((r, 3), 5e-3), rest_mean_std=np.full((r, 3), rest_std),
+        temperature_c=float(np.mean(np.concatenate([temps_turn, temps_rest]))))
+    return obs, b0, g
+
+
+def test_drift_within_a_run_is_referred_to_the_mean_temperature():
+    from gyrocal.calib.thermal import correct_drift
+
+    slope = np.array([3e-3, -2e-3, 1e-3])  # rad/s per °C
+    tr = np.linspace(24.0, 25.2, 7)
+    tt = (tr[:-1] + tr[1:]) / 2
+    obs, b0, g = _run_obs(tt, tr, slope)
+    fixed, note = correct_drift(obs, tt, tr)
+    assert "changed by 1.20 °C" in note and "7 rests" in note
+    t_bar = obs.temperature_c
+    b_bar = b0 + slope * (t_bar - 25.0)
+    z = (fixed.rest_mean + b_bar) / fixed.rest_mean_std
+    assert np.all(np.abs(z) < 4)  # every rest now reads -b(T̄)
+    assert np.all(np.abs(fixed.mean - (g - b_bar)) < 4 * fixed.mean_std)
+    assert np.all(fixed.mean_std >= obs.mean_std)  # the drift's uncertainty was added
+    # before the correction the rests disagree with one bias by far more than their noise
+    assert np.max(np.abs(obs.rest_mean + b_bar) / obs.rest_mean_std) > 20
+
+
+def test_steady_or_unmeasurable_drift():
+    from gyrocal.calib.thermal import correct_drift
+
+    obs, _, _ = _run_obs(np.full(6, 25.0), np.full(7, 25.01), np.zeros(3))
+    assert correct_drift(obs, np.full(6, 25.0), np.full(7, 25.01)) == (obs, None)
+    tr = np.array([24.0, 25.0])  # two rests cannot measure a drift and check it
+    obs, _, _ = _run_obs(np.linspace(24, 25, 6), tr, np.full(3, 1e-3))
+    same, note = correct_drift(obs, np.linspace(24, 25, 6), tr)
+    assert same is obs and "too few rests" in note
