@@ -16,8 +16,10 @@ DESCRIPTION = (
     "Calibration JSON files or directories of them (e.g. what 'gyrocal history export' wrote), "
     "or run the jig (--sim: the emulated one): the calibration protocol runs --runs times back "
     "to back while the die warms, each run written to DIR/run-NN/, the model to "
-    "DIR/calibration.json. --static S adds the flight stacks' approach for comparison: the "
-    "sensor still for S seconds after one spin calibration, bias only. Exits 3 if the "
+    "DIR/calibration.json. With --sim the emulated die warms by itself from power-on (and with "
+    "--sim-temperature the ambient moves too). --static S fits the flight stacks' way instead, "
+    "for comparison: one spin calibration, then the sensor still for S seconds, bias only. "
+    "Exits 3 if the "
     "calibrations are not consistent with their stated uncertainties."
 )
 
@@ -110,6 +112,11 @@ def run(args: argparse.Namespace) -> int:
         from gyrocal.kit.commands.calibrate import _output_dir, load_cli_config
         from gyrocal.kit.thermal import thermal_on_jig
 
+        if args.sim and args.sim_temperature is None and args.sim_self_heating is None:
+            from gyrocal.drivers.emulated.thermal import SELF_HEATING_C, SELF_HEATING_TAU_S
+
+            # a thermal run on the emulated jig always has the warming die
+            args.sim_self_heating = f"{SELF_HEATING_C:g}:{SELF_HEATING_TAU_S:g}"
         cfg = load_cli_config(args)
         out, work = _output_dir(args)
         cal, runs, truth = thermal_on_jig(cfg, args, out, work, quiet=args.quiet)
