@@ -69,13 +69,15 @@ def truth_at(truth: Mapping[str, Any] | None, temperature_c: float | None
 
 def collect_calibrations(paths: Sequence[str]) -> list[tuple[str, GyroCalibration]]:
     """The calibrations in ``paths``: Calibration JSON files, or directories searched
-    recursively for them (JSON files of another kind inside a directory are passed over).
+    recursively for them (JSON files of another kind inside a directory, and thermal models,
+    are passed over).
 
     Raises
     ------
     InputError
-        A path that does not exist, a file given by name that is not a valid Calibration, a
-        directory without any, or a calibration without its mean die temperature.
+        A path that does not exist, a file given by name that is not a valid Calibration or is
+        a thermal model, a directory without any, or a calibration without its mean die
+        temperature.
     """
     from gyrocal.kit.exports import load_document, read_json
 
@@ -88,14 +90,20 @@ def collect_calibrations(paths: Sequence[str]) -> list[tuple[str, GyroCalibratio
                     doc = read_json(str(f), "calibration")
                 except InputError:
                     continue
-                if isinstance(doc, dict) and doc.get("format") == FORMAT:
+                if (isinstance(doc, dict) and doc.get("format") == FORMAT
+                        and doc.get("temperature_model") is None):  # a fit is not a point
                     inside.append((str(f), load_document(str(f), FORMAT, "calibration")))
             if not inside:
                 raise InputError(f"{p} holds no gyrocal calibration (*.json with format "
                                  f"{FORMAT!r}); give calibration files or their directory")
             found += inside
         elif p.exists():
-            found.append((str(p), load_document(str(p), FORMAT, "calibration")))
+            cal = load_document(str(p), FORMAT, "calibration")
+            if cal.temperature_model is not None:
+                raise InputError(f"{p} is a thermal model (it has a temperature_model), not a "
+                                 "calibration at one temperature; give the calibrations it was "
+                                 "fitted on")
+            found.append((str(p), cal))
         else:
             raise InputError(f"{p} does not exist; give Calibration JSON files or directories "
                              "of them")
