@@ -227,3 +227,17 @@ def test_bad_sim_temperature_exits_2(capsys, tmp_path):
         code = main(["calibrate", "--sim", flag, value, "--out", str(tmp_path / "x"), "--quiet"])
         err = capsys.readouterr().err
         assert code == 2 and what in err and "Traceback" not in err
+
+
+def test_a_thermal_model_is_not_a_calibration_point(warmup, capsys, tmp_path):
+    root, _ = warmup
+    code, out, _ = run_thermal(capsys, root / "cals", "--json")
+    d = tmp_path / "mixed"
+    d.mkdir()
+    (d / "thermal.json").write_text(out)
+    for i in range(4):
+        (d / f"c{i}.json").write_text((root / "cals" / f"cal{i}.json").read_text())
+    code, out2, _ = run_thermal(capsys, d, "--json")
+    assert code == 0 and json.loads(out2)["temperature_model"]["points"] == 4
+    code, _, err = run_thermal(capsys, d / "thermal.json", d / "c0.json")
+    assert code == 2 and "is a thermal model" in err
