@@ -20,7 +20,6 @@ matrix) of one spin calibration kept at every temperature.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -266,7 +265,7 @@ def write_model_json(path: Path, cal: GyroCalibration) -> None:
     """Write the thermal Calibration document to ``path`` (atomically)."""
     from gyrocal.kit.fileio import atomic_write_text
 
-    atomic_write_text(path, json.dumps(cal.to_dict(), indent=2, allow_nan=False) + "\n")
+    atomic_write_text(path, cal.to_json() + "\n")
 
 
 def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
