@@ -24,11 +24,14 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+
+if TYPE_CHECKING:
+    from gyrocal.calib.thermal import ThermalModel
 
 __all__ = ["FORMAT", "LIMITS", "VERSION", "VERSION_FULL", "Consistency", "GyroCalibration"]
 
@@ -56,6 +59,7 @@ _V1_FIELDS = (
     "method", "iterations", "consistency", "sensor", "temperature_c", "created", "source", "axes",
 )
 _V2_FIELDS = ("matrix", "matrix_std", "frame", "kinematics")
+_THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
 _ACTION = "correct or remove it (see hardware_docs/formats.md)"
 
@@ -240,6 +244,9 @@ class GyroCalibration:
         The gimbal as the full-model fit estimated it: ``chain`` (servo IDs, base first),
         ``axes`` (one unit vector per servo in the sensor frame at the reference angles) and
         ``reference_angles_rad``; input of ``calib.kinematics``.
+    temperature_model : ThermalModel or None
+        Bias (and scale or matrix) against die temperature (:mod:`gyrocal.calib.thermal`),
+        written as the document's ``temperature_model`` in either version.
     """
 
     scale: tuple[float, float, float]
@@ -259,6 +266,7 @@ class GyroCalibration:
     matrix_std: tuple[tuple[float, ...], ...] | None = None
     frame: str | None = None
     kinematics: dict[str, Any] | None = field(default=None, hash=False)
+    temperature_model: ThermalModel | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
@@ -308,16 +316,22 @@ class GyroCalibration:
         """Whether this is the full model (Calibration v2), with cross-axis terms."""
         return self.matrix is not None
 
-    def apply(self, m: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
+    def apply(self, m: np.ndarray | list[float] | tuple[float, ...],
+              temperature_c: float | np.ndarray | None = None) -> np.ndarray:
         """Calibrated rate ``A (m + bias)`` for one reading or many.
 
         ``A`` is :attr:`full_matrix`, so a v1 calibration gives the paper's Eq. (1),
-        ``scale ∘ (m + bias)``.
+        ``scale ∘ (m + bias)``. With a :attr:`temperature_model` and the die temperature of the
+        readings, ``A(T) (m + b(T))`` instead (:mod:`gyrocal.calib.thermal`; a bias-only model
+        keeps ``A``); a temperature outside the model's covered range is clamped to it, with a
+        :class:`~gyrocal.calib.thermal.ThermalRangeWarning`.
 
         Parameters
         ----------
         m : array_like, shape (3,) or (N, 3)
             Raw readings in rad/s (datasheet sensitivity applied, nothing else).
+        temperature_c : float or array_like (N,), optional
+            Die temperature of the readings, °C; ignored without a temperature model.
 
         Returns
         -------
@@ -329,6 +343,10 @@ class GyroCalibration:
             raise CalibInputError(f"readings must have shape (3,) or (N, 3), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise CalibInputError("readings contain NaN or inf; drop or repair those samples first")
+        if self.temperature_model is not None and temperature_c is not None:
+            from gyrocal.calib.thermal import apply_thermal
+
+            return apply_thermal(self.temperature_model, self.full_matrix, a, temperature_c)
         if self.matrix is None:
             return np.asarray(self.scale) * (a + np.asarray(self.bias))
         return (a + np.asarray(self.bias)) @ self.full_matrix.T
@@ -378,6 +396,8 @@ class GyroCalibration:
             doc["matrix_std"] = grid(self.matrix_std)
             doc["frame"] = self.frame
             doc["kinematics"] = copy.deepcopy(self.kinematics)
+        if self.temperature_model is not None:
+            doc["temperature_model"] = self.temperature_model.to_dict()
         return doc
 
     def to_json(self) -> str:
@@ -399,7 +419,7 @@ class GyroCalibration:
         if not isinstance(doc, Mapping):
             raise CalibrationFormatError("a calibration document must be a JSON object")
         full = _check_header(doc)
-        _refuse_unknown(doc, _V1_FIELDS + (_V2_FIELDS if full else ()),
+        _refuse_unknown(doc, _V1_FIELDS + _THERMAL_FIELDS + (_V2_FIELDS if full else ()),
                         f"a version {VERSION_FULL if full else VERSION} calibration")
         kw = _read_model(doc, full)
         try:
@@ -542,4 +562,15 @@ def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:
         "created": doc.get("created"),
         "source": doc.get("source"),
         "axes": None if axes is None else dict(axes),
+        "temperature_model": _read_thermal(doc.get("temperature_model")),
     }
+
+
+def _read_thermal(doc: Any) -> ThermalModel | None:
+    """The ``temperature_model`` object (:meth:`gyrocal.calib.thermal.ThermalModel.from_dict`),
+    or None."""
+    if doc is None:
+        return None
+    from gyrocal.calib.thermal import ThermalModel
+
+    return ThermalModel.from_dict(doc)

@@ -57,6 +57,7 @@ import numpy as np
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.observations import ObservationSet, diff_noise
 from gyrocal.calib.segments import Segment
+from gyrocal.calib.thermal import correct_drift
 from gyrocal.calib.timebase import TimebaseFit, refit_sample_times
 
 __all__ = [
@@ -669,6 +670,18 @@ def _assemble(
     )
 
 
+def _window_temps(t: np.ndarray, temp: np.ndarray, windows: Sequence[Window]) -> np.ndarray:
+    """Mean die temperature over each window's span (NaN where no sample has one)."""
+    out = np.full(len(windows), np.nan)
+    for i, w in enumerate(windows):
+        a, b = np.searchsorted(t, [w.corners[0], w.corners[3]], side="left")
+        x = temp[a:b]
+        x = x[np.isfinite(x)]
+        if x.size:
+            out[i] = float(x.mean())
+    return out
+
+
 def extract_observations(
     imu_t: np.ndarray,
     imu_rate: np.ndarray,
@@ -784,6 +797,11 @@ def extract_observations(
             pose_still[i, chain_t.index(int(w.window.motor))] = -1  # type: ignore[arg-type]
     obs = _assemble(turns, noise, mean_std, rest_windows, rest_samples, tau, temp, q, chain_t,
                     pose, pose_still)
+    if temp is not None:  # a die that warmed during the run: refer the windows to its mean
+        obs, note = correct_drift(obs, _window_temps(imu_t, temp, [w.window for w in turns]),
+                                  _window_temps(imu_t, temp, rest_windows))
+        if note is not None:
+            warnings.append(note)
     return ExtractedWindows(
         observations=obs,
         windows=tuple(w.window for w in turns),

@@ -38,6 +38,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("report", "gyrocal.kit.commands.report"),
     ("track", "gyrocal.kit.commands.track"),
     ("history", "gyrocal.kit.commands.history"),
+    ("thermal", "gyrocal.kit.commands.thermal"),
     ("noise", "gyrocal.kit.commands.noise"),
     ("study", "gyrocal.kit.commands.study"),
     ("simulate-recording", "gyrocal.kit.commands.simulate_recording"),
@@ -149,6 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     old = signals.install()
     if argv is None:
         argv = sys.argv[1:]
+    old_show = warnings.showwarning
+    warnings.showwarning = _show_warning  # a library warning is a line for the user
     try:
         show_traceback = False
         try:
@@ -165,6 +168,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return _report(exc, show_traceback)
     finally:
         signals.restore(old)
+        warnings.showwarning = old_show
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: object = None, line: str | None = None) -> None:
+    """Print a warning as ``gyrocal: warning: ...`` on stderr (no source line)."""
+    print(f"gyrocal: warning: {message}", file=sys.stderr)
 
 
 def _report(exc: BaseException, show_traceback: bool) -> int:

@@ -912,8 +912,73 @@ def _render_c_header(
             "/* Datasheet sensitivity the readings were converted with: m = counts * this. */",
             f"#define {P}_SENSITIVITY_RAD_S_PER_LSB {_c_float(float(sens))}",
         ]
-    lines += ["", *_c_apply(cal, P, fn), "", f"#endif /* {guard} */"]
+    lines += ["", *_c_apply(cal, P, fn)]
+    if cal.temperature_model is not None:
+        lines += ["", *_c_thermal(cal, P, fn)]
+    lines += ["", f"#endif /* {guard} */"]
     return "\n".join(lines) + "\n", []
+
+
+def _c_thermal(cal: Any, P: str, fn: str) -> list[str]:
+    """The temperature model (Calibration ``temperature_model``, calib.thermal) as constant
+    tables and ``<fn>_at(m, die_c, g)``: ``g = A(T) (m + b(T))`` with ``T`` clamped to the
+    covered range, ``b`` a polynomial in ``T − reference`` (Horner), ``A`` linear in it."""
+    import numpy as np
+
+    tm = cal.temperature_model
+    n = tm.bias_order + 1
+    lo, hi = tm.range_c
+
+    def arr(values: Any) -> str:
+        if np.ndim(values) == 0:
+            return _c_float(float(values))
+        return "{" + ", ".join(arr(v) for v in values) + "}"
+
+    lines = [
+        "/*",
+        f" * Temperature model ({tm.kind}; {tm.points} points): bias b(T) a polynomial of order "
+        f"{n - 1} in",
+        f" * (T - {P}_TEMP_REFERENCE_C), coefficients in ascending powers; "
+        + ("the gain A(T) = A0 + A1 (T - reference)."
+           if tm.gain_coeffs is not None else "the gain is the constant one above."),
+        f" * Valid over {lo:.2f} to {hi:.2f} degrees C of die temperature: outside, T is clamped",
+        " * to the nearest end (never extrapolated).",
+        " */",
+        f"#define {P}_TEMP_REFERENCE_C {_c_float(tm.reference_c)}",
+        f"#define {P}_TEMP_MIN_C {_c_float(lo)}",
+        f"#define {P}_TEMP_MAX_C {_c_float(hi)}",
+        f"#define {P}_BIAS_ORDER {n - 1}",
+        f"static const float {P}_BIAS_COEFFS[3][{n}] = {arr(tm.bias_coeffs)};",
+    ]
+    if tm.gain_coeffs is not None:
+        lines.append(f"static const float {P}_GAIN_COEFFS[2][3][3] = {arr(tm.gain_coeffs)};")
+        gain = [f"        const float a{i}{j} = {P}_GAIN_COEFFS[0][{i}][{j}] + "
+                f"{P}_GAIN_COEFFS[1][{i}][{j}] * d;" for i in range(3) for j in range(3)]
+        rows = [f"    g_rad_s[{i}] = a{i}0 * x[0] + a{i}1 * x[1] + a{i}2 * x[2];"
+                for i in range(3)]
+        body = ["    {", *gain, *["    " + r for r in rows], "    }"]
+    else:
+        A = cal.full_matrix
+        body = [f"    g_rad_s[{i}] = " + " + ".join(f"{_c_float(float(A[i][j]))} * x[{j}]"
+                                                    for j in range(3)) + ";" for i in range(3)]
+    return lines + [
+        "",
+        "/* Apply the calibration at die temperature die_c (degrees C); in place allowed. */",
+        f"static inline void {fn}_at(const float m_rad_s[3], float die_c, float g_rad_s[3])",
+        "{",
+        f"    const float t = die_c < {P}_TEMP_MIN_C ? {P}_TEMP_MIN_C"
+        f" : (die_c > {P}_TEMP_MAX_C ? {P}_TEMP_MAX_C : die_c);",
+        f"    const float d = t - {P}_TEMP_REFERENCE_C;",
+        "    float x[3];",
+        "    int i, k;",
+        "    for (i = 0; i < 3; ++i) {",
+        f"        float b = {P}_BIAS_COEFFS[i][{P}_BIAS_ORDER];",
+        f"        for (k = {P}_BIAS_ORDER - 1; k >= 0; --k) b = b * d + {P}_BIAS_COEFFS[i][k];",
+        "        x[i] = m_rad_s[i] + b;",
+        "    }",
+        *body,
+        "}",
+    ]
 
 
 register(
@@ -930,3 +995,7 @@ register(
         suffix=".h",
     )
 )
+
+
+# ---------------------------------------------------------------------------- flight stacks
+from gyrocal.kit import exports_thermal  # noqa: E402,F401 - registers px4-/ardupilot-thermal

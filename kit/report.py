@@ -16,8 +16,12 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
     """The result table: scale and bias with standard deviations, the verdict, the axes.
 
     With ``truth`` (a simulated recording's ``{"scale", "bias"}``) each row also shows the error
-    in units of its own standard deviation.
+    in units of its own standard deviation; a truth with a temperature model (``truth.
+    temperature``) is taken at the calibration's mean die temperature.
     """
+    from gyrocal.kit.thermal import truth_at
+
+    truth = truth_at(truth, cal.temperature_c)
     lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
     if cal.matrix is not None:
         lines += _matrix_rows(cal, truth)

@@ -23,7 +23,7 @@ from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
 __all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SimJig", "build_sim",
-           "realism_sizes", "sim_misalignment", "sim_realism", "sim_truth"]
+           "realism_sizes", "sim_misalignment", "sim_realism", "sim_thermal", "sim_truth"]
 
 #: Servo model of the emulated jig.
 SIM_SERVO_MODEL = "XM430-W350"
@@ -257,6 +257,8 @@ def build_sim(
     noise_seed: int | None = None,
     cross_axis: float = SIM_CROSS_AXIS,
     realism: Collection[str] | None = None,
+    temperature: str | None = None,
+    self_heating: str | None = None,
 ) -> SimJig:
     """Assemble the emulated jig described by ``cfg`` (IDs, axes, IMU model and address).
 
@@ -282,6 +284,10 @@ def build_sim(
         (:func:`sim_misalignment`; 0 = the paper's sensor).
     realism : collection of str, optional
         The :data:`REALISM_EFFECTS` that are on; all of them when omitted, none with ``()``.
+    temperature, self_heating : str, optional
+        ``--sim-temperature`` and ``--sim-self-heating`` (:func:`sim_thermal`): either turns on
+        the die's warm-up and temperature coefficients drawn by ``seed``; without both the die
+        stays at 25 °C and the sensor has no temperature terms.
     """
     clock: Clock = SystemClock() if realtime else VirtualClock()
     k, b = sim_truth(seed, scale, bias)
@@ -303,6 +309,9 @@ def build_sim(
                                 "realism": sensor_realism, "clock_ppm": ppm}
     if noise_density_rad_s_sqrt_hz is not None:
         truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density_rad_s_sqrt_hz
+    if temperature is not None or self_heating is not None:
+        truth_kw.update(sim_thermal(seed, cfg["imu"]["model"], temperature, self_heating,
+                                    clock.monotonic()))
     truth = SensorTruth(**truth_kw)
     # The chip sits where a real one of its model can (the configured address if the model
     # allows it, else its default), so a config that names the wrong address fails as it would
@@ -313,6 +322,44 @@ def build_sim(
         address=imu_cfg["address"] if imu_cfg["address"] in possible else None,
     )
     return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth, effects)
+
+
+def sim_thermal(seed: int, model: str, temperature: str | None, self_heating: str | None,
+                power_on_s: float = 0.0) -> dict[str, Any]:
+    """The emulated sensor's thermal truth (``SensorTruth`` keywords): the die temperature
+    (ambient ``temperature``, default 25 °C, plus the self-heating warm-up ``DT[:TAU]``, default
+    :data:`~gyrocal.drivers.emulated.thermal.SELF_HEATING_C` over
+    :data:`~gyrocal.drivers.emulated.thermal.SELF_HEATING_TAU_S`) and the coefficients drawn by
+    ``seed`` within the model's datasheet (:mod:`gyrocal.drivers.emulated.thermal`).
+
+    Raises
+    ------
+    InputError
+        If a profile or the self-heating is malformed (the message shows the forms).
+    """
+    from gyrocal.drivers.emulated import thermal
+
+    try:
+        ambient = thermal.parse_ambient("25" if temperature is None else temperature)
+    except ValueError as exc:
+        raise InputError(f"--sim-temperature: {exc}") from None
+    heat = [thermal.SELF_HEATING_C, thermal.SELF_HEATING_TAU_S]
+    if self_heating is not None:
+        try:
+            given = [float(x) for x in self_heating.split(":")]
+            if not 1 <= len(given) <= 2:
+                raise ValueError
+        except ValueError:
+            raise InputError(f"--sim-self-heating {self_heating!r}: use DT or DT:TAU (°C above "
+                             "ambient, time constant in s; e.g. 4:180)") from None
+        heat[:len(given)] = given
+    try:
+        die = thermal.DieTemperature(ambient, heat[0], heat[1], power_on_s)
+        coeffs = thermal.draw_thermal_coefficients(seed, model)
+    except ValueError as exc:
+        raise InputError(f"--sim-self-heating: {exc}") from None
+    return {"temperature_c": die, "reference_temperature_c": 25.0,
+            **{k: tuple(v) for k, v in coeffs.items()}}
 
 
 #: ``--sim-fault`` kinds: what each takes, what it does.

@@ -150,10 +150,13 @@ class SensorTruth:
     The calibration model is the paper's Eq. 1, ``g = scale ∘ (m + bias)``, with ``g`` the true
     rate and ``m`` the reading (both rad/s). The emulated chip therefore reads
 
-    ``m = (misalignment @ g) / scale − bias(T) + n``,  elementwise per axis,
+    ``m = (misalignment @ g) / scale(T) − bias(T) + n``,  elementwise per axis,
 
-    with ``bias(T) = bias + bias_temp_coeff_rad_s_per_c · (T − reference_temperature_c)`` at the
-    chip temperature ``T``, and white noise ``n`` of per-sample standard deviation
+    with ``bias(T) = bias + bias_temp_coeff_rad_s_per_c · dT + bias_temp_quad_rad_s_per_c2 · dT²``
+    and ``scale(T) = scale · (1 + scale_temp_coeff_per_c · dT)``, ``dT = T − reference_
+    temperature_c`` at the chip temperature ``T`` (issue 13; drivers.emulated.thermal draws
+    datasheet-range coefficients and the die temperature), and white noise ``n`` of per-sample
+    standard deviation
     ``σ = noise_density_rad_s_sqrt_hz · sqrt(odr_hz)`` (the angle-random-walk convention: the
     mean of the samples over ``τ`` seconds then has deviation ``density / sqrt(τ)``), or
     ``noise_sigma_rad_s`` when given. ``m`` is then divided by the datasheet sensitivity,
@@ -175,6 +178,10 @@ class SensorTruth:
         Per-sample noise standard deviation, overriding the density.
     bias_temp_coeff_rad_s_per_c : float or (3,)
         Bias change per °C.
+    bias_temp_quad_rad_s_per_c2 : float or (3,)
+        Quadratic bias change per °C².
+    scale_temp_coeff_per_c : float or (3,)
+        Relative scale change per °C.
     reference_temperature_c : float
         Temperature at which the bias is ``bias``.
     temperature_c : float or callable
@@ -195,6 +202,8 @@ class SensorTruth:
     temperature_c: float | Callable[[np.ndarray], np.ndarray] = 25.0
     clock_ppm: float = 0.0
     realism: SensorRealism = SensorRealism()
+    bias_temp_quad_rad_s_per_c2: Any = (0.0, 0.0, 0.0)
+    scale_temp_coeff_per_c: Any = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -218,6 +227,8 @@ class SensorTruth:
             "bias_temp_coeff_rad_s_per_c",
             _vec3("bias_temp_coeff_rad_s_per_c", self.bias_temp_coeff_rad_s_per_c),
         )
+        for name in ("bias_temp_quad_rad_s_per_c2", "scale_temp_coeff_per_c"):
+            put(self, name, _vec3(name, getattr(self, name)))
         if not (math.isfinite(self.clock_ppm) and self.clock_ppm > -1e6):  # a positive rate
             raise ValueError(f"clock_ppm must be finite and above -1e6, got {self.clock_ppm!r}")
         if not callable(self.temperature_c) and not math.isfinite(self.temperature_c):
@@ -229,6 +240,8 @@ class SensorTruth:
         put(self, "_bias_a", np.asarray(self.bias))
         put(self, "_mis_t", np.asarray(self.misalignment).T.copy())
         put(self, "_coeff_a", np.asarray(self.bias_temp_coeff_rad_s_per_c))
+        put(self, "_quad_a", np.asarray(self.bias_temp_quad_rad_s_per_c2))
+        put(self, "_scale_tc_a", np.asarray(self.scale_temp_coeff_per_c))
 
     def sigma_rad_s(self, odr_hz: float) -> np.ndarray:
         """Per-sample noise standard deviation (3,) at output data rate ``odr_hz``."""
@@ -246,18 +259,45 @@ class SensorTruth:
     def bias_at(self, temperature_c: np.ndarray) -> np.ndarray:
         """Bias (N, 3) in rad/s at the given temperatures."""
         dt = np.asarray(temperature_c, dtype=float)[:, None] - self.reference_temperature_c
-        return self._bias_a + self._coeff_a * dt  # type: ignore[attr-defined]
+        return self._bias_a + (self._coeff_a + self._quad_a * dt) * dt  # type: ignore[attr-defined]
+
+    def scale_at(self, temperature_c: np.ndarray) -> np.ndarray:
+        """Scale (N, 3) at the given temperatures."""
+        dt = np.asarray(temperature_c, dtype=float)[:, None] - self.reference_temperature_c
+        return self._scale_a * (1.0 + self._scale_tc_a * dt)  # type: ignore[attr-defined]
 
     def reading(self, omega: np.ndarray, temperature_c: np.ndarray) -> np.ndarray:
         """The noiseless reading ``m`` (N, 3) in rad/s for true rates ``omega`` (N, 3)."""
-        mis_t, scale = self._mis_t, self._scale_a  # type: ignore[attr-defined]
-        return (np.asarray(omega) @ mis_t) / scale - self.bias_at(temperature_c)
+        mis_t = self._mis_t  # type: ignore[attr-defined]
+        return (np.asarray(omega) @ mis_t) / self.scale_at(temperature_c) - self.bias_at(
+            temperature_c)
 
     def manifest(self) -> dict[str, list[Any]]:
         """The ``"truth"`` object of a simulated Recording v1 manifest (``misalignment`` in this
         class's convention, rows of the 3×3 matrix)."""
-        return {"scale": list(self.scale), "bias": list(self.bias),
-                "misalignment": [list(r) for r in self.misalignment]}
+        out: dict[str, Any] = {"scale": list(self.scale), "bias": list(self.bias),
+                               "misalignment": [list(r) for r in self.misalignment]}
+        temperature = self.temperature_manifest()
+        if temperature is not None:
+            out["temperature"] = temperature
+        return out
+
+    def temperature_manifest(self) -> dict[str, Any] | None:
+        """``truth.temperature``: the reference, the coefficients and the die temperature's
+        description (issue 13), or None for a sensor without temperature terms at a constant
+        temperature."""
+        coeffs = (self.bias_temp_coeff_rad_s_per_c, self.bias_temp_quad_rad_s_per_c2,
+                  self.scale_temp_coeff_per_c)
+        if not callable(self.temperature_c) and not any(any(c) for c in coeffs):
+            return None
+        die = getattr(self.temperature_c, "manifest", None)
+        return {"reference_c": self.reference_temperature_c,
+                # per axis, ascending powers of (T - reference_c), as Calibration's
+                # temperature_model
+                "bias_coeffs": [list(c) for c in zip(self.bias, *coeffs[:2], strict=True)],
+                "scale_coeff_per_c": list(self.scale_temp_coeff_per_c),
+                "die": die() if die is not None else (
+                    None if callable(self.temperature_c) else float(self.temperature_c))}
 
     def accel_reading(self, force_g: np.ndarray) -> np.ndarray:
         """The accelerometer's reading (N, 3) in g for the true specific force ``force_g``: the

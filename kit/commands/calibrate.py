@@ -69,6 +69,14 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--sim-without", action="append", default=[], metavar="EFFECT",
                    help="turn one realism effect off (repeatable): coloured-noise, dlpf, "
                         "g-sensitivity, gravity, wobble, clock, encoder-latency")
+    p.add_argument("--sim-temperature", metavar="PROFILE",
+                   help="ambient temperature of the emulated sensor, °C: T, ramp:T0:T1:SECONDS "
+                        "or soak:T0:T1:TAU (from power-on). Turns on the die's self-heating "
+                        "warm-up and temperature coefficients drawn by seed within the "
+                        "datasheet (default: a constant 25 °C, no temperature terms)")
+    p.add_argument("--sim-self-heating", metavar="DT[:TAU]",
+                   help="self-heating of the emulated die above ambient, °C, and its time "
+                        "constant, s (default 4:180; turns the thermal sensor on too)")
     p.add_argument("--realtime", action="store_true",
                    help="run the emulated jig on the wall clock (a demonstration)")
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
@@ -188,7 +196,9 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
         sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
                         realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
                         cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis,
-                        realism=sim_effects(args))
+                        realism=sim_effects(args),
+                        temperature=getattr(args, "sim_temperature", None),
+                        self_heating=getattr(args, "sim_self_heating", None))
         if sim_imu:
             g = cfg["gimbal"]
             return sim, sim.clock, g["port"], g["baud"], sim.imu_bus

@@ -228,6 +228,14 @@ def _build_tracker(
             axis_std = math.radians(max(stds))
     st = _settings(args, odr, n_density, k, axis_std)
     if cal is not None:
+        from dataclasses import replace
+
+        from gyrocal.kit.thermal import tracker_tempco
+
+        prior = tracker_tempco(cal) if st.temperature_model else None
+        if prior is not None:  # issue 13: the thermal model seeds the coefficient
+            st = replace(st, tempco=prior[0], tempco_std=prior[1])
+            notes.append("temperature coefficient seeded from the calibration's thermal model")
         try:
             return BiasTracker(st, cal, keep_states=keep_states), cal
         except ValueError as exc:

@@ -35,9 +35,15 @@ def _profile(t, speed, turns, accel):
 
 def write_recording(path, *, scale=(1.01, 0.99, 1.02), bias=(0.01, -0.02, 0.005), odr=200.0,
                     speed=np.pi, turns=2, accel=10.0, rest=1.0, noise=0.005, seed=0,
-                    gyro_unit=1.0, angle_unit=1.0):
+                    gyro_unit=1.0, angle_unit=1.0, thermal=None):
     """Write a Recording v1 directory; ``gyro_unit``/``angle_unit`` scale the written gyro
-    readings / encoder angles (180/π writes °/s / degrees: the unit mistakes)."""
+    readings / encoder angles (180/π writes °/s / degrees: the unit mistakes).
+
+    ``thermal`` (optional) makes the sensor temperature-dependent: a dict with ``die`` (die
+    temperature in °C as a function of time, vectorised), ``t0`` (the recording's start on that
+    time axis), ``bias_coeffs`` (3 × (p+1): per axis, ascending powers of T − 25 °C; they
+    replace ``bias``) and ``scale_coeff`` (3: relative scale change per °C). The temp column
+    then carries the die temperature."""
     rng = np.random.default_rng(seed)
     path = Path(path)
     path.mkdir(parents=True)
@@ -61,11 +67,18 @@ def write_recording(path, *, scale=(1.01, 0.99, 1.02), bias=(0.01, -0.02, 0.005)
             ang = np.where(ts >= t0, ang, 0.0)
             true[:, motor - 1] += d * rate
             angles[:, motor - 1] += d * ang
+    temp = np.full(ts.size, 25.0)
+    if thermal is not None:
+        temp = np.asarray(thermal["die"](thermal["t0"] + ts), dtype=float)
+        d = (temp - 25.0)[:, None]
+        c = np.asarray(thermal["bias_coeffs"], dtype=float)
+        b = sum(c[:, i] * d**i for i in range(c.shape[1]))
+        k = k * (1.0 + np.asarray(thermal["scale_coeff"], dtype=float) * d)
     m = true / k - b + noise * rng.standard_normal(true.shape)
     with open(path / "imu.csv", "w") as f:
         f.write("t,gx,gy,gz,temp\n")
-        for ti, row in zip(ts, m * gyro_unit, strict=True):
-            f.write(f"{ti:.6f},{row[0]:.7g},{row[1]:.7g},{row[2]:.7g},25.0\n")
+        for ti, row, tc in zip(ts, m * gyro_unit, temp, strict=True):
+            f.write(f"{ti:.6f},{row[0]:.7g},{row[1]:.7g},{row[2]:.7g},{tc:.4f}\n")
     with open(path / "encoder.csv", "w") as f:
         f.write("t,motor,angle\n")
         q = np.round(angles / TICK) * TICK * angle_unit

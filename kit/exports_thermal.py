@@ -1,0 +1,163 @@
+"""Exports of a calibration's temperature model to the flight stacks (issue 13).
+
+Both stacks correct only the gyro's bias against temperature; neither has a gyro scale factor or
+cross-axis matrix, so those parts of the calibration are not carried (a note says so).
+
+PX4 (``--format px4-thermal``), parameters ``TC_G<n>_*`` of the thermal compensation
+(PX4-Autopilot ``src/modules/temperature_compensation``; ``TemperatureCompensation::
+calc_thermal_offsets_3D`` and ``Gyroscope::Correct``):
+
+    ``offset = X0 + X1·dT + X2·dT² + X3·dT³``, ``dT = clamp(T, TMIN, TMAX) − TREF``,
+    ``corrected = raw − offset − CAL_GYRO<n>_?OFF``  (rad/s).
+
+gyrocal's model reads ``raw + b(T)``, so ``X_k = −c_k`` with ``TREF`` the model's reference and
+``TMIN``/``TMAX`` its covered range. Written as a QGroundControl parameter file.
+
+ArduPilot (``--format ardupilot-thermal``), ``INS_TCAL<n>_*`` (``AP_InertialSensor_tempcal.cpp``,
+``TCal::correct_sensor``, and ``AP_InertialSensor_Backend::_rotate_and_correct_gyro``):
+
+    ``P(x) = (GYR1 + (GYR2 + GYR3·x)·x)·x · 1e-6``,  ``T`` and ``CALTEMP`` clamped to
+    ``[TMIN, TMAX]``,
+    ``corrected = raw − P(T − 35) + P(CALTEMP − 35) − INS_GYROFFS``  (rad/s; 35 °C is the fixed
+    ``TEMP_REFERENCE``).
+
+gyrocal's ``b(T)`` is re-expanded in powers of ``T − 35``; ``GYRk = −e_k·1e6`` (no constant
+term), ``INS_GYR<n>_CALTEMP`` the model's reference and ``INS_GYROFFS`` (``INS_GYR<n>OFFS`` for
+n > 1) ``−b(reference)``. Written as a Mission Planner parameter file (``NAME,VALUE``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.exports import Exporter, ExportOption, register
+
+__all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "px4_params"]
+
+#: ArduPilot's fixed reference temperature of INS_TCALn (AP_InertialSensor_tempcal.cpp).
+ARDUPILOT_TEMP_REFERENCE_C = 35.0
+_ARDUPILOT_SCALE = 1.0e6  # its SCALE_FACTOR: the coefficients are stored times 1e6
+_MAV_INT32, _MAV_REAL32 = 6, 9  # MAV_PARAM_TYPE
+_NOT_CARRIED = ("{stack} corrects only the gyro's bias against temperature: the calibration's "
+                "scale{matrix} is not in these parameters; apply it elsewhere or accept the "
+                "scale error")
+
+
+def _model(doc: Mapping[str, Any], fmt: str) -> Any:
+    from gyrocal.calib.model import GyroCalibration
+
+    cal = GyroCalibration.from_dict(doc)
+    if cal.temperature_model is None:
+        raise InputError(f"--format {fmt} needs a calibration with a temperature_model; fit one "
+                         "with 'gyrocal thermal'")
+    return cal
+
+
+def px4_params(cal: Any, instance: int = 0, device_id: int = 0) -> list[tuple[str, float, int]]:
+    """PX4's ``TC_G<instance>_*`` (and ``TC_G_ENABLE``) for ``cal``'s temperature model:
+    ``(name, value, MAV_PARAM_TYPE)``."""
+    tm = cal.temperature_model
+    p = f"TC_G{instance}_"
+    out: list[tuple[str, float, int]] = [("TC_G_ENABLE", 1, _MAV_INT32),
+                                         (p + "ID", device_id, _MAV_INT32),
+                                         (p + "TMIN", tm.range_c[0], _MAV_REAL32),
+                                         (p + "TMAX", tm.range_c[1], _MAV_REAL32),
+                                         (p + "TREF", tm.reference_c, _MAV_REAL32)]
+    for k in range(4):
+        for axis in range(3):
+            c = float(tm.bias_coeffs[axis, k]) if k <= tm.bias_order else 0.0
+            out.append((f"{p}X{k}_{axis}", -c, _MAV_REAL32))
+    return out
+
+
+def _about(reference: float, coeffs: Any, order: int) -> list[float]:
+    """Coefficients of ``Σ c_k u^k`` (``u = T − reference``) in powers of ``x = T − 35``."""
+    s = ARDUPILOT_TEMP_REFERENCE_C - reference  # u = x + s
+    e = [0.0] * 4
+    for k in range(order + 1):
+        for j in range(k + 1):
+            e[j] += float(coeffs[k]) * math.comb(k, j) * s ** (k - j)
+    return e
+
+
+def ardupilot_params(cal: Any, imu: int = 1) -> list[tuple[str, float]]:
+    """ArduPilot's ``INS_TCAL<imu>_*``, gyro offsets and calibration temperature for ``cal``'s
+    temperature model."""
+    tm = cal.temperature_model
+    t = f"INS_TCAL{imu}_"
+    offs = "INS_GYROFFS_" if imu == 1 else f"INS_GYR{imu}OFFS_"
+    st = tm.at(tm.reference_c)
+    out: list[tuple[str, float]] = [(t + "ENABLE", 1), (t + "TMIN", tm.range_c[0]),
+                                    (t + "TMAX", tm.range_c[1])]
+    e = [_about(tm.reference_c, tm.bias_coeffs[axis], tm.bias_order) for axis in range(3)]
+    for k in (1, 2, 3):
+        for axis, name in enumerate("XYZ"):
+            out.append((f"{t}GYR{k}_{name}", -e[axis][k] * _ARDUPILOT_SCALE))
+    out.append((f"INS_GYR{imu}_CALTEMP", tm.reference_c))
+    for axis, name in enumerate("XYZ"):
+        out.append((offs + name, -float(st.bias[axis])))
+    return out
+
+
+def _check_index(value: Any, lo: int, hi: int, what: str) -> int:
+    v = lo if value is None else value
+    if not lo <= v <= hi:
+        raise InputError(f"--imu-index {v} is outside {lo}..{hi} for {what}")
+    return int(v)
+
+
+def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    cal = _model(doc, "px4-thermal")
+    inst = _check_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
+    dev = options.get("device_id")
+    rows = px4_params(cal, inst, 0 if dev is None else int(dev))
+    lines = ["# Onboard parameters for Vehicle 1",
+             "# gyro thermal compensation written by gyrocal from a temperature_model",
+             "#",
+             "# Vehicle-Id Component-Id Name Value Type"]
+    for name, value, kind in rows:
+        text = str(int(value)) if kind == _MAV_INT32 else f"{value + 0.0:.9g}"
+        lines.append(f"1\t1\t{name}\t{text}\t{kind}")
+    notes = [_NOT_CARRIED.format(stack="PX4", matrix=" and cross-axis matrix" if cal.is_full
+                                 else ""),
+             f"the whole bias is in TC_G{inst}_X0_*: set CAL_GYRO{inst}_XOFF/YOFF/ZOFF to 0, or "
+             "the bias is removed twice"]
+    if dev is None:
+        notes.append(f"TC_G{inst}_ID is 0: set it to the gyro's device ID (CAL_GYRO{inst}_ID on "
+                     "the vehicle) with --device-id, or PX4 will not use these parameters")
+    return "\n".join(lines) + "\n", notes
+
+
+def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
+                      ) -> tuple[str, list[str]]:
+    cal = _model(doc, "ardupilot-thermal")
+    imu = _check_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_TCAL1..3")
+    lines = ["# ArduPilot gyro temperature calibration written by gyrocal from a "
+             "temperature_model"]
+    lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_params(cal, imu)]
+    notes = [_NOT_CARRIED.format(stack="ArduPilot", matrix=" and cross-axis matrix"
+                                 if cal.is_full else ""),
+             "with INS_GYR_CAL = 1 (the default) ArduPilot re-measures the gyro offsets at "
+             "every boot and overwrites INS_GYROFFS and the CALTEMP; the temperature terms then "
+             "still apply about the boot temperature"]
+    return "\n".join(lines) + "\n", notes
+
+
+_INDEX = ExportOption("imu_index", int, "px4-thermal / ardupilot-thermal: which gyro (PX4 "
+                                        "TC_Gn: 0-3, default 0; ArduPilot INS_TCALn: 1-3, "
+                                        "default 1)")
+register(Exporter(
+    name="px4-thermal", accepts=("gyrocal-calibration",),
+    description="PX4 gyro thermal compensation parameters TC_Gn_* (QGroundControl .params)",
+    render=_render_px4, suffix=".params",
+    options=(_INDEX, ExportOption("device_id", int, "px4-thermal: the gyro's device ID for "
+                                                    "TC_Gn_ID (CAL_GYROn_ID on the vehicle)")),
+))
+register(Exporter(
+    name="ardupilot-thermal", accepts=("gyrocal-calibration",),
+    description="ArduPilot gyro temperature calibration INS_TCALn_* (Mission Planner .param)",
+    render=_render_ardupilot, suffix=".param", options=(_INDEX,),
+))
