@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy.special import chdtrc  # χ² tail without scipy.stats' import cost
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.model import LIMITS, Consistency, _array, _number, _refuse_unknown
@@ -411,6 +411,11 @@ def fit_thermal(
         mask = np.eye(3, dtype=bool) if diagonal else np.ones((3, 3), dtype=bool)
         g_coeffs, g_std = np.zeros((2, 3, 3)), np.zeros((2, 3, 3))
         for i, k in zip(*np.nonzero(mask), strict=True):
+            if np.all(s[:, i, k] == 0) and np.ptp(g[:, i, k]) == 0:
+                # an entry the frame convention fixes (Calibration v2's ``frame``): exact and
+                # the same in every calibration, so it has no temperature terms to fit
+                g_coeffs[0, i, k] = g[0, i, k]
+                continue
             var = _positive_var(s[:, i, k], f"gain_std[{i}][{k}]")
             c, cv, ch = _wls(x, g[:, i, k], var, 1)
             g_coeffs[:, i, k], g_std[:, i, k] = c, np.sqrt(np.diag(cv))
@@ -420,7 +425,7 @@ def fit_thermal(
 
     consistency = None
     if dof > 0:
-        pv = float(stats.chi2.sf(chi2, dof))
+        pv = float(chdtrc(dof, chi2))
         consistency = Consistency(chi2=float(chi2), dof=int(dof), p_value=pv, ok=pv >= _ALPHA)
         if not consistency.ok:  # Birge ratio: the scatter, not the stated σ, sets the error
             birge = chi2 / dof

@@ -74,9 +74,8 @@ class SimJig:
             "g-sensitivity": {
                 "matrix_rad_s_per_g": [list(x) for x in r.g_sensitivity_rad_s_per_g],
                 # what it adds to the bias in the home pose, where a calibration's rests are
-                "home_bias_shift_rad_s": (np.asarray(r.g_sensitivity_rad_s_per_g) @ self.chip
-                                          ._specific_force(np.array([self.jig.home_time]))[0]
-                                          ).tolist()},
+                "home_bias_shift_rad_s": (np.asarray(r.g_sensitivity_rad_s_per_g)
+                                          @ self.jig.home_gravity()).tolist()},
             "gravity": {"lever_arm_m": self.jig.lever_arm_m.tolist()},
             "wobble": {"amplitude_rad": self.jig.wobble_rad,
                        "axes": self.jig.wobble_axes.tolist()},

@@ -327,6 +327,13 @@ class GimbalJig:
             out[:, i, :] = np.einsum("nji,nj->ni", r_sensor, a_base)
         return out
 
+    def home_gravity(self) -> np.ndarray:
+        """Gravity in the sensor frame in the home pose, in g: ``R_homeᵀ (0, 0, 1)`` from the
+        joints' home angles (no motor history needed, so it holds however long the jig ran)."""
+        home = self._sensor_orientation(self._chain(self.home_angles[None, :])[-1],
+                                        np.array([self.home_time]))
+        return home[0, 2, :]
+
     def specific_force(self, t: np.ndarray, dt: float = 2e-4) -> np.ndarray:
         """The specific force at the sensor in its own frame, in g, shape (N, 3): gravity
         ``R_sensorᵀ (0, 0, 1)`` plus ``(α × r + ω × (ω × r)) / g₀`` with ``r`` the lever arm

@@ -145,7 +145,8 @@ def test_a_failed_check_repeats_the_turn_once_and_the_run_still_calibrates(tmp_p
     # is reversed, rested and repeated, and the repeat is clean.
     # (the diagonal protocol, whose timings these are; --protocol auto)
     code = main(["calibrate", "--sim", "--out", str(tmp_path), "--sim-fault",
-                 "stall:2:11:0.9:3", "--json", "--protocol", "auto", "--sim-cross-axis", "0"])
+                 "stall:2:11:0.9:3", "--json", "--protocol", "auto", "--sim-cross-axis", "0",
+                 *PAPER_SENSOR])
     captured = capsys.readouterr()
     assert "servo 2 held only" in captured.err and "repeating once" in captured.err
     assert code == 0, captured.err

@@ -29,7 +29,8 @@ def run_dir(tmp_path_factory):
     # (the full model's posed turns are tested on the shared default run below).
     d = tmp_path_factory.mktemp("report") / "run"
     assert main(["calibrate", "--sim", "--sim-seed", "11", "--protocol", "auto",
-                 "--sim-cross-axis", "0", "--sim-realism", "off", "--out", str(d), "--quiet"]) in (0, 3)
+                 "--sim-cross-axis", "0", "--sim-realism", "off", "--out", str(d),
+                 "--quiet"]) in (0, 3)
     return d
 
 

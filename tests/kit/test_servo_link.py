@@ -130,7 +130,7 @@ def _calibrate(tmp_path: Path, *extra: str) -> int:
     cfg = tmp_path / "g.toml"
     cfg.write_text(SHORT)
     return main(["calibrate", "--sim", "--config", str(cfg), "--out", str(tmp_path / "out"),
-                 "--quiet", "--no-report", "--json", *extra])
+                 "--quiet", "--no-report", "--json", "--sim-realism", "off", *extra])
 
 
 def _servos(tmp_path: Path) -> dict:

@@ -179,7 +179,7 @@ def _turns_run(capsys, tmp_path, cal_path):
                  "1", "--turn-every", "3", "--turn-speed-dps", "120", "--cal", str(cal_path),
                  "--out", str(out_json), "--rows", "2",
                  # the paper's sensor: the tracker applies only the scale (issue 14's fix pending)
-                 "--sim-cross-axis", "0"])
+                 "--sim-cross-axis", "0", "--sim-realism", "off"])
     out, err = capsys.readouterr()
     assert code == 0, err
     counts = re.search(r"(\d+) zero-rate, (\d+) reference-rate", out)
