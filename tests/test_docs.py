@@ -333,7 +333,7 @@ def run_document(path: Path, workdir: Path) -> DocRun:
                 for argv in commands:
                     if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
                         argv = [*argv, "--sim"]
-                    if "--sim" in argv and needs_jig(argv) and "--sim-realism" not in argv:
+                    if "--sim" in argv and "--sim-realism" not in argv:
                         # the documents' figures are the paper's sensor; what the realism
                         # effects cost (g-sensitivity fails the χ² test) is bench realism's
                         argv = [*argv, "--sim-realism", "off"]
