@@ -15,6 +15,11 @@ otherwise tilt the line (recordings shorter than three times ``settle_s`` use ev
 The refit is applied only where its assumptions hold: samples at a fixed period (every step a whole
 number of periods within a third of a period) and residuals of the fit small against the period.
 Otherwise the recorded times are kept.
+
+The refit works through the stream a block at a time (steps, normal equations of the fit in a
+basis scaled to [-1, 1], the fitted times written over the sample indices), so that besides its
+input it holds only its output: an hour at 1 kHz is 3.6 million samples, and a whole-stream
+least-squares fit would hold about ten arrays of that length at once.
 """
 
 from __future__ import annotations
