@@ -1,7 +1,7 @@
 """Long recordings: what reading a Recording v1 and the analysis commands cost in CPU and memory.
 
-``python -m bench longrec`` (``--quick``: 1 and 10 minutes at 200 Hz only; ``--size MINxHZ``,
-repeatable, e.g. ``--size 60x1000``: those sizes only). Each recording is
+``python -m bench longrec`` (``--quick``: 1 and 10 minutes at 200 Hz only; ``--size=MINxHZ``,
+repeatable, e.g. ``--size=60x1000``: those sizes only). Each recording is
 written by ``gyrocal simulate-recording`` (streamed, bounded memory; its own CPU and peak memory
 are a column) with enough turns and long rests to last 1, 10 and 60 minutes at 200 Hz and 10
 and 60 minutes at 1 kHz. Each measurement runs in its own process (CPU seconds user+system and
@@ -150,13 +150,13 @@ def _old_modules(work: Path) -> list[str] | None:
 
 def _sizes(argv: list[str]) -> tuple[tuple[int, int], ...]:
     """The recording sizes (minutes, Hz) the arguments ask for."""
-    if "--size" in argv:
-        picked = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--size"]
+    picked = [a.split("=", 1)[1] for a in argv if a.startswith("--size=")]
+    if picked:
         try:
             return tuple((int(m), int(hz)) for m, hz in (p.split("x") for p in picked))
         except ValueError:
             raise SystemExit(
-                f"bench longrec: --size wants MINxHZ, e.g. 60x1000; got {picked}") from None
+                f"bench longrec: --size wants MINxHZ, e.g. --size=60x1000; got {picked}") from None
     return SIZES_QUICK if "--quick" in argv else SIZES_FULL
 
 
