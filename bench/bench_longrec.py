@@ -1,6 +1,7 @@
 """Long recordings: what reading a Recording v1 and the analysis commands cost in CPU and memory.
 
-``python -m bench longrec`` (``--quick``: 1 and 10 minutes at 200 Hz only). Each recording is
+``python -m bench longrec`` (``--quick``: 1 and 10 minutes at 200 Hz only; ``--size=MINxHZ``,
+repeatable, e.g. ``--size=60x1000``: those sizes only). Each recording is
 written by ``gyrocal simulate-recording`` (streamed, bounded memory; its own CPU and peak memory
 are a column) with enough turns and long rests to last 1, 10 and 60 minutes at 200 Hz and 10
 and 60 minutes at 1 kHz. Each measurement runs in its own process (CPU seconds user+system and
@@ -9,6 +10,8 @@ peak resident memory from ``getrusage`` of the child):
 * the reader before issue 16 (``kit/recording.py`` of commit ``BEFORE``, from git history), the
   numpy block reader (``GYROCAL_CSV_PARSER=numpy``) and the default (pandas' parser when the
   ``fast`` extra is installed and the file is large);
+* ``gyrocal estimate`` before its memory fix (today's code with the modules
+  :data:`ESTIMATE_BEFORE` names as they were at its commit) and now;
 * ``gyrocal estimate``, ``noise --json`` (streamed), ``track --json`` and ``report`` with the
   default parser (``report`` only with matplotlib, and only up to 10 minutes: its plots of
   every sample dominate and are not issue 16's subject).
@@ -33,6 +36,9 @@ from bench.table import print_table
 
 #: The commit whose ``kit/recording.py`` is the reader before issue 16.
 BEFORE = "2b3e916"
+#: The commit before the estimate's memory fix (issue 16: the gyro time refit held ten
+#: stream-sized temporaries) and the modules that fix changed.
+ESTIMATE_BEFORE = ("bb53b79", ("calib/timebase.py",))
 SIZES_FULL = ((1, 200), (10, 200), (60, 200), (10, 1000), (60, 1000))
 SIZES_QUICK = ((1, 200), (10, 200))
 #: Longest recording ``report`` is run on, minutes.
@@ -50,6 +56,26 @@ rec = load_recording(sys.argv[1])
 cpu = time.process_time() - t0
 ru = resource.getrusage(resource.RUSAGE_SELF)
 print(cpu, ru.ru_maxrss * 1024, rec.imu_t.size, rec.enc_t.size)
+"""
+
+#: Runs ``python -m gyrocal.kit ARGS`` with modules replaced by older files:
+#: ``-c OLD_MODULES DIR PATH,PATH -- ARGS`` (PATH relative to the repository, e.g.
+#: calib/timebase.py, read from DIR/PATH).
+OLD_MODULES = """
+import importlib.util, runpy, sys
+from pathlib import Path
+import gyrocal.calib, gyrocal.kit, gyrocal.drivers
+top, paths, args = Path(sys.argv[1]), sys.argv[2].split(","), sys.argv[4:]
+for path in paths:
+    name = "gyrocal." + path[:-3].replace("/", ".")
+    spec = importlib.util.spec_from_file_location(name, top / path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    parent, _, leaf = name.rpartition(".")
+    setattr(sys.modules[parent], leaf, mod)
+sys.argv = ["gyrocal", *args]
+runpy.run_module("gyrocal.kit", run_name="__main__")
 """
 
 WRAPPER = ("import resource, subprocess, sys\n"
@@ -107,13 +133,40 @@ def _wall(argv: list[str], runs: int = 5) -> float:
     return statistics.median(times)
 
 
+def _old_modules(work: Path) -> list[str] | None:
+    """The command prefix running gyrocal with :data:`ESTIMATE_BEFORE`'s modules (None without
+    git history)."""
+    commit, paths = ESTIMATE_BEFORE
+    top = work / f"modules-{commit}"
+    for path in paths:
+        old = subprocess.run(["git", "show", f"{commit}:{path}"], capture_output=True, text=True,
+                             cwd=Path(__file__).resolve().parent.parent)
+        if old.returncode != 0:
+            return None
+        (top / path).parent.mkdir(parents=True, exist_ok=True)
+        (top / path).write_text(old.stdout)
+    return [sys.executable, "-c", OLD_MODULES, str(top), ",".join(paths), "--"]
+
+
+def _sizes(argv: list[str]) -> tuple[tuple[int, int], ...]:
+    """The recording sizes (minutes, Hz) the arguments ask for."""
+    picked = [a.split("=", 1)[1] for a in argv if a.startswith("--size=")]
+    if picked:
+        try:
+            return tuple((int(m), int(hz)) for m, hz in (p.split("x") for p in picked))
+        except ValueError:
+            raise SystemExit(
+                f"bench longrec: --size wants MINxHZ, e.g. --size=60x1000; got {picked}") from None
+    return SIZES_QUICK if "--quick" in argv else SIZES_FULL
+
+
 def _cell(cpu: float, rss: float, rc: int) -> str:
     return f"{cpu:.2f} s / {rss:.0f} MiB" + ("" if rc == 0 else f" (exit {rc})")
 
 
 def main(argv: list[str]) -> None:
     """Generate the recordings, measure, print the tables."""
-    sizes = SIZES_QUICK if "--quick" in argv else SIZES_FULL
+    sizes = _sizes(argv)
     have_plot = importlib.util.find_spec("matplotlib") is not None
     have_fast = importlib.util.find_spec("pandas") is not None
     work = Path(tempfile.mkdtemp(prefix="gyrocal-longrec-"))
@@ -124,6 +177,7 @@ def main(argv: list[str]) -> None:
         have_old = old.returncode == 0
         if have_old:
             (work / "old_recording.py").write_text(old.stdout)
+        before = _old_modules(work)
         read_rows, cmd_rows = [], []
         wall_rec = None
         for minutes, odr in sizes:
@@ -145,6 +199,8 @@ def main(argv: list[str]) -> None:
                               f"{new_cpu:.2f} s / {new_rss:.0f} MiB", *old_cols[1:],
                               f"{new_cpu / n_rows * 1e6:.2f}"])
             cells = [label, _cell(*sim)]
+            cells.append(_cell(*_command([*before, "estimate", str(rec)])) if before
+                         else "(no git)")
             cells.append(_cell(*_command(_gyrocal("estimate", str(rec)))))
             cells.append(_cell(*_command(_gyrocal("noise", str(rec), "--json"))))
             cells.append(_cell(*_command(_gyrocal("track", str(rec), "--json"))))
@@ -167,7 +223,8 @@ def main(argv: list[str]) -> None:
             "(CPU s user+system / peak RSS)",
         )
         print_table(
-            ["recording", "simulate-recording", "estimate", "noise --json", "track --json",
+            ["recording", "simulate-recording", f"estimate {ESTIMATE_BEFORE[0]}", "estimate",
+             "noise --json", "track --json",
              "report"], cmd_rows,
             "Commands on the same recordings, default parser (CPU s user+system / peak RSS)",
         )

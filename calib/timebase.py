@@ -15,6 +15,11 @@ otherwise tilt the line (recordings shorter than three times ``settle_s`` use ev
 The refit is applied only where its assumptions hold: samples at a fixed period (every step a whole
 number of periods within a third of a period) and residuals of the fit small against the period.
 Otherwise the recorded times are kept.
+
+The refit works through the stream a block at a time (steps, normal equations of the fit in a
+basis scaled to [-1, 1], the fitted times written over the sample indices), so that besides its
+input it holds only its output: an hour at 1 kHz is 3.6 million samples, and a whole-stream
+least-squares fit would hold about ten arrays of that length at once.
 """
 
 from __future__ import annotations
@@ -70,27 +75,80 @@ def refit_sample_times(
     fit : TimebaseFit
     """
     t = np.asarray(t, dtype=float)
-    if t.size < 50:
+    n = t.size
+    if n < 50:
         return t, TimebaseFit(False, float("nan"), float("nan"), "too few samples")
-    d = np.diff(t)
-    period = float(np.median(d))
+    d = np.subtract(t[1:], t[:-1])
+    period = float(np.median(d, overwrite_input=True))  # d is only needed for its median
+    del d
     if not period > 0:
         return t, TimebaseFit(False, period, float("nan"), "timestamps do not increase")
-    steps = d / period
-    whole = np.rint(steps)
-    if np.any(whole < 1) or np.max(np.abs(steps - whole)) > 1 / 3:
+    out = _sample_indices(t, period)
+    if out is None:
         return t, TimebaseFit(False, period, float("nan"),
                               "steps are not whole periods: not a fixed-rate stream")
-    i = np.concatenate([[0.0], np.cumsum(whole)])
-    x = i / i[-1]  # scaled for conditioning
-    settled = (t - t[0]) >= settle_s
-    if t[-1] - t[0] < 3 * settle_s:
-        settled[:] = True
-    coeffs = np.polynomial.polynomial.polyfit(x[settled], t[settled], degree)
-    fitted = np.polynomial.polynomial.polyval(x, coeffs)
-    resid = (t - fitted)[settled]
-    rms = float(np.sqrt(np.mean(resid**2)))
-    p0 = float(coeffs[1] / i[-1])
+    # t is now known to increase; the settled samples are a suffix.
+    first = 0 if t[-1] - t[0] < 3 * settle_s else int(np.searchsorted(t, t[0] + settle_s))
+    coeffs = _fit_suffix(out, t, first, degree)
+    last = float(out[-1])
+    rms = _evaluate(out, t, first, coeffs)  # out: sample indices -> fitted times
+    # The period at the first sample: d fitted / d i at i = 0 (u = -1).
+    p0 = float(np.polynomial.polynomial.polyval(
+        -1.0, np.polynomial.polynomial.polyder(coeffs)) * 2.0 / last)
     if rms > period / 4:
         return t, TimebaseFit(False, p0, rms, "residuals too large for a fixed-rate stream")
-    return fitted, TimebaseFit(True, p0, rms)
+    return out, TimebaseFit(True, p0, rms)
+
+
+#: Samples handled at once by the refit's passes (bounded temporaries: the refit holds only its
+#: input and its output, whatever the stream's length).
+_BLOCK = 1 << 18
+
+
+def _sample_indices(t: np.ndarray, period: float) -> np.ndarray | None:
+    """Each sample's index ``i`` on the chip's clock (steps rounded to whole periods), or None
+    when a step is not within a third of a whole number of periods (at least one)."""
+    out = np.empty(t.size)
+    out[0] = 0.0
+    for a in range(0, t.size - 1, _BLOCK):
+        b = min(a + _BLOCK, t.size - 1)
+        steps = (t[a + 1:b + 1] - t[a:b]) / period
+        whole = np.rint(steps)
+        if np.any(whole < 1) or np.max(np.abs(steps - whole)) > 1 / 3:
+            return None
+        out[a + 1:b + 1] = whole
+    return np.cumsum(out, out=out)
+
+
+def _unit(i: np.ndarray, last: float) -> np.ndarray:
+    """Sample indices mapped onto [-1, 1] (a well-conditioned polynomial basis)."""
+    return i * (2.0 / last) - 1.0
+
+
+def _fit_suffix(i: np.ndarray, t: np.ndarray, first: int, degree: int) -> np.ndarray:
+    """Least-squares polynomial ``t - t[0] = sum_k c_k u^k`` over samples ``first:``, with ``u``
+    the sample index mapped onto [-1, 1], from normal equations accumulated block by block
+    (their matrix is well conditioned on [-1, 1] for the low degrees used here)."""
+    m = degree + 1
+    gram = np.zeros((m, m))
+    rhs = np.zeros(m)
+    for a in range(first, t.size, _BLOCK):
+        b = min(a + _BLOCK, t.size)
+        v = np.polynomial.polynomial.polyvander(_unit(i[a:b], i[-1]), degree)
+        gram += v.T @ v
+        rhs += v.T @ (t[a:b] - t[0])
+    return np.linalg.solve(gram, rhs)
+
+
+def _evaluate(i: np.ndarray, t: np.ndarray, first: int, coeffs: np.ndarray) -> float:
+    """Overwrite the sample indices ``i`` with the fitted times, block by block (the last
+    block last: the mapping needs ``i[-1]``); return the RMS residual over samples ``first:``."""
+    last = float(i[-1])
+    ss = 0.0
+    for a in range(0, t.size, _BLOCK):
+        b = min(a + _BLOCK, t.size)
+        i[a:b] = t[0] + np.polynomial.polynomial.polyval(_unit(i[a:b], last), coeffs)
+        lo = max(a, first)
+        if lo < b:
+            ss += float(np.sum((t[lo:b] - i[lo:b]) ** 2))
+    return float(np.sqrt(ss / (t.size - first)))
