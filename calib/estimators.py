@@ -1213,7 +1213,7 @@ def full_matrix_batch(
         evaluate, retract, (c, b, u0, z), max_iter=max_iter, xtol=xtol)
     c, b, u0, z = state
     JtJ = J.transpose(0, 2, 1) @ J
-    cov = np.linalg.pinv(JtJ, hermitian=True)
+    cov = _scaled_pinv(JtJ)
     # Observability of the model terms (C, b, axes) by the singular values of the whitened
     # Jacobian with its columns normalised (the still angles always have their priors).
     Jm = J[:, :, : 9 + 2 * S]
@@ -1276,8 +1276,8 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
     stepped state and which runs' steps are admissible. Marquardt's damping scales the
     diagonal of ``JᵀJ`` (floored at 1e-300 so a parameter no residual sees still gets damped).
     A run has converged when an admissible step is below ``xtol`` (times
-    ``step_scale(state)``, per run, when given) or changes the cost by less than ``1e-10``
-    relative, up or down (rounding level).
+    ``step_scale(state)``, per run, when given), changes the cost by less than ``1e-10``
+    relative, up or down (rounding level), or is predicted to lower it by under 1e-6.
     """
     E, J, tb = evaluate(*state, True)
     B, _, P = J.shape
@@ -1306,6 +1306,12 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
         tol = xtol if step_scale is None else xtol * step_scale(state)
         small = np.max(np.abs(step), axis=1) <= tol
         flat = np.abs(cost - cost_new) <= 1e-10 * (1.0 + cost)
+        # The step's predicted decrease of the whitened cost (a χ²): below 1e-6 it moves every
+        # parameter by under a thousandth of its σ, while rounding in residuals whitened by
+        # σ ≈ 1e-10 already makes the cost itself jitter by more than 1e-10 relative.
+        Js = J @ step[..., None]
+        predicted = -(np.einsum("bp,bp->b", g, step) + 0.5 * np.sum(Js[..., 0] ** 2, axis=1))
+        flat |= predicted <= 1e-6
         state = pick(accept, new_state, state)
         lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
         done = active & ok & (small | flat)
