@@ -8,58 +8,13 @@ by central finite differences, the axes eliminated by inverting the whole inform
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from gyrocal.calib.design import full_schedule, score_full_design
 from gyrocal.calib.errors import CalibInputError
-from tests.calib.fullmodel_truth import body_axis
+from tests.calib.fullmodel_truth import body_axis, independent_fisher
 
-TRIL = [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2)]
 POSES_2 = ((1, 2, np.pi / 2), (0, 1, np.pi / 2))
 POSES_45 = ((1, 2, np.pi / 4), (0, 2, np.pi / 4))
-
-
-def _perp(a):
-    t1 = np.cross(a, [0.3, 0.5, 0.8])
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(a, t1)
-
-
-def _predict(theta, links0, schedule, rate, n_rests):
-    C = np.zeros((3, 3))
-    for k, (i, j) in enumerate(TRIL):
-        C[i, j] = theta[k]
-    b = theta[6:9]
-    links = []
-    for j, a in enumerate(links0):
-        t1, t2 = _perp(a)
-        rot = Rotation.from_rotvec(theta[9 + 2 * j] * t1 + theta[10 + 2 * j] * t2)
-        links.append(rot.apply(a))
-    out = [C @ body_axis(links, np.eye(3), pose, s) * d * rate - b for s, pose, d in schedule]
-    out += [-b] * n_rests
-    return np.concatenate(out)
-
-
-def _independent_std(links0, schedule, rate, sigma, rest_sigma, n_rests):
-    theta0 = np.concatenate([[1, 0, 1, 0, 0, 1], np.zeros(3), np.zeros(6)]).astype(float)
-    h = 1e-6
-    J = np.empty((3 * (len(schedule) + n_rests), theta0.size))
-    for p in range(theta0.size):
-        e = np.zeros_like(theta0)
-        e[p] = h
-        J[:, p] = (_predict(theta0 + e, links0, schedule, rate, n_rests)
-                   - _predict(theta0 - e, links0, schedule, rate, n_rests)) / (2 * h)
-    w = np.concatenate([np.full(3 * len(schedule), 1 / sigma**2),
-                        np.full(3 * n_rests, 1 / rest_sigma**2)])
-    cov = np.linalg.inv(J.T @ (w[:, None] * J))[:9, :9]
-    # A = C⁻¹ = I at the truth: dA = −dC (the sign leaves σ and the information's diagonal
-    # alone); the upper triangle is fixed by the frame.
-    idx = [3 * i + j for i, j in TRIL] + [9, 10, 11]
-    std = np.zeros(12)
-    std[idx] = np.sqrt(np.diag(cov))
-    info = np.zeros((12, 12))
-    info[np.ix_(idx, idx)] = np.linalg.inv(cov)
-    return std, info
 
 
 @pytest.mark.parametrize("poses", [POSES_2, POSES_45])
@@ -70,7 +25,7 @@ def test_predicted_sigma_matches_an_independent_fisher_information(poses):
     sched = full_schedule(poses)
     got = score_full_design(sched, rate=2.5, window_std=4e-4, rest_std=3e-4, n_rests=7,
                             axes=links0, n_search=200)
-    want, info = _independent_std(links0, sched, 2.5, 4e-4, 3e-4, 7)
+    want, info = independent_fisher(links0, sched, 2.5, 4e-4, 3e-4, 7)
     np.testing.assert_allclose(got.parameter_std, want, rtol=1e-4, atol=1e-12)
     assert got.model == "full"
     sign = np.where(np.arange(12) < 9, -1.0, 1.0)  # dA = −dC
