@@ -1243,12 +1243,12 @@ def _scaled_damped_step(JtJ: np.ndarray, g: np.ndarray, lam: np.ndarray) -> np.n
     """Marquardt's step ``−(JᵀJ + λ diag JᵀJ)⁻¹ Jᵀe`` solved in unit-column scaling.
 
     With ``s = sqrt(diag JᵀJ)`` the system is ``(S⁻¹JᵀJS⁻¹ + λ I)(S step) = −S⁻¹Jᵀe``: the same
-    step, but the matrix has a unit diagonal. Unscaled, its condition number is the square of
-    the columns' spread (window means whitened by σ ≈ 1e-10 next to still angles with a 4e-4
-    rad prior: above 1e20 once the noise is below about 1e-7), and the solve returns rounding
-    noise, so the fit stalls short of its minimum. A diagonal entry no residual sees is floored
-    at 1e-300 so it is still damped (Moré 1978, "The Levenberg-Marquardt algorithm:
-    implementation and theory", §3 on scaling).
+    step, but the matrix has a unit diagonal: unscaled, its condition number carries the square
+    of the columns' spread (window means whitened by σ ≈ 1e-10 next to still angles with a
+    4e-4 rad prior), which costs the solve digits it does not need to lose. (The full-matrix
+    fit's stall at tiny noise had another cause: :func:`_still_gauge`.) A diagonal entry no
+    residual sees is floored at 1e-300 so it is still damped (Moré 1978, "The
+    Levenberg-Marquardt algorithm: implementation and theory", §3 on scaling).
     """
     s = np.sqrt(np.maximum(np.einsum("bpp->bp", JtJ), 1e-300))
     Ms = JtJ / (s[:, :, None] * s[:, None, :])

@@ -81,3 +81,28 @@ def test_axis_and_pose_derivatives_match_finite_differences():
         fp = kinematics.chain_axes(axes[:, None], 0.0, dp)[:, np.arange(5), index]
         fm = kinematics.chain_axes(axes[:, None], 0.0, dm)[:, np.arange(5), index]
         np.testing.assert_allclose(gotd[:, :, k], (fp - fm) / (2 * h), atol=1e-8)
+
+
+def test_the_still_angle_gauge_move_changes_no_window_axis():
+    # The symmetry the fit moves along: every still angle of a servo shifted, the axes inside it
+    # turned; the axes in every window stay put and each servo's reading errors average 0.
+    from gyrocal.calib.estimators import _still_gauge
+
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(1, 3, 3))
+    u /= np.linalg.norm(u, axis=2, keepdims=True)
+    ps = np.array([[-1, 0, 1], [2, -1, 1], [2, 3, -1], [2, -1, 4]])
+    owner = np.array([1, 2, 0, 1, 2])
+    delta = rng.uniform(-2, 2, (4, 3))
+    midx = np.array([0, 1, 2, 1])
+    z = rng.normal(size=(1, 5)) * 0.01
+
+    def window_axes(u, z):
+        zp = np.where(ps >= 0, z[:, np.maximum(ps, 0)], 0.0)
+        return kinematics.chain_axes(u[:, None], 0.0, delta - zp)[:, np.arange(4), midx]
+
+    u2, z2 = _still_gauge(u, z, owner)
+    np.testing.assert_allclose(window_axes(u2, z2), window_axes(u, z), atol=1e-14)
+    for k in range(3):
+        assert abs(z2[0, owner == k].sum()) < 1e-15
+    assert np.abs(u2 - u).max() > 1e-4  # it did move
