@@ -45,11 +45,12 @@ def _run(args: tuple[int, str]) -> dict:
         out = Path(tmp) / "run"
         t0 = time.perf_counter()
         # the full protocol on the default sensor (±2 % cross-axis); the diagonal protocols on
-        # the paper's sensor, whose truth is the six parameters they fit
+        # the paper's sensor, whose truth is the six parameters they fit; realistic effects
+        # (issue 12) off: the estimators do not model them yet
         flags = [] if protocol == "full" else ["--protocol", protocol, "--sim-cross-axis", "0"]
         with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
-            code = main(["calibrate", "--sim", "--sim-seed", str(seed), "--out", str(out),
-                         "--quiet", "--json", *flags])
+            code = main(["calibrate", "--sim", "--sim-realism", "off", "--sim-seed", str(seed),
+                         "--out", str(out), "--quiet", "--json", *flags])
         wall = time.perf_counter() - t0
         cal = json.loads((out / "calibration.json").read_text())
         rec = load_recording(out / "recording")

@@ -41,6 +41,7 @@ __all__ = [
     "predicted_general_motion_rms",
     "predict_uncertainty",
     "score_design",
+    "score_full_design",
     "sphere_points",
 ]
 
@@ -76,12 +77,28 @@ class DesignScore:
         ``p / max d``: 1 for a G-optimal design, smaller is worse; 0 for a singular design.
     d_criterion : float
         ``det(FᵀF/n)^(1/p)`` (larger is better).
+    model : str
+        ``"paper"`` (the squared-norm model of Eq. (5), :func:`score_design`) or ``"full"``
+        (``g = A (m + b)`` on the gimbal, :func:`score_full_design`).
+    parameter_std : tuple of 12 float, optional
+        Full model: predicted one-sigma uncertainty of ``A`` (row-major, 0 for the three
+        elements the frame fixes) and ``b``, rad/s for ``b``.
+    information : ndarray, shape (12, 12), optional
+        Full model: the Fisher information of ``(A, b)`` with the servo axes eliminated (the
+        pseudo-inverse of their covariance; zero rows for the fixed elements).
+    rate_error_std : float, optional
+        Full model: the largest standard deviation of a calibrated rate component over the
+        sphere of ``radius``, rad/s (what :func:`plan_protocol` minimises).
     """
 
     max_variance: float
     argmax: tuple[float, float, float]
     g_efficiency: float
     d_criterion: float
+    model: str = "paper"
+    parameter_std: tuple[float, ...] | None = None
+    information: np.ndarray | None = None
+    rate_error_std: float | None = None
 
 
 def score_design(points: np.ndarray, radius: float = 1.0, n_search: int = 4000) -> DesignScore:
@@ -467,15 +484,165 @@ def predict_full_uncertainty(
                             n_servos=S, reference=np.zeros(S), ref_matrix=G,
                             still_std=q / np.sqrt(12), pose_still=pose_still)
     cov = res.covariance
-    U = sphere_points(400) * reference_rate
-    grad = np.zeros((U.shape[0], 3, 12))
-    for i in range(3):
-        grad[:, i, 3 * i : 3 * i + 3] = U
-        grad[:, i, 9 + i] = 1.0
+    grad = _full_output_gradients(sphere_points(400) * reference_rate)
     var = np.einsum("nip,bpq,niq->bn", grad, cov, grad)
     matrix_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, :9], 0, None))
     bias_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, 9:], 0, None))
     return matrix_std.reshape(B, 3, 3), bias_std, np.sqrt(var.max(axis=1))
+
+
+def _full_output_gradients(U: np.ndarray) -> np.ndarray:
+    """``∂(A (m + b))_j / ∂(A row-major, b)`` at ``A = I``, ``b = 0`` for true rates ``U``
+    (N, 3): row ``j`` is ``ω`` in the block of ``A``'s row ``j`` and 1 at ``b_j``; shape
+    (N, 3, 12)."""
+    grad = np.zeros((U.shape[0], 3, 12))
+    for i in range(3):
+        grad[:, i, 3 * i : 3 * i + 3] = U
+        grad[:, i, 9 + i] = 1.0
+    return grad
+
+
+def score_full_design(
+    schedule: list[tuple[int, np.ndarray, int]],
+    *,
+    rate: float | np.ndarray,
+    window_std: float | np.ndarray,
+    rest_std: float,
+    n_rests: int,
+    axes: np.ndarray | None = None,
+    radius: float | None = None,
+    n_search: int = 2000,
+) -> DesignScore:
+    r"""Information, predicted σ and G-criterion of a gimbal design for the full model
+    ``g = A (m + b)`` (issue 10; the paper's Section II-B criterion carried to twelve parameters).
+
+    A design is the turns of :func:`full_schedule` (turning servo, every servo's angle, direction)
+    at reference rates ``rate`` and the rests. At the nominal truth (``A = I``, ``b = 0``, servo
+    axes ``axes`` at home) a turn's window mean reads ``ω_i C u_s(θ_i) − b`` with noise
+    ``window_std`` per axis, a rest ``−b`` with ``rest_std``
+    (:func:`gyrocal.calib.estimators.fit_full_matrix`). The Fisher information of ``(C, b)`` and
+    the servo axes is ``J̃ᵀJ̃`` of the whitened residuals; eliminating the axes (Schur
+    complement) and mapping ``dA = −A dC A`` gives the covariance of the twelve parameters in the
+    frame ``gyro-x-xy`` (three elements fixed at 0), computed here as the estimator's own
+    covariance at exact data (:func:`gyrocal.calib.estimators.full_matrix_batch`). Encoder
+    readings are taken as exact (no still-angle terms; :func:`predict_full_uncertainty` models
+    them for the planner).
+
+    G-criterion: a calibrated component ``ĝ_j(ω) = (A (m + b))_j`` has variance
+    ``f_j(ω)ᵀ Σ f_j(ω)`` with ``f_j`` the gradient of :func:`_full_output_gradients`; with
+    ``W = Σ_i 1/σ²_i`` over every window and rest (the design's total weight), its standardised
+    prediction variance is ``d_j(u) = W f_j(ωu)ᵀ Σ f_j(ωu)`` on ``|ω| = radius``. Component
+    ``j`` is a regression on its row's free elements of ``A`` and ``b_j``: ``p_j`` = 2, 3, 4
+    terms in the frame ``gyro-x-xy``. Known axes would decouple the rows, so by the
+    Kiefer–Wolfowitz theorem ``max_u d_j ≥ p_j``; a gimbal's unknown axes only lose
+    information. ``g_efficiency = min_j p_j / max_u d_j`` (≤ 1; 0 when the design cannot
+    determine ``A``), ``max_variance`` the ``max d_j`` of that component and ``argmax`` its
+    direction.
+
+    Parameters
+    ----------
+    schedule : list of (int, ndarray (S,), int)
+        The turns (:func:`full_schedule`).
+    rate : float or ndarray (n,)
+        Unsigned reference rate of each turn, rad/s.
+    window_std : float or ndarray (n,)
+        Noise of each turn's window mean, per axis, rad/s.
+    rest_std, n_rests :
+        Noise of a rest's mean and the number of rests.
+    axes : ndarray (S, 3), optional
+        The servos' axes in the sensor frame at home, chain order (default x, y, z).
+    radius : float, optional
+        Rotation rate of the design region, rad/s; at least the largest ``rate`` (the bound
+        holds for designs inside the region; default: the largest ``rate``).
+    n_search : int
+        Directions searched before local refinement.
+
+    Returns
+    -------
+    DesignScore
+        ``model="full"`` with ``parameter_std``, ``information`` and ``rate_error_std``;
+        ``d_criterion`` is ``det(I_free / W)^(1/9)`` over the nine free parameters.
+
+    Raises
+    ------
+    CalibInputError
+        On an empty schedule, non-positive noise, rate or radius, or a radius below a rate.
+    """
+    from gyrocal.calib.estimators import full_matrix_batch
+    from gyrocal.calib.kinematics import chain_axes
+
+    if not schedule:
+        raise CalibInputError("the schedule has no turns")
+    n = len(schedule)
+    w = np.broadcast_to(np.asarray(rate, dtype=float), (n,))
+    sd = np.broadcast_to(np.asarray(window_std, dtype=float), (n,))
+    radius = float(np.max(w)) if radius is None else radius
+    for name, v in (("rate", w), ("window_std", sd), ("rest_std", np.array([rest_std])),
+                    ("radius", np.array([radius]))):
+        if not np.all(np.isfinite(v) & (v > 0)):
+            raise CalibInputError(f"{name} must be positive and finite")
+    if radius < np.max(w) * (1 - 1e-12):
+        raise CalibInputError(
+            f"radius {radius:g} rad/s is below the design's fastest turn ({np.max(w):g} rad/s); "
+            "score on a region that contains the design (leave radius unset)")
+    if int(n_rests) < 0:
+        raise CalibInputError(f"n_rests must be at least 0, got {n_rests!r}")
+    ax = np.eye(3) if axes is None else np.asarray(axes, dtype=float)
+    S = ax.shape[0]
+    midx = np.array([t[0] for t in schedule])
+    pose = np.array([np.asarray(t[1], dtype=float) for t in schedule])
+    signed = w * np.array([t[2] for t in schedule], dtype=float)
+    u = chain_axes(ax, np.zeros(S), pose)[np.arange(n), midx]
+    mean = (signed[:, None] * u)[None]
+    r = int(n_rests)
+    res = full_matrix_batch(
+        mean, signed[None], midx, pose, np.broadcast_to(sd[:, None], (1, n, 3)).copy(),
+        np.full((1, n), 1e-12), np.zeros((1, r, 3)), np.full((1, r, 3), float(rest_std)),
+        n_servos=S, reference=np.zeros(S), max_iter=5)
+    cov = res.covariance[0]
+    weight = float(np.sum(1.0 / sd**2) + r / rest_std**2)
+    free = np.diag(cov) > 0
+    if res.rank_deficiency[0] or not np.all(np.isfinite(cov)) or free.sum() < 9:
+        return DesignScore(np.inf, (np.nan, np.nan, np.nan), 0.0, 0.0, model="full",
+                           parameter_std=tuple(np.full(12, np.inf).tolist()),
+                           information=np.zeros((12, 12)), rate_error_std=np.inf)
+    info = np.zeros((12, 12))
+    info[np.ix_(free, free)] = np.linalg.inv(cov[np.ix_(free, free)])
+
+    # Component j regresses on its row's free elements and b_j: p_j terms (2, 3, 4 in gyro-x-xy).
+    p_j = free[:9].reshape(3, 3).sum(axis=1) + 1
+    weight_j = np.sum(1.0 / sd**2) + r / rest_std**2
+
+    def std_var(v: np.ndarray) -> np.ndarray:
+        """(N, 3): each component's standardised variance over its bound, at directions v."""
+        g = _full_output_gradients(radius * v / np.linalg.norm(v, axis=-1, keepdims=True))
+        return weight_j * np.einsum("nip,pq,niq->ni", g, cov, g) / p_j
+
+    S_pts = sphere_points(n_search)
+    vals = std_var(S_pts).max(axis=1)
+    top, arg = -np.inf, S_pts[int(np.argmax(vals))]
+    for i in np.argsort(vals)[-5:]:
+        opt = optimize.minimize(lambda x: -float(std_var(x[None]).max()), S_pts[i],
+                                method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-15})
+        if -opt.fun > top:
+            top, arg = -opt.fun, opt.x / np.linalg.norm(opt.x)
+    g_arg = _full_output_gradients(radius * arg[None])
+    var_arg = np.einsum("nip,pq,niq->ni", g_arg, cov, g_arg)[0]
+    rate_var = max(float(var_arg.max()), float(
+        np.einsum("nip,pq,niq->ni", _full_output_gradients(radius * S_pts), cov,
+                  _full_output_gradients(radius * S_pts)).max()))
+    d_max = float(top) * float(p_j[int(np.argmax(std_var(arg[None])[0]))])
+    det = float(np.linalg.det(info[np.ix_(free, free)] / weight))
+    return DesignScore(
+        max_variance=d_max,
+        argmax=(float(arg[0]), float(arg[1]), float(arg[2])),
+        g_efficiency=1.0 / float(top),
+        d_criterion=max(det, 0.0) ** (1 / 9),
+        model="full",
+        parameter_std=tuple(float(x) for x in np.sqrt(np.clip(np.diag(cov), 0, None))),
+        information=info,
+        rate_error_std=float(np.sqrt(rate_var)),
+    )
 
 
 def general_motion_rms(matrix: np.ndarray, bias: np.ndarray, sensing: np.ndarray,

@@ -1032,6 +1032,46 @@ def _tril(c: np.ndarray) -> np.ndarray:
     return C
 
 
+def _still_owner(G: np.ndarray, pose_still: np.ndarray, midx: np.ndarray, n_still: int
+                 ) -> np.ndarray:
+    """The servo each still angle (column of ``G``) belongs to, -1 where no window uses it."""
+    owner = np.full(n_still, -1, dtype=np.int64)
+    for i, k in zip(*np.nonzero(pose_still >= 0), strict=True):
+        owner[pose_still[i, k]] = k
+    used = np.any(G != 0, axis=tuple(range(G.ndim - 2)) + (G.ndim - 2,)) if G.size else []
+    for a in np.flatnonzero(used):
+        rows = np.any(np.reshape(G[..., a], (-1, G.shape[-2])) != 0, axis=0)
+        owner[a] = midx[np.flatnonzero(rows)[0]]
+    return owner
+
+
+def _still_gauge(u: np.ndarray, z: np.ndarray, owner: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Move along the fit's one exact symmetry per servo to where the still angles' priors are
+    least: zero mean reading error for each servo.
+
+    Shifting every still angle of servo ``k`` by ``δ`` (its encoder's zero) changes no rate
+    reference (each is a difference of that servo's still angles) and, with every axis ``u_m⁰``
+    inside it (``m < k``) turned by ``Rot(u_k⁰, δ)``, no axis in any window
+    (:mod:`gyrocal.calib.kinematics`: ``Rot(Ra, φ) = R Rot(a, φ) Rᵀ``); ``C`` and ``b`` do not
+    move. Only the priors ``z/σ`` see ``δ``, so the minimum has ``Σ z = 0`` per servo. A linear
+    step cannot follow this curved valley once the data are precise (its walls rise as
+    ``δ²/σ²_mean``): without this move the fit stalls at noise below about 1e-7 rad/s.
+    """
+    if not z.shape[1] or np.all(owner < 0):
+        return u, z
+    u, z = u.copy(), z.copy()
+    for k in range(u.shape[1]):
+        cols = owner == k
+        if not cols.any():
+            continue
+        delta = z[:, cols].mean(axis=1)
+        z[:, cols] -= delta[:, None]
+        for m in range(k):
+            u[:, m] = kinematics.rotate(u[:, k], delta, u[:, m])
+    return u, z
+
+
 def full_matrix_batch(
     mean: np.ndarray,
     rate: np.ndarray,
@@ -1101,7 +1141,6 @@ def full_matrix_batch(
     var_w = rate_std[:, :, None, None] ** 2
     eye3 = np.eye(3)
     ar = np.arange(n)
-    h = 1e-6
     ps = np.full((n, S), -1, dtype=np.int64) if pose_still is None else np.asarray(pose_still)
     held = ps >= 0
     if np.any(held) and not (still_std > 0 and ps.max() < n_still):
@@ -1138,22 +1177,15 @@ def full_matrix_batch(
         for col, (p, q) in enumerate(zip(*_TRIL, strict=True)):
             J[:, :, p, col] = -w[..., 0] * ui[..., q]
         J[:, :, np.arange(3), 6 + np.arange(3)] = 1.0
-        for s in range(S):  # axis directions: central differences along the tangent basis
-            for t_i, t in enumerate((t1, t2)):
-                dp, dm = u.copy(), u.copy()
-                dp[:, s] += h * t[:, s]
-                dm[:, s] -= h * t[:, s]
-                dp[:, s] /= np.linalg.norm(dp[:, s], axis=1, keepdims=True)
-                dm[:, s] /= np.linalg.norm(dm[:, s], axis=1, keepdims=True)
-                du = (axes_in_windows(dp, d) - axes_in_windows(dm, d)) / (2 * h)
-                J[:, :, :, 9 + 2 * s + t_i] = -w * np.einsum("bpq,bnq->bnp", C, du)
+        for t_i, t in enumerate((t1, t2)):  # axis directions along the tangent basis, exact
+            du = kinematics.axis_derivatives(u, d, midx, t)  # (B, n, S, 3)
+            J[:, :, :, 9 + t_i : 9 + 2 * S : 2] = -w[..., None] * np.einsum(
+                "bpq,bnsq->bnps", C, du)
         if n_still:
             J[:, :, :, 9 + 2 * S :] = ci[..., None] * G[:, :, None, :]
+        dUs = kinematics.pose_derivatives(u, d, midx) if np.any(held) else None
         for k in np.flatnonzero(held.any(axis=0)):  # held poses: d e / d z = w C dU/dΔ_k
-            step = np.zeros(S)
-            step[k] = h
-            dU = (axes_in_windows(u, d + step) - axes_in_windows(u, d - step)) / (2 * h)
-            contrib = w * np.einsum("bpq,bnq->bnp", C, dU)  # (B, n, 3)
+            contrib = w * np.einsum("bpq,bnq->bnp", C, dUs[:, :, k])  # (B, n, 3)
             for i in np.flatnonzero(held[:, k]):
                 J[:, i, :, 9 + 2 * S + ps[i, k]] += contrib[:, i]
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
@@ -1173,13 +1205,15 @@ def full_matrix_batch(
         u_new /= np.linalg.norm(u_new, axis=2, keepdims=True)
         c_new = c + step[:, :6]
         ok = np.all(c_new[:, [0, 2, 5]] > 0, axis=1)  # the diagonal stays positive
-        return (c_new, b + step[:, 6:9], u_new, z + step[:, 9 + 2 * S :]), ok
+        u_new, z_new = _still_gauge(u_new, z + step[:, 9 + 2 * S :], owner)
+        return (c_new, b + step[:, 6:9], u_new, z_new), ok
 
+    owner = _still_owner(G, ps, midx, n_still)
     state, E, J, iterations, converged = _lm_batch(
         evaluate, retract, (c, b, u0, z), max_iter=max_iter, xtol=xtol)
     c, b, u0, z = state
     JtJ = J.transpose(0, 2, 1) @ J
-    cov = np.linalg.pinv(JtJ, hermitian=True)
+    cov = _scaled_pinv(JtJ)
     # Observability of the model terms (C, b, axes) by the singular values of the whitened
     # Jacobian with its columns normalised (the still angles always have their priors).
     Jm = J[:, :, : 9 + 2 * S]
@@ -1205,6 +1239,33 @@ def full_matrix_batch(
     )
 
 
+def _scaled_damped_step(JtJ: np.ndarray, g: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Marquardt's step ``−(JᵀJ + λ diag JᵀJ)⁻¹ Jᵀe`` solved in unit-column scaling.
+
+    With ``s = sqrt(diag JᵀJ)`` the system is ``(S⁻¹JᵀJS⁻¹ + λ I)(S step) = −S⁻¹Jᵀe``: the same
+    step, but the matrix has a unit diagonal: unscaled, its condition number carries the square
+    of the columns' spread (window means whitened by σ ≈ 1e-10 next to still angles with a
+    4e-4 rad prior), which costs the solve digits it does not need to lose. (The full-matrix
+    fit's stall at tiny noise had another cause: :func:`_still_gauge`.) A diagonal entry no
+    residual sees is floored at 1e-300 so it is still damped (Moré 1978, "The
+    Levenberg-Marquardt algorithm: implementation and theory", §3 on scaling).
+    """
+    s = np.sqrt(np.maximum(np.einsum("bpp->bp", JtJ), 1e-300))
+    Ms = JtJ / (s[:, :, None] * s[:, None, :])
+    Ms = Ms + lam[:, None, None] * np.eye(JtJ.shape[-1])
+    return -np.linalg.solve(Ms, (g / s)[..., None])[..., 0] / s
+
+
+def _scaled_pinv(JtJ: np.ndarray) -> np.ndarray:
+    """``(JᵀJ)⁺`` computed in unit-column scaling (see :func:`_scaled_damped_step`), so that the
+    pseudo-inverse's cut-off acts on the design's real degeneracies and not on the units of its
+    columns; columns no residual sees stay zero."""
+    d = np.einsum("bpp->bp", JtJ)
+    s = np.where(d > 0, np.sqrt(np.where(d > 0, d, 1.0)), 1.0)
+    inv = np.linalg.pinv(JtJ / (s[:, :, None] * s[:, None, :]), hermitian=True)
+    return inv / (s[:, :, None] * s[:, None, :])
+
+
 def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: ignore[no-untyped-def]
               step_scale=None):
     """Levenberg-Marquardt over a batch of independent problems (the paired-axis and the
@@ -1215,8 +1276,8 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
     stepped state and which runs' steps are admissible. Marquardt's damping scales the
     diagonal of ``JᵀJ`` (floored at 1e-300 so a parameter no residual sees still gets damped).
     A run has converged when an admissible step is below ``xtol`` (times
-    ``step_scale(state)``, per run, when given) or changes the cost by less than ``1e-10``
-    relative, up or down (rounding level).
+    ``step_scale(state)``, per run, when given), changes the cost by less than ``1e-10``
+    relative, up or down (rounding level), or is predicted to lower it by under 1e-6.
     """
     E, J, tb = evaluate(*state, True)
     B, _, P = J.shape
@@ -1236,9 +1297,7 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
         Jt = J.transpose(0, 2, 1)
         JtJ = Jt @ J
         g = (Jt @ E[..., None])[..., 0]
-        D = np.einsum("bpp->bp", JtJ)
-        M = JtJ + (lam[:, None] * np.maximum(D, 1e-300))[:, :, None] * np.eye(P)
-        step = -np.linalg.solve(M, g[..., None])[..., 0]
+        step = _scaled_damped_step(JtJ, g, lam)
         new_state, ok = retract(state, step, tb)
         E_new, _, _ = evaluate(*new_state, False)
         cost_new = np.sum(E_new**2, axis=1)
@@ -1247,6 +1306,12 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
         tol = xtol if step_scale is None else xtol * step_scale(state)
         small = np.max(np.abs(step), axis=1) <= tol
         flat = np.abs(cost - cost_new) <= 1e-10 * (1.0 + cost)
+        # The step's predicted decrease of the whitened cost (a χ²): below 1e-6 it moves every
+        # parameter by under a thousandth of its σ, while rounding in residuals whitened by
+        # σ ≈ 1e-10 already makes the cost itself jitter by more than 1e-10 relative.
+        Js = J @ step[..., None]
+        predicted = -(np.einsum("bp,bp->b", g, step) + 0.5 * np.sum(Js[..., 0] ** 2, axis=1))
+        flat |= predicted <= 1e-6
         state = pick(accept, new_state, state)
         lam = np.where(accept, np.maximum(lam / 3.0, 1e-12), np.minimum(lam * 4.0, 1e12))
         done = active & ok & (small | flat)

@@ -80,3 +80,54 @@ Q = np.pi / 2
 #: middle at 90° (hardware_docs/method.md: the smallest schedule of full rank).
 POSED = HOME + [(1, np.array([0.0, 0.0, Q]), d) for d in (1, -1)] + [
     (0, np.array([0.0, Q, 0.0]), d) for d in (1, -1)]
+
+
+TRIL = [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2)]
+
+
+def _perp(a):
+    t1 = np.cross(a, [0.3, 0.5, 0.8])
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(a, t1)
+
+
+def _predict(theta, links0, schedule, rate, n_rests):
+    C = np.zeros((3, 3))
+    for k, (i, j) in enumerate(TRIL):
+        C[i, j] = theta[k]
+    b = theta[6:9]
+    links = []
+    for j, a in enumerate(links0):
+        t1, t2 = _perp(a)
+        rot = Rotation.from_rotvec(theta[9 + 2 * j] * t1 + theta[10 + 2 * j] * t2)
+        links.append(rot.apply(a))
+    out = [C @ body_axis(links, np.eye(3), pose, s) * d * rate - b for s, pose, d in schedule]
+    out += [-b] * n_rests
+    return np.concatenate(out)
+
+
+def independent_fisher(links0, schedule, rate, sigma, rest_sigma, n_rests):
+    """The Cramér–Rao bound of ``(A row-major, b)`` at ``A = I``, ``b = 0`` for a gimbal of link
+    axes ``links0`` (mount fixed, the frame convention): the Fisher information of ``(C tril,
+    b, two tilts per link)`` by central differences of this module's forward model, the tilts
+    eliminated by inversion. Returns ``(std (12,), information (12, 12))``, zero for the three
+    elements of ``A`` the frame fixes."""
+    theta0 = np.concatenate([[1, 0, 1, 0, 0, 1], np.zeros(3), np.zeros(6)]).astype(float)
+    h = 1e-6
+    J = np.empty((3 * (len(schedule) + n_rests), theta0.size))
+    for p in range(theta0.size):
+        e = np.zeros_like(theta0)
+        e[p] = h
+        J[:, p] = (_predict(theta0 + e, links0, schedule, rate, n_rests)
+                   - _predict(theta0 - e, links0, schedule, rate, n_rests)) / (2 * h)
+    w = np.concatenate([np.full(3 * len(schedule), 1 / sigma**2),
+                        np.full(3 * n_rests, 1 / rest_sigma**2)])
+    cov = np.linalg.inv(J.T @ (w[:, None] * J))[:9, :9]
+    # A = C⁻¹ = I at the truth: dA = −dC (the sign leaves σ and the information's diagonal
+    # alone); the upper triangle is fixed by the frame.
+    idx = [3 * i + j for i, j in TRIL] + [9, 10, 11]
+    std = np.zeros(12)
+    std[idx] = np.sqrt(np.diag(cov))
+    info = np.zeros((12, 12))
+    info[np.ix_(idx, idx)] = np.linalg.inv(cov)
+    return std, info
