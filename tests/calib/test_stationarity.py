@@ -6,7 +6,12 @@ import pytest
 from numpy.lib.stride_tricks import sliding_window_view
 
 from gyrocal.calib import stationarity
-from gyrocal.calib.stationarity import StillDetector, StillSettings, quiet_windows
+from gyrocal.calib.stationarity import (
+    StillDetector,
+    StillSettings,
+    StreamingQuiet,
+    quiet_windows,
+)
 
 
 def quiet_windows_oracle(centred, detector, n_history):
@@ -74,3 +79,22 @@ def test_short_batches():
     for total in range(0, det.n_window + 2):
         x = np.zeros((total, 3))
         np.testing.assert_array_equal(quiet_windows(x, det, 0), quiet_windows_oracle(x, det, 0))
+
+
+@pytest.mark.parametrize("alpha, window_s", [(1e-6, 0.2), (0.5, 0.05), (0.5, 1.0)])
+@pytest.mark.parametrize("n_history", [0, 3, "full"])
+def test_streaming_quiet_equals_the_windowed_oracle(alpha, window_s, n_history):
+    """StreamingQuiet (the tracker's update() path) decides each window like the oracle, one
+    sample at a time, starting from some history, through rests and 6 rad/s turns."""
+    rng = np.random.default_rng(7)
+    sigma = np.array([2e-3, 3e-3, 1.5e-3])
+    det = StillDetector.build(sigma, 200.0, StillSettings(window_s=window_s,
+                                                          variance_alpha=alpha))
+    centred = session(rng, 12_000, sigma) - np.array([3.0, -2.0, 0.5])
+    h = det.history if n_history == "full" else min(n_history, det.history)
+    want = quiet_windows_oracle(centred, det, h)
+    sq = StreamingQuiet(det, centred[:h])
+    got = np.array([sq.push(*row) for row in centred[h:]])
+    assert 0.01 < want.mean() < 0.99
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(sq.history(), centred[-det.history:])
