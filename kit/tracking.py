@@ -42,7 +42,12 @@ class Batch:
 
 @dataclass(frozen=True)
 class Tracked:
-    """Per-sample output of a whole run."""
+    """Per-sample output of a whole run.
+
+    ``t``, ``bias``, ``bias_std``, ``nis_ok`` and ``since_update_s`` hold the samples ``rows``
+    (global indices; None: every sample), ``still`` every sample; ``since_max`` is the longest
+    time without an update over every sample, s.
+    """
 
     t: np.ndarray
     bias: np.ndarray
@@ -54,19 +59,71 @@ class Tracked:
     update_kind: np.ndarray
     alarm_t: np.ndarray
     shift_t: np.ndarray
+    rows: np.ndarray | None = None
+    since_max: float = math.nan
 
 
-def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
+class _Kept:
+    """Per-sample outputs of consecutive batches, kept at the samples ``rows`` (global indices,
+    increasing; None: all) in arrays that grow by doubling (no list of parts to join at the end,
+    which would hold everything twice)."""
+
+    def __init__(self, rows: np.ndarray | None) -> None:
+        self.rows = rows
+        self.n = 0  # samples seen
+        self.k = 0  # rows filled
+        self.cols: dict[str, np.ndarray] = {}
+        self.still = np.zeros(1024, dtype=bool)
+
+    def _put(self, name: str, value: np.ndarray) -> None:
+        col = self.cols.get(name)
+        need = self.k + value.shape[0]
+        if col is None or col.shape[0] < need:
+            size = max(need, 2 * (0 if col is None else col.shape[0]), 1024)
+            if self.rows is not None:
+                size = self.rows.size
+            grown = np.empty((size, *value.shape[1:]), dtype=value.dtype)
+            if col is not None:
+                grown[: self.k] = col[: self.k]
+            self.cols[name] = col = grown
+        col[self.k:need] = value
+
+    def add(self, res: Any) -> None:
+        n = res.t.size
+        if self.rows is None:
+            sel: Any = slice(None)
+        else:
+            a, b = np.searchsorted(self.rows, (self.n, self.n + n))
+            sel = self.rows[a:b] - self.n
+        for name, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
+                        ("nis", res.nis_ok), ("since", res.since_update_s)):
+            self._put(name, np.asarray(v)[sel])
+        self.k += int(np.asarray(res.t)[sel].shape[0])
+        self.n += n
+        if self.still.size < self.n:
+            grown = np.zeros(max(self.n, 2 * self.still.size), dtype=bool)
+            grown[: self.still.size] = self.still
+            self.still = grown
+        self.still[res.decision_index] = res.decision_still
+
+    def col(self, name: str) -> np.ndarray:
+        return self.cols[name][: self.k]
+
+
+def run_tracker(tracker: Any, batches: Iterable[Batch], *,
+                rows: np.ndarray | None = None) -> Tracked:
     """Feed ``batches`` to a :class:`gyrocal.calib.tracker.BiasTracker` and collect per-sample
     output.
 
     A live source (the jig's IMU FIFO) is one more iterable of :class:`Batch`. The last batch is
     processed with ``finish=True``; still decisions that arrive after their batch (the
     detector's look-ahead) are placed by the sample index the tracker reports with them.
+    ``rows`` (increasing global sample indices) keeps the estimates at those samples only, so
+    a long replay holds a few bytes per sample (the still flags) besides the rows shown.
     """
-    parts: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "sh", "di", "ds")
-    }
+    kept = _Kept(None if rows is None else np.asarray(rows, dtype=np.int64))
+    upd: dict[str, list[np.ndarray]] = {k: [] for k in ("ut", "uk", "al", "sh")}
+    since_max = -math.inf
     it = iter(batches)
     current = next(it, None)
     if current is None:
@@ -78,38 +135,41 @@ def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
             reference_rate=current.reference_rate, reference_axis=current.reference_axis,
             finish=nxt is None,
         )
-        for key, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
-                       ("nis", res.nis_ok), ("since", res.since_update_s),
-                       ("ut", res.updates.t), ("uk", res.updates.kind),
+        kept.add(res)
+        if res.t.size:
+            since_max = max(since_max, float(np.max(res.since_update_s)))
+        for key, v in (("ut", res.updates.t), ("uk", res.updates.kind),
                        ("al", res.updates.t[res.updates.alarm]),
-                       ("sh", res.updates.t[res.updates.shift]),
-                       ("di", res.decision_index), ("ds", res.decision_still)):
-            parts[key].append(v)
+                       ("sh", res.updates.t[res.updates.shift])):
+            upd[key].append(v)
         current = nxt
-    t = np.concatenate(parts["t"])
-    still = np.zeros(t.size, dtype=bool)
-    still[np.concatenate(parts["di"])] = np.concatenate(parts["ds"])
     return Tracked(
-        t=t,
-        bias=np.vstack(parts["bias"]),
-        bias_std=np.vstack(parts["std"]),
-        still=still,
-        nis_ok=np.concatenate(parts["nis"]),
-        since_update_s=np.concatenate(parts["since"]),
-        update_t=np.concatenate(parts["ut"]),
-        update_kind=np.concatenate(parts["uk"]),
-        alarm_t=np.concatenate(parts["al"]),
-        shift_t=np.concatenate(parts["sh"]),
+        t=kept.col("t"),
+        bias=kept.col("bias"),
+        bias_std=kept.col("std"),
+        still=kept.still[: kept.n].copy(),
+        nis_ok=kept.col("nis"),
+        since_update_s=kept.col("since"),
+        update_t=np.concatenate(upd["ut"]),
+        update_kind=np.concatenate(upd["uk"]),
+        alarm_t=np.concatenate(upd["al"]),
+        shift_t=np.concatenate(upd["sh"]),
+        rows=kept.rows,
+        since_max=since_max,
     )
 
 
 def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None) -> Tracked:
     """``tr`` with each sample's bias and uncertainty smoothed over the whole run
     (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`; the tracker was built with
-    ``keep_states=True``): for a replayed recording, where every sample is at hand."""
+    ``keep_states=True``): for a replayed recording, where every sample is at hand.
+    ``temperature`` covers every sample; only ``tr``'s rows are smoothed."""
     from dataclasses import replace
 
-    bias, std = tracker.smoothed(tr.t, temperature)
+    temp = temperature
+    if temp is not None and tr.rows is not None:
+        temp = np.asarray(temp)[tr.rows]
+    bias, std = tracker.smoothed(tr.t, temp)
     return replace(tr, bias=bias, bias_std=std)
 
 

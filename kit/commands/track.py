@@ -480,11 +480,21 @@ def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False
     save_png(fig, path, force=force)
 
 
+def _summary_rows(n: int, rows: int) -> np.ndarray:
+    """Samples the summary table shows: ``rows`` spread evenly over ``n``."""
+    import numpy as np
+
+    return np.unique(np.linspace(0, n - 1, max(2, rows)).round().astype(int))
+
+
 def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
     import numpy as np
 
-    n = tr.t.size
-    out = [f"gyrocal track: {source}, {n} samples over {tr.t[-1] - tr.t[0]:.1f} s; "
+    n = tr.still.size
+    want = _summary_rows(n, rows)
+    idx = want if tr.rows is None else np.searchsorted(tr.rows, want)
+    since_max = tr.since_max if math.isfinite(tr.since_max) else float(tr.since_update_s.max())
+    out = [f"gyrocal track: {source}, {n} samples over {tr.t[idx[-1]] - tr.t[idx[0]]:.1f} s; "
            f"{tr.update_t.size} updates "
            f"({np.count_nonzero(tr.update_kind == 'still')} zero-rate, "
            f"{np.count_nonzero(tr.update_kind == 'reference')} reference-rate), "
@@ -495,10 +505,9 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
            + f"; {tr.shift_t.size} bias shift(s) found by the CUSUM test"
            + (f" at t = {', '.join(f'{x:.1f}' for x in tr.shift_t[:5])} s" if tr.shift_t.size
               else "")
-           + f"; longest time without an update {tr.since_update_s.max():.1f} s",
+           + f"; longest time without an update {since_max:.1f} s",
            f"{'t s':>9}  {'bias x':>11} {'bias y':>11} {'bias z':>11}   "
            f"{'std x':>9} {'std y':>9} {'std z':>9}  (rad/s, Calibration v1 sign)"]
-    idx = np.unique(np.linspace(0, n - 1, max(2, rows)).round().astype(int))
     for i in idx:
         b, s = tr.bias[i], tr.bias_std[i]
         out.append(f"{tr.t[i]:9.2f}  {b[0]:11.4e} {b[1]:11.4e} {b[2]:11.4e}   "
@@ -546,6 +555,25 @@ def _check_modes(args: argparse.Namespace) -> None:
                 raise InputError(f"{flag} applies to --sim or --live, not to a recording")
 
 
+def _kept_rows(args: argparse.Namespace, t: np.ndarray) -> tuple[Any, Any]:
+    """The samples a replay must keep estimates for: those the JSON document and the summary
+    show (every sample for --plot). Returns (rows or None, json_rows' answer or None)."""
+    import numpy as np
+
+    from gyrocal.kit.tracking import json_rows
+
+    if args.plot:
+        return None, None
+    parts = []
+    sel = None
+    if args.json or args.out:
+        sel = json_rows(t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        parts.append(sel[0])
+    if not args.json:
+        parts.append(_summary_rows(t.size, args.rows))
+    return np.unique(np.concatenate(parts)), sel
+
+
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
     import numpy as np
@@ -566,6 +594,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--every must be a number of seconds >= 0, got {args.every!r}")
     refuse_existing((args.out, args.plot), force=args.force)  # before a long (or live) run
     notes: list[str] = []
+    json_sel = None
     if args.live:
         tr, truth, source = _run_live(args, notes)
     else:
@@ -579,7 +608,8 @@ def run(args: argparse.Namespace) -> int:
             # in pieces: the tracker's working arrays stay a piece long (the estimates are
             # the same however the samples are cut)
             batches = chunks(batch, REPLAY_CHUNK)
-        tr = run_tracker(tracker, batches)
+        keep, json_sel = _kept_rows(args, batch.t) if not args.sim else (None, None)
+        tr = run_tracker(tracker, batches, rows=keep)
         if not args.sim and not args.causal:
             tr = smooth_tracked(tracker, tr, batch.temperature)
         notes += tracker_notes(tracker)
@@ -589,18 +619,21 @@ def run(args: argparse.Namespace) -> int:
         plot_track(tr, args.plot, truth, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json or args.out:
-        rows, every = json_rows(tr.t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        if json_sel is None:
+            json_sel = json_rows(tr.t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        rows, every = json_sel
+        at = rows if tr.rows is None else np.searchsorted(tr.rows, rows)
         if every is not None:
             print(f"gyrocal: note: the JSON document is decimated to one row every {every:g} s "
-                  f"({rows.size} of {tr.t.size} samples; each row the estimate at that sample, "
+                  f"({rows.size} of {tr.still.size} samples; each row the estimate at that sample, "
                   "still true if any sample since the previous row was); --every sets the "
                   "interval, --every 0 keeps every sample", file=sys.stderr)
         still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
             if every is not None else tr.still
         doc: dict[str, Any] = {
-            "t": tr.t[rows].tolist(),
-            "bias": tr.bias[rows].tolist(),
-            "bias_std": tr.bias_std[rows].tolist(),
+            "t": tr.t[at].tolist(),
+            "bias": tr.bias[at].tolist(),
+            "bias_std": tr.bias_std[at].tolist(),
             "still": still.tolist(),
         }
         if every is not None:
