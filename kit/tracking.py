@@ -3,7 +3,7 @@
 
 The command (:mod:`gyrocal.kit.commands.track`) parses arguments and calls this module:
 :class:`Batch` is what a source hands the tracker, :func:`run_tracker` feeds batches and collects
-a :class:`Tracked`, :func:`encoder_reference` and :func:`rest_flags` turn a Recording v1 into
+a :class:`Tracked`, :func:`reference_segments` and :func:`rest_flags` turn a Recording v1 into
 reference-rate and still flags, and :class:`LiveSource` with :func:`run_live` is the live loop on
 the jig (the protocol runner's loop of :mod:`gyrocal.kit.protocol`, holding the servos still).
 """
@@ -197,42 +197,112 @@ def load_noise(path: str) -> Any:
     return load_document(path, "gyrocal-noise", "--noise")
 
 
-def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Per-sample reference rate and axis over the recording's rotate segments.
+@dataclass(frozen=True)
+class Reference:
+    """Reference rates of a recording's rotate segments, held per segment (a few bytes per
+    turning sample, instead of a rate and an axis for every sample of the recording).
+
+    Attributes
+    ----------
+    runs : list of (int, ndarray (m,), ndarray (3,))
+        First sample index, the encoder rate of each sample from there (NaN where the encoder
+        does not cover it), and the servo's unit axis in the sensor frame during the turn.
+    """
+
+    runs: list[tuple[int, np.ndarray, np.ndarray]]
+
+    def window(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(rate (b−a,), axis (b−a, 3))`` of samples ``a:b`` (NaN off the turns), or None
+        when no turn covers them."""
+        rr = ra = None
+        for i0, rate, u in self.runs:
+            lo, hi = max(a, i0), min(b, i0 + rate.size)
+            if lo >= hi:
+                continue
+            if rr is None:
+                rr = np.full(b - a, np.nan)
+                ra = np.full((b - a, 3), np.nan)
+            seg = rate[lo - i0:hi - i0]
+            ok = np.isfinite(seg)
+            rr[lo - a:hi - a][ok] = seg[ok]
+            ra[lo - a:hi - a][ok] = u  # type: ignore[index]
+        return None if rr is None else (rr, ra)  # type: ignore[return-value]
+
+
+def turn_axis(rec: Any, cal: Any, motor: int, t_mid: float) -> np.ndarray | None:
+    """Servo ``motor``'s unit axis in the sensor frame during a turn.
+
+    With a Calibration v2's ``kinematics`` the axis is carried by the servos inside it in the
+    chain (:func:`gyrocal.calib.kinematics.axes_at`, at their encoder angles mid-turn; a
+    servo's own angle and those outside it do not move its axis, so the axis is constant
+    through the turn), which a posed turn needs; otherwise the calibration's ``axes`` entry
+    (:func:`gyrocal.kit.report_plots.calibration_axis`, the axis at the reference pose).
+    """
+    from gyrocal.kit.report_plots import calibration_axis
+
+    kin = getattr(cal, "kinematics", None)
+    chain = [int(x) for x in kin["chain"]] if kin else []
+    if motor not in chain:
+        return calibration_axis(cal, motor)
+    from gyrocal.calib.kinematics import axes_at
+
+    angles = np.empty((1, len(chain)))
+    for j, sid in enumerate(chain):
+        et, ea = rec.encoder(sid)
+        if et.size == 0:
+            angles[0, j] = float(kin["reference_angles_rad"][j])  # never moved
+        else:
+            angles[0, j] = float(np.interp(t_mid, et, ea))
+    u = axes_at(kin, angles)[0, chain.index(motor)]
+    return u / np.linalg.norm(u)
+
+
+def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
+    """Reference rates and axes over the recording's rotate segments.
 
     The rate of sample ``i`` is the encoder angle's change across the sample's own interval
     ``[t_i − dt/2, t_i + dt/2]`` (linear interpolation of the encoder), so the mean over any
     run of samples is the angle change across the run divided by its length: the reference a
-    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
-    calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
+    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes: :func:`turn_axis`.
     """
-    from gyrocal.kit.report_plots import calibration_axis, encoder_rate
+    from gyrocal.kit.report_plots import encoder_rate
 
     n = rec.imu_t.size
-    rr = np.full(n, np.nan)
-    ra = np.full((n, 3), np.nan)
+    runs: list[tuple[int, np.ndarray, np.ndarray]] = []
     notes: list[str] = []
     if n < 2:
-        return rr, ra, notes
+        return Reference(runs), notes
     dt = float(np.median(np.diff(rec.imu_t)))
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue
-        u = calibration_axis(cal, int(seg.motor))  # type: ignore[arg-type]
+        u = turn_axis(rec, cal, int(seg.motor), 0.5 * (seg.t_start + seg.t_end))
         if u is None:
             notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
                          f"{seg.index} gives no reference-rate updates")
             continue
         et, ea = rec.encoder(seg.motor)
-        idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
-        rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
-        covered = np.isfinite(rate)
-        if not covered.any():
+        i0 = int(np.searchsorted(rec.imu_t, seg.t_start, side="left"))
+        i1 = int(np.searchsorted(rec.imu_t, seg.t_end, side="right"))
+        rate = encoder_rate(et, ea, rec.imu_t[i0:i1], dt / 2)
+        if not np.isfinite(rate).any():
             notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
             continue
-        rr[idx[covered]] = rate[covered]
-        ra[idx[covered]] = u
-    return rr, ra, notes
+        runs.append((int(i0), rate, np.asarray(u, dtype=float)))
+    return Reference(runs), notes
+
+
+def replay_chunks(batch: Batch, ref: Reference | None, size: int) -> Iterator[Batch]:
+    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` over its
+    samples (a recording replayed in bounded working memory)."""
+    n = batch.t.size
+    for a in range(0, n, size):
+        b = min(a + size, n)
+        rr_ra = ref.window(a, b) if ref is not None else None
+        yield Batch(batch.t[a:b], batch.rate[a:b],
+                    None if batch.temperature is None else batch.temperature[a:b],
+                    None if batch.still is None else batch.still[a:b],
+                    *(rr_ra if rr_ra is not None else (None, None)))
 
 
 def rest_flags(

@@ -258,7 +258,7 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
     import numpy as np
 
     from gyrocal.kit.recording import load_recording
-    from gyrocal.kit.tracking import Batch, encoder_reference, rest_flags
+    from gyrocal.kit.tracking import Batch, reference_segments, rest_flags
 
     rec = load_recording(args.recording)
     notes += list(rec.warnings)
@@ -279,21 +279,22 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
         still = rest_flags(rec)
     elif args.still == "auto" and any(seg.kind == "rest" for seg in rec.segments):
         still = rest_flags(rec, outside=math.nan, check=tracker.detector, notes=notes)
-    rr = ra = None
+    ref = None
     if not args.no_reference and cal is not None and any(
         s.kind == "rotate" for s in rec.segments
     ):
-        rr, ra, more = encoder_reference(rec, cal)
+        ref, more = reference_segments(rec, cal)
         notes += more
-        if not np.isfinite(rr).any():
-            rr = ra = None
+        if not ref.runs:
+            ref = None
         elif not np.all(np.isfinite(cal.scale_std)):
             notes.append("the calibration has no scale_std: no reference-rate updates")
-            rr = ra = None
-        if rr is not None and still is not None:
-            still[np.isfinite(rr)] = 0.0
-    batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still, rr, ra)
-    return tracker, batch, None, str(rec.path)
+            ref = None
+        if ref is not None and still is not None:
+            for i0, rate, _ in ref.runs:
+                still[i0:i0 + rate.size][np.isfinite(rate)] = 0.0
+    batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still)
+    return tracker, batch, ref, str(rec.path)
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
@@ -582,6 +583,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.tracking import (
         chunks,
         json_rows,
+        replay_chunks,
         run_tracker,
         smooth_tracked,
         tracker_notes,
@@ -604,10 +606,11 @@ def run(args: argparse.Namespace) -> int:
             batches: Iterable[Batch] = chunks(batch,
                                                max(1, int(round(tracker.settings.odr_hz))))
         else:
-            tracker, batch, truth, source = _replay(args, notes)
+            tracker, batch, ref, source = _replay(args, notes)
+            truth = None
             # in pieces: the tracker's working arrays stay a piece long (the estimates are
-            # the same however the samples are cut)
-            batches = chunks(batch, REPLAY_CHUNK)
+            # the same however the samples are cut), the reference rates made per piece
+            batches = replay_chunks(batch, ref, REPLAY_CHUNK)
         keep, json_sel = _kept_rows(args, batch.t) if not args.sim else (None, None)
         tr = run_tracker(tracker, batches, rows=keep)
         if not args.sim and not args.causal:
