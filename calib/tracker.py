@@ -57,8 +57,12 @@ tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (
 first, so any way of cutting the stream into batches refreshes it at the same samples), so a
 drifting bias does not hide still periods.
 
-:meth:`BiasTracker.update` pays a whole :meth:`process` call per sample (about 150 µs). For
-fast streams :meth:`BiasTracker.feed` fuses samples into blocks of ``stream_block_s``: each
+:meth:`BiasTracker.update` does, for a sample without a reference rate, the arithmetic of a
+one-sample :meth:`process` call in scalar code (the detector's window by running sums,
+:class:`gyrocal.calib.stationarity.StreamingQuiet`; the update window's sums; the output from
+the current state), and pays a Kalman step only when an update window closes: about 12 µs per
+sample (median) here against 1.1 ms for the call it replaces, with the same estimates to
+rounding. :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
 sample is corrected at once with the latest estimate (the estimate only changes at update
 windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
 and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
