@@ -10,6 +10,7 @@ the jig (the protocol runner's loop of :mod:`gyrocal.kit.protocol`, holding the 
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -672,6 +673,14 @@ def tracker_notes(tracker: Any) -> list[str]:
                    + (f"it matters on {', '.join(sig)} (beyond 3 sigma)" if sig
                       else "not distinguishable from zero (--no-tempco would do)"))
     return out
+
+
+def json_text(columns: dict[str, Callable[[], Any]]) -> str:
+    """``json.dumps`` of ``{name: make()}`` plus a newline, built one column at a time: the
+    Python objects of one column exist at once, not of all (the same text)."""
+    parts = [f"{json.dumps(name)}: {json.dumps(make(), allow_nan=False)}"
+             for name, make in columns.items()]
+    return "{" + ", ".join(parts) + "}\n"
 
 
 def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tuple[

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Iterable
@@ -583,6 +582,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.tracking import (
         chunks,
         json_rows,
+        json_text,
         replay_chunks,
         run_tracker,
         smooth_tracked,
@@ -634,14 +634,14 @@ def run(args: argparse.Namespace) -> int:
         still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
             if every is not None else tr.still
         doc: dict[str, Any] = {
-            "t": tr.t[at].tolist(),
-            "bias": tr.bias[at].tolist(),
-            "bias_std": tr.bias_std[at].tolist(),
-            "still": still.tolist(),
+            "t": lambda: tr.t[at].tolist(),
+            "bias": lambda: tr.bias[at].tolist(),
+            "bias_std": lambda: tr.bias_std[at].tolist(),
+            "still": lambda: still.tolist(),
         }
         if every is not None:
-            doc["decimated_every_s"] = every
-        text = json.dumps(doc, allow_nan=False) + "\n"
+            doc["decimated_every_s"] = lambda: every
+        text = json_text(doc)
         emit_text(text, args.out, force=args.force)
     if not args.json:
         print(_summary(tr, args.rows, source, truth))
