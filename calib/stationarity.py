@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -427,14 +428,32 @@ def quiet_noise_std(rate: np.ndarray, block: int) -> np.ndarray:
     nb = m.shape[0] // block
     if nb < 5:
         return white_noise_std(m)
-    d = np.diff(m[: nb * block].reshape(nb, block, 3), axis=1)  # within-block differences
-    score = d.var(axis=1).sum(axis=1)
+    step = max(1, _BLOCK * 8 // block)  # blocks per piece: temporaries of a few MB
+
+    def pieces() -> Iterator[tuple[int, int, np.ndarray]]:
+        for a in range(0, nb, step):
+            b = min(nb, a + step)
+            # within-block differences of blocks a..b-1
+            yield a, b, np.diff(m[a * block: b * block].reshape(b - a, block, 3), axis=1)
+
+    score = np.empty(nb)
+    for a, b, d in pieces():
+        score[a:b] = d.var(axis=1).sum(axis=1)
     order = np.sort(score)
     ref = float(np.median(order[: max(3, int(0.02 * nb))]))
     rel = 1.2 * math.sqrt(2.0 / (block - 1)) / math.sqrt(3.0)
     keep = score <= ref * (1.0 + 5.0 * rel)
-    pooled = d[keep].reshape(-1, 3)
-    sigma = pooled.std(axis=0) / math.sqrt(2.0)
+    # the standard deviation of the kept differences, pooled: two passes over the pieces
+    total, count = np.zeros(3), 0
+    for a, b, d in pieces():
+        kd = d[keep[a:b]]
+        total += kd.sum(axis=(0, 1))
+        count += kd.shape[0] * kd.shape[1]
+    mean = total / count
+    ss = np.zeros(3)
+    for a, b, d in pieces():
+        ss += ((d[keep[a:b]] - mean) ** 2).sum(axis=(0, 1))
+    sigma = np.sqrt(ss / count) / math.sqrt(2.0)
     if not np.all(sigma > 0):
         return white_noise_std(m)
     return sigma

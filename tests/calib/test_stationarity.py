@@ -98,3 +98,26 @@ def test_streaming_quiet_equals_the_windowed_oracle(alpha, window_s, n_history):
     assert 0.01 < want.mean() < 0.99
     np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(sq.history(), centred[-det.history:])
+
+
+def quiet_noise_std_oracle(m, block):
+    """quiet_noise_std before it went piece by piece (all differences held at once)."""
+    import math
+
+    nb = m.shape[0] // block
+    d = np.diff(m[: nb * block].reshape(nb, block, 3), axis=1)
+    score = d.var(axis=1).sum(axis=1)
+    ref = float(np.median(np.sort(score)[: max(3, int(0.02 * nb))]))
+    rel = 1.2 * math.sqrt(2.0 / (block - 1)) / math.sqrt(3.0)
+    return d[score <= ref * (1.0 + 5.0 * rel)].reshape(-1, 3).std(axis=0) / math.sqrt(2.0)
+
+
+@pytest.mark.parametrize("piece", [8, 1000, 8192])
+def test_quiet_noise_std_piecewise_equals_the_whole_array_version(piece, monkeypatch):
+    monkeypatch.setattr(stationarity, "_BLOCK", piece)  # pieces of 1, 200 and 1638 blocks
+    rng = np.random.default_rng(5)
+    sigma = np.array([2e-3, 3e-3, 1.5e-3])
+    rate = session(rng, 40_000, sigma)
+    want = quiet_noise_std_oracle(rate, 40)
+    got = stationarity.quiet_noise_std(rate, 40)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
