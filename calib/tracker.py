@@ -842,9 +842,9 @@ class BiasTracker:
             pd = [float(v) for v in np.diag(P)]
             pbc = [float(P[i, i + 3]) for i in range(3)] if self._temp_model else []
             terms = (key, x, pd, pbc, [float(v) for v in self._q], self._t_state,
-                     self._t_update, self._nis_ok, self._A.tolist())
+                     self._t_update, self._A.tolist())
             self._out_terms = terms
-        _, x, pd, pbc, q, t_state, t_update, _ok, A = terms
+        _, x, pd, pbc, q, t_state, t_update, A = terms
         dt = t - t_state
         if dt < 0.0:
             dt = 0.0
