@@ -25,6 +25,8 @@ batches, so a recording processed at once and a live stream fed sample by sample
 from __future__ import annotations
 
 import math
+from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +38,7 @@ from gyrocal.calib.validation import scalar, vec3
 __all__ = [
     "StillDetector",
     "StillSettings",
+    "StreamingQuiet",
     "detect_still",
     "first_still_mean",
     "quiet_windows",
@@ -198,6 +201,78 @@ def quiet_windows(
     return out
 
 
+class StreamingQuiet:
+    """:func:`quiet_windows` one sample at a time in O(1): running sums over a ring of the last
+    ``n_window`` centred readings, in Python floats (a 3-vector is too small for numpy's
+    per-call cost to pay).
+
+    The sums are taken about a shift (the window mean when they were last rebuilt) and rebuilt
+    from the ring every ``n_window`` samples, so rounding does not accumulate and the variance
+    ``(Σy² − (Σy)²/n)/(n − 1)`` stays free of cancellation, as in :func:`quiet_windows`; the
+    two agree to rounding (about 1e-16 relative), which changes a decision only for a window
+    within that of a threshold.
+
+    Parameters
+    ----------
+    detector : StillDetector
+    history : ndarray (h, 3), optional
+        The centred readings before the first :meth:`push` (the last ``n_window − 1`` are kept).
+    """
+
+    def __init__(self, detector: StillDetector, history: np.ndarray | None = None) -> None:
+        self.nw = detector.n_window
+        self._var = [float(v) for v in detector.var_limit]
+        self._rate = [float(v) for v in detector.rate_limit]
+        self.ring: deque[tuple[float, float, float]] = deque(maxlen=self.nw)
+        if history is not None:
+            for r in np.asarray(history, dtype=float)[-(self.nw - 1):] if self.nw > 1 else []:
+                self.ring.append((float(r[0]), float(r[1]), float(r[2])))
+        self._rebuild()
+
+    def _rebuild(self) -> None:
+        n = len(self.ring)
+        c = [sum(r[a] for r in self.ring) / n if n else 0.0 for a in range(3)]
+        self._c = c
+        self._s1 = [sum(r[a] - c[a] for r in self.ring) for a in range(3)]
+        self._s2 = [sum((r[a] - c[a]) ** 2 for r in self.ring) for a in range(3)]
+        self._age = 0
+
+    def push(self, x0: float, x1: float, x2: float) -> bool:
+        """Add one centred reading; True when the window ending at it is quiet (False while
+        fewer than ``n_window`` readings have been seen)."""
+        ring = self.ring
+        nw = self.nw
+        c, s1, s2 = self._c, self._s1, self._s2
+        if len(ring) == nw:
+            o = ring[0]
+            for a in range(3):
+                y = o[a] - c[a]
+                s1[a] -= y
+                s2[a] -= y * y
+        ring.append((x0, x1, x2))
+        for a, x in enumerate((x0, x1, x2)):
+            y = x - c[a]
+            s1[a] += y
+            s2[a] += y * y
+        self._age += 1
+        if self._age >= nw:
+            self._rebuild()
+        if len(ring) < nw:
+            return False
+        for a in range(3):
+            mean = s1[a] / nw + c[a]
+            var = max(s2[a] - s1[a] * s1[a] / nw, 0.0) / (nw - 1)
+            if not (var <= self._var[a] and abs(mean) <= self._rate[a]):
+                return False
+        return True
+
+    def history(self) -> np.ndarray:
+        """The last ``n_window − 1`` centred readings (the ``history`` rows of
+        :func:`quiet_windows`)."""
+        rows = list(self.ring)[-(self.nw - 1):] if self.nw > 1 else []
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
+
 def run_lengths(quiet: np.ndarray, carry: int = 0) -> np.ndarray:
     """Length of the run of quiet windows ending at each position (0 where not quiet).
 
@@ -353,14 +428,32 @@ def quiet_noise_std(rate: np.ndarray, block: int) -> np.ndarray:
     nb = m.shape[0] // block
     if nb < 5:
         return white_noise_std(m)
-    d = np.diff(m[: nb * block].reshape(nb, block, 3), axis=1)  # within-block differences
-    score = d.var(axis=1).sum(axis=1)
+    step = max(1, _BLOCK * 8 // block)  # blocks per piece: temporaries of a few MB
+
+    def pieces() -> Iterator[tuple[int, int, np.ndarray]]:
+        for a in range(0, nb, step):
+            b = min(nb, a + step)
+            # within-block differences of blocks a..b-1
+            yield a, b, np.diff(m[a * block: b * block].reshape(b - a, block, 3), axis=1)
+
+    score = np.empty(nb)
+    for a, b, d in pieces():
+        score[a:b] = d.var(axis=1).sum(axis=1)
     order = np.sort(score)
     ref = float(np.median(order[: max(3, int(0.02 * nb))]))
     rel = 1.2 * math.sqrt(2.0 / (block - 1)) / math.sqrt(3.0)
     keep = score <= ref * (1.0 + 5.0 * rel)
-    pooled = d[keep].reshape(-1, 3)
-    sigma = pooled.std(axis=0) / math.sqrt(2.0)
+    # the standard deviation of the kept differences, pooled: two passes over the pieces
+    total, count = np.zeros(3), 0
+    for a, b, d in pieces():
+        kd = d[keep[a:b]]
+        total += kd.sum(axis=(0, 1))
+        count += kd.shape[0] * kd.shape[1]
+    mean = total / count
+    ss = np.zeros(3)
+    for a, b, d in pieces():
+        ss += ((d[keep[a:b]] - mean) ** 2).sum(axis=(0, 1))
+    sigma = np.sqrt(ss / count) / math.sqrt(2.0)
     if not np.all(sigma > 0):
         return white_noise_std(m)
     return sigma

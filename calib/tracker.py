@@ -57,8 +57,12 @@ tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (
 first, so any way of cutting the stream into batches refreshes it at the same samples), so a
 drifting bias does not hide still periods.
 
-:meth:`BiasTracker.update` pays a whole :meth:`process` call per sample (about 150 µs). For
-fast streams :meth:`BiasTracker.feed` fuses samples into blocks of ``stream_block_s``: each
+:meth:`BiasTracker.update` does, for a sample without a reference rate, the arithmetic of a
+one-sample :meth:`process` call in scalar code (the detector's window by running sums,
+:class:`gyrocal.calib.stationarity.StreamingQuiet`; the update window's sums; the output from
+the current state), and pays a Kalman step only when an update window closes: about 12 µs per
+sample (median) here against 1.1 ms for the call it replaces, with the same estimates to
+rounding. :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
 sample is corrected at once with the latest estimate (the estimate only changes at update
 windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
 and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
@@ -110,7 +114,13 @@ from scipy.stats import chi2
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.kalman import KalmanFilter
 from gyrocal.calib.model import GyroCalibration
-from gyrocal.calib.stationarity import StillDetector, StillSettings, quiet_windows, run_lengths
+from gyrocal.calib.stationarity import (
+    StillDetector,
+    StillSettings,
+    StreamingQuiet,
+    quiet_windows,
+    run_lengths,
+)
 from gyrocal.calib.validation import scalar, vec3
 
 if TYPE_CHECKING:
@@ -590,6 +600,12 @@ class BiasTracker:
         self._hist = np.zeros((0, 3))
         self._run = 0
         self._pending: dict[str, np.ndarray] = {}
+        # update()'s own queue of samples awaiting their still decision (t, m, temp, ext), and
+        # the output terms of the current state (rebuilt after each measurement update)
+        self._pq: deque[tuple[float, np.ndarray, float, float]] = deque()
+        self._out_terms: tuple[Any, ...] | None = None
+        # update()'s detector window (None while self._hist holds it, for process())
+        self._sq: StreamingQuiet | None = None
         self._open: _OpenWindow | None = None
         self._nis_hist: deque[float] = deque(maxlen=s.nis_window)
         self._nis_ok = True
@@ -623,12 +639,12 @@ class BiasTracker:
     @property
     def bias(self) -> np.ndarray:
         """Bias estimate at the latest sample (its time and temperature), rad/s."""
-        return self._last["bias"].copy()
+        return np.array(self._last["bias"], dtype=float)
 
     @property
     def bias_std(self) -> np.ndarray:
         """One-sigma uncertainty of :attr:`bias`, rad/s."""
-        return self._last["bias_std"].copy()
+        return np.array(self._last["bias_std"], dtype=float)
 
     @property
     def bias_covariance(self) -> np.ndarray:
@@ -714,6 +730,9 @@ class BiasTracker:
         -------
         ndarray (3,)
         """
+        fast = self._update_fast(sample, t, temperature, still, reference_rate, reference_axis)
+        if fast is not None:
+            return fast
         m = np.asarray(sample, dtype=float)
         if m.shape != (3,):
             raise CalibInputError(f"sample must be 3 numbers (rad/s), got shape {m.shape}")
@@ -730,6 +749,123 @@ class BiasTracker:
             else np.asarray(reference_axis, dtype=float).reshape(1, -1),
         )
         return res.corrected[0]
+
+    def _update_fast(
+        self, sample: Any, t: Any, temperature: Any, still: Any, reference_rate: Any,
+        reference_axis: Any,
+    ) -> np.ndarray | None:
+        """:meth:`update` for the common sample (valid, no reference rate, not the first):
+        the same arithmetic as a one-sample :meth:`process` call, without its per-call
+        overhead. Returns None where the general path must run (it also names bad input)."""
+        if (reference_rate is not None or reference_axis is not None or self._k == 0
+                or self._finished or self._nbuf):
+            return None
+        try:
+            m = np.array(sample, dtype=float)
+            tf = float(t)
+            temp = math.nan if temperature is None else float(temperature)
+        except (TypeError, ValueError):
+            return None
+        if (m.shape != (3,) or not (math.isfinite(m[0]) and math.isfinite(m[1])
+                                    and math.isfinite(m[2]) and math.isfinite(tf))
+                or self._t_last is None or not tf > self._t_last
+                or (self._temp_model and not math.isfinite(temp))):
+            return None
+        if self._pending:  # samples a process() call left awaiting their decision
+            pend = self._pending
+            if np.isfinite(pend["rr"]).any():
+                return None
+            for i in range(pend["t"].size):
+                self._pq.append((float(pend["t"][i]), pend["m"][i].copy(),
+                                 float(pend["temp"][i]), float(pend["ext"][i])))
+            self._pending = {}
+        ext = math.nan if still is None else (1.0 if still else 0.0)
+        k = self._k
+        if k % self._refresh == 0:
+            self._refresh_detector_bias()
+        if self._t_ref is None and math.isfinite(temp):
+            self._t_ref = temp
+        # detector: the window ending at this sample, and the run of quiet windows
+        det = self.detector
+        sq = self._sq
+        if sq is None:
+            sq = self._sq = StreamingQuiet(det, self._hist)
+        b = self._det_bias
+        quiet = sq.push(m[0] + b[0], m[1] + b[1], m[2] + b[2])
+        self._run = self._run + 1 if quiet else 0
+        # the still decision on the sample L back, and the update window it feeds
+        pq = self._pq
+        pq.append((tf, m, temp, ext))
+        L = det.n_lookahead
+        while len(pq) > L:
+            g = k - len(pq) + 1
+            td, md, tempd, extd = pq.popleft()
+            is_still = (self._run >= det.n_min + L) if math.isnan(extd) else extd > 0.5
+            self._last_decision = (g, bool(is_still))
+            self._window_step(g, L, td, md, tempd, is_still)
+        return self._sample_output(m, tf, temp)
+
+    def _window_step(self, g: int, L: int, t: float, z: np.ndarray, temp: float,
+                     is_still: bool) -> None:
+        """Pool the decided sample ``g`` into the open update window, applying the window when
+        it closes (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
+        op = self._open
+        if op is not None and not (is_still and op.kind == _KIND_STILL):
+            self._apply_window(op, _log_sink(), g + L)
+            self._open = op = None
+        if not is_still:
+            return
+        sum_temp = temp if self._temp_model else 0.0
+        if op is None:
+            op = _OpenWindow(kind=_KIND_STILL, axis=None, last=g, count=1, sum_z=z.copy(),
+                             sum_temp=sum_temp, sum_omega=0.0, t_last=t)
+        else:
+            op.count += 1
+            op.sum_z = op.sum_z + z
+            op.sum_temp += sum_temp
+            op.last = g
+            op.t_last = t
+        if op.count == self._U:
+            self._apply_window(op, _log_sink(), op.last + L)
+            self._open = None
+        else:
+            self._open = op
+
+    def _sample_output(self, m: np.ndarray, t: float, temp: float) -> np.ndarray:
+        """Bias, its uncertainty and the corrected rate at one sample from the current state
+        (the one-row case of :meth:`_outputs`), in scalar arithmetic."""
+        key = (self._n_updates, self._t_ref)
+        terms = self._out_terms
+        if terms is None or terms[0] != key:
+            x = [float(v) for v in np.asarray(self.kf.x, dtype=float).reshape(-1)]
+            P = np.asarray(self.kf.P, dtype=float)
+            pd = [float(v) for v in np.diag(P)]
+            pbc = [float(P[i, i + 3]) for i in range(3)] if self._temp_model else []
+            terms = (key, x, pd, pbc, [float(v) for v in self._q], self._t_state,
+                     self._t_update, self._A.tolist())
+            self._out_terms = terms
+        _, x, pd, pbc, q, t_state, t_update, A = terms
+        dt = t - t_state
+        if dt < 0.0:
+            dt = 0.0
+        if self._temp_model:
+            dT = temp - (self._t_ref if self._t_ref is not None else 0.0)
+            bias = [x[i] + x[i + 3] * dT for i in range(3)]
+            var = [pd[i] + 2 * dT * pbc[i] + dT * dT * pd[i + 3] + (q[i] + q[i + 3] * dT * dT) * dt
+                   for i in range(3)]
+        else:
+            bias = x[:3]
+            var = [pd[i] + q[i] * dt for i in range(3)]
+        std = [math.sqrt(v) if v > 0.0 else 0.0 for v in var]
+        c0, c1, c2 = m[0] + bias[0], m[1] + bias[1], m[2] + bias[2]
+        out = np.array([A[0][0] * c0 + A[0][1] * c1 + A[0][2] * c2,
+                        A[1][0] * c0 + A[1][1] * c1 + A[1][2] * c2,
+                        A[2][0] * c0 + A[2][1] * c1 + A[2][2] * c2])
+        self._k += 1
+        self._t_last = t
+        self._temp_last = temp
+        self._last = {"bias": bias, "bias_std": std, "since": t - t_update}
+        return out
 
     def feed(
         self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None
@@ -938,6 +1074,17 @@ class BiasTracker:
             raise CalibInputError("samples given to feed() are waiting: call flush() before "
                                   "process() or update()")
         cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
+        if self._sq is not None:  # update()'s detector window, back to the rows process() keeps
+            self._hist = self._sq.history()
+            self._sq = None
+        if self._pq:  # samples update() left awaiting their decision
+            q = list(self._pq)
+            self._pq.clear()
+            self._pending = {
+                "t": np.array([r[0] for r in q]), "m": np.array([r[1] for r in q]),
+                "temp": np.array([r[2] for r in q]), "ext": np.array([r[3] for r in q]),
+                "rr": np.full(len(q), np.nan), "ra": np.full((len(q), 3), np.nan),
+            }
         # The detector's rate test is centred on the bias estimate, refreshed at every multiple
         # of D samples counted from the first: cut the batch there, so that any way of
         # feeding the same samples refreshes it at the same samples.
@@ -1454,6 +1601,12 @@ class BiasTracker:
             "since": t - tu[j],
             "nis_ok": ok[j],
         }
+
+
+def _log_sink() -> dict[str, list[Any]]:
+    """A throwaway update log (:meth:`BiasTracker.update` returns no log)."""
+    return {k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at",
+                            "shift")}
 
 
 def _concat(parts: list[TrackResult], g_first: int) -> TrackResult:

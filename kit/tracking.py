@@ -3,13 +3,14 @@
 
 The command (:mod:`gyrocal.kit.commands.track`) parses arguments and calls this module:
 :class:`Batch` is what a source hands the tracker, :func:`run_tracker` feeds batches and collects
-a :class:`Tracked`, :func:`encoder_reference` and :func:`rest_flags` turn a Recording v1 into
+a :class:`Tracked`, :func:`reference_segments` and :func:`rest_flags` turn a Recording v1 into
 reference-rate and still flags, and :class:`LiveSource` with :func:`run_live` is the live loop on
 the jig (the protocol runner's loop of :mod:`gyrocal.kit.protocol`, holding the servos still).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -42,7 +43,12 @@ class Batch:
 
 @dataclass(frozen=True)
 class Tracked:
-    """Per-sample output of a whole run."""
+    """Per-sample output of a whole run.
+
+    ``t``, ``bias``, ``bias_std``, ``nis_ok`` and ``since_update_s`` hold the samples ``rows``
+    (global indices; None: every sample), ``still`` every sample; ``since_max`` is the longest
+    time without an update over every sample, s.
+    """
 
     t: np.ndarray
     bias: np.ndarray
@@ -54,19 +60,71 @@ class Tracked:
     update_kind: np.ndarray
     alarm_t: np.ndarray
     shift_t: np.ndarray
+    rows: np.ndarray | None = None
+    since_max: float = math.nan
 
 
-def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
+class _Kept:
+    """Per-sample outputs of consecutive batches, kept at the samples ``rows`` (global indices,
+    increasing; None: all) in arrays that grow by doubling (no list of parts to join at the end,
+    which would hold everything twice)."""
+
+    def __init__(self, rows: np.ndarray | None) -> None:
+        self.rows = rows
+        self.n = 0  # samples seen
+        self.k = 0  # rows filled
+        self.cols: dict[str, np.ndarray] = {}
+        self.still = np.zeros(1024, dtype=bool)
+
+    def _put(self, name: str, value: np.ndarray) -> None:
+        col = self.cols.get(name)
+        need = self.k + value.shape[0]
+        if col is None or col.shape[0] < need:
+            size = max(need, 2 * (0 if col is None else col.shape[0]), 1024)
+            if self.rows is not None:
+                size = self.rows.size
+            grown = np.empty((size, *value.shape[1:]), dtype=value.dtype)
+            if col is not None:
+                grown[: self.k] = col[: self.k]
+            self.cols[name] = col = grown
+        col[self.k:need] = value
+
+    def add(self, res: Any) -> None:
+        n = res.t.size
+        if self.rows is None:
+            sel: Any = slice(None)
+        else:
+            a, b = np.searchsorted(self.rows, (self.n, self.n + n))
+            sel = self.rows[a:b] - self.n
+        for name, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
+                        ("nis", res.nis_ok), ("since", res.since_update_s)):
+            self._put(name, np.asarray(v)[sel])
+        self.k += int(np.asarray(res.t)[sel].shape[0])
+        self.n += n
+        if self.still.size < self.n:
+            grown = np.zeros(max(self.n, 2 * self.still.size), dtype=bool)
+            grown[: self.still.size] = self.still
+            self.still = grown
+        self.still[res.decision_index] = res.decision_still
+
+    def col(self, name: str) -> np.ndarray:
+        return self.cols[name][: self.k]
+
+
+def run_tracker(tracker: Any, batches: Iterable[Batch], *,
+                rows: np.ndarray | None = None) -> Tracked:
     """Feed ``batches`` to a :class:`gyrocal.calib.tracker.BiasTracker` and collect per-sample
     output.
 
     A live source (the jig's IMU FIFO) is one more iterable of :class:`Batch`. The last batch is
     processed with ``finish=True``; still decisions that arrive after their batch (the
     detector's look-ahead) are placed by the sample index the tracker reports with them.
+    ``rows`` (increasing global sample indices) keeps the estimates at those samples only, so
+    a long replay holds a few bytes per sample (the still flags) besides the rows shown.
     """
-    parts: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("t", "bias", "std", "nis", "since", "ut", "uk", "al", "sh", "di", "ds")
-    }
+    kept = _Kept(None if rows is None else np.asarray(rows, dtype=np.int64))
+    upd: dict[str, list[np.ndarray]] = {k: [] for k in ("ut", "uk", "al", "sh")}
+    since_max = -math.inf
     it = iter(batches)
     current = next(it, None)
     if current is None:
@@ -78,38 +136,41 @@ def run_tracker(tracker: Any, batches: Iterable[Batch]) -> Tracked:
             reference_rate=current.reference_rate, reference_axis=current.reference_axis,
             finish=nxt is None,
         )
-        for key, v in (("t", res.t), ("bias", res.bias), ("std", res.bias_std),
-                       ("nis", res.nis_ok), ("since", res.since_update_s),
-                       ("ut", res.updates.t), ("uk", res.updates.kind),
+        kept.add(res)
+        if res.t.size:
+            since_max = max(since_max, float(np.max(res.since_update_s)))
+        for key, v in (("ut", res.updates.t), ("uk", res.updates.kind),
                        ("al", res.updates.t[res.updates.alarm]),
-                       ("sh", res.updates.t[res.updates.shift]),
-                       ("di", res.decision_index), ("ds", res.decision_still)):
-            parts[key].append(v)
+                       ("sh", res.updates.t[res.updates.shift])):
+            upd[key].append(v)
         current = nxt
-    t = np.concatenate(parts["t"])
-    still = np.zeros(t.size, dtype=bool)
-    still[np.concatenate(parts["di"])] = np.concatenate(parts["ds"])
     return Tracked(
-        t=t,
-        bias=np.vstack(parts["bias"]),
-        bias_std=np.vstack(parts["std"]),
-        still=still,
-        nis_ok=np.concatenate(parts["nis"]),
-        since_update_s=np.concatenate(parts["since"]),
-        update_t=np.concatenate(parts["ut"]),
-        update_kind=np.concatenate(parts["uk"]),
-        alarm_t=np.concatenate(parts["al"]),
-        shift_t=np.concatenate(parts["sh"]),
+        t=kept.col("t"),
+        bias=kept.col("bias"),
+        bias_std=kept.col("std"),
+        still=kept.still[: kept.n].copy(),
+        nis_ok=kept.col("nis"),
+        since_update_s=kept.col("since"),
+        update_t=np.concatenate(upd["ut"]),
+        update_kind=np.concatenate(upd["uk"]),
+        alarm_t=np.concatenate(upd["al"]),
+        shift_t=np.concatenate(upd["sh"]),
+        rows=kept.rows,
+        since_max=since_max,
     )
 
 
 def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None) -> Tracked:
     """``tr`` with each sample's bias and uncertainty smoothed over the whole run
     (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`; the tracker was built with
-    ``keep_states=True``): for a replayed recording, where every sample is at hand."""
+    ``keep_states=True``): for a replayed recording, where every sample is at hand.
+    ``temperature`` covers every sample; only ``tr``'s rows are smoothed."""
     from dataclasses import replace
 
-    bias, std = tracker.smoothed(tr.t, temperature)
+    temp = temperature
+    if temp is not None and tr.rows is not None:
+        temp = np.asarray(temp)[tr.rows]
+    bias, std = tracker.smoothed(tr.t, temp)
     return replace(tr, bias=bias, bias_std=std)
 
 
@@ -137,42 +198,112 @@ def load_noise(path: str) -> Any:
     return load_document(path, "gyrocal-noise", "--noise")
 
 
-def encoder_reference(rec: Any, cal: Any) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Per-sample reference rate and axis over the recording's rotate segments.
+@dataclass(frozen=True)
+class Reference:
+    """Reference rates of a recording's rotate segments, held per segment (a few bytes per
+    turning sample, instead of a rate and an axis for every sample of the recording).
+
+    Attributes
+    ----------
+    runs : list of (int, ndarray (m,), ndarray (3,))
+        First sample index, the encoder rate of each sample from there (NaN where the encoder
+        does not cover it), and the servo's unit axis in the sensor frame during the turn.
+    """
+
+    runs: list[tuple[int, np.ndarray, np.ndarray]]
+
+    def window(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(rate (b−a,), axis (b−a, 3))`` of samples ``a:b`` (NaN off the turns), or None
+        when no turn covers them."""
+        rr = ra = None
+        for i0, rate, u in self.runs:
+            lo, hi = max(a, i0), min(b, i0 + rate.size)
+            if lo >= hi:
+                continue
+            if rr is None:
+                rr = np.full(b - a, np.nan)
+                ra = np.full((b - a, 3), np.nan)
+            seg = rate[lo - i0:hi - i0]
+            ok = np.isfinite(seg)
+            rr[lo - a:hi - a][ok] = seg[ok]
+            ra[lo - a:hi - a][ok] = u  # type: ignore[index]
+        return None if rr is None else (rr, ra)  # type: ignore[return-value]
+
+
+def turn_axis(rec: Any, cal: Any, motor: int, t_mid: float) -> np.ndarray | None:
+    """Servo ``motor``'s unit axis in the sensor frame during a turn.
+
+    With a Calibration v2's ``kinematics`` the axis is carried by the servos inside it in the
+    chain (:func:`gyrocal.calib.kinematics.axes_at`, at their encoder angles mid-turn; a
+    servo's own angle and those outside it do not move its axis, so the axis is constant
+    through the turn), which a posed turn needs; otherwise the calibration's ``axes`` entry
+    (:func:`gyrocal.kit.report_plots.calibration_axis`, the axis at the reference pose).
+    """
+    from gyrocal.kit.report_plots import calibration_axis
+
+    kin = getattr(cal, "kinematics", None)
+    chain = [int(x) for x in kin["chain"]] if kin else []
+    if motor not in chain:
+        return calibration_axis(cal, motor)
+    from gyrocal.calib.kinematics import axes_at
+
+    angles = np.empty((1, len(chain)))
+    for j, sid in enumerate(chain):
+        et, ea = rec.encoder(sid)
+        if et.size == 0:
+            angles[0, j] = float(kin["reference_angles_rad"][j])  # never moved
+        else:
+            angles[0, j] = float(np.interp(t_mid, et, ea))
+    u = axes_at(kin, angles)[0, chain.index(motor)]
+    return u / np.linalg.norm(u)
+
+
+def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
+    """Reference rates and axes over the recording's rotate segments.
 
     The rate of sample ``i`` is the encoder angle's change across the sample's own interval
     ``[t_i − dt/2, t_i + dt/2]`` (linear interpolation of the encoder), so the mean over any
     run of samples is the angle change across the run divided by its length: the reference a
-    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes come from the
-    calibration's ``axes`` (servo id -> ``{"axis": [3]}``).
+    window needs (DESIGN.md, "What makes the estimate right", item 2). Axes: :func:`turn_axis`.
     """
-    from gyrocal.kit.report_plots import calibration_axis, encoder_rate
+    from gyrocal.kit.report_plots import encoder_rate
 
     n = rec.imu_t.size
-    rr = np.full(n, np.nan)
-    ra = np.full((n, 3), np.nan)
+    runs: list[tuple[int, np.ndarray, np.ndarray]] = []
     notes: list[str] = []
     if n < 2:
-        return rr, ra, notes
+        return Reference(runs), notes
     dt = float(np.median(np.diff(rec.imu_t)))
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue
-        u = calibration_axis(cal, int(seg.motor))  # type: ignore[arg-type]
+        u = turn_axis(rec, cal, int(seg.motor), 0.5 * (seg.t_start + seg.t_end))
         if u is None:
             notes.append(f"no axis for servo {seg.motor} in the calibration: segment "
                          f"{seg.index} gives no reference-rate updates")
             continue
         et, ea = rec.encoder(seg.motor)
-        idx = np.flatnonzero((rec.imu_t >= seg.t_start) & (rec.imu_t <= seg.t_end))
-        rate = encoder_rate(et, ea, rec.imu_t[idx], dt / 2)
-        covered = np.isfinite(rate)
-        if not covered.any():
+        i0 = int(np.searchsorted(rec.imu_t, seg.t_start, side="left"))
+        i1 = int(np.searchsorted(rec.imu_t, seg.t_end, side="right"))
+        rate = encoder_rate(et, ea, rec.imu_t[i0:i1], dt / 2)
+        if not np.isfinite(rate).any():
             notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
             continue
-        rr[idx[covered]] = rate[covered]
-        ra[idx[covered]] = u
-    return rr, ra, notes
+        runs.append((int(i0), rate, np.asarray(u, dtype=float)))
+    return Reference(runs), notes
+
+
+def replay_chunks(batch: Batch, ref: Reference | None, size: int) -> Iterator[Batch]:
+    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` over its
+    samples (a recording replayed in bounded working memory)."""
+    n = batch.t.size
+    for a in range(0, n, size):
+        b = min(a + size, n)
+        rr_ra = ref.window(a, b) if ref is not None else None
+        yield Batch(batch.t[a:b], batch.rate[a:b],
+                    None if batch.temperature is None else batch.temperature[a:b],
+                    None if batch.still is None else batch.still[a:b],
+                    *(rr_ra if rr_ra is not None else (None, None)))
 
 
 def rest_flags(
@@ -542,6 +673,14 @@ def tracker_notes(tracker: Any) -> list[str]:
                    + (f"it matters on {', '.join(sig)} (beyond 3 sigma)" if sig
                       else "not distinguishable from zero (--no-tempco would do)"))
     return out
+
+
+def json_text(columns: dict[str, Callable[[], Any]]) -> str:
+    """``json.dumps`` of ``{name: make()}`` plus a newline, built one column at a time: the
+    Python objects of one column exist at once, not of all (the same text)."""
+    parts = [f"{json.dumps(name)}: {json.dumps(make(), allow_nan=False)}"
+             for name, make in columns.items()]
+    return "{" + ", ".join(parts) + "}\n"
 
 
 def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tuple[

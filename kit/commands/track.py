@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Iterable
@@ -258,7 +257,7 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
     import numpy as np
 
     from gyrocal.kit.recording import load_recording
-    from gyrocal.kit.tracking import Batch, encoder_reference, rest_flags
+    from gyrocal.kit.tracking import Batch, reference_segments, rest_flags
 
     rec = load_recording(args.recording)
     notes += list(rec.warnings)
@@ -279,21 +278,22 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
         still = rest_flags(rec)
     elif args.still == "auto" and any(seg.kind == "rest" for seg in rec.segments):
         still = rest_flags(rec, outside=math.nan, check=tracker.detector, notes=notes)
-    rr = ra = None
+    ref = None
     if not args.no_reference and cal is not None and any(
         s.kind == "rotate" for s in rec.segments
     ):
-        rr, ra, more = encoder_reference(rec, cal)
+        ref, more = reference_segments(rec, cal)
         notes += more
-        if not np.isfinite(rr).any():
-            rr = ra = None
+        if not ref.runs:
+            ref = None
         elif not np.all(np.isfinite(cal.scale_std)):
             notes.append("the calibration has no scale_std: no reference-rate updates")
-            rr = ra = None
-        if rr is not None and still is not None:
-            still[np.isfinite(rr)] = 0.0
-    batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still, rr, ra)
-    return tracker, batch, None, str(rec.path)
+            ref = None
+        if ref is not None and still is not None:
+            for i0, rate, _ in ref.runs:
+                still[i0:i0 + rate.size][np.isfinite(rate)] = 0.0
+    batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still)
+    return tracker, batch, ref, str(rec.path)
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
@@ -480,11 +480,21 @@ def plot_track(tr: Tracked, path: str, truth: Any = None, *, force: bool = False
     save_png(fig, path, force=force)
 
 
+def _summary_rows(n: int, rows: int) -> np.ndarray:
+    """Samples the summary table shows: ``rows`` spread evenly over ``n``."""
+    import numpy as np
+
+    return np.unique(np.linspace(0, n - 1, max(2, rows)).round().astype(int))
+
+
 def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
     import numpy as np
 
-    n = tr.t.size
-    out = [f"gyrocal track: {source}, {n} samples over {tr.t[-1] - tr.t[0]:.1f} s; "
+    n = tr.still.size
+    want = _summary_rows(n, rows)
+    idx = want if tr.rows is None else np.searchsorted(tr.rows, want)
+    since_max = tr.since_max if math.isfinite(tr.since_max) else float(tr.since_update_s.max())
+    out = [f"gyrocal track: {source}, {n} samples over {tr.t[idx[-1]] - tr.t[idx[0]]:.1f} s; "
            f"{tr.update_t.size} updates "
            f"({np.count_nonzero(tr.update_kind == 'still')} zero-rate, "
            f"{np.count_nonzero(tr.update_kind == 'reference')} reference-rate), "
@@ -495,10 +505,9 @@ def _summary(tr: Tracked, rows: int, source: str, truth: Any) -> str:
            + f"; {tr.shift_t.size} bias shift(s) found by the CUSUM test"
            + (f" at t = {', '.join(f'{x:.1f}' for x in tr.shift_t[:5])} s" if tr.shift_t.size
               else "")
-           + f"; longest time without an update {tr.since_update_s.max():.1f} s",
+           + f"; longest time without an update {since_max:.1f} s",
            f"{'t s':>9}  {'bias x':>11} {'bias y':>11} {'bias z':>11}   "
            f"{'std x':>9} {'std y':>9} {'std z':>9}  (rad/s, Calibration v1 sign)"]
-    idx = np.unique(np.linspace(0, n - 1, max(2, rows)).round().astype(int))
     for i in idx:
         b, s = tr.bias[i], tr.bias_std[i]
         out.append(f"{tr.t[i]:9.2f}  {b[0]:11.4e} {b[1]:11.4e} {b[2]:11.4e}   "
@@ -546,6 +555,25 @@ def _check_modes(args: argparse.Namespace) -> None:
                 raise InputError(f"{flag} applies to --sim or --live, not to a recording")
 
 
+def _kept_rows(args: argparse.Namespace, t: np.ndarray) -> tuple[Any, Any]:
+    """The samples a replay must keep estimates for: those the JSON document and the summary
+    show (every sample for --plot). Returns (rows or None, json_rows' answer or None)."""
+    import numpy as np
+
+    from gyrocal.kit.tracking import json_rows
+
+    if args.plot:
+        return None, None
+    parts = []
+    sel = None
+    if args.json or args.out:
+        sel = json_rows(t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        parts.append(sel[0])
+    if not args.json:
+        parts.append(_summary_rows(t.size, args.rows))
+    return np.unique(np.concatenate(parts)), sel
+
+
 def run(args: argparse.Namespace) -> int:
     """Build the tracker and its source, run, report."""
     import numpy as np
@@ -554,6 +582,8 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.tracking import (
         chunks,
         json_rows,
+        json_text,
+        replay_chunks,
         run_tracker,
         smooth_tracked,
         tracker_notes,
@@ -566,6 +596,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--every must be a number of seconds >= 0, got {args.every!r}")
     refuse_existing((args.out, args.plot), force=args.force)  # before a long (or live) run
     notes: list[str] = []
+    json_sel = None
     if args.live:
         tr, truth, source = _run_live(args, notes)
     else:
@@ -575,11 +606,13 @@ def run(args: argparse.Namespace) -> int:
             batches: Iterable[Batch] = chunks(batch,
                                                max(1, int(round(tracker.settings.odr_hz))))
         else:
-            tracker, batch, truth, source = _replay(args, notes)
+            tracker, batch, ref, source = _replay(args, notes)
+            truth = None
             # in pieces: the tracker's working arrays stay a piece long (the estimates are
-            # the same however the samples are cut)
-            batches = chunks(batch, REPLAY_CHUNK)
-        tr = run_tracker(tracker, batches)
+            # the same however the samples are cut), the reference rates made per piece
+            batches = replay_chunks(batch, ref, REPLAY_CHUNK)
+        keep, json_sel = _kept_rows(args, batch.t) if not args.sim else (None, None)
+        tr = run_tracker(tracker, batches, rows=keep)
         if not args.sim and not args.causal:
             tr = smooth_tracked(tracker, tr, batch.temperature)
         notes += tracker_notes(tracker)
@@ -589,23 +622,26 @@ def run(args: argparse.Namespace) -> int:
         plot_track(tr, args.plot, truth, force=args.force)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json or args.out:
-        rows, every = json_rows(tr.t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        if json_sel is None:
+            json_sel = json_rows(tr.t, args.every, JSON_MAX_ROWS if args.every is None else None)
+        rows, every = json_sel
+        at = rows if tr.rows is None else np.searchsorted(tr.rows, rows)
         if every is not None:
             print(f"gyrocal: note: the JSON document is decimated to one row every {every:g} s "
-                  f"({rows.size} of {tr.t.size} samples; each row the estimate at that sample, "
+                  f"({rows.size} of {tr.still.size} samples; each row the estimate at that sample, "
                   "still true if any sample since the previous row was); --every sets the "
                   "interval, --every 0 keeps every sample", file=sys.stderr)
         still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
             if every is not None else tr.still
         doc: dict[str, Any] = {
-            "t": tr.t[rows].tolist(),
-            "bias": tr.bias[rows].tolist(),
-            "bias_std": tr.bias_std[rows].tolist(),
-            "still": still.tolist(),
+            "t": lambda: tr.t[at].tolist(),
+            "bias": lambda: tr.bias[at].tolist(),
+            "bias_std": lambda: tr.bias_std[at].tolist(),
+            "still": lambda: still.tolist(),
         }
         if every is not None:
-            doc["decimated_every_s"] = every
-        text = json.dumps(doc, allow_nan=False) + "\n"
+            doc["decimated_every_s"] = lambda: every
+        text = json_text(doc)
         emit_text(text, args.out, force=args.force)
     if not args.json:
         print(_summary(tr, args.rows, source, truth))

@@ -373,3 +373,48 @@ def test_smoothed_beats_the_filter_and_works_in_pieces():
     np.testing.assert_allclose(b[-1], r.bias[-1], atol=1e-12)
     with pytest.raises(CalibInputError, match="keep_states"):
         BiasTracker(settings(), cal).smoothed(s.t, s.temperature_c)
+
+
+@pytest.mark.parametrize("temperature_model", [True, False])
+def test_fast_update_matches_one_sample_process_calls(temperature_model):
+    """update()'s scalar path does the arithmetic of the general path (a one-sample process()
+    call per reading, the implementation it replaced) to 1e-12, through the adaptive process
+    noise, a bias step (NIS alarm and CUSUM), external still flags, keep_states and a switch to
+    process() and back mid-stream."""
+    s = simulate_session(np.random.default_rng(21), 30.0, model=MODEL, still_s=(1.0, 4.0),
+                         motion_s=(1.0, 3.0), bias_step=(15.0, (1e-2, -5e-3, 0.0)))
+    cal = sim_calibration(np.random.default_rng(22), s)
+    st = settings(rate_random_walk=None, temperature_model=temperature_model)
+    ext = np.full(s.n, np.nan)
+    ext[3000:3400] = 1.0  # the user says still (true: it is)
+    ext[3000:3400][~s.still[3000:3400]] = np.nan
+    old, new = BiasTracker(st, cal, keep_states=True), BiasTracker(st, cal, keep_states=True)
+    ref_c, ref_b, ref_s = [], [], []
+    for i in range(s.n):
+        e = None if np.isnan(ext[i]) else bool(ext[i])
+        r = old.process(s.t[i:i + 1], s.rate[i:i + 1], s.temperature_c[i:i + 1],
+                        None if e is None else np.array([float(e)]))
+        ref_c.append(r.corrected[0])
+        ref_b.append(old.bias)
+        ref_s.append(old.bias_std)
+    out_c, out_b, out_s = [], [], []
+    for i in range(s.n):
+        e = None if np.isnan(ext[i]) else bool(ext[i])
+        if 5000 <= i < 5100:  # a batch in the middle: the queues change hands both ways
+            if i == 5000:
+                r = new.process(s.t[i:i + 100], s.rate[i:i + 100], s.temperature_c[i:i + 100])
+                out_c.extend(r.corrected)
+                out_b.extend(r.bias)
+                out_s.extend(r.bias_std)
+            continue
+        out_c.append(new.update(s.rate[i], s.t[i], s.temperature_c[i], e))
+        out_b.append(new.bias)
+        out_s.append(new.bias_std)
+    np.testing.assert_allclose(np.array(out_c), np.array(ref_c), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array(out_b), np.array(ref_b), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array(out_s), np.array(ref_s), rtol=1e-12)
+    assert new.health == old.health and new.health.alarms + new.shifts >= 1
+    assert new.last_decision == old.last_decision
+    np.testing.assert_allclose(new.rate_random_walk, old.rate_random_walk, rtol=1e-12)
+    np.testing.assert_allclose(new.smoothed(s.t, s.temperature_c)[0],
+                               old.smoothed(s.t, s.temperature_c)[0], rtol=0, atol=1e-12)
