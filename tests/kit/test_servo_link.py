@@ -150,7 +150,9 @@ def test_a_turn_disturbed_by_a_host_stall_is_repeated_and_never_fitted(tmp_path,
     assert bad[0] < 1.5 < bad[1]
     # Never a segment, so never a window: every segment lies outside the disturbed attempt.
     assert all(s.t_end <= bad[0] + 1e-6 or s.t_start >= bad[1] - 1e-6 for s in rec.segments)
-    assert sum(s.kind == "rotate" for s in rec.segments) == 6  # the turn was done again
+    # the turn was done again: every planned turn once (the full protocol's six home turns and
+    # its two posed pairs)
+    assert sum(s.kind == "rotate" for s in rec.segments) == 10
     truth = rec.manifest["truth"]
     err = np.abs(np.array(cal["scale"]) - truth["scale"]) / np.array(cal["scale_std"])
     assert cal["consistency"]["ok"] and np.all(err < 5)
