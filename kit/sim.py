@@ -61,6 +61,9 @@ class SimJig:
     imu_address: int
     truth: SensorTruth
     realism: frozenset[str] = field(default_factory=frozenset)
+    #: Every sensor's view of a plate of several (:func:`build_sim_plate`), this one first;
+    #: empty for a single sensor.
+    plate: list[Any] = field(default_factory=list, repr=False)
 
     def truth_manifest(self) -> dict[str, Any]:
         """The manifest's ``truth``: the sensor's errors, the axes, and one line per realism
@@ -404,6 +407,8 @@ def build_sim_plate(cfg: Config, *, seed: int = 0, noise_seed: int | None = None
                            bus=buses.get(sensor["bus"]))
         buses.setdefault(sensor["bus"], view.imu_bus)
         out.append(view)
+    if len(out) > 1:
+        first.plate = out
     return out
 
 
