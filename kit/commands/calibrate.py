@@ -686,7 +686,7 @@ def _run_plate(cfg: Any, args: argparse.Namespace, out: Path, work: Path, report
     if history is not None:
         raise InputError("--history and [history] store one sensor's calibration; with "
                          f"{len(sensors)} sensors on the plate store each one afterwards with "
-                         "'gyrocal history import DIR/NAME/calibration.json'")
+                         "'gyrocal history import DIR/NAME --sensor-label LABEL'")
     names = [s["name"] for s in sensors]
     try:
         run_jig(cfg, args, work, work / "recording")
