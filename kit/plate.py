@@ -185,10 +185,10 @@ def calibrate_plate(dirs: Sequence[Path], names: Sequence[str], models: Sequence
         One per sensor, in order. A sensor that failed during the run, or whose fit fails,
         gets its reason and exit code; nothing here raises for one sensor's failure.
     """
-    from gyrocal.kit.errors import GyrocalError, exit_code_for
+    from gyrocal.kit.errors import GyrocalError, HardwareError, exit_code_for
     from gyrocal.kit.fileio import atomic_write_text
     from gyrocal.kit.pipeline import check_plausible, estimate_recording
-    from gyrocal.kit.recording import load_recording, read_manifest
+    from gyrocal.kit.recording import RecordingError, load_recording, read_manifest
 
     out = []
     for d, name, model, source in zip(dirs, names, models, sources, strict=True):
@@ -199,6 +199,11 @@ def calibrate_plate(dirs: Sequence[Path], names: Sequence[str], models: Sequence
             continue
         try:
             rec = load_recording(d / "recording")
+        except RecordingError as exc:  # written just now: the sensor gave nothing usable
+            out.append(SensorOutcome(name, model, f"gave no usable data: {exc}",
+                                     HardwareError.exit_code))
+            continue
+        try:
             est = estimate_recording(rec, method, source=source)
             cal = est.calibration
             check_plausible(cal, rec.sensor, allow=allow_implausible)

@@ -584,8 +584,9 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
     if interrupted is not None:
         signum = getattr(interrupted, "signum", 2)
         what = {2: "interrupted", 15: "terminated", 1: "hung up"}.get(signum, "stopped")
-        kept = (f"the recording in {rec_dir} is kept, marked incomplete"
-                if (rec_dir / "manifest.json").exists() else "no recording was begun")
+        begun = [d for d in recording_dirs(jig, rec_dir) if (d / "manifest.json").exists()]
+        kept = (f"the recording in {', '.join(map(str, begun))} is kept, marked incomplete"
+                if begun else "no recording was begun")
         raise InterruptedRun(f"{what}: servos stopped, torque off; {kept}", signum)
     return jig
 

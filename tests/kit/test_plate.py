@@ -214,6 +214,26 @@ def test_a_sensor_that_dies_mid_run_fails_alone(tmp_path, capsys):
     assert all(s["torque_enable"] == 0 for s in servos.values())
 
 
+def test_a_sensor_whose_fifo_overflows_on_every_repeat_fails_alone(tmp_path, capsys):
+    # a FIFO of one sample (8 bytes, as tests/kit/test_calibrate.py) on sensor b only
+    cfg = write(tmp_path, '[[imu]]\nname = "mpu"\naddress = 0x68\n'
+                          '[[imu]]\nname = "b"\naddress = 0x69\n')
+    out = tmp_path / "run"
+    code = main(["calibrate", "--sim", *PAPER_SENSOR, "--protocol", "auto", "--config",
+                 str(cfg), "--out", str(out), "--quiet", "--no-report",
+                 "--sim-fault", "fifo:8@b"])
+    text = capsys.readouterr().out
+    assert code == 5  # a check's class
+    assert "== sensor mpu: mpu9250 at 0x68 on bus 1: PASSED" in text
+    assert "gyro samples were lost" in text and "(on 4 attempts)" in text
+    manifest = read_manifest(out / "b" / "recording")
+    assert manifest["failure"]["exit_code"] == 5 and not manifest["complete"]
+    # the repeats are listed, naming the sensor, in the recordings that go on
+    discarded = read_manifest(out / "mpu" / "recording")["protocol"]["discarded"]
+    assert [d["check"] for d in discarded] == ["fifo-gap"] * 4
+    assert load_recording(out / "mpu" / "recording").complete
+
+
 def test_when_every_sensor_dies_the_run_stops_with_torque_off(tmp_path, capsys):
     cfg = write(tmp_path, TWO_BUSES)
     out = tmp_path / "run"
