@@ -16,20 +16,20 @@ low rates).
 Table 2. Sensors per hour on one jig, N on the plate against one at a time, from the default
 (full) protocol's planned jig time, the still-noise measurement (0.5 s per sensor), a fit time
 measured here on one emulated recording, and a mounting time per sensor that is an
-**assumption** (``--mount-s``, default 60 s: unscrew, place, screw, plug one board). The fits
+**assumption** (``--mount-s``, default 15 and 60 s: a board in a quick-release socket, or
+unscrew, place, screw and plug one board). The fits
 are counted in series after the run (a line could overlap them with the next mounting).
 
 Data: gyrocal's own emulator only (throughput is not an accuracy figure; each sensor's
 recording is an ordinary Recording v1, fitted by the same estimator as a one-sensor run).
 
-Usage: ``python -m bench multi [--quick] [--seconds=S] [--mount-s=S]``.
+Usage: ``python -m bench multi [--quick] [--seconds=S] [--mount-s=S[,S...]]``.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
-import math
 import tempfile
 import time
 import warnings
@@ -130,7 +130,7 @@ def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
     seconds = float(opts.get("seconds", 1.0 if quick else 3.0))
-    mount_s = float(opts.get("mount-s", 60.0))
+    mounts = [float(x) for x in opts.get("mount-s", "15,60").split(",")]
     rates = RATES_HZ[:2] if quick else RATES_HZ
     rows = []
     best: dict[int, float] = {}
@@ -153,14 +153,14 @@ def main(argv: list[str]) -> None:
                     [[n, f"{best.get(n, 0):.0f}"] for n in (1, 2, 4)])
         jig_s, fit_s = fit_seconds(tmp)
     rows = []
-    one = mount_s + 0.5 + jig_s + fit_s
-    for n in (1, 2, 4):
-        cycle = n * mount_s + n * 0.5 + jig_s + n * fit_s
-        rows.append([n, f"{cycle:.0f}", f"{3600 * n / cycle:.1f}",
-                     f"{(3600 * n / cycle) / (3600 / one):.2f}"])
-    print_table(["sensors on the plate", "cycle s", "sensors/hour", "× one at a time"], rows,
-                f"Table 2: jig time {jig_s:.1f} s (default full protocol, planned), mounting "
-                f"{mount_s:g} s per sensor (ASSUMED), still noise 0.5 s and fit {fit_s:.1f} s "
-                "CPU per sensor (measured here)")
-    if math.isclose(mount_s, 60.0):
-        print("(--mount-s=S changes the assumed mounting time)")
+    for mount_s in mounts:
+        one = mount_s + 0.5 + jig_s + fit_s
+        for n in (1, 2, 4):
+            cycle = n * mount_s + n * 0.5 + jig_s + n * fit_s
+            rows.append([f"{mount_s:g}", n, f"{cycle:.0f}", f"{3600 * n / cycle:.1f}",
+                         f"{(3600 * n / cycle) / (3600 / one):.2f}"])
+    print_table(["mounting s/sensor (ASSUMED)", "sensors on the plate", "cycle s",
+                 "sensors/hour", "× one at a time"], rows,
+                f"Table 2: jig time {jig_s:.1f} s (default full protocol, planned), still noise "
+                f"0.5 s and fit {fit_s:.1f} s CPU per sensor (measured here); mounting time "
+                "assumed (--mount-s=S[,S...]: 15 s a quick-release socket, 60 s screws)")
