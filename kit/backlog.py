@@ -147,11 +147,16 @@ class Backlog:
                     self.check()
         self.high_water = max(self.high_water, self._queue.qsize())
 
-    def put_samples(self, imu: tuple[np.ndarray, np.ndarray, Any] | None,
-                    encoder: tuple[float, Any, np.ndarray]) -> None:
-        """One loop iteration: ``imu`` ``(t, rate, temperature_c)`` or None, and ``encoder``
+    def put_samples(self, imu: Any, encoder: tuple[float, Any, np.ndarray]) -> None:
+        """One loop iteration: ``imu`` ``(t, rate, temperature_c)`` or None (one sensor), or a
+        list of them, one per sensor (the writer's ``append_imus``); and ``encoder``
         ``(t, ids, angles)``."""
         self._put(("samples", imu, encoder))
+
+    def put_call(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Call ``fn(*args)`` in the consumer, after the items before it (for instance a
+        sensor's failure, after its last rows)."""
+        self._put(("call", fn, args))
 
     def put_segment(self, seg: Any) -> None:
         """A finished segment, after the samples before it."""
@@ -227,11 +232,15 @@ class Backlog:
         kind = item[0]
         if kind == "samples":
             _, imu, (te, ids, angles) = item
-            if imu is not None:
+            if isinstance(imu, list):
+                self.writer.append_imus(imu)
+            elif imu is not None:
                 self.writer.append_imu(*imu)
             self.writer.append_encoder(te, ids, angles)
         elif kind == "segment":
             self.writer.append_segment(item[1])
+        elif kind == "call":
+            item[1](*item[2])
         elif kind == "manifest":
             old = self.writer.manifest
             self.writer.update_manifest(**{

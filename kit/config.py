@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ from gyrocal.drivers.imu import MODELS as IMU_MODELS
 from gyrocal.kit.errors import InputError
 
 __all__ = [
+    "MAX_SENSORS",
     "METHODS",
     "PROTOCOLS",
     "SCHEMA",
@@ -163,15 +165,34 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 
+#: The most sensors one run may carry (``[[imu]]`` tables): each is drained every loop
+#: iteration, and ``python -m bench multi`` measures the loop with up to four.
+MAX_SENSORS = 8
+#: A sensor's name (``[[imu]]`` key ``name``) is the name of its output directory.
+_SENSOR_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,39}")
+
+
 @dataclass(frozen=True)
 class Config:
-    """A validated configuration: ``sections[section][key]``, plus where it came from."""
+    """A validated configuration: ``sections[section][key]``, plus where it came from.
+
+    ``sections["imu"]`` is the (first) sensor; ``sensors`` lists every sensor of a plate given
+    as ``[[imu]]`` tables (each the ``[imu]`` keys plus ``name``), empty for a single ``[imu]``.
+    """
 
     sections: dict[str, dict[str, Any]]
     source: str
+    sensors: tuple[dict[str, Any], ...] = ()
 
     def __getitem__(self, section: str) -> dict[str, Any]:
         return self.sections[section]
+
+    def imus(self) -> list[dict[str, Any]]:
+        """Every sensor of the run as ``[imu]`` keys plus ``name``, in the config's order (a
+        single ``[imu]`` table is one sensor named ``imu``)."""
+        if self.sensors:
+            return [dict(s) for s in self.sensors]
+        return [{**self.sections["imu"], "name": "imu"}]
 
     def axis_of(self) -> dict[int, str]:
         """``{servo id: signed sensor axis}`` from gimbal.ids and gimbal.axes."""
@@ -215,8 +236,59 @@ def _validate(section: str, name: str, value: Any) -> Any:
     return value
 
 
+def _sensor_list(tables: list[Any], source: str) -> tuple[dict[str, Any], ...]:
+    """The ``[[imu]]`` tables validated: each over the ``[imu]`` defaults, named, and at its own
+    address on its bus."""
+    if not 1 <= len(tables) <= MAX_SENSORS:
+        raise InputError(f"{source}: [[imu]] lists {len(tables)} sensors; give 1 to "
+                         f"{MAX_SENSORS}")
+    defaults = default_config()["imu"]
+    out: list[dict[str, Any]] = []
+    for i, table in enumerate(tables):
+        where = f"{source}: [[imu]] number {i + 1}"
+        if not isinstance(table, Mapping):
+            raise InputError(f"{where} must be a table of keys")
+        sensor = dict(defaults)
+        for name, value in table.items():
+            if name == "name":
+                if not isinstance(value, str) or not _SENSOR_NAME.fullmatch(value):
+                    raise InputError(
+                        f"{where}: name {_excerpt(value)} must be 1-40 letters, digits, '_', "
+                        "'.' or '-' (it names the sensor's output directory)")
+                continue
+            if name not in SCHEMA["imu"]:
+                raise InputError(f"{where}: unknown key {_cut(name)}; allowed: name, "
+                                 + ", ".join(SCHEMA["imu"]))
+            sensor[name] = _validate("imu", name, value)
+        sensor["name"] = table.get("name", f"{sensor['model']}-{sensor['bus']}-"
+                                           f"{sensor['address']:02x}")
+        out.append(sensor)
+    seen: dict[Any, str] = {}
+    for s in out:
+        for key, what in (((s["bus"], s["address"]), "the same I2C bus and address"),
+                          (s["name"].lower(), "the same name")):
+            if key in seen:
+                raise InputError(
+                    f"{source}: sensors {seen[key]!r} and {s['name']!r} have {what}: give each "
+                    "sensor its own address (or bus), and each a distinct name")
+            seen[key] = s["name"]
+    return tuple(out)
+
+
 def _merge(base: Config, data: Mapping[str, Any], source: str) -> Config:
     sections = {s: dict(v) for s, v in base.sections.items()}
+    sensors = base.sensors
+    if isinstance(data.get("imu"), list):  # [[imu]] tables: several sensors on the plate
+        sensors = _sensor_list(data["imu"], source)
+        sections["imu"] = {k: v for k, v in sensors[0].items() if k != "name"}
+        data = {k: v for k, v in data.items() if k != "imu"}
+    elif "imu" in data and sensors:
+        if len(sensors) > 1:
+            raise InputError(
+                f"{source}: the config lists {len(sensors)} sensors as [[imu]] tables; the "
+                "--imu-* and --range-dps/--odr flags set a single sensor: edit each [[imu]] "
+                "table instead")
+        sensors = ()
     for section, values in data.items():
         if section not in SCHEMA:
             raise InputError(
@@ -233,7 +305,7 @@ def _merge(base: Config, data: Mapping[str, Any], source: str) -> Config:
             sections[section][name] = _validate(section, name, value)
     # "+y" means "y": one spelling for the validator and everything downstream
     sections["gimbal"]["axes"] = [a.removeprefix("+") for a in sections["gimbal"]["axes"]]
-    cfg = Config(sections, source)
+    cfg = Config(sections, source, sensors)
     g = cfg["gimbal"]
     if len(g["ids"]) != len(g["axes"]):
         raise InputError(
@@ -318,4 +390,8 @@ def template() -> str:
             if name == "address":
                 value = hex(key.default)
             lines.append(f"{name} = {value}")
+    lines += ["", "# Several sensors on the plate (hardware_docs/running.md): replace [imu] by one",
+              "# [[imu]] table per sensor, each with the [imu] keys and a name, e.g.",
+              "# [[imu]]", '# name = "a"', '# model = "mpu9250"', "# address = 0x68",
+              "# [[imu]]", '# name = "b"', '# model = "icm42688p"', "# address = 0x69"]
     return "\n".join(lines) + "\n"

@@ -19,7 +19,14 @@ A failed turn is first reversed, so the cables never wind past the plan's excurs
 attempt is never a segment of the recording (so it is never fitted); it is listed in the
 manifest's ``protocol.discarded`` with its times and the check that failed.
 
-The loop itself only drains the FIFO, polls the servos and steps the plan. Writing the recording
+Several sensors on one plate (``imu`` a list of readers, ``writer`` a
+:class:`~gyrocal.kit.plate.RecordingGroup`) are drained one after the other in every iteration,
+each into its own recording. A check that one sensor's data fail (saturation, a movement on its
+mount, lost FIFO samples) fails that sensor alone once it has used up its repeats, as does a
+sensor that stops answering; the run goes on with the others, and stops only when none is left.
+The encoder checks (speed, a servo that moved) concern every sensor.
+
+The loop itself only drains the FIFOs, polls the servos and steps the plan. Writing the recording
 and drawing progress run in a consumer thread behind a bounded queue (:mod:`gyrocal.kit.backlog`),
 so a slow disk or terminal cannot delay a servo poll.
 """
@@ -40,7 +47,7 @@ from gyrocal.calib.segments import Segment
 from gyrocal.drivers.clock import Clock, VirtualClock
 from gyrocal.drivers.errors import DriverError
 from gyrocal.kit.backlog import Backlog, RunStatus
-from gyrocal.kit.errors import ProtocolCheckError
+from gyrocal.kit.errors import HardwareError, ProtocolCheckError
 from gyrocal.kit.recording import RecordingWriter
 
 __all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
@@ -108,12 +115,14 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
 @dataclass(frozen=True)
 class CheckFailure:
     """A runtime check that failed, with what to change; ``disturbed`` when the cause was the
-    host (a FIFO gap, a late servo poll), not the jig."""
+    host (a FIFO gap, a late servo poll), not the jig; ``sensor`` the index of the one sensor
+    whose data failed it (None: the jig's, every sensor's)."""
 
     check: str
     step: int
     message: str
     disturbed: bool = False
+    sensor: int | None = None
 
 
 class _StepData:
@@ -143,10 +152,11 @@ class Runner:
     ----------
     gimbal : gyrocal.drivers.dynamixel.Gimbal
         Opened; its ``ids`` are the servos.
-    imu : gyrocal.drivers.imu.ImuReader
-        Configured, not yet streaming.
-    writer : RecordingWriter
-        Receives every sample and each finished segment.
+    imu : gyrocal.drivers.imu.ImuReader or list of them
+        Configured, not yet streaming; a list for several sensors on the plate.
+    writer : RecordingWriter or RecordingGroup
+        Receives every sample and each finished segment; with several sensors a
+        :class:`~gyrocal.kit.plate.RecordingGroup` of one writer per sensor.
     clock : Clock
         The clock of both devices.
     steps : sequence of Step
@@ -172,6 +182,8 @@ class Runner:
     backlog_s : float
         Loop iterations the recording and progress may fall behind, in seconds of loop time,
         before the run stops with :class:`~gyrocal.kit.backlog.BacklogError`.
+    sensor_names : sequence of str, optional
+        Each sensor's name, for messages (several sensors).
     """
 
     def __init__(
@@ -190,9 +202,17 @@ class Runner:
         max_repeats: int = 3,
         gap_limit_s: float | None = None,
         backlog_s: float = 5.0,
+        sensor_names: Sequence[str] | None = None,
     ) -> None:
         self.gimbal = gimbal
-        self.imu = imu
+        self.imus = list(imu) if isinstance(imu, (list, tuple)) else [imu]
+        self.imu = self.imus[0]
+        self.names = (list(sensor_names) if sensor_names is not None
+                      else [f"sensor {k + 1}" for k in range(len(self.imus))])
+        if len(self.names) != len(self.imus):
+            raise ValueError(f"{len(self.imus)} sensors but {len(self.names)} sensor_names")
+        #: Sensors that failed, by index: what failed them.
+        self.failed: dict[int, str] = {}
         self.writer = writer
         self.clock = clock
         self.steps = list(steps)
@@ -221,7 +241,7 @@ class Runner:
         self.t0 = 0.0
         self.step_index = 0
         self.step_desc = ""
-        self._data: _StepData | None = None
+        self._data: list[_StepData] | None = None  # one per sensor during a step
         self._next = 0.0
         # Loop dither (see _tick); seeded so that runs repeat exactly.
         self._dither = np.random.default_rng(0x6779726F)
@@ -241,28 +261,72 @@ class Runner:
         """A line for the user, through the consumer thread (in order with the samples)."""
         self.backlog.put_event(line, self.now())
 
-    def _tick(self) -> None:
-        batch = self.imu.read()
-        d = self._data
-        imu_rows = None
+    @property
+    def several(self) -> bool:
+        """True with more than one sensor on the plate."""
+        return len(self.imus) > 1
+
+    def _drain(self, k: int, datas: list[_StepData] | None) -> Any:
+        """Read sensor ``k``'s FIFO into the step's data; its rows for the recording, or None.
+        With several sensors, one that stops answering is failed alone."""
+        try:
+            batch = self.imus[k].read()
+        except DriverError as exc:
+            if not self.several:
+                raise
+            self.fail_sensor(k, f"stopped answering ({exc})", HardwareError.exit_code)
+            return None
+        d = datas[k] if datas is not None else None
+        rows = None
         if len(batch):
             t = batch.t - self.t0
-            imu_rows = (t, batch.rate, batch.temperature_c)
-            self.last_rate = batch.rate[-1]
+            rows = (t, batch.rate, batch.temperature_c)
+            if k == min(set(range(len(self.imus))) - set(self.failed)):
+                self.last_rate = batch.rate[-1]
             if d is not None:
                 d.imu_t.append(t)
                 d.imu_rate.append(batch.rate)
                 d.saturated += int(np.any(batch.saturated, axis=-1).sum())
         if batch.gaps and d is not None:
             d.gaps.extend(batch.gaps)
+        who = f"{self.names[k]}: " if self.several else ""
+        for g in batch.gaps:
+            self._event(f"{who}lost {g.samples} gyro samples at {g.t - self.t0:.2f} s "
+                        f"({g.reason})")
+        return rows
+
+    def fail_sensor(self, k: int, message: str, exit_code: int = ProtocolCheckError.exit_code
+                    ) -> None:
+        """Fail sensor ``k`` alone (several sensors): its reader stops, its recording is closed
+        incomplete with ``message`` and ``exit_code`` (what the run would exit with for it
+        alone: 4 hardware, 5 a check) in order with the rows before it; the run goes on.
+
+        Raises
+        ------
+        HardwareError
+            When no sensor is left.
+        """
+        self.failed[k] = message
+        with contextlib.suppress(DriverError):
+            self.imus[k].stop()
+        self.backlog.put_call(self.writer.fail, k, message, exit_code)
+        if len(self.failed) == len(self.imus):
+            raise HardwareError("every sensor on the plate failed: " + "; ".join(
+                f"{self.names[j]} {m}" for j, m in sorted(self.failed.items())))
+        self._event(f"{self.names[k]} failed: {message}; the run goes on with the others")
+
+    def _tick(self) -> None:
+        datas = self._data
+        rows = [None if k in self.failed else self._drain(k, datas)
+                for k in range(len(self.imus))]
+        d = datas[0] if datas is not None else None
+        imu_rows = rows if self.several else rows[0]
         s = self.gimbal.poll()
-        if d is not None:
-            d.max_poll_gap = max(d.max_poll_gap, self.gimbal.last_poll_gap_s)
+        for dk in datas or ():
+            dk.max_poll_gap = max(dk.max_poll_gap, self.gimbal.last_poll_gap_s)
         ts = s.t - self.t0
         self.backlog.put_samples(imu_rows, (ts, list(s.ids), s.angles))
-        for g in batch.gaps:
-            self._event(f"lost {g.samples} gyro samples at {g.t - self.t0:.2f} s ({g.reason})")
-        if d is not None:
+        if d is not None:  # the sensors' step data share the encoder lists
             d.enc_t.append(ts)
             d.enc_angles.append(np.asarray(s.angles, dtype=float))
         if s.velocities is not None:
@@ -308,9 +372,9 @@ class Runner:
         """A rest before a repeated turn, recorded as a rest segment if it passes its check, so
         that the repeat has still time before it as every other turn does."""
         rest = Step("rest", rest_s=max(self._rest_s, 0.3))
-        self._data = _StepData()
+        self._data = self._new_data()
         t_start, t_end = self._run_rest(rest)
-        if (self._check_disturbed(rest, self._data) or self._check_rest(rest, self._data)) is None:
+        if self._check(rest, None) is None:
             self._record(Segment(len(self._segments), "rest", None, 0, 0.0, t_start, t_end))
 
     def _reposition(self, step: Step) -> None:
@@ -320,6 +384,47 @@ class Runner:
             self._tick()
 
     # ------------------------------------------------------------------ checks
+    def _new_data(self) -> list[_StepData]:
+        """Empty step data, one per sensor, sharing the encoder lists."""
+        first = _StepData()
+        out = [first]
+        for _ in self.imus[1:]:
+            d = _StepData()
+            d.enc_t, d.enc_angles = first.enc_t, first.enc_angles
+            out.append(d)
+        return out
+
+    def _check(self, step: Step, motion: Any) -> CheckFailure | None:
+        """The step's checks over every sensor still in the run: the host's first (it makes
+        the others moot), then the sensor's data and the encoders'. The first failure, naming
+        its sensor when there are several."""
+        if self._data is None:
+            return None
+        alive = [k for k in range(len(self.imus)) if k not in self.failed]
+        checks: list[Callable[[Step, _StepData], CheckFailure | None]] = [self._check_disturbed]
+        if step.kind == "rest":
+            checks += [self._check_rest, self._check_mount]
+        elif step.kind == "rotate":
+            checks.append(self._check_saturation)
+        for check in checks:
+            for k in alive:
+                failure = check(step, self._data[k])
+                if failure is not None:
+                    if failure.check == "fifo-gap" or check in (self._check_saturation,
+                                                                self._check_mount):
+                        failure = self._blame(failure, k)
+                    return failure
+        if step.kind == "rotate" and alive:
+            return self._check_speed(step, motion, self._data[alive[0]])
+        return None
+
+    def _blame(self, failure: CheckFailure, k: int) -> CheckFailure:
+        """``failure`` as sensor ``k``'s (named in the message when there are several)."""
+        if not self.several:
+            return failure
+        return CheckFailure(failure.check, failure.step, f"{self.names[k]}: {failure.message}",
+                            failure.disturbed, sensor=k)
+
     def _check_disturbed(self, step: Step, d: _StepData) -> CheckFailure | None:
         """The host's part: gyro samples lost from the FIFO, or (in a turn or move) a gap
         between two servo polls beyond :attr:`gap_limit_s`. Either leaves the step's data with
@@ -342,14 +447,19 @@ class Runner:
             )
         return None
 
-    def _check_turn(self, step: Step, motion: Any, d: _StepData) -> CheckFailure | None:
-        it, ir, et, ea = d.arrays()
+    def _check_saturation(self, step: Step, d: _StepData) -> CheckFailure | None:
+        """The gyro stayed within its range during a turn."""
         if d.saturated:
             return CheckFailure(
                 "saturation", self.step_index,
                 f"the gyro saturated during '{step.describe()}' ({d.saturated} samples at full "
                 "scale): raise imu.range_dps or lower the speed (protocol.speed_dps)",
             )
+        return None
+
+    def _check_speed(self, step: Step, motion: Any, d: _StepData) -> CheckFailure | None:
+        """The turning servo held its commanded speed (encoder only)."""
+        it, ir, et, ea = d.arrays()
         j = self.ids.index(step.motor)
         reached = 0.0
         if et.size >= 5:
@@ -380,6 +490,11 @@ class Runner:
                 "a servo moved during a rest: check that nothing pushes the gimbal and that the "
                 "servos hold (torque on, not overloaded)",
             )
+        return None
+
+    def _check_mount(self, step: Step, d: _StepData) -> CheckFailure | None:
+        """The gyro saw no rotation during a rest while every servo held."""
+        it, ir, et, ea = d.arrays()
         if it.size < 20:
             return None
         keep = (it >= it[0] + self.rest_guard_s) & (it <= it[-1] - self.rest_guard_s)
@@ -421,18 +536,14 @@ class Runner:
 
     def _run_step(self, step: Step) -> tuple[float, float, Any, CheckFailure | None]:
         """One attempt at a step: ``(t_start, t_end, motion or None, failure or None)``."""
-        self._data = _StepData()
+        self._data = self._new_data()
         if step.kind == "rest":
             t_start, t_end = self._run_rest(step)
-            return t_start, t_end, None, (self._check_disturbed(step, self._data)
-                                          or self._check_rest(step, self._data))
+            return t_start, t_end, None, self._check(step, None)
         t_start, t_end, motion = self._run_turn(step)
-        failure = self._check_disturbed(step, self._data)
         if step.kind == "move":
             self._pose[step.motor] = step.angle  # the driver finished it on its goal, still
-        elif failure is None:
-            failure = self._check_turn(step, motion, self._data)
-        return t_start, t_end, motion, failure
+        return t_start, t_end, motion, self._check(step, motion)
 
     def _segment(self, step: Step, t_start: float, t_end: float, motion: Any) -> Segment:
         speed = float(motion.speed) if motion is not None else 0.0
@@ -447,26 +558,31 @@ class Runner:
     def _do_step(self, i: int, step: Step) -> None:
         """Run a step until it passes its checks: a disturbed attempt is repeated up to
         :attr:`max_repeats` times, a failed one once."""
-        failed = disturbed = 0
+        tries: dict[tuple[int | None, bool], int] = {}  # (sensor, disturbed) -> failures
         while True:
             self._event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}"
-                        + (" (repeat)" if failed + disturbed else ""))
+                        + (" (repeat)" if tries else ""))
             t_start, t_end, motion, failure = self._run_step(step)
             if failure is None:
                 self._record(self._segment(step, t_start, t_end, motion))
                 return
             self._discard(step, t_start, t_end, failure)
-            if failure.disturbed:
-                disturbed += 1
-                if disturbed > self.max_repeats:
-                    raise ProtocolCheckError(
-                        f"{failure.message} (disturbed {disturbed} times in a row)")
-                self._event(f"disturbed by the host, repeating ({disturbed}/"
-                            f"{self.max_repeats}): {failure.message}")
-            else:
-                failed += 1
-                if failed == 2:
+            key = (failure.sensor, failure.disturbed)
+            n = tries[key] = tries.get(key, 0) + 1
+            if n > (self.max_repeats if failure.disturbed else 1):
+                if failure.sensor is not None:
+                    # one sensor's data failed on every repeat: it fails alone, and the others
+                    # repeat the step
+                    self.fail_sensor(failure.sensor, failure.message.split(": ", 1)[1]
+                                     + f" (on {n} attempts)")
+                elif failure.disturbed:
+                    raise ProtocolCheckError(f"{failure.message} (disturbed {n} times in a row)")
+                else:
                     raise ProtocolCheckError(f"{failure.message} (failed twice)")
+            elif failure.disturbed:
+                self._event(f"disturbed by the host, repeating ({n}/{self.max_repeats}): "
+                            f"{failure.message}")
+            else:
                 self._event(f"check failed, repeating once: {failure.message}")
             if step.kind == "rotate":
                 self._reposition(step)
@@ -486,8 +602,14 @@ class Runner:
         self.t0 = self.clock.monotonic()
         self._next = self.t0
         self.backlog.start()
-        self.imu.start()
         try:
+            for k, imu in enumerate(self.imus):
+                try:
+                    imu.start()
+                except DriverError as exc:
+                    if not self.several:
+                        raise
+                    self.fail_sensor(k, f"did not start ({exc})", HardwareError.exit_code)
             for i, step in enumerate(self.steps):
                 self.step_index = i
                 self.step_desc = step.describe()
@@ -496,7 +618,9 @@ class Runner:
         except BaseException as exc:
             self._abort(exc)
             raise
-        self.imu.stop()
+        for k, imu in enumerate(self.imus):
+            if k not in self.failed:
+                imu.stop()
         self.backlog.close()
 
     def _abort(self, exc: BaseException) -> None:
@@ -511,8 +635,9 @@ class Runner:
                 except Exception as stop_exc:  # the gimbal's close tries again and reports it
                     exc.add_note(f"The safe stop after this error failed too: {stop_exc}")
             # Stopping a failed IMU may fail too: that must not hide the error that stopped us.
-            with contextlib.suppress(DriverError):
-                self.imu.stop()
+            for imu in self.imus:
+                with contextlib.suppress(DriverError):
+                    imu.stop()
             try:
                 if not self.backlog.close(timeout_s=5.0):
                     exc.add_note("The recording's last rows could not be written within 5 s.")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,7 @@ from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
 __all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SimJig", "build_sim",
+           "build_sim_plate", "plate_seed",
            "realism_sizes", "sim_misalignment", "sim_realism", "sim_thermal", "sim_truth"]
 
 #: Servo model of the emulated jig.
@@ -60,6 +61,9 @@ class SimJig:
     imu_address: int
     truth: SensorTruth
     realism: frozenset[str] = field(default_factory=frozenset)
+    #: Every sensor's view of a plate of several (:func:`build_sim_plate`), this one first;
+    #: empty for a single sensor.
+    plate: list[Any] = field(default_factory=list, repr=False)
 
     def truth_manifest(self) -> dict[str, Any]:
         """The manifest's ``truth``: the sensor's errors, the axes, and one line per realism
@@ -289,13 +293,9 @@ def build_sim(
         stays at 25 °C and the sensor has no temperature terms.
     """
     clock: Clock = SystemClock() if realtime else VirtualClock()
-    k, b = sim_truth(seed, scale, bias)
     g = cfg["gimbal"]
     run_seed = seed if noise_seed is None else noise_seed
     effects = frozenset(REALISM_EFFECTS if realism is None else realism)
-    imu_cfg = cfg["imu"]
-    family = READERS[imu_cfg["model"]].family
-    sensor_realism, ppm = sim_realism(family.name, seed, effects)
     port, servo_bus, _ = make_emulated_gimbal(
         clock, g["ids"], SIM_SERVO_MODEL, run_seed, baudrate=SIM_BAUD, axes=g["axes"],
         mount=mount_deg, model_timing="encoder-latency" in effects,
@@ -303,24 +303,113 @@ def build_sim(
     jig = GimbalJig(servo_bus.servos, axes=g["axes"], mount=mount_deg, seed=seed,
                     wobble_deg=SIM_WOBBLE_DEG if "wobble" in effects else 0.0,
                     lever_arm_m=SIM_LEVER_ARM_M if "gravity" in effects else (0.0, 0.0, 0.0))
+    plate = SimJig(clock, port, servo_bus, jig, None, 0, SensorTruth(), effects)
+    return _add_sensor(plate, cfg["imu"], seed, run_seed, sim_truth(seed, scale, bias),
+                       cross_axis=cross_axis, noise_density=noise_density_rad_s_sqrt_hz,
+                       temperature=temperature, self_heating=self_heating)
+
+
+def _add_sensor(plate: SimJig, imu_cfg: dict[str, Any], seed: int, run_seed: int,
+                scale_bias: tuple[np.ndarray, np.ndarray], *, cross_axis: float,
+                noise_density: float | None, temperature: str | None,
+                self_heating: str | None, bus: Any = None) -> SimJig:
+    """One emulated sensor on the plate's jig: its truth drawn by ``seed`` (scale, bias from
+    ``scale_bias``), its chip on ``bus`` (a new emulated bus when None); the returned
+    :class:`SimJig` shares the plate's clock, servos and joints."""
+    k, b = scale_bias
+    family = READERS[imu_cfg["model"]].family
+    sensor_realism, ppm = sim_realism(family.name, seed, plate.realism)
     truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b),
                                 "misalignment": sim_misalignment(seed, cross_axis),
                                 "realism": sensor_realism, "clock_ppm": ppm}
-    if noise_density_rad_s_sqrt_hz is not None:
-        truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density_rad_s_sqrt_hz
+    if noise_density is not None:
+        truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density
     if temperature is not None or self_heating is not None:
-        truth_kw.update(sim_thermal(seed, cfg["imu"]["model"], temperature, self_heating,
-                                    clock.monotonic()))
+        truth_kw.update(sim_thermal(seed, imu_cfg["model"], temperature, self_heating,
+                                    plate.clock.monotonic()))
     truth = SensorTruth(**truth_kw)
     # The chip sits where a real one of its model can (the configured address if the model
     # allows it, else its default), so a config that names the wrong address fails as it would
     # on hardware.
     possible = family.addresses  # hardware reference §1.1, §2.1
     imu_bus, address = make_emulated_imu(
-        imu_cfg["model"], clock, jig, truth, seed=run_seed,
+        imu_cfg["model"], plate.clock, plate.jig, truth, seed=run_seed, bus=bus,
         address=imu_cfg["address"] if imu_cfg["address"] in possible else None,
     )
-    return SimJig(clock, port, servo_bus, jig, imu_bus, address, truth, effects)
+    return replace(plate, imu_bus=imu_bus, imu_address=address, truth=truth)
+
+
+#: Where the k-th sensor of a plate sits from the first, m (sensor frame): a row of boards
+#: 25 mm apart ⚠ (jig geometry; it sets each one's lever arm).
+SIM_PLATE_PITCH_M = (0.025, 0.0, 0.0)
+
+
+def plate_seed(seed: int, k: int) -> int:
+    """The seed of the ``k``-th sensor on an emulated plate: ``seed`` itself for the first (so
+    a one-sensor plate is the one-sensor ``--sim``), a value drawn from ``(seed, k)`` for the
+    others."""
+    if k == 0:
+        return int(seed)
+    return int(np.random.SeedSequence([int(seed), int(k), 0x91A7E]).generate_state(1)[0])
+
+
+def build_sim_plate(cfg: Config, *, seed: int = 0, noise_seed: int | None = None,
+                    mount_deg: float = 3.0, **options: Any) -> list[SimJig]:
+    """Every sensor of ``cfg.imus()`` on one emulated jig, in the config's order.
+
+    The first is :func:`build_sim`'s (same ``seed``, same truth as a one-sensor run); the
+    ``k``-th draws its truth and its mount misalignment from :func:`plate_seed` ``(seed, k)``
+    and sits :data:`SIM_PLATE_PITCH_M` further along the plate (its own lever arm). Sensors on
+    the same ``bus`` number share one emulated bus. All share the clock, the servos and the
+    joint axes; each :class:`SimJig` is one sensor's view, with its own truth and chip.
+
+    Parameters
+    ----------
+    cfg : Config
+    seed, noise_seed, mount_deg
+        As for :func:`build_sim`.
+    **options
+        :func:`build_sim`'s other keywords (not ``scale`` or ``bias`` with several sensors: each
+        sensor draws its own).
+
+    Raises
+    ------
+    InputError
+        If ``scale`` or ``bias`` is fixed for more than one sensor.
+    """
+    sensors = cfg.imus()
+    fixed = [k for k in ("scale", "bias") if options.get(k) is not None]
+    if len(sensors) > 1 and fixed:
+        raise InputError(f"--sim-{fixed[0]} fixes one sensor's truth; with {len(sensors)} "
+                         "sensors on the plate each draws its own by --sim-seed")
+    first = build_sim(cfg, seed=seed, noise_seed=noise_seed, mount_deg=mount_deg, **options)
+    out = [first]
+    buses = {sensors[0]["bus"]: first.imu_bus}
+    run_seed = seed if noise_seed is None else noise_seed
+    g = cfg["gimbal"]
+    for k, sensor in enumerate(sensors[1:], start=1):
+        sk = plate_seed(seed, k)
+        rng = np.random.default_rng([sk, 0x3047])
+        axis = rng.normal(size=3)
+        mount = axis / np.linalg.norm(axis) * math.radians(mount_deg)
+        arm = (np.asarray(SIM_LEVER_ARM_M) + k * np.asarray(SIM_PLATE_PITCH_M)
+               if "gravity" in first.realism else np.zeros(3))
+        # the same seed draws the same joint-axis tilts as the first sensor's jig: one gimbal
+        jig = GimbalJig(first.servo_bus.servos, axes=g["axes"], mount=mount, seed=seed,
+                        wobble_deg=SIM_WOBBLE_DEG if "wobble" in first.realism else 0.0,
+                        lever_arm_m=tuple(arm))
+        plate = replace(first, jig=jig)
+        view = _add_sensor(plate, sensor, sk, plate_seed(run_seed, k), sim_truth(sk),
+                           cross_axis=options.get("cross_axis", SIM_CROSS_AXIS),
+                           noise_density=options.get("noise_density_rad_s_sqrt_hz"),
+                           temperature=options.get("temperature"),
+                           self_heating=options.get("self_heating"),
+                           bus=buses.get(sensor["bus"]))
+        buses.setdefault(sensor["bus"], view.imu_bus)
+        out.append(view)
+    if len(out) > 1:
+        first.plate = out
+    return out
 
 
 def sim_thermal(seed: int, model: str, temperature: str | None, self_heating: str | None,

@@ -190,15 +190,20 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
                          "servos on a port (or 'gyrocal emulate --pty') with an emulated IMU "
                          "use --sim-imu --port PORT")
     if args.sim or sim_imu:
-        from gyrocal.kit.sim import SIM_BAUD, SIM_CROSS_AXIS, build_sim
+        from gyrocal.kit.sim import SIM_BAUD, SIM_CROSS_AXIS, build_sim_plate
 
         cross_axis = getattr(args, "sim_cross_axis", None)
-        sim = build_sim(cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
-                        realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
-                        cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis,
-                        realism=sim_effects(args),
-                        temperature=getattr(args, "sim_temperature", None),
-                        self_heating=getattr(args, "sim_self_heating", None))
+        if sim_imu and len(cfg.imus()) > 1:
+            raise InputError("--sim-imu emulates one IMU at rest; the config lists "
+                             f"{len(cfg.imus())} sensors ([[imu]] tables): use --sim, or a "
+                             "config with one [imu]")
+        # with several [[imu]] sensors the first is returned and holds the others (sim.plate)
+        sim = build_sim_plate(
+            cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
+            realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
+            cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis,
+            realism=sim_effects(args), temperature=getattr(args, "sim_temperature", None),
+            self_heating=getattr(args, "sim_self_heating", None))[0]
         if sim_imu:
             g = cfg["gimbal"]
             return sim, sim.clock, g["port"], g["baud"], sim.imu_bus
@@ -217,32 +222,67 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
 
 
 class Jig:
-    """The devices of one run: a gimbal driver and an IMU reader on one clock (real or sim)."""
+    """The devices of one run: a gimbal driver and the IMU readers on one clock (real or sim).
 
-    def __init__(self, cfg: Any, args: argparse.Namespace) -> None:
+    ``imus`` has one reader per sensor of the config (:meth:`~gyrocal.kit.config.Config.imus`),
+    ``imu`` is the first; ``names`` are the sensors' names. A config with several sensors is
+    refused unless ``several`` (only ``gyrocal calibrate`` runs a plate of them).
+    """
+
+    def __init__(self, cfg: Any, args: argparse.Namespace, *, several: bool = False) -> None:
         from gyrocal.drivers.dynamixel import Gimbal
         from gyrocal.drivers.imu import open_imu
+        from gyrocal.kit.errors import InputError
 
+        sensors = cfg.imus()
+        if len(sensors) > 1 and not several:
+            raise InputError(
+                f"this command drives one sensor, and the config lists {len(sensors)} ([[imu]] "
+                "tables): give a config with a single [imu] (gyrocal calibrate runs several)")
         self.cfg = cfg
         self.faults: list[str] = []
+        self.names = [s["name"] for s in sensors]
         sim, self.clock, port, baud, bus = jig_endpoints(cfg, args)
         # --sim-imu: only the IMU is emulated (``imu_sim``); the servos are real or on a PTY.
         self.imu_sim = sim if getattr(args, "sim_imu", False) else None
         self.sim = None if self.imu_sim is not None else sim
+        #: Each sensor's emulated view (its truth and chip), with --sim.
+        self.sims = (self.sim.plate or [self.sim]) if self.sim is not None else []
         self._fault_specs: list[str] = list(args.sim_fault)
         if self._fault_specs:
             from gyrocal.kit.sim import apply_fault, build_sim
 
             scratch = build_sim(cfg, seed=args.sim_seed)
             for spec in self._fault_specs:  # validate now; armed when the protocol starts
-                apply_fault(scratch, spec)
-        g, imu = cfg["gimbal"], cfg["imu"]
-        self.imu = open_imu(imu["model"], bus, imu["address"], clock=self.clock,
-                            range_dps=imu["range_dps"], odr_hz=imu["odr_hz"])
-        note_rounded_odr(imu["odr_hz"], self.imu.info)
+                apply_fault(scratch, self._fault_target(spec)[0])
+        g = cfg["gimbal"]
+        self.imus: list[Any] = []
+        try:
+            for k, s in enumerate(sensors):
+                where = self.sims[k].imu_bus if self.sims else (bus if k == 0 else s["bus"])
+                self.imus.append(open_imu(s["model"], where, s["address"], clock=self.clock,
+                                          range_dps=s["range_dps"], odr_hz=s["odr_hz"]))
+                note_rounded_odr(s["odr_hz"], self.imus[-1].info)
+        except BaseException:
+            self.close()
+            raise
+        self.imu = self.imus[0]
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
                              max_turns=g["max_turns"], acceleration=g["acceleration"],
                              watchdog_s=g["watchdog_s"])
+
+    def _fault_target(self, spec: str) -> tuple[str, int]:
+        """``KIND:ARGS[@SENSOR]`` as ``(KIND:ARGS, sensor index)`` (the first sensor without
+        ``@``)."""
+        from gyrocal.kit.errors import InputError
+
+        base, at, name = spec.rpartition("@")
+        if not at:
+            return spec, 0
+        if name not in self.names:
+            raise InputError(f"--sim-fault {spec!r}: no sensor named {name!r}; the sensors are "
+                             + ", ".join(self.names))
+        return base, self.names.index(name)
 
     def arm_faults(self) -> list[str]:
         """Arm the ``--sim-fault`` knobs with their times counted from now (the recording's
@@ -252,17 +292,22 @@ class Jig:
         if self.sim is None:
             return []
         t0 = self.clock.monotonic()
-        self.faults = [apply_fault(self.sim, spec, t0) for spec in self._fault_specs]
+        self.faults = []
+        for spec in self._fault_specs:
+            base, k = self._fault_target(spec)
+            said = apply_fault(self.sims[k], base, t0)
+            self.faults.append(f"{self.names[k]}: {said}" if len(self.sims) > 1 else said)
         return self.faults
 
     def close(self) -> None:
-        """Close the IMU (the gimbal closes through its context manager)."""
+        """Close the IMUs (the gimbal closes through its context manager)."""
         from contextlib import suppress
 
         from gyrocal.drivers.errors import DriverError
 
-        with suppress(DriverError):
-            self.imu.close()
+        for imu in self.imus:
+            with suppress(DriverError):
+                imu.close()
 
 
 def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | None:
@@ -363,10 +408,11 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     return plan
 
 
-def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
+def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: int = 0
                     ) -> tuple[dict, dict, dict, dict | None]:
-    """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of a run."""
-    sensor = jig.imu.info.manifest()
+    """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of sensor
+    ``k``'s recording."""
+    sensor = jig.imus[k].info.manifest()
     gimbal_info = {"motors": [
         {"id": sid, "model": jig.gimbal.infos[sid].model_name,
          "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
@@ -381,30 +427,77 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
                 "sample_hz": cfg["gimbal"]["sample_hz"],
                 "discarded": []}  # attempts repeated after a failed check (the runner's)
     truth = None
-    if jig.sim is not None:
-        truth = {**jig.sim.truth_manifest(),
-                 "axes": {str(k): v.tolist() for k, v in jig.sim.jig.home_axes.items()}}
+    if jig.sims:
+        sim = jig.sims[k]
+        truth = {**sim.truth_manifest(),
+                 "axes": {str(i): v.tolist() for i, v in sim.jig.home_axes.items()}}
     return sensor, gimbal_info, protocol, truth
+
+
+def recording_dirs(jig: Jig, rec_dir: Path) -> list[Path]:
+    """Where each sensor records: ``rec_dir`` for one sensor; with several (a plate),
+    ``rec_dir.parent / NAME / "recording"`` for each (:mod:`gyrocal.kit.plate`)."""
+    if len(jig.imus) == 1:
+        return [rec_dir]
+    return [rec_dir.parent / name / "recording" for name in jig.names]
+
+
+def _planning_sensor(jig: Jig) -> Any:
+    """What the planner needs of the sensors: the lowest range and output data rate among
+    them (the protocol must suit every sensor on the plate)."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(full_scale_dps=min(i.full_scale_dps for i in jig.imus),
+                           odr_hz=min(i.odr_hz for i in jig.imus))
+
+
+def _still_noise(jig: Jig) -> float | None:
+    """The largest still noise among the sensors (:func:`measure_still_noise`, each in turn)."""
+    noises = [measure_still_noise(imu, jig.clock) for imu in jig.imus]
+    known = [n for n in noises if n is not None]
+    return max(known) if known else None
+
+
+def _writers(cfg: Any, args: argparse.Namespace, jig: Jig, plan: Any, noise_std: float | None,
+             rec_dir: Path) -> Any:
+    """A RecordingWriter, or with several sensors a RecordingGroup of one per sensor."""
+    from gyrocal.kit.plate import RecordingGroup
+    from gyrocal.kit.recording import RecordingWriter
+
+    dirs = recording_dirs(jig, rec_dir)
+    writers = []
+    try:
+        for k, d in enumerate(dirs):
+            sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std, k)
+            extra = None if len(dirs) == 1 else {"plate": {
+                "sensor": jig.names[k], "sensors": list(jig.names),
+                "address": cfg.imus()[k]["address"], "bus": cfg.imus()[k]["bus"]}}
+            writers.append(RecordingWriter(d, sensor=sensor, gimbal=gimbal_info,
+                                           protocol=protocol, truth=truth, force=args.force,
+                                           extra=extra))
+    except BaseException:
+        for w in writers:
+            w.close()
+        raise
+    return writers[0] if len(writers) == 1 else RecordingGroup(writers)
 
 
 def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
             extend: Any = None) -> None:
-    """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``
-    (``extend``: see :func:`run_jig`)."""
+    """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``, or one
+    per sensor (:func:`recording_dirs`) (``extend``: see :func:`run_jig`)."""
     from gyrocal.kit.progress import Progress
     from gyrocal.kit.protocol import Runner, build_steps
-    from gyrocal.kit.recording import RecordingWriter
 
     quiet = getattr(args, "quiet", False)
     with jig.gimbal:
-        noise_std = measure_still_noise(jig.imu, jig.clock)
-        plan = choose_plan(cfg, jig.gimbal, jig.imu, noise_std)
+        noise_std = _still_noise(jig)
+        plan = choose_plan(cfg, jig.gimbal, _planning_sensor(jig), noise_std)
         steps = build_steps(plan, cfg["gimbal"]["ids"])
         runner_class = Runner
         if extend is not None:
             runner_class, extra = extend
             steps += extra(plan, cfg["gimbal"]["ids"])
-        sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std)
         progress = Progress(sys.stderr, plan.jig_time_s, interactive=False if quiet else None)
         if not quiet:
             progress.event(
@@ -412,15 +505,15 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, "
                 + (f"{len(plan.poses)} posed pairs for the full matrix, " if plan.poses else "")
                 + f"about {plan.jig_time_s:.0f} s of jig time"
+                + (f", {len(jig.imus)} sensors" if len(jig.imus) > 1 else "")
                 + (" (emulated jig)" if jig.sim is not None else "")
                 + (" (emulated IMU at rest)" if jig.imu_sim is not None else ""))
-        with RecordingWriter(rec_dir, sensor=sensor, gimbal=gimbal_info, protocol=protocol,
-                             truth=truth, force=args.force) as writer:
+        with _writers(cfg, args, jig, plan, noise_std, rec_dir) as writer:
             runner = runner_class(
-                jig.gimbal, jig.imu, writer, jig.clock, steps,
-                sample_hz=cfg["gimbal"]["sample_hz"],
+                jig.gimbal, jig.imus if len(jig.imus) > 1 else jig.imu, writer, jig.clock,
+                steps, sample_hz=cfg["gimbal"]["sample_hz"],
                 on_progress=None if quiet else progress.update,
-                on_event=None if quiet else progress.event,
+                on_event=None if quiet else progress.event, sensor_names=jig.names,
             )
             for f in jig.arm_faults():
                 if not quiet:
@@ -441,12 +534,13 @@ def _record(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                         **writer.manifest["protocol"],
                         "worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
                         "bus_watchdog_s": jig.gimbal.watchdog_s})
-            if jig.sim is not None:
-                # The true axis of each servo during its turns (the holding servos rest
-                # somewhere within their ticks, which tilts the axes slightly off the
-                # ideal home pose).
-                writer.update_manifest(truth={**truth, "axes": jig.sim.turn_axes(
-                    cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
+            for k, w in enumerate(getattr(writer, "writers", [writer])):
+                if jig.sims and k not in runner.failed:
+                    # The true axis of each servo during its turns (the holding servos rest
+                    # somewhere within their ticks, which tilts the axes slightly off the
+                    # ideal home pose).
+                    w.update_manifest(truth={**w.manifest["truth"], "axes": jig.sims[k].turn_axes(
+                        cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
             writer.finish()
 
 
@@ -475,7 +569,7 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
     from gyrocal.kit.errors import InterruptedRun
     from gyrocal.kit.fileio import atomic_write_json
 
-    jig = Jig(cfg, args)
+    jig = Jig(cfg, args, several=True)
     interrupted: BaseException | None = None
     try:
         _record(cfg, args, jig, rec_dir, extend)
@@ -490,8 +584,9 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
     if interrupted is not None:
         signum = getattr(interrupted, "signum", 2)
         what = {2: "interrupted", 15: "terminated", 1: "hung up"}.get(signum, "stopped")
-        kept = (f"the recording in {rec_dir} is kept, marked incomplete"
-                if (rec_dir / "manifest.json").exists() else "no recording was begun")
+        begun = [d for d in recording_dirs(jig, rec_dir) if (d / "manifest.json").exists()]
+        kept = (f"the recording in {', '.join(map(str, begun))} is kept, marked incomplete"
+                if begun else "no recording was begun")
         raise InterruptedRun(f"{what}: servos stopped, torque off; {kept}", signum)
     return jig
 
@@ -532,6 +627,8 @@ def run(args: argparse.Namespace) -> int:
     report = not args.no_report and importlib.util.find_spec("matplotlib") is not None
     if report and work == out:
         refuse_existing([out / "report.html", out / "plots"], force=args.force)
+    if len(cfg.imus()) > 1:
+        return _run_plate(cfg, args, out, work, report, history)
     try:
         run_jig(cfg, args, work, work / "recording")
         if getattr(args, "sim_imu", False):
@@ -574,3 +671,55 @@ def run(args: argparse.Namespace) -> int:
         print(f"\nwrote {cal_path} and {rec_dir}/"
               + (f", and the report {out / 'report.html'}" if report else ""))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0
+
+
+def _run_plate(cfg: Any, args: argparse.Namespace, out: Path, work: Path, report: bool,
+               history: Any) -> int:
+    """``calibrate`` with several sensors on the plate (:mod:`gyrocal.kit.plate`): one run, then
+    per sensor a calibration, a verdict and a summary; exit 0 only if every sensor passed."""
+    from gyrocal.drivers.signals import shielded
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.fileio import atomic_write_json, replace_dir
+    from gyrocal.kit.plate import calibrate_plate, plate_exit_code, summary_document
+    from gyrocal.kit.report import calibration_table
+
+    sensors = cfg.imus()
+    if history is not None:
+        raise InputError("--history and [history] store one sensor's calibration; with "
+                         f"{len(sensors)} sensors on the plate store each one afterwards with "
+                         "'gyrocal history import DIR/NAME --sensor-label LABEL'")
+    names = [s["name"] for s in sensors]
+    try:
+        run_jig(cfg, args, work, work / "recording")
+        outcomes = calibrate_plate(
+            [work / n for n in names], names, [s["model"] for s in sensors],
+            cfg["protocol"]["method"], sources=[str(out / n / "recording") for n in names],
+            allow_implausible=args.allow_implausible, report=report, force=args.force,
+            title=f"{out} (gyrocal calibrate)")
+        atomic_write_json(work / "summary.json", summary_document(outcomes))
+    except BaseException:
+        if work != out:
+            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
+                  f"{work}", file=sys.stderr)
+        raise
+    if work != out:
+        with shielded():
+            replace_dir(work, out)
+    if args.json:
+        json.dump(summary_document(outcomes), sys.stdout, indent=2)
+        print()
+        return plate_exit_code(outcomes)
+    for o, sensor in zip(outcomes, sensors, strict=True):
+        print(f"== sensor {o.name}: {sensor['model']} at 0x{sensor['address']:02X} on bus "
+              f"{sensor['bus']}: {o.verdict.upper() if o.passed else 'FAILED: ' + o.verdict}")
+        if o.calibration is not None:
+            from gyrocal.calib.model import GyroCalibration
+            from gyrocal.kit.recording import read_manifest
+
+            truth = read_manifest(out / o.name / "recording").get("truth")
+            print(calibration_table(GyroCalibration.from_dict(o.calibration), truth))
+        print()
+    passed = sum(o.passed for o in outcomes)
+    print(f"plate: {passed} of {len(outcomes)} sensors passed; wrote {out}/NAME/ for each "
+          f"({', '.join(names)}) and {out / 'summary.json'}")
+    return plate_exit_code(outcomes)
