@@ -206,6 +206,12 @@ class FitResult:
                 frame=self.frame,
                 kinematics=self.kinematics,
             )
+            if self.g_sensitivity is not None:
+                g_std = np.sqrt(np.clip(np.diag(self.g_sensitivity_cov), 0, None))  # type: ignore[arg-type]
+                full["g_sensitivity"] = {
+                    "matrix": self.g_sensitivity.tolist(),
+                    "matrix_std": g_std.reshape(3, 3).tolist(),
+                    "directions": np.asarray(self.g_directions).tolist()}
         return GyroCalibration(
             **full,
             scale=tuple(self.scale),  # type: ignore[arg-type]
