@@ -1388,12 +1388,19 @@ def fit_full_matrix(
     basis = np.zeros((3, 0))
     if g_sensitivity and obs.has_gravity:
         # The specific force comes from the poses and the fitted axes, so fit once without it,
-        # then with the forces of that fit's gimbal (the axes move by far less than G resolves).
-        force = obs.specific_force(res.axes[0], obs.pose[0])
-        basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
-                                   max_std=max_g_std)
-        if basis.shape[1]:
-            res = run((force[0] @ basis, force[1] @ basis))
+        # then with the forces of the last fit's gimbal until its axes settle (G moves them by
+        # far less than their uncertainty: one or two passes).
+        for _ in range(4):
+            force = obs.specific_force(res.axes[0], obs.pose[0])
+            basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
+                                       max_std=max_g_std)
+            if not basis.shape[1]:
+                break
+            new = run((force[0] @ basis, force[1] @ basis))
+            moved = float(np.max(np.linalg.norm(new.axes[0] - res.axes[0], axis=-1)))
+            res = new
+            if moved < 1e-10:
+                break
         if basis.shape[1] < 3:
             g_note = (f"; g-sensitivity fitted along {basis.shape[1]} of 3 directions of "
                       "gravity (the others are in the bias): rest in more orientations")
