@@ -204,8 +204,13 @@ def effect_costs(seeds: int, cases: list[str] | None = None) -> None:
     if cases is None:
         cases = ["none", *REALISM_EFFECTS, "all", "all but wobble"]
     jobs = [(s, c) for c in cases for s in range(seeds)]
+    results = []
     with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
-        results = list(pool.map(_effect_run, jobs))
+        for (seed, case), r in zip(jobs, pool.map(_effect_run, jobs), strict=True):
+            results.append(r)  # one line per run as it lands, for a long table's progress
+            zb, za = _rms([r["before"]["bias_z"]]), _rms([r["after"]["bias_z"]])
+            print(f"# {case} seed {seed}: χ² ok {r['before']['ok']}→{r['after']['ok']}, bias "
+                  f"err/σ RMS {zb:.2f}→{za:.2f}", file=sys.stderr, flush=True)
     rows = []
     for c in cases:
         rs = [r for r in results if r["which"] == c]
