@@ -1348,12 +1348,22 @@ def fit_full_matrix(
         The fit succeeds only if every matrix element's one-sigma uncertainty is at most this
         (:data:`MAX_MATRIX_STD`): a schedule whose poses leave a direction unobservable on a
         square gimbal sees it only through the gimbal's small tilts, with a huge uncertainty.
+    g_sensitivity : bool
+        When ``obs`` says where gravity points (:attr:`ObservationSet.has_gravity`), fit
+        ``g = A (m + b + G f)`` (``hardware_docs/method.md`` §10): ``f`` each window's mean
+        specific force from the poses and the fitted gimbal
+        (:meth:`ObservationSet.specific_force`), ``E[m̄] = ω C u − b − G f``; ``G`` along the
+        directions :func:`gravity_directions` finds determined, ``b`` the zero-g bias.
+    max_g_std : float
+        Largest one-sigma uncertainty of ``G`` along a direction for it to be fitted
+        (:data:`MAX_G_STD`).
 
     Returns
     -------
     FitResult
-        ``method`` ``"full-matrix"``, with ``matrix``, ``frame``, ``kinematics``; ``scale`` is
-        ``diag(A)``, ``covariance`` 12×12. ``success`` is false with status ``not-determined``
+        ``method`` ``"full-matrix"``, with ``matrix``, ``frame``, ``kinematics`` (and
+        ``g_sensitivity``, its 9×9 covariance and ``g_directions`` when fitted); ``scale`` is
+        ``diag(A)``, ``covariance`` 12×12 (marginal over ``G``). ``success`` is false with status ``not-determined``
         when the poses cannot determine the full matrix (the message says how far off).
 
     Raises
