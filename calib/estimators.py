@@ -1363,8 +1363,9 @@ def fit_full_matrix(
     FitResult
         ``method`` ``"full-matrix"``, with ``matrix``, ``frame``, ``kinematics`` (and
         ``g_sensitivity``, its 9×9 covariance and ``g_directions`` when fitted); ``scale`` is
-        ``diag(A)``, ``covariance`` 12×12 (marginal over ``G``). ``success`` is false with status ``not-determined``
-        when the poses cannot determine the full matrix (the message says how far off).
+        ``diag(A)``, ``covariance`` 12×12 (marginal over ``G``). ``success`` is false with
+        status ``not-determined`` when the poses cannot determine the full matrix (the message
+        says how far off).
 
     Raises
     ------
