@@ -46,8 +46,8 @@ def test_the_full_plan_counts_its_gravity_rests_and_the_steps_run_them():
     assert plan.jig_time_s <= 45.0
     steps = build_steps(plan, [1, 2, 3])
     tail = steps[-3 * len(plan.gravity_poses):]
-    for (moved, angle), (go, rest, back) in zip(plan.gravity_poses, zip(*[iter(tail)] * 3),
-                                                strict=True):
+    triples = [tuple(tail[i:i + 3]) for i in range(0, len(tail), 3)]
+    for (moved, angle), (go, rest, back) in zip(plan.gravity_poses, triples, strict=True):
         assert (go.kind, go.motor, go.angle) == ("move", moved + 1, angle)
         assert rest.kind == "rest" and rest.rest_s == plan.rest_s
         assert (back.kind, back.motor, back.angle) == ("move", moved + 1, 0.0)
