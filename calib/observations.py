@@ -154,6 +154,10 @@ class ObservationSet:
         points in the sensor frame during the rest (g-sensitivity, :meth:`specific_force`).
     home_pose : array_like, shape (S,), optional
         Every servo's encoder angle in the home pose (the recording's first readings), rad.
+    turn_phase : array_like, shape (n, 2), optional
+        Per rotation window, the window-weighted means of ``cos φ`` and ``sin φ``, ``φ`` the
+        turning servo's angle less its ``pose`` angle: how far the window is from whole
+        revolutions (both 0 over whole revolutions at constant speed; the default).
     gravity : tuple of int, optional
         ``(servo ID, sign)``: in the home pose, "up" (the specific force of a still sensor, +1 g)
         points along ``sign`` times that servo's positive axis (the gimbal stands with that axis
@@ -190,6 +194,7 @@ class ObservationSet:
     rest_pose: np.ndarray | None = None
     home_pose: np.ndarray | None = None
     gravity: tuple[int, int] | None = None
+    turn_phase: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -297,6 +302,9 @@ class ObservationSet:
             object.__setattr__(self, "rest_pose", _ro(_arr(self.rest_pose, "rest_pose", (r, S))))
         if self.home_pose is not None:
             object.__setattr__(self, "home_pose", _ro(_arr(self.home_pose, "home_pose", (S,))))
+        if self.turn_phase is not None:
+            object.__setattr__(self, "turn_phase", _ro(_arr(
+                self.turn_phase, "turn_phase", (self.n_windows, 2))))
         if self.gravity is not None:
             try:
                 sid, sign = (int(x) for x in self.gravity)
@@ -324,8 +332,10 @@ class ObservationSet:
         ``θ`` it is carried by every servo's rotation from the home pose, like the axis of a joint
         outside the base (:mod:`gyrocal.calib.kinematics`):
         ``γ(θ) = Rot(u_{S-1}, −Δ_{S-1}) ⋯ Rot(u_0, −Δ_0) γ_h`` with ``Δ = θ − θ_h`` and the axes
-        at ``θ_h``. A rest sees ``γ(θ_r)``; a turn of servo ``j`` over whole revolutions sees its
-        mean, the component along the turning axis ``(u_j·γ) u_j``. The lever arm's centripetal
+        at ``θ_h``. A rest sees ``γ(θ_r)``; a turn of servo ``j`` sees
+        ``Rot(u_j, −φ) γ`` averaged over its window, ``γ c̄ − (u_j × γ) s̄ + u_j (u_j·γ)(1 − c̄)``
+        with ``(c̄, s̄)`` = :attr:`turn_phase`: over whole revolutions the component along the
+        turning axis, ``(u_j·γ) u_j``. The lever arm's centripetal
         term ``ω²r⊥/g₀`` is not included (at 40 mm and 3 rad/s it is 0.037 g).
 
         Parameters
@@ -368,7 +378,10 @@ class ObservationSet:
         pose = np.asarray(self.pose, dtype=float)
         g_win = carried(pose)
         u_win = chain_axes(axes, reference, pose)[np.arange(self.n_windows), self.motor_index]
-        force = np.sum(u_win * g_win, axis=1, keepdims=True) * u_win
+        c, s = (np.zeros((self.n_windows, 1)),) * 2 if self.turn_phase is None else (
+            np.asarray(self.turn_phase)[:, :1], np.asarray(self.turn_phase)[:, 1:])
+        force = (g_win * c - np.cross(u_win, g_win) * s
+                 + u_win * np.sum(u_win * g_win, axis=1, keepdims=True) * (1 - c))
         rest = (carried(np.asarray(self.rest_pose, dtype=float)) if self.n_rests
                 else np.zeros((0, 3)))
         return force, rest

@@ -42,22 +42,26 @@ def force_at(links, mount, angles) -> np.ndarray:
 
 def gsens_observations(
     C, bias, Gs, links, mount, schedule, rest_poses, *, speed=3.0, noise=0.0, count=2000,
-    n_avg=12, rng: np.random.Generator | None = None, chain=(1, 2, 3),
+    n_avg=12, span=(0.0, 2 * np.pi), rng: np.random.Generator | None = None, chain=(1, 2, 3),
 ) -> ObservationSet:
     """Window and rest means for ``schedule`` (``(servo position, pose (S,), direction)``) and
     rests at ``rest_poses`` (list of (S,) angles); white noise ``noise / sqrt(count)`` per axis
-    on every mean when ``noise`` > 0."""
-    mean, rate, motor, direction, pose = [], [], [], [], []
+    on every mean when ``noise`` > 0. A turn's window covers the turning servo's angles
+    ``pose + span`` (midpoints of ``n_avg`` equal steps; a whole revolution by default): its
+    recorded pose is their mean and its ``turn_phase`` the means of cos and sin about it."""
+    mean, rate, motor, direction, pose, phase = [], [], [], [], [], []
     for s, p, d in schedule:
         w = d * speed
-        phis = np.arange(n_avg) * 2 * np.pi / n_avg
+        phis = span[0] + (span[1] - span[0]) * (np.arange(n_avg) + 0.5) / n_avg
         f = np.mean([force_at(links, mount, np.where(np.arange(3) == s, p[s] + ph, p))
                      for ph in phis], axis=0)
         mean.append(C @ body_rate(links, mount, p, s) * w - bias + Gs @ f)
         rate.append(w)
         motor.append(chain[s])
         direction.append(d)
-        pose.append(p)
+        pose.append(np.where(np.arange(3) == s, p[s] + phis.mean(), p))
+        dev = phis - phis.mean()
+        phase.append([np.mean(np.cos(dev)), np.mean(np.sin(dev))])
     mean = np.array(mean)
     rest_mean = np.array([-bias + Gs @ force_at(links, mount, p) for p in rest_poses])
     if noise:
@@ -70,6 +74,7 @@ def gsens_observations(
         rest_mean=rest_mean, rest_count=np.full(r, count),
         rest_noise=np.full((r, 3), noise or 1e-3), chain=chain, pose=np.array(pose, float),
         rest_pose=np.array(rest_poses, float), home_pose=np.zeros(3), gravity=(chain[2], 1),
+        turn_phase=np.array(phase),
     )
 
 

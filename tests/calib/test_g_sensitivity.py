@@ -43,6 +43,18 @@ def test_noise_free_windows_recover_G_A_and_b(seed):
     np.testing.assert_allclose(fit.bias, bias, atol=1e-9)
 
 
+@pytest.mark.parametrize("span", [(0.0, 1.3 * np.pi), (-0.4, 2 * np.pi + 0.9)])
+def test_noise_free_windows_off_whole_revolutions_recover_G(span):
+    # A window that is not whole revolutions (a one-turn, rest-to-rest window with its still
+    # margins and ramps) sees part of gravity across the axis: turn_phase carries it.
+    _, C, bias, Gs, links, mount = _truth(7)
+    obs = gsens_observations(C, bias, Gs, links, mount, POSED, ALL_RESTS, span=span, n_avg=40)
+    assert np.max(np.abs(obs.turn_phase)) > 0.05
+    fit = fit_full_matrix(obs)
+    np.testing.assert_allclose(fit.g_sensitivity, _g_in_frame(Gs, C), atol=1e-9)
+    np.testing.assert_allclose(fit.bias, bias, atol=1e-9)
+
+
 def test_without_the_model_the_bias_is_off_by_G_times_gravity():
     # The reason for the term: the rests see gravity, the horizontal turns do not.
     _, C, bias, Gs, links, mount = _truth(3)
