@@ -14,7 +14,14 @@ cannot tell from the chips).
    (off-diagonal) and bias against the emulator's truth, the RMS of the bias error in its own σ,
    and how many fits pass the χ² consistency test.
 
-Usage: ``python -m bench realism [--quick] [--seeds=N] [--effects-only]``.
+   Each recording is fitted twice, without the g-sensitivity term and with it (the default),
+   and the table gives the ratio; the last column is G's error in its own σ.
+
+5. ``--independent``: g-sensitivity on the independent generator's recordings
+   (tests/kit/contract_fullmodel_recording.py), ``--seeds`` of them.
+
+Usage: ``python -m bench realism [--quick] [--seeds=N] [--effects-only] [--cases=all,none,...]
+[--independent]``.
 """
 
 from __future__ import annotations
@@ -126,16 +133,33 @@ def clients() -> None:
                 title="Third-party clients, unmodified, against the emulators")
 
 
+def _errors(fit, C: np.ndarray, t: dict, Gt: np.ndarray | None) -> dict:
+    """A fit's errors against the truth: scale (diagonal of A), free cross-axis terms, bias,
+    bias error in its σ, χ², and (where fitted and true) G's error in its σ."""
+    dA = fit.matrix - C
+    db = fit.bias - np.asarray(t["bias"])
+    bstd = np.sqrt(np.diag(fit.covariance))[9:12]
+    off = ~np.eye(3, dtype=bool) & (np.abs(C) > 0)  # the free off-diagonal terms
+    out = {"scale": np.diag(dA), "cross": dA[off], "bias": db, "bias_z": db / bstd,
+           "ok": bool(fit.consistency.ok), "g_z": np.zeros(0)}
+    if fit.g_sensitivity is not None and Gt is not None:
+        # the model's G takes f in the calibration's frame: G = −G_true Qᵀ, Q = A C_sensing
+        out["g_z"] = ((fit.g_sensitivity - t["_G_model"])
+                      / np.sqrt(np.diag(fit.g_sensitivity_cov)).reshape(3, 3)).ravel()
+    return out
+
+
 def _effect_run(job: tuple[int, str]) -> dict:
     """One emulated calibration with only the effects named in ``job[1]`` on ("none", "all",
-    one effect, or "all but E1 & E2"): the fit's errors against the manifest's truth."""
+    one effect, or "all but E1 & E2"), fitted with and without the g-sensitivity term: each
+    fit's errors against the manifest's truth."""
     import io
     import tempfile
     from contextlib import redirect_stderr, redirect_stdout
 
-    from gyrocal.calib.estimators import matrix_in_frame
+    from gyrocal.calib.estimators import fit_full_matrix, matrix_in_frame
     from gyrocal.kit.cli import main as cli
-    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.pipeline import extract_recording
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.sim import REALISM_EFFECTS
 
@@ -154,55 +178,114 @@ def _effect_run(job: tuple[int, str]) -> dict:
             cli(["calibrate", "--sim", "--sim-seed", str(seed), "--out", str(d), "--quiet",
                  "--no-report", "--protocol", "full", "--sim-cross-axis", "0.02", *flags])
         rec = load_recording(d / "recording")
-        t = rec.truth
-        C = matrix_in_frame(np.diag(1 / np.asarray(t["scale"])) @ np.asarray(t["misalignment"]))
-        fit = estimate_recording(rec).fit
-    dA = fit.matrix - C
-    db = fit.bias - np.asarray(t["bias"])
-    bstd = np.sqrt(np.diag(fit.covariance))[9:12]
-    off = ~np.eye(3, dtype=bool) & (np.abs(C) > 0)  # the free off-diagonal terms
-    return {"which": which, "scale": np.diag(dA), "cross": dA[off], "bias": db,
-            "bias_z": db / bstd, "ok": bool(fit.consistency.ok)}
+        t = dict(rec.truth)
+        sensing = np.diag(1 / np.asarray(t["scale"])) @ np.asarray(t["misalignment"])
+        C = matrix_in_frame(sensing)
+        g = (t.get("realism") or {}).get("g-sensitivity", "off")
+        Gt = None if g == "off" else np.asarray(g["matrix_rad_s_per_g"])
+        if Gt is not None:
+            t["_G_model"] = -Gt @ (C @ sensing).T
+        obs = extract_recording(rec).observations
+        before = _errors(fit_full_matrix(obs, g_sensitivity=False), C, t, Gt)
+        after = _errors(fit_full_matrix(obs), C, t, Gt)
+    return {"which": which, "before": before, "after": after}
 
 
 def _rms(xs: list[np.ndarray]) -> float:
-    return float(np.sqrt(np.mean(np.concatenate(xs) ** 2)))
+    x = np.concatenate(xs) if xs else np.zeros(0)
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
 
 
-def effect_costs(seeds: int) -> None:
+def effect_costs(seeds: int, cases: list[str] | None = None) -> None:
+    """The per-effect table: every effect alone, none and all (``cases`` to choose), each
+    recording fitted without the g-sensitivity term (before) and with it (after)."""
     import os
     from concurrent.futures import ProcessPoolExecutor
 
     from gyrocal.kit.sim import REALISM_EFFECTS, realism_sizes
 
     sizes = realism_sizes()
-    # the last two rows: what is left without the effects the kit cannot correct (see below)
-    cases = ["none", *REALISM_EFFECTS, "all", "all but g-sensitivity",
-             "all but g-sensitivity & wobble"]
+    if cases is None:
+        cases = ["none", *REALISM_EFFECTS, "all", "all but wobble"]
     jobs = [(s, c) for c in cases for s in range(seeds)]
+    results = []
     with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
-        results = list(pool.map(_effect_run, jobs))
-    base = [r for r in results if r["which"] == "none"]
-    b_scale, b_cross, b_bias = (_rms([r[k] for r in base]) for k in ("scale", "cross", "bias"))
+        for (seed, case), r in zip(jobs, pool.map(_effect_run, jobs), strict=True):
+            results.append(r)  # one line per run as it lands, for a long table's progress
+            zb, za = _rms([r["before"]["bias_z"]]), _rms([r["after"]["bias_z"]])
+            print(f"# {case} seed {seed}: χ² ok {r['before']['ok']}→{r['after']['ok']}, bias "
+                  f"err/σ RMS {zb:.2f}→{za:.2f}", file=sys.stderr, flush=True)
     rows = []
     for c in cases:
         rs = [r for r in results if r["which"] == c]
-        sc, cr, bi = (_rms([r[k] for r in rs]) for k in ("scale", "cross", "bias"))
-        size = sizes.get(c, "")
-        rows.append([c, size, sc, sc - b_scale, cr, cr - b_cross, bi, bi - b_bias,
-                     _rms([r["bias_z"] for r in rs]), f"{sum(r['ok'] for r in rs)}/{len(rs)}"])
-    print_table(["effect", "size", "scale RMS", "Δ", "cross RMS", "Δ", "bias RMS rad/s", "Δ",
-                 "bias err/σ RMS", "χ² ok"], rows,
-                title=f"Cost of each realism effect alone (emulated MPU-9250, protocol full, "
-                      f"±2 % cross-axis, seeds 0..{seeds - 1}; Δ against none)")
+        row: list = [c, sizes.get(c, "")]
+        cols = {}
+        for when in ("before", "after"):
+            e = [r[when] for r in rs]
+            cols[when] = [_rms([x[k] for x in e]) for k in ("scale", "cross", "bias")]
+            cols[when] += [_rms([x["bias_z"] for x in e]), sum(x["ok"] for x in e)]
+        b, a = cols["before"], cols["after"]
+        row += [a[0], a[0] / b[0], a[1], a[1] / b[1], a[2], a[2] / b[2], b[3], a[3],
+                f"{b[4]}/{len(rs)}", f"{a[4]}/{len(rs)}",
+                _rms([r["after"]["g_z"] for r in rs])]
+        rows.append(row)
+    print_table(["effect", "size", "scale RMS", "÷before", "cross RMS", "÷before",
+                 "bias RMS rad/s", "÷before", "bias err/σ before", "after", "χ² ok before",
+                 "after", "G err/σ RMS"], rows,
+                title=f"Cost of each realism effect (emulated MPU-9250, protocol full, ±2 % "
+                      f"cross-axis, seeds 0..{seeds - 1}); after = with g-sensitivity in the "
+                      "model (the default), before = the same recordings without it")
+
+
+def independent_g(seeds: int) -> None:
+    """g-sensitivity on Recording v1 from the independent generator
+    (tests/kit/contract_fullmodel_recording.py: scipy rotations, servo 3 vertical at home, a
+    gravity rest; no gyrocal code): G drawn within the MPU-9250's ±0.1 °/s/g per term; the
+    fit's G and zero-g bias errors in their σ, and χ², with and without the term."""
+    import tempfile
+
+    from gyrocal.calib.estimators import fit_full_matrix, matrix_in_frame
+    from gyrocal.kit.pipeline import extract_recording
+    from gyrocal.kit.recording import load_recording
+    from tests.kit.contract_fullmodel_recording import write_recording
+
+    gz, bz_before, bz_after, ok_before, ok_after, err_g = [], [], [], 0, 0, []
+    for seed in range(seeds):
+        G = np.random.default_rng([seed, 0x65]).uniform(-1.0, 1.0, (3, 3)) * math.radians(0.1)
+        with tempfile.TemporaryDirectory() as tmp:
+            truth = write_recording(Path(tmp) / "rec", seed=seed, g_sensitivity=G)
+            obs = extract_recording(load_recording(Path(tmp) / "rec")).observations
+        sensing = np.diag(1 / truth["scale"]) @ truth["misalignment"]
+        Q = matrix_in_frame(sensing) @ sensing
+        before, after = fit_full_matrix(obs, g_sensitivity=False), fit_full_matrix(obs)
+        g_std = np.sqrt(np.diag(after.g_sensitivity_cov)).reshape(3, 3)
+        dG = after.g_sensitivity + G @ Q.T
+        gz.append((dG / g_std).ravel())
+        err_g.append(dG.ravel())
+        bz_before.append((before.bias - truth["bias"]) / before.bias_std)
+        bz_after.append((after.bias - truth["bias"]) / after.bias_std)
+        ok_before += before.consistency.ok
+        ok_after += after.consistency.ok
+    print_table(["seeds", "G err RMS rad/s/g", "G err/σ RMS", "max |G err|/σ",
+                 "bias err/σ RMS before", "after", "χ² ok before", "after"],
+                [[seeds, _rms(err_g), _rms(gz), float(np.max(np.abs(np.concatenate(gz)))),
+                  _rms(bz_before), _rms(bz_after), f"{ok_before}/{seeds}",
+                  f"{ok_after}/{seeds}"]],
+                title="g-sensitivity on the independent generator's recordings (G within "
+                      "±0.1 °/s/g per term)")
 
 
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     seeds = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--seeds=")),
                  3 if quick else 30)
+    if "--independent" in argv:
+        independent_g(seeds)
+        return
     if "--effects-only" not in argv:
         bus_timing(300 if quick else 3000)
         lsm_bandwidth()
         clients()
-    effect_costs(seeds)
+    cases = next((a.split("=", 1)[1].split(",") for a in argv if a.startswith("--cases=")),
+                 None)
+    effect_costs(seeds, cases)

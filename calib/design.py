@@ -34,6 +34,7 @@ __all__ = [
     "Plan",
     "candidate_pose_sets",
     "full_schedule",
+    "gravity_poses",
     "general_motion_rms",
     "paper_plan",
     "plan_protocol",
@@ -188,6 +189,10 @@ class Plan:
         for the diagonal model.
     matrix_std : tuple of 3 tuples of 3 float, or None
         Predicted one-sigma uncertainty of the full model's matrix (None for the diagonal one).
+    gravity_poses : tuple of (int, float)
+        Rests for the full model's g-sensitivity, after the posed pairs: ``(moved servo,
+        angle)``: move the servo (chain position) to the angle, rest, move it back
+        (:func:`gravity_poses`).
     """
 
     speed: float
@@ -201,6 +206,7 @@ class Plan:
     reference_rate: float
     poses: tuple[tuple[int, int, float], ...] = ()
     matrix_std: tuple[tuple[float, ...], ...] | None = None
+    gravity_poses: tuple[tuple[int, float], ...] = ()
 
     @property
     def model(self) -> str:
@@ -216,15 +222,52 @@ class Plan:
 def jig_time(
     speed: float, turns: int, rest_s: float, accel: float, settle_s: float = 0.1,
     n_servos: int = 3, move_angles: tuple[float, ...] = (),
+    gravity_angles: tuple[float, ...] = (),
 ) -> float:
     """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests, and
     for each posed pair (its move angle in ``move_angles``) two turns, three rests and two moves
-    (there and back) at ``speed``."""
+    (there and back) at ``speed``; for each gravity pose (``gravity_angles``) a rest and two
+    moves."""
     turn = profile_duration(2 * np.pi * turns, speed, accel) + settle_s
     home = 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
     posed = sum(2 * turn + 3 * rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
                 for a in move_angles)
-    return home + posed
+    gravity = sum(rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
+                  for a in gravity_angles)
+    return home + posed + gravity
+
+
+def gravity_poses(
+    poses: tuple[tuple[int, int, float], ...], axes: np.ndarray | None = None,
+    up: np.ndarray | None = None,
+) -> tuple[tuple[int, float], ...]:
+    """Rests the full model adds so that its g-sensitivity ``G`` is determined in full.
+
+    ``g = A (m + b + G f)`` sees ``G`` only through how the specific force ``f`` differs between
+    windows (:func:`gyrocal.calib.estimators.gravity_directions`): the home rests see ``f = up``,
+    turns about horizontal axes a mean ``f ≈ 0``, so two more directions of gravity are needed.
+    A servo whose axis is horizontal in the home pose, moved a quarter turn, puts gravity along
+    ``axis × up``; each such servo not already moved by a posed pair (whose rests see it) gets
+    one rest at +90°.
+
+    Parameters
+    ----------
+    poses : tuple of (int, int, float)
+        The plan's posed pairs ``(turning, moved, angle)``.
+    axes : ndarray, shape (S, 3), optional
+        Nominal servo axes in the sensor frame, chain order (default x, y, z).
+    up : ndarray, shape (3,), optional
+        Nominal "up" in the sensor frame at home (default +z, hardware_docs/mechanical.md).
+
+    Returns
+    -------
+    tuple of (chain position, angle in rad)
+    """
+    ax = np.eye(3) if axes is None else np.asarray(axes, dtype=float)
+    u = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
+    moved = {m for _, m, _ in poses}
+    return tuple((j, float(np.pi / 2)) for j in range(ax.shape[0])
+                 if abs(float(ax[j] @ u)) < 0.5 and j not in moved)
 
 
 #: Shortest time budget the full-model protocol is planned within, s (issue 10's target: the
@@ -788,10 +831,12 @@ def _plan_full(
     best: Plan | None = None
     for poses in candidate_pose_sets(3):
         angles = tuple(abs(p[2]) for p in poses)
+        grav = gravity_poses(poses, axes)
+        g_angles = tuple(a for _, a in grav)
         cands = [
             (float(sp), t, float(r)) for sp in speeds for t in (1, 2, 3)
             for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s
-            and jig_time(sp, t, r, accel, move_angles=angles) <= budget
+            and jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles) <= budget
         ]
         if not cands:
             continue
@@ -803,11 +848,13 @@ def _plan_full(
             continue
         sp, t, r = cands[i]
         best = Plan(
-            sp, t, r, float(accel), float(jig_time(sp, t, r, accel, move_angles=angles)),
+            sp, t, r, float(accel),
+            float(jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles)),
             tuple(float(x) for x in np.diag(ms[i])), tuple(float(x) for x in bs[i]),  # type: ignore[arg-type]
             float(err[i]), float(reference_rate),
             poses=tuple((int(a), int(b), float(c)) for a, b, c in poses),
             matrix_std=tuple(tuple(float(x) for x in row) for row in ms[i]),
+            gravity_poses=grav,
         )
     return best
 

@@ -122,6 +122,14 @@ class FitResult:
     kinematics : dict or None
         Full-matrix only: the gimbal as fitted, ``{"chain", "axes", "reference_angles_rad"}``
         (:mod:`gyrocal.calib.kinematics`).
+    g_sensitivity : numpy.ndarray, shape (3, 3), or None
+        Full-matrix with gravity known only: ``G`` of ``g = A (m + b + G f)``, rad/s per g of
+        specific force ``f`` (sensor frame).
+    g_sensitivity_cov : numpy.ndarray, shape (9, 9), or None
+        Its covariance, ``G`` row-major.
+    g_directions : numpy.ndarray, shape (k, 3), or None
+        The directions of specific force the run determined ``G`` along
+        (:func:`gravity_directions`); ``G`` is zero along the others, which stay in the bias.
     """
 
     method: str
@@ -140,6 +148,9 @@ class FitResult:
     matrix: np.ndarray | None = None
     frame: str | None = None
     kinematics: dict[str, Any] | None = None
+    g_sensitivity: np.ndarray | None = None
+    g_sensitivity_cov: np.ndarray | None = None
+    g_directions: np.ndarray | None = None
 
     @property
     def scale_std(self) -> np.ndarray:
@@ -195,6 +206,12 @@ class FitResult:
                 frame=self.frame,
                 kinematics=self.kinematics,
             )
+            if self.g_sensitivity is not None:
+                g_std = np.sqrt(np.clip(np.diag(self.g_sensitivity_cov), 0, None))  # type: ignore[arg-type]
+                full["g_sensitivity"] = {
+                    "matrix": self.g_sensitivity.tolist(),
+                    "matrix_std": g_std.reshape(3, 3).tolist(),
+                    "directions": np.asarray(self.g_directions).tolist()}
         return GyroCalibration(
             **full,
             scale=tuple(self.scale),  # type: ignore[arg-type]
@@ -977,6 +994,8 @@ class FullMatrixBatch:
     converged: np.ndarray  # (B,) bool
     residuals: np.ndarray  # (B, 3n + 3r + A) whitened
     rank_deficiency: np.ndarray  # (B,) int: unobservable directions of the 9 + 2S model terms
+    g_sensitivity: np.ndarray | None = None  # (B, 3, k) G of g = A (m + b + G f), rad/s per g
+    g_covariance: np.ndarray | None = None  # (B, 3k, 3k) of G row-major
 
 
 def _inner_unrotate(u0: np.ndarray, delta: np.ndarray, j: int, v: np.ndarray) -> np.ndarray:
@@ -1087,6 +1106,8 @@ def full_matrix_batch(
     ref_matrix: np.ndarray | None = None,
     still_std: float = 0.0,
     pose_still: np.ndarray | None = None,
+    force: np.ndarray | None = None,
+    rest_force: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-12,
 ) -> FullMatrixBatch:
@@ -1115,6 +1136,11 @@ def full_matrix_batch(
         Servos in the chain (default: ``pose.shape[-1]``).
     reference : ndarray, shape (S,), optional
         Reference angles of the returned axes (default: the first window's pose).
+    force, rest_force : ndarray, shape (B, n, k) and (B, r, k), optional
+        The mean specific force of each window and rest, g (sensor frame, or its coordinates
+        along ``k`` directions: :meth:`ObservationSet.specific_force`). Given, the model gains
+        g-sensitivity, ``E[m̄] = ω C u − b − G f`` (``3k`` more parameters, ``G`` row-major,
+        after the still angles).
     xtol : float
         Convergence threshold on the largest parameter step.
 
@@ -1134,9 +1160,15 @@ def full_matrix_batch(
     n_still = G.shape[-1]
     if n_still and not still_std > 0:
         raise CalibInputError("still_std must be positive when ref_matrix has still angles")
-    P = 9 + 2 * S + n_still
+    nk = 0 if force is None else np.shape(force)[-1]
+    nG = 3 * nk
+    f_win = np.zeros((B, n, 0)) if force is None else np.broadcast_to(force, (B, n, nk))
+    f_rest = np.zeros((B, r, 0)) if rest_force is None else np.broadcast_to(rest_force, (B, r, nk))
+    P0 = 9 + 2 * S + n_still
+    P = P0 + nG
     c, b, u0 = _full_initial(mean, rate, midx, delta, S, rest_mean, rest_std, mean_std)
     z = np.zeros((B, n_still))
+    gs = np.zeros((B, 3, nk))
     var_m = mean_std**2
     var_w = rate_std[:, :, None, None] ** 2
     eye3 = np.eye(3)
@@ -1157,17 +1189,17 @@ def full_matrix_batch(
     def axes_in_windows(u: np.ndarray, d: np.ndarray) -> np.ndarray:
         return kinematics.chain_axes(u[:, None], 0.0, d)[:, ar, midx]  # (B, n, 3)
 
-    def evaluate(c, b, u, z, with_jac):
+    def evaluate(c, b, u, z, gs, with_jac):
         C = _tril(c)
         d = true_delta(z)
         ui = axes_in_windows(u, d)
         ci = np.einsum("bpq,bnq->bnp", C, ui)
         w = (rate - np.einsum("bna,ba->bn", G, z))[:, :, None]
-        e = mean - (w * ci - b[:, None, :])
+        e = mean - (w * ci - b[:, None, :] - np.einsum("bpq,bnq->bnp", gs, f_win))
         cov = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
         L = np.linalg.cholesky(cov)
         ew = np.linalg.solve(L, e[..., None])[..., 0]
-        er = (rest_mean + b[:, None, :]) / rest_std
+        er = (rest_mean + b[:, None, :] + np.einsum("bpq,brq->brp", gs, f_rest)) / rest_std
         ez = z / still_std if n_still else z
         E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r), ez], axis=1)
         if not with_jac:
@@ -1177,12 +1209,14 @@ def full_matrix_batch(
         for col, (p, q) in enumerate(zip(*_TRIL, strict=True)):
             J[:, :, p, col] = -w[..., 0] * ui[..., q]
         J[:, :, np.arange(3), 6 + np.arange(3)] = 1.0
+        for p in range(3 if nG else 0):  # d e_p / d G_pq = f_q
+            J[:, :, p, P0 + nk * p : P0 + nk * p + nk] = f_win
         for t_i, t in enumerate((t1, t2)):  # axis directions along the tangent basis, exact
             du = kinematics.axis_derivatives(u, d, midx, t)  # (B, n, S, 3)
             J[:, :, :, 9 + t_i : 9 + 2 * S : 2] = -w[..., None] * np.einsum(
                 "bpq,bnsq->bnps", C, du)
         if n_still:
-            J[:, :, :, 9 + 2 * S :] = ci[..., None] * G[:, :, None, :]
+            J[:, :, :, 9 + 2 * S : P0] = ci[..., None] * G[:, :, None, :]
         dUs = kinematics.pose_derivatives(u, d, midx) if np.any(held) else None
         for k in np.flatnonzero(held.any(axis=0)):  # held poses: d e / d z = w C dU/dΔ_k
             contrib = w * np.einsum("bpq,bnq->bnp", C, dUs[:, :, k])  # (B, n, 3)
@@ -1191,13 +1225,15 @@ def full_matrix_batch(
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
         Jr = np.zeros((B, r, 3, P))
         Jr[:, :, np.arange(3), 6 + np.arange(3)] = 1.0 / rest_std
+        for p in range(3 if nG else 0):
+            Jr[:, :, p, P0 + nk * p : P0 + nk * p + nk] = f_rest / rest_std[:, :, p : p + 1]
         Jz = np.zeros((B, n_still, P))
         if n_still:
             Jz[:, np.arange(n_still), 9 + 2 * S + np.arange(n_still)] = 1.0 / still_std
         return E, np.concatenate([Jw, Jr.reshape(B, 3 * r, P), Jz], axis=1), (t1, t2)
 
     def retract(state, step, tb):
-        c, b, u, z = state
+        c, b, u, z, gs = state
         t1, t2 = tb
         da = step[:, 9 : 9 + 2 * S : 2][..., None]
         db = step[:, 10 : 9 + 2 * S : 2][..., None]
@@ -1205,13 +1241,14 @@ def full_matrix_batch(
         u_new /= np.linalg.norm(u_new, axis=2, keepdims=True)
         c_new = c + step[:, :6]
         ok = np.all(c_new[:, [0, 2, 5]] > 0, axis=1)  # the diagonal stays positive
-        u_new, z_new = _still_gauge(u_new, z + step[:, 9 + 2 * S :], owner)
-        return (c_new, b + step[:, 6:9], u_new, z_new), ok
+        u_new, z_new = _still_gauge(u_new, z + step[:, 9 + 2 * S : P0], owner)
+        gs_new = gs + step[:, P0:].reshape(B, 3, nk) if nG else gs
+        return (c_new, b + step[:, 6:9], u_new, z_new, gs_new), ok
 
     owner = _still_owner(G, ps, midx, n_still)
     state, E, J, iterations, converged = _lm_batch(
-        evaluate, retract, (c, b, u0, z), max_iter=max_iter, xtol=xtol)
-    c, b, u0, z = state
+        evaluate, retract, (c, b, u0, z, gs), max_iter=max_iter, xtol=xtol)
+    c, b, u0, z, gs = state
     JtJ = J.transpose(0, 2, 1) @ J
     cov = _scaled_pinv(JtJ)
     # Observability of the model terms (C, b, axes) by the singular values of the whitened
@@ -1236,6 +1273,7 @@ def full_matrix_batch(
         matrix=A, bias=b, axes=u0, axes_std_rad=ax_std, covariance=cov12,
         chi2=np.sum(E**2, axis=1), dof=3 * n + 3 * r + n_still - P, iterations=iterations,
         converged=converged, residuals=E, rank_deficiency=deficiency,
+        g_sensitivity=gs if nG else None, g_covariance=cov[:, P0:, P0:] if nG else None,
     )
 
 
@@ -1327,13 +1365,21 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
     return state, E, J, iterations, converged
 
 
+#: Largest one-sigma uncertainty of g-sensitivity along a direction of gravity for that
+#: direction to be fitted, rad/s per g: the MPU-9250's typical 0.1 °/s/g (PS §3.1). Along a
+#: direction the run sees less well, a typical ``G`` moves the windows by less than their noise
+#: (it adds about 1 to χ² per axis), so it is left in the bias rather than fitted as noise.
+MAX_G_STD = 1.75e-3
+
+
 #: Largest one-sigma uncertainty of a matrix element for which the full model counts as
 #: determined: a twentieth of the ±2 % cross-axis sensitivity the MPU-9250 datasheet allows.
 MAX_MATRIX_STD = 1e-3
 
 
 def fit_full_matrix(
-    obs: ObservationSet, *, max_iter: int = 50, max_matrix_std: float = MAX_MATRIX_STD
+    obs: ObservationSet, *, max_iter: int = 50, max_matrix_std: float = MAX_MATRIX_STD,
+    g_sensitivity: bool = True, max_g_std: float = MAX_G_STD,
 ) -> FitResult:
     r"""Full-matrix fit: ``g = A (m + b)`` with ``A`` a full 3×3 matrix, from a posed protocol.
 
@@ -1367,13 +1413,24 @@ def fit_full_matrix(
         The fit succeeds only if every matrix element's one-sigma uncertainty is at most this
         (:data:`MAX_MATRIX_STD`): a schedule whose poses leave a direction unobservable on a
         square gimbal sees it only through the gimbal's small tilts, with a huge uncertainty.
+    g_sensitivity : bool
+        When ``obs`` says where gravity points (:attr:`ObservationSet.has_gravity`), fit
+        ``g = A (m + b + G f)`` (``hardware_docs/method.md`` §10): ``f`` each window's mean
+        specific force from the poses and the fitted gimbal
+        (:meth:`ObservationSet.specific_force`), ``E[m̄] = ω C u − b − G f``; ``G`` along the
+        directions :func:`gravity_directions` finds determined, ``b`` the zero-g bias.
+    max_g_std : float
+        Largest one-sigma uncertainty of ``G`` along a direction for it to be fitted
+        (:data:`MAX_G_STD`).
 
     Returns
     -------
     FitResult
-        ``method`` ``"full-matrix"``, with ``matrix``, ``frame``, ``kinematics``; ``scale`` is
-        ``diag(A)``, ``covariance`` 12×12. ``success`` is false with status ``not-determined``
-        when the poses cannot determine the full matrix (the message says how far off).
+        ``method`` ``"full-matrix"``, with ``matrix``, ``frame``, ``kinematics`` (and
+        ``g_sensitivity``, its 9×9 covariance and ``g_directions`` when fitted); ``scale`` is
+        ``diag(A)``, ``covariance`` 12×12 (marginal over ``G``). ``success`` is false with
+        status ``not-determined`` when the poses cannot determine the full matrix (the message
+        says how far off).
 
     Raises
     ------
@@ -1391,12 +1448,38 @@ def fit_full_matrix(
             f"servos {never} of the chain never turn; full-matrix needs a turn of every servo "
             "(its axis carries the axes of the servos outside it)")
     obs = obs.with_pooled_noise()
-    res = full_matrix_batch(
-        obs.mean[None], obs.rate[None], obs.motor_index, obs.pose, obs.mean_std[None],
-        obs.rate_std[None], obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
-        n_servos=len(obs.chain), ref_matrix=obs.reference_matrix(),
-        still_std=obs.still_angle_std, pose_still=obs.pose_still, max_iter=max_iter,
-    )
+
+    def run(force: tuple[np.ndarray, np.ndarray] | None) -> FullMatrixBatch:
+        return full_matrix_batch(
+            obs.mean[None], obs.rate[None], obs.motor_index, obs.pose, obs.mean_std[None],
+            obs.rate_std[None], obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
+            n_servos=len(obs.chain), ref_matrix=obs.reference_matrix(),  # type: ignore[arg-type]
+            still_std=obs.still_angle_std, pose_still=obs.pose_still, max_iter=max_iter,
+            force=None if force is None else force[0][None],
+            rest_force=None if force is None else force[1][None],
+        )
+
+    res = run(None)
+    g_note = ""
+    basis = np.zeros((3, 0))
+    if g_sensitivity and obs.has_gravity:
+        # The specific force comes from the poses and the fitted axes, so fit once without it,
+        # then with the forces of the last fit's gimbal until its axes settle (G moves them by
+        # far less than their uncertainty: one or two passes).
+        for _ in range(4):
+            force = obs.specific_force(res.axes[0], obs.pose[0])
+            basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
+                                       max_std=max_g_std)
+            if not basis.shape[1]:
+                break
+            new = run((force[0] @ basis, force[1] @ basis))
+            moved = float(np.max(np.linalg.norm(new.axes[0] - res.axes[0], axis=-1)))
+            res = new
+            if moved < 1e-10:
+                break
+        if basis.shape[1] < 3:
+            g_note = (f"; g-sensitivity fitted along {basis.shape[1]} of 3 directions of "
+                      "gravity (the others are in the bias): rest in more orientations")
     A, b, cov = res.matrix[0], res.bias[0], res.covariance[0]
     it = int(res.iterations[0])
     deficiency = int(res.rank_deficiency[0])
@@ -1412,7 +1495,7 @@ def fit_full_matrix(
             f"the poses {how}: turn outer servos with the servos inside them at other angles "
             "(two posed pairs of turns at least; hardware_docs/method.md, observability)")
     elif ok:
-        status, message = "converged", f"converged in {it} steps"
+        status, message = "converged", f"converged in {it} steps{g_note}"
     else:
         status, message = "max-iterations", f"no convergence in {max_iter} steps"
     consistency = None
@@ -1442,7 +1525,53 @@ def fit_full_matrix(
         matrix=A.copy(),
         frame=FULL_FRAME,
         kinematics=kin,
+        **_g_terms(res, basis),
     )
+
+
+def _g_terms(res: FullMatrixBatch, basis: np.ndarray) -> dict[str, Any]:
+    """``G`` (3×3) and its 9×9 covariance from the fit's ``G_k`` along ``basis`` (3, k):
+    ``G = G_k Vᵀ``, ``d vec(G) / d vec(G_k) = I₃ ⊗ V``."""
+    if res.g_sensitivity is None:
+        return {}
+    T = np.kron(np.eye(3), basis)
+    return {"g_sensitivity": res.g_sensitivity[0] @ basis.T,
+            "g_sensitivity_cov": T @ res.g_covariance[0] @ T.T,  # type: ignore[index]
+            "g_directions": basis.T.copy()}
+
+
+def gravity_directions(force: np.ndarray, rest_force: np.ndarray, mean_std: np.ndarray,
+                       rest_std: np.ndarray, *, max_std: float = MAX_G_STD) -> np.ndarray:
+    """The directions of specific force along which a run determines g-sensitivity.
+
+    A window's offset is ``b + G f``: ``G`` is seen only through how ``f`` varies between the
+    windows and rests, so the weighted scatter of ``f`` about its weighted mean,
+    ``M = Σ wᵢ (fᵢ − f̄)(fᵢ − f̄)ᵀ`` (``wᵢ = 1/σᵢ²`` of the window's best axis), is the information
+    each row of ``G`` gets (with ``b`` free). Its eigenvectors whose ``1/√λ`` is at most
+    ``max_std`` are returned; along the others ``G`` stays in the bias. All three need gravity
+    in three independent directions (rests in three non-coplanar orientations, or two and the
+    horizontal turns' zero mean force).
+
+    Parameters
+    ----------
+    force, rest_force : ndarray, shape (n, 3) and (r, 3)
+        Mean specific force per window and rest, g.
+    mean_std, rest_std : ndarray, shape (n, 3) and (r, 3)
+        Standard errors of the window and rest means, rad/s.
+    max_std : float
+        Largest predicted one-sigma uncertainty of a fitted direction, rad/s per g.
+
+    Returns
+    -------
+    ndarray, shape (3, k)
+        Orthonormal columns, ``k`` in 0..3, best determined first.
+    """
+    f = np.concatenate([force, rest_force])
+    w = 1.0 / np.min(np.concatenate([mean_std, rest_std]), axis=1) ** 2
+    fc = f - (w @ f) / w.sum()
+    lam, V = np.linalg.eigh((fc * w[:, None]).T @ fc)
+    keep = lam > 1.0 / max_std**2
+    return V[:, keep][:, ::-1]
 
 
 METHODS["full-matrix"] = fit_full_matrix

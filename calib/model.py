@@ -33,7 +33,8 @@ from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 if TYPE_CHECKING:
     from gyrocal.calib.thermal import ThermalModel
 
-__all__ = ["FORMAT", "LIMITS", "VERSION", "VERSION_FULL", "Consistency", "GyroCalibration"]
+__all__ = ["FORMAT", "LIMITS", "MODEL_G", "VERSION", "VERSION_FULL", "Consistency",
+           "GSensitivityWarning", "GyroCalibration"]
 
 FORMAT = "gyrocal-calibration"
 VERSION = 1
@@ -58,7 +59,19 @@ _V1_FIELDS = (
     "format", "version", "model", "scale", "bias", "scale_std", "bias_std", "covariance",
     "method", "iterations", "consistency", "sensor", "temperature_c", "created", "source", "axes",
 )
-_V2_FIELDS = ("matrix", "matrix_std", "frame", "kinematics")
+_V2_FIELDS = ("matrix", "matrix_std", "frame", "kinematics", "g_sensitivity")
+_G_FIELDS = ("model", "matrix", "matrix_std", "directions")
+#: ``g_sensitivity.model``: the full model with g-sensitivity, ``f`` the specific force in g.
+MODEL_G = "g = matrix @ (m + bias + g_sensitivity @ f)"
+#: Largest g-sensitivity term a document may carry, rad/s per g: 50× the MPU-9250's typical
+#: 0.1 °/s/g (PS §3.1); more is a unit mistake (°/s, or m/s² for g).
+MAX_G_SENSITIVITY = 0.1
+
+
+class GSensitivityWarning(UserWarning):
+    """A calibration with g-sensitivity applied without the specific force: its bias is the
+    zero-g bias, so the rate is off by ``A G f`` (up to ~1.7e-3 rad/s at 1 g for an MPU-9250)."""
+
 _THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
 _ACTION = "correct or remove it (see hardware_docs/formats.md)"
@@ -247,6 +260,11 @@ class GyroCalibration:
     temperature_model : ThermalModel or None
         Bias (and scale or matrix) against die temperature (:mod:`gyrocal.calib.thermal`),
         written as the document's ``temperature_model`` in either version.
+    g_sensitivity : dict or None
+        Full model only: ``{"matrix": G (3×3, rad/s per g), "matrix_std": its one-sigma,
+        "directions": the k unit vectors of specific force G was determined along}`` of
+        ``g = A (m + bias + G f)`` (:func:`gyrocal.calib.estimators.fit_full_matrix`); ``bias``
+        is then the zero-g bias.
     """
 
     scale: tuple[float, float, float]
@@ -267,6 +285,7 @@ class GyroCalibration:
     frame: str | None = None
     kinematics: dict[str, Any] | None = field(default=None, hash=False)
     temperature_model: ThermalModel | None = field(default=None, hash=False)
+    g_sensitivity: dict[str, Any] | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
@@ -281,6 +300,13 @@ class GyroCalibration:
         if self.kinematics is not None:
             try:
                 object.__setattr__(self, "kinematics", _read_kinematics(self.kinematics))
+            except CalibrationFormatError as exc:
+                raise CalibInputError(str(exc)) from None
+        if self.g_sensitivity is not None:
+            if self.matrix is None:
+                raise CalibInputError("g_sensitivity needs a matrix (the full model)")
+            try:
+                object.__setattr__(self, "g_sensitivity", _read_g(self.g_sensitivity))
             except CalibrationFormatError as exc:
                 raise CalibInputError(str(exc)) from None
         if self.covariance is not None:
@@ -317,7 +343,9 @@ class GyroCalibration:
         return self.matrix is not None
 
     def apply(self, m: np.ndarray | list[float] | tuple[float, ...],
-              temperature_c: float | np.ndarray | None = None) -> np.ndarray:
+              temperature_c: float | np.ndarray | None = None,
+              specific_force: np.ndarray | list[float] | tuple[float, ...] | None = None,
+              ) -> np.ndarray:
         """Calibrated rate ``A (m + bias)`` for one reading or many.
 
         ``A`` is :attr:`full_matrix`, so a v1 calibration gives the paper's Eq. (1),
@@ -332,6 +360,11 @@ class GyroCalibration:
             Raw readings in rad/s (datasheet sensitivity applied, nothing else).
         temperature_c : float or array_like (N,), optional
             Die temperature of the readings, °C; ignored without a temperature model.
+        specific_force : array_like, shape (3,) or (N, 3), optional
+            The specific force at the sensor in g, sensor frame (an accelerometer's reading beside
+            the gyro; +1 g up when still). With :attr:`g_sensitivity` the rate is
+            ``A (m + bias + G f)``; without it a :class:`GSensitivityWarning` says that the
+            g-sensitivity is not applied. Ignored (with no warning) without ``g_sensitivity``.
 
         Returns
         -------
@@ -343,6 +376,8 @@ class GyroCalibration:
             raise CalibInputError(f"readings must have shape (3,) or (N, 3), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise CalibInputError("readings contain NaN or inf; drop or repair those samples first")
+        if self.g_sensitivity is not None:
+            a = a + self._g_offset(specific_force, a.shape)
         if self.temperature_model is not None and temperature_c is not None:
             from gyrocal.calib.thermal import apply_thermal
 
@@ -350,6 +385,26 @@ class GyroCalibration:
         if self.matrix is None:
             return np.asarray(self.scale) * (a + np.asarray(self.bias))
         return (a + np.asarray(self.bias)) @ self.full_matrix.T
+
+    def _g_offset(self, force: Any, shape: tuple[int, ...]) -> np.ndarray | float:
+        """``G f`` for :meth:`apply` (0, with a warning, when ``force`` is None)."""
+        if force is None:
+            import warnings
+
+            warnings.warn(
+                "g-sensitivity NOT applied: this calibration's bias is the zero-g bias, so "
+                "without the specific force the rate is off by up to |A G| x 1 g; pass "
+                "specific_force (the accelerometer's reading, g)", GSensitivityWarning,
+                stacklevel=3)
+            return 0.0
+        f = np.asarray(force, dtype=float)
+        if f.shape[-1:] != (3,) or f.ndim > 2 or (f.ndim == 2 and f.shape[0] != (
+                shape[0] if len(shape) == 2 else 1)):
+            raise CalibInputError(
+                f"specific_force must have shape (3,) or one row per reading, got {f.shape}")
+        if not np.all(np.isfinite(f)):
+            raise CalibInputError("specific_force contains NaN or inf")
+        return f @ np.asarray(self.g_sensitivity["matrix"]).T  # type: ignore[index]
 
     @property
     def covariance_matrix(self) -> np.ndarray | None:
@@ -396,6 +451,11 @@ class GyroCalibration:
             doc["matrix_std"] = grid(self.matrix_std)
             doc["frame"] = self.frame
             doc["kinematics"] = copy.deepcopy(self.kinematics)
+            if self.g_sensitivity is not None:
+                g = self.g_sensitivity
+                doc["g_sensitivity"] = {"model": MODEL_G, "matrix": grid(g["matrix"]),
+                                        "matrix_std": grid(g["matrix_std"]),
+                                        "directions": [list(v) for v in g["directions"]]}
         if self.temperature_model is not None:
             doc["temperature_model"] = self.temperature_model.to_dict()
         return doc
@@ -504,7 +564,42 @@ def _read_model(doc: Mapping[str, Any], full: bool) -> dict[str, Any]:
             raise CalibrationFormatError("'frame' must be a string or null")
         kw["frame"] = frame
         kw["kinematics"] = doc.get("kinematics")
+        kw["g_sensitivity"] = _read_g(doc.get("g_sensitivity"))
     return kw
+
+
+def _read_g(g: Any) -> dict[str, Any] | None:
+    """Check a ``g_sensitivity`` object (model, matrix, matrix_std, directions); None stays
+    None. Returns it with tuples."""
+    if g is None:
+        return None
+    if not isinstance(g, Mapping):
+        raise CalibrationFormatError("'g_sensitivity' must be an object or null")
+    _refuse_unknown(g, _G_FIELDS, "'g_sensitivity'")
+
+    def lists(x: Any) -> Any:  # tuples (a GyroCalibration's own) read as JSON lists
+        return [lists(e) for e in x] if isinstance(x, (list, tuple)) else x
+
+    g = {k: lists(v) for k, v in g.items()}
+    for name in ("matrix", "directions"):
+        if name not in g:
+            raise CalibrationFormatError(f"'g_sensitivity' lacks the field {name!r}")
+    if g.get("model", MODEL_G) != MODEL_G:
+        raise CalibrationFormatError(
+            f"'g_sensitivity.model' is {_excerpt(g.get('model'))}, expected {MODEL_G!r}")
+    G = _array(g["matrix"], "g_sensitivity.matrix", (3, 3), lo=-MAX_G_SENSITIVITY,
+               hi=MAX_G_SENSITIVITY)
+    std = (np.full((3, 3), math.nan) if g.get("matrix_std") is None else
+           _array(g["matrix_std"], "g_sensitivity.matrix_std", (3, 3), nullable=True, lo=0.0))
+    d = g["directions"]
+    if not isinstance(d, (list, tuple)) or len(d) > 3:
+        raise CalibrationFormatError("'g_sensitivity.directions' must list 0 to 3 unit vectors")
+    V = _array(list(d), "g_sensitivity.directions", (len(d), 3)) if d else np.zeros((0, 3))
+    if V.size and not np.allclose(V @ V.T, np.eye(len(d)), atol=1e-6):
+        raise CalibrationFormatError("'g_sensitivity.directions' must be orthonormal")
+    return {"matrix": tuple(tuple(float(x) for x in r) for r in G),
+            "matrix_std": tuple(tuple(float(x) for x in r) for r in std),
+            "directions": tuple(tuple(float(x) for x in r) for r in V)}
 
 
 def _read_kinematics(k: Any) -> dict[str, Any] | None:

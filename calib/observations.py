@@ -149,6 +149,20 @@ class ObservationSet:
         during the window (the same numbering as ``ref_start``/``ref_end``: one still period of
         one servo is one unknown, its reading error with prior ``still_angle_std``); -1 for the
         turning servo, or where the pose is taken as exact. Default: all -1.
+    rest_pose : array_like, shape (r, S), optional
+        Every servo's encoder angle over each rest window (chain order), rad: where gravity
+        points in the sensor frame during the rest (g-sensitivity, :meth:`specific_force`).
+    home_pose : array_like, shape (S,), optional
+        Every servo's encoder angle in the home pose (the recording's first readings), rad.
+    turn_phase : array_like, shape (n, 2), optional
+        Per rotation window, the window-weighted means of ``cos φ`` and ``sin φ``, ``φ`` the
+        turning servo's angle less its ``pose`` angle: how far the window is from whole
+        revolutions (both 0 over whole revolutions at constant speed; the default).
+    gravity : tuple of int, optional
+        ``(servo ID, sign)``: in the home pose, "up" (the specific force of a still sensor, +1 g)
+        points along ``sign`` times that servo's positive axis (the gimbal stands with that axis
+        vertical). With ``rest_pose`` and ``home_pose`` it lets the full-matrix fit model
+        g-sensitivity; without it, none is fitted.
 
     Raises
     ------
@@ -177,6 +191,10 @@ class ObservationSet:
     chain: tuple[int, ...] | None = None
     pose: np.ndarray | None = None
     pose_still: np.ndarray | None = None
+    rest_pose: np.ndarray | None = None
+    home_pose: np.ndarray | None = None
+    gravity: tuple[int, int] | None = None
+    turn_phase: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -270,6 +288,103 @@ class ObservationSet:
         object.__setattr__(self, "pose_still", None if pose_still is None else _ro(pose_still))
         if pose_still is not None and np.any(pose_still >= 0) and not self.still_angle_std > 0:
             raise CalibInputError("still_angle_std must be positive when pose_still is used")
+        self._gravity_fields(r_mean.shape[0])
+
+    def _gravity_fields(self, r: int) -> None:
+        """Check and freeze ``rest_pose``, ``home_pose`` and ``gravity``."""
+        given = [v is not None for v in (self.rest_pose, self.home_pose, self.gravity)]
+        if not any(given):
+            return
+        if self.chain is None:
+            raise CalibInputError("rest_pose, home_pose and gravity need chain and pose")
+        S = len(self.chain)
+        if self.rest_pose is not None:
+            object.__setattr__(self, "rest_pose", _ro(_arr(self.rest_pose, "rest_pose", (r, S))))
+        if self.home_pose is not None:
+            object.__setattr__(self, "home_pose", _ro(_arr(self.home_pose, "home_pose", (S,))))
+        if self.turn_phase is not None:
+            object.__setattr__(self, "turn_phase", _ro(_arr(
+                self.turn_phase, "turn_phase", (self.n_windows, 2))))
+        if self.gravity is not None:
+            try:
+                sid, sign = (int(x) for x in self.gravity)
+            except (TypeError, ValueError):
+                raise CalibInputError(
+                    f"gravity must be (servo ID, ±1), got {self.gravity!r}") from None
+            if sid not in self.chain or sign not in (-1, 1):
+                raise CalibInputError(
+                    f"gravity must name a servo of the chain {self.chain} and a sign ±1, got "
+                    f"{self.gravity!r}")
+            object.__setattr__(self, "gravity", (sid, sign))
+
+    @property
+    def has_gravity(self) -> bool:
+        """Whether the set says where gravity points in every window (g-sensitivity can be
+        modelled): ``gravity``, ``home_pose`` and, when there are rests, ``rest_pose``."""
+        return (self.gravity is not None and self.home_pose is not None and self.pose is not None
+                and (self.n_rests == 0 or self.rest_pose is not None))
+
+    def specific_force(self, axes: np.ndarray, reference: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Mean specific force of a still-or-turning sensor in each window, in g, sensor frame.
+
+        "Up" is ``gravity``'s servo axis in the home pose (``γ_h = ±u_k(θ_h)``); in any pose
+        ``θ`` it is carried by every servo's rotation from the home pose, like the axis of a joint
+        outside the base (:mod:`gyrocal.calib.kinematics`):
+        ``γ(θ) = Rot(u_{S-1}, −Δ_{S-1}) ⋯ Rot(u_0, −Δ_0) γ_h`` with ``Δ = θ − θ_h`` and the axes
+        at ``θ_h``. A rest sees ``γ(θ_r)``; a turn of servo ``j`` sees
+        ``Rot(u_j, −φ) γ`` averaged over its window, ``γ c̄ − (u_j × γ) s̄ + u_j (u_j·γ)(1 − c̄)``
+        with ``(c̄, s̄)`` = :attr:`turn_phase`: over whole revolutions the component along the
+        turning axis, ``(u_j·γ) u_j``. The lever arm's centripetal
+        term ``ω²r⊥/g₀`` is not included (at 40 mm and 3 rad/s it is 0.037 g).
+
+        Parameters
+        ----------
+        axes : ndarray, shape (S, 3)
+            The servos' axes in the sensor frame at ``reference`` (a fit's kinematics).
+        reference : ndarray, shape (S,)
+            Their reference angles, rad.
+
+        Returns
+        -------
+        force : ndarray, shape (n, 3)
+            Per rotation window.
+        rest_force : ndarray, shape (r, 3)
+            Per rest window.
+
+        Raises
+        ------
+        CalibInputError
+            If the set does not say where gravity points (:attr:`has_gravity`).
+        """
+        from gyrocal.calib.kinematics import chain_axes
+
+        if not self.has_gravity:
+            raise CalibInputError(
+                "the observations do not say where gravity points (gravity, home_pose, "
+                "rest_pose); g-sensitivity cannot be modelled")
+        chain = list(self.chain)  # type: ignore[arg-type]
+        sid, sign = self.gravity  # type: ignore[misc]
+        axes = np.asarray(axes, dtype=float)
+        home = np.asarray(self.home_pose, dtype=float)
+        at_home = chain_axes(axes, reference, home)
+        up = sign * at_home[chain.index(sid)]
+        ext = np.concatenate([up[None], at_home])
+
+        def carried(theta: np.ndarray) -> np.ndarray:
+            th = np.concatenate([np.zeros((theta.shape[0], 1)), theta], axis=1)
+            return chain_axes(ext, np.concatenate([[0.0], home]), th)[:, 0]
+
+        pose = np.asarray(self.pose, dtype=float)
+        g_win = carried(pose)
+        u_win = chain_axes(axes, reference, pose)[np.arange(self.n_windows), self.motor_index]
+        c, s = (np.zeros((self.n_windows, 1)),) * 2 if self.turn_phase is None else (
+            np.asarray(self.turn_phase)[:, :1], np.asarray(self.turn_phase)[:, 1:])
+        force = (g_win * c - np.cross(u_win, g_win) * s
+                 + u_win * np.sum(u_win * g_win, axis=1, keepdims=True) * (1 - c))
+        rest = (carried(np.asarray(self.rest_pose, dtype=float)) if self.n_rests
+                else np.zeros((0, 3)))
+        return force, rest
 
     def _chain_pose(
         self, n: int, motor: np.ndarray

@@ -50,7 +50,7 @@ measured where the servo cannot reach it: at rest and on the other windows' off-
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -670,6 +670,19 @@ def _assemble(
     )
 
 
+def _turn_phase(turns: Sequence[_Turn], tracks: EncoderTracks, chain: tuple[int, ...],
+                pose: np.ndarray) -> np.ndarray:
+    """Per window, the weighted means of ``cos φ`` and ``sin φ`` with ``φ`` the turning servo's
+    angle less its pose angle (:attr:`ObservationSet.turn_phase`), with the window's weight."""
+    out = np.zeros((len(turns), 2))
+    for i, w in enumerate(turns):
+        t, th = tracks.track[int(w.window.motor)]  # type: ignore[arg-type]
+        phi = th - pose[i, chain.index(int(w.window.motor))]  # type: ignore[arg-type]
+        out[i], _, _ = _weighted_mean(t, np.column_stack([np.cos(phi), np.sin(phi)]),
+                                      w.window.corners)
+    return out
+
+
 def _window_temps(t: np.ndarray, temp: np.ndarray, windows: Sequence[Window]) -> np.ndarray:
     """Mean die temperature over each window's span (NaN where no sample has one)."""
     out = np.full(len(windows), np.nan)
@@ -797,6 +810,12 @@ def extract_observations(
             pose_still[i, chain_t.index(int(w.window.motor))] = -1  # type: ignore[arg-type]
     obs = _assemble(turns, noise, mean_std, rest_windows, rest_samples, tau, temp, q, chain_t,
                     pose, pose_still)
+    if chain_t is not None:  # where gravity points in each rest, and the home pose
+        rest_pose = np.array([tracks.pose(chain_t, w.corners[0], w.corners[3])[0]
+                              for w in rest_windows]).reshape(len(rest_windows), len(chain_t))
+        home = np.array([tracks.track[m][1][0] for m in chain_t])
+        obs = replace(obs, rest_pose=rest_pose, home_pose=home,
+                      turn_phase=_turn_phase(turns, tracks, chain_t, pose))  # type: ignore[arg-type]
     if temp is not None:  # a die that warmed during the run: refer the windows to its mean
         obs, note = correct_drift(obs, _window_temps(imu_t, temp, [w.window for w in turns]),
                                   _window_temps(imu_t, temp, rest_windows))

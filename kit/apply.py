@@ -18,7 +18,7 @@ import numpy as np
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.recording import IMU_HEADER
 
-__all__ = ["calibrated", "calibrated_rows", "format_rows", "stream"]
+__all__ = ["calibrated", "calibrated_rows", "format_rows", "g_sensitivity_note", "stream"]
 
 
 def calibrated(cal: Any, rate: np.ndarray, temp_c: np.ndarray) -> np.ndarray:
@@ -28,14 +28,34 @@ def calibrated(cal: Any, rate: np.ndarray, temp_c: np.ndarray) -> np.ndarray:
     applied as ``cal.apply(rate, temperature_c=temp_c)``; otherwise as ``cal.apply(rate)``. The
     model itself is the calibration's; nothing of it is reimplemented here.
     """
+    import warnings
+
+    from gyrocal.calib.model import GSensitivityWarning
+
+    kw = {}
     if getattr(cal, "temperature_model", None) is not None:
         if np.any(~np.isfinite(temp_c)):
             raise InputError(
                 "the calibration has a temperature model, but some readings have no temperature; "
                 "give the temp column for every row"
             )
-        return np.asarray(cal.apply(rate, temperature_c=temp_c), dtype=float)
-    return np.asarray(cal.apply(rate), dtype=float)
+        kw["temperature_c"] = temp_c
+    with warnings.catch_warnings():  # said once per run by g_sensitivity_note instead
+        warnings.simplefilter("ignore", GSensitivityWarning)
+        return np.asarray(cal.apply(rate, **kw), dtype=float)
+
+
+def g_sensitivity_note(cal: Any) -> str | None:
+    """What a user must know when a calibration's g-sensitivity cannot be applied: ``imu.csv``
+    rows carry no accelerometer reading, so ``G f`` is left out (None without g-sensitivity)."""
+    if getattr(cal, "g_sensitivity", None) is None:
+        return None
+    G = np.asarray(cal.g_sensitivity["matrix"])
+    worst = float(np.max(np.linalg.norm(cal.full_matrix @ G, axis=1)))
+    return (f"note: the calibration's g-sensitivity is NOT applied (imu.csv rows carry no "
+            f"accelerometer reading): its bias is the zero-g bias, so the rates are off by up "
+            f"to {worst:.1e} rad/s per g of specific force; apply it in code with "
+            "GyroCalibration.apply(m, specific_force=f)")
 
 
 def format_rows(t: np.ndarray, rate: np.ndarray, temp_c: np.ndarray) -> Iterator[str]:

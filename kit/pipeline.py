@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -69,12 +69,36 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
         If the recording cannot be windowed (truncated, a servo without encoder data, ...).
     """
     try:
-        return extract_observations(
+        ex = extract_observations(
             rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
             imu_temp=rec.imu_temp, chain=_chain(rec),
         )
+        up = gravity_servo(rec.manifest)
+        if up is not None and ex.observations.chain is not None:
+            ex = replace(ex, observations=replace(ex.observations, gravity=up))
+        return ex
     except CalibInputError as exc:
         raise InputError(f"{rec.path}: {exc}") from None
+
+
+def gravity_servo(manifest: Mapping[str, Any]) -> tuple[int, int] | None:
+    """``(servo ID, sign)`` of the servo whose axis is vertical in the home pose, for the
+    g-sensitivity model (:attr:`gyrocal.calib.observations.ObservationSet.gravity`).
+
+    The jig stands with the sensor's +z up in the home pose (``hardware_docs/mechanical.md``),
+    so "up" is the servo listed with axis ``z`` (sign +1) or ``-z`` (sign -1) in the manifest's
+    ``gimbal.motors``; None when no servo is (then no g-sensitivity is fitted).
+    """
+    motors = (manifest.get("gimbal") or {}).get("motors")
+    if not isinstance(motors, list):
+        return None
+    for m in motors:
+        if isinstance(m, Mapping) and m.get("axis") in ("z", "+z", "-z"):
+            try:
+                return int(m["id"]), (-1 if m["axis"] == "-z" else 1)
+            except (KeyError, TypeError, ValueError):
+                return None
+    return None
 
 
 def _chain(rec: Recording) -> tuple[int, ...] | None:

@@ -80,7 +80,8 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
     """The plan as steps: per servo rest, turn −, rest, turn +; then a final rest; then, for
     each posed pair of the full model (:attr:`~gyrocal.calib.design.Plan.poses`), move a servo
     to its pose, rest, turn the other −, rest, +, rest, and move the first back home
-    (:func:`gyrocal.calib.design.full_schedule` is the same order).
+    (:func:`gyrocal.calib.design.full_schedule` is the same order); last, for each gravity pose
+    (:attr:`~gyrocal.calib.design.Plan.gravity_poses`), move the servo there, rest, and back.
 
     Turning the negative way first and back again ends every servo where it started; every
     move is undone, so the run ends in the home pose.
@@ -107,6 +108,10 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
             raise ValueError(f"pose ({turn}, {moved}) names a servo beyond the chain {ids}")
         steps.append(Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed))
         steps += turns(ids[turn])[1:]
+        steps.append(Step("rest", rest_s=plan.rest_s))
+        steps.append(Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed))
+    for moved, angle in plan.gravity_poses:  # gravity in more directions, for g-sensitivity
+        steps.append(Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed))
         steps.append(Step("rest", rest_s=plan.rest_s))
         steps.append(Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed))
     return steps

@@ -324,6 +324,19 @@ class Residuals:
         return float(np.sum(self.z**2))
 
 
+def _g_offsets(obs: Any, cal: GyroCalibration) -> tuple[np.ndarray, np.ndarray]:
+    """``G f`` of each window and rest for a calibration with g-sensitivity, ``f`` from the
+    poses and the calibration's kinematics as its fit took it
+    (:meth:`~gyrocal.calib.observations.ObservationSet.specific_force`); zeros otherwise."""
+    zero = np.zeros((obs.n_windows, 3)), np.zeros((obs.n_rests, 3))
+    g, kin = cal.g_sensitivity, cal.kinematics
+    if g is None or kin is None or not obs.has_gravity:
+        return zero
+    f, fr = obs.specific_force(np.asarray(kin["axes"]), np.asarray(kin["reference_angles_rad"]))
+    G = np.asarray(g["matrix"])
+    return f @ G.T, fr @ G.T
+
+
 def window_residuals(
     extracted: ExtractedWindows, cal: GyroCalibration,
     axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...],
@@ -331,7 +344,8 @@ def window_residuals(
     """Each window's mean minus what the calibration predicts, in units of its deviation.
 
     A rotation window at reference rate ``ω`` about the axis ``u`` predicts ``A⁻¹ ω u − b`` (the
-    model ``g = A (m + b)`` inverted, with ``g = ω u``; ``A = diag(k)`` for the paper's model,
+    model ``g = A (m + b)`` inverted, with ``g = ω u``; less ``G f`` with g-sensitivity;
+    ``A = diag(k)`` for the paper's model,
     ``ω u ⊘ k − b``); a rest predicts ``−b``. The deviation of each component is
     ``sqrt(σ_m² + (σ_ω A⁻¹u)²)``: the window mean's standard error (the noise pooled over the
     windows where it is homogeneous, as the fits do) and the reference rate's; for an axis from
@@ -361,12 +375,13 @@ def window_residuals(
         raise InputError(f"{len(per_window)} axes for {len(extracted.windows)} windows")
     a_inv = np.linalg.inv(cal.full_matrix)
     b = np.asarray(cal.bias)
+    f_win, f_rest = _g_offsets(obs, cal)
     labels: list[str] = []
     kinds: list[str] = []
     err, sig = [], []
     for i, w in enumerate(extracted.windows):
         v = a_inv @ per_window[i].axis
-        err.append(obs.mean[i] - (obs.rate[i] * v - b))
+        err.append(obs.mean[i] - (obs.rate[i] * v - b - f_win[i]))
         var = obs.mean_std[i] ** 2 + (obs.rate_std[i] * v) ** 2
         if per_window[i].pose_terms is not None:
             var = var + np.sum((obs.rate[i] * per_window[i].pose_terms @ a_inv.T) ** 2, axis=0)
@@ -374,7 +389,7 @@ def window_residuals(
         labels.append(f"s{w.motor}{'+' if w.direction > 0 else '-'}")
         kinds.append("rotate")
     for i, w in enumerate(extracted.rests):
-        err.append(obs.rest_mean[i] + b)  # type: ignore[index]
+        err.append(obs.rest_mean[i] + b + f_rest[i])  # type: ignore[index]
         sig.append(obs.rest_mean_std[i])  # type: ignore[index]
         labels.append(f"rest {w.segment}")
         kinds.append("rest")

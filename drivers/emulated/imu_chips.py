@@ -603,8 +603,7 @@ class _EmulatedImu(ABC):
         t = self._origin + period * ks
         # a delayed output reaches no further back than the chip's power-on
         t_eval = np.maximum(t - self._pure_delay_s(period), self._created)
-        omega = self._filtered(self._true_rate(t_eval, self._average_window_s(period)), head,
-                               skipped)
+        omega = self._filtered(self._internal_rates(t_eval, period), head, skipped)
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         force = self._specific_force(t_eval)
@@ -658,24 +657,51 @@ class _EmulatedImu(ABC):
         :meth:`_true_rate`): the output period unless the chip says otherwise."""
         return period
 
+    def _internal_per_output(self, period: float) -> int:
+        """Internal samples the chip filters per output sample (1: it filters at the output
+        rate; a chip that low-passes at its internal rate before decimating says more)."""
+        return 1
+
+    def _internal_rates(self, t: np.ndarray, period: float) -> np.ndarray:
+        """The true rate of each new output sample (n, 3), or, for a chip that filters at its
+        internal rate, of the ``D`` internal samples ending at each (n, D, 3): each the mean over
+        :meth:`_average_window_s` (:meth:`_true_rate`)."""
+        D = self._internal_per_output(period)
+        if D == 1:
+            return self._true_rate(t, self._average_window_s(period))
+        step = period / D
+        t_int = (t[:, None] - step * np.arange(D - 1, -1, -1)[None, :]).reshape(-1)
+        return self._true_rate(t_int, min(step, self._average_window_s(period))).reshape(
+            t.size, D, 3)
+
+    def _filter_rate_hz(self) -> float | None:
+        """The rate the output filter runs at: the output rate times the internal samples per
+        output sample."""
+        odr = self._odr_hz()
+        return None if odr is None else odr * self._internal_per_output(1.0 / odr)
+
     def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
         """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples (the
         first ``head`` rows, then ``skipped`` not generated, then the rest), discretised at the
-        output rate by the bilinear transform prewarped to that cutoff (exactly −3 dB there).
-        The chips' filter orders are not published, so this stands in with the datasheet's
-        bandwidth ⚠. The state carries across calls; it restarts (at rest on its first input)
-        after skipped samples and when the cutoff or rate changes."""
-        fc, odr = self._lowpass_hz(), self._odr_hz()
-        if fc is None or odr is None or omega.shape[0] == 0:
-            return omega
-        k = math.tan(math.pi * fc / odr)
+        filter's rate (:meth:`_filter_rate_hz`) by the bilinear transform prewarped to that
+        cutoff (exactly −3 dB there). Rates given per internal sample (n, D, 3) are filtered at
+        the internal rate and decimated to the last of each D (the MPU-9250's DLPF runs at
+        1 kHz before SMPLRT_DIV, register map CONFIG). The chips' filter orders are not
+        published, so this stands in with the datasheet's bandwidth ⚠. The state carries across
+        calls; it restarts (at rest on its first input) after skipped samples and when the
+        cutoff or rate changes."""
+        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
+        D = omega.shape[1] if omega.ndim == 3 else 1
+        if fc is None or rate is None or omega.shape[0] == 0:
+            return omega if D == 1 else omega[:, -1]
+        k = math.tan(math.pi * fc / rate)
         b, a = k / (1 + k), (k - 1) / (k + 1)
         out = np.empty_like(omega)
         parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
         for i, (lo, hi) in enumerate(parts):
             if hi <= lo:
                 continue
-            x = omega[lo:hi]
+            x = omega[lo:hi].reshape(-1, 3)
             state = self._lpf
             if state is None or state[0] != fc or (i == 1 and skipped):
                 prev_x = prev_y = x[0]
@@ -683,18 +709,18 @@ class _EmulatedImu(ABC):
                 prev_x, prev_y = state[1][0], state[1][1]
             y, _ = lfilter([b, b], [1.0, a], x, axis=0,
                            zi=(b * prev_x - a * prev_y)[None, :])
-            out[lo:hi] = y
+            out[lo:hi] = y.reshape(omega[lo:hi].shape)
             self._lpf = (fc, np.stack([x[-1], y[-1]]))
-        return out
+        return out if D == 1 else out[:, -1]
 
     def filter_delay_s(self) -> float | None:
         """Group delay at DC of the emulated output filter, s: ``1 / (2 k · odr)`` with
         ``k = tan(π fc / odr)`` for the bilinear first-order low-pass (its numerator's half
         sample plus its pole's ``(1 − k) / 2k`` samples); ``None`` without a filter."""
-        fc, odr = self._lowpass_hz(), self._odr_hz()
-        if fc is None or odr is None:
+        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
+        if fc is None or rate is None:
             return None
-        return 1.0 / (2.0 * math.tan(math.pi * fc / odr) * odr)
+        return 1.0 / (2.0 * math.tan(math.pi * fc / rate) * rate)
 
     def _after_samples(self) -> None:  # noqa: B027 - a hook, empty unless a chip needs it
         """Runs after new samples were taken (the MPU-9250's I²C master cycle)."""
@@ -842,6 +868,14 @@ class EmulatedMPU9250(_EmulatedImu):
         if self._lowpass_hz() is None:
             return period
         return min(period, 1.0 / self.family.extra["internal_rate_hz"])
+
+    def _internal_per_output(self, period: float) -> int:
+        """With the DLPF emulated, ``1 + SMPLRT_DIV`` internal (1 kHz) samples per output
+        sample: the DLPF runs at the internal rate and SMPLRT_DIV decimates its output
+        (register map CONFIG, SMPLRT_DIV; hardware reference §1.4)."""
+        if self._lowpass_hz() is None:
+            return 1
+        return max(1, round(period * self.family.extra["internal_rate_hz"]))
 
     def _pure_delay_s(self, period: float) -> float:
         """The CONFIG table's delay less the filter's DC group delay and the sub-sample

@@ -36,6 +36,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("a stream (-) goes to standard output; --out goes with a recording")
     refuse_existing([args.out], force=args.force)
     cal = load_document(args.calibration, "gyrocal-calibration", "calibration")
+    note = apply.g_sensitivity_note(cal)
+    if note:
+        print(note, file=sys.stderr)
     if args.source == "-":
         apply.stream(cal, sys.stdin, sys.stdout)
         return 0

@@ -384,7 +384,8 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
         plan = replace(plan, **fixed)
         plan = replace(plan, jig_time_s=jig_time(
             plan.speed, plan.turns, plan.rest_s, accel,
-            move_angles=tuple(abs(a) for _, _, a in plan.poses)))
+            move_angles=tuple(abs(a) for _, _, a in plan.poses),
+            gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
     # the planned protocols stay within their budget (the full one's is at least
     # FULL_TIME_BUDGET_S) also when fixed values override the plan
     limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (
@@ -421,6 +422,8 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: i
                 "turns": plan.turns, "rest_s": plan.rest_s,
                 "poses": [{"turn": ids[t], "moved": ids[m], "angle_rad": a}
                           for t, m, a in plan.poses],
+                "gravity_poses": [{"moved": ids[m], "angle_rad": a}
+                                  for m, a in plan.gravity_poses],
                 "acceleration": plan.accel,
                 "planned_jig_time_s": plan.jig_time_s,
                 "planning_noise_std": noise_std,

@@ -111,6 +111,28 @@ def test_mpu9250_dlpf_gain_at_its_cutoff_is_minus_3_db(bandwidth):
     assert gain / amp == pytest.approx(boxcar / math.sqrt(2), abs=0.01)
 
 
+def test_mpu9250_dlpf_runs_at_the_internal_1khz_rate_before_decimation():
+    # Register map CONFIG/SMPLRT_DIV: the DLPF filters the 1 kHz internal samples and
+    # SMPLRT_DIV decimates its output. At 200 Hz out, a 60 Hz input keeps the gain of the
+    # 92 Hz filter run at 1 kHz (the first-order bilinear stand-in), not of one run at 200 Hz.
+    amp, f, fc = math.radians(100), 60.0, 92.0
+    motion = FunctionMotion(lambda t: np.column_stack(
+        [amp * np.sin(2 * np.pi * f * t), 0 * t, 0 * t]))
+    clock, reader, _ = _mpu(motion, SensorRealism(dlpf_delay=True), odr=200.0, lowpass=fc)
+    t, g = _record(clock, reader, 2.0)
+    keep = t > 1.0
+    gain, _ = _fit_sine(t[keep], g[keep, 0], f)
+
+    def bilinear_gain(rate):
+        k = math.tan(math.pi * fc / rate)
+        z = np.exp(-2j * np.pi * f / rate)
+        return abs(k / (1 + k) * (1 + z) / (1 + (k - 1) / (k + 1) * z))
+
+    expected = bilinear_gain(1000.0) * np.sinc(f / 1000.0)  # boxcar over one 1 ms sample
+    assert gain / amp == pytest.approx(expected, abs=0.01)
+    assert abs(bilinear_gain(200.0) - expected) > 0.05  # the test tells the two apart
+
+
 def test_g_sensitivity_adds_its_figure_per_g():
     g_sens = np.zeros((3, 3))
     g_sens[0, 2] = math.radians(0.1)  # 0.1 °/s/g, datasheet typical

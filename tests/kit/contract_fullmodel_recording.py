@@ -69,8 +69,9 @@ def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.nd
     return out
 
 
-def schedule(pose_deg: float) -> list[tuple]:
-    """``(kind, servo position or positions, direction or target angles, )`` steps."""
+def schedule(pose_deg: float, gravity: bool = False) -> list[tuple]:
+    """``(kind, servo position or positions, direction or target angles, )`` steps; with
+    ``gravity`` a last rest with the base a quarter turn from home (gravity along ±y)."""
     p = np.radians(pose_deg)
     steps: list[tuple] = []
     for s in range(3):  # home turns, positive first
@@ -81,15 +82,31 @@ def schedule(pose_deg: float) -> list[tuple]:
         steps.append(("move", target))
         steps += [("rotate", turn, 1), ("rotate", turn, -1)]
         steps.append(("move", (0.0, 0.0, 0.0)))
+    if gravity:
+        steps += [("move", (np.pi / 2, 0.0, 0.0)), ("move", (0.0, 0.0, 0.0))]
     return steps
+
+
+def specific_force(links: list, mount: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Gravity (1 g, up) in the sensor frame at each row of ``angles`` (N, 3): ``Rᵀ up`` with
+    ``R = Rot(a_0, θ_0) Rot(a_1, θ_1) Rot(a_2, θ_2) M`` and ``up`` servo 3's link axis (the jig
+    stands with it vertical in the home pose, the servo the manifest lists with axis ``z``)."""
+    R = np.broadcast_to(np.eye(3), (angles.shape[0], 3, 3))
+    for j in range(3):
+        R = R @ Rotation.from_rotvec(angles[:, j:j + 1] * links[j][None, :]).as_matrix()
+    R = R @ mount
+    return np.einsum("nki,k->ni", R, links[2])
 
 
 def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 2.5e-3,
                     odr: float = 200.0, enc_hz: float = 100.0, speed: float = 4.0,
                     turns: int = 2, accel: float = 10.0, rest: float = 0.8,
                     move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
-                    lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13)) -> dict:
-    """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``)."""
+                    lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
+                    g_sensitivity: np.ndarray | None = None) -> dict:
+    """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``). With
+    ``g_sensitivity`` (3×3, rad/s per g) the reading gains ``G f`` (``f`` from
+    :func:`specific_force`) and the schedule a gravity rest."""
     truth = draw_sensor(seed, cross)
     rng = np.random.default_rng([seed, 0x5A3])
     path = Path(path)
@@ -98,7 +115,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     t = 0.0
     pose = np.zeros(3)
     _, _, turn_time = _profile(np.zeros(1), speed, turns, accel)
-    for step in schedule(pose_deg):
+    for step in schedule(pose_deg, gravity=g_sensitivity is not None):
         segs.append(("rest", None, 0, 0.0, t, t + rest, []))
         t += rest
         if step[0] == "rotate":
@@ -136,6 +153,9 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     omega = sensor_rate(truth["links"], truth["mount"], ang, rate)
     C = np.diag(1 / truth["scale"]) @ truth["misalignment"]
     m = omega @ C.T - truth["bias"] + noise * rng.standard_normal(omega.shape)
+    if g_sensitivity is not None:
+        m = m + specific_force(truth["links"], truth["mount"], ang) @ np.asarray(
+            g_sensitivity).T
     if lsb:
         m = np.round(m / lsb) * lsb
     enc, _ = motion(te)

@@ -90,3 +90,23 @@ def test_noise_free_recording_with_exact_encoders_gets_within_the_sampling_error
     A_true = truth_in_frame(sensing(truth))
     assert np.max(np.abs(fit.matrix - A_true)) < 1e-5
     assert np.max(np.abs(fit.bias - truth["bias"])) < 1e-7
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_g_sensitivity_from_an_independent_recording_is_within_its_sigma(tmp_path, seed):
+    # The generator adds G f with f = Rᵀ up from scipy rotations (servo 3 vertical at home) and
+    # a rest with the base at 90°; the model's G takes f in the calibrated frame: −G Qᵀ,
+    # Q = A C the rotation from the generator's sensor frame to gyro-x-xy.
+    G = np.random.default_rng([seed, 0x65]).uniform(-1.0, 1.0, (3, 3)) * np.radians(0.1)
+    truth = write_recording(tmp_path / "rec", seed=seed, g_sensitivity=G)
+    est = estimate_recording(load_recording(tmp_path / "rec"))
+    fit = est.fit
+    assert fit.method == "full-matrix" and fit.consistency.ok, fit.message
+    assert fit.g_directions.shape == (3, 3), fit.message
+    C = sensing(truth)
+    A = truth_in_frame(C)
+    g_std = np.sqrt(np.diag(fit.g_sensitivity_cov)).reshape(3, 3)
+    assert np.all(np.abs(fit.g_sensitivity + G @ (A @ C).T) < 4 * g_std)
+    assert np.all(np.abs(fit.bias - truth["bias"]) < 4 * fit.bias_std)
+    doc = est.calibration.to_dict()["g_sensitivity"]
+    np.testing.assert_allclose(doc["matrix"], fit.g_sensitivity)

@@ -101,3 +101,20 @@ def test_a_one_pose_recording_falls_back_to_the_diagonal_model_and_says_so(rec):
     assert "cross-axis terms were NOT calibrated" in est.notes[0]
     assert "±2 %" in est.notes[0]
     assert est.calibration.matrix is None  # a v1 document
+
+
+def test_the_default_sensor_has_g_sensitivity_and_the_calibration_recovers_it(rec, full_run):
+    # --sim's default sensor has every realism effect, g-sensitivity within the MPU-9250's
+    # 0.1 °/s/g per term (PS §3.1); the planner adds a gravity rest, the fit finds G in all three
+    # directions of gravity, consistent, and G and the zero-g bias within 4σ of the truth
+    # (G for f in the calibrated frame: −G_true Qᵀ, Q = A C).
+    G_true = rec.truth["realism"]["g-sensitivity"]["matrix_rad_s_per_g"]
+    assert rec.manifest["protocol"]["gravity_poses"]
+    cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
+    assert cal.consistency.ok
+    g = cal.g_sensitivity
+    assert len(g["directions"]) == 3
+    C = _sensing(rec.truth)
+    expected = -np.asarray(G_true) @ (truth_in_frame(C) @ C).T
+    assert np.all(np.abs(np.asarray(g["matrix"]) - expected) < 4 * np.asarray(g["matrix_std"]))
+    assert np.all(np.abs(np.asarray(cal.bias) - rec.truth["bias"]) < 4 * np.asarray(cal.bias_std))
