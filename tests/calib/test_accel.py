@@ -1,0 +1,146 @@
+"""The accelerometer fit (calib.accel) against an independent generator (accel_truth)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrocal.calib.accel import (
+    STANDARD_GRAVITY,
+    AccelCalibration,
+    accel_design,
+    fit_accelerometer,
+    in_frame,
+    normal_gravity,
+    six_position,
+)
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+from tests.calib.accel_truth import (
+    fibonacci_directions,
+    random_sensing,
+    rest_means,
+    truth_matrix,
+)
+
+G = 9.80
+
+
+def _params(matrix: np.ndarray, bias: np.ndarray) -> np.ndarray:
+    return np.concatenate([matrix[np.tril_indices(3)], bias])
+
+
+def test_noise_free_recovery_to_1e9() -> None:
+    rng = np.random.default_rng(1)
+    c = random_sensing(rng)
+    b = rng.uniform(-0.3, 0.3, 3)
+    means, std = rest_means(rng, c, b, fibonacci_directions(14), G, 0.0, 1)
+    fit = fit_accelerometer(means, np.full(means.shape, 1e-3), G)
+    assert np.max(np.abs(fit.matrix - truth_matrix(c))) < 1e-9
+    assert np.max(np.abs(fit.bias - b)) < 1e-9
+    assert fit.converged and fit.consistency.chi2 < 1e-12
+
+
+def test_with_noise_within_sigma_and_consistent() -> None:
+    rng = np.random.default_rng(2)
+    c = random_sensing(rng)
+    b = rng.uniform(-0.3, 0.3, 3)
+    means, std = rest_means(rng, c, b, fibonacci_directions(20), G, 0.02, 400)
+    fit = fit_accelerometer(means, std, G)
+    z = (_params(fit.matrix, fit.bias) - _params(truth_matrix(c), b)) / fit.std
+    assert np.max(np.abs(z)) < 4.0
+    assert fit.consistency.dof == 11 and fit.consistency.ok
+
+
+def test_monte_carlo_coverage() -> None:
+    """Over 200 seeded runs, each parameter's error lies within 1σ about 68 % of the time and
+    the χ² test passes about 99 % of the time."""
+    rng = np.random.default_rng(3)
+    c = random_sensing(rng)
+    b = rng.uniform(-0.3, 0.3, 3)
+    truth = _params(truth_matrix(c), b)
+    dirs = fibonacci_directions(12)
+    inside, ok, runs = np.zeros(9), 0, 200
+    for _ in range(runs):
+        means, std = rest_means(rng, c, b, dirs, G, 0.02, 200)
+        fit = fit_accelerometer(means, std, G)
+        inside += np.abs(_params(fit.matrix, fit.bias) - truth) < fit.std
+        ok += fit.consistency.ok
+    cover = inside / runs
+    # binomial σ of a 68 % rate over 200 runs is 3.3 %
+    assert np.all(np.abs(cover - 0.683) < 0.11), cover
+    assert ok >= 0.95 * runs
+
+
+def test_wrong_gravity_goes_into_the_scales() -> None:
+    """Fitting against standard gravity data taken at 9.78 m/s² scales A by g_n/9.78."""
+    rng = np.random.default_rng(4)
+    c = random_sensing(rng)
+    means, _ = rest_means(rng, c, np.zeros(3), fibonacci_directions(12), 9.78, 0.0, 1)
+    fit = fit_accelerometer(means, np.full(means.shape, 1e-3))
+    assert fit.gravity == STANDARD_GRAVITY
+    np.testing.assert_allclose(fit.matrix, truth_matrix(c) * STANDARD_GRAVITY / 9.78, atol=1e-9)
+
+
+def test_normal_gravity_matches_wgs84_figures() -> None:
+    # NIMA TR8350.2 Table 3.4: normal gravity at the equator and at the poles
+    assert normal_gravity(0.0) == pytest.approx(9.7803253359, abs=1e-9)
+    assert normal_gravity(90.0) == pytest.approx(9.8321849378, abs=1e-9)
+    # free-air gradient near the surface ≈ −3.086e-6 s⁻² (TR8350.2 §4.3)
+    slope = (normal_gravity(45.0, 100.0) - normal_gravity(45.0, 0.0)) / 100.0
+    assert slope == pytest.approx(-3.086e-6, rel=2e-3)
+
+
+def test_six_position_exact_when_aligned() -> None:
+    rng = np.random.default_rng(5)
+    c = np.diag([1.02, 0.99, 1.01]) + 0.01 * (1 - np.eye(3)) * rng.uniform(-1, 1, (3, 3))
+    b = rng.uniform(-0.3, 0.3, 3)
+    dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]])
+    means, _ = rest_means(rng, c, b, dirs, G, 0.0, 1)
+    a, bias = six_position(means, G)
+    np.testing.assert_allclose(a, np.linalg.inv(c), atol=1e-12)
+    np.testing.assert_allclose(bias, b, atol=1e-12)
+    np.testing.assert_allclose(in_frame(a), truth_matrix(c), atol=1e-12)
+
+
+def test_design_scores() -> None:
+    good = accel_design(fibonacci_directions(12), 1e-3)
+    assert good.identifiable and good.condition < 100
+    # four orientations cannot fix nine parameters
+    bad = accel_design(fibonacci_directions(4), 1e-3)
+    assert not bad.identifiable
+    # a design's predicted σ matches the fit's stated σ
+    rng = np.random.default_rng(6)
+    means, std = rest_means(rng, np.eye(3), np.zeros(3), fibonacci_directions(12), G, 1e-2, 100)
+    fit = fit_accelerometer(means, std, G)
+    np.testing.assert_allclose(accel_design(fibonacci_directions(12), 1e-3, G).parameter_std,
+                               fit.std, rtol=0.05)
+
+
+def test_round_trip_and_bad_documents() -> None:
+    rng = np.random.default_rng(7)
+    means, std = rest_means(rng, random_sensing(rng), np.zeros(3), fibonacci_directions(12), G,
+                            0.01, 100)
+    fit = fit_accelerometer(means, std, G)
+    back = AccelCalibration.from_dict(fit.to_dict())
+    np.testing.assert_array_equal(back.matrix, fit.matrix)
+    np.testing.assert_array_equal(back.covariance, fit.covariance)
+    d = fit.to_dict()
+    d["matrix"] = np.triu(np.ones((3, 3))).tolist()
+    with pytest.raises(CalibrationFormatError, match="lower triangular"):
+        AccelCalibration.from_dict(d)
+    with pytest.raises(CalibrationFormatError, match="lacks the field 'bias'"):
+        AccelCalibration.from_dict({k: v for k, v in fit.to_dict().items() if k != "bias"})
+
+
+def test_bad_input_names_the_problem() -> None:
+    with pytest.raises(CalibInputError, match="at least 10 rest windows"):
+        fit_accelerometer(np.tile([0, 0, G], (5, 1)), np.full((5, 3), 1e-3))
+    with pytest.raises(CalibInputError, match="near gravity"):
+        fit_accelerometer(np.tile([0, 0, 1.0], (12, 1)), np.full((12, 3), 1e-3))
+    with pytest.raises(CalibInputError, match="cannot determine"):
+        fit_accelerometer(np.tile([0, 0, G], (12, 1)) + 1e-6 * np.arange(36).reshape(12, 3),
+                          np.full((12, 3), 1e-3))
+    with pytest.raises(CalibInputError, match="mean_std must have shape"):
+        fit_accelerometer(np.tile([0, 0, G], (12, 1)), np.ones(3))
+    with pytest.raises(CalibInputError, match="latitude_deg"):
+        normal_gravity(91.0)
