@@ -56,7 +56,7 @@ from scipy.special import chdtrc
 from gyrocal.calib.design import sphere_points
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.estimators import matrix_in_frame
-from gyrocal.calib.model import Consistency
+from gyrocal.calib.model import Consistency, _refuse_unknown
 from gyrocal.calib.validation import scalar
 
 __all__ = [
@@ -192,7 +192,7 @@ class AccelCalibration:
     def to_dict(self) -> dict[str, Any]:
         """The Calibration document's ``accelerometer`` object."""
         std = self.std
-        return {"model": "f = matrix @ (a + bias)", "frame": ACCEL_FRAME,
+        return {"model": _DOC_MODEL, "frame": ACCEL_FRAME,
                 "matrix": self.matrix.tolist(), "bias": self.bias.tolist(),
                 "matrix_std": _lower(std[:6]).tolist(), "bias_std": std[6:].tolist(),
                 "covariance": self.covariance.tolist(), "gravity_m_s2": self.gravity,
@@ -204,6 +204,10 @@ class AccelCalibration:
         """Inverse of :meth:`to_dict`; :class:`CalibrationFormatError` on a bad field."""
         if not isinstance(d, Mapping):
             raise CalibrationFormatError("'accelerometer' must be an object")
+        _refuse_unknown(d, _DOC_FIELDS, "'accelerometer'")
+        if d.get("frame") != ACCEL_FRAME or d.get("model") != _DOC_MODEL:
+            raise CalibrationFormatError(f"'accelerometer' must have model {_DOC_MODEL!r} and "
+                                         f"frame {ACCEL_FRAME!r}")
         try:
             m = np.asarray(d["matrix"], dtype=float)
             b = np.asarray(d["bias"], dtype=float)
@@ -230,6 +234,11 @@ class AccelCalibration:
         if not isinstance(conv, bool):
             raise CalibrationFormatError("'accelerometer.converged' must be true or false")
         return cls(m, b, c, g, Consistency.from_dict(d["consistency"]), rests, its, conv)
+
+
+_DOC_MODEL = "f = matrix @ (a + bias)"
+_DOC_FIELDS = ("model", "frame", "matrix", "bias", "matrix_std", "bias_std", "covariance",
+               "gravity_m_s2", "consistency", "rests", "iterations", "converged")
 
 
 def _lower(v: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ import numpy as np
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
 if TYPE_CHECKING:
+    from gyrocal.calib.accel import AccelCalibration
     from gyrocal.calib.thermal import ThermalModel
 
 __all__ = ["FORMAT", "LIMITS", "VERSION", "VERSION_FULL", "Consistency", "GyroCalibration"]
@@ -60,6 +61,7 @@ _V1_FIELDS = (
 )
 _V2_FIELDS = ("matrix", "matrix_std", "frame", "kinematics")
 _THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
+_ACCEL_FIELDS = ("accelerometer",)  # either version (issue 15; calib.accel)
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
 _ACTION = "correct or remove it (see hardware_docs/formats.md)"
 
@@ -247,6 +249,9 @@ class GyroCalibration:
     temperature_model : ThermalModel or None
         Bias (and scale or matrix) against die temperature (:mod:`gyrocal.calib.thermal`),
         written as the document's ``temperature_model`` in either version.
+    accelerometer : AccelCalibration or None
+        The accelerometer's calibration from the same run's rests (:mod:`gyrocal.calib.accel`),
+        written as the document's ``accelerometer`` in either version.
     """
 
     scale: tuple[float, float, float]
@@ -267,6 +272,7 @@ class GyroCalibration:
     frame: str | None = None
     kinematics: dict[str, Any] | None = field(default=None, hash=False)
     temperature_model: ThermalModel | None = field(default=None, hash=False)
+    accelerometer: AccelCalibration | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
@@ -398,6 +404,8 @@ class GyroCalibration:
             doc["kinematics"] = copy.deepcopy(self.kinematics)
         if self.temperature_model is not None:
             doc["temperature_model"] = self.temperature_model.to_dict()
+        if self.accelerometer is not None:
+            doc["accelerometer"] = self.accelerometer.to_dict()
         return doc
 
     def to_json(self) -> str:
@@ -419,7 +427,8 @@ class GyroCalibration:
         if not isinstance(doc, Mapping):
             raise CalibrationFormatError("a calibration document must be a JSON object")
         full = _check_header(doc)
-        _refuse_unknown(doc, _V1_FIELDS + _THERMAL_FIELDS + (_V2_FIELDS if full else ()),
+        known = _V1_FIELDS + _THERMAL_FIELDS + _ACCEL_FIELDS + (_V2_FIELDS if full else ())
+        _refuse_unknown(doc, known,
                         f"a version {VERSION_FULL if full else VERSION} calibration")
         kw = _read_model(doc, full)
         try:
@@ -563,6 +572,7 @@ def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:
         "source": doc.get("source"),
         "axes": None if axes is None else dict(axes),
         "temperature_model": _read_thermal(doc.get("temperature_model")),
+        "accelerometer": _read_accel(doc.get("accelerometer")),
     }
 
 
@@ -574,3 +584,13 @@ def _read_thermal(doc: Any) -> ThermalModel | None:
     from gyrocal.calib.thermal import ThermalModel
 
     return ThermalModel.from_dict(doc)
+
+
+def _read_accel(doc: Any) -> AccelCalibration | None:
+    """The ``accelerometer`` object (:meth:`gyrocal.calib.accel.AccelCalibration.from_dict`),
+    or None."""
+    if doc is None:
+        return None
+    from gyrocal.calib.accel import AccelCalibration
+
+    return AccelCalibration.from_dict(doc)

@@ -144,3 +144,29 @@ def test_bad_input_names_the_problem() -> None:
         fit_accelerometer(np.tile([0, 0, G], (12, 1)), np.ones(3))
     with pytest.raises(CalibInputError, match="latitude_deg"):
         normal_gravity(91.0)
+
+
+def test_calibration_document_carries_the_accelerometer() -> None:
+    """The Calibration v1 document with an ``accelerometer`` object as hardware_docs/formats.md
+    describes it, written out here field by field, reads back; an unknown field is refused."""
+    from gyrocal.calib.model import GyroCalibration
+
+    cov = np.diag([1e-8] * 6 + [1e-6] * 3)
+    accel = {"model": "f = matrix @ (a + bias)", "frame": "accel-x-xy",
+             "matrix": [[1.01, 0, 0], [0.002, 0.99, 0], [-0.003, 0.001, 1.02]],
+             "bias": [0.1, -0.2, 0.3], "matrix_std": [[1e-4, 0, 0], [1e-4, 1e-4, 0],
+                                                      [1e-4, 1e-4, 1e-4]],
+             "bias_std": [1e-3] * 3, "covariance": cov.tolist(), "gravity_m_s2": 9.80665,
+             "consistency": {"chi2": 3.0, "dof": 3, "p_value": 0.39, "ok": True},
+             "rests": 12, "iterations": 7, "converged": True}
+    doc = {"format": "gyrocal-calibration", "version": 1, "model": "g = scale * (m + bias)",
+           "scale": [1.0, 1.0, 1.0], "bias": [0.0, 0.0, 0.0], "accelerometer": accel}
+    cal = GyroCalibration.from_dict(doc)
+    assert cal.accelerometer is not None
+    np.testing.assert_array_equal(cal.accelerometer.matrix, accel["matrix"])
+    np.testing.assert_allclose(cal.accelerometer.apply(np.array([[0, 0, 9.5]])),
+                               [[0.1 * 0, 0, 0]] + np.array(accel["matrix"]) @ [0.1, -0.2, 9.8],
+                               atol=1e-12)
+    assert cal.to_dict()["accelerometer"]["matrix"] == accel["matrix"]
+    with pytest.raises(CalibrationFormatError, match="'accelerometer'"):
+        GyroCalibration.from_dict({**doc, "accelerometer": {**accel, "scales": [1, 1, 1]}})
