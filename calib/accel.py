@@ -63,12 +63,16 @@ __all__ = [
     "ACCEL_FRAME",
     "PARAMETER_NAMES",
     "STANDARD_GRAVITY",
+    "TOUR_DIRECTIONS",
     "AccelCalibration",
     "AccelDesign",
     "accel_design",
+    "GravityTour",
     "fit_accelerometer",
+    "gravity_tour",
     "normal_gravity",
     "six_position",
+    "tour_gravity",
     "in_frame",
 ]
 
@@ -453,3 +457,83 @@ def accel_design(directions: Any, window_std: float, gravity: float = STANDARD_G
     jq = _jacobian(p0, q, g, np.ones(q.shape[0]))
     worst = float(np.sqrt(np.max(np.einsum("ni,ij,nj->n", jq, cov, jq))))
     return AccelDesign(d, float(sv[0] / sv[-1]), np.sqrt(np.diag(cov)), worst, True)
+
+
+#: Gravity directions a rest tour visits: the six axes (the six-position design) and the eight
+#: cube corners, a 14-point design that spreads the quadratic model's regressors over the sphere.
+TOUR_DIRECTIONS = np.vstack([
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]],
+    np.array([[x, y, z] for x in (1, -1) for y in (1, -1) for z in (1, -1)]) / math.sqrt(3),
+]).astype(float)
+
+
+@dataclass(frozen=True)
+class GravityTour:
+    """Rests added to a protocol so the accelerometer is determined (:func:`gravity_tour`).
+
+    Attributes
+    ----------
+    poses_rad : (K, 2) ndarray
+        Base and middle servo angles from home of each added rest, in visiting order.
+    directions : (K, 3) ndarray
+        Gravity's direction in the sensor frame at each (nominal gimbal).
+    added_time_s : float
+        Jig time the tour adds: one-servo moves (profile plus settling), the rests, and the
+        moves back home.
+    """
+
+    poses_rad: np.ndarray
+    directions: np.ndarray
+    added_time_s: float
+
+
+def tour_gravity(base_rad: np.ndarray, middle_rad: np.ndarray) -> np.ndarray:
+    """Gravity's direction in the sensor frame (N, 3) for base and middle servo angles on the
+    nominal gimbal (base about sensor x, middle about y, home gravity along +z):
+    ``(R_x(φ1) R_y(φ2))ᵀ e_z = (−sin φ2 cos φ1, sin φ1, cos φ2 cos φ1)``."""
+    p1, p2 = np.asarray(base_rad, dtype=float), np.asarray(middle_rad, dtype=float)
+    return np.column_stack([-np.sin(p2) * np.cos(p1), np.sin(p1), np.cos(p2) * np.cos(p1)])
+
+
+def gravity_tour(speed: float, accel: float, rest_s: float, settle_s: float = 0.1,
+                 directions: np.ndarray | None = None) -> GravityTour:
+    """The rests to add, after a protocol's turns, so that gravity visits ``directions``
+    (default :data:`TOUR_DIRECTIONS` less the home pose's +z), and the jig time they add.
+
+    The nominal gimbal turns the base about sensor x and the middle about sensor y
+    (:func:`tour_gravity`); a direction ``u`` is reached with ``φ1 = asin(u_y)``,
+    ``φ2 = atan2(−u_x, u_z)``. The order is greedy by move time from home; each move turns one
+    servo (``profile_duration`` at ``speed`` and ``accel``, plus ``settle_s``), then rests
+    ``rest_s``; the tour ends by moving both servos home.
+    """
+    from gyrocal.calib.simulate import profile_duration
+
+    sp = scalar(speed, "speed", positive=True)
+    ac = scalar(accel, "accel", positive=True)
+    rs = scalar(rest_s, "rest_s", positive=True)
+    st = scalar(settle_s, "settle_s", nonneg=True)
+    if directions is None:
+        d = TOUR_DIRECTIONS[~np.all(np.isclose(TOUR_DIRECTIONS, [0.0, 0.0, 1.0]), axis=1)]
+    else:
+        d = np.asarray(directions, dtype=float)
+        if d.ndim != 2 or d.shape[1] != 3 or not np.all(np.isfinite(d)) or np.any(
+                np.linalg.norm(d, axis=1) == 0):
+            raise CalibInputError("directions must be non-zero finite vectors, shape (K, 3)")
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    phi1 = np.arcsin(np.clip(u[:, 1], -1, 1))
+    c1 = np.cos(phi1)
+    phi2 = np.where(c1 > 1e-9, np.arctan2(-u[:, 0], u[:, 2]), 0.0)
+
+    def move(a: float, b: float) -> float:
+        return 0.0 if abs(a - b) < 1e-12 else profile_duration(abs(a - b), sp, ac) + st
+
+    here, left, order, total = np.zeros(2), list(range(len(u))), [], 0.0
+    while left:
+        costs = [move(here[0], phi1[i]) + move(here[1], phi2[i]) for i in left]
+        k = left.pop(int(np.argmin(costs)))
+        total += min(costs) + rs
+        here = np.array([phi1[k], phi2[k]])
+        order.append(k)
+    total += move(here[0], 0.0) + move(here[1], 0.0)
+    poses = np.column_stack([phi1, phi2])[order]
+    return GravityTour(poses, tour_gravity(poses[:, 0], poses[:, 1]), float(total))

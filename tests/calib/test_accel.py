@@ -170,3 +170,34 @@ def test_calibration_document_carries_the_accelerometer() -> None:
     assert cal.to_dict()["accelerometer"]["matrix"] == accel["matrix"]
     with pytest.raises(CalibrationFormatError, match="'accelerometer'"):
         GyroCalibration.from_dict({**doc, "accelerometer": {**accel, "scales": [1, 1, 1]}})
+
+
+def _rot(axis: int, angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [k for k in range(3) if k != axis]
+    r = np.eye(3)
+    r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+    return r
+
+
+def test_gravity_tour_visits_its_directions_and_costs_its_moves() -> None:
+    from gyrocal.calib.accel import TOUR_DIRECTIONS, gravity_tour
+    from gyrocal.calib.simulate import profile_duration
+
+    speed, acc, rest = np.radians(247.0), 10.0, 0.6
+    tour = gravity_tour(speed, acc, rest)
+    # every tour direction but home's +z, each once, reached by base-x then middle-y rotations
+    assert len(tour.poses_rad) == len(TOUR_DIRECTIONS) - 1
+    for (p1, p2), u in zip(tour.poses_rad, tour.directions, strict=True):
+        g = (_rot(0, p1) @ _rot(1, p2)).T @ [0, 0, 1.0]
+        np.testing.assert_allclose(u, g, atol=1e-12)
+        assert np.min(np.linalg.norm(TOUR_DIRECTIONS - g, axis=1)) < 1e-9
+    # the added time is at least the rests plus, per rest, one move's profile
+    floor = len(tour.poses_rad) * rest
+    assert floor < tour.added_time_s < floor + 2 * len(tour.poses_rad) * (
+        profile_duration(np.pi, speed, acc) + 0.1) + 2 * profile_duration(np.pi, speed, acc)
+    # with the tour, the default protocol's two directions become a well-conditioned design
+    home = np.array([[0, 0, 1.0]] * 10 + [[-np.sqrt(0.5), 0, np.sqrt(0.5)]] * 3)
+    assert not accel_design(home, 1e-3).identifiable
+    d = accel_design(np.vstack([home, tour.directions]), 1e-3)
+    assert d.identifiable and d.condition < 10
