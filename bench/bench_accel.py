@@ -39,7 +39,7 @@ from gyrocal.calib.accel import (
     six_position,
 )
 from gyrocal.calib.design import sphere_points
-from gyrocal.drivers.emulated.accel import draw_accel_truth
+from gyrocal.drivers.emulated.accel import AccelTruth, draw_accel_truth
 from tests.calib import accel_truth as indep
 
 ODR_HZ, WINDOW_S, DENSITY_G = 200.0, 0.4, 300e-6
@@ -93,8 +93,8 @@ def _errors(sensing_g: np.ndarray, bias_g: np.ndarray, dirs: np.ndarray, true_di
             rng: np.random.Generator, generator: str) -> tuple[float, float]:
     """RMS calibrated-force error (mg) of ours and of the six-position method."""
     g = STANDARD_GRAVITY
-    if generator == "emulator":
-        means = (true_dirs @ sensing_g.T - bias_g) * g
+    if generator == "emulator":  # the emulated chip's reading (noise: of the window mean)
+        means = AccelTruth(sensing_g, bias_g).reading(true_dirs) * g
         means += rng.standard_normal(means.shape) * WINDOW_STD
         std = np.full(means.shape, WINDOW_STD)
     else:
