@@ -31,6 +31,7 @@ import numpy as np
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
 if TYPE_CHECKING:
+    from gyrocal.calib.accel import AccelCalibration
     from gyrocal.calib.thermal import ThermalModel
 
 __all__ = ["FORMAT", "LIMITS", "MODEL_G", "VERSION", "VERSION_FULL", "Consistency",
@@ -73,6 +74,7 @@ class GSensitivityWarning(UserWarning):
     zero-g bias, so the rate is off by ``A G f`` (up to ~1.7e-3 rad/s at 1 g for an MPU-9250)."""
 
 _THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
+_ACCEL_FIELDS = ("accelerometer",)  # either version (issue 15; calib.accel)
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
 _ACTION = "correct or remove it (see hardware_docs/formats.md)"
 
@@ -265,6 +267,9 @@ class GyroCalibration:
         "directions": the k unit vectors of specific force G was determined along}`` of
         ``g = A (m + bias + G f)`` (:func:`gyrocal.calib.estimators.fit_full_matrix`); ``bias``
         is then the zero-g bias.
+    accelerometer : AccelCalibration or None
+        The accelerometer's calibration from the same run's rests (:mod:`gyrocal.calib.accel`),
+        written as the document's ``accelerometer`` in either version.
     """
 
     scale: tuple[float, float, float]
@@ -286,6 +291,7 @@ class GyroCalibration:
     kinematics: dict[str, Any] | None = field(default=None, hash=False)
     temperature_model: ThermalModel | None = field(default=None, hash=False)
     g_sensitivity: dict[str, Any] | None = field(default=None, hash=False)
+    accelerometer: AccelCalibration | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
@@ -458,6 +464,8 @@ class GyroCalibration:
                                         "directions": [list(v) for v in g["directions"]]}
         if self.temperature_model is not None:
             doc["temperature_model"] = self.temperature_model.to_dict()
+        if self.accelerometer is not None:
+            doc["accelerometer"] = self.accelerometer.to_dict()
         return doc
 
     def to_json(self) -> str:
@@ -479,7 +487,8 @@ class GyroCalibration:
         if not isinstance(doc, Mapping):
             raise CalibrationFormatError("a calibration document must be a JSON object")
         full = _check_header(doc)
-        _refuse_unknown(doc, _V1_FIELDS + _THERMAL_FIELDS + (_V2_FIELDS if full else ()),
+        known = _V1_FIELDS + _THERMAL_FIELDS + _ACCEL_FIELDS + (_V2_FIELDS if full else ())
+        _refuse_unknown(doc, known,
                         f"a version {VERSION_FULL if full else VERSION} calibration")
         kw = _read_model(doc, full)
         try:
@@ -658,6 +667,7 @@ def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:
         "source": doc.get("source"),
         "axes": None if axes is None else dict(axes),
         "temperature_model": _read_thermal(doc.get("temperature_model")),
+        "accelerometer": _read_accel(doc.get("accelerometer")),
     }
 
 
@@ -669,3 +679,13 @@ def _read_thermal(doc: Any) -> ThermalModel | None:
     from gyrocal.calib.thermal import ThermalModel
 
     return ThermalModel.from_dict(doc)
+
+
+def _read_accel(doc: Any) -> AccelCalibration | None:
+    """The ``accelerometer`` object (:meth:`gyrocal.calib.accel.AccelCalibration.from_dict`),
+    or None."""
+    if doc is None:
+        return None
+    from gyrocal.calib.accel import AccelCalibration
+
+    return AccelCalibration.from_dict(doc)

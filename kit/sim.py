@@ -16,6 +16,7 @@ import numpy as np
 
 from gyrocal.calib.simulate import NORMAL, draw_sensors
 from gyrocal.drivers.clock import Clock, SystemClock, VirtualClock
+from gyrocal.drivers.emulated.accel import ACCEL_DATASHEET, draw_accel_truth
 from gyrocal.drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
 from gyrocal.drivers.emulated.imu_chips import SensorRealism, SensorTruth, make_emulated_imu
 from gyrocal.drivers.imu import READERS
@@ -81,6 +82,7 @@ class SimJig:
                 "home_bias_shift_rad_s": (np.asarray(r.g_sensitivity_rad_s_per_g)
                                           @ self.jig.home_gravity()).tolist()},
             "gravity": {"lever_arm_m": self.jig.lever_arm_m.tolist()},
+            "accel-errors": self.truth.manifest().get("accelerometer", "off"),
             "wobble": {"amplitude_rad": self.jig.wobble_rad,
                        "axes": self.jig.wobble_axes.tolist()},
             "clock": {"clock_ppm": self.truth.clock_ppm},
@@ -160,6 +162,8 @@ REALISM_EFFECTS: dict[str, str] = {
                      "the datasheet's typical figure (MPU-9250: 0.1 °/s/g)",
     "gravity": "the accelerometer sees gravity in the true orientation and the lever-arm "
                "accelerations of a sensor SIM_LEVER_ARM_M off the axes ⚠ (jig geometry)",
+    "accel-errors": "the accelerometer's scale, cross-axis, zero-g bias and noise, each term "
+                    "drawn by seed within the datasheet's figure (ACCEL_DATASHEET)",
     "wobble": "each turning link nods SIM_WOBBLE_DEG once per revolution ⚠ (assumed)",
     "clock": "chip clock off by up to SIM_CLOCK_PPM, drawn by seed ⚠ (assumed)",
     "encoder-latency": "Present Position sampled at the servo's reply (after the instruction, "
@@ -188,6 +192,7 @@ SIM_CLOCK_PPM = 300.0
 def realism_sizes(family: str = "mpu9250") -> dict[str, str]:
     """Each realism effect's size in ``--sim``, in words with its figures (⚠: assumed)."""
     fig = SIM_REALISM_FIGURES.get(family, SIM_REALISM_FIGURES["mpu9250"])
+    acc = ACCEL_DATASHEET.get(family, ACCEL_DATASHEET["mpu9250"])
     arm = math.hypot(*SIM_LEVER_ARM_M) * 1000
     return {
         "coloured-noise": f"B {fig['bias_instability_deg_h']:g} °/h, "
@@ -195,6 +200,10 @@ def realism_sizes(family: str = "mpu9250") -> dict[str, str]:
         "dlpf": "92 Hz, 3.9 ms at 200 Hz (CONFIG table)" if family == "mpu9250" else "none",
         "g-sensitivity": f"±{fig['g_sensitivity_deg_s_per_g']:g} °/s/g per term (datasheet)",
         "gravity": f"1 g in the true pose, lever arm {arm:.0f} mm ⚠",
+        "accel-errors": "scale ±{:g} %, cross-axis ±{:g} %, zero-g ±{:g} mg, {:g} µg/√Hz ({})"
+                        .format(100 * acc["scale_tolerance"], 100 * acc["cross_axis"],
+                                1000 * max(acc["zero_g_g"]), 1e6 * acc["noise_g_sqrt_hz"],
+                                acc["source"]),
         "wobble": f"{SIM_WOBBLE_DEG:g}° once per revolution ⚠",
         "clock": f"±{SIM_CLOCK_PPM:g} ppm ⚠",
         "encoder-latency": f"instruction + 500 µs RDT + packets at {SIM_BAUD / 1e6:g} Mbps",
@@ -322,6 +331,8 @@ def _add_sensor(plate: SimJig, imu_cfg: dict[str, Any], seed: int, run_seed: int
     truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b),
                                 "misalignment": sim_misalignment(seed, cross_axis),
                                 "realism": sensor_realism, "clock_ppm": ppm}
+    if "accel-errors" in plate.realism:
+        truth_kw["accelerometer"] = draw_accel_truth(family.name, seed)
     if noise_density is not None:
         truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density
     if temperature is not None or self_heating is not None:

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.accel import AccelTruth
 from gyrocal.drivers.emulated.magnetometers import (
     AuxPort,
     EmulatedAK8963,
@@ -190,6 +191,9 @@ class SensorTruth:
         The chip oscillator's error: it samples at ``odr · (1 + clock_ppm·1e-6)``.
     realism : SensorRealism
         Coloured noise, DLPF delay, g-sensitivity, specific force (all off by default).
+    accelerometer : AccelTruth, optional
+        The accelerometer's errors (:mod:`gyrocal.drivers.emulated.accel`); an ideal
+        accelerometer when None.
     """
 
     scale: Any = (1.0, 1.0, 1.0)
@@ -204,6 +208,7 @@ class SensorTruth:
     realism: SensorRealism = SensorRealism()
     bias_temp_quad_rad_s_per_c2: Any = (0.0, 0.0, 0.0)
     scale_temp_coeff_per_c: Any = (0.0, 0.0, 0.0)
+    accelerometer: AccelTruth | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -280,6 +285,8 @@ class SensorTruth:
         temperature = self.temperature_manifest()
         if temperature is not None:
             out["temperature"] = temperature
+        if self.accelerometer is not None:
+            out["accelerometer"] = self.accelerometer.manifest()
         return out
 
     def temperature_manifest(self) -> dict[str, Any] | None:
@@ -299,10 +306,14 @@ class SensorTruth:
                 "die": die() if die is not None else (
                     None if callable(self.temperature_c) else float(self.temperature_c))}
 
-    def accel_reading(self, force_g: np.ndarray) -> np.ndarray:
-        """The accelerometer's reading (N, 3) in g for the true specific force ``force_g``: the
-        hook for accelerometer errors (scale, cross-axis, bias), none yet."""
-        return np.asarray(force_g, dtype=float)
+    def accel_reading(self, force_g: np.ndarray, rng: np.random.Generator | None = None,
+                      odr_hz: float | None = None) -> np.ndarray:
+        """The accelerometer's reading (N, 3) in g for the true specific force ``force_g``:
+        through :attr:`accelerometer`'s scale, cross-axis, bias and (with ``rng`` and
+        ``odr_hz``) white noise, or the force itself for an ideal accelerometer."""
+        if self.accelerometer is None:
+            return np.asarray(force_g, dtype=float)
+        return self.accelerometer.reading(force_g, rng, odr_hz)
 
 
 @dataclass
@@ -388,6 +399,7 @@ class _EmulatedImu(ABC):
         self.faults = faults if faults is not None else ChipFaults()
         self._noise_rng = np.random.default_rng([seed, 0])
         self._fault_rng = np.random.default_rng([seed, 1])
+        self._accel_rng = np.random.default_rng([seed, 3])  # its own: the gyro's draws stay
         r = self.truth.realism
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
                                        np.random.default_rng([seed, 2]))
@@ -620,7 +632,8 @@ class _EmulatedImu(ABC):
         f = self.faults
         if f.stuck_axis is not None:
             gyro[t >= f.stuck_from_s, f.stuck_axis] = f.stuck_counts
-        accel = np.clip(np.rint(self.truth.accel_reading(force) * self._accel_counts_1g()),
+        accel = np.clip(np.rint(self.truth.accel_reading(force, self._accel_rng, odr)
+                                * self._accel_counts_1g()),
                         -32768, 32767).astype(np.int64)
         temp = self._temperature_counts(temperature)
         self._ingest(gyro, accel, temp, head, skipped)

@@ -1,0 +1,539 @@
+r"""Accelerometer calibration against gravity from the rests of a gyro run (issue 15).
+
+Model (imu_tk's, Tedaldi et al. 2014, the multi-position form of the paper's reference
+[ye2017efficient]): the calibrated specific force is
+
+.. math:: f = T K (a + b),
+
+with ``a`` the reading (m/s², datasheet sensitivity applied and nothing else), ``b`` the bias
+(3), ``K = diag(s)`` the scales and ``T`` a unit triangular non-orthogonality matrix. imu_tk
+makes ``T`` upper triangular (its z axis fixed); gyrocal uses the gyro's frame convention
+(:data:`gyrocal.calib.estimators.FULL_FRAME`: x along the sensor's x sensing axis, y in the plane
+of its x and y axes), in which ``T`` and hence ``A = T K`` are lower triangular:
+
+.. math:: T = \begin{pmatrix} 1 & 0 & 0 \\ \alpha_{yx} & 1 & 0 \\
+          \alpha_{zx} & \alpha_{zy} & 1 \end{pmatrix}.
+
+The six entries of ``A`` and ``b`` are the nine parameters fitted here (``s = diag(A)``,
+``α_yx = A10/s_x``, ``α_zx = A20/s_x``, ``α_zy = A21/s_y``). Any other calibration matrix ``M``
+(``f = M (a + b)`` in another frame) is brought to this convention by
+:func:`gyrocal.calib.estimators.matrix_in_frame` of ``M⁻¹``: the rotation between the frames is
+one that no gravity-only fit can see.
+
+When the sensor is still, ``|f| = g``, the local gravity magnitude; every rest window gives one
+equation
+
+.. math:: r_i = \lVert A (\bar a_i + b) \rVert - g,
+
+and the fit minimises ``Σ (r_i/σ_i)²`` (Levenberg–Marquardt, ``scipy.optimize.least_squares``),
+``σ_i² = u_iᵀ A Σ_i Aᵀ u_i`` the variance of ``r_i`` from the window mean's covariance ``Σ_i``
+(``u_i`` the unit calibrated force). The parameters' covariance is ``(JᵀJ)⁻¹`` of the whitened
+Jacobian at the optimum, and ``χ² = Σ (r_i/σ_i)²`` with ``N − 9`` degrees of freedom is the
+consistency test. Nine parameters need at least nine rests whose gravity directions spread over
+the sphere (:func:`accel_design` scores a set of directions).
+
+The baseline is the classic six-position method (:func:`six_position`): readings with gravity
+along ``±x, ±y, ±z`` of a reference frame, assumed exact, solved for the full ``a = M f + o``.
+
+Local gravity (:func:`normal_gravity`): WGS-84 normal gravity on the ellipsoid by Somigliana's
+closed formula, NIMA TR8350.2 (3rd ed.) Eq. (4-1), with the second-order free-air correction for
+height above the ellipsoid, Eq. (4-3). Without a location, :data:`STANDARD_GRAVITY` (9.80665 m/s²,
+the CGPM's g_n, the "g" of the accelerometer datasheets) is the documented default; it differs
+from the local value by up to 0.3 %, which the fit then puts into the scales.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+from scipy.special import chdtrc
+
+from gyrocal.calib.design import sphere_points
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+from gyrocal.calib.estimators import matrix_in_frame
+from gyrocal.calib.model import Consistency, _refuse_unknown
+from gyrocal.calib.validation import scalar
+
+__all__ = [
+    "ACCEL_FRAME",
+    "PARAMETER_NAMES",
+    "STANDARD_GRAVITY",
+    "TOUR_DIRECTIONS",
+    "AccelCalibration",
+    "AccelDesign",
+    "accel_design",
+    "GravityTour",
+    "fit_accelerometer",
+    "gravity_tour",
+    "normal_gravity",
+    "six_position",
+    "tour_gravity",
+    "in_frame",
+]
+
+#: Standard gravity g_n, m/s² (3rd CGPM, 1901): the default local gravity magnitude.
+STANDARD_GRAVITY = 9.80665
+
+# WGS-84 (NIMA TR8350.2, Table 3.1 and 3.3): semi-major axis a (m), flattening f, normal gravity
+# at the equator γ_e (m/s²), Somigliana's constant k, first eccentricity squared e², and
+# m = ω² a² b / GM.
+_WGS84_A = 6378137.0
+_WGS84_F = 1.0 / 298.257223563
+_WGS84_GAMMA_E = 9.7803253359
+_WGS84_K = 0.00193185265241
+_WGS84_E2 = 0.00669437999013
+_WGS84_M = 0.00344978650684
+
+#: Parameters in fit order: the lower triangle of A row by row, then the bias.
+PARAMETER_NAMES = ("A00", "A10", "A11", "A20", "A21", "A22", "bx", "by", "bz")
+_IU = np.tril_indices(3)
+
+#: Identifier of the accelerometer's frame convention (the gyro's, for the accelerometer's axes).
+ACCEL_FRAME = "accel-x-xy"
+
+#: Significance level of the χ² consistency test.
+CONSISTENCY_LEVEL = 0.01
+
+
+def normal_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
+    """WGS-84 normal gravity (m/s²) at geodetic latitude and ellipsoidal height.
+
+    Somigliana's formula, NIMA TR8350.2 Eq. (4-1),
+    ``γ = γ_e (1 + k sin²φ) / sqrt(1 − e² sin²φ)``, and the free-air correction Eq. (4-3),
+    ``γ_h = γ [1 − 2/a (1 + f + m − 2 f sin²φ) h + 3 h²/a²]``.
+
+    Parameters
+    ----------
+    latitude_deg : float
+        Geodetic latitude in degrees, within [-90, 90].
+    height_m : float
+        Height above the ellipsoid in metres (a few km at most: the series is second order).
+
+    Returns
+    -------
+    float
+        The normal gravity magnitude in m/s².
+    """
+    lat = scalar(latitude_deg, "latitude_deg")
+    h = scalar(height_m, "height_m")
+    if not -90.0 <= lat <= 90.0:
+        raise CalibInputError(f"latitude_deg must be within [-90, 90], got {latitude_deg!r}")
+    if not -1000.0 <= h <= 20000.0:
+        raise CalibInputError(f"height_m must be within [-1000, 20000] m, got {height_m!r}")
+    s2 = math.sin(math.radians(lat)) ** 2
+    g0 = _WGS84_GAMMA_E * (1 + _WGS84_K * s2) / math.sqrt(1 - _WGS84_E2 * s2)
+    a = _WGS84_A
+    return g0 * (1 - 2 / a * (1 + _WGS84_F + _WGS84_M - 2 * _WGS84_F * s2) * h + 3 * h * h / a**2)
+
+
+def in_frame(matrix: np.ndarray) -> np.ndarray:
+    """The matrix of ``f = M (a + b)`` in :data:`ACCEL_FRAME` (lower triangular, positive
+    diagonal): :func:`~gyrocal.calib.estimators.matrix_in_frame` of ``M⁻¹``."""
+    m = np.asarray(matrix, dtype=float)
+    if m.shape != (3, 3) or not np.all(np.isfinite(m)) or abs(np.linalg.det(m)) < 1e-12:
+        raise CalibInputError(f"matrix must be a finite invertible 3x3 array, got {m.tolist()}")
+    return matrix_in_frame(np.linalg.inv(m))
+
+
+@dataclass(frozen=True)
+class AccelCalibration:
+    """An accelerometer calibration ``f = A (a + b)``, ``A = T K`` lower triangular.
+
+    Attributes
+    ----------
+    matrix : (3, 3) ndarray
+        ``A`` (dimensionless).
+    bias : (3,) ndarray
+        ``b`` in m/s².
+    covariance : (9, 9) ndarray
+        Of :data:`PARAMETER_NAMES` (lower triangle of ``A`` row by row, then ``b``).
+    gravity : float
+        The local gravity magnitude the fit used, m/s².
+    consistency : Consistency
+        χ² of the whitened residuals against the windows' noise.
+    rests : int
+        Rest windows used.
+    iterations : int
+        Function evaluations of the solver.
+    converged : bool
+        Whether the solver met its tolerance.
+    """
+
+    matrix: np.ndarray
+    bias: np.ndarray
+    covariance: np.ndarray
+    gravity: float
+    consistency: Consistency
+    rests: int
+    iterations: int
+    converged: bool
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations (9,) of :data:`PARAMETER_NAMES`."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    @property
+    def scale(self) -> np.ndarray:
+        """``s = diag(K) = diag(A)``."""
+        return np.diag(self.matrix).copy()
+
+    @property
+    def nonorthogonality(self) -> np.ndarray:
+        """``(α_yx, α_zx, α_zy)`` of ``T`` (rad, small angles)."""
+        a, s = self.matrix, np.diag(self.matrix)
+        return np.array([a[1, 0] / s[0], a[2, 0] / s[0], a[2, 1] / s[1]])
+
+    def apply(self, reading: np.ndarray) -> np.ndarray:
+        """Calibrated specific force (N, 3) for readings (N, 3), both m/s²."""
+        return (np.asarray(reading, dtype=float) + self.bias) @ self.matrix.T
+
+    def to_dict(self) -> dict[str, Any]:
+        """The Calibration document's ``accelerometer`` object."""
+        std = self.std
+        return {"model": _DOC_MODEL, "frame": ACCEL_FRAME,
+                "matrix": self.matrix.tolist(), "bias": self.bias.tolist(),
+                "matrix_std": _lower(std[:6]).tolist(), "bias_std": std[6:].tolist(),
+                "covariance": self.covariance.tolist(), "gravity_m_s2": self.gravity,
+                "consistency": self.consistency.to_dict(), "rests": self.rests,
+                "iterations": self.iterations, "converged": self.converged}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> AccelCalibration:
+        """Inverse of :meth:`to_dict`; :class:`CalibrationFormatError` on a bad field."""
+        if not isinstance(d, Mapping):
+            raise CalibrationFormatError("'accelerometer' must be an object")
+        _refuse_unknown(d, _DOC_FIELDS, "'accelerometer'")
+        if d.get("frame") != ACCEL_FRAME or d.get("model") != _DOC_MODEL:
+            raise CalibrationFormatError(f"'accelerometer' must have model {_DOC_MODEL!r} and "
+                                         f"frame {ACCEL_FRAME!r}")
+        try:
+            m = np.asarray(d["matrix"], dtype=float)
+            b = np.asarray(d["bias"], dtype=float)
+            c = np.asarray(d["covariance"], dtype=float)
+            g = float(d["gravity_m_s2"])
+            rests, its = d["rests"], d["iterations"]
+            conv = d["converged"]
+        except KeyError as e:
+            raise CalibrationFormatError(f"'accelerometer' lacks the field {e.args[0]!r}") from None
+        except (TypeError, ValueError):
+            raise CalibrationFormatError("'accelerometer' has a non-numeric matrix, bias, "
+                                         "covariance or gravity_m_s2") from None
+        if (m.shape != (3, 3) or b.shape != (3,) or c.shape != (9, 9)
+                or not all(np.all(np.isfinite(x)) for x in (m, b, c)) or not g > 0):
+            raise CalibrationFormatError("'accelerometer' needs a finite 3x3 matrix, 3 biases, "
+                                         "a 9x9 covariance and a positive gravity_m_s2")
+        if np.any(np.triu(m, 1) != 0) or np.any(np.diag(m) <= 0):
+            raise CalibrationFormatError("'accelerometer.matrix' must be lower triangular with "
+                                         "a positive diagonal (its frame convention)")
+        for name, v in (("rests", rests), ("iterations", its)):
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise CalibrationFormatError(f"'accelerometer.{name}' must be a non-negative "
+                                             "integer")
+        if not isinstance(conv, bool):
+            raise CalibrationFormatError("'accelerometer.converged' must be true or false")
+        return cls(m, b, c, g, Consistency.from_dict(d["consistency"]), rests, its, conv)
+
+
+_DOC_MODEL = "f = matrix @ (a + bias)"
+_DOC_FIELDS = ("model", "frame", "matrix", "bias", "matrix_std", "bias_std", "covariance",
+               "gravity_m_s2", "consistency", "rests", "iterations", "converged")
+
+
+def _lower(v: np.ndarray) -> np.ndarray:
+    m = np.zeros((3, 3))
+    m[_IU] = v
+    return m
+
+
+def _unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return _lower(p[:6]), p[6:]
+
+
+def _residuals(p: np.ndarray, means: np.ndarray, g: float, sigma: np.ndarray) -> np.ndarray:
+    a, b = _unpack(p)
+    return (np.linalg.norm((means + b) @ a.T, axis=1) - g) / sigma
+
+
+def _jacobian(p: np.ndarray, means: np.ndarray, g: float, sigma: np.ndarray) -> np.ndarray:
+    """d r_i / d p: with ``f = A (a + b)``, ``u = f/|f|``: d|f|/dA_jk = u_j (a + b)_k,
+    d|f|/db = Aᵀ u."""
+    a, b = _unpack(p)
+    x = means + b
+    f = x @ a.T
+    u = f / np.linalg.norm(f, axis=1, keepdims=True)
+    outer = u[:, :, None] * x[:, None, :]  # (N, 3, 3): d|f|/dA
+    jac = np.concatenate([outer[:, _IU[0], _IU[1]], u @ a], axis=1)
+    return jac / sigma[:, None]
+
+
+def _sigma(p: np.ndarray, means: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    a, b = _unpack(p)
+    f = (means + b) @ a.T
+    u = f / np.linalg.norm(f, axis=1, keepdims=True)
+    w = u @ a  # (N, 3): Aᵀ u
+    return np.sqrt(np.einsum("ni,nij,nj->n", w, cov, w))
+
+
+def _window_covariance(mean_std: Any, n: int) -> np.ndarray:
+    s = np.asarray(mean_std, dtype=float)
+    if s.shape == (n, 3):
+        if not np.all(np.isfinite(s)) or np.any(s <= 0):
+            raise CalibInputError("mean_std must be finite and positive")
+        return np.einsum("ni,ij->nij", s**2, np.eye(3))
+    if s.shape == (n, 3, 3):
+        if not np.all(np.isfinite(s)) or np.any(np.linalg.eigvalsh(s) <= 0):
+            raise CalibInputError("mean_std as covariances (N, 3, 3) must be positive definite")
+        return s
+    raise CalibInputError(f"mean_std must have shape ({n}, 3) (standard deviations of the window "
+                          f"means) or ({n}, 3, 3) (their covariances), got {s.shape}")
+
+
+def fit_accelerometer(
+    means: Any, mean_std: Any, gravity: float = STANDARD_GRAVITY, *,
+    max_nfev: int = 200,
+) -> AccelCalibration:
+    """Fit ``f = A (a + b)`` to rest windows' mean readings against gravity's magnitude.
+
+    Parameters
+    ----------
+    means : (N, 3) array_like
+        Each rest window's mean accelerometer reading, m/s² (the mean of the readings: averaged
+        first, as the design's rule 1 asks). N ≥ 10 (nine parameters and one degree of freedom
+        for the consistency test), with gravity directions spread over the sphere.
+    mean_std : (N, 3) or (N, 3, 3) array_like
+        Standard deviation of each window mean per axis (white noise: the sample standard
+        deviation over sqrt(count)), or each mean's covariance.
+    gravity : float
+        Local gravity magnitude, m/s²: :data:`STANDARD_GRAVITY` by default, or
+        :func:`normal_gravity` of the site.
+    max_nfev : int
+        Solver's evaluation limit; reaching it gives ``converged`` false, not an error.
+
+    Returns
+    -------
+    AccelCalibration
+    """
+    a = np.asarray(means, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a)):
+        raise CalibInputError(f"means must be a finite (N, 3) array, got shape {a.shape}")
+    n = a.shape[0]
+    if n < 10:
+        raise CalibInputError(f"means needs at least 10 rest windows (9 parameters and a "
+                              f"consistency test), got {n}; add rests in more orientations")
+    cov = _window_covariance(mean_std, n)
+    g = scalar(gravity, "gravity", positive=True)
+    norms = np.linalg.norm(a, axis=1)
+    if np.any(norms < 0.5 * g) or np.any(norms > 1.5 * g):
+        raise CalibInputError("means must be readings of a still sensor in m/s² (norms near "
+                              f"gravity {g:.3f}); got norms {norms.min():.3g}..{norms.max():.3g}")
+    # Start: unit matrix and zero bias, scale fixed to the mean norm.
+    p = np.concatenate([_entries(np.eye(3) * g / norms.mean()), np.zeros(3)])
+    res = None
+    for _ in range(2):  # weights at the start, then at the first solution
+        sigma = _sigma(p, a, cov)
+        res = optimize.least_squares(_residuals, p, jac=_jacobian, args=(a, g, sigma),
+                                     method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                                     max_nfev=max_nfev)
+        p = res.x
+    assert res is not None
+    sigma = _sigma(p, a, cov)
+    r = _residuals(p, a, g, sigma)
+    jac = _jacobian(p, a, g, sigma)
+    jtj = jac.T @ jac
+    if np.linalg.cond(jtj) > 1e14:
+        raise CalibInputError("the rests' gravity directions cannot determine the nine "
+                              "accelerometer parameters (too few distinct orientations); "
+                              "add rests in other poses")
+    covariance = np.linalg.inv(jtj)
+    chi2 = float(r @ r)
+    dof = n - 9
+    pv = float(chdtrc(dof, chi2))
+    matrix, bias = _unpack(p)
+    if np.any(np.diag(matrix) <= 0):  # the sign-flipped twin of the same fit
+        flip = np.sign(np.diag(matrix))
+        matrix = matrix * flip[:, None]
+        j = np.concatenate([flip[_IU[0]], np.ones(3)])
+        covariance = covariance * np.outer(j, j)
+    return AccelCalibration(matrix, bias, covariance, g,
+                            Consistency(chi2, dof, pv, pv >= CONSISTENCY_LEVEL), n,
+                            int(res.nfev), bool(res.status > 0))
+
+
+def _entries(m: np.ndarray) -> np.ndarray:
+    return np.asarray(m, dtype=float)[_IU]
+
+
+def six_position(readings: Any, gravity: float = STANDARD_GRAVITY) -> tuple[np.ndarray, np.ndarray]:
+    """The classic six-position method: readings with gravity along ``+x, −x, +y, −y, +z, −z``
+    of the reference frame, taken as exact; solves ``a = M f + o`` for the full ``M`` and ``o``
+    (least squares over the 18 equations) and returns ``(A, b) = (M⁻¹, −o)`` in this module's
+    model ``f = A (a + b)`` (not brought to its frame convention).
+
+    Parameters
+    ----------
+    readings : (6, 3) array_like
+        Mean readings (m/s²) in the order +x, −x, +y, −y, +z, −z.
+    gravity : float
+        Local gravity magnitude, m/s².
+    """
+    u = np.asarray(readings, dtype=float)
+    if u.shape != (6, 3) or not np.all(np.isfinite(u)):
+        raise CalibInputError(f"readings must be a finite (6, 3) array, got shape {u.shape}")
+    g = scalar(gravity, "gravity", positive=True)
+    f = g * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
+    x = np.hstack([f, np.ones((6, 1))])  # a_i = M f_i + o
+    sol, *_ = np.linalg.lstsq(x, u, rcond=None)
+    m, o = sol[:3].T, sol[3]
+    return np.linalg.inv(m), -o
+
+
+@dataclass(frozen=True)
+class AccelDesign:
+    """How well a set of rest orientations determines the accelerometer's nine parameters.
+
+    Attributes
+    ----------
+    directions : (N, 3) ndarray
+        Unit gravity directions in the sensor frame.
+    condition : float
+        Condition number of the whitened information matrix (columns scaled to unit norm).
+    parameter_std : (9,) ndarray
+        Predicted σ of :data:`PARAMETER_NAMES` (matrix entries dimensionless, bias m/s²).
+    worst_force_std : float
+        Largest predicted σ of the calibrated specific force's magnitude over the sphere of
+        gravity directions, m/s² (the G-criterion of the paper's Section II-B for this model).
+    identifiable : bool
+        Whether every parameter is determined (full rank, finite σ).
+    """
+
+    directions: np.ndarray
+    condition: float
+    parameter_std: np.ndarray
+    worst_force_std: float
+    identifiable: bool
+
+
+def accel_design(directions: Any, window_std: float, gravity: float = STANDARD_GRAVITY,
+                 n_sphere: int = 2000) -> AccelDesign:
+    """Score rest orientations for the accelerometer fit at the ideal sensor (``A = I, b = 0``).
+
+    Parameters
+    ----------
+    directions : (N, 3) array_like
+        Gravity directions in the sensor frame during each rest (normalised here).
+    window_std : float
+        Standard deviation of one rest window's mean reading per axis, m/s².
+    gravity : float
+        Local gravity magnitude, m/s².
+    n_sphere : int
+        Directions searched for the worst prediction σ.
+    """
+    d = np.asarray(directions, dtype=float)
+    if d.ndim != 2 or d.shape[1] != 3 or d.shape[0] < 1 or not np.all(np.isfinite(d)):
+        raise CalibInputError(f"directions must be a finite (N, 3) array, got shape {d.shape}")
+    nrm = np.linalg.norm(d, axis=1, keepdims=True)
+    if np.any(nrm == 0):
+        raise CalibInputError("directions must be non-zero vectors")
+    s = scalar(window_std, "window_std", positive=True)
+    g = scalar(gravity, "gravity", positive=True)
+    d = d / nrm
+    p0 = np.concatenate([_entries(np.eye(3)), np.zeros(3)])
+    sig = np.full(d.shape[0], s)
+    jac = _jacobian(p0, g * d, g, sig)
+    jtj = jac.T @ jac
+    colnorm = np.sqrt(np.clip(np.diag(jtj), 1e-300, None))
+    sv = np.linalg.svd(jac / colnorm, compute_uv=False)
+    rank_ok = sv.size == 9 and sv[-1] > 1e-9 * sv[0]
+    if not rank_ok:
+        return AccelDesign(d, math.inf, np.full(9, math.inf), math.inf, False)
+    cov = np.linalg.inv(jtj)
+    q = g * sphere_points(n_sphere)
+    jq = _jacobian(p0, q, g, np.ones(q.shape[0]))
+    worst = float(np.sqrt(np.max(np.einsum("ni,ij,nj->n", jq, cov, jq))))
+    return AccelDesign(d, float(sv[0] / sv[-1]), np.sqrt(np.diag(cov)), worst, True)
+
+
+#: Gravity directions a rest tour visits: the six axes (the six-position design) and the eight
+#: cube corners, a 14-point design that spreads the quadratic model's regressors over the sphere.
+TOUR_DIRECTIONS = np.vstack([
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]],
+    np.array([[x, y, z] for x in (1, -1) for y in (1, -1) for z in (1, -1)]) / math.sqrt(3),
+]).astype(float)
+
+
+@dataclass(frozen=True)
+class GravityTour:
+    """Rests added to a protocol so the accelerometer is determined (:func:`gravity_tour`).
+
+    Attributes
+    ----------
+    poses_rad : (K, 2) ndarray
+        Base and middle servo angles from home of each added rest, in visiting order.
+    directions : (K, 3) ndarray
+        Gravity's direction in the sensor frame at each (nominal gimbal).
+    added_time_s : float
+        Jig time the tour adds: one-servo moves (profile plus settling), the rests, and the
+        moves back home.
+    """
+
+    poses_rad: np.ndarray
+    directions: np.ndarray
+    added_time_s: float
+
+
+def tour_gravity(base_rad: np.ndarray, middle_rad: np.ndarray) -> np.ndarray:
+    """Gravity's direction in the sensor frame (N, 3) for base and middle servo angles on the
+    nominal gimbal (base about sensor x, middle about y, home gravity along +z):
+    ``(R_x(φ1) R_y(φ2))ᵀ e_z = (−sin φ2 cos φ1, sin φ1, cos φ2 cos φ1)``."""
+    p1, p2 = np.asarray(base_rad, dtype=float), np.asarray(middle_rad, dtype=float)
+    return np.column_stack([-np.sin(p2) * np.cos(p1), np.sin(p1), np.cos(p2) * np.cos(p1)])
+
+
+def gravity_tour(speed: float, accel: float, rest_s: float, settle_s: float = 0.1,
+                 directions: np.ndarray | None = None) -> GravityTour:
+    """The rests to add, after a protocol's turns, so that gravity visits ``directions``
+    (default :data:`TOUR_DIRECTIONS` less the home pose's +z), and the jig time they add.
+
+    The nominal gimbal turns the base about sensor x and the middle about sensor y
+    (:func:`tour_gravity`); a direction ``u`` is reached with ``φ1 = asin(u_y)``,
+    ``φ2 = atan2(−u_x, u_z)``. The order is greedy by move time from home; each move turns one
+    servo (``profile_duration`` at ``speed`` and ``accel``, plus ``settle_s``), then rests
+    ``rest_s``; the tour ends by moving both servos home.
+    """
+    from gyrocal.calib.simulate import profile_duration
+
+    sp = scalar(speed, "speed", positive=True)
+    ac = scalar(accel, "accel", positive=True)
+    rs = scalar(rest_s, "rest_s", positive=True)
+    st = scalar(settle_s, "settle_s", nonneg=True)
+    if directions is None:
+        d = TOUR_DIRECTIONS[~np.all(np.isclose(TOUR_DIRECTIONS, [0.0, 0.0, 1.0]), axis=1)]
+    else:
+        d = np.asarray(directions, dtype=float)
+        if d.ndim != 2 or d.shape[1] != 3 or not np.all(np.isfinite(d)) or np.any(
+                np.linalg.norm(d, axis=1) == 0):
+            raise CalibInputError("directions must be non-zero finite vectors, shape (K, 3)")
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    phi1 = np.arcsin(np.clip(u[:, 1], -1, 1))
+    c1 = np.cos(phi1)
+    phi2 = np.where(c1 > 1e-9, np.arctan2(-u[:, 0], u[:, 2]), 0.0)
+
+    def move(a: float, b: float) -> float:
+        return 0.0 if abs(a - b) < 1e-12 else profile_duration(abs(a - b), sp, ac) + st
+
+    here, left, order, total = np.zeros(2), list(range(len(u))), [], 0.0
+    while left:
+        costs = [move(here[0], phi1[i]) + move(here[1], phi2[i]) for i in left]
+        k = left.pop(int(np.argmin(costs)))
+        total += min(costs) + rs
+        here = np.array([phi1[k], phi2[k]])
+        order.append(k)
+    total += move(here[0], 0.0) + move(here[1], 0.0)
+    poses = np.column_stack([phi1, phi2])[order]
+    return GravityTour(poses, tour_gravity(poses[:, 0], poses[:, 1]), float(total))

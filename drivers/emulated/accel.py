@@ -1,0 +1,128 @@
+"""The emulated accelerometer's true errors (issue 15): scale, cross-axis, zero-g bias and white
+noise, per the chips' datasheets, drawn by seed.
+
+The emulated accelerometer reads, in g,
+
+``a = C f − b + n``,
+
+with ``f`` the true specific force in the sensor frame (in g; the jig's
+:meth:`~gyrocal.drivers.emulated.jig.GimbalJig.specific_force`), ``C`` the sensing matrix (its
+diagonal the scale factors, its off-diagonal terms the cross-axis sensitivities), ``b`` the
+zero-g bias and ``n`` white noise of per-sample standard deviation ``density · sqrt(odr)``.
+A calibration ``f = A (a + b)`` then holds with ``A = C⁻¹``; in the calibration's frame
+convention (x along the x sensing axis, y in the x-y plane: ``A`` lower triangular) the same
+calibration is ``A = L⁻¹`` with ``C Cᵀ = L Lᵀ`` (Cholesky), which :meth:`AccelTruth.manifest`
+writes as ``truth.accelerometer.matrix``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ACCEL_DATASHEET", "STANDARD_GRAVITY", "AccelTruth", "draw_accel_truth"]
+
+#: g_n, m/s²: the datasheets' "g" (the readers scale counts by it to m/s²).
+STANDARD_GRAVITY = 9.80665
+
+_MPU9250_TABLE2 = {
+    # MPU-9250 PS-MPU-9250A-01 rev 1.0, §3.2 Table 2 "Accelerometer Specifications" ⚠ one source
+    "scale_tolerance": 0.03,  # Initial Tolerance, component-level, ±3 %
+    "cross_axis": 0.02,  # Cross-Axis Sensitivity ±2 %
+    "zero_g_g": (0.060, 0.060, 0.080),  # Zero-G Initial Calibration Tolerance X,Y ±60, Z ±80 mg
+    "noise_g_sqrt_hz": 300e-6,  # Noise Power Spectral Density, low noise mode, 300 µg/√Hz
+    "source": "MPU-9250 PS-MPU-9250A-01 §3.2 Table 2",
+}
+
+#: Accelerometer error sizes per chip model (each term drawn uniformly within ±the figure).
+#: Only the MPU-9250's row is from its own datasheet; for the other chips its figures stand in
+#: (⚠ not yet checked against their datasheets), except the ICM-42688-P's noise density
+#: (DS-000347 "Features": accelerometer noise 70 µg/√Hz ⚠ one source).
+ACCEL_DATASHEET: dict[str, dict[str, Any]] = {
+    "mpu9250": _MPU9250_TABLE2,
+    "lsm9ds1": {**_MPU9250_TABLE2, "source": "stand-in: MPU-9250 Table 2 ⚠"},
+    "icm20948": {**_MPU9250_TABLE2, "source": "stand-in: MPU-9250 Table 2 ⚠"},
+    "icm42688p": {**_MPU9250_TABLE2, "noise_g_sqrt_hz": 70e-6,
+                  "source": "noise: ICM-42688-P DS-000347 features ⚠; rest: MPU-9250 Table 2 ⚠"},
+    "lsm6dsox": {**_MPU9250_TABLE2, "source": "stand-in: MPU-9250 Table 2 ⚠"},
+}
+
+
+@dataclass(frozen=True)
+class AccelTruth:
+    """The true errors of an emulated accelerometer: ``a = C f − b + n`` (module docstring).
+
+    Parameters
+    ----------
+    sensing : (3, 3)
+        ``C``: scale factors on the diagonal, cross-axis sensitivities off it.
+    bias_g : (3,)
+        Zero-g bias ``b`` in g.
+    noise_density_g_sqrt_hz : float
+        White-noise density in g/√Hz (per-sample σ = density · sqrt(odr)).
+    """
+
+    sensing: Any = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    bias_g: Any = (0.0, 0.0, 0.0)
+    noise_density_g_sqrt_hz: float = 0.0
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.sensing, dtype=float)
+        if c.shape != (3, 3) or not np.all(np.isfinite(c)) or abs(np.linalg.det(c)) < 1e-6:
+            raise ValueError("sensing must be a finite invertible 3×3 matrix, got "
+                             f"{self.sensing!r}")
+        b = np.broadcast_to(np.asarray(self.bias_g, dtype=float), (3,))
+        if not np.all(np.isfinite(b)):
+            raise ValueError(f"bias_g must be finite, got {self.bias_g!r}")
+        d = float(self.noise_density_g_sqrt_hz)
+        if not (math.isfinite(d) and d >= 0):
+            raise ValueError(f"noise_density_g_sqrt_hz must be finite and >= 0, got {d!r}")
+        object.__setattr__(self, "sensing", tuple(tuple(float(x) for x in r) for r in c))
+        object.__setattr__(self, "bias_g", tuple(float(x) for x in b))
+        object.__setattr__(self, "noise_density_g_sqrt_hz", d)
+
+    def reading(self, force_g: np.ndarray, rng: np.random.Generator | None = None,
+                odr_hz: float | None = None) -> np.ndarray:
+        """The reading (N, 3) in g for true specific forces ``force_g`` (N, 3) in g; white noise
+        is added when ``rng`` and ``odr_hz`` are given and the density is non-zero."""
+        f = np.asarray(force_g, dtype=float)
+        a = f @ np.asarray(self.sensing).T - np.asarray(self.bias_g)
+        if rng is not None and odr_hz is not None and self.noise_density_g_sqrt_hz > 0:
+            a = a + rng.standard_normal(a.shape) * (self.noise_density_g_sqrt_hz
+                                                    * math.sqrt(odr_hz))
+        return a
+
+    def manifest(self) -> dict[str, Any]:
+        """``truth.accelerometer`` of a simulated manifest: the sensing matrix and bias as drawn,
+        and the calibration they imply in m/s² and the calibration's frame (``matrix`` lower
+        triangular, ``f = matrix @ (a + bias_m_s2)``)."""
+        c = np.asarray(self.sensing)
+        matrix = np.linalg.inv(np.linalg.cholesky(c @ c.T))
+        return {"sensing": [list(r) for r in self.sensing], "bias_g": list(self.bias_g),
+                "matrix": matrix.tolist(),
+                "bias_m_s2": [b * STANDARD_GRAVITY for b in self.bias_g],
+                "noise_density_m_s2_sqrt_hz": self.noise_density_g_sqrt_hz * STANDARD_GRAVITY,
+                "frame": "accel-x-xy"}
+
+
+def draw_accel_truth(model: str, seed: int) -> AccelTruth:
+    """An accelerometer's errors drawn by ``seed`` within ``model``'s :data:`ACCEL_DATASHEET`
+    figures (uniform within ± each figure).
+
+    Raises
+    ------
+    ValueError
+        If ``model`` has no row in :data:`ACCEL_DATASHEET`.
+    """
+    if model not in ACCEL_DATASHEET:
+        raise ValueError(f"no accelerometer figures for chip model {model!r}; known: "
+                         + ", ".join(ACCEL_DATASHEET))
+    fig = ACCEL_DATASHEET[model]
+    rng = np.random.default_rng([int(seed), 0xACCE])
+    c = np.diag(1.0 + fig["scale_tolerance"] * rng.uniform(-1, 1, 3))
+    c += fig["cross_axis"] * rng.uniform(-1, 1, (3, 3)) * (1.0 - np.eye(3))
+    bias = np.asarray(fig["zero_g_g"]) * rng.uniform(-1, 1, 3)
+    return AccelTruth(c, bias, fig["noise_g_sqrt_hz"])
