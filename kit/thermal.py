@@ -177,7 +177,7 @@ class WarmupRun:
 def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: int,
                wait_s: float = 0.0, on_run: Any = None) -> list[WarmupRun]:
     """Run the calibration protocol ``runs`` times back to back on ``jig``
-    (:class:`~gyrocal.kit.commands.calibrate.Jig`, the emulated one with ``--sim``), waiting
+    (:class:`~gyrocal.kit.jig.Jig`, the emulated one with ``--sim``), waiting
     ``wait_s`` between runs, into ``work/run-NN/recording`` and ``work/run-NN/calibration.json``.
 
     The servos stop with torque off after every run and after any failure (each run opens and
@@ -192,8 +192,8 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
     InputError, EstimationError, DriverError
         As ``gyrocal calibrate``; a run that cannot be fitted stops the warm-up.
     """
-    from gyrocal.kit.commands.calibrate import _record
     from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.jig import record_protocol
     from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.recording import load_recording
 
@@ -201,7 +201,7 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
     for i in range(runs):
         run_dir = work / f"run-{i + 1:02d}"
         t0 = jig.clock.monotonic()
-        _record(cfg, args, jig, run_dir / "recording")
+        record_protocol(cfg, args, jig, run_dir / "recording")
         rec = load_recording(run_dir / "recording")
         est = estimate_recording(rec, cfg["protocol"]["method"],
                                  source=str(run_dir / "recording"))
@@ -298,7 +298,7 @@ def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
     if not quiet:  # the protocol's own progress display is off: one line per run instead
         print(f"gyrocal: thermal: {runs_wanted} calibration run(s)"
               + (f", then {static:g} s still" if static is not None else ""), file=sys.stderr)
-    from gyrocal.kit.commands.calibrate import Jig
+    from gyrocal.kit.jig import Jig
 
     quiet_args = argparse.Namespace(**{**vars(args), "quiet": True})
     try:
