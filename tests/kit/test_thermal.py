@@ -253,3 +253,40 @@ def test_a_thermal_model_is_not_a_calibration_point(warmup, capsys, tmp_path):
     assert code == 0 and json.loads(out2)["temperature_model"]["points"] == 4
     code, _, err = run_thermal(capsys, d / "thermal.json", d / "c0.json")
     assert code == 2 and "is a thermal model" in err
+
+
+def test_full_model_calibrations_give_a_matrix_model_that_holds_the_truth():
+    """fit_calibrations on full-model calibrations (Calibration v2, lower-triangular frame):
+    A(T) = A0 + A1 (T − 25) is fitted element by element, the entries the frame fixes at zero
+    stay zero, and the thermal Calibration is a v2 document that round-trips. Each calibration
+    is the truth at its temperature plus noise of its stated σ (seeded)."""
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.thermal import fit_calibrations, thermal_calibration
+
+    rng = np.random.default_rng(13)
+    a0 = np.array([[1.0132, 0.0, 0.0], [0.0187, 0.9871, 0.0], [-0.0164, 0.0119, 1.0043]])
+    a1 = np.array([[3e-4, 0.0, 0.0], [1e-5, -2e-4, 0.0], [0.0, 0.0, 1e-4]])
+    lower = np.tril(np.ones((3, 3), dtype=bool))
+    a_std, b_std = np.where(lower, 5e-5, 0.0), np.full(3, 3e-5)
+    temps = np.linspace(18.0, 30.0, 7)
+    cals = []
+    for t in temps:
+        a = (a0 + a1 * (t - 25.0) + rng.normal(0.0, 1.0, (3, 3)) * a_std)
+        b = truth_bias(t) + rng.normal(0.0, 1.0, 3) * b_std
+        cals.append(GyroCalibration(
+            scale=tuple(np.diag(a)), bias=tuple(b), bias_std=tuple(b_std),
+            matrix=tuple(map(tuple, a)), matrix_std=tuple(map(tuple, a_std)), frame="gyro-x-xy",
+            temperature_c=float(t), method="full-matrix"))
+    model = fit_calibrations(cals)
+    assert not model.diagonal and model.points == 7
+    for t in np.linspace(18.0, 30.0, 5):
+        st = model.at(t)
+        want = a0 + a1 * (t - 25.0)
+        assert np.all(np.abs(st.gain - want)[lower] <= 4 * st.gain_std[lower])
+        assert np.all(st.gain[~lower] == 0.0)
+        assert np.all(np.abs(st.bias - truth_bias(t)) <= 4 * st.bias_std)
+    cal = thermal_calibration(cals, model, source="test")
+    back = GyroCalibration.from_json(cal.to_json())
+    assert back.is_full and back.temperature_model is not None
+    np.testing.assert_allclose(back.temperature_model.at(21.0).gain, model.at(21.0).gain,
+                               rtol=1e-12, atol=1e-15)
