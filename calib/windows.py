@@ -670,8 +670,10 @@ def _assemble(
     )
 
 
-def _window_temps(t: np.ndarray, temp: np.ndarray, windows: Sequence[Window]) -> np.ndarray:
-    """Mean die temperature over each window's span (NaN where no sample has one)."""
+def window_temperatures(t: np.ndarray, temp: np.ndarray, windows: Sequence[Window]
+                        ) -> np.ndarray:
+    """Mean die temperature (°C) over each window's span, from the IMU stream's times ``t``
+    and die temperatures ``temp`` (NaN where no sample has one)."""
     out = np.full(len(windows), np.nan)
     for i, w in enumerate(windows):
         a, b = np.searchsorted(t, [w.corners[0], w.corners[3]], side="left")
@@ -798,8 +800,8 @@ def extract_observations(
     obs = _assemble(turns, noise, mean_std, rest_windows, rest_samples, tau, temp, q, chain_t,
                     pose, pose_still)
     if temp is not None:  # a die that warmed during the run: refer the windows to its mean
-        obs, note = correct_drift(obs, _window_temps(imu_t, temp, [w.window for w in turns]),
-                                  _window_temps(imu_t, temp, rest_windows))
+        obs, note = correct_drift(obs, window_temperatures(imu_t, temp, [w.window for w in turns]),
+                                  window_temperatures(imu_t, temp, rest_windows))
         if note is not None:
             warnings.append(note)
     return ExtractedWindows(

@@ -290,3 +290,38 @@ def test_full_model_calibrations_give_a_matrix_model_that_holds_the_truth():
     assert back.is_full and back.temperature_model is not None
     np.testing.assert_allclose(back.temperature_model.at(21.0).gain, model.at(21.0).gain,
                                rtol=1e-12, atol=1e-15)
+
+
+def test_the_scale_within_a_warming_run_is_that_at_its_turns_temperature_and_is_flagged(
+        tmp_path):
+    """A run whose die warms by 0.05 °C/s (about 1.5 °C over the run) with MPU-9250-sized scale
+    coefficients (datasheet ±4 % over −40…85 °C: up to 6.4e-4 per °C): each axis's scale is the
+    one at the mean temperature of its own servo's turns, not at the run's mean, which the
+    independent generator's truth shows beyond the scale's σ; the estimate says so in a note.
+    A run at a steady temperature gets no such note."""
+    from gyrocal.kit.thermal import turn_temperature_offsets
+
+    k = np.array([6.0e-4, -6.0e-4, 4.0e-4])
+    flat = np.array([[0.01, 0.0], [-0.02, 0.0], [0.005, 0.0]])
+    notes = {}
+    for name, rate in (("warming", 0.05), ("steady", 0.0)):
+        thermal = {"die": lambda t, r=rate: 20.0 + r * np.asarray(t), "t0": 0.0,
+                   "bias_coeffs": flat, "scale_coeff": k}
+        rec = load_recording(write_recording(tmp_path / name, scale=SCALE, thermal=thermal,
+                                             seed=21, noise=0.002))
+        est = estimate_recording(rec, "paired-axis")
+        cal = est.calibration
+        notes[name] = [n for n in est.notes if "drifts with the die temperature" in n]
+        if name == "steady":
+            continue
+        off = turn_temperature_offsets(rec.imu_t, rec.imu_temp, est.extracted.windows,
+                                       cal.temperature_c)
+        assert off[1] < -0.3 and off[3] > 0.3  # servo 1 turns first, servo 3 last
+        t_axis = cal.temperature_c + np.array([off[1], off[2], off[3]])
+        at_turns = SCALE * (1.0 + k * (t_axis - 25.0))
+        at_mean = SCALE * (1.0 + k * (cal.temperature_c - 25.0))
+        std = np.asarray(cal.scale_std)
+        assert np.all(np.abs(np.asarray(cal.scale) - at_turns) <= 4 * std)
+        assert np.abs(cal.scale[0] - at_mean[0]) > 4 * std[0]  # the drift is beyond σ
+    assert len(notes["warming"]) == 1 and "servo 1 -" in notes["warming"][0]
+    assert notes["steady"] == []
