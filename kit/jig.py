@@ -19,7 +19,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config", "manifest_parts",
+__all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "measure_still_noise", "note_rounded_odr", "output_dir", "record_protocol",
            "run_jig", "sim_effects"]
 
@@ -261,7 +261,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     return plan
 
 
-def manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
+def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
                     ) -> tuple[dict, dict, dict, dict | None]:
     """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of a run."""
     sensor = jig.imu.info.manifest()
@@ -286,14 +286,16 @@ def manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None
 
 
 def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
-            extend: Any = None) -> None:
+                    extend: Any = None) -> None:
     """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``
     (``extend``: see :func:`run_jig`).
 
     Raises
     ------
     InputError, DriverError
-        As the protocol's runner and the recording writer.."""
+        As the protocol's runner and the recording writer; the gimbal's context stops the
+        servos with torque off on the way out.
+    """
     from gyrocal.kit.progress import Progress
     from gyrocal.kit.protocol import Runner, build_steps
     from gyrocal.kit.recording import RecordingWriter
@@ -307,7 +309,7 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
         if extend is not None:
             runner_class, extra = extend
             steps += extra(plan, cfg["gimbal"]["ids"])
-        sensor, gimbal_info, protocol, truth = manifest_parts(cfg, jig, plan, noise_std)
+        sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std)
         progress = Progress(sys.stderr, plan.jig_time_s, interactive=False if quiet else None)
         if not quiet:
             progress.event(
