@@ -484,8 +484,10 @@ def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
     mean temperature ``T̄`` (``obs.temperature_c``): ``mean − β (T_w − T̄)``, and its variance
     grows by ``(σ_β (T_w − T̄))²``, so the fit reports the bias at ``T̄`` with the drift's
     uncertainty in it rather than a false tight figure. The scale's own temperature change
-    within a run is not modelled (it averages out across a run's clockwise and
-    counter-clockwise turns to first order).
+    within a run cannot be measured here: each axis's scale is the one at the temperature of its
+    own servo's turns (which do not average out over the run: the servos turn one after
+    another); the kit's estimate flags it in a note when the chip's datasheet
+    figure makes it larger than the scale's σ.
 
     Parameters
     ----------

@@ -683,8 +683,10 @@ def _turn_phase(turns: Sequence[_Turn], tracks: EncoderTracks, chain: tuple[int,
     return out
 
 
-def _window_temps(t: np.ndarray, temp: np.ndarray, windows: Sequence[Window]) -> np.ndarray:
-    """Mean die temperature over each window's span (NaN where no sample has one)."""
+def window_temperatures(t: np.ndarray, temp: np.ndarray, windows: Sequence[Window]
+                        ) -> np.ndarray:
+    """Mean die temperature (°C) over each window's span, from the IMU stream's times ``t``
+    and die temperatures ``temp`` (NaN where no sample has one)."""
     out = np.full(len(windows), np.nan)
     for i, w in enumerate(windows):
         a, b = np.searchsorted(t, [w.corners[0], w.corners[3]], side="left")
@@ -817,8 +819,8 @@ def extract_observations(
         obs = replace(obs, rest_pose=rest_pose, home_pose=home,
                       turn_phase=_turn_phase(turns, tracks, chain_t, pose))  # type: ignore[arg-type]
     if temp is not None:  # a die that warmed during the run: refer the windows to its mean
-        obs, note = correct_drift(obs, _window_temps(imu_t, temp, [w.window for w in turns]),
-                                  _window_temps(imu_t, temp, rest_windows))
+        obs, note = correct_drift(obs, window_temperatures(imu_t, temp, [w.window for w in turns]),
+                                  window_temperatures(imu_t, temp, rest_windows))
         if note is not None:
             warnings.append(note)
     return ExtractedWindows(

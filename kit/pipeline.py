@@ -162,6 +162,11 @@ def estimate_recording(
         created=now_iso(),
         source=source if source is not None else str(rec.path),
     )
+    from gyrocal.kit.thermal import scale_drift_note
+
+    drift = scale_drift_note(rec.imu_t, rec.imu_temp, ex.windows, cal, rec.sensor.get("model"))
+    if drift is not None:
+        notes = (*notes, drift)
     return Estimate(calibration=cal, fit=fit, extracted=ex, notes=notes)
 
 

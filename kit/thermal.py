@@ -40,6 +40,7 @@ __all__ = [
     "collect_calibrations",
     "fit_calibrations",
     "run_warmup",
+    "scale_drift_note",
     "static_warmup",
     "thermal_calibration",
     "truth_at",
@@ -64,6 +65,61 @@ def truth_at(truth: Mapping[str, Any] | None, temperature_c: float | None
     scale = np.asarray(truth["scale"], dtype=float) * (
         1.0 + np.asarray(tm["scale_coeff_per_c"], dtype=float) * d)
     return {**truth, "scale": scale.tolist(), "bias": bias.tolist()}
+
+
+def turn_temperature_offsets(imu_t: np.ndarray, imu_temp: np.ndarray, windows: Sequence[Any],
+                             mean_c: float) -> dict[int, float]:
+    """Per servo, the mean die temperature of its turn windows minus the run's mean ``mean_c``
+    (°C): where, on the run's warm-up, each axis's scale was measured."""
+    from gyrocal.calib.windows import window_temperatures
+
+    temps = window_temperatures(np.asarray(imu_t, float), np.asarray(imu_temp, float), windows)
+    out: dict[int, float] = {}
+    for motor in sorted({int(w.motor) for w in windows if w.motor is not None}):
+        sel = np.array([w.motor == motor for w in windows]) & np.isfinite(temps)
+        if sel.any():
+            out[motor] = float(temps[sel].mean()) - float(mean_c)
+    return out
+
+
+def scale_drift_note(imu_t: np.ndarray, imu_temp: np.ndarray, windows: Sequence[Any],
+                     cal: GyroCalibration, sensor_model: str | None) -> str | None:
+    """Flag the scale's temperature drift within one run (issue 13, "within one calibration
+    run"), or None when it is below the scale's standard deviation.
+
+    The paper's fit (Eq. 1) takes each axis's scale from that axis's turns, so when the die
+    warms during the run each scale is the one at the temperature of its own turns,
+    ``T̄ + δ_servo``, not at the run's mean ``T̄`` that the calibration reports (the bias is
+    referred to ``T̄`` by :func:`gyrocal.calib.thermal.correct_drift`; the scale's coefficient
+    cannot be measured within one run). With the chip's datasheet sensitivity change ``k``
+    (:data:`gyrocal.drivers.emulated.thermal.THERMAL_DATASHEET`: ±change over half the rated
+    range, per °C) the scale may be off by up to ``k · max |δ|`` (relative); that is reported
+    when it exceeds the scale's relative standard deviation, which does not include it.
+    """
+    from gyrocal.drivers.emulated.thermal import THERMAL_DATASHEET
+
+    if cal.temperature_c is None or imu_temp is None or not np.any(np.isfinite(imu_temp)):
+        return None
+    spec = THERMAL_DATASHEET.get(str(sensor_model or "").lower().replace("-", ""))
+    offsets = turn_temperature_offsets(imu_t, imu_temp, windows, cal.temperature_c)
+    if spec is None or not offsets:
+        return None
+    k = spec.sensitivity_change / (spec.span_c / 2.0)
+    worst = k * max(abs(d) for d in offsets.values())
+    std = np.diag(cal.matrix_std) if cal.is_full and cal.matrix_std is not None \
+        else np.asarray(cal.scale_std, dtype=float)
+    rel = std / np.abs(np.asarray(cal.scale, dtype=float))
+    rel = rel[np.isfinite(rel)]
+    if rel.size == 0 or worst <= float(rel.min()):
+        return None
+    where = ", ".join(f"servo {m} {d:+.2f}" for m, d in offsets.items())
+    return (f"the scale drifts with the die temperature within the run: the servos' turns were "
+            f"at {where} °C from the run's mean {cal.temperature_c:.2f} °C, so with the "
+            f"{sensor_model}'s datasheet sensitivity change (up to {k * 100:.3f} %/°C, "
+            f"{spec.source}) a scale may be off by up to {worst:.1e} (relative), "
+            f"{worst / float(rel.min()):.1f}× its standard deviation, which does not include "
+            "it; let the sensor warm up first, or calibrate over the warm-up with gyrocal "
+            "thermal")
 
 
 def collect_calibrations(paths: Sequence[str]) -> list[tuple[str, GyroCalibration]]:
@@ -177,7 +233,7 @@ class WarmupRun:
 def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: int,
                wait_s: float = 0.0, on_run: Any = None) -> list[WarmupRun]:
     """Run the calibration protocol ``runs`` times back to back on ``jig``
-    (:class:`~gyrocal.kit.commands.calibrate.Jig`, the emulated one with ``--sim``), waiting
+    (:class:`~gyrocal.kit.jig.Jig`, the emulated one with ``--sim``), waiting
     ``wait_s`` between runs, into ``work/run-NN/recording`` and ``work/run-NN/calibration.json``.
 
     The servos stop with torque off after every run and after any failure (each run opens and
@@ -192,8 +248,8 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
     InputError, EstimationError, DriverError
         As ``gyrocal calibrate``; a run that cannot be fitted stops the warm-up.
     """
-    from gyrocal.kit.commands.calibrate import _record
     from gyrocal.kit.fileio import atomic_write_text
+    from gyrocal.kit.jig import record_protocol
     from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.recording import load_recording
 
@@ -201,7 +257,7 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
     for i in range(runs):
         run_dir = work / f"run-{i + 1:02d}"
         t0 = jig.clock.monotonic()
-        _record(cfg, args, jig, run_dir / "recording")
+        record_protocol(cfg, args, jig, run_dir / "recording")
         rec = load_recording(run_dir / "recording")
         est = estimate_recording(rec, cfg["protocol"]["method"],
                                  source=str(run_dir / "recording"))
@@ -298,7 +354,7 @@ def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
     if not quiet:  # the protocol's own progress display is off: one line per run instead
         print(f"gyrocal: thermal: {runs_wanted} calibration run(s)"
               + (f", then {static:g} s still" if static is not None else ""), file=sys.stderr)
-    from gyrocal.kit.commands.calibrate import Jig
+    from gyrocal.kit.jig import Jig
 
     quiet_args = argparse.Namespace(**{**vars(args), "quiet": True})
     try:

@@ -385,7 +385,7 @@ class LiveSource:
 
     Parameters
     ----------
-    jig : gyrocal.kit.commands.calibrate.Jig
+    jig : gyrocal.kit.jig.Jig
         Its gimbal open (inside ``with jig.gimbal``), its IMU configured.
     period_s : float
         Loop period (the config's ``gimbal.sample_hz``).
@@ -576,7 +576,7 @@ def run_live(
 
     Parameters
     ----------
-    jig : gyrocal.kit.commands.calibrate.Jig
+    jig : gyrocal.kit.jig.Jig
         Not yet opened; closed on return, whatever happens.
     source : LiveSource
         Built on ``jig``.

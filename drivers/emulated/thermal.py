@@ -41,6 +41,7 @@ __all__ = [
     "ThermalSpec",
     "draw_thermal_coefficients",
     "parse_ambient",
+    "per_degree",
 ]
 
 _RAD_PER_DEG = math.pi / 180.0
@@ -77,17 +78,51 @@ class ThermalSpec:
         return self.range_c[1] - self.range_c[0]
 
 
-#: Temperature figures by chip model (hardware facts as data).
+def per_degree(zro_dps_per_c: float, sensitivity_pct_per_c: float,
+               range_c: tuple[float, float], source: str) -> ThermalSpec:
+    """A :class:`ThermalSpec` from a datasheet that gives per-°C figures ("zero-rate level change
+    vs. temperature", dps/°C; "sensitivity change vs. temperature", %/°C): the change over the
+    range is the figure times half its width (from a reference in the middle), so that the
+    drawn linear coefficient stays within ¾ of the datasheet's per-°C figure."""
+    half = (range_c[1] - range_c[0]) / 2.0
+    return ThermalSpec(zro_dps_per_c * half, sensitivity_pct_per_c / 100.0 * half, range_c,
+                       source)
+
+
+#: Temperature figures by chip model (hardware facts as data). ⚠ marks a figure found in one
+#: source only (or in sources that disagree), to be checked against the manufacturer's PDF.
 THERMAL_DATASHEET: dict[str, ThermalSpec] = {
     # PS-MPU-9250A-01 §3.1, Gyroscope Specifications: "ZRO Variation Over Temperature
     # −40 °C to +85 °C ±30 °/s" and "Sensitivity Scale Factor Variation Over Temperature
     # −40 °C to +85 °C ±4 %".
     "mpu9250": ThermalSpec(30.0, 0.04, (-40.0, 85.0), "PS-MPU-9250A-01 §3.1"),
-    # LSM9DS1 datasheet (DocID025715) Table 3: angular rate typical zero-rate level change vs.
-    # temperature ±0.03 dps/°C (⚠ single-sourced); the gyro's sensitivity change vs.
-    # temperature is not given, ±2 % over the range stands in for it (⚠ assumption).
-    "lsm9ds1": ThermalSpec(0.03 * 125.0, 0.02, (-40.0, 85.0),
-                           "LSM9DS1 DocID025715 Table 3 (⚠ single-sourced)"),
+    # LSM9DS1 (DocID025715) Table 3: angular rate zero-rate level change vs. temperature
+    # ±0.03 dps/°C (⚠ single-sourced: the same ±0.03 dps/°C is ST's figure for its other
+    # 245-dps gyros, e.g. the I3G4250D, but the LSM9DS1 table was not read here); the gyro's
+    # sensitivity change vs. temperature is not given: ±2 % over the range stands in for it
+    # (⚠ assumption: the I3G4250D's "SoDr ±2 %" over −40…85 °C).
+    "lsm9ds1": ThermalSpec(0.03 * 62.5, 0.02, (-40.0, 85.0),
+                           "LSM9DS1 DocID025715 Table 3 (⚠ single-sourced; sensitivity ⚠ "
+                           "assumed ±2 %)"),
+    # ICM-20948 DS-000189 Table 1, Gyroscope Specifications: "ZRO Variation Over Temperature
+    # −40 °C to +85 °C ±0.05 dps/°C" (two sources agree) and "Sensitivity Scale Factor
+    # Variation Over Temperature −40 °C to +85 °C ±3 %" (⚠ single-sourced).
+    "icm20948": ThermalSpec(0.05 * 62.5, 0.03, (-40.0, 85.0),
+                            "ICM-20948 DS-000189 Table 1 (sensitivity ⚠ single-sourced)"),
+    # ICM-42688-P DS-000347 Table 1, Gyroscope Specifications: "Sensitivity Scale Factor
+    # Variation Over Temperature 0 °C to +70 °C ±0.005 %/°C" and "ZRO Variation vs.
+    # Temperature 0 °C to +70 °C ±0.005 dps/°C" (⚠ single-sourced; one secondary table gives
+    # 0.05 dps/°C instead).
+    "icm42688p": per_degree(0.005, 0.005, (0.0, 70.0),
+                            "ICM-42688-P DS-000347 Table 1 (⚠ single-sourced; ZRO figures "
+                            "disagree: 0.005 vs 0.05 dps/°C)"),
+    # LSM6DSOX (DS12814) Table 2, Mechanical characteristics: "G_OffDr angular rate typical
+    # zero-rate level change vs. temperature ±0.01 dps/°C" (⚠ single-sourced; the LSM6DSO32's
+    # DocID032891 gives the same) and "G_SoDr angular rate sensitivity change vs.
+    # temperature, −40…85 °C" (⚠ not read: the LSM6DSO32's ±0.005 %/°C stands in for it).
+    "lsm6dsox": per_degree(0.01, 0.005, (-40.0, 85.0),
+                           "LSM6DSOX DS12814 Table 2 (⚠ single-sourced; sensitivity ⚠ "
+                           "LSM6DSO32's figure)"),
 }
 for _alias in ("mpu9255", "mpu6500"):
     THERMAL_DATASHEET[_alias] = THERMAL_DATASHEET["mpu9250"]

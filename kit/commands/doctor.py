@@ -93,7 +93,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
     from gyrocal.calib.observations import diff_noise
     from gyrocal.drivers.errors import DriverError
     from gyrocal.drivers.imu import open_imu
-    from gyrocal.kit.commands.calibrate import note_rounded_odr
+    from gyrocal.kit.jig import note_rounded_odr
 
     imu_cfg = cfg["imu"]
     where = "the emulated bus" if args.sim else f"/dev/i2c-{imu_cfg['bus']}"
@@ -216,8 +216,8 @@ def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, 
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from gyrocal.kit.commands.calibrate import jig_endpoints, load_cli_config
     from gyrocal.kit.errors import HardwareError
+    from gyrocal.kit.jig import jig_endpoints, load_cli_config
 
     cfg = load_cli_config(args)
     sim, clock, port, baud, bus = jig_endpoints(cfg, args)

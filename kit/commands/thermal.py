@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
                          f"{args.runs}")
     truth = None
     if jig_mode:
-        from gyrocal.kit.commands.calibrate import _output_dir, load_cli_config
+        from gyrocal.kit.jig import load_cli_config, output_dir
         from gyrocal.kit.thermal import thermal_on_jig
 
         if args.sim and args.sim_temperature is None and args.sim_self_heating is None:
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
             # a thermal run on the emulated jig always has the warming die
             args.sim_self_heating = f"{SELF_HEATING_C:g}:{SELF_HEATING_TAU_S:g}"
         cfg = load_cli_config(args)
-        out, work = _output_dir(args)
+        out, work = output_dir(args)
         cal, runs, truth = thermal_on_jig(cfg, args, out, work, quiet=args.quiet)
     else:
         found = collect_calibrations(args.calibrations)

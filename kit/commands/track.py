@@ -377,7 +377,7 @@ def _turn_plan(args: argparse.Namespace, cfg: Any) -> TurnPlan | None:
 def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any, str]:
     """Hold the jig still, track, release: the servos stop and torque goes off at the end, on
     an error, Ctrl-C or SIGTERM (the gimbal's context), before anything else."""
-    from gyrocal.kit.commands.calibrate import Jig, load_cli_config
+    from gyrocal.kit.jig import Jig, load_cli_config
     from gyrocal.kit.tracking import (
         LIVE_WARMUP_S,
         LiveSource,

@@ -42,9 +42,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the command."""
     from gyrocal.calib.errors import CalibrationFormatError
     from gyrocal.calib.model import GyroCalibration
-    from gyrocal.kit.commands.calibrate import load_cli_config, run_jig
     from gyrocal.kit.errors import InconsistentCalibrationError, InputError
     from gyrocal.kit.fileio import make_output_dir
+    from gyrocal.kit.jig import load_cli_config, run_jig
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.verify import verify_recording
 

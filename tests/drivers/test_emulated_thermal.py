@@ -73,6 +73,29 @@ def test_drawn_coefficients_stay_within_the_mpu9250_datasheet(seed):
         c["bias_temp_coeff_rad_s_per_c"].tolist()  # the seed decides
 
 
+# Per-°C datasheet figures written out here (zero-rate level change, dps/°C; sensitivity change,
+# %/°C): ICM-20948 DS-000189 Table 1 (±0.05 dps/°C; ±3 % over −40…85 °C, i.e. 0.048 %/°C about
+# mid-range), ICM-42688-P DS-000347 Table 1 (±0.005 dps/°C, ±0.005 %/°C), LSM6DSOX DS12814
+# Table 2 (±0.01 dps/°C; sensitivity: the LSM6DSO32's ±0.005 %/°C), LSM9DS1 DocID025715 Table 3
+# (±0.03 dps/°C; sensitivity ±2 % over −40…85 °C, i.e. 0.032 %/°C).
+PER_DEGREE = {"icm20948": (0.05, 3.0 / 62.5), "icm42688p": (0.005, 0.005),
+              "lsm6dsox": (0.01, 0.005), "lsm9ds1": (0.03, 2.0 / 62.5)}
+
+
+@pytest.mark.parametrize("model", sorted(PER_DEGREE))
+@pytest.mark.parametrize("seed", range(10))
+def test_the_other_chips_slopes_stay_within_their_per_degree_figures(model, seed):
+    """Within ±15 °C of 25 °C (a warm-up's range) the drawn bias slope and scale coefficient of
+    each chip stay within its datasheet's per-°C figure."""
+    zro, sens = PER_DEGREE[model]
+    c = draw_thermal_coefficients(seed, model)
+    dt = np.linspace(-15.0, 15.0, 61)[:, None]
+    slope = c["bias_temp_coeff_rad_s_per_c"] + 2 * c["bias_temp_quad_rad_s_per_c2"] * dt
+    assert np.all(np.abs(slope) <= zro * DEG)
+    assert np.all(np.abs(c["scale_temp_coeff_per_c"]) <= sens / 100)
+    assert np.any(np.abs(c["bias_temp_coeff_rad_s_per_c"]) > 0.05 * zro * DEG)  # not zero
+
+
 def test_coefficients_differ_by_seed_and_unknown_models_are_refused():
     a, b = draw_thermal_coefficients(1), draw_thermal_coefficients(2)
     assert not np.allclose(a["bias_temp_coeff_rad_s_per_c"], b["bias_temp_coeff_rad_s_per_c"])

@@ -54,7 +54,7 @@ def test_the_default_run_is_the_full_model_on_a_datasheet_sensor(rec, full_run):
 @pytest.mark.parametrize(("flag", "largest"), [((), 0.02), (("--sim-cross-axis", "0"), 0.0),
                                                (("--sim-cross-axis", "0.01"), 0.01)])
 def test_sim_cross_axis_flag_and_default(flag, largest):
-    from gyrocal.kit.commands.calibrate import jig_endpoints, load_cli_config
+    from gyrocal.kit.jig import jig_endpoints, load_cli_config
     from gyrocal.kit.sim import DATASHEET_CROSS_AXIS
 
     assert DATASHEET_CROSS_AXIS == 0.02  # MPU-9250 PS §3.1: cross-axis sensitivity ±2 %

@@ -98,7 +98,7 @@ def test_single_sensor_flags_are_refused_with_several_sensors(tmp_path, capsys):
     # commands that drive one sensor (verify, thermal, track --live) say so rather than use
     # the first silently: their shared Jig refuses a plate unless asked for several
     from gyrocal.kit.cli import build_parser
-    from gyrocal.kit.commands.calibrate import Jig
+    from gyrocal.kit.jig import Jig
 
     args = build_parser().parse_args(["calibrate", "--sim", "--config", str(cfg)])
     with pytest.raises(InputError, match="this command drives one sensor, and the config lists 3"):

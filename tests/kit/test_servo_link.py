@@ -191,8 +191,8 @@ def test_a_slow_disk_does_not_delay_the_servo_polls(tmp_path, monkeypatch):
         return slow(self, *a, **k)
 
     monkeypatch.setattr(RecordingWriter, "append_encoder", stalled)
-    from gyrocal.kit.commands.calibrate import Jig
     from gyrocal.kit.config import default_config
+    from gyrocal.kit.jig import Jig
     from gyrocal.kit.protocol import Runner, Step
 
     args = build_parser(["calibrate"]).parse_args(["calibrate", "--sim", "--realtime"])

@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-import gyrocal.kit.commands.calibrate as calibrate_cmd
+import gyrocal.kit.jig as jig_lib
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
 from gyrocal.kit.cli import main
@@ -65,7 +65,7 @@ class _Trap:
         self.instances = []
         trap = self
 
-        class TrappedJig(calibrate_cmd.Jig):
+        class TrappedJig(jig_lib.Jig):
             def __init__(self, cfg, args):
                 super().__init__(cfg, args)
                 trap.instances.append(self)
@@ -82,7 +82,7 @@ class _Trap:
                 if after is not None:
                     after(self)
 
-        monkeypatch.setattr(calibrate_cmd, "Jig", TrappedJig)
+        monkeypatch.setattr(jig_lib, "Jig", TrappedJig)
 
     def torque(self):
         (jig,) = self.instances
