@@ -32,6 +32,8 @@ __all__ = ["Outcome", "ServoRig", "write_config"]
 #: Moving, Present Velocity.
 TORQUE_ENABLE, BUS_WATCHDOG, MOVING, PRESENT_VELOCITY = 64, 98, 122, 128
 BAUD = 1_000_000
+#: How long a read-back keeps asking a servo that does not answer, s.
+READ_WITHIN_S = 10.0
 
 
 @dataclass
@@ -49,8 +51,13 @@ class Outcome:
 
     @property
     def torque_left_on(self) -> bool:
-        """A servo reads torque on, or did not answer the read-back."""
-        return any(v != 0 for v in self.torque.values())
+        """A servo answered the read-back with torque on: the kit left it on."""
+        return any(v is not None and v != 0 for v in self.torque.values())
+
+    @property
+    def torque_unknown(self) -> bool:
+        """A servo did not answer the read-back (the emulator, not the kit): torque unknown."""
+        return any(v is None for v in self.torque.values())
 
 
 def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3)) -> Path:
@@ -114,9 +121,14 @@ class ServoRig:
                 pass
         return self._handle(instr, baudrate)
 
-    def read(self, address: int, size: int, tries: int = 5) -> dict[int, int | None]:
-        """One control-table item of every servo, signed, through dynamixel-sdk on the PTY
-        (None: no answer after ``tries``)."""
+    def read(self, address: int, size: int, within_s: float = READ_WITHIN_S
+             ) -> dict[int, int | None]:
+        """One control-table item of every servo, signed, through dynamixel-sdk on the PTY.
+
+        Each servo is asked again until it answers or ``within_s`` has passed (a loaded host
+        can starve the emulated servos past the SDK's ~34 ms status timeout); None: it never
+        answered.
+        """
         port = PortHandler(self.path)
         port.openPort()
         port.setBaudRate(BAUD)
@@ -126,23 +138,38 @@ class ServoRig:
         try:
             for i in self.ids:
                 out[i] = None
-                for _ in range(tries):
+                deadline = time.monotonic() + within_s
+                while True:
                     value, result, error = fn(port, i, address)
                     if result == COMM_SUCCESS:
                         bits = 8 * size  # the SDK returns unsigned values (§6, point 5)
                         out[i] = int(value) - (1 << bits) * (int(value) >> (bits - 1))
                         break
+                    if time.monotonic() >= deadline:
+                        break
                     time.sleep(0.02)
+                    port.clearPort()  # a late answer to the previous try must not be read
         finally:
             port.closePort()
         return out
+
+    def wait_for(self, address: int, size: int, want: dict[int, int],
+                 within_s: float = 20.0) -> dict[int, int | None]:
+        """Read an item until every servo reads ``want`` or ``within_s`` has passed; the last
+        values read (what a test asserts on: an event, not a fixed sleep)."""
+        deadline = time.monotonic() + within_s
+        while True:
+            got = self.read(address, size)
+            if got == want or time.monotonic() >= deadline:
+                return got
+            time.sleep(0.05)
 
     def read_torque(self) -> dict[int, int | None]:
         """Torque Enable (64) of every servo."""
         return self.read(TORQUE_ENABLE, 1)
 
     def run(self, config: Path, out: Path, plan: list[tuple[int, int, float]], *,
-            timeout_s: float = 60.0, extra: tuple[str, ...] = ()) -> Outcome:
+            timeout_s: float = 120.0, extra: tuple[str, ...] = ()) -> Outcome:
         """Run ``gyrocal calibrate --sim-imu`` and send ``plan``'s signals.
 
         Parameters

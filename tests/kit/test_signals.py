@@ -14,7 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 from dynamixel_sdk import PortHandler
@@ -72,9 +71,10 @@ def test_kill_9_mid_turn_the_bus_watchdog_stops_the_servo(rig, config, tmp_path)
     it (hardware reference §5, address 98, 20 ms units)."""
     out = rig.run(config, tmp_path / "run", [(200, signal.SIGKILL, 0.0)])
     assert out.returncode == -signal.SIGKILL
-    time.sleep(0.6)  # the watchdog (100 ms) expires and the servo decelerates
+    # the watchdog (0.3 s) expires and the servo decelerates: wait for that event, bounded
+    stopped = rig.wait_for(PRESENT_VELOCITY, 4, {i: 0 for i in rig.ids}, within_s=20.0)
+    assert stopped == {i: 0 for i in rig.ids}
     assert -1 in rig.read(BUS_WATCHDOG, 1).values()  # it tripped: the host went silent
-    assert rig.read(PRESENT_VELOCITY, 4) == {i: 0 for i in rig.ids}
 
 
 def test_a_second_process_on_the_bus_is_refused_naming_the_first(rig, tmp_path):
