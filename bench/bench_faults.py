@@ -58,8 +58,14 @@ def signal_matrix(quick: bool, bad: list[list[str]] | None = None) -> Counter:
             plan = [(k, sig, 0.0)] + ([(k + 1, second, 0.0)] if second else [])
             o = rig.run(cfg, tmp / f"run{n}", plan)
             tally["cases"] += 1
+            name = (f"{signal.Signals(sig).name}@{k}"
+                    + (f"+{signal.Signals(second).name}" if second else ""))
+            last = (o.stderr.strip().splitlines()[-1:] or [""])[0][:90]
             if not o.fired:  # the run ended before packet K: finished, or failed on its own
                 tally[f"ended before the signal, exit {o.returncode}"] += 1
+                if o.returncode != 0:
+                    bad.append([name, str(o.returncode), str(o.torque), "before the signal",
+                                last])
                 continue
             tally["aborts"] += 1
             flags = {"torque left on": o.torque_left_on,
@@ -72,11 +78,8 @@ def signal_matrix(quick: bool, bad: list[list[str]] | None = None) -> Counter:
             if o.returncode not in (None, 128 + sig):
                 tally[f"other exit: {o.returncode}"] += 1
             if any(flags.values()) or o.returncode not in (None, 128 + sig):
-                last = o.stderr.strip().splitlines()[-1:] or [""]
-                bad.append([f"{signal.Signals(sig).name}@{k}"
-                            + (f"+{signal.Signals(second).name}" if second else ""),
-                            str(o.returncode), str(o.torque),
-                            ", ".join(f for f, hit in flags.items() if hit), last[0][:90]])
+                bad.append([name, str(o.returncode), str(o.torque),
+                            ", ".join(f for f, hit in flags.items() if hit), last])
     finally:
         rig.close()
     return tally
@@ -177,3 +180,4 @@ def main(argv: list[str]) -> None:
     print_table(["other outcomes", "count"], [[k, s[k]] for k in other])
     if bad:
         print_table(["case", "exit", "torque read back", "flags", "last line of stderr"], bad)
+        # A run that failed on its own before its moment also ends with its servos read back.
