@@ -180,4 +180,3 @@ def main(argv: list[str]) -> None:
     print_table(["other outcomes", "count"], [[k, s[k]] for k in other])
     if bad:
         print_table(["case", "exit", "torque read back", "flags", "last line of stderr"], bad)
-        # A run that failed on its own before its moment also ends with its servos read back.
