@@ -63,7 +63,8 @@ def signal_matrix(quick: bool, bad: list[list[str]] | None = None) -> Counter:
             last = (o.stderr.strip().splitlines()[-1:] or [""])[0][:90]
             if not o.fired:  # the run ended before packet K: finished, or failed on its own
                 tally[f"ended before the signal, exit {o.returncode}"] += 1
-                if o.returncode != 0:
+                if o.returncode != 0:  # a failure must leave torque off as well
+                    tally["failed on its own, torque left on"] += o.torque_left_on
                     bad.append([name, str(o.returncode), str(o.torque), "before the signal",
                                 last])
                 continue
@@ -176,7 +177,7 @@ def main(argv: list[str]) -> None:
     keys = ["cases", "aborts", "torque left on", "servo did not answer", "no message",
             "traceback", "hang"]
     print_table(keys + ["s"], [[s[k] for k in keys] + [f"{time.perf_counter() - t:.0f}"]])
-    other = sorted(k for k in s if k.startswith(("ended before", "other exit")))
+    other = sorted(k for k in s if k.startswith(("ended before", "other exit", "failed on")))
     print_table(["other outcomes", "count"], [[k, s[k]] for k in other])
     if bad:
         print_table(["case", "exit", "torque read back", "flags", "last line of stderr"], bad)
