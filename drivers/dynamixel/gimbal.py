@@ -36,6 +36,7 @@ is reported as an error, never as a zero reading.
 from __future__ import annotations
 
 import math
+import signal
 import struct
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -1398,7 +1399,11 @@ class Gimbal:
 def _shutdown_after(cause: BaseException, shutdown: ShutdownError) -> ShutdownError:
     """The error for a failed safe stop on the way out of ``cause``: the cause first, in words
     (the user acts on it), then that torque off could not be confirmed."""
-    what = str(cause).strip() or type(cause).__name__
+    if isinstance(cause, (KeyboardInterrupt, signals.TerminatedBySignal)):
+        signum = getattr(cause, "signum", 2)
+        what = f"Stopping on {signal.Signals(signum).name}"
+    else:
+        what = str(cause).strip() or type(cause).__name__
     if not what.endswith("."):
         what += "."
     return ShutdownError(f"{what} The safe stop then {shutdown}")

@@ -326,6 +326,20 @@ def test_a_stop_that_cannot_confirm_gives_up_within_its_bound_and_says_what_to_d
     assert not bus.servo(1).torque_enabled() and not bus.servo(2).torque_enabled()
 
 
+@pytest.mark.parametrize(("cause", "name"), [(KeyboardInterrupt(), "SIGINT"),
+                                             (TerminatedBySignal(signal.SIGTERM), "SIGTERM")])
+def test_a_signal_whose_stop_cannot_confirm_says_so_instead_of_claiming_torque_off(cause, name):
+    clock, port, bus, _ = emulated(seed=10)
+    with pytest.raises(ShutdownError) as info:
+        with Gimbal(port, clock=clock, retries=1):
+            bus.servo(2).go_silent(deaf=True)
+            raise cause
+    assert str(info.value).startswith(
+        f"Stopping on {name}. The safe stop then could not confirm torque off on servo(s) 2:")
+    assert isinstance(info.value.__cause__, type(cause))
+    assert bus.servo(2).torque_enabled() and not bus.servo(1).torque_enabled()
+
+
 def test_a_hardware_alert_is_raised_by_name_and_everything_stops():
     clock, port, bus, _ = emulated(seed=7)
     with pytest.raises(OverloadError) as info:
