@@ -60,14 +60,22 @@ class Outcome:
         return any(v is None for v in self.torque.values())
 
 
-def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3)) -> Path:
-    """A ``gyrocal.toml`` for a short protocol on the PTY servos."""
+def write_config(path: Path, port: str, ids: tuple[int, ...] = (1, 2, 3), *,
+                 retries: int | None = None, watchdog_s: float | None = None) -> Path:
+    """A ``gyrocal.toml`` for a short protocol on the PTY servos.
+
+    ``retries`` and ``watchdog_s`` (``gimbal.*``; default: the kit's defaults) let a test on a
+    loaded host absorb the emulated servos' lateness, which a real servo's own MCU does not
+    have, without changing what the test checks of the kit.
+    """
     axes = ["x", "y", "z"][: len(ids)]
+    knobs = "".join(f"{k} = {v}\n" for k, v in (("retries", retries),
+                                                  ("watchdog_s", watchdog_s)) if v is not None)
     path.write_text(
         "[gimbal]\n"
         f'port = "{port}"\nbaud = {BAUD}\nids = {list(ids)}\n'
         f"axes = {axes!r}\n".replace("'", '"')
-        + "sample_hz = 100.0\n"
+        + knobs + "sample_hz = 100.0\n"
         '[protocol]\nname = "auto"\nspeed_dps = 180\nturns = 1\nrest_s = 0.3\n',  # no poses
         encoding="utf-8")
     return path

@@ -242,7 +242,7 @@ class Jig:
         note_rounded_odr(imu["odr_hz"], self.imu.info)
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
                              max_turns=g["max_turns"], acceleration=g["acceleration"],
-                             watchdog_s=g["watchdog_s"])
+                             watchdog_s=g["watchdog_s"], retries=g["retries"])
 
     def arm_faults(self) -> list[str]:
         """Arm the ``--sim-fault`` knobs with their times counted from now (the recording's

@@ -31,9 +31,18 @@ def rig():
     r.close()
 
 
+#: On a host loaded far beyond its cores the emulated servos (a thread of this process) can
+#: answer later than dynamixel-sdk's ~34 ms status timeout, and the kit's polls can be later than
+#: the default 0.3 s Bus Watchdog: either ended a run with exit 4 before its signal. Real servos
+#: answer from their own MCU. More resends and the longest watchdog take the emulator's
+#: lateness out of the verdict; what is checked of the kit (exit code, torque read back,
+#: message, recording) is unchanged, and kill -9 still needs the watchdog to trip.
+LOADED_HOST = {"retries": 30, "watchdog_s": 2.5}
+
+
 @pytest.fixture
 def config(rig, tmp_path):
-    return write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids)
+    return write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids, **LOADED_HOST)
 
 
 # (first signal, packet it lands on, second signal one packet later or None)
