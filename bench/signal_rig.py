@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -161,14 +162,19 @@ class ServoRig:
             port.closePort()
         return out
 
-    def wait_for(self, address: int, size: int, want: dict[int, int],
-                 within_s: float = 20.0) -> dict[int, int | None]:
-        """Read an item until every servo reads ``want`` or ``within_s`` has passed; the last
-        values read (what a test asserts on: an event, not a fixed sleep)."""
+    def wait_for(self, name: str, done: Callable[[dict[int, int]], bool],
+                 within_s: float = 20.0) -> dict[int, int]:
+        """Watch one item of every servo in the emulator itself until ``done(values)`` or
+        ``within_s`` has passed; the last values (a test waits on the event, not a fixed sleep).
+
+        No packet is sent: a read through the bus would restart the Bus Watchdog it waits on.
+        The emulator applies a timed event (the watchdog's expiry) at its own deadline,
+        whenever it is looked at.
+        """
         deadline = time.monotonic() + within_s
         while True:
-            got = self.read(address, size)
-            if got == want or time.monotonic() >= deadline:
+            got = {i: self.bus.servo(i).register(name) for i in self.ids}
+            if done(got) or time.monotonic() >= deadline:
                 return got
             time.sleep(0.05)
 
