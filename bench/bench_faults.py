@@ -12,11 +12,14 @@ calibrations 0.
 * damaged configs: ``load_config`` on a damaged ``gyrocal init`` template.
 * damaged calibrations: ``gyrocal export --format json|yaml`` on a damaged Calibration document.
 
-Usage: ``python -m bench faults [--quick]`` (``--quick``: 12 signal cases, 40 inputs each).
+Usage: ``python -m bench faults [--quick] [--signals] [--hogs=N]`` (``--quick``: 12 signal
+cases, 40 inputs each; ``--signals``: the signal cases only; ``--hogs=N``: N CPU-bound processes
+run beside the signal cases, the loaded host on which aborts once left torque on).
 """
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import signal
 import tempfile
@@ -26,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.bench_servo_link import _burn
 from bench.fuzz_inputs import copy_tree, damage, run_command
 from bench.signal_rig import SIGNALS, ServoRig, write_config
 from bench.table import print_table
@@ -33,9 +37,15 @@ from bench.table import print_table
 MOMENTS = (1, 2, 3, 5, 8, 12, 16, 20, 25, 30, 40, 55, 80, 120, 200, 350, 600, 900, 1200)
 
 
-def signal_matrix(quick: bool) -> Counter:
-    """Tally of the signal cases."""
+def signal_matrix(quick: bool, bad: list[list[str]] | None = None) -> Counter:
+    """Tally of the signal cases; the cases that did not end cleanly are appended to ``bad``.
+
+    A servo that reads torque on after the run counts as "torque left on" (the kit's fault); a
+    servo that did not answer the read-back at all counts as "servo did not answer" (the
+    emulated servo, starved of CPU, not the kit: it is not evidence either way).
+    """
     tally: Counter = Counter()
+    bad = [] if bad is None else bad
     rig = ServoRig(ids=(1, 2, 3))
     tmp = Path(tempfile.mkdtemp(prefix="gyrocal-faults-"))
     cfg = write_config(tmp / "gyrocal.toml", rig.path, ids=rig.ids)
@@ -48,16 +58,29 @@ def signal_matrix(quick: bool) -> Counter:
             plan = [(k, sig, 0.0)] + ([(k + 1, second, 0.0)] if second else [])
             o = rig.run(cfg, tmp / f"run{n}", plan)
             tally["cases"] += 1
+            name = (f"{signal.Signals(sig).name}@{k}"
+                    + (f"+{signal.Signals(second).name}" if second else ""))
+            last = (o.stderr.strip().splitlines()[-1:] or [""])[0][:90]
             if not o.fired:  # the run ended before packet K: finished, or failed on its own
                 tally[f"ended before the signal, exit {o.returncode}"] += 1
+                if o.returncode != 0:  # a failure must leave torque off as well
+                    tally["failed on its own, torque left on"] += o.torque_left_on
+                    bad.append([name, str(o.returncode), str(o.torque), "before the signal",
+                                last])
                 continue
             tally["aborts"] += 1
-            tally["torque left on"] += o.torque_left_on
-            tally["hang"] += o.returncode is None
-            tally["traceback"] += "Traceback" in o.stderr
+            flags = {"torque left on": o.torque_left_on,
+                     "servo did not answer": o.torque_unknown,
+                     "hang": o.returncode is None,
+                     "traceback": "Traceback" in o.stderr,
+                     "no message": "servos stopped, torque off" not in o.stderr}
+            for key, hit in flags.items():
+                tally[key] += hit
             if o.returncode not in (None, 128 + sig):
                 tally[f"other exit: {o.returncode}"] += 1
-            tally["no message"] += "servos stopped, torque off" not in o.stderr
+            if any(flags.values()) or o.returncode not in (None, 128 + sig):
+                bad.append([name, str(o.returncode), str(o.torque),
+                            ", ".join(f for f, hit in flags.items() if hit), last])
     finally:
         rig.close()
     return tally
@@ -119,25 +142,42 @@ def calibration_matrix(n: int, tmp: Path) -> Counter:
 
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
+    hogs = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--hogs=")), 0)
     n = 40 if quick else 200
     tmp = Path(tempfile.mkdtemp(prefix="gyrocal-fuzz-"))
     rows = []
-    for name, fn in (("damaged recordings (estimate)", lambda: recording_matrix(n, tmp)),
-                     ("damaged configs (load_config)", lambda: config_matrix(2 * n, tmp)),
-                     ("damaged calibrations (export)", lambda: calibration_matrix(n, tmp))):
+    inputs = (("damaged recordings (estimate)", lambda: recording_matrix(n, tmp)),
+              ("damaged configs (load_config)", lambda: config_matrix(2 * n, tmp)),
+              ("damaged calibrations (export)", lambda: calibration_matrix(n, tmp)))
+    for name, fn in inputs if "--signals" not in argv else ():
         t = time.perf_counter()
         c = fn()
         rows.append([name, sum(c.values()), c["ok"] + c["finished"], c["refused"],
                      c["silent-wrong"], c["traceback"], c["hang"],
                      f"{time.perf_counter() - t:.0f}"])
-    print_table(["inputs", "runs", "ok", "refused", "silent wrong", "traceback", "hang", "s"],
-                rows)
+    if rows:
+        print_table(["inputs", "runs", "ok", "refused", "silent wrong", "traceback", "hang",
+                     "s"], rows)
     t = time.perf_counter()
+    stop = mp.Event()
+    procs = [mp.Process(target=_burn, args=(stop, os.getpriority(os.PRIO_PROCESS, 0)),
+                        daemon=True) for _ in range(hogs)]
+    for p in procs:
+        p.start()
     load = os.getloadavg()[0]
-    s = signal_matrix(quick)
-    print(f"\nsignals: host load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at "
-          f"the end ({os.cpu_count()} CPUs)")
-    keys = ["cases", "aborts", "torque left on", "no message", "traceback", "hang"]
+    bad: list[list[str]] = []
+    try:
+        s = signal_matrix(quick, bad)
+    finally:
+        stop.set()
+        for p in procs:
+            p.join(timeout=5)
+    print(f"\nsignals ({hogs} CPU hogs beside): host load average {load:.1f} at the start, "
+          f"{os.getloadavg()[0]:.1f} at the end ({os.cpu_count()} CPUs)")
+    keys = ["cases", "aborts", "torque left on", "servo did not answer", "no message",
+            "traceback", "hang"]
     print_table(keys + ["s"], [[s[k] for k in keys] + [f"{time.perf_counter() - t:.0f}"]])
-    other = sorted(k for k in s if k.startswith(("ended before", "other exit")))
+    other = sorted(k for k in s if k.startswith(("ended before", "other exit", "failed on")))
     print_table(["other outcomes", "count"], [[k, s[k]] for k in other])
+    if bad:
+        print_table(["case", "exit", "torque read back", "flags", "last line of stderr"], bad)

@@ -127,6 +127,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "watchdog_s": Key(0.3, "Bus Watchdog armed while a servo moves: a servo that gets no "
                           "packet this long stops by itself, s (0.02..2.54, 20 ms steps)",
                           (int, float), check=_within(0.02, 2.54)),
+        "retries": Key(3, "resends of a servo transaction whose status packet was lost or late "
+                       "before it is an error (0..50)", int, check=_within(0, 50)),
     },
     "imu": {
         "model": Key("mpu9250", "sensor chip", str, IMU_MODELS),

@@ -167,7 +167,7 @@ class Jig:
         self.imu = self.imus[0]
         self.gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=self.clock,
                              max_turns=g["max_turns"], acceleration=g["acceleration"],
-                             watchdog_s=g["watchdog_s"])
+                             watchdog_s=g["watchdog_s"], retries=g["retries"])
 
     def _fault_target(self, spec: str) -> tuple[str, int]:
         """``KIND:ARGS[@SENSOR]`` as ``(KIND:ARGS, sensor index)`` (the first sensor without

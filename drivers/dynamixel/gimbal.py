@@ -36,6 +36,7 @@ is reported as an error, never as a zero reading.
 from __future__ import annotations
 
 import math
+import signal
 import struct
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -100,6 +101,13 @@ SAMPLE_LAYOUTS: dict[str, tuple[int, int]] = {"motion": (120, _MOTION_STRUCT.siz
 #: How long a cut-short transaction's status packet may still take to arrive, s: the longest
 #: Return Delay Time (254 × 2 µs) plus a 30-byte status packet at 57600 baud (5.2 ms), rounded up.
 STALE_REPLY_WAIT_S = 0.01
+#: How long :meth:`Gimbal.stop` keeps trying to confirm torque off (whole rounds of sync write,
+#: write and read-back per unconfirmed servo, each transaction with its own retries) before it
+#: gives up and says so: long enough to ride out a host stalled for a second or a burst of
+#: noise on the bus, short enough that a user waiting at Ctrl-C is told promptly.
+STOP_CONFIRM_S = 2.0
+#: Pause between two rounds of the stop (lets a starved bus or servo catch up).
+STOP_RETRY_PAUSE_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -1157,29 +1165,46 @@ class Gimbal:
     def _stop(self) -> None:
         self.port.is_using = False
         self.motion = None
-        self._discard_stale_replies()
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
-        for name in ("Goal Velocity", "Torque Enable"):
-            try:
-                self._sync_write(name, 0, known)
-            except CommunicationError:
-                pass
-        unconfirmed = []
-        for i in known:
-            try:
-                self._write_item(i, "Torque Enable", 0, allow_alert=True)
-                if self._read_item(i, "Torque Enable", allow_alert=True) != 0:
-                    unconfirmed.append((i, "it still reads torque on"))
-                    continue
-                self._write_item(i, "Bus Watchdog", 0, allow_alert=True)
-            except (CommunicationError, ServoStatusError) as exc:
-                unconfirmed.append((i, str(exc)))
+        unconfirmed: dict[int, str] = dict.fromkeys(known, "")
+        deadline = self.clock.monotonic() + STOP_CONFIRM_S
+        rounds = 0
+        while unconfirmed:
+            rounds += 1
+            self._discard_stale_replies()
+            for name in ("Goal Velocity", "Torque Enable"):
+                try:
+                    self._sync_write(name, 0, list(unconfirmed))
+                except CommunicationError:
+                    pass
+            for i in list(unconfirmed):
+                why = self._torque_off_confirmed(i)
+                if why is None:
+                    del unconfirmed[i]
+                else:
+                    unconfirmed[i] = why
+            if not unconfirmed or self.clock.monotonic() >= deadline:
+                break
+            self.clock.sleep(STOP_RETRY_PAUSE_S)
         if unconfirmed:
-            ids = ", ".join(str(i) for i, _ in unconfirmed)
-            why = "; ".join(f"servo {i}: {w.rstrip('. ')}" for i, w in unconfirmed)
+            ids = ", ".join(str(i) for i in unconfirmed)
+            why = "; ".join(f"servo {i}: {w.rstrip('. ')}" for i, w in unconfirmed.items())
             raise ShutdownError(
-                f"could not confirm torque off on servo(s) {ids}: {why}. Switch the servo "
-                "power off before touching the gimbal.")
+                f"could not confirm torque off on servo(s) {ids}: {why} (tried {rounds} "
+                f"time(s) within {STOP_CONFIRM_S:g} s). Switch the servo power off before "
+                "touching the gimbal, then check its cable and power.")
+
+    def _torque_off_confirmed(self, dxl_id: int) -> str | None:
+        """Torque Enable 0 written to one servo and read back as 0 (then its Bus Watchdog
+        cleared, e-Manual §2.4.36): None if confirmed, else why not."""
+        try:
+            self._write_item(dxl_id, "Torque Enable", 0, allow_alert=True)
+            if self._read_item(dxl_id, "Torque Enable", allow_alert=True) != 0:
+                return "it still reads torque on"
+            self._write_item(dxl_id, "Bus Watchdog", 0, allow_alert=True)
+        except (CommunicationError, ServoStatusError) as exc:
+            return str(exc)
+        return None
 
     def _safe_stop_quietly(self, error: BaseException) -> None:
         """Best-effort :meth:`stop` on the way out with ``error``: a failure of the stop must not
@@ -1374,7 +1399,11 @@ class Gimbal:
 def _shutdown_after(cause: BaseException, shutdown: ShutdownError) -> ShutdownError:
     """The error for a failed safe stop on the way out of ``cause``: the cause first, in words
     (the user acts on it), then that torque off could not be confirmed."""
-    what = str(cause).strip() or type(cause).__name__
+    if isinstance(cause, (KeyboardInterrupt, signals.TerminatedBySignal)):
+        signum = getattr(cause, "signum", 2)
+        what = f"Stopping on {signal.Signals(signum).name}"
+    else:
+        what = str(cause).strip() or type(cause).__name__
     if not what.endswith("."):
         what += "."
     return ShutdownError(f"{what} The safe stop then {shutdown}")

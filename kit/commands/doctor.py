@@ -184,7 +184,8 @@ def _check_servos(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, 
         rep.warn(f"{baud} baud limits the position sampling rate (about 55-80 sync reads/s at "
                  "57600 for three servos)",
                  "set the servos to 1 Mbps (Dynamixel Wizard) and gimbal.baud = 1000000")
-    gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=clock, handle_signals=True)
+    gimbal = Gimbal(port, g["ids"], baudrate=baud, clock=clock, handle_signals=True,
+                    retries=g["retries"])
     try:
         with gimbal:
             for note in gimbal.notices:

@@ -290,6 +290,56 @@ def test_a_servo_that_stops_answering_mid_turn():
     assert all_torque_off(bus)
 
 
+def test_the_stop_retries_until_a_lost_torque_off_is_confirmed():
+    """A servo that misses the stop's first write and read-back (a starved host, a noise
+    burst: more lost replies than one transaction's retries) is asked again, and the stop
+    confirms torque off by reading it back instead of giving up."""
+    clock, port, bus, _ = emulated(seed=8)
+    with Gimbal(port, clock=clock, retries=1) as g:
+        g.begin_turn(2, 2, 1.0)
+        for _ in range(20):
+            g.poll()
+            clock.sleep(0.005)
+        bus.servo(2).drop_replies(5)  # 2 attempts per transaction: the first round fails
+        g.stop()  # no ShutdownError: the next round confirms
+        assert bus.servo(2).replies_dropped == 5
+        assert all_torque_off(bus)
+        assert all(s.register("Bus Watchdog") == 0 for s in bus.servos)
+
+
+def test_a_stop_that_cannot_confirm_gives_up_within_its_bound_and_says_what_to_do():
+    from gyrocal.drivers.dynamixel.gimbal import STOP_CONFIRM_S
+
+    clock, port, bus, _ = emulated(seed=9)
+    g = Gimbal(port, clock=clock, retries=1)
+    g.open()
+    bus.servo(3).go_silent(deaf=True)  # a cut cable: it neither hears nor answers
+    t0 = clock.monotonic()
+    with pytest.raises(ShutdownError) as info:
+        g.close()
+    spent = clock.monotonic() - t0
+    assert STOP_CONFIRM_S <= spent < STOP_CONFIRM_S + 1.0  # bounded, and not given up at once
+    text = str(info.value)
+    assert "could not confirm torque off on servo(s) 3:" in text
+    assert "Switch the servo power off" in text and "time(s) within" in text
+    assert bus.servo(3).torque_enabled()  # the truth: it is on, and the error says so
+    assert not bus.servo(1).torque_enabled() and not bus.servo(2).torque_enabled()
+
+
+@pytest.mark.parametrize(("cause", "name"), [(KeyboardInterrupt(), "SIGINT"),
+                                             (TerminatedBySignal(signal.SIGTERM), "SIGTERM")])
+def test_a_signal_whose_stop_cannot_confirm_says_so_instead_of_claiming_torque_off(cause, name):
+    clock, port, bus, _ = emulated(seed=10)
+    with pytest.raises(ShutdownError) as info:
+        with Gimbal(port, clock=clock, retries=1):
+            bus.servo(2).go_silent(deaf=True)
+            raise cause
+    assert str(info.value).startswith(
+        f"Stopping on {name}. The safe stop then could not confirm torque off on servo(s) 2:")
+    assert isinstance(info.value.__cause__, type(cause))
+    assert bus.servo(2).torque_enabled() and not bus.servo(1).torque_enabled()
+
+
 def test_a_hardware_alert_is_raised_by_name_and_everything_stops():
     clock, port, bus, _ = emulated(seed=7)
     with pytest.raises(OverloadError) as info:

@@ -14,7 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 from dynamixel_sdk import PortHandler
@@ -32,9 +31,18 @@ def rig():
     r.close()
 
 
+#: On a host loaded far beyond its cores the emulated servos (a thread of this process) can
+#: answer later than dynamixel-sdk's ~34 ms status timeout, and the kit's polls can be later than
+#: the default 0.3 s Bus Watchdog: either ended a run with exit 4 before its signal. Real servos
+#: answer from their own MCU. More resends and the longest watchdog take the emulator's
+#: lateness out of the verdict; what is checked of the kit (exit code, torque read back,
+#: message, recording) is unchanged, and kill -9 still needs the watchdog to trip.
+LOADED_HOST = {"retries": 30, "watchdog_s": 2.5}
+
+
 @pytest.fixture
 def config(rig, tmp_path):
-    return write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids)
+    return write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids, **LOADED_HOST)
 
 
 # (first signal, packet it lands on, second signal one packet later or None)
@@ -72,9 +80,13 @@ def test_kill_9_mid_turn_the_bus_watchdog_stops_the_servo(rig, config, tmp_path)
     it (hardware reference §5, address 98, 20 ms units)."""
     out = rig.run(config, tmp_path / "run", [(200, signal.SIGKILL, 0.0)])
     assert out.returncode == -signal.SIGKILL
-    time.sleep(0.6)  # the watchdog (100 ms) expires and the servo decelerates
-    assert -1 in rig.read(BUS_WATCHDOG, 1).values()  # it tripped: the host went silent
-    assert rig.read(PRESENT_VELOCITY, 4) == {i: 0 for i in rig.ids}
+    # wait, bounded, for the event without sending a packet (one would restart the watchdog):
+    # the armed watchdog expires (-1: it tripped, the host went silent)
+    rig.wait_for("Bus Watchdog", lambda v: -1 in v.values(), within_s=20.0)
+    assert -1 in rig.read(BUS_WATCHDOG, 1).values()  # read back through dynamixel-sdk
+    zero = {i: 0 for i in rig.ids}  # and the servo decelerates to a stop
+    rig.wait_for("Present Velocity", lambda v: v == zero, within_s=20.0)
+    assert rig.read(PRESENT_VELOCITY, 4) == zero
 
 
 def test_a_second_process_on_the_bus_is_refused_naming_the_first(rig, tmp_path):

@@ -48,6 +48,25 @@ def line_baudrate(fd: int) -> int | None:
         return None
 
 
+#: Nice levels the serving thread takes above its process when it may (Linux, privileged). A
+#: real servo answers from its own MCU, which host load cannot starve; the emulated one answers
+#: from a thread of a process on the host, and under a load of 10 on 2 cores it can miss the
+#: client's status timeout (dynamixel-sdk: 2 × 16 ms latency timer + 2 ms + the packet),
+#: which would be counted against the client.
+SERVE_PRIORITY_BOOST = 10
+
+
+def _raise_thread_priority(levels: int) -> bool:
+    """Lower the calling thread's niceness by ``levels`` (Linux: a thread's own nice value,
+    setpriority(2) on its thread ID); False if not permitted or not supported."""
+    try:
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) - levels)
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
 class PtyServoBridge:
     """Serve a :class:`ServoBus` on a pseudo-terminal.
 
@@ -85,6 +104,10 @@ class PtyServoBridge:
         self.path: str | None = None
         #: The exception that stopped the serving thread, if any.
         self.error: Exception | None = None
+        #: Whether the serving thread runs :data:`SERVE_PRIORITY_BOOST` nice levels above the
+        #: process (needs the privilege to lower niceness; without it the servos share the
+        #: host's lot and may answer a starved client late).
+        self.boosted = False
 
     def start(self) -> str:
         """Open the pseudo-terminal, start serving, and return the device path."""
@@ -125,6 +148,7 @@ class PtyServoBridge:
         self.stop()
 
     def _serve(self) -> None:
+        self.boosted = _raise_thread_priority(SERVE_PRIORITY_BOOST)
         master, wake = self._master, self._wake_r
         try:
             while not self._stop.is_set():
