@@ -59,6 +59,16 @@ def full_run(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def paper_full_run(tmp_path_factory):
+    """``(directory, exit code)`` of ``gyrocal calibrate --sim`` with the full protocol on the
+    paper's sensor (cross-axis terms, no realism effects): for what compares with a truth that
+    has no g-sensitivity or coloured noise in it (the tracker's bias)."""
+    return _once(tmp_path_factory, "calibrate-paper", lambda d: main(
+        ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), *PAPER_REALISM, "--out", str(d),
+         "--quiet", "--no-report"]))
+
+
+@pytest.fixture(scope="session")
 def verify_run(tmp_path_factory, full_run):
     """``(directory, exit code)`` of ``gyrocal verify`` of ``full_run``'s calibration on the same
     emulated sensor (fresh noise), its protocol the planner's diagonal one in 18 s."""

@@ -123,7 +123,7 @@ def test_verify_falls_back_to_the_nominal_axes(runs, tmp_path, capsys):
 
 # ------------------------------------------------------------------ runtime checks and faults
 def test_a_servo_that_does_not_reach_its_speed_stops_the_run(tmp_path, capsys):
-    assert calibrate(tmp_path, "--sim-fault", "stall:2:11:0.9") == 5
+    assert calibrate(tmp_path, "--sim-fault", "stall:2:7.5:0.9") == 5
     err = capsys.readouterr().err
     assert "servo 2 held only" in err and "lower the speed" in err and "failed twice" in err
     assert all(s["torque_enable"] == 0 for s in sim_state(tmp_path).values())

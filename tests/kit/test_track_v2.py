@@ -9,9 +9,9 @@ import numpy as np
 from gyrocal.kit.cli import main
 
 
-def test_track_replays_a_posed_v2_recording_against_the_emulated_truth(full_run, tmp_path,
+def test_track_replays_a_posed_v2_recording_against_the_emulated_truth(paper_full_run, tmp_path,
                                                                         capsys):
-    d, code = full_run
+    d, code = paper_full_run
     assert code == 0
     rec, cal = d / "recording", d / "calibration.json"
     assert json.loads(cal.read_text())["kinematics"]["chain"]
