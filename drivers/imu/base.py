@@ -22,7 +22,7 @@ import math
 import os
 import warnings
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
@@ -49,6 +49,8 @@ __all__ = [
     "ImuBatch",
     "ImuReader",
     "SensorInfo",
+    "divided_rate",
+    "filter_band",
     "open_bus",
 ]
 
@@ -72,6 +74,52 @@ NACK_ERRNOS = frozenset({errno_mod.EREMOTEIO, errno_mod.ENXIO})
 NO_RDWR_ERRNOS = frozenset({errno_mod.EOPNOTSUPP, errno_mod.ENOTTY, errno_mod.ENOSYS})
 
 _T = TypeVar("_T")
+
+
+def divided_rate(chip: str, base_hz: float, odr_hz: float, divider: str,
+                 examples: tuple[int, ...]) -> tuple[float, int]:
+    """The output data rate ``base_hz / (1 + div)`` nearest ``odr_hz`` and its divider
+    ``div`` in 0..255 (MPU-9250 register map §4.4 SMPLRT_DIV; ICM-20948 GYRO_SMPLRT_DIV).
+
+    Raises
+    ------
+    ConfigurationError
+        If that rate is more than :data:`ODR_RELATIVE_TOLERANCE` from ``odr_hz`` (the message
+        lists rates the chip can do, from the dividers ``examples``).
+    """
+    div = round(base_hz / odr_hz - 1.0) if odr_hz > 0 else -1
+    div = min(max(div, 0), 255)
+    actual = base_hz / (1 + div)
+    if not (odr_hz > 0 and abs(actual - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
+        listed = ", ".join(f"{base_hz / (1 + d):.4g}" for d in examples)
+        raise ConfigurationError(
+            f"odr_hz={odr_hz!r} is not an {chip} output data rate. With the gyro low-pass "
+            f"filter on, the rate is {base_hz:g}/(1 + {divider}) Hz for {divider} 0..255, "
+            f"that is {listed}, ... down to {base_hz / 256:.4g} Hz."
+        )
+    return actual, div
+
+
+def filter_band(chip: str, bands: Iterable[float], lowpass_hz: float | None,
+                odr_hz: float) -> float:
+    """The gyro low-pass bandwidth, Hz: ``lowpass_hz`` when it is one of ``bands`` (to 0.5 Hz),
+    else by default the widest below half ``odr_hz`` (the narrowest if none is).
+
+    Raises
+    ------
+    ConfigurationError
+        If ``lowpass_hz`` is given and is not one of ``bands`` (the message lists them).
+    """
+    ordered = sorted(bands, reverse=True)
+    if lowpass_hz is None:
+        return next((b for b in ordered if b <= odr_hz / 2), ordered[-1])
+    lp = next((b for b in ordered if abs(b - float(lowpass_hz)) <= 0.5), None)
+    if lp is None:
+        raise ConfigurationError(
+            f"lowpass_hz={lowpass_hz!r} is not an {chip} gyro filter bandwidth; choose one of "
+            + ", ".join(f"{b:g}" for b in ordered) + " Hz"
+        )
+    return lp
 
 
 class ChipNotice(UserWarning):

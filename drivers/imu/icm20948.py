@@ -29,8 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
+from gyrocal.drivers.imu.base import BLOCK_MAX, ImuReader, divided_rate, filter_band
 from gyrocal.drivers.imu.chips import (
     ICM20948,
     ICM20948_BITS,
@@ -80,27 +79,9 @@ class ICM20948Reader(ImuReader):
             return super()._identify()
 
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
-        base = ICM20948.extra["internal_rate_hz"]
-        div = round(base / odr_hz - 1.0) if odr_hz > 0 else -1
-        div = min(max(div, 0), 255)
-        actual = base / (1 + div)
-        if not (odr_hz > 0 and abs(actual - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
-            examples = ", ".join(f"{base / (1 + d):.4g}" for d in (0, 1, 2, 4, 9, 24, 99))
-            raise ConfigurationError(
-                f"odr_hz={odr_hz!r} is not an ICM-20948 output data rate. With the gyro low-pass "
-                f"filter on, the rate is {base:g}/(1 + GYRO_SMPLRT_DIV) Hz for GYRO_SMPLRT_DIV "
-                f"0..255, that is {examples}, ... down to {base / 256:.4g} Hz."
-            )
-        bands = sorted(ICM20948_DLPF, reverse=True)
-        if lowpass_hz is None:
-            lp = next((b for b in bands if b <= actual / 2), bands[-1])
-        else:
-            lp = next((b for b in bands if abs(b - float(lowpass_hz)) <= 0.5), None)
-            if lp is None:
-                raise ConfigurationError(
-                    f"lowpass_hz={lowpass_hz!r} is not an ICM-20948 gyro filter bandwidth; "
-                    "choose one of " + ", ".join(f"{b:g}" for b in bands) + " Hz"
-                )
+        actual, div = divided_rate("ICM-20948", ICM20948.extra["internal_rate_hz"], odr_hz,
+                                   "GYRO_SMPLRT_DIV", (0, 1, 2, 4, 9, 24, 99))
+        lp = filter_band("ICM-20948", ICM20948_DLPF, lowpass_hz, actual)
         return actual, lp, (div, ICM20948_DLPF[lp])
 
     def _bring_up(self, rng: GyroRange, setting: Any) -> None:

@@ -21,8 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
+from gyrocal.drivers.imu.base import BLOCK_MAX, ImuReader, divided_rate, filter_band
 from gyrocal.drivers.imu.chips import (
     MPU9250,
     MPU9250_BITS,
@@ -73,27 +72,9 @@ class MPU9250Reader(ImuReader):
         return 8 if self.temperature_in_fifo else 6
 
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
-        base = MPU9250.extra["internal_rate_hz"]
-        div = round(base / odr_hz - 1.0) if odr_hz > 0 else -1
-        div = min(max(div, 0), 255)
-        actual = base / (1 + div)
-        if not (odr_hz > 0 and abs(actual - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
-            examples = ", ".join(f"{base / (1 + d):.4g}" for d in (0, 1, 2, 3, 4, 7, 9, 19, 49, 99))
-            raise ConfigurationError(
-                f"odr_hz={odr_hz!r} is not an MPU-9250 output data rate. With the gyro low-pass "
-                f"filter on, the rate is {base:g}/(1 + SMPLRT_DIV) Hz for SMPLRT_DIV 0..255, that "
-                f"is {examples}, ... down to {base / 256:.4g} Hz."
-            )
-        bands = sorted(MPU9250_DLPF, reverse=True)
-        if lowpass_hz is None:
-            lp = next((b for b in bands if b <= actual / 2), bands[-1])
-        else:
-            lp = next((b for b in bands if abs(b - float(lowpass_hz)) <= 0.5), None)
-            if lp is None:
-                raise ConfigurationError(
-                    f"lowpass_hz={lowpass_hz!r} is not an MPU-9250 gyro filter bandwidth; choose "
-                    "one of " + ", ".join(f"{b:g}" for b in bands) + " Hz"
-                )
+        actual, div = divided_rate("MPU-9250", MPU9250.extra["internal_rate_hz"], odr_hz,
+                                   "SMPLRT_DIV", (0, 1, 2, 3, 4, 7, 9, 19, 49, 99))
+        lp = filter_band("MPU-9250", MPU9250_DLPF, lowpass_hz, actual)
         return actual, lp, (div, MPU9250_DLPF[lp])
 
     def _bring_up(self, rng: GyroRange, setting: Any) -> None:
