@@ -109,7 +109,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri  # χ² quantiles without scipy.stats' import cost
 
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.kalman import KalmanFilter
@@ -611,7 +611,7 @@ class BiasTracker:
         self._nis_ok = True
         self._nis_last = math.nan
         self._nis_sum = 0.0
-        self._nis_bound = float(chi2.ppf(1.0 - s.nis_alpha, 3))
+        self._nis_bound = float(chdtri(3, s.nis_alpha))
         self._bound_cache: dict[int, float] = {}
         self._n_updates = 0
         self._n_alarms = 0
@@ -1330,7 +1330,7 @@ class BiasTracker:
     def _bound(self, k: int) -> float:
         b = self._bound_cache.get(k)
         if b is None:
-            b = float(chi2.ppf(1.0 - self.settings.nis_alpha, 3 * k))
+            b = float(chdtri(3 * k, self.settings.nis_alpha))
             self._bound_cache[k] = b
         return b
 
