@@ -207,17 +207,28 @@ def effect_costs(seeds: int, cases: list[str] | None = None) -> None:
     sizes = realism_sizes()
     if cases is None:
         cases = ["none", *REALISM_EFFECTS, "all", "all but wobble"]
-    jobs = [(s, c) for c in cases for s in range(seeds)]
+    # seed-major, so that a long run stopped early (Ctrl-C) still has every case at nearly the
+    # same number of seeds; the table is printed from the runs that finished
+    jobs = [(s, c) for s in range(seeds) for c in cases]
     results = []
-    with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
+    pool = ProcessPoolExecutor(min(2, os.cpu_count() or 1))
+    try:
         for (seed, case), r in zip(jobs, pool.map(_effect_run, jobs), strict=True):
             results.append(r)  # one line per run as it lands, for a long table's progress
             zb, za = _rms([r["before"]["bias_z"]]), _rms([r["after"]["bias_z"]])
             print(f"# {case} seed {seed}: χ² ok {r['before']['ok']}→{r['after']['ok']}, bias "
                   f"err/σ RMS {zb:.2f}→{za:.2f}", file=sys.stderr, flush=True)
+    except KeyboardInterrupt:
+        print(f"# stopped after {len(results)} of {len(jobs)} runs; the table below holds "
+              "those", file=sys.stderr, flush=True)
+        pool.shutdown(wait=False, cancel_futures=True)
+    else:
+        pool.shutdown()
     rows = []
     for c in cases:
         rs = [r for r in results if r["which"] == c]
+        if not rs:
+            continue
         row: list = [c, sizes.get(c, "")]
         cols = {}
         for when in ("before", "after"):
@@ -233,8 +244,9 @@ def effect_costs(seeds: int, cases: list[str] | None = None) -> None:
                  "bias RMS rad/s", "÷before", "bias err/σ before", "after", "χ² ok before",
                  "after", "G err/σ RMS"], rows,
                 title=f"Cost of each realism effect (emulated MPU-9250, protocol full, ±2 % "
-                      f"cross-axis, seeds 0..{seeds - 1}); after = with g-sensitivity in the "
-                      "model (the default), before = the same recordings without it")
+                      f"cross-axis, {len(results)} runs of seeds 0..{seeds - 1}); after = "
+                      "with g-sensitivity in the model (the default), before = the same "
+                      "recordings without it")
 
 
 def independent_g(seeds: int) -> None:
