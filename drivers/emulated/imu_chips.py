@@ -107,9 +107,11 @@ class SensorRealism:
         Rate error per g of specific force, ``m += G f`` (MPU-9250 datasheet: typical
         0.1 °/s/g, "Linear Acceleration Sensitivity").
     specific_force : bool
-        The accelerometer (and the g-sensitivity) see the motion source's specific force,
-        gravity in the sensor's true orientation plus the lever-arm accelerations, when the
-        motion source has ``specific_force(t)``; otherwise +1 g on z.
+        The accelerometer sees the motion source's specific force, gravity in the sensor's
+        true orientation plus the lever-arm accelerations, when the motion source has
+        ``specific_force(t)``; otherwise +1 g on z. The g-sensitivity always sees the true
+        specific force when the motion source has one: a gyro's g-sensitivity does not depend
+        on what the accelerometer is shown, so turning ``gravity`` off alone leaves it physical.
     """
 
     bias_instability_rad_s: float = 0.0
@@ -129,11 +131,6 @@ class SensorRealism:
                              f"{self.g_sensitivity_rad_s_per_g!r}")
         object.__setattr__(self, "g_sensitivity_rad_s_per_g",
                            tuple(tuple(float(x) for x in row) for row in g))
-
-    @property
-    def needs_force(self) -> bool:
-        """Whether the specific force must be evaluated (for the accelerometer or G)."""
-        return self.specific_force or self.g_sensitivity_rad_s_per_g != _ZERO33
 
     def manifest(self) -> dict[str, Any]:
         """The realism lines of a simulated manifest's ``truth``."""
@@ -620,8 +617,9 @@ class _EmulatedImu(ABC):
         m = self.truth.reading(omega, temperature)
         force = self._specific_force(t_eval)
         realism = self.truth.realism
-        if realism.needs_force:
-            m = m + force @ np.asarray(realism.g_sensitivity_rad_s_per_g).T
+        if realism.g_sensitivity_rad_s_per_g != _ZERO33:
+            m = m + self._true_force(t_eval, force) @ np.asarray(
+                realism.g_sensitivity_rad_s_per_g).T
         odr = 1.0 / period
         m = m + self._noise_rng.standard_normal(m.shape) * self.truth.sigma_rad_s(odr)
         if self._coloured.active:
@@ -640,6 +638,15 @@ class _EmulatedImu(ABC):
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
         self._k = k_end
         self._after_samples()
+
+    def _true_force(self, t: np.ndarray, accel_force: np.ndarray) -> np.ndarray:
+        """The specific force (N, 3) in g the gyro's g-sensitivity sees at ``t``: the motion
+        source's true one whenever it has one, whether or not the accelerometer is shown it
+        (the ``gravity`` knob is the accelerometer's), else ``accel_force``."""
+        spf = getattr(self.motion, "specific_force", None)
+        if self.truth.realism.specific_force or spf is None:
+            return accel_force
+        return np.asarray(spf(t), dtype=float).reshape(t.size, 3)
 
     def _specific_force(self, t: np.ndarray) -> np.ndarray:
         """The true specific force (N, 3) in g at ``t``: the motion source's when

@@ -173,6 +173,21 @@ def test_gravity_is_seen_in_the_true_orientation():
     np.testing.assert_array_equal(chip._latest.accel, [0, 16384, 0])
 
 
+def test_g_sensitivity_sees_the_true_orientation_when_the_accelerometer_is_not_shown_it():
+    # the sensor held at 90° about x: the true specific force is +1 g on the sensor's y. With
+    # the accelerometer's gravity knob off the accelerometer still reads +1 g on z, but the
+    # gyro's g-sensitivity (here only its y column) must see the true +y force
+    jig = GimbalJig([_Fixed(1, 0.0), _Fixed(2, 0.0), _Fixed(3, 0.0)], tilt_deg=0.0, mount=0.0,
+                    home_time=0.0)
+    jig.joints[0].angle = math.pi / 2
+    g_sens = np.zeros((3, 3))
+    g_sens[0, 1] = math.radians(0.1)  # x rate per g on y
+    clock, reader, chip = _mpu(jig, SensorRealism(g_sensitivity_rad_s_per_g=g_sens))
+    _, g = _record(clock, reader, 2.0)
+    assert g[:, 0].mean() == pytest.approx(math.radians(0.1), abs=2e-4)
+    np.testing.assert_array_equal(chip._latest.accel[:2], [0, 0])  # the knob is still off
+
+
 def test_lever_arm_adds_the_centripetal_omega_squared_r():
     w = 2.0  # rad/s about z
     r = np.array([0.1, 0.0, 0.05])

@@ -28,7 +28,8 @@ def test_off_gives_the_papers_sensor():
     assert all(v == "off" for v in sim.truth_manifest()["realism"].values())
     r = sim.truth.realism
     assert (r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s, r.dlpf_delay,
-            r.specific_force, r.needs_force) == (0.0, 0.0, False, False, False)
+            r.specific_force) == (0.0, 0.0, False, False)
+    assert not np.any(r.g_sensitivity_rad_s_per_g)
     assert sim.truth.clock_ppm == 0.0 and sim.jig.wobble_rad == 0.0
     assert not sim.port.model_timing
 
