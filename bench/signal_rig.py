@@ -49,6 +49,10 @@ class Outcome:
     #: The longest time between two instruction packets arriving while a servo's Bus Watchdog
     #: was armed, s, as the servos saw it (what their watchdog measures).
     armed_gap_s: float = 0.0
+    #: The servos' Bus Watchdog and Present Velocity, from the emulator itself, at the moment
+    #: the signal was sent (empty if it was not): what a kill -9 test needs to know it killed a
+    #: moving, watched servo.
+    at_fire: dict[str, dict[int, int]] = field(default_factory=dict)
 
     @property
     def torque_left_on(self) -> bool:
@@ -102,6 +106,10 @@ class ServoRig:
         self._plan: list[tuple[int, int, float]] = []  # (packet, signal, delay after it)
         self._pid: int | None = None
         self.fired = threading.Event()
+        self.at_fire: dict[str, dict[int, int]] = {}
+        self._from_armed = False
+        self._armed_packets = 0  # packets since a servo first turned with its watchdog armed
+        self._watched_motion = False
 
     def close(self) -> None:
         """Stop serving."""
@@ -112,17 +120,26 @@ class ServoRig:
         now = time.monotonic()
         if self._armed_since is not None:
             self.armed_gap_s = max(self.armed_gap_s, now - self._armed_since)
+        if self._armed_packets or self._watched_motion:
+            self._armed_packets += 1
         try:
             return self._serve(instr, baudrate)
         finally:
             armed = any(s.register("Bus Watchdog") > 0 for s in self.bus.servos)
             self._armed_since = now if armed else None
+            self._watched_motion = any(s.register("Bus Watchdog") > 0
+                                       and s.register("Present Velocity") != 0
+                                       for s in self.bus.servos)
 
     def _serve(self, instr, baudrate):
-        while self._plan and self.packets >= self._plan[0][0] and self._pid is not None:
+        count = self._armed_packets if self._from_armed else self.packets
+        ready = self._watched_motion or not self._from_armed
+        while ready and self._plan and count >= self._plan[0][0] and self._pid is not None:
             _, sig, delay = self._plan.pop(0)
             if delay > 0:
                 time.sleep(delay)
+            self.at_fire = {name: {i: self.bus.servo(i).register(name) for i in self.ids}
+                            for name in ("Bus Watchdog", "Present Velocity")}
             try:
                 os.kill(self._pid, sig)
                 self.fired.set()
@@ -183,7 +200,8 @@ class ServoRig:
         return self.read(TORQUE_ENABLE, 1)
 
     def run(self, config: Path, out: Path, plan: list[tuple[int, int, float]], *,
-            timeout_s: float = 120.0, extra: tuple[str, ...] = ()) -> Outcome:
+            timeout_s: float = 120.0, extra: tuple[str, ...] = (),
+            from_motion: bool = False) -> Outcome:
         """Run ``gyrocal calibrate --sim-imu`` and send ``plan``'s signals.
 
         Parameters
@@ -191,10 +209,19 @@ class ServoRig:
         plan : list of (packet, signal, delay)
             Send ``signal`` when the servos receive instruction packet number ``packet`` of this
             run (counted from 1), after waiting ``delay`` s.
+        from_motion : bool
+            Count ``packet`` from the first packet a servo receives while it turns with its
+            Bus Watchdog armed, not from the start, and send it only while one does: a SIGKILL
+            then lands mid-motion, after the kit armed the watchdog, however slowly the host
+            got there.
         """
         self.packets = 0
         self.armed_gap_s = 0.0
         self._armed_since = None
+        self._armed_packets = 0
+        self._watched_motion = False
+        self._from_armed = from_motion
+        self.at_fire = {}
         self.fired.clear()
         self._plan = sorted(plan)
         cmd = [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu", "--config",
@@ -215,7 +242,12 @@ class ServoRig:
             self._pid = None
             self._plan = []
         gap = self.armed_gap_s
-        return Outcome(code, err, self.packets, self.read_torque(), self.fired.is_set(), gap)
+        if code == -signal.SIGKILL:  # nothing of the kit's ran: leave the servos to their
+            torque: dict[int, int | None] = {}  # watchdog (a read-back would restart it)
+        else:
+            torque = self.read_torque()
+        return Outcome(code, err, self.packets, torque, self.fired.is_set(), gap,
+                       dict(self.at_fire))
 
 
 def expected_code(sig: int) -> int:

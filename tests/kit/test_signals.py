@@ -77,9 +77,15 @@ def test_a_signal_at_any_moment_ends_with_torque_off(rig, config, tmp_path, sig,
 
 def test_kill_9_mid_turn_the_bus_watchdog_stops_the_servo(rig, config, tmp_path):
     """No handler runs on SIGKILL: the servo's own Bus Watchdog (armed before the turn) stops
-    it (hardware reference §5, address 98, 20 ms units)."""
-    out = rig.run(config, tmp_path / "run", [(200, signal.SIGKILL, 0.0)])
+    it (hardware reference §5, address 98, 20 ms units). The kill is counted from the first
+    packet after a servo started turning with its watchdog armed, so it lands mid-motion
+    however loaded the host is."""
+    out = rig.run(config, tmp_path / "run", [(20, signal.SIGKILL, 0.0)], from_motion=True)
     assert out.returncode == -signal.SIGKILL
+    # at the kill a servo was turning, watched by its armed watchdog
+    at = out.at_fire
+    assert any(v != 0 and at["Bus Watchdog"][i] > 0
+               for i, v in at["Present Velocity"].items()), at
     # wait, bounded, for the event without sending a packet (one would restart the watchdog):
     # the armed watchdog expires (-1: it tripped, the host went silent)
     rig.wait_for("Bus Watchdog", lambda v: -1 in v.values(), within_s=20.0)
