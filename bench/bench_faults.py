@@ -12,9 +12,10 @@ calibrations 0.
 * damaged configs: ``load_config`` on a damaged ``gyrocal init`` template.
 * damaged calibrations: ``gyrocal export --format json|yaml`` on a damaged Calibration document.
 
-Usage: ``python -m bench faults [--quick] [--signals] [--hogs=N]`` (``--quick``: 12 signal
-cases, 40 inputs each; ``--signals``: the signal cases only; ``--hogs=N``: N CPU-bound processes
-run beside the signal cases, the loaded host on which aborts once left torque on).
+Usage: ``python -m bench faults [--quick] [--signals] [--hogs=N] [--kill9=N]`` (``--quick``: 12
+signal cases, 40 inputs each, 3 kills; ``--signals``: the signal cases only; ``--hogs=N``: N
+CPU-bound processes run beside the signal cases, the loaded host on which aborts once left
+torque on; ``--kill9=N``: N SIGKILLs mid-motion, default 20).
 """
 
 from __future__ import annotations
@@ -84,6 +85,58 @@ def signal_matrix(quick: bool, bad: list[list[str]] | None = None) -> Counter:
     finally:
         rig.close()
     return tally
+
+
+def kill9_matrix(runs: int) -> tuple[Counter, list[float]]:
+    """SIGKILL mid-motion, ``runs`` times at moments spread over the run: nothing of the kit
+    runs, so only the servos themselves can stop: at the end of the commanded turn (a turn is
+    an extended-position move, gimbal module docstring) or when their Bus Watchdog (armed
+    before the first motion) trips, whichever comes first.
+
+    Each kill lands on the K-th packet after a servo started turning with its watchdog armed
+    (K = 1, 8, 15, ...), while one turns. A case passes when every servo that was turning
+    reaches Present Velocity 0 and its watchdog has tripped within 1 s of its period; the
+    seconds from the kill to the last servo's stop are returned for the passing cases (watched
+    in the emulator every 50 ms, so the figure is good to about that).
+    """
+    tally: Counter = Counter()
+    stops: list[float] = []
+    rig = ServoRig(ids=(1, 2, 3))
+    tmp = Path(tempfile.mkdtemp(prefix="gyrocal-kill9-"))
+    # the loaded-host knobs of tests/kit/test_signals.py (more resends, the longest watchdog):
+    # a starved emulator must not end the run with exit 4 before the kill; the stop measured
+    # is then the 2.5 s watchdog's, an upper bound of the default 0.3 s one's
+    cfg = write_config(tmp / "gyrocal.toml", rig.path, ids=rig.ids, retries=30, watchdog_s=2.5)
+    try:
+        for n in range(runs):
+            o = rig.run(cfg, tmp / f"run{n}", [(1 + 7 * n, signal.SIGKILL, 0.0)],
+                        from_motion=True)
+            tally["runs"] += 1
+            if not o.fired:
+                tally[f"ended before the kill, exit {o.returncode}"] += 1
+                continue
+            t0 = time.monotonic()
+            turning = [i for i, v in o.at_fire["Present Velocity"].items() if v != 0]
+            if not turning:  # a turn ended between the last packet and the kill
+                tally["killed just after a turn"] += 1
+                continue
+            tally["killed mid-motion"] += 1
+            tally["turning servo unwatched"] += not all(o.at_fire["Bus Watchdog"][i] > 0
+                                                        for i in turning)
+            ids = tuple(turning)
+            got = rig.wait_for("Present Velocity",
+                               lambda v, ids=ids: all(v[i] == 0 for i in ids), within_s=20.0)
+            stopped = all(got[i] == 0 for i in turning)
+            tripped = rig.wait_for("Bus Watchdog",
+                                   lambda v, ids=ids: all(v[i] == -1 for i in ids),
+                                   within_s=max(0.0, 2.5 + 1.0 - (time.monotonic() - t0)))
+            tally["kept turning"] += not stopped
+            tally["watchdog tripped"] += stopped and all(tripped[i] == -1 for i in turning)
+            if stopped:
+                stops.append(time.monotonic() - t0)
+    finally:
+        rig.close()
+    return tally, stops
 
 
 def recording_matrix(n: int, tmp: Path) -> Counter:
@@ -179,5 +232,19 @@ def main(argv: list[str]) -> None:
     print_table(keys + ["s"], [[s[k] for k in keys] + [f"{time.perf_counter() - t:.0f}"]])
     other = sorted(k for k in s if k.startswith(("ended before", "other exit", "failed on")))
     print_table(["other outcomes", "count"], [[k, s[k]] for k in other])
+    kills = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--kill9=")),
+                 3 if quick else 20)
+    t = time.perf_counter()
+    k9, stops = kill9_matrix(kills)
+    print("\nkill -9 mid-motion (no handler runs; the servos' Bus Watchdog must stop them):")
+    keys = ["runs", "killed mid-motion", "turning servo unwatched", "watchdog tripped",
+            "kept turning"]
+    print_table(keys + ["stop s median", "stop s max", "s"],
+                [[k9[k] for k in keys]
+                 + [float(np.median(stops)) if stops else float("nan"),
+                    max(stops) if stops else float("nan"), f"{time.perf_counter() - t:.0f}"]])
+    other = sorted(k for k in k9 if k.startswith(("ended before", "killed just")))
+    if other:
+        print_table(["other outcomes", "count"], [[k, k9[k]] for k in other])
     if bad:
         print_table(["case", "exit", "torque read back", "flags", "last line of stderr"], bad)
