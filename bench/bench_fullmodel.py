@@ -139,7 +139,7 @@ def jig_table(seeds: list[int]) -> list[dict]:
           float(np.sqrt(np.mean(z[:, np.any(z != 0, axis=0)] ** 2))), float(np.abs(z).max()),
           float(np.mean([r["gm_pred"] for r in rs]))]],
         title="The same fits against the emulator's truth, in their own σ")
-    print(f"wall time of gyrocal calibrate --sim (default), two runs at once: median "
+    print(f"wall time of gyrocal calibrate --sim --no-report (default), two runs at once: median "
           f"{np.median([r['wall_s'] for r in rs]):.1f} s, max "
           f"{np.max([r['wall_s'] for r in rs]):.1f} s\n")
     return rs
