@@ -1064,26 +1064,50 @@ def _still_owner(G: np.ndarray, pose_still: np.ndarray, midx: np.ndarray, n_stil
     return owner
 
 
-def _still_gauge(u: np.ndarray, z: np.ndarray, owner: np.ndarray
+def _gauge_servos(owner: np.ndarray, pose_still: np.ndarray, midx: np.ndarray, S: int
+                  ) -> np.ndarray:
+    """The servos whose encoder zero is an exact symmetry of the fit (:func:`_still_gauge`).
+
+    Servo ``k``'s angle carries the axis of every servo outside it (``j < k``) in the sensor
+    frame. Shifting its still angles by ``δ`` while turning the axes outside it by
+    ``Rot(u_k⁰, δ)`` leaves a window of such a servo unchanged only if the window's pose of ``k``
+    rests on one of those still angles (``pose_still[i, k] ≥ 0``). A window whose pose of ``k`` is
+    its encoder reading as such (``-1``: the servo moved within the window, for instance still
+    settling from a pose move, or another tool's schedule moves two servos at once) pins the zero
+    through its data instead: there is no flat valley to move along, and a move would change that
+    window's axis. Those servos are left out.
+
+    Returns
+    -------
+    ndarray of bool, shape (S,)
+    """
+    movable = np.zeros(S, dtype=bool)
+    for k in range(S):
+        if np.any(owner == k):
+            movable[k] = bool(np.all(pose_still[midx < k, k] >= 0))
+    return movable
+
+
+def _still_gauge(u: np.ndarray, z: np.ndarray, owner: np.ndarray, movable: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Move along the fit's one exact symmetry per servo to where the still angles' priors are
-    least: zero mean reading error for each servo.
+    """Move along the fit's exact symmetries, one per servo of ``movable``
+    (:func:`_gauge_servos`), to where the still angles' priors are least: zero mean reading
+    error for each servo.
 
     Shifting every still angle of servo ``k`` by ``δ`` (its encoder's zero) changes no rate
     reference (each is a difference of that servo's still angles) and, with every axis ``u_m⁰``
-    inside it (``m < k``) turned by ``Rot(u_k⁰, δ)``, no axis in any window
-    (:mod:`gyrocal.calib.kinematics`: ``Rot(Ra, φ) = R Rot(a, φ) Rᵀ``); ``C`` and ``b`` do not
-    move. Only the priors ``z/σ`` see ``δ``, so the minimum has ``Σ z = 0`` per servo. A linear
-    step cannot follow this curved valley once the data are precise (its walls rise as
-    ``δ²/σ²_mean``): without this move the fit stalls at noise below about 1e-7 rad/s.
+    outside it (``m < k``) turned by ``Rot(u_k⁰, δ)``, no axis in any window whose pose of ``k``
+    rests on those still angles (:mod:`gyrocal.calib.kinematics`:
+    ``Rot(Ra, φ) = R Rot(a, φ) Rᵀ``); ``C``, ``b``, ``G`` and the specific forces (fixed within
+    a fit) do not move. Only the priors ``z/σ`` see ``δ``, so the minimum has ``Σ z = 0`` per
+    servo. A linear step cannot follow this curved valley once the data are precise (its walls
+    rise as ``δ²/σ²_mean``): without this move the fit stalls at noise below about 1e-7 rad/s.
     """
-    if not z.shape[1] or np.all(owner < 0):
+    if not z.shape[1] or not np.any(movable):
         return u, z
     u, z = u.copy(), z.copy()
-    for k in range(u.shape[1]):
+    for k in np.flatnonzero(movable):
         cols = owner == k
-        if not cols.any():
-            continue
         delta = z[:, cols].mean(axis=1)
         z[:, cols] -= delta[:, None]
         for m in range(k):
@@ -1110,7 +1134,6 @@ def full_matrix_batch(
     rest_force: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-12,
-    gauge: bool = True,
 ) -> FullMatrixBatch:
     r"""The full-matrix fit for ``B`` runs at once (vectorised); model in :func:`fit_full_matrix`.
 
@@ -1137,10 +1160,6 @@ def full_matrix_batch(
         Servos in the chain (default: ``pose.shape[-1]``).
     reference : ndarray, shape (S,), optional
         Reference angles of the returned axes (default: the first window's pose).
-    gauge : bool
-        Move along the still angles' exact symmetry after every step (:func:`_still_gauge`):
-        what lets the fit converge at very low noise. On some realistic recordings it slows
-        the fit instead (:func:`fit_full_matrix` tries without it first).
     force, rest_force : ndarray, shape (B, n, k) and (B, r, k), optional
         The mean specific force of each window and rest, g (sensor frame, or its coordinates
         along ``k`` directions: :meth:`ObservationSet.specific_force`). Given, the model gains
@@ -1247,12 +1266,12 @@ def full_matrix_batch(
         c_new = c + step[:, :6]
         ok = np.all(c_new[:, [0, 2, 5]] > 0, axis=1)  # the diagonal stays positive
         z_new = z + step[:, 9 + 2 * S : P0]
-        if gauge:
-            u_new, z_new = _still_gauge(u_new, z_new, owner)
+        u_new, z_new = _still_gauge(u_new, z_new, owner, movable)
         gs_new = gs + step[:, P0:].reshape(B, 3, nk) if nG else gs
         return (c_new, b + step[:, 6:9], u_new, z_new, gs_new), ok
 
     owner = _still_owner(G, ps, midx, n_still)
+    movable = _gauge_servos(owner, ps, midx, S)
     state, E, J, iterations, converged = _lm_batch(
         evaluate, retract, (c, b, u0, z, gs), max_iter=max_iter, xtol=xtol)
     c, b, u0, z, gs = state
@@ -1457,25 +1476,13 @@ def fit_full_matrix(
     obs = obs.with_pooled_noise()
 
     def run(force: tuple[np.ndarray, np.ndarray] | None) -> FullMatrixBatch:
-        # Without the gauge move first (fewest steps on realistic recordings), then with it
-        # (what converges at very low noise); the converged fit, else the lower χ².
-        first = run_once(force, gauge=False)
-        if first.converged[0]:
-            return first
-        second = run_once(force, gauge=True)
-        if second.converged[0] or not second.chi2[0] >= first.chi2[0]:
-            return second
-        return first
-
-    def run_once(force: tuple[np.ndarray, np.ndarray] | None, *, gauge: bool
-                 ) -> FullMatrixBatch:
         return full_matrix_batch(
             obs.mean[None], obs.rate[None], obs.motor_index, obs.pose, obs.mean_std[None],
             obs.rate_std[None], obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
             n_servos=len(obs.chain), ref_matrix=obs.reference_matrix(),  # type: ignore[arg-type]
             still_std=obs.still_angle_std, pose_still=obs.pose_still, max_iter=max_iter,
             force=None if force is None else force[0][None],
-            rest_force=None if force is None else force[1][None], gauge=gauge,
+            rest_force=None if force is None else force[1][None],
         )
 
     res = run(None)

@@ -87,6 +87,26 @@ def schedule(pose_deg: float, gravity: bool = False) -> list[tuple]:
     return steps
 
 
+def default_plan_steps(rest: float = 1.0, pose_deg: float = 45.0) -> list[tuple]:
+    """The pose schedule of gyrocal's default protocol as written out in its segments.csv
+    (``gyrocal calibrate --sim``; hardware_docs/running.md, "The steps"), for ``steps`` of
+    :func:`write_recording`: every servo turned negative first with rests; two posed pairs, the
+    base turned with the middle, then the inner servo at ``pose_deg``, each turn following its
+    pose move at once (no rest between); the base a quarter turn from home for a gravity rest.
+    Only the schedule is copied, none of the planner's code."""
+    p = np.radians(pose_deg)
+    steps: list[tuple] = [("rest", rest)]
+    for s in range(3):
+        steps += [("rotate", s, -1), ("rest", rest), ("rotate", s, 1), ("rest", rest)]
+    for moved in (1, 2):
+        target = np.zeros(3)
+        target[moved] = p
+        steps += [("move", tuple(target)), ("rotate", 0, -1), ("rest", rest), ("rotate", 0, 1),
+                  ("rest", rest), ("move", (0.0, 0.0, 0.0))]
+    steps += [("move", (np.pi / 2, 0.0, 0.0)), ("rest", rest), ("move", (0.0, 0.0, 0.0))]
+    return steps
+
+
 def specific_force(links: list, mount: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Gravity (1 g, up) in the sensor frame at each row of ``angles`` (N, 3): ``Rᵀ up`` with
     ``R = Rot(a_0, θ_0) Rot(a_1, θ_1) Rot(a_2, θ_2) M`` and ``up`` servo 3's link axis (the jig
@@ -103,10 +123,16 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     turns: int = 2, accel: float = 10.0, rest: float = 0.8,
                     move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
-                    g_sensitivity: np.ndarray | None = None) -> dict:
+                    g_sensitivity: np.ndarray | None = None, steps: list | None = None,
+                    hold: float = 0.06) -> dict:
     """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``). With
     ``g_sensitivity`` (3×3, rad/s per g) the reading gains ``G f`` (``f`` from
-    :func:`specific_force`) and the schedule a gravity rest."""
+    :func:`specific_force`) and the schedule a gravity rest. ``steps`` replaces the schedule
+    (:func:`schedule`, a rest before every step) by steps laid out as given:
+    ``("rest", seconds)``, ``("rotate", servo, ±1)``, ``("move", target angles)``
+    (e.g. :func:`default_plan_steps`); there a move's segment lasts ``hold`` seconds past the
+    servo's arrival (a runner waits for the servo to report it, then commands the next step:
+    about 60 ms in gyrocal's emulated runs), the only still time before a turn that follows it."""
     truth = draw_sensor(seed, cross)
     rng = np.random.default_rng([seed, 0x5A3])
     path = Path(path)
@@ -115,10 +141,14 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     t = 0.0
     pose = np.zeros(3)
     _, _, turn_time = _profile(np.zeros(1), speed, turns, accel)
-    for step in schedule(pose_deg, gravity=g_sensitivity is not None):
-        segs.append(("rest", None, 0, 0.0, t, t + rest, []))
-        t += rest
-        if step[0] == "rotate":
+    plan = steps if steps is not None else [
+        x for step in schedule(pose_deg, gravity=g_sensitivity is not None)
+        for x in (("rest", rest), step)]
+    for step in plan:
+        if step[0] == "rest":
+            segs.append(("rest", None, 0, 0.0, t, t + step[1], []))
+            t += step[1]
+        elif step[0] == "rotate":
             _, s, d = step
             segs.append(("rotate", s, d, speed, t, t + turn_time, [(s, d * 2 * np.pi * turns)]))
             t += turn_time
@@ -132,6 +162,10 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                 segs.append(("move", j, int(np.sign(delta)), move_speed, t, t + dur,
                              [(j, delta)]))
                 durations.append(dur)
+            if steps is not None:
+                segs[-len(moving):] = [sg[:5] + (sg[5] + hold,) + sg[6:]
+                                       for sg in segs[-len(moving):]]
+                durations.append(max(durations) + hold)
             t += max(durations)
             pose = target
     segs.append(("rest", None, 0, 0.0, t, t + rest, []))
