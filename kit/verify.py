@@ -14,9 +14,18 @@ against the gyro's mean over it, raw, with the calibration's diagonal only, and 
 calibration. Blocks on an acceleration ramp are left out: there the gyro's low-pass delay of a few
 milliseconds against the encoder makes errors that say nothing about the calibration.
 
+A calibration with g-sensitivity (``g = A (m + b + G f)``, hardware_docs/method.md §10) is
+applied as it was fitted: ``f`` at each gyro sample is gravity's direction in the sensor frame
+from the joint angles the encoders read, the calibration's kinematics and the servo the manifest
+lists as vertical at home (:mod:`gyrocal.kit.gravity`), averaged over the block like the
+readings. The lever arm's accelerations are neglected, as the fit neglects them: at the sweeps'
+speeds (at most the protocol's, about 3 rad/s) the centripetal term of a sensor 40 mm off the
+axes is 0.037 g, at most 6e-5 rad/s through an MPU-9250's 0.1 °/s/g.
+
 Each block also gets the error the calibration's own uncertainty predicts (gyro noise over the
-block, the parameters' covariance, the encoders' quantisation); a calibration whose RMS error
-exceeds :data:`FLAG_RATIO` times its prediction on any axis fails the verification.
+block, the parameters' covariance, the g-sensitivity's standard deviations, the encoders'
+quantisation); a calibration whose RMS error exceeds :data:`FLAG_RATIO` times its prediction on
+any axis fails the verification.
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from gyrocal.calib.observations import diff_noise
 from gyrocal.calib.segments import Segment
 from gyrocal.drivers.dynamixel.control_table import POSITION_UNIT_RAD
 from gyrocal.kit.errors import InputError
+from gyrocal.kit.gravity import force_source, specific_force
 from gyrocal.kit.protocol import Runner, Step
 from gyrocal.kit.recording import Recording
 from gyrocal.kit.report_plots import boxcar_mean, encoder_rate, servo_axes
@@ -63,8 +73,9 @@ class Sweep(Step):
 
     Recorded as one ``move`` segment per servo (Recording v1), all with the sweep's times.
     ``kind``, ``motor``, ``direction`` and ``speed`` describe its slowest servo, the one that
-    turns throughout, so the :class:`~gyrocal.kit.protocol.Runner` treats it as a turn and checks
-    that servo's speed (repeats included).
+    turns throughout, so the :class:`~gyrocal.kit.protocol.Runner` treats it as a turn (repeats
+    included); :class:`GeneralMotionRunner` checks every servo's speed, and the gimbal stops a
+    servo that stalls (``Gimbal.begin_turns``).
     """
 
     moves: tuple[tuple[int, int, float, int], ...] = ()  # (servo, turns, speed, direction)
@@ -96,11 +107,11 @@ class GeneralMotionRunner(Runner):
         if not isinstance(step, Sweep):
             return super()._run_turn(step)
         start = self.now()
-        self.gimbal.begin_turns({m: (n, v, d) for m, n, v, d in step.moves})
+        motion = self.gimbal.begin_turns({m: (n, v, d) for m, n, v, d in step.moves})
         while self.gimbal.busy:
             self._tick()
         self._tick()
-        return start, self.now(), _Checked(step.speed)
+        return start, self.now(), motion
 
     def _reposition(self, step: Step) -> None:
         if not isinstance(step, Sweep):
@@ -109,6 +120,21 @@ class GeneralMotionRunner(Runner):
         while self.gimbal.busy:
             self._tick()
 
+    def _check_speed(self, step: Step, motion: Any, d: Any) -> Any:
+        """Every servo of a sweep held its own commanded speed over the middle half of its own
+        turns (the runner's check of one servo, :meth:`Runner.servo_speed_failure`, per servo;
+        a servo that stops outright is stopped by the gimbal's stall check before this)."""
+        if not isinstance(step, Sweep):
+            return super()._check_speed(step, motion, d)
+        _, _, et, ea = d.arrays()
+        speeds = getattr(motion, "speeds", {})  # as the gimbal quantized them
+        for m, n, v, _ in step.moves:
+            failure = self.servo_speed_failure(m, float(speeds.get(m, v)), et, ea,
+                                               2 * math.pi * n / v)
+            if failure is not None:
+                return failure
+        return None
+
     def _record(self, seg: Segment) -> None:
         step = self.steps[self.step_index]
         if not isinstance(step, Sweep) or seg.kind != "rotate":
@@ -116,13 +142,6 @@ class GeneralMotionRunner(Runner):
         for m, _, v, d in step.moves:
             super()._record(Segment(len(self._segments), "move", m, d, v, seg.t_start,
                                     seg.t_end))
-
-
-@dataclass(frozen=True)
-class _Checked:
-    """What the runner's turn check reads of a motion: the checked servo's commanded speed."""
-
-    speed: float
 
 
 @dataclass(frozen=True)
@@ -149,6 +168,9 @@ class Verification:
         Whether the calibration has a full matrix.
     delay_s : float
         The gyro's delay against the encoders, fitted (s); the reference is compared as delayed.
+    g_sensitivity : str
+        How the calibration's g-sensitivity was applied: ``"applied"`` (with the specific force
+        from the kinematics), ``"none"`` (the calibration has none), or why it could not be.
     """
 
     rms_before: np.ndarray
@@ -161,6 +183,7 @@ class Verification:
     reference: str
     full: bool
     delay_s: float = 0.0
+    g_sensitivity: str = "none"
 
     @property
     def rms_after(self) -> np.ndarray:
@@ -207,6 +230,12 @@ class Verification:
             f"calibration. That delay, fitted on the several-servo blocks, is "
             f"{self.delay_s * 1e3:.1f} ms; the reference is compared as delayed by it.",
         ]
+        if self.g_sensitivity == "applied":
+            lines.append("g-sensitivity: applied with the specific force from the encoder angles "
+                         "(gravity only; the lever arm's accelerations are left out).")
+        elif self.g_sensitivity != "none":
+            lines.append(f"g-sensitivity: NOT applied ({self.g_sensitivity}); the errors include "
+                         "it.")
         return "\n".join(lines)
 
     def verdict(self) -> str:
@@ -227,7 +256,8 @@ class Verification:
             "rms_full": arr(self.rms_full), "rms_predicted": arr(self.rms_predicted),
             **{f"rms_{k}": arr(v) for k, v in self.rms_by_kind.items()},
             "blocks": dict(self.blocks), "block_s": self.block_s, "reference": self.reference,
-            "delay_s": self.delay_s, "ok": self.ok, "flag_ratio": FLAG_RATIO,
+            "delay_s": self.delay_s, "g_sensitivity": self.g_sensitivity, "ok": self.ok,
+            "flag_ratio": FLAG_RATIO,
         }
 
 
@@ -315,12 +345,19 @@ def _mean_rate(te: np.ndarray, omega: np.ndarray, a: float, b: float) -> np.ndar
     return np.array([boxcar_mean(te, omega[:, k], mid, half) for k in range(3)], dtype=float)
 
 
-def _param_variance(cal: GyroCalibration, x: np.ndarray) -> np.ndarray:
+def _param_variance(cal: GyroCalibration, x: np.ndarray, gf: np.ndarray,
+                    f: np.ndarray | None) -> np.ndarray:
     """Per axis, the variance the parameters' covariance puts on the calibrated rate of the
-    block mean ``x`` (first order: ``J C Jᵀ``, ``J`` the derivative of ``A (x + b)``)."""
+    block mean ``x`` (first order: ``J C Jᵀ``, ``J`` the derivative of ``A (x + b + G f)``,
+    ``gf = G f``), plus, with g-sensitivity, ``Σ_jk (A_ij f_k σ(G_jk))²``: the document keeps
+    ``G``'s standard deviations only, so its correlation with ``b`` is left out."""
     c = cal.covariance_matrix
-    y = x + np.asarray(cal.bias)
+    y = x + np.asarray(cal.bias) + gf
     a = cal.full_matrix
+    g_var = 0.0
+    if f is not None and cal.g_sensitivity is not None:
+        s = np.nan_to_num(np.asarray(cal.g_sensitivity["matrix_std"], dtype=float))
+        g_var = (a**2) @ ((s**2) @ (f**2))
     if cal.is_full:  # g_i = Σ_j A_ij y_j: ∂/∂A_ij = y_j (index 3i+j), ∂/∂b_j = A_ij (9+j)
         jac = np.zeros((3, 12))
         for i in range(3):
@@ -337,7 +374,7 @@ def _param_variance(cal: GyroCalibration, x: np.ndarray) -> np.ndarray:
         else:
             c = np.zeros((12, 12))
     c = np.nan_to_num(c)
-    return np.einsum("ik,kl,il->i", jac, c, jac)
+    return np.einsum("ik,kl,il->i", jac, c, jac) + g_var
 
 
 def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5) -> Verification:
@@ -365,8 +402,10 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
     kin, source = _kinematics(rec, cal)
     te, ang = _encoders(rec, list(kin["chain"]))
     omega = sensor_rate(kin, ang, np.gradient(ang, te, axis=0))  # (N, 3) at the encoder times
+    g_note = "none" if cal.g_sensitivity is None else (force_source(rec, cal) or "applied")
+    force = specific_force(rec, cal, t) if g_note == "applied" else None
     diag = GyroCalibration(scale=cal.scale, bias=cal.bias)
-    rows: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, int]] = []
+    rows: list[tuple[Any, ...]] = []
     spans = sorted({(s.t_start, s.t_end) for s in rec.segments})
     for start, end in spans:
         for i in range(int((end - start) // block_s)):
@@ -383,7 +422,8 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
             if not (np.all(np.isfinite(ref)) and np.all(np.isfinite(slope))):
                 continue
             rows.append((kind, m[sel].mean(axis=0), ref, m[sel], int(sel.sum()), slope,
-                         _reference_variance(te, ang, a, b)))
+                         _reference_variance(te, ang, a, b),
+                         None if force is None else force[sel].mean(axis=0)))
     if not rows:
         raise InputError(f"{rec.path}: no segment is long enough for {block_s:g} s blocks")
     ramps = sum(r[0] == "ramp" for r in rows)
@@ -394,11 +434,18 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
     kinds = np.array([r[0] for r in used])
     raw = np.array([r[1] for r in used])
     slope = np.array([r[5] for r in used])
+    f = None if force is None else np.array([r[7] for r in used])
+    # G f, in the readings' units (0 without g-sensitivity or its force): the model is
+    # A (m + b + G f), so the diagonal column applies it too.
+    gf = (np.zeros_like(raw) if f is None
+          else f @ np.asarray(cal.g_sensitivity["matrix"]).T)  # type: ignore[index]
+    calibrated = (cal.apply(raw, specific_force=f) if f is not None
+                  else _quietly(cal.apply, raw))
     # The gyro's filter and sample timing lag the encoders by a few ms: while the rate turns
     # (several servos at once) that is an error of -delay * dω/dt. Fit the delay (a nuisance:
     # rates linear in ω change sign with the direction of the sweeps, dω/dt does not) and
     # compare with the reference as a gyro with that delay sees it.
-    first = cal.apply(raw) - np.array([r[2] for r in used])
+    first = calibrated - np.array([r[2] for r in used])
     turning = kinds == "several_servos"  # where the rate's direction changes
     ss = float(np.sum(slope[turning] ** 2))
     delay = (-float(np.sum(first[turning] * slope[turning])) / ss
@@ -409,9 +456,10 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
              else diff_noise(m))
     a_mat = cal.full_matrix
     noise_var = np.einsum("ij,j,ij->i", a_mat, sigma**2, a_mat)
-    predicted = np.array([noise_var / r[4] + _param_variance(cal, r[1]) + r[6] for r in used])
-    err_full = cal.apply(raw) - ref if cal.is_full else np.full(raw.shape, np.nan)
-    err_diag = diag.apply(raw) - ref
+    predicted = np.array([noise_var / r[4] + _param_variance(cal, r[1], gf[i], r[7]) + r[6]
+                          for i, r in enumerate(used)])
+    err_full = calibrated - ref if cal.is_full else np.full(raw.shape, np.nan)
+    err_diag = diag.apply(raw + gf) - ref
     err_after = err_full if cal.is_full else err_diag
 
     def rms(e: np.ndarray) -> np.ndarray:
@@ -423,4 +471,16 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
         rms_by_kind={k: rms(err_after[kinds == k]) for k in KINDS},
         blocks={**{k: int(np.sum(kinds == k)) for k in KINDS}, "ramp_excluded": int(ramps)},
         block_s=float(block_s), reference=source, full=cal.is_full, delay_s=delay,
+        g_sensitivity=g_note,
     )
+
+
+def _quietly(apply: Any, raw: np.ndarray) -> np.ndarray:
+    """``apply(raw)`` without the warning that g-sensitivity is not applied (the table says so)."""
+    import warnings
+
+    from gyrocal.calib.model import GSensitivityWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GSensitivityWarning)
+        return apply(raw)

@@ -103,3 +103,51 @@ def test_the_table_explains_its_figures_and_json_matches_columns(general_run):
     np.testing.assert_allclose(np.sqrt((n[:, None] * parts**2).sum(0) / n.sum()), v.rms_full,
                                rtol=1e-12)
     json.dumps(d)
+
+
+def test_g_sensitivity_is_applied_and_a_fit_without_it_is_caught(full_run, general_run):
+    # The shared runs are the realistic default sensor (g-sensitivity up to 0.1 °/s/g per term).
+    # The calibration of `gyrocal calibrate --sim` (with G) passes; the full model fitted to the
+    # same recording without G fails, and so does the G calibration applied without its G f.
+    from gyrocal.calib.estimators import estimate
+    from gyrocal.kit.pipeline import extract_recording
+
+    assert general_run.manifest["truth"]["realism"]["g-sensitivity"] != "off"
+    cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
+    assert cal.g_sensitivity is not None
+    v = verify_recording(general_run, cal)
+    assert v.g_sensitivity == "applied" and v.ok, v.table()
+    ex = extract_recording(load_recording(full_run[0] / "recording"))
+    fit = estimate(ex.observations, "full-matrix", g_sensitivity=False)
+    assert fit.success and fit.g_sensitivity is None
+    no_g = fit.to_calibration(sensor=cal.sensor)
+    vn = verify_recording(general_run, no_g)
+    assert not vn.ok and np.max(vn.ratio) > FLAG_RATIO, vn.table()
+    # The same calibration with its G dropped (its bias is then the zero-g bias) fails too.
+    dropped = GyroCalibration.from_dict({**cal.to_dict(), "g_sensitivity": None})
+    vd = verify_recording(general_run, dropped)
+    assert not vd.ok, vd.table()
+    # G's uncertainty is in the prediction: without its σ the prediction is smaller.
+    zero_std = {**cal.to_dict()["g_sensitivity"], "matrix_std": [[0.0] * 3] * 3}
+    v0 = verify_recording(general_run, GyroCalibration.from_dict(
+        {**cal.to_dict(), "g_sensitivity": zero_std}))
+    assert np.all(v0.rms_predicted < v.rms_predicted)
+    np.testing.assert_allclose(v0.rms_full, v.rms_full, rtol=1e-12)
+
+
+def test_gravity_from_the_encoders_matches_the_emulated_jig(general_run):
+    # Independent truth: the emulated jig's home gravity (R_homeᵀ e_z), recovered from the
+    # manifest's g-sensitivity truth (its G and the bias shift G γ_home it puts in the home
+    # pose), is what gyrocal.kit.gravity says at the recording's start with the truth's axes.
+    from gyrocal.kit.gravity import specific_force
+
+    full, _ = truth_calibrations(general_run)
+    g = {"matrix": [[0.0] * 3] * 3, "matrix_std": [[0.0] * 3] * 3, "directions": []}
+    cal = GyroCalibration.from_dict({**full.to_dict(), "g_sensitivity": g})
+    t0 = general_run.imu_t[0]
+    f = specific_force(general_run, cal, np.array([t0]))[0]
+    line = general_run.manifest["truth"]["realism"]["g-sensitivity"]
+    home = np.linalg.solve(np.array(line["matrix_rad_s_per_g"]),
+                           np.array(line["home_bias_shift_rad_s"]))
+    assert abs(np.linalg.norm(home) - 1) < 1e-6
+    np.testing.assert_allclose(f, home, atol=0.01)
