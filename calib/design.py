@@ -19,7 +19,7 @@ G-criterion, now in rad/s and for our paired-axis estimator with its rests) is s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -180,7 +180,10 @@ class Plan:
         Predicted one-sigma uncertainties (paired-axis estimator).
     rate_error_std : float
         Predicted worst-direction standard deviation of a calibrated rate at ``reference_rate``,
-        rad/s (the planner's objective).
+        rad/s (the planner's objective). For a full-model plan with gravity rests, of
+        ``A (m + b + G f)`` with g-sensitivity fitted, worst also over a 1 g specific force
+        (:func:`predict_full_uncertainty` with ``gravity``), as are ``matrix_std`` and
+        ``bias_std`` (the zero-g bias); the plan is chosen on ``A (m + b)``.
     reference_rate : float
         rad/s.
     poses : tuple of (int, int, float)
@@ -911,7 +914,7 @@ def _plan_full(
             continue
         ms, bs, err = predict_full_uncertainty(
             cands, poses, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
-            reference_rate=reference_rate, axes=axes, gravity=grav)
+            reference_rate=reference_rate, axes=axes)
         i = int(np.argmin(err))
         if best is not None and not err[i] < best.rate_error_std * (1 - 1e-9):
             continue
@@ -925,7 +928,17 @@ def _plan_full(
             matrix_std=tuple(tuple(float(x) for x in row) for row in ms[i]),
             gravity_poses=grav,
         )
-    return best
+    if best is None:
+        return None
+    # The plan is chosen on A (m + b) (the objective of the matrix), then its figures are given
+    # for the model it fits, g = A (m + b + G f): with G's uncertainty and its correlations.
+    ms, bs, err = predict_full_uncertainty(
+        [(best.speed, best.turns, best.rest_s)], best.poses, noise_std=noise_std,
+        odr_hz=odr_hz, accel=accel, reference_rate=reference_rate, axes=axes,
+        gravity=best.gravity_poses)
+    return replace(best, scale_std=tuple(float(x) for x in np.diag(ms[0])),
+                   bias_std=tuple(float(x) for x in bs[0]), rate_error_std=float(err[0]),
+                   matrix_std=tuple(tuple(float(x) for x in row) for row in ms[0]))
 
 
 def paper_plan(

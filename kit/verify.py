@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -85,10 +85,22 @@ class Sweep(Step):
         return f"turn servos {', '.join(str(m[0]) for m in self.moves)} at once"
 
 
-def general_motion_steps(plan: Any, ids: list[int]) -> list[Step]:
+#: Rest of each gravity pair (a rest with gravity tilted, then one at home), s.
+GRAVITY_REST_S = 2.0
+
+
+def general_motion_steps(plan: Any, ids: list[int], axes: np.ndarray | None = None
+                         ) -> list[Step]:
     """Two sweeps, every servo one turn at once at :data:`SWEEP_SPEEDS` of the plan's speed,
     the negative way first and back (so every servo ends where it started and the cables never
-    twist further than the protocol's turns), each after a rest."""
+    twist further than the protocol's turns), each after a rest; then the gravity pairs: each
+    servo horizontal at home (``axes``, its nominal axes in chain order, default x, y, z; "up"
+    is +z) is moved a quarter turn, rests :data:`GRAVITY_REST_S` with gravity tilted, moves
+    back and rests as long at home (:func:`gyrocal.calib.design.gravity_poses`). Each pair's
+    difference of calibrated means is zero for a still sensor whatever its bias did, so it
+    tests the calibration's g-sensitivity alone (:func:`verify_recording`)."""
+    from gyrocal.calib.design import gravity_poses
+
     steps: list[Step] = []
     for d in (-1, 1):
         moves = tuple((int(i), 1, plan.speed * f, d) for i, f in zip(ids, SWEEP_SPEEDS,
@@ -97,6 +109,12 @@ def general_motion_steps(plan: Any, ids: list[int]) -> list[Step]:
         steps.append(Sweep("rotate", motor=moves[-1][0], direction=d, turns=1,
                            speed=moves[-1][2], moves=moves))
     steps.append(Step("rest", rest_s=plan.rest_s))
+    for moved, angle in gravity_poses((), axes):
+        if moved < len(ids):
+            steps += [Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed),
+                      Step("rest", rest_s=GRAVITY_REST_S),
+                      Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed),
+                      Step("rest", rest_s=GRAVITY_REST_S)]
     return steps
 
 
@@ -159,6 +177,15 @@ class Verification:
     rms_by_kind : dict
         The calibration's error (full where it has a matrix) over the blocks of each kind of
         :data:`KINDS` (NaN where there were none).
+    predicted_by_kind : dict
+        What the calibration's uncertainty predicts over the blocks of each kind.
+    gravity_pairs : int
+        Pairs of rests, one with gravity tilted from its home direction and the next at home
+        (:func:`general_motion_steps`), compared.
+    rms_gravity, predicted_gravity : ndarray (3,)
+        RMS over the pairs of the difference of their calibrated means (zero for a still
+        sensor: a g-sensitivity the calibration does not model shows here, while the bias's
+        slow wander cancels), and what the calibration predicts for it; NaN without pairs.
     blocks : dict
         Blocks used per kind, and ``ramp_excluded``.
     block_s : float
@@ -184,6 +211,10 @@ class Verification:
     full: bool
     delay_s: float = 0.0
     g_sensitivity: str = "none"
+    predicted_by_kind: dict[str, np.ndarray] | None = None
+    gravity_pairs: int = 0
+    rms_gravity: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    predicted_gravity: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
 
     @property
     def rms_after(self) -> np.ndarray:
@@ -197,9 +228,18 @@ class Verification:
             return self.rms_after / self.rms_predicted
 
     @property
+    def gravity_ratio(self) -> np.ndarray:
+        """``rms_gravity / predicted_gravity`` per axis (NaN without gravity pairs)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.rms_gravity / self.predicted_gravity
+
+    @property
     def ok(self) -> bool:
-        """Whether the error stays within :data:`FLAG_RATIO` times the prediction on every axis."""
-        return bool(np.all(self.ratio <= FLAG_RATIO))
+        """Whether the error stays within :data:`FLAG_RATIO` times the prediction on every axis,
+        over all blocks and over the gravity pairs (where there are any)."""
+        grav = self.gravity_ratio
+        return bool(np.all(self.ratio <= FLAG_RATIO)
+                    and (self.gravity_pairs == 0 or np.all(grav <= FLAG_RATIO)))
 
     def table(self) -> str:
         """The result as text (like the paper's Tables V and VI), with a legend."""
@@ -230,6 +270,13 @@ class Verification:
             f"calibration. That delay, fitted on the several-servo blocks, is "
             f"{self.delay_s * 1e3:.1f} ms; the reference is compared as delayed by it.",
         ]
+        if self.gravity_pairs:
+            lines.append(
+                f"gravity: {self.gravity_pairs} pairs of rests (gravity tilted, then at home); "
+                "RMS of the difference of their calibrated means, rad/s: "
+                + ", ".join(f"{a} {e:.5f}" for a, e in zip("xyz", self.rms_gravity, strict=True))
+                + " (predicted " + ", ".join(f"{e:.5f}" for e in self.predicted_gravity)
+                + "): zero for a still sensor; an unmodelled g-sensitivity shows here.")
         if self.g_sensitivity == "applied":
             lines.append("g-sensitivity: applied with the specific force from the encoder angles "
                          "(gravity only; the lever arm's accelerations are left out).")
@@ -240,6 +287,15 @@ class Verification:
 
     def verdict(self) -> str:
         """One line: the worst axis's error against its prediction."""
+        grav = self.gravity_ratio
+        if self.gravity_pairs and np.nanmax(grav) > max(float(np.nanmax(self.ratio)),
+                                                       FLAG_RATIO):
+            j = int(np.nanargmax(grav))
+            return (f"axis {'xyz'[j]}: with gravity tilted the still sensor's calibrated rate "
+                    f"moves by {self.rms_gravity[j]:.2g} rad/s, {grav[j]:.1f} times what the "
+                    f"calibration's uncertainty predicts ({self.predicted_gravity[j]:.2g} "
+                    f"rad/s; the limit is {FLAG_RATIO:g} times): its g-sensitivity is not "
+                    "modelled or wrong")
         j = int(np.nanargmax(self.ratio)) if np.any(np.isfinite(self.ratio)) else 0
         return (f"axis {'xyz'[j]}: error {self.rms_after[j]:.2g} rad/s is "
                 f"{self.ratio[j]:.1f} times what the calibration's uncertainty predicts "
@@ -255,8 +311,11 @@ class Verification:
             "rms_before": arr(self.rms_before), "rms_diagonal": arr(self.rms_diagonal),
             "rms_full": arr(self.rms_full), "rms_predicted": arr(self.rms_predicted),
             **{f"rms_{k}": arr(v) for k, v in self.rms_by_kind.items()},
+            **{f"rms_predicted_{k}": arr(v) for k, v in (self.predicted_by_kind or {}).items()},
             "blocks": dict(self.blocks), "block_s": self.block_s, "reference": self.reference,
-            "delay_s": self.delay_s, "g_sensitivity": self.g_sensitivity, "ok": self.ok,
+            "delay_s": self.delay_s, "g_sensitivity": self.g_sensitivity,
+            "gravity_pairs": self.gravity_pairs, "rms_gravity": arr(self.rms_gravity),
+            "rms_predicted_gravity": arr(self.predicted_gravity), "ok": self.ok,
             "flag_ratio": FLAG_RATIO,
         }
 
@@ -465,14 +524,75 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
     def rms(e: np.ndarray) -> np.ndarray:
         return np.sqrt(np.mean(e**2, axis=0)) if e.size else np.full(3, np.nan)
 
+    pairs, g_err, g_pred = _gravity_pairs(rec, cal, list(kin["chain"]), t, m, force, sigma)
     return Verification(
+        gravity_pairs=pairs, rms_gravity=g_err, predicted_gravity=g_pred,
         rms_before=rms(raw - ref), rms_diagonal=rms(err_diag), rms_full=rms(err_full),
         rms_predicted=np.sqrt(np.mean(predicted, axis=0)),
         rms_by_kind={k: rms(err_after[kinds == k]) for k in KINDS},
+        predicted_by_kind={k: (np.sqrt(np.mean(predicted[kinds == k], axis=0))
+                               if np.any(kinds == k) else np.full(3, np.nan)) for k in KINDS},
         blocks={**{k: int(np.sum(kinds == k)) for k in KINDS}, "ramp_excluded": int(ramps)},
         block_s=float(block_s), reference=source, full=cal.is_full, delay_s=delay,
         g_sensitivity=g_note,
     )
+
+
+#: Settling time left out at each end of a rest in the gravity pairs, s.
+_REST_GUARD_S = 0.3
+#: A rest is in the home pose when every servo is within this of its home angle (mod 2π), rad.
+_HOME_TOL = 0.05
+
+
+def _gravity_pairs(rec: Recording, cal: GyroCalibration, chain: list[int], t: np.ndarray,
+                   m: np.ndarray, force: np.ndarray | None, sigma: np.ndarray
+                   ) -> tuple[int, np.ndarray, np.ndarray]:
+    """Each rest out of the home pose (gravity tilted) paired with the next rest at home:
+    ``(pairs, RMS of the difference of the calibrated means, its predicted RMS)``.
+
+    For a still sensor the difference is zero; a g-sensitivity ``G_s`` the calibration does not
+    model makes it ``A G_s Δf`` (up to 2.4e-3 rad/s for an MPU-9250's 0.1 °/s/g and a quarter
+    turn), while the bias's slow wander (bias instability) cancels over the seconds between the
+    two. Predicted: the white noise of both means (``A diag(σ²) Aᵀ / n``) and, with
+    g-sensitivity applied, ``Σ_jk (A_ij Δf_k σ(G_jk))²``; the matrix's own uncertainty acts on
+    ``Δm ≈ −G Δf`` only, a negligible 1e-6 of it.
+    """
+    nan = np.full(3, np.nan)
+    home = np.array([rec.encoder(mm)[1][0] for mm in chain])
+    rests = []
+    for seg in sorted((s for s in rec.segments if s.kind == "rest"), key=lambda s: s.t_start):
+        a, b = seg.t_start + _REST_GUARD_S, seg.t_end - _REST_GUARD_S
+        sel = (t >= a) & (t <= b)
+        if sel.sum() < 10:
+            continue
+        mid = 0.5 * (a + b)
+        ang = np.array([np.interp(mid, *rec.encoder(mm)) for mm in chain])
+        off = np.abs(np.angle(np.exp(1j * (ang - home))))
+        rests.append((bool(np.all(off < _HOME_TOL)), sel))
+    a_mat = cal.full_matrix
+    g = None if force is None else np.asarray(cal.g_sensitivity["matrix"])  # type: ignore[index]
+    s = (None if force is None else
+         np.nan_to_num(np.asarray(cal.g_sensitivity["matrix_std"], dtype=float)))  # type: ignore[index]
+    errs, preds = [], []
+    for i, (at_home, sel) in enumerate(rests):
+        if at_home or i + 1 >= len(rests) or not rests[i + 1][0]:
+            continue
+        sel2 = rests[i + 1][1]
+        means = []
+        for k in (sel, sel2):
+            f = None if force is None else force[k].mean(axis=0)
+            mk = m[k].mean(axis=0) + (0.0 if f is None else g @ f)  # type: ignore[operator]
+            means.append((a_mat @ (mk + np.asarray(cal.bias)), f, int(k.sum())))
+        errs.append(means[0][0] - means[1][0])
+        var = np.einsum("ij,j,ij->i", a_mat, sigma**2, a_mat) * (1 / means[0][2] + 1 / means[1][2])
+        if force is not None:
+            df = means[0][1] - means[1][1]  # type: ignore[operator]
+            var = var + (a_mat**2) @ ((s**2) @ (df**2))  # type: ignore[operator]
+        preds.append(var)
+    if not errs:
+        return 0, nan, nan
+    return (len(errs), np.sqrt(np.mean(np.square(errs), axis=0)),
+            np.sqrt(np.mean(preds, axis=0)))
 
 
 def _quietly(apply: Any, raw: np.ndarray) -> np.ndarray:
