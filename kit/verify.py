@@ -436,6 +436,40 @@ def _param_variance(cal: GyroCalibration, x: np.ndarray, gf: np.ndarray,
     return np.einsum("ik,kl,il->i", jac, c, jac) + g_var
 
 
+def _block_rows(rec: Recording, t: np.ndarray, m: np.ndarray, te: np.ndarray, ang: np.ndarray,
+                omega: np.ndarray, force: np.ndarray | None, block_s: float
+                ) -> list[tuple[Any, ...]]:
+    """Every segment cut into ``block_s`` blocks: per block ``(kind, gyro mean, reference mean,
+    readings, count, reference slope, reference variance, mean specific force or None)``.
+
+    Raises
+    ------
+    InputError
+        When no segment is long enough for one block.
+    """
+    rows: list[tuple[Any, ...]] = []
+    for start, end in sorted({(s.t_start, s.t_end) for s in rec.segments}):
+        for i in range(int((end - start) // block_s)):
+            a = start + i * block_s
+            b = a + block_s
+            sel = (t >= a) & (t < b)
+            kind = _block_kind(te, ang, a, b) if sel.sum() >= 3 else None
+            if kind is None:
+                continue
+            ref = _mean_rate(te, omega, a, b)
+            h = _EDGE_S / 2
+            slope = (_mean_rate(te, omega, b - 2 * h, b) - _mean_rate(te, omega, a, a + 2 * h)) \
+                / (b - a - 2 * h)
+            if not (np.all(np.isfinite(ref)) and np.all(np.isfinite(slope))):
+                continue
+            rows.append((kind, m[sel].mean(axis=0), ref, m[sel], int(sel.sum()), slope,
+                         _reference_variance(te, ang, a, b),
+                         None if force is None else force[sel].mean(axis=0)))
+    if not rows:
+        raise InputError(f"{rec.path}: no segment is long enough for {block_s:g} s blocks")
+    return rows
+
+
 def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5) -> Verification:
     """Compare raw and calibrated readings with the encoder reference, block by block.
 
@@ -464,27 +498,7 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
     g_note = "none" if cal.g_sensitivity is None else (force_source(rec, cal) or "applied")
     force = specific_force(rec, cal, t) if g_note == "applied" else None
     diag = GyroCalibration(scale=cal.scale, bias=cal.bias)
-    rows: list[tuple[Any, ...]] = []
-    spans = sorted({(s.t_start, s.t_end) for s in rec.segments})
-    for start, end in spans:
-        for i in range(int((end - start) // block_s)):
-            a = start + i * block_s
-            b = a + block_s
-            sel = (t >= a) & (t < b)
-            kind = _block_kind(te, ang, a, b) if sel.sum() >= 3 else None
-            if kind is None:
-                continue
-            ref = _mean_rate(te, omega, a, b)
-            h = _EDGE_S / 2
-            slope = (_mean_rate(te, omega, b - 2 * h, b) - _mean_rate(te, omega, a, a + 2 * h)) \
-                / (b - a - 2 * h)
-            if not (np.all(np.isfinite(ref)) and np.all(np.isfinite(slope))):
-                continue
-            rows.append((kind, m[sel].mean(axis=0), ref, m[sel], int(sel.sum()), slope,
-                         _reference_variance(te, ang, a, b),
-                         None if force is None else force[sel].mean(axis=0)))
-    if not rows:
-        raise InputError(f"{rec.path}: no segment is long enough for {block_s:g} s blocks")
+    rows = _block_rows(rec, t, m, te, ang, omega, force, block_s)
     ramps = sum(r[0] == "ramp" for r in rows)
     used = [r for r in rows if r[0] != "ramp"]
     if not used:
