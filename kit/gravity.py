@@ -9,9 +9,11 @@ every later pose by the calibration's kinematics (:func:`gyrocal.calib.kinematic
 as it was fitted.
 
 What this leaves out, as the fit does: the lever arm's accelerations. A sensor ``r`` from the
-meeting point of the axes feels ``ω² r⊥ / g₀`` more while turning (0.037 g at 40 mm and 3 rad/s;
-``gyrocal verify``'s sweeps turn at most at the protocol's speed) and ``α r`` on the ramps; with
-an MPU-9250's 0.1 °/s/g that is at most 6e-5 rad/s, below a half-second block's noise.
+meeting point of the axes feels ``ω² r⊥ / g₀`` more while turning, and ``α r`` on the ramps. At
+the emulated jig's planned 3.6 rad/s (``gyrocal verify``'s sweeps turn no faster) and its 39 mm
+lever arm that is 0.05 g, about 9e-5 rad/s through an MPU-9250's 0.1 °/s/g: far below a
+half-second turning block's reference scatter (a few 1e-3 rad/s); the gravity pairs are at
+rest, where there is none.
 """
 
 from __future__ import annotations

@@ -19,8 +19,9 @@ applied as it was fitted: ``f`` at each gyro sample is gravity's direction in th
 from the joint angles the encoders read, the calibration's kinematics and the servo the manifest
 lists as vertical at home (:mod:`gyrocal.kit.gravity`), averaged over the block like the
 readings. The lever arm's accelerations are neglected, as the fit neglects them: at the sweeps'
-speeds (at most the protocol's, about 3 rad/s) the centripetal term of a sensor 40 mm off the
-axes is 0.037 g, at most 6e-5 rad/s through an MPU-9250's 0.1 °/s/g.
+speeds (at most the protocol's, 3.6 rad/s on the emulated jig) the centripetal term of a sensor
+39 mm off the axes is 0.05 g, about 9e-5 rad/s through an MPU-9250's 0.1 °/s/g, far below a
+turning block's reference scatter (a few 1e-3 rad/s); the gravity pairs are at rest.
 
 Each block also gets the error the calibration's own uncertainty predicts (gyro noise over the
 block, the parameters' covariance, the g-sensitivity's standard deviations, the encoders'
