@@ -97,7 +97,9 @@ def general_motion_steps(plan: Any, ids: list[int], axes: np.ndarray | None = No
     twist further than the protocol's turns), each after a rest; then the gravity pairs: each
     servo horizontal at home (``axes``, its nominal axes in chain order, default x, y, z; "up"
     is +z) is moved a quarter turn, rests :data:`GRAVITY_REST_S` with gravity tilted, moves
-    back and rests as long at home (:func:`gyrocal.calib.design.gravity_poses`). Each pair's
+    back and rests as long at home (:func:`gyrocal.calib.design.gravity_poses`), then the same
+    a quarter turn the other way: with one way only the changes of gravity ``Δf`` span two
+    directions, and a g-sensitivity that acts little on them escapes. Each pair's
     difference of calibrated means is zero for a still sensor whatever its bias did, so it
     tests the calibration's g-sensitivity alone (:func:`verify_recording`)."""
     from gyrocal.calib.design import gravity_poses
@@ -111,11 +113,12 @@ def general_motion_steps(plan: Any, ids: list[int], axes: np.ndarray | None = No
                            speed=moves[-1][2], moves=moves))
     steps.append(Step("rest", rest_s=plan.rest_s))
     for moved, angle in gravity_poses((), axes):
-        if moved < len(ids):
-            steps += [Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed),
-                      Step("rest", rest_s=GRAVITY_REST_S),
-                      Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed),
-                      Step("rest", rest_s=GRAVITY_REST_S)]
+        for a in (angle, -angle):  # both ways: the tilts' Δf then span all three directions
+            if moved < len(ids):
+                steps += [Step("move", motor=int(ids[moved]), angle=a, speed=plan.speed),
+                          Step("rest", rest_s=GRAVITY_REST_S),
+                          Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed),
+                          Step("rest", rest_s=GRAVITY_REST_S)]
     return steps
 
 

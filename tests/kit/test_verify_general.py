@@ -77,10 +77,11 @@ def test_the_run_turns_several_servos_at_once_and_tilts_gravity_at_rest(general_
     sweeps = [s for s in moves if spans.count((s.t_start, s.t_end)) == 3]
     assert len(sweeps) == 6 and len({(s.t_start, s.t_end) for s in sweeps}) == 2
     assert {s.motor for s in sweeps} == {1, 2, 3}
-    # then the gravity pairs: servos 1 and 2 (axes x, y: horizontal at home) a quarter turn and
-    # back, a rest after each move
+    # then the gravity pairs: servos 1 and 2 (axes x, y: horizontal at home) a quarter turn
+    # each way and back, a rest after each move
     single = [s for s in moves if spans.count((s.t_start, s.t_end)) == 1]
-    assert [s.motor for s in single] == [1, 1, 2, 2]
+    assert [s.motor for s in single] == [1] * 4 + [2] * 4
+    assert [s.direction for s in single] == [1, -1, -1, 1] * 2
     after = [min((r for r in general_run.segments if r.kind == "rest" and r.t_start >= s.t_end),
                  key=lambda r: r.t_start) for s in single]
     assert all(r.t_end - r.t_start >= 1.9 for r in after)
@@ -140,7 +141,7 @@ def test_g_sensitivity_is_applied_and_a_fit_without_it_is_caught(full_run, gener
     vn = verify_recording(general_run, no_g)
     # Caught by the gravity pairs (the blocks' RMS is dominated by the encoder reference's
     # scatter while turning, and a slowly wandering bias at rest, both larger than G f).
-    assert vn.gravity_pairs == 2 and not vn.ok, vn.table()
+    assert vn.gravity_pairs == 4 and not vn.ok, vn.table()
     assert np.max(vn.gravity_ratio) > FLAG_RATIO >= np.max(v.gravity_ratio), vn.table()
     # The same calibration with its G dropped (its bias is then the zero-g bias) fails too.
     dropped = GyroCalibration.from_dict({**cal.to_dict(), "g_sensitivity": None})
