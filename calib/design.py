@@ -19,7 +19,8 @@ G-criterion, now in rad/s and for our paired-axis estimator with its rests) is s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy import optimize
@@ -179,7 +180,10 @@ class Plan:
         Predicted one-sigma uncertainties (paired-axis estimator).
     rate_error_std : float
         Predicted worst-direction standard deviation of a calibrated rate at ``reference_rate``,
-        rad/s (the planner's objective).
+        rad/s (the planner's objective). For a full-model plan with gravity rests, of
+        ``A (m + b + G f)`` with g-sensitivity fitted, worst also over a 1 g specific force
+        (:func:`predict_full_uncertainty` with ``gravity``), as are ``matrix_std`` and
+        ``bias_std`` (the zero-g bias); the plan is chosen on ``A (m + b)``.
     reference_rate : float
         rad/s.
     poses : tuple of (int, int, float)
@@ -442,6 +446,8 @@ def predict_full_uncertainty(
     encoder_ticks: int = 4096,
     jitter_s: float = 1e-3,
     sample_hz: float = 200.0,
+    gravity: tuple[tuple[int, float], ...] | None = None,
+    up: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Predicted full-matrix uncertainties of protocols at nominal truth (A = I, b = 0).
 
@@ -458,14 +464,27 @@ def predict_full_uncertainty(
         The protocols to score.
     poses : tuple of (int, int, float)
         Their posed pairs (:attr:`Plan.poses`).
+    gravity : tuple of (int, float), optional
+        Given, the design fits g-sensitivity, ``g = A (m + b + G f)``
+        (:func:`gyrocal.calib.estimators.fit_full_matrix`): these are its gravity rests
+        (:attr:`Plan.gravity_poses`, one rest each after the posed pairs). The specific force is
+        ``up`` carried to each pose by the chain (:func:`gyrocal.calib.kinematics.carried_up`):
+        a rest sees it whole, a turn over whole revolutions its part along the turning axis;
+        ``G`` is fitted along the directions in which ``f`` varies (its constant part is in
+        ``b``, then the zero-g bias), as the fit keeps the directions it determines.
+    up : ndarray (3,), optional
+        "Up" in the sensor frame at home (default +z, hardware_docs/mechanical.md).
 
     Returns
     -------
     matrix_std : ndarray, shape (B, 3, 3)
     bias_std : ndarray, shape (B, 3)
+        With ``gravity``, of the zero-g bias.
     rate_error_std : ndarray, shape (B,)
         Worst-direction standard deviation of ``A (m + b)`` at ``reference_rate`` (the
-        G-criterion for the calibrated output, as in :func:`predict_uncertainty`).
+        G-criterion for the calibrated output, as in :func:`predict_uncertainty`); with
+        ``gravity``, of ``A (m + b + G f)``, worst also over the direction of a 1 g specific
+        force, the correlations of ``G`` with ``A`` and ``b`` included.
     """
     from gyrocal.calib.estimators import full_matrix_batch
     from gyrocal.calib.kinematics import chain_axes
@@ -504,7 +523,7 @@ def predict_full_uncertainty(
             period[poses[(i - 2 * S) // 2][1]] += 1
     n_still = len(ids)
     G = np.zeros((B, n, n_still))
-    n_rest = 2 * S + 1 + 3 * len(poses)
+    n_rest = 2 * S + 1 + 3 * len(poses) + len(gravity or ())
     rest_std = np.zeros((B, n_rest, 3))
     for c, (speed, turns, rest_s) in enumerate(candidates):
         win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
@@ -523,15 +542,68 @@ def predict_full_uncertainty(
         rest_std[c] = noise_std / np.sqrt(m_rest)
     mean = rate[..., None] * u[None]
     rest_mean = np.zeros_like(rest_std)
+    forces = (None if gravity is None
+              else _design_forces(ax, u, pose, poses, gravity, up))
     res = full_matrix_batch(mean, rate, midx, pose, mean_std, rate_std, rest_mean, rest_std,
                             n_servos=S, reference=np.zeros(S), ref_matrix=G,
-                            still_std=q / np.sqrt(12), pose_still=pose_still)
+                            still_std=q / np.sqrt(12), pose_still=pose_still,
+                            **({} if forces is None else {"force": forces[0],
+                                                          "rest_force": forces[1]}))
     cov = res.covariance
     grad = _full_output_gradients(sphere_points(400) * reference_rate)
     var = np.einsum("nip,bpq,niq->bn", grad, cov, grad)
+    if forces is not None and res.g_covariance is not None:
+        var = _with_g_variance(grad, res, forces[2])
     matrix_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, :9], 0, None))
     bias_std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2)[:, 9:], 0, None))
     return matrix_std.reshape(B, 3, 3), bias_std, np.sqrt(var.max(axis=1))
+
+
+def _design_forces(axes: np.ndarray, u: np.ndarray, pose: np.ndarray,
+                   poses: tuple[tuple[int, int, float], ...],
+                   gravity: tuple[tuple[int, float], ...], up: np.ndarray | None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mean specific force of each turn (``(u·γ) u`` over whole revolutions) and each rest
+    (``γ``) of a :func:`full_schedule` design, in the coordinates of the directions it varies
+    along (the ``basis`` rows, also returned): the ``force``/``rest_force`` of
+    :func:`gyrocal.calib.estimators.full_matrix_batch`. Rests: ``2S + 1`` at home, three per
+    posed pair in its pose, one per gravity pose."""
+    from gyrocal.calib.kinematics import carried_up
+
+    S = axes.shape[0]
+    zero = np.zeros(S)
+    g0 = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
+    rest_pose = [zero] * (2 * S + 1)
+    for _, moved, angle in poses:
+        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 3
+    for moved, angle in gravity:
+        rest_pose.append(np.where(np.arange(S) == moved, angle, 0.0))
+    gam = carried_up(axes, zero, zero, g0, pose)
+    f_win = u * np.sum(u * gam, axis=1, keepdims=True)
+    f_rest = carried_up(axes, zero, zero, g0, np.array(rest_pose))
+    every = np.concatenate([f_win, f_rest])
+    _, sv, vt = np.linalg.svd(every - every.mean(axis=0))
+    basis = vt[sv > 1e-6 * max(float(sv[0]), 1e-300)]
+    return f_win @ basis.T, f_rest @ basis.T, basis
+
+
+def _with_g_variance(grad: np.ndarray, res: Any, basis: np.ndarray) -> np.ndarray:
+    """``(B, N)``: the largest variance (summed over the three components, as without ``G``)
+    over 1 g specific forces ``f`` in every direction of ``A (m + b + G f)`` at the rates of
+    ``grad`` (:func:`_full_output_gradients`), ``G = G_k basis``, with the fit's covariances of
+    ``(A, b)``, of ``G_k`` and between them (at ``A = I``: ``∂g_j / ∂G_jk = f_k``)."""
+    tg = np.kron(np.eye(3), basis.T)  # vec(G) (9) from vec(G_k) (3k), both row-major
+    cg = tg @ res.g_covariance @ tg.T  # (B, 9, 9)
+    x = res.g_cross_covariance @ tg.T  # (B, 12, 9)
+    v = np.einsum("nip,bpq,niq->bn", grad, res.covariance, grad)  # (B, N)
+    gx = np.einsum("nip,bpq->bniq", grad, x)  # (B, N, 3, 9)
+    f = sphere_points(50)
+    total = v[:, :, None] + np.zeros((1, 1, f.shape[0]))
+    for j in range(3):
+        blk = slice(3 * j, 3 * j + 3)
+        total = total + 2 * np.einsum("bna,ka->bnk", gx[:, :, j, blk], f)
+        total = total + np.einsum("ka,bac,kc->bk", f, cg[:, blk, blk], f)[:, None, :]
+    return total.max(axis=2)
 
 
 def _full_output_gradients(U: np.ndarray) -> np.ndarray:
@@ -856,7 +928,17 @@ def _plan_full(
             matrix_std=tuple(tuple(float(x) for x in row) for row in ms[i]),
             gravity_poses=grav,
         )
-    return best
+    if best is None:
+        return None
+    # The plan is chosen on A (m + b) (the objective of the matrix), then its figures are given
+    # for the model it fits, g = A (m + b + G f): with G's uncertainty and its correlations.
+    ms, bs, err = predict_full_uncertainty(
+        [(best.speed, best.turns, best.rest_s)], best.poses, noise_std=noise_std,
+        odr_hz=odr_hz, accel=accel, reference_rate=reference_rate, axes=axes,
+        gravity=best.gravity_poses)
+    return replace(best, scale_std=tuple(float(x) for x in np.diag(ms[0])),
+                   bias_std=tuple(float(x) for x in bs[0]), rate_error_std=float(err[0]),
+                   matrix_std=tuple(tuple(float(x) for x in row) for row in ms[0]))
 
 
 def paper_plan(

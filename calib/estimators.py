@@ -996,6 +996,7 @@ class FullMatrixBatch:
     rank_deficiency: np.ndarray  # (B,) int: unobservable directions of the 9 + 2S model terms
     g_sensitivity: np.ndarray | None = None  # (B, 3, k) G of g = A (m + b + G f), rad/s per g
     g_covariance: np.ndarray | None = None  # (B, 3k, 3k) of G row-major
+    g_cross_covariance: np.ndarray | None = None  # (B, 12, 3k): of (A row-major, b) with G
 
 
 def _inner_unrotate(u0: np.ndarray, delta: np.ndarray, j: int, v: np.ndarray) -> np.ndarray:
@@ -1300,6 +1301,7 @@ def full_matrix_batch(
         chi2=np.sum(E**2, axis=1), dof=3 * n + 3 * r + n_still - P, iterations=iterations,
         converged=converged, residuals=E, rank_deficiency=deficiency,
         g_sensitivity=gs if nG else None, g_covariance=cov[:, P0:, P0:] if nG else None,
+        g_cross_covariance=T @ cov[:, :, P0:] if nG else None,
     )
 
 

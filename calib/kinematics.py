@@ -35,7 +35,8 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError
 
-__all__ = ["axes_at", "axis_derivatives", "chain_axes", "pose_derivatives", "rotate", "sensor_rate"]
+__all__ = ["axes_at", "axis_derivatives", "carried_up", "chain_axes", "gravity_up",
+           "pose_derivatives", "rotate", "sensor_rate"]
 
 
 def rotate(axis: np.ndarray, angle: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -245,3 +246,78 @@ def sensor_rate(kinematics: Mapping[str, Any], angles: np.ndarray, rates: np.nda
     if not np.all(np.isfinite(w)):
         raise CalibInputError("rates contain NaN or inf")
     return np.einsum("nsk,ns->nk", chain_axes(axes, ref, th), w)
+
+
+def carried_up(axes: np.ndarray, reference: np.ndarray, home: np.ndarray, up: np.ndarray,
+               angles: np.ndarray) -> np.ndarray:
+    r""""Up" in the sensor frame (the specific force of a still sensor, in g) at encoder angles.
+
+    ``up`` is ``γ_h``, "up" in the sensor frame in the home pose ``θ_h`` (for a gimbal that
+    stands with servo ``k``'s axis vertical, ``±u_k(θ_h)``: :func:`gravity_up`). In any pose
+    ``θ`` it is carried by every servo's rotation from home, like the axis of a joint outside
+    the base: ``γ(θ) = Rot(u_{S-1}, −Δ_{S-1}) ⋯ Rot(u_0, −Δ_0) γ_h`` with ``Δ = θ − θ_h`` and
+    the axes ``u`` at ``θ_h`` (module docstring). The lever arm's accelerations are not in it.
+
+    Parameters
+    ----------
+    axes : ndarray, shape (S, 3)
+        Unit axes at the reference angles, chain order.
+    reference : ndarray, shape (S,)
+        Their reference angles, rad.
+    home : ndarray, shape (S,)
+        The encoder angles of the home pose, rad.
+    up : ndarray, shape (3,)
+        "Up" in the sensor frame in the home pose (unit).
+    angles : ndarray, shape (N, S)
+        Encoder angles, rad.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        Unit vectors.
+    """
+    axes = np.asarray(axes, dtype=float)
+    home = np.asarray(home, dtype=float)
+    at_home = chain_axes(axes, reference, home)
+    ext = np.concatenate([np.asarray(up, dtype=float)[None], at_home])
+    th = np.asarray(angles, dtype=float)
+    th = np.concatenate([np.zeros((th.shape[0], 1)), th], axis=1)
+    return chain_axes(ext, np.concatenate([[0.0], home]), th)[:, 0]
+
+
+def gravity_up(kinematics: Mapping[str, Any], angles: np.ndarray, home: np.ndarray,
+               gravity: tuple[int, int]) -> np.ndarray:
+    """:func:`carried_up` for a ``kinematics`` mapping (module docstring).
+
+    Parameters
+    ----------
+    kinematics : mapping
+        ``{"chain", "axes", "reference_angles_rad"}``.
+    angles : array_like, shape (N, S)
+        Encoder angles of the servos in chain order, rad.
+    home : array_like, shape (S,)
+        Encoder angles of the home pose, rad.
+    gravity : (int, int)
+        ``(servo ID, sign)`` of the servo vertical at home
+        (:attr:`gyrocal.calib.observations.ObservationSet.gravity`).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+
+    Raises
+    ------
+    CalibInputError
+        As :func:`axes_at`, a home pose of the wrong shape or a servo not in the chain.
+    """
+    axes, ref, th = _parse(kinematics, angles)
+    chain = [int(c) for c in kinematics["chain"]]
+    sid, sign = (int(x) for x in gravity)
+    if sid not in chain or sign not in (1, -1):
+        raise CalibInputError(f"gravity must name a servo of the chain {chain} and a sign ±1, "
+                              f"got {gravity!r}")
+    h = np.asarray(home, dtype=float)
+    if h.shape != (len(chain),) or not np.all(np.isfinite(h)):
+        raise CalibInputError(f"home must be {len(chain)} finite angles, got shape {h.shape}")
+    up = sign * chain_axes(axes, ref, h)[chain.index(sid)]
+    return carried_up(axes, ref, h, up, th)

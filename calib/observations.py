@@ -357,7 +357,7 @@ class ObservationSet:
         CalibInputError
             If the set does not say where gravity points (:attr:`has_gravity`).
         """
-        from gyrocal.calib.kinematics import chain_axes
+        from gyrocal.calib.kinematics import carried_up, chain_axes
 
         if not self.has_gravity:
             raise CalibInputError(
@@ -366,14 +366,12 @@ class ObservationSet:
         chain = list(self.chain)  # type: ignore[arg-type]
         sid, sign = self.gravity  # type: ignore[misc]
         axes = np.asarray(axes, dtype=float)
+
         home = np.asarray(self.home_pose, dtype=float)
-        at_home = chain_axes(axes, reference, home)
-        up = sign * at_home[chain.index(sid)]
-        ext = np.concatenate([up[None], at_home])
+        up = sign * chain_axes(axes, reference, home)[chain.index(sid)]
 
         def carried(theta: np.ndarray) -> np.ndarray:
-            th = np.concatenate([np.zeros((theta.shape[0], 1)), theta], axis=1)
-            return chain_axes(ext, np.concatenate([[0.0], home]), th)[:, 0]
+            return carried_up(axes, reference, home, up, theta)
 
         pose = np.asarray(self.pose, dtype=float)
         g_win = carried(pose)

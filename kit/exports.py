@@ -373,9 +373,15 @@ def _render_kalibr_intrinsics(
     and writes its intrinsics as ``model: scale-misalignment``, ``gyroscopes: {M, A, C_gyro_i}``,
     ``accelerometers: {M}`` (``setIntrisicsMatrices``). gyrocal's ``g = matrix (m + bias)`` is
     ``m = matrix⁻¹ g − bias``: so ``M = matrix⁻¹`` with ``C_gyro_i`` the identity (Kalibr's IMU
-    frame is gyrocal's calibrated frame). Kalibr has no place for a fixed bias (it estimates the
-    bias as a random walk) and gyrocal measures neither ``A`` nor the accelerometer: notes say so.
+    frame is gyrocal's calibrated frame). Kalibr's ``A`` is the g-sensitivity in
+    (rad/s)/(m/s²) on the specific force ``a_i`` (its ``C_b_w (a_w − g_w)`` plus the lever-arm
+    terms, ``addGyroscopeErrorTerms``): with ``g_sensitivity``,
+    ``m = matrix⁻¹ g − bias − G f`` and ``f = a / g₀`` give ``A = −G / g₀``
+    (``g₀`` = 9.80665 m/s², :data:`gyrocal.calib.accel.STANDARD_GRAVITY`); without it ``A`` is
+    a zero placeholder. Kalibr has no place for a fixed bias (it estimates the bias as a random
+    walk) and gyrocal does not calibrate the accelerometer for it: notes say so.
     """
+    from gyrocal.calib.accel import STANDARD_GRAVITY
     from gyrocal.calib.model import GyroCalibration
 
     cal = GyroCalibration.from_dict(doc)
@@ -386,11 +392,23 @@ def _render_kalibr_intrinsics(
     rostopic, rate = _kalibr_topic_and_rate(options, cal.sensor.get("odr_hz"))
     inverse = _inverse3(cal.full_matrix.tolist())
     eye = [[float(i == j) for j in range(3)] for i in range(3)]
+    if cal.g_sensitivity is None:
+        g_acc = [[0.0] * 3] * 3
+        placeholders = ("gyroscopes.A (g-sensitivity) and accelerometers.M are identity/zero "
+                        "placeholders: gyrocal does not measure them")
+        a_line = ["# Placeholders, not measured by gyrocal: gyroscopes.A (zero) and "
+                  "accelerometers.M"]
+    else:
+        g_acc = [[-float(x) / STANDARD_GRAVITY + 0.0 for x in row]
+                 for row in cal.g_sensitivity["matrix"]]
+        placeholders = ("accelerometers.M is an identity placeholder: gyrocal does not "
+                        "calibrate the accelerometer for Kalibr")
+        a_line = ["# gyroscopes.A: the g-sensitivity, -G / 9.80665 in (rad/s)/(m/s^2) (gyrocal's G",
+                  "# is ADDED to the reading per g). Placeholder, not measured: accelerometers.M"]
     notes = [
         "Kalibr's IMU file has no place for a fixed gyro bias (Kalibr estimates it as a random "
         f"walk): the bias {[float(b) for b in cal.bias]} rad/s is not in the file",
-        "gyroscopes.A (g-sensitivity) and accelerometers.M are identity/zero placeholders: "
-        "gyrocal does not measure them",
+        placeholders,
         "the noise fields Kalibr also needs are not in a calibration: export the gyrocal-noise "
         "document of `gyrocal noise` with --format kalibr and merge the two files",
     ]
@@ -407,12 +425,12 @@ def _render_kalibr_intrinsics(
         "# NOT in this file: the bias (Kalibr has no field for a fixed bias; gyrocal's bias, ADDED",
         "# to the reading, rad/s: " + ", ".join(f"{a}={_fmt(b)}" for a, b in zip("xyz", cal.bias,
                                                                             strict=True)) + ").",
-        "# Placeholders, not measured by gyrocal: gyroscopes.A (zero) and accelerometers.M",
+        *a_line,
         "# (identity). Noise fields: export a gyrocal-noise document with --format kalibr.",
         f"# Sensor: {_sensor_text(cal.sensor)}.",
         f"# Consistency: {_verdict(cal)}.",
         "model: scale-misalignment",
-        *_yaml_block("gyroscopes", {"M": inverse, "A": [[0.0] * 3] * 3, "C_gyro_i": eye}),
+        *_yaml_block("gyroscopes", {"M": inverse, "A": g_acc, "C_gyro_i": eye}),
         *_yaml_block("accelerometers", {"M": eye}),
         f"rostopic: {rostopic}",
     ]
@@ -577,10 +595,25 @@ def _sensor_text(sensor: Mapping[str, Any]) -> str:
 
 
 def _model_lines(cal: Any, prefix: str) -> list[str]:
-    """Comment lines stating the model the calibration holds (v1 diagonal or v2 full matrix)."""
+    """Comment lines stating the model the calibration holds (v1 diagonal or v2 full matrix,
+    with g-sensitivity where it has it)."""
     if not cal.is_full:
         return [f"{prefix}Model (paper Eq. 1), elementwise per sensor axis x, y, z:",
                 f"{prefix}    g = scale * (m + bias)"]
+    if cal.g_sensitivity is not None:
+        return [
+            f"{prefix}Model (Calibration v2, the full matrix with g-sensitivity), with i, j, k",
+            f"{prefix}over the axes x, y, z:",
+            f"{prefix}    g = matrix @ (m + bias + g_sensitivity.matrix @ f)",
+            f"{prefix}    g[i] = sum over j of matrix[i][j] * (m[j] + bias[j]",
+            f"{prefix}                          + sum over k of G[j][k] * f[k])",
+            f"{prefix}  matrix  3x3, row by row, dimensionless: scale factors on the diagonal,",
+            f"{prefix}          cross-axis sensitivities off it; frame convention "
+            f"{_one_line(cal.frame or 'not stated')}",
+            f"{prefix}  G       g_sensitivity.matrix, rad/s per g; f the specific force at the",
+            f"{prefix}          sensor in g, same frame (the accelerometer's reading: +1 g up when",
+            f"{prefix}          still); bias is then the zero-g bias",
+        ]
     return [
         f"{prefix}Model (Calibration v2, the full matrix), with i, j over the axes x, y, z:",
         f"{prefix}    g = matrix @ (m + bias)",
@@ -589,6 +622,21 @@ def _model_lines(cal: Any, prefix: str) -> list[str]:
         f"{prefix}          cross-axis sensitivities off it; frame convention "
         f"{_one_line(cal.frame or 'not stated')}",
     ]
+
+
+def g_sensitivity_note(cal: Any, target: str) -> list[str]:
+    """The note for a target with no place for a calibration's g-sensitivity (none without
+    one): what is lost, ``|A G| x 1 g`` at most."""
+    if cal.g_sensitivity is None:
+        return []
+    import numpy as np
+
+    worst = float(np.max(np.abs(cal.full_matrix @ np.asarray(cal.g_sensitivity["matrix"]))
+                         .sum(axis=1)))
+    return [f"{target} has no place for the gyro's g-sensitivity (g_sensitivity.matrix): it is "
+            f"not carried, so the rate is off by up to {worst:.2g} rad/s per g of specific "
+            "force; apply it where the accelerometer is read (gyrocal export --format "
+            "c-header or yaml carries it)"]
 
 
 # ---------------------------------------------------------------------------- yaml
@@ -631,6 +679,8 @@ def _render_yaml(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[st
         "matrix_std": "# one-sigma of each entry of matrix",
         "kinematics": "# the gimbal as the fit estimated it: servo IDs base first, their axes in\n"
                       "# the sensor frame at the reference encoder angles (rad)",
+        "g_sensitivity": "# G of g = matrix @ (m + bias + G f), rad/s per g of specific force f;\n"
+                         "# its one-sigma, and the directions of f the run determined it along",
     }
     for key, value in d.items():
         if key in comments:
@@ -678,6 +728,14 @@ def _ros_params(cal: Any, frame: str) -> tuple[dict[str, Any], list[str]]:
     params["scale"] = list(cal.scale)
     params["bias"] = list(cal.bias)
     missing = []
+    if cal.g_sensitivity is not None:
+        params["model"] = "omega = matrix * (omega_raw + bias + g_sensitivity * f)"
+        params["g_sensitivity"] = _finite_list(cal.g_sensitivity["matrix"])
+        g_std = _finite_list(cal.g_sensitivity["matrix_std"])
+        if g_std is None:
+            missing.append("g_sensitivity_std")
+        else:
+            params["g_sensitivity_std"] = g_std
     stds = ("matrix_std", "bias_std") if full else ("scale_std", "bias_std")
     for name in (*stds, "covariance"):
         value = getattr(cal, name)
@@ -722,6 +780,15 @@ def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
             "#              convention is matrix_frame_convention; matrix_std its one-sigma",
         ]
         cov = "#   covariance row-major 12x12 of (matrix row by row, bias_x, bias_y, bias_z)"
+        if cal.g_sensitivity is not None:
+            model[1] = ("#     omega[i] = sum over j of matrix[3*i + j] * (omega_raw[j] + bias[j]"
+                        " + sum over k of g_sensitivity[3*j + k] * f[k])")
+            model += [
+                "#   g_sensitivity  9 numbers, G row by row, rad/s per g; f the specific force",
+                "#              in g in the same frame (the accelerometer's linear_acceleration",
+                "#              divided by 9.80665: +1 g up when still); g_sensitivity_std its",
+                "#              one-sigma; bias is the zero-g bias",
+            ]
     else:
         model = [
             "# Model, elementwise per axis x, y, z of that frame:",
@@ -815,6 +882,18 @@ def _c_header_comment(cal: Any, P: str, sens_ok: bool) -> list[str]:
             " *",
             f" *   k  scale factor, dimensionless ({P}_SCALE_X, _Y, _Z)",
         ]
+    if cal.g_sensitivity is not None:
+        model += [
+            " *",
+            " * With g-sensitivity (the document's g_sensitivity), with k over x, y, z too:",
+            " *",
+            " *     g[i] = sum over j of A[i][j] * (m[j] + b[j] + sum over k of G[j][k] * f[k])",
+            " *",
+            f" *   G  rad/s per g ({P}_GSENS_XX, _XY, ... _ZZ: row, column); f the specific force",
+            " *      at the sensor in g, same frame: the accelerometer's reading (+1 g up when",
+            f" *      still). b is then the zero-g bias: apply with {P.lower()}_apply_force();",
+            f" *      {P.lower()}_apply() leaves G out (off by up to |A G| x 1 g)",
+        ]
     lines = [
         "/*",
         f" * Gyroscope calibration for firmware, written by gyrocal {__version__} from a "
@@ -861,6 +940,13 @@ def _c_constants(cal: Any, P: str) -> list[str]:
     lines += ["", "/* Biases b, rad/s, added to the reading before scaling. */"]
     for a, b, s in zip(_AXES, cal.bias, cal.bias_std, strict=True):
         lines.append(f"#define {P}_BIAS_{a} {_c_float(b)} /* rad/s, std {_std_text(s)} */")
+    if cal.g_sensitivity is not None:
+        lines += ["", f"/* g-sensitivity G, rad/s per g: {P}_GSENS_<row><column>. */"]
+        g = cal.g_sensitivity
+        for i, row in enumerate(g["matrix"]):
+            for j, x in enumerate(row):
+                lines.append(f"#define {P}_GSENS_{_AXES[i]}{_AXES[j]} {_c_float(x)} "
+                             f"/* std {_std_text(g['matrix_std'][i][j])} */")
     return lines
 
 
@@ -879,7 +965,7 @@ def _c_apply(cal: Any, P: str, fn: str) -> list[str]:
         body = [f"    const float {c} = {P}_SCALE_{a} * (m_rad_s[{i}] + {P}_BIAS_{a});"
                 for i, (c, a) in enumerate(zip("xyz", _AXES, strict=True))]
         body += [f"    g_rad_s[{i}] = {c};" for i, c in enumerate("xyz")]
-    return [
+    lines = [
         "/*",
         f" * Apply the calibration: {what}. m_rad_s and g_rad_s are",
         " * {x, y, z} in rad/s; they may be the same array (in place).",
@@ -887,6 +973,26 @@ def _c_apply(cal: Any, P: str, fn: str) -> list[str]:
         f"static inline void {fn}(const float m_rad_s[3], float g_rad_s[3])",
         "{",
         *body,
+        "}",
+    ]
+    if cal.g_sensitivity is None:
+        return lines
+    rows = [f"    y[{i}] = m_rad_s[{i}] + " + " + ".join(
+        f"{P}_GSENS_{r}{c} * f_g[{j}]" for j, c in enumerate(_AXES)) + ";"
+        for i, r in enumerate(_AXES)]
+    return lines + [
+        "",
+        "/*",
+        " * Apply the calibration with g-sensitivity: g = A * (m + b + G * f). f_g is the",
+        " * specific force {x, y, z} in g (the accelerometer's reading, +1 g up when still);",
+        " * g_rad_s may be m_rad_s (in place).",
+        " */",
+        f"static inline void {fn}_force(const float m_rad_s[3], const float f_g[3], "
+        "float g_rad_s[3])",
+        "{",
+        "    float y[3];",
+        *rows,
+        f"    {fn}(y, g_rad_s);",
         "}",
     ]
 
@@ -916,7 +1022,11 @@ def _render_c_header(
     if cal.temperature_model is not None:
         lines += ["", *_c_thermal(cal, P, fn)]
     lines += ["", f"#endif /* {guard} */"]
-    return "\n".join(lines) + "\n", []
+    notes = []
+    if cal.g_sensitivity is not None and cal.temperature_model is not None:
+        notes.append(f"{fn}_at() (the temperature model) leaves the g-sensitivity out: add "
+                     "G f to the reading first, as " + fn + "_force() does")
+    return "\n".join(lines) + "\n", notes
 
 
 def _c_thermal(cal: Any, P: str, fn: str) -> list[str]:

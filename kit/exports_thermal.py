@@ -33,7 +33,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from gyrocal.kit.errors import InputError
-from gyrocal.kit.exports import Exporter, ExportOption, register
+from gyrocal.kit.exports import Exporter, ExportOption, g_sensitivity_note, register
 
 __all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "px4_params"]
 
@@ -122,7 +122,7 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
         text = str(int(value)) if kind == _MAV_INT32 else f"{value + 0.0:.9g}"
         lines.append(f"1\t1\t{name}\t{text}\t{kind}")
     notes = [_NOT_CARRIED.format(stack="PX4", matrix=" and cross-axis matrix" if cal.is_full
-                                 else ""),
+                                 else ""), *g_sensitivity_note(cal, "PX4's TC_G parameters"),
              f"the whole bias is in TC_G{inst}_X0_*: set CAL_GYRO{inst}_XOFF/YOFF/ZOFF to 0, or "
              "the bias is removed twice"]
     if dev is None:
@@ -140,6 +140,7 @@ def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
     lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_params(cal, imu)]
     notes = [_NOT_CARRIED.format(stack="ArduPilot", matrix=" and cross-axis matrix"
                                  if cal.is_full else ""),
+             *g_sensitivity_note(cal, "ArduPilot's INS_TCAL parameters"),
              "with INS_GYR_CAL = 1 (the default) ArduPilot re-measures the gyro offsets at "
              "every boot and overwrites INS_GYROFFS and the CALTEMP; the temperature terms then "
              "still apply about the boot temperature"]

@@ -463,26 +463,32 @@ class Runner:
         return None
 
     def _check_speed(self, step: Step, motion: Any, d: _StepData) -> CheckFailure | None:
-        """The turning servo held its commanded speed (encoder only)."""
-        it, ir, et, ea = d.arrays()
-        j = self.ids.index(step.motor)
+        """The turning servo held its commanded speed (encoder only) over the middle half of
+        the turn."""
+        _, _, et, ea = d.arrays()
+        duration = float(et[-1] - et[0]) if et.size else 0.0
+        return self.servo_speed_failure(step.motor, float(getattr(motion, "speed", step.speed)),
+                                        et, ea, duration)
+
+    def servo_speed_failure(self, motor: int, commanded: float, et: np.ndarray, ea: np.ndarray,
+                            duration: float) -> CheckFailure | None:
+        """Whether servo ``motor`` held :attr:`speed_fraction` of ``commanded`` rad/s over the
+        middle half of its motion, the first ``duration`` s of the step's encoder readings
+        (``et``, ``ea`` with a column per servo): the median of its speed over 0.1 s spans
+        there, so that a servo which reaches the speed but then drags is caught too."""
         reached = 0.0
         if et.size >= 5:
-            # The speed held over the middle half of the turn (its median), so that a servo which
-            # reaches the speed but then drags is caught too.
-            ang = ea[:, j]
+            ang = ea[:, self.ids.index(motor)]
             span = max(1, int(round(0.1 / max(np.median(np.diff(et)), 1e-6))))
             v = np.abs(ang[span:] - ang[:-span]) / np.maximum(et[span:] - et[:-span], 1e-9)
             tv = 0.5 * (et[span:] + et[:-span])
-            quarter = (et[-1] - et[0]) / 4
-            mid = (tv >= et[0] + quarter) & (tv <= et[-1] - quarter)
+            mid = (tv >= et[0] + duration / 4) & (tv <= et[0] + 3 * duration / 4)
             if mid.any():
                 reached = float(np.median(v[mid]))
-        commanded = float(getattr(motion, "speed", step.speed))
         if reached < self.speed_fraction * commanded:
             return CheckFailure(
                 "speed", self.step_index,
-                f"servo {step.motor} held only {reached:.2f} of {commanded:.2f} rad/s: lower "
+                f"servo {motor} held only {reached:.2f} of {commanded:.2f} rad/s: lower "
                 "the speed (protocol.speed_dps), check the supply voltage, or free the joint",
             )
         return None

@@ -51,12 +51,14 @@ __all__ = [
     "Residuals",
     "ServoAxis",
     "boxcar_mean",
+    "calibrated",
     "calibration_axis",
     "encoder_rate",
     "nominal_axis",
     "plan_report",
     "servo_axes",
     "window_axes",
+    "window_forces",
     "window_residuals",
     "write_report",
 ]
@@ -136,14 +138,15 @@ def calibration_axis(cal: GyroCalibration, motor: int) -> np.ndarray | None:
 
 def servo_axes(
     motors: list[int], cal: GyroCalibration, manifest: Mapping[str, Any],
-    windows: tuple[Window, ...] = (),
+    windows: tuple[Window, ...] = (), forces: np.ndarray | None = None,
 ) -> dict[int, ServoAxis]:
     """Each servo's axis in the sensor frame, for the plots and the residuals.
 
     In order of preference: the calibration's ``axes`` (the paired-axis fit estimates them);
     else fitted to the servo's windows under this calibration's scale and bias (the least-squares
-    direction of ``ω_i · k ∘ (m̄_i + b)``: the mount's misalignment is then absorbed, as it is by
-    an estimator that does not model axes); else the nominal axis the manifest names.
+    direction of ``ω_i · k ∘ (m̄_i + b)``, or ``ω_i A (m̄_i + b + G f_i)`` with g-sensitivity: the
+    mount's misalignment is then absorbed, as it is by an estimator that does not model axes);
+    else the nominal axis the manifest names.
 
     Parameters
     ----------
@@ -154,6 +157,10 @@ def servo_axes(
         The recording's manifest (``gimbal.motors[].axis`` names the nominal axes).
     windows : tuple of Window
         The rotation windows.
+    forces : ndarray, shape (len(windows), 3), optional
+        Each window's mean specific force, g (:meth:`~gyrocal.calib.observations.
+        ObservationSet.specific_force`), for a calibration with g-sensitivity; without it ``G``
+        is left out (its ``G f`` mostly cancels between a servo's two directions).
 
     Raises
     ------
@@ -167,7 +174,9 @@ def servo_axes(
     out: dict[int, ServoAxis] = {}
     for motor in motors:
         u = calibration_axis(cal, motor)
-        acc = _fitted_direction(cal, [w for w in windows if w.motor == motor])
+        mine = [i for i, w in enumerate(windows) if w.motor == motor]
+        acc = _fitted_direction(cal, [windows[i] for i in mine],
+                                None if forces is None else np.asarray(forces)[mine])
         if u is not None:
             out[motor] = ServoAxis(motor, u, "calibration")
         elif np.any(acc):
@@ -180,13 +189,29 @@ def servo_axes(
     return out
 
 
-def _fitted_direction(cal: GyroCalibration, windows: list[Window]) -> np.ndarray:
-    """``Σ ω_i A (m̄_i + b)`` over ``windows``: the least-squares direction of their calibrated
-    means (not normalised; zero without windows)."""
+def _fitted_direction(cal: GyroCalibration, windows: list[Window],
+                      forces: np.ndarray | None = None) -> np.ndarray:
+    """``Σ ω_i A (m̄_i + b + G f_i)`` over ``windows``: the least-squares direction of their
+    calibrated means (not normalised; zero without windows)."""
     acc = np.zeros(3)
-    for w in windows:
-        acc += w.rate * cal.apply(w.mean)
+    for i, w in enumerate(windows):
+        acc += w.rate * calibrated(cal, w.mean, None if forces is None else forces[i])
     return acc
+
+
+def calibrated(cal: GyroCalibration, m: np.ndarray, force: np.ndarray | None) -> np.ndarray:
+    """``cal.apply(m)`` with the specific force ``force`` (g, one row per reading or one for
+    all) where the calibration has g-sensitivity; without a force its ``G f`` is left out
+    silently (the report says where)."""
+    if cal.g_sensitivity is not None and force is not None:
+        return cal.apply(m, specific_force=force)
+    import warnings
+
+    from gyrocal.calib.model import GSensitivityWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GSensitivityWarning)
+        return cal.apply(m)
 
 
 def _kinematic_axes(extracted: ExtractedWindows, cal: GyroCalibration
@@ -244,6 +269,8 @@ def window_axes(
     """
     windows = extracted.windows
     kin = _kinematic_axes(extracted, cal)
+    forces = window_forces(extracted.observations, cal)
+    f_win = None if forces is None else forces[0]
     if kin is not None:
         return tuple(ServoAxis(int(w.motor), kin[0][i], "kinematics",  # type: ignore[arg-type]
                                kin[1][i]) for i, w in enumerate(windows))
@@ -252,15 +279,16 @@ def window_axes(
     for w, g in zip(windows, groups, strict=True):
         per_motor.setdefault(int(w.motor), set()).add(g)  # type: ignore[arg-type]
     single = sorted(m for m, gs in per_motor.items() if len(gs) == 1)
-    home = servo_axes(single, cal, manifest, windows)
+    home = servo_axes(single, cal, manifest, windows, f_win)
     fitted: dict[int, ServoAxis] = {}
     for g in set(groups):
-        members = [w for w, h in zip(windows, groups, strict=True) if h == g]
+        idx = [i for i, h in enumerate(groups) if h == g]
+        members = [windows[i] for i in idx]
         motor = int(members[0].motor)  # type: ignore[arg-type]
         if motor in home:
             fitted[g] = home[motor]
         else:
-            acc = _fitted_direction(cal, members)
+            acc = _fitted_direction(cal, members, None if f_win is None else f_win[idx])
             fitted[g] = ServoAxis(motor, acc / np.linalg.norm(acc), "fitted")
     return tuple(fitted[g] for g in groups)
 
@@ -324,17 +352,26 @@ class Residuals:
         return float(np.sum(self.z**2))
 
 
+def window_forces(obs: Any, cal: GyroCalibration) -> tuple[np.ndarray, np.ndarray] | None:
+    """The mean specific force of each window and rest (g), from the poses and the
+    calibration's kinematics as its fit took it
+    (:meth:`~gyrocal.calib.observations.ObservationSet.specific_force`), for a calibration with
+    g-sensitivity; None otherwise (or when the observations do not say where gravity points)."""
+    kin = cal.kinematics
+    if cal.g_sensitivity is None or kin is None or not obs.has_gravity:
+        return None
+    if [int(c) for c in kin["chain"]] != [int(c) for c in obs.chain]:
+        return None
+    return obs.specific_force(np.asarray(kin["axes"]), np.asarray(kin["reference_angles_rad"]))
+
+
 def _g_offsets(obs: Any, cal: GyroCalibration) -> tuple[np.ndarray, np.ndarray]:
-    """``G f`` of each window and rest for a calibration with g-sensitivity, ``f`` from the
-    poses and the calibration's kinematics as its fit took it
-    (:meth:`~gyrocal.calib.observations.ObservationSet.specific_force`); zeros otherwise."""
-    zero = np.zeros((obs.n_windows, 3)), np.zeros((obs.n_rests, 3))
-    g, kin = cal.g_sensitivity, cal.kinematics
-    if g is None or kin is None or not obs.has_gravity:
-        return zero
-    f, fr = obs.specific_force(np.asarray(kin["axes"]), np.asarray(kin["reference_angles_rad"]))
-    G = np.asarray(g["matrix"])
-    return f @ G.T, fr @ G.T
+    """``G f`` of each window and rest (:func:`window_forces`); zeros without them."""
+    forces = window_forces(obs, cal)
+    if forces is None:
+        return np.zeros((obs.n_windows, 3)), np.zeros((obs.n_rests, 3))
+    G = np.asarray(cal.g_sensitivity["matrix"])  # type: ignore[index]
+    return forces[0] @ G.T, forces[1] @ G.T
 
 
 def window_residuals(
@@ -471,7 +508,11 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
     t, m = rec.imu_t[sel], rec.imu_rate[sel]
     et, ea = rec.encoder(int(seg.motor))  # type: ignore[arg-type]
     u = axis.axis
-    g = cal.apply(m) if m.shape[0] else np.zeros((0, 3))
+    from gyrocal.kit.gravity import force_source, specific_force
+
+    f = (specific_force(rec, cal, t) if cal.g_sensitivity is not None and t.size
+         and force_source(rec, cal) is None else None)
+    g = calibrated(cal, m, f) if m.shape[0] else np.zeros((0, 3))
     fig, axs = plt.subplots(3, 1, sharex=True, figsize=(10, 8.5), constrained_layout=True,
                             gridspec_kw={"height_ratios": [1.3, 1.0, 1.0]})
     sense = "positive" if seg.direction > 0 else "negative"
@@ -513,7 +554,9 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
             ax.set_ylim(-2.5 * span, 2.5 * span)
     if window is not None and window_index is not None:
         obs = extracted.observations.with_pooled_noise()
-        e = float(cal.apply(window.mean) @ u - window.rate)
+        forces = window_forces(obs, cal)
+        e = float(calibrated(cal, window.mean, None if forces is None
+                             else forces[0][window_index]) @ u - window.rate)
         s = float(math.hypot(np.linalg.norm((cal.full_matrix.T @ u)
                                             * obs.mean_std[window_index]),
                              obs.rate_std[window_index]))
@@ -589,6 +632,10 @@ def _rests_plot(plt: Any, extracted: ExtractedWindows, cal: GyroCalibration,
     fig, axs = plt.subplots(1, 3, figsize=(12, 4.5), constrained_layout=True)
     obs = extracted.observations.with_pooled_noise()
     x = np.array([w.segment for w in extracted.rests])
+    # With g-sensitivity a still sensor reads −(b + G f): show each rest mean plus its G f, so
+    # that all sit on −b (the zero-g bias).
+    shift = _g_offsets(obs, cal)[1]
+    gsens = cal.g_sensitivity is not None and bool(np.any(shift))
     for j, ax in enumerate(axs):
         bj, sj = cal.bias[j], cal.bias_std[j]
         ax.axhline(-bj, color="C0", lw=1.2, label="−bias (calibration)")
@@ -598,17 +645,19 @@ def _rests_plot(plt: Any, extracted: ExtractedWindows, cal: GyroCalibration,
             ax.axhline(-float(truth["bias"][j]), color="k", lw=0.8, ls=":",
                        label="−bias (simulation truth)")
         if x.size:
-            ax.errorbar(x, obs.rest_mean[:, j], yerr=obs.rest_mean_std[:, j],  # type: ignore[index]
+            ax.errorbar(x, obs.rest_mean[:, j] + shift[:, j],  # type: ignore[index]
+                        yerr=obs.rest_mean_std[:, j],  # type: ignore[index]
                         fmt="o", color=_AXIS_COLORS[j], ms=4, capsize=3,
-                        label="rest mean ±1σ")
+                        label="rest mean + G f ±1σ" if gsens else "rest mean ±1σ")
         ax.set_title(f"{_AXES[j]} axis")
         ax.set_xlabel("segment index")
         ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 3), useOffset=False)
         ax.grid(True, alpha=0.3)
     axs[0].set_ylabel("mean reading at rest, rad/s")
     axs[0].legend(fontsize=8)
-    fig.suptitle("rest windows: a still sensor reads −bias (Calibration v1 convention)",
-                 fontsize=10)
+    fig.suptitle("rest windows: a still sensor reads −bias (Calibration v1 convention)"
+                 + ("; with g-sensitivity −(bias + G f), f gravity's direction in the rest"
+                    if gsens else ""), fontsize=10)
     return fig
 
 
@@ -697,7 +746,9 @@ def write_report(
         )
     make_output_dir(out, "--out")
     motors = sorted({int(s.motor) for s in rec.segments if s.kind == "rotate"})  # type: ignore[arg-type]
-    home = servo_axes(motors, cal, rec.manifest, extracted.windows)
+    forces = window_forces(extracted.observations, cal)
+    home = servo_axes(motors, cal, rec.manifest, extracted.windows,
+                      None if forces is None else forces[0])
     axes = window_axes(extracted, cal, rec.manifest)
     index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}
     written: list[tuple[Path, str]] = []

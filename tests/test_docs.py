@@ -333,11 +333,6 @@ def run_document(path: Path, workdir: Path) -> DocRun:
                 for argv in commands:
                     if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
                         argv = [*argv, "--sim"]
-                    if argv[0] == "verify" and "--sim" in argv and "--sim-realism" not in argv:
-                        # verify applies the calibration without the specific force (its
-                        # g-sensitivity is left out) and predicts for white noise, so its
-                        # emulated sensor is the paper's (the shared verify_run does the same)
-                        argv = [*argv, "--sim-realism", "off"]
                     _run_gyrocal(argv, block.where, expect, run.log)
             elif block.lang == "python":
                 if block.directive == "emulated-servo":

@@ -247,6 +247,9 @@ class Motion:
         Time of the poll that found it finished.
     finished : bool
         True once every servo is at its goal and still.
+    speeds : dict
+        Per servo of a ``"turns"`` motion, its commanded (quantized) speed, rad/s; empty for the
+        other kinds (``speed`` is then every servo's).
     """
 
     kind: str
@@ -261,7 +264,8 @@ class Motion:
     t_begin: float
     t_end: float | None = None
     finished: bool = False
-    _history: deque = field(default_factory=deque, repr=False)
+    speeds: dict[int, float] = field(default_factory=dict)
+    _history: dict[int, deque] = field(default_factory=dict, repr=False)  # servo: (t, ticks)
     _settled: dict[int, tuple[int, float]] = field(default_factory=dict, repr=False)
 
 
@@ -795,7 +799,7 @@ class Gimbal:
             start_angles={servo_id: (start - home) * POSITION_UNIT_RAD},
             goal_angles={servo_id: (goal - home) * POSITION_UNIT_RAD},
             goal_ticks={servo_id: goal}, t_begin=self.clock.monotonic())
-        self.motion._history.append((s.t, start))
+        self.motion._history[servo_id] = deque([(s.t, start)])
         self._last_poll_t = self.clock.monotonic()
         return self.motion
 
@@ -946,7 +950,10 @@ class Gimbal:
             acceleration=self._accel_units() * ACCELERATION_UNIT_RAD_S2,
             start_angles={i: (starts[i] - home[i]) * POSITION_UNIT_RAD for i in plan},
             goal_angles={i: (goals[i] - home[i]) * POSITION_UNIT_RAD for i in plan},
-            goal_ticks=goals, t_begin=self.clock.monotonic())
+            goal_ticks=goals, t_begin=self.clock.monotonic(),
+            speeds={i: p[2] for i, p in plan.items()})
+        for i in plan:
+            self.motion._history[i] = deque([(s.t, starts[i])])
         self._last_poll_t = self.clock.monotonic()
         return self.motion
 
@@ -999,39 +1006,40 @@ class Gimbal:
             still = s.t - last[1] >= SETTLE_S and (s.moving is None or not bool(s.moving[k]))
             if not (abs(ticks - m.goal_ticks[i]) <= 1 and still):
                 done = False
-        if m.kind == "turn":
-            i = m.servo_ids[0]
-            m._history.append((s.t, int(s.ticks[self.ids.index(i)])))
-            self._check_stall(m, s)
+        if m.kind in ("turn", "turns"):
+            for i in m.servo_ids:
+                m._history[i].append((s.t, int(s.ticks[self.ids.index(i)])))
+                self._check_stall(m, s, i)
         if done:
             m.finished = True
             m.t_end = s.t
             for i in m.servo_ids:
                 self._write_item(i, "Bus Watchdog", 0)
 
-    def _check_stall(self, m: Motion, s: GimbalSample) -> None:
-        """A turning servo must keep ``min_speed_fraction`` of its speed over the last
-        ``stall_timeout_s``, once past its acceleration ramp and before its deceleration."""
-        i = m.servo_ids[0]
-        ramp_t = m.speed / m.acceleration
+    def _check_stall(self, m: Motion, s: GimbalSample, i: int) -> None:
+        """Turning servo ``i`` must keep ``min_speed_fraction`` of its speed over the last
+        ``stall_timeout_s``, once past its acceleration ramp and before its deceleration (each
+        servo of a ``"turns"`` motion at its own speed)."""
+        speed = m.speeds.get(i, m.speed)
+        ramp_t = speed / m.acceleration
         if s.t - m.t_begin < ramp_t + self.stall_timeout_s:
             return
         ticks = int(s.ticks[self.ids.index(i)])
         remaining = abs(m.goal_ticks[i] - ticks) * POSITION_UNIT_RAD
-        if remaining <= m.speed ** 2 / (2 * m.acceleration) + m.speed * 0.05:
+        if remaining <= speed ** 2 / (2 * m.acceleration) + speed * 0.05:
             return
-        hist = m._history  # (t, ticks); keep one entry older than the window
+        hist = m._history[i]  # (t, ticks); keep one entry older than the window
         while len(hist) >= 2 and s.t - hist[1][0] > self.stall_timeout_s:
             hist.popleft()
         t_old, ticks_old = hist[0]
         if s.t - t_old < 0.5 * self.stall_timeout_s:
             return
-        speed = abs(ticks - ticks_old) * POSITION_UNIT_RAD / (s.t - t_old)
-        if speed < self.min_speed_fraction * m.speed:
+        held = abs(ticks - ticks_old) * POSITION_UNIT_RAD / (s.t - t_old)
+        if held < self.min_speed_fraction * speed:
             if self._read_item(i, "Bus Watchdog", allow_alert=True) == -1:
                 raise self._watchdog_error(i)
             raise StallError(
-                f"servo {i} turns at {speed:.3f} rad/s but was commanded {m.speed:.3f} rad/s "
+                f"servo {i} turns at {held:.3f} rad/s but was commanded {speed:.3f} rad/s "
                 f"(below {self.min_speed_fraction:.0%} over {self.stall_timeout_s:g} s): it is "
                 "blocked or overloaded. Check that the gimbal turns freely and that no cable "
                 "pulls, lower the speed or the load; it has been stopped.")

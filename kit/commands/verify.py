@@ -15,8 +15,9 @@ DESCRIPTION = (
     "calibration against the servo encoders: the true rate is the servos' encoder rates along "
     "their axes (the calibration's kinematics, or the home-pose axes of a version 1 "
     "calibration), at rest it is zero (like the paper's Tables V and VI, with the servos as the "
-    "reference instead of a second gyroscope). Exits 3 when the calibration's error exceeds "
-    "3 times what its own uncertainty predicts."
+    "reference instead of a second gyroscope), and the change of the still sensor's calibrated "
+    "rate when gravity is tilted (its g-sensitivity). Exits 3 when the calibration's error "
+    "exceeds 3 times what its own uncertainty predicts."
 )
 
 
@@ -71,9 +72,16 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out or datetime.now().strftime("gyrocal-verify-%Y%m%d-%H%M%S"))
         make_output_dir(out, "--out")
         rec_dir = out / "recording"
+        from functools import partial
+
+        import numpy as np
+
+        from gyrocal.kit.report_plots import nominal_axis
         from gyrocal.kit.verify import GeneralMotionRunner, general_motion_steps
 
-        run_jig(cfg, args, out, rec_dir, extend=(GeneralMotionRunner, general_motion_steps))
+        axes = np.array([nominal_axis(a) for a in cfg["gimbal"]["axes"]])
+        run_jig(cfg, args, out, rec_dir,
+                extend=(GeneralMotionRunner, partial(general_motion_steps, axes=axes)))
     rec = load_recording(rec_dir)
     v = verify_recording(rec, cal, args.block)
     if args.json:

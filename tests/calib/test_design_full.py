@@ -87,3 +87,47 @@ def test_bad_inputs_are_refused():
     with pytest.raises(CalibInputError, match="fastest turn"):
         score_full_design(full_schedule(POSES_2), rate=3.0, window_std=1e-3, rest_std=1e-3,
                           n_rests=1, radius=1.0)
+
+
+def test_the_design_s_specific_forces_match_the_independent_generator():
+    # tests/calib/gsens_truth.py (scipy rotations, a numeric mean over each revolution) with a
+    # unit g-sensitivity on a square gimbal: each window's and rest's mean reading less its rate
+    # part is its specific force, what the planner models each turn and rest to see.
+    from gyrocal.calib.design import _design_forces, full_schedule, gravity_poses
+    from gyrocal.calib.kinematics import chain_axes
+    from tests.calib.gsens_truth import gsens_observations
+
+    poses = ((1, 2, np.pi / 2), (0, 1, np.pi / 2), (0, 2, np.pi / 4))
+    grav = gravity_poses(poses)
+    sched = full_schedule(poses)
+    midx = np.array([t[0] for t in sched])
+    pose = np.array([t[1] for t in sched])
+    u = chain_axes(np.eye(3), np.zeros(3), pose)[np.arange(len(sched)), midx]
+    f_win, f_rest, basis = _design_forces(np.eye(3), u, pose, poses, grav, None)
+    assert basis.shape == (3, 3)
+    rest_poses = [np.zeros(3)] * 7
+    for _, moved, angle in poses:
+        rest_poses += [np.where(np.arange(3) == moved, angle, 0.0)] * 3
+    rest_poses += [np.where(np.arange(3) == m, a, 0.0) for m, a in grav]
+    links = [np.eye(3)[j] for j in range(3)]
+    obs = gsens_observations(np.eye(3), np.zeros(3), np.eye(3), links, np.eye(3), sched,
+                             rest_poses, speed=1.0, n_avg=64)
+    np.testing.assert_allclose(f_rest @ basis, obs.rest_mean, atol=1e-12)
+    want = obs.mean - obs.rate[:, None] * u
+    np.testing.assert_allclose(f_win @ basis, want, atol=1e-12)
+
+
+def test_predicted_uncertainty_with_g_sensitivity_costs_the_bias_and_the_rate():
+    # Fitting G (three more unknowns per axis, seen only through how gravity moves between
+    # windows) can only lose precision on the same data; the zero-g bias is what G trades with.
+    from gyrocal.calib.design import gravity_poses, predict_full_uncertainty
+
+    poses = ((1, 2, np.pi / 2), (0, 1, np.pi / 2), (0, 2, np.pi / 2))
+    grav = gravity_poses(poses)
+    kw = dict(noise_std=0.01, odr_hz=200.0, reference_rate=1.0)
+    cands = [(3.0, 1, 1.0), (2.0, 2, 1.5)]
+    ms0, bs0, e0 = predict_full_uncertainty(cands, poses, **kw)
+    ms1, bs1, e1 = predict_full_uncertainty(cands, poses, gravity=grav, **kw)
+    assert np.all(np.isfinite(e1)) and np.all(e1 > e0)
+    assert np.all(bs1 > 1.1 * bs0)
+    assert np.all(ms1 >= ms0 - 1e-12)

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gyrocal.calib.errors import CalibInputError
-from gyrocal.calib.kinematics import axes_at, sensor_rate
+from gyrocal.calib.kinematics import axes_at, gravity_up, sensor_rate
 
 
 def Rx(a):
@@ -98,6 +98,46 @@ def test_skewed_gimbal_with_reference_angles():
     np.testing.assert_allclose(u[0], axes, atol=1e-14)  # at the reference angles: as given
     np.testing.assert_allclose(u[1, 2], axes[2], atol=1e-14)  # innermost: constant
     np.testing.assert_allclose(np.linalg.norm(u, axis=2), 1.0, atol=1e-14)
+
+
+def test_gravity_up_is_the_world_vertical_seen_from_the_sensor():
+    # The skewed gimbal of the test above, standing with servo `index`'s axis vertical in a home
+    # pose that is not the reference pose. Truth from scipy rotations only: "up" in the world is
+    # ±R(home) u(home); at any pose the sensor sees R(θ)ᵀ of it.
+    rng = np.random.default_rng(12)
+    a = [v / np.linalg.norm(v) for v in (np.array([0.04, -0.02, 1]), np.array([0.03, 1, -0.05]),
+                                         np.array([1, 0.02, 0.03]))]
+    M = Rotation.from_rotvec([-0.1, 0.15, 0.2]).as_matrix()
+
+    def R(th):
+        out = np.eye(3)
+        for aj, tj in zip(a, th, strict=True):
+            out = out @ Rotation.from_rotvec(aj * tj).as_matrix()
+        return out @ M
+
+    ref = rng.uniform(-1, 1, 3)
+    axes = []
+    for j in range(3):
+        inner = np.eye(3)
+        for k in range(j + 1, 3):
+            inner = inner @ Rotation.from_rotvec(a[k] * ref[k]).as_matrix()
+        axes.append((inner @ M).T @ a[j])
+    kin = {"chain": [7, 8, 9], "axes": [list(x) for x in axes], "reference_angles_rad": list(ref)}
+    home = rng.uniform(-0.5, 0.5, 3) + 2 * np.pi * np.array([1, 0, -2])
+    angles = home + rng.uniform(-7, 7, (20, 3))
+    for index, sign in ((0, 1), (2, -1), (1, 1)):
+        u_home = axes_at(kin, home[None])[0, index]
+        world_up = sign * R(home) @ u_home
+        want = np.array([R(th).T @ world_up for th in angles])
+        got = gravity_up(kin, angles, home, (kin["chain"][index], sign))
+        np.testing.assert_allclose(got, want, atol=1e-12)
+    # the base's axis stays vertical whatever the pose: up is its axis in every pose
+    got = gravity_up(kin, angles, home, (7, 1))
+    np.testing.assert_allclose(got, axes_at(kin, angles)[:, 0], atol=1e-12)
+    with pytest.raises(CalibInputError, match="gravity must name a servo of the chain"):
+        gravity_up(kin, angles, home, (4, 1))
+    with pytest.raises(CalibInputError, match="home must be 3 finite angles"):
+        gravity_up(kin, angles, home[:2], (7, 1))
 
 
 def test_bad_kinematics_and_angles_are_named():

@@ -401,6 +401,34 @@ def test_a_stall_is_detected_and_the_servos_stopped():
     assert all_torque_off(bus)
 
 
+@pytest.mark.parametrize("fraction", [0.0, 0.5])
+def test_a_stall_of_one_servo_among_several_turning_at_once_is_detected(fraction):
+    # verify's general motion: three servos at three speeds; the middle one (its own speed
+    # 0.62 rad/s, below the others' top speed of 1.0) stalls to `fraction` of it. The check must
+    # use each servo's own speed: at 0.5 of 0.62 rad/s it still turns faster than 0.8 × 0.38.
+    clock, port, bus, _ = emulated(seed=8)
+    with pytest.raises(StallError, match=r"servo 2 turns at 0\.\d+ rad/s but was commanded "
+                                         r"0\.6\d+ rad/s"):
+        with Gimbal(port, clock=clock) as g:
+            g.begin_turns({1: (1, 1.0, 1), 2: (1, 0.62, -1), 3: (1, 0.38, 1)})
+            assert g.motion.speeds[2] == pytest.approx(0.62, abs=0.025)
+            bus.servo(2).stall_at(clock.monotonic() + 2.0, speed_fraction=fraction)
+            for _ in range(6000):  # 30 s of polls: the turns take 17 s unstalled
+                g.poll()
+                clock.sleep(0.005)
+    assert all_torque_off(bus)
+
+
+def test_several_servos_turning_at_their_own_speeds_are_not_taken_for_a_stall():
+    clock, port, bus, _ = emulated(seed=8)
+    with Gimbal(port, clock=clock) as g:
+        m = g.begin_turns({1: (1, 1.0, 1), 2: (1, 0.62, -1), 3: (1, 0.38, 1)})
+        while not m.finished:
+            g.poll()
+            clock.sleep(0.005)
+        assert m.t_end - m.t_begin > 2 * math.pi / 0.38
+
+
 def test_a_late_host_trips_the_bus_watchdog():
     clock, port, bus, _ = emulated(seed=9)
     with pytest.raises(WatchdogTrippedError, match="Bus Watchdog expired"):

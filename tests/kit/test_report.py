@@ -284,3 +284,29 @@ def test_a_diagonal_calibration_of_a_posed_run_gets_one_axis_per_pose(full):
         for p, u in zip(mine, distinct[1:], strict=True):
             angle = np.arccos(np.clip(distinct[0] @ u, -1, 1))
             assert angle == pytest.approx(abs(p["angle_rad"]), abs=np.radians(3)), p
+
+
+def test_servo_axes_apply_the_g_sensitivity_with_each_window_s_force():
+    # A servo about z turned both ways at 1 rad/s, vertical (f = up = +z) in both windows, by a
+    # sensor with a bias and g-sensitivity G: m = ω u − b − G f. Written out by hand: with the
+    # forces, the fitted axis is exactly u; without them (G f left out) it is still u only
+    # because G f cancels between the two directions, so a one-direction servo shows the
+    # difference.
+    from gyrocal.calib.windows import Window
+
+    G = np.array([[1e-3, 0.0, 4e-3], [0.0, 1e-3, -3e-3], [0.0, 0.0, 2e-3]])
+    b = np.array([0.01, -0.02, 0.005])
+    u, f = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])
+    cal = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=tuple(b), matrix=np.eye(3),
+                          g_sensitivity={"matrix": G.tolist(), "matrix_std": None,
+                                         "directions": np.eye(3).tolist()})
+
+    def window(d):
+        m = d * u - b - G @ f
+        return Window("steady", 0, 3, d, (0, 1, 2, 3), 1.0, float(d), tuple(m), 100)
+
+    one = (window(1),)
+    with_f = servo_axes([3], cal, {}, one, np.array([f]))[3]
+    np.testing.assert_allclose(with_f.axis, u, atol=1e-15)
+    without = servo_axes([3], cal, {}, one)[3]
+    assert np.linalg.norm(without.axis - u) > 4e-3  # G f = (4e-3, -3e-3, 2e-3) off

@@ -1,8 +1,10 @@
-"""verify's general motion on the emulated jig with a ±2 % cross-axis sensor.
+"""verify's general motion on the emulated jig with a ±2 % cross-axis sensor and every realism
+effect (the default ``--sim`` sensor).
 
 Truth: the emulator's own parameters (manifest ``truth``: scale, bias, misalignment, the servo
-axes at home), turned into a calibration by the emulator's documented convention
-``m = (misalignment @ g) / scale - bias``, i.e. ``g = misalignment⁻¹ diag(scale) (m + bias)``.
+axes at home, the g-sensitivity), turned into a calibration by the emulator's documented
+convention ``m = (misalignment @ g) / scale - bias + G_s f``, i.e.
+``g = misalignment⁻¹ diag(scale) (m + bias − G_s f)``.
 """
 
 import json
@@ -57,17 +59,32 @@ def truth_calibrations(rec):
     axes = [np.asarray(t["axes"][str(i)]) for i in ids]
     kin = {"chain": ids, "axes": [(u / np.linalg.norm(u)).tolist() for u in axes],
            "reference_angles_rad": [0.0] * len(ids)}
+    # The emulator adds G_s f to the reading (m = C g - bias + G_s f), so the model's G is -G_s.
+    line = t.get("realism", {}).get("g-sensitivity", "off")
+    gs = None if line == "off" else {
+        "matrix": (-np.array(line["matrix_rad_s_per_g"])).tolist(),
+        "matrix_std": [[0.0] * 3] * 3, "directions": np.eye(3).tolist()}
     full = GyroCalibration(scale=tuple(np.diag(a)), bias=tuple(t["bias"]), matrix=a,
-                           kinematics=kin, frame="sensor")
+                           kinematics=kin, frame="sensor", g_sensitivity=gs)
     diagonal = GyroCalibration(scale=tuple(t["scale"]), bias=tuple(t["bias"]),
                                scale_std=(1e-5,) * 3, bias_std=(1e-5,) * 3)
     return full, diagonal
 
 
-def test_the_run_turns_several_servos_at_once(general_run):
+def test_the_run_turns_several_servos_at_once_and_tilts_gravity_at_rest(general_run):
     moves = [s for s in general_run.segments if s.kind == "move"]
-    assert len(moves) == 6 and len({(s.t_start, s.t_end) for s in moves}) == 2
-    assert {s.motor for s in moves} == {1, 2, 3}
+    spans = [(s.t_start, s.t_end) for s in moves]
+    sweeps = [s for s in moves if spans.count((s.t_start, s.t_end)) == 3]
+    assert len(sweeps) == 6 and len({(s.t_start, s.t_end) for s in sweeps}) == 2
+    assert {s.motor for s in sweeps} == {1, 2, 3}
+    # then the gravity pairs: servos 1 and 2 (axes x, y: horizontal at home) a quarter turn
+    # each way and back, a rest after each move
+    single = [s for s in moves if spans.count((s.t_start, s.t_end)) == 1]
+    assert [s.motor for s in single] == [1] * 4 + [2] * 4
+    assert [s.direction for s in single] == [1, -1, -1, 1] * 2
+    after = [min((r for r in general_run.segments if r.kind == "rest" and r.t_start >= s.t_end),
+                 key=lambda r: r.t_start) for s in single]
+    assert all(r.t_end - r.t_start >= 1.9 for r in after)
 
 
 def test_the_full_calibration_passes_and_the_diagonal_one_is_flagged(general_run):
@@ -103,3 +120,54 @@ def test_the_table_explains_its_figures_and_json_matches_columns(general_run):
     np.testing.assert_allclose(np.sqrt((n[:, None] * parts**2).sum(0) / n.sum()), v.rms_full,
                                rtol=1e-12)
     json.dumps(d)
+
+
+def test_g_sensitivity_is_applied_and_a_fit_without_it_is_caught(full_run, general_run):
+    # The shared runs are the realistic default sensor (g-sensitivity up to 0.1 °/s/g per term).
+    # The calibration of `gyrocal calibrate --sim` (with G) passes; the full model fitted to the
+    # same recording without G fails, and so does the G calibration applied without its G f.
+    from gyrocal.calib.estimators import estimate
+    from gyrocal.kit.pipeline import extract_recording
+
+    assert general_run.manifest["truth"]["realism"]["g-sensitivity"] != "off"
+    cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
+    assert cal.g_sensitivity is not None
+    v = verify_recording(general_run, cal)
+    assert v.g_sensitivity == "applied" and v.ok, v.table()
+    ex = extract_recording(load_recording(full_run[0] / "recording"))
+    fit = estimate(ex.observations, "full-matrix", g_sensitivity=False)
+    assert fit.success and fit.g_sensitivity is None
+    no_g = fit.to_calibration(sensor=cal.sensor)
+    vn = verify_recording(general_run, no_g)
+    # Caught by the gravity pairs (the blocks' RMS is dominated by the encoder reference's
+    # scatter while turning, and a slowly wandering bias at rest, both larger than G f).
+    assert vn.gravity_pairs == 4 and not vn.ok, vn.table()
+    assert np.max(vn.gravity_ratio) > FLAG_RATIO >= np.max(v.gravity_ratio), vn.table()
+    # The same calibration with its G dropped (its bias is then the zero-g bias) fails too.
+    dropped = GyroCalibration.from_dict({**cal.to_dict(), "g_sensitivity": None})
+    vd = verify_recording(general_run, dropped)
+    assert not vd.ok and "g-sensitivity is not modelled" in vd.verdict(), vd.table()
+    # G's uncertainty is in the prediction: without its σ the prediction is smaller.
+    zero_std = {**cal.to_dict()["g_sensitivity"], "matrix_std": [[0.0] * 3] * 3}
+    v0 = verify_recording(general_run, GyroCalibration.from_dict(
+        {**cal.to_dict(), "g_sensitivity": zero_std}))
+    assert np.all(v0.rms_predicted < v.rms_predicted)
+    np.testing.assert_allclose(v0.rms_full, v.rms_full, rtol=1e-12)
+
+
+def test_gravity_from_the_encoders_matches_the_emulated_jig(general_run):
+    # Independent truth: the emulated jig's home gravity (R_homeᵀ e_z), recovered from the
+    # manifest's g-sensitivity truth (its G and the bias shift G γ_home it puts in the home
+    # pose), is what gyrocal.kit.gravity says at the recording's start with the truth's axes.
+    from gyrocal.kit.gravity import specific_force
+
+    full, _ = truth_calibrations(general_run)
+    g = {"matrix": [[0.0] * 3] * 3, "matrix_std": [[0.0] * 3] * 3, "directions": []}
+    cal = GyroCalibration.from_dict({**full.to_dict(), "g_sensitivity": g})
+    t0 = general_run.imu_t[0]
+    f = specific_force(general_run, cal, np.array([t0]))[0]
+    line = general_run.manifest["truth"]["realism"]["g-sensitivity"]
+    home = np.linalg.solve(np.array(line["matrix_rad_s_per_g"]),
+                           np.array(line["home_bias_shift_rad_s"]))
+    assert abs(np.linalg.norm(home) - 1) < 1e-6
+    np.testing.assert_allclose(f, home, atol=0.01)

@@ -1,0 +1,93 @@
+"""Where gravity points in the sensor frame during a recording, for a calibration's g-sensitivity.
+
+A Calibration v2 with ``g_sensitivity`` holds ``g = A (m + b + G f)``, ``f`` the specific force at
+the sensor in g (hardware_docs/method.md §10). The fit took ``f`` from the gimbal, not from an
+accelerometer: the servo the manifest lists with axis ``z`` (or ``-z``) stands vertical in the
+recording's first pose (:func:`gyrocal.kit.pipeline.gravity_servo`), and "up" is carried to
+every later pose by the calibration's kinematics (:func:`gyrocal.calib.kinematics.gravity_up`).
+:func:`specific_force` does the same at any time of a recording, so the calibration is applied
+as it was fitted.
+
+What this leaves out, as the fit does: the lever arm's accelerations. A sensor ``r`` from the
+meeting point of the axes feels ``ω² r⊥ / g₀`` more while turning, and ``α r`` on the ramps. At
+the emulated jig's planned 3.6 rad/s (``gyrocal verify``'s sweeps turn no faster) and its 39 mm
+lever arm that is 0.05 g, about 9e-5 rad/s through an MPU-9250's 0.1 °/s/g: far below a
+half-second turning block's reference scatter (a few 1e-3 rad/s); the gravity pairs are at
+rest, where there is none.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.kinematics import gravity_up
+from gyrocal.calib.model import GyroCalibration
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.pipeline import gravity_servo
+from gyrocal.kit.recording import Recording
+
+__all__ = ["force_source", "specific_force"]
+
+
+def force_source(rec: Recording, cal: GyroCalibration) -> str | None:
+    """Why :func:`specific_force` cannot give ``f`` for this calibration and recording, or None
+    when it can (the calibration has ``g_sensitivity`` and ``kinematics``, the manifest names
+    the vertical servo, and every servo of the chain has encoder readings)."""
+    if cal.g_sensitivity is None:
+        return "the calibration has no g-sensitivity"
+    if cal.kinematics is None:
+        return "the calibration has no kinematics to carry gravity's direction"
+    up = gravity_servo(rec.manifest)
+    if up is None:
+        return ("the recording's manifest lists no servo with axis z or -z (the one vertical "
+                "at home)")
+    chain = [int(c) for c in cal.kinematics["chain"]]
+    if up[0] not in chain:
+        return f"the vertical servo {up[0]} is not in the calibration's chain {chain}"
+    missing = [m for m in chain if rec.encoder(m)[0].size < 2]
+    if missing:
+        return f"no encoder readings of servo(s) {missing}"
+    return None
+
+
+def specific_force(rec: Recording, cal: GyroCalibration, t: np.ndarray) -> np.ndarray:
+    """The specific force of a still sensor at times ``t`` of the recording, g, sensor frame.
+
+    Parameters
+    ----------
+    rec : Recording
+    cal : GyroCalibration
+        With ``g_sensitivity`` and ``kinematics`` (:func:`force_source` says whether).
+    t : ndarray, shape (N,)
+        Times on the recording clock, s (encoder angles are interpolated linearly, and held at
+        the first and last readings outside them).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        Unit vectors ("up", +1 g when still).
+
+    Raises
+    ------
+    InputError
+        When :func:`force_source` gives a reason.
+    """
+    why = force_source(rec, cal)
+    if why is not None:
+        raise InputError(f"{rec.path}: cannot tell where gravity points: {why}")
+    kin: Mapping[str, Any] = cal.kinematics  # type: ignore[assignment]
+    t = np.asarray(t, dtype=float).reshape(-1)
+    cols, home = [], []
+    for m in kin["chain"]:
+        te, th = rec.encoder(int(m))
+        cols.append(np.interp(t, te, th))
+        home.append(float(th[0]))  # the recording's first pose, as the fit takes it
+    try:
+        return gravity_up(kin, np.column_stack(cols).reshape(t.size, -1), np.array(home),
+                          gravity_servo(rec.manifest))  # type: ignore[arg-type]
+    except CalibInputError as exc:
+        raise InputError(f"{rec.path}: {exc}") from None
