@@ -298,7 +298,10 @@ class GimbalJig:
         t = np.asarray(t, dtype=float).reshape(-1)
         if t.size == 0:
             return np.zeros((0, 3))
-        th, dth = self.joint_angles(t)
+        return self._rate(t, *self.joint_angles(t))
+
+    def _rate(self, t: np.ndarray, th: np.ndarray, dth: np.ndarray) -> np.ndarray:
+        """:meth:`rate` from the joint angles and rates at ``t``."""
         # R_chainᵀ Σ_i R_1..i−1 a_i θ̇_i = Σ_i R_i+1..nᵀ a_i θ̇_i (R_iᵀ a_i = a_i), by the
         # recursion u_i = R_iᵀ (u_i−1 + a_i θ̇_i): vector rotations only, no matrices.
         w = np.zeros((t.size, 3))
@@ -340,13 +343,17 @@ class GimbalJig:
         and ``α`` the backward difference of the rate over ``dt`` (α and ω in the sensor frame:
         ``r`` is fixed there, and ``dω/dt`` is the same in both frames)."""
         t = np.asarray(t, dtype=float).reshape(-1)
-        force = self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
         r = self.lever_arm_m
-        if t.size and np.any(r):
-            before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
-            both = self.rate(np.column_stack([before, t]).reshape(-1)).reshape(t.size, 2, 3)
-            step = np.where(t > before, t - before, np.inf)[:, None]
-            w, alpha = both[:, 1], (both[:, 1] - both[:, 0]) / step
-            acc = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
-            force = force + acc / STANDARD_GRAVITY
-        return force
+        if not (t.size and np.any(r)):
+            return self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
+        # one evaluation of the joints for the rates at t - dt and t and the orientation at t
+        before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
+        both = np.column_stack([before, t]).reshape(-1)
+        th, dth = self.joint_angles(both)
+        w_both = self._rate(both, th, dth).reshape(t.size, 2, 3)
+        at_t = slice(1, None, 2)
+        force = self._sensor_orientation(self._chain(th[at_t])[-1], t)[:, 2, :]
+        step = np.where(t > before, t - before, np.inf)[:, None]
+        w, alpha = w_both[:, 1], (w_both[:, 1] - w_both[:, 0]) / step
+        acc = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
+        return force + acc / STANDARD_GRAVITY
