@@ -82,7 +82,7 @@ def _rotate_back(v: np.ndarray, axis: np.ndarray, skew_t: np.ndarray,
     ``skew_t`` is ``_skew(axis).T`` so that ``v @ skew_t`` is ``axis × v`` row by row."""
     c = np.cos(angle)[:, None]
     s = np.sin(angle)[:, None]
-    return v * c - (v @ skew_t) * s + np.outer(v @ axis, axis) * (1.0 - c)
+    return v * c - (v @ skew_t) * s + (v @ axis)[:, None] * axis * (1.0 - c)
 
 
 def rotvec_to_matrix(rotvec: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -307,12 +307,12 @@ class GimbalJig:
         w = np.zeros((t.size, 3))
         for i in range(len(self.joints)):
             a = self.axes[i]
-            w += np.outer(dth[:, i], a)
+            w += dth[:, i, None] * a
             w = _rotate_back(w, a, self._skew_t[i], th[:, i])
             if self.wobble_rad:  # the link's tilt R(e, ψ): w ← R(e, ψ)ᵀ w + e ψ̇
                 e, eps = self.wobble_axes[i], self.wobble_rad
                 w = _rotate_back(w, e, self._wobble_skew_t[i], eps * np.sin(th[:, i]))
-                w += np.outer(eps * np.cos(th[:, i]) * dth[:, i], e)
+                w += (eps * np.cos(th[:, i]) * dth[:, i])[:, None] * e
         w = w @ self.mount  # Mᵀ w for each row
         for m, ds, slip in self._slip_matrices(t):
             w = np.einsum("nji,nj->ni", m, w) + ds[:, None] * slip.rotvec[None, :]
@@ -351,9 +351,25 @@ class GimbalJig:
         both = np.column_stack([before, t]).reshape(-1)
         th, dth = self.joint_angles(both)
         w_both = self._rate(both, th, dth).reshape(t.size, 2, 3)
-        at_t = slice(1, None, 2)
-        force = self._sensor_orientation(self._chain(th[at_t])[-1], t)[:, 2, :]
+        force = self._gravity(t, th[1::2])
         step = np.where(t > before, t - before, np.inf)[:, None]
         w, alpha = w_both[:, 1], (w_both[:, 1] - w_both[:, 0]) / step
-        acc = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
+        # α × r + ω × (ω × r), the second as ω (ω·r) − r |ω|²
+        acc = np.cross(alpha, r) + w * (w @ r)[:, None] - r * np.einsum("ni,ni->n", w, w)[:, None]
         return force + acc / STANDARD_GRAVITY
+
+    def _gravity(self, t: np.ndarray, th: np.ndarray) -> np.ndarray:
+        """Gravity in the sensor frame, ``R_sensorᵀ (0, 0, 1)``, from the joint angles at ``t``:
+        the inverse rotations applied to the vector in turn, base first (as :meth:`_rate`),
+        rather than the product of the matrices."""
+        g = np.zeros((t.size, 3))
+        g[:, 2] = 1.0
+        for i in range(len(self.joints)):
+            g = _rotate_back(g, self.axes[i], self._skew_t[i], th[:, i])
+            if self.wobble_rad:
+                g = _rotate_back(g, self.wobble_axes[i], self._wobble_skew_t[i],
+                                 self.wobble_rad * np.sin(th[:, i]))
+        g = g @ self.mount
+        for m, _, _ in self._slip_matrices(t):
+            g = np.einsum("nji,nj->ni", m, g)
+        return g
