@@ -244,6 +244,11 @@ class SensorTruth:
         put(self, "_coeff_a", np.asarray(self.bias_temp_coeff_rad_s_per_c))
         put(self, "_quad_a", np.asarray(self.bias_temp_quad_rad_s_per_c2))
         put(self, "_scale_tc_a", np.asarray(self.scale_temp_coeff_per_c))
+        #: No temperature terms: scale(T) and bias(T) are the constants (exactly, as the
+        #: general formulas give them with zero coefficients), so the reading skips them.
+        put(self, "_isothermal", not any(any(c) for c in (
+            self.bias_temp_coeff_rad_s_per_c, self.bias_temp_quad_rad_s_per_c2,
+            self.scale_temp_coeff_per_c)))
 
     def sigma_rad_s(self, odr_hz: float) -> np.ndarray:
         """Per-sample noise standard deviation (3,) at output data rate ``odr_hz``."""
@@ -271,6 +276,8 @@ class SensorTruth:
     def reading(self, omega: np.ndarray, temperature_c: np.ndarray) -> np.ndarray:
         """The noiseless reading ``m`` (N, 3) in rad/s for true rates ``omega`` (N, 3)."""
         mis_t = self._mis_t  # type: ignore[attr-defined]
+        if self._isothermal:  # type: ignore[attr-defined]
+            return (np.asarray(omega) @ mis_t) / self._scale_a - self._bias_a  # type: ignore[attr-defined]
         return (np.asarray(omega) @ mis_t) / self.scale_at(temperature_c) - self.bias_at(
             temperature_c)
 

@@ -82,7 +82,7 @@ def _rotate_back(v: np.ndarray, axis: np.ndarray, skew_t: np.ndarray,
     ``skew_t`` is ``_skew(axis).T`` so that ``v @ skew_t`` is ``axis × v`` row by row."""
     c = np.cos(angle)[:, None]
     s = np.sin(angle)[:, None]
-    return v * c - (v @ skew_t) * s + np.outer(v @ axis, axis) * (1.0 - c)
+    return v * c - (v @ skew_t) * s + (v @ axis)[:, None] * axis * (1.0 - c)
 
 
 def rotvec_to_matrix(rotvec: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -298,18 +298,21 @@ class GimbalJig:
         t = np.asarray(t, dtype=float).reshape(-1)
         if t.size == 0:
             return np.zeros((0, 3))
-        th, dth = self.joint_angles(t)
+        return self._rate(t, *self.joint_angles(t))
+
+    def _rate(self, t: np.ndarray, th: np.ndarray, dth: np.ndarray) -> np.ndarray:
+        """:meth:`rate` from the joint angles and rates at ``t``."""
         # R_chainᵀ Σ_i R_1..i−1 a_i θ̇_i = Σ_i R_i+1..nᵀ a_i θ̇_i (R_iᵀ a_i = a_i), by the
         # recursion u_i = R_iᵀ (u_i−1 + a_i θ̇_i): vector rotations only, no matrices.
         w = np.zeros((t.size, 3))
         for i in range(len(self.joints)):
             a = self.axes[i]
-            w += np.outer(dth[:, i], a)
+            w += dth[:, i, None] * a
             w = _rotate_back(w, a, self._skew_t[i], th[:, i])
             if self.wobble_rad:  # the link's tilt R(e, ψ): w ← R(e, ψ)ᵀ w + e ψ̇
                 e, eps = self.wobble_axes[i], self.wobble_rad
                 w = _rotate_back(w, e, self._wobble_skew_t[i], eps * np.sin(th[:, i]))
-                w += np.outer(eps * np.cos(th[:, i]) * dth[:, i], e)
+                w += (eps * np.cos(th[:, i]) * dth[:, i])[:, None] * e
         w = w @ self.mount  # Mᵀ w for each row
         for m, ds, slip in self._slip_matrices(t):
             w = np.einsum("nji,nj->ni", m, w) + ds[:, None] * slip.rotvec[None, :]
@@ -340,13 +343,33 @@ class GimbalJig:
         and ``α`` the backward difference of the rate over ``dt`` (α and ω in the sensor frame:
         ``r`` is fixed there, and ``dω/dt`` is the same in both frames)."""
         t = np.asarray(t, dtype=float).reshape(-1)
-        force = self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
         r = self.lever_arm_m
-        if t.size and np.any(r):
-            before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
-            both = self.rate(np.column_stack([before, t]).reshape(-1)).reshape(t.size, 2, 3)
-            step = np.where(t > before, t - before, np.inf)[:, None]
-            w, alpha = both[:, 1], (both[:, 1] - both[:, 0]) / step
-            acc = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
-            force = force + acc / STANDARD_GRAVITY
-        return force
+        if not (t.size and np.any(r)):
+            return self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
+        # one evaluation of the joints for the rates at t - dt and t and the orientation at t
+        before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
+        both = np.column_stack([before, t]).reshape(-1)
+        th, dth = self.joint_angles(both)
+        w_both = self._rate(both, th, dth).reshape(t.size, 2, 3)
+        force = self._gravity(t, th[1::2])
+        step = np.where(t > before, t - before, np.inf)[:, None]
+        w, alpha = w_both[:, 1], (w_both[:, 1] - w_both[:, 0]) / step
+        # α × r + ω × (ω × r), the second as ω (ω·r) − r |ω|²
+        acc = np.cross(alpha, r) + w * (w @ r)[:, None] - r * np.einsum("ni,ni->n", w, w)[:, None]
+        return force + acc / STANDARD_GRAVITY
+
+    def _gravity(self, t: np.ndarray, th: np.ndarray) -> np.ndarray:
+        """Gravity in the sensor frame, ``R_sensorᵀ (0, 0, 1)``, from the joint angles at ``t``:
+        the inverse rotations applied to the vector in turn, base first (as :meth:`_rate`),
+        rather than the product of the matrices."""
+        g = np.zeros((t.size, 3))
+        g[:, 2] = 1.0
+        for i in range(len(self.joints)):
+            g = _rotate_back(g, self.axes[i], self._skew_t[i], th[:, i])
+            if self.wobble_rad:
+                g = _rotate_back(g, self.wobble_axes[i], self._wobble_skew_t[i],
+                                 self.wobble_rad * np.sin(th[:, i]))
+        g = g @ self.mount
+        for m, _, _ in self._slip_matrices(t):
+            g = np.einsum("nji,nj->ni", m, g)
+        return g

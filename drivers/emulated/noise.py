@@ -105,28 +105,59 @@ class ColouredNoise:
         """The noise (N, 3) at the ends of the ``N`` steps ``dt`` (s, each > 0), continuing from
         the previous call."""
         dt = np.asarray(dt, dtype=float).reshape(-1)
-        out = np.zeros((dt.size, 3))
-        if dt.size == 0 or not self.active:
+        n = dt.size
+        out = np.zeros((n, 3))
+        if n == 0 or not self.active:
             return out
-        if self.q > 0:
-            for j, T in enumerate(FLICKER_TIME_CONSTANTS_S):
-                phi = np.exp(-dt / T)
-                w = self._rng.standard_normal((dt.size, 3)) * (
-                    self.q * np.sqrt(1.0 - phi**2))[:, None]
-                if np.allclose(phi, phi[0]):  # a fixed step: one linear filter
-                    y, _ = lfilter([1.0], [1.0, -phi[0]], w, axis=0,
-                                   zi=(phi[0] * self._gm[j])[None, :])
-                else:
-                    y = np.empty_like(w)
-                    x = self._gm[j]
-                    for i in range(dt.size):
-                        x = phi[i] * x + w[i]
-                        y[i] = x
-                self._gm[j] = y[-1]
-                out += y
+        n_gm = _TAU.size if self.q > 0 else 0
+        # one draw for every process, in the order they use it: each Gauss–Markov component's
+        # (n, 3) steps, then the random walk's
+        z = self._rng.standard_normal((n_gm + (self.k > 0), n, 3))
+        if n_gm:
+            phi = np.exp(-dt[None, :] / _TAU[:, None])  # (component, step)
+            w = z[:n_gm] * (self.q * np.sqrt(1.0 - phi**2))[:, :, None]
+            # a fixed step (to numpy.allclose's tolerance) filters with the first step's φ
+            fixed = np.all(np.abs(phi - phi[:, :1]) <= 1e-8 + 1e-5 * np.abs(phi[:, :1]), axis=1)
+            coef = np.where(fixed[:, None], phi[:, :1], phi)
+            y = _first_order(coef, w, self._gm)
+            self._gm = y[:, -1].copy()
+            for j in range(n_gm):
+                out += y[j]
         if self.k > 0:
-            steps = self._rng.standard_normal((dt.size, 3)) * (self.k * np.sqrt(dt))[:, None]
+            steps = z[-1] * (self.k * np.sqrt(dt))[:, None]
             walk = self._walk + np.cumsum(steps, axis=0)
             self._walk = walk[-1].copy()
             out += walk
         return out
+
+
+#: :data:`FLICKER_TIME_CONSTANTS_S` as an array.
+_TAU = np.asarray(FLICKER_TIME_CONSTANTS_S)
+#: Up to this many steps :func:`_first_order` runs its loop in numpy over the components; longer
+#: runs go through one C filter per component.
+_LOOP_STEPS = 24
+
+
+def _first_order(coef: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    """``x_k = coef_k x_k−1 + w_k`` from ``x0`` for each component: ``coef`` (J, n), ``w``
+    (J, n, 3), ``x0`` (J, 3); returns every ``x_k``, (J, n, 3). A component whose ``coef`` is
+    constant goes through ``scipy.signal.lfilter`` on long runs, which computes the same products
+    and sums in the same order."""
+    J, n = coef.shape
+    y = np.empty_like(w)
+    if n <= _LOOP_STEPS:
+        x = x0
+        for i in range(n):
+            x = coef[:, i, None] * x + w[:, i]
+            y[:, i] = x
+        return y
+    for j in range(J):
+        c = coef[j]
+        if np.all(c == c[0]):
+            y[j], _ = lfilter([1.0], [1.0, -c[0]], w[j], axis=0, zi=(c[0] * x0[j])[None, :])
+        else:
+            x = x0[j]
+            for i in range(n):
+                x = c[i] * x + w[j, i]
+                y[j, i] = x
+    return y
