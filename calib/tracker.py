@@ -407,6 +407,7 @@ class _Snapshot:
     t_state: float
     t_update: float
     nis_ok: bool
+    q: np.ndarray
 
 
 class _QBank:
@@ -545,6 +546,8 @@ class BiasTracker:
             self._A = np.eye(3)
             self._A_std = np.diag(self.scale_std)
         self._A_inv = np.linalg.inv(self._A)
+        self._A_inv_rows = self._A_inv.tolist()  # update()'s scalar reference arithmetic
+        self._ref_ready = bool(np.all(np.isfinite(self.scale_std)))
 
         s = settings
         self._temp_model = bool(s.temperature_model)
@@ -602,7 +605,8 @@ class BiasTracker:
         self._pending: dict[str, np.ndarray] = {}
         # update()'s own queue of samples awaiting their still decision (t, m, temp, ext), and
         # the output terms of the current state (rebuilt after each measurement update)
-        self._pq: deque[tuple[float, np.ndarray, float, float]] = deque()
+        # (t, m, temp, ext, reference rate, reference axis or None)
+        self._pq: deque[tuple[Any, ...]] = deque()
         self._out_terms: tuple[Any, ...] | None = None
         # update()'s detector window (None while self._hist holds it, for process())
         self._sq: StreamingQuiet | None = None
@@ -754,11 +758,11 @@ class BiasTracker:
         self, sample: Any, t: Any, temperature: Any, still: Any, reference_rate: Any,
         reference_axis: Any,
     ) -> np.ndarray | None:
-        """:meth:`update` for the common sample (valid, no reference rate, not the first):
-        the same arithmetic as a one-sample :meth:`process` call, without its per-call
-        overhead. Returns None where the general path must run (it also names bad input)."""
-        if (reference_rate is not None or reference_axis is not None or self._k == 0
-                or self._finished or self._nbuf):
+        """:meth:`update` for the common sample (valid, not the first), with or without a
+        reference rate: the same arithmetic as a one-sample :meth:`process` call, without its
+        per-call overhead. Returns None where the general path must run (it also names bad
+        input)."""
+        if self._k == 0 or self._finished or self._nbuf:
             return None
         try:
             m = np.array(sample, dtype=float)
@@ -771,15 +775,22 @@ class BiasTracker:
                 or self._t_last is None or not tf > self._t_last
                 or (self._temp_model and not math.isfinite(temp))):
             return None
+        ext = math.nan if still is None else (1.0 if still else 0.0)
+        rr, axis = math.nan, None
+        if reference_rate is not None or reference_axis is not None:
+            ref = self._fast_reference(reference_rate, reference_axis, ext)
+            if ref is None:
+                return None
+            rr, axis = ref
         if self._pending:  # samples a process() call left awaiting their decision
             pend = self._pending
-            if np.isfinite(pend["rr"]).any():
-                return None
             for i in range(pend["t"].size):
+                r = float(pend["rr"][i])
                 self._pq.append((float(pend["t"][i]), pend["m"][i].copy(),
-                                 float(pend["temp"][i]), float(pend["ext"][i])))
+                                 float(pend["temp"][i]), float(pend["ext"][i]), r,
+                                 tuple(float(v) for v in pend["ra"][i]) if math.isfinite(r)
+                                 else None))
             self._pending = {}
-        ext = math.nan if still is None else (1.0 if still else 0.0)
         k = self._k
         if k % self._refresh == 0:
             self._refresh_detector_bias()
@@ -795,34 +806,76 @@ class BiasTracker:
         self._run = self._run + 1 if quiet else 0
         # the still decision on the sample L back, and the update window it feeds
         pq = self._pq
-        pq.append((tf, m, temp, ext))
+        pq.append((tf, m, temp, ext, rr, axis))
         L = det.n_lookahead
         while len(pq) > L:
             g = k - len(pq) + 1
-            td, md, tempd, extd = pq.popleft()
+            td, md, tempd, extd, rrd, axd = pq.popleft()
+            if axd is not None:  # a servo turns the sample: a reference, never still
+                self._last_decision = (g, False)
+                self._window_step(g, L, td, md, tempd, _KIND_REF, rrd, axd)
+                continue
             is_still = (self._run >= det.n_min + L) if math.isnan(extd) else extd > 0.5
             self._last_decision = (g, bool(is_still))
-            self._window_step(g, L, td, md, tempd, is_still)
+            self._window_step(g, L, td, md, tempd, _KIND_STILL if is_still else _KIND_NONE)
         return self._sample_output(m, tf, temp)
 
-    def _window_step(self, g: int, L: int, t: float, z: np.ndarray, temp: float,
-                     is_still: bool) -> None:
-        """Pool the decided sample ``g`` into the open update window, applying the window when
-        it closes (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
+    def _fast_reference(self, reference_rate: Any, reference_axis: Any, ext: float
+                        ) -> tuple[float, tuple[float, float, float] | None] | None:
+        """The reference of one :meth:`update` call as ``(rate, axis)`` (axis None where the
+        rate is NaN: no servo turns), checked as :meth:`_validate` checks a batch; None where
+        the general path must run (to name what is wrong)."""
+        if reference_rate is None or reference_axis is None:
+            return None
+        try:
+            rr = float(reference_rate)
+        except (TypeError, ValueError):
+            return None
+        if math.isnan(rr):
+            return rr, None
+        if (not math.isfinite(rr) or ext == 1.0 or self.calibration is None
+                or not self._ref_ready):
+            return None
+        try:
+            u0, u1, u2 = (float(v) for v in reference_axis)
+        except (TypeError, ValueError):
+            return None
+        if not (math.isfinite(u0) and math.isfinite(u1) and math.isfinite(u2)
+                and abs(math.sqrt(u0 * u0 + u1 * u1 + u2 * u2) - 1.0) <= 1e-6):
+            return None
+        return rr, (u0, u1, u2)
+
+    def _window_step(self, g: int, L: int, t: float, m: np.ndarray, temp: float, kind: int,
+                     rr: float = math.nan, axis: tuple[float, float, float] | None = None
+                     ) -> None:
+        """Pool the decided sample ``g`` (of ``kind``; with a reference its encoder rate ``rr``
+        and servo axis) into the open update window, applying the window when it closes
+        (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
         op = self._open
-        if op is not None and not (is_still and op.kind == _KIND_STILL):
+        if op is not None and not (kind == op.kind and axis == op.axis):
             self._apply_window(op, _log_sink(), g + L)
             self._open = op = None
-        if not is_still:
+        if kind == _KIND_NONE:
             return
+        if kind == _KIND_REF:  # z = m − A⁻¹ ω u, the reading less the reference
+            assert axis is not None
+            ai = self._A_inv_rows
+            w0, w1, w2 = rr * axis[0], rr * axis[1], rr * axis[2]
+            z = np.array([m[0] - (ai[0][0] * w0 + ai[0][1] * w1 + ai[0][2] * w2),
+                          m[1] - (ai[1][0] * w0 + ai[1][1] * w1 + ai[1][2] * w2),
+                          m[2] - (ai[2][0] * w0 + ai[2][1] * w1 + ai[2][2] * w2)])
+            omega = rr
+        else:
+            z, omega = m, 0.0
         sum_temp = temp if self._temp_model else 0.0
         if op is None:
-            op = _OpenWindow(kind=_KIND_STILL, axis=None, last=g, count=1, sum_z=z.copy(),
-                             sum_temp=sum_temp, sum_omega=0.0, t_last=t)
+            op = _OpenWindow(kind=kind, axis=axis, last=g, count=1, sum_z=z.copy(),
+                             sum_temp=sum_temp, sum_omega=omega, t_last=t)
         else:
             op.count += 1
             op.sum_z = op.sum_z + z
             op.sum_temp += sum_temp
+            op.sum_omega += omega
             op.last = g
             op.t_last = t
         if op.count == self._U:
@@ -1083,7 +1136,8 @@ class BiasTracker:
             self._pending = {
                 "t": np.array([r[0] for r in q]), "m": np.array([r[1] for r in q]),
                 "temp": np.array([r[2] for r in q]), "ext": np.array([r[3] for r in q]),
-                "rr": np.full(len(q), np.nan), "ra": np.full((len(q), 3), np.nan),
+                "rr": np.array([r[4] for r in q]),
+                "ra": np.array([(math.nan,) * 3 if r[5] is None else r[5] for r in q]),
             }
         # The detector's rate test is centred on the bias estimate, refreshed at every multiple
         # of D samples counted from the first: cut the batch there, so that any way of
@@ -1218,6 +1272,7 @@ class BiasTracker:
             t_state=self._t_state,
             t_update=self._t_update,
             nis_ok=self._nis_ok,
+            q=self._q.copy(),
         )
 
     def _assemble_and_apply(
@@ -1580,7 +1635,7 @@ class BiasTracker:
         ok = np.array([s.nis_ok for s in snaps], dtype=bool)
         j = sidx
         dt = np.maximum(t - ts[j], 0.0)
-        q = self._q
+        q = np.array([s.q for s in snaps]).reshape(W, -1)[j]  # the process noise then
         if self._temp_model:
             Pbc = np.array([[s.P[i, i + 3] for i in range(3)] for s in snaps]).reshape(W, 3)
             dT = (temp - (self._t_ref if self._t_ref is not None else 0.0))[:, None]
@@ -1589,11 +1644,11 @@ class BiasTracker:
                 Pd[j, :3]
                 + 2 * dT * Pbc[j]
                 + dT * dT * Pd[j, 3:]
-                + (q[None, :3] + q[None, 3:] * dT * dT) * dt[:, None]
+                + (q[:, :3] + q[:, 3:] * dT * dT) * dt[:, None]
             )
         else:
             bias = X[j, :3]
-            var = Pd[j, :3] + q[None, :3] * dt[:, None]
+            var = Pd[j, :3] + q[:, :3] * dt[:, None]
         return {
             "bias": bias,
             "bias_std": np.sqrt(np.maximum(var, 0.0)),
