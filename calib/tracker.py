@@ -581,6 +581,7 @@ class BiasTracker:
         self._sigma2 = s.noise_std**2
         self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
         self._det_bias = b0.copy()
+        self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
         self._refresh = max(1, int(round(s.detector_refresh_s * s.odr_hz)))
         # feed(): the block buffer and the estimate it corrects with
@@ -770,8 +771,11 @@ class BiasTracker:
             temp = math.nan if temperature is None else float(temperature)
         except (TypeError, ValueError):
             return None
-        if (m.shape != (3,) or not (math.isfinite(m[0]) and math.isfinite(m[1])
-                                    and math.isfinite(m[2]) and math.isfinite(tf))
+        if m.shape != (3,):
+            return None
+        m0, m1, m2 = m.tolist()
+        if (not (math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2)
+                 and math.isfinite(tf))
                 or self._t_last is None or not tf > self._t_last
                 or (self._temp_model and not math.isfinite(temp))):
             return None
@@ -801,8 +805,8 @@ class BiasTracker:
         sq = self._sq
         if sq is None:
             sq = self._sq = StreamingQuiet(det, self._hist)
-        b = self._det_bias
-        quiet = sq.push(m[0] + b[0], m[1] + b[1], m[2] + b[2])
+        b = self._det_bias_l
+        quiet = sq.push(m0 + b[0], m1 + b[1], m2 + b[2])
         self._run = self._run + 1 if quiet else 0
         # the still decision on the sample L back, and the update window it feeds
         pq = self._pq
@@ -886,16 +890,17 @@ class BiasTracker:
 
     def _sample_output(self, m: np.ndarray, t: float, temp: float) -> np.ndarray:
         """Bias, its uncertainty and the corrected rate at one sample from the current state
-        (the one-row case of :meth:`_outputs`), in scalar arithmetic."""
+        (the one-row case of :meth:`_outputs`), in scalar arithmetic (three axes written out:
+        this runs for every sample)."""
         key = (self._n_updates, self._t_ref)
         terms = self._out_terms
         if terms is None or terms[0] != key:
-            x = [float(v) for v in np.asarray(self.kf.x, dtype=float).reshape(-1)]
+            x = np.asarray(self.kf.x, dtype=float).reshape(-1).tolist()
             P = np.asarray(self.kf.P, dtype=float)
-            pd = [float(v) for v in np.diag(P)]
+            pd = np.diag(P).tolist()
             pbc = [float(P[i, i + 3]) for i in range(3)] if self._temp_model else []
-            terms = (key, x, pd, pbc, [float(v) for v in self._q], self._t_state,
-                     self._t_update, self._A.tolist())
+            terms = (key, x, pd, pbc, self._q.tolist(), self._t_state, self._t_update,
+                     self._A.ravel().tolist())
             self._out_terms = terms
         _, x, pd, pbc, q, t_state, t_update, A = terms
         dt = t - t_state
@@ -903,21 +908,26 @@ class BiasTracker:
             dt = 0.0
         if self._temp_model:
             dT = temp - (self._t_ref if self._t_ref is not None else 0.0)
-            bias = [x[i] + x[i + 3] * dT for i in range(3)]
-            var = [pd[i] + 2 * dT * pbc[i] + dT * dT * pd[i + 3] + (q[i] + q[i + 3] * dT * dT) * dt
-                   for i in range(3)]
+            d2 = dT * dT
+            b0, b1, b2 = x[0] + x[3] * dT, x[1] + x[4] * dT, x[2] + x[5] * dT
+            v0 = pd[0] + 2 * dT * pbc[0] + d2 * pd[3] + (q[0] + q[3] * d2) * dt
+            v1 = pd[1] + 2 * dT * pbc[1] + d2 * pd[4] + (q[1] + q[4] * d2) * dt
+            v2 = pd[2] + 2 * dT * pbc[2] + d2 * pd[5] + (q[2] + q[5] * d2) * dt
         else:
-            bias = x[:3]
-            var = [pd[i] + q[i] * dt for i in range(3)]
-        std = [math.sqrt(v) if v > 0.0 else 0.0 for v in var]
-        c0, c1, c2 = m[0] + bias[0], m[1] + bias[1], m[2] + bias[2]
-        out = np.array([A[0][0] * c0 + A[0][1] * c1 + A[0][2] * c2,
-                        A[1][0] * c0 + A[1][1] * c1 + A[1][2] * c2,
-                        A[2][0] * c0 + A[2][1] * c1 + A[2][2] * c2])
+            b0, b1, b2 = x[0], x[1], x[2]
+            v0, v1, v2 = pd[0] + q[0] * dt, pd[1] + q[1] * dt, pd[2] + q[2] * dt
+        sq = math.sqrt
+        std = [sq(v0) if v0 > 0.0 else 0.0, sq(v1) if v1 > 0.0 else 0.0,
+               sq(v2) if v2 > 0.0 else 0.0]
+        m0, m1, m2 = m.tolist()
+        c0, c1, c2 = m0 + b0, m1 + b1, m2 + b2
+        out = np.array([A[0] * c0 + A[1] * c1 + A[2] * c2,
+                        A[3] * c0 + A[4] * c1 + A[5] * c2,
+                        A[6] * c0 + A[7] * c1 + A[8] * c2])
         self._k += 1
         self._t_last = t
         self._temp_last = temp
-        self._last = {"bias": bias, "bias_std": std, "since": t - t_update}
+        self._last = {"bias": [b0, b1, b2], "bias_std": std, "since": t - t_update}
         return out
 
     def feed(
@@ -1163,6 +1173,7 @@ class BiasTracker:
         if self._temp_model and self._t_ref is not None and math.isfinite(self._temp_last):
             b += x[3:] * (self._temp_last - self._t_ref)
         self._det_bias = b
+        self._det_bias_l = b.tolist()
 
     def _process(
         self,
