@@ -434,15 +434,17 @@ class _QBank:
     def __init__(self, b0: np.ndarray, b0_std: np.ndarray, s: TrackerSettings,
                  c0: np.ndarray | None) -> None:
         G = self.GRID.size
-        d = 1 if c0 is None else 2
         self.qg = self.GRID**2
-        self.x = np.zeros((G, 3, d))
-        self.x[:, :, 0] = b0
-        self.P = np.zeros((G, 3, d, d))
-        self.P[:, :, 0, 0] = b0_std**2
+        self._qg = self.qg[:, None]
+        # each filter's state and covariance entries, (G, 3) each (x1, P01, P11: the
+        # temperature coefficient's, None without it): elementwise arithmetic only
+        self.x0 = np.broadcast_to(np.asarray(b0, dtype=float), (G, 3)).copy()
+        self.P00 = np.broadcast_to(np.asarray(b0_std, dtype=float) ** 2, (G, 3)).copy()
+        self.x1 = self.P01 = self.P11 = None
         if c0 is not None:
-            self.x[:, :, 1] = c0
-            self.P[:, :, 1, 1] = np.asarray(s.tempco_std) ** 2
+            self.x1 = np.broadcast_to(np.asarray(c0, dtype=float), (G, 3)).copy()
+            self.P01 = np.zeros((G, 3))
+            self.P11 = np.broadcast_to(np.asarray(s.tempco_std) ** 2, (G, 3)).copy()
             self.qc = np.asarray(s.tempco_random_walk) ** 2
         self.memory = s.adapt_memory_s
         self.loglik = np.zeros((G, 3))
@@ -452,31 +454,41 @@ class _QBank:
     def step(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float) -> np.ndarray:
         """Predict by ``dt``, update every filter with window mean ``z`` (variance ``R``);
         return the ``q`` per axis the tracker should use: the posterior mean plus the posterior
-        standard deviation."""
-        P = self.P
-        P[:, :, 0, 0] += self.qg[:, None] * dt
+        standard deviation.
+
+        Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
+        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry."""
+        self.P00 += self._qg * dt
         if dT is None:
-            h = np.array([-1.0])
+            y = z + self.x0
+            ph0 = -self.P00
+            S = self.P00 + R
+            k0 = ph0 / S
+            self.x0 += k0 * y
+            self.P00 -= k0 * ph0
         else:
-            P[:, :, 1, 1] += self.qc[None, :] * dt
-            h = np.array([-1.0, -dT])
-        y = z[None, :] - self.x @ h
-        Ph = P @ h
-        S = Ph @ h + R[None, :]
-        K = Ph / S[..., None]
-        self.x += K * y[..., None]
-        self.P = P - K[..., :, None] * Ph[..., None, :]
+            self.P11 += self.qc * dt
+            y = z + self.x0 + dT * self.x1
+            ph0 = -(self.P00 + dT * self.P01)
+            ph1 = -(self.P01 + dT * self.P11)
+            S = R - ph0 - dT * ph1
+            k0, k1 = ph0 / S, ph1 / S
+            self.x0 += k0 * y
+            self.x1 += k1 * y
+            self.P00 -= k0 * ph0
+            self.P01 -= k0 * ph1
+            self.P11 -= k1 * ph1
         lam = math.exp(-dt / self.memory) if dt > 0 else 1.0
         self.loglik = lam * self.loglik - 0.5 * (np.log(S) + y * y / S)
         w = np.exp(self.loglik - self.loglik.max(axis=0))
         w /= w.sum(axis=0)
-        self.q = (w * self.qg[:, None]).sum(axis=0)
-        self.q_std = np.sqrt((w * (self.qg[:, None] - self.q) ** 2).sum(axis=0))
+        self.q = (w * self._qg).sum(axis=0)
+        self.q_std = np.sqrt((w * (self._qg - self.q) ** 2).sum(axis=0))
         return self.q + self.q_std
 
     def widen(self, extra: np.ndarray) -> None:
         """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
-        self.P[:, :, 0, 0] += extra[None, :]
+        self.P00 += extra[None, :]
 
 
 class BiasTracker:
@@ -570,12 +582,14 @@ class BiasTracker:
         )
         # CUSUM state per axis: upper and lower sums, and the innovations summed since each
         # last left zero (their mean sizes a detected shift).
-        self._cu = np.zeros((2, 3))
-        self._cu_sum = np.zeros((2, 3))
-        self._cu_n = np.zeros((2, 3))
+        self._cu = [[0.0] * 3, [0.0] * 3]
+        self._cu_sum = [[0.0] * 3, [0.0] * 3]
+        self._cu_n = [[0.0] * 3, [0.0] * 3]
         self._n_shifts = 0
         kf.F = np.eye(dim)
         kf.Q = np.zeros((dim, dim))
+        # H = [−I] or [−I, −(T − T_ref) I]: the fixed part, scaled per window
+        self._H0 = -np.hstack([np.eye(3)] * (dim // 3))
         self.kf = kf
         self._dim = dim
         self._sigma2 = s.noise_std**2
@@ -1423,9 +1437,11 @@ class BiasTracker:
         dt = max(w.t_last - self._t_state, 0.0)
         if self._temp_model:
             dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0)
-            kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
+            H = self._H0.copy()
+            H[:, 3:] *= dT
+            kf.H = H
         else:
-            kf.H = -np.eye(3)
+            kf.H = self._H0
         kf.Q = np.diag(self._q * dt)
         kf.predict()
         kf.R = np.diag(R)
@@ -1604,30 +1620,34 @@ class BiasTracker:
         s = self.settings
         if not math.isfinite(s.cusum_h):
             return False
-        e = y / np.sqrt(s_diag)
-        step = np.stack([e - s.cusum_k, -e - s.cusum_k])
-        g = np.maximum(self._cu + step, 0.0)
-        restart = self._cu <= 0.0
-        self._cu_sum = np.where(restart, 0.0, self._cu_sum) + y[None, :]
-        self._cu_n = np.where(restart, 0.0, self._cu_n) + 1.0
-        self._cu = g
-        hit = g > s.cusum_h
-        if not hit.any():
+        # per axis and side in Python floats (six numbers: numpy's per-call cost dominates)
+        cu, cu_sum, cu_n = self._cu, self._cu_sum, self._cu_n
+        k, h = s.cusum_k, s.cusum_h
+        hit = [[False] * 3, [False] * 3]
+        for i, (yi, si) in enumerate(zip(y.tolist(), s_diag.tolist(), strict=True)):
+            e = yi / math.sqrt(si)
+            for side, step in ((0, e - k), (1, -e - k)):
+                restart = cu[side][i] <= 0.0
+                cu_sum[side][i] = (0.0 if restart else cu_sum[side][i]) + yi
+                cu_n[side][i] = (0.0 if restart else cu_n[side][i]) + 1.0
+                cu[side][i] = max(cu[side][i] + step, 0.0)
+                hit[side][i] = cu[side][i] > h
+        axes = [i for i in range(3) if hit[0][i] or hit[1][i]]
+        if not axes:
             return False
-        axes = np.flatnonzero(hit.any(axis=0))
         self._n_shifts += 1
         if s.recover:
             P = self.kf.P.copy()
             for i in axes:
-                side = 0 if hit[0, i] else 1
-                mean_y = self._cu_sum[side, i] / self._cu_n[side, i]
+                side = 0 if hit[0][i] else 1
+                mean_y = cu_sum[side][i] / cu_n[side][i]
                 P[i, i] += 4.0 * mean_y**2
                 if self._bank is not None:
                     self._bank.widen(4.0 * mean_y**2 * (np.arange(3) == i))
             self.kf.P = P
-        self._cu[:, axes] = 0.0
-        self._cu_sum[:, axes] = 0.0
-        self._cu_n[:, axes] = 0.0
+        for i in axes:
+            for side in (0, 1):
+                cu[side][i] = cu_sum[side][i] = cu_n[side][i] = 0.0
         return True
 
     def _outputs(
