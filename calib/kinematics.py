@@ -35,7 +35,8 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError
 
-__all__ = ["axes_at", "axis_derivatives", "chain_axes", "pose_derivatives", "rotate", "sensor_rate"]
+__all__ = ["axes_at", "axis_derivatives", "chain_axes", "pose_derivatives", "rotate", "sensor_rate",
+           "up_at"]
 
 
 def rotate(axis: np.ndarray, angle: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -81,6 +82,43 @@ def chain_axes(axes: np.ndarray, reference: np.ndarray, angles: np.ndarray) -> n
             v = rotate(axes[..., k, :], -delta[..., k], v)
         out[..., j, :] = v
     return out
+
+
+def up_at(axes: np.ndarray, reference: np.ndarray, up: tuple[int, int], home: np.ndarray,
+          angles: np.ndarray) -> np.ndarray:
+    """"Up" in the sensor frame at encoder angles ``angles``: the specific force of a still
+    sensor, in g (gravity's reaction, +1 g up).
+
+    Up is servo ``up[0]``'s axis (chain index, sign ``up[1]``) in the home pose ``θ_h``, where
+    the jig stands with that axis vertical; in any pose ``θ`` it is carried by every servo's
+    rotation from the home pose, like the axis of a joint outside the base:
+    ``γ(θ) = Rot(u_{S-1}, −Δ_{S-1}) ⋯ Rot(u_0, −Δ_0) γ_h``, ``Δ = θ − θ_h``, the axes at
+    ``θ_h`` (module docstring).
+
+    Parameters
+    ----------
+    axes : ndarray, shape (S, 3)
+        The servos' axes in the sensor frame at ``reference`` (a fit's kinematics), base first.
+    reference : ndarray, shape (S,)
+        Their reference angles, rad.
+    up : (int, int)
+        Chain index of the servo whose axis is vertical at home, and ±1.
+    home : ndarray, shape (S,)
+        The home pose, rad.
+    angles : ndarray, shape (N, S)
+        Encoder angles, rad.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    home = np.asarray(home, dtype=float)
+    at_home = chain_axes(axes, reference, home)
+    g_home = up[1] * at_home[up[0]]
+    ext = np.concatenate([g_home[None], at_home])
+    th = np.asarray(angles, dtype=float)
+    th = np.concatenate([np.zeros((th.shape[0], 1)), th], axis=1)
+    return chain_axes(ext, np.concatenate([[0.0], home]), th)[:, 0]
 
 
 def axis_derivatives(

@@ -357,7 +357,7 @@ class ObservationSet:
         CalibInputError
             If the set does not say where gravity points (:attr:`has_gravity`).
         """
-        from gyrocal.calib.kinematics import chain_axes
+        from gyrocal.calib.kinematics import chain_axes, up_at
 
         if not self.has_gravity:
             raise CalibInputError(
@@ -367,13 +367,9 @@ class ObservationSet:
         sid, sign = self.gravity  # type: ignore[misc]
         axes = np.asarray(axes, dtype=float)
         home = np.asarray(self.home_pose, dtype=float)
-        at_home = chain_axes(axes, reference, home)
-        up = sign * at_home[chain.index(sid)]
-        ext = np.concatenate([up[None], at_home])
 
         def carried(theta: np.ndarray) -> np.ndarray:
-            th = np.concatenate([np.zeros((theta.shape[0], 1)), theta], axis=1)
-            return chain_axes(ext, np.concatenate([[0.0], home]), th)[:, 0]
+            return up_at(axes, reference, (chain.index(sid), sign), home, theta)
 
         pose = np.asarray(self.pose, dtype=float)
         g_win = carried(pose)

@@ -4,7 +4,12 @@ Model
 -----
 The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, or with the full model of a
 Calibration v2 ``g = A (m + b)`` (``A = diag(scale)`` for v1), so a reading is
-``m = A⁻¹ g − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
+``m = A⁻¹ g − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. A
+Calibration v2 with ``g_sensitivity`` adds ``G f`` (``g = A (m + b + G f)``, ``f`` the specific
+force at the sensor in g, sensor frame): where the caller gives ``f`` for its samples, every
+reading enters the filter as ``m + G f`` (the detector, the measurements and the corrected
+rate alike), so ``b`` stays the zero-g bias; without ``f`` the tracker follows ``b + G f`` of
+the pose the sensor holds. The bias
 ``b`` (Calibration v1 convention: added to the reading) is the state; optionally a linear
 temperature coefficient ``c`` joins it, ``b(T) = b_ref + c ∘ (T − T_ref)``:
 
@@ -559,6 +564,9 @@ class BiasTracker:
             self._A_std = np.diag(self.scale_std)
         self._A_inv = np.linalg.inv(self._A)
         self._A_inv_rows = self._A_inv.tolist()  # update()'s scalar reference arithmetic
+        g_sens = None if calibration is None else calibration.g_sensitivity
+        self._G = None if g_sens is None else np.array(g_sens["matrix"], dtype=float)
+        self._G_rows = None if self._G is None else self._G.tolist()
         self._ref_ready = bool(np.all(np.isfinite(self.scale_std)))
 
         s = settings
@@ -683,6 +691,12 @@ class BiasTracker:
         return None if self._bank is None else np.sqrt(self._bank.q)
 
     @property
+    def applies_g_sensitivity(self) -> bool:
+        """Whether the calibration has a g-sensitivity ``G`` for the ``specific_force`` that
+        :meth:`process`, :meth:`update` and :meth:`feed` take (without it they ignore it)."""
+        return self._G is not None
+
+    @property
     def shifts(self) -> int:
         """Bias shifts the CUSUM test has detected so far."""
         return self._n_shifts
@@ -727,8 +741,9 @@ class BiasTracker:
         *,
         reference_rate: float | None = None,
         reference_axis: Any = None,
+        specific_force: Any = None,
     ) -> np.ndarray:
-        """Feed one reading; returns its corrected rate ``A (m + bias)``, rad/s.
+        """Feed one reading; returns its corrected rate ``A (m + bias [+ G f])``, rad/s.
 
         Parameters
         ----------
@@ -744,12 +759,16 @@ class BiasTracker:
             Rate of the turning servo from its encoder, rad/s (jig only).
         reference_axis : array_like (3,), optional
             That servo's unit axis in the sensor frame.
+        specific_force : array_like (3,), optional
+            Specific force at the sensor, g, sensor frame: with the calibration's
+            g-sensitivity the reading counts as ``m + G f`` (ignored without it).
 
         Returns
         -------
         ndarray (3,)
         """
-        fast = self._update_fast(sample, t, temperature, still, reference_rate, reference_axis)
+        fast = self._update_fast(sample, t, temperature, still, reference_rate, reference_axis,
+                                 specific_force)
         if fast is not None:
             return fast
         m = np.asarray(sample, dtype=float)
@@ -766,12 +785,14 @@ class BiasTracker:
             reference_axis=None
             if reference_axis is None
             else np.asarray(reference_axis, dtype=float).reshape(1, -1),
+            specific_force=None if specific_force is None
+            else np.asarray(specific_force, dtype=float).reshape(1, -1),
         )
         return res.corrected[0]
 
     def _update_fast(
         self, sample: Any, t: Any, temperature: Any, still: Any, reference_rate: Any,
-        reference_axis: Any,
+        reference_axis: Any, specific_force: Any = None,
     ) -> np.ndarray | None:
         """:meth:`update` for the common sample (valid, not the first), with or without a
         reference rate: the same arithmetic as a one-sample :meth:`process` call, without its
@@ -788,6 +809,18 @@ class BiasTracker:
         if m.shape != (3,):
             return None
         m0, m1, m2 = m.tolist()
+        if specific_force is not None and self._G_rows is not None:  # m + G f
+            try:
+                f0, f1, f2 = (float(v) for v in specific_force)
+            except (TypeError, ValueError):
+                return None
+            if not (math.isfinite(f0) and math.isfinite(f1) and math.isfinite(f2)):
+                return None
+            G = self._G_rows
+            m0 += G[0][0] * f0 + G[0][1] * f1 + G[0][2] * f2
+            m1 += G[1][0] * f0 + G[1][1] * f1 + G[1][2] * f2
+            m2 += G[2][0] * f0 + G[2][1] * f1 + G[2][2] * f2
+            m = np.array([m0, m1, m2])
         if (not (math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2)
                  and math.isfinite(tf))
                 or self._t_last is None or not tf > self._t_last
@@ -945,7 +978,8 @@ class BiasTracker:
         return out
 
     def feed(
-        self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None
+        self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None,
+        specific_force: Any = None,
     ) -> np.ndarray:
         """Fast streaming: buffer one reading, return it corrected with the latest estimate.
 
@@ -963,11 +997,13 @@ class BiasTracker:
             Die temperature, °C (required with the temperature model).
         still : bool, optional
             External still flag; None lets the detector decide.
+        specific_force : array_like (3,), optional
+            Specific force at the sensor, g, sensor frame (as in :meth:`update`).
 
         Returns
         -------
         ndarray (3,)
-            ``A (m + bias)`` with the bias estimate at the end of the last processed
+            ``A (m + bias [+ G f])`` with the bias estimate at the end of the last processed
             block (at this sample's temperature with the temperature model).
         """
         i = self._nbuf
@@ -979,6 +1015,8 @@ class BiasTracker:
             self._buf_still = np.full(B, np.nan)
         m = self._buf_m[i]
         m[:] = sample
+        if specific_force is not None and self._G is not None:
+            m += self._G @ self._force(specific_force, 1)[0]
         self._buf_t[i] = t
         if temperature is not None:
             self._buf_temp[i] = temperature
@@ -1118,6 +1156,7 @@ class BiasTracker:
         *,
         reference_rate: Any = None,
         reference_axis: Any = None,
+        specific_force: Any = None,
         finish: bool = False,
     ) -> TrackResult:
         """Feed a batch of readings (vectorised); returns per-sample estimates.
@@ -1136,6 +1175,10 @@ class BiasTracker:
             Encoder rate of the turning servo, rad/s; NaN where none turns.
         reference_axis : array_like (n, 3) or (3,), optional
             Unit axis of the turning servo in the sensor frame.
+        specific_force : array_like (n, 3) or (3,), optional
+            Specific force at the sensor, g, sensor frame: with the calibration's
+            g-sensitivity ``G`` the readings count as ``m + G f`` (module docstring); ignored
+            without it.
         finish : bool
             The stream ends with this batch: decide the samples still awaiting their look-ahead
             (as not still, unless flagged), close the open update window and apply it. Further
@@ -1151,6 +1194,9 @@ class BiasTracker:
             raise CalibInputError("samples given to feed() are waiting: call flush() before "
                                   "process() or update()")
         cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
+        if specific_force is not None and self._G is not None:
+            cols = (cols[0], cols[1] + self._force(specific_force, cols[0].size) @ self._G.T,
+                    *cols[2:])
         if self._sq is not None:  # update()'s detector window, back to the rows process() keeps
             self._hist = self._sq.history()
             self._sq = None
@@ -1178,6 +1224,22 @@ class BiasTracker:
                 parts.append(self._process(*(c[a:b] for c in cols),
                                            finish=finish and j == len(cuts) - 2))
         return _concat(parts, g_first)
+
+    @staticmethod
+    def _force(specific_force: Any, n: int) -> np.ndarray:
+        """``specific_force`` as (n, 3) g, checked (CalibInputError naming the problem)."""
+        try:
+            f = np.asarray(specific_force, dtype=float)
+        except (TypeError, ValueError):
+            raise CalibInputError("specific_force must be numbers (g)") from None
+        if f.shape == (3,):
+            f = np.broadcast_to(f, (n, 3))
+        if f.shape != (n, 3):
+            raise CalibInputError(
+                f"specific_force must have shape ({n}, 3) or (3,), got {f.shape}")
+        if not np.all(np.isfinite(f)):
+            raise CalibInputError("specific_force contains NaN or inf")
+        return f
 
     def _refresh_detector_bias(self) -> None:
         """Centre the detector's rate test on the current bias estimate (at the latest

@@ -484,3 +484,58 @@ def test_fast_update_refuses_bad_references_as_the_general_path_does():
     # a NaN rate is no reference: the sample goes on as a plain one
     tr.update(*args, reference_rate=math.nan, reference_axis=(1.0, 1.0, 0.0))
     assert tr.samples == 2
+
+
+def _g_cal(G, bias_std=0.02):
+    A = np.eye(3)
+    return GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0), scale_std=(1e-6,) * 3,
+                           bias_std=(bias_std,) * 3, matrix=tuple(map(tuple, A)),
+                           matrix_std=((1e-6,) * 3,) * 3,
+                           g_sensitivity={"model": "g = matrix @ (m + bias + g_sensitivity @ f)",
+                                          "matrix": [list(r) for r in G],
+                                          "matrix_std": [[1e-6] * 3] * 3,
+                                          "directions": np.eye(3).tolist()})
+
+
+def test_g_sensitivity_applied_with_the_specific_force():
+    """Still sensor in four poses (gravity along +z, +x, -y, -z), reading m = −b − G f + v
+    (the model g = A (m + b + G f) at g = 0): given f, the tracker's bias is the zero-g b in
+    every pose; without it, the estimate follows b + G f of the pose. update() and process()
+    agree on it."""
+    rng = np.random.default_rng(41)
+    G = np.array([[2e-3, -1e-3, 3e-3], [1e-3, 2.5e-3, -2e-3], [-3e-3, 1e-3, 2e-3]])
+    b = np.array([0.01, -0.02, 0.005])
+    cal = _g_cal(G)
+    poses = np.array([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]])
+    n_pose = 2000
+    f = np.repeat(poses, n_pose, axis=0)
+    sigma = 1e-4
+    m = -b - f @ G.T + sigma * rng.standard_normal(f.shape)
+    t = np.arange(f.shape[0]) / ODR
+    st = TrackerSettings(odr_hz=ODR, noise_density=sigma / math.sqrt(ODR),
+                         rate_random_walk=1e-7)
+    still = np.ones(t.size)
+    with_g = BiasTracker(st, cal)
+    r = with_g.process(t, m, still=still, specific_force=f, finish=True)
+    without = BiasTracker(st, cal).process(t, m, still=still, finish=True)
+    assert with_g.applies_g_sensitivity
+    ends = np.arange(1, 5) * n_pose - 1  # the last sample of each pose
+    np.testing.assert_allclose(r.bias[ends], np.tile(b, (4, 1)), atol=2e-5)
+    assert np.all(np.abs(r.bias[ends] - b) <= 3 * r.bias_std[ends])
+    err_without = np.abs(without.bias[ends] - b).max()
+    assert err_without > 2e-3  # |G f| of the last poses
+    # corrected = A (m + bias + G f) (A = I): the true rate, zero, to the noise
+    np.testing.assert_allclose(r.corrected, m + r.bias + f @ G.T, rtol=0, atol=1e-15)
+    late = r.corrected.reshape(4, n_pose, 3)[:, n_pose // 2:].mean(axis=1)
+    np.testing.assert_allclose(late, 0.0, atol=2e-5)
+    # update() (scalar path) and the general one see the same m + G f
+    stream = BiasTracker(st, cal)
+    out = [stream.update(m[i], t[i], None, True, specific_force=f[i]) for i in range(t.size)]
+    np.testing.assert_allclose(stream.bias, r.bias[-1], atol=1e-12)
+    np.testing.assert_allclose(np.array(out), r.corrected, atol=1e-12)
+    # a calibration without G ignores the force
+    plain = BiasTracker(st, sim_calibration(np.random.default_rng(1), simulate_session(
+        np.random.default_rng(2), 1.0, model=MODEL)))
+    assert not plain.applies_g_sensitivity
+    with pytest.raises(CalibInputError, match="specific_force"):
+        BiasTracker(st, cal).process(t[:5], m[:5], specific_force=np.ones((4, 3)))
