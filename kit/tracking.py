@@ -26,6 +26,10 @@ LIVE_WARMUP_S = 2.0
 LIVE_CHUNK_S = 1.0
 #: A servo that moves more than this between two polls marks its samples as not still, rad.
 LIVE_MOVE_TOLERANCE_RAD = 2 * 2 * math.pi / 4096
+#: A turn's sample gives a reference rate only where the encoder's mean rate over this many
+#: seconds either side is within :data:`STEADY_TOLERANCE` of the turn's cruise rate.
+STEADY_HALF_SPAN_S = 0.1
+STEADY_TOLERANCE = 0.01
 
 
 
@@ -287,12 +291,35 @@ def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
         et, ea = rec.encoder(seg.motor)
         i0 = int(np.searchsorted(rec.imu_t, seg.t_start, side="left"))
         i1 = int(np.searchsorted(rec.imu_t, seg.t_end, side="right"))
-        rate = encoder_rate(et, ea, rec.imu_t[i0:i1], dt / 2)
+        rate = steady_only(et, ea, rec.imu_t[i0:i1], encoder_rate(et, ea, rec.imu_t[i0:i1],
+                                                                     dt / 2))
         if not np.isfinite(rate).any():
             notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
             continue
         runs.append((int(i0), rate, np.asarray(u, dtype=float)))
     return Reference(runs), notes
+
+
+def steady_only(enc_t: np.ndarray, enc_angle: np.ndarray, t: np.ndarray, rate: np.ndarray
+                ) -> np.ndarray:
+    """``rate`` with NaN off the turn's cruise: where the encoder's mean rate over
+    ±:data:`STEADY_HALF_SPAN_S` differs from its median over the turn by more than
+    :data:`STEADY_TOLERANCE`.
+
+    While the servo accelerates, a delay ``τ`` between the gyro and the encoder (the gyro's
+    low-pass filter, the encoder's read latency) puts ``α τ`` on each sample's reference
+    (10 rad/s² × 4 ms = 0.04 rad/s), which a window shorter than the whole turn does not
+    cancel; at cruise it puts nothing.
+    """
+    from gyrocal.kit.report_plots import encoder_rate
+
+    wide = encoder_rate(enc_t, enc_angle, t, STEADY_HALF_SPAN_S)
+    if not np.isfinite(wide).any():
+        return rate
+    cruise = float(np.nanmedian(wide))
+    with np.errstate(invalid="ignore"):
+        steady = np.abs(wide - cruise) <= STEADY_TOLERANCE * abs(cruise)
+    return np.where(steady, rate, np.nan)
 
 
 def replay_chunks(batch: Batch, ref: Reference | None, size: int,
