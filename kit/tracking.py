@@ -374,6 +374,21 @@ class Gravity:
                      angles)
 
 
+def _g_worst(cal: Any) -> float:
+    """``max |A G|`` row norm: the most a specific force of 1 g moves the rate, rad/s."""
+    G = np.asarray(cal.g_sensitivity["matrix"])
+    return float(np.max(np.linalg.norm(np.asarray(cal.full_matrix) @ G, axis=1)))
+
+
+def live_g_note(cal: Any) -> str:
+    """What a live run with a g-sensitive calibration must say: the live loop does not know the
+    home pose the calibration's "up" refers to, so ``G f`` is not applied (the tracked bias is
+    the zero-g bias plus ``G f`` of the pose the jig holds)."""
+    return ("the calibration's g-sensitivity is NOT applied live (a Calibration v2 does not "
+            "store the home pose its 'up' refers to; replay the --record recording to apply "
+            f"it): the tracked bias includes G f, up to {_g_worst(cal):.1e} rad/s per g")
+
+
 def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
     """The :class:`Gravity` of a recording for ``cal``'s g-sensitivity, or None and what the
     user must know (None and None when the calibration has no g-sensitivity).
@@ -398,11 +413,9 @@ def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
                "a servo of the chain has no encoder readings"
                if any(et.size == 0 for et, _ in encoders) else None)
     if missing is not None:
-        G = np.asarray(g["matrix"])
-        worst = float(np.max(np.linalg.norm(np.asarray(cal.full_matrix) @ G, axis=1)))
         return None, (f"the calibration's g-sensitivity is NOT applied ({missing}, so the "
                       "specific force is unknown): the tracked bias is the zero-g bias plus "
-                      f"G f, off by up to {worst:.1e} rad/s per g")
+                      f"G f, off by up to {_g_worst(cal):.1e} rad/s per g")
     assert up is not None
     home = np.array([ea[0] for _, ea in encoders])
     return Gravity(dict(kin), (chain.index(up[0]), up[1]), home, encoders), None

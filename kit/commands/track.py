@@ -384,6 +384,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     from gyrocal.kit.tracking import (
         LIVE_WARMUP_S,
         LiveSource,
+        live_g_note,
         live_truth,
         run_live,
         tracker_notes,
@@ -433,8 +434,10 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
               "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
 
     def build(warm: Batch) -> Any:
-        tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
-                                    f"the first {LIVE_WARMUP_S:g} s", where)
+        tracker, cal = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
+                                      f"the first {LIVE_WARMUP_S:g} s", where)
+        if tracker.applies_g_sensitivity:
+            notes.append(live_g_note(cal))
         built.append(tracker)
         return tracker
 
