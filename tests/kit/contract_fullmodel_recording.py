@@ -103,10 +103,12 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     turns: int = 2, accel: float = 10.0, rest: float = 0.8,
                     move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
-                    g_sensitivity: np.ndarray | None = None) -> dict:
+                    g_sensitivity: np.ndarray | None = None, bias_walk: float = 0.0) -> dict:
     """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``). With
     ``g_sensitivity`` (3×3, rad/s per g) the reading gains ``G f`` (``f`` from
-    :func:`specific_force`) and the schedule a gravity rest."""
+    :func:`specific_force`) and the schedule a gravity rest. With ``bias_walk`` (rad/s/√s) the
+    bias wanders as a random walk from ``truth["bias"]``; the truth then holds the walk at
+    every gyro sample as ``bias_walk`` (n, 3), the bias being ``bias + bias_walk``."""
     truth = draw_sensor(seed, cross)
     rng = np.random.default_rng([seed, 0x5A3])
     path = Path(path)
@@ -153,6 +155,10 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     omega = sensor_rate(truth["links"], truth["mount"], ang, rate)
     C = np.diag(1 / truth["scale"]) @ truth["misalignment"]
     m = omega @ C.T - truth["bias"] + noise * rng.standard_normal(omega.shape)
+    if bias_walk:
+        steps = np.random.default_rng([seed, 0xB1A5]).standard_normal(omega.shape)
+        truth["bias_walk"] = np.cumsum(steps, axis=0) * bias_walk / np.sqrt(odr)
+        m = m - truth["bias_walk"]
     if g_sensitivity is not None:
         m = m + specific_force(truth["links"], truth["mount"], ang) @ np.asarray(
             g_sensitivity).T

@@ -102,3 +102,23 @@ def test_track_says_when_it_cannot_apply_g_sensitivity(tmp_path, capsys):
                          capsys, "cal")
     assert err.count("g-sensitivity is NOT applied") == 1, err
     assert "manifest lists no servo with axis z" in err
+
+
+def test_track_follows_a_bias_random_walk(tmp_path, capsys):
+    """The generator's bias wanders (2e-4 rad/s/√s: about 1.4e-3 rad/s over the session, ten
+    times the turns' noise floor); with nothing but the recording and the calibration the
+    tracker estimates the walk from its innovations and its band holds the moving truth."""
+    rec = tmp_path / "rec"
+    truth = write_recording(rec, seed=7, bias_walk=2e-4)
+    walk = truth["bias_walk"]
+    assert np.ptp(walk, axis=0).max() > 5e-4
+    bias, std, text, err = track(rec, truth_calibration(truth, offset=np.zeros(3)), tmp_path,
+                                 capsys, "cal")
+    e = bias - (truth["bias"] + walk)
+    assert np.mean(np.abs(e) <= 3 * std) >= 0.99, np.max(np.abs(e) / std, axis=0)
+    assert alarms(text) <= 1, text
+    # it follows the walk: better than the calibration's frozen bias
+    assert np.sqrt(np.mean(e**2)) < 0.6 * np.sqrt(np.mean(walk**2))
+    k = re.search(r"innovations: ([^ ]+), ([^ ]+), ([^ ]+) ", err)
+    assert k is not None, err
+    assert all(1e-4 < float(x) < 4e-4 for x in k.groups()), k.groups()  # the true 2e-4
