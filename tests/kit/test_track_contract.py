@@ -18,7 +18,7 @@ G_TRUE = np.array([[2.0e-3, -1.5e-3, 1.0e-3], [1.0e-3, 2.5e-3, -2.0e-3],
                    [-1.5e-3, 1.0e-3, 3.0e-3]])
 
 
-def truth_calibration(truth, *, offset, g=None):
+def truth_calibration(truth, *, offset, g=None, temperature_c=None):
     """The generator's truth as a Calibration v2 (``A = C⁻¹`` for ``m = C ω − b``; the servo
     axes at home ``Mᵀ a_j``), its bias moved by ``offset`` (the tracker has to find the rest)
     and loose enough to say so."""
@@ -34,7 +34,7 @@ def truth_calibration(truth, *, offset, g=None):
         bias_std=(1e-2,) * 3, matrix=tuple(map(tuple, A)), matrix_std=((1e-4,) * 3,) * 3,
         kinematics={"chain": [11, 12, 13], "axes": [(M.T @ a).tolist() for a in truth["links"]],
                     "reference_angles_rad": [0.0, 0.0, 0.0]},
-        method="truth of the contract generator", **kw)
+        method="truth of the contract generator", temperature_c=temperature_c, **kw)
 
 
 def track(rec, cal, tmp_path, capsys, name):
@@ -122,3 +122,22 @@ def test_track_follows_a_bias_random_walk(tmp_path, capsys):
     k = re.search(r"innovations: ([^ ]+), ([^ ]+), ([^ ]+) ", err)
     assert k is not None, err
     assert all(1e-4 < float(x) < 4e-4 for x in k.groups()), k.groups()  # the true 2e-4
+
+
+def test_track_follows_a_temperature_ramp(tmp_path, capsys):
+    """The die warms 25 -> 35 °C over the session and the bias follows (a coefficient of up to
+    3e-4 rad/s/°C: 3e-3 rad/s); the recording's temperatures turn the tracker's temperature
+    state on, and its band holds the moving truth."""
+    rec = tmp_path / "rec"
+    c = np.array([3e-4, -2e-4, 1e-4])
+    truth = write_recording(rec, seed=8, temp_ramp=(25.0, 35.0), tempco=tuple(c))
+    temp = np.loadtxt(rec / "imu.csv", delimiter=",", skiprows=1)[:, 4]
+    drift = np.outer(temp - 25.0, c)
+    bias, std, text, err = track(rec, truth_calibration(truth, offset=np.zeros(3),
+                                                        temperature_c=25.0),
+                                 tmp_path, capsys, "cal")
+    assert "temperature coefficient" in err
+    e = bias - (truth["bias"] + drift)
+    assert np.mean(np.abs(e) <= 3 * std) >= 0.99, np.max(np.abs(e) / std, axis=0)
+    assert alarms(text) <= 1, text
+    assert np.sqrt(np.mean(e**2)) < 0.5 * np.sqrt(np.mean(drift**2))
