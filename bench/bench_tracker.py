@@ -35,9 +35,10 @@ Both corrected rates use the calibration's scale, ``scale ∘ (m + bias)``; Fusi
 ``−bias`` in °/s. Reported: RMS bias error and RMS corrected-rate error against the truth (all
 samples, all axes), their ratios ours/Fusion, and our 3-sigma band coverage.
 
-Speed: batch throughput (a whole 30-minute session in one ``process`` call, best of 3) and
-streaming latency (``update`` per sample: median and 99th percentile), with Fusion's per-sample
-update for scale.
+Speed: batch throughput (a whole session in one ``process`` call) and streaming latency
+(``feed`` and ``update`` per sample: median and 99th percentile; ``update`` also with the
+encoder's reference rate on the turning samples of a jig session), each beside the one-sample
+``process`` call that ``update`` made before it had a scalar path.
 """
 
 from __future__ import annotations
@@ -220,6 +221,7 @@ def _streaming(n_max: int) -> None:
             t0 = time.perf_counter()
             tu.update(rate[i], tt[i], temp[i])
             ulat[i] = time.perf_counter() - t0
+        ref_new, ref_old, ref_share, steps = _reference_latency(n)
         # the general path update() used for every sample before: a one-sample process() call
         n_old = min(n, 2000)
         to = BiasTracker(st, s.calibration)
@@ -249,13 +251,74 @@ def _streaming(n_max: int) -> None:
             ("median", np.median(ulat) * 1e6), ("p99", np.percentile(ulat, 99) * 1e6),
             ("mean", ulat.mean() * 1e6))],
         ["one-sample process() (update() before)", f"{old_us:.0f} us", f"{5 * old_us:.0f} us"],
+        *[[f"update() with a reference rate {name}", f"{v:.1f} us", f"{5 * v:.0f} us"]
+          for name, v in (("median", np.median(ref_new) * 1e6),
+                          ("p99", np.percentile(ref_new, 99) * 1e6),
+                          ("mean", ref_new.mean() * 1e6))],
+        [f"  of which Kalman steps: {steps.size} update windows, median",
+         f"{np.median(steps) * 1e6:.0f} us", f"{5 * np.median(steps) * 1e6:.0f} us"],
+        ["one-sample process() with a reference rate (update() before)",
+         f"{np.median(ref_old) * 1e6:.0f} us", f"{5 * np.median(ref_old) * 1e6:.0f} us"],
         ["process() batch throughput", f"{n / batch_s:,.0f} samples/s",
          f"{n / batch_s / 5:,.0f} samples/s"],
         ["  of which the still detector", f"{100 * batch_det / batch_s:.0f} % of the time", ""],
     ]
     print_table(["mode (1 kHz, temperature model on)", "this machine", "Pi estimate (5x slower)"],
-                rows, title=f"speed: {n} samples of a 1 kHz independent session; budget a tenth "
-                "of the sample period = 100 us per sample on the Pi")
+                rows, title=f"speed: {n} samples of a 1 kHz independent session (the reference "
+                f"rows: the turning samples, {100 * ref_share:.0f} % of the first {n} of a jig "
+                "session, medians for the old path); budget a tenth of the sample period = "
+                "100 us per sample on the Pi")
+
+
+def _reference_latency(n_max: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Per-sample time of update() with the encoder's reference rate on the turning samples of
+    an independent jig session, and of the one-sample process() call it replaced (at most 2000
+    turning samples); returns both (s), the turning share of the samples and the time of each
+    Kalman step (one per update window, s)."""
+    from bench.sessions import generate
+
+    s = generate("jig turns, 6-15 s rests", 100)
+    n = min(s.t.size, n_max)
+    rr, ra = _reference(s)
+    st = TrackerSettings(odr_hz=s.odr_hz, noise_density=tuple(s.noise_density),
+                         temperature_model=True)
+    turning = np.isfinite(rr[:n])
+    rate, tt, temp = s.rate, s.t, s.temperature_c
+    tu = BiasTracker(st, s.calibration)
+    lat = np.empty(n)
+    for i in range(n):
+        kw = ({"reference_rate": float(rr[i]), "reference_axis": ra[i]} if turning[i]
+              else {})
+        t0 = time.perf_counter()
+        tu.update(rate[i], tt[i], temp[i], **kw)
+        lat[i] = time.perf_counter() - t0
+    steps = []
+    apply = tu._apply_window  # the Kalman step, timed on its own on a fresh tracker
+    tk = BiasTracker(st, s.calibration)
+
+    def timed(*a, **k):
+        t0 = time.perf_counter()
+        try:
+            return apply.__func__(tk, *a, **k)
+        finally:
+            steps.append(time.perf_counter() - t0)
+
+    tk._apply_window = timed
+    for i in range(n):
+        kw = ({"reference_rate": float(rr[i]), "reference_axis": ra[i]} if turning[i]
+              else {})
+        tk.update(rate[i], tt[i], temp[i], **kw)
+    to = BiasTracker(st, s.calibration)
+    old = []
+    for i in range(n):
+        if len(old) >= 2000:
+            break
+        t0 = time.perf_counter()
+        to.process(tt[i:i + 1], rate[i:i + 1], temp[i:i + 1], reference_rate=rr[i:i + 1],
+                   reference_axis=ra[i:i + 1])
+        if turning[i]:
+            old.append(time.perf_counter() - t0)
+    return lat[turning], np.array(old), float(turning.mean()), np.array(steps)
 
 
 def main(argv: list[str]) -> None:

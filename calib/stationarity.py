@@ -206,11 +206,13 @@ class StreamingQuiet:
     ``n_window`` centred readings, in Python floats (a 3-vector is too small for numpy's
     per-call cost to pay).
 
-    The sums are taken about a shift (the window mean when they were last rebuilt) and rebuilt
-    from the ring every ``n_window`` samples, so rounding does not accumulate and the variance
+    The sums are taken about a shift (a recent window mean) and started afresh every
+    ``n_window`` samples, so rounding does not accumulate and the variance
     ``(Σy² − (Σy)²/n)/(n − 1)`` stays free of cancellation, as in :func:`quiet_windows`; the
     two agree to rounding (about 1e-16 relative), which changes a decision only for a window
-    within that of a threshold.
+    within that of a threshold. The fresh sums are gathered as the samples arrive (about the
+    window mean when the gathering began): after ``n_window`` pushes they cover exactly the
+    ring, and take over in O(1), so no push pays for re-summing the ring.
 
     Parameters
     ----------
@@ -227,14 +229,18 @@ class StreamingQuiet:
         if history is not None:
             for r in np.asarray(history, dtype=float)[-(self.nw - 1):] if self.nw > 1 else []:
                 self.ring.append((float(r[0]), float(r[1]), float(r[2])))
-        self._rebuild()
-
-    def _rebuild(self) -> None:
         n = len(self.ring)
         c = [sum(r[a] for r in self.ring) / n if n else 0.0 for a in range(3)]
         self._c = c
         self._s1 = [sum(r[a] - c[a] for r in self.ring) for a in range(3)]
         self._s2 = [sum((r[a] - c[a]) ** 2 for r in self.ring) for a in range(3)]
+        self._restart(c)
+
+    def _restart(self, centre: list[float]) -> None:
+        """Begin gathering fresh sums of the next ``n_window`` pushes about ``centre``."""
+        self._c_next = list(centre)
+        self._t1 = [0.0, 0.0, 0.0]
+        self._t2 = [0.0, 0.0, 0.0]
         self._age = 0
 
     def push(self, x0: float, x1: float, x2: float) -> bool:
@@ -243,26 +249,42 @@ class StreamingQuiet:
         ring = self.ring
         nw = self.nw
         c, s1, s2 = self._c, self._s1, self._s2
-        if len(ring) == nw:
-            o = ring[0]
-            for a in range(3):
-                y = o[a] - c[a]
-                s1[a] -= y
-                s2[a] -= y * y
+        cn, t1, t2 = self._c_next, self._t1, self._t2
+        if len(ring) == nw:  # the oldest leaves (three axes written out: the hot loop)
+            o0, o1, o2 = ring[0]
+            y0, y1, y2 = o0 - c[0], o1 - c[1], o2 - c[2]
+            s1[0] -= y0
+            s1[1] -= y1
+            s1[2] -= y2
+            s2[0] -= y0 * y0
+            s2[1] -= y1 * y1
+            s2[2] -= y2 * y2
         ring.append((x0, x1, x2))
-        for a, x in enumerate((x0, x1, x2)):
-            y = x - c[a]
-            s1[a] += y
-            s2[a] += y * y
+        y0, y1, y2 = x0 - c[0], x1 - c[1], x2 - c[2]
+        s1[0] += y0
+        s1[1] += y1
+        s1[2] += y2
+        s2[0] += y0 * y0
+        s2[1] += y1 * y1
+        s2[2] += y2 * y2
+        y0, y1, y2 = x0 - cn[0], x1 - cn[1], x2 - cn[2]
+        t1[0] += y0
+        t1[1] += y1
+        t1[2] += y2
+        t2[0] += y0 * y0
+        t2[1] += y1 * y1
+        t2[2] += y2 * y2
         self._age += 1
-        if self._age >= nw:
-            self._rebuild()
+        if self._age >= nw:  # the fresh sums now cover exactly the ring: they take over
+            self._c, self._s1, self._s2 = c, s1, s2 = cn, t1, t2
+            self._restart([s1[a] / nw + c[a] for a in range(3)])
         if len(ring) < nw:
             return False
+        var_lim, rate_lim = self._var, self._rate
         for a in range(3):
             mean = s1[a] / nw + c[a]
             var = max(s2[a] - s1[a] * s1[a] / nw, 0.0) / (nw - 1)
-            if not (var <= self._var[a] and abs(mean) <= self._rate[a]):
+            if not (var <= var_lim[a] and abs(mean) <= rate_lim[a]):
                 return False
         return True
 

@@ -4,7 +4,12 @@ Model
 -----
 The calibration model (paper Eq. 1) is ``g = scale ∘ (m + b)``, or with the full model of a
 Calibration v2 ``g = A (m + b)`` (``A = diag(scale)`` for v1), so a reading is
-``m = A⁻¹ g − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. The bias
+``m = A⁻¹ g − b + v`` with white noise ``v`` of per-sample variance ``σ² = N²·odr``. A
+Calibration v2 with ``g_sensitivity`` adds ``G f`` (``g = A (m + b + G f)``, ``f`` the specific
+force at the sensor in g, sensor frame): where the caller gives ``f`` for its samples, every
+reading enters the filter as ``m + G f`` (the detector, the measurements and the corrected
+rate alike), so ``b`` stays the zero-g bias; without ``f`` the tracker follows ``b + G f`` of
+the pose the sensor holds. The bias
 ``b`` (Calibration v1 convention: added to the reading) is the state; optionally a linear
 temperature coefficient ``c`` joins it, ``b(T) = b_ref + c ∘ (T − T_ref)``:
 
@@ -407,6 +412,7 @@ class _Snapshot:
     t_state: float
     t_update: float
     nis_ok: bool
+    q: np.ndarray
 
 
 class _QBank:
@@ -433,15 +439,17 @@ class _QBank:
     def __init__(self, b0: np.ndarray, b0_std: np.ndarray, s: TrackerSettings,
                  c0: np.ndarray | None) -> None:
         G = self.GRID.size
-        d = 1 if c0 is None else 2
         self.qg = self.GRID**2
-        self.x = np.zeros((G, 3, d))
-        self.x[:, :, 0] = b0
-        self.P = np.zeros((G, 3, d, d))
-        self.P[:, :, 0, 0] = b0_std**2
+        self._qg = self.qg[:, None]
+        # each filter's state and covariance entries, (G, 3) each (x1, P01, P11: the
+        # temperature coefficient's, None without it): elementwise arithmetic only
+        self.x0 = np.broadcast_to(np.asarray(b0, dtype=float), (G, 3)).copy()
+        self.P00 = np.broadcast_to(np.asarray(b0_std, dtype=float) ** 2, (G, 3)).copy()
+        self.x1 = self.P01 = self.P11 = None
         if c0 is not None:
-            self.x[:, :, 1] = c0
-            self.P[:, :, 1, 1] = np.asarray(s.tempco_std) ** 2
+            self.x1 = np.broadcast_to(np.asarray(c0, dtype=float), (G, 3)).copy()
+            self.P01 = np.zeros((G, 3))
+            self.P11 = np.broadcast_to(np.asarray(s.tempco_std) ** 2, (G, 3)).copy()
             self.qc = np.asarray(s.tempco_random_walk) ** 2
         self.memory = s.adapt_memory_s
         self.loglik = np.zeros((G, 3))
@@ -451,31 +459,41 @@ class _QBank:
     def step(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float) -> np.ndarray:
         """Predict by ``dt``, update every filter with window mean ``z`` (variance ``R``);
         return the ``q`` per axis the tracker should use: the posterior mean plus the posterior
-        standard deviation."""
-        P = self.P
-        P[:, :, 0, 0] += self.qg[:, None] * dt
+        standard deviation.
+
+        Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
+        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry."""
+        self.P00 += self._qg * dt
         if dT is None:
-            h = np.array([-1.0])
+            y = z + self.x0
+            ph0 = -self.P00
+            S = self.P00 + R
+            k0 = ph0 / S
+            self.x0 += k0 * y
+            self.P00 -= k0 * ph0
         else:
-            P[:, :, 1, 1] += self.qc[None, :] * dt
-            h = np.array([-1.0, -dT])
-        y = z[None, :] - self.x @ h
-        Ph = P @ h
-        S = Ph @ h + R[None, :]
-        K = Ph / S[..., None]
-        self.x += K * y[..., None]
-        self.P = P - K[..., :, None] * Ph[..., None, :]
+            self.P11 += self.qc * dt
+            y = z + self.x0 + dT * self.x1
+            ph0 = -(self.P00 + dT * self.P01)
+            ph1 = -(self.P01 + dT * self.P11)
+            S = R - ph0 - dT * ph1
+            k0, k1 = ph0 / S, ph1 / S
+            self.x0 += k0 * y
+            self.x1 += k1 * y
+            self.P00 -= k0 * ph0
+            self.P01 -= k0 * ph1
+            self.P11 -= k1 * ph1
         lam = math.exp(-dt / self.memory) if dt > 0 else 1.0
         self.loglik = lam * self.loglik - 0.5 * (np.log(S) + y * y / S)
         w = np.exp(self.loglik - self.loglik.max(axis=0))
         w /= w.sum(axis=0)
-        self.q = (w * self.qg[:, None]).sum(axis=0)
-        self.q_std = np.sqrt((w * (self.qg[:, None] - self.q) ** 2).sum(axis=0))
+        self.q = (w * self._qg).sum(axis=0)
+        self.q_std = np.sqrt((w * (self._qg - self.q) ** 2).sum(axis=0))
         return self.q + self.q_std
 
     def widen(self, extra: np.ndarray) -> None:
         """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
-        self.P[:, :, 0, 0] += extra[None, :]
+        self.P00 += extra[None, :]
 
 
 class BiasTracker:
@@ -545,6 +563,11 @@ class BiasTracker:
             self._A = np.eye(3)
             self._A_std = np.diag(self.scale_std)
         self._A_inv = np.linalg.inv(self._A)
+        self._A_inv_rows = self._A_inv.tolist()  # update()'s scalar reference arithmetic
+        g_sens = None if calibration is None else calibration.g_sensitivity
+        self._G = None if g_sens is None else np.array(g_sens["matrix"], dtype=float)
+        self._G_rows = None if self._G is None else self._G.tolist()
+        self._ref_ready = bool(np.all(np.isfinite(self.scale_std)))
 
         s = settings
         self._temp_model = bool(s.temperature_model)
@@ -567,17 +590,20 @@ class BiasTracker:
         )
         # CUSUM state per axis: upper and lower sums, and the innovations summed since each
         # last left zero (their mean sizes a detected shift).
-        self._cu = np.zeros((2, 3))
-        self._cu_sum = np.zeros((2, 3))
-        self._cu_n = np.zeros((2, 3))
+        self._cu = [[0.0] * 3, [0.0] * 3]
+        self._cu_sum = [[0.0] * 3, [0.0] * 3]
+        self._cu_n = [[0.0] * 3, [0.0] * 3]
         self._n_shifts = 0
         kf.F = np.eye(dim)
         kf.Q = np.zeros((dim, dim))
+        # H = [−I] or [−I, −(T − T_ref) I]: the fixed part, scaled per window
+        self._H0 = -np.hstack([np.eye(3)] * (dim // 3))
         self.kf = kf
         self._dim = dim
         self._sigma2 = s.noise_std**2
         self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
         self._det_bias = b0.copy()
+        self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
         self._refresh = max(1, int(round(s.detector_refresh_s * s.odr_hz)))
         # feed(): the block buffer and the estimate it corrects with
@@ -602,7 +628,8 @@ class BiasTracker:
         self._pending: dict[str, np.ndarray] = {}
         # update()'s own queue of samples awaiting their still decision (t, m, temp, ext), and
         # the output terms of the current state (rebuilt after each measurement update)
-        self._pq: deque[tuple[float, np.ndarray, float, float]] = deque()
+        # (t, m, temp, ext, reference rate, reference axis or None)
+        self._pq: deque[tuple[Any, ...]] = deque()
         self._out_terms: tuple[Any, ...] | None = None
         # update()'s detector window (None while self._hist holds it, for process())
         self._sq: StreamingQuiet | None = None
@@ -664,6 +691,12 @@ class BiasTracker:
         return None if self._bank is None else np.sqrt(self._bank.q)
 
     @property
+    def applies_g_sensitivity(self) -> bool:
+        """Whether the calibration has a g-sensitivity ``G`` for the ``specific_force`` that
+        :meth:`process`, :meth:`update` and :meth:`feed` take (without it they ignore it)."""
+        return self._G is not None
+
+    @property
     def shifts(self) -> int:
         """Bias shifts the CUSUM test has detected so far."""
         return self._n_shifts
@@ -708,8 +741,9 @@ class BiasTracker:
         *,
         reference_rate: float | None = None,
         reference_axis: Any = None,
+        specific_force: Any = None,
     ) -> np.ndarray:
-        """Feed one reading; returns its corrected rate ``A (m + bias)``, rad/s.
+        """Feed one reading; returns its corrected rate ``A (m + bias [+ G f])``, rad/s.
 
         Parameters
         ----------
@@ -725,12 +759,16 @@ class BiasTracker:
             Rate of the turning servo from its encoder, rad/s (jig only).
         reference_axis : array_like (3,), optional
             That servo's unit axis in the sensor frame.
+        specific_force : array_like (3,), optional
+            Specific force at the sensor, g, sensor frame: with the calibration's
+            g-sensitivity the reading counts as ``m + G f`` (ignored without it).
 
         Returns
         -------
         ndarray (3,)
         """
-        fast = self._update_fast(sample, t, temperature, still, reference_rate, reference_axis)
+        fast = self._update_fast(sample, t, temperature, still, reference_rate, reference_axis,
+                                 specific_force)
         if fast is not None:
             return fast
         m = np.asarray(sample, dtype=float)
@@ -747,18 +785,20 @@ class BiasTracker:
             reference_axis=None
             if reference_axis is None
             else np.asarray(reference_axis, dtype=float).reshape(1, -1),
+            specific_force=None if specific_force is None
+            else np.asarray(specific_force, dtype=float).reshape(1, -1),
         )
         return res.corrected[0]
 
     def _update_fast(
         self, sample: Any, t: Any, temperature: Any, still: Any, reference_rate: Any,
-        reference_axis: Any,
+        reference_axis: Any, specific_force: Any = None,
     ) -> np.ndarray | None:
-        """:meth:`update` for the common sample (valid, no reference rate, not the first):
-        the same arithmetic as a one-sample :meth:`process` call, without its per-call
-        overhead. Returns None where the general path must run (it also names bad input)."""
-        if (reference_rate is not None or reference_axis is not None or self._k == 0
-                or self._finished or self._nbuf):
+        """:meth:`update` for the common sample (valid, not the first), with or without a
+        reference rate: the same arithmetic as a one-sample :meth:`process` call, without its
+        per-call overhead. Returns None where the general path must run (it also names bad
+        input)."""
+        if self._k == 0 or self._finished or self._nbuf:
             return None
         try:
             m = np.array(sample, dtype=float)
@@ -766,20 +806,42 @@ class BiasTracker:
             temp = math.nan if temperature is None else float(temperature)
         except (TypeError, ValueError):
             return None
-        if (m.shape != (3,) or not (math.isfinite(m[0]) and math.isfinite(m[1])
-                                    and math.isfinite(m[2]) and math.isfinite(tf))
+        if m.shape != (3,):
+            return None
+        m0, m1, m2 = m.tolist()
+        if specific_force is not None and self._G_rows is not None:  # m + G f
+            try:
+                f0, f1, f2 = (float(v) for v in specific_force)
+            except (TypeError, ValueError):
+                return None
+            if not (math.isfinite(f0) and math.isfinite(f1) and math.isfinite(f2)):
+                return None
+            G = self._G_rows
+            m0 += G[0][0] * f0 + G[0][1] * f1 + G[0][2] * f2
+            m1 += G[1][0] * f0 + G[1][1] * f1 + G[1][2] * f2
+            m2 += G[2][0] * f0 + G[2][1] * f1 + G[2][2] * f2
+            m = np.array([m0, m1, m2])
+        if (not (math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2)
+                 and math.isfinite(tf))
                 or self._t_last is None or not tf > self._t_last
                 or (self._temp_model and not math.isfinite(temp))):
             return None
+        ext = math.nan if still is None else (1.0 if still else 0.0)
+        rr, axis = math.nan, None
+        if reference_rate is not None or reference_axis is not None:
+            ref = self._fast_reference(reference_rate, reference_axis, ext)
+            if ref is None:
+                return None
+            rr, axis = ref
         if self._pending:  # samples a process() call left awaiting their decision
             pend = self._pending
-            if np.isfinite(pend["rr"]).any():
-                return None
             for i in range(pend["t"].size):
+                r = float(pend["rr"][i])
                 self._pq.append((float(pend["t"][i]), pend["m"][i].copy(),
-                                 float(pend["temp"][i]), float(pend["ext"][i])))
+                                 float(pend["temp"][i]), float(pend["ext"][i]), r,
+                                 tuple(float(v) for v in pend["ra"][i]) if math.isfinite(r)
+                                 else None))
             self._pending = {}
-        ext = math.nan if still is None else (1.0 if still else 0.0)
         k = self._k
         if k % self._refresh == 0:
             self._refresh_detector_bias()
@@ -790,39 +852,81 @@ class BiasTracker:
         sq = self._sq
         if sq is None:
             sq = self._sq = StreamingQuiet(det, self._hist)
-        b = self._det_bias
-        quiet = sq.push(m[0] + b[0], m[1] + b[1], m[2] + b[2])
+        b = self._det_bias_l
+        quiet = sq.push(m0 + b[0], m1 + b[1], m2 + b[2])
         self._run = self._run + 1 if quiet else 0
         # the still decision on the sample L back, and the update window it feeds
         pq = self._pq
-        pq.append((tf, m, temp, ext))
+        pq.append((tf, m, temp, ext, rr, axis))
         L = det.n_lookahead
         while len(pq) > L:
             g = k - len(pq) + 1
-            td, md, tempd, extd = pq.popleft()
+            td, md, tempd, extd, rrd, axd = pq.popleft()
+            if axd is not None:  # a servo turns the sample: a reference, never still
+                self._last_decision = (g, False)
+                self._window_step(g, L, td, md, tempd, _KIND_REF, rrd, axd)
+                continue
             is_still = (self._run >= det.n_min + L) if math.isnan(extd) else extd > 0.5
             self._last_decision = (g, bool(is_still))
-            self._window_step(g, L, td, md, tempd, is_still)
+            self._window_step(g, L, td, md, tempd, _KIND_STILL if is_still else _KIND_NONE)
         return self._sample_output(m, tf, temp)
 
-    def _window_step(self, g: int, L: int, t: float, z: np.ndarray, temp: float,
-                     is_still: bool) -> None:
-        """Pool the decided sample ``g`` into the open update window, applying the window when
-        it closes (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
+    def _fast_reference(self, reference_rate: Any, reference_axis: Any, ext: float
+                        ) -> tuple[float, tuple[float, float, float] | None] | None:
+        """The reference of one :meth:`update` call as ``(rate, axis)`` (axis None where the
+        rate is NaN: no servo turns), checked as :meth:`_validate` checks a batch; None where
+        the general path must run (to name what is wrong)."""
+        if reference_rate is None or reference_axis is None:
+            return None
+        try:
+            rr = float(reference_rate)
+        except (TypeError, ValueError):
+            return None
+        if math.isnan(rr):
+            return rr, None
+        if (not math.isfinite(rr) or ext == 1.0 or self.calibration is None
+                or not self._ref_ready):
+            return None
+        try:
+            u0, u1, u2 = (float(v) for v in reference_axis)
+        except (TypeError, ValueError):
+            return None
+        if not (math.isfinite(u0) and math.isfinite(u1) and math.isfinite(u2)
+                and abs(math.sqrt(u0 * u0 + u1 * u1 + u2 * u2) - 1.0) <= 1e-6):
+            return None
+        return rr, (u0, u1, u2)
+
+    def _window_step(self, g: int, L: int, t: float, m: np.ndarray, temp: float, kind: int,
+                     rr: float = math.nan, axis: tuple[float, float, float] | None = None
+                     ) -> None:
+        """Pool the decided sample ``g`` (of ``kind``; with a reference its encoder rate ``rr``
+        and servo axis) into the open update window, applying the window when it closes
+        (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
         op = self._open
-        if op is not None and not (is_still and op.kind == _KIND_STILL):
+        if op is not None and not (kind == op.kind and axis == op.axis):
             self._apply_window(op, _log_sink(), g + L)
             self._open = op = None
-        if not is_still:
+        if kind == _KIND_NONE:
             return
+        if kind == _KIND_REF:  # z = m − A⁻¹ ω u, the reading less the reference
+            assert axis is not None
+            ai = self._A_inv_rows
+            w0, w1, w2 = rr * axis[0], rr * axis[1], rr * axis[2]
+            z = np.array([m[0] - (ai[0][0] * w0 + ai[0][1] * w1 + ai[0][2] * w2),
+                          m[1] - (ai[1][0] * w0 + ai[1][1] * w1 + ai[1][2] * w2),
+                          m[2] - (ai[2][0] * w0 + ai[2][1] * w1 + ai[2][2] * w2)])
+            omega = rr
+        else:
+            z, omega = m, 0.0
         sum_temp = temp if self._temp_model else 0.0
         if op is None:
-            op = _OpenWindow(kind=_KIND_STILL, axis=None, last=g, count=1, sum_z=z.copy(),
-                             sum_temp=sum_temp, sum_omega=0.0, t_last=t)
+            op = _OpenWindow(kind=kind, axis=axis, last=g, count=1, sum_z=z.copy(),
+                             sum_temp=sum_temp, sum_omega=omega, t_last=t)
         else:
             op.count += 1
             op.sum_z = op.sum_z + z
             op.sum_temp += sum_temp
+            op.sum_omega += omega
             op.last = g
             op.t_last = t
         if op.count == self._U:
@@ -833,16 +937,17 @@ class BiasTracker:
 
     def _sample_output(self, m: np.ndarray, t: float, temp: float) -> np.ndarray:
         """Bias, its uncertainty and the corrected rate at one sample from the current state
-        (the one-row case of :meth:`_outputs`), in scalar arithmetic."""
+        (the one-row case of :meth:`_outputs`), in scalar arithmetic (three axes written out:
+        this runs for every sample)."""
         key = (self._n_updates, self._t_ref)
         terms = self._out_terms
         if terms is None or terms[0] != key:
-            x = [float(v) for v in np.asarray(self.kf.x, dtype=float).reshape(-1)]
+            x = np.asarray(self.kf.x, dtype=float).reshape(-1).tolist()
             P = np.asarray(self.kf.P, dtype=float)
-            pd = [float(v) for v in np.diag(P)]
+            pd = np.diag(P).tolist()
             pbc = [float(P[i, i + 3]) for i in range(3)] if self._temp_model else []
-            terms = (key, x, pd, pbc, [float(v) for v in self._q], self._t_state,
-                     self._t_update, self._A.tolist())
+            terms = (key, x, pd, pbc, self._q.tolist(), self._t_state, self._t_update,
+                     self._A.ravel().tolist())
             self._out_terms = terms
         _, x, pd, pbc, q, t_state, t_update, A = terms
         dt = t - t_state
@@ -850,25 +955,31 @@ class BiasTracker:
             dt = 0.0
         if self._temp_model:
             dT = temp - (self._t_ref if self._t_ref is not None else 0.0)
-            bias = [x[i] + x[i + 3] * dT for i in range(3)]
-            var = [pd[i] + 2 * dT * pbc[i] + dT * dT * pd[i + 3] + (q[i] + q[i + 3] * dT * dT) * dt
-                   for i in range(3)]
+            d2 = dT * dT
+            b0, b1, b2 = x[0] + x[3] * dT, x[1] + x[4] * dT, x[2] + x[5] * dT
+            v0 = pd[0] + 2 * dT * pbc[0] + d2 * pd[3] + (q[0] + q[3] * d2) * dt
+            v1 = pd[1] + 2 * dT * pbc[1] + d2 * pd[4] + (q[1] + q[4] * d2) * dt
+            v2 = pd[2] + 2 * dT * pbc[2] + d2 * pd[5] + (q[2] + q[5] * d2) * dt
         else:
-            bias = x[:3]
-            var = [pd[i] + q[i] * dt for i in range(3)]
-        std = [math.sqrt(v) if v > 0.0 else 0.0 for v in var]
-        c0, c1, c2 = m[0] + bias[0], m[1] + bias[1], m[2] + bias[2]
-        out = np.array([A[0][0] * c0 + A[0][1] * c1 + A[0][2] * c2,
-                        A[1][0] * c0 + A[1][1] * c1 + A[1][2] * c2,
-                        A[2][0] * c0 + A[2][1] * c1 + A[2][2] * c2])
+            b0, b1, b2 = x[0], x[1], x[2]
+            v0, v1, v2 = pd[0] + q[0] * dt, pd[1] + q[1] * dt, pd[2] + q[2] * dt
+        sq = math.sqrt
+        std = [sq(v0) if v0 > 0.0 else 0.0, sq(v1) if v1 > 0.0 else 0.0,
+               sq(v2) if v2 > 0.0 else 0.0]
+        m0, m1, m2 = m.tolist()
+        c0, c1, c2 = m0 + b0, m1 + b1, m2 + b2
+        out = np.array([A[0] * c0 + A[1] * c1 + A[2] * c2,
+                        A[3] * c0 + A[4] * c1 + A[5] * c2,
+                        A[6] * c0 + A[7] * c1 + A[8] * c2])
         self._k += 1
         self._t_last = t
         self._temp_last = temp
-        self._last = {"bias": bias, "bias_std": std, "since": t - t_update}
+        self._last = {"bias": [b0, b1, b2], "bias_std": std, "since": t - t_update}
         return out
 
     def feed(
-        self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None
+        self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None,
+        specific_force: Any = None,
     ) -> np.ndarray:
         """Fast streaming: buffer one reading, return it corrected with the latest estimate.
 
@@ -886,11 +997,13 @@ class BiasTracker:
             Die temperature, °C (required with the temperature model).
         still : bool, optional
             External still flag; None lets the detector decide.
+        specific_force : array_like (3,), optional
+            Specific force at the sensor, g, sensor frame (as in :meth:`update`).
 
         Returns
         -------
         ndarray (3,)
-            ``A (m + bias)`` with the bias estimate at the end of the last processed
+            ``A (m + bias [+ G f])`` with the bias estimate at the end of the last processed
             block (at this sample's temperature with the temperature model).
         """
         i = self._nbuf
@@ -902,6 +1015,8 @@ class BiasTracker:
             self._buf_still = np.full(B, np.nan)
         m = self._buf_m[i]
         m[:] = sample
+        if specific_force is not None and self._G is not None:
+            m += self._G @ self._force(specific_force, 1)[0]
         self._buf_t[i] = t
         if temperature is not None:
             self._buf_temp[i] = temperature
@@ -1041,6 +1156,7 @@ class BiasTracker:
         *,
         reference_rate: Any = None,
         reference_axis: Any = None,
+        specific_force: Any = None,
         finish: bool = False,
     ) -> TrackResult:
         """Feed a batch of readings (vectorised); returns per-sample estimates.
@@ -1059,6 +1175,10 @@ class BiasTracker:
             Encoder rate of the turning servo, rad/s; NaN where none turns.
         reference_axis : array_like (n, 3) or (3,), optional
             Unit axis of the turning servo in the sensor frame.
+        specific_force : array_like (n, 3) or (3,), optional
+            Specific force at the sensor, g, sensor frame: with the calibration's
+            g-sensitivity ``G`` the readings count as ``m + G f`` (module docstring); ignored
+            without it.
         finish : bool
             The stream ends with this batch: decide the samples still awaiting their look-ahead
             (as not still, unless flagged), close the open update window and apply it. Further
@@ -1074,6 +1194,9 @@ class BiasTracker:
             raise CalibInputError("samples given to feed() are waiting: call flush() before "
                                   "process() or update()")
         cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
+        if specific_force is not None and self._G is not None:
+            cols = (cols[0], cols[1] + self._force(specific_force, cols[0].size) @ self._G.T,
+                    *cols[2:])
         if self._sq is not None:  # update()'s detector window, back to the rows process() keeps
             self._hist = self._sq.history()
             self._sq = None
@@ -1083,7 +1206,8 @@ class BiasTracker:
             self._pending = {
                 "t": np.array([r[0] for r in q]), "m": np.array([r[1] for r in q]),
                 "temp": np.array([r[2] for r in q]), "ext": np.array([r[3] for r in q]),
-                "rr": np.full(len(q), np.nan), "ra": np.full((len(q), 3), np.nan),
+                "rr": np.array([r[4] for r in q]),
+                "ra": np.array([(math.nan,) * 3 if r[5] is None else r[5] for r in q]),
             }
         # The detector's rate test is centred on the bias estimate, refreshed at every multiple
         # of D samples counted from the first: cut the batch there, so that any way of
@@ -1101,6 +1225,22 @@ class BiasTracker:
                                            finish=finish and j == len(cuts) - 2))
         return _concat(parts, g_first)
 
+    @staticmethod
+    def _force(specific_force: Any, n: int) -> np.ndarray:
+        """``specific_force`` as (n, 3) g, checked (CalibInputError naming the problem)."""
+        try:
+            f = np.asarray(specific_force, dtype=float)
+        except (TypeError, ValueError):
+            raise CalibInputError("specific_force must be numbers (g)") from None
+        if f.shape == (3,):
+            f = np.broadcast_to(f, (n, 3))
+        if f.shape != (n, 3):
+            raise CalibInputError(
+                f"specific_force must have shape ({n}, 3) or (3,), got {f.shape}")
+        if not np.all(np.isfinite(f)):
+            raise CalibInputError("specific_force contains NaN or inf")
+        return f
+
     def _refresh_detector_bias(self) -> None:
         """Centre the detector's rate test on the current bias estimate (at the latest
         sample's temperature with the temperature model)."""
@@ -1109,6 +1249,7 @@ class BiasTracker:
         if self._temp_model and self._t_ref is not None and math.isfinite(self._temp_last):
             b += x[3:] * (self._temp_last - self._t_ref)
         self._det_bias = b
+        self._det_bias_l = b.tolist()
 
     def _process(
         self,
@@ -1218,6 +1359,7 @@ class BiasTracker:
             t_state=self._t_state,
             t_update=self._t_update,
             nis_ok=self._nis_ok,
+            q=self._q.copy(),
         )
 
     def _assemble_and_apply(
@@ -1357,9 +1499,11 @@ class BiasTracker:
         dt = max(w.t_last - self._t_state, 0.0)
         if self._temp_model:
             dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0)
-            kf.H = np.hstack([-np.eye(3), -dT * np.eye(3)])
+            H = self._H0.copy()
+            H[:, 3:] *= dT
+            kf.H = H
         else:
-            kf.H = -np.eye(3)
+            kf.H = self._H0
         kf.Q = np.diag(self._q * dt)
         kf.predict()
         kf.R = np.diag(R)
@@ -1538,30 +1682,34 @@ class BiasTracker:
         s = self.settings
         if not math.isfinite(s.cusum_h):
             return False
-        e = y / np.sqrt(s_diag)
-        step = np.stack([e - s.cusum_k, -e - s.cusum_k])
-        g = np.maximum(self._cu + step, 0.0)
-        restart = self._cu <= 0.0
-        self._cu_sum = np.where(restart, 0.0, self._cu_sum) + y[None, :]
-        self._cu_n = np.where(restart, 0.0, self._cu_n) + 1.0
-        self._cu = g
-        hit = g > s.cusum_h
-        if not hit.any():
+        # per axis and side in Python floats (six numbers: numpy's per-call cost dominates)
+        cu, cu_sum, cu_n = self._cu, self._cu_sum, self._cu_n
+        k, h = s.cusum_k, s.cusum_h
+        hit = [[False] * 3, [False] * 3]
+        for i, (yi, si) in enumerate(zip(y.tolist(), s_diag.tolist(), strict=True)):
+            e = yi / math.sqrt(si)
+            for side, step in ((0, e - k), (1, -e - k)):
+                restart = cu[side][i] <= 0.0
+                cu_sum[side][i] = (0.0 if restart else cu_sum[side][i]) + yi
+                cu_n[side][i] = (0.0 if restart else cu_n[side][i]) + 1.0
+                cu[side][i] = max(cu[side][i] + step, 0.0)
+                hit[side][i] = cu[side][i] > h
+        axes = [i for i in range(3) if hit[0][i] or hit[1][i]]
+        if not axes:
             return False
-        axes = np.flatnonzero(hit.any(axis=0))
         self._n_shifts += 1
         if s.recover:
             P = self.kf.P.copy()
             for i in axes:
-                side = 0 if hit[0, i] else 1
-                mean_y = self._cu_sum[side, i] / self._cu_n[side, i]
+                side = 0 if hit[0][i] else 1
+                mean_y = cu_sum[side][i] / cu_n[side][i]
                 P[i, i] += 4.0 * mean_y**2
                 if self._bank is not None:
                     self._bank.widen(4.0 * mean_y**2 * (np.arange(3) == i))
             self.kf.P = P
-        self._cu[:, axes] = 0.0
-        self._cu_sum[:, axes] = 0.0
-        self._cu_n[:, axes] = 0.0
+        for i in axes:
+            for side in (0, 1):
+                cu[side][i] = cu_sum[side][i] = cu_n[side][i] = 0.0
         return True
 
     def _outputs(
@@ -1580,7 +1728,7 @@ class BiasTracker:
         ok = np.array([s.nis_ok for s in snaps], dtype=bool)
         j = sidx
         dt = np.maximum(t - ts[j], 0.0)
-        q = self._q
+        q = np.array([s.q for s in snaps]).reshape(W, -1)[j]  # the process noise then
         if self._temp_model:
             Pbc = np.array([[s.P[i, i + 3] for i in range(3)] for s in snaps]).reshape(W, 3)
             dT = (temp - (self._t_ref if self._t_ref is not None else 0.0))[:, None]
@@ -1589,11 +1737,11 @@ class BiasTracker:
                 Pd[j, :3]
                 + 2 * dT * Pbc[j]
                 + dT * dT * Pd[j, 3:]
-                + (q[None, :3] + q[None, 3:] * dT * dT) * dt[:, None]
+                + (q[:, :3] + q[:, 3:] * dT * dT) * dt[:, None]
             )
         else:
             bias = X[j, :3]
-            var = Pd[j, :3] + q[None, :3] * dt[:, None]
+            var = Pd[j, :3] + q[:, :3] * dt[:, None]
         return {
             "bias": bias,
             "bias_std": np.sqrt(np.maximum(var, 0.0)),

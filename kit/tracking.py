@@ -26,6 +26,10 @@ LIVE_WARMUP_S = 2.0
 LIVE_CHUNK_S = 1.0
 #: A servo that moves more than this between two polls marks its samples as not still, rad.
 LIVE_MOVE_TOLERANCE_RAD = 2 * 2 * math.pi / 4096
+#: A turn's sample gives a reference rate only where the encoder's mean rate over this many
+#: seconds either side is within :data:`STEADY_TOLERANCE` of the turn's cruise rate.
+STEADY_HALF_SPAN_S = 0.1
+STEADY_TOLERANCE = 0.01
 
 
 
@@ -39,6 +43,8 @@ class Batch:
     still: np.ndarray | None = None
     reference_rate: np.ndarray | None = None
     reference_axis: np.ndarray | None = None
+    #: Specific force at the sensor (n, 3), g, for the calibration's g-sensitivity (or None).
+    specific_force: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -134,7 +140,7 @@ def run_tracker(tracker: Any, batches: Iterable[Batch], *,
         res = tracker.process(
             current.t, current.rate, current.temperature, current.still,
             reference_rate=current.reference_rate, reference_axis=current.reference_axis,
-            finish=nxt is None,
+            specific_force=current.specific_force, finish=nxt is None,
         )
         kept.add(res)
         if res.t.size:
@@ -181,7 +187,7 @@ def chunks(batch: Batch, size: int) -> Iterator[Batch]:
         sl = slice(a, min(a + size, n))
         yield Batch(*(None if x is None else x[sl] for x in (
             batch.t, batch.rate, batch.temperature, batch.still, batch.reference_rate,
-            batch.reference_axis)))
+            batch.reference_axis, batch.specific_force)))
 
 
 def load_calibration(path: str) -> Any:
@@ -285,7 +291,8 @@ def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
         et, ea = rec.encoder(seg.motor)
         i0 = int(np.searchsorted(rec.imu_t, seg.t_start, side="left"))
         i1 = int(np.searchsorted(rec.imu_t, seg.t_end, side="right"))
-        rate = encoder_rate(et, ea, rec.imu_t[i0:i1], dt / 2)
+        rate = steady_only(et, ea, rec.imu_t[i0:i1], encoder_rate(et, ea, rec.imu_t[i0:i1],
+                                                                     dt / 2))
         if not np.isfinite(rate).any():
             notes.append(f"no encoder readings of servo {seg.motor} across segment {seg.index}")
             continue
@@ -293,9 +300,33 @@ def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
     return Reference(runs), notes
 
 
-def replay_chunks(batch: Batch, ref: Reference | None, size: int) -> Iterator[Batch]:
-    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` over its
-    samples (a recording replayed in bounded working memory)."""
+def steady_only(enc_t: np.ndarray, enc_angle: np.ndarray, t: np.ndarray, rate: np.ndarray
+                ) -> np.ndarray:
+    """``rate`` with NaN off the turn's cruise: where the encoder's mean rate over
+    ±:data:`STEADY_HALF_SPAN_S` differs from its median over the turn by more than
+    :data:`STEADY_TOLERANCE`.
+
+    While the servo accelerates, a delay ``τ`` between the gyro and the encoder (the gyro's
+    low-pass filter, the encoder's read latency) puts ``α τ`` on each sample's reference
+    (10 rad/s² × 4 ms = 0.04 rad/s), which a window shorter than the whole turn does not
+    cancel; at cruise it puts nothing.
+    """
+    from gyrocal.kit.report_plots import encoder_rate
+
+    wide = encoder_rate(enc_t, enc_angle, t, STEADY_HALF_SPAN_S)
+    if not np.isfinite(wide).any():
+        return rate
+    cruise = float(np.nanmedian(wide))
+    with np.errstate(invalid="ignore"):
+        steady = np.abs(wide - cruise) <= STEADY_TOLERANCE * abs(cruise)
+    return np.where(steady, rate, np.nan)
+
+
+def replay_chunks(batch: Batch, ref: Reference | None, size: int,
+                  gravity: Gravity | None = None) -> Iterator[Batch]:
+    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` and the
+    specific force of ``gravity`` over its samples (a recording replayed in bounded working
+    memory)."""
     n = batch.t.size
     for a in range(0, n, size):
         b = min(a + size, n)
@@ -303,7 +334,91 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int) -> Iterator[Ba
         yield Batch(batch.t[a:b], batch.rate[a:b],
                     None if batch.temperature is None else batch.temperature[a:b],
                     None if batch.still is None else batch.still[a:b],
-                    *(rr_ra if rr_ra is not None else (None, None)))
+                    *(rr_ra if rr_ra is not None else (None, None)),
+                    None if gravity is None else gravity.at(batch.t[a:b]))
+
+
+@dataclass(frozen=True)
+class Gravity:
+    """The specific force of a sensor on the jig from the servos' encoders, for a
+    calibration's g-sensitivity: "up" carried into the sensor frame by the chain's angles
+    (:func:`gyrocal.calib.kinematics.carried_up` with the calibration's kinematics), 1 g. The
+    lever arm's centripetal term is left out, as the fit leaves it out
+    (:meth:`gyrocal.calib.observations.ObservationSet.specific_force`).
+
+    Attributes
+    ----------
+    kinematics : dict
+        The Calibration v2 ``kinematics``.
+    up : (int, int)
+        Chain index of the servo vertical in the home pose, and its sign.
+    home : ndarray (S,)
+        The home pose (the encoders' first angles), rad.
+    encoders : list of (ndarray, ndarray)
+        Each chain servo's encoder times and angles.
+    """
+
+    kinematics: dict[str, Any]
+    up: tuple[int, int]
+    home: np.ndarray
+    encoders: list[tuple[np.ndarray, np.ndarray]]
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """Specific force (n, 3), g, sensor frame, at times ``t`` (encoders interpolated)."""
+        from gyrocal.calib.kinematics import carried_up, chain_axes
+
+        angles = np.column_stack([np.interp(t, et, ea) for et, ea in self.encoders])
+        axes = np.asarray(self.kinematics["axes"], dtype=float)
+        ref = np.asarray(self.kinematics["reference_angles_rad"], dtype=float)
+        up = self.up[1] * chain_axes(axes, ref, self.home)[self.up[0]]
+        return carried_up(axes, ref, self.home, up, angles)
+
+
+def _g_worst(cal: Any) -> float:
+    """``max |A G|`` row norm: the most a specific force of 1 g moves the rate, rad/s."""
+    G = np.asarray(cal.g_sensitivity["matrix"])
+    return float(np.max(np.linalg.norm(np.asarray(cal.full_matrix) @ G, axis=1)))
+
+
+def live_g_note(cal: Any) -> str:
+    """What a live run with a g-sensitive calibration must say: the live loop does not know the
+    home pose the calibration's "up" refers to, so ``G f`` is not applied (the tracked bias is
+    the zero-g bias plus ``G f`` of the pose the jig holds)."""
+    return ("the calibration's g-sensitivity is NOT applied live (a Calibration v2 does not "
+            "store the home pose its 'up' refers to; replay the --record recording to apply "
+            f"it): the tracked bias includes G f, up to {_g_worst(cal):.1e} rad/s per g")
+
+
+def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
+    """The :class:`Gravity` of a recording for ``cal``'s g-sensitivity, or None and what the
+    user must know (None and None when the calibration has no g-sensitivity).
+
+    The pose comes from the recording's encoders through the calibration's kinematics, "up"
+    from the manifest's motor listed with axis ``z`` (:func:`gyrocal.kit.pipeline.gravity_servo`),
+    the home pose from the encoders' first angles, as the fit took them.
+    """
+    g = getattr(cal, "g_sensitivity", None)
+    if g is None:
+        return None, None
+    from gyrocal.kit.pipeline import gravity_servo
+
+    kin = getattr(cal, "kinematics", None)
+    chain = [int(x) for x in kin["chain"]] if kin else []
+    up = gravity_servo(rec.manifest)
+    encoders = [rec.encoder(sid) for sid in chain]
+    missing = ("the calibration has no kinematics" if not chain else
+               "the manifest lists no servo with axis z (up)" if up is None else
+               f"servo {up[0]} is not in the calibration's chain {chain}"
+               if up[0] not in chain else
+               "a servo of the chain has no encoder readings"
+               if any(et.size == 0 for et, _ in encoders) else None)
+    if missing is not None:
+        return None, (f"the calibration's g-sensitivity is NOT applied ({missing}, so the "
+                      "specific force is unknown): the tracked bias is the zero-g bias plus "
+                      f"G f, off by up to {_g_worst(cal):.1e} rad/s per g")
+    assert up is not None
+    home = np.array([ea[0] for _, ea in encoders])
+    return Gravity(dict(kin), (chain.index(up[0]), up[1]), home, encoders), None
 
 
 def rest_flags(

@@ -253,11 +253,11 @@ def _build_tracker(
     return tracker, None
 
 
-def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any]:
+def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any, Any]:
     import numpy as np
 
     from gyrocal.kit.recording import load_recording
-    from gyrocal.kit.tracking import Batch, reference_segments, rest_flags
+    from gyrocal.kit.tracking import Batch, recording_gravity, reference_segments, rest_flags
 
     rec = load_recording(args.recording)
     notes += list(rec.warnings)
@@ -293,7 +293,10 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any
             for i0, rate, _ in ref.runs:
                 still[i0:i0 + rate.size][np.isfinite(rate)] = 0.0
     batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still)
-    return tracker, batch, ref, str(rec.path)
+    gravity, g_note = recording_gravity(rec, cal)  # the specific force for G (v2 only)
+    if g_note is not None:
+        notes.append(g_note)
+    return tracker, batch, ref, str(rec.path), gravity
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
@@ -381,6 +384,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     from gyrocal.kit.tracking import (
         LIVE_WARMUP_S,
         LiveSource,
+        live_g_note,
         live_truth,
         run_live,
         tracker_notes,
@@ -430,8 +434,10 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
               "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
 
     def build(warm: Batch) -> Any:
-        tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
-                                    f"the first {LIVE_WARMUP_S:g} s", where)
+        tracker, cal = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
+                                      f"the first {LIVE_WARMUP_S:g} s", where)
+        if tracker.applies_g_sensitivity:
+            notes.append(live_g_note(cal))
         built.append(tracker)
         return tracker
 
@@ -606,11 +612,12 @@ def run(args: argparse.Namespace) -> int:
             batches: Iterable[Batch] = chunks(batch,
                                                max(1, int(round(tracker.settings.odr_hz))))
         else:
-            tracker, batch, ref, source = _replay(args, notes)
+            tracker, batch, ref, source, gravity = _replay(args, notes)
             truth = None
             # in pieces: the tracker's working arrays stay a piece long (the estimates are
-            # the same however the samples are cut), the reference rates made per piece
-            batches = replay_chunks(batch, ref, REPLAY_CHUNK)
+            # the same however the samples are cut), the reference rates and the specific
+            # force made per piece
+            batches = replay_chunks(batch, ref, REPLAY_CHUNK, gravity)
         keep, json_sel = _kept_rows(args, batch.t) if not args.sim else (None, None)
         tr = run_tracker(tracker, batches, rows=keep)
         if not args.sim and not args.causal:

@@ -418,3 +418,124 @@ def test_fast_update_matches_one_sample_process_calls(temperature_model):
     np.testing.assert_allclose(new.rate_random_walk, old.rate_random_walk, rtol=1e-12)
     np.testing.assert_allclose(new.smoothed(s.t, s.temperature_c)[0],
                                old.smoothed(s.t, s.temperature_c)[0], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("temperature_model", [False, True])
+def test_fast_update_with_reference_matches_one_sample_process_calls(temperature_model):
+    """update() with a reference rate takes the scalar path too, with the arithmetic of a
+    one-sample process() call per reading (the path it replaced) to 1e-12: turns about three
+    axes (a v2 matrix with cross-axis terms), rests between them, and a process() batch in the
+    middle of a turn so that samples awaiting their decision change hands both ways."""
+    s = simulate_session(np.random.default_rng(31), 40.0, model=MODEL, motion="jig",
+                         still_s=(1.0, 3.0), motion_s=(2.0, 4.0))
+    A = np.diag(s.scale) + 0.01 * np.array(
+        [[0.0, 1.0, -0.5], [0.8, 0.0, 0.3], [-0.4, 0.6, 0.0]])
+    cal = _full_cal(A, bias_std=0.02, a_std=1e-4)
+    st = settings(rate_random_walk=None, temperature_model=temperature_model)
+    rr, ra = s.reference_rate, s.reference_axis
+    turning = np.flatnonzero(np.isfinite(rr))
+    assert turning.size > 1000
+    mid = int(turning[turning.size // 2])  # the batch starts inside a turn
+    old, new = BiasTracker(st, cal, keep_states=True), BiasTracker(st, cal, keep_states=True)
+    ref_c, ref_b, ref_s = [], [], []
+    for i in range(s.n):
+        r = old.process(s.t[i:i + 1], s.rate[i:i + 1], s.temperature_c[i:i + 1],
+                        reference_rate=rr[i:i + 1], reference_axis=ra[i:i + 1])
+        ref_c.append(r.corrected[0])
+        ref_b.append(old.bias)
+        ref_s.append(old.bias_std)
+    out_c, out_b, out_s = [], [], []
+    for i in range(s.n):
+        if mid <= i < mid + 150:
+            if i == mid:
+                r = new.process(s.t[i:i + 150], s.rate[i:i + 150], s.temperature_c[i:i + 150],
+                                reference_rate=rr[i:i + 150], reference_axis=ra[i:i + 150])
+                out_c.extend(r.corrected)
+                out_b.extend(r.bias)
+                out_s.extend(r.bias_std)
+            continue
+        ref = {} if not np.isfinite(rr[i]) else {"reference_rate": float(rr[i]),
+                                                 "reference_axis": ra[i]}
+        out_c.append(new.update(s.rate[i], s.t[i], s.temperature_c[i], **ref))
+        out_b.append(new.bias)
+        out_s.append(new.bias_std)
+    np.testing.assert_allclose(np.array(out_c), np.array(ref_c), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array(out_b), np.array(ref_b), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array(out_s), np.array(ref_s), rtol=1e-12)
+    hn, ho = vars(new.health), vars(old.health)
+    assert hn == pytest.approx(ho, rel=1e-12) and new.health.updates > 50
+    assert new.last_decision == old.last_decision
+    np.testing.assert_allclose(new.smoothed(s.t, s.temperature_c)[0],
+                               old.smoothed(s.t, s.temperature_c)[0], rtol=0, atol=1e-12)
+
+
+def test_fast_update_refuses_bad_references_as_the_general_path_does():
+    s = simulate_session(np.random.default_rng(32), 2.0, model=MODEL)
+    cal = sim_calibration(np.random.default_rng(33), s)
+    tr = BiasTracker(settings(), cal)
+    tr.update(s.rate[0], s.t[0], s.temperature_c[0])
+    args = (s.rate[1], s.t[1], s.temperature_c[1])
+    with pytest.raises(CalibInputError, match="unit vectors"):
+        tr.update(*args, reference_rate=1.0, reference_axis=(1.0, 1.0, 0.0))
+    with pytest.raises(CalibInputError, match="together"):
+        tr.update(*args, reference_rate=1.0)
+    with pytest.raises(CalibInputError, match="cannot be still"):
+        tr.update(*args, True, reference_rate=1.0, reference_axis=(1.0, 0.0, 0.0))
+    # a NaN rate is no reference: the sample goes on as a plain one
+    tr.update(*args, reference_rate=math.nan, reference_axis=(1.0, 1.0, 0.0))
+    assert tr.samples == 2
+
+
+def _g_cal(G, bias_std=0.02):
+    A = np.eye(3)
+    return GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0), scale_std=(1e-6,) * 3,
+                           bias_std=(bias_std,) * 3, matrix=tuple(map(tuple, A)),
+                           matrix_std=((1e-6,) * 3,) * 3,
+                           g_sensitivity={"model": "g = matrix @ (m + bias + g_sensitivity @ f)",
+                                          "matrix": [list(r) for r in G],
+                                          "matrix_std": [[1e-6] * 3] * 3,
+                                          "directions": np.eye(3).tolist()})
+
+
+def test_g_sensitivity_applied_with_the_specific_force():
+    """Still sensor in four poses (gravity along +z, +x, -y, -z), reading m = −b − G f + v
+    (the model g = A (m + b + G f) at g = 0): given f, the tracker's bias is the zero-g b in
+    every pose; without it, the estimate follows b + G f of the pose. update() and process()
+    agree on it."""
+    rng = np.random.default_rng(41)
+    G = np.array([[2e-3, -1e-3, 3e-3], [1e-3, 2.5e-3, -2e-3], [-3e-3, 1e-3, 2e-3]])
+    b = np.array([0.01, -0.02, 0.005])
+    cal = _g_cal(G)
+    poses = np.array([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]])
+    n_pose = 2000
+    f = np.repeat(poses, n_pose, axis=0)
+    sigma = 1e-4
+    m = -b - f @ G.T + sigma * rng.standard_normal(f.shape)
+    t = np.arange(f.shape[0]) / ODR
+    st = TrackerSettings(odr_hz=ODR, noise_density=sigma / math.sqrt(ODR),
+                         rate_random_walk=1e-7)
+    still = np.ones(t.size)
+    with_g = BiasTracker(st, cal)
+    r = with_g.process(t, m, still=still, specific_force=f, finish=True)
+    without = BiasTracker(st, cal).process(t, m, still=still, finish=True)
+    assert with_g.applies_g_sensitivity
+    ends = np.arange(1, 5) * n_pose - 1  # the last sample of each pose
+    np.testing.assert_allclose(r.bias[ends], np.tile(b, (4, 1)), atol=2e-5)
+    assert np.all(np.abs(r.bias[ends] - b) <= 3 * r.bias_std[ends])
+    err_without = np.abs(without.bias[ends] - b).max()
+    assert err_without > 2e-3  # |G f| of the last poses
+    # corrected = A (m + bias + G f) (A = I): the true rate, zero, to the noise
+    np.testing.assert_allclose(r.corrected, m + r.bias + f @ G.T, rtol=0, atol=1e-15)
+    late = r.corrected.reshape(4, n_pose, 3)[:, n_pose // 2:].mean(axis=1)
+    np.testing.assert_allclose(late, 0.0, atol=2e-5)
+    # update() (scalar path) and the general one see the same m + G f
+    stream = BiasTracker(st, cal)
+    out = [stream.update(m[i], t[i], None, True, specific_force=f[i]) for i in range(t.size)]
+    np.testing.assert_allclose(stream.bias, r.bias[-1], atol=1e-12)
+    np.testing.assert_allclose(np.array(out), r.corrected, atol=1e-12)
+    # a calibration without G ignores the force
+    plain = BiasTracker(st, sim_calibration(np.random.default_rng(1), simulate_session(
+        np.random.default_rng(2), 1.0, model=MODEL)))
+    assert not plain.applies_g_sensitivity
+    with pytest.raises(CalibInputError, match="specific_force"):
+        BiasTracker(st, cal).process(t[:5], m[:5], specific_force=np.ones((4, 3)))

@@ -124,7 +124,9 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
-                    hold: float = 0.06) -> dict:
+                    hold: float = 0.06, bias_walk: float = 0.0,
+                    temp_ramp: tuple[float, float] | None = None,
+                    tempco: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict:
     """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``). With
     ``g_sensitivity`` (3×3, rad/s per g) the reading gains ``G f`` (``f`` from
     :func:`specific_force`) and the schedule a gravity rest. ``steps`` replaces the schedule
@@ -132,7 +134,12 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     ``("rest", seconds)``, ``("rotate", servo, ±1)``, ``("move", target angles)``
     (e.g. :func:`default_plan_steps`); there a move's segment lasts ``hold`` seconds past the
     servo's arrival (a runner waits for the servo to report it, then commands the next step:
-    about 60 ms in gyrocal's emulated runs), the only still time before a turn that follows it."""
+    about 60 ms in gyrocal's emulated runs), the only still time before a turn that follows it.
+    With ``bias_walk`` (rad/s/√s) the bias wanders as a random walk from ``truth["bias"]``; the
+    truth then holds the walk at every gyro sample as ``bias_walk`` (n, 3), the bias being
+    ``bias + bias_walk``. With ``temp_ramp`` (°C at the start and the end) the die temperature
+    ramps linearly (written in the ``temp`` column) and the bias follows it,
+    ``bias + tempco (T − T_start)``."""
     truth = draw_sensor(seed, cross)
     rng = np.random.default_rng([seed, 0x5A3])
     path = Path(path)
@@ -187,6 +194,14 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     omega = sensor_rate(truth["links"], truth["mount"], ang, rate)
     C = np.diag(1 / truth["scale"]) @ truth["misalignment"]
     m = omega @ C.T - truth["bias"] + noise * rng.standard_normal(omega.shape)
+    temp = None
+    if temp_ramp is not None:
+        temp = np.linspace(temp_ramp[0], temp_ramp[1], ts.size)
+        m = m - np.outer(temp - temp_ramp[0], np.asarray(tempco, dtype=float))
+    if bias_walk:
+        steps = np.random.default_rng([seed, 0xB1A5]).standard_normal(omega.shape)
+        truth["bias_walk"] = np.cumsum(steps, axis=0) * bias_walk / np.sqrt(odr)
+        m = m - truth["bias_walk"]
     if g_sensitivity is not None:
         m = m + specific_force(truth["links"], truth["mount"], ang) @ np.asarray(
             g_sensitivity).T
@@ -197,8 +212,9 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         enc = np.round(enc / (2 * np.pi / ticks)) * (2 * np.pi / ticks)
     with open(path / "imu.csv", "w") as f:
         f.write("t,gx,gy,gz,temp\n")
-        for ti, row in zip(ts, m, strict=True):
-            f.write(f"{ti:.6f},{row[0]:.10g},{row[1]:.10g},{row[2]:.10g},\n")
+        for i, (ti, row) in enumerate(zip(ts, m, strict=True)):
+            tc = "" if temp is None else f"{temp[i]:.4f}"
+            f.write(f"{ti:.6f},{row[0]:.10g},{row[1]:.10g},{row[2]:.10g},{tc}\n")
     with open(path / "encoder.csv", "w") as f:
         f.write("t,motor,angle\n")
         for i in range(te.size):

@@ -238,3 +238,12 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
                  str(tmp_path / "a-file"), "--force"]) == 2
     assert main(["track", "--live", "--sim", "--turns", "1", "--record", str(tmp_path / "x"),
                  "--cal", "c.json"]) == 2
+
+
+def test_live_says_once_that_it_does_not_apply_g_sensitivity(full_run, capsys):
+    d, code = full_run
+    assert code == 0
+    assert json.loads((d / "calibration.json").read_text())["g_sensitivity"] is not None
+    _, err = run_json(capsys, "--sim-seed", "5", "--duration", "3", "--cal",
+                      str(d / "calibration.json"))
+    assert err.count("g-sensitivity is NOT applied live") == 1, err
