@@ -160,15 +160,17 @@ def run_tracker(tracker: Any, batches: Iterable[Batch], *,
     )
 
 
-def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None) -> Tracked:
+def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None, *,
+                   at_rows: bool = False) -> Tracked:
     """``tr`` with each sample's bias and uncertainty smoothed over the whole run
     (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`; the tracker was built with
     ``keep_states=True``): for a replayed recording, where every sample is at hand.
-    ``temperature`` covers every sample; only ``tr``'s rows are smoothed."""
+    ``temperature`` covers every sample (``at_rows``: only ``tr``'s rows); only ``tr``'s rows
+    are smoothed."""
     from dataclasses import replace
 
     temp = temperature
-    if temp is not None and tr.rows is not None:
+    if temp is not None and tr.rows is not None and not at_rows:
         temp = np.asarray(temp)[tr.rows]
     bias, std = tracker.smoothed(tr.t, temp)
     return replace(tr, bias=bias, bias_std=std)
@@ -306,6 +308,308 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int) -> Iterator[Ba
                     *(rr_ra if rr_ra is not None else (None, None)))
 
 
+#: Seconds of encoder readings kept on each side of a rotate segment by a streamed replay (the
+#: reference rates interpolate the encoder inside the turn; the servos are polled many times
+#: a second, so the readings that bracket each sample of a turn lie well inside this margin).
+ENCODER_MARGIN_S = 2.0
+
+
+class SpilledImu:
+    """A recording's gyro samples read once, block by block
+    (:func:`gyrocal.kit.recording.iter_imu`, with all its checks): the times kept in memory
+    (8 bytes a sample), the readings and temperatures written to a temporary file (32 bytes a
+    sample, deleted on :meth:`close`) and read back a piece at a time, so a replay's working
+    memory does not grow with the recording's rate columns.
+
+    Parameters
+    ----------
+    root : Path
+        The recording directory (manifest already checked).
+    warnings : list of str
+        Receives what the reader tolerated.
+
+    Attributes
+    ----------
+    t : ndarray (n,)
+        Sample times, s.
+    temperature_complete : bool
+        Whether every sample has a temperature.
+    """
+
+    ROW = 4 * 8  # gx, gy, gz, temp as float64
+
+    def __init__(self, root: Any, warnings: list[str]) -> None:
+        import tempfile
+
+        from gyrocal.kit.recording import imu_rows_bound, iter_imu
+
+        t = np.empty(imu_rows_bound(root))
+        self._fh = tempfile.TemporaryFile(prefix="gyrocal-replay-")
+        n = 0
+        complete = True
+        try:
+            for tb, rate, temp in iter_imu(root, warnings):
+                k = tb.size
+                t[n:n + k] = tb
+                complete = complete and bool(np.isfinite(temp).all())
+                rows = np.empty((k, 4))
+                rows[:, :3] = rate
+                rows[:, 3] = temp
+                self._fh.write(rows.data)
+                n += k
+            self._fh.flush()
+        except BaseException:
+            self._fh.close()
+            raise
+        self.t = t[:n]
+        self.n = n
+        self.temperature_complete = complete
+
+    def rows(self, lo: int, hi: int) -> np.ndarray:
+        """Samples ``lo:hi`` as an ``(hi − lo, 4)`` array: rate x, y, z (rad/s), temperature
+        (°C or NaN)."""
+        lo, hi = max(0, int(lo)), min(self.n, int(hi))
+        out = np.empty((max(hi - lo, 0), 4))
+        view = memoryview(out).cast("B")
+        self._fh.seek(lo * self.ROW)
+        got = 0
+        while got < len(view):
+            k = self._fh.readinto(view[got:])
+            if not k:
+                raise OSError(f"the replay's temporary file ended {len(view) - got} bytes early")
+            got += k
+        return out
+
+    def rate(self, lo: int, hi: int) -> np.ndarray:
+        """Readings of samples ``lo:hi``, ``(hi − lo, 3)`` rad/s."""
+        return np.ascontiguousarray(self.rows(lo, hi)[:, :3])
+
+    def close(self) -> None:
+        """Delete the temporary file."""
+        self._fh.close()
+
+    def __enter__(self) -> SpilledImu:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """What a streamed replay holds of a recording besides its readings: the sample times, the
+    segments, and the encoder readings near the rotate segments (:data:`ENCODER_MARGIN_S`);
+    enough for :func:`reference_segments` and :func:`turn_axis`."""
+
+    path: Any
+    manifest: dict[str, Any]
+    imu_t: np.ndarray
+    segments: tuple[Any, ...]
+    enc_t: np.ndarray
+    enc_motor: np.ndarray
+    enc_angle: np.ndarray
+
+    def encoder(self, motor: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, angle)`` of one servo (near the rotate segments only)."""
+        sel = self.enc_motor == motor
+        return self.enc_t[sel], self.enc_angle[sel]
+
+
+def open_replay(path: Any, warnings: list[str]) -> tuple[SpilledImu, Timeline]:
+    """Read a Recording v1 for a streamed replay: the manifest, ``imu.csv`` into a
+    :class:`SpilledImu`, ``encoder.csv`` (every row checked, the rows within
+    :data:`ENCODER_MARGIN_S` of a rotate segment kept) and ``segments.csv``, in the order and
+    with the checks of :func:`gyrocal.kit.recording.load_recording`. The caller closes the
+    :class:`SpilledImu`."""
+    from pathlib import Path
+
+    from gyrocal.kit.recording import iter_encoder, read_manifest, read_segments
+
+    root = Path(path)
+    manifest = read_manifest(root)
+    imu = SpilledImu(root, warnings)
+    try:
+        # the segments say which encoder rows to keep; a fault in them is raised after the
+        # encoder's own, as load_recording would
+        seg_w: list[str] = []
+        segments: tuple[Any, ...] = ()
+        seg_error: BaseException | None = None
+        try:
+            segments = read_segments(root, seg_w)
+        except InputError as exc:
+            seg_error = exc
+        spans = sorted((s.t_start - ENCODER_MARGIN_S, s.t_end + ENCODER_MARGIN_S)
+                       for s in segments if s.kind == "rotate")
+        lo: list[float] = []
+        hi: list[float] = []
+        for a, b in spans:  # merged into disjoint, increasing spans
+            if lo and a <= hi[-1]:
+                hi[-1] = max(hi[-1], b)
+            else:
+                lo.append(a)
+                hi.append(b)
+        lo_a, hi_a = np.asarray(lo), np.asarray(hi)
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        for et, em, ea in iter_encoder(root, warnings):
+            if not lo_a.size:
+                continue
+            k = np.searchsorted(lo_a, et, side="right") - 1
+            keep = (k >= 0) & (et <= hi_a[np.maximum(k, 0)])
+            if keep.any():
+                parts.append((et[keep], em[keep], ea[keep]))
+        if seg_error is not None:
+            raise seg_error
+        warnings += seg_w
+    except BaseException:
+        imu.close()
+        raise
+
+    def cat(i: int, dtype: Any) -> np.ndarray:
+        return np.concatenate([p[i] for p in parts]) if parts else np.empty(0, dtype=dtype)
+
+    return imu, Timeline(root, manifest, imu.t, segments, cat(0, float), cat(1, np.int64),
+                         cat(2, float))
+
+
+@dataclass(frozen=True)
+class StillPlan:
+    """Still flags of a replay, made a piece at a time: 1 on the ``intervals``
+    (:func:`rest_intervals`), ``outside`` elsewhere (0: not still; NaN: the detector decides),
+    0 wherever a reference rate is given (the sensor turns)."""
+
+    intervals: list[tuple[int, int]]
+    outside: float
+
+    def window(self, a: int, b: int, reference: np.ndarray | None) -> np.ndarray:
+        """Flags of samples ``a:b`` (``reference``: their reference rates, NaN off turns)."""
+        still = np.full(b - a, float(self.outside))
+        for i0, i1 in self.intervals:
+            lo, hi = max(a, i0), min(b, i1)
+            if lo < hi:
+                still[lo - a:hi - a] = 1.0
+        if reference is not None:
+            still[np.isfinite(reference)] = 0.0
+        return still
+
+
+def spilled_chunks(
+    imu: SpilledImu, ref: Reference | None, size: int, *, still: StillPlan | None = None,
+    temperature: bool = False, rows: np.ndarray | None = None,
+    kept_temperature: list[np.ndarray] | None = None,
+) -> Iterator[Batch]:
+    """A :class:`SpilledImu` in runs of ``size`` samples, each with its reference rates
+    (``ref``), still flags (``still``) and, with ``temperature``, the die temperature: a
+    recording replayed in bounded working memory. ``kept_temperature`` receives the
+    temperatures of the samples ``rows`` (None: all), for the smoother."""
+    n = imu.n
+    for a in range(0, n, size):
+        b = min(a + size, n)
+        block = imu.rows(a, b)
+        rr_ra = ref.window(a, b) if ref is not None else None
+        flags = None if still is None else still.window(a, b, None if rr_ra is None
+                                                         else rr_ra[0])
+        temp = block[:, 3]
+        if kept_temperature is not None:
+            if rows is None:
+                kept_temperature.append(temp.copy())
+            else:
+                lo, hi = np.searchsorted(rows, (a, b))
+                kept_temperature.append(temp[rows[lo:hi] - a])
+        yield Batch(imu.t[a:b], np.ascontiguousarray(block[:, :3]),
+                    temp if temperature else None, flags,
+                    *(rr_ra if rr_ra is not None else (None, None)))
+
+
+class ReplaySource:
+    """A recording ready to replay through the tracker (:func:`gyrocal.kit.commands.track`):
+    its spilled readings, reference rates, still plan and whether the tracker takes the
+    temperature. A context manager: leaving it deletes the temporary file."""
+
+    def __init__(self, imu: SpilledImu, ref: Reference | None, still: StillPlan | None,
+                 temperature: bool) -> None:
+        self.imu = imu
+        self.ref = ref
+        self.still = still
+        self.temperature = temperature
+        self._temps: list[np.ndarray] = []
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times, s."""
+        return self.imu.t
+
+    def batches(self, size: int, rows: np.ndarray | None = None) -> Iterator[Batch]:
+        """The samples in runs of ``size`` (:func:`spilled_chunks`); the temperatures of
+        ``rows`` (None: all) are kept for :meth:`kept_temperature`."""
+        self._temps = []
+        return spilled_chunks(self.imu, self.ref, size, still=self.still,
+                              temperature=self.temperature, rows=rows,
+                              kept_temperature=self._temps if self.temperature else None)
+
+    def kept_temperature(self) -> np.ndarray | None:
+        """Temperatures of the rows of the last :meth:`batches` run (None without the
+        temperature model)."""
+        return np.concatenate(self._temps) if self.temperature and self._temps else None
+
+    def close(self) -> None:
+        """Delete the temporary file."""
+        self.imu.close()
+
+    def __enter__(self) -> ReplaySource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def rest_intervals(
+    t: np.ndarray,
+    segments: Iterable[Any],
+    read: Callable[[int, int], np.ndarray],
+    trim_s: float = 0.5,
+    *,
+    check: Any = None,
+    notes: list[str] | None = None,
+) -> list[tuple[int, int]]:
+    """The sample ranges ``[i0, i1)`` inside the recording's rest segments (less ``trim_s`` at
+    each end) that are still.
+
+    ``t`` are the sample times (non-decreasing), ``read(lo, hi)`` the readings of samples
+    ``lo:hi`` (so a recording held in a temporary file is read a piece at a time). With
+    ``check`` (a :class:`gyrocal.calib.stationarity.StillDetector`), a rest is trusted only when
+    at least 95 % of its windows pass the detector's variance test (the rate test is left out:
+    the bias is what is being tracked, :func:`gyrocal.calib.stationarity.quiet_fraction`); a
+    rest that fails is left out, with a line in ``notes`` (a recording whose "rest" moved,
+    e.g. one not made on the jig).
+    """
+    out: list[tuple[int, int]] = []
+    loose = None
+    if check is not None:
+        from gyrocal.calib.stationarity import StillDetector
+
+        loose = StillDetector(check.n_window, check.n_min, check.n_lookahead, check.var_limit,
+                              np.full(3, np.inf))
+    for seg in segments:
+        if seg.kind != "rest" or seg.duration <= 2 * trim_s:
+            continue
+        # t is non-decreasing: the samples with t_start + trim <= t <= t_end - trim
+        i0 = int(np.searchsorted(t, seg.t_start + trim_s, side="left"))
+        i1 = int(np.searchsorted(t, seg.t_end - trim_s, side="right"))
+        if loose is not None:
+            from gyrocal.calib.stationarity import quiet_fraction
+
+            frac = quiet_fraction(max(i1 - i0, 0), lambda a, b, i0=i0: read(i0 + a, i0 + b),
+                                  loose)
+            if frac is None or frac < 0.95:
+                if notes is not None:
+                    notes.append(f"rest segment {seg.index} ({seg.t_start:.1f}-{seg.t_end:.1f} "
+                                 "s) shows motion in the gyro readings: left to the detector")
+                continue
+        if i1 > i0:
+            out.append((i0, i1))
+    return out
+
+
 def rest_flags(
     rec: Any,
     trim_s: float = 0.5,
@@ -314,35 +618,14 @@ def rest_flags(
     check: Any = None,
     notes: list[str] | None = None,
 ) -> np.ndarray:
-    """Still flags from the recording's rest segments: 1 on samples inside a rest (less
-    ``trim_s`` at each end), ``outside`` elsewhere (0: not still; NaN: the detector decides).
-
-    With ``check`` (a :class:`gyrocal.calib.stationarity.StillDetector`), a rest is trusted only
-    when at least 95 % of its windows pass the detector's variance test (the rate test is left
-    out: the bias is what is being tracked); a rest that fails gets ``outside`` and a line in
-    ``notes`` (a recording whose "rest" moved, e.g. one not made on the jig).
-    """
+    """Still flags of a :class:`gyrocal.kit.recording.Recording` from its rest segments: 1 on
+    samples inside a rest (:func:`rest_intervals`), ``outside`` elsewhere (0: not still; NaN:
+    the detector decides)."""
     still = np.full(rec.imu_t.size, float(outside))
-    loose = None
-    if check is not None:
-        from gyrocal.calib.stationarity import StillDetector, quiet_windows
-
-        loose = StillDetector(check.n_window, check.n_min, check.n_lookahead, check.var_limit,
-                              np.full(3, np.inf))
-    for seg in rec.segments:
-        if seg.kind != "rest" or seg.duration <= 2 * trim_s:
-            continue
-        sel = (rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)
-        if loose is not None:
-            quiet = quiet_windows(rec.imu_rate[sel], loose, 0)[loose.n_window - 1:]
-            if quiet.size == 0 or quiet.mean() < 0.95:
-                if notes is not None:
-                    notes.append(f"rest segment {seg.index} ({seg.t_start:.1f}-{seg.t_end:.1f} "
-                                 "s) shows motion in the gyro readings: left to the detector")
-                continue
-        still[sel] = 1.0
+    for i0, i1 in rest_intervals(rec.imu_t, rec.segments, lambda a, b: rec.imu_rate[a:b],
+                                 trim_s, check=check, notes=notes):
+        still[i0:i1] = 1.0
     return still
-
 
 
 @dataclass(frozen=True)
