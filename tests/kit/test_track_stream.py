@@ -1,0 +1,146 @@
+"""``gyrocal track`` on a recording streams it (issue 16): the readings go once through the
+block reader into a temporary file and are read back a piece at a time. The output must be
+what the whole-array replay gives (the recording loaded whole, every estimate of the noise,
+the first still second and the rest checks taken on whole arrays, as before the streaming):
+that replay is written out here from the library's whole-array functions, and the streamed
+command is run with tiny blocks, pieces and running-sum blocks so that every piece boundary
+is crossed many times.
+"""
+
+import argparse
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gyrocal.calib import stationarity
+from gyrocal.calib.stationarity import StillDetector, quiet_windows
+from gyrocal.kit import recording
+from gyrocal.kit.cli import main
+from gyrocal.kit.commands import track
+from gyrocal.kit.recording import load_recording
+from gyrocal.kit.tracking import (
+    Batch,
+    reference_segments,
+    replay_chunks,
+    run_tracker,
+    smooth_tracked,
+)
+
+
+@pytest.fixture(scope="module")
+def rec(tmp_path_factory):
+    """A seeded simulated calibration run (turns and rests), and its estimated calibration."""
+    d = tmp_path_factory.mktemp("stream")
+    assert main(["simulate-recording", str(d / "rec"), "--seed", "5", "--turns", "1",
+                 "--rest", "4", "--odr", "200"]) == 0
+    assert main(["estimate", str(d / "rec"), "--out", str(d / "cal.json")]) == 0
+    return d / "rec", d / "cal.json"
+
+
+def whole_array_track(path, argv):
+    """The replay with the recording held whole (the code path before streaming)."""
+    p = argparse.ArgumentParser()
+    track.add_arguments(p)
+    args = p.parse_args([str(path), *argv])
+    r = load_recording(path)
+    odr = 1.0 / float(np.median(np.diff(r.imu_t)))
+    if args.tempco is None:
+        args.tempco = bool(np.all(np.isfinite(r.imu_temp)))
+    tracker, cal = track._build_tracker(args, odr, r.imu_rate, [], "the recording", str(path),
+                                        keep_states=not args.causal)
+    still = None
+    if args.still == "segments" or (args.still == "auto"
+                                    and any(s.kind == "rest" for s in r.segments)):
+        det = tracker.detector
+        loose = StillDetector(det.n_window, det.n_min, det.n_lookahead, det.var_limit,
+                              np.full(3, np.inf))
+        still = np.full(r.imu_t.size, 0.0 if args.still == "segments" else math.nan)
+        for seg in r.segments:
+            if seg.kind != "rest" or seg.duration <= 1.0:
+                continue
+            sel = (r.imu_t >= seg.t_start + 0.5) & (r.imu_t <= seg.t_end - 0.5)
+            if args.still == "auto":
+                q = quiet_windows(r.imu_rate[sel], loose, 0)[loose.n_window - 1:]
+                if q.size == 0 or q.mean() < 0.95:
+                    continue
+            still[sel] = 1.0
+    ref = None
+    if cal is not None and not args.no_reference:
+        ref, _ = reference_segments(r, cal)
+        ref = ref if ref.runs else None
+        if ref is not None and still is not None:
+            for i0, rate, _ in ref.runs:
+                still[i0:i0 + rate.size][np.isfinite(rate)] = 0.0
+    batch = Batch(r.imu_t, r.imu_rate, r.imu_temp if args.tempco else None, still)
+    tr = run_tracker(tracker, replay_chunks(batch, ref, 65_536))
+    if not args.causal:
+        tr = smooth_tracked(tracker, tr, batch.temperature)
+    return tr
+
+
+@pytest.mark.parametrize("argv", [
+    [],                                              # no --cal: the first still second
+    ["--cal", "CAL"],                                # reference-rate updates, rest checks
+    ["--cal", "CAL", "--still", "segments", "--no-tempco"],
+    ["--cal", "CAL", "--still", "detect", "--causal"],
+], ids=["no-cal", "cal", "segments", "detect-causal"])
+def test_streamed_replay_equals_the_whole_array_replay(rec, argv, monkeypatch, capsys):
+    path, cal = rec
+    argv = [str(cal) if a == "CAL" else a for a in argv]
+    want = whole_array_track(path, argv)
+    # every piece boundary crossed many times: reader blocks, replay pieces, running sums
+    monkeypatch.setattr(recording, "BLOCK_BYTES", 8192)
+    monkeypatch.setattr(track, "REPLAY_CHUNK", 1000)
+    monkeypatch.setattr(stationarity, "_BLOCK", 64)
+    want_small = whole_array_track(path, argv)  # the same arithmetic with the small blocks
+    assert main(["track", str(path), *argv, "--json", "--every", "0"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    for w in (want, want_small):
+        np.testing.assert_array_equal(doc["t"], w.t)
+        np.testing.assert_array_equal(doc["still"], w.still)
+        np.testing.assert_allclose(doc["bias"], w.bias, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(doc["bias_std"], w.bias_std, rtol=1e-12, atol=0)
+    # the run is long enough to cross the pieces, with turns updating the filter
+    assert len(doc["t"]) > 8 * 1000 and 0 < np.mean(doc["still"]) < 1
+
+
+def test_a_bad_row_stops_the_streamed_replay_at_its_line(rec, tmp_path, monkeypatch, capsys):
+    import shutil
+
+    path, _ = rec
+    bad = tmp_path / "bad"
+    shutil.copytree(path, bad)
+    lines = (bad / "imu.csv").read_text().split("\n")
+    lines[7001] = lines[7001].replace(",", ",x", 1)
+    (bad / "imu.csv").write_text("\n".join(lines))
+    monkeypatch.setattr(recording, "BLOCK_BYTES", 8192)
+    assert main(["track", str(bad), "--json"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and "imu.csv:7002: field 2 is 'x" in err and "Traceback" not in err
+
+
+def test_pieces_of_the_stationarity_estimates_equal_the_whole(monkeypatch):
+    """quiet_noise_std, first_still_mean and quiet_fraction read piecewise give the whole
+    array's answer bit for bit, on readings with still and moving stretches."""
+    monkeypatch.setattr(stationarity, "_BLOCK", 50)
+    rng = np.random.default_rng(12)
+    n = 9000
+    m = rng.normal(scale=1e-3, size=(n, 3)) + 0.02
+    m[:700] += np.sin(np.arange(700) / 30.0)[:, None]  # moving first: the still start is late
+    m[4000:4600] += 0.5
+    read = lambda a, b: m[a:b].copy()  # noqa: E731
+    np.testing.assert_array_equal(stationarity.quiet_noise_std(None, 100, n=n, read=read),
+                                  stationarity.quiet_noise_std(m, 100))
+    sig = np.full(3, 1e-3)
+    got = stationarity.first_still_mean(None, sig, 100.0, n=n, read=read)
+    np.testing.assert_array_equal(got, stationarity.first_still_mean(m, sig, 100.0))
+    assert got is not None
+    full = StillDetector.build(sig, 100.0)
+    det = StillDetector(full.n_window, full.n_min, full.n_lookahead, full.var_limit,
+                        np.full(3, np.inf))  # the variance test only, as the rest checks
+    whole = quiet_windows(m, det, 0)[det.n_window - 1:]
+    assert stationarity.quiet_fraction(n, read, det, blocks=3) == whole.mean()
+    assert 0.5 < whole.mean() < 0.95
+    assert stationarity.quiet_fraction(det.n_window - 1, read, det) is None
