@@ -958,12 +958,37 @@ def tracker_notes(tracker: Any) -> list[str]:
     return out
 
 
-def json_text(columns: dict[str, Callable[[], Any]]) -> str:
-    """``json.dumps`` of ``{name: make()}`` plus a newline, built one column at a time: the
-    Python objects of one column exist at once, not of all (the same text)."""
-    parts = [f"{json.dumps(name)}: {json.dumps(make(), allow_nan=False)}"
-             for name, make in columns.items()]
-    return "{" + ", ".join(parts) + "}\n"
+#: Rows of an array turned into Python objects at a time by :func:`json_pieces`.
+JSON_PIECE_ROWS = 8192
+
+
+def json_pieces(columns: dict[str, Callable[[], Any]]) -> Iterator[str]:
+    """The text of ``json.dumps({name: make()})`` plus a newline, in pieces.
+
+    A column whose ``make()`` gives an array is turned into Python objects and text
+    :data:`JSON_PIECE_ROWS` rows at a time, so the objects of a few thousand rows exist at
+    once, not of a column; written piece by piece (:func:`gyrocal.kit.fileio.emit_text`) the
+    document is never held whole. The text is ``json.dumps``'s (``allow_nan=False``); a NaN or
+    infinity in an array raises ValueError before the first piece, so nothing is half-written.
+    """
+    values = {name: make() for name, make in columns.items()}
+    for name, value in values.items():
+        if (isinstance(value, np.ndarray) and value.dtype.kind == "f"
+                and not np.isfinite(value).all()):
+            raise ValueError(f"Out of range float values are not JSON compliant ({name})")
+    yield "{"
+    for c, (name, value) in enumerate(values.items()):
+        yield f"{', ' if c else ''}{json.dumps(name)}: "
+        if not isinstance(value, np.ndarray) or value.ndim == 0:
+            yield json.dumps(value.tolist() if isinstance(value, np.ndarray) else value,
+                             allow_nan=False)
+            continue
+        yield "["
+        for a in range(0, value.shape[0], JSON_PIECE_ROWS):
+            part = json.dumps(value[a:a + JSON_PIECE_ROWS].tolist(), allow_nan=False)[1:-1]
+            yield (", " if a else "") + part
+        yield "]"
+    yield "}\n"
 
 
 def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tuple[
@@ -994,8 +1019,15 @@ def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tup
         every = math.ceil(raw / unit * (1 + 1e-9)) * unit  # rounded up to two digits
     if every is None or n < 2:
         return np.arange(n), None
-    cell = np.floor((t - t[0]) / every).astype(np.int64)
-    last = np.flatnonzero(np.append(cell[1:] != cell[:-1], True))
+    # the last sample of each interval, a piece of JSON_PIECE_ROWS × 8 samples at a time (no
+    # temporaries the length of the session)
+    step = 8 * JSON_PIECE_ROWS
+    parts = []
+    for a in range(0, n - 1, step):
+        b = min(n, a + step + 1)  # one sample more: does the piece's last sample end a cell?
+        cell = np.floor((t[a:b] - t[0]) / every).astype(np.int64)
+        parts.append(np.flatnonzero(cell[1:] != cell[:-1]) + a)
+    last = np.concatenate([*parts, [n - 1]])
     if last.size == n:
         return np.arange(n), None
     return last, float(every)

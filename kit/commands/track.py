@@ -590,8 +590,8 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.fileio import emit_text, refuse_existing
     from gyrocal.kit.tracking import (
         chunks,
+        json_pieces,
         json_rows,
-        json_text,
         run_tracker,
         smooth_tracked,
         tracker_notes,
@@ -643,15 +643,15 @@ def run(args: argparse.Namespace) -> int:
         still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
             if every is not None else tr.still
         doc: dict[str, Any] = {
-            "t": lambda: tr.t[at].tolist(),
-            "bias": lambda: tr.bias[at].tolist(),
-            "bias_std": lambda: tr.bias_std[at].tolist(),
-            "still": lambda: still.tolist(),
+            "t": lambda: tr.t[at],
+            "bias": lambda: tr.bias[at],
+            "bias_std": lambda: tr.bias_std[at],
+            "still": lambda: still,
         }
         if every is not None:
             doc["decimated_every_s"] = lambda: every
-        text = json_text(doc)
-        emit_text(text, args.out, force=args.force)
+        # written in pieces: the Python objects of a few thousand rows at a time
+        emit_text(json_pieces(doc), args.out, force=args.force)
     if not args.json:
         print(_summary(tr, args.rows, source, truth))
     return 0

@@ -144,3 +144,36 @@ def test_pieces_of_the_stationarity_estimates_equal_the_whole(monkeypatch):
     assert stationarity.quiet_fraction(n, read, det, blocks=3) == whole.mean()
     assert 0.5 < whole.mean() < 0.95
     assert stationarity.quiet_fraction(det.n_window - 1, read, det) is None
+
+
+def test_json_rows_by_pieces_equal_the_whole_formula(monkeypatch):
+    from gyrocal.kit import tracking
+
+    monkeypatch.setattr(tracking, "JSON_PIECE_ROWS", 16)  # pieces of 128 samples
+    rng = np.random.default_rng(8)
+    for n in (2, 3, 127, 128, 129, 130, 1000):
+        t = np.cumsum(rng.uniform(0.0005, 0.0015, n))
+        for every in (0.001, 0.01, 0.37):
+            cell = np.floor((t - t[0]) / every).astype(np.int64)
+            want = np.flatnonzero(np.append(cell[1:] != cell[:-1], True))
+            got, used = tracking.json_rows(t, every, None)
+            if want.size == n:
+                assert used is None
+                want = np.arange(n)
+            np.testing.assert_array_equal(got, want)
+
+
+def test_json_pieces_are_json_dumps_text_and_refuse_nan_before_writing(monkeypatch):
+    from gyrocal.kit import tracking
+
+    monkeypatch.setattr(tracking, "JSON_PIECE_ROWS", 7)
+    rng = np.random.default_rng(9)
+    cols = {"t": rng.normal(size=50), "bias": rng.normal(size=(50, 3)) * 1e-3,
+            "still": rng.random(50) < 0.5, "empty": np.empty((0, 3)), "every": 0.25}
+    text = "".join(tracking.json_pieces({k: (lambda v=v: v) for k, v in cols.items()}))
+    want = {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cols.items()}
+    assert text == json.dumps(want) + "\n"
+    cols["bias"][31, 1] = np.nan
+    pieces = tracking.json_pieces({k: (lambda v=v: v) for k, v in cols.items()})
+    with pytest.raises(ValueError, match="bias"):
+        next(pieces)
