@@ -160,6 +160,11 @@ def run_tracker(tracker: Any, batches: Iterable[Batch], *,
     )
 
 
+#: Samples smoothed at a time (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`: a few
+#: state-sized matrices per sample, some 3 MB of temporaries at this size).
+SMOOTH_CHUNK = 4096
+
+
 def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None, *,
                    at_rows: bool = False) -> Tracked:
     """``tr`` with each sample's bias and uncertainty smoothed over the whole run
@@ -172,7 +177,7 @@ def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None, *,
     temp = temperature
     if temp is not None and tr.rows is not None and not at_rows:
         temp = np.asarray(temp)[tr.rows]
-    bias, std = tracker.smoothed(tr.t, temp)
+    bias, std = tracker.smoothed(tr.t, temp, chunk=SMOOTH_CHUNK)
     return replace(tr, bias=bias, bias_std=std)
 
 
