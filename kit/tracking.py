@@ -313,10 +313,63 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int) -> Iterator[Ba
                     *(rr_ra if rr_ra is not None else (None, None)))
 
 
-#: Seconds of encoder readings kept on each side of a rotate segment by a streamed replay (the
-#: reference rates interpolate the encoder inside the turn; the servos are polled many times
-#: a second, so the readings that bracket each sample of a turn lie well inside this margin).
-ENCODER_MARGIN_S = 2.0
+#: Seconds on each side of a rotate segment whose encoder readings a streamed replay keeps
+#: (the reference rate of a sample interpolates the encoder half a sample period either side).
+ENCODER_MARGIN_S = 1.0
+
+
+class _NearTurns:
+    """The encoder readings a streamed replay keeps: every reading inside a window (a rotate
+    segment widened by :data:`ENCODER_MARGIN_S`), both readings of each pair of a servo's
+    consecutive readings whose interval meets a window, and each servo's first and last
+    reading. Linear interpolation (``numpy.interp``, which holds the end values outside the
+    readings) at any time in a window then uses the same readings, so
+    :func:`reference_segments` and :func:`turn_axis` give what they give on every reading
+    (blocks are fed in file order)."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        self.lo, self.hi = lo, hi
+        self.last: dict[int, tuple[float, float, bool]] = {}  # servo: its last reading, kept?
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def _meets(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether ``[a, b]`` meets a window (the windows are disjoint and increasing)."""
+        k = np.searchsorted(self.lo, b, side="right") - 1
+        return (k >= 0) & (self.hi[np.maximum(k, 0)] >= a)
+
+    def add(self, et: np.ndarray, em: np.ndarray, ea: np.ndarray) -> None:
+        """One block of ``encoder.csv``."""
+        if not self.lo.size:
+            return
+        for m in np.unique(em).tolist():
+            sel = em == m
+            t, a = et[sel], ea[sel]
+            prev = self.last.get(m)
+            if prev is not None:
+                t, a = np.concatenate([[prev[0]], t]), np.concatenate([[prev[1]], a])
+            keep = self._meets(t, t)
+            pair = self._meets(t[:-1], t[1:])
+            keep[:-1] |= pair
+            keep[1:] |= pair
+            if prev is None:
+                keep[0] = True  # the servo's first reading
+            self.last[m] = (float(t[-1]), float(a[-1]), bool(keep[-1]))
+            if prev is not None and prev[2]:
+                keep[0] = False  # kept with its own block
+            if keep.any():
+                self.parts.append((t[keep], np.full(int(keep.sum()), m, dtype=np.int64),
+                                   a[keep]))
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(t, motor, angle)`` of the kept readings (each servo's in time order)."""
+        for m, (t, a, kept) in self.last.items():
+            if not kept:  # the servo's last reading
+                self.parts.append((np.array([t]), np.array([m], dtype=np.int64), np.array([a])))
+                self.last[m] = (t, a, True)
+        if not self.parts:
+            return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0)
+        return tuple(np.concatenate([p[i] for p in self.parts])  # type: ignore[return-value]
+                     for i in range(3))
 
 
 class SpilledImu:
@@ -403,8 +456,8 @@ class SpilledImu:
 @dataclass(frozen=True)
 class Timeline:
     """What a streamed replay holds of a recording besides its readings: the sample times, the
-    segments, and the encoder readings near the rotate segments (:data:`ENCODER_MARGIN_S`);
-    enough for :func:`reference_segments` and :func:`turn_axis`."""
+    segments, and the encoder readings near the rotate segments (:class:`_NearTurns`); enough
+    for :func:`reference_segments` and :func:`turn_axis`."""
 
     path: Any
     manifest: dict[str, Any]
@@ -422,8 +475,8 @@ class Timeline:
 
 def open_replay(path: Any, warnings: list[str]) -> tuple[SpilledImu, Timeline]:
     """Read a Recording v1 for a streamed replay: the manifest, ``imu.csv`` into a
-    :class:`SpilledImu`, ``encoder.csv`` (every row checked, the rows within
-    :data:`ENCODER_MARGIN_S` of a rotate segment kept) and ``segments.csv``, in the order and
+    :class:`SpilledImu`, ``encoder.csv`` (every row checked, those near the rotate segments
+    kept: :class:`_NearTurns`) and ``segments.csv``, in the order and
     with the checks of :func:`gyrocal.kit.recording.load_recording`. The caller closes the
     :class:`SpilledImu`."""
     from pathlib import Path
@@ -453,27 +506,16 @@ def open_replay(path: Any, warnings: list[str]) -> tuple[SpilledImu, Timeline]:
             else:
                 lo.append(a)
                 hi.append(b)
-        lo_a, hi_a = np.asarray(lo), np.asarray(hi)
-        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        for et, em, ea in iter_encoder(root, warnings):
-            if not lo_a.size:
-                continue
-            k = np.searchsorted(lo_a, et, side="right") - 1
-            keep = (k >= 0) & (et <= hi_a[np.maximum(k, 0)])
-            if keep.any():
-                parts.append((et[keep], em[keep], ea[keep]))
+        near = _NearTurns(np.asarray(lo), np.asarray(hi))
+        for block in iter_encoder(root, warnings):
+            near.add(*block)
         if seg_error is not None:
             raise seg_error
         warnings += seg_w
     except BaseException:
         imu.close()
         raise
-
-    def cat(i: int, dtype: Any) -> np.ndarray:
-        return np.concatenate([p[i] for p in parts]) if parts else np.empty(0, dtype=dtype)
-
-    return imu, Timeline(root, manifest, imu.t, segments, cat(0, float), cat(1, np.int64),
-                         cat(2, float))
+    return imu, Timeline(root, manifest, imu.t, segments, *near.columns())
 
 
 @dataclass(frozen=True)

@@ -94,14 +94,12 @@ def test_streamed_replay_equals_the_whole_array_replay(rec, argv, monkeypatch, c
     monkeypatch.setattr(recording, "BLOCK_BYTES", 8192)
     monkeypatch.setattr(track, "REPLAY_CHUNK", 1000)
     monkeypatch.setattr(stationarity, "_BLOCK", 64)
-    want_small = whole_array_track(path, argv)  # the same arithmetic with the small blocks
     assert main(["track", str(path), *argv, "--json", "--every", "0"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    for w in (want, want_small):
-        np.testing.assert_array_equal(doc["t"], w.t)
-        np.testing.assert_array_equal(doc["still"], w.still)
-        np.testing.assert_allclose(doc["bias"], w.bias, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(doc["bias_std"], w.bias_std, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(doc["t"], want.t)
+    np.testing.assert_array_equal(doc["still"], want.still)
+    np.testing.assert_allclose(doc["bias"], want.bias, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(doc["bias_std"], want.bias_std, rtol=1e-12, atol=0)
     # the run is long enough to cross the pieces, with turns updating the filter
     assert len(doc["t"]) > 8 * 1000 and 0 < np.mean(doc["still"]) < 1
 
@@ -177,3 +175,42 @@ def test_json_pieces_are_json_dumps_text_and_refuse_nan_before_writing(monkeypat
     pieces = tracking.json_pieces({k: (lambda v=v: v) for k, v in cols.items()})
     with pytest.raises(ValueError, match="bias"):
         next(pieces)
+
+
+def test_encoder_rows_kept_near_turns_interpolate_as_all_rows():
+    """However the file is cut into blocks and however sparse a servo's readings (gaps longer
+    than the windows, a servo read once), interpolation anywhere in a window over the kept
+    readings equals interpolation over all of them, and so does the reference rate."""
+    from gyrocal.kit.report_plots import encoder_rate
+    from gyrocal.kit.tracking import _NearTurns
+
+    rng = np.random.default_rng(14)
+    for trial in range(20):
+        rows = []
+        for m, n in ((1, 400), (2, 30), (3, 1)):
+            t = np.sort(rng.uniform(0, 100, n))
+            rows += [(ti, m, rng.normal()) for ti in t]
+        rows.sort()
+        et = np.array([r[0] for r in rows])
+        em = np.array([r[1] for r in rows], dtype=np.int64)
+        ea = np.array([r[2] for r in rows])
+        lo = np.sort(rng.uniform(0, 95, 4))
+        lo = lo[np.concatenate([[True], np.diff(lo) > 3])]
+        hi = lo + rng.uniform(0.1, 3, lo.size)
+        near = _NearTurns(lo, hi)
+        cuts = np.sort(rng.integers(0, et.size, 6))
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, et.size], strict=True):
+            near.add(et[a:b], em[a:b], ea[a:b])
+        kt, km, ka = near.columns()
+        assert kt.size < et.size
+        # queries as a replay makes them: inside the windows by the half span at least
+        q = np.concatenate([rng.uniform(a + 0.01, b - 0.01, 50) for a, b in zip(lo, hi,
+                                                                             strict=True)])
+        for m in (1, 2, 3):
+            full_t, full_a = et[em == m], ea[em == m]
+            got_t, got_a = kt[km == m], ka[km == m]
+            assert np.all(np.diff(got_t) >= 0), trial
+            np.testing.assert_array_equal(np.interp(q, got_t, got_a),
+                                          np.interp(q, full_t, full_a))
+            np.testing.assert_array_equal(encoder_rate(got_t, got_a, q, 0.01),
+                                          encoder_rate(full_t, full_a, q, 0.01))
