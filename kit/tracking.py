@@ -6,6 +6,13 @@ The command (:mod:`gyrocal.kit.commands.track`) parses arguments and calls this 
 a :class:`Tracked`, :func:`reference_segments` and :func:`rest_flags` turn a Recording v1 into
 reference-rate and still flags, and :class:`LiveSource` with :func:`run_live` is the live loop on
 the jig (the protocol runner's loop of :mod:`gyrocal.kit.protocol`, holding the servos still).
+
+A recording is replayed in bounded memory (issue 16): :func:`open_replay` reads it once, the
+readings into a temporary file (:class:`SpilledImu`), the encoder near the turns only
+(:class:`_NearTurns`); :class:`ReplaySource` hands the tracker pieces with their reference
+rates and still flags (:class:`StillPlan`, :func:`rest_intervals`), and :func:`json_pieces`
+writes the document a few thousand rows at a time. What stays in memory per sample: its time
+(8 bytes) and its still flag (1 byte).
 """
 
 from __future__ import annotations
