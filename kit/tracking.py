@@ -326,36 +326,50 @@ ENCODER_MARGIN_S = 1.0
 
 
 class _NearTurns:
-    """The encoder readings a streamed replay keeps: every reading inside a window (a rotate
-    segment widened by :data:`ENCODER_MARGIN_S`), both readings of each pair of a servo's
+    """The encoder readings a streamed replay keeps: every reading inside one of the servo's
+    windows (its rotate segments widened by :data:`ENCODER_MARGIN_S`, and the middle instant of
+    every other servo's, where :func:`turn_axis` reads its angle), both readings of each pair of
+    a servo's
     consecutive readings whose interval meets a window, and each servo's first and last
     reading. Linear interpolation (``numpy.interp``, which holds the end values outside the
     readings) at any time in a window then uses the same readings, so
     :func:`reference_segments` and :func:`turn_axis` give what they give on every reading
     (blocks are fed in file order)."""
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        self.lo, self.hi = lo, hi
+    def __init__(self, windows: dict[int | None, list[tuple[float, float]]]) -> None:
+        self.spans = windows  # servo (None: every servo) -> its windows
+        self.windows: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.last: dict[int, tuple[float, float, bool]] = {}  # servo: its last reading, kept?
         self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def _meets(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Whether ``[a, b]`` meets a window (the windows are disjoint and increasing)."""
-        k = np.searchsorted(self.lo, b, side="right") - 1
-        return (k >= 0) & (self.hi[np.maximum(k, 0)] >= a)
+    def _meets(self, m: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether ``[a, b]`` meets one of servo ``m``'s windows."""
+        if m not in self.windows:
+            lo_l: list[float] = []
+            hi_l: list[float] = []
+            for x, y in sorted(self.spans.get(m, []) + self.spans.get(None, [])):
+                if lo_l and x <= hi_l[-1]:  # merged into disjoint, increasing spans
+                    hi_l[-1] = max(hi_l[-1], y)
+                else:
+                    lo_l.append(x)
+                    hi_l.append(y)
+            self.windows[m] = (np.asarray(lo_l), np.asarray(hi_l))
+        lo, hi = self.windows[m]
+        if not lo.size:
+            return np.zeros(a.shape, dtype=bool)
+        k = np.searchsorted(lo, b, side="right") - 1
+        return (k >= 0) & (hi[np.maximum(k, 0)] >= a)
 
     def add(self, et: np.ndarray, em: np.ndarray, ea: np.ndarray) -> None:
         """One block of ``encoder.csv``."""
-        if not self.lo.size:
-            return
         for m in np.unique(em).tolist():
             sel = em == m
             t, a = et[sel], ea[sel]
             prev = self.last.get(m)
             if prev is not None:
                 t, a = np.concatenate([[prev[0]], t]), np.concatenate([[prev[1]], a])
-            keep = self._meets(t, t)
-            pair = self._meets(t[:-1], t[1:])
+            keep = self._meets(m, t, t)
+            pair = self._meets(m, t[:-1], t[1:])
             keep[:-1] |= pair
             keep[1:] |= pair
             if prev is None:
@@ -480,12 +494,14 @@ class Timeline:
         return self.enc_t[sel], self.enc_angle[sel]
 
 
-def open_replay(path: Any, warnings: list[str]) -> tuple[SpilledImu, Timeline]:
+def open_replay(path: Any, warnings: list[str], *, encoder: bool = True
+                ) -> tuple[SpilledImu, Timeline]:
     """Read a Recording v1 for a streamed replay: the manifest, ``imu.csv`` into a
     :class:`SpilledImu`, ``encoder.csv`` (every row checked, those near the rotate segments
     kept: :class:`_NearTurns`) and ``segments.csv``, in the order and
-    with the checks of :func:`gyrocal.kit.recording.load_recording`. The caller closes the
-    :class:`SpilledImu`."""
+    with the checks of :func:`gyrocal.kit.recording.load_recording`. Without ``encoder`` (no
+    reference rates wanted) no encoder reading is kept, though every one is checked. The caller
+    closes the :class:`SpilledImu`."""
     from pathlib import Path
 
     from gyrocal.kit.recording import iter_encoder, read_manifest, read_segments
@@ -503,17 +519,15 @@ def open_replay(path: Any, warnings: list[str]) -> tuple[SpilledImu, Timeline]:
             segments = read_segments(root, seg_w)
         except InputError as exc:
             seg_error = exc
-        spans = sorted((s.t_start - ENCODER_MARGIN_S, s.t_end + ENCODER_MARGIN_S)
-                       for s in segments if s.kind == "rotate")
-        lo: list[float] = []
-        hi: list[float] = []
-        for a, b in spans:  # merged into disjoint, increasing spans
-            if lo and a <= hi[-1]:
-                hi[-1] = max(hi[-1], b)
-            else:
-                lo.append(a)
-                hi.append(b)
-        near = _NearTurns(np.asarray(lo), np.asarray(hi))
+        windows: dict[int | None, list[tuple[float, float]]] = {}
+        for s in segments if encoder else ():
+            if s.kind != "rotate" or s.motor is None:
+                continue
+            mid = 0.5 * (s.t_start + s.t_end)
+            windows.setdefault(int(s.motor), []).append(
+                (s.t_start - ENCODER_MARGIN_S, s.t_end + ENCODER_MARGIN_S))
+            windows.setdefault(None, []).append((mid, mid))  # every servo's angle mid-turn
+        near = _NearTurns(windows)
         for block in iter_encoder(root, warnings):
             near.add(*block)
         if seg_error is not None:

@@ -267,7 +267,9 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
     from gyrocal.kit.tracking import ReplaySource, StillPlan, open_replay, reference_segments
     from gyrocal.kit.tracking import rest_intervals as rests
 
-    imu, rec = open_replay(args.recording, notes)
+    # the encoder only gives reference rates, which need a calibration's axes
+    imu, rec = open_replay(args.recording, notes,
+                           encoder=args.cal is not None and not args.no_reference)
     try:
         n = imu.n
         if n < 2:
