@@ -14,10 +14,14 @@ peak resident memory from ``getrusage`` of the child):
   :data:`ESTIMATE_BEFORE` names as they were at its commit) and now;
 * ``gyrocal estimate``, ``noise --json`` (streamed), ``track --json`` and ``report`` with the
   default parser (``report`` only with matplotlib, and only up to 10 minutes: its plots of
-  every sample dominate and are not issue 16's subject).
+  every sample dominate and are not issue 16's subject);
+* ``track --json`` before it streamed (the modules :data:`TRACK_BEFORE` names as they were at
+  its commit) and now, with the largest difference between their documents (0 when the
+  two are the same text).
 
-A second table compares wall times of ``gyrocal --help`` and ``gyrocal estimate`` on the
-1-minute recording with a bare ``python -c pass``, medians of 5 runs.
+A last table compares wall times of ``gyrocal --help``, ``gyrocal estimate --help``, an
+argument error and ``gyrocal estimate`` on the 1-minute recording with a bare ``python -c
+pass``, medians of 5 runs.
 """
 
 from __future__ import annotations
@@ -39,6 +43,10 @@ BEFORE = "2b3e916"
 #: The commit before the estimate's memory fix (issue 16: the gyro time refit held ten
 #: stream-sized temporaries) and the modules that fix changed.
 ESTIMATE_BEFORE = ("bb53b79", ("calib/timebase.py",))
+#: The commit before ``track`` streamed the recording (issue 16: the recording was loaded
+#: whole and the JSON document built whole) and the modules that change touched.
+TRACK_BEFORE = ("741f28b", ("kit/recording.py", "calib/stationarity.py", "kit/fileio.py",
+                            "kit/tracking.py", "kit/commands/track.py"))
 SIZES_FULL = ((1, 200), (10, 200), (60, 200), (10, 1000), (60, 1000))
 SIZES_QUICK = ((1, 200), (10, 200))
 #: Longest recording ``report`` is run on, minutes.
@@ -64,7 +72,7 @@ print(cpu, ru.ru_maxrss * 1024, rec.imu_t.size, rec.enc_t.size)
 OLD_MODULES = """
 import importlib.util, runpy, sys
 from pathlib import Path
-import gyrocal.calib, gyrocal.kit, gyrocal.drivers
+import gyrocal.calib, gyrocal.kit, gyrocal.drivers, gyrocal.kit.commands
 top, paths, args = Path(sys.argv[1]), sys.argv[2].split(","), sys.argv[4:]
 for path in paths:
     name = "gyrocal." + path[:-3].replace("/", ".")
@@ -124,6 +132,39 @@ def _reader(rec: Path, old_dir: Path, which: str, parser: str | None) -> tuple[f
     return float(cpu), float(rss) / 2**20
 
 
+def _same_output(a: Path, b: Path) -> str:
+    """Largest absolute difference between two ``track --json`` documents ("same text" when
+    they are byte for byte the same)."""
+    import json
+
+    import numpy as np
+
+    if a.read_bytes() == b.read_bytes():
+        return "same text"
+    x, y = json.loads(a.read_text()), json.loads(b.read_text())
+    if sorted(x) != sorted(y) or len(x["t"]) != len(y["t"]):
+        return "different rows"
+    return f"{max(float(np.max(np.abs(np.subtract(x[k], y[k])), initial=0)) for k in x):.1e}"
+
+
+def _track_pair(rec: Path, before: list[str] | None, work: Path) -> list[str]:
+    """``track --json`` before streaming and now: two cells of CPU / peak, and whether the
+    documents agree."""
+    out = []
+    for name, prefix in (("before", before), ("now", _gyrocal())):
+        if prefix is None:
+            out.append("(no git)")
+            continue
+        doc = work / f"track-{name}.json"
+        out.append(_cell(*_command([*prefix, "track", str(rec), "--json", "--out", str(doc),
+                                    "--force"])))
+    have = [work / f"track-{n}.json" for n in ("before", "now")]
+    out.append(_same_output(*have) if all(p.exists() for p in have) else "")
+    for p in have:
+        p.unlink(missing_ok=True)
+    return out
+
+
 def _wall(argv: list[str], runs: int = 5) -> float:
     times = []
     for _ in range(runs):
@@ -133,10 +174,11 @@ def _wall(argv: list[str], runs: int = 5) -> float:
     return statistics.median(times)
 
 
-def _old_modules(work: Path) -> list[str] | None:
-    """The command prefix running gyrocal with :data:`ESTIMATE_BEFORE`'s modules (None without
-    git history)."""
-    commit, paths = ESTIMATE_BEFORE
+def _old_modules(work: Path, before: tuple[str, tuple[str, ...]] = ESTIMATE_BEFORE
+                 ) -> list[str] | None:
+    """The command prefix running gyrocal with the modules of ``before`` (commit, paths) as
+    they were at that commit (None without git history)."""
+    commit, paths = before
     top = work / f"modules-{commit}"
     for path in paths:
         old = subprocess.run(["git", "show", f"{commit}:{path}"], capture_output=True, text=True,
@@ -178,6 +220,7 @@ def main(argv: list[str]) -> None:
         if have_old:
             (work / "old_recording.py").write_text(old.stdout)
         before = _old_modules(work)
+        track_before = _old_modules(work, TRACK_BEFORE)
         read_rows, cmd_rows = [], []
         wall_rec = None
         for minutes, odr in sizes:
@@ -203,7 +246,7 @@ def main(argv: list[str]) -> None:
                          else "(no git)")
             cells.append(_cell(*_command(_gyrocal("estimate", str(rec)))))
             cells.append(_cell(*_command(_gyrocal("noise", str(rec), "--json"))))
-            cells.append(_cell(*_command(_gyrocal("track", str(rec), "--json"))))
+            cells += _track_pair(rec, track_before, work)
             if have_plot and minutes <= REPORT_MAX_MIN:
                 cells.append(_cell(*_command(_gyrocal("report", str(rec), "--out",
                                                       str(work / "report"), "--force"))))
@@ -224,16 +267,21 @@ def main(argv: list[str]) -> None:
         )
         print_table(
             ["recording", "simulate-recording", f"estimate {ESTIMATE_BEFORE[0]}", "estimate",
-             "noise --json", "track --json",
-             "report"], cmd_rows,
+             "noise --json", f"track --json {TRACK_BEFORE[0]}", "track --json",
+             "track: max |diff|", "report"], cmd_rows,
             "Commands on the same recordings, default parser (CPU s user+system / peak RSS)",
         )
         if wall_rec is not None:
             py = _wall([sys.executable, "-c", "pass"])
-            rows = [["python -c pass", f"{py:.3f}"],
-                    ["gyrocal --help", f"{_wall(_gyrocal('--help')):.3f}"],
-                    ["gyrocal estimate (1 min @ 200 Hz)",
-                     f"{_wall(_gyrocal('estimate', str(wall_rec))):.3f}"]]
-            print_table(["command", "wall s (median of 5)"], rows, "Start-up")
+            rows = [["python -c pass", f"{py:.3f}"]]
+            for label, argv in (("gyrocal --help", ["--help"]),
+                                ("gyrocal estimate --help", ["estimate", "--help"]),
+                                ("gyrocal estimate (argument error)", ["estimate"]),
+                                ("gyrocal estimate (1 min @ 200 Hz)", ["estimate", str(wall_rec)])):
+                wall = _wall(_gyrocal(*argv))
+                rows.append([label, f"{wall:.3f}", f"{wall - py:+.3f}"])
+            rows[0].append("")
+            print_table(["command", "wall s (median of 5)", "beyond python -c pass"], rows,
+                        "Start-up")
     finally:
         shutil.rmtree(work, ignore_errors=True)

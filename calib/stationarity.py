@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +42,7 @@ __all__ = [
     "detect_still",
     "first_still_mean",
     "quiet_windows",
+    "quiet_fraction",
     "quiet_noise_std",
     "run_lengths",
     "white_noise_std",
@@ -295,6 +296,53 @@ class StreamingQuiet:
         return np.array(rows, dtype=float).reshape(-1, 3)
 
 
+def quiet_fraction(
+    n: int, read: Callable[[int, int], np.ndarray], detector: StillDetector, *,
+    blocks: int = 8,
+) -> float | None:
+    """Fraction of the complete windows of rows ``0:n`` that are quiet, read piece by piece.
+
+    The same as ``quiet_windows(read(0, n), detector, 0)[n_window − 1:].mean()``, bit for bit:
+    the pieces are cut where :func:`quiet_windows` starts its blocks of running sums (the
+    first after ``n_window − 1`` rows, then every ``blocks`` × its block), and each carries the
+    last ``n_window − 1`` rows of the one before, so every window's sums are taken over the
+    same rows about the same shift. Working memory: one piece.
+
+    Parameters
+    ----------
+    n : int
+        Rows.
+    read : callable
+        ``read(lo, hi)``: rows ``lo:hi`` as an ``(hi − lo, 3)`` array (centred as
+        :func:`quiet_windows` wants them).
+    detector : StillDetector
+    blocks : int
+        Blocks of running sums per piece.
+
+    Returns
+    -------
+    float or None
+        None when ``n < n_window`` (no complete window).
+    """
+    nw = detector.n_window
+    if n < nw:
+        return None
+    step = max(1, int(blocks)) * _BLOCK
+    quiet = 0
+    hist = np.empty((0, 3))
+    lo = 0
+    hi = min(n, nw - 1 + step)
+    while lo < n:
+        x = read(lo, hi)
+        q = quiet_windows(np.concatenate([hist, x]) if hist.shape[0] else x, detector,
+                          hist.shape[0])
+        quiet += int(np.count_nonzero(q))
+        hist = (np.concatenate([hist, x]) if hist.shape[0] else x)[-(nw - 1):] if nw > 1 \
+            else np.empty((0, 3))
+        lo, hi = hi, min(n, hi + step)
+    return quiet / (n - nw + 1)
+
+
 def run_lengths(quiet: np.ndarray, carry: int = 0) -> np.ndarray:
     """Length of the run of quiet windows ending at each position (0 where not quiet).
 
@@ -384,17 +432,23 @@ def white_noise_std(rate: np.ndarray) -> np.ndarray:
 
 
 def first_still_mean(
-    rate: np.ndarray,
+    rate: np.ndarray | None,
     noise_std: np.ndarray | float,
     odr_hz: float,
     settings: StillSettings | None = None,
     *,
     seconds: float = 1.0,
+    n: int | None = None,
+    read: Callable[[int, int], np.ndarray] | None = None,
 ) -> np.ndarray | None:
     """Mean reading over the first ``seconds`` whose every window passes the variance test.
 
     A starting point for the bias when there is no calibration (a still sensor reads
     ``−bias``). The rate test is not applied (there is no bias to test against yet).
+
+    ``n`` and ``read(lo, hi)`` (rows ``lo:hi``) instead of ``rate`` (None) read only as far as
+    needed: prefixes that double in length, cut where :func:`quiet_windows` starts a block,
+    so the answer is the whole array's, bit for bit.
 
     Returns
     -------
@@ -404,19 +458,37 @@ def first_still_mean(
     det = StillDetector.build(noise_std, odr_hz, settings)
     loose = StillDetector(det.n_window, det.n_min, det.n_lookahead, det.var_limit,
                           np.full(3, np.inf))
-    m = np.asarray(rate, dtype=float)
-    quiet = quiet_windows(m, loose, 0)
     need = max(1, int(round(seconds * float(odr_hz))))
+    if read is None:
+        m = np.asarray(rate, dtype=float)
+        return _first_still(m, loose, need)
+    if n is None:
+        raise CalibInputError("read needs the session length n")
+    k = det.n_window - 1 + 8 * _BLOCK
+    while True:
+        k = min(n, k)
+        got = _first_still(read(0, k), loose, need)
+        if got is not None or k >= n:
+            return got
+        k = det.n_window - 1 + 2 * (k - det.n_window + 1)
+
+
+def _first_still(m: np.ndarray, loose: StillDetector, need: int) -> np.ndarray | None:
+    """:func:`first_still_mean` on the rows ``m``."""
+    quiet = quiet_windows(m, loose, 0)
     run = run_lengths(quiet)
     hit = np.flatnonzero(run >= need)
     if hit.size == 0:
         return None
     e = int(hit[0])
-    a = e - need - det.n_window + 2
+    a = e - need - loose.n_window + 2
     return m[max(a, 0) : e + 1].mean(axis=0)
 
 
-def quiet_noise_std(rate: np.ndarray, block: int) -> np.ndarray:
+def quiet_noise_std(
+    rate: np.ndarray | None, block: int, *, n: int | None = None,
+    read: Callable[[int, int], np.ndarray] | None = None,
+) -> np.ndarray:
     """Per-sample white-noise standard deviation of each axis from the still stretches.
 
     :func:`white_noise_std` over a whole session counts the sample-to-sample change of every
@@ -437,26 +509,38 @@ def quiet_noise_std(rate: np.ndarray, block: int) -> np.ndarray:
         Readings, rad/s.
     block : int
         Samples per block (at least 8); with fewer than 5 blocks the whole session is used.
+    n, read : int, callable, optional
+        Instead of ``rate`` (None): the session's length and ``read(lo, hi)`` giving its rows
+        ``lo:hi`` as an ``(hi − lo, 3)`` array, so a session held outside memory (a temporary
+        file) is worked a few MB at a time, with the same arithmetic as an array.
 
     Returns
     -------
     ndarray (3,)
     """
-    m = np.asarray(rate, dtype=float)
-    if m.ndim != 2 or m.shape[1] != 3 or m.shape[0] < 3:
-        raise CalibInputError(f"rate must have shape (n >= 3, 3), got {m.shape}")
     if isinstance(block, bool) or not isinstance(block, (int, np.integer)) or block < 8:
         raise CalibInputError(f"block must be an integer >= 8, got {block!r}")
-    nb = m.shape[0] // block
+    if read is None:
+        m = np.asarray(rate, dtype=float)
+        if m.ndim != 2 or m.shape[1] != 3 or m.shape[0] < 3:
+            raise CalibInputError(f"rate must have shape (n >= 3, 3), got {m.shape}")
+
+        def read(lo: int, hi: int) -> np.ndarray:
+            return m[lo:hi]
+
+        n = m.shape[0]
+    elif n is None or n < 3:
+        raise CalibInputError(f"read needs the session length n >= 3, got {n!r}")
+    nb = n // block
     if nb < 5:
-        return white_noise_std(m)
+        return white_noise_std(read(0, n))
     step = max(1, _BLOCK * 8 // block)  # blocks per piece: temporaries of a few MB
 
     def pieces() -> Iterator[tuple[int, int, np.ndarray]]:
         for a in range(0, nb, step):
             b = min(nb, a + step)
             # within-block differences of blocks a..b-1
-            yield a, b, np.diff(m[a * block: b * block].reshape(b - a, block, 3), axis=1)
+            yield a, b, np.diff(read(a * block, b * block).reshape(b - a, block, 3), axis=1)
 
     score = np.empty(nb)
     for a, b, d in pieces():
@@ -477,5 +561,5 @@ def quiet_noise_std(rate: np.ndarray, block: int) -> np.ndarray:
         ss += ((d[keep[a:b]] - mean) ** 2).sum(axis=(0, 1))
     sigma = np.sqrt(ss / count) / math.sqrt(2.0)
     if not np.all(sigma > 0):
-        return white_noise_std(m)
+        return white_noise_std(read(0, n))
     return sigma

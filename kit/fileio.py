@@ -62,7 +62,9 @@ def make_output_dir(path: str | os.PathLike[str], flag: str) -> Path:
     return out
 
 
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool = False) -> Path:
+def atomic_write_bytes(
+    path: str | os.PathLike[str], data: bytes | Iterable[bytes], *, force: bool = False
+) -> Path:
     """Write ``data`` to ``path`` atomically.
 
     The data go to a temporary file in the same directory, which is flushed, fsynced and then
@@ -72,8 +74,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
     ----------
     path : path-like
         Destination file.
-    data : bytes
-        Contents.
+    data : bytes or iterable of bytes
+        Contents (pieces are written as they come: a long document need not be held whole).
     force : bool
         Replace an existing file. Without it an existing file is an error.
 
@@ -108,7 +110,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, force: bool
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual file mode
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            for part in (data,) if isinstance(data, bytes) else data:
+                fh.write(part)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, dest)
@@ -134,19 +137,25 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, *, force: bool = 
     return atomic_write_bytes(path, text.encode("utf-8"), force=force)
 
 
-def emit_text(text: str, out: str | os.PathLike[str] | None, *, force: bool = False) -> None:
+def emit_text(text: str | Iterable[str], out: str | os.PathLike[str] | None, *,
+              force: bool = False) -> None:
     """A command's output: written atomically to ``out`` (``--out``, said on stderr), or to stdout.
+
+    ``text`` may come in pieces (an iterable of str), written as they come.
 
     Raises
     ------
     OutputExistsError, InputError
         As :func:`atomic_write_bytes`.
     """
+    if isinstance(text, str):
+        text = (text,)
     if out:
-        atomic_write_text(out, text, force=force)
+        atomic_write_bytes(out, (p.encode("utf-8") for p in text), force=force)
         print(f"wrote {out}", file=sys.stderr)
     else:
-        sys.stdout.write(text)
+        for part in text:
+            sys.stdout.write(part)
 
 
 def atomic_write_json(path: str | os.PathLike[str], doc: Any, *, force: bool = False) -> Path:

@@ -43,6 +43,8 @@ __all__ = [
     "Recording",
     "RecordingError",
     "RecordingWriter",
+    "imu_rows_bound",
+    "iter_encoder",
     "iter_imu",
     "load_recording",
     "open_regular",
@@ -451,11 +453,12 @@ def _long_line(path: Path, buf: bytes, lo: int, hi: int, line_no: int) -> None:
 
 
 def _lines(
-    path: Path, header: str, max_bytes: int, warnings: list[str]
+    path: Path, header: str, max_bytes: int, warnings: list[str], *, extra: int = 0,
 ) -> Iterator[tuple[int, bytes, int]]:
     """Blocks of whole lines of a CSV file after its header.
 
     Yields ``(number of the block's first line, the block, how many lines it holds)``.
+    ``extra``: the header names that many more columns after ``header``'s (any names).
     Each block ends with a newline. A last line without one (an interrupted run) is dropped with
     a warning; a NUL byte or a line longer than :data:`MAX_LINE_BYTES` is an error.
     """
@@ -485,7 +488,8 @@ def _lines(
                 first = buf[: end if end >= 0 else MAX_LINE_BYTES].decode("ascii", "replace")
                 if not buf:
                     raise RecordingError(f"{path} is empty: expected the header {header!r}")
-                if first.strip() != header:
+                names = first.strip().split(",")
+                if ",".join(names[:len(names) - extra] if extra else names) != header:
                     raise RecordingError(
                         f"{path}: header is {_excerpt(first.strip())}, expected {header!r}"
                     )
@@ -527,8 +531,10 @@ def _split_rows(text: str, first: int, path: Path, ncols: int) -> list[list[str]
     return rows
 
 
-def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: bool) -> np.ndarray:
-    """Parse ``block`` line by line; the first fault raises with its file, line and field."""
+def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: int) -> np.ndarray:
+    """Parse ``block`` line by line; the first fault raises with its file, line and field.
+
+    ``empty_last``: how many trailing columns may be empty (NaN), True meaning one."""
     import numpy as np
 
     rows = _split_rows(block.decode("ascii", errors="replace"), first, path, ncols)
@@ -536,7 +542,7 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: b
     for r, row in enumerate(rows):
         for c, field in enumerate(row):
             s = field.strip()
-            last = empty_last and c == ncols - 1
+            last = c >= ncols - int(empty_last)
             if s == "" and last:
                 out[r, c] = math.nan
                 continue
@@ -552,19 +558,24 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: b
     return out
 
 
-def _numpy_parse(block: bytes, empty_last: bool) -> np.ndarray | None:
-    """A block through ``numpy.loadtxt`` (its C reader); None if it rejects the block."""
+def _numpy_parse(block: bytes, empty_last: int) -> np.ndarray | None:
+    """A block through ``numpy.loadtxt`` (its C reader); None if it rejects the block.
+
+    Empty fields become NaN (``empty_last`` > 0); :func:`_parse_block` refuses a NaN outside
+    the last ``empty_last`` columns."""
     import numpy as np
 
     if empty_last:
         block = block.replace(b",\n", b",nan\n")
+        if empty_last > 1:  # empty fields inside the row, a run of them too
+            block = block.replace(b",,", b",nan,").replace(b",,", b",nan,")
     try:
         return np.loadtxt(io.BytesIO(block), delimiter=",", dtype=float, comments=None, ndmin=2)
     except ValueError:
         return None
 
 
-def _pandas_parse(block: bytes, empty_last: bool) -> np.ndarray | None:
+def _pandas_parse(block: bytes, empty_last: int) -> np.ndarray | None:
     """A block through pandas' C parser; None if it rejects the block.
 
     Only an empty field is read as missing (NaN), quotes are ordinary characters and no column
@@ -614,7 +625,7 @@ def _choose_parser(size: int) -> Callable[[bytes, bool], np.ndarray | None]:
 
 
 def _parse_block(
-    block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_last: bool,
+    block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_last: int,
     parse: Callable[[bytes, bool], np.ndarray | None] = _numpy_parse,
 ) -> np.ndarray:
     """Parse a block of whole lines into an ``(n, ncols)`` array.
@@ -631,17 +642,21 @@ def _parse_block(
     out = parse(fast, empty_last)
     if (out is not None and out.shape == (nlines, ncols)
             and fast.count(b",") == nlines * (ncols - 1)):
-        head = out[:, :-1] if empty_last else out
-        if np.isfinite(head).all() and not (empty_last and np.isinf(out[:, -1]).any()):
+        k = int(empty_last)
+        head = out[:, :ncols - k]
+        if np.isfinite(head).all() and not (k and np.isinf(out[:, ncols - k:]).any()):
             return out
     return _parse_exact(block, first, path, ncols, empty_last)
 
 
 def _csv_blocks(
-    path: Path, header: str, ncols: int, warnings: list[str], *, empty_last: bool = False,
-    max_bytes: int = MAX_CSV_BYTES,
+    path: Path, header: str, ncols: int, warnings: list[str], *, empty_last: int = 0,
+    max_bytes: int = MAX_CSV_BYTES, extra: int = 0,
 ) -> Iterator[np.ndarray]:
     """``(n, ncols)`` float blocks of a numeric CSV file, its first column a non-decreasing time.
+
+    ``extra`` trailing columns beyond ``header``'s are counted in ``ncols``; the last
+    ``empty_last`` columns may be empty (NaN).
 
     Raises
     ------
@@ -652,7 +667,7 @@ def _csv_blocks(
 
     last_t = -math.inf
     parse = _choose_parser(path.stat().st_size if path.is_file() else 0)
-    for first, block, nlines in _lines(path, header, max_bytes, warnings):
+    for first, block, nlines in _lines(path, header, max_bytes, warnings, extra=extra):
         arr = _parse_block(block, nlines, first, path, ncols, empty_last, parse)
         if arr.shape[0] == 0:
             continue
@@ -687,7 +702,7 @@ def _count_lines(path: Path, max_bytes: int) -> int:
 
 def _read_columns(
     path: Path, header: str, widths: Sequence[int], warnings: list[str], *,
-    empty_last: bool = False,
+    empty_last: int = 0,
 ) -> list[np.ndarray]:
     """A numeric CSV file as contiguous float64 arrays, one per group of ``widths`` columns.
 
@@ -707,13 +722,29 @@ def _read_columns(
     return [a[:n] for a in out]
 
 
+def _extra_columns(path: Path, header: str) -> int:
+    """How many columns the header line of ``path`` names after ``header``'s (0 when the file
+    cannot be read here: the reading pass says why)."""
+    try:
+        with open_regular(path, MAX_CSV_BYTES) as fh:
+            first = fh.read(MAX_LINE_BYTES).split(b"\n", 1)[0].decode("ascii", "replace")
+    except RecordingError:
+        return 0
+    names = first.strip().split(",")
+    base = header.split(",")
+    return len(names) - len(base) if len(names) > len(base) and names[:len(base)] == base else 0
+
+
 def iter_imu(
     path: str | os.PathLike[str], warnings: list[str] | None = None
 ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Stream ``imu.csv`` of a recording in blocks of some 60 000 rows.
 
-    For commands that need one pass over the samples (``noise``): memory stays bounded
-    whatever the recording's length. Every check of :func:`load_recording` applies.
+    For commands that need one pass over the samples (``noise``, ``track``): memory stays
+    bounded whatever the recording's length. Every check of :func:`load_recording` applies
+    (file and line of a bad row, a partial last row dropped with a warning, time going
+    backwards refused). Columns after ``temp`` (named in the header, numbers or empty) are
+    checked and left out.
 
     Parameters
     ----------
@@ -733,8 +764,35 @@ def iter_imu(
     root = Path(path)
     read_manifest(root)
     sink: list[str] = [] if warnings is None else warnings
-    for arr in _csv_blocks(root / "imu.csv", IMU_HEADER, 5, sink, empty_last=True):
+    ipath = root / "imu.csv"
+    extra = _extra_columns(ipath, IMU_HEADER)
+    for arr in _csv_blocks(ipath, IMU_HEADER, 5 + extra, sink, empty_last=1 + extra,
+                           extra=extra):
         yield arr[:, 0], arr[:, 1:4], arr[:, 4]
+
+
+def iter_encoder(
+    path: str | os.PathLike[str], warnings: list[str] | None = None
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Stream ``encoder.csv`` of the recording directory ``path`` in blocks (the manifest is not
+    read again), with every check of :func:`load_recording`.
+
+    Yields
+    ------
+    t : ndarray (n,)
+    motor : ndarray (n,) of int64
+    angle : ndarray (n,)
+        rad.
+    """
+    sink: list[str] = [] if warnings is None else warnings
+    for arr in _csv_blocks(Path(path) / "encoder.csv", ENCODER_HEADER, 3, sink):
+        yield arr[:, 0], arr[:, 1].astype("int64"), arr[:, 2]
+
+
+def imu_rows_bound(path: str | os.PathLike[str]) -> int:
+    """An upper bound on the rows of ``imu.csv`` in the recording directory ``path`` (its
+    newlines), so a column can be allocated once at its final size."""
+    return _count_lines(Path(path) / "imu.csv", MAX_CSV_BYTES)
 
 
 def read_segments(root: Path, warnings: list[str]) -> tuple[Segment, ...]:

@@ -662,8 +662,6 @@ def _rests_plot(plt: Any, extracted: ExtractedWindows, cal: GyroCalibration,
 
 
 def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
-    from scipy import stats
-
     fig, (ax, axh) = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True,
                                   gridspec_kw={"width_ratios": [3, 1]})
     n = len(res.labels)
@@ -699,7 +697,8 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
         bins = np.linspace(-lim, lim, 17)
         axh.hist(z, bins=bins, color="0.6", density=True, label="all residuals")
         zz = np.linspace(-lim, lim, 200)
-        axh.plot(zz, stats.norm.pdf(zz), color="k", lw=1.0, label="N(0, 1)")
+        axh.plot(zz, np.exp(-0.5 * zz**2) / math.sqrt(2 * math.pi), color="k", lw=1.0,
+                 label="N(0, 1)")
         axh.legend(fontsize=8)
     axh.set_xlabel("z")
     fig.suptitle(f"residuals of the windows against the calibration ({cal.method})", fontsize=10)

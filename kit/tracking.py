@@ -6,6 +6,13 @@ The command (:mod:`gyrocal.kit.commands.track`) parses arguments and calls this 
 a :class:`Tracked`, :func:`reference_segments` and :func:`rest_flags` turn a Recording v1 into
 reference-rate and still flags, and :class:`LiveSource` with :func:`run_live` is the live loop on
 the jig (the protocol runner's loop of :mod:`gyrocal.kit.protocol`, holding the servos still).
+
+A recording is replayed in bounded memory (issue 16): :func:`open_replay` reads it once, the
+readings into a temporary file (:class:`SpilledImu`), the encoder near the turns only
+(:class:`_NearTurns`); :class:`ReplaySource` hands the tracker pieces with their reference
+rates and still flags (:class:`StillPlan`, :func:`rest_intervals`), and :func:`json_pieces`
+writes the document a few thousand rows at a time. What stays in memory per sample: its time
+(8 bytes) and its still flag (1 byte).
 """
 
 from __future__ import annotations
@@ -13,7 +20,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -166,17 +173,24 @@ def run_tracker(tracker: Any, batches: Iterable[Batch], *,
     )
 
 
-def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None) -> Tracked:
+#: Samples smoothed at a time (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`: a few
+#: state-sized matrices per sample, some 3 MB of temporaries at this size).
+SMOOTH_CHUNK = 4096
+
+
+def smooth_tracked(tracker: Any, tr: Tracked, temperature: np.ndarray | None, *,
+                   at_rows: bool = False) -> Tracked:
     """``tr`` with each sample's bias and uncertainty smoothed over the whole run
     (:meth:`gyrocal.calib.tracker.BiasTracker.smoothed`; the tracker was built with
     ``keep_states=True``): for a replayed recording, where every sample is at hand.
-    ``temperature`` covers every sample; only ``tr``'s rows are smoothed."""
+    ``temperature`` covers every sample (``at_rows``: only ``tr``'s rows); only ``tr``'s rows
+    are smoothed."""
     from dataclasses import replace
 
     temp = temperature
-    if temp is not None and tr.rows is not None:
+    if temp is not None and tr.rows is not None and not at_rows:
         temp = np.asarray(temp)[tr.rows]
-    bias, std = tracker.smoothed(tr.t, temp)
+    bias, std = tracker.smoothed(tr.t, temp, chunk=SMOOTH_CHUNK)
     return replace(tr, bias=bias, bias_std=std)
 
 
@@ -421,6 +435,373 @@ def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
     return Gravity(dict(kin), (chain.index(up[0]), up[1]), home, encoders), None
 
 
+#: Seconds on each side of a rotate segment whose encoder readings a streamed replay keeps
+#: (the reference rate of a sample interpolates the encoder half a sample period either side).
+ENCODER_MARGIN_S = 1.0
+
+
+class _NearTurns:
+    """The encoder readings a streamed replay keeps: every reading inside one of the servo's
+    windows (its rotate segments widened by :data:`ENCODER_MARGIN_S`, and the middle instant of
+    every other servo's, where :func:`turn_axis` reads its angle), both readings of each pair of
+    a servo's
+    consecutive readings whose interval meets a window, and each servo's first and last
+    reading. Linear interpolation (``numpy.interp``, which holds the end values outside the
+    readings) at any time in a window then uses the same readings, so
+    :func:`reference_segments` and :func:`turn_axis` give what they give on every reading
+    (blocks are fed in file order)."""
+
+    def __init__(self, windows: dict[int | None, list[tuple[float, float]]]) -> None:
+        self.spans = windows  # servo (None: every servo) -> its windows
+        self.windows: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.last: dict[int, tuple[float, float, bool]] = {}  # servo: its last reading, kept?
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def _meets(self, m: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether ``[a, b]`` meets one of servo ``m``'s windows."""
+        if m not in self.windows:
+            lo_l: list[float] = []
+            hi_l: list[float] = []
+            for x, y in sorted(self.spans.get(m, []) + self.spans.get(None, [])):
+                if lo_l and x <= hi_l[-1]:  # merged into disjoint, increasing spans
+                    hi_l[-1] = max(hi_l[-1], y)
+                else:
+                    lo_l.append(x)
+                    hi_l.append(y)
+            self.windows[m] = (np.asarray(lo_l), np.asarray(hi_l))
+        lo, hi = self.windows[m]
+        if not lo.size:
+            return np.zeros(a.shape, dtype=bool)
+        k = np.searchsorted(lo, b, side="right") - 1
+        return (k >= 0) & (hi[np.maximum(k, 0)] >= a)
+
+    def add(self, et: np.ndarray, em: np.ndarray, ea: np.ndarray) -> None:
+        """One block of ``encoder.csv``."""
+        for m in np.unique(em).tolist():
+            sel = em == m
+            t, a = et[sel], ea[sel]
+            prev = self.last.get(m)
+            if prev is not None:
+                t, a = np.concatenate([[prev[0]], t]), np.concatenate([[prev[1]], a])
+            keep = self._meets(m, t, t)
+            pair = self._meets(m, t[:-1], t[1:])
+            keep[:-1] |= pair
+            keep[1:] |= pair
+            if prev is None:
+                keep[0] = True  # the servo's first reading
+            self.last[m] = (float(t[-1]), float(a[-1]), bool(keep[-1]))
+            if prev is not None and prev[2]:
+                keep[0] = False  # kept with its own block
+            if keep.any():
+                self.parts.append((t[keep], np.full(int(keep.sum()), m, dtype=np.int64),
+                                   a[keep]))
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(t, motor, angle)`` of the kept readings (each servo's in time order)."""
+        for m, (t, a, kept) in self.last.items():
+            if not kept:  # the servo's last reading
+                self.parts.append((np.array([t]), np.array([m], dtype=np.int64), np.array([a])))
+                self.last[m] = (t, a, True)
+        if not self.parts:
+            return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0)
+        return tuple(np.concatenate([p[i] for p in self.parts])  # type: ignore[return-value]
+                     for i in range(3))
+
+
+class SpilledImu:
+    """A recording's gyro samples read once, block by block
+    (:func:`gyrocal.kit.recording.iter_imu`, with all its checks): the times kept in memory
+    (8 bytes a sample), the readings and temperatures written to a temporary file (32 bytes a
+    sample, deleted on :meth:`close`) and read back a piece at a time, so a replay's working
+    memory does not grow with the recording's rate columns.
+
+    Parameters
+    ----------
+    root : Path
+        The recording directory (manifest already checked).
+    warnings : list of str
+        Receives what the reader tolerated.
+
+    Attributes
+    ----------
+    t : ndarray (n,)
+        Sample times, s.
+    temperature_complete : bool
+        Whether every sample has a temperature.
+    """
+
+    ROW = 4 * 8  # gx, gy, gz, temp as float64
+
+    def __init__(self, root: Any, warnings: list[str]) -> None:
+        import tempfile
+
+        from gyrocal.kit.recording import imu_rows_bound, iter_imu
+
+        t = np.empty(imu_rows_bound(root))
+        self._fh = tempfile.TemporaryFile(prefix="gyrocal-replay-")
+        n = 0
+        complete = True
+        try:
+            for tb, rate, temp in iter_imu(root, warnings):
+                k = tb.size
+                t[n:n + k] = tb
+                complete = complete and bool(np.isfinite(temp).all())
+                rows = np.empty((k, 4))
+                rows[:, :3] = rate
+                rows[:, 3] = temp
+                self._fh.write(rows.data)
+                n += k
+            self._fh.flush()
+        except BaseException:
+            self._fh.close()
+            raise
+        self.t = t[:n]
+        self.n = n
+        self.temperature_complete = complete
+
+    def rows(self, lo: int, hi: int) -> np.ndarray:
+        """Samples ``lo:hi`` as an ``(hi − lo, 4)`` array: rate x, y, z (rad/s), temperature
+        (°C or NaN)."""
+        lo, hi = max(0, int(lo)), min(self.n, int(hi))
+        out = np.empty((max(hi - lo, 0), 4))
+        view = memoryview(out).cast("B")
+        self._fh.seek(lo * self.ROW)
+        got = 0
+        while got < len(view):
+            k = self._fh.readinto(view[got:])
+            if not k:
+                raise OSError(f"the replay's temporary file ended {len(view) - got} bytes early")
+            got += k
+        return out
+
+    def rate(self, lo: int, hi: int) -> np.ndarray:
+        """Readings of samples ``lo:hi``, ``(hi − lo, 3)`` rad/s."""
+        return np.ascontiguousarray(self.rows(lo, hi)[:, :3])
+
+    def close(self) -> None:
+        """Delete the temporary file."""
+        self._fh.close()
+
+    def __enter__(self) -> SpilledImu:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """What a streamed replay holds of a recording besides its readings: the sample times, the
+    segments, and the encoder readings near the rotate segments (:class:`_NearTurns`); enough
+    for :func:`reference_segments` and :func:`turn_axis`."""
+
+    path: Any
+    manifest: dict[str, Any]
+    imu_t: np.ndarray
+    segments: tuple[Any, ...]
+    enc_t: np.ndarray
+    enc_motor: np.ndarray
+    enc_angle: np.ndarray
+
+    def encoder(self, motor: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, angle)`` of one servo (near the rotate segments only)."""
+        sel = self.enc_motor == motor
+        return self.enc_t[sel], self.enc_angle[sel]
+
+
+def open_replay(path: Any, warnings: list[str], *, encoder: bool = True,
+                every_encoder: bool = False) -> tuple[SpilledImu, Timeline]:
+    """Read a Recording v1 for a streamed replay: the manifest, ``imu.csv`` into a
+    :class:`SpilledImu`, ``encoder.csv`` (every row checked, those near the rotate segments
+    kept: :class:`_NearTurns`) and ``segments.csv``, in the order and
+    with the checks of :func:`gyrocal.kit.recording.load_recording`. Without ``encoder`` (no
+    reference rates wanted) no encoder reading is kept, though every one is checked; with
+    ``every_encoder`` every one is kept (a calibration's g-sensitivity needs the pose at every
+    sample: :func:`recording_gravity`). The caller closes the :class:`SpilledImu`."""
+    from pathlib import Path
+
+    from gyrocal.kit.recording import iter_encoder, read_manifest, read_segments
+
+    root = Path(path)
+    manifest = read_manifest(root)
+    imu = SpilledImu(root, warnings)
+    try:
+        # the segments say which encoder rows to keep; a fault in them is raised after the
+        # encoder's own, as load_recording would
+        seg_w: list[str] = []
+        segments: tuple[Any, ...] = ()
+        seg_error: BaseException | None = None
+        try:
+            segments = read_segments(root, seg_w)
+        except InputError as exc:
+            seg_error = exc
+        windows: dict[int | None, list[tuple[float, float]]] = {}
+        for s in segments if encoder else ():
+            if s.kind != "rotate" or s.motor is None:
+                continue
+            mid = 0.5 * (s.t_start + s.t_end)
+            windows.setdefault(int(s.motor), []).append(
+                (s.t_start - ENCODER_MARGIN_S, s.t_end + ENCODER_MARGIN_S))
+            windows.setdefault(None, []).append((mid, mid))  # every servo's angle mid-turn
+        if every_encoder:
+            windows = {None: [(-math.inf, math.inf)]}
+        near = _NearTurns(windows)
+        for block in iter_encoder(root, warnings):
+            near.add(*block)
+        if seg_error is not None:
+            raise seg_error
+        warnings += seg_w
+    except BaseException:
+        imu.close()
+        raise
+    return imu, Timeline(root, manifest, imu.t, segments, *near.columns())
+
+
+@dataclass(frozen=True)
+class StillPlan:
+    """Still flags of a replay, made a piece at a time: 1 on the ``intervals``
+    (:func:`rest_intervals`), ``outside`` elsewhere (0: not still; NaN: the detector decides),
+    0 wherever a reference rate is given (the sensor turns)."""
+
+    intervals: list[tuple[int, int]]
+    outside: float
+
+    def window(self, a: int, b: int, reference: np.ndarray | None) -> np.ndarray:
+        """Flags of samples ``a:b`` (``reference``: their reference rates, NaN off turns)."""
+        still = np.full(b - a, float(self.outside))
+        for i0, i1 in self.intervals:
+            lo, hi = max(a, i0), min(b, i1)
+            if lo < hi:
+                still[lo - a:hi - a] = 1.0
+        if reference is not None:
+            still[np.isfinite(reference)] = 0.0
+        return still
+
+
+def spilled_chunks(
+    imu: SpilledImu, ref: Reference | None, size: int, *, still: StillPlan | None = None,
+    temperature: bool = False, rows: np.ndarray | None = None,
+    kept_temperature: list[np.ndarray] | None = None,
+) -> Iterator[Batch]:
+    """A :class:`SpilledImu` in runs of ``size`` samples, each with its reference rates
+    (``ref``), still flags (``still``) and, with ``temperature``, the die temperature: a
+    recording replayed in bounded working memory. ``kept_temperature`` receives the
+    temperatures of the samples ``rows`` (None: all), for the smoother."""
+    n = imu.n
+    for a in range(0, n, size):
+        b = min(a + size, n)
+        block = imu.rows(a, b)
+        rr_ra = ref.window(a, b) if ref is not None else None
+        flags = None if still is None else still.window(a, b, None if rr_ra is None
+                                                         else rr_ra[0])
+        temp = block[:, 3]
+        if kept_temperature is not None:
+            if rows is None:
+                kept_temperature.append(temp.copy())
+            else:
+                lo, hi = np.searchsorted(rows, (a, b))
+                kept_temperature.append(temp[rows[lo:hi] - a])
+        yield Batch(imu.t[a:b], np.ascontiguousarray(block[:, :3]),
+                    temp if temperature else None, flags,
+                    *(rr_ra if rr_ra is not None else (None, None)))
+
+
+class ReplaySource:
+    """A recording ready to replay through the tracker (:func:`gyrocal.kit.commands.track`):
+    its spilled readings, reference rates, still plan, whether the tracker takes the
+    temperature, and the specific force for a calibration's g-sensitivity (``gravity``). A
+    context manager: leaving it deletes the temporary file."""
+
+    def __init__(self, imu: SpilledImu, ref: Reference | None, still: StillPlan | None,
+                 temperature: bool, gravity: Gravity | None = None) -> None:
+        self.imu = imu
+        self.ref = ref
+        self.still = still
+        self.temperature = temperature
+        self.gravity = gravity
+        self._temps: list[np.ndarray] = []
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times, s."""
+        return self.imu.t
+
+    def batches(self, size: int, rows: np.ndarray | None = None) -> Iterator[Batch]:
+        """The samples in runs of ``size`` (:func:`spilled_chunks`); the temperatures of
+        ``rows`` (None: all) are kept for :meth:`kept_temperature`."""
+        self._temps = []
+        pieces = spilled_chunks(self.imu, self.ref, size, still=self.still,
+                                temperature=self.temperature, rows=rows,
+                                kept_temperature=self._temps if self.temperature else None)
+        if self.gravity is None:
+            return pieces
+        gravity = self.gravity
+        return (replace(b, specific_force=gravity.at(b.t)) for b in pieces)
+
+    def kept_temperature(self) -> np.ndarray | None:
+        """Temperatures of the rows of the last :meth:`batches` run (None without the
+        temperature model)."""
+        return np.concatenate(self._temps) if self.temperature and self._temps else None
+
+    def close(self) -> None:
+        """Delete the temporary file."""
+        self.imu.close()
+
+    def __enter__(self) -> ReplaySource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def rest_intervals(
+    t: np.ndarray,
+    segments: Iterable[Any],
+    read: Callable[[int, int], np.ndarray],
+    trim_s: float = 0.5,
+    *,
+    check: Any = None,
+    notes: list[str] | None = None,
+) -> list[tuple[int, int]]:
+    """The sample ranges ``[i0, i1)`` inside the recording's rest segments (less ``trim_s`` at
+    each end) that are still.
+
+    ``t`` are the sample times (non-decreasing), ``read(lo, hi)`` the readings of samples
+    ``lo:hi`` (so a recording held in a temporary file is read a piece at a time). With
+    ``check`` (a :class:`gyrocal.calib.stationarity.StillDetector`), a rest is trusted only when
+    at least 95 % of its windows pass the detector's variance test (the rate test is left out:
+    the bias is what is being tracked, :func:`gyrocal.calib.stationarity.quiet_fraction`); a
+    rest that fails is left out, with a line in ``notes`` (a recording whose "rest" moved,
+    e.g. one not made on the jig).
+    """
+    out: list[tuple[int, int]] = []
+    loose = None
+    if check is not None:
+        from gyrocal.calib.stationarity import StillDetector
+
+        loose = StillDetector(check.n_window, check.n_min, check.n_lookahead, check.var_limit,
+                              np.full(3, np.inf))
+    for seg in segments:
+        if seg.kind != "rest" or seg.duration <= 2 * trim_s:
+            continue
+        # t is non-decreasing: the samples with t_start + trim <= t <= t_end - trim
+        i0 = int(np.searchsorted(t, seg.t_start + trim_s, side="left"))
+        i1 = int(np.searchsorted(t, seg.t_end - trim_s, side="right"))
+        if loose is not None:
+            from gyrocal.calib.stationarity import quiet_fraction
+
+            frac = quiet_fraction(max(i1 - i0, 0), lambda a, b, i0=i0: read(i0 + a, i0 + b),
+                                  loose)
+            if frac is None or frac < 0.95:
+                if notes is not None:
+                    notes.append(f"rest segment {seg.index} ({seg.t_start:.1f}-{seg.t_end:.1f} "
+                                 "s) shows motion in the gyro readings: left to the detector")
+                continue
+        if i1 > i0:
+            out.append((i0, i1))
+    return out
+
+
 def rest_flags(
     rec: Any,
     trim_s: float = 0.5,
@@ -429,35 +810,14 @@ def rest_flags(
     check: Any = None,
     notes: list[str] | None = None,
 ) -> np.ndarray:
-    """Still flags from the recording's rest segments: 1 on samples inside a rest (less
-    ``trim_s`` at each end), ``outside`` elsewhere (0: not still; NaN: the detector decides).
-
-    With ``check`` (a :class:`gyrocal.calib.stationarity.StillDetector`), a rest is trusted only
-    when at least 95 % of its windows pass the detector's variance test (the rate test is left
-    out: the bias is what is being tracked); a rest that fails gets ``outside`` and a line in
-    ``notes`` (a recording whose "rest" moved, e.g. one not made on the jig).
-    """
+    """Still flags of a :class:`gyrocal.kit.recording.Recording` from its rest segments: 1 on
+    samples inside a rest (:func:`rest_intervals`), ``outside`` elsewhere (0: not still; NaN:
+    the detector decides)."""
     still = np.full(rec.imu_t.size, float(outside))
-    loose = None
-    if check is not None:
-        from gyrocal.calib.stationarity import StillDetector, quiet_windows
-
-        loose = StillDetector(check.n_window, check.n_min, check.n_lookahead, check.var_limit,
-                              np.full(3, np.inf))
-    for seg in rec.segments:
-        if seg.kind != "rest" or seg.duration <= 2 * trim_s:
-            continue
-        sel = (rec.imu_t >= seg.t_start + trim_s) & (rec.imu_t <= seg.t_end - trim_s)
-        if loose is not None:
-            quiet = quiet_windows(rec.imu_rate[sel], loose, 0)[loose.n_window - 1:]
-            if quiet.size == 0 or quiet.mean() < 0.95:
-                if notes is not None:
-                    notes.append(f"rest segment {seg.index} ({seg.t_start:.1f}-{seg.t_end:.1f} "
-                                 "s) shows motion in the gyro readings: left to the detector")
-                continue
-        still[sel] = 1.0
+    for i0, i1 in rest_intervals(rec.imu_t, rec.segments, lambda a, b: rec.imu_rate[a:b],
+                                 trim_s, check=check, notes=notes):
+        still[i0:i1] = 1.0
     return still
-
 
 
 @dataclass(frozen=True)
@@ -790,12 +1150,37 @@ def tracker_notes(tracker: Any) -> list[str]:
     return out
 
 
-def json_text(columns: dict[str, Callable[[], Any]]) -> str:
-    """``json.dumps`` of ``{name: make()}`` plus a newline, built one column at a time: the
-    Python objects of one column exist at once, not of all (the same text)."""
-    parts = [f"{json.dumps(name)}: {json.dumps(make(), allow_nan=False)}"
-             for name, make in columns.items()]
-    return "{" + ", ".join(parts) + "}\n"
+#: Rows of an array turned into Python objects at a time by :func:`json_pieces`.
+JSON_PIECE_ROWS = 8192
+
+
+def json_pieces(columns: dict[str, Callable[[], Any]]) -> Iterator[str]:
+    """The text of ``json.dumps({name: make()})`` plus a newline, in pieces.
+
+    A column whose ``make()`` gives an array is turned into Python objects and text
+    :data:`JSON_PIECE_ROWS` rows at a time, so the objects of a few thousand rows exist at
+    once, not of a column; written piece by piece (:func:`gyrocal.kit.fileio.emit_text`) the
+    document is never held whole. The text is ``json.dumps``'s (``allow_nan=False``); a NaN or
+    infinity in an array raises ValueError before the first piece, so nothing is half-written.
+    """
+    values = {name: make() for name, make in columns.items()}
+    for name, value in values.items():
+        if (isinstance(value, np.ndarray) and value.dtype.kind == "f"
+                and not np.isfinite(value).all()):
+            raise ValueError(f"Out of range float values are not JSON compliant ({name})")
+    yield "{"
+    for c, (name, value) in enumerate(values.items()):
+        yield f"{', ' if c else ''}{json.dumps(name)}: "
+        if not isinstance(value, np.ndarray) or value.ndim == 0:
+            yield json.dumps(value.tolist() if isinstance(value, np.ndarray) else value,
+                             allow_nan=False)
+            continue
+        yield "["
+        for a in range(0, value.shape[0], JSON_PIECE_ROWS):
+            part = json.dumps(value[a:a + JSON_PIECE_ROWS].tolist(), allow_nan=False)[1:-1]
+            yield (", " if a else "") + part
+        yield "]"
+    yield "}\n"
 
 
 def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tuple[
@@ -826,8 +1211,15 @@ def json_rows(t: np.ndarray, every_s: float | None, max_rows: int | None) -> tup
         every = math.ceil(raw / unit * (1 + 1e-9)) * unit  # rounded up to two digits
     if every is None or n < 2:
         return np.arange(n), None
-    cell = np.floor((t - t[0]) / every).astype(np.int64)
-    last = np.flatnonzero(np.append(cell[1:] != cell[:-1], True))
+    # the last sample of each interval, a piece of JSON_PIECE_ROWS × 8 samples at a time (no
+    # temporaries the length of the session)
+    step = 8 * JSON_PIECE_ROWS
+    parts = []
+    for a in range(0, n - 1, step):
+        b = min(n, a + step + 1)  # one sample more: does the piece's last sample end a cell?
+        cell = np.floor((t[a:b] - t[0]) / every).astype(np.int64)
+        parts.append(np.flatnonzero(cell[1:] != cell[:-1]) + a)
+    last = np.concatenate([*parts, [n - 1]])
     if last.size == n:
         return np.arange(n), None
     return last, float(every)

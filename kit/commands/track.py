@@ -182,10 +182,11 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
 
 
 def _build_tracker(
-    args: argparse.Namespace, odr: float, rate: np.ndarray, notes: list[str], what: str,
+    args: argparse.Namespace, odr: float, rate: Any, notes: list[str], what: str,
     where: str, *, keep_states: bool = False,
 ) -> tuple[Any, Any]:
-    """The tracker from the flags: calibration, noise model (``rate`` gives the estimates the
+    """The tracker from the flags: calibration, noise model (``rate``, an ``(n, 3)`` array or a
+    :class:`gyrocal.kit.tracking.SpilledImu` read a piece at a time, gives the estimates the
     flags leave open: the white noise, and without --cal the first still second's bias).
     ``what`` names the data in notes, ``where`` in errors.
 
@@ -195,8 +196,12 @@ def _build_tracker(
     """
     from gyrocal.calib.stationarity import first_still_mean, quiet_noise_std
     from gyrocal.calib.tracker import BiasTracker
-    from gyrocal.kit.tracking import load_calibration, load_noise
+    from gyrocal.kit.tracking import SpilledImu, load_calibration, load_noise
 
+    # the readings whole, or n and a reader of rows lo:hi (the same arithmetic)
+    spilled = isinstance(rate, SpilledImu)
+    whole = None if spilled else rate
+    piecewise: dict[str, Any] = {"n": rate.n, "read": rate.rate} if spilled else {}
     cal = load_calibration(args.cal) if args.cal else None
     noise = load_noise(args.noise) if args.noise else None
     if args.noise_density is not None:
@@ -205,7 +210,7 @@ def _build_tracker(
         n_density = tuple(noise.noise_density.value)
     else:
         try:
-            sigma = quiet_noise_std(rate, max(8, int(round(odr))))
+            sigma = quiet_noise_std(whole, max(8, int(round(odr))), **piecewise)
         except ValueError as exc:
             raise InputError(f"{where}: {exc}") from None
         n_density = tuple(float(x) for x in sigma / math.sqrt(odr))
@@ -239,7 +244,7 @@ def _build_tracker(
             return BiasTracker(st, cal, keep_states=keep_states), cal
         except ValueError as exc:
             raise InputError(f"--cal {args.cal}: {exc}") from None
-    guess = first_still_mean(rate, st.noise_std, odr, st.still)
+    guess = first_still_mean(whole, st.noise_std, odr, st.still, **piecewise)
     if guess is None:
         raise InputError(f"{where}: no still second found to start from; give --cal")
     notes.append("no --cal: starting from the first still second's bias "
@@ -253,50 +258,67 @@ def _build_tracker(
     return tracker, None
 
 
-def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, Any, Any]:
+def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
+    """The tracker and the streamed source of a recording (issue 16: the readings are read
+    once into a temporary file and replayed a piece at a time; only the times stay in
+    memory). Returns ``(tracker, ReplaySource, name)``; the caller closes the source."""
     import numpy as np
 
-    from gyrocal.kit.recording import load_recording
-    from gyrocal.kit.tracking import Batch, recording_gravity, reference_segments, rest_flags
+    from gyrocal.kit.tracking import (
+        ReplaySource,
+        StillPlan,
+        load_calibration,
+        open_replay,
+        recording_gravity,
+        reference_segments,
+    )
+    from gyrocal.kit.tracking import rest_intervals as rests
 
-    rec = load_recording(args.recording)
-    notes += list(rec.warnings)
-    n = rec.imu_t.size
-    if n < 2:
-        raise InputError(f"{rec.path}: only {n} gyro samples")
-    odr = 1.0 / float(np.median(np.diff(rec.imu_t)))
-    temp = rec.imu_temp
-    if args.tempco is None:
-        args.tempco = bool(np.all(np.isfinite(temp)))
-    if args.tempco and not np.all(np.isfinite(temp)):
-        raise InputError(f"{rec.path}: --tempco needs a temperature on every sample (imu.csv "
-                         "temp column); this recording lacks some")
-    tracker, cal = _build_tracker(args, odr, rec.imu_rate, notes, "the recording", str(rec.path),
-                                  keep_states=not args.causal)
-    still = None
-    if args.still == "segments":
-        still = rest_flags(rec)
-    elif args.still == "auto" and any(seg.kind == "rest" for seg in rec.segments):
-        still = rest_flags(rec, outside=math.nan, check=tracker.detector, notes=notes)
-    ref = None
-    if not args.no_reference and cal is not None and any(
-        s.kind == "rotate" for s in rec.segments
-    ):
-        ref, more = reference_segments(rec, cal)
-        notes += more
-        if not ref.runs:
-            ref = None
-        elif not np.all(np.isfinite(cal.scale_std)):
-            notes.append("the calibration has no scale_std: no reference-rate updates")
-            ref = None
-        if ref is not None and still is not None:
-            for i0, rate, _ in ref.runs:
-                still[i0:i0 + rate.size][np.isfinite(rate)] = 0.0
-    batch = Batch(rec.imu_t, rec.imu_rate, temp if args.tempco else None, still)
-    gravity, g_note = recording_gravity(rec, cal)  # the specific force for G (v2 only)
-    if g_note is not None:
-        notes.append(g_note)
-    return tracker, batch, ref, str(rec.path), gravity
+    # the encoder gives reference rates, which need a calibration's axes, and the specific
+    # force for a calibration's g-sensitivity, which needs the pose at every sample (every
+    # encoder reading kept, not only those near the turns)
+    g_sens = args.cal is not None and load_calibration(args.cal).g_sensitivity is not None
+    imu, rec = open_replay(args.recording, notes,
+                           encoder=(args.cal is not None and not args.no_reference) or g_sens,
+                           every_encoder=g_sens)
+    try:
+        n = imu.n
+        if n < 2:
+            raise InputError(f"{rec.path}: only {n} gyro samples")
+        d = np.diff(rec.imu_t)
+        odr = 1.0 / float(np.median(d, overwrite_input=True))
+        del d
+        if args.tempco is None:
+            args.tempco = imu.temperature_complete
+        if args.tempco and not imu.temperature_complete:
+            raise InputError(f"{rec.path}: --tempco needs a temperature on every sample "
+                             "(imu.csv temp column); this recording lacks some")
+        tracker, cal = _build_tracker(args, odr, imu, notes, "the recording", str(rec.path),
+                                      keep_states=not args.causal)
+        still = None
+        if args.still == "segments":
+            still = StillPlan(rests(rec.imu_t, rec.segments, imu.rate), 0.0)
+        elif args.still == "auto" and any(seg.kind == "rest" for seg in rec.segments):
+            still = StillPlan(rests(rec.imu_t, rec.segments, imu.rate, check=tracker.detector,
+                                    notes=notes), math.nan)
+        ref = None
+        if not args.no_reference and cal is not None and any(
+            s.kind == "rotate" for s in rec.segments
+        ):
+            ref, more = reference_segments(rec, cal)
+            notes += more
+            if not ref.runs:
+                ref = None
+            elif not np.all(np.isfinite(cal.scale_std)):
+                notes.append("the calibration has no scale_std: no reference-rate updates")
+                ref = None
+        gravity, g_note = recording_gravity(rec, cal)  # the specific force for G (v2 only)
+        if g_note is not None:
+            notes.append(g_note)
+    except BaseException:
+        imu.close()
+        raise
+    return tracker, ReplaySource(imu, ref, still, bool(args.tempco), gravity), str(rec.path)
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
@@ -587,9 +609,8 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.fileio import emit_text, refuse_existing
     from gyrocal.kit.tracking import (
         chunks,
+        json_pieces,
         json_rows,
-        json_text,
-        replay_chunks,
         run_tracker,
         smooth_tracked,
         tracker_notes,
@@ -605,23 +626,23 @@ def run(args: argparse.Namespace) -> int:
     json_sel = None
     if args.live:
         tr, truth, source = _run_live(args, notes)
+    elif args.sim:
+        tracker, batch, truth, source = _simulate(args, notes)
+        # fed one second at a time, as a live source would
+        batches: Iterable[Batch] = chunks(batch, max(1, int(round(tracker.settings.odr_hz))))
+        tr = run_tracker(tracker, batches)
+        notes += tracker_notes(tracker)
     else:
-        if args.sim:
-            tracker, batch, truth, source = _simulate(args, notes)
-            # fed one second at a time, as a live source would
-            batches: Iterable[Batch] = chunks(batch,
-                                               max(1, int(round(tracker.settings.odr_hz))))
-        else:
-            tracker, batch, ref, source, gravity = _replay(args, notes)
-            truth = None
-            # in pieces: the tracker's working arrays stay a piece long (the estimates are
-            # the same however the samples are cut), the reference rates and the specific
-            # force made per piece
-            batches = replay_chunks(batch, ref, REPLAY_CHUNK, gravity)
-        keep, json_sel = _kept_rows(args, batch.t) if not args.sim else (None, None)
-        tr = run_tracker(tracker, batches, rows=keep)
-        if not args.sim and not args.causal:
-            tr = smooth_tracked(tracker, tr, batch.temperature)
+        tracker, replay, source = _replay(args, notes)
+        truth = None
+        with replay:
+            keep, json_sel = _kept_rows(args, replay.t)
+            # in pieces: the tracker's working arrays stay a piece long (the estimates are the
+            # same however the samples are cut), the readings read back from the temporary
+            # file, the reference rates and still flags made per piece
+            tr = run_tracker(tracker, replay.batches(REPLAY_CHUNK, keep), rows=keep)
+            if not args.causal:
+                tr = smooth_tracked(tracker, tr, replay.kept_temperature(), at_rows=True)
         notes += tracker_notes(tracker)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
@@ -641,15 +662,15 @@ def run(args: argparse.Namespace) -> int:
         still = np.logical_or.reduceat(tr.still, np.concatenate([[0], rows[:-1] + 1])) \
             if every is not None else tr.still
         doc: dict[str, Any] = {
-            "t": lambda: tr.t[at].tolist(),
-            "bias": lambda: tr.bias[at].tolist(),
-            "bias_std": lambda: tr.bias_std[at].tolist(),
-            "still": lambda: still.tolist(),
+            "t": lambda: tr.t[at],
+            "bias": lambda: tr.bias[at],
+            "bias_std": lambda: tr.bias_std[at],
+            "still": lambda: still,
         }
         if every is not None:
             doc["decimated_every_s"] = lambda: every
-        text = json_text(doc)
-        emit_text(text, args.out, force=args.force)
+        # written in pieces: the Python objects of a few thousand rows at a time
+        emit_text(json_pieces(doc), args.out, force=args.force)
     if not args.json:
         print(_summary(tr, args.rows, source, truth))
     return 0

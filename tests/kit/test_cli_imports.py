@@ -80,7 +80,7 @@ STATS_PROBE = (
 )
 
 
-def test_estimate_and_noise_do_not_import_scipy_stats(tmp_path):
+def test_analysis_commands_do_not_import_scipy_stats(tmp_path):
     """Only the chi-square tail is needed, which scipy.special has (issue 16: scipy.stats costs
     seconds to import on a Pi); estimate's default method does not import scipy.optimize."""
     rec = tmp_path / "rec"
@@ -88,7 +88,7 @@ def test_estimate_and_noise_do_not_import_scipy_stats(tmp_path):
 
     assert main(["simulate-recording", str(rec), "--turns", "1", "--rest", "2"]) == 0
     for argv in (["estimate", str(rec)], ["noise", str(rec), "--span", "all", "--min-tau",
-                                            "0.005"]):
+                                            "0.005"], ["track", str(rec), "--every", "1"]):
         out = subprocess.run([sys.executable, "-c", STATS_PROBE, *argv], capture_output=True,
                              text=True, timeout=120, check=True)
         code, stats, optimize = out.stdout.split()

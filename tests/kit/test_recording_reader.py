@@ -104,6 +104,8 @@ def test_a_bad_row_is_named_by_file_and_line(tmp_path, block_bytes, row, message
     write_rec(tmp_path / "r", lines)
     with pytest.raises(RecordingError, match=message.format(line=where + 2)):
         load_recording(tmp_path / "r")
+    with pytest.raises(RecordingError, match=message.format(line=where + 2)):
+        list(iter_imu(tmp_path / "r"))  # the streaming reader (noise, track) names it alike
 
 
 @pytest.mark.parametrize("where", [1, 250, 499])
@@ -294,3 +296,42 @@ def test_the_parser_choice(monkeypatch):
     with pytest.raises(InputError,
                        match="GYROCAL_CSV_PARSER is 'fastest'; use auto, numpy or pandas"):
         recording._choose_parser(1)
+
+
+def _with_accel(lines, rng, empty_every=5):
+    """``lines`` with three more columns (a reader that knows only ``t,gx,gy,gz,temp`` must
+    check and skip them): numbers, or all three empty on every ``empty_every``-th row."""
+    out = []
+    for i, line in enumerate(lines):
+        acc = ",," if i % empty_every == 0 else ",".join(
+            repr(float(v)) for v in rng.normal(scale=9.8, size=3))
+        out.append(line + "," + acc)
+    return out
+
+
+def test_the_stream_reads_past_extra_trailing_columns(tmp_path, block_bytes):
+    lines, t, rate, temp = make_rows(400, seed=3)
+    write_rec(tmp_path / "r", _with_accel(lines, np.random.default_rng(4)))
+    path = tmp_path / "r" / "imu.csv"
+    path.write_text(path.read_text().replace("t,gx,gy,gz,temp\n", "t,gx,gy,gz,temp,ax,ay,az\n"))
+    warns = []
+    got = list(iter_imu(tmp_path / "r", warns))
+    truth = np.array([[float(f) if f.strip() else np.nan for f in x.split(",")] for x in lines])
+    np.testing.assert_array_equal(np.concatenate([g[0] for g in got]), truth[:, 0])
+    np.testing.assert_array_equal(np.concatenate([g[1] for g in got]), truth[:, 1:4])
+    np.testing.assert_array_equal(np.concatenate([g[2] for g in got]), truth[:, 4])
+    assert warns == []
+    # the extra columns are checked all the same: a bad field, a missing field, an empty gyro
+    for bad, message in (("{t},1,2,3,4,5,x,6", "field 7 is 'x', not a number"),
+                         ("{t},1,2,3,4,5,6", "expected 8 comma-separated fields, got 7"),
+                         ("{t},1,,3,4,5,6,7", "field 3 is '', not a number"),
+                         ("{t},1,2,3,4,5,6,inf", "field 8 is 'inf'")):
+        text = path.read_text().split("\n")
+        text[150] = bad.format(t=repr(float(t[148])))
+        path.write_text("\n".join(text))
+        with pytest.raises(RecordingError, match=f"imu.csv:151: {message}"):
+            list(iter_imu(tmp_path / "r"))
+    # a header that renames a gyro column is still refused
+    path.write_text("t,gx,gy,gq,temp,ax\n" + "\n".join(text[1:]))
+    with pytest.raises(RecordingError, match="header is"):
+        list(iter_imu(tmp_path / "r"))
