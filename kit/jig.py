@@ -375,7 +375,7 @@ def _writers(cfg: Any, args: argparse.Namespace, jig: Jig, plan: Any, noise_std:
                 "address": cfg.imus()[k]["address"], "bus": cfg.imus()[k]["bus"]}}
             writers.append(RecordingWriter(d, sensor=sensor, gimbal=gimbal_info,
                                            protocol=protocol, truth=truth, force=args.force,
-                                           extra=extra))
+                                           extra=extra, accel=True))
     except BaseException:
         for w in writers:
             w.close()
