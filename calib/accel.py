@@ -408,11 +408,11 @@ def still_means(t: Any, accel: Any, spans: Any, *, min_samples: int = 10
     if not np.all(np.isfinite(means)):
         raise CalibInputError("accel holds non-finite readings inside the still windows")
     count = (hi - lo)[used]
-    noise = np.array([diff_noise(a[lo[i]:hi[i]]) for i in used]).reshape(-1, 3)
+    # a noise-free (simulated) reading still gets a positive weight
+    noise = np.maximum(np.array([diff_noise(a[lo[i]:hi[i]]) for i in used]).reshape(-1, 3),
+                       1e-12)
     if used.size > 1:
         noise, _ = pool_noise(noise, count)
-    # a noise-free (simulated) reading still gets a positive weight
-    noise = np.maximum(noise, 1e-12)
     return means, noise / np.sqrt(count)[:, None], used
 
 
