@@ -29,12 +29,12 @@ from gyrocal.drivers.emulated.motion import FunctionMotion
 from gyrocal.drivers.imu import open_imu
 
 # model -> (address, odr_hz, FIFO knob in the chip's unit: about 16 samples)
-CHIPS = {
-    "mpu9250": (0x68, 1000.0, 128),
+CHIPS = {  # FIFO capacities in samples: 16, 12, 18, 16, 12 (14-byte frames, 3 words a sample)
+    "mpu9250": (0x68, 1000.0, 16 * 14),
     "lsm9ds1": (0x6B, 952.0, 12),
-    "icm20948": (0x68, 1125.0, 144),
+    "icm20948": (0x68, 1125.0, 18 * 14),
     "icm42688p": (0x68, 1000.0, 256),
-    "lsm6dsox": (0x6A, 1 / (48 * 25e-6), 24),
+    "lsm6dsox": (0x6A, 1 / (48 * 25e-6), 12 * 3),
 }
 
 

@@ -57,6 +57,7 @@ from gyrocal.calib.design import sphere_points
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.estimators import matrix_in_frame
 from gyrocal.calib.model import Consistency, _refuse_unknown
+from gyrocal.calib.observations import diff_noise, pool_noise
 from gyrocal.calib.validation import scalar
 
 __all__ = [
@@ -72,6 +73,7 @@ __all__ = [
     "gravity_tour",
     "normal_gravity",
     "six_position",
+    "still_means",
     "tour_gravity",
     "in_frame",
 ]
@@ -363,6 +365,55 @@ def fit_accelerometer(
     return AccelCalibration(matrix, bias, covariance, g,
                             Consistency(chi2, dof, pv, pv >= CONSISTENCY_LEVEL), n,
                             int(res.nfev), bool(res.status > 0))
+
+
+def still_means(t: Any, accel: Any, spans: Any, *, min_samples: int = 10
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each still window's mean accelerometer reading and the standard deviation of that mean,
+    the observations :func:`fit_accelerometer` takes.
+
+    The readings are averaged first (the design's rule 1). A window's per-sample noise is
+    estimated from first differences (:func:`~gyrocal.calib.observations.diff_noise`, blind to
+    slow drift) and pooled over the windows when they agree (Bartlett's test,
+    :func:`~gyrocal.calib.observations.pool_noise`); the mean's standard deviation is that over
+    the square root of the window's sample count (white noise).
+
+    Parameters
+    ----------
+    t : (N,) array_like
+        Sample times, non-decreasing.
+    accel : (N, 3) array_like
+        Readings, m/s².
+    spans : (K, 2) array_like
+        ``[start, end]`` of each still window on the same clock (both ends included).
+    min_samples : int
+        Windows with fewer samples are left out.
+
+    Returns
+    -------
+    means : (M, 3) ndarray
+    mean_std : (M, 3) ndarray
+    used : (M,) ndarray of int
+        Indices into ``spans`` of the windows kept.
+    """
+    tt = np.asarray(t, dtype=float).reshape(-1)
+    a = np.asarray(accel, dtype=float)
+    if a.shape != (tt.size, 3):
+        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
+    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
+    lo = np.searchsorted(tt, sp[:, 0], side="left")
+    hi = np.searchsorted(tt, sp[:, 1], side="right")
+    used = np.flatnonzero(hi - lo >= max(int(min_samples), 3))
+    means = np.array([a[lo[i]:hi[i]].mean(axis=0) for i in used]).reshape(-1, 3)
+    if not np.all(np.isfinite(means)):
+        raise CalibInputError("accel holds non-finite readings inside the still windows")
+    count = (hi - lo)[used]
+    # a noise-free (simulated) reading still gets a positive weight
+    noise = np.maximum(np.array([diff_noise(a[lo[i]:hi[i]]) for i in used]).reshape(-1, 3),
+                       1e-12)
+    if used.size > 1:
+        noise, _ = pool_noise(noise, count)
+    return means, noise / np.sqrt(count)[:, None], used
 
 
 def _entries(m: np.ndarray) -> np.ndarray:

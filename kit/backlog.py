@@ -148,8 +148,8 @@ class Backlog:
         self.high_water = max(self.high_water, self._queue.qsize())
 
     def put_samples(self, imu: Any, encoder: tuple[float, Any, np.ndarray]) -> None:
-        """One loop iteration: ``imu`` ``(t, rate, temperature_c)`` or None (one sensor), or a
-        list of them, one per sensor (the writer's ``append_imus``); and ``encoder``
+        """One loop iteration: ``imu`` ``(t, rate, temperature_c, accel)`` or None (one
+        sensor), or a list of them, one per sensor (the writer's ``append_imus``); and ``encoder``
         ``(t, ids, angles)``."""
         self._put(("samples", imu, encoder))
 

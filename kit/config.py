@@ -155,6 +155,20 @@ SCHEMA: dict[str, dict[str, Key]] = {
                       check=_within(0.1, 600, zero="planned")),
         "method": Key(METHODS[0], "estimator", str, METHODS),
     },
+    "accelerometer": {
+        # the accelerometer is fitted to |f| = g on the rests (calib.accel): the local gravity
+        # magnitude is an input; standard gravity is off the local value by up to 0.3 %, which
+        # the fit then puts into the scales
+        "gravity_m_s2": Key(9.80665, "local gravity magnitude for the accelerometer fit, m/s^2 "
+                            "(9.7..9.9; default standard gravity 9.80665; 0: WGS-84 normal "
+                            "gravity at latitude_deg and height_m)", (int, float),
+                            check=_within(9.7, 9.9, zero="from latitude_deg and height_m")),
+        "latitude_deg": Key(0.0, "geodetic latitude of the jig, degrees (-90..90; used when "
+                            "gravity_m_s2 = 0)", (int, float), check=_within(-90, 90)),
+        "height_m": Key(0.0, "height of the jig above the WGS-84 ellipsoid, m (-1000..20000; "
+                        "used when gravity_m_s2 = 0)", (int, float),
+                        check=_within(-1000, 20000)),
+    },
     "history": {
         "url": Key("", "calibration history (kit/history.py): sqlite:///PATH or "
                    "postgresql://USER@HOST/DB; calibrate stores every calibration there "

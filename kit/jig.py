@@ -362,20 +362,24 @@ def _still_noise(jig: Jig) -> float | None:
 def _writers(cfg: Any, args: argparse.Namespace, jig: Jig, plan: Any, noise_std: float | None,
              rec_dir: Path) -> Any:
     """A RecordingWriter, or with several sensors a RecordingGroup of one per sensor."""
+    from gyrocal.kit.pipeline import local_gravity
     from gyrocal.kit.plate import RecordingGroup
     from gyrocal.kit.recording import RecordingWriter
 
     dirs = recording_dirs(jig, rec_dir)
+    # the local gravity the accelerometer is fitted against, from [accelerometer]
+    gravity, source = local_gravity(cfg["accelerometer"])
+    site = {"site": {"gravity_m_s2": gravity, "gravity_from": source}}
     writers = []
     try:
         for k, d in enumerate(dirs):
             sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std, k)
-            extra = None if len(dirs) == 1 else {"plate": {
+            extra = site if len(dirs) == 1 else {**site, "plate": {
                 "sensor": jig.names[k], "sensors": list(jig.names),
                 "address": cfg.imus()[k]["address"], "bus": cfg.imus()[k]["bus"]}}
             writers.append(RecordingWriter(d, sensor=sensor, gimbal=gimbal_info,
                                            protocol=protocol, truth=truth, force=args.force,
-                                           extra=extra))
+                                           extra=extra, accel=True))
     except BaseException:
         for w in writers:
             w.close()

@@ -4,6 +4,13 @@ With the method ``auto`` (the default) the full model ``g = A (m + b)`` is fitte
 recording's poses determine it (hardware_docs/method.md §9); otherwise the paper's diagonal model
 is fitted with the paired-axis estimator, and the estimate carries a note saying that cross-axis
 terms were not calibrated and how large the error they leave can be.
+
+When the recording's ``imu.csv`` has the accelerometer's columns, the same run's still windows
+(the rests, held in the orientations the protocol's poses give) are the accelerometer's
+observations: each window's mean reading must have the magnitude of the local gravity, and
+:func:`gyrocal.calib.accel.fit_accelerometer` fits scale, cross-axis and bias to them, with
+standard deviations and the χ² verdict, into the calibration's ``accelerometer``. Too few
+distinct orientations give a note instead (the planner's gravity tour supplies them).
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrocal.calib.accel import AccelCalibration
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.estimators import FitResult, estimate
 from gyrocal.calib.model import GyroCalibration
@@ -30,6 +38,8 @@ __all__ = [
     "check_plausible",
     "estimate_recording",
     "extract_recording",
+    "fit_recording_accelerometer",
+    "local_gravity",
 ]
 
 #: Scale factors a real MEMS gyro calibration can have: datasheet sensitivity tolerances are a
@@ -140,10 +150,64 @@ def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
         raise InputError(f"{path}: {exc}") from None
 
 
+def local_gravity(section: Mapping[str, Any]) -> tuple[float, str]:
+    """The local gravity magnitude (m/s²) from the config's ``[accelerometer]`` keys, and where
+    it came from: ``gravity_m_s2`` as given (standard gravity by default), or with
+    ``gravity_m_s2 = 0`` the WGS-84 normal gravity at ``latitude_deg`` and ``height_m``
+    (:func:`gyrocal.calib.accel.normal_gravity`, NIMA TR8350.2 Eqs. 4-1 and 4-3)."""
+    from gyrocal.calib.accel import STANDARD_GRAVITY, normal_gravity
+
+    g = float(section.get("gravity_m_s2", STANDARD_GRAVITY))
+    if g:
+        return g, ("standard gravity" if g == STANDARD_GRAVITY else "configured")
+    lat, h = float(section.get("latitude_deg", 0.0)), float(section.get("height_m", 0.0))
+    return normal_gravity(lat, h), f"WGS-84 normal gravity at {lat:g}°, {h:g} m"
+
+
+def recording_gravity(rec: Recording) -> float:
+    """The gravity magnitude the recording's manifest gives (``site.gravity_m_s2``, written by
+    the runner from the config), else standard gravity."""
+    from gyrocal.calib.accel import STANDARD_GRAVITY
+
+    site = rec.manifest.get("site")
+    g = site.get("gravity_m_s2") if isinstance(site, Mapping) else None
+    if isinstance(g, (int, float)) and not isinstance(g, bool) and 9.7 <= g <= 9.9:
+        return float(g)
+    return STANDARD_GRAVITY
+
+
+def fit_recording_accelerometer(
+    rec: Recording, ex: ExtractedWindows, gravity_m_s2: float
+) -> tuple[AccelCalibration | None, str | None]:
+    """Fit the accelerometer to the recording's still windows (module docstring).
+
+    Returns
+    -------
+    (AccelCalibration, None)
+        When the recording has accelerometer columns and its rests determine the fit;
+    (None, note)
+        with what is missing otherwise (``(None, None)`` for a recording without the columns).
+    """
+    from gyrocal.calib.accel import fit_accelerometer, still_means
+
+    if rec.imu_accel is None:
+        return None, None
+    spans = [(w.corners[0], w.corners[3]) for w in ex.rests]
+    try:
+        means, mean_std, _ = still_means(rec.imu_t, rec.imu_accel, spans)
+        return fit_accelerometer(means, mean_std, gravity_m_s2), None
+    except CalibInputError as exc:
+        return None, (f"the accelerometer was NOT calibrated: {exc} (a protocol with the "
+                      "gravity tour holds the sensor in enough orientations)")
+
+
 def estimate_recording(
-    rec: Recording, method: str = AUTO, *, source: str | None = None
+    rec: Recording, method: str = AUTO, *, source: str | None = None,
+    gravity_m_s2: float | None = None,
 ) -> Estimate:
-    """Window a recording and fit it with ``method`` (``auto``: module docstring).
+    """Window a recording and fit it with ``method`` (``auto``: module docstring); with the
+    accelerometer's columns, fit the accelerometer too against ``gravity_m_s2`` (by default
+    the manifest's ``site.gravity_m_s2``, else standard gravity).
 
     Raises
     ------
@@ -162,6 +226,12 @@ def estimate_recording(
         created=now_iso(),
         source=source if source is not None else str(rec.path),
     )
+    g = recording_gravity(rec) if gravity_m_s2 is None else gravity_m_s2
+    accel, accel_note = fit_recording_accelerometer(rec, ex, g)
+    if accel is not None:
+        cal = replace(cal, accelerometer=accel)
+    if accel_note is not None:
+        notes = (*notes, accel_note)
     from gyrocal.kit.thermal import scale_drift_note
 
     drift = scale_drift_note(rec.imu_t, rec.imu_temp, ex.windows, cal, rec.sensor.get("model"))

@@ -64,7 +64,7 @@ class RecordingGroup:
         return [w for k, w in enumerate(self.writers) if k not in self.failed]
 
     def append_imus(self, rows: Sequence[Any]) -> None:
-        """One loop iteration's gyro rows: ``(t, rate, temperature_c)`` or None per sensor."""
+        """One loop iteration's rows: ``(t, rate, temperature_c, accel)`` or None per sensor."""
         for k, (w, r) in enumerate(zip(self.writers, rows, strict=True)):
             if r is not None and k not in self.failed:
                 w.append_imu(*r)

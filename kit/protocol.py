@@ -285,7 +285,7 @@ class Runner:
         rows = None
         if len(batch):
             t = batch.t - self.t0
-            rows = (t, batch.rate, batch.temperature_c)
+            rows = (t, batch.rate, batch.temperature_c, batch.accel)
             if k == min(set(range(len(self.imus))) - set(self.failed)):
                 self.last_rate = batch.rate[-1]
             if d is not None:

@@ -5,7 +5,10 @@
     "complete", "truth"?}``
 ``imu.csv``
     ``t,gx,gy,gz,temp``: seconds on the recording clock; rad/s with the datasheet sensitivity only;
-    °C or empty.
+    °C or empty. Optionally three trailing columns ``ax,ay,az`` (header
+    ``t,gx,gy,gz,temp,ax,ay,az``): the accelerometer's specific force of the same sample in m/s²,
+    sensor frame, datasheet sensitivity times standard gravity and nothing else. A recording
+    without them is as valid; readers accept both.
 ``encoder.csv``
     ``t,motor,angle``: the cumulative, unwrapped shaft angle of servo ``motor`` in rad.
 ``segments.csv``
@@ -55,6 +58,10 @@ __all__ = [
 FORMAT = "gyrocal-recording"
 VERSION = 1
 IMU_HEADER = "t,gx,gy,gz,temp"
+#: The header of an ``imu.csv`` with the accelerometer's optional columns.
+IMU_HEADER_ACCEL = IMU_HEADER + ",ax,ay,az"
+#: Column of the temperature, the one field of an imu.csv row that may be empty.
+_TEMP_COL = 4
 ENCODER_HEADER = "t,motor,angle"
 SEGMENTS_HEADER = "index,kind,motor,direction,speed,t_start,t_end"
 FILES = ("manifest.json", "imu.csv", "encoder.csv", "segments.csv")
@@ -102,8 +109,11 @@ class RecordingWriter:
         force: bool = False,
         extra: Mapping[str, Any] | None = None,
         created: str | None = None,
+        accel: bool = False,
     ) -> None:
         self.path = Path(path)
+        #: Whether imu.csv has the accelerometer's columns ``ax,ay,az``.
+        self.accel = bool(accel)
         if self.path.exists():
             if not self.path.is_dir():
                 raise OutputExistsError(f"{self.path} exists and is not a directory")
@@ -131,7 +141,7 @@ class RecordingWriter:
         if extra:
             self.manifest.update(dict(extra))
         self._write_manifest()
-        self._imu = self._open("imu.csv", IMU_HEADER)
+        self._imu = self._open("imu.csv", IMU_HEADER_ACCEL if self.accel else IMU_HEADER)
         self._enc = self._open("encoder.csv", ENCODER_HEADER)
         self._seg = self._open("segments.csv", SEGMENTS_HEADER)
         self._closed = False
@@ -154,9 +164,12 @@ class RecordingWriter:
         self._write_manifest()
 
     def append_imu(
-        self, t: np.ndarray, rate: np.ndarray, temperature_c: np.ndarray | None = None
+        self, t: np.ndarray, rate: np.ndarray, temperature_c: np.ndarray | None = None,
+        accel: np.ndarray | None = None,
     ) -> None:
-        """Append gyro samples: ``t`` (N,), ``rate`` (N, 3) rad/s, ``temperature_c`` (N,)."""
+        """Append samples: ``t`` (N,), ``rate`` (N, 3) rad/s, ``temperature_c`` (N,) and, in a
+        recording with the accelerometer's columns (``accel=True`` at creation), ``accel``
+        (N, 3) m/s², which such a recording requires; one without them ignores ``accel``."""
         import numpy as np
 
         t = np.asarray(t, dtype=float).reshape(-1)
@@ -165,13 +178,24 @@ class RecordingWriter:
             raise ValueError(f"append_imu: {t.size} times but {rate.shape[0]} rate rows")
         if t.size == 0:
             return
+        temp = (np.full(t.size, np.nan) if temperature_c is None
+                else np.asarray(temperature_c, dtype=float).reshape(-1))
+        cols, fmt = [t, rate, temp], "%.9f,%.10g,%.10g,%.10g,%.4f"
+        if self.accel:
+            if accel is None:
+                raise ValueError("append_imu: this recording has accelerometer columns; give "
+                                 "accel")
+            acc = np.asarray(accel, dtype=float).reshape(-1, 3)
+            if acc.shape[0] != t.size:
+                raise ValueError(f"append_imu: {t.size} times but {acc.shape[0]} accel rows")
+            cols.append(acc)
+            fmt += ",%.10g,%.10g,%.10g"
         buf = io.StringIO()
-        if temperature_c is None:
-            np.savetxt(buf, np.column_stack([t, rate]), fmt="%.9f,%.10g,%.10g,%.10g,")
-        else:
-            temp = np.asarray(temperature_c, dtype=float).reshape(-1)
-            np.savetxt(buf, np.column_stack([t, rate, temp]), fmt="%.9f,%.10g,%.10g,%.10g,%.4f")
-        self._imu.write(buf.getvalue().replace(",nan\n", ",\n"))
+        np.savetxt(buf, np.column_stack(cols), fmt=fmt)
+        text = buf.getvalue()
+        # an absent temperature is an empty field
+        text = text.replace(",nan,", ",,") if self.accel else text.replace(",nan\n", ",\n")
+        self._imu.write(text)
         self._imu.flush()
         self.n_imu += t.size
 
@@ -243,6 +267,8 @@ class Recording:
     segments : tuple of Segment
     warnings : tuple of str
         What the reader tolerated (a partial last row of an interrupted run).
+    imu_accel : ndarray (N, 3) or None
+        The accelerometer's specific force, m/s², or None when imu.csv has no ``ax,ay,az``.
     """
 
     path: Path
@@ -255,6 +281,7 @@ class Recording:
     enc_angle: np.ndarray
     segments: tuple[Segment, ...]
     warnings: tuple[str, ...] = ()
+    imu_accel: np.ndarray | None = None
 
     @property
     def complete(self) -> bool:
@@ -453,12 +480,11 @@ def _long_line(path: Path, buf: bytes, lo: int, hi: int, line_no: int) -> None:
 
 
 def _lines(
-    path: Path, header: str, max_bytes: int, warnings: list[str], *, extra: int = 0,
+    path: Path, header: str, max_bytes: int, warnings: list[str],
 ) -> Iterator[tuple[int, bytes, int]]:
     """Blocks of whole lines of a CSV file after its header.
 
     Yields ``(number of the block's first line, the block, how many lines it holds)``.
-    ``extra``: the header names that many more columns after ``header``'s (any names).
     Each block ends with a newline. A last line without one (an interrupted run) is dropped with
     a warning; a NUL byte or a line longer than :data:`MAX_LINE_BYTES` is an error.
     """
@@ -488,8 +514,7 @@ def _lines(
                 first = buf[: end if end >= 0 else MAX_LINE_BYTES].decode("ascii", "replace")
                 if not buf:
                     raise RecordingError(f"{path} is empty: expected the header {header!r}")
-                names = first.strip().split(",")
-                if ",".join(names[:len(names) - extra] if extra else names) != header:
+                if first.strip() != header:
                     raise RecordingError(
                         f"{path}: header is {_excerpt(first.strip())}, expected {header!r}"
                     )
@@ -531,10 +556,9 @@ def _split_rows(text: str, first: int, path: Path, ncols: int) -> list[list[str]
     return rows
 
 
-def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: int) -> np.ndarray:
-    """Parse ``block`` line by line; the first fault raises with its file, line and field.
-
-    ``empty_last``: how many trailing columns may be empty (NaN), True meaning one."""
+def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_col: int | None
+                 ) -> np.ndarray:
+    """Parse ``block`` line by line; the first fault raises with its file, line and field."""
     import numpy as np
 
     rows = _split_rows(block.decode("ascii", errors="replace"), first, path, ncols)
@@ -542,7 +566,7 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: i
     for r, row in enumerate(rows):
         for c, field in enumerate(row):
             s = field.strip()
-            last = c >= ncols - int(empty_last)
+            last = c == empty_col
             if s == "" and last:
                 out[r, c] = math.nan
                 continue
@@ -558,24 +582,22 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_last: i
     return out
 
 
-def _numpy_parse(block: bytes, empty_last: int) -> np.ndarray | None:
+def _numpy_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
     """A block through ``numpy.loadtxt`` (its C reader); None if it rejects the block.
 
-    Empty fields become NaN (``empty_last`` > 0); :func:`_parse_block` refuses a NaN outside
-    the last ``empty_last`` columns."""
+    Empty fields are read as NaN (only column ``empty_col`` may hold one: :func:`_parse_block`
+    checks)."""
     import numpy as np
 
-    if empty_last:
-        block = block.replace(b",\n", b",nan\n")
-        if empty_last > 1:  # empty fields inside the row, a run of them too
-            block = block.replace(b",,", b",nan,").replace(b",,", b",nan,")
+    if empty_col is not None:
+        block = block.replace(b",\n", b",nan\n").replace(b",,", b",nan,")
     try:
         return np.loadtxt(io.BytesIO(block), delimiter=",", dtype=float, comments=None, ndmin=2)
     except ValueError:
         return None
 
 
-def _pandas_parse(block: bytes, empty_last: int) -> np.ndarray | None:
+def _pandas_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
     """A block through pandas' C parser; None if it rejects the block.
 
     Only an empty field is read as missing (NaN), quotes are ordinary characters and no column
@@ -604,7 +626,7 @@ PARSERS = {"numpy": _numpy_parse, "pandas": _pandas_parse}
 FAST_MIN_BYTES = 16 << 20
 
 
-def _choose_parser(size: int) -> Callable[[bytes, bool], np.ndarray | None]:
+def _choose_parser(size: int) -> Callable[[bytes, int | None], np.ndarray | None]:
     """The block parser for a file of ``size`` bytes (see :data:`PARSERS`)."""
     import importlib.util
 
@@ -625,8 +647,8 @@ def _choose_parser(size: int) -> Callable[[bytes, bool], np.ndarray | None]:
 
 
 def _parse_block(
-    block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_last: int,
-    parse: Callable[[bytes, bool], np.ndarray | None] = _numpy_parse,
+    block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_col: int | None,
+    parse: Callable[[bytes, int | None], np.ndarray | None] = _numpy_parse,
 ) -> np.ndarray:
     """Parse a block of whole lines into an ``(n, ncols)`` array.
 
@@ -639,24 +661,21 @@ def _parse_block(
     fast = block
     if b"\r" in fast:
         fast = fast.replace(b"\r\n", b"\n")
-    out = parse(fast, empty_last)
+    out = parse(fast, empty_col)
     if (out is not None and out.shape == (nlines, ncols)
             and fast.count(b",") == nlines * (ncols - 1)):
-        k = int(empty_last)
-        head = out[:, :ncols - k]
-        if np.isfinite(head).all() and not (k and np.isinf(out[:, ncols - k:]).any()):
+        head = out if empty_col is None else np.delete(out, empty_col, axis=1)
+        if np.isfinite(head).all() and not (
+                empty_col is not None and np.isinf(out[:, empty_col]).any()):
             return out
-    return _parse_exact(block, first, path, ncols, empty_last)
+    return _parse_exact(block, first, path, ncols, empty_col)
 
 
 def _csv_blocks(
-    path: Path, header: str, ncols: int, warnings: list[str], *, empty_last: int = 0,
-    max_bytes: int = MAX_CSV_BYTES, extra: int = 0,
+    path: Path, header: str, ncols: int, warnings: list[str], *, empty_col: int | None = None,
+    max_bytes: int = MAX_CSV_BYTES,
 ) -> Iterator[np.ndarray]:
     """``(n, ncols)`` float blocks of a numeric CSV file, its first column a non-decreasing time.
-
-    ``extra`` trailing columns beyond ``header``'s are counted in ``ncols``; the last
-    ``empty_last`` columns may be empty (NaN).
 
     Raises
     ------
@@ -667,8 +686,8 @@ def _csv_blocks(
 
     last_t = -math.inf
     parse = _choose_parser(path.stat().st_size if path.is_file() else 0)
-    for first, block, nlines in _lines(path, header, max_bytes, warnings, extra=extra):
-        arr = _parse_block(block, nlines, first, path, ncols, empty_last, parse)
+    for first, block, nlines in _lines(path, header, max_bytes, warnings):
+        arr = _parse_block(block, nlines, first, path, ncols, empty_col, parse)
         if arr.shape[0] == 0:
             continue
         t = arr[:, 0]
@@ -702,7 +721,7 @@ def _count_lines(path: Path, max_bytes: int) -> int:
 
 def _read_columns(
     path: Path, header: str, widths: Sequence[int], warnings: list[str], *,
-    empty_last: int = 0,
+    empty_col: int | None = None,
 ) -> list[np.ndarray]:
     """A numeric CSV file as contiguous float64 arrays, one per group of ``widths`` columns.
 
@@ -714,25 +733,12 @@ def _read_columns(
     out = [np.empty((cap, w)) if w > 1 else np.empty(cap) for w in widths]
     edges = np.cumsum([0, *widths]).tolist()
     n = 0
-    for arr in _csv_blocks(path, header, edges[-1], warnings, empty_last=empty_last):
+    for arr in _csv_blocks(path, header, edges[-1], warnings, empty_col=empty_col):
         k = arr.shape[0]
         for a, lo, hi in zip(out, edges[:-1], edges[1:], strict=True):
             a[n:n + k] = arr[:, lo:hi] if hi - lo > 1 else arr[:, lo]
         n += k
     return [a[:n] for a in out]
-
-
-def _extra_columns(path: Path, header: str) -> int:
-    """How many columns the header line of ``path`` names after ``header``'s (0 when the file
-    cannot be read here: the reading pass says why)."""
-    try:
-        with open_regular(path, MAX_CSV_BYTES) as fh:
-            first = fh.read(MAX_LINE_BYTES).split(b"\n", 1)[0].decode("ascii", "replace")
-    except RecordingError:
-        return 0
-    names = first.strip().split(",")
-    base = header.split(",")
-    return len(names) - len(base) if len(names) > len(base) and names[:len(base)] == base else 0
 
 
 def iter_imu(
@@ -743,8 +749,8 @@ def iter_imu(
     For commands that need one pass over the samples (``noise``, ``track``): memory stays
     bounded whatever the recording's length. Every check of :func:`load_recording` applies
     (file and line of a bad row, a partial last row dropped with a warning, time going
-    backwards refused). Columns after ``temp`` (named in the header, numbers or empty) are
-    checked and left out.
+    backwards refused). The accelerometer's optional columns (``ax,ay,az``) are checked and
+    left out.
 
     Parameters
     ----------
@@ -764,11 +770,20 @@ def iter_imu(
     root = Path(path)
     read_manifest(root)
     sink: list[str] = [] if warnings is None else warnings
-    ipath = root / "imu.csv"
-    extra = _extra_columns(ipath, IMU_HEADER)
-    for arr in _csv_blocks(ipath, IMU_HEADER, 5 + extra, sink, empty_last=1 + extra,
-                           extra=extra):
+    header = imu_header(root / "imu.csv")
+    for arr in _csv_blocks(root / "imu.csv", header, header.count(",") + 1, sink,
+                           empty_col=_TEMP_COL):
         yield arr[:, 0], arr[:, 1:4], arr[:, 4]
+
+
+def imu_header(path: Path) -> str:
+    """The header of the ``imu.csv`` at ``path``: :data:`IMU_HEADER_ACCEL` when its first line
+    is that (the accelerometer's optional columns), else :data:`IMU_HEADER` (which the parser
+    then checks, naming the file if the header is neither)."""
+    with open_regular(path, MAX_CSV_BYTES) as fh:
+        first = fh.read(len(IMU_HEADER_ACCEL) + 2)
+    line = first.split(b"\n", 1)[0].strip().decode("ascii", "replace")
+    return IMU_HEADER_ACCEL if line == IMU_HEADER_ACCEL else IMU_HEADER
 
 
 def iter_encoder(
@@ -849,8 +864,14 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     root = Path(path)
     manifest = read_manifest(root)
     warnings: list[str] = []
-    t, rate, temp = _read_columns(root / "imu.csv", IMU_HEADER, (1, 3, 1), warnings,
-                                  empty_last=True)
+    header = imu_header(root / "imu.csv")
+    accel = None
+    if header == IMU_HEADER_ACCEL:
+        t, rate, temp, accel = _read_columns(root / "imu.csv", header, (1, 3, 1, 3), warnings,
+                                             empty_col=_TEMP_COL)
+    else:
+        t, rate, temp = _read_columns(root / "imu.csv", header, (1, 3, 1), warnings,
+                                      empty_col=_TEMP_COL)
     enc_t, enc_motor, enc_angle = _read_columns(root / "encoder.csv", ENCODER_HEADER, (1, 1, 1),
                                                 warnings)
     segments = read_segments(root, warnings)
@@ -865,4 +886,5 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         enc_angle=enc_angle,
         segments=segments,
         warnings=tuple(warnings),
+        imu_accel=accel,
     )

@@ -9,7 +9,7 @@ import numpy as np
 
 from gyrocal.calib.model import GyroCalibration
 
-__all__ = ["calibration_table"]
+__all__ = ["accelerometer_rows", "calibration_table"]
 
 
 def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = None) -> str:
@@ -28,7 +28,37 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
     else:
         lines += _diagonal_rows(cal, truth)
     _verdict(cal, lines)
+    if cal.accelerometer is not None:
+        lines += accelerometer_rows(cal.accelerometer, (truth or {}).get("accelerometer"))
     return "\n".join(lines)
+
+
+def accelerometer_rows(acc: Any, truth: Mapping[str, Any] | None = None) -> list[str]:
+    """The accelerometer's part of the summary: ``f = A (a + bias)`` (calib.accel) with standard
+    deviations, the gravity it was fitted against and its χ² verdict; with a simulated truth
+    (``truth.accelerometer``: ``matrix``, ``bias_m_s2``) the largest error in σ."""
+    std = acc.std
+    S = np.zeros((3, 3))
+    S[np.tril_indices(3)] = std[:6]
+    lines = ["", f"accelerometer: f = A (a + bias), m/s²; frame accel-x-xy, {acc.rests} still "
+             f"windows against gravity {acc.gravity:.5f} m/s²", ""]
+    lines.append(f"{'row':<5}" + "".join(f"{'A_' + c:>13}{'± std':>10}" for c in "xyz")
+                 + f"{'bias m/s²':>14}{'± std':>10}")
+    for j, ax in enumerate("xyz"):
+        lines.append(f"{ax:<5}" + "".join(f"{acc.matrix[j, i]:>13.6f}{S[j, i]:>10.1e}"
+                                          for i in range(3))
+                     + f"{acc.bias[j]:>14.5f}{std[6 + j]:>10.1e}")
+    if truth is not None and "matrix" in truth and "bias_m_s2" in truth:
+        il = np.tril_indices(3)
+        em = (acc.matrix - np.asarray(truth["matrix"]))[il] / std[:6]
+        eb = (acc.bias - np.asarray(truth["bias_m_s2"])) / std[6:]
+        lines.append(f"error against the simulated truth, in σ: matrix max |err/σ| = "
+                     f"{np.max(np.abs(em)):.2f}, bias " + " ".join(f"{v:+.2f}" for v in eb))
+    c = acc.consistency
+    verdict = "consistent" if c.ok else "NOT consistent"
+    lines.append(f"accelerometer consistency: {verdict} with the measured noise (chi2 = "
+                 f"{c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})")
+    return lines
 
 
 def _truth_matrix(truth: Mapping[str, Any]) -> np.ndarray:

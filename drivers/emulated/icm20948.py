@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.banks import UserBanks
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
 from gyrocal.drivers.imu.chips import ICM20948, ICM20948_BITS, ICM20948_REG, ICM20948_REG2
@@ -45,7 +46,7 @@ _READ_ONLY = frozenset(
 _GYRO_ORDER = ((_B.FIFO_EN_2_GYRO_X, 0), (_B.FIFO_EN_2_GYRO_Y, 1), (_B.FIFO_EN_2_GYRO_Z, 2))
 
 
-class EmulatedICM20948(_EmulatedImu):
+class EmulatedICM20948(UserBanks, _EmulatedImu):
     """An ICM-20948 on the I²C bus (see the module docstring for what is modelled).
 
     Parameters
@@ -61,29 +62,24 @@ class EmulatedICM20948(_EmulatedImu):
     reset_values = {_R.PWR_MGMT_1: 0x41}
     read_only = _READ_ONLY
     soft_reset = (_R.PWR_MGMT_1, _B.PWR_MGMT_1_DEVICE_RESET)
+    bank_register, bank_shift, bank_mask = _R.REG_BANK_SEL, _B.BANK_SHIFT, _B.BANK_MASK
+    other_banks = (1, 2, 3)
+    fifo_port = _R.FIFO_R_W
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
                  truth: SensorTruth | None = None, *, output_filter: bool = True,
                  **kwargs: Any) -> None:
         self.output_filter = bool(output_filter)
-        self._bank = 0
-        self._banks = {b: bytearray(128) for b in (1, 2, 3)}
+        self._reset_banks()
         super().__init__(clock, motion, truth, **kwargs)
 
-    @property
-    def bank(self) -> int:
-        """The user bank REG_BANK_SEL selects."""
-        return self._bank
-
     def _power_on_reset(self) -> None:
-        self._bank = 0
-        self._banks = {b: bytearray(128) for b in (1, 2, 3)}
+        self._reset_banks()
         self._banks[2][_R2.GYRO_CONFIG_1] = _B.GYRO_FCHOICE
         super()._power_on_reset()
 
     def _write_register(self, register: int, value: int) -> None:
-        if register == _R.REG_BANK_SEL:
-            self._bank = (value & _B.BANK_MASK) >> _B.BANK_SHIFT
+        if self._select_bank(register, value):
             return
         if not self._bank:
             super()._write_register(register, value)
@@ -172,26 +168,17 @@ class EmulatedICM20948(_EmulatedImu):
 
     # -- registers ------------------------------------------------------------------------------
 
-    def _next_pointer(self, register: int) -> int:
-        if register == _R.FIFO_R_W and not self._bank:
-            return register  # a data port
-        return super()._next_pointer(register)
+    def _popped(self, data: bytes) -> None:
+        if data:
+            self._fifo_last = data[-1]
 
-    def _read_fast(self, length: int) -> bytes | None:
-        if self._ptr != _R.FIFO_R_W or self._bank:
-            return None
-        take = min(length, len(self._fifo))
-        out = bytes(self._fifo[:take])
-        del self._fifo[:take]
-        if take:
-            self._fifo_last = out[-1]
-        return out + bytes([self._fifo_last]) * (length - take)
+    def _fifo_fill(self) -> int:
+        return self._fifo_last  # an empty FIFO repeats the last byte read
 
     def _read_register(self, register: int) -> int:
-        if register == _R.REG_BANK_SEL:
-            return self._bank << _B.BANK_SHIFT
-        if self._bank:
-            return self._banks[self._bank][register]
+        banked = self._banked_read(register)
+        if banked is not None:
+            return banked
         r = _R
         if register == r.WHO_AM_I:
             return self.who_am_i
@@ -207,7 +194,7 @@ class EmulatedICM20948(_EmulatedImu):
             self._latched = None
             return count & 0xFF
         if register == r.FIFO_R_W:
-            return self._read_fast(1)[0]  # type: ignore[index]
+            return self._read_port_byte()
         if r.ACCEL_XOUT_H <= register < r.TEMP_OUT_H + 2:
             s = self._latest
             words = np.concatenate((s.accel, s.gyro, [s.temp])).astype(">i2").tobytes()

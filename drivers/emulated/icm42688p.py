@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.clock import Clock
+from gyrocal.drivers.emulated.banks import UserBanks
 from gyrocal.drivers.emulated.imu_chips import EmulatedLSM9DS1, SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
 from gyrocal.drivers.imu.chips import (
@@ -69,7 +70,7 @@ _READ_ONLY = frozenset(
 _ACCEL_FS_G = {0: 16, 1: 8, 2: 4, 3: 2}
 
 
-class EmulatedICM42688P(_EmulatedImu):
+class EmulatedICM42688P(UserBanks, _EmulatedImu):
     """An ICM-42688-P on the I²C bus (see the module docstring for what is modelled).
 
     Parameters
@@ -86,23 +87,19 @@ class EmulatedICM42688P(_EmulatedImu):
     reset_values = _RESET
     read_only = _READ_ONLY
     soft_reset = (_R.DEVICE_CONFIG, _B.DEVICE_CONFIG_SOFT_RESET)
+    bank_register, bank_mask, other_banks = _R.REG_BANK_SEL, 0x07, (1, 2, 3, 4)
+    fifo_port = _R.FIFO_DATA
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
                  truth: SensorTruth | None = None, *, output_filter: bool = True,
                  **kwargs: Any) -> None:
         self.output_filter = bool(output_filter)
         self._lpf: tuple[float, np.ndarray] | None = None
-        self._bank = 0
-        self._banks = {b: bytearray(128) for b in range(1, 5)}
+        self._reset_banks()
         self._power_on_t = clock.monotonic()
         super().__init__(clock, motion, truth, **kwargs)
 
     # -- banks, reset ---------------------------------------------------------------------------
-
-    @property
-    def bank(self) -> int:
-        """The user bank REG_BANK_SEL selects."""
-        return self._bank
 
     def _power_on_reset(self) -> None:
         self._bank = 0
@@ -110,8 +107,7 @@ class EmulatedICM42688P(_EmulatedImu):
         super()._power_on_reset()
 
     def _write_register(self, register: int, value: int) -> None:
-        if register == _R.REG_BANK_SEL:
-            self._bank = value & 0x07
+        if self._select_bank(register, value):
             return
         if self._bank:
             if self._bank in self._banks:
@@ -263,20 +259,6 @@ class EmulatedICM42688P(_EmulatedImu):
 
     # -- registers ------------------------------------------------------------------------------
 
-    def _next_pointer(self, register: int) -> int:
-        # FIFO_DATA is a data port: a burst that reaches it keeps popping the FIFO
-        if register == _R.FIFO_DATA and not self._bank:
-            return register
-        return super()._next_pointer(register)
-
-    def _read_fast(self, length: int) -> bytes | None:
-        if self._ptr != _R.FIFO_DATA or self._bank:
-            return None
-        take = min(length, len(self._fifo))
-        out = bytes(self._fifo[:take])
-        del self._fifo[:take]
-        return out + b"\xff" * (length - take)
-
     def _count(self) -> int:
         n = len(self._fifo)
         if self._regs[_R.INTF_CONFIG0] & _B.INTF_CONFIG0_FIFO_COUNT_REC:
@@ -284,12 +266,10 @@ class EmulatedICM42688P(_EmulatedImu):
         return n
 
     def _read_register(self, register: int) -> int:
-        if self._bank:
-            return self._bank if register == _R.REG_BANK_SEL else (
-                self._banks.get(self._bank, bytearray(128))[register])
+        banked = self._banked_read(register)
+        if banked is not None:
+            return banked
         r = _R
-        if register == r.REG_BANK_SEL:
-            return 0
         if register == r.WHO_AM_I:
             return self.who_am_i
         if register == r.INT_STATUS:
@@ -306,7 +286,7 @@ class EmulatedICM42688P(_EmulatedImu):
             high = register == r.FIFO_COUNTH
             return (count >> 8) & 0xFF if high else count & 0xFF
         if register == r.FIFO_DATA:
-            return self._read_fast(1)[0]  # type: ignore[index]
+            return self._read_port_byte()
         if r.TEMP_DATA1 <= register < r.GYRO_DATA_X1 + 6:
             s = self._latest
             reg_lsb = self.family.extra["register_temperature_lsb_per_c"]

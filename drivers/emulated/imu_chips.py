@@ -525,8 +525,9 @@ class _EmulatedImu(ABC):
         """The configured gyro sensitivity."""
 
     @abstractmethod
-    def _accel_counts_1g(self) -> int:
-        """Accelerometer counts of 1 g at the configured range."""
+    def _accel_counts_1g(self) -> float:
+        """Accelerometer counts of 1 g at the configured range (the datasheet sensitivity,
+        unrounded)."""
 
     def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
         """Temperature register counts for temperatures in °C (§1.6, §2.5)."""
@@ -1161,9 +1162,9 @@ class EmulatedLSM9DS1(_EmulatedImu):
                 return g.sensitivity_rad_s_per_lsb
         return self.family.gyro_ranges[0].sensitivity_rad_s_per_lsb  # FS_G = 10: not available
 
-    def _accel_counts_1g(self) -> int:
+    def _accel_counts_1g(self) -> float:
         fs = (self._regs[_LR.CTRL_REG6_XL] >> _LB.FS_XL_SHIFT) & 0x03
-        return round(1000.0 / _LSM_ACCEL_MG_PER_LSB[fs])
+        return 1000.0 / _LSM_ACCEL_MG_PER_LSB[fs]
 
     def _word(self, value: int) -> bytes:
         order = "big" if self._regs[_LR.CTRL_REG8] & _LB.CTRL_REG8_BLE else "little"

@@ -16,15 +16,16 @@ What it models:
   reset (TIMESTAMP0..3, 0x40, little-endian); the sample period is a whole number of LSBs.
 - The tagged FIFO (512 words of 7 bytes ⚠): while FIFO_CTRL4.FIFO_MODE is not bypass and
   FIFO_CTRL3.BDR_GY is set, each gyro sample writes (if FIFO_CTRL4.DEC_TS_BATCH = 01 and the
-  timestamp is on) a TIMESTAMP word (tag 0x04; bytes 1-4 the timestamp, little-endian) and then
-  a GYRO_NC word (tag 0x01; X, Y, Z little-endian). The tag byte is TAG_SENSOR << 3 | TAG_CNT
-  << 1 (TAG_CNT counts the time slots modulo 4; the parity bit is left 0 ⚠). The batch rate is
-  taken to be the ODR (the chip's decimation by BDR_GY < ODR is not modelled). FIFO mode (001)
-  stops when full, continuous (110) drops the oldest word; a lost word sets FIFO_OVR_IA while it
-  lasts and FIFO_OVR_LATCHED until FIFO_STATUS2 is read; FIFO_FULL_IA is set while the FIFO is
-  full. Bypass empties it. FIFO_STATUS1/2 give DIFF_FIFO (10 bits, words). Reading
-  FIFO_DATA_OUT_Z_H (0x7E) pops a word, and with IF_INC the address wraps from 0x7E to 0x78 so
-  a burst reads word after word (⚠ the kernel reads four words per transfer this way).
+  timestamp is on) a TIMESTAMP word (tag 0x04; bytes 1-4 the timestamp, little-endian), then a
+  GYRO_NC word (tag 0x01; X, Y, Z little-endian) and, if FIFO_CTRL3.BDR_XL is set and the
+  accelerometer is on, an XL_NC word (tag 0x02) of the same sample (AN5272 §9). The tag byte is
+  TAG_SENSOR << 3 | TAG_CNT << 1 (TAG_CNT counts the time slots modulo 4; the parity bit is left 0
+  ⚠). The batch rate is taken to be the ODR (the chip's decimation by BDR_GY < ODR is not modelled).
+  FIFO mode (001) stops when full, continuous (110) drops the oldest word; a lost word sets
+  FIFO_OVR_IA while it lasts and FIFO_OVR_LATCHED until FIFO_STATUS2 is read; FIFO_FULL_IA is set
+  while the FIFO is full. Bypass empties it. FIFO_STATUS1/2 give DIFF_FIFO (10 bits, words). Reading
+  FIFO_DATA_OUT_Z_H (0x7E) pops a word, and with IF_INC the address wraps from 0x7E to 0x78 so a
+  burst reads word after word (⚠ the kernel reads four words per transfer this way).
 - No output low-pass is emulated (the gyro chain's bandwidth with LPF1 off is not transcribed ⚠).
 """
 
@@ -116,10 +117,10 @@ class EmulatedLSM6DSOX(_EmulatedImu):
         code = 0b100 if ctrl2 & _B.FS_125 else (ctrl2 & _B.FS_G_MASK) >> _B.FS_G_SHIFT
         return next(g for g in self.family.gyro_ranges if g.code == code).sensitivity_rad_s_per_lsb
 
-    def _accel_counts_1g(self) -> int:
+    def _accel_counts_1g(self) -> float:
         if not self._regs[_R.CTRL1_XL] >> _B.ODR_SHIFT:
-            return 0
-        return round(1000.0 / _ACCEL_MG_PER_LSB[(self._regs[_R.CTRL1_XL] >> _B.FS_XL_SHIFT) & 3])
+            return 0.0
+        return 1000.0 / _ACCEL_MG_PER_LSB[(self._regs[_R.CTRL1_XL] >> _B.FS_XL_SHIFT) & 3]
 
     def timestamp_lsb(self, k: np.ndarray) -> np.ndarray:
         """The timestamps (25 µs LSBs, modulo 2^32) of samples ``k`` of the current grid."""
@@ -146,8 +147,12 @@ class EmulatedLSM6DSOX(_EmulatedImu):
         return dec == _B.DEC_TS_EVERY_BATCH and bool(
             self._regs[_R.CTRL10_C] & _B.CTRL10_C_TIMESTAMP_EN)
 
+    def _with_accel(self) -> bool:
+        return bool(self._regs[_R.FIFO_CTRL3] & 0x0F) and bool(
+            self._regs[_R.CTRL1_XL] >> _B.ODR_SHIFT)
+
     def _words_per_sample(self) -> int:
-        return 2 if self._with_timestamps() else 1
+        return 1 + self._with_timestamps() + self._with_accel()
 
     def _head_tail(self, n: int) -> tuple[int, int]:
         if not self._fifo_on():
@@ -157,9 +162,10 @@ class EmulatedLSM6DSOX(_EmulatedImu):
             return max(0, self.fifo_capacity - len(self._fifo)) // per + 2, 1
         return 0, self.fifo_capacity // per + 2
 
-    def _words(self, gyro: np.ndarray, ks: np.ndarray) -> list[bytes]:
+    def _words(self, gyro: np.ndarray, accel: np.ndarray, ks: np.ndarray) -> list[bytes]:
         out = []
         stamps = self.timestamp_lsb(ks) if self._with_timestamps() else None
+        with_accel = self._with_accel()
         for i in range(gyro.shape[0]):
             cnt = (self._slot & 3) << 1
             self._slot += 1
@@ -168,6 +174,9 @@ class EmulatedLSM6DSOX(_EmulatedImu):
                 out.append(bytes([(_B.TAG_TIMESTAMP << _B.TAG_SENSOR_SHIFT) | cnt]) + ts)
             data = gyro[i].astype("<i2").tobytes()
             out.append(bytes([(_B.TAG_GYRO << _B.TAG_SENSOR_SHIFT) | cnt]) + data)
+            if with_accel:
+                data = accel[i].astype("<i2").tobytes()
+                out.append(bytes([(_B.TAG_ACCEL << _B.TAG_SENSOR_SHIFT) | cnt]) + data)
         return out
 
     def _push(self, words: list[bytes]) -> None:
@@ -188,11 +197,11 @@ class EmulatedLSM6DSOX(_EmulatedImu):
         k_end = self._k + n + skipped  # _k is still the last sample of the previous sync
         ks = np.concatenate((np.arange(self._k + 1, self._k + 1 + head),
                              np.arange(k_end - (n - head) + 1, k_end + 1)))
-        self._push(self._words(gyro[:head], ks[:head]))
+        self._push(self._words(gyro[:head], accel[:head], ks[:head]))
         if skipped:  # dropped or overwritten
             self._slot += skipped
             self._push([b"\xff" * 7] * (skipped * self._words_per_sample()))
-        self._push(self._words(gyro[head:], ks[head:]))
+        self._push(self._words(gyro[head:], accel[head:], ks[head:]))
 
     def _pop(self) -> None:
         if self._fifo:

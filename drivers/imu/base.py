@@ -30,7 +30,7 @@ import numpy as np
 
 from gyrocal.drivers.clock import Clock, SystemClock
 from gyrocal.drivers.errors import BusError, ConfigurationError, DeviceIdentityError
-from gyrocal.drivers.imu.chips import ChipFamily, ChipModel, GyroRange
+from gyrocal.drivers.imu.chips import AccelRange, ChipFamily, ChipModel, GyroRange
 from gyrocal.drivers.imu.errors import (
     BusOpenError,
     ChipIdentityError,
@@ -49,8 +49,10 @@ __all__ = [
     "ImuBatch",
     "ImuReader",
     "SensorInfo",
+    "TimestampedFifoReader",
     "divided_rate",
     "filter_band",
+    "nearest_rate",
     "open_bus",
 ]
 
@@ -190,6 +192,10 @@ class SensorInfo:
         The 7-bit I²C address.
     who_am_i : int
         The identity byte read from the chip.
+    accel_full_scale_g : float or None
+        The configured accelerometer range, ± g (None for a reader without the accelerometer).
+    accel_sensitivity_m_s2_per_lsb : float or None
+        The accelerometer's datasheet sensitivity times standard gravity, m/s² per count.
     """
 
     model: str
@@ -199,15 +205,22 @@ class SensorInfo:
     lowpass_hz: float
     address: int
     who_am_i: int
+    accel_full_scale_g: float | None = None
+    accel_sensitivity_m_s2_per_lsb: float | None = None
 
     def manifest(self) -> dict[str, Any]:
-        """The ``"sensor"`` object of a Recording v1 manifest."""
-        return {
+        """The ``"sensor"`` object of a Recording v1 manifest (with the accelerometer's range
+        and sensitivity when it is recorded)."""
+        out: dict[str, Any] = {
             "model": self.model,
             "odr_hz": self.odr_hz,
             "full_scale_dps": self.full_scale_dps,
             "sensitivity_rad_s_per_lsb": self.sensitivity_rad_s_per_lsb,
         }
+        if self.accel_sensitivity_m_s2_per_lsb is not None:
+            out["accel_full_scale_g"] = self.accel_full_scale_g
+            out["accel_sensitivity_m_s2_per_lsb"] = self.accel_sensitivity_m_s2_per_lsb
+        return out
 
 
 @dataclass(frozen=True)
@@ -255,6 +268,12 @@ class ImuBatch:
         The gyro counts as read.
     index : ndarray, shape (N,), int64
         Stream index of each sample (consecutive except across gaps).
+    accel : ndarray, shape (N, 3)
+        Specific force in m/s², sensor frame, from the same FIFO sample: raw counts times the
+        datasheet sensitivity (:class:`~gyrocal.drivers.imu.chips.AccelRange`) times standard
+        gravity, nothing else.
+    accel_saturated : ndarray, shape (N, 3), bool
+        True where an accelerometer axis was at or near its full scale.
     gaps : tuple of FifoGap
         Samples lost since the previous batch.
     """
@@ -265,6 +284,8 @@ class ImuBatch:
     saturated: np.ndarray
     raw_counts: np.ndarray
     index: np.ndarray
+    accel: np.ndarray
+    accel_saturated: np.ndarray
     gaps: tuple[FifoGap, ...] = field(default=())
 
     def __len__(self) -> int:
@@ -280,6 +301,8 @@ class ImuBatch:
             saturated=np.zeros((0, 3), dtype=bool),
             raw_counts=np.empty((0, 3), dtype=np.int16),
             index=np.empty(0, dtype=np.int64),
+            accel=np.empty((0, 3)),
+            accel_saturated=np.zeros((0, 3), dtype=bool),
             gaps=gaps,
         )
 
@@ -616,6 +639,11 @@ class ImuReader(ABC):
             )
         return r
 
+    @property
+    def accel_range(self) -> AccelRange:
+        """The accelerometer range :meth:`configure` sets (the family's, as data)."""
+        return self.family.accel_range
+
     @abstractmethod
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         """Validate the rate and filter: return (odr_hz, lowpass_hz, chip setting)."""
@@ -657,6 +685,7 @@ class ImuReader(ABC):
         rng = self._choose_range(range_dps)
         odr, lp, setting = self._choose_rate(float(odr_hz), lowpass_hz)
         self._bring_up(rng, setting)
+        acc = self.accel_range
         self._info = SensorInfo(
             model=self.chip.name,
             odr_hz=odr,
@@ -665,6 +694,8 @@ class ImuReader(ABC):
             lowpass_hz=lp,
             address=self.address,
             who_am_i=self.chip.who_am_i,
+            accel_full_scale_g=acc.full_scale_g,
+            accel_sensitivity_m_s2_per_lsb=acc.sensitivity_m_s2_per_lsb,
         )
         return self._info
 
@@ -696,8 +727,9 @@ class ImuReader(ABC):
         """
 
     @abstractmethod
-    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
-        """Pop ``n`` samples: gyro counts (n, 3) int16 and temperature counts (n,) or ``None``.
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Pop ``n`` samples: gyro counts (n, 3) int16, accelerometer counts (n, 3) int16 of
+        the same samples, and temperature counts (n,) or ``None``.
 
         Transient errors other than NACKs propagate as ``OSError``.
         """
@@ -762,11 +794,11 @@ class ImuReader(ABC):
         lost = "fifo overflow" if overflow else None  # why samples were lost, if they were
         if lost and not self.overflow_keeps_oldest:
             return ImuBatch.empty(self._restart(self._next_index, lost))
-        gyro = np.empty((0, 3), dtype=np.int16)
+        gyro = accel = np.empty((0, 3), dtype=np.int16)
         temp: np.ndarray | None = None
         if n:
             try:
-                gyro, temp = self._fifo_read(n)
+                gyro, accel, temp = self._fifo_read(n)
             except OSError as e:
                 reason = _bus_error_reason(e, "during FIFO read")
                 return ImuBatch.empty(self._restart(self._next_index, reason))
@@ -786,14 +818,14 @@ class ImuReader(ABC):
         if temp is None:
             temp = np.full(n, self._temperature_counts() if n else 0, dtype=np.float64)
         if self._discard_pending and n:
-            gyro, temp, index = gyro[1:], temp[1:], index[1:]
+            gyro, accel, temp, index = gyro[1:], accel[1:], temp[1:], index[1:]
             self._discard_pending = False
         gaps: tuple[FifoGap, ...] = jumps
         if lost:
             # a full FIFO that keeps its oldest samples drops only newer ones: the samples
             # just read follow the last batch, and the loss comes after them
             gaps += self._restart(self._next_index, lost)
-        return self._make_batch(index, gyro, temp, gaps)
+        return self._make_batch(index, gyro, accel, temp, gaps)
 
     def _stream_index(self, n: int) -> np.ndarray:
         """Stream indices of the ``n`` samples just popped: consecutive from the next expected.
@@ -891,13 +923,15 @@ class ImuReader(ABC):
         )
 
     def _make_batch(
-        self, index: np.ndarray, gyro: np.ndarray, temp_counts: np.ndarray, gaps: tuple
+        self, index: np.ndarray, gyro: np.ndarray, accel: np.ndarray, temp_counts: np.ndarray,
+        gaps: tuple,
     ) -> ImuBatch:
         if index.size == 0:
             return ImuBatch.empty(gaps)
         rate = gyro.astype(np.float64) * self.info.sensitivity_rad_s_per_lsb
         wide = gyro.astype(np.int32)
         saturated = np.abs(wide) >= self._sat_counts
+        accel_wide = accel.astype(np.int32)
         self._check_stuck(wide, saturated)
         temperature = self.family.counts_to_celsius(temp_counts)
         t = self._sclock.time_of(index)
@@ -912,6 +946,8 @@ class ImuReader(ABC):
             saturated=saturated,
             raw_counts=gyro.astype(np.int16, copy=False),
             index=index,
+            accel=accel_wide * self.accel_range.sensitivity_m_s2_per_lsb,
+            accel_saturated=np.abs(accel_wide) >= self._sat_counts,
             gaps=gaps,
         )
 
@@ -986,3 +1022,96 @@ class ImuReader(ABC):
     def __repr__(self) -> str:
         return f"{type(self).__name__}(model={self.chip.name!r}, address={_hex(self.address)})"
 
+
+
+class TimestampedFifoReader(ImuReader):
+    """Base of the readers whose FIFO packets carry the chip's sample timestamps
+    (ICM-42688-P, LSM6DSOX): the samples are numbered from the timestamps, so a jump is a gap
+    of exactly known size and the first sample after a FIFO restart has an exact number.
+
+    Consecutive samples are one nominal period apart on the timestamp counter (both run on the
+    chip's oscillator). A counter that wraps within a run (the ICM-42688-P's 16 bits at 16 µs,
+    1.05 s) is unwrapped with the host-clock estimate of the sample number, which is good to
+    far better than half a wrap. Sample times on the host clock then follow from the numbers by
+    the shared timing model (:class:`~gyrocal.drivers.imu.timing.SampleClock`): the timestamps
+    count the chip's oscillator, not the host's, so they number the samples but do not time
+    them.
+
+    Subclasses set :attr:`timestamp_tick_s` and :attr:`timestamp_modulus` (chip data) and
+    leave the popped packets' timestamps in ``self._stamps`` in :meth:`_fifo_read`.
+    """
+
+    numbers_from_timestamps = True
+    #: Seconds per timestamp count.
+    timestamp_tick_s: ClassVar[float]
+    #: The counter's modulus (2^16, 2^32).
+    timestamp_modulus: ClassVar[int]
+    #: Register that selects a user bank or page, readable in all of them, and the mask of its
+    #: value that means "not the main bank": a chip left there by an earlier program answers
+    #: something else at WHO_AM_I, and the reader goes back to the main bank and asks again.
+    bank_register: ClassVar[int]
+    bank_mask: ClassVar[int]
+
+    def __init__(self, bus: Any, address: int | None = None, **kwargs: Any) -> None:
+        self._stamps = np.empty(0, dtype=np.int64)
+        self._stamp_ref: tuple[int, int] | None = None  # (timestamp, index) of the last sample
+        super().__init__(bus, address, **kwargs)
+
+    def _identify(self) -> ChipModel:
+        from gyrocal.drivers.imu.errors import ChipIdentityError
+
+        try:
+            return super()._identify()
+        except ChipIdentityError:
+            if not self._read_byte(self.bank_register) & self.bank_mask:
+                raise
+            self._write_byte(self.bank_register, 0)  # left in another bank: back to the main one
+            return super()._identify()
+
+    @property
+    def period_ticks(self) -> float:
+        """The configured sample period in timestamp counts."""
+        return 1.0 / (self.info.odr_hz * self.timestamp_tick_s)
+
+    def start(self) -> None:
+        """Start streaming; the sample numbering (from the timestamps) starts afresh."""
+        if not self._streaming:
+            self._stamp_ref = None
+        super().start()
+
+    def _stream_index(self, n: int) -> np.ndarray:
+        """Sample numbers from the packets' timestamps (see the class docstring)."""
+        if n == 0:
+            return np.empty(0, dtype=np.int64)
+        p, stamps, mod = self.period_ticks, self._stamps, self.timestamp_modulus
+        steps = np.maximum(1, np.rint((np.diff(stamps) % mod) / p).astype(np.int64))
+        if self._stamp_ref is None:
+            first = self._next_index
+        else:
+            ref_stamp, ref_index = self._stamp_ref
+            ticks = (int(stamps[0]) - ref_stamp) % mod
+            expected = (self._next_index - ref_index) * p  # from the host-clock estimate
+            ticks += round((expected - ticks) / mod) * mod
+            first = ref_index + max(1, round(ticks / p))
+        index = first + np.concatenate(([0], np.cumsum(steps)))
+        self._stamp_ref = (int(stamps[-1]), int(index[-1]))
+        return index
+
+
+def nearest_rate(chip: str, rates: Iterable[float], odr_hz: float) -> float:
+    """The rate of ``rates`` nearest ``odr_hz``.
+
+    Raises
+    ------
+    ConfigurationError
+        If it is more than :data:`ODR_RELATIVE_TOLERANCE` from ``odr_hz`` (the message lists
+        the rates).
+    """
+    ordered = sorted(rates)
+    odr = min(ordered, key=lambda r: abs(r - odr_hz))
+    if not (odr_hz > 0 and abs(odr - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
+        raise ConfigurationError(
+            f"odr_hz={odr_hz!r} is not an {chip} output data rate gyrocal can stream over I²C; "
+            "choose one of " + ", ".join(f"{r:g}" for r in ordered) + " Hz"
+        )
+    return odr

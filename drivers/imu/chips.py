@@ -49,14 +49,44 @@ __all__ = [
     "MPU9250_REG",
     "ChipFamily",
     "ChipModel",
+    "AccelRange",
     "GyroRange",
     "RAD_PER_DEG",
+    "STANDARD_GRAVITY_M_S2",
     "icm42688p_bandwidth_hz",
     "register_names",
 ]
 
 #: Radians per degree.
 RAD_PER_DEG = math.pi / 180.0
+#: Standard gravity g_n (3rd CGPM, 1901), m/s²: the "g" of the accelerometer datasheets'
+#: sensitivities (LSB/g), so counts / (LSB/g) × g_n is the reading in m/s².
+STANDARD_GRAVITY_M_S2 = 9.80665
+
+
+@dataclass(frozen=True)
+class AccelRange:
+    """The accelerometer full scale a reader configures (one per chip family).
+
+    Parameters
+    ----------
+    code : int
+        The register field value (MPU-9250 ``ACCEL_FS_SEL``, ST ``FS_XL``, ICM-42688-P
+        ``ACCEL_FS_SEL``).
+    full_scale_g : float
+        The nominal range, ± g.
+    lsb_per_g : float
+        The datasheet sensitivity in counts per g.
+    """
+
+    code: int
+    full_scale_g: float
+    lsb_per_g: float
+
+    @property
+    def sensitivity_m_s2_per_lsb(self) -> float:
+        """m/s² per count: the datasheet sensitivity times :data:`STANDARD_GRAVITY_M_S2`."""
+        return STANDARD_GRAVITY_M_S2 / self.lsb_per_g
 
 
 @dataclass(frozen=True)
@@ -137,6 +167,11 @@ class ChipFamily:
         Temperature at zero counts.
     temperature_lsb_per_c : float
         Counts per °C.
+    accel_range : AccelRange
+        The accelerometer range the reader sets: ±4 g on every chip, the finest that keeps a
+        2 g margin over gravity for the jig's lever-arm accelerations and knocks.
+    extra : mapping
+        Further chip facts by name.
     """
 
     name: str
@@ -152,6 +187,7 @@ class ChipFamily:
     startup_time_s: float
     temperature_offset_c: float
     temperature_lsb_per_c: float
+    accel_range: AccelRange
     extra: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     def model_for(self, who_am_i: int) -> ChipModel | None:
@@ -298,6 +334,9 @@ MPU9250 = ChipFamily(
     startup_time_s=0.070,  # §1.3 step 4: kernel's MPU-6500 gyro start-up (datasheet: 35 ms)
     temperature_offset_c=21.0,  # §1.6
     temperature_lsb_per_c=333.87,
+    # PS-MPU-9250A-01 Table 2 (accelerometer): AFS_SEL = 1, ±4 g, 8192 LSB/g (register map
+    # ACCEL_CONFIG[4:3])
+    accel_range=AccelRange(1, 4.0, 8192.0),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
@@ -427,6 +466,8 @@ LSM9DS1 = ChipFamily(
     startup_time_s=0.100,  # not in the hardware reference: a conservative wait (⚠)
     temperature_offset_c=25.0,  # §2.5: 16 LSB/°C, 0 at 25 °C
     temperature_lsb_per_c=16.0,
+    # LSM9DS1 datasheet Table 3 (LA_So): CTRL_REG6_XL.FS_XL = 10, ±4 g, 0.122 mg/LSB
+    accel_range=AccelRange(0b10, 4.0, 1000.0 / 0.122),
 )
 
 
@@ -608,6 +649,8 @@ ICM42688P = ChipFamily(
     # FIFO temperature, 8 bits: T = FIFO_TEMP_DATA / 2.07 + 25 (DS-000347 register TEMP_DATA)
     temperature_offset_c=25.0,
     temperature_lsb_per_c=2.07,
+    # DS-000347 Table 2 and ACCEL_CONFIG0.ACCEL_FS_SEL: 010 = ±4 g, 8192 LSB/g
+    accel_range=AccelRange(0b010, 4.0, 8192.0),
     extra=MappingProxyType(
         {
             "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
@@ -755,6 +798,8 @@ LSM6DSOX = ChipFamily(
     startup_time_s=0.100,  # ⚠ a conservative wait for the gyro to settle (cf. LSM9DS1)
     temperature_offset_c=25.0,  # DS12814 Table 4: 256 LSB/°C, 0 LSB at 25 °C
     temperature_lsb_per_c=256.0,
+    # DS12814 Table 2 (LA_So) and CTRL1_XL.FS_XL: 10 = ±4 g, 0.122 mg/LSB
+    accel_range=AccelRange(0b10, 4.0, 1000.0 / 0.122),
     extra=MappingProxyType(
         {
             "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
@@ -802,6 +847,8 @@ class _ICM20948Bank2:
 
     GYRO_SMPLRT_DIV: int = 0x00
     GYRO_CONFIG_1: int = 0x01
+    ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
+    ACCEL_SMPLRT_DIV_2: int = 0x11  # bits [7:0]
     ACCEL_CONFIG: int = 0x14
 
 
@@ -821,6 +868,7 @@ class _ICM20948Bits:
     GYRO_FS_SEL_MASK: int = 0x06
     GYRO_FCHOICE: int = 0x01  # 1: the DLPF is on and the rate is 1125/(1 + GYRO_SMPLRT_DIV)
     ACCEL_FS_SEL_SHIFT: int = 1
+    ACCEL_FCHOICE: int = 0x01  # 1: the accelerometer DLPF is on, rate 1125/(1 + ACCEL_SMPLRT_DIV)
     FIFO_EN_2_ACCEL: int = 0x10
     FIFO_EN_2_GYRO_Z: int = 0x08
     FIFO_EN_2_GYRO_Y: int = 0x04
@@ -869,9 +917,14 @@ ICM20948 = ChipFamily(
     startup_time_s=0.035,  # DS-000189 Table 1: gyro start-up time 35 ms
     temperature_offset_c=21.0,  # DS-000189: T = (TEMP_OUT − RoomTemp_Offset)/333.87 + 21
     temperature_lsb_per_c=333.87,
+    # DS-000189 Table 2 and ACCEL_CONFIG.ACCEL_FS_SEL: 01 = ±4 g, 8192 LSB/g
+    accel_range=AccelRange(1, 4.0, 8192.0),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)
+            # FIFO frame with ACCEL, GYRO and TEMP enabled in FIFO_EN_2: the data registers in
+            # order, ACCEL_XOUT_H (0x2D) .. TEMP_OUT_L (0x3A), 14 bytes (DS-000189 FIFO_EN_2)
+            "fifo_frame_bytes": 14.0,
             "dlpf_off_rate_hz": 9000.0,  # GYRO_FCHOICE = 0 ⚠
             "wake_time_s": 0.010,  # ⚠ as for the MPU-9250
             "accel_lsb_per_g_2g": 16384.0,  # DS-000189 Table 2

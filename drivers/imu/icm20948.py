@@ -13,10 +13,13 @@ names it ("use model 'icm20948'").
 
 Bring-up: PWR_MGMT_1 = DEVICE_RESET, wait; PWR_MGMT_1 = clock auto (awake), wait; WHO_AM_I
 again; PWR_MGMT_2 = all sensors on; bank 2: GYRO_SMPLRT_DIV, GYRO_CONFIG_1 = DLPFCFG | FS_SEL |
-FCHOICE (read back); bank 0; wait for the gyro to start (35 ms, DS-000189 Table 1).
+FCHOICE, ACCEL_SMPLRT_DIV = the gyro's divider (so both sensors sample at one rate),
+ACCEL_CONFIG = ±4 g | ACCEL_FCHOICE (read back); bank 0; wait for the gyro to start (35 ms,
+DS-000189 Table 1).
 
-Streaming: FIFO_MODE = snapshot (a full FIFO keeps its oldest frames), FIFO_EN_2 = GYRO X/Y/Z |
-TEMP gives 8-byte big-endian frames ``GX GY GZ TEMP`` (64 in 512 bytes ⚠, 57 ms at 1125 Hz);
+Streaming: FIFO_MODE = snapshot (a full FIFO keeps its oldest frames), FIFO_EN_2 = ACCEL | GYRO
+X/Y/Z | TEMP gives 14-byte big-endian frames ``AX AY AZ GX GY GZ TEMP`` in register order
+(ACCEL_XOUT_H 0x2D, GYRO_XOUT_H 0x33, TEMP_OUT_H 0x39; 36 in 512 bytes ⚠, 32 ms at 1125 Hz);
 USER_CTRL.FIFO_EN starts collection. ``read()`` latches FIFO_COUNT (2 bytes at 0x70), pops the
 whole frames from FIFO_R_W (0x72) in one ``i2c_rdwr`` burst (or 32-byte block reads), then reads
 INT_STATUS_2 (FIFO_OVERFLOW_INT, cleared when read: a failed read of it is not retried), as the
@@ -46,8 +49,9 @@ __all__ = ["ICM20948Reader"]
 
 R, R2, B = ICM20948_REG, ICM20948_REG2, ICM20948_BITS
 _REG_NAMES = register_names(R)
-_FRAME = 8  # GX GY GZ TEMP, 2 bytes each
-_FIFO_SOURCES = B.FIFO_EN_2_GYRO_X | B.FIFO_EN_2_GYRO_Y | B.FIFO_EN_2_GYRO_Z | B.FIFO_EN_2_TEMP
+_FRAME = int(ICM20948.extra["fifo_frame_bytes"])  # AX AY AZ GX GY GZ TEMP, 2 bytes each
+_FIFO_SOURCES = (B.FIFO_EN_2_ACCEL | B.FIFO_EN_2_GYRO_X | B.FIFO_EN_2_GYRO_Y
+                 | B.FIFO_EN_2_GYRO_Z | B.FIFO_EN_2_TEMP)
 
 
 class ICM20948Reader(ImuReader):
@@ -96,12 +100,16 @@ class ICM20948Reader(ImuReader):
         self._write_byte(R.PWR_MGMT_2, 0x00)
         config = (dlpf << B.GYRO_DLPFCFG_SHIFT) | (rng.code << B.GYRO_FS_SEL_SHIFT) | (
             B.GYRO_FCHOICE)
+        accel = (self.accel_range.code << B.ACCEL_FS_SEL_SHIFT) | B.ACCEL_FCHOICE
+        writes = ((R2.GYRO_SMPLRT_DIV, div), (R2.GYRO_CONFIG_1, config),
+                  (R2.ACCEL_SMPLRT_DIV_1, div >> 8), (R2.ACCEL_SMPLRT_DIV_2, div & 0xFF),
+                  (R2.ACCEL_CONFIG, accel))
         self._bank(2)
         try:
-            self._write_byte(R2.GYRO_SMPLRT_DIV, div)
-            self._write_byte(R2.GYRO_CONFIG_1, config)
-            self._verify(R2.GYRO_SMPLRT_DIV, div)
-            self._verify(R2.GYRO_CONFIG_1, config)
+            for reg, value in writes:
+                self._write_byte(reg, value)
+            for reg, value in writes:
+                self._verify(reg, value)
         finally:
             self._bank(0)
         clock.sleep(fam.startup_time_s)
@@ -132,10 +140,10 @@ class ICM20948Reader(ImuReader):
         status = self._read_byte(R.INT_STATUS_2, retry=False)
         return bool(status & B.INT_STATUS_2_FIFO_OVERFLOW)
 
-    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         data = self._read_stream(R.FIFO_R_W, n * _FRAME, (BLOCK_MAX // _FRAME) * _FRAME)
-        words = np.frombuffer(data, dtype=">i2").reshape(n, 4)
-        return words[:, :3], words[:, 3].astype(np.float64)
+        words = np.frombuffer(data, dtype=">i2").reshape(n, _FRAME // 2)
+        return words[:, 3:6], words[:, 0:3], words[:, 6].astype(np.float64)
 
     def _temperature_counts(self) -> int:
         hi, lo = self._read_block(R.TEMP_OUT_H, 2)

@@ -6,12 +6,12 @@ program answers something else there; REG_BANK_SEL (0x76, readable in every bank
 and the reader selects bank 0 and asks again, as the kernel's regmap does before every access.
 Siblings (ICM-42605 0x42, ICM-42686-P 0x44, ...) are named.
 
-Bring-up: DEVICE_CONFIG.SOFT_RESET, wait 1 ms; WHO_AM_I again; INTF_CONFIG0 = big-endian data
-and FIFO count, count in bytes (the reset value 0x30); GYRO_CONFIG0 = FS_SEL | ODR;
-ACCEL_CONFIG0 = ±16 g at the same ODR (so that every FIFO packet carries both sensors and the
-timestamp); GYRO_ACCEL_CONFIG0 = the UI filter bandwidth; TMST_CONFIG = TMST_EN | TMST_RES
-(16 µs units); PWR_MGMT0 = gyro and accelerometer low-noise, then no write for 200 µs; the
-configuration is read back; wait for the gyro to start (60 ms, the kernel's figure).
+Bring-up: DEVICE_CONFIG.SOFT_RESET, wait 1 ms; WHO_AM_I again; INTF_CONFIG0 = big-endian data and
+FIFO count, count in bytes (the reset value 0x30); GYRO_CONFIG0 = FS_SEL | ODR; ACCEL_CONFIG0 = ±4 g
+(the family's ``accel_range``, 8192 LSB/g) at the same ODR (so that every FIFO packet carries both
+sensors of one sample and the timestamp); GYRO_ACCEL_CONFIG0 = the UI filter bandwidth; TMST_CONFIG
+= TMST_EN | TMST_RES (16 µs units); PWR_MGMT0 = gyro and accelerometer low-noise, then no write for
+200 µs; the configuration is read back; wait for the gyro to start (60 ms, the kernel's figure).
 
 Streaming: FIFO_CONFIG1 = ACCEL | GYRO | TEMP gives 16-byte packets (header, accel, gyro, an
 8-bit temperature, a 16-bit ODR timestamp); FIFO_CONFIG = stop-on-full starts collection (128
@@ -22,14 +22,11 @@ FIFO_FULL means the next sample had no room, so the FIFO is restarted and the lo
 for the MPU-9250 (INT_STATUS clears when read, so a failed read of it is not retried).
 
 Timestamps. Every packet carries the chip's time of its sample in 16 µs units modulo 2^16
-(1.05 s). Consecutive samples are one nominal period apart on that counter (both run on the
-chip's oscillator), so the reader numbers the samples from their timestamps: a jump is a gap of
-exactly known size, even one the FIFO never flagged, and after a FIFO restart the first sample's
-number comes from its timestamp rather than from the host-clock estimate (which can be one
-off). The wrap is resolved with that estimate, which is good to far better than half a wrap.
-Sample times on the host clock then follow from the sample numbers by the shared timing model
-(:class:`~gyrocal.drivers.imu.timing.SampleClock`), as for the other chips: the timestamps count
-the chip's oscillator, not the host's, so they number the samples but do not time them.
+(1.05 s); the reader numbers the samples from them
+(:class:`~gyrocal.drivers.imu.base.TimestampedFifoReader`, shared with the LSM6DSOX): a jump is
+a gap of exactly known size, even one the FIFO never flagged, and after a FIFO restart the first
+sample's number comes from its timestamp rather than from the host-clock estimate (which can be
+one off). The wrap is resolved with that estimate.
 """
 
 from __future__ import annotations
@@ -40,35 +37,30 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
+from gyrocal.drivers.imu.base import BLOCK_MAX, TimestampedFifoReader, nearest_rate
 from gyrocal.drivers.imu.chips import (
     ICM42688P,
     ICM42688P_BITS,
     ICM42688P_MAX_READER_ODR_HZ,
     ICM42688P_ODR,
     ICM42688P_REG,
-    ChipModel,
     GyroRange,
     icm42688p_bandwidth_hz,
     register_names,
 )
-from gyrocal.drivers.imu.errors import ChipIdentityError
 
 __all__ = ["ICM42688PReader"]
 
 R, B = ICM42688P_REG, ICM42688P_BITS
 _REG_NAMES = register_names(R)
 _PACKET = int(ICM42688P.extra["packet_bytes"])
-_MODULUS = int(ICM42688P.extra["timestamp_modulus"])
-_TICK_S = ICM42688P.extra["timestamp_resolution_s"]
 #: The header of a packet with accelerometer, gyro and the ODR timestamp (the ODR-change bits
 #: 1:0 and the 20-bit flag are not used by this configuration and are ignored).
 _HEADER_MASK = B.HEADER_MSG | B.HEADER_ACCEL | B.HEADER_GYRO | B.HEADER_TMST_MASK
 _HEADER_WANTED = B.HEADER_ACCEL | B.HEADER_GYRO | B.HEADER_TMST_ODR
-_ACCEL_FS_16G = 0b000
 
 
-class ICM42688PReader(ImuReader):
+class ICM42688PReader(TimestampedFifoReader):
     """ICM-42688-P gyro reader over an smbus2-compatible bus.
 
     Parameters
@@ -79,34 +71,17 @@ class ICM42688PReader(ImuReader):
     """
 
     family = ICM42688P
-    numbers_from_timestamps = True
-
-    def __init__(self, bus: Any, address: int | None = None, **kwargs: Any) -> None:
-        self._stamps = np.empty(0, dtype=np.int64)
-        self._stamp_ref: tuple[int, int] | None = None  # (timestamp, index) of the last sample
-        super().__init__(bus, address, **kwargs)
+    timestamp_tick_s = ICM42688P.extra["timestamp_resolution_s"]
+    timestamp_modulus = int(ICM42688P.extra["timestamp_modulus"])
+    bank_register = R.REG_BANK_SEL  # user banks 1..4 are "not bank 0"
+    bank_mask = 0x07
 
     def _register_names(self) -> dict[int, str]:
         return _REG_NAMES
 
-    def _identify(self) -> ChipModel:
-        try:
-            return super()._identify()
-        except ChipIdentityError:
-            bank = self._read_byte(R.REG_BANK_SEL)
-            if not 1 <= bank <= 4:
-                raise
-            self._write_byte(R.REG_BANK_SEL, 0)  # left in another user bank: back to bank 0
-            return super()._identify()
-
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
-        rates = sorted(r for r in ICM42688P_ODR if r <= ICM42688P_MAX_READER_ODR_HZ)
-        odr = min(rates, key=lambda r: abs(r - odr_hz))
-        if not (odr_hz > 0 and abs(odr - odr_hz) <= ODR_RELATIVE_TOLERANCE * odr_hz):
-            raise ConfigurationError(
-                f"odr_hz={odr_hz!r} is not an ICM-42688-P output data rate gyrocal can stream "
-                "over I²C; choose one of " + ", ".join(f"{r:g}" for r in rates) + " Hz"
-            )
+        odr = nearest_rate("ICM-42688-P", (r for r in ICM42688P_ODR
+                                           if r <= ICM42688P_MAX_READER_ODR_HZ), odr_hz)
         bands = {code: icm42688p_bandwidth_hz(odr, code) for code in range(8)}
         if lowpass_hz is None:
             below = {c: b for c, b in bands.items() if b <= odr / 2}
@@ -122,11 +97,6 @@ class ICM42688PReader(ImuReader):
             code = min(near)
         return odr, bands[code], (ICM42688P_ODR[odr], code)
 
-    @property
-    def period_ticks(self) -> float:
-        """The configured sample period in timestamp units (16 µs)."""
-        return 1.0 / (self.info.odr_hz * _TICK_S)
-
     def _bring_up(self, rng: GyroRange, setting: Any) -> None:
         odr_code, filt = setting
         fam, clock = self.family, self._clock
@@ -136,7 +106,7 @@ class ICM42688PReader(ImuReader):
         self._check_identity_again()
         intf = B.INTF_CONFIG0_FIFO_COUNT_ENDIAN | B.INTF_CONFIG0_SENSOR_DATA_ENDIAN
         gyro = (rng.code << B.FS_SEL_SHIFT) | odr_code
-        accel = (_ACCEL_FS_16G << B.FS_SEL_SHIFT) | odr_code
+        accel = (self.accel_range.code << B.FS_SEL_SHIFT) | odr_code
         filters = (1 << 4) | filt  # accelerometer UI filter at its reset value, 1
         tmst = B.TMST_EN | B.TMST_RES_16US
         writes = ((R.INTF_CONFIG0, intf), (R.GYRO_CONFIG0, gyro), (R.ACCEL_CONFIG0, accel),
@@ -149,12 +119,6 @@ class ICM42688PReader(ImuReader):
         for reg, value in (*writes, (R.PWR_MGMT0, low_noise)):
             self._verify(reg, value)
         clock.sleep(fam.startup_time_s)
-
-    def start(self) -> None:
-        """Start streaming; the sample numbering (from the timestamps) starts afresh."""
-        if not self._streaming:
-            self._stamp_ref = None
-        super().start()
 
     def _fifo_prepare(self) -> None:
         self._write_byte(R.FIFO_CONFIG, B.FIFO_MODE_BYPASS << B.FIFO_MODE_SHIFT)
@@ -180,7 +144,7 @@ class ICM42688PReader(ImuReader):
     def _overflowed(self) -> bool:
         return bool(self._read_byte(R.INT_STATUS, retry=False) & B.INT_STATUS_FIFO_FULL)
 
-    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         data = self._read_stream(R.FIFO_DATA, n * _PACKET, (BLOCK_MAX // _PACKET) * _PACKET)
         packets = np.frombuffer(data, dtype=np.uint8).reshape(n, _PACKET)
         bad = np.flatnonzero(packets[:, 0] & _HEADER_MASK != _HEADER_WANTED)
@@ -190,28 +154,11 @@ class ICM42688PReader(ImuReader):
                 f"FIFO packet {bad[0]} of {n} has header 0x{packets[bad[0], 0]:02X}, not "
                 f"0x{_HEADER_WANTED:02X} (accelerometer, gyro, ODR timestamp)",
             )
+        accel = packets[:, 1:7].copy().view(">i2").reshape(n, 3)
         gyro = packets[:, 7:13].copy().view(">i2").reshape(n, 3)
         temp = packets[:, 13].view(np.int8).astype(np.float64)
         self._stamps = packets[:, 14:16].copy().view(">u2").reshape(n).astype(np.int64)
-        return gyro, temp
-
-    def _stream_index(self, n: int) -> np.ndarray:
-        """Sample numbers from the packets' ODR timestamps (see the module docstring)."""
-        if n == 0:
-            return np.empty(0, dtype=np.int64)
-        p, stamps = self.period_ticks, self._stamps
-        steps = np.maximum(1, np.rint((np.diff(stamps) % _MODULUS) / p).astype(np.int64))
-        if self._stamp_ref is None:
-            first = self._next_index
-        else:
-            ref_stamp, ref_index = self._stamp_ref
-            ticks = (int(stamps[0]) - ref_stamp) % _MODULUS
-            expected = (self._next_index - ref_index) * p  # from the host-clock estimate
-            ticks += round((expected - ticks) / _MODULUS) * _MODULUS
-            first = ref_index + max(1, round(ticks / p))
-        index = first + np.concatenate(([0], np.cumsum(steps)))
-        self._stamp_ref = (int(stamps[-1]), int(index[-1]))
-        return index
+        return gyro, accel, temp
 
     def _temperature_counts(self) -> int:
         hi, lo = self._read_block(R.TEMP_DATA1, 2)

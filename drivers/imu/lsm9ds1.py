@@ -3,8 +3,9 @@
 Bring-up (hardware reference §2.6, §2.2): CTRL_REG8 = SW_RESET | IF_ADD_INC, wait 10 ms;
 WHO_AM_I again; CTRL_REG8 = BDU | IF_ADD_INC (little-endian output); FIFO off; gyro axes on
 (CTRL_REG4); no high-pass (CTRL_REG3_G = 0); the LPF2 output (CTRL_REG2_G.OUT_SEL = 10);
-CTRL_REG1_G = ODR_G | FS_G | BW_G; wait for start-up.
-With the gyro on, the accelerometer runs at the gyro's rate and shares each FIFO slot (§2.3).
+CTRL_REG6_XL.FS_XL = ±4 g (0.122 mg/LSB, Table 3); CTRL_REG1_G = ODR_G | FS_G | BW_G; wait for
+start-up. With the gyro on, the accelerometer runs at the gyro's rate and shares each FIFO slot
+(§2.3): every slot is gyro X, Y, Z then accelerometer X, Y, Z, both of the same sample.
 
 Streaming (§2.7): CTRL_REG9.FIFO_EN and FIFO_CTRL.FMODE = continuous (32 slots, 34 ms at
 952 Hz; when full the oldest slot is overwritten and FIFO_SRC.OVRN is set). ``read()`` reads
@@ -109,6 +110,9 @@ class LSM9DS1Reader(ImuReader):
         # bandwidth: with the reset OUT_SEL = 00 they carry LPF1 and BW_G does nothing (Fig. 28)
         self._write_byte(R.CTRL_REG2_G, B.OUT_SEL_LPF2)
         self._verify(R.CTRL_REG2_G, B.OUT_SEL_LPF2)
+        accel = self.accel_range.code << B.FS_XL_SHIFT  # ODR_XL is the gyro's while it is on
+        self._write_byte(R.CTRL_REG6_XL, accel)
+        self._verify(R.CTRL_REG6_XL, accel)
         ctrl1 = (odr_code << B.ODR_G_SHIFT) | (rng.code << B.FS_G_SHIFT) | bw
         self._write_byte(R.CTRL_REG1_G, ctrl1)
         self._verify(R.CTRL_REG1_G, ctrl1)
@@ -140,7 +144,7 @@ class LSM9DS1Reader(ImuReader):
     def _overflowed(self) -> bool:
         return bool(self._read_byte(R.FIFO_SRC) & B.FIFO_SRC_OVRN)
 
-    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         if self.burst_wrap:
             data = self._read_stream(R.OUT_X_L_G, n * _SLOT, (BLOCK_MAX // _SLOT) * _SLOT)
         else:
@@ -150,7 +154,7 @@ class LSM9DS1Reader(ImuReader):
                 parts.append(self._read_stream(R.OUT_X_L_XL, 6, 6))
             data = b"".join(parts)
         words = np.frombuffer(data, dtype="<i2").reshape(n, 6)
-        return words[:, :3], None
+        return words[:, :3], words[:, 3:], None
 
     def _temperature_counts(self) -> int:
         lo, hi = self._read_block(R.OUT_TEMP_L, 2)

@@ -3,10 +3,13 @@
 Bring-up (hardware reference §1.3): H_RESET, wait 100 ms; SIGNAL_PATH_RESET, wait 100 ms;
 PWR_MGMT_1 = CLKSEL auto (PLL), wait 10 ms; WHO_AM_I again; all axes on; CONFIG (DLPF_CFG, and
 FIFO_MODE = 1 so a full FIFO keeps its oldest data and never tears a frame), SMPLRT_DIV,
-GYRO_CONFIG (FS_SEL, FCHOICE_B = 00); wait for the gyro to start.
+GYRO_CONFIG (FS_SEL, FCHOICE_B = 00), ACCEL_CONFIG (±4 g, the family's ``accel_range``; the
+accelerometer samples at the same SMPLRT_DIV rate); wait for the gyro to start.
 
-Streaming (§1.7): FIFO_EN = TEMP | GYRO_XYZ gives 8-byte big-endian frames ``TEMP GX GY GZ``
-(64 frames in the 512-byte FIFO: 64 ms at 1 kHz). ``read()`` latches FIFO_COUNT (2 bytes from
+Streaming (§1.7): FIFO_EN = ACCEL | TEMP | GYRO_XYZ gives 14-byte big-endian frames
+``AX AY AZ TEMP GX GY GZ`` in register order (register map §4.7 FIFO_EN; ACCEL_XOUT_H 0x3B,
+TEMP_OUT_H 0x41, GYRO_XOUT_H 0x43): 36 frames in the 512-byte FIFO, 36 ms at 1 kHz (64 ms
+without the accelerometer). ``read()`` latches FIFO_COUNT (2 bytes from
 FIFO_COUNTH), pops the whole frames from the FIFO_R_W data port in one ``i2c_rdwr`` burst (or in
 32-byte block reads on a bus without it), then reads INT_STATUS. With FIFO_MODE = 1 a full FIFO
 drops only newer samples, so if FIFO_OFLOW_INT is set the frames just read are still delivered;
@@ -46,8 +49,8 @@ class MPU9250Reader(ImuReader):
         As for :class:`~gyrocal.drivers.imu.base.ImuReader` (default address 0x68; 0x69 with AD0
         high).
     temperature_in_fifo : bool
-        Put TEMP_OUT in every FIFO frame (8-byte frames, 64 in the FIFO). With ``False`` the
-        frames are 6 bytes (85 fit, 85 ms at 1 kHz) and TEMP_OUT is read once per drain.
+        Put TEMP_OUT in every FIFO frame (14-byte frames, 36 in the FIFO). With ``False`` the
+        frames are 12 bytes (42 fit, 42 ms at 1 kHz) and TEMP_OUT is read once per drain.
     """
 
     family = MPU9250
@@ -68,8 +71,9 @@ class MPU9250Reader(ImuReader):
 
     @property
     def frame_bytes(self) -> int:
-        """Bytes per FIFO frame: TEMP (if in the FIFO) and GYRO X, Y, Z, 2 bytes each."""
-        return 8 if self.temperature_in_fifo else 6
+        """Bytes per FIFO frame: ACCEL X, Y, Z, TEMP (if in the FIFO) and GYRO X, Y, Z, 2
+        bytes each."""
+        return 14 if self.temperature_in_fifo else 12
 
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         actual, div = divided_rate("MPU-9250", MPU9250.extra["internal_rate_hz"], odr_hz,
@@ -90,15 +94,16 @@ class MPU9250Reader(ImuReader):
         self._write_byte(R.PWR_MGMT_2, 0x00)
         config = B.CONFIG_FIFO_MODE | dlpf
         gyro_config = rng.code << B.GYRO_FS_SHIFT  # FCHOICE_B = 00: the DLPF is in use
-        self._write_byte(R.SMPLRT_DIV, div)
-        self._write_byte(R.CONFIG, config)
-        self._write_byte(R.GYRO_CONFIG, gyro_config)
-        for reg, value in ((R.SMPLRT_DIV, div), (R.CONFIG, config), (R.GYRO_CONFIG, gyro_config)):
+        writes = ((R.SMPLRT_DIV, div), (R.CONFIG, config), (R.GYRO_CONFIG, gyro_config),
+                  (R.ACCEL_CONFIG, self.accel_range.code << B.ACCEL_FS_SHIFT))
+        for reg, value in writes:
+            self._write_byte(reg, value)
+        for reg, value in writes:
             self._verify(reg, value)
         clock.sleep(fam.startup_time_s)
 
     def _fifo_sources(self) -> int:
-        gyro = B.FIFO_EN_GYRO_X | B.FIFO_EN_GYRO_Y | B.FIFO_EN_GYRO_Z
+        gyro = B.FIFO_EN_GYRO_X | B.FIFO_EN_GYRO_Y | B.FIFO_EN_GYRO_Z | B.FIFO_EN_ACCEL
         return gyro | (B.FIFO_EN_TEMP if self.temperature_in_fifo else 0)
 
     def _fifo_prepare(self) -> None:
@@ -127,13 +132,13 @@ class MPU9250Reader(ImuReader):
         # retried (only NACKs are): the reader restarts the FIFO as after an overflow
         return bool(self._read_byte(R.INT_STATUS, retry=False) & B.INT_STATUS_FIFO_OFLOW)
 
-    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    def _fifo_read(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         frame = self.frame_bytes
         data = self._read_stream(R.FIFO_R_W, n * frame, (BLOCK_MAX // frame) * frame)
         words = np.frombuffer(data, dtype=">i2").reshape(n, frame // 2)
         if self.temperature_in_fifo:
-            return words[:, 1:4], words[:, 0].astype(np.float64)
-        return words, None
+            return words[:, 4:7], words[:, 0:3], words[:, 3].astype(np.float64)
+        return words[:, 3:6], words[:, 0:3], None
 
     def _temperature_counts(self) -> int:
         hi, lo = self._read_block(R.TEMP_OUT_H, 2)

@@ -26,6 +26,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator (default: auto = full-matrix when the poses determine it, "
                    "else paired-axis)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--gravity", type=float, metavar="M_S2",
+                   help="local gravity magnitude for the accelerometer fit, m/s² (9.7..9.9; "
+                   "default: the recording's site.gravity_m_s2, else standard gravity 9.80665)")
+    g.add_argument("--latitude", type=float, metavar="DEG",
+                   help="geodetic latitude of the jig: the accelerometer is fitted against the "
+                   "WGS-84 normal gravity there (with --height)")
+    p.add_argument("--height", type=float, metavar="M", default=0.0,
+                   help="height above the WGS-84 ellipsoid, m, with --latitude (default 0)")
     p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the Calibration v1 document here")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
@@ -44,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out:
         refuse_existing([args.out], force=args.force)
+    gravity = _gravity(args)
     history = _history(args)
     rec = load_recording(args.recording)  # path and contents checked before scipy is imported
     from gyrocal.kit.commands.history import store_and_say
@@ -57,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         print("gyrocal: warning: the recording is not marked complete (an interrupted run, or "
               "a tool that does not mark it)",
               file=sys.stderr)
-    est = estimate_recording(rec, args.method)
+    est = estimate_recording(rec, args.method, gravity_m_s2=gravity)
     for w in est.extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     for note in est.notes:
@@ -75,6 +85,30 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(calibration_table(cal, rec.truth))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0
+
+
+def _gravity(args: argparse.Namespace) -> float | None:
+    """The gravity of ``--gravity`` or ``--latitude``/``--height`` (checked as the config's
+    ``[accelerometer]`` keys are), or None for the recording's own."""
+    from gyrocal.kit.config import SCHEMA
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.pipeline import local_gravity
+
+    if args.gravity is None and args.latitude is None:
+        return None
+    keys = SCHEMA["accelerometer"]
+    given = ({"gravity_m_s2": args.gravity} if args.gravity is not None else
+             {"gravity_m_s2": 0.0, "latitude_deg": args.latitude, "height_m": args.height})
+    for name, value in given.items():
+        problem = keys[name].check(value) if keys[name].check else None
+        if name == "gravity_m_s2" and args.gravity is not None and (
+                problem or value == 0):
+            problem = "must be in 9.7..9.9 m/s²"
+        if problem:
+            flag = {"gravity_m_s2": "--gravity", "latitude_deg": "--latitude",
+                    "height_m": "--height"}[name]
+            raise InputError(f"{flag} {value!r} {problem}")
+    return local_gravity(given)[0]
 
 
 def _history(args: argparse.Namespace) -> Any:

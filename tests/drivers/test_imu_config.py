@@ -278,7 +278,10 @@ def test_info_and_state_errors():
         r.read()
     info = r.configure(2000, 952)
     assert info.manifest() == {"model": "lsm9ds1", "odr_hz": 952.0, "full_scale_dps": 2000.0,
-                               "sensitivity_rad_s_per_lsb": pytest.approx(70e-3 * DEG, rel=1e-12)}
+                               "sensitivity_rad_s_per_lsb": pytest.approx(70e-3 * DEG, rel=1e-12),
+                               "accel_full_scale_g": 4.0,  # LSM9DS1 Table 3: 0.122 mg/LSB
+                               "accel_sensitivity_m_s2_per_lsb": pytest.approx(
+                                   0.122e-3 * 9.80665, rel=1e-12)}
     assert (r.odr_hz, r.full_scale_dps) == (952.0, 2000.0)
     r.close()
     assert bus.read_byte_data(addr, 0x10) >> 5 == 0  # powered down

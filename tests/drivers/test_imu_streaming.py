@@ -30,8 +30,14 @@ SETUPS = {
 # model -> what the chip's FIFO level counts per sample (MPU: TEMP GX GY GZ bytes; LSM: slots;
 # ICM: a 16-byte packet), the default address and the FIFO level register (FIFO_COUNTH,
 # FIFO_SRC, FIFO_COUNTH)
-FIFO_UNIT = {"mpu9250": 8, "lsm9ds1": 1, "icm42688p": 16, "lsm6dsox": 2,  # LSM6DSOX: TS + gyro
-             "icm20948": 8}  # GX GY GZ TEMP
+FIFO_UNIT = {"mpu9250": 14, "lsm9ds1": 1, "icm42688p": 16,  # MPU: AX AY AZ TEMP GX GY GZ
+             "lsm6dsox": 3,  # LSM6DSOX: TS + gyro + accelerometer words
+             "icm20948": 14}  # AX AY AZ GX GY GZ TEMP
+#: Accelerometer counts per g at ±4 g, the range every reader sets (datasheets: MPU-9250
+#: PS-MPU-9250A-01 Table 2, ICM-20948 DS-000189 Table 2, ICM-42688-P DS-000347 Table 2: 8192
+#: LSB/g; LSM9DS1 Table 3 and LSM6DSOX DS12814 Table 2: 0.122 mg/LSB).
+ACCEL_LSB_PER_G = {"mpu9250": 8192.0, "lsm9ds1": 1000 / 0.122, "icm42688p": 8192.0,
+                   "lsm6dsox": 1000 / 0.122, "icm20948": 8192.0}
 LEVEL_REGISTER = {"mpu9250": (0x68, 0x72), "lsm9ds1": (0x6B, 0x2F), "icm42688p": (0x68, 0x2E),
                   "lsm6dsox": (0x6A, 0x3A), "icm20948": (0x68, 0x70)}  # FIFO_STATUS1, _COUNTH
 SMALL_FIFO = {"mpu9250": 128, "lsm9ds1": 12, "icm42688p": 256, "lsm6dsox": 24,  # 16/12/16/12
@@ -127,6 +133,13 @@ def test_a_simulated_minute_delivers_every_sample_once_in_order_on_time(model):
     assert np.all(np.diff(t) > 0)
     ks = grid_index(chip, batches)
     np.testing.assert_allclose(rate, expected_rate(truth, motion, chip, ks, lsb), atol=1e-12)
+    # the accelerometer of the same samples: an ideal one reading +1 g on z (the motion has no
+    # specific force), in counts of the datasheet sensitivity, times standard gravity
+    per_g = ACCEL_LSB_PER_G[model]
+    accel = cat(batches, "accel")
+    assert accel.shape == rate.shape and not cat(batches, "accel_saturated").any()
+    np.testing.assert_allclose(accel, np.tile([0.0, 0.0, np.rint(per_g) / per_g * 9.80665],
+                                              (len(t), 1)), atol=1e-12)
     assert np.max(np.abs(t - chip.sample_time(ks))) < 0.5e-3
     # a minute between two samples' midpoints holds exactly ODR × 60 s samples
     period = 1.0 / odr
@@ -260,7 +273,7 @@ def test_mpu_frames_without_temperature():
     motion = wave(range_dps)
     clock, bus, chip, reader = rig("mpu9250", truth, motion, temperature_in_fifo=False)
     reader.start()
-    assert bus.read_byte_data(0x68, 0x23) == 0x70  # FIFO_EN: gyro X, Y, Z only
+    assert bus.read_byte_data(0x68, 0x23) == 0x78  # FIFO_EN: gyro X, Y, Z and accelerometer
     batches = collect(reader, clock, 2.0)
     ks = grid_index(chip, batches)
     np.testing.assert_allclose(

@@ -164,8 +164,8 @@ def test_a_word_lost_inside_the_fifo_is_a_gap_of_one_without_a_restart():
         clock.sleep(0.01)
         batches.append(reader.read())
     chip.fifo_level  # noqa: B018 - bring the FIFO up to date
-    del chip._fifo[2]  # the timestamp and gyro words of the second waiting sample are lost
-    del chip._fifo[2]
+    for _ in range(3):  # the timestamp, gyro and accelerometer words of the second waiting
+        del chip._fifo[3]  # sample are lost
     enables = len(chip.fifo_enables)
     for _ in range(50):
         clock.sleep(0.01)

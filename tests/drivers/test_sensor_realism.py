@@ -160,7 +160,8 @@ def test_gravity_is_seen_in_the_true_orientation():
     jig.joints[0].angle = math.pi / 2  # 90° about x: +z of the base is +y of the sensor
     f = jig.specific_force(np.array([1.0, 2.0]))
     np.testing.assert_allclose(f, [[0.0, 1.0, 0.0]] * 2, atol=1e-12)
-    # and through the chip's accelerometer registers, counts at ±2 g
+    # and through the chip's accelerometer registers, counts at the reader's ±4 g (8192 LSB/g,
+    # PS-MPU-9250A-01 Table 2), and in the reader's batch as specific force in m/s²
     clock = VirtualClock()
     clock.sleep(0.0)
     truth = SensorTruth(noise_sigma_rad_s=0.0, realism=SensorRealism(specific_force=True))
@@ -168,9 +169,10 @@ def test_gravity_is_seen_in_the_true_orientation():
     reader = open_imu("mpu9250", bus, addr, clock=clock, range_dps=500, odr_hz=200)
     reader.start()
     clock.sleep(0.1)
-    reader.read()
+    batch = reader.read()
     chip = bus.device(addr)
-    np.testing.assert_array_equal(chip._latest.accel, [0, 16384, 0])
+    np.testing.assert_array_equal(chip._latest.accel, [0, 8192, 0])
+    np.testing.assert_allclose(batch.accel, [[0.0, 9.80665, 0.0]] * len(batch), atol=1e-12)
 
 
 def test_g_sensitivity_sees_the_true_orientation_when_the_accelerometer_is_not_shown_it():

@@ -18,6 +18,13 @@ evaluated at every gyro sample from the servos' exact angles and rates. The gyro
 MPU-9250's 500 °/s LSB unless ``lsb`` is 0. The encoders read the true angle rounded to 4096
 ticks a turn unless ``ticks`` is 0.
 
+With ``accel_truth`` (an accelerometer truth, :func:`draw_accel`), ``imu.csv`` gains the optional
+columns ``ax,ay,az``: the specific force ``g f`` (gravity in the sensor's true orientation, the
+jig's accelerations left out) read through ``a = A⁻¹ (g f) − b`` plus white noise, ``A`` lower
+triangular (the calibration's frame convention, so ``A`` and ``b`` are what a fit must return),
+and the schedule ends with a tour of :data:`TOUR_POSES` (base and middle servo angles) with a
+rest in each.
+
 The pose schedule differs from gyrocal's planner (which poses at 45° or 90°, turns negative first
 and moves one servo per pair): here every servo turns positive first, the poses are at
 ``pose_deg`` (default 60°) and ``-pose_deg``, and a pose may move two servos at once.
@@ -69,9 +76,24 @@ def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.nd
     return out
 
 
-def schedule(pose_deg: float, gravity: bool = False) -> list[tuple]:
+#: Base and middle servo angles (degrees) of the accelerometer's tour: gravity then points along
+#: the sensor's ±x, ±y, −z and the eight diagonals between them (besides +z at home).
+TOUR_POSES = ((90, 0), (-90, 0), (180, 0), (0, 90), (0, -90), (45, 45), (-45, 45), (45, -45),
+              (-45, -45), (135, 45), (-135, 45), (135, -45), (-135, -45))
+
+
+def draw_accel(seed: int, cross: float = 0.01, noise: float = 0.03) -> dict:
+    """An accelerometer truth: ``A`` lower triangular with scales 0.97–1.03 and off-diagonal
+    terms up to ``cross``, bias up to 0.3 m/s², white noise ``noise`` m/s² per sample."""
+    rng = np.random.default_rng([seed, 0xACC])
+    A = np.diag(rng.uniform(0.97, 1.03, 3)) + np.tril(rng.uniform(-cross, cross, (3, 3)), -1)
+    return {"matrix": A, "bias": rng.uniform(-0.3, 0.3, 3), "noise": noise}
+
+
+def schedule(pose_deg: float, gravity: bool = False, tour: bool = False) -> list[tuple]:
     """``(kind, servo position or positions, direction or target angles, )`` steps; with
-    ``gravity`` a last rest with the base a quarter turn from home (gravity along ±y)."""
+    ``gravity`` a last rest with the base a quarter turn from home (gravity along ±y); with
+    ``tour`` a rest at each of :data:`TOUR_POSES`."""
     p = np.radians(pose_deg)
     steps: list[tuple] = []
     for s in range(3):  # home turns, positive first
@@ -84,6 +106,9 @@ def schedule(pose_deg: float, gravity: bool = False) -> list[tuple]:
         steps.append(("move", (0.0, 0.0, 0.0)))
     if gravity:
         steps += [("move", (np.pi / 2, 0.0, 0.0)), ("move", (0.0, 0.0, 0.0))]
+    if tour:
+        steps += [("move", (np.radians(a), np.radians(b), 0.0)) for a, b in TOUR_POSES]
+        steps.append(("move", (0.0, 0.0, 0.0)))
     return steps
 
 
@@ -126,7 +151,9 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
                     hold: float = 0.06, bias_walk: float = 0.0,
                     temp_ramp: tuple[float, float] | None = None,
-                    tempco: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict:
+                    tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                    accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
+                    tour: bool = True) -> dict:
     """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``). With
     ``g_sensitivity`` (3×3, rad/s per g) the reading gains ``G f`` (``f`` from
     :func:`specific_force`) and the schedule a gravity rest. ``steps`` replaces the schedule
@@ -139,7 +166,11 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     truth then holds the walk at every gyro sample as ``bias_walk`` (n, 3), the bias being
     ``bias + bias_walk``. With ``temp_ramp`` (°C at the start and the end) the die temperature
     ramps linearly (written in the ``temp`` column) and the bias follows it,
-    ``bias + tempco (T − T_start)``."""
+    ``bias + tempco (T − T_start)``. With ``accel_truth`` (:func:`draw_accel`) the
+    accelerometer's columns and (unless ``tour`` is false) the tour (module docstring), gravity
+    ``gravity_m_s2`` also written to the manifest's ``site``; an ``accel_truth`` with a
+    ``reading`` (a function of the specific force in g giving the reading in g, such as an
+    emulated accelerometer's) reads through it instead."""
     truth = draw_sensor(seed, cross)
     rng = np.random.default_rng([seed, 0x5A3])
     path = Path(path)
@@ -148,8 +179,9 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     t = 0.0
     pose = np.zeros(3)
     _, _, turn_time = _profile(np.zeros(1), speed, turns, accel)
+    with_tour = tour and accel_truth is not None
     plan = steps if steps is not None else [
-        x for step in schedule(pose_deg, gravity=g_sensitivity is not None)
+        x for step in schedule(pose_deg, gravity=g_sensitivity is not None, tour=with_tour)
         for x in (("rest", rest), step)]
     for step in plan:
         if step[0] == "rest":
@@ -207,14 +239,27 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
             g_sensitivity).T
     if lsb:
         m = np.round(m / lsb) * lsb
+    cols = m
+    if accel_truth is not None:
+        force = gravity_m_s2 * specific_force(truth["links"], truth["mount"], ang)
+        if "reading" in accel_truth:
+            a = gravity_m_s2 * np.asarray(accel_truth["reading"](force / gravity_m_s2))
+        else:
+            a = (np.linalg.solve(accel_truth["matrix"], force.T).T - accel_truth["bias"]
+                 + accel_truth["noise"] * rng.standard_normal(force.shape))
+        cols = np.column_stack([m, np.full(m.shape[0], np.nan), a])
     enc, _ = motion(te)
     if ticks:
         enc = np.round(enc / (2 * np.pi / ticks)) * (2 * np.pi / ticks)
     with open(path / "imu.csv", "w") as f:
-        f.write("t,gx,gy,gz,temp\n")
+        f.write("t,gx,gy,gz,temp\n" if accel_truth is None else "t,gx,gy,gz,temp,ax,ay,az\n")
         for i, (ti, row) in enumerate(zip(ts, m, strict=True)):
             tc = "" if temp is None else f"{temp[i]:.4f}"
-            f.write(f"{ti:.6f},{row[0]:.10g},{row[1]:.10g},{row[2]:.10g},{tc}\n")
+            line = f"{ti:.6f},{row[0]:.10g},{row[1]:.10g},{row[2]:.10g},{tc}"
+            if accel_truth is not None:
+                r = cols[i]
+                line += f",{r[4]:.10g},{r[5]:.10g},{r[6]:.10g}"
+            f.write(line + "\n")
     with open(path / "encoder.csv", "w") as f:
         f.write("t,motor,angle\n")
         for i in range(te.size):
@@ -236,5 +281,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         "truth": {"scale": truth["scale"].tolist(), "bias": truth["bias"].tolist(),
                   "misalignment": truth["misalignment"].tolist()},
     }
+    if accel_truth is not None:
+        manifest["site"] = {"gravity_m_s2": gravity_m_s2}
     (path / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
     return truth

@@ -156,7 +156,8 @@ def test_a_failed_check_repeats_the_turn_once_and_the_run_still_calibrates(tmp_p
 
 
 def test_a_fifo_gap_is_caught(tmp_path, capsys):
-    assert calibrate(tmp_path, "--sim-fault", "fifo:8") == 5  # a FIFO of one sample
+    # a FIFO of one sample: 14 bytes, accelerometer, temperature and gyro (PS-MPU-9250A-01 FIFO)
+    assert calibrate(tmp_path, "--sim-fault", "fifo:14") == 5
     err = capsys.readouterr().err
     # A FIFO gap is the host's part (issue 17): repeated up to 3 times, then the run stops.
     assert "gyro samples were lost" in err and "FIFO overflow" in err

@@ -68,7 +68,8 @@ def test_sim_cross_axis_flag_and_default(flag, largest):
 def test_full_model_recovers_the_matrix_and_holds_in_general_motion(rec):
     est = estimate_recording(rec)  # auto
     fit = est.fit
-    assert fit.method == "full-matrix" and not est.notes
+    # the only note: the default protocol's rests hold too few orientations for the accelerometer
+    assert fit.method == "full-matrix" and not _gyro_notes(est)
     assert fit.consistency.ok
     C, b = _sensing(rec.truth), np.asarray(rec.truth["bias"])
     A_true = truth_in_frame(C)
@@ -97,9 +98,10 @@ def test_a_one_pose_recording_falls_back_to_the_diagonal_model_and_says_so(rec):
         home.append(s)
     est = estimate_recording(replace(rec, segments=tuple(home)))
     assert est.fit.method == "paired-axis"
-    assert len(est.notes) == 1
-    assert "cross-axis terms were NOT calibrated" in est.notes[0]
-    assert "±2 %" in est.notes[0]
+    notes = _gyro_notes(est)
+    assert len(notes) == 1
+    assert "cross-axis terms were NOT calibrated" in notes[0]
+    assert "±2 %" in notes[0]
     assert est.calibration.matrix is None  # a v1 document
 
 
@@ -118,3 +120,8 @@ def test_the_default_sensor_has_g_sensitivity_and_the_calibration_recovers_it(re
     expected = -np.asarray(G_true) @ (truth_in_frame(C) @ C).T
     assert np.all(np.abs(np.asarray(g["matrix"]) - expected) < 4 * np.asarray(g["matrix_std"]))
     assert np.all(np.abs(np.asarray(cal.bias) - rec.truth["bias"]) < 4 * np.asarray(cal.bias_std))
+
+
+def _gyro_notes(est):
+    """The estimate's notes about the gyro (the recording has accelerometer columns too)."""
+    return [n for n in est.notes if "accelerometer" not in n]

@@ -215,13 +215,13 @@ def test_a_sensor_that_dies_mid_run_fails_alone(tmp_path, capsys):
 
 
 def test_a_sensor_whose_fifo_overflows_on_every_repeat_fails_alone(tmp_path, capsys):
-    # a FIFO of one sample (8 bytes, as tests/kit/test_calibrate.py) on sensor b only
+    # a FIFO of one sample (14 bytes, as tests/kit/test_calibrate.py) on sensor b only
     cfg = write(tmp_path, '[[imu]]\nname = "mpu"\naddress = 0x68\n'
                           '[[imu]]\nname = "b"\naddress = 0x69\n')
     out = tmp_path / "run"
     code = main(["calibrate", "--sim", *PAPER_SENSOR, "--protocol", "auto", "--config",
                  str(cfg), "--out", str(out), "--quiet", "--no-report",
-                 "--sim-fault", "fifo:8@b"])
+                 "--sim-fault", "fifo:14@b"])
     text = capsys.readouterr().out
     assert code == 5  # a check's class
     assert "== sensor mpu: mpu9250 at 0x68 on bus 1: PASSED" in text

@@ -298,18 +298,14 @@ def test_the_parser_choice(monkeypatch):
         recording._choose_parser(1)
 
 
-def _with_accel(lines, rng, empty_every=5):
-    """``lines`` with three more columns (a reader that knows only ``t,gx,gy,gz,temp`` must
-    check and skip them): numbers, or all three empty on every ``empty_every``-th row."""
-    out = []
-    for i, line in enumerate(lines):
-        acc = ",," if i % empty_every == 0 else ",".join(
-            repr(float(v)) for v in rng.normal(scale=9.8, size=3))
-        out.append(line + "," + acc)
-    return out
+def _with_accel(lines, rng):
+    """``lines`` with the accelerometer's three columns (numbers: only ``temp`` may be empty),
+    which the gyro stream must check and leave out."""
+    return [line + "," + ",".join(repr(float(v)) for v in rng.normal(scale=9.8, size=3))
+            for line in lines]
 
 
-def test_the_stream_reads_past_extra_trailing_columns(tmp_path, block_bytes):
+def test_the_stream_reads_past_the_accelerometer_columns(tmp_path, block_bytes):
     lines, t, rate, temp = make_rows(400, seed=3)
     write_rec(tmp_path / "r", _with_accel(lines, np.random.default_rng(4)))
     path = tmp_path / "r" / "imu.csv"
