@@ -910,14 +910,17 @@ def _base_sequence(plan: Plan, n_servos: int) -> list[tuple]:
 def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
     """The plan's steps in running order, servos as chain positions (base = 0).
 
-    Each step is ``("rest",)``, ``("rotate", servo, direction)`` (``plan.turns`` whole turns)
-    or ``("move", servo, angle)`` (to ``angle`` rad from home). Per servo: rest, turn −, rest,
-    turn +; a final rest; each posed pair: move a servo to its pose, turn another −, rest, +,
-    rest, move the first home (:func:`full_schedule` is the turns' order); each gravity pose:
-    move, rest, move home; then :attr:`Plan.accel_extra_rests` rests. The accelerometer's
-    moves (:attr:`Plan.accel_moves`) go before
-    their rests, and the run ends with every servo still away from home moved home
-    (lowest chain position first). :func:`gyrocal.kit.protocol.build_steps` runs this.
+    Each step is ``("rest",)``, ``("rotate", servo, direction)`` (``plan.turns`` whole
+    turns), ``("move", servo, angle)`` (to ``angle`` rad from home) or ``("still", seconds)``
+    (the jig holds still: no rest of the fit, only still time after a turn). Per servo: rest,
+    turn −, rest, turn +; a final rest; each posed pair: move a servo to its pose, turn another
+    −, rest, +, rest, move the first home (:func:`full_schedule` is the turns' order); each
+    gravity pose: move, rest, move home; then :attr:`Plan.accel_extra_rests` rests. The
+    accelerometer's moves (:attr:`Plan.accel_moves`) go right before their rest, after
+    :data:`ACCEL_STILL_S` of still time when a turn comes before (the turn's rest-to-rest
+    window takes still time after it: :mod:`gyrocal.calib.windows`); the run ends with every
+    servo still away from home moved home (lowest chain position first).
+    :func:`gyrocal.kit.protocol.build_steps` runs this.
 
     Raises
     ------
@@ -937,7 +940,10 @@ def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
     r = 0
     for step in seq:
         if step[0] == "rest":
-            out += before.pop(r, [])
+            moves = before.pop(r, [])
+            if moves and out and out[-1][0] == "rotate":
+                out.append(("still", ACCEL_STILL_S))  # the turn's window needs still time
+            out += moves
             r += 1
         out.append(step)
     if before:
@@ -982,15 +988,21 @@ def rest_gravity(angles: np.ndarray, axes: np.ndarray | None = None,
 #: needs ten); protocols with fewer get extra rests at the end.
 ACCEL_MIN_RESTS = 12
 
+#: Still time between a turn and an accelerometer move after it, s: a rest-to-rest window of
+#: the turn takes up to 0.15 s of still time after it (:func:`gyrocal.calib.windows.
+#: extract_observations`' ``still_margin_s``), and the loop reads once more after a turn.
+ACCEL_STILL_S = 0.2
+
 #: Angles a servo may be moved to for an accelerometer rest, rad from home: multiples of 45°.
 ACCEL_REST_ANGLES = tuple(float(a) for a in np.radians(np.arange(-135.0, 181.0, 45.0)))
 
 #: Bound on the predicted worst-direction σ of the calibrated |f| over one rest window's σ
-#: that :func:`plan_accel_rests` aims for. For scale: the 14-point gravity tour
-#: (:data:`gyrocal.calib.accel.TOUR_DIRECTIONS`) with one rest each scores 0.81, and adds
-#: 17-22 s to a run; the default protocol's own rests (two or three directions) cannot
-#: determine the nine parameters at all.
-ACCEL_STD_RATIO_TARGET = 1.5
+#: that :func:`plan_accel_rests` aims for: 2, i.e. about 0.8 mg for an MPU-9250 (300 µg/√Hz,
+#: 200 Hz) with 1 s rests, against its ±60-80 mg zero-g offset and ±3 % scale (datasheet
+#: Table 2). For scale: the 14-point gravity tour (:data:`gyrocal.calib.accel.TOUR_DIRECTIONS`)
+#: with one rest each scores 0.81 and adds 17-22 s to a run; the default protocol's own rests
+#: (two or three directions) cannot determine the nine parameters at all.
+ACCEL_STD_RATIO_TARGET = 2.0
 
 
 def _accel_rows(d: np.ndarray) -> np.ndarray:
@@ -1072,10 +1084,12 @@ def plan_accel_rests(
         return 0.0 if abs(a - b) < 1e-12 else profile_duration(abs(a - b), plan.speed,
                                                                plan.accel) + settle_s
 
-    # Which servos each rest may move, and how far: until the servo's next move, every turn
-    # must be of a servo at or outside it (its angle then changes no turn's axis), and a turn
-    # of the servo itself must stay within the cable-wrap limit.
+    # Which servos each rest may move (right before it), and how far: until the servo's next
+    # move, every turn must be of a servo at or outside it (its angle then changes no turn's
+    # axis), and a turn of the servo itself must stay within the cable-wrap limit. A move
+    # after a turn waits ACCEL_STILL_S first.
     rests = [i for i, st in enumerate(base) if st[0] == "rest"]
+    still = [ACCEL_STILL_S if i and base[i - 1][0] == "rotate" else 0.0 for i in rests]
     limit: list[list[float]] = []
     for i in rests:
         row = []
@@ -1131,7 +1145,7 @@ def plan_accel_rests(
                     for k in range(n_grid):
                         if abs(grid[k]) <= limit[r][s] + 1e-9 and k != here[s]:
                             options.append((here[:s] + (k,) + here[s + 1:],
-                                            t + move_time(grid[here[s]], grid[k]),
+                                            t + still[r] + move_time(grid[here[s]], grid[k]),
                                             mv + [(r, s, float(grid[k]))]))
                 pose = np.array([int(np.dot(o[0], strides)) for o in options])
                 ninfo = info + info_all[pose]

@@ -57,7 +57,7 @@ __all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
 class Step:
     """One step of the protocol."""
 
-    kind: str  # "rest", "rotate" or "move"
+    kind: str  # "rest", "rotate", "move" or "still" (still time only: no segment, no check)
     motor: int | None = None
     direction: int = 0
     turns: int = 0
@@ -69,6 +69,8 @@ class Step:
         """Human-readable, e.g. ``turn servo 2, 2 turns at 200°/s, negative``."""
         if self.kind == "rest":
             return f"rest {self.rest_s:.1f} s"
+        if self.kind == "still":
+            return f"hold still {self.rest_s:.1f} s"
         if self.kind == "move":
             return f"move servo {self.motor} to {math.degrees(self.angle):+.0f}°"
         sign = "positive" if self.direction > 0 else "negative"
@@ -105,6 +107,8 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
     for st in seq:
         if st[0] == "rest":
             steps.append(Step("rest", rest_s=plan.rest_s))
+        elif st[0] == "still":
+            steps.append(Step("still", rest_s=float(st[1])))
         elif st[0] == "rotate":
             steps.append(Step("rotate", motor=int(ids[st[1]]), direction=st[2], turns=plan.turns,
                               speed=plan.speed))
@@ -617,6 +621,10 @@ class Runner:
             for i, step in enumerate(self.steps):
                 self.step_index = i
                 self.step_desc = step.describe()
+                if step.kind == "still":  # still time after a turn, before a move: no segment
+                    self._data = None
+                    self._run_rest(step)
+                    continue
                 self._do_step(i, step)
             self._data = None
         except BaseException as exc:

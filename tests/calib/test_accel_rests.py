@@ -35,11 +35,16 @@ def rot(axis, angle):
 def walk(plan, axes=AXES):
     """Run the sequence on the test's gimbal: per rest the gravity direction, per turn
     (servo, its axis in the sensor frame, every servo's angle at its start, direction), the
-    moves (servo, from, to) and where the servos end."""
+    moves (servo, from, to) and where the servos end. A move straight after a turn fails."""
     here = np.zeros(len(axes))
     rests, turns, moves = [], [], []
-    for st in protocol_sequence(plan, len(axes)):
+    seq = protocol_sequence(plan, len(axes))
+    for k, st in enumerate(seq):
+        if st[0] == "still":
+            continue
         if st[0] == "move":
+            if k and seq[k - 1][0] == "rotate":
+                raise AssertionError("a move right after a turn leaves its window no still time")
             moves.append((st[1], here[st[1]], st[2]))
             here[st[1]] = st[2]
         elif st[0] == "rest":
@@ -107,7 +112,9 @@ def test_the_added_time_is_the_moves_it_adds_and_far_below_a_gravity_tour(plans)
         return sum(profile_duration(abs(b - a), plan.speed, plan.accel) + 0.1
                    for _, a, b in moves if abs(b - a) > 1e-12)
 
-    added = move_time(walk(plan)[2]) - move_time(walk(gyro)[2])
+    still = sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
+    assert still >= 0.15 * sum(1 for st in protocol_sequence(plan) if st[0] == "still")
+    added = move_time(walk(plan)[2]) - move_time(walk(gyro)[2]) + still
     assert plan.accel_time_s == pytest.approx(added, rel=1e-9)
     assert plan.jig_time_s == pytest.approx(gyro.jig_time_s + added, rel=1e-12)
     assert 0 < plan.accel_time_s < 10.0  # the 14-point tour adds 17-22 s
@@ -137,4 +144,5 @@ def test_a_diagonal_plan_gets_tilted_rests_too():
     assert np.all(home == 0)
     moved = sum(profile_duration(abs(b - a), plan.speed, plan.accel) + 0.1
                 for _, a, b in moves if abs(b - a) > 1e-12)
-    assert plan.accel_time_s == pytest.approx(moved + plan.accel_extra_rests * plan.rest_s)
+    still = sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
+    assert plan.accel_time_s == pytest.approx(moved + still + plan.accel_extra_rests * plan.rest_s)
