@@ -155,8 +155,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                       check=_within(0.1, 600, zero="planned")),
         "method": Key(METHODS[0], "estimator", str, METHODS),
         "accel_rests": Key(True, "tilt the rests between turns so the accelerometer is "
-                           "calibrated too (protocols full and auto; a few moves, about 6 s "
-                           "on the default run); false: rests in the gyro's poses only", bool),
+                           "calibrated too (protocol full; a few moves, about 8 s on the "
+                           "default run); false: rests in the gyro's poses only", bool),
     },
     "history": {
         "url": Key("", "calibration history (kit/history.py): sqlite:///PATH or "

@@ -291,7 +291,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses),
             gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
-    if p["name"] != "paper" and p["accel_rests"]:
+    if p["name"] == "full" and p["accel_rests"]:
         # tilt the rests for the accelerometer (calib.design.plan_accel_rests): the turns the
         # gyro sees are unchanged; the moves add plan.accel_time_s beyond the gyro's budget
         plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),

@@ -115,9 +115,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=METHODS)
     p.add_argument("--accel-rests", action=argparse.BooleanOptionalAction, default=None,
                    help="tilt the rests between turns so the accelerometer is calibrated too "
-                        "(protocol.accel_rests, on by default for protocols full and auto: a "
-                        "few servo moves, about 6 s on the default run); --no-accel-rests "
-                        "keeps the rests in the gyro's poses")
+                        "(protocol.accel_rests, on by default for protocol full: a few servo "
+                        "moves, about 8 s on the default run); --no-accel-rests keeps the "
+                        "rests in the gyro's poses")
     p.add_argument("--json", action="store_true", help="print the calibration document")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--no-report", action="store_true",
