@@ -157,6 +157,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "accel_rests": Key(True, "tilt the rests between turns so the accelerometer is "
                            "calibrated too (protocol full; a few moves, about 8 s on the "
                            "default run); false: rests in the gyro's poses only", bool),
+        "align_gyro_to_accel": Key(False, "express the gyro calibration in the calibrated "
+                                   "accelerometer's frame (accel-x-xy), as imu_tk does", bool),
     },
     "history": {
         "url": Key("", "calibration history (kit/history.py): sqlite:///PATH or "

@@ -48,6 +48,7 @@ def load_cli_config(args: argparse.Namespace) -> Any:
         "protocol.name": getattr(args, "protocol", None),
         "protocol.method": getattr(args, "method", None),
         "protocol.accel_rests": getattr(args, "accel_rests", None),
+        "protocol.align_gyro_to_accel": getattr(args, "align_gyro_to_accel", None),
     })
 
 

@@ -6,6 +6,7 @@ import argparse
 import importlib.util
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -113,6 +114,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default); auto: planned for this jig, diagonal model; paper: 60°/s, "
                         "one turn, 3 s waits")
     p.add_argument("--method", choices=METHODS)
+    p.add_argument("--align-gyro-to-accel", action="store_true", default=None,
+                   help="express the gyro calibration in the calibrated accelerometer's frame "
+                        "(accel-x-xy), as imu_tk does: the rotation between the frames is "
+                        "estimated from the rests and applied with its uncertainty "
+                        "(protocol.align_gyro_to_accel; needs the accelerometer's calibration)")
     p.add_argument("--accel-rests", action=argparse.BooleanOptionalAction, default=None,
                    help="tilt the rests between turns so the accelerometer is calibrated too "
                         "(protocol.accel_rests, on by default for protocol full: a few servo "
@@ -155,6 +161,11 @@ def run(args: argparse.Namespace) -> int:
             est = estimate_recording(rec, cfg["protocol"]["method"],
                                      source=str(out / "recording"))
             cal = est.calibration
+            if cfg["protocol"]["align_gyro_to_accel"]:
+                from gyrocal.kit.alignment import align_to_accelerometer
+
+                cal, aligned_note = align_to_accelerometer(cal, rec, est.extracted)
+                est = replace(est, notes=(*est.notes, aligned_note))
             check_plausible(cal, rec.sensor, allow=args.allow_implausible)
             atomic_write_text(work / "calibration.json", cal.to_json() + "\n")
             if report:
