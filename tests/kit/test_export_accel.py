@@ -158,3 +158,18 @@ def test_a_calibration_without_an_accelerometer_is_refused_for_the_accel_formats
     for fmt in ("px4-accel", "ardupilot-accel"):
         assert main(["export", str(p), "--format", fmt]) == 2
         assert "needs a calibration with an 'accelerometer'" in capsys.readouterr().err
+
+
+def test_the_thermal_formats_say_the_accelerometer_goes_elsewhere(cal, tmp_path, capsys):
+    from dataclasses import replace
+
+    from gyrocal.calib.thermal import ThermalModel
+
+    tm = ThermalModel(reference_c=30.0, range_c=(20.0, 40.0),
+                      bias_coeffs=np.array([[0.01, 1e-4]] * 3),
+                      bias_coeffs_covariance=np.array([np.eye(2) * 1e-12] * 3), points=5)
+    p = tmp_path / "t.json"
+    p.write_text(replace(cal, temperature_model=tm).to_json())
+    for fmt, other in (("px4-thermal", "px4-accel"), ("ardupilot-thermal", "ardupilot-accel")):
+        _, err = export(capsys, p, fmt)
+        assert f"export it with --format {other}" in err
