@@ -1027,9 +1027,11 @@ def plan_accel_rests(
     The rests between turns already hold the sensor still; they see gravity in only two or
     three directions. A turning servo's axis in the sensor frame depends only on the servos
     outside it (:func:`gyrocal.calib.kinematics.chain_axes`), so a servo at or inside the
-    next turning servo may be moved before a rest without changing any turn the gyro fit sees
-    (:func:`predict_full_uncertainty` is unchanged); each such move costs its profile time
-    plus ``settle_s``, and the run ends with a move home of every servo left away. The rests'
+    next turning servo (until that servo's next move) may be moved before a rest without
+    changing any turn the gyro fit sees (:func:`predict_full_uncertainty` is unchanged); each
+    such move costs its profile time plus ``settle_s``, and :data:`ACCEL_STILL_S` of still time
+    first when a turn comes before it; the run ends with a move home of every servo left
+    away. The rests'
     gravity directions (:func:`rest_gravity`) are chosen by a beam search over
     :data:`ACCEL_REST_ANGLES` that maximises ``log det`` of the accelerometer fit's
     information minus ``λ`` times the added time, for several ``λ``; of the results, the one
