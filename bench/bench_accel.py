@@ -19,6 +19,12 @@ six-position method on the same data.
    errors) and (b) the independent generator ``tests/calib/accel_truth.py`` (shares no code with
    the estimator or the emulator).
 
+3. The planner's own rests (``calib.design.plan_accel_rests`` on the default full plan): the
+   protocol's existing rests tilted by moving servos inside the next turning one (no gravity
+   tour). Design score and added time as in 1, and the same accuracy as in 2 (our fit only: its
+   rests need not include ±x, ±y, ±z), on both generators, the true directions through a jig
+   whose three axes are each tilted 0.3° and a sensor mounted ``--mount-deg`` off.
+
 Usage: ``python -m bench accel [--seeds=N] [--mount-deg=D]``.
 """
 
@@ -61,9 +67,29 @@ def _rotation(rng: np.random.Generator, deg: float) -> np.ndarray:
     return np.eye(3) + math.sin(a) * k + (1 - math.cos(a)) * k @ k
 
 
+def _planned() -> tuple[np.ndarray, object]:
+    """The default full plan with its accelerometer rests: every rest's servo angles (N, 3)."""
+    from gyrocal.calib.design import plan_accel_rests, plan_protocol, protocol_sequence
+
+    gyro = plan_protocol(servo_max_speed=SPEED / 0.9, full_scale=math.radians(500),
+                         time_budget_s=45.0, model="full")
+    plan = plan_accel_rests(gyro, max_turns=3.0)
+    here, angles = np.zeros(3), []
+    for st in protocol_sequence(plan):
+        if st[0] == "move":
+            here[st[1]] = st[2]
+        elif st[0] == "rest":
+            angles.append(here.copy())
+    return np.array(angles), plan
+
+
 def _designs() -> list[list[object]]:
+    from gyrocal.calib.design import rest_gravity
+
     rows = []
-    options = [("default protocol", DEFAULT_RESTS, 0.0)]
+    angles, plan = _planned()
+    options = [("default protocol", DEFAULT_RESTS, 0.0),
+               ("planned accel rests", rest_gravity(angles), plan.accel_time_s)]
     for name, dirs in (("+ 14-point tour", None), ("+ 10-point tour", SMALL_TOUR)):
         tour = gravity_tour(SPEED, ACCEL, REST_S, directions=dirs)
         options.append((name, np.vstack([DEFAULT_RESTS, tour.directions]), tour.added_time_s))
@@ -87,6 +113,34 @@ def _true_directions(poses: np.ndarray, mount: np.ndarray, tilts: list[np.ndarra
     out = [(_axis_rotation(a1, p1) @ _axis_rotation(a2, p2) @ mount).T @ [0, 0, 1.0]
            for p1, p2 in poses]
     return np.array(out)
+
+
+def _true_directions3(angles: np.ndarray, mount: np.ndarray, tilts: list[np.ndarray]
+                      ) -> np.ndarray:
+    """Gravity in the sensor frame with three servos at ``angles`` (N, 3) on a jig whose x, y, z
+    axes are tilted by ``tilts`` and whose sensor is mounted off by ``mount``."""
+    ax = [t @ e for t, e in zip(tilts, np.eye(3), strict=True)]
+    return np.array([(_axis_rotation(ax[0], a[0]) @ _axis_rotation(ax[1], a[1])
+                      @ _axis_rotation(ax[2], a[2]) @ mount).T @ [0, 0, 1.0] for a in angles])
+
+
+def _fit_error(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
+               rng: np.random.Generator, generator: str) -> float:
+    """RMS calibrated-force error (mg) of our fit on rests in ``true_dirs``."""
+    g = STANDARD_GRAVITY
+    if generator == "emulator":
+        means = AccelTruth(sensing_g, bias_g).reading(true_dirs) * g
+        means += rng.standard_normal(means.shape) * WINDOW_STD
+        std = np.full(means.shape, WINDOW_STD)
+    else:
+        means, std = indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
+                                      DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
+    fit = fit_accelerometer(means, std, g)
+    truth_a = in_frame(np.linalg.inv(sensing_g))
+    q = g * sphere_points(2000)
+    reading = q @ sensing_g.T - bias_g * g
+    err = fit.apply(reading) - (reading + bias_g * g) @ truth_a.T
+    return 1e3 * math.sqrt(np.mean(np.sum(err**2, axis=1))) / g
 
 
 def _errors(sensing_g: np.ndarray, bias_g: np.ndarray, dirs: np.ndarray, true_dirs: np.ndarray,
@@ -148,3 +202,24 @@ def main(argv: list[str]) -> None:
     print_table(["data", "sensors", "ours RMS mg", "six-position RMS mg", "ratio six/ours"],
                 rows, f"calibrated specific force error over the sphere, default protocol + "
                       f"14-point tour (+{tour.added_time_s:.1f} s), mount {mount_deg:g}°")
+    angles, plan = _planned()
+    rows = []
+    for generator in ("emulator", "independent"):
+        out = []
+        for seed in range(seeds):
+            rng = np.random.default_rng([seed, 16])
+            if generator == "emulator":
+                t = draw_accel_truth("mpu9250", seed)
+                c, b = np.asarray(t.sensing), np.asarray(t.bias_g)
+            else:
+                c = indep.random_sensing(rng, 0.03, 0.02)
+                b = rng.uniform(-0.06, 0.06, 3)
+            true_dirs = _true_directions3(angles, _rotation(rng, mount_deg),
+                                          [_rotation(rng, 0.3) for _ in range(3)])
+            out.append(_fit_error(c, b, true_dirs, rng, generator))
+        e = np.array(out)
+        rows.append([generator, seeds, len(angles), float(np.sqrt(np.mean(e**2))),
+                     float(np.max(e)), plan.accel_time_s])
+    print_table(["data", "sensors", "rests", "ours RMS mg", "worst sensor mg", "added jig s"],
+                rows, "calibrated specific force error over the sphere, the planner's tilted "
+                      f"rests (no tour), mount {mount_deg:g}°")

@@ -67,7 +67,10 @@ __all__ = [
     "TOUR_DIRECTIONS",
     "AccelCalibration",
     "AccelDesign",
+    "FrameRotation",
     "accel_design",
+    "align_gyro",
+    "frame_rotation",
     "GravityTour",
     "fit_accelerometer",
     "gravity_tour",
@@ -588,3 +591,229 @@ def gravity_tour(speed: float, accel: float, rest_s: float, settle_s: float = 0.
     total += move(here[0], 0.0) + move(here[1], 0.0)
     poses = np.column_stack([phi1, phi2])[order]
     return GravityTour(poses, tour_gravity(poses[:, 0], poses[:, 1]), float(total))
+
+
+# ------------------------------------------------------- the gyro in the accelerometer's frame
+@dataclass(frozen=True)
+class FrameRotation:
+    """The rotation from the gyro calibration's frame to the accelerometer calibration's
+    (:func:`frame_rotation`).
+
+    Attributes
+    ----------
+    rotation : (3, 3) ndarray
+        ``R``: a vector in the gyro's frame ``gyro-x-xy`` is ``R v`` in :data:`ACCEL_FRAME`.
+    covariance : (3, 3) ndarray
+        Of the small rotation vector ``δ`` in ``R̂ = exp([δ]×) R`` (rad²).
+    up : (3,) ndarray
+        Gravity's direction (up) in the gyro's frame at the kinematics' reference angles.
+    rms_rad : float
+        RMS angle between the carried and the measured gravity directions over the rests.
+    rests : int
+        Rests used.
+    """
+
+    rotation: np.ndarray
+    covariance: np.ndarray
+    up: np.ndarray
+    rms_rad: float
+    rests: int
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _expm_so3(v: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector ``v`` (Rodrigues)."""
+    a = float(np.linalg.norm(v))
+    if a < 1e-300:
+        return np.eye(3)
+    k = _skew(v / a)
+    return np.eye(3) + math.sin(a) * k + (1 - math.cos(a)) * k @ k
+
+
+def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
+                   direction_std: Any) -> FrameRotation:
+    r"""The rotation between the gyro's and the accelerometer's calibrated frames, from rests.
+
+    Each calibration has its own frame convention (``gyro-x-xy``: the gyro's x sensing axis;
+    :data:`ACCEL_FRAME`: the accelerometer's), and neither fit sees the rotation between them.
+    The rests see it: the gyro fit's kinematics give every servo's axis in the gyro's frame
+    (:mod:`gyrocal.calib.kinematics`), so gravity's direction there at rest ``r`` is "up" at the
+    reference angles carried by the servos' rotations, ``γ_r = K(θ_r) γ₀``
+    (:func:`gyrocal.calib.kinematics.chain_axes` of ``γ₀`` as a joint outside the base); the
+    calibrated accelerometer measures it in its own frame, ``v_r = R γ_r``. imu_tk (Tedaldi et
+    al. 2014) aligns the gyro to the accelerometer's frame the same way, from gravity seen
+    before and after rotations. The fit minimises ``Σ |R K(θ_r) γ₀ − v_r/|v_r||² / σ_r²`` over
+    ``R`` and the unit ``γ₀`` (Levenberg–Marquardt, ``scipy.optimize.least_squares``); the
+    covariance of the rotation is the ``δ`` block of ``(JᵀJ)⁻¹``. Rotations about at least two
+    non-parallel servo axes are needed (a planned run with accelerometer rests has them).
+
+    Parameters
+    ----------
+    forces : (N, 3) array_like
+        Calibrated specific force of each rest in the accelerometer's frame
+        (:meth:`AccelCalibration.apply` of the rest's mean reading); only its direction is used.
+    angles : (N, S) array_like
+        Every servo's encoder angle during each rest, rad, chain order.
+    axes : (S, 3) array_like
+        The servos' axes in the gyro's frame at ``reference`` (a full calibration's
+        ``kinematics``).
+    reference : (S,) array_like
+        The kinematics' reference angles, rad.
+    direction_std : float or (N,) array_like
+        Standard deviation of each rest's direction per axis, rad (its mean's σ over ``g``).
+
+    Returns
+    -------
+    FrameRotation
+
+    Raises
+    ------
+    CalibInputError
+        On bad shapes or values, fewer than three rests, or rests whose rotations do not
+        determine ``R`` (all about one axis).
+    """
+    from gyrocal.calib.kinematics import chain_axes
+
+    v = np.asarray(forces, dtype=float)
+    th = np.asarray(angles, dtype=float)
+    ax = np.asarray(axes, dtype=float)
+    ref = np.asarray(reference, dtype=float)
+    if v.ndim != 2 or v.shape[1] != 3 or v.shape[0] < 3 or not np.all(np.isfinite(v)):
+        raise CalibInputError(f"forces must be a finite (N, 3) array with N >= 3 rests, got "
+                              f"shape {v.shape}")
+    n = v.shape[0]
+    if ax.ndim != 2 or ax.shape[1] != 3 or not np.all(np.isfinite(ax)):
+        raise CalibInputError(f"axes must be a finite (S, 3) array, got shape {ax.shape}")
+    S = ax.shape[0]
+    if th.shape != (n, S) or ref.shape != (S,) or not (np.all(np.isfinite(th))
+                                                       and np.all(np.isfinite(ref))):
+        raise CalibInputError(f"angles must be finite ({n}, {S}) and reference ({S},), got "
+                              f"{th.shape} and {ref.shape}")
+    nrm = np.linalg.norm(v, axis=1)
+    if np.any(nrm <= 0):
+        raise CalibInputError("forces must be non-zero (a still sensor feels gravity)")
+    u = v / nrm[:, None]
+    sd = np.broadcast_to(np.asarray(direction_std, dtype=float), (n,))
+    if not np.all(np.isfinite(sd) & (sd > 0)):
+        raise CalibInputError("direction_std must be positive and finite")
+    ext_ref = np.concatenate([[0.0], ref])
+    th_ext = np.concatenate([np.zeros((n, 1)), th], axis=1)
+
+    # carrying is linear: K_r (N, 3, 3), its columns the carried unit vectors
+    K = np.stack([chain_axes(np.vstack([e, ax]), ext_ref, th_ext)[:, 0] for e in np.eye(3)],
+                 axis=2)
+
+    def carried(g0: np.ndarray) -> np.ndarray:
+        return K @ g0
+
+    # start: R = I, γ₀ from the rest nearest the reference angles carried back
+    k0 = int(np.argmin(np.abs(th - ref).sum(axis=1)))
+    back = chain_axes(np.vstack([u[k0], ax]), np.concatenate([[0.0], th[k0]]),
+                      np.concatenate([[0.0], ref])[None])[0, 0]
+    e1 = np.cross(back, [1.0, 0, 0] if abs(back[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(back, e1)
+
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        g0 = back + p[3] * e1 + p[4] * e2
+        return _expm_so3(p[:3]), g0 / np.linalg.norm(g0)
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        R, g0 = unpack(p)
+        return ((carried(g0) @ R.T - u) / sd[:, None]).ravel()
+
+    res = optimize.least_squares(resid, np.zeros(5), method="lm", xtol=1e-15, ftol=1e-15,
+                                 gtol=1e-15, max_nfev=200)
+    # re-centre the rotation vector at the solution so the covariance is that of δ at R̂
+    R, g0 = unpack(res.x)
+
+    def resid_at(p: np.ndarray) -> np.ndarray:
+        g = g0 + p[3] * e1 + p[4] * e2
+        return ((carried(g / np.linalg.norm(g)) @ (_expm_so3(p[:3]) @ R).T - u)
+                / sd[:, None]).ravel()
+
+    jac = optimize.approx_fprime(np.zeros(5), resid_at, 1e-7)
+    jtj = jac.T @ jac
+    if np.linalg.cond(jtj) > 1e12:
+        raise CalibInputError("the rests do not determine the rotation between the gyro's and "
+                              "the accelerometer's frames: they need rotations about two "
+                              "servo axes (plan the run with accelerometer rests)")
+    cov = np.linalg.inv(jtj)[:3, :3]
+    ang = np.arcsin(np.clip(np.linalg.norm(np.cross(carried(g0) @ R.T, u), axis=1), 0, 1))
+    return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
+
+
+def align_gyro(cal: Any, rotation: FrameRotation) -> Any:
+    r"""The gyro calibration expressed in the accelerometer's frame (imu_tk's alignment).
+
+    ``g = A (m + b)`` in ``gyro-x-xy`` becomes ``R g = (R A)(m + b)`` in :data:`ACCEL_FRAME`:
+    ``A' = R A``; the bias, g-sensitivity (both in the reading's space) and temperature model's
+    bias terms are unchanged; the kinematics' axes turn with the frame. The 12×12 covariance of
+    ``(A row-major, b)`` is propagated, ``Σ' = T Σ Tᵀ + J Σ_δ Jᵀ`` with ``T = R ⊗ I₃`` on the
+    matrix block and ``∂A'/∂δ_l = [e_l]× A'`` for the rotation's own uncertainty (independent of
+    the gyro fit's). ``frame`` becomes :data:`ACCEL_FRAME`.
+
+    Parameters
+    ----------
+    cal : gyrocal.calib.model.GyroCalibration
+        A full (v2) calibration in the frame ``gyro-x-xy``.
+    rotation : FrameRotation
+        From :func:`frame_rotation` (or any rotation with its covariance).
+
+    Returns
+    -------
+    gyrocal.calib.model.GyroCalibration
+
+    Raises
+    ------
+    CalibInputError
+        A diagonal calibration, one already in another frame, one whose temperature model
+        moves its gain, or a rotation that is not one.
+    """
+    from dataclasses import replace
+
+    from gyrocal.calib.estimators import FULL_FRAME
+
+    R = np.asarray(rotation.rotation, dtype=float)
+    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or not (
+            np.linalg.det(R) > 0):
+        raise CalibInputError("rotation must be a proper 3x3 rotation matrix")
+    if cal.matrix is None:
+        raise CalibInputError("aligning to the accelerometer needs the full model's matrix (a "
+                              "v2 calibration); the diagonal model has no frame to turn")
+    if cal.frame != FULL_FRAME:
+        raise CalibInputError(f"the calibration's frame is {cal.frame!r}; only one in "
+                              f"{FULL_FRAME!r} can be aligned (it is aligned once)")
+    tm = cal.temperature_model
+    if tm is not None and tm.gain_coeffs is not None:
+        raise CalibInputError("the calibration's temperature model moves its matrix; align "
+                              "the calibration before fitting the temperature model")
+    a = R @ np.asarray(cal.matrix, dtype=float)
+    if np.any(np.diag(a) <= 0):
+        raise CalibInputError("the rotation between the frames is too large for a calibration "
+                              "(a scale would turn negative): check the accelerometer's fit")
+    cov_doc = None
+    std = None
+    if cal.covariance is not None:
+        c = np.asarray(cal.covariance, dtype=float)
+        T = np.eye(12)
+        T[:9, :9] = np.kron(R, np.eye(3))
+        J = np.zeros((12, 3))
+        for ell in range(3):
+            J[:9, ell] = (_skew(np.eye(3)[ell]) @ a).ravel()
+        cov = T @ c @ T.T + J @ np.asarray(rotation.covariance, dtype=float) @ J.T
+        cov_doc = tuple(tuple(float(x) for x in row) for row in cov)
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    kin = cal.kinematics
+    if kin is not None:
+        kin = {**kin, "axes": (np.asarray(kin["axes"], dtype=float) @ R.T).tolist()}
+    return replace(
+        cal, matrix=tuple(tuple(float(x) for x in r) for r in a),
+        scale=tuple(float(x) for x in np.diag(a)),
+        scale_std=(cal.scale_std if std is None else tuple(float(x) for x in std[[0, 4, 8]])),
+        matrix_std=(cal.matrix_std if std is None
+                    else tuple(tuple(float(x) for x in r) for r in std[:9].reshape(3, 3))),
+        covariance=cov_doc, frame=ACCEL_FRAME, kinematics=kin)

@@ -38,7 +38,9 @@ __all__ = [
     "gravity_poses",
     "general_motion_rms",
     "paper_plan",
+    "plan_accel_rests",
     "plan_protocol",
+    "protocol_sequence",
     "predict_full_uncertainty",
     "predicted_general_motion_rms",
     "predict_uncertainty",
@@ -197,6 +199,20 @@ class Plan:
         Rests for the full model's g-sensitivity, after the posed pairs: ``(moved servo,
         angle)``: move the servo (chain position) to the angle, rest, move it back
         (:func:`gravity_poses`).
+    accel_moves : tuple of (int, int, float)
+        Moves that tilt the protocol's rests for the accelerometer (:func:`plan_accel_rests`):
+        ``(rest number, moved servo, angle)``: before the protocol's rest of that number
+        (0-based, in :func:`protocol_sequence` order), move the servo (chain position) to the
+        angle from home. The run ends with every servo moved home. Empty: no accelerometer rests.
+    accel_extra_rests : int
+        Rests added at the end of the protocol for the accelerometer, when the gyro protocol
+        has fewer than :data:`ACCEL_MIN_RESTS` (its moves tilt them like the others).
+    accel_time_s : float
+        Jig time the accelerometer's moves and extra rests add (included in ``jig_time_s``), s.
+    accel_std_ratio : float or None
+        Predicted worst-direction σ of the calibrated specific force's magnitude over the σ of
+        one rest window's mean per axis (:attr:`gyrocal.calib.accel.AccelDesign.worst_force_std`
+        at ``window_std = 1``); None without accelerometer rests.
     """
 
     speed: float
@@ -211,6 +227,10 @@ class Plan:
     poses: tuple[tuple[int, int, float], ...] = ()
     matrix_std: tuple[tuple[float, ...], ...] | None = None
     gravity_poses: tuple[tuple[int, float], ...] = ()
+    accel_moves: tuple[tuple[int, int, float], ...] = ()
+    accel_extra_rests: int = 0
+    accel_time_s: float = 0.0
+    accel_std_ratio: float | None = None
 
     @property
     def model(self) -> str:
@@ -951,3 +971,295 @@ def paper_plan(
                                       accel=accel, reference_rate=reference_rate)
     return Plan(speed, 1, 3.0, accel, jig_time(speed, 1, 3.0, accel), tuple(ks), tuple(bs),
                 err, reference_rate)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------- the accelerometer's rests
+def _base_sequence(plan: Plan, n_servos: int) -> list[tuple]:
+    """The protocol without accelerometer moves, as :func:`protocol_sequence` describes it."""
+    seq: list[tuple] = []
+    for m in range(n_servos):
+        for d in (-1, 1):
+            seq += [("rest",), ("rotate", m, d)]
+    seq.append(("rest",))
+    for turn, moved, angle in plan.poses:
+        seq += [("move", moved, float(angle)), ("rotate", turn, -1), ("rest",),
+                ("rotate", turn, 1), ("rest",), ("move", moved, 0.0)]
+    for moved, angle in plan.gravity_poses:
+        seq += [("move", moved, float(angle)), ("rest",), ("move", moved, 0.0)]
+    return seq + [("rest",)] * int(plan.accel_extra_rests)
+
+
+def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
+    """The plan's steps in running order, servos as chain positions (base = 0).
+
+    Each step is ``("rest",)``, ``("rotate", servo, direction)`` (``plan.turns`` whole
+    turns), ``("move", servo, angle)`` (to ``angle`` rad from home) or ``("still", seconds)``
+    (the jig holds still: no rest of the fit, only still time after a turn). Per servo: rest,
+    turn −, rest, turn +; a final rest; each posed pair: move a servo to its pose, turn another
+    −, rest, +, rest, move the first home (:func:`full_schedule` is the turns' order); each
+    gravity pose: move, rest, move home; then :attr:`Plan.accel_extra_rests` rests. The
+    accelerometer's moves (:attr:`Plan.accel_moves`) go right before their rest, after
+    :data:`ACCEL_STILL_S` of still time when a turn comes before (the turn's rest-to-rest
+    window takes still time after it: :mod:`gyrocal.calib.windows`); the run ends with every
+    servo still away from home moved home (lowest chain position first).
+    :func:`gyrocal.kit.protocol.build_steps` runs this.
+
+    Raises
+    ------
+    CalibInputError
+        If a pose or move names a servo beyond ``n_servos``, or an accelerometer move names a
+        rest the protocol does not have.
+    """
+    seq = _base_sequence(plan, n_servos)
+    used = [x[1] for x in seq if x[0] != "rest"] + [m for _, m, _ in plan.accel_moves]
+    if used and max(used) >= n_servos:
+        raise CalibInputError(f"the plan names servo position {max(used)} beyond a chain of "
+                              f"{n_servos}")
+    before: dict[int, list[tuple]] = {}
+    for r, moved, angle in plan.accel_moves:
+        before.setdefault(int(r), []).append(("move", int(moved), float(angle)))
+    out: list[tuple] = []
+    r = 0
+    for step in seq:
+        if step[0] == "rest":
+            moves = before.pop(r, [])
+            if moves and out and out[-1][0] == "rotate":
+                out.append(("still", ACCEL_STILL_S))  # the turn's window needs still time
+            out += moves
+            r += 1
+        out.append(step)
+    if before:
+        raise CalibInputError(f"accelerometer moves name rests {sorted(before)} of a protocol "
+                              f"with {r} rests")
+    here = np.zeros(n_servos)
+    for step in out:
+        if step[0] == "move":
+            here[step[1]] = step[2]
+    out += [("move", s, 0.0) for s in range(n_servos) if here[s] != 0.0]
+    return out
+
+
+def rest_gravity(angles: np.ndarray, axes: np.ndarray | None = None,
+                 up: np.ndarray | None = None) -> np.ndarray:
+    """Gravity's direction in the sensor frame (N, 3) with the nominal gimbal's servos at
+    ``angles`` (N, S) from home: "up" carried by every servo's rotation, as
+    :meth:`gyrocal.calib.observations.ObservationSet.specific_force` carries it
+    (:func:`gyrocal.calib.kinematics.chain_axes` of "up" as a joint outside the base).
+
+    Parameters
+    ----------
+    angles : ndarray, shape (N, S)
+        Servo angles from home, chain order, rad.
+    axes : ndarray, shape (S, 3), optional
+        Nominal servo axes in the sensor frame at home (default x, y, z).
+    up : ndarray, shape (3,), optional
+        "Up" in the sensor frame at home (default +z, hardware_docs/mechanical.md).
+    """
+    from gyrocal.calib.kinematics import chain_axes
+
+    th = np.atleast_2d(np.asarray(angles, dtype=float))
+    ax = np.eye(th.shape[1]) if axes is None else np.asarray(axes, dtype=float)
+    u = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
+    ext = np.vstack([u / np.linalg.norm(u), ax])
+    full = np.concatenate([np.zeros((th.shape[0], 1)), th], axis=1)
+    return chain_axes(ext, np.zeros(ext.shape[0]), full)[:, 0]
+
+
+#: The fewest rests a protocol with accelerometer rests has: the nine parameters and three
+#: degrees of freedom for the consistency test (:func:`gyrocal.calib.accel.fit_accelerometer`
+#: needs ten); protocols with fewer get extra rests at the end.
+ACCEL_MIN_RESTS = 12
+
+#: Still time between a turn and an accelerometer move after it, s: a rest-to-rest window of
+#: the turn takes up to 0.15 s of still time after it (:func:`gyrocal.calib.windows.
+#: extract_observations`' ``still_margin_s``), and the loop reads once more after a turn.
+ACCEL_STILL_S = 0.2
+
+#: Angles a servo may be moved to for an accelerometer rest, rad from home: multiples of 45°.
+ACCEL_REST_ANGLES = tuple(float(a) for a in np.radians(np.arange(-135.0, 181.0, 45.0)))
+
+#: Bound on the predicted worst-direction σ of the calibrated |f| over one rest window's σ
+#: that :func:`plan_accel_rests` aims for: 2, i.e. about 0.8 mg for an MPU-9250 (300 µg/√Hz,
+#: 200 Hz) with 1 s rests, against its ±60-80 mg zero-g offset and ±3 % scale (datasheet
+#: Table 2). For scale: the 14-point gravity tour (:data:`gyrocal.calib.accel.TOUR_DIRECTIONS`)
+#: with one rest each scores 0.81 and adds 17-22 s to a run; the default protocol's own rests
+#: (two or three directions) cannot determine the nine parameters at all.
+ACCEL_STD_RATIO_TARGET = 2.0
+
+
+def _accel_rows(d: np.ndarray) -> np.ndarray:
+    """Whitened Jacobian rows of the accelerometer fit at the ideal sensor for unit gravity
+    directions ``d`` (N, 3), σ = 1 and g = 1 (:func:`gyrocal.calib.accel.accel_design`'s)."""
+    il = np.tril_indices(3)
+    return np.concatenate([(d[:, :, None] * d[:, None, :])[:, il[0], il[1]], d], axis=1)
+
+
+def plan_accel_rests(
+    plan: Plan,
+    *,
+    axes: np.ndarray | None = None,
+    up: np.ndarray | None = None,
+    max_turns: float | None = None,
+    settle_s: float = 0.1,
+    target_ratio: float = ACCEL_STD_RATIO_TARGET,
+    beam: int = 24,
+) -> Plan:
+    r"""Tilt the protocol's rests so the accelerometer's nine parameters are determined.
+
+    The rests between turns already hold the sensor still; they see gravity in only two or
+    three directions. A turning servo's axis in the sensor frame depends only on the servos
+    outside it (:func:`gyrocal.calib.kinematics.chain_axes`), so a servo at or inside the
+    next turning servo (until that servo's next move) may be moved before a rest without
+    changing any turn the gyro fit sees (:func:`predict_full_uncertainty` is unchanged); each
+    such move costs its profile time plus ``settle_s``, and :data:`ACCEL_STILL_S` of still time
+    first when a turn comes before it; the run ends with a move home of every servo left
+    away. The rests'
+    gravity directions (:func:`rest_gravity`) are chosen by a beam search over
+    :data:`ACCEL_REST_ANGLES` that maximises ``log det`` of the accelerometer fit's
+    information minus ``λ`` times the added time, for several ``λ``; of the results, the one
+    with the least added time whose predicted worst-direction σ of ``|f|``
+    (:func:`gyrocal.calib.accel.accel_design`, the G-criterion of the paper's reference
+    [ye2017efficient] for this model) is within ``target_ratio`` times one rest window's σ
+    is kept (else the one with the smallest σ). A protocol with fewer than
+    :data:`ACCEL_MIN_RESTS` rests (the diagonal model's has seven) gets the missing ones at its
+    end, their time counted in ``accel_time_s``.
+
+    Parameters
+    ----------
+    plan : Plan
+        The gyro protocol (its ``accel_moves`` are replaced).
+    axes, up : ndarray, optional
+        The nominal gimbal (:func:`rest_gravity`).
+    max_turns : float, optional
+        The cable-wrap limit in turns from home: a servo that turns from a moved angle ``θ``
+        keeps ``turns + |θ|/2π`` within it (default: no limit).
+    settle_s : float
+        Settling after each move, s.
+    target_ratio : float
+        The σ bound above.
+    beam : int
+        Beam width.
+
+    Returns
+    -------
+    Plan
+        With ``accel_moves``, ``accel_time_s``, ``accel_std_ratio`` and ``jig_time_s``
+        (increased by ``accel_time_s``).
+
+    Raises
+    ------
+    CalibInputError
+        If ``target_ratio`` or ``beam`` is not positive.
+    """
+    from gyrocal.calib.accel import accel_design
+
+    if not target_ratio > 0 or int(beam) < 1:
+        raise CalibInputError(f"target_ratio and beam must be positive, got {target_ratio!r}, "
+                              f"{beam!r}")
+    S = 3 if axes is None else len(axes)
+    gyro_time = plan.jig_time_s - plan.accel_time_s
+    plan = replace(plan, accel_moves=(), accel_extra_rests=0)
+    n_rests = sum(st[0] == "rest" for st in _base_sequence(plan, S))
+    extra = max(ACCEL_MIN_RESTS - n_rests, 0)
+    base = _base_sequence(replace(plan, accel_extra_rests=extra), S)
+    two_pi = 2 * np.pi
+
+    def move_time(a: float, b: float) -> float:
+        return 0.0 if abs(a - b) < 1e-12 else profile_duration(abs(a - b), plan.speed,
+                                                               plan.accel) + settle_s
+
+    # Which servos each rest may move (right before it), and how far: until the servo's next
+    # move, every turn must be of a servo at or outside it (its angle then changes no turn's
+    # axis), and a turn of the servo itself must stay within the cable-wrap limit. A move
+    # after a turn waits ACCEL_STILL_S first.
+    rests = [i for i, st in enumerate(base) if st[0] == "rest"]
+    still = [ACCEL_STILL_S if i and base[i - 1][0] == "rotate" else 0.0 for i in rests]
+    limit: list[list[float]] = []
+    for i in rests:
+        row = []
+        for s in range(S):
+            lim = np.inf
+            for st in base[i + 1:]:
+                if st[0] == "move" and st[1] == s:
+                    break
+                if st[0] == "rotate":
+                    if st[1] < s:
+                        lim = -1.0
+                        break
+                    if st[1] == s and max_turns is not None:
+                        lim = min(lim, two_pi * (max_turns - plan.turns))
+            row.append(lim)
+        limit.append(row)
+
+    grid = np.array(ACCEL_REST_ANGLES)
+    n_grid = grid.size
+    # Every reachable pose's gravity direction and information, once: poses are grid angles.
+    combos = np.stack(np.meshgrid(*[grid] * S, indexing="ij"), axis=-1).reshape(-1, S)
+    rows_all = _accel_rows(rest_gravity(combos, axes, up))
+    info_all = rows_all[:, :, None] * rows_all[:, None, :]
+    strides = n_grid ** np.arange(S - 1, -1, -1)
+
+    def index(a: float) -> int:
+        k = int(np.argmin(np.abs(grid - a)))
+        if abs(grid[k] - a) > 1e-9:
+            raise CalibInputError(f"pose angle {np.degrees(a):g}° is not a multiple of 45°; "
+                                  "the accelerometer's rests cannot be planned around it")
+        return k
+
+    zero = index(0.0)
+    eps = 1e-6 * np.eye(9)
+
+    def search(lam: float) -> tuple[float, list[tuple[int, int, float]], list[int]]:
+        # a state: (score, time, angle indices, moves, information, pose per rest)
+        states: list[tuple] = [(0.0, 0.0, (zero,) * S, [], np.zeros((9, 9)), [])]
+        r = 0
+        for st in base:
+            if st[0] == "move":
+                k = index(st[2])
+                states = [(sc, t + move_time(grid[here[st[1]]], st[2]),
+                           here[:st[1]] + (k,) + here[st[1] + 1:], mv, info, seen)
+                          for sc, t, here, mv, info, seen in states]
+                continue
+            if st[0] != "rest":
+                continue
+            grown: list[tuple] = []
+            for _, t, here, mv, info, seen in states:
+                options = [(here, t, mv)]
+                for s in range(S):
+                    for k in range(n_grid):
+                        if abs(grid[k]) <= limit[r][s] + 1e-9 and k != here[s]:
+                            options.append((here[:s] + (k,) + here[s + 1:],
+                                            t + still[r] + move_time(grid[here[s]], grid[k]),
+                                            mv + [(r, s, float(grid[k]))]))
+                pose = np.array([int(np.dot(o[0], strides)) for o in options])
+                ninfo = info + info_all[pose]
+                sc = np.linalg.slogdet(ninfo + eps)[1] - lam * np.array([o[1] for o in options])
+                grown += [(float(sc[i]), o[1], o[0], o[2], ninfo[i], seen + [int(pose[i])])
+                          for i, o in enumerate(options)]
+            grown.sort(key=lambda x: -x[0])
+            states = grown[:int(beam)]
+            r += 1
+        best = min(((t + sum(move_time(grid[here[s]], 0.0) for s in range(S)), mv, seen)
+                    for _, t, here, mv, _, seen in states), key=lambda x: x[0])
+        return best
+
+    # The moves the gyro protocol makes anyway (its poses), to subtract from the searched time.
+    fixed = 0.0
+    here0 = np.zeros(S)
+    for st in base:
+        if st[0] == "move":
+            fixed += move_time(here0[st[1]], st[2])
+            here0[st[1]] = st[2]
+    results = []
+    for lam in (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0):
+        total, moves, seen = search(lam)
+        design = accel_design(rest_gravity(combos[seen], axes, up), 1.0, gravity=1.0,
+                              n_sphere=500)
+        ratio = design.worst_force_std if design.identifiable else np.inf
+        results.append((total - fixed + extra * plan.rest_s, ratio, moves))
+    ok = [x for x in results if x[1] <= target_ratio]
+    added, ratio, moves = (min(ok, key=lambda x: (x[0], x[1])) if ok
+                           else min(results, key=lambda x: (x[1], x[0])))
+    return replace(plan, accel_moves=tuple((int(r), int(s), float(a)) for r, s, a in moves),
+                   accel_extra_rests=extra, accel_time_s=float(added),
+                   accel_std_ratio=float(ratio), jig_time_s=float(gyro_time + added))

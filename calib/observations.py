@@ -414,10 +414,12 @@ class ObservationSet:
     def pose_groups(self, tolerance_rad: float = POSE_TOLERANCE_RAD) -> np.ndarray:
         """A group number per rotation window: one group per servo and gimbal pose.
 
-        Two windows are in one group when the same servo turned with every other servo of
-        :attr:`chain` at the same angle, within ``tolerance_rad`` and modulo whole turns (the
-        servo then turned about one axis in the sensor frame); without poses, one group per
-        servo. Groups are numbered in the order of their first window.
+        Two windows are in one group when the same servo turned with every servo outside it
+        in :attr:`chain` at the same angle, within ``tolerance_rad`` and modulo whole turns
+        (the servo then turned about one axis in the sensor frame: the servos inside it move
+        the sensor and the axis together, :func:`gyrocal.calib.kinematics.chain_axes`);
+        without poses, one group per servo. Groups are numbered in the order of their first
+        window.
 
         Returns
         -------
@@ -429,7 +431,7 @@ class ObservationSet:
         for i, m in enumerate(int(x) for x in self.motor):
             pose = None
             if self.pose is not None and m in chain:
-                pose = np.delete(np.asarray(self.pose[i], dtype=float), chain.index(m))
+                pose = np.asarray(self.pose[i], dtype=float)[chain.index(m) + 1:]
             for g, (motor, rep) in enumerate(reps):
                 if motor == m and (pose is None or rep is None or np.all(
                         np.abs((pose - rep + np.pi) % (2 * np.pi) - np.pi) < tolerance_rad)):

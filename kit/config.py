@@ -154,6 +154,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rest_s": Key(0.0, "fixed rest before each turn, s (0.1..600; 0: planned)", (int, float),
                       check=_within(0.1, 600, zero="planned")),
         "method": Key(METHODS[0], "estimator", str, METHODS),
+        "accel_rests": Key(True, "tilt the rests between turns so the accelerometer is "
+                           "calibrated too (protocol full; a few moves, about 8 s on the "
+                           "default run); false: rests in the gyro's poses only", bool),
+        "align_gyro_to_accel": Key(False, "express the gyro calibration in the calibrated "
+                                   "accelerometer's frame (accel-x-xy), as imu_tk does", bool),
     },
     "accelerometer": {
         # the accelerometer is fitted to |f| = g on the rests (calib.accel): the local gravity

@@ -392,28 +392,48 @@ def _render_kalibr_intrinsics(
     rostopic, rate = _kalibr_topic_and_rate(options, cal.sensor.get("odr_hz"))
     inverse = _inverse3(cal.full_matrix.tolist())
     eye = [[float(i == j) for j in range(3)] for i in range(3)]
+    acc = cal.accelerometer
+    # Kalibr's accelerometer: a_meas = M_accel * a_i + b (IccSensors.py, IccScaledMisalignedImu)
+    # in the IMU frame i; gyrocal's f = A (a + b): M_accel = A^-1 in accel-x-xy
+    m_accel = eye if acc is None else _inverse3(acc.matrix.tolist())
     if cal.g_sensitivity is None:
         g_acc = [[0.0] * 3] * 3
-        placeholders = ("gyroscopes.A (g-sensitivity) and accelerometers.M are identity/zero "
-                        "placeholders: gyrocal does not measure them")
-        a_line = ["# Placeholders, not measured by gyrocal: gyroscopes.A (zero) and "
-                  "accelerometers.M"]
+        g_lines = ["# Placeholder, not measured by gyrocal: gyroscopes.A (zero)."]
     else:
         g_acc = [[-float(x) / STANDARD_GRAVITY + 0.0 for x in row]
                  for row in cal.g_sensitivity["matrix"]]
-        placeholders = ("accelerometers.M is an identity placeholder: gyrocal does not "
-                        "calibrate the accelerometer for Kalibr")
-        a_line = ["# gyroscopes.A: the g-sensitivity, -G / 9.80665 in (rad/s)/(m/s^2) (gyrocal's G",
-                  "# is ADDED to the reading per g). Placeholder, not measured: accelerometers.M"]
+        g_lines = ["# gyroscopes.A: the g-sensitivity, -G / 9.80665 in (rad/s)/(m/s^2)",
+                   "# (gyrocal's G is ADDED to the reading per g)."]
+    a_lines = (["# accelerometers.M = inverse of the accelerometer's matrix (frame accel-x-xy)."]
+               if acc is not None else
+               ["# Placeholder, not measured by gyrocal: accelerometers.M (identity)."])
+    if cal.g_sensitivity is None and acc is None:
+        placeholders = ["gyroscopes.A (g-sensitivity) and accelerometers.M are identity/zero "
+                        "placeholders: gyrocal does not measure them"]
+    elif cal.g_sensitivity is None:
+        placeholders = ["gyroscopes.A (g-sensitivity) is a zero placeholder: the calibration "
+                        "has no g-sensitivity"]
+    elif acc is None:
+        placeholders = ["accelerometers.M is an identity placeholder: the calibration has no "
+                        "accelerometer"]
+    else:
+        placeholders = []
     notes = [
         "Kalibr's IMU file has no place for a fixed gyro bias (Kalibr estimates it as a random "
         f"walk): the bias {[float(b) for b in cal.bias]} rad/s is not in the file",
-        placeholders,
+        *placeholders,
         "the noise fields Kalibr also needs are not in a calibration: export the gyrocal-noise "
         "document of `gyrocal noise` with --format kalibr and merge the two files",
     ]
     if not cal.is_full:
         notes.append("a version 1 calibration has no cross-axis terms: M is diagonal")
+    if acc is not None:
+        notes.append("Kalibr's IMU file has no place for a fixed accelerometer bias either: "
+                     f"{[float(b) for b in acc.bias]} m/s^2 is not in the file")
+        if cal.frame != "accel-x-xy":
+            notes.append("the gyro calibration is in its own frame, not the accelerometer's: "
+                         "C_gyro_i = identity is then only nominal "
+                         "(gyrocal.calib.accel.align_gyro expresses it in the accelerometer's)")
     lines = [
         f"# Kalibr IMU intrinsics (model scale-misalignment), written by gyrocal {__version__} "
         f"from a Calibration v{2 if cal.is_full else 1} document.",
@@ -425,13 +445,14 @@ def _render_kalibr_intrinsics(
         "# NOT in this file: the bias (Kalibr has no field for a fixed bias; gyrocal's bias, ADDED",
         "# to the reading, rad/s: " + ", ".join(f"{a}={_fmt(b)}" for a, b in zip("xyz", cal.bias,
                                                                             strict=True)) + ").",
-        *a_line,
-        "# (identity). Noise fields: export a gyrocal-noise document with --format kalibr.",
+        *g_lines,
+        *a_lines,
+        "# Noise fields: export a gyrocal-noise document with --format kalibr.",
         f"# Sensor: {_sensor_text(cal.sensor)}.",
         f"# Consistency: {_verdict(cal)}.",
         "model: scale-misalignment",
         *_yaml_block("gyroscopes", {"M": inverse, "A": g_acc, "C_gyro_i": eye}),
-        *_yaml_block("accelerometers", {"M": eye}),
+        *_yaml_block("accelerometers", {"M": m_accel}),
         f"rostopic: {rostopic}",
     ]
     if rate is None:
@@ -681,6 +702,10 @@ def _render_yaml(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[st
                       "# the sensor frame at the reference encoder angles (rad)",
         "g_sensitivity": "# G of g = matrix @ (m + bias + G f), rad/s per g of specific force f;\n"
                          "# its one-sigma, and the directions of f the run determined it along",
+        "accelerometer": "# the accelerometer from the same run's rests: f = matrix @ (a + bias),\n"
+                         "# a the reading and f the specific force in m/s^2, bias m/s^2, matrix\n"
+                         "# lower triangular (frame accel-x-xy); covariance of (the lower\n"
+                         "# triangle row by row, bias); gravity_m_s2 the gravity it was fitted to",
     }
     for key, value in d.items():
         if key in comments:
@@ -747,6 +772,15 @@ def _ros_params(cal: Any, frame: str) -> tuple[dict[str, Any], list[str]]:
     params["method"] = cal.method
     if cal.consistency is not None:
         params["consistent"] = bool(cal.consistency.ok)
+    if cal.accelerometer is not None:
+        acc = cal.accelerometer
+        params["accel_model"] = "accel = accel_matrix * (accel_raw + accel_bias)"
+        params["accel_matrix"] = _finite_list(acc.matrix.tolist())
+        params["accel_matrix_frame_convention"] = ACCEL_FRAME_TEXT.split(" ")[0]
+        params["accel_bias"] = [float(x) for x in acc.bias]
+        params["accel_bias_std"] = [float(x) for x in acc.std[6:]]
+        params["accel_units"] = "m/s^2"
+        params["accel_consistent"] = bool(acc.consistency.ok)
     if cal.temperature_c is not None:
         params["temperature_c"] = float(cal.temperature_c)
     if cal.sensor.get("model") is not None:
@@ -807,6 +841,11 @@ def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
         "#              reads -bias. A node that subtracts an offset must subtract -bias.",
         "#   bias_std   one-sigma, rad/s",
         cov,
+        *([
+            "# Accelerometer (from the same run's rests), linear_acceleration in m/s^2:",
+            "#     accel[i] = sum over j of accel_matrix[3*i + j] * (accel_raw[j] + accel_bias[j])",
+            "#   accel_matrix lower triangular (accel_matrix_frame_convention); accel_bias ADDED",
+        ] if cal.accelerometer is not None else []),
         f"# Sensor: {_sensor_text(cal.sensor)}.",
         f"# Consistency: {_verdict(cal)}.",
     ]
@@ -1019,6 +1058,8 @@ def _render_c_header(
             f"#define {P}_SENSITIVITY_RAD_S_PER_LSB {_c_float(float(sens))}",
         ]
     lines += ["", *_c_apply(cal, P, fn)]
+    if cal.accelerometer is not None:
+        lines += ["", *_c_accel(cal.accelerometer, P, prefix.lower() + "_accel_apply")]
     if cal.temperature_model is not None:
         lines += ["", *_c_thermal(cal, P, fn)]
     lines += ["", f"#endif /* {guard} */"]
@@ -1027,6 +1068,58 @@ def _render_c_header(
         notes.append(f"{fn}_at() (the temperature model) leaves the g-sensitivity out: add "
                      "G f to the reading first, as " + fn + "_force() does")
     return "\n".join(lines) + "\n", notes
+
+
+def _c_accel(acc: Any, P: str, fn: str) -> list[str]:
+    """The accelerometer's calibration (Calibration ``accelerometer``, :mod:`gyrocal.calib.accel`):
+    ``f = A (a + b)`` as constants and ``<prefix>_accel_apply``."""
+    import numpy as np
+
+    std = acc.std
+    a_std = np.zeros((3, 3))
+    a_std[np.tril_indices(3)] = std[:6]
+    lines = [
+        "/*",
+        " * The accelerometer, calibrated against gravity from the same run's rests:",
+        " *",
+        " *     f[i] = sum over j of A_ACC[i][j] * (a[j] + b_acc[j])",
+        " *",
+        f" *   A_ACC  3x3, dimensionless ({P}_ACCEL_MATRIX_XX ... _ZZ), lower triangular: frame",
+        f" *          convention {_c_comment(ACCEL_FRAME_TEXT)}",
+        " *   a      raw accelerometer reading in m/s^2 (datasheet sensitivity applied, nothing",
+        " *          else); f the calibrated specific force, m/s^2",
+        f" *   b_acc  bias in m/s^2 ({P}_ACCEL_BIAS_X, _Y, _Z), ADDED to the reading",
+        f" * Local gravity the fit used: {acc.gravity:.6f} m/s^2; consistency: "
+        f"{_c_comment(_consistency_text(acc.consistency))}; {acc.rests} rests.",
+        " */",
+    ]
+    for i in range(3):
+        for j in range(3):
+            lines.append(f"#define {P}_ACCEL_MATRIX_{_AXES[i]}{_AXES[j]} "
+                         f"{_c_float(float(acc.matrix[i][j]))} /* std {_std_text(a_std[i, j])} */")
+    for i, a in enumerate(_AXES):
+        lines.append(f"#define {P}_ACCEL_BIAS_{a} {_c_float(float(acc.bias[i]))} "
+                     f"/* m/s^2, std {_std_text(float(std[6 + i]))} */")
+    lines.append(f"#define {P}_ACCEL_GRAVITY_M_S2 {_c_float(float(acc.gravity))}")
+    body = [f"    const float {c} = a_m_s2[{i}] + {P}_ACCEL_BIAS_{a};"
+            for i, (c, a) in enumerate(zip("xyz", _AXES, strict=True))]
+    body += [f"    f_m_s2[{i}] = {P}_ACCEL_MATRIX_{r}X * x + {P}_ACCEL_MATRIX_{r}Y * y + "
+             f"{P}_ACCEL_MATRIX_{r}Z * z;" for i, r in enumerate(_AXES)]
+    return [*lines, "",
+            "/* Apply the accelerometer's calibration: f = A_ACC * (a + b_acc), m/s^2; in place "
+            "allowed. */",
+            f"static inline void {fn}(const float a_m_s2[3], float f_m_s2[3])", "{", *body, "}"]
+
+
+def _consistency_text(c: Any) -> str:
+    if c is None:
+        return "not tested"
+    return (f"{'consistent' if c.ok else 'NOT consistent'} with the measured noise "
+            f"(chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})")
+
+
+#: How the exports name the accelerometer's frame convention.
+ACCEL_FRAME_TEXT = "accel-x-xy (x along the accelerometer's x axis, y in its x-y plane)"
 
 
 def _c_thermal(cal: Any, P: str, fn: str) -> list[str]:
@@ -1108,4 +1201,4 @@ register(
 
 
 # ---------------------------------------------------------------------------- flight stacks
-from gyrocal.kit import exports_thermal  # noqa: E402,F401 - registers px4-/ardupilot-thermal
+from gyrocal.kit import exports_accel, exports_thermal  # noqa: E402,F401 - register formats

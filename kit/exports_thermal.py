@@ -46,6 +46,10 @@ _NOT_CARRIED = ("{stack} corrects only the gyro's bias against temperature: the 
                 "scale error")
 
 
+_ACCEL_ELSEWHERE = ("the calibration's accelerometer is not in these gyro parameters: export "
+                    "it with --format {fmt}")
+
+
 def _model(doc: Mapping[str, Any], fmt: str) -> Any:
     from gyrocal.calib.model import GyroCalibration
 
@@ -128,6 +132,8 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     if dev is None:
         notes.append(f"TC_G{inst}_ID is 0: set it to the gyro's device ID (CAL_GYRO{inst}_ID on "
                      "the vehicle) with --device-id, or PX4 will not use these parameters")
+    if cal.accelerometer is not None:
+        notes.append(_ACCEL_ELSEWHERE.format(fmt="px4-accel"))
     return "\n".join(lines) + "\n", notes
 
 
@@ -144,6 +150,8 @@ def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
              "with INS_GYR_CAL = 1 (the default) ArduPilot re-measures the gyro offsets at "
              "every boot and overwrites INS_GYROFFS and the CALTEMP; the temperature terms then "
              "still apply about the boot temperature"]
+    if cal.accelerometer is not None:
+        notes.append(_ACCEL_ELSEWHERE.format(fmt="ardupilot-accel"))
     return "\n".join(lines) + "\n", notes
 
 

@@ -47,6 +47,8 @@ def load_cli_config(args: argparse.Namespace) -> Any:
         "imu.range_dps": args.range_dps, "imu.odr_hz": args.odr,
         "protocol.name": getattr(args, "protocol", None),
         "protocol.method": getattr(args, "method", None),
+        "protocol.accel_rests": getattr(args, "accel_rests", None),
+        "protocol.align_gyro_to_accel": getattr(args, "align_gyro_to_accel", None),
     })
 
 
@@ -246,7 +248,13 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     fixed values override."""
     from dataclasses import replace
 
-    from gyrocal.calib.design import FULL_TIME_BUDGET_S, jig_time, paper_plan, plan_protocol
+    from gyrocal.calib.design import (
+        FULL_TIME_BUDGET_S,
+        jig_time,
+        paper_plan,
+        plan_accel_rests,
+        plan_protocol,
+    )
     from gyrocal.kit.errors import InputError
 
     p = cfg["protocol"]
@@ -284,11 +292,16 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses),
             gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
+    if p["name"] == "full" and p["accel_rests"]:
+        # tilt the rests for the accelerometer (calib.design.plan_accel_rests): the turns the
+        # gyro sees are unchanged; the moves add plan.accel_time_s beyond the gyro's budget
+        plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),
+                                max_turns=float(cfg["gimbal"]["max_turns"]))
     # the planned protocols stay within their budget (the full one's is at least
     # FULL_TIME_BUDGET_S) also when fixed values override the plan
     limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (
         p["time_budget_s"])
-    if p["name"] != "paper" and plan.jig_time_s > limit * (1 + 1e-9):
+    if p["name"] != "paper" and plan.jig_time_s - plan.accel_time_s > limit * (1 + 1e-9):
         raise InputError(
             f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
             f"protocol.time_budget_s = {limit:g} s: raise the budget, or lower "
@@ -322,6 +335,10 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: i
                           for t, m, a in plan.poses],
                 "gravity_poses": [{"moved": ids[m], "angle_rad": a}
                                   for m, a in plan.gravity_poses],
+                "accel_moves": [{"rest": r, "moved": ids[m], "angle_rad": a}
+                                for r, m, a in plan.accel_moves],
+                "accel_extra_rests": plan.accel_extra_rests,
+                "accel_time_s": plan.accel_time_s,
                 "acceleration": plan.accel,
                 "planned_jig_time_s": plan.jig_time_s,
                 "planning_noise_std": noise_std,

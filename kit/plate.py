@@ -26,7 +26,8 @@ from typing import Any
 
 from gyrocal.kit.recording import RecordingWriter
 
-__all__ = ["PASSED", "RecordingGroup", "SensorOutcome", "calibrate_plate", "plate_exit_code",
+__all__ = ["PASSED", "RecordingGroup", "SensorOutcome", "calibrate_plate", "describe_plate",
+           "history_targets", "plate_exit_code", "run_plate", "sensor_labels",
            "summary_document"]
 
 #: The verdict of a sensor that passed.
@@ -221,3 +222,125 @@ def calibrate_plate(dirs: Sequence[Path], names: Sequence[str], models: Sequence
             name, model, PASSED if ok else "not consistent with the measured noise (chi2 test)",
             0 if ok else 3, cal.to_dict()))
     return out
+
+
+def sensor_labels(label: str, names: Sequence[str]) -> list[str]:
+    """Each sensor's label in the calibration history, from one ``--sensor-label`` (or
+    ``history.sensor_label``) for the whole plate.
+
+    ``NAME=LABEL,NAME=LABEL,...`` names every sensor's label (by its ``[[imu]]`` name); a plain
+    ``LABEL`` labels each sensor ``LABEL/NAME`` (a batch and its places on the plate).
+
+    Raises
+    ------
+    gyrocal.kit.history.HistoryError
+        A pair that is not ``NAME=LABEL``, a name not on the plate, a sensor left without a
+        label, or a label the history refuses (:func:`gyrocal.kit.history.check_label`).
+    """
+    from gyrocal.kit.history import HistoryError, check_label
+
+    if "=" not in label:
+        return [check_label(f"{label}/{n}", f"--sensor-label {label!r} for sensor {n!r}")
+                for n in names]
+    pairs: dict[str, str] = {}
+    for item in label.split(","):
+        name, sep, lab = item.partition("=")
+        name = name.strip()
+        if not sep or not name or name in pairs:
+            raise HistoryError(f"--sensor-label {label!r}: give NAME=LABEL pairs separated by "
+                               "commas, one per sensor on the plate "
+                               f"({', '.join(names)}), or one LABEL for them all")
+        if name not in names:
+            raise HistoryError(f"--sensor-label names {name!r}, which is not on the plate; its "
+                               f"sensors are {', '.join(names)}")
+        pairs[name] = check_label(lab, f"--sensor-label for sensor {name!r}")
+    missing = [n for n in names if n not in pairs]
+    if missing:
+        raise HistoryError(f"--sensor-label gives no label for {', '.join(missing)}: label "
+                           "every sensor on the plate (NAME=LABEL,...)")
+    return [pairs[n] for n in names]
+
+
+def history_targets(target: Any, names: Sequence[str]) -> list[Any]:
+    """One :class:`~gyrocal.kit.history.HistoryTarget` per sensor (:func:`sensor_labels`), or
+    None for each when nothing is to be stored."""
+    from dataclasses import replace
+
+    if target is None:
+        return [None] * len(names)
+    return [replace(target, label=lab) for lab in sensor_labels(target.label, names)]
+
+
+def run_plate(cfg: Any, args: Any, out: Path, work: Path, *, report: bool
+              ) -> list[SensorOutcome]:
+    """``gyrocal calibrate`` with several sensors on the plate: one run of the jig (every
+    sensor into its own recording under ``work``), then each sensor fitted
+    (:func:`calibrate_plate`), ``summary.json`` written, and ``work`` swapped into ``out``
+    (when they differ) only once everything is written.
+
+    Parameters
+    ----------
+    cfg : Config
+        With ``[[imu]]`` sensors.
+    args : argparse.Namespace
+        The jig flags (:func:`gyrocal.kit.jig.run_jig`) and ``allow_implausible``, ``force``.
+    out, work : Path
+        Where the run goes, and where it is built (``out`` itself, or a directory beside it
+        when ``--force`` replaces a run).
+    report : bool
+        Write each sensor's report.
+
+    Returns
+    -------
+    list of SensorOutcome
+        In the config's order.
+    """
+    import sys
+
+    from gyrocal.drivers.signals import shielded
+    from gyrocal.kit.fileio import atomic_write_json, replace_dir
+    from gyrocal.kit.jig import run_jig
+
+    sensors = cfg.imus()
+    names = [s["name"] for s in sensors]
+    try:
+        run_jig(cfg, args, work, work / "recording")
+        outcomes = calibrate_plate(
+            [work / n for n in names], names, [s["model"] for s in sensors],
+            cfg["protocol"]["method"], sources=[str(out / n / "recording") for n in names],
+            allow_implausible=args.allow_implausible, report=report, force=args.force,
+            title=f"{out} (gyrocal calibrate)")
+        atomic_write_json(work / "summary.json", summary_document(outcomes))
+    except BaseException:
+        if work != out:
+            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
+                  f"{work}", file=sys.stderr)
+        raise
+    if work != out:
+        with shielded():
+            replace_dir(work, out)
+    return outcomes
+
+
+def describe_plate(outcomes: Sequence[SensorOutcome], sensors: Sequence[dict[str, Any]],
+                   out: Path) -> str:
+    """The text ``gyrocal calibrate`` prints after a plate run: each sensor's verdict and
+    calibration table (against its truth when emulated), then the count that passed."""
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.recording import read_manifest
+    from gyrocal.kit.report import calibration_table
+
+    lines = []
+    for o, sensor in zip(outcomes, sensors, strict=True):
+        lines.append(f"== sensor {o.name}: {sensor['model']} at 0x{sensor['address']:02X} on bus "
+                     f"{sensor['bus']}: "
+                     f"{o.verdict.upper() if o.passed else 'FAILED: ' + o.verdict}")
+        if o.calibration is not None:
+            truth = read_manifest(out / o.name / "recording").get("truth")
+            lines.append(calibration_table(GyroCalibration.from_dict(o.calibration), truth))
+        lines.append("")
+    passed = sum(o.passed for o in outcomes)
+    names = ", ".join(o.name for o in outcomes)
+    lines.append(f"plate: {passed} of {len(outcomes)} sensors passed; wrote {out}/NAME/ for each "
+                 f"({names}) and {out / 'summary.json'}")
+    return "\n".join(lines)

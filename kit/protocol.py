@@ -57,7 +57,7 @@ __all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
 class Step:
     """One step of the protocol."""
 
-    kind: str  # "rest", "rotate" or "move"
+    kind: str  # "rest", "rotate", "move" or "still" (still time only: no segment, no check)
     motor: int | None = None
     direction: int = 0
     turns: int = 0
@@ -69,6 +69,8 @@ class Step:
         """Human-readable, e.g. ``turn servo 2, 2 turns at 200°/s, negative``."""
         if self.kind == "rest":
             return f"rest {self.rest_s:.1f} s"
+        if self.kind == "still":
+            return f"hold still {self.rest_s:.1f} s"
         if self.kind == "move":
             return f"move servo {self.motor} to {math.degrees(self.angle):+.0f}°"
         sign = "positive" if self.direction > 0 else "negative"
@@ -77,11 +79,14 @@ class Step:
 
 
 def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
-    """The plan as steps: per servo rest, turn −, rest, turn +; then a final rest; then, for
-    each posed pair of the full model (:attr:`~gyrocal.calib.design.Plan.poses`), move a servo
-    to its pose, rest, turn the other −, rest, +, rest, and move the first back home
-    (:func:`gyrocal.calib.design.full_schedule` is the same order); last, for each gravity pose
-    (:attr:`~gyrocal.calib.design.Plan.gravity_poses`), move the servo there, rest, and back.
+    """The plan as steps, in :func:`gyrocal.calib.design.protocol_sequence`'s order: per servo
+    rest, turn −, rest, turn +; then a final rest; then, for each posed pair of the full model
+    (:attr:`~gyrocal.calib.design.Plan.poses`), move a servo to its pose, turn the other −,
+    rest, +, rest, and move the first back home (:func:`gyrocal.calib.design.full_schedule` is
+    the same order); then, for each gravity pose (:attr:`~gyrocal.calib.design.Plan.gravity_poses`),
+    move the servo there, rest, and back. The accelerometer's moves
+    (:attr:`~gyrocal.calib.design.Plan.accel_moves`) tilt some rests; the run ends with every
+    servo moved home.
 
     Turning the negative way first and back again ends every servo where it started; every
     move is undone, so the run ends in the home pose.
@@ -91,29 +96,24 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
     ValueError
         If a pose names a chain position beyond ``ids``.
     """
-    def turns(motor: int) -> list[Step]:
-        out = []
-        for d in (-1, 1):
-            out.append(Step("rest", rest_s=plan.rest_s))
-            out.append(Step("rotate", motor=int(motor), direction=d, turns=plan.turns,
-                            speed=plan.speed))
-        return out
+    from gyrocal.calib.design import protocol_sequence
+    from gyrocal.calib.errors import CalibInputError
 
+    try:
+        seq = protocol_sequence(plan, len(ids))
+    except CalibInputError as exc:
+        raise ValueError(f"{exc} (servos {list(ids)})") from None
     steps: list[Step] = []
-    for motor in ids:
-        steps += turns(motor)
-    steps.append(Step("rest", rest_s=plan.rest_s))
-    for turn, moved, angle in plan.poses:
-        if max(turn, moved) >= len(ids):
-            raise ValueError(f"pose ({turn}, {moved}) names a servo beyond the chain {ids}")
-        steps.append(Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed))
-        steps += turns(ids[turn])[1:]
-        steps.append(Step("rest", rest_s=plan.rest_s))
-        steps.append(Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed))
-    for moved, angle in plan.gravity_poses:  # gravity in more directions, for g-sensitivity
-        steps.append(Step("move", motor=int(ids[moved]), angle=angle, speed=plan.speed))
-        steps.append(Step("rest", rest_s=plan.rest_s))
-        steps.append(Step("move", motor=int(ids[moved]), angle=0.0, speed=plan.speed))
+    for st in seq:
+        if st[0] == "rest":
+            steps.append(Step("rest", rest_s=plan.rest_s))
+        elif st[0] == "still":
+            steps.append(Step("still", rest_s=float(st[1])))
+        elif st[0] == "rotate":
+            steps.append(Step("rotate", motor=int(ids[st[1]]), direction=st[2], turns=plan.turns,
+                              speed=plan.speed))
+        else:
+            steps.append(Step("move", motor=int(ids[st[1]]), angle=st[2], speed=plan.speed))
     return steps
 
 
@@ -561,7 +561,10 @@ class Runner:
         direction = step.direction
         if step.kind == "move":
             direction = motion.direction or 1
-        elif step.kind == "rotate" and any(self._pose.values()):
+        elif step.kind == "rotate" and step.motor in self.ids and any(
+                self._pose.get(sid, 0.0) for sid in self.ids[self.ids.index(step.motor) + 1:]):
+            # posed: a servo outside the turning one is away from home (the servos inside it,
+            # tilted for the accelerometer's rests, leave the turn's axis in the sensor frame)
             self._posed.add(len(self._segments))
         return Segment(len(self._segments), step.kind, step.motor, direction, speed, t_start,
                        t_end)
@@ -624,6 +627,10 @@ class Runner:
             for i, step in enumerate(self.steps):
                 self.step_index = i
                 self.step_desc = step.describe()
+                if step.kind == "still":  # still time after a turn, before a move: no segment
+                    self._data = None
+                    self._run_rest(step)
+                    continue
                 self._do_step(i, step)
             self._data = None
         except BaseException as exc:

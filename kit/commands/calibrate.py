@@ -6,6 +6,7 @@ import argparse
 import importlib.util
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -113,6 +114,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default); auto: planned for this jig, diagonal model; paper: 60°/s, "
                         "one turn, 3 s waits")
     p.add_argument("--method", choices=METHODS)
+    p.add_argument("--align-gyro-to-accel", action="store_true", default=None,
+                   help="express the gyro calibration in the calibrated accelerometer's frame "
+                        "(accel-x-xy), as imu_tk does: the rotation between the frames is "
+                        "estimated from the rests and applied with its uncertainty "
+                        "(protocol.align_gyro_to_accel; needs the accelerometer's calibration)")
+    p.add_argument("--accel-rests", action=argparse.BooleanOptionalAction, default=None,
+                   help="tilt the rests between turns so the accelerometer is calibrated too "
+                        "(protocol.accel_rests, on by default for protocol full: a few servo "
+                        "moves, about 8 s on the default run); --no-accel-rests keeps the "
+                        "rests in the gyro's poses")
     p.add_argument("--json", action="store_true", help="print the calibration document")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--no-report", action="store_true",
@@ -150,6 +161,11 @@ def run(args: argparse.Namespace) -> int:
             est = estimate_recording(rec, cfg["protocol"]["method"],
                                      source=str(out / "recording"))
             cal = est.calibration
+            if cfg["protocol"]["align_gyro_to_accel"]:
+                from gyrocal.kit.alignment import align_to_accelerometer
+
+                cal, aligned_note = align_to_accelerometer(cal, rec, est.extracted)
+                est = replace(est, notes=(*est.notes, aligned_note))
             check_plausible(cal, rec.sensor, allow=args.allow_implausible)
             atomic_write_text(work / "calibration.json", cal.to_json() + "\n")
             if report:
@@ -187,52 +203,27 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_plate(cfg: Any, args: argparse.Namespace, out: Path, work: Path, report: bool,
                history: Any) -> int:
-    """``calibrate`` with several sensors on the plate (:mod:`gyrocal.kit.plate`): one run, then
-    per sensor a calibration, a verdict and a summary; exit 0 only if every sensor passed."""
-    from gyrocal.drivers.signals import shielded
-    from gyrocal.kit.errors import InputError
-    from gyrocal.kit.fileio import atomic_write_json, replace_dir
-    from gyrocal.kit.jig import run_jig
-    from gyrocal.kit.plate import calibrate_plate, plate_exit_code, summary_document
-    from gyrocal.kit.report import calibration_table
+    """Several sensors on the plate (:func:`gyrocal.kit.plate.run_plate`): exit 0 only if every
+    sensor passed; with a history, one record per calibrated sensor under its own label."""
+    from gyrocal.kit.commands.history import store_and_say
+    from gyrocal.kit.plate import (
+        describe_plate,
+        history_targets,
+        plate_exit_code,
+        run_plate,
+        summary_document,
+    )
 
     sensors = cfg.imus()
-    if history is not None:
-        raise InputError("--history and [history] store one sensor's calibration; with "
-                         f"{len(sensors)} sensors on the plate store each one afterwards with "
-                         "'gyrocal history import DIR/NAME --sensor-label LABEL'")
-    names = [s["name"] for s in sensors]
-    try:
-        run_jig(cfg, args, work, work / "recording")
-        outcomes = calibrate_plate(
-            [work / n for n in names], names, [s["model"] for s in sensors],
-            cfg["protocol"]["method"], sources=[str(out / n / "recording") for n in names],
-            allow_implausible=args.allow_implausible, report=report, force=args.force,
-            title=f"{out} (gyrocal calibrate)")
-        atomic_write_json(work / "summary.json", summary_document(outcomes))
-    except BaseException:
-        if work != out:
-            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
-                  f"{work}", file=sys.stderr)
-        raise
-    if work != out:
-        with shielded():
-            replace_dir(work, out)
+    targets = history_targets(history, [s["name"] for s in sensors])  # refused before the run
+    outcomes = run_plate(cfg, args, out, work, report=report)
+    for o, target in zip(outcomes, targets, strict=True):
+        if o.calibration is not None:
+            store_and_say(target, (out / o.name / "calibration.json").read_text(encoding="utf-8"),
+                          str((out / o.name).resolve()))
     if args.json:
         json.dump(summary_document(outcomes), sys.stdout, indent=2)
         print()
-        return plate_exit_code(outcomes)
-    for o, sensor in zip(outcomes, sensors, strict=True):
-        print(f"== sensor {o.name}: {sensor['model']} at 0x{sensor['address']:02X} on bus "
-              f"{sensor['bus']}: {o.verdict.upper() if o.passed else 'FAILED: ' + o.verdict}")
-        if o.calibration is not None:
-            from gyrocal.calib.model import GyroCalibration
-            from gyrocal.kit.recording import read_manifest
-
-            truth = read_manifest(out / o.name / "recording").get("truth")
-            print(calibration_table(GyroCalibration.from_dict(o.calibration), truth))
-        print()
-    passed = sum(o.passed for o in outcomes)
-    print(f"plate: {passed} of {len(outcomes)} sensors passed; wrote {out}/NAME/ for each "
-          f"({', '.join(names)}) and {out / 'summary.json'}")
+    else:
+        print(describe_plate(outcomes, sensors, out))
     return plate_exit_code(outcomes)

@@ -41,6 +41,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-implausible", action="store_true",
                    help="accept a scale outside 0.5..2 or a bias beyond the gyro's range "
                         "(normally refused, exit 6: a unit mix-up such as °/s for rad/s)")
+    p.add_argument("--align-gyro-to-accel", action="store_true",
+                   help="express the gyro calibration in the calibrated accelerometer's frame "
+                        "(accel-x-xy), as imu_tk does: the rotation between the frames is "
+                        "estimated from the rests and applied with its uncertainty (needs the "
+                        "recording's accelerometer columns and the full model)")
     from gyrocal.kit.commands.history import add_history_arguments
 
     add_history_arguments(p)
@@ -73,6 +78,11 @@ def run(args: argparse.Namespace) -> int:
     for note in est.notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     cal = est.calibration
+    if args.align_gyro_to_accel:
+        from gyrocal.kit.alignment import align_to_accelerometer
+
+        cal, note = align_to_accelerometer(cal, rec, est.extracted)
+        print(f"gyrocal: note: {note}", file=sys.stderr)
     for problem in check_plausible(cal, rec.sensor, allow=args.allow_implausible):
         print(f"gyrocal: warning: {problem} (accepted: --allow-implausible)", file=sys.stderr)
     if args.out:

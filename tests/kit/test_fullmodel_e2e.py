@@ -38,9 +38,12 @@ def test_the_default_run_is_the_full_model_on_a_datasheet_sensor(rec, full_run):
     assert rec.manifest["protocol"]["name"] == "full"
     assert rec.manifest["protocol"]["model"] == "full"
     assert any(s.kind == "move" for s in rec.segments)
-    assert rec.manifest["protocol"]["planned_jig_time_s"] <= 45.0
+    # (the accelerometer's rests add their moves beyond the gyro's 45 s: protocol.accel_rests)
+    added = rec.manifest["protocol"]["accel_time_s"]
+    assert 0 < added < 10.0
+    assert rec.manifest["protocol"]["planned_jig_time_s"] - added <= 45.0
     last = max(s.t_end for s in rec.segments)
-    assert last - min(s.t_start for s in rec.segments) <= 45.0 + 1.0
+    assert last - min(s.t_start for s in rec.segments) <= 45.0 + added + 1.0
     cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
     assert cal.is_full and cal.method == "full-matrix" and cal.frame == "gyro-x-xy"
     C, b = _sensing(rec.truth), np.asarray(rec.truth["bias"])
@@ -91,11 +94,12 @@ def test_full_model_recovers_the_matrix_and_holds_in_general_motion(rec):
 
 
 def test_a_one_pose_recording_falls_back_to_the_diagonal_model_and_says_so(rec):
-    home = []
-    for s in rec.segments:  # everything before the first pose move
-        if s.kind == "move":
+    home, turns = [], 0
+    for s in rec.segments:  # each servo's turns both ways at home, with their rests and the
+        if turns == 6 and s.kind != "rest":  # accelerometer's moves of the servos inside them
             break
         home.append(s)
+        turns += s.kind == "rotate"
     est = estimate_recording(replace(rec, segments=tuple(home)))
     assert est.fit.method == "paired-axis"
     notes = _gyro_notes(est)

@@ -156,7 +156,9 @@ def three(tmp_path_factory):
     cfg = write(d, THREE)
     out = d / "run"
     code = main(["calibrate", "--sim", "--sim-seed", "11", *PAPER_SENSOR, "--config", str(cfg),
-                 "--out", str(out), "--quiet", "--no-report"])
+                 "--out", str(out), "--quiet", "--no-report",
+                 "--history", f"sqlite:///{d / 'history.sqlite'}",
+                 "--sensor-label", "mpu=imu-01, icm=imu-02,st=imu-03"])
     return cfg, out, code
 
 
@@ -190,6 +192,41 @@ def test_three_sensors_of_different_models_are_each_calibrated_to_their_own_trut
     assert len(set(truths)) == 3
     servos = json.loads((out / "sim-state.json").read_text())["servos"]
     assert all(s["torque_enable"] == 0 for s in servos.values())
+
+
+def test_history_gets_one_record_per_sensor_under_its_own_label(three):
+    from gyrocal.kit.history import open_history
+
+    _, out, code = three
+    assert code == 0
+    with open_history(f"sqlite:///{out.parent / 'history.sqlite'}") as store:
+        by_label = {r.label: r for r in store.records()}
+    assert sorted(by_label) == ["imu-01", "imu-02", "imu-03"]
+    for label, name in (("imu-01", "mpu"), ("imu-02", "icm"), ("imu-03", "st")):
+        stored = GyroCalibration.from_json(by_label[label].document)
+        written = GyroCalibration.from_json((out / name / "calibration.json").read_text())
+        assert np.array_equal(stored.full_matrix, written.full_matrix)
+
+
+@pytest.mark.parametrize(("label", "says"), [
+    ("mpu=imu-01", "no label for icm, st"),
+    ("mpu=a,icm=b,st=c,xx=d", "names 'xx', which is not on the plate"),
+    ("mpu=a,mpu=b", "NAME=LABEL pairs"),
+])
+def test_plate_labels_are_checked_before_the_jig_moves(tmp_path, capsys, label, says):
+    out = tmp_path / "o"
+    code = main(["calibrate", "--sim", "--config", str(write(tmp_path, THREE)), "--out",
+                 str(out), "--quiet", "--no-report", "--history",
+                 f"sqlite:///{tmp_path / 'h.sqlite'}", "--sensor-label", label])
+    assert code == 2
+    assert says in capsys.readouterr().err
+    assert not (out / "mpu").exists()
+
+
+def test_one_plain_label_labels_each_sensor_by_its_place():
+    from gyrocal.kit.plate import sensor_labels
+
+    assert sensor_labels("batch-12", ["top", "bottom"]) == ["batch-12/top", "batch-12/bottom"]
 
 
 def test_a_sensor_that_dies_mid_run_fails_alone(tmp_path, capsys):

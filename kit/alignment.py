@@ -1,0 +1,94 @@
+"""The gyro calibration expressed in the calibrated accelerometer's frame (issue 15).
+
+``--align-gyro-to-accel`` (``protocol.align_gyro_to_accel``) turns a full (v2) calibration that
+carries the accelerometer's (the Calibration's ``accelerometer`` key) into the accelerometer's
+frame ``accel-x-xy``, as imu_tk does, so that both sensors speak one frame: the rotation between
+the frames is estimated from the recording's rests (:func:`gyrocal.calib.accel.frame_rotation`:
+gravity carried through the fitted gimbal kinematics against the calibrated accelerometer's
+reading) and applied to the matrix with its covariance (:func:`gyrocal.calib.accel.align_gyro`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gyrocal.kit.errors import InputError
+
+__all__ = ["align_to_accelerometer", "rest_means"]
+
+
+def rest_means(t: np.ndarray, values: np.ndarray, spans: list[tuple[float, float]]
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of ``values`` (N, 3) over each ``(start, end)`` span of times ``t``, and each
+    mean's per-axis standard error (sample standard deviation over √count).
+
+    Raises
+    ------
+    InputError
+        A span with fewer than 10 samples.
+    """
+    means, errs = [], []
+    for lo, hi in spans:
+        sel = (t >= lo) & (t <= hi) & np.all(np.isfinite(values), axis=1)
+        n = int(sel.sum())
+        if n < 10:
+            raise InputError(f"the rest at {lo:.2f}-{hi:.2f} s has {n} accelerometer samples; "
+                             "at least 10 are needed to align the frames")
+        v = values[sel]
+        means.append(v.mean(axis=0))
+        errs.append(v.std(axis=0, ddof=1) / np.sqrt(n))
+    return np.array(means), np.array(errs)
+
+
+def align_to_accelerometer(cal: Any, rec: Any, extracted: Any) -> tuple[Any, str]:
+    """``cal`` in the accelerometer's frame, and a note for the user (the rotation's angle and
+    σ, the rests' RMS misfit).
+
+    Parameters
+    ----------
+    cal : GyroCalibration
+        A full calibration with ``kinematics`` and ``accelerometer``.
+    rec : Recording
+        Its recording, with the accelerometer's columns (``imu_accel``, m/s², beside ``imu_t``).
+    extracted : ExtractedWindows
+        The recording's windows (its rests and their encoder angles, ``observations.rest_pose``).
+
+    Raises
+    ------
+    InputError
+        What is missing, and what to do.
+    """
+    from gyrocal.calib.accel import align_gyro, frame_rotation
+    from gyrocal.calib.errors import CalibInputError
+
+    if cal.accelerometer is None:
+        raise InputError("--align-gyro-to-accel needs the accelerometer's calibration: the "
+                         "recording has no accelerometer columns, or its rests did not "
+                         "determine it (record with protocol.accel_rests on)")
+    if cal.kinematics is None or cal.matrix is None:
+        raise InputError("--align-gyro-to-accel needs the full model (a posed protocol, "
+                         "protocol full): the diagonal model has no frame to align")
+    accel = getattr(rec, "imu_accel", None)
+    pose = getattr(extracted.observations, "rest_pose", None)
+    if accel is None or pose is None or not extracted.rests:
+        raise InputError("--align-gyro-to-accel needs the recording's accelerometer columns "
+                         "and rests with encoder angles")
+    spans = [(w.corners[0], w.corners[3]) for w in extracted.rests]
+    means, errs = rest_means(np.asarray(rec.imu_t), np.asarray(accel, dtype=float), spans)
+    forces = cal.accelerometer.apply(means)
+    g = np.linalg.norm(forces, axis=1)
+    sd = np.max(errs, axis=1) * np.max(np.diag(cal.accelerometer.matrix)) / g
+    kin = cal.kinematics
+    try:
+        fr = frame_rotation(forces, pose, kin["axes"], kin["reference_angles_rad"],
+                            np.maximum(sd, 1e-9))
+        aligned = align_gyro(cal, fr)
+    except CalibInputError as exc:
+        raise InputError(f"cannot align the gyro to the accelerometer: {exc}") from None
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(fr.rotation) - 1) / 2, -1, 1))))
+    sigma = float(np.degrees(np.sqrt(np.trace(fr.covariance))))
+    return aligned, (f"the gyro calibration is in the accelerometer's frame accel-x-xy: the "
+                     f"frames differ by {angle:.3f}° ± {sigma:.3f}° over {fr.rests} rests "
+                     f"(RMS misfit {np.degrees(fr.rms_rad):.3f}°)")

@@ -1,0 +1,121 @@
+"""Exports of a calibration's accelerometer (the Calibration's ``accelerometer`` key, issue 15)
+to the flight stacks' accelerometer calibration parameters.
+
+Both stacks correct the accelerometer per axis with an offset and a scale factor, and neither
+has a cross-axis matrix:
+
+PX4 (``--format px4-accel``), ``CAL_ACC<n>_XOFF/YOFF/ZOFF`` (m/s²) and ``CAL_ACC<n>_XSCALE/
+YSCALE/ZSCALE`` (PX4-Autopilot ``src/lib/sensor_calibration/Accelerometer``, parameters in
+``src/modules/sensors``): ``corrected = (raw − offset) ⊙ scale``. Written as a QGroundControl
+parameter file.
+
+ArduPilot (``--format ardupilot-accel``), ``INS_ACCOFFS_X/Y/Z`` and ``INS_ACCSCAL_X/Y/Z`` (the
+second and third IMU ``INS_ACC2OFFS_*``/``INS_ACC2SCAL_*``, ``INS_ACC3…``;
+``AP_InertialSensor_Backend::_rotate_and_correct_accel``): ``accel −= offset`` then each axis
+times its scale (m/s²). Written as a Mission Planner parameter file (``NAME,VALUE``).
+
+gyrocal's ``f = A (a + b)`` (:mod:`gyrocal.calib.accel`) gives ``offset = −b`` and
+``scale = diag(A)``; the cross-axis terms (``A``'s lower triangle) have no place, and a note on
+stderr says how large the error they leave is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from gyrocal.kit.errors import InputError
+from gyrocal.kit.exports import Exporter, ExportOption, register
+
+__all__ = ["accel_offsets_scales", "ardupilot_accel_params", "px4_accel_params"]
+
+_MAV_REAL32 = 9  # MAV_PARAM_TYPE
+
+
+def _accelerometer(doc: Mapping[str, Any], fmt: str) -> Any:
+    from gyrocal.calib.model import GyroCalibration
+
+    cal = GyroCalibration.from_dict(doc)
+    if cal.accelerometer is None:
+        raise InputError(f"--format {fmt} needs a calibration with an 'accelerometer' (a run "
+                         "whose recording has the accelerometer's columns, fitted by "
+                         "'gyrocal calibrate' or 'gyrocal estimate')")
+    return cal.accelerometer
+
+
+def accel_offsets_scales(acc: Any) -> tuple[list[float], list[float]]:
+    """The per-axis ``(offset, scale)`` of ``corrected = (raw − offset) ⊙ scale`` nearest
+    ``f = A (a + b)``: ``offset = −b``, ``scale = diag(A)``."""
+    return [-float(x) for x in acc.bias], [float(acc.matrix[i][i]) for i in range(3)]
+
+
+def px4_accel_params(acc: Any, instance: int = 0) -> list[tuple[str, float, int]]:
+    """PX4's ``CAL_ACC<instance>_?OFF`` and ``_?SCALE``: ``(name, value, MAV_PARAM_TYPE)``."""
+    off, scale = accel_offsets_scales(acc)
+    p = f"CAL_ACC{instance}_"
+    return ([(f"{p}{a}OFF", o, _MAV_REAL32) for a, o in zip("XYZ", off, strict=True)]
+            + [(f"{p}{a}SCALE", s, _MAV_REAL32) for a, s in zip("XYZ", scale, strict=True)])
+
+
+def ardupilot_accel_params(acc: Any, imu: int = 1) -> list[tuple[str, float]]:
+    """ArduPilot's ``INS_ACCOFFS_*``/``INS_ACCSCAL_*`` (``INS_ACC<imu>OFFS_*`` for imu > 1)."""
+    off, scale = accel_offsets_scales(acc)
+    n = "" if imu == 1 else str(imu)
+    return ([(f"INS_ACC{n}OFFS_{a}", o) for a, o in zip("XYZ", off, strict=True)]
+            + [(f"INS_ACC{n}SCAL_{a}", s) for a, s in zip("XYZ", scale, strict=True)])
+
+
+def _cross_axis_note(acc: Any, stack: str) -> str:
+    a = acc.matrix
+    worst = max(abs(float(a[i][j])) for i in range(3) for j in range(3) if i != j)
+    return (f"{stack} has no accelerometer cross-axis terms: the calibration's (up to "
+            f"{worst:.2e} of the reading; frame accel-x-xy) are not in these parameters, so "
+            f"the corrected force keeps an error of up to about {worst * 9.81:.3f} m/s^2 at 1 g")
+
+
+def _index(value: Any, lo: int, hi: int, what: str) -> int:
+    v = lo if value is None else value
+    if not lo <= v <= hi:
+        raise InputError(f"--imu-index {v} is outside {lo}..{hi} for {what}")
+    return int(v)
+
+
+def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    acc = _accelerometer(doc, "px4-accel")
+    inst = _index(options.get("imu_index"), 0, 3, "PX4's CAL_ACC0..CAL_ACC3")
+    lines = ["# Onboard parameters for Vehicle 1",
+             "# accelerometer calibration written by gyrocal from a Calibration's accelerometer",
+             "#",
+             "# Vehicle-Id Component-Id Name Value Type"]
+    lines += [f"1\t1\t{name}\t{value + 0.0:.9g}\t{kind}"
+              for name, value, kind in px4_accel_params(acc, inst)]
+    notes = [_cross_axis_note(acc, "PX4"),
+             f"CAL_ACC{inst}_ID is not written: these parameters apply to the accelerometer "
+             "whose ID the vehicle already has in that slot"]
+    return "\n".join(lines) + "\n", notes
+
+
+def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
+                      ) -> tuple[str, list[str]]:
+    acc = _accelerometer(doc, "ardupilot-accel")
+    imu = _index(options.get("imu_index"), 1, 3, "ArduPilot's INS_ACC, INS_ACC2, INS_ACC3")
+    lines = ["# ArduPilot accelerometer calibration written by gyrocal from a Calibration's "
+             "accelerometer"]
+    lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_accel_params(acc, imu)]
+    return "\n".join(lines) + "\n", [_cross_axis_note(acc, "ArduPilot")]
+
+
+_INDEX = ExportOption("imu_index", int, "px4-accel / ardupilot-accel / the thermal formats: "
+                                        "which sensor (PX4: 0-3, default 0; ArduPilot: 1-3, "
+                                        "default 1)")
+register(Exporter(
+    name="px4-accel", accepts=("gyrocal-calibration",),
+    description="PX4 accelerometer calibration CAL_ACCn_?OFF/?SCALE (QGroundControl .params)",
+    render=_render_px4, suffix=".params", options=(_INDEX,),
+))
+register(Exporter(
+    name="ardupilot-accel", accepts=("gyrocal-calibration",),
+    description="ArduPilot accelerometer calibration INS_ACCOFFS/INS_ACCSCAL (Mission "
+                "Planner .param)",
+    render=_render_ardupilot, suffix=".param", options=(_INDEX,),
+))

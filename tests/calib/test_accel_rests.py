@@ -1,0 +1,148 @@
+"""The planner's accelerometer rests (calib.design.plan_accel_rests, issue 15).
+
+Truth is the test's own gimbal kinematics (rotation matrices written here, nothing shared with
+calib.kinematics): with servo angles θ the sensor's orientation is R = R_0(θ0) R_1(θ1) R_2(θ2)
+about the home axes, gravity in the sensor frame is Rᵀ up, and servo j's axis in the sensor
+frame is (R_{j+1} ⋯ R_{S-1})ᵀ a_j (only the servos outside j move it).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from gyrocal.calib.accel import accel_design
+from gyrocal.calib.design import (
+    ACCEL_MIN_RESTS,
+    ACCEL_STD_RATIO_TARGET,
+    plan_accel_rests,
+    plan_protocol,
+    profile_duration,
+    protocol_sequence,
+    score_full_design,
+)
+
+AXES = np.eye(3)
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def rot(axis, angle):
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+
+
+def walk(plan, axes=AXES):
+    """Run the sequence on the test's gimbal: per rest the gravity direction, per turn
+    (servo, its axis in the sensor frame, every servo's angle at its start, direction), the
+    moves (servo, from, to) and where the servos end. A move straight after a turn fails."""
+    here = np.zeros(len(axes))
+    rests, turns, moves = [], [], []
+    seq = protocol_sequence(plan, len(axes))
+    for k, st in enumerate(seq):
+        if st[0] == "still":
+            continue
+        if st[0] == "move":
+            if k and seq[k - 1][0] == "rotate":
+                raise AssertionError("a move right after a turn leaves its window no still time")
+            moves.append((st[1], here[st[1]], st[2]))
+            here[st[1]] = st[2]
+        elif st[0] == "rest":
+            R = np.eye(3)
+            for j in range(len(axes)):
+                R = R @ rot(axes[j], here[j])
+            rests.append(R.T @ UP)
+        else:
+            j = st[1]
+            Rout = np.eye(3)
+            for k in range(j + 1, len(axes)):
+                Rout = Rout @ rot(axes[k], here[k])
+            turns.append((j, Rout.T @ axes[j], here.copy(), st[2]))
+    return np.array(rests), turns, moves, here
+
+
+@pytest.fixture(scope="module")
+def plans():
+    gyro = plan_protocol(servo_max_speed=4.8, full_scale=math.radians(500), time_budget_s=45.0,
+                         model="full")
+    return gyro, plan_accel_rests(gyro, max_turns=3.0)
+
+
+def test_the_default_rests_alone_cannot_determine_the_accelerometer(plans):
+    gyro, _ = plans
+    rests, _, _, _ = walk(gyro)
+    assert len(np.unique(np.round(rests, 9), axis=0)) <= 3
+    assert not accel_design(rests, 1.0).identifiable
+
+
+def test_tilted_rests_determine_the_nine_parameters_within_the_stated_bound(plans):
+    gyro, plan = plans
+    rests, _, _, home = walk(plan)
+    assert len(rests) == len(walk(gyro)[0]), "no rest is added, the existing ones are tilted"
+    assert len(np.unique(np.round(rests, 9), axis=0)) >= 9
+    d = accel_design(rests, window_std=1.0, gravity=1.0)
+    assert d.identifiable
+    assert d.worst_force_std <= ACCEL_STD_RATIO_TARGET
+    assert plan.accel_std_ratio == pytest.approx(d.worst_force_std, rel=0.05)
+    assert np.all(home == 0), "the run ends in the home pose"
+
+
+def test_the_gyro_sees_the_same_turns_so_its_predicted_error_is_unchanged(plans):
+    gyro, plan = plans
+    _, before, _, _ = walk(gyro)
+    _, after, _, _ = walk(plan)
+    assert [t[0] for t in after] == [t[0] for t in before]
+    for (_, u0, *_), (_, u1, *_) in zip(before, after, strict=True):
+        assert np.allclose(u0, u1, atol=1e-12)
+    # the design score of the turns as actually posed (inner servos tilted) is the same
+    kw = dict(rate=plan.speed, window_std=1e-3, rest_std=1e-3, n_rests=len(walk(plan)[0]))
+    assert any(np.any(ang != 0) for *_, ang, _ in after), "some turns start tilted"
+    sched = [(j, ang, d) for j, _, ang, d in after]
+    nominal = [(j, ang, d) for j, _, ang, d in before]
+    s1 = score_full_design(sched, **kw)
+    s0 = score_full_design(nominal, **kw)
+    assert s1.rate_error_std == pytest.approx(s0.rate_error_std, rel=1e-9)
+    assert plan.rate_error_std == gyro.rate_error_std
+
+
+def test_the_added_time_is_the_moves_it_adds_and_far_below_a_gravity_tour(plans):
+    gyro, plan = plans
+
+    def move_time(moves):
+        return sum(profile_duration(abs(b - a), plan.speed, plan.accel) + 0.1
+                   for _, a, b in moves if abs(b - a) > 1e-12)
+
+    still = sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
+    assert still >= 0.15 * sum(1 for st in protocol_sequence(plan) if st[0] == "still")
+    added = move_time(walk(plan)[2]) - move_time(walk(gyro)[2]) + still
+    assert plan.accel_time_s == pytest.approx(added, rel=1e-9)
+    assert plan.jig_time_s == pytest.approx(gyro.jig_time_s + added, rel=1e-12)
+    assert 0 < plan.accel_time_s < 10.0  # the 14-point tour adds 17-22 s
+
+
+def test_a_turning_servo_never_passes_the_cable_wrap_limit():
+    gyro = plan_protocol(servo_max_speed=4.8, full_scale=math.radians(500), time_budget_s=45.0,
+                         model="full")
+    plan = plan_accel_rests(gyro, max_turns=float(gyro.turns))
+    for j, _, angles, _ in walk(plan)[1]:
+        assert abs(angles[j]) < 1e-12, "with no slack, a servo turns only from home"
+    loose = plan_accel_rests(gyro, max_turns=gyro.turns + 0.25)
+    for j, _, angles, _ in walk(loose)[1]:
+        assert abs(angles[j]) <= 2 * math.pi * 0.25 + 1e-9
+
+
+def test_a_diagonal_plan_gets_tilted_rests_too():
+    gyro = plan_protocol(servo_max_speed=4.8, full_scale=math.radians(500), time_budget_s=30.0)
+    plan = plan_accel_rests(gyro, max_turns=3.0)
+    rests, before, _, home = walk(gyro)
+    rests, after, moves, home = walk(plan)
+    for (_, u0, *_), (_, u1, *_) in zip(before, after, strict=True):
+        assert np.allclose(u0, u1, atol=1e-12)
+    # seven rests cannot hold nine parameters and a test: five more at the end
+    assert plan.accel_extra_rests == ACCEL_MIN_RESTS - 7 and len(rests) == ACCEL_MIN_RESTS
+    assert accel_design(rests, 1.0, 1.0).worst_force_std <= ACCEL_STD_RATIO_TARGET
+    assert np.all(home == 0)
+    moved = sum(profile_duration(abs(b - a), plan.speed, plan.accel) + 0.1
+                for _, a, b in moves if abs(b - a) > 1e-12)
+    still = sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
+    assert plan.accel_time_s == pytest.approx(moved + still + plan.accel_extra_rests * plan.rest_s)

@@ -1,0 +1,175 @@
+"""The exports carry the Calibration's ``accelerometer`` (issue 15): the C header applies both
+sensors (compiled and compared with Python), YAML/ROS carry it, Kalibr's intrinsics get its
+``M``, PX4 and ArduPilot get their offset and scale parameters, and what has no place is said on
+stderr.
+
+The accelerometer calibration is fitted to rests from the independent generator
+tests/calib/accel_truth.py; the expected values are the stacks' documented formulas written here
+(PX4 ``(raw − off) ⊙ scale``, ArduPilot ``(raw − offs) ⊙ scal``, Kalibr ``a = M f + b``).
+"""
+
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+import yaml
+
+from gyrocal.calib.accel import fit_accelerometer
+from gyrocal.calib.model import Consistency, GyroCalibration
+from gyrocal.kit.cli import main
+from tests.calib import accel_truth
+
+
+@pytest.fixture(scope="module")
+def cal():
+    rng = np.random.default_rng(15)
+    sensing = accel_truth.random_sensing(rng)
+    bias = rng.normal(0, 0.3, 3)
+    means, std = accel_truth.rest_means(rng, sensing, bias, accel_truth.fibonacci_directions(14),
+                                        9.80665, 0.03, 200)
+    acc = fit_accelerometer(means, std)
+    a = np.tril(np.eye(3) + rng.normal(0, 0.02, (3, 3)))
+    return GyroCalibration(
+        scale=tuple(np.diag(a)), bias=(0.01, -0.02, 0.003), matrix=tuple(map(tuple, a)),
+        matrix_std=tuple(map(tuple, np.tril(np.full((3, 3), 1e-4)))), frame="gyro-x-xy",
+        method="full-matrix", consistency=Consistency(40.0, 42, 0.5, True),
+        sensor={"model": "mpu9250", "odr_hz": 200.0}, accelerometer=acc)
+
+
+@pytest.fixture
+def cal_file(tmp_path, cal):
+    p = tmp_path / "cal.json"
+    p.write_text(cal.to_json())
+    return p
+
+
+def export(capsys, path, fmt, *options):
+    code = main(["export", str(path), "--format", fmt, *options])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return out, err
+
+
+PROGRAM = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "cal.h"
+
+int main(int argc, char **argv)
+{
+    float m[3], g[3], a[3], f[3];
+    int i;
+    if (argc != 7) return 2;
+    for (i = 0; i < 3; ++i) m[i] = strtof(argv[i + 1], NULL);
+    for (i = 0; i < 3; ++i) a[i] = strtof(argv[i + 4], NULL);
+    gyrocal_apply(m, g);
+    gyrocal_accel_apply(a, f);
+    gyrocal_accel_apply(a, a); /* in place */
+    for (i = 0; i < 3; ++i)
+        printf("%.9e %.9e %.9e\n", (double)g[i], (double)f[i], (double)a[i]);
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: cannot compile "
+                    "the exported C header (install gcc to run this test)")
+def test_the_c_header_applies_both_sensors(cal, cal_file, tmp_path, capsys):
+    out, _ = export(capsys, cal_file, "c-header")
+    assert "f[i] = sum over j of A_ACC[i][j] * (a[j] + b_acc[j])" in out
+    (tmp_path / "cal.h").write_text(out)
+    (tmp_path / "main.c").write_text(PROGRAM)
+    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion",
+             "-Wconversion", "-Wshadow"]
+    cc = subprocess.run(["gcc", *flags, "-o", str(tmp_path / "apply"), str(tmp_path / "main.c")],
+                        capture_output=True, text=True, cwd=tmp_path)
+    assert cc.returncode == 0, cc.stderr
+    m = np.array([1.3, -2.1, 0.7])
+    a = np.array([0.4, -9.7, 1.2])
+    run = subprocess.run([str(tmp_path / "apply"), *(repr(float(x)) for x in (*m, *a))],
+                         capture_output=True, text=True, check=True)
+    res = np.array([[float(x) for x in line.split()] for line in run.stdout.splitlines()])
+    m32, a32 = (v.astype(np.float32).astype(float) for v in (m, a))
+    np.testing.assert_allclose(res[:, 0], cal.apply(m32), rtol=1e-6)
+    expected = cal.accelerometer.apply(a32[None])[0]
+    np.testing.assert_allclose(res[:, 1], expected, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(res[:, 2], expected, rtol=1e-6, atol=1e-6)
+    # the uncalibrated reading is far from it: the test can tell
+    assert np.max(np.abs(a32 - expected)) > 1e-2
+
+
+def test_yaml_and_ros_carry_the_accelerometer(cal, cal_file, capsys):
+    out, _ = export(capsys, cal_file, "yaml")
+    doc = yaml.safe_load(out)
+    assert np.allclose(doc["accelerometer"]["matrix"], cal.accelerometer.matrix, rtol=1e-15)
+    assert np.allclose(doc["accelerometer"]["bias"], cal.accelerometer.bias, rtol=1e-15)
+    # converted back to JSON it is a valid calibration with the same accelerometer
+    back = GyroCalibration.from_dict(json.loads(json.dumps(doc)))
+    assert np.array_equal(back.accelerometer.matrix, cal.accelerometer.matrix)
+    out, _ = export(capsys, cal_file, "ros")
+    params = yaml.safe_load(out)["gyro_calibration"]
+    assert np.allclose(np.reshape(params["accel_matrix"], (3, 3)), cal.accelerometer.matrix)
+    assert np.allclose(params["accel_bias"], cal.accelerometer.bias)
+    assert params["accel_units"] == "m/s^2"
+
+
+def test_kalibr_gets_the_accelerometer_matrix_and_says_what_has_no_place(cal, cal_file, capsys):
+    out, err = export(capsys, cal_file, "kalibr")
+    doc = yaml.safe_load(out)
+    M = np.asarray(doc["accelerometers"]["M"])
+    # Kalibr: a_meas = M f + b; gyrocal: f = A (a + b_acc), so a = A^-1 f - b_acc
+    f = np.array([0.3, -9.5, 2.0])
+    a = np.linalg.solve(cal.accelerometer.matrix, f) - cal.accelerometer.bias
+    assert np.allclose(M @ f - cal.accelerometer.bias, a, atol=1e-9)
+    assert "fixed accelerometer bias" in err and "not the accelerometer's" in err
+
+
+def test_px4_and_ardupilot_get_offsets_and_scales_per_their_formulas(cal, cal_file, capsys):
+    acc = cal.accelerometer
+    raw = np.array([0.5, -9.6, 0.8])
+    diag = np.diag(acc.matrix) * (raw + acc.bias)  # gyrocal's model without its cross-axis part
+    out, err = export(capsys, cal_file, "px4-accel", "--imu-index", "1")
+    p = {r.split("\t")[2]: float(r.split("\t")[3]) for r in out.splitlines()
+         if not r.startswith("#")}
+    assert sorted(p) == sorted(f"CAL_ACC1_{a}{k}" for a in "XYZ" for k in ("OFF", "SCALE"))
+    off = np.array([p[f"CAL_ACC1_{a}OFF"] for a in "XYZ"])
+    scale = np.array([p[f"CAL_ACC1_{a}SCALE"] for a in "XYZ"])
+    assert np.allclose((raw - off) * scale, diag, rtol=1e-8)
+    assert "no accelerometer cross-axis terms" in err
+    out, err = export(capsys, cal_file, "ardupilot-accel", "--imu-index", "2")
+    q = dict((r.split(",")[0], float(r.split(",")[1])) for r in out.splitlines()
+             if not r.startswith("#"))
+    assert sorted(q) == sorted([f"INS_ACC2OFFS_{a}" for a in "XYZ"]
+                               + [f"INS_ACC2SCAL_{a}" for a in "XYZ"])
+    offs = np.array([q[f"INS_ACC2OFFS_{a}"] for a in "XYZ"])
+    scal = np.array([q[f"INS_ACC2SCAL_{a}"] for a in "XYZ"])
+    assert np.allclose((raw - offs) * scal, diag, rtol=1e-8)
+    assert "no accelerometer cross-axis terms" in err
+    out, _ = export(capsys, cal_file, "ardupilot-accel")
+    assert "INS_ACCOFFS_X," in out and "INS_ACCSCAL_Z," in out
+
+
+def test_a_calibration_without_an_accelerometer_is_refused_for_the_accel_formats(
+        tmp_path, capsys):
+    p = tmp_path / "g.json"
+    p.write_text(GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0)).to_json())
+    for fmt in ("px4-accel", "ardupilot-accel"):
+        assert main(["export", str(p), "--format", fmt]) == 2
+        assert "needs a calibration with an 'accelerometer'" in capsys.readouterr().err
+
+
+def test_the_thermal_formats_say_the_accelerometer_goes_elsewhere(cal, tmp_path, capsys):
+    from dataclasses import replace
+
+    from gyrocal.calib.thermal import ThermalModel
+
+    tm = ThermalModel(reference_c=30.0, range_c=(20.0, 40.0),
+                      bias_coeffs=np.array([[0.01, 1e-4]] * 3),
+                      bias_coeffs_covariance=np.array([np.eye(2) * 1e-12] * 3), points=5)
+    p = tmp_path / "t.json"
+    p.write_text(replace(cal, temperature_model=tm).to_json())
+    for fmt, other in (("px4-thermal", "px4-accel"), ("ardupilot-thermal", "ardupilot-accel")):
+        _, err = export(capsys, p, fmt)
+        assert f"export it with --format {other}" in err
