@@ -6,7 +6,8 @@ import json
 import os
 import sys
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,7 @@ from gyrocal.kit.errors import InputError, OutputExistsError
 
 __all__ = [
     "atomic_write_bytes",
+    "built_beside",
     "atomic_write_json",
     "atomic_write_text",
     "emit_text",
@@ -231,3 +233,23 @@ def replace_dir(staging: str | os.PathLike[str], dest: str | os.PathLike[str]) -
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
     return d
+
+
+@contextmanager
+def built_beside(work: Path, out: Path) -> Iterator[Path]:
+    """Build a run's output in ``work`` and, when the body ends without an exception, put it in
+    the place of ``out`` as a whole (:func:`replace_dir`, shielded from signals); ``work`` may
+    be ``out`` itself (nothing to replace). On failure ``out`` is untouched and stderr says
+    where this run's output is (``--force`` replaces a run only when the new one is whole)."""
+    from gyrocal.drivers.signals import shielded
+
+    try:
+        yield work
+    except BaseException:
+        if work != out:
+            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
+                  f"{work}", file=sys.stderr)
+        raise
+    if work != out:
+        with shielded():
+            replace_dir(work, out)

@@ -295,15 +295,13 @@ def run_plate(cfg: Any, args: Any, out: Path, work: Path, *, report: bool
     list of SensorOutcome
         In the config's order.
     """
-    import sys
 
-    from gyrocal.drivers.signals import shielded
-    from gyrocal.kit.fileio import atomic_write_json, replace_dir
+    from gyrocal.kit.fileio import atomic_write_json, built_beside
     from gyrocal.kit.jig import run_jig
 
     sensors = cfg.imus()
     names = [s["name"] for s in sensors]
-    try:
+    with built_beside(work, out):
         run_jig(cfg, args, work, work / "recording")
         outcomes = calibrate_plate(
             [work / n for n in names], names, [s["model"] for s in sensors],
@@ -311,14 +309,6 @@ def run_plate(cfg: Any, args: Any, out: Path, work: Path, *, report: bool
             allow_implausible=args.allow_implausible, report=report, force=args.force,
             title=f"{out} (gyrocal calibrate)")
         atomic_write_json(work / "summary.json", summary_document(outcomes))
-    except BaseException:
-        if work != out:
-            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
-                  f"{work}", file=sys.stderr)
-        raise
-    if work != out:
-        with shielded():
-            replace_dir(work, out)
     return outcomes
 
 

@@ -340,7 +340,7 @@ def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
     import sys
 
     from gyrocal.drivers.signals import shielded
-    from gyrocal.kit.fileio import replace_dir
+    from gyrocal.kit.fileio import built_beside
     from gyrocal.kit.recording import now_iso
 
     static = getattr(args, "static", None)
@@ -357,7 +357,7 @@ def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
     from gyrocal.kit.jig import Jig
 
     quiet_args = argparse.Namespace(**{**vars(args), "quiet": True})
-    try:
+    with built_beside(work, out):
         jig = Jig(cfg, args)
         try:
             runs = run_warmup(jig, cfg, quiet_args, work, runs_wanted, args.wait, progress)
@@ -377,14 +377,6 @@ def thermal_on_jig(cfg: Any, args: argparse.Namespace, out: Path, work: Path, *,
             model = fit_calibrations(cals)
         cal = thermal_calibration(cals, model, source=str(out), created=now_iso())
         write_model_json(work / "calibration.json", cal)
-    except BaseException:
-        if work != out:
-            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
-                  f"{work}", file=sys.stderr)
-        raise
-    if work != out:
-        with shielded():
-            replace_dir(work, out)
     truth = None if jig.sim is None else jig.sim.truth.manifest()
     return cal, list(zip(names, cals, strict=True)), truth
 

@@ -136,9 +136,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from gyrocal.drivers.signals import shielded
     from gyrocal.kit.commands.history import history_target_from, store_and_say
-    from gyrocal.kit.fileio import atomic_write_text, refuse_existing, replace_dir
+    from gyrocal.kit.fileio import atomic_write_text, built_beside, refuse_existing
     from gyrocal.kit.jig import load_cli_config, output_dir, run_jig
     from gyrocal.kit.pipeline import check_plausible, estimate_recording
     from gyrocal.kit.recording import load_recording
@@ -152,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         refuse_existing([out / "report.html", out / "plots"], force=args.force)
     if len(cfg.imus()) > 1:
         return _run_plate(cfg, args, out, work, report, history)
-    try:
+    with built_beside(work, out):
         run_jig(cfg, args, work, work / "recording")
         if getattr(args, "sim_imu", False):
             cal = None
@@ -174,14 +173,6 @@ def run(args: argparse.Namespace) -> int:
                 write_run_report(rec, cal, est.extracted, work / "plots",
                                  title=f"{out} (gyrocal calibrate)",
                                  html_path=work / "report.html", force=args.force)
-    except BaseException:
-        if work != out:
-            print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
-                  f"{work}", file=sys.stderr)
-        raise
-    if work != out:
-        with shielded():
-            replace_dir(work, out)
     rec_dir, cal_path = out / "recording", out / "calibration.json"
     if cal is None:
         print(f"wrote {rec_dir}/ (emulated IMU at rest: the servos were tested, nothing to fit)")
