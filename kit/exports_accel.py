@@ -26,6 +26,7 @@ from typing import Any
 
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, register
+from gyrocal.kit.exports_thermal import check_imu_index
 
 __all__ = ["accel_offsets_scales", "ardupilot_accel_params", "px4_accel_params"]
 
@@ -73,16 +74,9 @@ def _cross_axis_note(acc: Any, stack: str) -> str:
             f"the corrected force keeps an error of up to about {worst * 9.81:.3f} m/s^2 at 1 g")
 
 
-def _index(value: Any, lo: int, hi: int, what: str) -> int:
-    v = lo if value is None else value
-    if not lo <= v <= hi:
-        raise InputError(f"--imu-index {v} is outside {lo}..{hi} for {what}")
-    return int(v)
-
-
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
     acc = _accelerometer(doc, "px4-accel")
-    inst = _index(options.get("imu_index"), 0, 3, "PX4's CAL_ACC0..CAL_ACC3")
+    inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's CAL_ACC0..CAL_ACC3")
     lines = ["# Onboard parameters for Vehicle 1",
              "# accelerometer calibration written by gyrocal from a Calibration's accelerometer",
              "#",
@@ -98,7 +92,7 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
                       ) -> tuple[str, list[str]]:
     acc = _accelerometer(doc, "ardupilot-accel")
-    imu = _index(options.get("imu_index"), 1, 3, "ArduPilot's INS_ACC, INS_ACC2, INS_ACC3")
+    imu = check_imu_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_ACC, INS_ACC2, INS_ACC3")
     lines = ["# ArduPilot accelerometer calibration written by gyrocal from a Calibration's "
              "accelerometer"]
     lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_accel_params(acc, imu)]

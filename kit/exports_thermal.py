@@ -35,7 +35,7 @@ from typing import Any
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, g_sensitivity_note, register
 
-__all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "px4_params"]
+__all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "check_imu_index", "px4_params"]
 
 #: ArduPilot's fixed reference temperature of INS_TCALn (AP_InertialSensor_tempcal.cpp).
 ARDUPILOT_TEMP_REFERENCE_C = 35.0
@@ -106,7 +106,8 @@ def ardupilot_params(cal: Any, imu: int = 1) -> list[tuple[str, float]]:
     return out
 
 
-def _check_index(value: Any, lo: int, hi: int, what: str) -> int:
+def check_imu_index(value: Any, lo: int, hi: int, what: str) -> int:
+    """``--imu-index`` (default ``lo``) within a flight stack's ``lo..hi`` instances."""
     v = lo if value is None else value
     if not lo <= v <= hi:
         raise InputError(f"--imu-index {v} is outside {lo}..{hi} for {what}")
@@ -115,7 +116,7 @@ def _check_index(value: Any, lo: int, hi: int, what: str) -> int:
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
     cal = _model(doc, "px4-thermal")
-    inst = _check_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
+    inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
     dev = options.get("device_id")
     rows = px4_params(cal, inst, 0 if dev is None else int(dev))
     lines = ["# Onboard parameters for Vehicle 1",
@@ -140,7 +141,7 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
                       ) -> tuple[str, list[str]]:
     cal = _model(doc, "ardupilot-thermal")
-    imu = _check_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_TCAL1..3")
+    imu = check_imu_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_TCAL1..3")
     lines = ["# ArduPilot gyro temperature calibration written by gyrocal from a "
              "temperature_model"]
     lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_params(cal, imu)]
