@@ -50,7 +50,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 from scipy.special import chdtrc
 
 from gyrocal.calib.design import sphere_points
@@ -339,6 +338,8 @@ def fit_accelerometer(
                               f"gravity {g:.3f}); got norms {norms.min():.3g}..{norms.max():.3g}")
     # Start: unit matrix and zero bias, scale fixed to the mean norm.
     p = np.concatenate([_entries(np.eye(3) * g / norms.mean()), np.zeros(3)])
+    from scipy import optimize  # imported where a fit needs it (seconds on a Pi)
+
     res = None
     for _ in range(2):  # weights at the start, then at the first solution
         sigma = _sigma(p, a, cov)
@@ -724,6 +725,8 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     def resid(p: np.ndarray) -> np.ndarray:
         R, g0 = unpack(p)
         return ((carried(g0) @ R.T - u) / sd[:, None]).ravel()
+
+    from scipy import optimize  # imported where a fit needs it (seconds on a Pi)
 
     res = optimize.least_squares(resid, np.zeros(5), method="lm", xtol=1e-15, ftol=1e-15,
                                  gtol=1e-15, max_nfev=200)

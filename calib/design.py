@@ -23,7 +23,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.simulate import profile_duration
@@ -148,6 +147,8 @@ def score_design(points: np.ndarray, radius: float = 1.0, n_search: int = 4000) 
     best = np.argsort(vals)[-5:]
     top, arg = -np.inf, S[best[-1]]
     for i in best:
+        from scipy import optimize  # imported where a search needs it (seconds on a Pi)
+
         res = optimize.minimize(lambda u: -d(u), S[i], method="Nelder-Mead",
                                 options={"xatol": 1e-10, "fatol": 1e-12})
         if -res.fun > top:
@@ -757,6 +758,8 @@ def score_full_design(
     vals = std_var(S_pts).max(axis=1)
     top, arg = -np.inf, S_pts[int(np.argmax(vals))]
     for i in np.argsort(vals)[-5:]:
+        from scipy import optimize  # imported where a search needs it (seconds on a Pi)
+
         opt = optimize.minimize(lambda x: -float(std_var(x[None]).max()), S_pts[i],
                                 method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-15})
         if -opt.fun > top:

@@ -100,12 +100,12 @@ def run(args: argparse.Namespace) -> int:
 def _gravity(args: argparse.Namespace) -> float | None:
     """The gravity of ``--gravity`` or ``--latitude``/``--height`` (checked as the config's
     ``[accelerometer]`` keys are), or None for the recording's own."""
+    if args.gravity is None and args.latitude is None:
+        return None  # before the imports: an argument error must not import numpy or scipy
     from gyrocal.kit.config import SCHEMA
     from gyrocal.kit.errors import InputError
     from gyrocal.kit.pipeline import local_gravity
 
-    if args.gravity is None and args.latitude is None:
-        return None
     keys = SCHEMA["accelerometer"]
     given = ({"gravity_m_s2": args.gravity} if args.gravity is not None else
              {"gravity_m_s2": 0.0, "latitude_deg": args.latitude, "height_m": args.height})
