@@ -24,6 +24,11 @@ __all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "run_jig", "sim_effects"]
 
 
+#: Shortest rest (s) from which :func:`choose_plan` tilts rests for the accelerometer: the
+#: planner's own minimum rest (calib.design's ``min_rest_s``).
+ACCEL_MIN_REST_S = 0.6
+
+
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
     """Say on stderr when the chip runs at a rate other than the one configured (``--odr 201``
     runs an MPU-9250 at 1000/(1 + 4) = 200 Hz)."""
@@ -292,9 +297,12 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses),
             gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
-    if p["name"] == "full" and p["accel_rests"]:
+    if p["name"] == "full" and p["accel_rests"] and plan.rest_s >= ACCEL_MIN_REST_S:
         # tilt the rests for the accelerometer (calib.design.plan_accel_rests): the turns the
-        # gyro sees are unchanged; the moves add plan.accel_time_s beyond the gyro's budget
+        # gyro sees are unchanged; the moves add plan.accel_time_s beyond the gyro's budget.
+        # Not with rests shorter than the planner's own minimum: the accelerometer gets no
+        # still window from them, and the moves cost the full matrix its observability (a
+        # user's rest_s = 0.4 with 240 °/s, one turn: ±1.1e-3 against the 1e-3 limit)
         plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),
                                 max_turns=float(cfg["gimbal"]["max_turns"]))
     # the planned protocols stay within their budget (the full one's is at least

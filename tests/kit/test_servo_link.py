@@ -144,8 +144,10 @@ def test_a_turn_disturbed_by_a_host_stall_is_repeated_and_never_fitted(tmp_path,
     cal = json.loads(capsys.readouterr().out)
     rec = load_recording(tmp_path / "out" / "recording")
     discarded = rec.manifest["protocol"]["discarded"]
-    assert [(d["check"], d["motor"], d["direction"], d["disturbed"]) for d in discarded] == [
-        ("poll-gap", 1, -1, True)]
+    # the stall shows as the poll gap, or as the FIFO gap it causes first: with the
+    # accelerometer in its frames the MPU-9250's FIFO holds 36 samples, 180 ms at 200 Hz
+    assert [(d["motor"], d["direction"], d["disturbed"]) for d in discarded] == [(1, -1, True)]
+    assert discarded[0]["check"] in ("poll-gap", "fifo-gap")
     bad = (discarded[0]["t_start"], discarded[0]["t_end"])
     assert bad[0] < 1.5 < bad[1]
     # Never a segment, so never a window: every segment lies outside the disturbed attempt.
