@@ -344,6 +344,16 @@ class GyroCalibration:
         return np.diag(self.scale) if self.matrix is None else np.array(self.matrix)
 
     @property
+    def g_rate_error_per_g(self) -> float:
+        """The most that leaving out ``G f`` moves a calibrated rate, rad/s per g of specific
+        force: ``max_i ‖(A G)_i‖₂`` (for a unit ``f`` along the worst direction of row ``i``);
+        0 without :attr:`g_sensitivity`. What a reader or a target that ignores G is off by."""
+        if self.g_sensitivity is None:
+            return 0.0
+        AG = self.full_matrix @ np.asarray(self.g_sensitivity["matrix"], dtype=float)
+        return float(np.max(np.linalg.norm(AG, axis=1)))
+
+    @property
     def is_full(self) -> bool:
         """Whether this is the full model (Calibration v2), with cross-axis terms."""
         return self.matrix is not None

@@ -46,16 +46,14 @@ def calibrated(cal: Any, rate: np.ndarray, temp_c: np.ndarray) -> np.ndarray:
 
 
 def g_sensitivity_note(cal: Any) -> str | None:
-    """What a user must know when a calibration's g-sensitivity cannot be applied: ``imu.csv``
-    rows carry no accelerometer reading, so ``G f`` is left out (None without g-sensitivity)."""
+    """What a user must know when a calibration's g-sensitivity is not applied: apply reads
+    only the gyro columns, so ``G f`` is left out (None without g-sensitivity)."""
     if getattr(cal, "g_sensitivity", None) is None:
         return None
-    G = np.asarray(cal.g_sensitivity["matrix"])
-    worst = float(np.max(np.linalg.norm(cal.full_matrix @ G, axis=1)))
-    return (f"note: the calibration's g-sensitivity is NOT applied (imu.csv rows carry no "
-            f"accelerometer reading): its bias is the zero-g bias, so the rates are off by up "
-            f"to {worst:.1e} rad/s per g of specific force; apply it in code with "
-            "GyroCalibration.apply(m, specific_force=f)")
+    return (f"note: the calibration's g-sensitivity is NOT applied (apply reads only the gyro "
+            f"columns of imu.csv): its bias is the zero-g bias, so the rates are off by up "
+            f"to {cal.g_rate_error_per_g:.1e} rad/s per g of specific force; apply it in code "
+            "with GyroCalibration.apply(m, specific_force=f)")
 
 
 def format_rows(t: np.ndarray, rate: np.ndarray, temp_c: np.ndarray) -> Iterator[str]:

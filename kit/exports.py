@@ -647,15 +647,12 @@ def _model_lines(cal: Any, prefix: str) -> list[str]:
 
 def g_sensitivity_note(cal: Any, target: str) -> list[str]:
     """The note for a target with no place for a calibration's g-sensitivity (none without
-    one): what is lost, ``|A G| x 1 g`` at most."""
+    one): what is lost, at most ``GyroCalibration.g_rate_error_per_g`` per g."""
     if cal.g_sensitivity is None:
         return []
-    import numpy as np
-
-    worst = float(np.max(np.abs(cal.full_matrix @ np.asarray(cal.g_sensitivity["matrix"]))
-                         .sum(axis=1)))
     return [f"{target} has no place for the gyro's g-sensitivity (g_sensitivity.matrix): it is "
-            f"not carried, so the rate is off by up to {worst:.2g} rad/s per g of specific "
+            f"not carried, so the rate is off by up to {cal.g_rate_error_per_g:.2g} rad/s per g "
+            "of specific "
             "force; apply it where the accelerometer is read (gyrocal export --format "
             "c-header or yaml carries it)"]
 

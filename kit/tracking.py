@@ -388,19 +388,13 @@ class Gravity:
         return carried_up(axes, ref, self.home, up, angles)
 
 
-def _g_worst(cal: Any) -> float:
-    """``max |A G|`` row norm: the most a specific force of 1 g moves the rate, rad/s."""
-    G = np.asarray(cal.g_sensitivity["matrix"])
-    return float(np.max(np.linalg.norm(np.asarray(cal.full_matrix) @ G, axis=1)))
-
-
 def live_g_note(cal: Any) -> str:
     """What a live run with a g-sensitive calibration must say: the live loop does not know the
     home pose the calibration's "up" refers to, so ``G f`` is not applied (the tracked bias is
     the zero-g bias plus ``G f`` of the pose the jig holds)."""
     return ("the calibration's g-sensitivity is NOT applied live (a Calibration v2 does not "
             "store the home pose its 'up' refers to; replay the --record recording to apply "
-            f"it): the tracked bias includes G f, up to {_g_worst(cal):.1e} rad/s per g")
+            f"it): the tracked bias includes G f, up to {cal.g_rate_error_per_g:.1e} rad/s per g")
 
 
 def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
@@ -429,7 +423,7 @@ def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
     if missing is not None:
         return None, (f"the calibration's g-sensitivity is NOT applied ({missing}, so the "
                       "specific force is unknown): the tracked bias is the zero-g bias plus "
-                      f"G f, off by up to {_g_worst(cal):.1e} rad/s per g")
+                      f"G f, off by up to {cal.g_rate_error_per_g:.1e} rad/s per g")
     assert up is not None
     home = np.array([ea[0] for _, ea in encoders])
     return Gravity(dict(kin), (chain.index(up[0]), up[1]), home, encoders), None

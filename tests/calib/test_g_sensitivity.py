@@ -176,3 +176,21 @@ def test_a_v1_document_cannot_carry_g_sensitivity():
               covariance=None, scale_std=doc["scale_std"])
     with pytest.raises(CalibrationFormatError, match="unknown field 'g_sensitivity'"):
         GyroCalibration.from_dict(v1)
+
+
+def test_the_rate_error_per_g_is_the_worst_unit_force_found_by_search():
+    """``g_rate_error_per_g`` against a brute-force search: the largest change of any calibrated
+    axis, ``|A G f|``, over 200,000 random unit specific forces, and 0 without G."""
+    rng = np.random.default_rng(11)
+    A = np.tril(np.eye(3) + rng.normal(0, 0.02, (3, 3)))
+    G = rng.uniform(-1, 1, (3, 3)) * np.radians(0.1)
+    cal = GyroCalibration(scale=tuple(np.diag(A)), bias=(0.0, 0.0, 0.0), matrix=A.tolist(),
+                          matrix_std=np.zeros((3, 3)).tolist(), frame="gyro-x-xy",
+                          g_sensitivity={"matrix": G.tolist(), "matrix_std": None,
+                                         "directions": np.eye(3).tolist()})
+    f = rng.normal(size=(200_000, 3))
+    f /= np.linalg.norm(f, axis=1, keepdims=True)
+    searched = np.max(np.abs(f @ (A @ G).T))
+    assert searched <= cal.g_rate_error_per_g <= searched * (1 + 1e-4)
+    plain = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0))
+    assert plain.g_rate_error_per_g == 0.0
