@@ -19,6 +19,7 @@ rest, where there is none.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,7 +31,7 @@ from gyrocal.kit.errors import InputError
 from gyrocal.kit.pipeline import gravity_servo
 from gyrocal.kit.recording import Recording
 
-__all__ = ["force_source", "specific_force"]
+__all__ = ["ForceSource", "force_of", "force_source", "specific_force"]
 
 
 def force_source(rec: Recording, cal: GyroCalibration) -> str | None:
@@ -52,6 +53,51 @@ def force_source(rec: Recording, cal: GyroCalibration) -> str | None:
     if missing:
         return f"no encoder readings of servo(s) {missing}"
     return None
+
+
+@dataclass(frozen=True)
+class ForceSource:
+    """The specific force of a recording's sensor at any time (g, sensor frame): the chain's
+    encoder angles, interpolated linearly (held at the first and last readings outside them),
+    carried into "up" by the calibration's kinematics (:func:`gyrocal.calib.kinematics.gravity_up`).
+
+    Attributes
+    ----------
+    kinematics : mapping
+        The Calibration v2 ``kinematics``.
+    up : (int, int)
+        ``(servo ID, sign)`` of the servo vertical at home.
+    home : ndarray (S,)
+        The recording's first encoder angles, chain order (the fit's home pose).
+    encoders : list of (ndarray, ndarray)
+        Each chain servo's encoder times and angles.
+    """
+
+    kinematics: Mapping[str, Any]
+    up: tuple[int, int]
+    home: np.ndarray
+    encoders: list[tuple[np.ndarray, np.ndarray]]
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """Unit vectors (N, 3), +1 g up when still, at times ``t`` (N,) on the recording clock."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        angles = np.column_stack([np.interp(t, et, ea) for et, ea in self.encoders])
+        return gravity_up(self.kinematics, angles.reshape(t.size, -1), self.home, self.up)
+
+
+def force_of(rec: Any, cal: GyroCalibration) -> tuple[ForceSource | None, str | None]:
+    """The :class:`ForceSource` of a recording (a :class:`Recording`, or anything with its
+    ``manifest`` and ``encoder(motor)``, such as a streamed replay's timeline) for ``cal``'s
+    g-sensitivity, or None and :func:`force_source`'s reason (None, None without G)."""
+    if cal.g_sensitivity is None:
+        return None, None
+    why = force_source(rec, cal)
+    if why is not None:
+        return None, why
+    kin: Mapping[str, Any] = cal.kinematics  # type: ignore[assignment]
+    encoders = [rec.encoder(int(m)) for m in kin["chain"]]
+    home = np.array([float(ea[0]) for _, ea in encoders])  # the first pose, as the fit takes it
+    return ForceSource(kin, gravity_servo(rec.manifest), home, encoders), None  # type: ignore[arg-type]
 
 
 def specific_force(rec: Recording, cal: GyroCalibration, t: np.ndarray) -> np.ndarray:
@@ -76,18 +122,11 @@ def specific_force(rec: Recording, cal: GyroCalibration, t: np.ndarray) -> np.nd
     InputError
         When :func:`force_source` gives a reason.
     """
-    why = force_source(rec, cal)
-    if why is not None:
-        raise InputError(f"{rec.path}: cannot tell where gravity points: {why}")
-    kin: Mapping[str, Any] = cal.kinematics  # type: ignore[assignment]
-    t = np.asarray(t, dtype=float).reshape(-1)
-    cols, home = [], []
-    for m in kin["chain"]:
-        te, th = rec.encoder(int(m))
-        cols.append(np.interp(t, te, th))
-        home.append(float(th[0]))  # the recording's first pose, as the fit takes it
+    src, why = force_of(rec, cal)
+    if src is None:
+        raise InputError(f"{rec.path}: cannot tell where gravity points: "
+                         f"{why or 'the calibration has no g-sensitivity'}")
     try:
-        return gravity_up(kin, np.column_stack(cols).reshape(t.size, -1), np.array(home),
-                          gravity_servo(rec.manifest))  # type: ignore[arg-type]
+        return src.at(t)
     except CalibInputError as exc:
         raise InputError(f"{rec.path}: {exc}") from None

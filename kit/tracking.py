@@ -337,7 +337,7 @@ def steady_only(enc_t: np.ndarray, enc_angle: np.ndarray, t: np.ndarray, rate: n
 
 
 def replay_chunks(batch: Batch, ref: Reference | None, size: int,
-                  gravity: Gravity | None = None) -> Iterator[Batch]:
+                  gravity: Any = None) -> Iterator[Batch]:
     """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` and the
     specific force of ``gravity`` over its samples (a recording replayed in bounded working
     memory)."""
@@ -352,42 +352,6 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int,
                     None if gravity is None else gravity.at(batch.t[a:b]))
 
 
-@dataclass(frozen=True)
-class Gravity:
-    """The specific force of a sensor on the jig from the servos' encoders, for a
-    calibration's g-sensitivity: "up" carried into the sensor frame by the chain's angles
-    (:func:`gyrocal.calib.kinematics.carried_up` with the calibration's kinematics), 1 g. The
-    lever arm's centripetal term is left out, as the fit leaves it out
-    (:meth:`gyrocal.calib.observations.ObservationSet.specific_force`).
-
-    Attributes
-    ----------
-    kinematics : dict
-        The Calibration v2 ``kinematics``.
-    up : (int, int)
-        Chain index of the servo vertical in the home pose, and its sign.
-    home : ndarray (S,)
-        The home pose (the encoders' first angles), rad.
-    encoders : list of (ndarray, ndarray)
-        Each chain servo's encoder times and angles.
-    """
-
-    kinematics: dict[str, Any]
-    up: tuple[int, int]
-    home: np.ndarray
-    encoders: list[tuple[np.ndarray, np.ndarray]]
-
-    def at(self, t: np.ndarray) -> np.ndarray:
-        """Specific force (n, 3), g, sensor frame, at times ``t`` (encoders interpolated)."""
-        from gyrocal.calib.kinematics import carried_up, chain_axes
-
-        angles = np.column_stack([np.interp(t, et, ea) for et, ea in self.encoders])
-        axes = np.asarray(self.kinematics["axes"], dtype=float)
-        ref = np.asarray(self.kinematics["reference_angles_rad"], dtype=float)
-        up = self.up[1] * chain_axes(axes, ref, self.home)[self.up[0]]
-        return carried_up(axes, ref, self.home, up, angles)
-
-
 def live_g_note(cal: Any) -> str:
     """What a live run with a g-sensitive calibration must say: the live loop does not know the
     home pose the calibration's "up" refers to, so ``G f`` is not applied (the tracked bias is
@@ -395,38 +359,6 @@ def live_g_note(cal: Any) -> str:
     return ("the calibration's g-sensitivity is NOT applied live (a Calibration v2 does not "
             "store the home pose its 'up' refers to; replay the --record recording to apply "
             f"it): the tracked bias includes G f, up to {cal.g_rate_error_per_g:.1e} rad/s per g")
-
-
-def recording_gravity(rec: Any, cal: Any) -> tuple[Gravity | None, str | None]:
-    """The :class:`Gravity` of a recording for ``cal``'s g-sensitivity, or None and what the
-    user must know (None and None when the calibration has no g-sensitivity).
-
-    The pose comes from the recording's encoders through the calibration's kinematics, "up"
-    from the manifest's motor listed with axis ``z`` (:func:`gyrocal.kit.pipeline.gravity_servo`),
-    the home pose from the encoders' first angles, as the fit took them.
-    """
-    g = getattr(cal, "g_sensitivity", None)
-    if g is None:
-        return None, None
-    from gyrocal.kit.pipeline import gravity_servo
-
-    kin = getattr(cal, "kinematics", None)
-    chain = [int(x) for x in kin["chain"]] if kin else []
-    up = gravity_servo(rec.manifest)
-    encoders = [rec.encoder(sid) for sid in chain]
-    missing = ("the calibration has no kinematics" if not chain else
-               "the manifest lists no servo with axis z (up)" if up is None else
-               f"servo {up[0]} is not in the calibration's chain {chain}"
-               if up[0] not in chain else
-               "a servo of the chain has no encoder readings"
-               if any(et.size == 0 for et, _ in encoders) else None)
-    if missing is not None:
-        return None, (f"the calibration's g-sensitivity is NOT applied ({missing}, so the "
-                      "specific force is unknown): the tracked bias is the zero-g bias plus "
-                      f"G f, off by up to {cal.g_rate_error_per_g:.1e} rad/s per g")
-    assert up is not None
-    home = np.array([ea[0] for _, ea in encoders])
-    return Gravity(dict(kin), (chain.index(up[0]), up[1]), home, encoders), None
 
 
 #: Seconds on each side of a rotate segment whose encoder readings a streamed replay keeps
@@ -611,7 +543,7 @@ def open_replay(path: Any, warnings: list[str], *, encoder: bool = True,
     with the checks of :func:`gyrocal.kit.recording.load_recording`. Without ``encoder`` (no
     reference rates wanted) no encoder reading is kept, though every one is checked; with
     ``every_encoder`` every one is kept (a calibration's g-sensitivity needs the pose at every
-    sample: :func:`recording_gravity`). The caller closes the :class:`SpilledImu`."""
+    sample: :func:`gyrocal.kit.gravity.force_of`). The caller closes the :class:`SpilledImu`."""
     from pathlib import Path
 
     from gyrocal.kit.recording import iter_encoder, read_manifest, read_segments
@@ -707,7 +639,7 @@ class ReplaySource:
     context manager: leaving it deletes the temporary file."""
 
     def __init__(self, imu: SpilledImu, ref: Reference | None, still: StillPlan | None,
-                 temperature: bool, gravity: Gravity | None = None) -> None:
+                 temperature: bool, gravity: Any = None) -> None:
         self.imu = imu
         self.ref = ref
         self.still = still

@@ -269,7 +269,6 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
         StillPlan,
         load_calibration,
         open_replay,
-        recording_gravity,
         reference_segments,
     )
     from gyrocal.kit.tracking import rest_intervals as rests
@@ -312,9 +311,15 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
             elif not np.all(np.isfinite(cal.scale_std)):
                 notes.append("the calibration has no scale_std: no reference-rate updates")
                 ref = None
-        gravity, g_note = recording_gravity(rec, cal)  # the specific force for G (v2 only)
-        if g_note is not None:
-            notes.append(g_note)
+        gravity = None  # the specific force for the calibration's G (v2 only)
+        if cal is not None and cal.g_sensitivity is not None:
+            from gyrocal.kit.gravity import force_of
+
+            gravity, why = force_of(rec, cal)
+            if why is not None:
+                notes.append(f"the calibration's g-sensitivity is NOT applied ({why}, so the "
+                             "specific force is unknown): the tracked bias is the zero-g bias "
+                             f"plus G f, off by up to {cal.g_rate_error_per_g:.1e} rad/s per g")
     except BaseException:
         imu.close()
         raise
