@@ -63,14 +63,14 @@ def test_square_gimbal_rate_against_orientation_derivative():
         np.testing.assert_allclose(got, want, atol=1e-8)
 
 
-def test_skewed_gimbal_with_reference_angles():
-    # A gimbal that is not square and a sensor mounted askew: link axes a_j in each link's own
-    # frame, mount rotation M (sensor to innermost link). Orientation of the sensor relative to
-    # the base: Rot(a0, θ0) Rot(a1, θ1) Rot(a2, θ2) M (scipy rotations, not the code's).
-    rng = np.random.default_rng(7)
-    a = [v / np.linalg.norm(v) for v in (np.array([0.05, -0.03, 1]), np.array([0.02, 1, 0.04]),
-                                         np.array([1, 0.03, -0.02]))]
-    M = Rotation.from_rotvec([0.1, -0.2, 0.05]).as_matrix()
+def _skewed_gimbal(rng, link_axes, mount_rotvec, chain):
+    """A gimbal that is not square with a sensor mounted askew: link axes ``a_j`` in each link's
+    own frame, mount rotation ``M``; the sensor's orientation ``R(θ) = Rot(a0, θ0) Rot(a1, θ1)
+    Rot(a2, θ2) M`` (scipy rotations, not the code's), random reference angles, and the axes in
+    the sensor frame there (each joint's axis carried to the sensor by the links inside it).
+    Returns ``(R, axes, kinematics)``."""
+    a = [np.asarray(v, dtype=float) / np.linalg.norm(v) for v in link_axes]
+    M = Rotation.from_rotvec(mount_rotvec).as_matrix()
 
     def R(th):
         out = np.eye(3)
@@ -79,15 +79,24 @@ def test_skewed_gimbal_with_reference_angles():
         return out @ M
 
     ref = rng.uniform(-1, 1, 3)
-    # The axes in the sensor frame at the reference angles: each joint's axis carried to the
-    # sensor by the links inside it at their reference angles.
     axes = []
     for j in range(3):
         inner = np.eye(3)
         for k in range(j + 1, 3):
             inner = inner @ Rotation.from_rotvec(a[k] * ref[k]).as_matrix()
         axes.append((inner @ M).T @ a[j])
-    kin = {"chain": [1, 2, 3], "axes": [list(x) for x in axes], "reference_angles_rad": list(ref)}
+    return R, axes, {"chain": list(chain), "axes": [list(x) for x in axes],
+                     "reference_angles_rad": list(ref)}
+
+
+def test_skewed_gimbal_with_reference_angles():
+    # A gimbal that is not square and a sensor mounted askew: link axes a_j in each link's own
+    # frame, mount rotation M (sensor to innermost link). Orientation of the sensor relative to
+    # the base: Rot(a0, θ0) Rot(a1, θ1) Rot(a2, θ2) M (scipy rotations, not the code's).
+    rng = np.random.default_rng(7)
+    R, axes, kin = _skewed_gimbal(rng, ([0.05, -0.03, 1], [0.02, 1, 0.04], [1, 0.03, -0.02]),
+                                  [0.1, -0.2, 0.05], [1, 2, 3])
+    ref = np.array(kin["reference_angles_rad"])
     th0 = rng.uniform(-4, 4, 3) + 2 * np.pi * np.array([3, -1, 2])  # cumulative angles
     rate = rng.uniform(-3, 3, 3)
     for t in (0.0, 0.4):
@@ -105,24 +114,8 @@ def test_gravity_up_is_the_world_vertical_seen_from_the_sensor():
     # pose that is not the reference pose. Truth from scipy rotations only: "up" in the world is
     # ±R(home) u(home); at any pose the sensor sees R(θ)ᵀ of it.
     rng = np.random.default_rng(12)
-    a = [v / np.linalg.norm(v) for v in (np.array([0.04, -0.02, 1]), np.array([0.03, 1, -0.05]),
-                                         np.array([1, 0.02, 0.03]))]
-    M = Rotation.from_rotvec([-0.1, 0.15, 0.2]).as_matrix()
-
-    def R(th):
-        out = np.eye(3)
-        for aj, tj in zip(a, th, strict=True):
-            out = out @ Rotation.from_rotvec(aj * tj).as_matrix()
-        return out @ M
-
-    ref = rng.uniform(-1, 1, 3)
-    axes = []
-    for j in range(3):
-        inner = np.eye(3)
-        for k in range(j + 1, 3):
-            inner = inner @ Rotation.from_rotvec(a[k] * ref[k]).as_matrix()
-        axes.append((inner @ M).T @ a[j])
-    kin = {"chain": [7, 8, 9], "axes": [list(x) for x in axes], "reference_angles_rad": list(ref)}
+    R, _, kin = _skewed_gimbal(rng, ([0.04, -0.02, 1], [0.03, 1, -0.05], [1, 0.02, 0.03]),
+                               [-0.1, 0.15, 0.2], [7, 8, 9])
     home = rng.uniform(-0.5, 0.5, 3) + 2 * np.pi * np.array([1, 0, -2])
     angles = home + rng.uniform(-7, 7, (20, 3))
     for index, sign in ((0, 1), (2, -1), (1, 1)):
