@@ -18,9 +18,11 @@
    tests/kit/contract_fullmodel_recording.py (60° poses, a two-servo pose move): errors in σ, χ²
    false alarms, general-motion error of the full model against the diagonal ones.
 
-Usage: ``python -m bench fullmodel [--quick] [--seeds=N] [--jig-only]``: ``--seeds`` sensors in
-the jig table (default 12; 3 with ``--quick``), ``--jig-only`` the jig table and the verify sweep
-time alone. The jig table runs seed by seed (a line per sensor as it lands, on stderr); Ctrl-C
+Usage: ``python -m bench fullmodel [--quick] [--seeds=N] [--jig-only] [--independent-default]``:
+``--seeds`` sensors in the jig table (default 12; 3 with ``--quick``), ``--jig-only`` the jig
+table and the verify sweep time alone, ``--independent-default`` only the default plan's schedule
+(accelerometer rests included) on ``--seeds`` independent recordings. The jig table runs seed
+by seed (a line per sensor as it lands, on stderr); Ctrl-C
 prints the table of the sensors that finished.
 """
 
@@ -370,12 +372,97 @@ def independent_recordings(seeds: list[int]) -> None:
               f"{seeds[0]}..{seeds[-1]}; GM = general-motion RMS rate error per rad/s)")
 
 
+def independent_default_plan(seeds: list[int]) -> None:
+    """The merged default plan (accelerometer rests included) on independent data: the schedule
+    of a default ``gyrocal calibrate --sim`` run's segments.csv (moves to the nearest 45°), laid
+    out by the independent generator (tests/kit/contract_fullmodel_recording.py ``steps=``, no
+    gyrocal code in its data) with G within ±0.1 °/s/g; the full fit's χ² and errors in σ."""
+    import csv
+    import io
+    import json
+    import tempfile
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from gyrocal.calib.estimators import fit_full_matrix, matrix_in_frame
+    from gyrocal.kit.cli import main as cli
+    from gyrocal.kit.pipeline import extract_recording
+    from gyrocal.kit.recording import load_recording
+    from tests.kit.contract_fullmodel_recording import write_recording
+
+    with tempfile.TemporaryDirectory() as tmp:
+        run = Path(tmp) / "run"
+        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            cli(["calibrate", "--sim", "--sim-seed", "0", "--out", str(run), "--quiet",
+                 "--no-report"])
+        src = run / "recording"
+        chain = [int(m["id"]) for m in
+                 json.loads((src / "manifest.json").read_text())["gimbal"]["motors"]]
+        segs = list(csv.DictReader(open(src / "segments.csv", encoding="ascii")))
+        enc = np.loadtxt(src / "encoder.csv", delimiter=",", skiprows=1)
+    steps = _steps_of(segs, enc, chain)
+    rows, zs = [], []
+    for seed in seeds:
+        G = np.random.default_rng([seed, 0x65]).uniform(-1, 1, (3, 3)) * np.radians(0.1)
+        with tempfile.TemporaryDirectory() as tmp:
+            truth = write_recording(Path(tmp) / "rec", seed=seed, g_sensitivity=G, steps=steps)
+            obs = extract_recording(load_recording(Path(tmp) / "rec")).observations
+        C = matrix_in_frame(np.diag(1 / truth["scale"]) @ truth["misalignment"])
+        fit = fit_full_matrix(obs)
+        std = np.sqrt(np.diag(fit.covariance))
+        free = std[:9] > 0
+        z = np.r_[(fit.matrix - C).ravel()[free] / std[:9][free],
+                  (fit.bias - truth["bias"]) / std[9:12]]
+        zs.append(z)
+        rows.append([seed, fit.consistency.ok, f"{fit.consistency.chi2:.1f}/{fit.consistency.dof}",
+                     float(np.max(np.abs(z)))])
+    allz = np.concatenate(zs)
+    rows.append(["all", sum(r[1] for r in rows), "", float(np.max(np.abs(allz)))])
+    print_table(["seed", "χ² ok", "χ²/dof", "max |err/σ|"], rows,
+                title=f"The merged default plan ({len(steps)} steps, accelerometer rests "
+                      f"included) on the independent generator; RMS err/σ "
+                      f"{float(np.sqrt(np.mean(allz ** 2))):.2f}")
+
+
+def _steps_of(segs: list[dict], enc: np.ndarray, chain: list[int]) -> list[tuple]:
+    """A recording's segments as the independent generator's ``steps``: rests with their
+    durations, turns by chain index, and each group of moves as the pose it ends in."""
+    def angle(m: int, t: float) -> float:
+        r = enc[enc[:, 1] == m]
+        return float(np.interp(t, r[:, 0], r[:, 2]))
+
+    home = np.array([angle(m, 0.0) for m in chain])
+    steps: list[tuple] = []
+    pose: tuple = (0.0, 0.0, 0.0)
+    i = 0
+    while i < len(segs):
+        s = segs[i]
+        if s["kind"] == "rest":
+            steps.append(("rest", float(s["t_end"]) - float(s["t_start"])))
+        elif s["kind"] == "rotate":
+            steps.append(("rotate", chain.index(int(s["motor"])), int(s["direction"])))
+        else:
+            t_end = float(s["t_end"])
+            while i + 1 < len(segs) and segs[i + 1]["kind"] == "move":
+                i += 1
+                t_end = max(t_end, float(segs[i]["t_end"]))
+            q = np.round((np.array([angle(m, t_end) for m in chain]) - home) / (np.pi / 4))
+            new = tuple(float(x) for x in q * (np.pi / 4))
+            if not np.allclose(new, pose):
+                steps.append(("move", new))
+                pose = new
+        i += 1
+    return steps
+
+
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     n = next((a.split("=", 1)[1] for a in argv if a.startswith("--seeds=")), None)
     if n is not None and not n.isdigit():
         raise SystemExit(f"--seeds needs a whole number of sensors, got {n!r}")
     seeds = list(range(int(n) if n is not None else 3 if quick else 12))
+    if "--independent-default" in argv:
+        independent_default_plan(seeds)
+        return
     jig_table(seeds)
     verify_sweep_time(seeds[0] if seeds else 0)
     if "--jig-only" in argv:
