@@ -20,6 +20,7 @@ torque on; ``--kill9=N``: N SIGKILLs mid-motion, default 20).
 
 from __future__ import annotations
 
+import json
 import multiprocessing as mp
 import os
 import signal
@@ -156,6 +157,61 @@ def recording_matrix(n: int, tmp: Path) -> Counter:
     return tally
 
 
+def fullmodel_matrix(n: int, tmp: Path) -> Counter:
+    """Damaged copies of a full-model recording with the accelerometer's columns and tour.
+
+    The recording is the independent generator's (tests/kit/contract_fullmodel_recording.py:
+    scipy rotations, a skewed gimbal, 60° poses, an accelerometer read through a known lower-
+    triangular A and bias). A finished ``estimate --json`` is judged against that truth: a
+    calibration that says it is consistent while its gyro matrix, bias, or accelerometer is
+    more than 6 of its own σ from the truth is a silent wrong calibration. A diagonal fallback
+    (cross-axis NOT calibrated, said on stderr) or an accelerometer left out are declared
+    outcomes, not silent ones.
+    """
+    from tests.calib.fullmodel_truth import truth_in_frame
+    from tests.kit.contract_fullmodel_recording import draw_accel, write_recording
+    from tests.kit.test_fuzz import FILES
+
+    acc_truth = draw_accel(3)
+    truth = write_recording(tmp / "fm-good", seed=3, accel_truth=acc_truth, turns=1)
+    sensing = np.diag(1 / truth["scale"]) @ truth["misalignment"]
+    A_true = truth_in_frame(sensing)
+    low = np.tril_indices(3)
+    def judge(d: Path) -> str:
+        outcome, code, out, _ = run_command(["estimate", str(d), "--json"], timeout_s=60)
+        if outcome != "finished":
+            return outcome
+        cal = json.loads(out)
+        if code == 3 or not cal["consistency"]["ok"]:
+            return "ok"  # an inconsistent fit, said so
+        bias_z = (np.array(cal["bias"]) - truth["bias"]) / np.array(cal["bias_std"])
+        if cal.get("method") != "full-matrix":  # the diagonal model: only the bias compares
+            tally["diagonal fallback"] += 1
+            z = [bias_z]
+        else:
+            z = [((np.array(cal["matrix"]) - A_true)[low]
+                  / np.array(cal["matrix_std"], dtype=float)[low]), bias_z]
+        acc = cal.get("accelerometer")
+        if acc is None:
+            tally["accelerometer left out"] += 1
+        elif acc["consistency"]["ok"]:
+            z += [(np.array(acc["matrix"]) - acc_truth["matrix"])[low]
+                  / np.array(acc["matrix_std"], dtype=float)[low],
+                  (np.array(acc["bias"]) - acc_truth["bias"]) / np.array(acc["bias_std"])]
+        return "ok" if np.all(np.abs(np.concatenate(z)) < 6) else "silent-wrong"
+
+    tally: Counter = Counter()
+    if judge(tmp / "fm-good") != "ok" or tally:  # the judge itself, on the undamaged recording
+        raise RuntimeError(f"the undamaged full-model recording judged wrong: {dict(tally)}")
+    rng = np.random.default_rng(2020)
+    for k in range(n):
+        d = copy_tree(tmp / "fm-good", tmp / f"fm{k}")
+        name = FILES[k % len(FILES)]
+        (d / name).write_bytes(damage((d / name).read_bytes(), rng)[1])
+        tally[judge(d)] += 1
+    return tally
+
+
 def config_matrix(n: int, tmp: Path) -> Counter:
     from gyrocal.kit.config import load_config, template
     from gyrocal.kit.errors import InputError
@@ -200,6 +256,8 @@ def main(argv: list[str]) -> None:
     tmp = Path(tempfile.mkdtemp(prefix="gyrocal-fuzz-"))
     rows = []
     inputs = (("damaged recordings (estimate)", lambda: recording_matrix(n, tmp)),
+              ("damaged full-model recordings with accelerometer (estimate)",
+               lambda: fullmodel_matrix(n // 2, tmp)),
               ("damaged configs (load_config)", lambda: config_matrix(2 * n, tmp)),
               ("damaged calibrations (export)", lambda: calibration_matrix(n, tmp)))
     for name, fn in inputs if "--signals" not in argv else ():
