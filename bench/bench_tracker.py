@@ -241,7 +241,7 @@ def _streaming(n_max: int) -> None:
             t0 = time.perf_counter()
             tu.update(rate[i], tt[i], temp[i])
             ulat[i] = time.perf_counter() - t0
-        ref_new, ref_old, ref_share, steps = _reference_latency(n)
+        ref_new, ref_old, ref_share, kinds = _reference_latency(n)
         # the general path update() used for every sample before: a one-sample process() call
         n_old = min(n, 2000)
         to = BiasTracker(st, s.calibration)
@@ -275,8 +275,12 @@ def _streaming(n_max: int) -> None:
           for name, v in (("median", np.median(ref_new) * 1e6),
                           ("p99", np.percentile(ref_new, 99) * 1e6),
                           ("mean", ref_new.mean() * 1e6))],
-        [f"  of which Kalman steps: {steps.size} update windows, median",
-         f"{np.median(steps) * 1e6:.0f} us", f"{5 * np.median(steps) * 1e6:.0f} us"],
+        *[[f"  calls that {label} ({kinds[k].size}): median / max",
+           f"{np.median(kinds[k]) * 1e6:.1f} / {kinds[k].max() * 1e6:.0f} us",
+           f"{5 * np.median(kinds[k]) * 1e6:.0f} / {5 * kinds[k].max() * 1e6:.0f} us"]
+          for k, label in (("close", "close an update window (the step's state)"),
+                           ("slice", "run a slice of an earlier step"),
+                           ("plain", "do neither")) if kinds[k].size],
         ["one-sample process() with a reference rate (update() before)",
          f"{np.median(ref_old) * 1e6:.0f} us", f"{5 * np.median(ref_old) * 1e6:.0f} us"],
         ["process() batch throughput", f"{n / batch_s:,.0f} samples/s",
@@ -290,11 +294,14 @@ def _streaming(n_max: int) -> None:
                 "100 us per sample on the Pi")
 
 
-def _reference_latency(n_max: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+def _reference_latency(n_max: int) -> tuple[np.ndarray, np.ndarray, float,
+                                            dict[str, np.ndarray]]:
     """Per-sample time of update() with the encoder's reference rate on the turning samples of
     an independent jig session, and of the one-sample process() call it replaced (at most 2000
-    turning samples); returns both (s), the turning share of the samples and the time of each
-    Kalman step (one per update window, s)."""
+    turning samples); returns both (s), the turning share of the samples and the turning calls'
+    times by what they did beyond the sample itself: ``close`` (an update window closed: the
+    Kalman step's state), ``slice`` (a slice of an earlier step's rest: covariance, health
+    tests, process-noise bank), ``plain`` (neither)."""
     from bench.sessions import generate
 
     s = generate("jig turns, 6-15 s rests", 100)
@@ -306,28 +313,17 @@ def _reference_latency(n_max: int) -> tuple[np.ndarray, np.ndarray, float, np.nd
     rate, tt, temp = s.rate, s.t, s.temperature_c
     tu = BiasTracker(st, s.calibration)
     lat = np.empty(n)
+    what = np.zeros(n, dtype=np.int64)
     for i in range(n):
         kw = ({"reference_rate": float(rr[i]), "reference_axis": ra[i]} if turning[i]
               else {})
+        updates, todo = tu._n_updates, bool(tu._todo)
         t0 = time.perf_counter()
         tu.update(rate[i], tt[i], temp[i], **kw)
         lat[i] = time.perf_counter() - t0
-    steps = []
-    apply = tu._apply_window  # the Kalman step, timed on its own on a fresh tracker
-    tk = BiasTracker(st, s.calibration)
-
-    def timed(*a, **k):
-        t0 = time.perf_counter()
-        try:
-            return apply.__func__(tk, *a, **k)
-        finally:
-            steps.append(time.perf_counter() - t0)
-
-    tk._apply_window = timed
-    for i in range(n):
-        kw = ({"reference_rate": float(rr[i]), "reference_axis": ra[i]} if turning[i]
-              else {})
-        tk.update(rate[i], tt[i], temp[i], **kw)
+        what[i] = 2 if tu._n_updates != updates else int(todo)
+    kinds = {name: lat[turning & (what == k)] for k, name in enumerate(("plain", "slice",
+                                                                        "close"))}
     to = BiasTracker(st, s.calibration)
     old = []
     for i in range(n):
@@ -338,7 +334,7 @@ def _reference_latency(n_max: int) -> tuple[np.ndarray, np.ndarray, float, np.nd
                    reference_axis=ra[i:i + 1])
         if turning[i]:
             old.append(time.perf_counter() - t0)
-    return lat[turning], np.array(old), float(turning.mean()), np.array(steps)
+    return lat[turning], np.array(old), float(turning.mean()), kinds
 
 
 def main(argv: list[str]) -> None:

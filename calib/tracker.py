@@ -62,12 +62,16 @@ tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (
 first, so any way of cutting the stream into batches refreshes it at the same samples), so a
 drifting bias does not hide still periods.
 
-:meth:`BiasTracker.update` does, for a sample without a reference rate, the arithmetic of a
-one-sample :meth:`process` call in scalar code (the detector's window by running sums,
-:class:`gyrocal.calib.stationarity.StreamingQuiet`; the update window's sums; the output from
-the current state), and pays a Kalman step only when an update window closes: about 12 µs per
-sample (median) here against 1.1 ms for the call it replaces, with the same estimates to
-rounding. :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
+:meth:`BiasTracker.update` does the arithmetic of a one-sample :meth:`process` call in scalar
+code (the detector's window by running sums, :class:`gyrocal.calib.stationarity.StreamingQuiet`;
+the update window's sums; the output from the current state), with the same estimates to
+rounding. The Kalman step of a closing update window is written out per axis (the state is
+axis-decoupled); the closing call applies the new state ``x`` (all the corrected rate needs), and
+the rest of the step (the Joseph-form covariance, the NIS and CUSUM tests, the process-noise
+bank) runs a slice per following call, so no call pays a whole step. Reading what that rest
+produces (:attr:`BiasTracker.bias_std`, :attr:`BiasTracker.health`, :attr:`BiasTracker.kf`, the
+random walk, :meth:`BiasTracker.smoothed`) or calling :meth:`process` finishes it first, and so
+does the next step: every observable equals the batch path's. :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
 sample is corrected at once with the latest estimate (the estimate only changes at update
 windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
 and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
