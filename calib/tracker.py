@@ -71,7 +71,8 @@ the rest of the step (the Joseph-form covariance, the NIS and CUSUM tests, the p
 bank) runs a slice per following call, so no call pays a whole step. Reading what that rest
 produces (:attr:`BiasTracker.bias_std`, :attr:`BiasTracker.health`, :attr:`BiasTracker.kf`, the
 random walk, :meth:`BiasTracker.smoothed`) or calling :meth:`process` finishes it first, and so
-does the next step: every observable equals the batch path's. :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
+does the next step: every observable equals the batch path's.
+:meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
 sample is corrected at once with the latest estimate (the estimate only changes at update
 windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
 and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
