@@ -33,8 +33,9 @@ the axis uncertainty and the encoder resolution put on ``A⁻¹ ω u``, to first
 over the window this is exactly the result of ``n`` sequential per-sample updates (the sum of
 ``n`` identical-H information terms), at a fraction of the cost; averaging readings and the
 encoder rate over the same window is also what makes a reference rate right (speed ripple
-cancels). Each window is one textbook Kalman step on :class:`gyrocal.calib.kalman.KalmanFilter`
-(``x, P, F, Q, H, R``):
+cancels). Each window is one textbook Kalman step (``x, P, F, Q, H, R``; with ``F = I`` and
+diagonal ``Q``, ``R`` and prior the axes are independent, so it is written out per axis in floats,
+equal to :class:`gyrocal.calib.kalman.KalmanFilter`'s matrix step to rounding):
 
     x⁻ = F x,  P⁻ = F P Fᵀ + Q,
     y = z̄ − H x⁻,  S = H P⁻ Hᵀ + R,  K = P⁻ Hᵀ S⁻¹,
@@ -477,39 +478,64 @@ class _QBank:
         the last.
 
         Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
-        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry."""
+        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry. A slice is one or
+        two array operations (about a microsecond each), so that spread over the calls that
+        follow a step each pays little."""
         self.P00 += self._qg * dt
+        yield
         if dT is None:
             y = z + self.x0
-            ph0 = -self.P00
             S = self.P00 + R
-            k0 = ph0 / S
+            yield
+            k0 = -self.P00 / S
             self.x0 += k0 * y
-            self.P00 -= k0 * ph0
+            yield
+            self.P00 += k0 * self.P00  # P − K Phᵀ with Ph = −P
         else:
             self.P11 += self.qc * dt
+            y = z + self.x0
             yield
-            y = z + self.x0 + dT * self.x1
-            ph0 = -(self.P00 + dT * self.P01)
+            y += dT * self.x1
+            ph0 = self.P00 + dT * self.P01
+            yield
+            ph0 = -ph0
             ph1 = -(self.P01 + dT * self.P11)
+            yield
             S = R - ph0 - dT * ph1
+            yield
             k0, k1 = ph0 / S, ph1 / S
             yield
             self.x0 += k0 * y
             self.x1 += k1 * y
+            yield
             self.P00 -= k0 * ph0
             self.P01 -= k0 * ph1
+            yield
             self.P11 -= k1 * ph1
         yield
         lam = math.exp(-dt / self.memory) if dt > 0 else 1.0
-        self.loglik = lam * self.loglik - 0.5 * (np.log(S) + y * y / S)
+        ll = np.log(S)
         yield
-        w = np.exp(self.loglik - self.loglik.max(axis=0))
+        ll += y * y / S
+        yield
+        ll *= -0.5
+        self.loglik *= lam
+        yield
+        self.loglik += ll
+        yield
+        w = self.loglik - self.loglik.max(axis=0)
+        yield
+        w = np.exp(w)
         w /= w.sum(axis=0)
         yield
-        self.q = (w * self._qg).sum(axis=0)
+        q = (w * self._qg).sum(axis=0)
         yield
-        self.q_std = np.sqrt((w * (self._qg - self.q) ** 2).sum(axis=0))
+        d = self._qg - q
+        d *= d
+        yield
+        d *= w
+        yield
+        self.q, self.q_std = q, np.sqrt(d.sum(axis=0))
 
     def widen(self, extra: np.ndarray) -> None:
         """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
@@ -706,8 +732,8 @@ class BiasTracker:
 
     @property
     def kf(self) -> KalmanFilter:
-        """The filter (``x``, ``P``, ``F``, ``Q``, ``H``, ``R`` in filterpy's names), with every
-        step that :meth:`update` left to its following calls finished."""
+        """The filter's state ``x``, covariance ``P`` and the last step's ``Q`` (filterpy's
+        names), with every step that :meth:`update` left to its following calls finished."""
         self._catch_up()
         return self._kf
 
@@ -1636,10 +1662,10 @@ class BiasTracker:
                 Pn[i][i] = (1.0 + k0) ** 2 * p00 + k0 * k0 * R[i]
             ys.append(y)
             Ss.append(S)
+        yield
         kf.P = np.array(Pn)
         kf.Q = np.diag(self._q * dt)
         yield
-        y = np.array(ys)
         nis = sum(yi * yi / si for yi, si in zip(ys, Ss, strict=True))
         bank_extra = np.zeros(3)
         shift = self._cusum(ys, Ss, bank_extra)
@@ -1653,9 +1679,10 @@ class BiasTracker:
         if alarm:
             self._n_alarms += 1
             if s.recover:
+                y2 = np.array(ys) ** 2
                 P = kf.P.copy()
-                P[np.arange(3), np.arange(3)] += y**2
-                bank_extra += y**2
+                P[np.arange(3), np.arange(3)] += y2
+                bank_extra += y2
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
@@ -1670,6 +1697,7 @@ class BiasTracker:
         log["alarm"].append(alarm)
         log["at"].append(close)
         if self._bank is not None:
+            yield
             bank = self._bank
             yield from bank.steps(np.array(z), np.array(R), dT if tm else None, dt)
             yield
