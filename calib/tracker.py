@@ -464,18 +464,11 @@ class _QBank:
         self.q = np.asarray(s.rate_random_walk_prior, dtype=float) ** 2
         self.q_std = np.zeros(3)
 
-    def step(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float) -> np.ndarray:
-        """Predict by ``dt``, update every filter with window mean ``z`` (variance ``R``);
-        return the ``q`` per axis the tracker should use: the posterior mean plus the posterior
-        standard deviation."""
-        for _ in self.steps(z, R, dT, dt):
-            pass
-        return self.q + self.q_std
-
     def steps(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float
               ) -> Iterator[None]:
-        """:meth:`step` in slices (yielding between them); ``q`` and ``q_std`` are updated in
-        the last.
+        """Predict by ``dt`` and update every filter with window mean ``z`` (variance ``R``),
+        in slices (yielding between them); the last sets ``q`` and ``q_std``, the posterior mean
+        of ``q = K²`` per axis and its posterior standard deviation (the tracker uses their sum).
 
         Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
         ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry. A slice is one or
