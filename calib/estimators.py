@@ -1537,6 +1537,9 @@ def fit_full_matrix(
         "axes": [[float(x) for x in u] for u in res.axes[0]],
         "reference_angles_rad": [float(x) for x in ref],
     }
+    if obs.gravity is not None and obs.home_pose is not None:  # the home pose "up" refers to
+        kin["home_angles_rad"] = [float(x) for x in obs.home_pose]
+        kin["up_servo"] = [int(obs.gravity[0]), int(obs.gravity[1])]
     return FitResult(
         method="full-matrix",
         scale=np.diag(A).copy(),

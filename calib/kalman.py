@@ -1,9 +1,11 @@
-"""The linear Kalman filter step the bias tracker runs, under filterpy's attribute names.
+"""The linear Kalman filter step of the bias tracker, under filterpy's attribute names.
 
 A plain install must not pull matplotlib, and ``filterpy`` (1.4.5, unchanged since 2018) declares
 it as a requirement; the tracker needs only one predict and one update per window, so they live
 here (about thirty lines), and the test suite checks them against ``filterpy.kalman.KalmanFilter``
-(kept in the ``test`` extra). The equations are the textbook ones (Bar-Shalom, Li & Kirubarajan,
+(kept in the ``test`` extra). The tracker holds its state in a :class:`KalmanFilter` and runs
+the same step written out per axis (its axes are independent), checked against this one.
+The equations are the textbook ones (Bar-Shalom, Li & Kirubarajan,
 *Estimation with Applications to Tracking and Navigation*, §5.2.4; the covariance update in
 Joseph form, §5.2.5):
 

@@ -76,6 +76,8 @@ class GSensitivityWarning(UserWarning):
 _THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
 _ACCEL_FIELDS = ("accelerometer",)  # either version (issue 15; calib.accel)
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
+#: Optional, together (the gravity reference of ``g_sensitivity``): absent means unknown.
+_KINEMATICS_HOME = ("home_angles_rad", "up_servo")
 _ACTION = "correct or remove it (see hardware_docs/formats.md)"
 
 
@@ -258,7 +260,12 @@ class GyroCalibration:
     kinematics : dict or None
         The gimbal as the full-model fit estimated it: ``chain`` (servo IDs, base first),
         ``axes`` (one unit vector per servo in the sensor frame at the reference angles) and
-        ``reference_angles_rad``; input of ``calib.kinematics``.
+        ``reference_angles_rad``; input of ``calib.kinematics``. Where the fit knew where
+        gravity points, also the home pose "up" refers to: ``home_angles_rad`` (every servo's
+        encoder angle there) and ``up_servo`` (``[servo ID, ±1]``: "up" is that servo's axis,
+        signed, in the home pose), so the specific force ``f`` of ``g_sensitivity`` follows
+        from any later encoder angles (:attr:`gravity_reference`,
+        :func:`gyrocal.calib.kinematics.gravity_up`); absent in older documents (unknown).
     temperature_model : ThermalModel or None
         Bias (and scale or matrix) against die temperature (:mod:`gyrocal.calib.thermal`),
         written as the document's ``temperature_model`` in either version.
@@ -352,6 +359,17 @@ class GyroCalibration:
             return 0.0
         AG = self.full_matrix @ np.asarray(self.g_sensitivity["matrix"], dtype=float)
         return float(np.max(np.linalg.norm(AG, axis=1)))
+
+    @property
+    def gravity_reference(self) -> tuple[np.ndarray, tuple[int, int]] | None:
+        """``(home encoder angles (S,), (servo ID, sign))`` of the home pose that the
+        g-sensitivity's "up" refers to (``kinematics.home_angles_rad``, ``up_servo``), or None
+        where the document does not say (older calibrations, fits without gravity)."""
+        k = self.kinematics
+        if k is None or "home_angles_rad" not in k:
+            return None
+        sid, sign = k["up_servo"]
+        return np.array(k["home_angles_rad"], dtype=float), (int(sid), int(sign))
 
     @property
     def is_full(self) -> bool:
@@ -627,7 +645,7 @@ def _read_kinematics(k: Any) -> dict[str, Any] | None:
         return None
     if not isinstance(k, Mapping):
         raise CalibrationFormatError("'kinematics' must be an object or null")
-    _refuse_unknown(k, _KINEMATICS_FIELDS, "'kinematics'")
+    _refuse_unknown(k, _KINEMATICS_FIELDS + _KINEMATICS_HOME, "'kinematics'")
     for name in _KINEMATICS_FIELDS:
         if name not in k:
             raise CalibrationFormatError(f"'kinematics' lacks the field {name!r}")
@@ -642,7 +660,24 @@ def _read_kinematics(k: Any) -> dict[str, Any] | None:
     if np.any(np.abs(np.linalg.norm(axes, axis=1) - 1.0) > 1e-6):  # as calib.kinematics
         raise CalibrationFormatError("'kinematics.axes' must be unit vectors, one per servo")
     angles = _array(k["reference_angles_rad"], "kinematics.reference_angles_rad", (s,))
-    return {"chain": list(chain), "axes": axes.tolist(), "reference_angles_rad": angles.tolist()}
+    out = {"chain": list(chain), "axes": axes.tolist(), "reference_angles_rad": angles.tolist()}
+    given = [name in k and k[name] is not None for name in _KINEMATICS_HOME]
+    if any(given):
+        if not all(given):
+            raise CalibrationFormatError("'kinematics.home_angles_rad' and 'kinematics.up_servo' "
+                                         "go together (the home pose and its 'up'): give both "
+                                         "or neither")
+        home = _array(k["home_angles_rad"], "kinematics.home_angles_rad", (s,))
+        up = k["up_servo"]
+        if (not isinstance(up, (list, tuple)) or len(up) != 2
+                or any(isinstance(v, bool) or not isinstance(v, int) for v in up)
+                or up[0] not in chain or up[1] not in (1, -1)):
+            raise CalibrationFormatError(
+                f"'kinematics.up_servo' must be [servo ID of the chain {list(chain)}, 1 or -1], "
+                f"got {_excerpt(up)}")
+        out["home_angles_rad"] = home.tolist()
+        out["up_servo"] = [int(up[0]), int(up[1])]
+    return out
 
 
 def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:

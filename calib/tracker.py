@@ -33,8 +33,9 @@ the axis uncertainty and the encoder resolution put on ``A⁻¹ ω u``, to first
 over the window this is exactly the result of ``n`` sequential per-sample updates (the sum of
 ``n`` identical-H information terms), at a fraction of the cost; averaging readings and the
 encoder rate over the same window is also what makes a reference rate right (speed ripple
-cancels). Each window is one textbook Kalman step on :class:`gyrocal.calib.kalman.KalmanFilter`
-(``x, P, F, Q, H, R``):
+cancels). Each window is one textbook Kalman step (``x, P, F, Q, H, R``; with ``F = I`` and
+diagonal ``Q``, ``R`` and prior the axes are independent, so it is written out per axis in floats,
+equal to :class:`gyrocal.calib.kalman.KalmanFilter`'s matrix step to rounding):
 
     x⁻ = F x,  P⁻ = F P Fᵀ + Q,
     y = z̄ − H x⁻,  S = H P⁻ Hᵀ + R,  K = P⁻ Hᵀ S⁻¹,
@@ -62,12 +63,17 @@ tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (
 first, so any way of cutting the stream into batches refreshes it at the same samples), so a
 drifting bias does not hide still periods.
 
-:meth:`BiasTracker.update` does, for a sample without a reference rate, the arithmetic of a
-one-sample :meth:`process` call in scalar code (the detector's window by running sums,
-:class:`gyrocal.calib.stationarity.StreamingQuiet`; the update window's sums; the output from
-the current state), and pays a Kalman step only when an update window closes: about 12 µs per
-sample (median) here against 1.1 ms for the call it replaces, with the same estimates to
-rounding. :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
+:meth:`BiasTracker.update` does the arithmetic of a one-sample :meth:`process` call in scalar
+code (the detector's window by running sums, :class:`gyrocal.calib.stationarity.StreamingQuiet`;
+the update window's sums; the output from the current state), with the same estimates to
+rounding. The Kalman step of a closing update window is written out per axis (the state is
+axis-decoupled); the closing call applies the new state ``x`` (all the corrected rate needs), and
+the rest of the step (the Joseph-form covariance, the NIS and CUSUM tests, the process-noise
+bank) runs a slice per following call, so no call pays a whole step. Reading what that rest
+produces (:attr:`BiasTracker.bias_std`, :attr:`BiasTracker.health`, :attr:`BiasTracker.kf`, the
+random walk, :meth:`BiasTracker.smoothed`) or calling :meth:`process` finishes it first, and so
+does the next step: every observable equals the batch path's.
+:meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
 sample is corrected at once with the latest estimate (the estimate only changes at update
 windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
 and every full block goes through :meth:`process`. The filter therefore sees exactly the samples
@@ -110,6 +116,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -143,6 +150,7 @@ __all__ = [
 ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
 
 _KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
+_DONE = object()  # a finished generator's next()
 
 
 @dataclass(frozen=True)
@@ -456,40 +464,71 @@ class _QBank:
         self.q = np.asarray(s.rate_random_walk_prior, dtype=float) ** 2
         self.q_std = np.zeros(3)
 
-    def step(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float) -> np.ndarray:
-        """Predict by ``dt``, update every filter with window mean ``z`` (variance ``R``);
-        return the ``q`` per axis the tracker should use: the posterior mean plus the posterior
-        standard deviation.
+    def steps(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float
+              ) -> Iterator[None]:
+        """Predict by ``dt`` and update every filter with window mean ``z`` (variance ``R``),
+        in slices (yielding between them); the last sets ``q`` and ``q_std``, the posterior mean
+        of ``q = K²`` per axis and its posterior standard deviation (the tracker uses their sum).
 
         Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
-        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry."""
+        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry. A slice is one or
+        two array operations (about a microsecond each), so that spread over the calls that
+        follow a step each pays little."""
         self.P00 += self._qg * dt
+        yield
         if dT is None:
             y = z + self.x0
-            ph0 = -self.P00
             S = self.P00 + R
-            k0 = ph0 / S
+            yield
+            k0 = -self.P00 / S
             self.x0 += k0 * y
-            self.P00 -= k0 * ph0
+            yield
+            self.P00 += k0 * self.P00  # P − K Phᵀ with Ph = −P
         else:
             self.P11 += self.qc * dt
-            y = z + self.x0 + dT * self.x1
-            ph0 = -(self.P00 + dT * self.P01)
+            y = z + self.x0
+            yield
+            y += dT * self.x1
+            ph0 = self.P00 + dT * self.P01
+            yield
+            ph0 = -ph0
             ph1 = -(self.P01 + dT * self.P11)
+            yield
             S = R - ph0 - dT * ph1
+            yield
             k0, k1 = ph0 / S, ph1 / S
+            yield
             self.x0 += k0 * y
             self.x1 += k1 * y
+            yield
             self.P00 -= k0 * ph0
             self.P01 -= k0 * ph1
+            yield
             self.P11 -= k1 * ph1
+        yield
         lam = math.exp(-dt / self.memory) if dt > 0 else 1.0
-        self.loglik = lam * self.loglik - 0.5 * (np.log(S) + y * y / S)
-        w = np.exp(self.loglik - self.loglik.max(axis=0))
+        ll = np.log(S)
+        yield
+        ll += y * y / S
+        yield
+        ll *= -0.5
+        self.loglik *= lam
+        yield
+        self.loglik += ll
+        yield
+        w = self.loglik - self.loglik.max(axis=0)
+        yield
+        w = np.exp(w)
         w /= w.sum(axis=0)
-        self.q = (w * self._qg).sum(axis=0)
-        self.q_std = np.sqrt((w * (self._qg - self.q) ** 2).sum(axis=0))
-        return self.q + self.q_std
+        yield
+        q = (w * self._qg).sum(axis=0)
+        yield
+        d = self._qg - q
+        d *= d
+        yield
+        d *= w
+        yield
+        self.q, self.q_std = q, np.sqrt(d.sum(axis=0))
 
     def widen(self, extra: np.ndarray) -> None:
         """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
@@ -515,7 +554,8 @@ class BiasTracker:
     Attributes
     ----------
     kf : gyrocal.calib.kalman.KalmanFilter
-        The filter (``x``, ``P``, ``F``, ``Q``, ``H``, ``R`` in filterpy's names).
+        The filter's state ``x`` and covariance ``P`` (filterpy's names), and ``Q`` of the last
+        step (the step itself is written out per axis: :meth:`_apply_window`).
     detector : StillDetector
     """
 
@@ -598,9 +638,16 @@ class BiasTracker:
         kf.Q = np.zeros((dim, dim))
         # H = [−I] or [−I, −(T − T_ref) I]: the fixed part, scaled per window
         self._H0 = -np.hstack([np.eye(3)] * (dim // 3))
-        self.kf = kf
+        self._kf = kf
         self._dim = dim
         self._sigma2 = s.noise_std**2
+        self._sigma2_l = self._sigma2.tolist()
+        # the reference's variance terms (_reference_variance): (A⁻¹)∘² σ_A², its row sums
+        ai2 = self._A_inv**2
+        self._ai2_astd2 = (ai2 @ self._A_std**2).tolist()
+        self._ai2_rowsum = ai2.sum(axis=1).tolist()
+        # steps update() left to its following calls (generators, a slice per call)
+        self._todo: deque[Iterator[None]] = deque()
         self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
         self._det_bias = b0.copy()
         self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
@@ -671,7 +718,17 @@ class BiasTracker:
     @property
     def bias_std(self) -> np.ndarray:
         """One-sigma uncertainty of :attr:`bias`, rad/s."""
+        if self._last["bias_std"] is None:  # update() leaves it to be read
+            self._catch_up()
+            self._last["bias_std"] = self._std_at(self._last["t"], self._last["temp"])
         return np.array(self._last["bias_std"], dtype=float)
+
+    @property
+    def kf(self) -> KalmanFilter:
+        """The filter's state ``x``, covariance ``P`` and the last step's ``Q`` (filterpy's
+        names), with every step that :meth:`update` left to its following calls finished."""
+        self._catch_up()
+        return self._kf
 
     @property
     def bias_covariance(self) -> np.ndarray:
@@ -682,12 +739,14 @@ class BiasTracker:
     def rate_random_walk(self) -> np.ndarray:
         """The bias random walk ``K`` the filter uses now, rad/s/√s (when estimated: from the
         posterior mean of ``q = K²`` plus its posterior standard deviation)."""
+        self._catch_up()
         return np.sqrt(self._q[:3])
 
     @property
     def rate_random_walk_estimate(self) -> np.ndarray | None:
         """The estimated ``K`` (from the posterior mean of ``q = K²``), rad/s/√s (None when
         ``rate_random_walk`` was given)."""
+        self._catch_up()
         return None if self._bank is None else np.sqrt(self._bank.q)
 
     @property
@@ -699,21 +758,24 @@ class BiasTracker:
     @property
     def shifts(self) -> int:
         """Bias shifts the CUSUM test has detected so far."""
+        self._catch_up()
         return self._n_shifts
 
     @property
     def tempco(self) -> np.ndarray | None:
         """Estimated temperature coefficient, rad/s/°C (None without the temperature model)."""
-        return self.kf.x[3:].copy() if self._temp_model else None
+        return self._kf.x[3:].copy() if self._temp_model else None
 
     @property
     def tempco_std(self) -> np.ndarray | None:
         """One-sigma uncertainty of :attr:`tempco`, rad/s/°C (None without the model)."""
-        return np.sqrt(np.diag(self.kf.P)[3:]) if self._temp_model else None
+        self._catch_up()
+        return np.sqrt(np.diag(self._kf.P)[3:]) if self._temp_model else None
 
     @property
     def health(self) -> Health:
         """Health flags after the latest sample."""
+        self._catch_up()
         since = self._last["since"]
         return Health(
             nis=self._nis_last,
@@ -842,6 +904,8 @@ class BiasTracker:
                                  tuple(float(v) for v in pend["ra"][i]) if math.isfinite(r)
                                  else None))
             self._pending = {}
+        if self._todo:  # a slice of a step an earlier call left
+            self._advance()
         k = self._k
         if k % self._refresh == 0:
             self._refresh_detector_bias()
@@ -904,7 +968,7 @@ class BiasTracker:
         (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
         op = self._open
         if op is not None and not (kind == op.kind and axis == op.axis):
-            self._apply_window(op, _log_sink(), g + L)
+            self._apply_window(op, _log_sink(), g + L, defer=True)
             self._open = op = None
         if kind == _KIND_NONE:
             return
@@ -930,42 +994,26 @@ class BiasTracker:
             op.last = g
             op.t_last = t
         if op.count == self._U:
-            self._apply_window(op, _log_sink(), op.last + L)
+            self._apply_window(op, _log_sink(), op.last + L, defer=True)
             self._open = None
         else:
             self._open = op
 
     def _sample_output(self, m: np.ndarray, t: float, temp: float) -> np.ndarray:
-        """Bias, its uncertainty and the corrected rate at one sample from the current state
-        (the one-row case of :meth:`_outputs`), in scalar arithmetic (three axes written out:
-        this runs for every sample)."""
+        """Bias and the corrected rate at one sample from the current state (the one-row case
+        of :meth:`_outputs`), in scalar arithmetic (three axes written out: this runs for every
+        sample); its uncertainty is computed when :attr:`bias_std` is read (:meth:`_std_at`)."""
         key = (self._n_updates, self._t_ref)
         terms = self._out_terms
         if terms is None or terms[0] != key:
-            x = np.asarray(self.kf.x, dtype=float).reshape(-1).tolist()
-            P = np.asarray(self.kf.P, dtype=float)
-            pd = np.diag(P).tolist()
-            pbc = [float(P[i, i + 3]) for i in range(3)] if self._temp_model else []
-            terms = (key, x, pd, pbc, self._q.tolist(), self._t_state, self._t_update,
-                     self._A.ravel().tolist())
+            terms = (key, self._kf.x.tolist(), self._A.ravel().tolist())
             self._out_terms = terms
-        _, x, pd, pbc, q, t_state, t_update, A = terms
-        dt = t - t_state
-        if dt < 0.0:
-            dt = 0.0
+        _, x, A = terms
         if self._temp_model:
             dT = temp - (self._t_ref if self._t_ref is not None else 0.0)
-            d2 = dT * dT
             b0, b1, b2 = x[0] + x[3] * dT, x[1] + x[4] * dT, x[2] + x[5] * dT
-            v0 = pd[0] + 2 * dT * pbc[0] + d2 * pd[3] + (q[0] + q[3] * d2) * dt
-            v1 = pd[1] + 2 * dT * pbc[1] + d2 * pd[4] + (q[1] + q[4] * d2) * dt
-            v2 = pd[2] + 2 * dT * pbc[2] + d2 * pd[5] + (q[2] + q[5] * d2) * dt
         else:
             b0, b1, b2 = x[0], x[1], x[2]
-            v0, v1, v2 = pd[0] + q[0] * dt, pd[1] + q[1] * dt, pd[2] + q[2] * dt
-        sq = math.sqrt
-        std = [sq(v0) if v0 > 0.0 else 0.0, sq(v1) if v1 > 0.0 else 0.0,
-               sq(v2) if v2 > 0.0 else 0.0]
         m0, m1, m2 = m.tolist()
         c0, c1, c2 = m0 + b0, m1 + b1, m2 + b2
         out = np.array([A[0] * c0 + A[1] * c1 + A[2] * c2,
@@ -974,8 +1022,40 @@ class BiasTracker:
         self._k += 1
         self._t_last = t
         self._temp_last = temp
-        self._last = {"bias": [b0, b1, b2], "bias_std": std, "since": t - t_update}
+        self._last = {"bias": [b0, b1, b2], "bias_std": None, "since": t - self._t_update,
+                      "t": t, "temp": temp}
         return out
+
+    def _std_at(self, t: float, temp: float) -> list[float]:
+        """The bias's one-sigma uncertainty at time ``t`` and temperature ``temp`` from the
+        current state (the filter's prediction ``P + q (t − t_state)``, one row of
+        :meth:`_outputs`)."""
+        P = self._kf.P
+        pd = np.diag(P).tolist()
+        q = self._q.tolist()
+        dt = t - self._t_state
+        if dt < 0.0:
+            dt = 0.0
+        if self._temp_model:
+            pbc = [float(P[i, i + 3]) for i in range(3)]
+            dT = temp - (self._t_ref if self._t_ref is not None else 0.0)
+            d2 = dT * dT
+            v = [pd[i] + 2 * dT * pbc[i] + d2 * pd[i + 3] + (q[i] + q[i + 3] * d2) * dt
+                 for i in range(3)]
+        else:
+            v = [pd[i] + q[i] * dt for i in range(3)]
+        return [math.sqrt(x) if x > 0.0 else 0.0 for x in v]
+
+    def _catch_up(self) -> None:
+        """Finish every step :meth:`update` left to its following calls."""
+        while self._todo:
+            for _ in self._todo.popleft():
+                pass
+
+    def _advance(self) -> None:
+        """One slice of the oldest step :meth:`update` left unfinished."""
+        if next(self._todo[0], _DONE) is _DONE:
+            self._todo.popleft()
 
     def feed(
         self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None,
@@ -1062,7 +1142,7 @@ class BiasTracker:
             return self.process(*cols, finish=finish)
         finally:
             self._fed = False
-            self._fx = self.kf.x.reshape(-1).copy()
+            self._fx = self._kf.x.reshape(-1).copy()
 
     # ------------------------------------------------------------------ batches
     def _validate(
@@ -1193,6 +1273,7 @@ class BiasTracker:
         if self._nbuf and not self._fed:
             raise CalibInputError("samples given to feed() are waiting: call flush() before "
                                   "process() or update()")
+        self._catch_up()
         cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
         if specific_force is not None and self._G is not None:
             cols = (cols[0], cols[1] + self._force(specific_force, cols[0].size) @ self._G.T,
@@ -1244,7 +1325,7 @@ class BiasTracker:
     def _refresh_detector_bias(self) -> None:
         """Centre the detector's rate test on the current bias estimate (at the latest
         sample's temperature with the temperature model)."""
-        x = self.kf.x.reshape(-1)
+        x = self._kf.x.reshape(-1)
         b = x[:3].copy()
         if self._temp_model and self._t_ref is not None and math.isfinite(self._temp_last):
             b += x[3:] * (self._temp_last - self._t_ref)
@@ -1354,8 +1435,8 @@ class BiasTracker:
     def _snapshot(self, close: int) -> _Snapshot:
         return _Snapshot(
             close=close,
-            x=self.kf.x.copy(),
-            P=self.kf.P.copy(),
+            x=self._kf.x.copy(),
+            P=self._kf.P.copy(),
             t_state=self._t_state,
             t_update=self._t_update,
             nis_ok=self._nis_ok,
@@ -1476,48 +1557,112 @@ class BiasTracker:
             self._bound_cache[k] = b
         return b
 
-    def _apply_window(self, w: _OpenWindow, log: dict[str, list[Any]], close: int) -> None:
-        """One Kalman step (predict to the window's end, update with its mean)."""
-        s = self.settings
-        kf = self.kf
+    def _apply_window(self, w: _OpenWindow, log: dict[str, list[Any]], close: int,
+                      defer: bool = False) -> None:
+        """One Kalman step (predict to the window's end, update with its mean).
+
+        The state is axis-decoupled (``F = I``, ``Q``, ``R`` diagonal, ``H = [−I]`` or
+        ``[−I, −ΔT I]``, a diagonal prior): each axis is a one- or two-state filter with a
+        scalar reading, so the textbook step (module docstring) is written out per axis in
+        floats. The new state ``x`` takes effect at once; the rest (the Joseph-form covariance,
+        the health tests, the process-noise bank) is :meth:`_step_rest`, run here, or with
+        ``defer`` (:meth:`update`) a slice per following call: every reading of what it
+        produces (:attr:`bias_std`, :attr:`health`, :attr:`kf`, ...) finishes it first, and the
+        next step does, so nothing observable changes, only which call pays."""
+        self._catch_up()
         n = w.count
-        zbar = w.sum_z / n
-        R = self._sigma2 / n
+        z = [v / n for v in w.sum_z.tolist()]
+        R = [v / n for v in self._sigma2_l]
         if w.kind == _KIND_REF:
-            omega = w.sum_omega / n
-            u = np.asarray(w.axis)
-            g = self._A_inv @ (omega * u)  # the reference's contribution A⁻¹ ω u
-            dur = n / s.odr_hz
-            ai2 = self._A_inv**2
-            # first order: d(A⁻¹) = −A⁻¹ dA A⁻¹, entries of A independent
-            R = (
-                R
-                + ai2 @ self._A_std**2 @ g**2
-                + (omega * s.reference_axis_std) ** 2 * ai2.sum(axis=1)
-                + (math.sqrt(2.0) * s.reference_angle_std / dur * (self._A_inv @ u)) ** 2
-            )
+            assert w.axis is not None
+            R = self._reference_variance(R, w.sum_omega / n, w.axis, n / self.settings.odr_hz)
         dt = max(w.t_last - self._t_state, 0.0)
-        if self._temp_model:
-            dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0)
-            H = self._H0.copy()
-            H[:, 3:] *= dT
-            kf.H = H
-        else:
-            kf.H = self._H0
-        kf.Q = np.diag(self._q * dt)
-        kf.predict()
-        kf.R = np.diag(R)
-        kf.update(zbar)
-        if self._bank is not None:
-            self._q[:3] = self._bank.step(zbar, R, -kf.H[0, 3] if self._temp_model else None,
-                                          dt)
-        y = np.asarray(kf.y, dtype=float).reshape(-1)
-        nis = float(y @ np.asarray(kf.SI) @ y)
-        s_diag = np.diag(np.asarray(kf.S, dtype=float))
-        shift = self._cusum(y, s_diag)
+        q = self._q.tolist()
+        x = self._kf.x.tolist()
+        P = self._kf.P.tolist()
+        tm = self._temp_model
+        dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0) if tm else 0.0
+        pre = []  # per axis: predicted P00, P01, P11, innovation y, S, gains k0, k1
+        for i in range(3):
+            p00 = P[i][i] + q[i] * dt
+            if tm:
+                p01 = P[i][i + 3]
+                p11 = P[i + 3][i + 3] + q[i + 3] * dt
+                ph0, ph1 = -(p00 + dT * p01), -(p01 + dT * p11)  # P⁻ hᵀ, h = [−1, −ΔT]
+                y = z[i] + x[i] + dT * x[i + 3]
+                S = R[i] - ph0 - dT * ph1
+                k0, k1 = ph0 / S, ph1 / S
+                x[i] += k0 * y
+                x[i + 3] += k1 * y
+            else:
+                p01 = p11 = k1 = 0.0
+                y = z[i] + x[i]
+                S = p00 + R[i]
+                k0 = -p00 / S
+                x[i] += k0 * y
+            pre.append((p00, p01, p11, y, S, k0, k1))
+        self._kf.x = np.array(x)
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
         self._n_updates += 1
+        rest = self._step_rest(pre, z, R, dt, dT, w, log, close)
+        if defer:
+            self._todo.append(rest)
+        else:
+            for _ in rest:
+                pass
+
+    def _reference_variance(self, R: list[float], omega: float,
+                            u: tuple[float, float, float], dur: float) -> list[float]:
+        """``R`` plus the variance the reference ``A⁻¹ ω u`` carries, to first order in
+        ``d(A⁻¹) = −A⁻¹ dA A⁻¹`` (entries of ``A`` independent): the calibration's matrix
+        uncertainty, the axis uncertainty and the encoder resolution over the window ``dur``."""
+        s = self.settings
+        ai = self._A_inv_rows
+        g = [omega * (r[0] * u[0] + r[1] * u[1] + r[2] * u[2]) for r in ai]
+        g2 = [v * v for v in g]
+        c_axis = (omega * s.reference_axis_std) ** 2
+        c_enc = math.sqrt(2.0) * s.reference_angle_std / dur
+        out = []
+        for i in range(3):
+            M, r = self._ai2_astd2[i], ai[i]
+            e = c_enc * (r[0] * u[0] + r[1] * u[1] + r[2] * u[2])
+            out.append(R[i] + (M[0] * g2[0] + M[1] * g2[1] + M[2] * g2[2])
+                       + c_axis * self._ai2_rowsum[i] + e * e)
+        return out
+
+    def _step_rest(self, pre: list[tuple[float, ...]], z: list[float], R: list[float],
+                   dt: float, dT: float, w: _OpenWindow, log: dict[str, list[Any]], close: int
+                   ) -> Iterator[None]:
+        """The rest of a Kalman step whose state :meth:`_apply_window` applied: the covariance
+        in Joseph form, ``P = (I − k h) P⁻ (I − k h)ᵀ + k r kᵀ`` per axis, the NIS and CUSUM
+        tests, then the process-noise bank (:meth:`_QBank.steps`), yielding between slices."""
+        s = self.settings
+        kf = self._kf
+        tm = self._temp_model
+        Pn = kf.P.tolist()
+        ys, Ss = [], []
+        for i, (p00, p01, p11, y, S, k0, k1) in enumerate(pre):
+            if tm:
+                # I − k h = [[1 + k0, k0 ΔT], [k1, 1 + k1 ΔT]]
+                a, b, c, d = 1.0 + k0, k0 * dT, k1, 1.0 + k1 * dT
+                m00, m01 = a * p00 + b * p01, a * p01 + b * p11
+                m10, m11 = c * p00 + d * p01, c * p01 + d * p11
+                Pn[i][i] = m00 * a + m01 * b + k0 * k0 * R[i]
+                Pn[i][i + 3] = Pn[i + 3][i] = m00 * c + m01 * d + k0 * k1 * R[i]
+                Pn[i + 3][i + 3] = m10 * c + m11 * d + k1 * k1 * R[i]
+            else:
+                Pn[i][i] = (1.0 + k0) ** 2 * p00 + k0 * k0 * R[i]
+            ys.append(y)
+            Ss.append(S)
+        yield
+        kf.P = np.array(Pn)
+        kf.Q = np.diag(self._q * dt)
+        yield
+        nis = sum(yi * yi / si for yi, si in zip(ys, Ss, strict=True))
+        bank_extra = np.zeros(3)
+        shift = self._cusum(ys, Ss, bank_extra)
+        yield
         self._nis_hist.append(nis)
         k = len(self._nis_hist)
         total = float(sum(self._nis_hist))
@@ -1527,10 +1672,10 @@ class BiasTracker:
         if alarm:
             self._n_alarms += 1
             if s.recover:
+                y2 = np.array(ys) ** 2
                 P = kf.P.copy()
-                P[np.arange(3), np.arange(3)] += y**2
-                if self._bank is not None:
-                    self._bank.widen(y**2)
+                P[np.arange(3), np.arange(3)] += y2
+                bank_extra += y2
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
@@ -1538,12 +1683,22 @@ class BiasTracker:
         log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
-        log["count"].append(n)
+        log["count"].append(w.count)
         log["nis"].append(nis)
         log["nis_sum"].append(total)
         log["nis_bound"].append(bound)
         log["alarm"].append(alarm)
         log["at"].append(close)
+        if self._bank is not None:
+            yield
+            bank = self._bank
+            yield from bank.steps(np.array(z), np.array(R), dT if tm else None, dt)
+            yield
+            # a detected step widened every filter of the bank as the tracker's own (after the
+            # bank's update, as the tracker's widening came after its own)
+            if bank_extra.any():
+                bank.widen(bank_extra)
+            self._q[:3] = bank.q + bank.q_std
 
     def _keep_state(self, Q: np.ndarray, brk: bool = False) -> None:
         """Store the state after an update (and the process noise its prediction added); ``brk``:
@@ -1552,8 +1707,8 @@ class BiasTracker:
             return
         st = self._states
         st["t"].append(self._t_state)
-        st["x"].append(np.asarray(self.kf.x, dtype=float).reshape(-1).copy())
-        st["P"].append(np.asarray(self.kf.P, dtype=float).copy())
+        st["x"].append(np.asarray(self._kf.x, dtype=float).reshape(-1).copy())
+        st["P"].append(np.asarray(self._kf.P, dtype=float).copy())
         st["Q"].append(np.asarray(Q, dtype=float).copy())
         st["break"].append(brk)
 
@@ -1564,6 +1719,7 @@ class BiasTracker:
         from gyrocal.calib.kalman import rts_smooth
 
         assert self._states is not None
+        self._catch_up()
         st = self._states
         N = len(st["t"])
         if self._smooth_cache is not None and self._smooth_cache[0] == N:
@@ -1634,6 +1790,7 @@ class BiasTracker:
         """
         if self._states is None:
             raise CalibInputError("smoothed() needs a tracker built with keep_states=True")
+        self._catch_up()
         if not self._states["t"]:
             raise CalibInputError("smoothed() needs processed samples")
         t = np.asarray(t, dtype=float).reshape(-1)
@@ -1670,14 +1827,15 @@ class BiasTracker:
             std[sl] = np.sqrt(np.maximum(var, 0.0))
         return bias, std
 
-    def _cusum(self, y: np.ndarray, s_diag: np.ndarray) -> bool:
+    def _cusum(self, y: list[float], s_diag: list[float], bank_extra: np.ndarray) -> bool:
         """Two-sided CUSUM (Page 1954) on each axis's normalised innovation ``e = y/√S``.
 
         ``g⁺ ← max(0, g⁺ + e − k)``, ``g⁻ ← max(0, g⁻ − e − k)``; a sum above ``h`` says the
         innovations' mean has shifted (a bias step the NIS window is too short or too coarse
         to see). With ``recover``, the axis's bias variance is then widened by four times the
         squared mean innovation since the sum last left zero (the size of the shift the filter
-        has not yet followed), so the next updates move the estimate to the new bias.
+        has not yet followed), so the next updates move the estimate to the new bias; the same
+        widening of the process-noise bank is added to ``bank_extra``.
         """
         s = self.settings
         if not math.isfinite(s.cusum_h):
@@ -1686,7 +1844,7 @@ class BiasTracker:
         cu, cu_sum, cu_n = self._cu, self._cu_sum, self._cu_n
         k, h = s.cusum_k, s.cusum_h
         hit = [[False] * 3, [False] * 3]
-        for i, (yi, si) in enumerate(zip(y.tolist(), s_diag.tolist(), strict=True)):
+        for i, (yi, si) in enumerate(zip(y, s_diag, strict=True)):
             e = yi / math.sqrt(si)
             for side, step in ((0, e - k), (1, -e - k)):
                 restart = cu[side][i] <= 0.0
@@ -1699,14 +1857,13 @@ class BiasTracker:
             return False
         self._n_shifts += 1
         if s.recover:
-            P = self.kf.P.copy()
+            P = self._kf.P.copy()
             for i in axes:
                 side = 0 if hit[0][i] else 1
                 mean_y = cu_sum[side][i] / cu_n[side][i]
                 P[i, i] += 4.0 * mean_y**2
-                if self._bank is not None:
-                    self._bank.widen(4.0 * mean_y**2 * (np.arange(3) == i))
-            self.kf.P = P
+                bank_extra[i] += 4.0 * mean_y**2
+            self._kf.P = P
         for i in axes:
             for side in (0, 1):
                 cu[side][i] = cu_sum[side][i] = cu_n[side][i] = 0.0

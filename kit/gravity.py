@@ -5,6 +5,10 @@ the sensor in g (hardware_docs/method.md §10). The fit took ``f`` from the gimb
 accelerometer: the servo the manifest lists with axis ``z`` (or ``-z``) stands vertical in the
 recording's first pose (:func:`gyrocal.kit.pipeline.gravity_servo`), and "up" is carried to
 every later pose by the calibration's kinematics (:func:`gyrocal.calib.kinematics.gravity_up`).
+A calibration that stores that home pose (``kinematics.home_angles_rad`` and ``up_servo``:
+:attr:`gyrocal.calib.model.GyroCalibration.gravity_reference`) is applied from it instead, so a
+recording that starts off the home pose, or whose manifest names no vertical servo, gets the
+right "up".
 :func:`specific_force` does the same at any time of a recording, so the calibration is applied
 as it was fitted.
 
@@ -42,7 +46,8 @@ def force_source(rec: Recording, cal: GyroCalibration) -> str | None:
         return "the calibration has no g-sensitivity"
     if cal.kinematics is None:
         return "the calibration has no kinematics to carry gravity's direction"
-    up = gravity_servo(rec.manifest)
+    ref = cal.gravity_reference
+    up = gravity_servo(rec.manifest) if ref is None else ref[1]
     if up is None:
         return ("the recording's manifest lists no servo with axis z or -z (the one vertical "
                 "at home)")
@@ -68,7 +73,8 @@ class ForceSource:
     up : (int, int)
         ``(servo ID, sign)`` of the servo vertical at home.
     home : ndarray (S,)
-        The recording's first encoder angles, chain order (the fit's home pose).
+        The home pose's encoder angles, chain order: the calibration's stored one, else the
+        recording's first (as the fit takes it).
     encoders : list of (ndarray, ndarray)
         Each chain servo's encoder times and angles.
     """
@@ -96,6 +102,9 @@ def force_of(rec: Any, cal: GyroCalibration) -> tuple[ForceSource | None, str | 
         return None, why
     kin: Mapping[str, Any] = cal.kinematics  # type: ignore[assignment]
     encoders = [rec.encoder(int(m)) for m in kin["chain"]]
+    ref = cal.gravity_reference
+    if ref is not None:  # the home pose the calibration's "up" refers to
+        return ForceSource(kin, ref[1], ref[0], encoders), None
     home = np.array([float(ea[0]) for _, ea in encoders])  # the first pose, as the fit takes it
     return ForceSource(kin, gravity_servo(rec.manifest), home, encoders), None  # type: ignore[arg-type]
 

@@ -352,13 +352,40 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int,
                     None if gravity is None else gravity.at(batch.t[a:b]))
 
 
-def live_g_note(cal: Any) -> str:
-    """What a live run with a g-sensitive calibration must say: the live loop does not know the
-    home pose the calibration's "up" refers to, so ``G f`` is not applied (the tracked bias is
-    the zero-g bias plus ``G f`` of the pose the jig holds)."""
-    return ("the calibration's g-sensitivity is NOT applied live (a Calibration v2 does not "
-            "store the home pose its 'up' refers to; replay the --record recording to apply "
-            f"it): the tracked bias includes G f, up to {cal.g_rate_error_per_g:.1e} rad/s per g")
+def live_gravity(cal: Any, ids: Iterable[int]
+                 ) -> tuple[Callable[[np.ndarray], np.ndarray] | None, str]:
+    """Where gravity points during a live run, for a calibration's g-sensitivity.
+
+    The calibration's ``kinematics`` carries the home pose its "up" refers to
+    (:attr:`gyrocal.calib.model.GyroCalibration.gravity_reference`), so the servo encoders give
+    ``f`` in any pose (:func:`gyrocal.calib.kinematics.gravity_up`, as the fit and the replay
+    carry it). Returns the function of encoder angles ``(N, servos in ids order)`` giving ``f``
+    (N, 3) in g, and the note the run prints; None and the note of what is missing where the
+    calibration (or the gimbal) cannot say, and the tracked bias then includes ``G f`` of the
+    pose the jig holds.
+    """
+    from gyrocal.calib.kinematics import gravity_up
+
+    ref = cal.gravity_reference
+    ids = [int(i) for i in ids]
+    missing = (None if ref is not None else
+               "this calibration does not store the home pose its 'up' refers to (calibrations "
+               "written before gyrocal stored kinematics.home_angles_rad: calibrate again)")
+    chain = [] if cal.kinematics is None else [int(c) for c in cal.kinematics["chain"]]
+    if missing is None and not set(chain) <= set(ids):
+        missing = f"the calibration's servos {chain} are not all on this gimbal ({ids})"
+    if missing is not None:
+        return None, (f"the calibration's g-sensitivity is NOT applied live ({missing}; replay "
+                      "the --record recording to apply it): the tracked bias includes G f, up to "
+                      f"{cal.g_rate_error_per_g:.1e} rad/s per g")
+    home, up = ref
+    cols = [ids.index(c) for c in chain]
+
+    def force(angles: np.ndarray) -> np.ndarray:
+        return gravity_up(cal.kinematics, np.asarray(angles, dtype=float)[:, cols], home, up)
+
+    return force, ("the calibration's g-sensitivity is applied live: the specific force comes "
+                   "from the servo encoders and the calibration's home pose")
 
 
 #: Seconds on each side of a rotate segment whose encoder readings a streamed replay keeps
@@ -796,10 +823,14 @@ class LiveSource:
         Flag every sample still unless a servo moved (``--still segments``); otherwise leave the
         decision to the detector.
     turns : TurnPlan, optional
+    gravity : callable, optional
+        Encoder angles ``(N, servos)`` → specific force ``(N, 3)``, g (:func:`live_gravity`):
+        every batch then carries ``f`` at each sample, from the servo readings around it.
     """
 
     def __init__(self, jig: Any, period_s: float, *, temperature: bool = False,
-                 trust_jig: bool = False, turns: TurnPlan | None = None) -> None:
+                 trust_jig: bool = False, turns: TurnPlan | None = None,
+                 gravity: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.jig = jig
         self.clock = jig.clock
         self.period_s = float(period_s)
@@ -816,6 +847,8 @@ class LiveSource:
         self._next = 0.0
         self._angles: np.ndarray | None = None
         self._dither = np.random.default_rng(0x74726B)
+        self.gravity = gravity
+        self._polls: list[tuple[float, np.ndarray]] = []  # (time, angles) since the last batch
         #: A RecordingWriter that receives every sample (``--record``), or None.
         self.writer: Any = None
 
@@ -839,6 +872,8 @@ class LiveSource:
                 self.writer.append_imu(b.t - self.t0, b.rate, b.temperature_c)
             self.writer.append_encoder(s.t - self.t0, list(s.ids), s.angles)
         angles = np.asarray(s.angles, dtype=float)
+        if self.gravity is not None:
+            self._polls.append((float(s.t), angles))
         moved = bool(np.any(np.abs(angles - self._angles) > LIVE_MOVE_TOLERANCE_RAD))
         self._angles = angles
         for g in b.gaps:
@@ -866,7 +901,19 @@ class LiveSource:
             still = np.where(moved, 0.0, 1.0)
         else:
             still = np.where(moved, 0.0, np.nan)
-        return Batch(t, rate, temp if self.temperature else None, still)
+        return Batch(t, rate, temp if self.temperature else None, still,
+                     specific_force=self._force(t + self.t0))
+
+    def _force(self, t: np.ndarray) -> np.ndarray | None:
+        """``f`` at jig times ``t`` from the servo readings (interpolated linearly, held
+        outside them); keeps only the last reading for the next batch."""
+        if self.gravity is None or not self._polls:
+            return None
+        pt = np.array([p[0] for p in self._polls])
+        pa = np.array([p[1] for p in self._polls])
+        self._polls = self._polls[-1:]
+        angles = np.column_stack([np.interp(t, pt, pa[:, j]) for j in range(pa.shape[1])])
+        return self.gravity(angles)
 
     def collect(self, until_s: float) -> Batch | None:
         """Drain until ``until_s`` after :meth:`start`; the samples as one batch (or None)."""
@@ -923,7 +970,8 @@ class LiveSource:
         rr = encoder_rate(np.asarray(enc_t), np.asarray(enc_a), t, dt / 2)
         ra = np.full((t.size, 3), np.nan)
         ra[np.isfinite(rr)] = p.axes[motor]
-        return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra)
+        return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra,
+                     batch.specific_force)
 
     def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
         """``first``, then a batch every ``chunk_s`` (and the turn pairs of the plan) until

@@ -540,7 +540,8 @@ def test_calibration_v2_fields_match_a_v2_document() -> None:
     cal = GyroCalibration(
         scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0), matrix=eye, matrix_std=eye,
         covariance=[[0.0] * 12] * 12, frame="gyro-x-xy",
-        kinematics={"chain": [1], "axes": [[1.0, 0.0, 0.0]], "reference_angles_rad": [0.0]},
+        kinematics={"chain": [1], "axes": [[1.0, 0.0, 0.0]], "reference_angles_rad": [0.0],
+                    "home_angles_rad": [0.0], "up_servo": [1, 1]},
         g_sensitivity={"matrix": [[0.0] * 3] * 3, "matrix_std": [[0.0] * 3] * 3,
                        "directions": eye},
     )

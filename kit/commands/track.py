@@ -411,8 +411,9 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     from gyrocal.kit.tracking import (
         LIVE_WARMUP_S,
         LiveSource,
-        live_g_note,
+        live_gravity,
         live_truth,
+        load_calibration,
         run_live,
         tracker_notes,
     )
@@ -434,6 +435,11 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
         if rec_path.is_dir() and any(rec_path.iterdir()) and not args.force:
             raise OutputExistsError(f"{rec_path} already holds files; choose another --record or "
                                     "pass --force")
+    gravity, g_note = None, ""
+    if args.cal is not None:  # (read before the jig opens: a bad file is exit 2, nothing moves)
+        g_cal = load_calibration(args.cal)
+        if g_cal.g_sensitivity is not None:
+            gravity, g_note = live_gravity(g_cal, cfg["gimbal"]["ids"])
     jig = Jig(cfg, args)
     where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
     if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
@@ -443,7 +449,7 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
                          "imu.range_dps")
     source = LiveSource(jig, period, temperature=bool(args.tempco),
                         trust_jig=args.still == "segments",
-                        turns=plan)
+                        turns=plan, gravity=gravity)
 
     def make_writer() -> Any:
         from gyrocal.kit.recording import RecordingWriter
@@ -461,10 +467,10 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
               "hold the sensor still (torque on); Ctrl-C stops them", file=sys.stderr)
 
     def build(warm: Batch) -> Any:
-        tracker, cal = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
-                                      f"the first {LIVE_WARMUP_S:g} s", where)
+        tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
+                                    f"the first {LIVE_WARMUP_S:g} s", where)
         if tracker.applies_g_sensitivity:
-            notes.append(live_g_note(cal))
+            notes.append(g_note)
         built.append(tracker)
         return tracker
 

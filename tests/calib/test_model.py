@@ -250,3 +250,26 @@ def test_out_of_domain_documents_are_refused_naming_the_field(full, mutate, mess
 def test_hostile_json_text_is_a_format_error(text):
     with pytest.raises(CalibrationFormatError, match="JSON"):
         GyroCalibration.from_json(text)
+
+
+def test_the_home_pose_of_gravity_round_trips_and_older_documents_mean_unknown():
+    kin = {**KIN, "home_angles_rad": [0.0, 0.5, -1.0], "up_servo": [3, -1]}
+    cal = make_full(kinematics=kin)
+    back = GyroCalibration.from_json(cal.to_json())
+    assert back.kinematics == kin and back == cal
+    home, up = back.gravity_reference
+    np.testing.assert_array_equal(home, [0.0, 0.5, -1.0])
+    assert up == (3, -1)
+    assert make_full().gravity_reference is None  # a document without it: unknown
+    assert make_cal().gravity_reference is None
+    for bad, match in (
+        ({**KIN, "home_angles_rad": [0.0, 0.0, 0.0]}, "go together"),
+        ({**KIN, "up_servo": [3, 1]}, "go together"),
+        ({**kin, "up_servo": [4, 1]}, r"servo ID of the chain \[1, 2, 3\], 1 or -1"),
+        ({**kin, "up_servo": [3, 0]}, "1 or -1"),
+        ({**kin, "home_angles_rad": [0.0, 0.0]}, "home_angles_rad"),
+    ):
+        doc = cal.to_dict()
+        doc["kinematics"] = bad
+        with pytest.raises(CalibrationFormatError, match=match):
+            GyroCalibration.from_dict(doc)

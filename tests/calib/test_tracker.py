@@ -539,3 +539,98 @@ def test_g_sensitivity_applied_with_the_specific_force():
     assert not plain.applies_g_sensitivity
     with pytest.raises(CalibInputError, match="specific_force"):
         BiasTracker(st, cal).process(t[:5], m[:5], specific_force=np.ones((4, 3)))
+
+
+def _textbook_step(kf_x, kf_P, q, w, dt, t_ref, sigma2, A, A_std, st):
+    """One window through gyrocal.calib.kalman.KalmanFilter (checked against filterpy in
+    test_kalman) with the matrix form of the reference's variance (the module docstring's
+    first-order d(A⁻¹) = −A⁻¹ dA A⁻¹): what the written-out per-axis step must equal."""
+    from gyrocal.calib.kalman import KalmanFilter
+
+    dim = kf_x.size
+    kf = KalmanFilter(dim_x=dim, dim_z=3)
+    kf.x, kf.P = kf_x.copy(), kf_P.copy()
+    n = w.count
+    R = sigma2 / n
+    if w.kind == 2:  # a reference window
+        Ai = np.linalg.inv(A)
+        omega, u = w.sum_omega / n, np.asarray(w.axis)
+        g = Ai @ (omega * u)
+        R = (R + (Ai**2) @ A_std**2 @ g**2 + (omega * st.reference_axis_std) ** 2
+             * (Ai**2).sum(axis=1)
+             + (math.sqrt(2.0) * st.reference_angle_std / (n / st.odr_hz) * (Ai @ u)) ** 2)
+    H = -np.hstack([np.eye(3)] * (dim // 3))
+    if dim == 6:
+        H[:, 3:] *= w.sum_temp / n - t_ref
+    kf.H, kf.Q, kf.R = H, np.diag(q * dt), np.diag(R)
+    kf.predict()
+    kf.update(w.sum_z / n)
+    return kf.x, kf.P
+
+
+@pytest.mark.parametrize("temperature_model", [True, False])
+def test_written_out_step_equals_the_textbook_filter(temperature_model):
+    """The per-axis Kalman step in floats (x at once, the Joseph-form P in a later slice) gives
+    the state and covariance of the matrix filter to 1e-12, on still and reference windows of a
+    v2 matrix with cross-axis terms, through the adaptive process noise."""
+    s = simulate_session(np.random.default_rng(41), 25.0, model=MODEL, motion="jig",
+                         still_s=(1.0, 3.0), motion_s=(2.0, 4.0))
+    A = np.diag(s.scale) + 0.01 * np.array([[0.0, 1.0, -0.5], [0.8, 0.0, 0.3], [-0.4, 0.6, 0.0]])
+    cal = _full_cal(A, bias_std=0.02, a_std=1e-4)
+    st = settings(rate_random_walk=None, temperature_model=temperature_model)
+    tr = BiasTracker(st, cal)
+    checked = {"still": 0, "reference": 0}
+    apply = tr._apply_window
+
+    def checked_apply(w, log, close, defer=False):
+        kf = tr.kf  # finishes any earlier step first
+        x0, P0, q, t0 = kf.x.copy(), kf.P.copy(), tr._q.copy(), tr._t_state
+        widened = tr.health.alarms + tr.shifts
+        apply(w, log, close, defer)
+        t_ref = tr.t_ref_c if tr.t_ref_c is not None else 0.0
+        x, P = _textbook_step(x0, P0, q, w, max(w.t_last - t0, 0.0), t_ref,
+                              st.noise_std**2, A, np.full((3, 3), 1e-4), st)
+        got = tr.kf
+        np.testing.assert_allclose(got.x, x, rtol=0, atol=1e-12 * max(1.0, np.abs(x).max()))
+        if tr.health.alarms + tr.shifts == widened:  # (a health test widens P after the step)
+            np.testing.assert_allclose(got.P, P, rtol=1e-12, atol=1e-30)
+            checked["reference" if w.kind == 2 else "still"] += 1
+
+    tr._apply_window = checked_apply
+    for i in range(s.n):
+        ref = s.reference_rate[i]
+        tr.update(s.rate[i], s.t[i], s.temperature_c[i],
+                  reference_rate=None if np.isnan(ref) else float(ref),
+                  reference_axis=None if np.isnan(ref) else s.reference_axis[i])
+    assert checked["still"] > 5 and checked["reference"] > 5, checked
+
+
+def test_steps_left_to_later_update_calls_change_nothing_observable():
+    """update() applies a window's state at once and leaves the rest of the step to the
+    following calls, a slice each; read rarely (not after every sample, which would finish the
+    step at once), every estimate, uncertainty, health flag and the estimated random walk equal
+    a batch process() of the same samples (the batch path finishes each step at once)."""
+    s = simulate_session(np.random.default_rng(43), 30.0, model=MODEL, motion="jig",
+                         still_s=(1.0, 3.0), motion_s=(2.0, 4.0),
+                         bias_step=(15.0, (1e-2, -5e-3, 0.0)))
+    cal = sim_calibration(np.random.default_rng(44), s)
+    st = settings(rate_random_walk=None)
+    kw = dict(reference_rate=s.reference_rate, reference_axis=s.reference_axis)
+    batch = BiasTracker(st, cal).process(s.t, s.rate, s.temperature_c, **kw)
+    stream = BiasTracker(st, cal)
+    pending_seen = 0
+    every = 37
+    for i in range(s.n):
+        ref = s.reference_rate[i]
+        c = stream.update(s.rate[i], s.t[i], s.temperature_c[i],
+                          reference_rate=None if np.isnan(ref) else float(ref),
+                          reference_axis=None if np.isnan(ref) else s.reference_axis[i])
+        np.testing.assert_allclose(c, batch.corrected[i], rtol=0, atol=1e-14)
+        pending_seen += bool(stream._todo)
+        if i % every == 0:
+            np.testing.assert_allclose(stream.bias, batch.bias[i], rtol=0, atol=1e-15)
+            np.testing.assert_allclose(stream.bias_std, batch.bias_std[i], rtol=1e-12)
+    assert pending_seen > 100  # the steps really were spread over later calls
+    h = stream.health
+    assert h.updates == batch.updates.t.size and h.alarms == int(batch.updates.alarm.sum())
+    assert stream.shifts == int(batch.updates.shift.sum()) >= 1

@@ -63,3 +63,42 @@ def test_track_applies_the_g_sensitivity_on_the_realistic_emulated_run(full_run,
             assert "0 NIS alarm(s)" in text, text
     rms = {k: float(np.sqrt(np.mean(v**2))) for k, v in err.items()}
     assert rms["with"] < 0.6 * rms["without"], rms
+
+
+def test_live_tracking_applies_the_g_sensitivity_from_the_stored_home_pose(full_run, tmp_path,
+                                                                          capsys):
+    """calibrate writes the home pose "up" refers to (kinematics.home_angles_rad, up_servo);
+    track --live then takes f from the servo encoders, and the tracked bias is the emulated
+    sensor's zero-g bias. The same calibration without the home pose (a document from before)
+    says so and tracks the bias plus G f of the held pose: off by the emulator's own home shift."""
+    d, code = full_run
+    assert code == 0
+    doc = json.loads((d / "calibration.json").read_text())
+    manifest = json.loads((d / "recording" / "manifest.json").read_text())
+    z_servo = next(m["id"] for m in manifest["gimbal"]["motors"] if m["axis"] == "z")
+    assert doc["kinematics"]["up_servo"] == [z_servo, 1]
+    assert len(doc["kinematics"]["home_angles_rad"]) == len(doc["kinematics"]["chain"])
+    truth = np.array(manifest["truth"]["bias"])
+    shift = np.array(manifest["truth"]["realism"]["g-sensitivity"]["home_bias_shift_rad_s"])
+    assert np.max(np.abs(shift)) > 5e-4  # large against the tracker's band below
+    old = tmp_path / "old.json"
+    kin = {k: v for k, v in doc["kinematics"].items() if k not in ("home_angles_rad", "up_servo")}
+    old.write_text(json.dumps({**doc, "kinematics": kin}))
+    final = {}
+    for name, path in (("home", d / "calibration.json"), ("old", old)):
+        out = tmp_path / f"live-{name}.json"
+        assert main(["track", "--live", "--sim", "--sim-seed", "5", "--duration", "6",
+                     "--cal", str(path), "--out", str(out)]) == 0
+        _, err = capsys.readouterr()
+        got = json.loads(out.read_text())
+        final[name] = (np.array(got["bias"])[-1], np.array(got["bias_std"])[-1], err)
+    size = np.linalg.norm(shift)
+    b, sd, err = final["home"]
+    assert "g-sensitivity is applied live" in err, err
+    assert np.all(np.abs(b - truth) <= 3 * sd), (b - truth, sd)
+    assert np.linalg.norm(b - truth) < 0.35 * size, (b - truth, shift)
+    b, sd, err = final["old"]
+    assert "g-sensitivity is NOT applied live" in err and "home pose" in err, err
+    # Calibration v1 convention (m = g/k − b + G f): without f the tracker follows b − G f
+    assert np.all(np.abs(b - (truth - shift)) <= 3 * sd), (b - truth, shift, sd)
+    assert np.linalg.norm(b - (truth - shift)) < 0.35 * size, (b - truth, shift)
