@@ -173,3 +173,29 @@ def test_the_thermal_formats_say_the_accelerometer_goes_elsewhere(cal, tmp_path,
     for fmt, other in (("px4-thermal", "px4-accel"), ("ardupilot-thermal", "ardupilot-accel")):
         _, err = export(capsys, p, fmt)
         assert f"export it with --format {other}" in err
+
+
+def test_kalibr_writes_the_measured_accelerometer_noise_unless_given(cal, tmp_path, capsys):
+    """accelerometer_noise_density: the calibration's measured density (largest axis) when the
+    user gives none, --accel-noise-density when given; stderr says which; left out (and said)
+    when the calibration has none."""
+    from dataclasses import replace
+
+    noisy = replace(cal, accelerometer=replace(
+        cal.accelerometer, noise_density=np.array([2.1e-3, 2.6e-3, 1.9e-3]),
+        noise_density_std=np.array([2e-4, 3e-4, 2e-4]), noise_tau_s=0.1))
+    p = tmp_path / "noisy.json"
+    p.write_text(noisy.to_json())
+    out, err = export(capsys, p, "kalibr")
+    assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(2.6e-3, rel=1e-6)
+    assert "measured on the run's rests (largest axis, y" in err
+    out, err = export(capsys, p, "kalibr", "--accel-noise-density", "5e-3")
+    assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(5e-3)
+    assert "from --accel-noise-density" in err
+    p2 = tmp_path / "plain.json"
+    p2.write_text(cal.to_json())
+    out, err = export(capsys, p2, "kalibr")
+    assert "accelerometer_noise_density" not in yaml.safe_load(out)
+    assert "left out: the calibration has no measured accelerometer noise" in err
+    assert main(["export", str(p), "--format", "kalibr", "--accel-noise-density", "-1"]) == 2
+    assert "must be a positive number" in capsys.readouterr().err
