@@ -332,7 +332,9 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: i
                     ) -> tuple[dict, dict, dict, dict | None]:
     """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of sensor
     ``k``'s recording."""
-    sensor = jig.imus[k].info.manifest()
+    # where the chip sits, for the flight stacks' device IDs (kit.px4_ids)
+    sensor = {**jig.imus[k].info.manifest(), "i2c_bus": int(cfg.imus()[k]["bus"]),
+              "i2c_address": int(jig.imus[k].info.address)}
     gimbal_info = {"motors": [
         {"id": sid, "model": jig.gimbal.infos[sid].model_name,
          "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
