@@ -505,9 +505,13 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
         The (closed) jig, for its sim truth.
     """
     from gyrocal.drivers.signals import TerminatedBySignal, shielded
+    from gyrocal.kit.busload import check_bus_loads
     from gyrocal.kit.errors import InterruptedRun
     from gyrocal.kit.fileio import atomic_write_json
 
+    # before anything is opened: a bus that cannot carry the plan's samples is refused
+    for warning in check_bus_loads(cfg.imus(), cfg["gimbal"]["sample_hz"]):
+        print(f"gyrocal: warning: {warning}", file=sys.stderr)
     jig = Jig(cfg, args, several=True)
     interrupted: BaseException | None = None
     try:

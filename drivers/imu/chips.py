@@ -380,6 +380,9 @@ MPU9250 = ChipFamily(
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
+            # bytes the reader drains per sample: the FIFO frame of ACCEL (6), TEMP (2) and
+            # GYRO (6) in register order (§1.7)
+            "fifo_sample_bytes": 14.0,
             "wake_time_s": 0.010,  # §1.3 step 3
             "accel_lsb_per_g_2g": 16384.0,  # §1.5
         }
@@ -515,6 +518,8 @@ LSM9DS1 = ChipFamily(
     accel_errors=AccelErrors(0.03, 0.02, (0.090, 0.090, 0.090), 300e-6,
                              "zero-g: LSM9DS1 DocID025715 Rev 3 Table 3; scale, cross-axis, "
                              "noise: stand-in (not in the datasheet) ⚠"),
+    # bytes the reader drains per sample: one FIFO slot, gyro XYZ and accel XYZ int16 (§2.7)
+    extra=MappingProxyType({"fifo_sample_bytes": 12.0}),
 )
 
 
@@ -708,6 +713,7 @@ ICM42688P = ChipFamily(
         {
             "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
             "packet_bytes": 16.0,  # FIFO packet 3: header, accel, gyro, temp, timestamp
+            "fifo_sample_bytes": 16.0,  # one packet 3 per sample
             "timestamp_resolution_s": 16e-6,  # TMST_CONFIG.TMST_RES = 1 (kernel: 16 µs)
             "timestamp_modulus": 65536.0,  # 16-bit ODR timestamp in the packet
             "mode_change_wait_s": 200e-6,  # no register writes for 200 µs after PWR_MGMT0
@@ -865,6 +871,8 @@ LSM6DSOX = ChipFamily(
             "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
             "timestamp_modulus": 2.0**32,
             "word_bytes": 7.0,  # FIFO_DATA_OUT_TAG + 6 data bytes
+            # per sample the reader batches a TIMESTAMP, a GYRO_NC and an XL_NC word
+            "fifo_sample_bytes": 21.0,
             "accel_mg_per_lsb_2g": 0.061,  # DS12814 Table 2
         }
     ),
@@ -991,6 +999,7 @@ ICM20948 = ChipFamily(
             # FIFO frame with ACCEL, GYRO and TEMP enabled in FIFO_EN_2: the data registers in
             # order, ACCEL_XOUT_H (0x2D) .. TEMP_OUT_L (0x3A), 14 bytes (DS-000189 FIFO_EN_2)
             "fifo_frame_bytes": 14.0,
+            "fifo_sample_bytes": 14.0,  # one frame per sample
             "dlpf_off_rate_hz": 9000.0,  # GYRO_FCHOICE = 0 ⚠
             "wake_time_s": 0.010,  # ⚠ as for the MPU-9250
             "accel_lsb_per_g_2g": 16384.0,  # DS-000189 Table 2
