@@ -24,15 +24,27 @@ def test_load_worked_out_by_hand():
     assert b.load == pytest.approx(9 * (21 * 416 * 35 / 32 + 5 * 100) / 400e3)
 
 
-def test_four_sensors_at_1khz_are_refused_on_one_bus_and_pass_on_two():
-    with pytest.raises(InputError, match=r"I2C bus 1 .* would carry 169 % .*lower odr_hz, "
-                                         r"put sensors on a second I2C bus"):
+def test_four_sensors_at_1khz_are_refused_on_one_bus_and_on_two():
+    """One bus: 169 % of its bits. Two buses (82 % and 87 % each): the loop reads them in turn,
+    so together they still need 169 % of its time (bench multi, Table 1b: samples lost)."""
+    with pytest.raises(InputError, match=r"I2C bus 1 .* would carry 169 % .*lower odr_hz"):
         check_bus_loads(FOUR_1K, 200.0)
-    # an InvenSense part and an LSM6DSOX on each bus
-    two = [{**s, "bus": 1 + k % 2} for k, s in enumerate(FOUR_1K)]
-    loads = {b.bus: b.load for b in bus_loads(two, 200.0)}
-    assert loads[1] < 0.9 and loads[2] < 0.9
-    assert check_bus_loads(two, 200.0) == []
+    two = [{**s, "bus": 1 + k % 2} for k, s in enumerate(FOUR_1K)]  # one InvenSense, one ST each
+    loads = {b.bus: round(100 * b.load) for b in bus_loads(two, 200.0)}
+    assert loads == {1: 82, 2: 87}
+    with pytest.raises(InputError, match=r"the 2 I2C buses together would need 169 % .*adds "
+                                         r"wires, not time"):
+        check_bus_loads(two, 200.0)
+    # at about 500 Hz (the bench's loss-free level): 89 %, neither refused nor warned
+    half = [{**s, "odr_hz": {1000.0: 500.0, 833.0: 416.0}[s["odr_hz"]]} for s in two]
+    assert check_bus_loads(half, 200.0) == []
+    # a bus near its limit (45 + 42 + 9 = 96 %) is warned about, with what to do
+    near = [{"model": "lsm6dsox", "bus": 3, "odr_hz": 833.0},
+            {"model": "icm42688p", "bus": 3, "odr_hz": 1000.0},
+            {"model": "mpu9250", "bus": 3, "odr_hz": 200.0}]
+    (w,) = check_bus_loads(near, 200.0)
+    assert "I2C bus 3 at 400 kHz would carry 96 %" in w and "may be lost" in w
+    assert "lower odr_hz" in w
 
 
 def test_calibrate_refuses_an_overloaded_bus_before_the_jig_moves(tmp_path, capsys):
@@ -46,5 +58,5 @@ def test_calibrate_refuses_an_overloaded_bus_before_the_jig_moves(tmp_path, caps
                  "--no-report"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "would carry 169 %" in err and "FIFOs would overflow" in err and "SPI" in err
+    assert "would carry 169 %" in err and "FIFOs would overflow" in err and "odr_hz" in err
     assert not any(out.rglob("manifest.json"))  # nothing recorded
