@@ -12,7 +12,7 @@ DC gain) at the cutoff given, long rests (100 × 3 s); the estimate's bias again
 what the naive per-sample scatter ``σ_d / sqrt(ODR)`` would give instead.
 
 Data: the independent generator of tests/calib/test_accel_noise.py (numpy and scipy.signal, no
-gyrocal code). Usage: ``python -m bench accelnoise [--runs=N]``.
+gyrocal code). Usage: ``python -m bench accelnoise [--quick] [--runs=N]``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from tests.calib.test_accel_noise import _rests
 
 def main(argv: list[str]) -> None:
     opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
-    runs = int(opts.get("runs", 400))
+    runs = int(opts.get("runs", 100 if "--quick" in argv else 400))
     rng = np.random.default_rng(2026)
     truth = np.array([2e-3, 3e-3, 0.7e-3])
     z, rel = [], []
