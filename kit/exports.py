@@ -385,10 +385,10 @@ def _render_kalibr_intrinsics(
     from gyrocal.calib.model import GyroCalibration
 
     cal = GyroCalibration.from_dict(doc)
-    for name in ("accel_noise_density", "accel_random_walk"):
-        if options.get(name) is not None:
-            raise InputError(f"--{name.replace('_', '-')} applies to a gyrocal-noise document, "
-                             "not a calibration")
+    if options.get("accel_random_walk") is not None:
+        raise InputError("--accel-random-walk applies to a gyrocal-noise document, not a "
+                         "calibration")
+    acc_n, acc_n_note = _kalibr_accel_noise(cal.accelerometer, options.get("accel_noise_density"))
     rostopic, rate = _kalibr_topic_and_rate(options, cal.sensor.get("odr_hz"))
     inverse = _inverse3(cal.full_matrix.tolist())
     eye = [[float(i == j) for j in range(3)] for i in range(3)]
@@ -422,8 +422,10 @@ def _render_kalibr_intrinsics(
         "Kalibr's IMU file has no place for a fixed gyro bias (Kalibr estimates it as a random "
         f"walk): the bias {[float(b) for b in cal.bias]} rad/s is not in the file",
         *placeholders,
-        "the noise fields Kalibr also needs are not in a calibration: export the gyrocal-noise "
-        "document of `gyrocal noise` with --format kalibr and merge the two files",
+        acc_n_note,
+        "the gyro's noise fields and accelerometer_random_walk Kalibr also needs are not in a "
+        "calibration: export the gyrocal-noise document of `gyrocal noise` with --format kalibr "
+        "and merge the two files",
     ]
     if not cal.is_full:
         notes.append("a version 1 calibration has no cross-axis terms: M is diagonal")
@@ -450,6 +452,9 @@ def _render_kalibr_intrinsics(
         "# Noise fields: export a gyrocal-noise document with --format kalibr.",
         f"# Sensor: {_sensor_text(cal.sensor)}.",
         f"# Consistency: {_verdict(cal)}.",
+        *([] if acc_n is None else [
+            f"# {acc_n_note}.",
+            f"accelerometer_noise_density: {_fmt(acc_n)}"]),
         "model: scale-misalignment",
         *_yaml_block("gyroscopes", {"M": inverse, "A": g_acc, "C_gyro_i": eye}),
         *_yaml_block("accelerometers", {"M": m_accel}),
@@ -461,6 +466,30 @@ def _render_kalibr_intrinsics(
     else:
         lines.append(f"update_rate: {rate:g}")
     return "\n".join(lines) + "\n", notes
+
+
+def _kalibr_accel_noise(acc: Any, given: Any) -> tuple[float | None, str]:
+    """Kalibr's ``accelerometer_noise_density`` (m/s²/√Hz, continuous time) for a calibration
+    and where it comes from, in words: ``--accel-noise-density`` when given (it wins), else the
+    largest axis of the calibration's measured ``accelerometer.noise_density``
+    (:func:`gyrocal.calib.accel.white_noise_density`), else none."""
+    if given is not None:
+        if not (float(given) > 0 and math.isfinite(float(given))):
+            raise InputError(f"--accel-noise-density must be a positive number, got {given!r}")
+        return float(given), "accelerometer_noise_density from --accel-noise-density"
+    if acc is None or acc.noise_density is None:
+        return None, ("accelerometer_noise_density left out: the calibration has no measured "
+                      "accelerometer noise; give --accel-noise-density N (m/s^2/sqrt(Hz))")
+    dens = [float(x) for x in acc.noise_density]
+    i = dens.index(max(dens))
+    n, sd = float(acc.noise_density[i]), float(acc.noise_density_std[i])
+    if not n > 0:
+        return None, ("accelerometer_noise_density left out: the calibration's measured "
+                      "accelerometer noise is zero (a noise-free simulation?); give "
+                      "--accel-noise-density N")
+    return n, (f"accelerometer_noise_density {n:.3e} ± {sd:.1e} m/s^2/sqrt(Hz) measured on the "
+               f"run's rests (largest axis, {'xyz'[i]}; Allan deviation at "
+               f"{acc.noise_tau_s:.3g} s, continuous time)")
 
 
 def _inverse3(a: list[list[float]]) -> list[list[float]]:
@@ -489,7 +518,8 @@ register(
             ),
             ExportOption(
                 "accel_noise_density", float,
-                "kalibr: accelerometer white noise, m/s^2/sqrt(Hz) (not measured by gyrocal)",
+                "kalibr: accelerometer white noise, m/s^2/sqrt(Hz) (for a calibration, "
+                "default its accelerometer's measured noise density)",
             ),
             ExportOption(
                 "accel_random_walk", float,

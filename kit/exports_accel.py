@@ -6,8 +6,9 @@ has a cross-axis matrix:
 
 PX4 (``--format px4-accel``), ``CAL_ACC<n>_XOFF/YOFF/ZOFF`` (m/s²) and ``CAL_ACC<n>_XSCALE/
 YSCALE/ZSCALE`` (PX4-Autopilot ``src/lib/sensor_calibration/Accelerometer``, parameters in
-``src/modules/sensors``): ``corrected = (raw − offset) ⊙ scale``. Written as a QGroundControl
-parameter file.
+``src/modules/sensors``): ``corrected = (raw − offset) ⊙ scale``; with ``CAL_ACC<n>_ID`` when the
+calibration says the chip, bus and address (:mod:`gyrocal.kit.px4_ids`). Written as a
+QGroundControl parameter file.
 
 ArduPilot (``--format ardupilot-accel``), ``INS_ACCOFFS_X/Y/Z`` and ``INS_ACCSCAL_X/Y/Z`` (the
 second and third IMU ``INS_ACC2OFFS_*``/``INS_ACC2SCAL_*``, ``INS_ACC3…``;
@@ -30,7 +31,7 @@ from gyrocal.kit.exports_thermal import check_imu_index
 
 __all__ = ["accel_offsets_scales", "ardupilot_accel_params", "px4_accel_params"]
 
-_MAV_REAL32 = 9  # MAV_PARAM_TYPE
+_MAV_INT32, _MAV_REAL32 = 6, 9  # MAV_PARAM_TYPE
 
 
 def _accelerometer(doc: Mapping[str, Any], fmt: str) -> Any:
@@ -75,17 +76,23 @@ def _cross_axis_note(acc: Any, stack: str) -> str:
 
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    from gyrocal.kit.px4_ids import px4_device_id
+
     acc = _accelerometer(doc, "px4-accel")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's CAL_ACC0..CAL_ACC3")
+    dev_id, how = px4_device_id(doc.get("sensor"))
     lines = ["# Onboard parameters for Vehicle 1",
              "# accelerometer calibration written by gyrocal from a Calibration's accelerometer",
              "#",
              "# Vehicle-Id Component-Id Name Value Type"]
+    if dev_id is not None:
+        lines.append(f"1\t1\tCAL_ACC{inst}_ID\t{dev_id}\t{_MAV_INT32}")
     lines += [f"1\t1\t{name}\t{value + 0.0:.9g}\t{kind}"
               for name, value, kind in px4_accel_params(acc, inst)]
     notes = [_cross_axis_note(acc, "PX4"),
-             f"CAL_ACC{inst}_ID is not written: these parameters apply to the accelerometer "
-             "whose ID the vehicle already has in that slot"]
+             f"CAL_ACC{inst}_ID: {how}" if dev_id is not None else
+             f"CAL_ACC{inst}_ID is not written: {how}; these parameters then apply to the "
+             "accelerometer whose ID the vehicle already has in that slot"]
     return "\n".join(lines) + "\n", notes
 
 

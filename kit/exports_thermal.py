@@ -118,6 +118,12 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     cal = _model(doc, "px4-thermal")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
     dev = options.get("device_id")
+    dev_note = None
+    if dev is None:
+        from gyrocal.kit.px4_ids import px4_device_id
+
+        dev, how = px4_device_id(doc.get("sensor"))
+        dev_note = f"TC_G{inst}_ID from the calibration: {how}" if dev is not None else None
     rows = px4_params(cal, inst, 0 if dev is None else int(dev))
     lines = ["# Onboard parameters for Vehicle 1",
              "# gyro thermal compensation written by gyrocal from a temperature_model",
@@ -133,6 +139,8 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     if dev is None:
         notes.append(f"TC_G{inst}_ID is 0: set it to the gyro's device ID (CAL_GYRO{inst}_ID on "
                      "the vehicle) with --device-id, or PX4 will not use these parameters")
+    elif dev_note is not None:
+        notes.append(dev_note)
     if cal.accelerometer is not None:
         notes.append(_ACCEL_ELSEWHERE.format(fmt="px4-accel"))
     return "\n".join(lines) + "\n", notes

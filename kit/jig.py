@@ -332,7 +332,9 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: i
                     ) -> tuple[dict, dict, dict, dict | None]:
     """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of sensor
     ``k``'s recording."""
-    sensor = jig.imus[k].info.manifest()
+    # where the chip sits, for the flight stacks' device IDs (kit.px4_ids)
+    sensor = {**jig.imus[k].info.manifest(), "i2c_bus": int(cfg.imus()[k]["bus"]),
+              "i2c_address": int(jig.imus[k].info.address)}
     gimbal_info = {"motors": [
         {"id": sid, "model": jig.gimbal.infos[sid].model_name,
          "axis": cfg.axis_of()[sid]} for sid in cfg["gimbal"]["ids"]]}
@@ -503,9 +505,13 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
         The (closed) jig, for its sim truth.
     """
     from gyrocal.drivers.signals import TerminatedBySignal, shielded
+    from gyrocal.kit.busload import check_bus_loads
     from gyrocal.kit.errors import InterruptedRun
     from gyrocal.kit.fileio import atomic_write_json
 
+    # before anything is opened: a bus that cannot carry the plan's samples is refused
+    for warning in check_bus_loads(cfg.imus(), cfg["gimbal"]["sample_hz"]):
+        print(f"gyrocal: warning: {warning}", file=sys.stderr)
     jig = Jig(cfg, args, several=True)
     interrupted: BaseException | None = None
     try:

@@ -188,17 +188,22 @@ def fit_recording_accelerometer(
     (None, note)
         with what is missing otherwise (``(None, None)`` for a recording without the columns).
     """
-    from gyrocal.calib.accel import fit_accelerometer, still_means
+    from gyrocal.calib.accel import fit_accelerometer, still_means, white_noise_density
 
     if rec.imu_accel is None:
         return None, None
     spans = [(w.corners[0], w.corners[3]) for w in ex.rests]
     try:
         means, mean_std, _ = still_means(rec.imu_t, rec.imu_accel, spans)
-        return fit_accelerometer(means, mean_std, gravity_m_s2), None
+        fit = fit_accelerometer(means, mean_std, gravity_m_s2)
     except CalibInputError as exc:
         return None, (f"the accelerometer was NOT calibrated: {exc} (a protocol with the "
                       "gravity tour holds the sensor in enough orientations)")
+    try:
+        density, std, tau, _ = white_noise_density(rec.imu_t, rec.imu_accel, spans)
+    except CalibInputError as exc:
+        return fit, f"the accelerometer's noise density was not measured: {exc}"
+    return replace(fit, noise_density=density, noise_density_std=std, noise_tau_s=tau), None
 
 
 def estimate_recording(

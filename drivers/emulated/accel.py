@@ -1,5 +1,5 @@
 """The emulated accelerometer's true errors (issue 15): scale, cross-axis, zero-g bias and white
-noise, per the chips' datasheets, drawn by seed.
+noise, per the chips' datasheets (the chip data's ``accel_errors``), drawn by seed.
 
 The emulated accelerometer reads, in g,
 
@@ -8,7 +8,12 @@ The emulated accelerometer reads, in g,
 with ``f`` the true specific force in the sensor frame (in g; the jig's
 :meth:`~gyrocal.drivers.emulated.jig.GimbalJig.specific_force`), ``C`` the sensing matrix (its
 diagonal the scale factors, its off-diagonal terms the cross-axis sensitivities), ``b`` the
-zero-g bias and ``n`` white noise of per-sample standard deviation ``density · sqrt(odr)``.
+zero-g bias and ``n`` white noise of per-sample standard deviation ``density · sqrt(odr)``
+(independent samples, no low-pass: ``density`` is then the continuous-time white-noise density
+``σ_c`` of Kalibr's IMU noise model, ``σ_d = σ_c · sqrt(odr)``; a datasheet's one-sided density
+``D``, with ``σ = D · sqrt(B)`` over a noise bandwidth ``B``, would give ``σ_c = D / sqrt(2)``
+at ``B = odr/2``, so the emulator is ``sqrt(2)`` noisier than the datasheet's figure: on the
+safe side).
 A calibration ``f = A (a + b)`` then holds with ``A = C⁻¹``; in the calibration's frame
 convention (x along the x sensing axis, y in the x-y plane: ``A`` lower triangular) the same
 calibration is ``A = L⁻¹`` with ``C Cᵀ = L Lᵀ`` (Cholesky), which :meth:`AccelTruth.manifest`
@@ -18,36 +23,24 @@ writes as ``truth.accelerometer.matrix``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+
+from gyrocal.drivers.imu.chips import ICM20948, ICM42688P, LSM6DSOX, LSM9DS1, MPU9250
 
 __all__ = ["ACCEL_DATASHEET", "STANDARD_GRAVITY", "AccelTruth", "draw_accel_truth"]
 
 #: g_n, m/s²: the datasheets' "g" (the readers scale counts by it to m/s²).
 STANDARD_GRAVITY = 9.80665
 
-_MPU9250_TABLE2 = {
-    # MPU-9250 PS-MPU-9250A-01 rev 1.0, §3.2 Table 2 "Accelerometer Specifications" ⚠ one source
-    "scale_tolerance": 0.03,  # Initial Tolerance, component-level, ±3 %
-    "cross_axis": 0.02,  # Cross-Axis Sensitivity ±2 %
-    "zero_g_g": (0.060, 0.060, 0.080),  # Zero-G Initial Calibration Tolerance X,Y ±60, Z ±80 mg
-    "noise_g_sqrt_hz": 300e-6,  # Noise Power Spectral Density, low noise mode, 300 µg/√Hz
-    "source": "MPU-9250 PS-MPU-9250A-01 §3.2 Table 2",
-}
-
-#: Accelerometer error sizes per chip model (each term drawn uniformly within ±the figure).
-#: Only the MPU-9250's row is from its own datasheet; for the other chips its figures stand in
-#: (⚠ not yet checked against their datasheets), except the ICM-42688-P's noise density
-#: (DS-000347 "Features": accelerometer noise 70 µg/√Hz ⚠ one source).
+#: Accelerometer error sizes per chip model (each term drawn uniformly within ±the figure), from
+#: each chip family's datasheet figures in the chip data
+#: (:attr:`gyrocal.drivers.imu.chips.ChipFamily.accel_errors`, cited there with ⚠ for what is
+#: single-sourced or stood in for).
 ACCEL_DATASHEET: dict[str, dict[str, Any]] = {
-    "mpu9250": _MPU9250_TABLE2,
-    "lsm9ds1": {**_MPU9250_TABLE2, "source": "stand-in: MPU-9250 Table 2 ⚠"},
-    "icm20948": {**_MPU9250_TABLE2, "source": "stand-in: MPU-9250 Table 2 ⚠"},
-    "icm42688p": {**_MPU9250_TABLE2, "noise_g_sqrt_hz": 70e-6,
-                  "source": "noise: ICM-42688-P DS-000347 features ⚠; rest: MPU-9250 Table 2 ⚠"},
-    "lsm6dsox": {**_MPU9250_TABLE2, "source": "stand-in: MPU-9250 Table 2 ⚠"},
+    fam.name: asdict(fam.accel_errors) for fam in (MPU9250, LSM9DS1, ICM20948, ICM42688P, LSM6DSOX)
 }
 
 

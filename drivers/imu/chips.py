@@ -49,6 +49,7 @@ __all__ = [
     "MPU9250_REG",
     "ChipFamily",
     "ChipModel",
+    "AccelErrors",
     "AccelRange",
     "GyroRange",
     "RAD_PER_DEG",
@@ -87,6 +88,37 @@ class AccelRange:
     def sensitivity_m_s2_per_lsb(self) -> float:
         """m/s² per count: the datasheet sensitivity times :data:`STANDARD_GRAVITY_M_S2`."""
         return STANDARD_GRAVITY_M_S2 / self.lsb_per_g
+
+
+@dataclass(frozen=True)
+class AccelErrors:
+    """The accelerometer's error sizes a chip's datasheet gives (the emulator draws each term
+    uniformly within ± the figure: :func:`gyrocal.drivers.emulated.accel.draw_accel_truth`).
+
+    Parameters
+    ----------
+    scale_tolerance : float
+        Sensitivity (scale factor) initial tolerance, fraction (±).
+    cross_axis : float
+        Cross-axis sensitivity, fraction (±).
+    zero_g_g : tuple of 3 float
+        Zero-g offset initial tolerance per axis, g (±).
+    noise_g_sqrt_hz : float
+        White-noise density at the range the reader sets, g/√Hz (the largest axis's).
+    source : str
+        The datasheet, its revision and table; what is not in it is named as a stand-in (⚠).
+    """
+
+    scale_tolerance: float
+    cross_axis: float
+    zero_g_g: tuple[float, float, float]
+    noise_g_sqrt_hz: float
+    source: str
+
+    def __post_init__(self) -> None:
+        figs = (self.scale_tolerance, self.cross_axis, self.noise_g_sqrt_hz, *self.zero_g_g)
+        if len(self.zero_g_g) != 3 or not all(math.isfinite(x) and x >= 0 for x in figs):
+            raise ValueError(f"accelerometer error figures must be finite and >= 0: {self!r}")
 
 
 @dataclass(frozen=True)
@@ -170,6 +202,8 @@ class ChipFamily:
     accel_range : AccelRange
         The accelerometer range the reader sets: ±4 g on every chip, the finest that keeps a
         2 g margin over gravity for the jig's lever-arm accelerations and knocks.
+    accel_errors : AccelErrors
+        The accelerometer's datasheet error sizes (scale, cross-axis, zero-g, noise density).
     extra : mapping
         Further chip facts by name.
     """
@@ -188,6 +222,7 @@ class ChipFamily:
     temperature_offset_c: float
     temperature_lsb_per_c: float
     accel_range: AccelRange
+    accel_errors: AccelErrors
     extra: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     def model_for(self, who_am_i: int) -> ChipModel | None:
@@ -337,9 +372,17 @@ MPU9250 = ChipFamily(
     # PS-MPU-9250A-01 Table 2 (accelerometer): AFS_SEL = 1, ±4 g, 8192 LSB/g (register map
     # ACCEL_CONFIG[4:3])
     accel_range=AccelRange(1, 4.0, 8192.0),
+    # PS-MPU-9250A-01 rev 1.0 §3.2 Table 2 ⚠ one source: Initial Tolerance (component-level)
+    # ±3 %, Cross-Axis Sensitivity ±2 %, Zero-G Initial Calibration Tolerance X/Y ±60, Z ±80 mg,
+    # Noise Power Spectral Density (low-noise mode) 300 µg/√Hz
+    accel_errors=AccelErrors(0.03, 0.02, (0.060, 0.060, 0.080), 300e-6,
+                             "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.2 Table 2 ⚠"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
+            # bytes the reader drains per sample: the FIFO frame of ACCEL (6), TEMP (2) and
+            # GYRO (6) in register order (§1.7)
+            "fifo_sample_bytes": 14.0,
             "wake_time_s": 0.010,  # §1.3 step 3
             "accel_lsb_per_g_2g": 16384.0,  # §1.5
         }
@@ -468,6 +511,15 @@ LSM9DS1 = ChipFamily(
     temperature_lsb_per_c=16.0,
     # LSM9DS1 datasheet Table 3 (LA_So): CTRL_REG6_XL.FS_XL = 10, ±4 g, 0.122 mg/LSB
     accel_range=AccelRange(0b10, 4.0, 1000.0 / 0.122),
+    # DocID025715 Rev 3 Table 3: LA_TyOff ±90 mg (typical zero-g offset after soldering) ✓✓ (the
+    # datasheet and SparkFun's LSM9DS1 notes quoting it). Table 3 gives no sensitivity tolerance,
+    # cross-axis sensitivity or accelerometer noise density: the MPU-9250's Table 2 figures
+    # stand in for them ⚠
+    accel_errors=AccelErrors(0.03, 0.02, (0.090, 0.090, 0.090), 300e-6,
+                             "zero-g: LSM9DS1 DocID025715 Rev 3 Table 3; scale, cross-axis, "
+                             "noise: stand-in (not in the datasheet) ⚠"),
+    # bytes the reader drains per sample: one FIFO slot, gyro XYZ and accel XYZ int16 (§2.7)
+    extra=MappingProxyType({"fifo_sample_bytes": 12.0}),
 )
 
 
@@ -651,10 +703,17 @@ ICM42688P = ChipFamily(
     temperature_lsb_per_c=2.07,
     # DS-000347 Table 2 and ACCEL_CONFIG0.ACCEL_FS_SEL: 010 = ±4 g, 8192 LSB/g
     accel_range=AccelRange(0b010, 4.0, 8192.0),
+    # DS-000347 rev 1.2 §3.2 Table 2: sensitivity initial tolerance ±0.5 %, cross-axis ±1 %,
+    # zero-g initial tolerance (board-level) ±20 mg ⚠ one source; power spectral density
+    # X/Y 65, Z 70 µg/√Hz ✓✓ (Table 2 and the "Features" list of rev 1.7: 70 µg/√Hz)
+    accel_errors=AccelErrors(0.005, 0.01, (0.020, 0.020, 0.020), 70e-6,
+                             "ICM-42688-P DS-000347 rev 1.2 §3.2 Table 2 (noise X/Y 65, "
+                             "Z 70 µg/√Hz) ⚠"),
     extra=MappingProxyType(
         {
             "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
             "packet_bytes": 16.0,  # FIFO packet 3: header, accel, gyro, temp, timestamp
+            "fifo_sample_bytes": 16.0,  # one packet 3 per sample
             "timestamp_resolution_s": 16e-6,  # TMST_CONFIG.TMST_RES = 1 (kernel: 16 µs)
             "timestamp_modulus": 65536.0,  # 16-bit ODR timestamp in the packet
             "mode_change_wait_s": 200e-6,  # no register writes for 200 µs after PWR_MGMT0
@@ -800,11 +859,20 @@ LSM6DSOX = ChipFamily(
     temperature_lsb_per_c=256.0,
     # DS12814 Table 2 (LA_So) and CTRL1_XL.FS_XL: 10 = ±4 g, 0.122 mg/LSB
     accel_range=AccelRange(0b10, 4.0, 1000.0 / 0.122),
+    # LSM6DSO DS12140 Rev 3 Table 2 (the LSM6DSOX shares its WHO_AM_I and accelerometer;
+    # DS12814's own table not read ⚠ one source): LA_So% sensitivity tolerance ±1 %, LA_TyOff
+    # ±20 mg, An 75 µg/√Hz at ±4 g in high-performance mode (70/75/80/110 at ±2/4/8/16 g). ST
+    # gives no cross-axis figure: the MPU-9250's ±2 % stands in ⚠
+    accel_errors=AccelErrors(0.01, 0.02, (0.020, 0.020, 0.020), 75e-6,
+                             "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
+                             "datasheet) ⚠"),
     extra=MappingProxyType(
         {
             "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
             "timestamp_modulus": 2.0**32,
             "word_bytes": 7.0,  # FIFO_DATA_OUT_TAG + 6 data bytes
+            # per sample the reader batches a TIMESTAMP, a GYRO_NC and an XL_NC word
+            "fifo_sample_bytes": 21.0,
             "accel_mg_per_lsb_2g": 0.061,  # DS12814 Table 2
         }
     ),
@@ -919,12 +987,19 @@ ICM20948 = ChipFamily(
     temperature_lsb_per_c=333.87,
     # DS-000189 Table 2 and ACCEL_CONFIG.ACCEL_FS_SEL: 01 = ±4 g, 8192 LSB/g
     accel_range=AccelRange(1, 4.0, 8192.0),
+    # DS-000189 rev 1.3 §3.2 Table 2: Initial Tolerance (component-level) ±0.5 % and Zero-G
+    # Initial Tolerance board-level ±50 mg ✓✓ (the datasheet and open drivers' comments quoting
+    # it; component-level ±25 mg, but the sensor sits on a board); Cross-Axis Sensitivity ±2 %
+    # and Noise Spectral Density 230 µg/√Hz ⚠ one source
+    accel_errors=AccelErrors(0.005, 0.02, (0.050, 0.050, 0.050), 230e-6,
+                             "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 ⚠"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)
             # FIFO frame with ACCEL, GYRO and TEMP enabled in FIFO_EN_2: the data registers in
             # order, ACCEL_XOUT_H (0x2D) .. TEMP_OUT_L (0x3A), 14 bytes (DS-000189 FIFO_EN_2)
             "fifo_frame_bytes": 14.0,
+            "fifo_sample_bytes": 14.0,  # one frame per sample
             "dlpf_off_rate_hz": 9000.0,  # GYRO_FCHOICE = 0 ⚠
             "wake_time_s": 0.010,  # ⚠ as for the MPU-9250
             "accel_lsb_per_g_2g": 16384.0,  # DS-000189 Table 2

@@ -56,7 +56,7 @@ R, B = LSM6DSOX_REG, LSM6DSOX_BITS
 _REG_NAMES = register_names(R)
 _WORD = int(LSM6DSOX.extra["word_bytes"])
 #: Words per sample: TIMESTAMP, GYRO_NC, XL_NC.
-_PER_SAMPLE = 3
+_PER_SAMPLE = int(LSM6DSOX.extra["fifo_sample_bytes"]) // _WORD
 
 
 class LSM6DSOXReader(TimestampedFifoReader):

@@ -45,7 +45,7 @@ __all__ = ["LSM9DS1Reader"]
 
 R, B = LSM9DS1_REG, LSM9DS1_BITS
 _REG_NAMES = register_names(R)
-_SLOT = 12  # gyro XYZ + accel XYZ, int16 each
+_SLOT = int(LSM9DS1.extra["fifo_sample_bytes"])  # gyro XYZ + accel XYZ, int16 each
 
 
 class LSM9DS1Reader(ImuReader):

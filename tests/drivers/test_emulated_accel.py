@@ -114,3 +114,53 @@ def test_sim_jig_accelerometer_sees_gravity_through_its_errors():
             c, b, sigma = np.eye(3), np.zeros(3), 0.0
         np.testing.assert_allclose(counts / LSB_PER_G, c @ force - b,
                                    atol=5 * sigma + 1.0 / LSB_PER_G)
+
+
+# Each chip's accelerometer figures, written out from the datasheets (not read from the chip
+# data): scale tolerance, cross-axis, zero-g per axis (g), noise density (g/√Hz).
+DATASHEET_ACCEL = {
+    # PS-MPU-9250A-01 rev 1.0 Table 2
+    "mpu9250": (0.03, 0.02, (0.060, 0.060, 0.080), 300e-6),
+    # LSM9DS1 DocID025715 Rev 3 Table 3: LA_TyOff ±90 mg (the rest are stand-ins)
+    "lsm9ds1": (0.03, 0.02, (0.090, 0.090, 0.090), 300e-6),
+    # ICM-20948 DS-000189 rev 1.3 Table 2: ±0.5 %, ±2 %, board-level ±50 mg, 230 µg/√Hz
+    "icm20948": (0.005, 0.02, (0.050, 0.050, 0.050), 230e-6),
+    # ICM-42688-P DS-000347 rev 1.2 Table 2: ±0.5 %, ±1 %, ±20 mg, 70 µg/√Hz (z)
+    "icm42688p": (0.005, 0.01, (0.020, 0.020, 0.020), 70e-6),
+    # LSM6DSO DS12140 Rev 3 Table 2: ±1 %, ±20 mg, 75 µg/√Hz at ±4 g (cross-axis stand-in)
+    "lsm6dsox": (0.01, 0.02, (0.020, 0.020, 0.020), 75e-6),
+}
+
+
+def test_each_chip_draws_within_its_own_datasheet_figures():
+    """Every supported chip's emulated accelerometer uses its own datasheet's figures, not the
+    MPU-9250's: the draws stay inside them and, over seeds, reach near their edges."""
+    for model, (scale, cross, zero_g, density) in DATASHEET_ACCEL.items():
+        draws = [draw_accel_truth(model, seed) for seed in range(60)]
+        c = np.array([t.sensing for t in draws])
+        b = np.array([t.bias_g for t in draws])
+        diag = np.diagonal(c, axis1=1, axis2=2) - 1
+        off = c - np.einsum("nii->ni", c)[:, :, None] * np.eye(3)
+        assert np.all(np.abs(diag) <= scale + 1e-15), model
+        assert np.all(np.abs(off) <= cross + 1e-15), model
+        assert np.all(np.abs(b) <= np.array(zero_g) + 1e-15), model
+        # uniform draws: 180 terms reach past 90 % of the figure
+        assert np.abs(diag).max() > 0.9 * scale and np.abs(b).max(axis=0).min() > 0.8 * min(
+            zero_g), model
+        assert all(t.noise_density_g_sqrt_hz == density for t in draws), model
+
+
+def test_sim_manifest_truth_is_the_chips_own():
+    """``--sim`` with each chip: the manifest's accelerometer truth is drawn from that chip's
+    figures (ICM-42688-P: 70 µg/√Hz, zero-g within ±20 mg), in m/s²."""
+    from gyrocal.kit.config import default_config
+    from gyrocal.kit.sim import build_sim
+
+    for model in ("icm42688p", "icm20948", "lsm6dsox"):
+        cfg = default_config()
+        cfg["imu"]["model"] = model
+        sim = build_sim(cfg, seed=3)
+        truth = sim.truth.manifest()["accelerometer"]
+        _, _, zero_g, density = DATASHEET_ACCEL[model]
+        assert math.isclose(truth["noise_density_m_s2_sqrt_hz"], density * 9.80665)
+        assert np.all(np.abs(truth["bias_g"]) <= np.array(zero_g))

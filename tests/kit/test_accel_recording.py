@@ -88,6 +88,12 @@ def test_independent_generator_accelerometer_within_its_sigma(tmp_path, seed):
     assert np.all(np.abs(err) < 4 * acc.std), err / acc.std
     doc = est.calibration.to_dict()["accelerometer"]
     assert doc["gravity_m_s2"] == 9.81 and np.allclose(doc["bias_std"], acc.std[6:])
+    # white noise of truth["noise"] m/s² per sample at 200 Hz: Kalibr's continuous-time density
+    # is σ_d · sqrt(Δt)
+    density = truth["noise"] / np.sqrt(200.0)
+    assert np.all(np.abs(acc.noise_density - density) < 4 * acc.noise_density_std)
+    assert np.all(acc.noise_density_std < 0.25 * density)
+    assert np.allclose(doc["noise_density"], acc.noise_density)
     summary = calibration_table(est.calibration)
     assert "against gravity 9.81000 m/s²" in summary
     assert "accelerometer consistency: consistent" in summary
@@ -131,3 +137,15 @@ def test_estimate_flags(tmp_path, capsys):
     doc = json.loads(capsys.readouterr().out)
     assert doc["accelerometer"]["gravity_m_s2"] == pytest.approx(
         local_gravity({"gravity_m_s2": 0, "latitude_deg": 52.0})[0])
+
+
+def test_default_sim_run_measures_the_emulated_noise_density(full_run):
+    """``gyrocal calibrate --sim`` at the defaults: the accelerometer block's noise density is
+    the emulated accelerometer's true density (manifest ``truth.accelerometer``, m/s²/√Hz)
+    within 4σ on every axis."""
+    d, _ = full_run
+    acc = json.loads((d / "calibration.json").read_text())["accelerometer"]
+    truth = json.loads((d / "recording" / "manifest.json").read_text())["truth"]["accelerometer"]
+    dens, std = np.array(acc["noise_density"]), np.array(acc["noise_density_std"])
+    assert np.all(np.abs(dens - truth["noise_density_m_s2_sqrt_hz"]) < 4 * std)
+    assert np.all(std < 0.2 * dens) and acc["noise_tau_s"] == pytest.approx(0.1, abs=0.005)

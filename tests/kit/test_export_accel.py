@@ -173,3 +173,73 @@ def test_the_thermal_formats_say_the_accelerometer_goes_elsewhere(cal, tmp_path,
     for fmt, other in (("px4-thermal", "px4-accel"), ("ardupilot-thermal", "ardupilot-accel")):
         _, err = export(capsys, p, fmt)
         assert f"export it with --format {other}" in err
+
+
+def test_kalibr_writes_the_measured_accelerometer_noise_unless_given(cal, tmp_path, capsys):
+    """accelerometer_noise_density: the calibration's measured density (largest axis) when the
+    user gives none, --accel-noise-density when given; stderr says which; left out (and said)
+    when the calibration has none."""
+    from dataclasses import replace
+
+    noisy = replace(cal, accelerometer=replace(
+        cal.accelerometer, noise_density=np.array([2.1e-3, 2.6e-3, 1.9e-3]),
+        noise_density_std=np.array([2e-4, 3e-4, 2e-4]), noise_tau_s=0.1))
+    p = tmp_path / "noisy.json"
+    p.write_text(noisy.to_json())
+    out, err = export(capsys, p, "kalibr")
+    assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(2.6e-3, rel=1e-6)
+    assert "measured on the run's rests (largest axis, y" in err
+    out, err = export(capsys, p, "kalibr", "--accel-noise-density", "5e-3")
+    assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(5e-3)
+    assert "from --accel-noise-density" in err
+    p2 = tmp_path / "plain.json"
+    p2.write_text(cal.to_json())
+    out, err = export(capsys, p2, "kalibr")
+    assert "accelerometer_noise_density" not in yaml.safe_load(out)
+    assert "left out: the calibration has no measured accelerometer noise" in err
+    assert main(["export", str(p), "--format", "kalibr", "--accel-noise-density", "-1"]) == 2
+    assert "must be a positive number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("model,bus,address,expected", [
+    # id = bus_type (I2C 1) | bus << 3 | address << 8 | devtype << 16, worked out by hand from
+    # PX4's Device.hpp DeviceStructure and drv_sensor.h: MPU9250 0x24, ICM42688P 0x26
+    ("mpu9250", 1, 0x68, 1 + 1 * 8 + 104 * 256 + 36 * 65536),  # 2385929
+    ("icm42688p", 3, 0x69, 1 + 3 * 8 + 105 * 256 + 38 * 65536),  # 2517273
+])
+def test_px4_accel_writes_the_device_id_of_a_known_chip_bus_and_address(
+        cal, tmp_path, capsys, model, bus, address, expected):
+    from dataclasses import replace
+
+    located = replace(cal, sensor={**cal.sensor, "model": model, "i2c_bus": bus,
+                                   "i2c_address": address})
+    p = tmp_path / "cal.json"
+    p.write_text(located.to_json())
+    out, err = export(capsys, p, "px4-accel", "--imu-index", "2")
+    rows = {r.split("\t")[2]: r.split("\t")[3:] for r in out.splitlines()
+            if not r.startswith("#")}
+    assert rows["CAL_ACC2_ID"] == [str(expected), "6"]  # MAV_PARAM_TYPE_INT32
+    assert f"device ID {expected} = I2C bus {bus}, address {address:#04x}" in err
+
+
+def test_px4_accel_without_the_bus_or_with_a_chip_px4_lacks_says_so(cal, tmp_path, capsys):
+    from dataclasses import replace
+
+    for sensor, why in (({"model": "mpu9250"}, "does not say which I2C bus"),
+                        ({"model": "lsm6dsox", "i2c_bus": 1, "i2c_address": 0x6A},
+                         "PX4 has no device type for the sensor model 'lsm6dsox'")):
+        p = tmp_path / "cal.json"
+        p.write_text(replace(cal, sensor=sensor).to_json())
+        out, err = export(capsys, p, "px4-accel")
+        assert "CAL_ACC0_ID" not in out
+        assert "CAL_ACC0_ID is not written" in err and why in err
+
+
+def test_a_sim_run_records_where_the_chip_is_and_px4_gets_its_id(full_run, capsys):
+    """``gyrocal calibrate --sim`` at the defaults (an MPU-9250 on bus 1 at 0x68) records
+    ``sensor.i2c_bus``/``i2c_address`` and px4-accel writes its ID (hand-computed above)."""
+    d, _ = full_run
+    sensor = json.loads((d / "calibration.json").read_text())["sensor"]
+    assert (sensor["i2c_bus"], sensor["i2c_address"]) == (1, 0x68)
+    out, _ = export(capsys, d / "calibration.json", "px4-accel")
+    assert "1\t1\tCAL_ACC0_ID\t2385929\t6" in out

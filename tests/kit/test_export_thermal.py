@@ -185,3 +185,17 @@ def test_flight_stack_exports_need_a_temperature_model(capsys, tmp_path):
     code = main(["export", str(tmp_path / "t.json"), "--format", "ardupilot-thermal",
                  "--imu-index", "0"])
     assert code == 2 and "outside 1..3" in capsys.readouterr().err
+
+
+def test_px4_thermal_id_comes_from_the_calibrations_chip_bus_and_address(capsys, tmp_path):
+    """Without --device-id, TC_G0_ID is PX4's device ID of the recorded chip, bus and address
+    (worked out by hand: I2C 1 | bus 1 << 3 | 0x68 << 8 | DRV_IMU_DEVTYPE_MPU9250 0x24 << 16);
+    --device-id still wins."""
+    from dataclasses import replace
+
+    cal = replace(make_cal(), sensor={"model": "mpu9250", "i2c_bus": 1, "i2c_address": 0x68})
+    out, err = export_text(capsys, tmp_path, cal, "px4-thermal")
+    assert "1\t1\tTC_G0_ID\t2385929\t6" in out
+    assert "TC_G0_ID from the calibration: device ID 2385929" in err
+    out, err = export_text(capsys, tmp_path, cal, "px4-thermal", "--device-id", "7")
+    assert "1\t1\tTC_G0_ID\t7\t6" in out and "device ID 2385929" not in err

@@ -1,0 +1,65 @@
+"""PX4's device ID of the sensor a calibration belongs to (``CAL_ACC<n>_ID``, ``CAL_GYRO<n>_ID``,
+``TC_G<n>_ID``), from the chip, bus and address a gyrocal run records.
+
+PX4 (PX4-Autopilot ``src/lib/drivers/device/Device.hpp``, ``union DeviceId``) packs a device's
+identity in 24 bits, least significant first: ``bus_type`` (3 bits; ``DeviceBusType_I2C = 1``),
+``bus`` (5 bits, the bus instance), ``address`` (8 bits, the I²C address) and ``devtype`` (8
+bits, one per driver: ``src/drivers/drv_sensor.h``)::
+
+    id = bus_type | bus << 3 | address << 8 | devtype << 16
+
+(PX4's own boards check it so: the Pixhawk 6C's internal MS5611 on I²C bus 4 at 0x77 is
+``device_id: 4028193`` in ``boards/px4/fmu-v6c/src/i2c.cpp``.) The bus is the one gyrocal read the
+chip on (Linux ``/dev/i2c-N``): PX4 on that Linux board numbers it the same; a flight controller
+numbers its own buses, so a sensor moved there has the ID its vehicle reports.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = ["PX4_DEVTYPE", "PX4_I2C", "px4_device_id"]
+
+#: ``DeviceBusType_I2C`` (Device.hpp).
+PX4_I2C = 1
+
+#: PX4 devtype per gyrocal sensor model (PX4-Autopilot ``src/drivers/drv_sensor.h``): the
+#: accelerometer and the gyro of these combined drivers share the ID. PX4 has no driver, hence
+#: no devtype, for the MPU-9255 and the LSM6DSO/LSM6DSOX.
+PX4_DEVTYPE: Mapping[str, int] = {
+    "mpu9250": 0x24,  # DRV_IMU_DEVTYPE_MPU9250
+    "mpu6500": 0x36,  # DRV_IMU_DEVTYPE_MPU6500
+    "icm20948": 0x28,  # DRV_IMU_DEVTYPE_ICM20948
+    "icm42688p": 0x26,  # DRV_IMU_DEVTYPE_ICM42688P
+    "lsm9ds1": 0x44,  # DRV_IMU_DEVTYPE_ST_LSM9DS1_AG
+}
+
+
+def px4_device_id(sensor: Mapping[str, Any] | None) -> tuple[int | None, str]:
+    """PX4's device ID of the calibration's ``sensor`` (its model, ``i2c_bus`` and
+    ``i2c_address``) and a sentence saying how it was made, or ``(None, why not)``.
+
+    Returns
+    -------
+    (int, str) or (None, str)
+    """
+    s = sensor or {}
+    model = str(s.get("model") or "")
+    bus, addr = s.get("i2c_bus"), s.get("i2c_address")
+    if model not in PX4_DEVTYPE:
+        return None, (f"PX4 has no device type for the sensor model {model or 'not recorded'!r} "
+                      f"(PX4 devtypes: {', '.join(PX4_DEVTYPE)})")
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (bus, addr)):
+        return None, ("the calibration does not say which I2C bus and address the chip was "
+                      "read on (sensor.i2c_bus, sensor.i2c_address; a recording from another "
+                      "tool, or from gyrocal before they were recorded)")
+    assert isinstance(bus, int) and isinstance(addr, int)
+    if not (0 <= bus < 32 and 0 <= addr < 128):
+        return None, (f"I2C bus {bus} / address {addr} do not fit PX4's device ID (bus 0-31, "
+                      "7-bit address)")
+    dev_id = PX4_I2C | bus << 3 | addr << 8 | PX4_DEVTYPE[model] << 16
+    return dev_id, (f"device ID {dev_id} = I2C bus {bus}, address {addr:#04x}, devtype "
+                    f"{PX4_DEVTYPE[model]:#04x} ({model}); the bus as gyrocal read it "
+                    "(/dev/i2c-N): on a flight controller with its own bus numbering, check it "
+                    "against the vehicle's")
