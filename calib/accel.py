@@ -784,8 +784,11 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     al. 2014) aligns the gyro to the accelerometer's frame the same way, from gravity seen
     before and after rotations. The fit minimises ``Σ |R K(θ_r) γ₀ − v_r/|v_r||² / σ_r²`` over
     ``R`` and the unit ``γ₀`` (Levenberg–Marquardt, ``scipy.optimize.least_squares``); the
-    covariance of the rotation is the ``δ`` block of ``(JᵀJ)⁻¹``. Rotations about at least two
-    non-parallel servo axes are needed (a planned run with accelerometer rests has them).
+    covariance of the rotation is the ``δ`` block of ``(JᵀJ)⁻¹``, widened by the reduced
+    ``χ²/(2N − 5)`` when above one: rests scattered beyond their noise (a pose off the one the
+    encoders report by a wobble of the jig) then count as the noise they show. Rotations about
+    at least two non-parallel servo axes are needed (a planned run with accelerometer rests has
+    them).
 
     Parameters
     ----------
@@ -880,7 +883,11 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
         raise CalibInputError("the rests do not determine the rotation between the gyro's and "
                               "the accelerometer's frames: they need rotations about two "
                               "servo axes (plan the run with accelerometer rests)")
-    cov = np.linalg.inv(jtj)[:3, :3]
+    # rests that scatter more than their noise says (the jig's wobble: a rest's pose is not
+    # quite the one its encoders give) widen the covariance by the reduced χ² (Birge ratio)
+    dof = 2 * n - 5
+    spread = max(1.0, float(res.fun @ res.fun) / dof) if dof > 0 else 1.0
+    cov = spread * np.linalg.inv(jtj)[:3, :3]
     ang = np.arcsin(np.clip(np.linalg.norm(np.cross(carried(g0) @ R.T, u), axis=1), 0, 1))
     return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
 

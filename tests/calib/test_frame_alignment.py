@@ -115,6 +115,29 @@ def test_the_rotation_sigma_covers_its_error_over_noisy_rests():
     assert np.all((z.std(axis=0) > 0.7) & (z.std(axis=0) < 1.3)), z.std(axis=0)
 
 
+def test_the_rotation_sigma_covers_a_wobbling_jig_that_the_rest_noise_does_not_show():
+    """Each rest held a pose 0.05° (RMS per axis) off the one its encoders give, while the rests'
+    stated noise is 40× smaller: the σ must widen to the scatter the rests show."""
+    rng = np.random.default_rng(11)
+    cg, ca, axes, up = world(rng)
+    ag, aa = in_frame(cg), in_frame(ca)
+    truth = (aa @ ca) @ (ag @ cg).T
+    dirs = rests(axes, up, ANGLES)
+    sd, wobble = 2e-5, math.radians(0.05)
+    z = []
+    for _ in range(80):
+        tilt = [rot(w, np.linalg.norm(w)) for w in rng.normal(0, wobble, (len(dirs), 3))]
+        seen = np.array([t @ d for t, d in zip(tilt, dirs, strict=True)])
+        noisy = (seen + rng.normal(0, sd, dirs.shape)) @ (aa @ ca).T
+        fr = frame_rotation(noisy, ANGLES, axes @ (ag @ cg).T, np.zeros(3), sd)
+        e = fr.rotation @ truth.T
+        delta = 0.5 * np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]])
+        z.append(delta / np.sqrt(np.diag(fr.covariance)))
+    z = np.array(z)
+    assert np.all((z.std(axis=0) > 0.6) & (z.std(axis=0) < 1.4)), z.std(axis=0)
+    assert np.mean(np.abs(z) < 3) > 0.97
+
+
 def test_the_covariance_is_propagated_through_the_rotation():
     rng = np.random.default_rng(3)
     cg, _, axes, _ = world(rng)
