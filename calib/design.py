@@ -1029,8 +1029,9 @@ def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
     servo: rest, turn −, rest, turn +; a final rest; each posed pair: move a servo to its pose,
     hold still :data:`POSE_SETTLE_S`, turn another −, rest, +, rest, move the first home
     (:func:`full_schedule` is the turns' order); each gravity pose: move, rest, move home;
-    then :attr:`Plan.accel_extra_rests` rests. The accelerometer's moves (:attr:`Plan.accel_moves`) go right before their rest, after
-    :data:`ACCEL_STILL_S` of still time when a turn comes before (the turn's rest-to-rest
+    then :attr:`Plan.accel_extra_rests` rests. The accelerometer's moves
+    (:attr:`Plan.accel_moves`) go right before their rest, after :data:`ACCEL_STILL_S` of still
+    time when a turn comes before (the turn's rest-to-rest
     window takes still time after it: :mod:`gyrocal.calib.windows`); the run ends with every
     servo still away from home moved home (lowest chain position first). A move's angle counts
     from home plus the whole turns its servo has made and not yet undone (between a servo's
