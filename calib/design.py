@@ -842,11 +842,11 @@ def plan_protocol(
     (:func:`predict_uncertainty`); for ``model="full"`` the full-matrix estimator's twelve
     (:func:`predict_full_uncertainty`), over the pose sets of :func:`candidate_pose_sets`, with
     the moves' time counted (:func:`jig_time`). Either way the plan minimises the worst-direction
-    standard deviation of a calibrated rate at ``reference_rate``. With ``accel_rests`` (full
-    model), the rests are tilted for the accelerometer (:func:`plan_accel_rests`) and the whole
-    run, their moves included, stays within the budget: the gyro's protocol is planned again
-    within the budget less the moves' time until it does (the moves' time depends on the speed
-    and the poses, hardly on the rests and turns the budget then trims).
+    standard deviation of a calibrated rate at ``reference_rate``. With ``accel_rests``, the
+    rests are tilted for the accelerometer (:func:`plan_accel_rests`) and the whole run, their
+    moves (and any rests added) included, stays within the budget: the gyro's protocol is
+    planned again within the budget less their time until it does (that time depends on the
+    speed and the poses, hardly on the rests and turns the budget then trims).
 
     Parameters
     ----------
@@ -877,7 +877,8 @@ def plan_protocol(
         Full model: the servos' nominal axes in the sensor frame, chain order, for planning only
         (default x, y, z); the estimate never uses them.
     accel_rests : bool
-        Full model: tilt the rests for the accelerometer within the budget (above).
+        Tilt the rests for the accelerometer within the budget (above; the diagonal protocol's
+        seven rests also get the missing ones at its end).
     max_turns : float, optional
         With ``accel_rests``: the cable-wrap limit, turns from home (:func:`plan_accel_rests`).
 
@@ -898,24 +899,36 @@ def plan_protocol(
     if model not in ("diagonal", "full"):
         raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
-    if model == "full":
-        budget = time_budget_s
-        for _ in range(4):
-            best = _plan_full(top, budget, noise_std, odr_hz, accel, reference_rate,
-                              min_rest_s, axes)
-            if best is None:
-                raise CalibInputError(
-                    f"no full-model protocol fits {time_budget_s:g} s with speeds up to "
-                    f"{top:.2f} rad/s{' and the accelerometer rests' if accel_rests else ''}; "
-                    "raise the time budget")
-            if not accel_rests:
-                return best
-            best = plan_accel_rests(best, axes=axes, max_turns=max_turns)
-            over = best.jig_time_s - time_budget_s
-            if over <= 1e-9:
-                return best
-            budget -= over + 1e-6
-        return best
+    budget = time_budget_s
+    best: Plan | None = None
+    for _ in range(4):
+        best = (_plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
+                           axes) if model == "full"
+                else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
+                                    min_rest_s))
+        if best is None:
+            raise CalibInputError(
+                f"no {'full-model ' if model == 'full' else ''}protocol fits "
+                f"{time_budget_s:g} s with speeds up to {top:.2f} rad/s"
+                f"{' and the accelerometer rests' if accel_rests else ''}; raise the time budget")
+        if not accel_rests:
+            return best
+        best = plan_accel_rests(best, axes=axes, max_turns=max_turns)
+        over = best.jig_time_s - time_budget_s
+        if over <= 1e-9:
+            return best
+        budget -= over + 1e-6
+    raise CalibInputError(
+        f"the accelerometer's rests take {best.accel_time_s:.1f} s (their moves and rests) of "
+        f"the {time_budget_s:g} s budget and no {model} protocol fits the rest; raise the time "
+        "budget or turn the accelerometer's rests off")
+
+
+def _plan_diagonal(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float,
+) -> Plan | None:
+    """The best diagonal-model plan over speeds × turns × rests within ``budget``."""
     speeds = np.unique(np.concatenate([np.linspace(0.5, top, 12), [top]]))
     speeds = speeds[speeds <= top]
     best = None
@@ -925,7 +938,7 @@ def plan_protocol(
                 if rest < min_rest_s:
                     continue
                 T = jig_time(speed, turns, rest, accel)
-                if T > time_budget_s:
+                if T > budget:
                     continue
                 ks, bs, err = predict_uncertainty(
                     speed, turns, rest, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
@@ -937,11 +950,6 @@ def plan_protocol(
                 )
                 if best is None or cand.rate_error_std < best.rate_error_std * (1 - 1e-9):
                     best = cand
-    if best is None:
-        raise CalibInputError(
-            f"no protocol fits {time_budget_s:g} s with speeds up to {top:.2f} rad/s; "
-            "raise the time budget"
-        )
     return best
 
 
