@@ -845,8 +845,7 @@ def plan_protocol(
     standard deviation of a calibrated rate at ``reference_rate``. With ``accel_rests``, the
     rests are tilted for the accelerometer (:func:`plan_accel_rests`) and the whole run, their
     moves (and any rests added) included, stays within the budget: the gyro's protocol is
-    planned again within the budget less their time until it does (that time depends on the
-    speed and the poses, hardly on the rests and turns the budget then trims).
+    planned again, each time within its own time less the overshoot, until it does.
 
     Parameters
     ----------
@@ -901,7 +900,7 @@ def plan_protocol(
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
     budget = time_budget_s
     best: Plan | None = None
-    for _ in range(4):
+    for _ in range(8):
         best = (_plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
                            axes) if model == "full"
                 else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
@@ -917,7 +916,8 @@ def plan_protocol(
         over = best.jig_time_s - time_budget_s
         if over <= 1e-9:
             return best
-        budget -= over + 1e-6
+        # below this gyro protocol's own time by the overshoot (the candidates' times jump)
+        budget = best.jig_time_s - best.accel_time_s - over - 1e-6
     raise CalibInputError(
         f"the accelerometer's rests take {best.accel_time_s:.1f} s (their moves and rests) of "
         f"the {time_budget_s:g} s budget and no {model} protocol fits the rest; raise the time "
