@@ -56,6 +56,9 @@ WINDOW_STD = DENSITY_G * math.sqrt(ODR_HZ) / math.sqrt(N_SAMPLES) * STANDARD_GRA
 #: still along z: the inner axis is vertical at home), 3 with the middle servo at 45°.
 DEFAULT_RESTS = np.array([[0, 0, 1.0]] * 10 + [[-math.sin(math.pi / 4), 0,
                                                  math.cos(math.pi / 4)]] * 3)
+#: The gyro noise the kit plans with on the emulated MPU-9250 (its still noise as measured
+#: before a run, the manifest's ``protocol.planning_noise_std``), rad/s per sample at 200 Hz.
+PLANNING_NOISE = 0.0025
 SMALL_TOUR = TOUR_DIRECTIONS[[0, 1, 2, 3, 5, 6, 9, 11, 12]]  # axes and a tetrahedron's corners
 
 
@@ -73,7 +76,8 @@ def _planned() -> tuple[np.ndarray, object]:
     from gyrocal.calib.design import plan_protocol, protocol_sequence
 
     plan = plan_protocol(servo_max_speed=SPEED / 0.9, full_scale=math.radians(500),
-                         time_budget_s=45.0, model="full", accel_rests=True, max_turns=3.0)
+                         time_budget_s=45.0, model="full", accel_rests=True, max_turns=3.0,
+                         noise_std=PLANNING_NOISE)
     here, angles = np.zeros(3), []
     for st in protocol_sequence(plan):
         if st[0] == "move":
@@ -206,7 +210,7 @@ def main(argv: list[str]) -> None:
     from gyrocal.calib.design import plan_protocol
 
     gyro = plan_protocol(servo_max_speed=SPEED / 0.9, full_scale=math.radians(500),
-                         time_budget_s=45.0, model="full")
+                         time_budget_s=45.0, model="full", noise_std=PLANNING_NOISE)
     print_table(["plan", "jig time s", "accelerometer's moves s", "rest s", "turns",
                  "predicted gyro rate error σ at 1 rad/s"],
                 [["gyro alone (--no-accel-rests)", gyro.jig_time_s, 0.0, gyro.rest_s,
