@@ -135,7 +135,9 @@ def test_no_turn_window_reads_a_held_servo_while_it_settles(rec):
     # a pose move used to be followed at once by the base's turn: its rest-to-rest window
     # (0.15 s before the motion) began while the posed servo settled by its last single ticks,
     # so the window read that servo's pose as moving instead of on a still angle (seed 0 of
-    # the old plan: window 8, the middle servo); the planner now holds still 0.2 s after a move
+    # the old plan: window 8, the middle servo; this test's seed escaped it by chance); the
+    # planner now holds still 0.2 s after a move (tests/calib/test_accel_rests.py checks the
+    # plan)
     obs = extract_recording(rec).observations
     held = np.arange(obs.pose.shape[1])[None, :] != obs.motor_index[:, None]
     assert np.all(obs.pose_still[held] >= 0)
