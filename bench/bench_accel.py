@@ -56,6 +56,9 @@ WINDOW_STD = DENSITY_G * math.sqrt(ODR_HZ) / math.sqrt(N_SAMPLES) * STANDARD_GRA
 #: still along z: the inner axis is vertical at home), 3 with the middle servo at 45°.
 DEFAULT_RESTS = np.array([[0, 0, 1.0]] * 10 + [[-math.sin(math.pi / 4), 0,
                                                  math.cos(math.pi / 4)]] * 3)
+#: The gyro noise the kit plans with on the emulated MPU-9250 (its still noise as measured
+#: before a run, the manifest's ``protocol.planning_noise_std``), rad/s per sample at 200 Hz.
+PLANNING_NOISE = 0.0025
 SMALL_TOUR = TOUR_DIRECTIONS[[0, 1, 2, 3, 5, 6, 9, 11, 12]]  # axes and a tetrahedron's corners
 
 
@@ -68,12 +71,13 @@ def _rotation(rng: np.random.Generator, deg: float) -> np.ndarray:
 
 
 def _planned() -> tuple[np.ndarray, object]:
-    """The default full plan with its accelerometer rests: every rest's servo angles (N, 3)."""
-    from gyrocal.calib.design import plan_accel_rests, plan_protocol, protocol_sequence
+    """The default full plan with its accelerometer rests (planned with them within the 45 s
+    budget, as ``gyrocal calibrate`` does): every rest's servo angles (N, 3)."""
+    from gyrocal.calib.design import plan_protocol, protocol_sequence
 
-    gyro = plan_protocol(servo_max_speed=SPEED / 0.9, full_scale=math.radians(500),
-                         time_budget_s=45.0, model="full")
-    plan = plan_accel_rests(gyro, max_turns=3.0)
+    plan = plan_protocol(servo_max_speed=SPEED / 0.9, full_scale=math.radians(500),
+                         time_budget_s=45.0, model="full", accel_rests=True, max_turns=3.0,
+                         noise_std=PLANNING_NOISE)
     here, angles = np.zeros(3), []
     for st in protocol_sequence(plan):
         if st[0] == "move":
@@ -203,6 +207,17 @@ def main(argv: list[str]) -> None:
                 rows, f"calibrated specific force error over the sphere, default protocol + "
                       f"14-point tour (+{tour.added_time_s:.1f} s), mount {mount_deg:g}°")
     angles, plan = _planned()
+    from gyrocal.calib.design import plan_protocol
+
+    gyro = plan_protocol(servo_max_speed=SPEED / 0.9, full_scale=math.radians(500),
+                         time_budget_s=45.0, model="full", noise_std=PLANNING_NOISE)
+    print_table(["plan", "jig time s", "accelerometer's moves s", "rest s", "turns",
+                 "predicted gyro rate error σ at 1 rad/s"],
+                [["gyro alone (--no-accel-rests)", gyro.jig_time_s, 0.0, gyro.rest_s,
+                  gyro.turns, gyro.rate_error_std],
+                 ["with the accelerometer's rests (default)", plan.jig_time_s,
+                  plan.accel_time_s, plan.rest_s, plan.turns, plan.rate_error_std]],
+                "what the accelerometer costs the default protocol (45 s budget, both planned)")
     rows = []
     for generator in ("emulator", "independent"):
         out = []

@@ -13,6 +13,10 @@
    these ratios is 1 when windowing loses nothing.
 
 Usage: ``python -m bench calibrate [--quick] [--seeds=N]`` (30 seeds; 6 with ``--quick``).
+Runs after the first table go two at a time without the HTML report (its plots took about
+1.5 min of wall time a run on a loaded machine, and ran 3 × N times: the run of the last
+session, killed before the pool finished, printed only the first table); a line per run lands
+on stderr as it finishes, and Ctrl-C prints the tables of the runs that finished.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -31,8 +36,9 @@ import numpy as np
 from bench.table import print_table
 
 
-def _run(args: tuple[int, str]) -> dict:
-    """One emulated calibration; returns errors and timings (run in a worker process)."""
+def _run(args: tuple[int, str] | tuple[int, str, bool]) -> dict:
+    """One emulated calibration; returns errors and timings (run in a worker process). A third
+    item True also writes the HTML report (as a user's default run does)."""
     from gyrocal.calib.estimators import estimate, paired_axis_batch
     from gyrocal.kit.cli import main
     from gyrocal.kit.config import default_config
@@ -40,7 +46,8 @@ def _run(args: tuple[int, str]) -> dict:
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.sim import build_sim
 
-    seed, protocol = args
+    seed, protocol = args[0], args[1]
+    report = [] if len(args) > 2 and args[2] else ["--no-report"]
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
         t0 = time.perf_counter()
@@ -52,7 +59,7 @@ def _run(args: tuple[int, str]) -> dict:
                                                "--sim-realism", "off"]
         with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
             code = main(["calibrate", "--sim", "--sim-seed", str(seed), "--out", str(out),
-                         "--quiet", "--json", *flags])
+                         "--quiet", "--json", *report, *flags])
         wall = time.perf_counter() - t0
         cal = json.loads((out / "calibration.json").read_text())
         rec = load_recording(out / "recording")
@@ -118,17 +125,31 @@ def main(argv: list[str]) -> None:
     seeds = list(range(int(n) if n is not None else 6 if quick else 30))
     workers = min(2, os.cpu_count() or 1)
     # One run at a time first: the wall time a user sees.
-    alone = [_run((100 + s, "full"))["wall_s"] for s in range(3)]
+    alone = [_run((100 + s, "full", True))["wall_s"] for s in range(3)]
     print_table(["runs", "wall s median", "wall s min", "wall s max"],
                 [[len(alone), float(np.median(alone)), min(alone), max(alone)]],
-                title="gyrocal calibrate --sim (default protocol), one run at a time")
-    jobs = ([(s, "full") for s in seeds] + [(s, "auto") for s in seeds]
-            + [(s, "paper") for s in seeds])
+                title="gyrocal calibrate --sim (default protocol, HTML report included), one run "
+                      "at a time")
+    sys.stdout.flush()
+    jobs = [(s, p) for s in seeds for p in ("full", "auto", "paper")]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(workers) as pool:
-        results = list(pool.map(_run, jobs))
+    results: list[dict] = []
+    pool = ProcessPoolExecutor(workers)
+    try:
+        for r in pool.map(_run, jobs):
+            results.append(r)
+            print(f"# seed {r['seed']} {r['protocol']}: exit {r['code']}, jig {r['jig_s']:.1f} s, "
+                  f"wall {r['wall_s']:.0f} s", file=sys.stderr, flush=True)
+    except KeyboardInterrupt:
+        print(f"# stopped after {len(results)} of {len(jobs)} runs; the tables hold those",
+              file=sys.stderr, flush=True)
+        pool.shutdown(wait=False, cancel_futures=True)
+    else:
+        pool.shutdown()
     total = time.perf_counter() - t0
     by = {p: [r for r in results if r["protocol"] == p] for p in ("full", "auto", "paper")}
+    if not all(by.values()):
+        return
     bad = [r for r in results if r["code"] not in (0, 3)]
     walls = np.array([r["wall_s"] for r in by["full"]])
     print_table(

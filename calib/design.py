@@ -249,14 +249,15 @@ def jig_time(
     n_servos: int = 3, move_angles: tuple[float, ...] = (),
     gravity_angles: tuple[float, ...] = (),
 ) -> float:
-    """Jig time of a protocol: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests, and
-    for each posed pair (its move angle in ``move_angles``) two turns, three rests and two moves
-    (there and back) at ``speed``; for each gravity pose (``gravity_angles``) a rest and two
-    moves."""
+    """Jig time of a protocol, step by step as :func:`protocol_sequence` lays it out without
+    accelerometer moves: ``2 n_servos`` turns with settling, ``2 n_servos + 1`` rests, and for
+    each posed pair (its move angle in ``move_angles``) two moves (there and back) at ``speed``,
+    :data:`POSE_SETTLE_S` of still time, two turns and two rests; for each gravity pose
+    (``gravity_angles``) a rest and two moves."""
     turn = profile_duration(2 * np.pi * turns, speed, accel) + settle_s
     home = 2 * n_servos * turn + (2 * n_servos + 1) * rest_s
-    posed = sum(2 * turn + 3 * rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
-                for a in move_angles)
+    posed = sum(2 * turn + 2 * rest_s + POSE_SETTLE_S
+                + 2 * (profile_duration(abs(a), speed, accel) + settle_s) for a in move_angles)
     gravity = sum(rest_s + 2 * (profile_duration(abs(a), speed, accel) + settle_s)
                   for a in gravity_angles)
     return home + posed + gravity
@@ -294,6 +295,13 @@ def gravity_poses(
     return tuple((j, float(np.pi / 2)) for j in range(ax.shape[0])
                  if abs(float(ax[j] @ u)) < 0.5 and j not in moved)
 
+
+#: Still time between a pose move and the turn after it, s: the turn's rest-to-rest window
+#: reaches :func:`gyrocal.calib.windows.extract_observations`' ``still_margin_s`` (0.15 s) back
+#: before the motion, and the moved servo's last ticks (one at a time, which the motion-span
+#: detector does not count as motion) come up to the driver's settle time (30 ms) and a poll
+#: before the move is reported finished; without this still time the window read them.
+POSE_SETTLE_S = 0.2
 
 #: Shortest time budget the full-model protocol is planned within, s (issue 10's target: the
 #: twelve parameters in at most 45 s of jig time).
@@ -544,7 +552,7 @@ def predict_full_uncertainty(
             period[poses[(i - 2 * S) // 2][1]] += 1
     n_still = len(ids)
     G = np.zeros((B, n, n_still))
-    n_rest = 2 * S + 1 + 3 * len(poses) + len(gravity or ())
+    n_rest = 2 * S + 1 + 2 * len(poses) + len(gravity or ())
     rest_std = np.zeros((B, n_rest, 3))
     for c, (speed, turns, rest_s) in enumerate(candidates):
         win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
@@ -587,8 +595,8 @@ def _design_forces(axes: np.ndarray, u: np.ndarray, pose: np.ndarray,
     """The mean specific force of each turn (``(u·γ) u`` over whole revolutions) and each rest
     (``γ``) of a :func:`full_schedule` design, in the coordinates of the directions it varies
     along (the ``basis`` rows, also returned): the ``force``/``rest_force`` of
-    :func:`gyrocal.calib.estimators.full_matrix_batch`. Rests: ``2S + 1`` at home, three per
-    posed pair in its pose, one per gravity pose."""
+    :func:`gyrocal.calib.estimators.full_matrix_batch`. Rests as :func:`protocol_sequence` runs
+    them: ``2S + 1`` at home, two per posed pair in its pose, one per gravity pose."""
     from gyrocal.calib.kinematics import carried_up
 
     S = axes.shape[0]
@@ -596,7 +604,7 @@ def _design_forces(axes: np.ndarray, u: np.ndarray, pose: np.ndarray,
     g0 = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
     rest_pose = [zero] * (2 * S + 1)
     for _, moved, angle in poses:
-        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 3
+        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 2
     for moved, angle in gravity:
         rest_pose.append(np.where(np.arange(S) == moved, angle, 0.0))
     gam = carried_up(axes, zero, zero, g0, pose)
@@ -825,6 +833,8 @@ def plan_protocol(
     max_scale_error: float = 1.25,
     model: str = "diagonal",
     axes: np.ndarray | None = None,
+    accel_rests: bool = False,
+    max_turns: float | None = None,
 ) -> Plan:
     """Choose speed, turns and rest length (and, for the full model, poses) within a time budget.
 
@@ -832,7 +842,10 @@ def plan_protocol(
     (:func:`predict_uncertainty`); for ``model="full"`` the full-matrix estimator's twelve
     (:func:`predict_full_uncertainty`), over the pose sets of :func:`candidate_pose_sets`, with
     the moves' time counted (:func:`jig_time`). Either way the plan minimises the worst-direction
-    standard deviation of a calibrated rate at ``reference_rate``.
+    standard deviation of a calibrated rate at ``reference_rate``. With ``accel_rests``, the
+    rests are tilted for the accelerometer (:func:`plan_accel_rests`) and the whole run, their
+    moves (and any rests added) included, stays within the budget: the gyro's protocol is
+    planned again, each time within its own time less the overshoot, until it does.
 
     Parameters
     ----------
@@ -862,6 +875,11 @@ def plan_protocol(
     axes : ndarray, shape (3, 3), optional
         Full model: the servos' nominal axes in the sensor frame, chain order, for planning only
         (default x, y, z); the estimate never uses them.
+    accel_rests : bool
+        Tilt the rests for the accelerometer within the budget (above; the diagonal protocol's
+        seven rests also get the missing ones at its end).
+    max_turns : float, optional
+        With ``accel_rests``: the cable-wrap limit, turns from home (:func:`plan_accel_rests`).
 
     Returns
     -------
@@ -880,14 +898,37 @@ def plan_protocol(
     if model not in ("diagonal", "full"):
         raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
-    if model == "full":
-        best = _plan_full(top, time_budget_s, noise_std, odr_hz, accel, reference_rate,
-                          min_rest_s, axes)
+    budget = time_budget_s
+    best: Plan | None = None
+    for _ in range(8):
+        best = (_plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
+                           axes) if model == "full"
+                else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
+                                    min_rest_s))
         if best is None:
             raise CalibInputError(
-                f"no full-model protocol fits {time_budget_s:g} s with speeds up to "
-                f"{top:.2f} rad/s; raise the time budget")
-        return best
+                f"no {'full-model ' if model == 'full' else ''}protocol fits "
+                f"{time_budget_s:g} s with speeds up to {top:.2f} rad/s"
+                f"{' and the accelerometer rests' if accel_rests else ''}; raise the time budget")
+        if not accel_rests:
+            return best
+        best = plan_accel_rests(best, axes=axes, max_turns=max_turns)
+        over = best.jig_time_s - time_budget_s
+        if over <= 1e-9:
+            return best
+        # below this gyro protocol's own time by the overshoot (the candidates' times jump)
+        budget = best.jig_time_s - best.accel_time_s - over - 1e-6
+    raise CalibInputError(
+        f"the accelerometer's rests take {best.accel_time_s:.1f} s (their moves and rests) of "
+        f"the {time_budget_s:g} s budget and no {model} protocol fits the rest; raise the time "
+        "budget or turn the accelerometer's rests off")
+
+
+def _plan_diagonal(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float,
+) -> Plan | None:
+    """The best diagonal-model plan over speeds × turns × rests within ``budget``."""
     speeds = np.unique(np.concatenate([np.linspace(0.5, top, 12), [top]]))
     speeds = speeds[speeds <= top]
     best = None
@@ -897,7 +938,7 @@ def plan_protocol(
                 if rest < min_rest_s:
                     continue
                 T = jig_time(speed, turns, rest, accel)
-                if T > time_budget_s:
+                if T > budget:
                     continue
                 ks, bs, err = predict_uncertainty(
                     speed, turns, rest, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
@@ -909,11 +950,6 @@ def plan_protocol(
                 )
                 if best is None or cand.rate_error_std < best.rate_error_std * (1 - 1e-9):
                     best = cand
-    if best is None:
-        raise CalibInputError(
-            f"no protocol fits {time_budget_s:g} s with speeds up to {top:.2f} rad/s; "
-            "raise the time budget"
-        )
     return best
 
 
@@ -985,8 +1021,8 @@ def _base_sequence(plan: Plan, n_servos: int) -> list[tuple]:
             seq += [("rest",), ("rotate", m, d)]
     seq.append(("rest",))
     for turn, moved, angle in plan.poses:
-        seq += [("move", moved, float(angle)), ("rotate", turn, -1), ("rest",),
-                ("rotate", turn, 1), ("rest",), ("move", moved, 0.0)]
+        seq += [("move", moved, float(angle)), ("still", POSE_SETTLE_S), ("rotate", turn, -1),
+                ("rest",), ("rotate", turn, 1), ("rest",), ("move", moved, 0.0)]
     for moved, angle in plan.gravity_poses:
         seq += [("move", moved, float(angle)), ("rest",), ("move", moved, 0.0)]
     return seq + [("rest",)] * int(plan.accel_extra_rests)
@@ -997,14 +1033,18 @@ def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
 
     Each step is ``("rest",)``, ``("rotate", servo, direction)`` (``plan.turns`` whole
     turns), ``("move", servo, angle)`` (to ``angle`` rad from home) or ``("still", seconds)``
-    (the jig holds still: no rest of the fit, only still time after a turn). Per servo: rest,
-    turn −, rest, turn +; a final rest; each posed pair: move a servo to its pose, turn another
-    −, rest, +, rest, move the first home (:func:`full_schedule` is the turns' order); each
-    gravity pose: move, rest, move home; then :attr:`Plan.accel_extra_rests` rests. The
-    accelerometer's moves (:attr:`Plan.accel_moves`) go right before their rest, after
-    :data:`ACCEL_STILL_S` of still time when a turn comes before (the turn's rest-to-rest
+    (the jig holds still: no rest of the fit, only still time after a turn or a pose move). Per
+    servo: rest, turn −, rest, turn +; a final rest; each posed pair: move a servo to its pose,
+    hold still :data:`POSE_SETTLE_S`, turn another −, rest, +, rest, move the first home
+    (:func:`full_schedule` is the turns' order); each gravity pose: move, rest, move home;
+    then :attr:`Plan.accel_extra_rests` rests. The accelerometer's moves
+    (:attr:`Plan.accel_moves`) go right before their rest, after :data:`ACCEL_STILL_S` of still
+    time when a turn comes before (the turn's rest-to-rest
     window takes still time after it: :mod:`gyrocal.calib.windows`); the run ends with every
-    servo still away from home moved home (lowest chain position first).
+    servo still away from home moved home (lowest chain position first). A move's angle counts
+    from home plus the whole turns its servo has made and not yet undone (between a servo's
+    turn − and turn +, an accelerometer move to ``a`` goes to ``a − 2π·turns``: the same
+    orientation, reached by the planned ``|a − from|`` of travel instead of a turn more).
     :func:`gyrocal.kit.protocol.build_steps` runs this.
 
     Raises
@@ -1014,7 +1054,7 @@ def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
         rest the protocol does not have.
     """
     seq = _base_sequence(plan, n_servos)
-    used = [x[1] for x in seq if x[0] != "rest"] + [m for _, m, _ in plan.accel_moves]
+    used = [x[1] for x in seq if x[0] in ("move", "rotate")] + [m for _, m, _ in plan.accel_moves]
     if used and max(used) >= n_servos:
         raise CalibInputError(f"the plan names servo position {max(used)} beyond a chain of "
                               f"{n_servos}")
@@ -1023,13 +1063,16 @@ def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
         before.setdefault(int(r), []).append(("move", int(moved), float(angle)))
     out: list[tuple] = []
     r = 0
+    wound = np.zeros(n_servos)  # whole turns each servo has made and not yet undone, rad
     for step in seq:
         if step[0] == "rest":
             moves = before.pop(r, [])
             if moves and out and out[-1][0] == "rotate":
                 out.append(("still", ACCEL_STILL_S))  # the turn's window needs still time
-            out += moves
+            out += [("move", s, a + float(wound[s])) for _, s, a in moves]
             r += 1
+        elif step[0] == "rotate":
+            wound[step[1]] += step[2] * 2 * np.pi * plan.turns
         out.append(step)
     if before:
         raise CalibInputError(f"accelerometer moves name rests {sorted(before)} of a protocol "
@@ -1038,7 +1081,9 @@ def protocol_sequence(plan: Plan, n_servos: int = 3) -> list[tuple]:
     for step in out:
         if step[0] == "move":
             here[step[1]] = step[2]
-    out += [("move", s, 0.0) for s in range(n_servos) if here[s] != 0.0]
+        elif step[0] == "rotate":
+            here[step[1]] += step[2] * 2 * np.pi * plan.turns
+    out += [("move", s, 0.0) for s in range(n_servos) if abs(here[s]) > 1e-12]
     return out
 
 

@@ -264,6 +264,8 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
 
     p = cfg["protocol"]
     accel = float(cfg["gimbal"]["acceleration"])
+    accel_rests = p["name"] == "full" and bool(p["accel_rests"])
+    max_turns = float(cfg["gimbal"]["max_turns"])
     noise = {} if noise_std is None else {"noise_std": noise_std}
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
@@ -277,13 +279,14 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
                 f"protocol 'full' (the default) needs a three-servo gimbal; gimbal.ids lists "
                 f"{len(cfg['gimbal']['ids'])}: set protocol.name = \"auto\" (or --protocol auto) "
                 "to calibrate the diagonal model with fewer servos")
+        # With the accelerometer's rests the whole run, their moves included, fits the budget.
         budget = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if full else p["time_budget_s"]
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
                              time_budget_s=budget, odr_hz=imu.odr_hz, accel=accel,
                              model="full" if full else "diagonal",
                              axes=_nominal_axes(cfg["gimbal"]["axes"]) if full else None,
-                             **noise)
+                             accel_rests=accel_rests, max_turns=max_turns, **noise)
     fixed = {}
     if p["speed_dps"] > 0:
         fixed["speed"] = math.radians(p["speed_dps"])
@@ -292,19 +295,21 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     if p["rest_s"] > 0:
         fixed["rest_s"] = float(p["rest_s"])
     if fixed:
-        plan = replace(plan, **fixed)
+        plan = replace(plan, **fixed, accel_moves=(), accel_extra_rests=0, accel_time_s=0.0,
+                       accel_std_ratio=None)
         plan = replace(plan, jig_time_s=jig_time(
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses),
             gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
-    if p["name"] == "full" and p["accel_rests"] and plan.rest_s >= ACCEL_MIN_REST_S:
-        # tilt the rests for the accelerometer (calib.design.plan_accel_rests): the turns the
-        # gyro sees are unchanged; the moves add plan.accel_time_s beyond the gyro's budget.
-        # Not with rests shorter than the planner's own minimum: the accelerometer gets no
-        # still window from them, and the moves cost the full matrix its observability (a
-        # user's rest_s = 0.4 with 240 °/s, one turn: ±1.1e-3 against the 1e-3 limit)
-        plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),
-                                max_turns=float(cfg["gimbal"]["max_turns"]))
+        if accel_rests and plan.rest_s >= ACCEL_MIN_REST_S:
+            # tilt the fixed protocol's rests for the accelerometer (calib.design.
+            # plan_accel_rests): the turns the gyro sees are unchanged; the moves add
+            # plan.accel_time_s. Not with rests shorter than the planner's own minimum: the
+            # accelerometer gets no still window from them, and the moves cost the full matrix
+            # its observability (a user's rest_s = 0.4 with 240 °/s, one turn: ±1.1e-3 against
+            # the 1e-3 limit)
+            plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),
+                                    max_turns=max_turns)
     # the planned protocols stay within their budget (the full one's is at least
     # FULL_TIME_BUDGET_S) also when fixed values override the plan
     limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (

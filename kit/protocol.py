@@ -81,12 +81,14 @@ class Step:
 def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
     """The plan as steps, in :func:`gyrocal.calib.design.protocol_sequence`'s order: per servo
     rest, turn −, rest, turn +; then a final rest; then, for each posed pair of the full model
-    (:attr:`~gyrocal.calib.design.Plan.poses`), move a servo to its pose, turn the other −,
-    rest, +, rest, and move the first back home (:func:`gyrocal.calib.design.full_schedule` is
+    (:attr:`~gyrocal.calib.design.Plan.poses`), move a servo to its pose, hold still
+    (:data:`~gyrocal.calib.design.POSE_SETTLE_S`), turn the other −, rest, +, rest, and move
+    the first back home (:func:`gyrocal.calib.design.full_schedule` is
     the same order); then, for each gravity pose (:attr:`~gyrocal.calib.design.Plan.gravity_poses`),
     move the servo there, rest, and back. The accelerometer's moves
-    (:attr:`~gyrocal.calib.design.Plan.accel_moves`) tilt some rests; the run ends with every
-    servo moved home.
+    (:attr:`~gyrocal.calib.design.Plan.accel_moves`) tilt some rests (a move between a servo's
+    two turns goes to the angle less the turns it has made, the same orientation); the run ends
+    with every servo moved home.
 
     Turning the negative way first and back again ends every servo where it started; every
     move is undone, so the run ends in the home pose.

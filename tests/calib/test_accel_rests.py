@@ -58,6 +58,7 @@ def walk(plan, axes=AXES):
             for k in range(j + 1, len(axes)):
                 Rout = Rout @ rot(axes[k], here[k])
             turns.append((j, Rout.T @ axes[j], here.copy(), st[2]))
+            here[j] += st[2] * 2 * math.pi * plan.turns  # a turn winds the servo a revolution
     return np.array(rests), turns, moves, here
 
 
@@ -112,9 +113,11 @@ def test_the_added_time_is_the_moves_it_adds_and_far_below_a_gravity_tour(plans)
         return sum(profile_duration(abs(b - a), plan.speed, plan.accel) + 0.1
                    for _, a, b in moves if abs(b - a) > 1e-12)
 
-    still = sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
-    assert still >= 0.15 * sum(1 for st in protocol_sequence(plan) if st[0] == "still")
-    added = move_time(walk(plan)[2]) - move_time(walk(gyro)[2]) + still
+    def still(plan):
+        return sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
+
+    assert still(plan) >= 0.15 * sum(1 for st in protocol_sequence(plan) if st[0] == "still")
+    added = move_time(walk(plan)[2]) - move_time(walk(gyro)[2]) + still(plan) - still(gyro)
     assert plan.accel_time_s == pytest.approx(added, rel=1e-9)
     assert plan.jig_time_s == pytest.approx(gyro.jig_time_s + added, rel=1e-12)
     assert 0 < plan.accel_time_s < 10.0  # the 14-point tour adds 17-22 s
@@ -123,12 +126,14 @@ def test_the_added_time_is_the_moves_it_adds_and_far_below_a_gravity_tour(plans)
 def test_a_turning_servo_never_passes_the_cable_wrap_limit():
     gyro = plan_protocol(servo_max_speed=4.8, full_scale=math.radians(500), time_budget_s=45.0,
                          model="full")
+    def reach(plan):  # the farthest from home a turning servo gets, turns
+        return max(max(abs(a[j]), abs(a[j] + d * 2 * math.pi * plan.turns)) / (2 * math.pi)
+                   for j, _, a, d in walk(plan)[1])
+
     plan = plan_accel_rests(gyro, max_turns=float(gyro.turns))
-    for j, _, angles, _ in walk(plan)[1]:
-        assert abs(angles[j]) < 1e-12, "with no slack, a servo turns only from home"
+    assert reach(plan) <= gyro.turns + 1e-9, "with no slack, a servo turns only from home"
     loose = plan_accel_rests(gyro, max_turns=gyro.turns + 0.25)
-    for j, _, angles, _ in walk(loose)[1]:
-        assert abs(angles[j]) <= 2 * math.pi * 0.25 + 1e-9
+    assert gyro.turns < reach(loose) <= gyro.turns + 0.25 + 1e-9
 
 
 def test_a_diagonal_plan_gets_tilted_rests_too():
@@ -146,3 +151,44 @@ def test_a_diagonal_plan_gets_tilted_rests_too():
                 for _, a, b in moves if abs(b - a) > 1e-12)
     still = sum(st[1] for st in protocol_sequence(plan) if st[0] == "still")
     assert plan.accel_time_s == pytest.approx(moved + still + plan.accel_extra_rests * plan.rest_s)
+
+
+def _sequence_time(plan) -> float:
+    """The jig time of the plan's steps as the test walks them: a turn its profile and 0.1 s
+    settling, a move its travel's profile and 0.1 s (none when the servo is there), rests and
+    still time as given; a turn winds its servo by whole revolutions."""
+    here, total = np.zeros(3), 0.0
+    for st in protocol_sequence(plan):
+        if st[0] == "rest":
+            total += plan.rest_s
+        elif st[0] == "still":
+            total += st[1]
+        elif st[0] == "rotate":
+            total += profile_duration(2 * math.pi * plan.turns, plan.speed, plan.accel) + 0.1
+            here[st[1]] += st[2] * 2 * math.pi * plan.turns
+        elif abs(st[2] - here[st[1]]) > 1e-12:
+            total += profile_duration(abs(st[2] - here[st[1]]), plan.speed, plan.accel) + 0.1
+            here[st[1]] = st[2]
+    return total
+
+
+def test_the_planned_jig_time_is_the_time_of_the_steps_the_jig_runs(plans):
+    # the gyro's time model once counted three rests per posed pair (the protocol runs two),
+    # and an accelerometer move between a servo's turns once went a revolution the long way
+    gyro, plan = plans
+    assert gyro.jig_time_s == pytest.approx(_sequence_time(gyro), rel=1e-12)
+    assert plan.jig_time_s == pytest.approx(_sequence_time(plan), rel=1e-12)
+    _, _, moves, _ = walk(plan)
+    assert max(abs(b - a) for _, a, b in moves) <= math.pi + 1e-9
+
+
+def test_a_turn_after_a_pose_move_has_still_time_before_it(plans):
+    # the turn's rest-to-rest window reaches 0.15 s back before the motion: it must not read
+    # the moved servo's last settling ticks
+    for plan in plans:
+        seq = protocol_sequence(plan)
+        for k, st in enumerate(seq[1:], start=1):
+            if st[0] == "rotate":
+                assert seq[k - 1][0] in ("rest", "still"), f"step {k} turns right after a move"
+                if seq[k - 1][0] == "still":
+                    assert seq[k - 1][1] >= 0.15 + 0.03
