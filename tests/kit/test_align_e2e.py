@@ -30,7 +30,8 @@ SEED = 7
 @pytest.fixture(scope="module")
 def aligned_run(tmp_path_factory):
     return _once(tmp_path_factory, "calibrate-aligned", lambda d: main(
-        ["calibrate", "--sim", "--sim-seed", str(SEED), "--align-gyro-to-accel", "--out", str(d), "--no-report"]))
+        ["calibrate", "--sim", "--sim-seed", str(SEED), "--align-gyro-to-accel",
+         "--out", str(d), "--no-report"]))
 
 
 def test_aligned_matrix_is_the_true_gyro_calibration_in_the_accelerometer_frame(aligned_run):
