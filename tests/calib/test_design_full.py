@@ -106,8 +106,8 @@ def test_the_design_s_specific_forces_match_the_independent_generator():
     f_win, f_rest, basis = _design_forces(np.eye(3), u, pose, poses, grav, None)
     assert basis.shape == (3, 3)
     rest_poses = [np.zeros(3)] * 7
-    for _, moved, angle in poses:
-        rest_poses += [np.where(np.arange(3) == moved, angle, 0.0)] * 3
+    for _, moved, angle in poses:  # a posed pair's two turns, a rest before each
+        rest_poses += [np.where(np.arange(3) == moved, angle, 0.0)] * 2
     rest_poses += [np.where(np.arange(3) == m, a, 0.0) for m, a in grav]
     links = [np.eye(3)[j] for j in range(3)]
     obs = gsens_observations(np.eye(3), np.zeros(3), np.eye(3), links, np.eye(3), sched,
