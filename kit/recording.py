@@ -582,7 +582,7 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_col: in
     return out
 
 
-def _numpy_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
+def _numpy_parse(block: bytes, empty_col: int | None, ncols: int) -> np.ndarray | None:
     """A block through ``numpy.loadtxt`` (its C reader); None if it rejects the block.
 
     Empty fields are read as NaN (only column ``empty_col`` may hold one: :func:`_parse_block`
@@ -597,7 +597,7 @@ def _numpy_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
         return None
 
 
-def _pandas_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
+def _pandas_parse(block: bytes, empty_col: int | None, ncols: int) -> np.ndarray | None:
     """A block through pandas' C parser; None if it rejects the block.
 
     Only an empty field is read as missing (NaN), quotes are ordinary characters and no column
@@ -618,25 +618,36 @@ def _pandas_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
     return df.to_numpy(dtype=np.float64)
 
 
+def _decimal_parse(block: bytes, empty_col: int | None, ncols: int) -> np.ndarray | None:
+    """A block through the vectorised decimal parser (:mod:`gyrocal.kit.decimal_csv`, numpy
+    alone, exact: every value equals ``float`` of its text); a block of anything else
+    (spaces, ``inf``, many exponents) goes to :func:`_numpy_parse`."""
+    from gyrocal.kit.decimal_csv import parse_plain_decimal
+
+    out = parse_plain_decimal(block, ncols, empty_col)
+    return _numpy_parse(block, empty_col, ncols) if out is None else out
+
+
 #: The block parsers by name (``GYROCAL_CSV_PARSER``); ``auto`` takes pandas when it is
-#: installed (the ``fast`` extra) and the file is at least :data:`FAST_MIN_BYTES`.
-PARSERS = {"numpy": _numpy_parse, "pandas": _pandas_parse}
+#: installed (the ``fast`` extra) and the file is at least :data:`FAST_MIN_BYTES`, else the
+#: vectorised decimal parser (``decimal``); ``numpy`` is ``numpy.loadtxt`` alone.
+PARSERS = {"decimal": _decimal_parse, "numpy": _numpy_parse, "pandas": _pandas_parse}
 #: Smallest file worth importing pandas for (its import costs about 0.4 CPU s, the time numpy
 #: takes for some 300 000 rows; pandas saves about 0.9 CPU s per million).
 FAST_MIN_BYTES = 16 << 20
 
 
-def _choose_parser(size: int) -> Callable[[bytes, int | None], np.ndarray | None]:
+def _choose_parser(size: int) -> Callable[[bytes, int | None, int], np.ndarray | None]:
     """The block parser for a file of ``size`` bytes (see :data:`PARSERS`)."""
     import importlib.util
 
     name = os.environ.get("GYROCAL_CSV_PARSER", "auto")
     if name == "auto":
         big = size >= FAST_MIN_BYTES
-        name = "pandas" if big and importlib.util.find_spec("pandas") else "numpy"
+        name = "pandas" if big and importlib.util.find_spec("pandas") else "decimal"
     if name not in PARSERS:
         raise InputError(
-            f"GYROCAL_CSV_PARSER is {_excerpt(name)}; use auto, numpy or pandas"
+            f"GYROCAL_CSV_PARSER is {_excerpt(name)}; use auto, decimal, numpy or pandas"
         )
     if name == "pandas" and importlib.util.find_spec("pandas") is None:
         raise InputError(
@@ -648,11 +659,12 @@ def _choose_parser(size: int) -> Callable[[bytes, int | None], np.ndarray | None
 
 def _parse_block(
     block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_col: int | None,
-    parse: Callable[[bytes, int | None], np.ndarray | None] = _numpy_parse,
+    parse: Callable[[bytes, int | None, int], np.ndarray | None] = _decimal_parse,
 ) -> np.ndarray:
     """Parse a block of whole lines into an ``(n, ncols)`` array.
 
-    A C parser (``parse``: numpy's or pandas') takes the block first; anything it rejects, a
+    A fast parser (``parse``: the vectorised decimal one, numpy's or pandas') takes the block
+    first; anything it rejects, a
     row count or comma count other than ``ncols`` fields per line, or a value out of domain
     sends the block to :func:`_parse_exact` for the located message.
     """
@@ -661,7 +673,7 @@ def _parse_block(
     fast = block
     if b"\r" in fast:
         fast = fast.replace(b"\r\n", b"\n")
-    out = parse(fast, empty_col)
+    out = parse(fast, empty_col, ncols)
     if (out is not None and out.shape == (nlines, ncols)
             and fast.count(b",") == nlines * (ncols - 1)):
         head = out if empty_col is None else np.delete(out, empty_col, axis=1)
