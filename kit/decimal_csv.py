@@ -50,10 +50,13 @@ _EXACT_INT = 1 << 53
 #: Longest field (bytes) read by the vectorised path (two 64-bit words); a longer one goes to
 #: ``float``.
 MAX_DIGITS = 16
+_ROW_SHIFT = 4  # log2(MAX_DIGITS)
 #: Most fields of a piece, as a fraction, worth converting one by one with ``float``; with more
 #: (a file written with exponents throughout) the caller's parser is faster.
 MAX_SPECIAL = 0.125
 _BIG_ENDIAN = sys.byteorder == "big"
+#: Word masks that clear a word's first k bytes (k = 0..8; its first byte is its lowest).
+_KEEP = np.array([((1 << 64) - 1) >> (8 * k) << (8 * k) for k in range(9)], dtype=np.uint64)
 #: Bytes parsed per pass; the temporaries are some 12 bytes per byte of text, so a piece of
 #: this size keeps them near 6 MiB whatever the block size.
 PIECE_BYTES = 1 << 19
@@ -99,19 +102,24 @@ def parse_plain_decimal(block: bytes, ncols: int, empty_col: int | None = None
     return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
 
 
-def _digits_value(win: np.ndarray) -> np.ndarray:
-    """Each row of ``win`` (``(n, 16)`` bytes) as the integer its digit bytes spell, any
-    other byte counting as a 0 digit, exact in int64.
+def _digits_value(win: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """Each row of ``win`` (``(n, 16)`` bytes, a field right-aligned) as the integer its
+    field's last ``length`` bytes spell, any byte other than a digit counting as a 0 digit,
+    exact in int64.
 
     The digits are combined eight bytes at a time in a 64-bit word, pairs into two-digit
     lanes, those into four- and eight-digit lanes (the usual SWAR reduction), so the work per
-    field is a few word operations rather than one per byte.
+    field is a few word operations rather than one per byte; the bytes before the field (the
+    previous field's) are masked off a word at a time.
     """
     d = win - np.uint8(ord("0"))
     d *= d < 10
     v = d.view(np.uint64)  # (n, 2): the first byte of each word is its most significant digit
     if _BIG_ENDIAN:
         v = v.byteswap()
+    drop = MAX_DIGITS - length  # bytes before the field: from the first word, then the second
+    v[:, 0] &= _KEEP[np.clip(drop, 0, 8)]
+    v[:, 1] &= _KEEP[np.clip(drop - 8, 0, 8)]
     v = (v * np.uint64(10) + (v >> np.uint64(8))) & np.uint64(0x00FF00FF00FF00FF)
     v = (v * np.uint64(100) + (v >> np.uint64(16))) & np.uint64(0x0000FFFF0000FFFF)
     v = (v * np.uint64(10000) + (v >> np.uint64(32))) & np.uint64(0x00000000FFFFFFFF)
@@ -158,19 +166,24 @@ def _parse_piece(buf: np.ndarray, block: bytes, offset: int, ncols: int,
     ap[:MAX_DIGITS] = _COMMA
     ap[MAX_DIGITS:] = buf
     win = sliding_window_view(ap, MAX_DIGITS)[sep]  # row i: the bytes before separator i
-    # digits of the field: the row's value modulo 10**length (earlier bytes add multiples)
-    mant = _digits_value(win) % POW10[np.minimum(length, MAX_DIGITS)]
+    mant = _digits_value(win, np.minimum(length, MAX_DIGITS))
     # the last point in the row, if inside the field: its distance from the end = places
-    dots = win[:, ::-1] == _DOT
-    places = dots.argmax(axis=1)
-    hasdot = dots[np.arange(nfields), places] & (places < length) & ~special
+    flat = np.flatnonzero(win == _DOT)  # row-major, so each row's points in order
+    rows = flat >> _ROW_SHIFT
+    lastof = np.ones(rows.size, dtype=bool)
+    lastof[:-1] = rows[1:] != rows[:-1]
+    last = np.full(nfields, -1, dtype=np.int64)
+    last[rows[lastof]] = flat[lastof] & (MAX_DIGITS - 1)
+    places = MAX_DIGITS - 1 - last
+    hasdot = (last >= 0) & (places < length) & ~special
     places[~hasdot] = 0
     neg = (buf[start] == _MINUS) & ~empty & ~special
     spec = np.flatnonzero(special)
     texts = [block[offset + start[i]:offset + sep[i]] for i in spec.tolist()]
     # every other minus sign or point of the buffer is a second one in some field
-    if (int(np.count_nonzero(hasdot)) + sum(t.count(b".") for t in texts) != n_dot
-            or int(np.count_nonzero(neg)) + sum(t.count(b"-") for t in texts) != n_minus):
+    joined = b",".join(texts)
+    if (int(np.count_nonzero(hasdot)) + joined.count(b".") != n_dot
+            or int(np.count_nonzero(neg)) + joined.count(b"-") != n_minus):
         return None
     if ((length - neg - hasdot == 0) & ~empty & ~special).any():  # "-", ".", "-."
         return None
