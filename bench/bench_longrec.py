@@ -267,8 +267,7 @@ def main(argv: list[str]) -> None:
              *(f"speed-up {PARSER_COLUMNS[n]}" for n in PARSER_COLUMNS),
              "decimal CPU s / M rows"], read_rows,
             "Reading a Recording v1 (imu.csv + encoder.csv), each in a fresh process "
-            "(CPU s user+system / peak RSS); the default is decimal without pandas, pandas "
-            "with it for files of 16 MiB or more",
+            "(CPU s user+system / peak RSS); the default is decimal",
         )
         print_table(
             ["recording", "simulate-recording", f"estimate {ESTIMATE_BEFORE[0]}", "estimate",

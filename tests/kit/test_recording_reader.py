@@ -294,21 +294,16 @@ def test_a_fast_parser_accepts_exactly_what_python_float_accepts(tmp_path, monke
 
 
 def test_the_parser_choice(monkeypatch):
-    """auto: the vectorised decimal parser for small files (no pandas import), pandas for large
-    ones when installed, else the decimal parser again."""
-    import importlib.util
-
+    """auto: the vectorised decimal parser, whether pandas is installed or not; the others
+    when asked for by name."""
     monkeypatch.delenv("GYROCAL_CSV_PARSER", raising=False)
-    assert recording._choose_parser(100) is recording._decimal_parse
-    have_pandas = importlib.util.find_spec("pandas") is not None
-    big = recording._choose_parser(recording.FAST_MIN_BYTES)
-    assert big is (recording._pandas_parse if have_pandas else recording._decimal_parse)
+    assert recording._choose_parser() is recording._decimal_parse
     monkeypatch.setenv("GYROCAL_CSV_PARSER", "numpy")
-    assert recording._choose_parser(1 << 40) is recording._numpy_parse
+    assert recording._choose_parser() is recording._numpy_parse
     monkeypatch.setenv("GYROCAL_CSV_PARSER", "fastest")
     with pytest.raises(InputError, match="GYROCAL_CSV_PARSER is 'fastest'; use auto, decimal, "
                                          "numpy or pandas"):
-        recording._choose_parser(1)
+        recording._choose_parser()
 
 
 def test_gyrocal_style_files_never_reach_loadtxt(tmp_path, monkeypatch):
