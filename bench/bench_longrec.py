@@ -148,7 +148,10 @@ def _same_output(a: Path, b: Path) -> str:
     x, y = json.loads(a.read_text()), json.loads(b.read_text())
     if sorted(x) != sorted(y) or len(x["t"]) != len(y["t"]):
         return "different rows"
-    return f"{max(float(np.max(np.abs(np.subtract(x[k], y[k])), initial=0)) for k in x):.1e}"
+    # as floats: the still flags are booleans, which numpy does not subtract
+    diffs = (np.abs(np.subtract(np.asarray(x[k], dtype=float), np.asarray(y[k], dtype=float)))
+             for k in x)
+    return f"{max(float(np.max(d, initial=0)) for d in diffs):.1e}"
 
 
 def _track_pair(rec: Path, before: list[str] | None, work: Path) -> list[str]:
