@@ -7,9 +7,9 @@ are a column) with enough turns and long rests to last 1, 10 and 60 minutes at 2
 and 60 minutes at 1 kHz. Each measurement runs in its own process (CPU seconds user+system and
 peak resident memory from ``getrusage`` of the child):
 
-* the reader before issue 16 (``kit/recording.py`` of commit ``BEFORE``, from git history), the
-  numpy block reader (``GYROCAL_CSV_PARSER=numpy``) and the default (pandas' parser when the
-  ``fast`` extra is installed and the file is large);
+* the reader before issue 16 (``kit/recording.py`` of commit ``BEFORE``, from git history) and
+  the block reader with each parser (``GYROCAL_CSV_PARSER``): numpy.loadtxt, the vectorised
+  decimal parser (numpy alone, the default without pandas) and pandas' (``fast`` extra);
 * ``gyrocal estimate`` before its memory fix (today's code with the modules
   :data:`ESTIMATE_BEFORE` names as they were at its commit) and now;
 * ``gyrocal estimate``, ``noise --json`` (streamed), ``track --json`` and ``report`` with the
@@ -27,6 +27,7 @@ pass``, medians of 5 runs.
 from __future__ import annotations
 
 import importlib.util
+import math
 import os
 import shutil
 import statistics
@@ -47,6 +48,9 @@ ESTIMATE_BEFORE = ("bb53b79", ("calib/timebase.py",))
 #: whole and the JSON document built whole) and the modules that change touched.
 TRACK_BEFORE = ("741f28b", ("kit/recording.py", "calib/stationarity.py", "kit/fileio.py",
                             "kit/tracking.py", "kit/commands/track.py"))
+#: The block parsers measured (``GYROCAL_CSV_PARSER``) and their column names.
+PARSER_COLUMNS = {"numpy": "numpy.loadtxt", "decimal": "decimal (numpy alone)",
+                  "pandas": "pandas"}
 SIZES_FULL = ((1, 200), (10, 200), (60, 200), (10, 1000), (60, 1000))
 SIZES_QUICK = ((1, 200), (10, 200))
 #: Longest recording ``report`` is run on, minutes.
@@ -144,7 +148,10 @@ def _same_output(a: Path, b: Path) -> str:
     x, y = json.loads(a.read_text()), json.loads(b.read_text())
     if sorted(x) != sorted(y) or len(x["t"]) != len(y["t"]):
         return "different rows"
-    return f"{max(float(np.max(np.abs(np.subtract(x[k], y[k])), initial=0)) for k in x):.1e}"
+    # as floats: the still flags are booleans, which numpy does not subtract
+    diffs = (np.abs(np.subtract(np.asarray(x[k], dtype=float), np.asarray(y[k], dtype=float)))
+             for k in x)
+    return f"{max(float(np.max(d, initial=0)) for d in diffs):.1e}"
 
 
 def _track_pair(rec: Path, before: list[str] | None, work: Path) -> list[str]:
@@ -229,18 +236,17 @@ def main(argv: list[str]) -> None:
             mb = sum(f.stat().st_size for f in rec.iterdir()) / 2**20
             n_rows = sum(sum(1 for _ in open(rec / f)) - 1 for f in ("imu.csv", "encoder.csv"))
             label = f"{minutes} min @ {odr} Hz"
-            np_cpu, np_rss = _reader(rec, work, "new", "numpy")
-            new_cpu, new_rss = _reader(rec, work, "new", None)
-            if have_old:
-                old_cpu, old_rss = _reader(rec, work, "old", None)
-                old_cols = [f"{old_cpu:.2f} s / {old_rss:.0f} MiB", f"{old_cpu / np_cpu:.1f}x",
-                            f"{old_cpu / new_cpu:.1f}x"]
-            else:
-                old_cols = ["(no git)", "", ""]
-            read_rows.append([label, f"{mb:.0f}", n_rows, *old_cols[:1],
-                              f"{np_cpu:.2f} s / {np_rss:.0f} MiB",
-                              f"{new_cpu:.2f} s / {new_rss:.0f} MiB", *old_cols[1:],
-                              f"{new_cpu / n_rows * 1e6:.2f}"])
+            readers = {name: _reader(rec, work, "new", name) for name in PARSER_COLUMNS
+                       if name != "pandas" or have_fast}
+            old_cpu = _reader(rec, work, "old", None)[0] if have_old else math.nan
+            read_rows.append([label, f"{mb:.0f}", n_rows,
+                              "(no git)" if not have_old else f"{old_cpu:.2f} s",
+                              *(f"{cpu:.2f} s / {rss:.0f} MiB" if name in readers else "(absent)"
+                                for name in PARSER_COLUMNS for cpu, rss in
+                                [readers.get(name, (math.nan, math.nan))]),
+                              *(f"{old_cpu / readers[name][0]:.1f}x" if name in readers
+                                else "" for name in PARSER_COLUMNS),
+                              f"{readers['decimal'][0] / n_rows * 1e6:.2f}"])
             cells = [label, _cell(*sim)]
             cells.append(_cell(*_command([*before, "estimate", str(rec)])) if before
                          else "(no git)")
@@ -259,11 +265,12 @@ def main(argv: list[str]) -> None:
             else:
                 shutil.rmtree(rec)
         print_table(
-            ["recording", "MiB", "CSV rows", f"reader {BEFORE} CPU/peak", "numpy blocks",
-             "default" + (" (pandas)" if have_fast else " (numpy)"), "speed-up numpy",
-             "speed-up default", "default CPU s / M rows"], read_rows,
+            ["recording", "MiB", "CSV rows", f"reader {BEFORE} CPU",
+             *(f"{PARSER_COLUMNS[n]} CPU/peak" for n in PARSER_COLUMNS),
+             *(f"speed-up {PARSER_COLUMNS[n]}" for n in PARSER_COLUMNS),
+             "decimal CPU s / M rows"], read_rows,
             "Reading a Recording v1 (imu.csv + encoder.csv), each in a fresh process "
-            "(CPU s user+system / peak RSS)",
+            "(CPU s user+system / peak RSS); the default is decimal",
         )
         print_table(
             ["recording", "simulate-recording", f"estimate {ESTIMATE_BEFORE[0]}", "estimate",

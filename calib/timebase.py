@@ -24,11 +24,12 @@ least-squares fit would hold about ten arrays of that length at once.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TimebaseFit", "refit_sample_times"]
+__all__ = ["TimebaseFit", "median_step", "refit_sample_times"]
 
 
 @dataclass(frozen=True)
@@ -78,9 +79,7 @@ def refit_sample_times(
     n = t.size
     if n < 50:
         return t, TimebaseFit(False, float("nan"), float("nan"), "too few samples")
-    d = np.subtract(t[1:], t[:-1])
-    period = float(np.median(d, overwrite_input=True))  # d is only needed for its median
-    del d
+    period = median_step(t, _BLOCK)
     if not period > 0:
         return t, TimebaseFit(False, period, float("nan"), "timestamps do not increase")
     out = _sample_indices(t, period)
@@ -103,6 +102,80 @@ def refit_sample_times(
 #: Samples handled at once by the refit's passes (bounded temporaries: the refit holds only its
 #: input and its output, whatever the stream's length).
 _BLOCK = 1 << 18
+
+
+def median_step(t: np.ndarray, block: int = _BLOCK) -> float:
+    """``numpy.median(numpy.diff(t))`` exactly, holding some ``block`` steps at a time.
+
+    Up to ``block`` steps the median is taken directly; beyond, the k-th smallest step is
+    selected by pivoting: the steps between two bounds are counted a block at a time, a pivot
+    is the median of every 64th of them, and the bounds close on the side that holds rank k
+    until at most ``block`` steps remain between them (or the pivot is the answer, as it is at
+    once for a fixed-rate stream, whose steps are a few distinct values).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, N >= 2.
+    block : int
+        Steps held at once.
+
+    Returns
+    -------
+    float
+        The median step, the mean of the two middle steps for an even number of steps (as
+        ``numpy.median``).
+    """
+    t = np.asarray(t, dtype=float)
+    m = t.size - 1
+    if m < 1:
+        raise ValueError("median_step needs at least two times")
+    if m <= block:
+        return float(np.median(np.subtract(t[1:], t[:-1])))
+    lo_k, hi_k = (m - 1) // 2, m // 2
+    lo_v = _kth_step(t, lo_k, block)
+    if hi_k == lo_k:
+        return lo_v
+    return float(np.mean([lo_v, _kth_step(t, hi_k, block)]))
+
+
+def _kth_step(t: np.ndarray, k: int, block: int) -> float:
+    """The ``k``-th smallest (from 0) of the steps of ``t``, holding ``block`` steps at once."""
+    m = t.size - 1
+
+    def inside(lo: float, hi: float) -> Iterator[np.ndarray]:
+        for a in range(0, m, block):
+            b = min(a + block, m)
+            d = np.subtract(t[a + 1:b + 1], t[a:b])
+            yield d[(d > lo) & (d <= hi)]
+
+    lo, hi, below = -np.inf, np.inf, 0  # the step lies in (lo, hi]; `below` steps are <= lo
+    while True:
+        kept: list[np.ndarray] | None = []
+        sample = []
+        count = 0
+        for s in inside(lo, hi):
+            count += s.size
+            sample.append(s[::64])
+            if kept is not None and count <= block:
+                kept.append(s)
+            else:
+                kept = None
+        if kept is not None:
+            v = np.concatenate(kept)
+            return float(np.partition(v, k - below)[k - below])
+        pivot = float(np.median(np.concatenate(sample)))
+        lt = le = 0
+        for s in inside(lo, hi):
+            lt += int(np.count_nonzero(s < pivot))
+            le += int(np.count_nonzero(s <= pivot))
+        if below + lt <= k < below + le:
+            return pivot
+        if k < below + lt:
+            hi = float(np.nextafter(pivot, -np.inf))
+        else:
+            below += le
+            lo = pivot
 
 
 def _sample_indices(t: np.ndarray, period: float) -> np.ndarray | None:

@@ -45,6 +45,14 @@ def save_png(
 
     buf = io.BytesIO()
     try:
+        # A figure with a layout engine (constrained layout) is laid out at the saving dpi
+        # once, then saved without the engine: savefig would otherwise draw it twice, a dry
+        # run for the layout and the real one (issue 16: half of a short report's time).
+        engine = fig.get_layout_engine()
+        if engine is not None:
+            fig.set_dpi(dpi)
+            engine.execute(fig)
+            fig.set_layout_engine(None)
         fig.savefig(buf, format="png", dpi=dpi)
     finally:
         plt.close(fig)

@@ -330,9 +330,10 @@ class Recording:
 # device is refused before a byte is read, so nothing can block), every file has a size cap, a
 # line may not run longer than MAX_LINE_BYTES, a NUL byte is refused where it is met, and a
 # message quotes at most EXCERPT_CHARS of a row. Parsing (issue 16): blocks of about
-# BLOCK_BYTES go through a C parser, pandas' when the ``fast`` extra is installed and the file
-# is large, else numpy's (numpy.loadtxt), see PARSERS; a block it rejects is parsed again line
-# by line by the exact checker, which names the file, line and field of the fault.
+# BLOCK_BYTES go through a fast parser, the vectorised decimal one (kit.decimal_csv, numpy
+# alone) unless GYROCAL_CSV_PARSER names numpy.loadtxt or pandas, see PARSERS; a block it
+# rejects is parsed again line by line by the exact checker, which names the file, line and
+# field of the fault.
 
 #: Largest manifest.json read, bytes.
 MAX_MANIFEST_BYTES = 1 << 20
@@ -582,7 +583,7 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_col: in
     return out
 
 
-def _numpy_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
+def _numpy_parse(block: bytes, empty_col: int | None, ncols: int) -> np.ndarray | None:
     """A block through ``numpy.loadtxt`` (its C reader); None if it rejects the block.
 
     Empty fields are read as NaN (only column ``empty_col`` may hold one: :func:`_parse_block`
@@ -597,7 +598,7 @@ def _numpy_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
         return None
 
 
-def _pandas_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
+def _pandas_parse(block: bytes, empty_col: int | None, ncols: int) -> np.ndarray | None:
     """A block through pandas' C parser; None if it rejects the block.
 
     Only an empty field is read as missing (NaN), quotes are ordinary characters and no column
@@ -618,25 +619,34 @@ def _pandas_parse(block: bytes, empty_col: int | None) -> np.ndarray | None:
     return df.to_numpy(dtype=np.float64)
 
 
-#: The block parsers by name (``GYROCAL_CSV_PARSER``); ``auto`` takes pandas when it is
-#: installed (the ``fast`` extra) and the file is at least :data:`FAST_MIN_BYTES`.
-PARSERS = {"numpy": _numpy_parse, "pandas": _pandas_parse}
-#: Smallest file worth importing pandas for (its import costs about 0.4 CPU s, the time numpy
-#: takes for some 300 000 rows; pandas saves about 0.9 CPU s per million).
-FAST_MIN_BYTES = 16 << 20
+def _decimal_parse(block: bytes, empty_col: int | None, ncols: int) -> np.ndarray | None:
+    """A block through the vectorised decimal parser (:mod:`gyrocal.kit.decimal_csv`, numpy
+    alone, exact: every value equals ``float`` of its text); a block of anything else
+    (spaces, ``inf``, many exponents) goes to :func:`_numpy_parse`."""
+    from gyrocal.kit.decimal_csv import parse_plain_decimal
+
+    out = parse_plain_decimal(block, ncols, empty_col)
+    return _numpy_parse(block, empty_col, ncols) if out is None else out
 
 
-def _choose_parser(size: int) -> Callable[[bytes, int | None], np.ndarray | None]:
-    """The block parser for a file of ``size`` bytes (see :data:`PARSERS`)."""
+#: The block parsers by name (``GYROCAL_CSV_PARSER``); ``auto`` is the vectorised decimal
+#: parser (``decimal``, numpy alone): on an hour at 1 kHz it reads as fast as pandas' C parser
+#: with its import, without pandas' 35 MiB of resident memory (issue 16, ``python -m bench
+#: longrec``); ``numpy`` is ``numpy.loadtxt`` alone, ``pandas`` pandas' parser (the ``fast``
+#: extra).
+PARSERS = {"decimal": _decimal_parse, "numpy": _numpy_parse, "pandas": _pandas_parse}
+
+
+def _choose_parser() -> Callable[[bytes, int | None, int], np.ndarray | None]:
+    """The block parser (see :data:`PARSERS`)."""
     import importlib.util
 
     name = os.environ.get("GYROCAL_CSV_PARSER", "auto")
     if name == "auto":
-        big = size >= FAST_MIN_BYTES
-        name = "pandas" if big and importlib.util.find_spec("pandas") else "numpy"
+        name = "decimal"
     if name not in PARSERS:
         raise InputError(
-            f"GYROCAL_CSV_PARSER is {_excerpt(name)}; use auto, numpy or pandas"
+            f"GYROCAL_CSV_PARSER is {_excerpt(name)}; use auto, decimal, numpy or pandas"
         )
     if name == "pandas" and importlib.util.find_spec("pandas") is None:
         raise InputError(
@@ -648,11 +658,12 @@ def _choose_parser(size: int) -> Callable[[bytes, int | None], np.ndarray | None
 
 def _parse_block(
     block: bytes, nlines: int, first: int, path: Path, ncols: int, empty_col: int | None,
-    parse: Callable[[bytes, int | None], np.ndarray | None] = _numpy_parse,
+    parse: Callable[[bytes, int | None, int], np.ndarray | None] = _decimal_parse,
 ) -> np.ndarray:
     """Parse a block of whole lines into an ``(n, ncols)`` array.
 
-    A C parser (``parse``: numpy's or pandas') takes the block first; anything it rejects, a
+    A fast parser (``parse``: the vectorised decimal one, numpy's or pandas') takes the block
+    first; anything it rejects, a
     row count or comma count other than ``ncols`` fields per line, or a value out of domain
     sends the block to :func:`_parse_exact` for the located message.
     """
@@ -661,7 +672,7 @@ def _parse_block(
     fast = block
     if b"\r" in fast:
         fast = fast.replace(b"\r\n", b"\n")
-    out = parse(fast, empty_col)
+    out = parse(fast, empty_col, ncols)
     if (out is not None and out.shape == (nlines, ncols)
             and fast.count(b",") == nlines * (ncols - 1)):
         head = out if empty_col is None else np.delete(out, empty_col, axis=1)
@@ -685,7 +696,7 @@ def _csv_blocks(
     import numpy as np
 
     last_t = -math.inf
-    parse = _choose_parser(path.stat().st_size if path.is_file() else 0)
+    parse = _choose_parser()
     for first, block, nlines in _lines(path, header, max_bytes, warnings):
         arr = _parse_block(block, nlines, first, path, ncols, empty_col, parse)
         if arr.shape[0] == 0:
@@ -839,11 +850,11 @@ def read_segments(root: Path, warnings: list[str]) -> tuple[Segment, ...]:
 def load_recording(path: str | os.PathLike[str]) -> Recording:
     """Read a Recording v1 directory.
 
-    The numeric files are parsed in blocks by a C parser (pandas' with the ``fast`` extra for
-    files of :data:`FAST_MIN_BYTES` or more, else numpy's; ``GYROCAL_CSV_PARSER=numpy|pandas``
-    forces one) straight into one float64 array per column (no per-row Python objects), so
-    the memory beyond the returned arrays is one block; :func:`iter_imu` streams the samples
-    instead for one-pass analyses.
+    The numeric files are parsed in blocks by the vectorised decimal parser
+    (:mod:`gyrocal.kit.decimal_csv`, numpy alone; ``GYROCAL_CSV_PARSER=numpy|pandas`` forces
+    numpy.loadtxt or pandas' C parser) straight into one float64 array per column (no
+    per-row Python objects), so the memory beyond the returned arrays is one block;
+    :func:`iter_imu` streams the samples instead for one-pass analyses.
 
     Parameters
     ----------

@@ -286,6 +286,7 @@ def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
     run of samples is the angle change across the run divided by its length: the reference a
     window needs (DESIGN.md, "What makes the estimate right", item 2). Axes: :func:`turn_axis`.
     """
+    from gyrocal.calib.timebase import median_step
     from gyrocal.kit.report_plots import encoder_rate
 
     n = rec.imu_t.size
@@ -293,7 +294,7 @@ def reference_segments(rec: Any, cal: Any) -> tuple[Reference, list[str]]:
     notes: list[str] = []
     if n < 2:
         return Reference(runs), notes
-    dt = float(np.median(np.diff(rec.imu_t)))
+    dt = median_step(rec.imu_t)
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue

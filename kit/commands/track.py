@@ -22,7 +22,7 @@ from gyrocal.kit.errors import InputError, OutputExistsError
 JSON_MAX_ROWS = 200_000
 
 #: Samples handed to the tracker at a time on a replay (bounds its working memory).
-REPLAY_CHUNK = 65_536
+REPLAY_CHUNK = 16_384
 
 #: The --live bias random walk when none is given, rad/s/√s: conservative for consumer MEMS gyros.
 DEFAULT_RATE_RANDOM_WALK = 1e-4
@@ -264,6 +264,7 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
     memory). Returns ``(tracker, ReplaySource, name)``; the caller closes the source."""
     import numpy as np
 
+    from gyrocal.calib.timebase import median_step
     from gyrocal.kit.tracking import (
         ReplaySource,
         StillPlan,
@@ -284,9 +285,7 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
         n = imu.n
         if n < 2:
             raise InputError(f"{rec.path}: only {n} gyro samples")
-        d = np.diff(rec.imu_t)
-        odr = 1.0 / float(np.median(d, overwrite_input=True))
-        del d
+        odr = 1.0 / median_step(rec.imu_t)  # a block of steps at a time
         if args.tempco is None:
             args.tempco = imu.temperature_complete
         if args.tempco and not imu.temperature_complete:
@@ -649,11 +648,16 @@ def run(args: argparse.Namespace) -> int:
         with replay:
             keep, json_sel = _kept_rows(args, replay.t)
             # in pieces: the tracker's working arrays stay a piece long (the estimates are the
-            # same however the samples are cut), the readings read back from the temporary
-            # file, the reference rates and still flags made per piece
+            # same however the samples are cut, to rounding), the readings read back from the
+            # temporary file, the reference rates and still flags made per piece
             tr = run_tracker(tracker, replay.batches(REPLAY_CHUNK, keep), rows=keep)
-            if not args.causal:
-                tr = smooth_tracked(tracker, tr, replay.kept_temperature(), at_rows=True)
+            kept_temperature = replay.kept_temperature()
+        # the replay's times (8 bytes a sample) and encoder readings go before the smoother's
+        # working arrays come: the rows kept are all that is shown
+        del replay
+        if not args.causal:
+            tr = smooth_tracked(tracker, tr, kept_temperature, at_rows=True)
+        del kept_temperature
         notes += tracker_notes(tracker)
     for note in notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)

@@ -78,3 +78,25 @@ def test_refit_holds_no_stream_sized_temporaries():
         tracemalloc.stop()
     assert fit.applied
     assert peak < 1.2 * t.nbytes + 24 * 2**20, f"peak {peak / 2**20:.0f} MiB"
+
+
+@pytest.mark.parametrize("kind", ["uniform", "grid", "few values", "outliers"])
+@pytest.mark.parametrize("block", [7, 64, 100_000])
+def test_median_step_equals_numpy_median_of_the_steps(kind, block):
+    """The bounded-memory median (issue 16: track and the refit no longer hold every step)
+    is numpy.median(numpy.diff(t)) exactly, blocks smaller and larger than the stream."""
+    from gyrocal.calib.timebase import median_step
+
+    rng = np.random.default_rng(["uniform", "grid", "few values", "outliers"].index(kind))
+    for n in (2, 3, 50, 1001, 4000):
+        if kind == "uniform":
+            d = rng.uniform(0, 1, n - 1)
+        elif kind == "grid":
+            d = np.round(rng.normal(1e-3, 1e-6, n - 1), 9)
+        elif kind == "few values":
+            d = rng.choice([1e-3, 2e-3, 0.0, 5e-4], n - 1)
+        else:
+            d = np.full(n - 1, 5e-3)
+            d[rng.integers(0, n - 1, 5)] = rng.uniform(0, 10, 5)
+        t = 100.0 + np.concatenate([[0.0], np.cumsum(d)])
+        assert median_step(t, block) == float(np.median(np.diff(t)))

@@ -35,7 +35,7 @@ def _written(tmp_path, temperature):
     return t, rate, accel
 
 
-@pytest.mark.parametrize("parser", ["numpy", "pandas"])
+@pytest.mark.parametrize("parser", ["decimal", "numpy", "pandas"])
 @pytest.mark.parametrize("temperature", [None, 31.5])
 def test_accel_columns_round_trip_with_either_parser(tmp_path, monkeypatch, parser, temperature):
     if parser == "pandas":

@@ -32,9 +32,18 @@ def make_rows(n, seed=0, *, empty_temp_every=7):
     temp[::empty_temp_every] = np.nan
     lines = []
     for i in range(n):
-        tt = "" if np.isnan(temp[i]) else repr(float(temp[i]))
-        lines.append(",".join([repr(float(t[i])), *(repr(float(v)) for v in rate[i]), tt]))
-    return lines, t, rate, temp
+        # mostly as gyrocal writes them (fixed and %g, exponents included), one row in ten as
+        # Python's repr (17 significant digits), so the vectorised decimal parser reads most
+        # fields and hands the rest to float()
+        if i % 10 == 3:
+            tt = "" if np.isnan(temp[i]) else repr(float(temp[i]))
+            fields = [repr(float(t[i])), *(repr(float(v)) for v in rate[i]), tt]
+        else:
+            tt = "" if np.isnan(temp[i]) else f"{temp[i]:.4f}"
+            fields = [f"{t[i]:.9f}", *(f"{v:.10g}" for v in rate[i]), tt]
+        lines.append(",".join(fields))
+    vals = np.array([[float(f) if f else np.nan for f in x.split(",")] for x in lines])
+    return lines, vals[:, 0], vals[:, 1:4], vals[:, 4]
 
 
 def write_rec(root, imu_lines, *, enc_lines=("0.0,1,0.0", "0.5,1,0.25"), eol="\n",
@@ -50,12 +59,15 @@ def write_rec(root, imu_lines, *, enc_lines=("0.0,1,0.0", "0.5,1,0.25"), eol="\n
 
 
 @pytest.fixture(
-    params=[(200, "numpy"), (1 << 22, "numpy"), (200, "pandas"), (1 << 22, "pandas")],
-    ids=["tiny-blocks", "default-blocks", "tiny-blocks-pandas", "default-blocks-pandas"],
+    params=[(200, "decimal"), (1 << 22, "decimal"), (200, "numpy"), (1 << 22, "numpy"),
+            (200, "pandas"), (1 << 22, "pandas")],
+    ids=["tiny-blocks", "default-blocks", "tiny-blocks-loadtxt", "default-blocks-loadtxt",
+         "tiny-blocks-pandas", "default-blocks-pandas"],
 )
 def block_bytes(request, monkeypatch):
-    """Every reader test on small and default blocks, through numpy's and (with the ``fast``
-    extra) pandas' C parser."""
+    """Every reader test on small and default blocks, through the vectorised decimal parser
+    (the default without pandas), numpy.loadtxt and (with the ``fast`` extra) pandas' C
+    parser."""
     size, parser = request.param
     if parser == "pandas":
         pytest.importorskip("pandas")
@@ -251,7 +263,7 @@ ODD_FIELDS = ["1_000", "0x10", " 1.5", "1.5 ", "+1", "1e5", "1.", ".", "-", "1d5
               "1.5\t", "", "#1", "1#"]
 
 
-@pytest.mark.parametrize("parser", ["numpy", "pandas"])
+@pytest.mark.parametrize("parser", ["decimal", "numpy", "pandas"])
 @pytest.mark.parametrize("column", [1, 4], ids=["gx", "temp"])
 @pytest.mark.parametrize("field", ODD_FIELDS)
 def test_a_fast_parser_accepts_exactly_what_python_float_accepts(tmp_path, monkeypatch, parser,
@@ -282,20 +294,39 @@ def test_a_fast_parser_accepts_exactly_what_python_float_accepts(tmp_path, monke
 
 
 def test_the_parser_choice(monkeypatch):
-    """auto: numpy for small files (no pandas import), pandas for large ones when installed."""
-    import importlib.util
-
+    """auto: the vectorised decimal parser, whether pandas is installed or not; the others
+    when asked for by name."""
     monkeypatch.delenv("GYROCAL_CSV_PARSER", raising=False)
-    assert recording._choose_parser(100) is recording._numpy_parse
-    have_pandas = importlib.util.find_spec("pandas") is not None
-    big = recording._choose_parser(recording.FAST_MIN_BYTES)
-    assert big is (recording._pandas_parse if have_pandas else recording._numpy_parse)
+    assert recording._choose_parser() is recording._decimal_parse
     monkeypatch.setenv("GYROCAL_CSV_PARSER", "numpy")
-    assert recording._choose_parser(1 << 40) is recording._numpy_parse
+    assert recording._choose_parser() is recording._numpy_parse
     monkeypatch.setenv("GYROCAL_CSV_PARSER", "fastest")
-    with pytest.raises(InputError,
-                       match="GYROCAL_CSV_PARSER is 'fastest'; use auto, numpy or pandas"):
-        recording._choose_parser(1)
+    with pytest.raises(InputError, match="GYROCAL_CSV_PARSER is 'fastest'; use auto, decimal, "
+                                         "numpy or pandas"):
+        recording._choose_parser()
+
+
+def test_gyrocal_style_files_never_reach_loadtxt(tmp_path, monkeypatch):
+    """Rows as gyrocal writes them (``%.9f``, ``%.10g`` with its exponents, ``%.4f``, an empty
+    temperature) are read by the vectorised parser alone, every value equal to float()."""
+    def refuse(*_):
+        raise AssertionError("numpy.loadtxt was called")
+
+    monkeypatch.setattr(recording, "_numpy_parse", refuse)
+    monkeypatch.setenv("GYROCAL_CSV_PARSER", "decimal")
+    monkeypatch.setattr(recording, "BLOCK_BYTES", 1 << 14)
+    rng = np.random.default_rng(7)
+    n = 3000
+    t = np.cumsum(rng.uniform(0.0005, 0.002, n)) + 3000.0
+    rate = rng.normal(scale=[2e-4, 0.5, 30.0], size=(n, 3))
+    lines = [",".join([f"{t[i]:.9f}", *(f"{v:.10g}" for v in rate[i]),
+                       "" if i % 5 == 0 else f"{20 + i * 1e-3:.4f}"]) for i in range(n)]
+    assert sum("e" in x for x in lines) > 50  # %g's exponents are in the test
+    write_rec(tmp_path / "r", lines)
+    rec = load_recording(tmp_path / "r")
+    truth = np.array([[float(f) if f else np.nan for f in x.split(",")] for x in lines])
+    np.testing.assert_array_equal(np.column_stack([rec.imu_t, rec.imu_rate, rec.imu_temp]),
+                                  truth)
 
 
 def _with_accel(lines, rng):
