@@ -366,23 +366,17 @@ def run_document(path: Path, workdir: Path) -> DocRun:
 #: second ``--out`` of the same name fails as it would for the reader); the chains share no
 #: directory, so under pytest-xdist they run on different workers at once (``tests/conftest.py``
 #: hands them out first, in this order: the longest first). A document that needs a file of
-#: another chain fails, as it would for a reader who skipped that page, unless it says what such
-#: a reader runs first (:data:`SKIPPED_PAGE`); what one directory for all caught across chains
-#: (two documents writing one output) is checked by ``test_no_two_documents_write_one_output``.
+#: another chain fails, as it would for a reader who skipped that page; what one directory for
+#: all caught across chains (two documents writing one output) is checked by
+#: ``test_no_two_documents_write_one_output``.
 CHAINS: dict[str, tuple[str, ...]] = {
-    # running.md's calibrations, plate and verification; history.md reads running.md's run1
-    "running": ("hardware_docs/running.md", "hardware_docs/history.md",
+    # using.md and history.md read running.md's run1 and its gyrocal.toml
+    "running": ("hardware_docs/running.md", "hardware_docs/using.md", "hardware_docs/history.md",
                 "hardware_docs/formats.md", "hardware_docs/method.md"),
-    # using.md, after the calibration it tells a reader who skipped running.md to make
-    "using": ("hardware_docs/using.md",),
     "intro": ("README.md", "hardware_docs/README.md", "hardware_docs/bom.md",
               "hardware_docs/wiring.md", "hardware_docs/chips.md", "hardware_docs/mechanical.md",
               "hardware_docs/setup.md"),
 }
-#: What a page that builds on an earlier page's files tells a reader who skipped that page to
-#: run first (on whitespace-normalised text); run first when the page opens a chain.
-SKIPPED_PAGE = re.compile(r"If you skipped that page, make one on the emulated jig first with "
-                          r"`gyrocal ([^`]+)`")
 
 
 def chain_of(path: Path | str) -> str:
@@ -392,12 +386,6 @@ def chain_of(path: Path | str) -> str:
         if name in names:
             return chain
     raise AssertionError(f"{name} is in no chain: add it to tests.test_docs.CHAINS")
-
-
-def skipped_page_command(path: Path) -> list[str] | None:
-    """The ``gyrocal`` command ``path`` gives a reader who skipped the page before it, if any."""
-    found = SKIPPED_PAGE.search(" ".join(path.read_text(encoding="utf-8").split()))
-    return shlex.split(found.group(1)) if found else None
 
 
 def xdist_unit(nodeid: str) -> str | None:
@@ -434,46 +422,23 @@ class DocRunner:
         self.runs: dict[str, DocRun] = {}
         self.failures: dict[str, BaseException] = {}
 
-    def _once(self, key: str, run: Any) -> Any:
-        if key in self.failures:
-            raise self.failures[key]
-        if key not in self.runs:
-            try:
-                self.runs[key] = run()
-            except BaseException as exc:  # remember, so a second caller sees the same failure
-                self.failures[key] = exc
-                raise
-        return self.runs[key]
-
-    def _workdir(self, chain: str) -> Path:
-        """The chain's directory, after what its first page tells a reader who skipped the page
-        before it to run (:data:`SKIPPED_PAGE`)."""
-        if chain not in self.workdirs:
-            self.workdirs[chain] = self.factory.mktemp(f"docs-{chain}")
-        first = ROOT / CHAINS[chain][0]
-        argv = skipped_page_command(first)
-        if argv is not None:
-            def prepare() -> DocRun:
-                run = DocRun(self.workdirs[chain])
-                with _cwd(run.workdir):
-                    _run_gyrocal(argv, f"{_name(first)} (for a reader who skipped the page "
-                                 "before)", 0, run.log)
-                return run
-            self._once(f"{chain}: before {_name(first)}", prepare)
-        return self.workdirs[chain]
-
     def __call__(self, path: Path) -> DocRun:
         chain = chain_of(path)
         names = CHAINS[chain]
-        try:
-            workdir = self._workdir(chain)
-        except BaseException as exc:
-            raise AssertionError(f"the chain {chain!r} could not start: {exc}") from exc
-        for earlier in names[: names.index(_name(path)) + 1]:
-            if earlier != _name(path) and earlier in self.failures:
-                raise AssertionError(f"{earlier}, read before {_name(path)}, failed: "
-                                     f"{self.failures[earlier]}")
-            self._once(earlier, lambda e=earlier: run_document(ROOT / e, workdir))
+        if chain not in self.workdirs:
+            self.workdirs[chain] = self.factory.mktemp(f"docs-{chain}")
+        for key in names[: names.index(_name(path)) + 1]:
+            if key in self.failures:
+                if key == _name(path):
+                    raise self.failures[key]
+                raise AssertionError(f"{key}, read before {_name(path)}, failed: "
+                                     f"{self.failures[key]}")
+            if key not in self.runs:
+                try:
+                    self.runs[key] = run_document(ROOT / key, self.workdirs[chain])
+                except BaseException as exc:  # remember, so a second caller sees the same failure
+                    self.failures[key] = exc
+                    raise
         return self.runs[_name(path)]
 
 
@@ -514,8 +479,6 @@ def test_the_chains_hold_every_document_once_in_reading_order() -> None:
     order = [_name(p) for p in DOCS]
     for chain, names in CHAINS.items():
         assert list(names) == sorted(names, key=order.index), f"{chain}: not in reading order"
-    # the one page that starts a chain on an earlier page's files says what to run instead
-    assert skipped_page_command(DOC_DIR / "using.md") is not None
 
 
 def _commands() -> list[tuple[Block, list[str]]]:
