@@ -1,10 +1,10 @@
 """The documents are part of the product: every command in them must work.
 
-Every fenced block of ``README.md`` and ``hardware_docs/*.md`` is run in ONE working directory, in
-the order a reader meets them: ``README.md``, then the index ``hardware_docs/README.md``, then the
-pages in the order of the index's table, each page's blocks in the order they appear. So a command
-reads the files any earlier command wrote, and two documents that make the same directory collide
-here as they would for the reader:
+Every fenced block of ``README.md`` and ``hardware_docs/*.md`` is run in the order a reader meets
+them: ``README.md``, then the index ``hardware_docs/README.md``, then the pages in the order of the
+index's table, each page's blocks in the order they appear; the documents that build on each
+other's files share a working directory (a chain, :data:`CHAINS`), in which a command reads the
+files every earlier command of its chain wrote:
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
@@ -361,26 +361,81 @@ def run_document(path: Path, workdir: Path) -> DocRun:
     return run
 
 
+#: The documents' chains. A chain's documents run in reading order in one directory of the
+#: chain's own, each after the ones before it (a command reads what the earlier ones wrote, and a
+#: second ``--out`` of the same name fails as it would for the reader); the chains share no
+#: directory, so under pytest-xdist they run on different workers at once (``tests/conftest.py``
+#: hands them out first, in this order: the longest first). A document that needs a file of
+#: another chain fails, as it would for a reader who skipped that page; what one directory for
+#: all caught across chains (two documents writing one output) is checked by
+#: ``test_no_two_documents_write_one_output``.
+CHAINS: dict[str, tuple[str, ...]] = {
+    # using.md and history.md read running.md's run1 and its gyrocal.toml
+    "running": ("hardware_docs/running.md", "hardware_docs/using.md", "hardware_docs/history.md",
+                "hardware_docs/formats.md", "hardware_docs/method.md"),
+    "intro": ("README.md", "hardware_docs/README.md", "hardware_docs/bom.md",
+              "hardware_docs/wiring.md", "hardware_docs/chips.md", "hardware_docs/mechanical.md",
+              "hardware_docs/setup.md"),
+}
+
+
+def chain_of(path: Path | str) -> str:
+    """The name of the chain that runs document ``path``."""
+    name = path if isinstance(path, str) else _name(path)
+    for chain, names in CHAINS.items():
+        if name in names:
+            return chain
+    raise AssertionError(f"{name} is in no chain: add it to tests.test_docs.CHAINS")
+
+
+def xdist_unit(nodeid: str) -> str | None:
+    """The scheduling unit of a test of this module that runs a chain (the chain's name under
+    this module), or None for a test that runs none (``tests/conftest.py``)."""
+    module, _, test = nodeid.partition("::")
+    name, _, param = test.partition("[")
+    if param.rstrip("]") in {n for names in CHAINS.values() for n in names}:
+        return f"{module}::{chain_of(param.rstrip(']'))}"
+    chain = USES_CHAIN.get(name)
+    return f"{module}::{chain}" if chain else None
+
+
+#: The chain each test that is not parametrized by a document reads (:func:`uses_chain`).
+USES_CHAIN: dict[str, str] = {}
+
+
+def uses_chain(chain: str) -> Any:
+    """Declare that a test reads the files of ``chain``'s documents, so the scheduler puts it
+    with them; the ``docs`` fixture refuses any other chain to such a test."""
+    def mark(fn: Any) -> Any:
+        USES_CHAIN[fn.__name__] = chain
+        return fn
+    return mark
+
+
 class DocRunner:
-    """Runs the documents once per test session, in :data:`DOCS` order in one directory (as a
-    reader would), and remembers what each produced."""
+    """Runs each chain's documents once per worker, in reading order in the chain's directory (as
+    a reader would), and remembers what each produced."""
 
     def __init__(self, factory: pytest.TempPathFactory) -> None:
-        self.workdir = factory.mktemp("docs")
+        self.factory = factory
+        self.workdirs: dict[str, Path] = {}
         self.runs: dict[str, DocRun] = {}
         self.failures: dict[str, BaseException] = {}
 
     def __call__(self, path: Path) -> DocRun:
-        for earlier in DOCS[: DOCS.index(path) + 1]:
-            key = _name(earlier)
+        chain = chain_of(path)
+        names = CHAINS[chain]
+        if chain not in self.workdirs:
+            self.workdirs[chain] = self.factory.mktemp(f"docs-{chain}")
+        for key in names[: names.index(_name(path)) + 1]:
             if key in self.failures:
-                if earlier == path:
+                if key == _name(path):
                     raise self.failures[key]
                 raise AssertionError(f"{key}, read before {_name(path)}, failed: "
                                      f"{self.failures[key]}")
             if key not in self.runs:
                 try:
-                    self.runs[key] = run_document(earlier, self.workdir)
+                    self.runs[key] = run_document(ROOT / key, self.workdirs[chain])
                 except BaseException as exc:  # remember, so a second caller sees the same failure
                     self.failures[key] = exc
                     raise
@@ -388,28 +443,82 @@ class DocRunner:
 
 
 @pytest.fixture(scope="module")
-def docs(tmp_path_factory: pytest.TempPathFactory) -> DocRunner:
+def doc_runner(tmp_path_factory: pytest.TempPathFactory) -> DocRunner:
     return DocRunner(tmp_path_factory)
+
+
+@pytest.fixture
+def docs(doc_runner: DocRunner, request: pytest.FixtureRequest) -> Any:
+    """The runner, for the chains this test may read: its document's, or the one it declares
+    with :func:`uses_chain` (so the scheduler's units hold every test of a chain)."""
+    param = getattr(request.node, "callspec", None)
+    doc = param.params.get("path") if param else None
+    allowed = chain_of(doc) if doc is not None else USES_CHAIN.get(request.node.originalname)
+
+    def run(path: Path) -> DocRun:
+        assert chain_of(path) == allowed, (
+            f"{request.node.name} reads {_name(path)} of the chain {chain_of(path)!r}: declare "
+            "it with @uses_chain so that it runs with that chain")
+        return doc_runner(path)
+    return run
 
 
 # --------------------------------------------------------------------------------- tests
 @pytest.mark.parametrize("path", DOCS, ids=_name)
-def test_every_command_in_the_document_works(path: Path, docs: DocRunner) -> None:
+def test_every_command_in_the_document_works(path: Path, docs: Any) -> None:
     run = docs(path)
     for reason in run.skipped:
         assert "needs hardware" in reason or "no C compiler" in reason, (
             f"a skipped block must say which hardware it needs: {reason}")
 
 
-def test_the_documents_run_gyrocal_commands_and_few_blocks_are_skipped(docs: DocRunner) -> None:
-    runs = [docs(p) for p in DOCS]
-    commands = sum(1 for r in runs for line in r.log if ": gyrocal " in line)
-    assert commands >= 15
-    skipped = [s for r in runs for s in r.skipped]
+def test_the_chains_hold_every_document_once_in_reading_order() -> None:
+    listed = [n for names in CHAINS.values() for n in names]
+    assert sorted(listed) == sorted(_name(p) for p in DOCS), (
+        "tests.test_docs.CHAINS must list every document once")
+    order = [_name(p) for p in DOCS]
+    for chain, names in CHAINS.items():
+        assert list(names) == sorted(names, key=order.index), f"{chain}: not in reading order"
+
+
+def _commands() -> list[tuple[Block, list[str]]]:
+    """Every ``gyrocal`` command the documents' tests run, with its block."""
+    out = []
+    for path in DOCS:
+        for block in parse_blocks(path):
+            d = DIRECTIVE.match(block.directive) if block.directive else None
+            if block.lang in SHELL_LANGS and not (d and d.group("reason")):
+                out.extend((block, argv) for argv in shell_commands(block))
+    return out
+
+
+def test_the_documents_run_gyrocal_commands_and_few_blocks_are_skipped() -> None:
+    # each command counted here is run, its exit code checked, by
+    # test_every_command_in_the_document_works
+    assert len(_commands()) >= 15
+    skipped = [b.where for p in DOCS for b in parse_blocks(p)
+               if b.directive and (d := DIRECTIVE.match(b.directive)) and d.group("reason")]
+    if not (shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")):
+        skipped += [b.where for p in DOCS for b in parse_blocks(p)
+                    if b.lang == "c" and re.search(r"\bint\s+main\s*\(", b.text)]
     assert len(skipped) <= 3, skipped
 
 
-def test_config_table_lists_exactly_the_schema(docs: DocRunner) -> None:
+def test_no_two_documents_write_one_output() -> None:
+    # in one directory for all, a second `--out X` failed (gyrocal refuses to overwrite); the
+    # chains have a directory each, so the same name in two of them would pass unnoticed
+    seen: dict[str, str] = {}
+    for block, argv in _commands():
+        for flag, value in zip(argv, argv[1:], strict=False):
+            if flag != "--out":
+                continue
+            target = os.path.normpath(value)
+            assert target not in seen or "--force" in argv, (
+                f"{block.where} writes {value}, which {seen.get(target)} wrote already")
+            seen[target] = block.where
+
+
+def test_config_table_lists_exactly_the_schema() -> None:
     rows = table_rows(section(DOC_DIR / "running.md", "<!-- config-table -->",
                               "<!-- /config-table -->"))
     keys = [code_spans(r[0])[0] for r in rows]
@@ -485,7 +594,7 @@ def _field_table(name: str) -> list[str]:
     return [code_spans(r[0])[0] for r in rows]
 
 
-def _real_runs(docs: DocRunner) -> tuple[Path, Path]:
+def _real_runs(docs: Any) -> tuple[Path, Path]:
     """A ``gyrocal calibrate --sim`` run (running.md) and a ``simulate-recording`` (formats.md)."""
     cal_runs = sorted(docs(DOC_DIR / "running.md").workdir.glob("*/calibration.json"))
     assert cal_runs, "running.md must make a calibration with gyrocal calibrate"
@@ -495,7 +604,8 @@ def _real_runs(docs: DocRunner) -> tuple[Path, Path]:
     return cal_runs[0].parent, sims[0]
 
 
-def test_recording_v1_fields_match_real_recordings(docs: DocRunner) -> None:
+@uses_chain("running")
+def test_recording_v1_fields_match_real_recordings(docs: Any) -> None:
     run, simulated = _real_runs(docs)
     real: set[str] = set()
     for rec in (run / "recording", simulated):
@@ -514,7 +624,7 @@ def test_recording_v1_fields_match_real_recordings(docs: DocRunner) -> None:
             assert f"`{h}`" in (DOC_DIR / "formats.md").read_text(), f"{name}: header line"
 
 
-def _real_calibrations(docs: DocRunner) -> dict[int, dict]:
+def _real_calibrations(docs: Any) -> dict[int, dict]:
     """The calibration documents running.md makes, by version (its ``gyrocal calibrate`` writes a
     version 2, its diagonal ``gyrocal estimate --out`` a version 1)."""
     out: dict[int, dict] = {}
@@ -525,7 +635,8 @@ def _real_calibrations(docs: DocRunner) -> dict[int, dict]:
     return out
 
 
-def test_calibration_v1_fields_match_a_real_calibration(docs: DocRunner) -> None:
+@uses_chain("running")
+def test_calibration_v1_fields_match_a_real_calibration(docs: Any) -> None:
     _real_runs(docs)
     real = _real_calibrations(docs)
     assert set(real) == {1, 2}, "running.md must make a version 1 and a version 2 calibration"
