@@ -771,7 +771,7 @@ def _expm_so3(v: np.ndarray) -> np.ndarray:
 
 
 def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
-                   direction_std: Any) -> FrameRotation:
+                   direction_std: Any, axes_std: Any = None) -> FrameRotation:
     r"""The rotation between the gyro's and the accelerometer's calibrated frames, from rests.
 
     Each calibration has its own frame convention (``gyro-x-xy``: the gyro's x sensing axis;
@@ -786,7 +786,10 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     ``R`` and the unit ``γ₀`` (Levenberg–Marquardt, ``scipy.optimize.least_squares``); the
     covariance of the rotation is the ``δ`` block of ``(JᵀJ)⁻¹``, widened by the reduced
     ``χ²/(2N − 5)`` when above one: rests scattered beyond their noise (a pose off the one the
-    encoders report by a wobble of the jig) then count as the noise they show. Rotations about
+    encoders report by a wobble of the jig) then count as the noise they show. With
+    ``axes_std``, the servo axes' own uncertainty (the gyro fit's) is added through the implicit
+    derivative of the solution, ``∂p/∂a = −(JᵀJ)⁻¹ Jᵀ ∂r/∂a``: a tilted axis carries every
+    rest's gravity the same wrong way, which the rests' scatter cannot show. Rotations about
     at least two non-parallel servo axes are needed (a planned run with accelerometer rests has
     them).
 
@@ -804,6 +807,9 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
         The kinematics' reference angles, rad.
     direction_std : float or (N,) array_like
         Standard deviation of each rest's direction per axis, rad (its mean's σ over ``g``).
+    axes_std : (S,) array_like, optional
+        Each servo axis's direction σ, rad, in both directions across it (the gyro fit's
+        ``axes_std_rad``); without it the axes count as exact.
 
     Returns
     -------
@@ -877,6 +883,11 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
         return ((carried(g / np.linalg.norm(g)) @ (_expm_so3(p[:3]) @ R).T - u)
                 / sd[:, None]).ravel()
 
+    def resid_axes(axes_now: np.ndarray, R: np.ndarray, g0: np.ndarray) -> np.ndarray:
+        Kn = np.stack([chain_axes(np.vstack([e, axes_now]), ext_ref, th_ext)[:, 0]
+                       for e in np.eye(3)], axis=2)
+        return (((Kn @ g0) @ R.T - u) / sd[:, None]).ravel()
+
     jac = optimize.approx_fprime(np.zeros(5), resid_at, 1e-7)
     jtj = jac.T @ jac
     if np.linalg.cond(jtj) > 1e12:
@@ -887,9 +898,40 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     # quite the one its encoders give) widen the covariance by the reduced χ² (Birge ratio)
     dof = 2 * n - 5
     spread = max(1.0, float(res.fun @ res.fun) / dof) if dof > 0 else 1.0
-    cov = spread * np.linalg.inv(jtj)[:3, :3]
+    inv = np.linalg.inv(jtj)
+    cov = spread * inv[:3, :3]
+    if axes_std is not None:
+        cov = cov + _axes_covariance(ax, np.asarray(axes_std, dtype=float), jac, inv,
+                                     lambda a: resid_axes(a, R, g0))
     ang = np.arcsin(np.clip(np.linalg.norm(np.cross(carried(g0) @ R.T, u), axis=1), 0, 1))
     return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
+
+
+def _axes_covariance(axes: np.ndarray, axes_std: np.ndarray, jac: np.ndarray,
+                     inv: np.ndarray, resid: Any) -> np.ndarray:
+    """The rotation's covariance from the servo axes' σ (:func:`frame_rotation`): each axis
+    tilted in two directions across it, ``δ``'s response by the implicit derivative."""
+    from scipy import optimize
+
+    if axes_std.shape != (axes.shape[0],) or not np.all(np.isfinite(axes_std) & (axes_std >= 0)):
+        raise CalibInputError(f"axes_std must be {axes.shape[0]} finite non-negative σ, got "
+                              f"{axes_std!r}")
+    tangents = []
+    for a in axes:
+        t1 = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
+        t1 /= np.linalg.norm(t1)
+        tangents.append((t1, np.cross(a / np.linalg.norm(a), t1)))
+
+    def tilted(q: np.ndarray) -> np.ndarray:
+        out = axes.copy()
+        for i, (t1, t2) in enumerate(tangents):
+            v = axes[i] + q[2 * i] * t1 + q[2 * i + 1] * t2
+            out[i] = v / np.linalg.norm(v)
+        return out
+
+    jac_a = optimize.approx_fprime(np.zeros(2 * len(axes)), lambda q: resid(tilted(q)), 1e-7)
+    dp = -(inv @ jac.T @ jac_a)[:3]
+    return (dp * np.repeat(axes_std, 2) ** 2) @ dp.T
 
 
 def align_gyro(cal: Any, rotation: FrameRotation) -> Any:

@@ -42,7 +42,8 @@ def rest_means(t: np.ndarray, values: np.ndarray, spans: list[tuple[float, float
     return np.array(means), np.array(errs)
 
 
-def align_to_accelerometer(cal: Any, rec: Any, extracted: Any) -> tuple[Any, str]:
+def align_to_accelerometer(cal: Any, rec: Any, extracted: Any,
+                           axes_std_rad: Any = None) -> tuple[Any, str]:
     """``cal`` in the accelerometer's frame, and a note for the user (the rotation's angle and
     σ, the rests' RMS misfit).
 
@@ -54,6 +55,9 @@ def align_to_accelerometer(cal: Any, rec: Any, extracted: Any) -> tuple[Any, str
         Its recording, with the accelerometer's columns (``imu_accel``, m/s², beside ``imu_t``).
     extracted : ExtractedWindows
         The recording's windows (its rests and their encoder angles, ``observations.rest_pose``).
+    axes_std_rad : dict, optional
+        Each servo's axis σ from the gyro fit (``FullMatrixFit.axes_std_rad``, keyed by servo
+        ID); the rotation's σ then carries the axes' uncertainty too.
 
     Raises
     ------
@@ -82,8 +86,10 @@ def align_to_accelerometer(cal: Any, rec: Any, extracted: Any) -> tuple[Any, str
     sd = np.max(errs, axis=1) * np.max(np.diag(cal.accelerometer.matrix)) / g
     kin = cal.kinematics
     try:
+        ax_std = (None if not axes_std_rad else
+                  [axes_std_rad.get(m, 0.0) for m in kin["chain"]])
         fr = frame_rotation(forces, pose, kin["axes"], kin["reference_angles_rad"],
-                            np.maximum(sd, 1e-9))
+                            np.maximum(sd, 1e-9), ax_std)
         aligned = align_gyro(cal, fr)
     except CalibInputError as exc:
         raise InputError(f"cannot align the gyro to the accelerometer: {exc}") from None

@@ -163,7 +163,8 @@ def run(args: argparse.Namespace) -> int:
             if cfg["protocol"]["align_gyro_to_accel"]:
                 from gyrocal.kit.alignment import align_to_accelerometer
 
-                cal, aligned_note = align_to_accelerometer(cal, rec, est.extracted)
+                cal, aligned_note = align_to_accelerometer(
+                    cal, rec, est.extracted, getattr(est.fit, "axes_std_rad", None))
                 est = replace(est, notes=(*est.notes, aligned_note))
             check_plausible(cal, rec.sensor, allow=args.allow_implausible)
             atomic_write_text(work / "calibration.json", cal.to_json() + "\n")

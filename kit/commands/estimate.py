@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
     if args.align_gyro_to_accel:
         from gyrocal.kit.alignment import align_to_accelerometer
 
-        cal, note = align_to_accelerometer(cal, rec, est.extracted)
+        cal, note = align_to_accelerometer(
+            cal, rec, est.extracted, getattr(est.fit, "axes_std_rad", None))
         print(f"gyrocal: note: {note}", file=sys.stderr)
     for problem in check_plausible(cal, rec.sensor, allow=args.allow_implausible):
         print(f"gyrocal: warning: {problem} (accepted: --allow-implausible)", file=sys.stderr)

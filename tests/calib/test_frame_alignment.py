@@ -138,6 +138,39 @@ def test_the_rotation_sigma_covers_a_wobbling_jig_that_the_rest_noise_does_not_s
     assert np.mean(np.abs(z) < 3) > 0.97
 
 
+def test_the_rotation_sigma_carries_the_fitted_axes_uncertainty():
+    """The gyro fit's servo axes are off the true ones by their σ (0.03°, tilts drawn here): a
+    tilted axis carries every rest's gravity the same wrong way, which the rests' own scatter
+    (10× smaller) cannot show; with ``axes_std`` the σ covers the rotation's error."""
+    rng = np.random.default_rng(12)
+    cg, ca, axes, up = world(rng)
+    ag, aa = in_frame(cg), in_frame(ca)
+    truth = (aa @ ca) @ (ag @ cg).T
+    dirs = rests(axes, up, ANGLES)
+    sd, ax_sd = 5e-5, math.radians(0.03)
+    z = {False: [], True: []}
+    for _ in range(60):
+        fitted = axes.copy()
+        for i, a in enumerate(axes):  # tilt each axis by σ per direction across it
+            t1 = np.cross(a, [1.0, 0, 0])
+            t1 /= np.linalg.norm(t1)
+            t2 = np.cross(a, t1)
+            v = a + ax_sd * (rng.standard_normal() * t1 + rng.standard_normal() * t2)
+            fitted[i] = v / np.linalg.norm(v)
+        noisy = (dirs + rng.normal(0, sd, dirs.shape)) @ (aa @ ca).T
+        for with_axes in (False, True):
+            fr = frame_rotation(noisy, ANGLES, fitted @ (ag @ cg).T, np.zeros(3), sd,
+                                np.full(3, ax_sd) if with_axes else None)
+            e = fr.rotation @ truth.T
+            delta = 0.5 * np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]])
+            z[with_axes].append(delta / np.sqrt(np.diag(fr.covariance)))
+    covered, blind = np.array(z[True]), np.array(z[False])
+    assert np.all((covered.std(axis=0) > 0.6) & (covered.std(axis=0) < 1.4)), covered.std(0)
+    assert np.max(blind.std(axis=0)) > 2  # without the axes' σ it is overconfident
+    with pytest.raises(CalibInputError, match="axes_std"):
+        frame_rotation(dirs, ANGLES, axes, np.zeros(3), sd, [1e-3, -1.0, 0.0])
+
+
 def test_the_covariance_is_propagated_through_the_rotation():
     rng = np.random.default_rng(3)
     cg, _, axes, _ = world(rng)
