@@ -96,20 +96,30 @@ def test_from_true_calibrations_the_aligned_gyro_reads_true_rates_in_the_accel_f
     assert back.frame == ACCEL_FRAME and np.allclose(back.full_matrix, cal.full_matrix)
 
 
-def test_the_rotation_sigma_covers_its_error_over_noisy_rests():
-    rng = np.random.default_rng(7)
+def setting(seed):
+    """A drawn world, the true rotation between the calibrations' frames, and the rests' true
+    gravity directions in the body frame."""
+    rng = np.random.default_rng(seed)
     cg, ca, axes, up = world(rng)
     ag, aa = in_frame(cg), in_frame(ca)
-    truth = (aa @ ca) @ (ag @ cg).T
-    dirs = rests(axes, up, ANGLES)
+    return rng, ag @ cg, aa @ ca, axes, rests(axes, up, ANGLES)
+
+
+def rotation_z(fr, truth):
+    """The fitted rotation's error in its own σ, per axis of the small rotation ``δ``."""
+    e = fr.rotation @ truth.T  # exp([δ]×)
+    delta = 0.5 * np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]])
+    return delta / np.sqrt(np.diag(fr.covariance))
+
+
+def test_the_rotation_sigma_covers_its_error_over_noisy_rests():
+    rng, rg, ra, axes, dirs = setting(7)
     sd = 2e-3
     z = []
     for _ in range(60):
-        noisy = (dirs + rng.normal(0, sd, dirs.shape)) @ (aa @ ca).T
-        fr = frame_rotation(noisy, ANGLES, axes @ (ag @ cg).T, np.zeros(3), sd)
-        e = fr.rotation @ truth.T  # exp([δ]×)
-        delta = 0.5 * np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]])
-        z.append(delta / np.sqrt(np.diag(fr.covariance)))
+        noisy = (dirs + rng.normal(0, sd, dirs.shape)) @ ra.T
+        z.append(rotation_z(frame_rotation(noisy, ANGLES, axes @ rg.T, np.zeros(3), sd),
+                            ra @ rg.T))
     z = np.array(z)
     assert np.all(np.abs(z.mean(axis=0)) < 0.45)
     assert np.all((z.std(axis=0) > 0.7) & (z.std(axis=0) < 1.3)), z.std(axis=0)
@@ -118,21 +128,15 @@ def test_the_rotation_sigma_covers_its_error_over_noisy_rests():
 def test_the_rotation_sigma_covers_a_wobbling_jig_that_the_rest_noise_does_not_show():
     """Each rest held a pose 0.05° (RMS per axis) off the one its encoders give, while the rests'
     stated noise is 40× smaller: the σ must widen to the scatter the rests show."""
-    rng = np.random.default_rng(11)
-    cg, ca, axes, up = world(rng)
-    ag, aa = in_frame(cg), in_frame(ca)
-    truth = (aa @ ca) @ (ag @ cg).T
-    dirs = rests(axes, up, ANGLES)
+    rng, rg, ra, axes, dirs = setting(11)
     sd, wobble = 2e-5, math.radians(0.05)
     z = []
     for _ in range(80):
         tilt = [rot(w, np.linalg.norm(w)) for w in rng.normal(0, wobble, (len(dirs), 3))]
         seen = np.array([t @ d for t, d in zip(tilt, dirs, strict=True)])
-        noisy = (seen + rng.normal(0, sd, dirs.shape)) @ (aa @ ca).T
-        fr = frame_rotation(noisy, ANGLES, axes @ (ag @ cg).T, np.zeros(3), sd)
-        e = fr.rotation @ truth.T
-        delta = 0.5 * np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]])
-        z.append(delta / np.sqrt(np.diag(fr.covariance)))
+        noisy = (seen + rng.normal(0, sd, dirs.shape)) @ ra.T
+        z.append(rotation_z(frame_rotation(noisy, ANGLES, axes @ rg.T, np.zeros(3), sd),
+                            ra @ rg.T))
     z = np.array(z)
     assert np.all((z.std(axis=0) > 0.6) & (z.std(axis=0) < 1.4)), z.std(axis=0)
     assert np.mean(np.abs(z) < 3) > 0.97
@@ -142,11 +146,7 @@ def test_the_rotation_sigma_carries_the_fitted_axes_uncertainty():
     """The gyro fit's servo axes are off the true ones by their σ (0.03°, tilts drawn here): a
     tilted axis carries every rest's gravity the same wrong way, which the rests' own scatter
     (10× smaller) cannot show; with ``axes_std`` the σ covers the rotation's error."""
-    rng = np.random.default_rng(12)
-    cg, ca, axes, up = world(rng)
-    ag, aa = in_frame(cg), in_frame(ca)
-    truth = (aa @ ca) @ (ag @ cg).T
-    dirs = rests(axes, up, ANGLES)
+    rng, rg, ra, axes, dirs = setting(12)
     sd, ax_sd = 5e-5, math.radians(0.03)
     z = {False: [], True: []}
     for _ in range(60):
@@ -157,13 +157,11 @@ def test_the_rotation_sigma_carries_the_fitted_axes_uncertainty():
             t2 = np.cross(a, t1)
             v = a + ax_sd * (rng.standard_normal() * t1 + rng.standard_normal() * t2)
             fitted[i] = v / np.linalg.norm(v)
-        noisy = (dirs + rng.normal(0, sd, dirs.shape)) @ (aa @ ca).T
+        noisy = (dirs + rng.normal(0, sd, dirs.shape)) @ ra.T
         for with_axes in (False, True):
-            fr = frame_rotation(noisy, ANGLES, fitted @ (ag @ cg).T, np.zeros(3), sd,
+            fr = frame_rotation(noisy, ANGLES, fitted @ rg.T, np.zeros(3), sd,
                                 np.full(3, ax_sd) if with_axes else None)
-            e = fr.rotation @ truth.T
-            delta = 0.5 * np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]])
-            z[with_axes].append(delta / np.sqrt(np.diag(fr.covariance)))
+            z[with_axes].append(rotation_z(fr, ra @ rg.T))
     covered, blind = np.array(z[True]), np.array(z[False])
     assert np.all((covered.std(axis=0) > 0.6) & (covered.std(axis=0) < 1.4)), covered.std(0)
     assert np.max(blind.std(axis=0)) > 2  # without the axes' σ it is overconfident
