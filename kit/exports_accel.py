@@ -28,10 +28,10 @@ from typing import Any
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, register
 from gyrocal.kit.exports_thermal import check_imu_index
+from gyrocal.kit.px4_ids import MAV_INT32, MAV_REAL32, px4_device_id, qgc_params
 
 __all__ = ["accel_offsets_scales", "ardupilot_accel_params", "px4_accel_params"]
 
-_MAV_INT32, _MAV_REAL32 = 6, 9  # MAV_PARAM_TYPE
 
 
 def _accelerometer(doc: Mapping[str, Any], fmt: str) -> Any:
@@ -55,8 +55,8 @@ def px4_accel_params(acc: Any, instance: int = 0) -> list[tuple[str, float, int]
     """PX4's ``CAL_ACC<instance>_?OFF`` and ``_?SCALE``: ``(name, value, MAV_PARAM_TYPE)``."""
     off, scale = accel_offsets_scales(acc)
     p = f"CAL_ACC{instance}_"
-    return ([(f"{p}{a}OFF", o, _MAV_REAL32) for a, o in zip("XYZ", off, strict=True)]
-            + [(f"{p}{a}SCALE", s, _MAV_REAL32) for a, s in zip("XYZ", scale, strict=True)])
+    return ([(f"{p}{a}OFF", o, MAV_REAL32) for a, o in zip("XYZ", off, strict=True)]
+            + [(f"{p}{a}SCALE", s, MAV_REAL32) for a, s in zip("XYZ", scale, strict=True)])
 
 
 def ardupilot_accel_params(acc: Any, imu: int = 1) -> list[tuple[str, float]]:
@@ -76,24 +76,18 @@ def _cross_axis_note(acc: Any, stack: str) -> str:
 
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
-    from gyrocal.kit.px4_ids import px4_device_id
-
     acc = _accelerometer(doc, "px4-accel")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's CAL_ACC0..CAL_ACC3")
     dev_id, how = px4_device_id(doc.get("sensor"))
-    lines = ["# Onboard parameters for Vehicle 1",
-             "# accelerometer calibration written by gyrocal from a Calibration's accelerometer",
-             "#",
-             "# Vehicle-Id Component-Id Name Value Type"]
-    if dev_id is not None:
-        lines.append(f"1\t1\tCAL_ACC{inst}_ID\t{dev_id}\t{_MAV_INT32}")
-    lines += [f"1\t1\t{name}\t{value + 0.0:.9g}\t{kind}"
-              for name, value, kind in px4_accel_params(acc, inst)]
+    rows = ([(f"CAL_ACC{inst}_ID", dev_id, MAV_INT32)] if dev_id is not None else []) \
+        + px4_accel_params(acc, inst)
+    text = qgc_params("accelerometer calibration written by gyrocal from a Calibration's "
+                      "accelerometer", rows)
     notes = [_cross_axis_note(acc, "PX4"),
              f"CAL_ACC{inst}_ID: {how}" if dev_id is not None else
              f"CAL_ACC{inst}_ID is not written: {how}; these parameters then apply to the "
              "accelerometer whose ID the vehicle already has in that slot"]
-    return "\n".join(lines) + "\n", notes
+    return text, notes
 
 
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]

@@ -34,13 +34,13 @@ from typing import Any
 
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, g_sensitivity_note, register
+from gyrocal.kit.px4_ids import MAV_INT32, MAV_REAL32, px4_device_id, qgc_params
 
 __all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "check_imu_index", "px4_params"]
 
 #: ArduPilot's fixed reference temperature of INS_TCALn (AP_InertialSensor_tempcal.cpp).
 ARDUPILOT_TEMP_REFERENCE_C = 35.0
 _ARDUPILOT_SCALE = 1.0e6  # its SCALE_FACTOR: the coefficients are stored times 1e6
-_MAV_INT32, _MAV_REAL32 = 6, 9  # MAV_PARAM_TYPE
 _NOT_CARRIED = ("{stack} corrects only the gyro's bias against temperature: the calibration's "
                 "scale{matrix} is not in these parameters; apply it elsewhere or accept the "
                 "scale error")
@@ -65,15 +65,15 @@ def px4_params(cal: Any, instance: int = 0, device_id: int = 0) -> list[tuple[st
     ``(name, value, MAV_PARAM_TYPE)``."""
     tm = cal.temperature_model
     p = f"TC_G{instance}_"
-    out: list[tuple[str, float, int]] = [("TC_G_ENABLE", 1, _MAV_INT32),
-                                         (p + "ID", device_id, _MAV_INT32),
-                                         (p + "TMIN", tm.range_c[0], _MAV_REAL32),
-                                         (p + "TMAX", tm.range_c[1], _MAV_REAL32),
-                                         (p + "TREF", tm.reference_c, _MAV_REAL32)]
+    out: list[tuple[str, float, int]] = [("TC_G_ENABLE", 1, MAV_INT32),
+                                         (p + "ID", device_id, MAV_INT32),
+                                         (p + "TMIN", tm.range_c[0], MAV_REAL32),
+                                         (p + "TMAX", tm.range_c[1], MAV_REAL32),
+                                         (p + "TREF", tm.reference_c, MAV_REAL32)]
     for k in range(4):
         for axis in range(3):
             c = float(tm.bias_coeffs[axis, k]) if k <= tm.bias_order else 0.0
-            out.append((f"{p}X{k}_{axis}", -c, _MAV_REAL32))
+            out.append((f"{p}X{k}_{axis}", -c, MAV_REAL32))
     return out
 
 
@@ -120,18 +120,11 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     dev = options.get("device_id")
     dev_note = None
     if dev is None:
-        from gyrocal.kit.px4_ids import px4_device_id
-
         dev, how = px4_device_id(doc.get("sensor"))
         dev_note = f"TC_G{inst}_ID from the calibration: {how}" if dev is not None else None
     rows = px4_params(cal, inst, 0 if dev is None else int(dev))
-    lines = ["# Onboard parameters for Vehicle 1",
-             "# gyro thermal compensation written by gyrocal from a temperature_model",
-             "#",
-             "# Vehicle-Id Component-Id Name Value Type"]
-    for name, value, kind in rows:
-        text = str(int(value)) if kind == _MAV_INT32 else f"{value + 0.0:.9g}"
-        lines.append(f"1\t1\t{name}\t{text}\t{kind}")
+    text = qgc_params("gyro thermal compensation written by gyrocal from a temperature_model",
+                      rows)
     notes = [_NOT_CARRIED.format(stack="PX4", matrix=" and cross-axis matrix" if cal.is_full
                                  else ""), *g_sensitivity_note(cal, "PX4's TC_G parameters"),
              f"the whole bias is in TC_G{inst}_X0_*: set CAL_GYRO{inst}_XOFF/YOFF/ZOFF to 0, or "
@@ -143,7 +136,7 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
         notes.append(dev_note)
     if cal.accelerometer is not None:
         notes.append(_ACCEL_ELSEWHERE.format(fmt="px4-accel"))
-    return "\n".join(lines) + "\n", notes
+    return text, notes
 
 
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]

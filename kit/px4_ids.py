@@ -1,5 +1,6 @@
-"""PX4's device ID of the sensor a calibration belongs to (``CAL_ACC<n>_ID``, ``CAL_GYRO<n>_ID``,
-``TC_G<n>_ID``), from the chip, bus and address a gyrocal run records.
+"""PX4's parameter files (QGroundControl ``.params``), and the device ID of the sensor a
+calibration belongs to (``CAL_ACC<n>_ID``, ``CAL_GYRO<n>_ID``, ``TC_G<n>_ID``) from the chip, bus
+and address a gyrocal run records.
 
 PX4 (PX4-Autopilot ``src/lib/drivers/device/Device.hpp``, ``union DeviceId``) packs a device's
 identity in 24 bits, least significant first: ``bus_type`` (3 bits; ``DeviceBusType_I2C = 1``),
@@ -16,13 +17,29 @@ numbers its own buses, so a sensor moved there has the ID its vehicle reports.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ["PX4_DEVTYPE", "PX4_I2C", "px4_device_id"]
+__all__ = ["MAV_INT32", "MAV_REAL32", "PX4_DEVTYPE", "PX4_I2C", "px4_device_id", "qgc_params"]
 
 #: ``DeviceBusType_I2C`` (Device.hpp).
 PX4_I2C = 1
+
+#: MAV_PARAM_TYPE of an integer and of a float parameter (MAVLink common.xml)
+MAV_INT32, MAV_REAL32 = 6, 9
+
+
+def qgc_params(what: str, rows: Iterable[tuple[str, float, int]]) -> str:
+    """A QGroundControl ``.params`` file (what PX4's parameter load reads): a header naming
+    ``what`` was written, then one tab-separated row per ``(name, value, MAV_PARAM_TYPE)``,
+    integers as integers and floats to 9 significant digits."""
+    lines = ["# Onboard parameters for Vehicle 1", f"# {what}", "#",
+             "# Vehicle-Id Component-Id Name Value Type"]
+    for name, value, kind in rows:
+        text = str(int(value)) if kind == MAV_INT32 else f"{value + 0.0:.9g}"
+        lines.append(f"1\t1\t{name}\t{text}\t{kind}")
+    return "\n".join(lines) + "\n"
+
 
 #: PX4 devtype per gyrocal sensor model (PX4-Autopilot ``src/drivers/drv_sensor.h``): the
 #: accelerometer and the gyro of these combined drivers share the ID. PX4 has no driver, hence
