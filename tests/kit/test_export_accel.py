@@ -9,7 +9,6 @@ tests/calib/accel_truth.py; the expected values are the stacks' documented formu
 """
 
 import json
-import shutil
 import subprocess
 
 import numpy as np
@@ -20,6 +19,7 @@ from gyrocal.calib.accel import fit_accelerometer
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.kit.cli import main
 from tests.calib import accel_truth
+from tests.kit.c_program import compile_program, needs_gcc
 
 
 @pytest.fixture(scope="module")
@@ -74,18 +74,11 @@ int main(int argc, char **argv)
 """
 
 
-@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: cannot compile "
-                    "the exported C header (install gcc to run this test)")
+@needs_gcc
 def test_the_c_header_applies_both_sensors(cal, cal_file, tmp_path, capsys):
     out, _ = export(capsys, cal_file, "c-header")
     assert "f[i] = sum over j of A_ACC[i][j] * (a[j] + b_acc[j])" in out
-    (tmp_path / "cal.h").write_text(out)
-    (tmp_path / "main.c").write_text(PROGRAM)
-    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion",
-             "-Wconversion", "-Wshadow"]
-    cc = subprocess.run(["gcc", *flags, "-o", str(tmp_path / "apply"), str(tmp_path / "main.c")],
-                        capture_output=True, text=True, cwd=tmp_path)
-    assert cc.returncode == 0, cc.stderr
+    compile_program(tmp_path, out, PROGRAM)
     m = np.array([1.3, -2.1, 0.7])
     a = np.array([0.4, -9.7, 1.2])
     run = subprocess.run([str(tmp_path / "apply"), *(repr(float(x)) for x in (*m, *a))],

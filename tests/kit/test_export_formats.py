@@ -2,7 +2,6 @@
 
 import json
 import re
-import shutil
 import subprocess
 
 import numpy as np
@@ -12,6 +11,7 @@ from gyrocal.calib.allan import characterise_noise
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.calib.noise_sim import NoiseModel, simulate_still
 from gyrocal.kit.cli import main
+from tests.kit.c_program import compile_program, needs_gcc
 
 
 def make_calibration():
@@ -204,22 +204,15 @@ int main(int argc, char **argv)
 """
 
 
-@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: cannot compile "
-                    "the exported C header (install gcc to run this test)")
+@needs_gcc
 def test_c_header_compiles_and_matches_the_model(cal, cal_file, tmp_path, capsys):
     out, _ = export_text(capsys, cal_file, "c-header")
-    (tmp_path / "cal.h").write_text(out)
     other = GyroCalibration(scale=(0.5, 2.0, 1.25), bias=(0.25, -0.125, 3.0))
     (tmp_path / "other.json").write_text(other.to_json())
     out2, _ = export_text(capsys, tmp_path / "other.json", "c-header", "--c-prefix", "other")
     assert "OTHER_CALIBRATION_H" in out2
     (tmp_path / "other.h").write_text(out2)
-    (tmp_path / "main.c").write_text(C_PROGRAM)
-    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion",
-             "-Wconversion", "-Wshadow"]
-    cc = subprocess.run(["gcc", *flags, "-o", str(tmp_path / "apply"), str(tmp_path / "main.c")],
-                        capture_output=True, text=True, cwd=tmp_path)
-    assert cc.returncode == 0, cc.stderr
+    compile_program(tmp_path, out, C_PROGRAM)
     m = np.array([1.3, -2.1, 0.7])
     run = subprocess.run([str(tmp_path / "apply"), *(repr(float(x)) for x in m)],
                          capture_output=True, text=True, check=True)

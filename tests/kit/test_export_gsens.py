@@ -8,7 +8,6 @@ Kalibr file through Kalibr's own gyro equation (ethz-asl/kalibr,
 """
 
 import re
-import shutil
 import subprocess
 
 import numpy as np
@@ -17,6 +16,7 @@ import yaml
 
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.kit.cli import main
+from tests.kit.c_program import compile_program, needs_gcc
 from tests.kit.test_export_thermal import make_cal as thermal_cal
 from tests.kit.test_export_v2 import A, B, make_full
 
@@ -62,19 +62,12 @@ int main(int argc, char **argv)
 """
 
 
-@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: cannot compile "
-                    "the exported C header (install gcc to run this test)")
+@needs_gcc
 def test_c_header_applies_g_sensitivity_given_the_specific_force(capsys, tmp_path):
     cal = make_full(g_sensitivity=GSENS, sensor={"model": "mpu9250", "odr_hz": 200.0})
     out, err = export(capsys, tmp_path, cal, "c-header")
     assert err == ""
-    (tmp_path / "cal.h").write_text(out)
-    (tmp_path / "main.c").write_text(C_MAIN)
-    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion",
-             "-Wconversion", "-Wshadow"]
-    cc = subprocess.run(["gcc", *flags, "-o", "apply", "main.c"], capture_output=True,
-                        text=True, cwd=tmp_path)
-    assert cc.returncode == 0, cc.stderr
+    compile_program(tmp_path, out, C_MAIN)
     rng = np.random.default_rng(3)
     for m, f in [([1.3, -2.1, 0.7], [0.0, 0.0, 1.0]), ([0.0, 0.0, 0.0], [0.6, -0.8, 0.0]),
                  (list(rng.normal(size=3)), list(rng.normal(size=3)))]:

@@ -4,7 +4,6 @@ The C header is compiled with the C compiler and its ``<prefix>_apply_at`` compa
 ``GyroCalibration.apply(m, temperature_c=T)`` and with the model's equation written out here.
 """
 
-import shutil
 import subprocess
 
 import numpy as np
@@ -13,6 +12,7 @@ import pytest
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.thermal import fit_thermal
 from gyrocal.kit.cli import main
+from tests.kit.c_program import compile_program, needs_gcc
 
 A0 = np.array([[1.0132, 0.0, 0.0], [0.0187, 0.9871, 0.0], [-0.0164, 0.0119, 1.0043]])
 A1 = np.array([[3e-4, 0.0, 0.0], [1e-5, -2e-4, 0.0], [0.0, 0.0, 1e-4]])
@@ -63,20 +63,13 @@ int main(int argc, char **argv)
 """
 
 
-@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: cannot compile "
-                    "the exported C header (install gcc to run this test)")
+@needs_gcc
 @pytest.mark.parametrize("full", [True, False])
 def test_c_header_applies_the_model_at_the_die_temperature(full, capsys, tmp_path):
     cal = make_cal(full)
     (tmp_path / "cal.json").write_text(cal.to_json())
     assert main(["export", str(tmp_path / "cal.json"), "--format", "c-header"]) == 0
-    (tmp_path / "cal.h").write_text(capsys.readouterr().out)
-    (tmp_path / "main.c").write_text(C_MAIN)
-    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion",
-             "-Wconversion", "-Wshadow"]
-    cc = subprocess.run(["gcc", *flags, "-o", "apply", "main.c"], capture_output=True,
-                        text=True, cwd=tmp_path)
-    assert cc.returncode == 0, cc.stderr
+    compile_program(tmp_path, capsys.readouterr().out, C_MAIN)
     m = [0.8, -1.1, 0.4]
     for T in (18.0, 20.0, 23.3, 25.0, 29.9, 40.0):  # outside the range: clamped, both sides
         run = subprocess.run([str(tmp_path / "apply"), *map(repr, m), repr(T)],

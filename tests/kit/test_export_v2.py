@@ -6,7 +6,6 @@ Truth here is the known matrix and bias the calibrations are built from, written
 """
 
 import json
-import shutil
 import subprocess
 
 import numpy as np
@@ -15,6 +14,7 @@ import yaml
 
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.kit.cli import main
+from tests.kit.c_program import compile_program, needs_gcc
 
 # A ±2 % cross-axis matrix in the gyro-x-xy convention (lower triangular) and a bias, rad/s.
 A = [[1.0132, 0.0, 0.0], [0.0187, 0.9871, 0.0], [-0.0164, 0.0119, 1.0043]]
@@ -114,18 +114,11 @@ int main(int argc, char **argv)
 """
 
 
-@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: cannot compile "
-                    "the exported C header (install gcc to run this test)")
+@needs_gcc
 def test_c_header_applies_the_full_matrix_like_the_equation(capsys, tmp_path):
     out, _ = export(capsys, tmp_path, make_full(sensor={"model": HOSTILE, "odr_hz": "200"}),
                     "c-header")
-    (tmp_path / "cal.h").write_text(out)
-    (tmp_path / "main.c").write_text(C_MAIN)
-    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion",
-             "-Wconversion", "-Wshadow"]
-    cc = subprocess.run(["gcc", *flags, "-o", "apply", "main.c"], capture_output=True,
-                        text=True, cwd=tmp_path)
-    assert cc.returncode == 0, cc.stderr
+    compile_program(tmp_path, out, C_MAIN)
     for m in ([1.3, -2.1, 0.7], [0.0, 0.0, 0.0], [-3.0, 0.25, 5.5]):
         run = subprocess.run([str(tmp_path / "apply"), *map(repr, m)], capture_output=True,
                              text=True, check=True)
