@@ -27,13 +27,12 @@ import os
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import numpy as np
 
-from bench.table import print_table
+from bench.table import pooled, print_table
 
 
 def _run(args: tuple[int, str] | tuple[int, str, bool]) -> dict:
@@ -133,19 +132,8 @@ def main(argv: list[str]) -> None:
     sys.stdout.flush()
     jobs = [(s, p) for s in seeds for p in ("full", "auto", "paper")]
     t0 = time.perf_counter()
-    results: list[dict] = []
-    pool = ProcessPoolExecutor(workers)
-    try:
-        for r in pool.map(_run, jobs):
-            results.append(r)
-            print(f"# seed {r['seed']} {r['protocol']}: exit {r['code']}, jig {r['jig_s']:.1f} s, "
-                  f"wall {r['wall_s']:.0f} s", file=sys.stderr, flush=True)
-    except KeyboardInterrupt:
-        print(f"# stopped after {len(results)} of {len(jobs)} runs; the tables hold those",
-              file=sys.stderr, flush=True)
-        pool.shutdown(wait=False, cancel_futures=True)
-    else:
-        pool.shutdown()
+    results = pooled(_run, jobs, lambda r: f"seed {r['seed']} {r['protocol']}: exit "
+                     f"{r['code']}, jig {r['jig_s']:.1f} s, wall {r['wall_s']:.0f} s")
     total = time.perf_counter() - t0
     by = {p: [r for r in results if r["protocol"] == p] for p in ("full", "auto", "paper")}
     if not all(by.values()):

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import io
 import os
-import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -40,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from bench.table import print_table
+from bench.table import pooled, print_table
 
 NAMES = [f"A_{r}{c}" for r in "xyz" for c in "xyz"] + ["b_x", "b_y", "b_z"]
 
@@ -99,20 +98,9 @@ def _run(seed: int) -> dict:
 def jig_table(seeds: list[int]) -> list[dict]:
     """The jig table, seed by seed (two sensors at once); Ctrl-C prints the sensors that
     finished."""
-    rs: list[dict] = []
-    pool = ProcessPoolExecutor(min(2, os.cpu_count() or 1))
-    try:
-        for r in pool.map(_run, seeds):
-            rs.append(r)
-            print(f"# seed {r['seed']}: full {r['gm']:.2e} per rad/s in {r['jig_s']:.1f} s "
-                  f"(χ² ok {r['ok']}), paper {r['gm_paper']:.2e} in {r['paper_jig_s']:.1f} s",
-                  file=sys.stderr, flush=True)
-    except KeyboardInterrupt:
-        print(f"# stopped after {len(rs)} of {len(seeds)} sensors; the table below holds those",
-              file=sys.stderr, flush=True)
-        pool.shutdown(wait=False, cancel_futures=True)
-    else:
-        pool.shutdown()
+    rs = pooled(_run, seeds, lambda r: f"seed {r['seed']}: full {r['gm']:.2e} per rad/s in "
+                f"{r['jig_s']:.1f} s (χ² ok {r['ok']}), paper {r['gm_paper']:.2e} in "
+                f"{r['paper_jig_s']:.1f} s")
     if not rs:
         return rs
     gm = np.array([r["gm"] for r in rs])

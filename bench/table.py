@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 
 
 def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]], title: str = "") -> None:
@@ -23,3 +26,22 @@ def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]], title:
     for r in cells:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
     print(flush=True)
+
+
+def pooled(fn: Callable, jobs: Sequence, describe: Callable[[dict], str]) -> list[dict]:
+    """``fn`` over ``jobs`` on up to two processes, in order, each result described on stderr as
+    it arrives; Ctrl-C stops the pool and returns the results that finished (the benches then
+    print their tables from those)."""
+    results: list[dict] = []
+    pool = ProcessPoolExecutor(min(2, os.cpu_count() or 1))
+    try:
+        for r in pool.map(fn, jobs):
+            results.append(r)
+            print(f"# {describe(r)}", file=sys.stderr, flush=True)
+    except KeyboardInterrupt:
+        print(f"# stopped after {len(results)} of {len(jobs)}; the tables hold those",
+              file=sys.stderr, flush=True)
+        pool.shutdown(wait=False, cancel_futures=True)
+    else:
+        pool.shutdown()
+    return results
