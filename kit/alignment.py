@@ -16,30 +16,7 @@ import numpy as np
 
 from gyrocal.kit.errors import InputError
 
-__all__ = ["align_to_accelerometer", "rest_means"]
-
-
-def rest_means(t: np.ndarray, values: np.ndarray, spans: list[tuple[float, float]]
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of ``values`` (N, 3) over each ``(start, end)`` span of times ``t``, and each
-    mean's per-axis standard error (sample standard deviation over √count).
-
-    Raises
-    ------
-    InputError
-        A span with fewer than 10 samples.
-    """
-    means, errs = [], []
-    for lo, hi in spans:
-        sel = (t >= lo) & (t <= hi) & np.all(np.isfinite(values), axis=1)
-        n = int(sel.sum())
-        if n < 10:
-            raise InputError(f"the rest at {lo:.2f}-{hi:.2f} s has {n} accelerometer samples; "
-                             "at least 10 are needed to align the frames")
-        v = values[sel]
-        means.append(v.mean(axis=0))
-        errs.append(v.std(axis=0, ddof=1) / np.sqrt(n))
-    return np.array(means), np.array(errs)
+__all__ = ["align_to_accelerometer"]
 
 
 def align_to_accelerometer(cal: Any, rec: Any, extracted: Any,
@@ -64,7 +41,7 @@ def align_to_accelerometer(cal: Any, rec: Any, extracted: Any,
     InputError
         What is missing, and what to do.
     """
-    from gyrocal.calib.accel import align_gyro, frame_rotation
+    from gyrocal.calib.accel import align_gyro, frame_rotation, still_means
     from gyrocal.calib.errors import CalibInputError
 
     if cal.accelerometer is None:
@@ -80,7 +57,11 @@ def align_to_accelerometer(cal: Any, rec: Any, extracted: Any,
         raise InputError("--align-gyro-to-accel needs the recording's accelerometer columns "
                          "and rests with encoder angles")
     spans = [(w.corners[0], w.corners[3]) for w in extracted.rests]
-    means, errs = rest_means(np.asarray(rec.imu_t), np.asarray(accel, dtype=float), spans)
+    try:  # the rests' means as the accelerometer's own fit takes them (shorter ones left out)
+        means, errs, used = still_means(rec.imu_t, accel, spans)
+    except CalibInputError as exc:
+        raise InputError(f"cannot align the gyro to the accelerometer: {exc}") from None
+    pose = np.asarray(pose)[used]
     forces = cal.accelerometer.apply(means)
     g = np.linalg.norm(forces, axis=1)
     sd = np.max(errs, axis=1) * np.max(np.diag(cal.accelerometer.matrix)) / g
