@@ -137,11 +137,13 @@ def _temperature(fam: Family, rng: np.random.Generator, t: np.ndarray) -> np.nda
     return np.round(temp / TEMP_LSB_C) * TEMP_LSB_C
 
 
-def generate(family: str, seed: int) -> Session:
-    """One session of ``family`` (a key of :data:`FAMILIES`) from ``seed``."""
+def generate(family: str, seed: int, odr_hz: float | None = None) -> Session:
+    """One session of ``family`` (a key of :data:`FAMILIES`) from ``seed``, at the family's
+    output data rate or at ``odr_hz`` (the same schedule and sensor drawn at another rate: the
+    streaming benchmark's jig at 1 kHz)."""
     fam = FAMILIES[family]
     rng = np.random.default_rng(seed)
-    fs = fam.odr_hz
+    fs = fam.odr_hz if odr_hz is None else float(odr_hz)
     # ---- motion schedule: rest, motion, rest, ... until the duration
     axes = np.linalg.qr(rng.standard_normal((3, 3)))[0].T  # three orthonormal servo axes
     pieces: list[np.ndarray] = []

@@ -406,7 +406,7 @@ class _OpenWindow:
     axis: tuple[float, float, float] | None
     last: int
     count: int
-    sum_z: np.ndarray
+    sum_z: list[float]  # three floats: the window's readings (less the reference) summed
     sum_temp: float
     sum_omega: float
     t_last: float
@@ -464,7 +464,7 @@ class _QBank:
         self.q = np.asarray(s.rate_random_walk_prior, dtype=float) ** 2
         self.q_std = np.zeros(3)
 
-    def steps(self, z: np.ndarray, R: np.ndarray, dT: float | None, dt: float
+    def steps(self, z: list[float], R: list[float], dT: float | None, dt: float
               ) -> Iterator[None]:
         """Predict by ``dt`` and update every filter with window mean ``z`` (variance ``R``),
         in slices (yielding between them); the last sets ``q`` and ``q_std``, the posterior mean
@@ -472,36 +472,47 @@ class _QBank:
 
         Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
         ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry. A slice is one or
-        two array operations (about a microsecond each), so that spread over the calls that
+        one array operation (about a microsecond or two), so that spread over the calls that
         follow a step each pays little."""
-        self.P00 += self._qg * dt
+        z_a, R_a = np.array(z), np.array(R)
+        yield
+        pred = self._qg * dt
+        yield
+        self.P00 += pred
         yield
         if dT is None:
-            y = z + self.x0
-            S = self.P00 + R
+            y = z_a + self.x0
+            yield
+            S = self.P00 + R_a
             yield
             k0 = -self.P00 / S
+            yield
             self.x0 += k0 * y
             yield
             self.P00 += k0 * self.P00  # P − K Phᵀ with Ph = −P
         else:
             self.P11 += self.qc * dt
-            y = z + self.x0
+            yield
+            y = z_a + self.x0
             yield
             y += dT * self.x1
+            yield
             ph0 = self.P00 + dT * self.P01
             yield
             ph0 = -ph0
             ph1 = -(self.P01 + dT * self.P11)
             yield
-            S = R - ph0 - dT * ph1
+            S = R_a - ph0 - dT * ph1
             yield
-            k0, k1 = ph0 / S, ph1 / S
+            k0 = ph0 / S
+            k1 = ph1 / S
             yield
             self.x0 += k0 * y
+            yield
             self.x1 += k1 * y
             yield
             self.P00 -= k0 * ph0
+            yield
             self.P01 -= k0 * ph1
             yield
             self.P11 -= k1 * ph1
@@ -516,19 +527,26 @@ class _QBank:
         yield
         self.loglik += ll
         yield
-        w = self.loglik - self.loglik.max(axis=0)
+        w = self.loglik.max(axis=0)
+        yield
+        w = self.loglik - w
         yield
         w = np.exp(w)
+        yield
         w /= w.sum(axis=0)
         yield
-        q = (w * self._qg).sum(axis=0)
+        q = w * self._qg
+        yield
+        q = q.sum(axis=0)
         yield
         d = self._qg - q
         d *= d
         yield
         d *= w
         yield
-        self.q, self.q_std = q, np.sqrt(d.sum(axis=0))
+        d = d.sum(axis=0)
+        yield
+        self.q, self.q_std = q, np.sqrt(d)
 
     def widen(self, extra: np.ndarray) -> None:
         """Widen every filter's bias variance as the tracker widened its own (a detected step)."""
@@ -863,14 +881,18 @@ class BiasTracker:
         if self._k == 0 or self._finished or self._nbuf:
             return None
         try:
-            m = np.array(sample, dtype=float)
+            if type(sample) is np.ndarray and sample.dtype == np.float64 \
+                    and sample.shape == (3,):
+                m0, m1, m2 = sample.tolist()  # the common case: no new array
+            else:
+                m = np.array(sample, dtype=float)
+                if m.shape != (3,):
+                    return None
+                m0, m1, m2 = m.tolist()
             tf = float(t)
             temp = math.nan if temperature is None else float(temperature)
         except (TypeError, ValueError):
             return None
-        if m.shape != (3,):
-            return None
-        m0, m1, m2 = m.tolist()
         if specific_force is not None and self._G_rows is not None:  # m + G f
             try:
                 f0, f1, f2 = (float(v) for v in specific_force)
@@ -882,7 +904,6 @@ class BiasTracker:
             m0 += G[0][0] * f0 + G[0][1] * f1 + G[0][2] * f2
             m1 += G[1][0] * f0 + G[1][1] * f1 + G[1][2] * f2
             m2 += G[2][0] * f0 + G[2][1] * f1 + G[2][2] * f2
-            m = np.array([m0, m1, m2])
         if (not (math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2)
                  and math.isfinite(tf))
                 or self._t_last is None or not tf > self._t_last
@@ -899,7 +920,7 @@ class BiasTracker:
             pend = self._pending
             for i in range(pend["t"].size):
                 r = float(pend["rr"][i])
-                self._pq.append((float(pend["t"][i]), pend["m"][i].copy(),
+                self._pq.append((float(pend["t"][i]), tuple(pend["m"][i].tolist()),
                                  float(pend["temp"][i]), float(pend["ext"][i]), r,
                                  tuple(float(v) for v in pend["ra"][i]) if math.isfinite(r)
                                  else None))
@@ -921,7 +942,7 @@ class BiasTracker:
         self._run = self._run + 1 if quiet else 0
         # the still decision on the sample L back, and the update window it feeds
         pq = self._pq
-        pq.append((tf, m, temp, ext, rr, axis))
+        pq.append((tf, (m0, m1, m2), temp, ext, rr, axis))
         L = det.n_lookahead
         while len(pq) > L:
             g = k - len(pq) + 1
@@ -933,7 +954,7 @@ class BiasTracker:
             is_still = (self._run >= det.n_min + L) if math.isnan(extd) else extd > 0.5
             self._last_decision = (g, bool(is_still))
             self._window_step(g, L, td, md, tempd, _KIND_STILL if is_still else _KIND_NONE)
-        return self._sample_output(m, tf, temp)
+        return self._sample_output(m0, m1, m2, tf, temp)
 
     def _fast_reference(self, reference_rate: Any, reference_axis: Any, ext: float
                         ) -> tuple[float, tuple[float, float, float] | None] | None:
@@ -952,7 +973,11 @@ class BiasTracker:
                 or not self._ref_ready):
             return None
         try:
-            u0, u1, u2 = (float(v) for v in reference_axis)
+            if type(reference_axis) is np.ndarray and reference_axis.dtype == np.float64 \
+                    and reference_axis.shape == (3,):
+                u0, u1, u2 = reference_axis.tolist()
+            else:
+                u0, u1, u2 = (float(v) for v in reference_axis)
         except (TypeError, ValueError):
             return None
         if not (math.isfinite(u0) and math.isfinite(u1) and math.isfinite(u2)
@@ -960,46 +985,52 @@ class BiasTracker:
             return None
         return rr, (u0, u1, u2)
 
-    def _window_step(self, g: int, L: int, t: float, m: np.ndarray, temp: float, kind: int,
-                     rr: float = math.nan, axis: tuple[float, float, float] | None = None
-                     ) -> None:
-        """Pool the decided sample ``g`` (of ``kind``; with a reference its encoder rate ``rr``
-        and servo axis) into the open update window, applying the window when it closes
-        (exactly as :meth:`_assemble_and_apply` does for a one-sample batch)."""
+    def _window_step(self, g: int, L: int, t: float, m: tuple[float, float, float],
+                     temp: float, kind: int, rr: float = math.nan,
+                     axis: tuple[float, float, float] | None = None) -> None:
+        """Pool the decided sample ``g`` (reading ``m``, of ``kind``; with a reference its
+        encoder rate ``rr`` and servo axis) into the open update window, applying the window
+        when it closes (exactly as :meth:`_assemble_and_apply` does for a one-sample batch);
+        in floats, as the window's sums are kept."""
         op = self._open
         if op is not None and not (kind == op.kind and axis == op.axis):
-            self._apply_window(op, _log_sink(), g + L, defer=True)
+            self._apply_window(op, _NO_LOG, g + L, defer=True)
             self._open = op = None
         if kind == _KIND_NONE:
             return
+        z0, z1, z2 = m
         if kind == _KIND_REF:  # z = m − A⁻¹ ω u, the reading less the reference
             assert axis is not None
             ai = self._A_inv_rows
             w0, w1, w2 = rr * axis[0], rr * axis[1], rr * axis[2]
-            z = np.array([m[0] - (ai[0][0] * w0 + ai[0][1] * w1 + ai[0][2] * w2),
-                          m[1] - (ai[1][0] * w0 + ai[1][1] * w1 + ai[1][2] * w2),
-                          m[2] - (ai[2][0] * w0 + ai[2][1] * w1 + ai[2][2] * w2)])
+            z0 -= ai[0][0] * w0 + ai[0][1] * w1 + ai[0][2] * w2
+            z1 -= ai[1][0] * w0 + ai[1][1] * w1 + ai[1][2] * w2
+            z2 -= ai[2][0] * w0 + ai[2][1] * w1 + ai[2][2] * w2
             omega = rr
         else:
-            z, omega = m, 0.0
+            omega = 0.0
         sum_temp = temp if self._temp_model else 0.0
         if op is None:
-            op = _OpenWindow(kind=kind, axis=axis, last=g, count=1, sum_z=z.copy(),
+            op = _OpenWindow(kind=kind, axis=axis, last=g, count=1, sum_z=[z0, z1, z2],
                              sum_temp=sum_temp, sum_omega=omega, t_last=t)
         else:
             op.count += 1
-            op.sum_z = op.sum_z + z
+            sz = op.sum_z
+            sz[0] += z0
+            sz[1] += z1
+            sz[2] += z2
             op.sum_temp += sum_temp
             op.sum_omega += omega
             op.last = g
             op.t_last = t
         if op.count == self._U:
-            self._apply_window(op, _log_sink(), op.last + L, defer=True)
+            self._apply_window(op, _NO_LOG, op.last + L, defer=True)
             self._open = None
         else:
             self._open = op
 
-    def _sample_output(self, m: np.ndarray, t: float, temp: float) -> np.ndarray:
+    def _sample_output(self, m0: float, m1: float, m2: float, t: float, temp: float
+                       ) -> np.ndarray:
         """Bias and the corrected rate at one sample from the current state (the one-row case
         of :meth:`_outputs`), in scalar arithmetic (three axes written out: this runs for every
         sample); its uncertainty is computed when :attr:`bias_std` is read (:meth:`_std_at`)."""
@@ -1014,7 +1045,6 @@ class BiasTracker:
             b0, b1, b2 = x[0] + x[3] * dT, x[1] + x[4] * dT, x[2] + x[5] * dT
         else:
             b0, b1, b2 = x[0], x[1], x[2]
-        m0, m1, m2 = m.tolist()
         c0, c1, c2 = m0 + b0, m1 + b1, m2 + b2
         out = np.array([A[0] * c0 + A[1] * c1 + A[2] * c2,
                         A[3] * c0 + A[4] * c1 + A[5] * c2,
@@ -1059,7 +1089,8 @@ class BiasTracker:
 
     def feed(
         self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None,
-        specific_force: Any = None,
+        specific_force: Any = None, *, reference_rate: float | None = None,
+        reference_axis: Any = None,
     ) -> np.ndarray:
         """Fast streaming: buffer one reading, return it corrected with the latest estimate.
 
@@ -1079,13 +1110,25 @@ class BiasTracker:
             External still flag; None lets the detector decide.
         specific_force : array_like (3,), optional
             Specific force at the sensor, g, sensor frame (as in :meth:`update`).
+        reference_rate : float, optional
+            Rate of the turning servo from its encoder, rad/s (jig only; as in :meth:`update`).
+        reference_axis : array_like (3,), optional
+            That servo's unit axis in the sensor frame (with ``reference_rate``).
 
         Returns
         -------
         ndarray (3,)
             ``A (m + bias [+ G f])`` with the bias estimate at the end of the last processed
             block (at this sample's temperature with the temperature model).
+
+        Raises
+        ------
+        CalibInputError
+            A reading or an axis that is not three numbers, or a reference rate without its
+            axis (or the reverse), at once; other bad values when their block is processed.
         """
+        if (reference_rate is None) != (reference_axis is None):
+            raise CalibInputError("give reference_rate and reference_axis together")
         i = self._nbuf
         if i == 0 and self._buf_m is None:
             B = max(1, int(round(self.settings.stream_block_s * self.settings.odr_hz)))
@@ -1093,8 +1136,20 @@ class BiasTracker:
             self._buf_m = np.empty((B, 3))
             self._buf_temp = np.full(B, np.nan)
             self._buf_still = np.full(B, np.nan)
+            self._buf_rr = np.full(B, np.nan)
+            self._buf_ra = np.full((B, 3), np.nan)
+            self._buf_has_ref = False
         m = self._buf_m[i]
-        m[:] = sample
+        try:
+            m[:] = sample
+            if reference_rate is not None:
+                self._buf_ra[i] = reference_axis
+                self._buf_rr[i] = reference_rate
+                self._buf_has_ref = True
+        except (TypeError, ValueError):
+            raise CalibInputError(
+                "sample and reference_axis must be 3 numbers each, and reference_rate a number"
+            ) from None
         if specific_force is not None and self._G is not None:
             m += self._G @ self._force(specific_force, 1)[0]
         self._buf_t[i] = t
@@ -1125,21 +1180,28 @@ class BiasTracker:
             return None
         self._nbuf = 0
         assert self._buf_m is not None or n == 0
+        ref: dict[str, np.ndarray] = {}
         if n:
             cols = (self._buf_t[:n].copy(), self._buf_m[:n].copy(),
                     self._buf_temp[:n].copy() if self._temp_model else None,
                     self._buf_still[:n].copy())
+            if self._buf_has_ref:
+                ref = {"reference_rate": self._buf_rr[:n].copy(),
+                       "reference_axis": self._buf_ra[:n].copy()}
+                self._buf_rr[:n] = np.nan
+                self._buf_ra[:n] = np.nan
+                self._buf_has_ref = False
             self._buf_temp[:n] = np.nan
             self._buf_still[:n] = np.nan
         else:
             cols = (np.zeros(0), np.zeros((0, 3)), None, None)
-        res = self._process_fed(cols, finish)
-        return res
+        return self._process_fed(cols, finish, ref)
 
-    def _process_fed(self, cols: tuple[Any, ...], finish: bool) -> TrackResult:
+    def _process_fed(self, cols: tuple[Any, ...], finish: bool,
+                     ref: dict[str, np.ndarray] | None = None) -> TrackResult:
         self._fed = True
         try:
-            return self.process(*cols, finish=finish)
+            return self.process(*cols, finish=finish, **(ref or {}))
         finally:
             self._fed = False
             self._fx = self._kf.x.reshape(-1).copy()
@@ -1505,13 +1567,13 @@ class BiasTracker:
                 e = int(min(nxt, run_end[b]))
                 rows = slice(int(b), e)
                 cnt = e - int(b)
-                sum_z = z[rows].sum(axis=0)
+                sum_z = z[rows].sum(axis=0).tolist()
                 sum_temp = float(np.sum(S["temp"][rows])) if self._temp_model else 0.0
                 sum_omega = float(np.sum(S["rr"][rows])) if kind[b] == _KIND_REF else 0.0
                 if wi == 0 and continues and op is not None:
                     w = op
                     w.count += cnt
-                    w.sum_z = w.sum_z + sum_z
+                    w.sum_z = [a + b for a, b in zip(w.sum_z, sum_z, strict=True)]
                     w.sum_temp += sum_temp
                     w.sum_omega += sum_omega
                     w.last = g0 + e - 1
@@ -1571,7 +1633,7 @@ class BiasTracker:
         next step does, so nothing observable changes, only which call pays."""
         self._catch_up()
         n = w.count
-        z = [v / n for v in w.sum_z.tolist()]
+        z = [v / n for v in w.sum_z]
         R = [v / n for v in self._sigma2_l]
         if w.kind == _KIND_REF:
             assert w.axis is not None
@@ -1657,10 +1719,14 @@ class BiasTracker:
             Ss.append(S)
         yield
         kf.P = np.array(Pn)
-        kf.Q = np.diag(self._q * dt)
+        yield
+        qdt = self._q * dt
+        yield
+        kf.Q = np.diag(qdt)
         yield
         nis = sum(yi * yi / si for yi, si in zip(ys, Ss, strict=True))
-        bank_extra = np.zeros(3)
+        yield
+        bank_extra = [0.0, 0.0, 0.0]
         shift = self._cusum(ys, Ss, bank_extra)
         yield
         self._nis_hist.append(nis)
@@ -1672,14 +1738,15 @@ class BiasTracker:
         if alarm:
             self._n_alarms += 1
             if s.recover:
-                y2 = np.array(ys) ** 2
+                y2 = [yi * yi for yi in ys]
                 P = kf.P.copy()
                 P[np.arange(3), np.arange(3)] += y2
-                bank_extra += y2
+                bank_extra = [a + b for a, b in zip(bank_extra, y2, strict=True)]
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
         self._keep_state(kf.Q, brk=bool(alarm and s.recover) or (shift and s.recover))
+        yield
         log["shift"].append(shift)
         log["t"].append(w.t_last)
         log["kind"].append("reference" if w.kind == _KIND_REF else "still")
@@ -1692,12 +1759,12 @@ class BiasTracker:
         if self._bank is not None:
             yield
             bank = self._bank
-            yield from bank.steps(np.array(z), np.array(R), dT if tm else None, dt)
-            yield
+            yield from bank.steps(z, R, dT if tm else None, dt)
             # a detected step widened every filter of the bank as the tracker's own (after the
             # bank's update, as the tracker's widening came after its own)
-            if bank_extra.any():
-                bank.widen(bank_extra)
+            if any(bank_extra):
+                bank.widen(np.array(bank_extra))
+            yield
             self._q[:3] = bank.q + bank.q_std
 
     def _keep_state(self, Q: np.ndarray, brk: bool = False) -> None:
@@ -1827,7 +1894,7 @@ class BiasTracker:
             std[sl] = np.sqrt(np.maximum(var, 0.0))
         return bias, std
 
-    def _cusum(self, y: list[float], s_diag: list[float], bank_extra: np.ndarray) -> bool:
+    def _cusum(self, y: list[float], s_diag: list[float], bank_extra: list[float]) -> bool:
         """Two-sided CUSUM (Page 1954) on each axis's normalised innovation ``e = y/√S``.
 
         ``g⁺ ← max(0, g⁺ + e − k)``, ``g⁻ ← max(0, g⁻ − e − k)``; a sum above ``h`` says the
@@ -1844,14 +1911,19 @@ class BiasTracker:
         cu, cu_sum, cu_n = self._cu, self._cu_sum, self._cu_n
         k, h = s.cusum_k, s.cusum_h
         hit = [[False] * 3, [False] * 3]
-        for i, (yi, si) in enumerate(zip(y, s_diag, strict=True)):
-            e = yi / math.sqrt(si)
+        for i in range(3):
+            yi = y[i]
+            e = yi / math.sqrt(s_diag[i])
             for side, step in ((0, e - k), (1, -e - k)):
-                restart = cu[side][i] <= 0.0
-                cu_sum[side][i] = (0.0 if restart else cu_sum[side][i]) + yi
-                cu_n[side][i] = (0.0 if restart else cu_n[side][i]) + 1.0
-                cu[side][i] = max(cu[side][i] + step, 0.0)
-                hit[side][i] = cu[side][i] > h
+                c, c_sum, c_n = cu[side], cu_sum[side], cu_n[side]
+                if c[i] <= 0.0:  # the sum left zero: its mean innovation starts afresh
+                    c_sum[i], c_n[i] = yi, 1.0
+                else:
+                    c_sum[i] += yi
+                    c_n[i] += 1.0
+                g = c[i] + step
+                c[i] = g if g > 0.0 else 0.0
+                hit[side][i] = g > h
         axes = [i for i in range(3) if hit[0][i] or hit[1][i]]
         if not axes:
             return False
@@ -1908,10 +1980,16 @@ class BiasTracker:
         }
 
 
-def _log_sink() -> dict[str, list[Any]]:
-    """A throwaway update log (:meth:`BiasTracker.update` returns no log)."""
-    return {k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at",
-                            "shift")}
+class _Discard:
+    """A list that keeps nothing (the update log of :meth:`BiasTracker.update`)."""
+
+    def append(self, value: Any) -> None:
+        pass
+
+
+#: A throwaway update log (:meth:`BiasTracker.update` returns no log): appending costs nothing.
+_NO_LOG: dict[str, Any] = {k: _Discard() for k in ("t", "kind", "count", "nis", "nis_sum",
+                                                   "nis_bound", "alarm", "at", "shift")}
 
 
 def _concat(parts: list[TrackResult], g_first: int) -> TrackResult:

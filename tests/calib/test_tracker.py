@@ -145,6 +145,50 @@ def test_streaming_batch_and_chunks_agree():
     assert set(batch.updates.kind) == {"still", "reference"}
 
 
+def test_feed_with_reference_rates_ends_in_the_batch_state():
+    """feed() takes the encoder's reference rate too: its blocks go through process() with their
+    reference columns, so the filter sees the batch run's samples and ends in its state (same
+    reference updates), and each sample is corrected with an estimate at most one block old;
+    a reference without its axis, or an axis that is not three numbers, is refused at once."""
+    s = simulate_session(np.random.default_rng(8), 30.0, model=MODEL, motion="jig",
+                         still_s=(2.0, 3.0), motion_s=(3.0, 4.0))
+    cal = sim_calibration(np.random.default_rng(9), s)
+    st = settings(reference_axis_std=1e-4, stream_block_s=0.3)
+    rr, ra = s.reference_rate, s.reference_axis
+    batch_tr = BiasTracker(st, cal)
+    batch = batch_tr.process(s.t, s.rate, s.temperature_c, reference_rate=rr,
+                             reference_axis=ra, finish=True)
+    fed = BiasTracker(st, cal)
+    corr = []
+    for i in range(s.n):
+        ref = {} if np.isnan(rr[i]) else {"reference_rate": float(rr[i]),
+                                           "reference_axis": ra[i]}
+        corr.append(fed.feed(s.rate[i], s.t[i], s.temperature_c[i], **ref))
+    fed.flush(finish=True)
+    np.testing.assert_allclose(fed.bias, batch_tr.bias, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(fed.bias_std, batch_tr.bias_std, rtol=1e-12)
+    assert fed.health.updates == batch.updates.t.size
+    assert np.sum(batch.updates.kind == "reference") > 10
+    # the same accuracy as the batch run's corrected rates against the true rate
+    e_fed = np.sqrt(np.mean((np.array(corr) - s.true_rate) ** 2))
+    e_batch = np.sqrt(np.mean((batch.corrected - s.true_rate) ** 2))
+    assert abs(e_fed / e_batch - 1) < 0.02, (e_fed, e_batch)
+    # without the reference columns the filter would not be in that state
+    plain = BiasTracker(st, cal)
+    plain.process(s.t, s.rate, s.temperature_c, finish=True)
+    assert plain.health.updates != batch.updates.t.size
+    tr = BiasTracker(st, cal)
+    with pytest.raises(CalibInputError, match="together"):
+        tr.feed(s.rate[0], s.t[0], s.temperature_c[0], reference_rate=1.0)
+    with pytest.raises(CalibInputError, match="3 numbers"):
+        tr.feed(s.rate[0], s.t[0], s.temperature_c[0], reference_rate=1.0,
+                reference_axis=(1.0, 0.0))
+    with pytest.raises(CalibInputError, match="unit vectors"):
+        tr.feed(s.rate[0], s.t[0], s.temperature_c[0], reference_rate=1.0,
+                reference_axis=(1.0, 1.0, 0.0))
+        tr.flush()
+
+
 def test_reference_rate_updates_track_the_bias_while_the_servos_turn():
     """Jig session with rests too short for the still detector: only the servo turns (known ω
     from the encoder about known axes, m = ω u ⊘ scale − b) keep the bias right."""
@@ -564,7 +608,7 @@ def _textbook_step(kf_x, kf_P, q, w, dt, t_ref, sigma2, A, A_std, st):
         H[:, 3:] *= w.sum_temp / n - t_ref
     kf.H, kf.Q, kf.R = H, np.diag(q * dt), np.diag(R)
     kf.predict()
-    kf.update(w.sum_z / n)
+    kf.update(np.asarray(w.sum_z) / n)
     return kf.x, kf.P
 
 
