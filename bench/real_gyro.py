@@ -1,0 +1,203 @@
+"""A real consumer-grade MEMS gyro's recording with rests, for the bias tracker's benchmark.
+
+Source: BROAD, the Berlin Robust Orientation Estimation Assessment Dataset (D. Laidig,
+M. Caruso, A. Cereatti, T. Seel, "BROAD - A Benchmark for Robust Inertial Orientation
+Estimation", Data 6(7), 2021), Creative Commons Attribution 4.0 International. Each trial is
+about three minutes of one myon aktos-t wearable IMU at 285.71 Hz (``imu_gyr`` in rad/s), with
+about 30 s of rest at the start and at the end and, in the "with breaks" trials, three breaks
+of 10 s between hand-held motions; an optical motion-capture system (eight OptiTrack Flex13
+cameras) gives the IMU's orientation (``opt_quat``) on the same clock. See
+``bench/data/README.md`` for what is kept and why the excerpt is not in the repository.
+
+The excerpt keeps, per trial, the gyro readings (integers of 10 µrad/s: the rounding,
+2.9 µrad/s RMS, is under a five-hundredth of the white noise's 1.7e-3 rad/s per sample) and
+a *reference stillness* flag computed from the optical orientation alone, so it shares nothing
+with the gyro or with :mod:`gyrocal.calib.stationarity`: the angle the optical orientation turns
+over :data:`STILL_SPAN_S` is taken at every sample, and a sample is still when the median of that
+angle over the :data:`MEDIAN_S` around it is under :data:`STILL_DEG` with no optical sample
+missing there (the median: the optical orientation jumps by about 0.2 degrees for a few samples
+about once a second while the gyro, integrated, turns by 0.01 degrees); each still stretch so
+found is trimmed by :data:`TRIM_S` at both ends and kept when at least :data:`MIN_REST_S`
+long.
+
+Usage::
+
+    python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz   # write the excerpt
+
+(an xz-compressed CSV, :data:`HEADER`: one row per sample, in time order within each trial,
+sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials under 1.5 MB)
+and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO``, then
+``bench/data/``, then ``shared/data/`` beside the repository.
+"""
+
+from __future__ import annotations
+
+import lzma
+import math
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+#: The trials kept (BROAD's names): the four "with breaks" trials that the repository's
+#: snapshot holds, a stationary-magnet trial (medium-speed motion with breaks; the magnet
+#: only disturbs the magnetometer) and one without breaks (rests at the start and the end
+#: only: the bias carried through two minutes of motion).
+TRIALS = (
+    "05_undisturbed_slow_rotation_with_breaks_B",
+    "09_undisturbed_fast_rotation_with_breaks_B",
+    "14_undisturbed_slow_translation_with_breaks_B",
+    "18_undisturbed_fast_translation_with_breaks_B",
+    "30_disturbed_stationary_magnet_C",
+    "02_undisturbed_slow_rotation_B",
+)
+
+#: BROAD's sampling rate, Hz (``sampling_rate`` of every trial: 2000/7).
+FS_HZ = 2000.0 / 7.0
+#: Reference stillness: the optical orientation turns by less than this, degrees ...
+STILL_DEG = 0.1
+#: ... over this span centred on the sample, s.
+STILL_SPAN_S = 0.5
+#: The median of that angle is taken over this span, s.
+MEDIAN_S = 1.0
+#: Each still stretch loses this much at each end, s (settling after a motion, and the
+#: median's reach).
+TRIM_S = 1.0
+#: Shortest reference rest kept, s.
+MIN_REST_S = 2.0
+
+FILE_NAME = "broad-gyro-rests.csv.xz"
+#: The readings' unit in the file, rad/s.
+UNIT_RAD_S = 1e-5
+HEADER = "trial,gx_1e-5rad_s,gy_1e-5rad_s,gz_1e-5rad_s,still_ref"
+
+
+@dataclass(frozen=True, eq=False)
+class Trial:
+    """One trial of the excerpt: sample ``k`` is at ``t[k] = k / odr_hz`` (s)."""
+
+    name: str
+    odr_hz: float
+    t: np.ndarray
+    rate: np.ndarray  # (n, 3) rad/s
+    still_ref: np.ndarray  # (n,) bool: the optical reference's rests
+
+    def rests(self) -> list[tuple[int, int]]:
+        """The reference rests as ``[start, stop)`` sample ranges."""
+        d = np.diff(np.r_[0, self.still_ref.astype(np.int8), 0])
+        return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(),
+                        strict=True))
+
+
+def optical_still(quat: np.ndarray, fs: float) -> np.ndarray:
+    """The reference stillness of one trial from its optical orientation (module docstring).
+
+    Parameters
+    ----------
+    quat : (n, 4) array
+        Unit quaternions (NaN where the markers were lost).
+    fs : float
+        Sampling rate, Hz.
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    n = quat.shape[0]
+    half = int(round(STILL_SPAN_S * fs / 2))
+    mh = int(round(MEDIAN_S * fs / 2))
+    turn = np.full(n, np.inf)
+    a, b = quat[: n - 2 * half], quat[2 * half:]
+    with np.errstate(invalid="ignore"):
+        turn[half: n - half] = 2.0 * np.degrees(
+            np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0)))
+    turn[~np.isfinite(turn)] = np.inf  # a missing optical sample at either end
+    ok = np.zeros(n, dtype=bool)
+    # the median of the angle around each sample; inf (missing) anywhere in reach: not still
+    win = sliding_window_view(turn, 2 * mh + 1)
+    ok[mh: n - mh] = (np.median(win, axis=1) < STILL_DEG) & np.isfinite(win).all(axis=1)
+    out = np.zeros(n, dtype=bool)
+    trim = int(round(TRIM_S * fs))
+    d = np.diff(np.r_[0, ok.astype(np.int8), 0])
+    for lo, hi in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        lo, hi = lo + trim, hi - trim
+        if hi - lo >= MIN_REST_S * fs:
+            out[lo:hi] = True
+    return out
+
+
+def convert(src: Path, out: Path) -> None:
+    """Write the excerpt of the BROAD trials in :data:`TRIALS` (``src``: BROAD's ``data_mat``
+    folder) to ``out`` (xz CSV, :data:`HEADER`). Refuses to overwrite ``out``."""
+    from scipy.io import loadmat
+
+    if out.exists():
+        raise FileExistsError(f"{out} exists; remove it first")
+    lines = [HEADER]
+    for name in TRIALS:
+        m = loadmat(src / f"{name}.mat")
+        fs = float(m["sampling_rate"][0, 0])
+        if not math.isclose(fs, FS_HZ, rel_tol=1e-9):
+            raise ValueError(f"{name}: sampling rate {fs} Hz, expected {FS_HZ}")
+        gyr = np.rint(np.asarray(m["imu_gyr"], dtype=float) / UNIT_RAD_S).astype(np.int64)
+        still = optical_still(np.asarray(m["opt_quat"], dtype=float), fs)
+        for k in range(gyr.shape[0]):
+            gx, gy, gz = gyr[k]
+            lines.append(f"{name},{gx},{gy},{gz},{int(still[k])}")
+    tmp = out.with_name(out.name + ".part")
+    with lzma.open(tmp, "wt", encoding="ascii", preset=9 | lzma.PRESET_EXTREME) as fh:
+        fh.write("\n".join(lines) + "\n")
+    tmp.replace(out)
+
+
+def locate() -> Path | None:
+    """The excerpt's path, or None when it is nowhere it is looked for (module docstring)."""
+    env = os.environ.get("GYROCAL_REAL_GYRO")
+    repo = Path(__file__).resolve().parent.parent
+    for p in ([Path(env)] if env else []) + [repo / "bench" / "data" / FILE_NAME,
+                                             repo.parent / "shared" / "data" / FILE_NAME]:
+        if p.is_file():
+            return p
+    return None
+
+
+def load(path: Path | None = None) -> list[Trial]:
+    """The trials of the excerpt, in file order.
+
+    Raises
+    ------
+    FileNotFoundError
+        No excerpt was given or found (the message says how to make one).
+    ValueError
+        The file is not the excerpt (its header).
+    """
+    path = path or locate()
+    if path is None:
+        raise FileNotFoundError(
+            f"no {FILE_NAME}: build it with `python -m bench.real_gyro BROAD/data_mat "
+            f"bench/data/{FILE_NAME}` from a copy of BROAD (bench/data/README.md), or point "
+            "GYROCAL_REAL_GYRO at it")
+    with lzma.open(path, "rt", encoding="ascii") as fh:
+        head = fh.readline().strip()
+        if head != HEADER:
+            raise ValueError(f"{path}: header {head!r}, expected {HEADER!r}")
+        rows = fh.read().split()
+    names = np.array([r.split(",", 1)[0] for r in rows])
+    nums = np.array([r.split(",")[1:] for r in rows], dtype=np.int64).reshape(-1, 4)
+    trials = []
+    cut = np.flatnonzero(names[1:] != names[:-1]) + 1
+    for lo, hi in zip(np.r_[0, cut], np.r_[cut, names.size], strict=True):
+        trials.append(Trial(str(names[lo]), FS_HZ, np.arange(hi - lo) / FS_HZ,
+                            nums[lo:hi, :3] * UNIT_RAD_S, nums[lo:hi, 3] == 1))
+    return trials
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        print("usage: python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz")
+        sys.exit(2)
+    try:
+        convert(Path(sys.argv[1]), Path(sys.argv[2]))
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"error: {exc}")
+        sys.exit(2)
