@@ -192,6 +192,55 @@ def load(path: Path | None = None) -> list[Trial]:
     return trials
 
 
+# ------------------------------------------------------------------ held-out reference biases
+#: Length of the held-out blocks of still readings whose mean is the reference bias, s.
+BLOCK_S = 2.0
+
+
+def blocks(trial: Trial, block_s: float = BLOCK_S) -> np.ndarray:
+    """The reference rests of ``trial`` cut into whole blocks of ``block_s`` (a remainder under
+    one block is left out): ``(nb, 3)`` int array of ``[start, stop)`` sample ranges and the
+    rest's number."""
+    w = int(round(block_s * trial.odr_hz))
+    out = [(lo + j * w, lo + (j + 1) * w, r)
+           for r, (lo, hi) in enumerate(trial.rests()) for j in range((hi - lo) // w)]
+    return np.array(out, dtype=np.int64).reshape(-1, 3)
+
+
+def reference_bias(trial: Trial, blk: np.ndarray) -> np.ndarray:
+    """The reference bias of each block: minus the mean of its readings (a still sensor reads
+    ``-bias`` in the Calibration v1 convention), ``(nb, 3)`` rad/s."""
+    return np.array([-trial.rate[a:b].mean(axis=0) for a, b, _ in blk]).reshape(-1, 3)
+
+
+def reference_variance(refs: list[np.ndarray], blks: list[np.ndarray]) -> np.ndarray:
+    """The variance of one block's reference about the bias it stands for, per axis (rad/s)²:
+    the Allan variance at the block length, half the mean square difference of consecutive
+    blocks of the same rest, pooled over the trials. For white noise of density ``N`` it is
+    ``N² / block_s``; it also holds whatever correlation the noise has, and the bias's own change
+    over one block (which makes it an upper bound of the reference's noise)."""
+    d2 = [np.diff(r, axis=0)[np.diff(b[:, 2]) == 0] ** 2 for r, b in zip(refs, blks, strict=True)]
+    both = np.concatenate(d2)
+    if both.shape[0] == 0:
+        raise ValueError("no rest holds two blocks")
+    return 0.5 * both.mean(axis=0)
+
+
+def leave_one_out_bias(trials: list[Trial], i: int) -> tuple[np.ndarray, np.ndarray]:
+    """An earlier calibration's bias and its spread for trial ``i``, from the *other* trials
+    only (the same sensor, the same day): the mean over them of each one's first reference
+    rest's bias, and the standard deviation of those (rad/s, per axis)."""
+    firsts = []
+    for j, tr in enumerate(trials):
+        if j != i and tr.rests():
+            lo, hi = tr.rests()[0]
+            firsts.append(-tr.rate[lo:hi].mean(axis=0))
+    if len(firsts) < 2:
+        raise ValueError("need two other trials with a rest")
+    f = np.array(firsts)
+    return f.mean(axis=0), f.std(axis=0, ddof=1)
+
+
 if __name__ == "__main__":
     if len(sys.argv) != 3:
         print("usage: python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz")
