@@ -126,9 +126,10 @@ def optical_still(quat: np.ndarray, fs: float) -> np.ndarray:
     return out
 
 
-def convert(src: Path, out: Path) -> None:
+def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None:
     """Write the excerpt of the BROAD trials in :data:`TRIALS` (``src``: BROAD's ``data_mat``
-    folder) to ``out`` (xz CSV, :data:`HEADER`). Refuses to overwrite ``out``."""
+    folder) to ``out`` (xz CSV, :data:`HEADER`; ``preset``: the xz level, the strongest by
+    default, 30 s for the six trials). Refuses to overwrite ``out``."""
     from scipy.io import loadmat
 
     if out.exists():
@@ -141,11 +142,11 @@ def convert(src: Path, out: Path) -> None:
             raise ValueError(f"{name}: sampling rate {fs} Hz, expected {FS_HZ}")
         gyr = np.rint(np.asarray(m["imu_gyr"], dtype=float) / UNIT_RAD_S).astype(np.int64)
         still = optical_still(np.asarray(m["opt_quat"], dtype=float), fs)
-        for k in range(gyr.shape[0]):
-            gx, gy, gz = gyr[k]
-            lines.append(f"{name},{gx},{gy},{gz},{int(still[k])}")
+        cols = [gyr[:, 0].astype(str), gyr[:, 1].astype(str), gyr[:, 2].astype(str),
+                still.astype(np.int8).astype(str)]
+        lines += [f"{name},{a},{b},{c},{d}" for a, b, c, d in zip(*cols, strict=True)]
     tmp = out.with_name(out.name + ".part")
-    with lzma.open(tmp, "wt", encoding="ascii", preset=9 | lzma.PRESET_EXTREME) as fh:
+    with lzma.open(tmp, "wt", encoding="ascii", preset=preset) as fh:
         fh.write("\n".join(lines) + "\n")
     tmp.replace(out)
 
