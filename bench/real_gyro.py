@@ -214,17 +214,32 @@ def reference_bias(trial: Trial, blk: np.ndarray) -> np.ndarray:
     return np.array([-trial.rate[a:b].mean(axis=0) for a, b, _ in blk]).reshape(-1, 3)
 
 
-def reference_variance(refs: list[np.ndarray], blks: list[np.ndarray]) -> np.ndarray:
+#: The white noise is measured at this averaging time, s (see :func:`reference_variance`).
+WHITE_TAU_S = 0.25
+
+
+def reference_variance(trials: list[Trial], blks: list[np.ndarray]) -> np.ndarray:
     """The variance of one block's reference about the bias it stands for, per axis (rad/s)²:
-    the Allan variance at the block length, half the mean square difference of consecutive
-    blocks of the same rest, pooled over the trials. For white noise of density ``N`` it is
-    ``N² / block_s``; it also holds whatever correlation the noise has, and the bias's own change
-    over one block (which makes it an upper bound of the reference's noise)."""
-    d2 = [np.diff(r, axis=0)[np.diff(b[:, 2]) == 0] ** 2 for r, b in zip(refs, blks, strict=True)]
-    both = np.concatenate(d2)
-    if both.shape[0] == 0:
-        raise ValueError("no rest holds two blocks")
-    return 0.5 * both.mean(axis=0)
+    ``N² / block_s``, the white noise of density ``N`` averaged over the block. ``N²`` is the
+    Allan variance at :data:`WHITE_TAU_S` times that time (``σ²(τ) = N²/τ`` for white noise),
+    from the differences of consecutive 0.25-s means inside each block, pooled over the blocks
+    of all trials: long enough that the noise's correlation from sample to sample (the sensor's
+    low-pass filter) has died out, short enough that the bias's own drift (``σ²(τ)`` grows as
+    ``K² τ / 3`` for a random walk ``K``) does not count, as it would in the Allan variance at
+    the block length itself."""
+    d2 = []
+    for tr, blk in zip(trials, blks, strict=True):
+        m = int(round(WHITE_TAU_S * tr.odr_hz))
+        for a, b, _ in blk:
+            k = (b - a) // m
+            means = tr.rate[a:a + k * m].reshape(k, m, 3).mean(axis=1)
+            d2.append(np.diff(means, axis=0) ** 2)
+    if not d2:
+        raise ValueError("no blocks")
+    avar = 0.5 * np.concatenate(d2).mean(axis=0)
+    tau = m / trials[-1].odr_hz
+    block_s = (blks[-1][0, 1] - blks[-1][0, 0]) / trials[-1].odr_hz
+    return avar * tau / block_s
 
 
 def leave_one_out_bias(trials: list[Trial], i: int) -> tuple[np.ndarray, np.ndarray]:
