@@ -521,7 +521,36 @@ def _real_sensor(imufusion) -> None:
                 "axes; reference scatter s = "
                 + ", ".join(f"{x:.2g}" for x in np.sqrt(s2))
                 + " rad/s (net: its variance taken off)")
+    _real_noise(trials, blks)
     _reference_check(imufusion)
+
+
+def _real_noise(trials, blks) -> None:
+    """``gyrocal noise``'s figures (:func:`gyrocal.calib.allan.characterise_noise`, IEEE Std
+    952 overlapping Allan deviation) on each trial's longest reference rest, beside the white
+    noise the tracker estimates for itself (the quietest seconds' first differences) and the
+    one :func:`bench.real_gyro.reference_variance` takes off."""
+    from bench import real_gyro as rg
+    from gyrocal.calib.allan import characterise_noise
+    from gyrocal.calib.stationarity import quiet_noise_std
+
+    rows = []
+    for tr, blk in zip(trials, blks, strict=True):
+        lo, hi = max(tr.rests(), key=lambda r: r[1] - r[0])
+        nc = characterise_noise(tr.rate[lo:hi], tr.odr_hz)
+        own = quiet_noise_std(tr.rate, max(8, int(round(tr.odr_hz)))) / math.sqrt(tr.odr_hz)
+        ref = np.sqrt(rg.reference_variance([tr], [blk]) * rg.BLOCK_S)
+        nd, b, k = nc.noise_density, nc.bias_instability, nc.rate_random_walk
+        rows.append([tr.name, f"{(hi - lo) / tr.odr_hz:.1f}",
+                     " ".join(f"{v:.3g}+-{e:.1g}" for v, e in zip(nd.value, nd.std, strict=True)),
+                     " ".join(f"{v:.2g}" for v in b.hi95), " ".join(f"{v:.2g}" for v in k.hi95),
+                     " ".join(f"{v:.3g}" for v in own), " ".join(f"{v:.3g}" for v in ref)])
+    print_table(["trial", "rest s", "N rad/s/sqrt(Hz) x y z (gyrocal noise)",
+                 "B 95 % upper, rad/s", "K 95 % upper, rad/s/sqrt(s)",
+                 "N the tracker takes", "N of the reference"], rows,
+                title="real sensor: noise of the longest rest of each trial (the part inside "
+                "is not named by the data set, so no datasheet figure stands beside it; rests "
+                "of 20-33 s resolve N, not B or K)")
 
 
 #: Independent families and seeds the held-out reference is checked on (held-back seeds).
