@@ -28,6 +28,15 @@ is the steady-state Kalman filter of a walk with ``N/K ≈ 8 s``, as in the nois
 ``N/K`` 5-22 s), a replay can beat it by about ``√2`` and no more, and the bound column says how
 far 0.5x is out of reach.
 
+Real sensor (second table, when the excerpt of :mod:`bench.real_gyro` is found: six BROAD
+trials, a hand-held consumer-grade IMU at 285.7 Hz with rests between motions; not in the
+repository, see ``bench/data/README.md``): no bias truth, so each method is judged against
+held-out 2-s and 5-s means of still readings (the rests of the optical reference), the
+reference's own white-noise scatter taken off (:func:`_real_sensor`); then ``gyrocal noise``'s
+figures on the rests, and the held-out scheme checked on independent sessions where the bias is
+known (:func:`_reference_check`). That part alone: ``python -m bench tracker --seeds=
+--sessions=0 --stream-samples=2000``.
+
 Accuracy: the same simulated sessions (``gyrocal.calib.noise_sim.simulate_session``: 30 minutes, a
 10 °C warm-up, bias random walk, still periods of 2-5 s between smooth random motions; seeded)
 go through
@@ -457,24 +466,40 @@ def _held_out(imufusion, tr, blk: np.ndarray, cal) -> tuple[dict[str, np.ndarray
     return est, {"smoothed": sd_s, "causal": sdc[before]}
 
 
+#: Lengths of the held-out blocks the real-sensor table is made with, s: the shorter gives
+#: more blocks, the longer a reference with less scatter of its own.
+_REAL_BLOCKS_S = (2.0, 5.0)
+
+
 def _real_sensor(imufusion) -> None:
     """The BROAD excerpt (:mod:`bench.real_gyro`): each trial as it is, the detector finding the
-    rests. No bias truth on a real sensor: the reference is the mean of a 2-s block of still
-    readings (the optical reference's rests, cut into blocks), held out from the estimate it
-    judges (:func:`_held_out`). The reference's own scatter ``s²`` (the white noise over 2 s,
-    :func:`bench.real_gyro.reference_variance`) is subtracted from the mean square error
-    (the "net" columns) and added to our variance for the 3-sigma coverage. Each trial starts
-    from a calibration made of the *other* trials' first rests (mean bias and its spread).
-    :func:`_reference_check` runs the same scheme on independent sessions with a known bias."""
+    rests. No bias truth on a real sensor: the reference is the mean of a block of still
+    readings (the optical reference's rests, cut into blocks of 2 s, and of 5 s), held out from
+    the estimate it judges (:func:`_held_out`). The reference's own scatter ``s²`` (the white
+    noise over the block, :func:`bench.real_gyro.reference_variance`) is subtracted from the
+    mean square error (the "net" columns) and added to our variance for the 3-sigma coverage.
+    Each trial starts from a calibration made of the *other* trials' first rests (mean bias and
+    its spread). :func:`_reference_check` runs the same scheme on independent sessions with a
+    known bias."""
     from bench import real_gyro as rg
-    from gyrocal.calib.model import GyroCalibration
 
     try:
         trials = rg.load()
     except FileNotFoundError as exc:
         print(f"real sensor: skipped ({exc})\n")
         return
-    blks = [rg.blocks(tr) for tr in trials]
+    for block_s in _REAL_BLOCKS_S:
+        _real_table(imufusion, trials, block_s)
+    _real_noise(trials, [rg.blocks(tr) for tr in trials])
+    _reference_check(imufusion)
+
+
+def _real_table(imufusion, trials, block_s: float) -> None:
+    """One real-sensor table, the held-out blocks ``block_s`` long (:func:`_real_sensor`)."""
+    from bench import real_gyro as rg
+    from gyrocal.calib.model import GyroCalibration
+
+    blks = [rg.blocks(tr, block_s) for tr in trials]
     refs = [rg.reference_bias(tr, b) for tr, b in zip(trials, blks, strict=True)]
     s2 = rg.reference_variance(trials, blks)
     err: dict[str, list[np.ndarray]] = {k: [] for k in _HELD_OUT}
@@ -516,13 +541,11 @@ def _real_sensor(imufusion) -> None:
                  "inside 3 sigma"], rows,
                 title=f"real sensor: {len(trials)} BROAD trials (myon aktos-t, 285.7 Hz, "
                 "hand-held motion between rests; bench/data/README.md), run as recorded, the "
-                f"detector finding the rests; {n_blk} held-out 2-s blocks of still readings "
-                f"({n_after} the first of a rest after motion); RMS bias error, rad/s, all "
-                "axes; reference scatter s = "
+                f"detector finding the rests; {n_blk} held-out {block_s:g}-s blocks of still "
+                f"readings ({n_after} the first of a rest after motion); RMS bias error, rad/s, "
+                "all axes; reference scatter s = "
                 + ", ".join(f"{x:.2g}" for x in np.sqrt(s2))
                 + " rad/s (net: its variance taken off)")
-    _real_noise(trials, blks)
-    _reference_check(imufusion)
 
 
 def _real_noise(trials, blks) -> None:

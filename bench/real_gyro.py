@@ -27,7 +27,8 @@ Usage::
 (an xz-compressed CSV, :data:`HEADER`: one row per sample, in time order within each trial,
 sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials under 1.5 MB)
 and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO``, then
-``bench/data/``, then ``shared/data/`` beside the repository.
+``bench/data/``, then ``shared/data/`` beside the repository or beside one of its two parent
+folders (a work tree kept in a folder of work trees).
 """
 
 from __future__ import annotations
@@ -155,8 +156,9 @@ def locate() -> Path | None:
     """The excerpt's path, or None when it is nowhere it is looked for (module docstring)."""
     env = os.environ.get("GYROCAL_REAL_GYRO")
     repo = Path(__file__).resolve().parent.parent
-    for p in ([Path(env)] if env else []) + [repo / "bench" / "data" / FILE_NAME,
-                                             repo.parent / "shared" / "data" / FILE_NAME]:
+    places = [repo / "bench" / "data" / FILE_NAME]
+    places += [up / "shared" / "data" / FILE_NAME for up in repo.parents[:3]]
+    for p in ([Path(env)] if env else []) + places:
         if p.is_file():
             return p
     return None
