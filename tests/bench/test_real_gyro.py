@@ -166,3 +166,40 @@ def test_the_live_band_holds_the_next_two_seconds_mean_as_often_as_it_claims(rea
     cover = np.concatenate(inside)
     assert cover.size == 3 * sum(len(b) for b in blks)
     assert cover.mean() >= 0.98, f"{(~cover).sum()} of {cover.size} outside the band"
+
+
+def test_the_bench_runs_our_tracker_as_the_track_command_does(tmp_path, capsys):
+    """The real-sensor table's "ours" is ``gyrocal track REC --cal CAL`` on a recording with no
+    rest segments and no temperatures: the bench's in-process run must give the command's
+    JSON, causal and smoothed, on a recording made here (rests and hand-held motion)."""
+    import json
+
+    from bench.bench_tracker import _real_run
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.cli import main
+    from gyrocal.kit.recording import RecordingWriter, load_recording
+
+    rng = np.random.default_rng(21)
+    n = int(40 * FS)
+    t = np.arange(n) / FS
+    motion = ((t > 8) & (t < 14)) | ((t > 24) & (t < 29))
+    rate = -np.array([3.4e-3, 2.1e-3, -3.9e-3]) + 1.7e-3 * rng.standard_normal((n, 3))
+    rate[motion] += 0.5 * np.sin(2 * np.pi * 0.7 * t[motion])[:, None] * [1.0, -0.5, 0.3]
+    rec = tmp_path / "rec"
+    with RecordingWriter(rec, sensor={"model": "test"}, gimbal={}, protocol={}) as w:
+        w.append_imu(t, rate)
+        w.finish()
+    cal = GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(3.3e-3, 2.0e-3, -3.8e-3),
+                          scale_std=(math.nan,) * 3, bias_std=(3e-4, 1e-4, 2e-4), method="test")
+    cal_path = tmp_path / "cal.json"
+    cal_path.write_text(cal.to_json())
+    back = load_recording(rec)  # the values the command reads
+    trial = rg.Trial("test", FS, back.imu_t, back.imu_rate, np.zeros(n, dtype=bool))
+    causal, causal_sd, smooth, smooth_sd = _real_run(trial, cal, None)
+    for flags, bias, sd in ((["--causal"], causal, causal_sd), ([], smooth, smooth_sd)):
+        capsys.readouterr()
+        assert main(["track", str(rec), "--cal", str(cal_path), "--json", "--every", "0",
+                     *flags]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        np.testing.assert_allclose(doc["bias"], bias, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(doc["bias_std"], sd, rtol=0, atol=1e-12)
