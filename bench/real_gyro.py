@@ -135,6 +135,10 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
 
     if out.exists():
         raise FileExistsError(f"{out} exists; remove it first")
+    missing = [f"{n}.mat" for n in TRIALS if not (src / f"{n}.mat").is_file()]
+    if missing:
+        raise FileNotFoundError(f"{src} lacks {', '.join(missing)}: give BROAD's data_mat "
+                                "folder (bench/data/README.md)")
     lines = [HEADER]
     for name in TRIALS:
         m = loadmat(src / f"{name}.mat")
