@@ -268,6 +268,9 @@ def _speed_rows(label: str, s, n: int, st, ref: list[dict], replays: int,
         tr.feed(rate[i], tt[i], temp[i], **ref[i])
 
     budget = 1e6 / s.odr_hz / 10
+    if only is not None and not only.any():
+        return [[f"update(), feed() {label}", f"none in the first {n} samples: raise "
+                 "--stream-samples", "", "", f"{budget:.0f} us", ""]]
     rows = []
     for name, call in (("update()", upd), ("feed()", fed)):
         first, least = _per_call(make, call, n, replays)
