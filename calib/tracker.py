@@ -72,7 +72,9 @@ the rest of the step (the Joseph-form covariance, the NIS and CUSUM tests, the p
 bank) runs a slice per following call, so no call pays a whole step. Reading what that rest
 produces (:attr:`BiasTracker.bias_std`, :attr:`BiasTracker.health`, :attr:`BiasTracker.kf`, the
 random walk, :meth:`BiasTracker.smoothed`) or calling :meth:`process` finishes it first, and so
-does the next step: every observable equals the batch path's.
+does the next step: every observable equals the batch path's. A :meth:`BiasTracker.process`
+call of a few samples (a FIFO drain) pools them into update windows the same way, a row at a
+time, where array operations would cost more than the work.
 :meth:`BiasTracker.feed` instead fuses samples into blocks of ``stream_block_s``: each
 sample is corrected at once with the latest estimate (the estimate only changes at update
 windows, ``update_interval_s`` apart, and the still decision lags by ``lookahead_s`` anyway),
@@ -116,7 +118,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -151,6 +153,9 @@ ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
 
 _KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
 _DONE = object()  # a finished generator's next()
+#: Decided rows that a batch pools one at a time, as update() does (numpy's fixed cost per
+#: call outweighs the work below this).
+_ROWS_ONE_BY_ONE = 64
 
 
 @dataclass(frozen=True)
@@ -987,14 +992,18 @@ class BiasTracker:
 
     def _window_step(self, g: int, L: int, t: float, m: tuple[float, float, float],
                      temp: float, kind: int, rr: float = math.nan,
-                     axis: tuple[float, float, float] | None = None) -> None:
+                     axis: tuple[float, float, float] | None = None,
+                     close: Callable[[_OpenWindow, int], None] | None = None) -> None:
         """Pool the decided sample ``g`` (reading ``m``, of ``kind``; with a reference its
-        encoder rate ``rr`` and servo axis) into the open update window, applying the window
-        when it closes (exactly as :meth:`_assemble_and_apply` does for a one-sample batch);
-        in floats, as the window's sums are kept."""
+        encoder rate ``rr`` and servo axis) into the open update window, closing the window
+        where :meth:`_pool_rows_vectorised` closes it; in floats, as the window's sums are
+        kept. ``close(window, at)`` applies a closed window (default: :meth:`update`'s, the
+        rest of the step deferred, no log)."""
+        if close is None:
+            close = self._close_deferred
         op = self._open
         if op is not None and not (kind == op.kind and axis == op.axis):
-            self._apply_window(op, _NO_LOG, g + L, defer=True)
+            close(op, g + L)
             self._open = op = None
         if kind == _KIND_NONE:
             return
@@ -1024,10 +1033,14 @@ class BiasTracker:
             op.last = g
             op.t_last = t
         if op.count == self._U:
-            self._apply_window(op, _NO_LOG, op.last + L, defer=True)
+            close(op, op.last + L)
             self._open = None
         else:
             self._open = op
+
+    def _close_deferred(self, w: _OpenWindow, at: int) -> None:
+        """:meth:`update`'s window close: the state at once, the rest of the step deferred."""
+        self._apply_window(w, _NO_LOG, at, defer=True)
 
     def _sample_output(self, m0: float, m1: float, m2: float, t: float, temp: float
                        ) -> np.ndarray:
@@ -1511,9 +1524,11 @@ class BiasTracker:
     def _assemble_and_apply(
         self, S: dict[str, np.ndarray], n_dec: int, kind: np.ndarray, g0: int, finish: bool
     ) -> tuple[list[_Snapshot], UpdateLog]:
-        """Pool decided samples into update windows and apply the closed ones in order."""
+        """Pool decided samples into update windows and apply the closed ones in order: a few
+        rows one at a time (:meth:`_window_step`, as :meth:`update` pools them; numpy's
+        per-call cost would dominate), more with array operations
+        (:meth:`_pool_rows_vectorised`); both close the same windows at the same rows."""
         L = self.detector.n_lookahead
-        U = self._U
         snaps = [self._snapshot(-1)]
         log: dict[str, list[Any]] = {
             k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at",
@@ -1524,82 +1539,14 @@ class BiasTracker:
             self._apply_window(w, log, close)
             snaps.append(self._snapshot(close))
 
-        ra = S["ra"][:n_dec]
-        # z_i: the reading, less the reference's A⁻¹ ω u where a servo turns
-        z = S["m"][:n_dec].copy()
-        is_ref = kind == _KIND_REF
-        if is_ref.any():
-            z[is_ref] -= (S["rr"][:n_dec][is_ref, None] * ra[is_ref]) @ self._A_inv.T
-        # run starts: kind changes, or a different servo axis within reference samples
-        new_run = np.ones(n_dec, dtype=bool)
-        if n_dec > 1:
-            same_axis = np.all(ra[1:] == ra[:-1], axis=1) | ~is_ref[1:]
-            new_run[1:] = (kind[1:] != kind[:-1]) | ~same_axis
-        op = self._open
-        continues = False
-        if op is not None and n_dec:
-            k0 = int(kind[0])
-            axis0 = tuple(float(x) for x in ra[0]) if k0 == _KIND_REF else None
-            continues = k0 == op.kind and axis0 == op.axis
-            if not continues:
-                apply(op, g0 + L)  # closed by the decision on S[0], made at g0 + L
-                self._open = op = None
-        if n_dec:
-            new_run[0] = not continues
-            idx = np.arange(n_dec)
-            run_start = np.maximum.accumulate(np.where(new_run, idx, 0))
-            offset = np.where(run_start == 0, op.count if continues and op else 0, 0)
-            pos = idx - run_start + offset
-            active = kind != _KIND_NONE
-            win_start = active & ((pos % U == 0) | new_run)
-            if continues:
-                win_start[0] = False
-            starts = np.flatnonzero(win_start)
-            # windows: [start, end) in decided rows; the first may be the continued open window
-            bounds = list(starts)
-            if continues:
-                bounds = [0, *bounds]
-            bounds_arr = np.array(bounds, dtype=np.int64)
-            # each window runs to the earlier of the next window start or the end of its run
-            ends_at = np.flatnonzero(np.append(new_run[1:], True))  # last row of each run
-            # exclusive end of the run of each row
-            run_id = np.cumsum(new_run) - int(new_run[0])  # the first run may continue
-            run_end = ends_at[run_id] + 1
-            for wi, b in enumerate(bounds_arr):
-                nxt = bounds_arr[wi + 1] if wi + 1 < bounds_arr.size else n_dec
-                e = int(min(nxt, run_end[b]))
-                rows = slice(int(b), e)
-                cnt = e - int(b)
-                sum_z = z[rows].sum(axis=0).tolist()
-                sum_temp = float(np.sum(S["temp"][rows])) if self._temp_model else 0.0
-                sum_omega = float(np.sum(S["rr"][rows])) if kind[b] == _KIND_REF else 0.0
-                if wi == 0 and continues and op is not None:
-                    w = op
-                    w.count += cnt
-                    w.sum_z = [a + b for a, b in zip(w.sum_z, sum_z, strict=True)]
-                    w.sum_temp += sum_temp
-                    w.sum_omega += sum_omega
-                    w.last = g0 + e - 1
-                    w.t_last = float(S["t"][e - 1])
-                else:
-                    w = _OpenWindow(
-                        kind=int(kind[b]),
-                        axis=tuple(float(x) for x in ra[b]) if kind[b] == _KIND_REF else None,
-                        last=g0 + e - 1,
-                        count=cnt,
-                        sum_z=sum_z,
-                        sum_temp=sum_temp,
-                        sum_omega=sum_omega,
-                        t_last=float(S["t"][e - 1]),
-                    )
-                if w.count == U:
-                    apply(w, w.last + L)
-                    self._open = None
-                elif e < n_dec:  # ended by a row of another kind (or another axis)
-                    apply(w, w.last + 1 + L)
-                    self._open = None
-                else:
-                    self._open = w
+        if n_dec <= _ROWS_ONE_BY_ONE:
+            cols = [S[k][:n_dec].tolist() for k in ("t", "m", "temp", "rr", "ra")]
+            for i, (t, m, temp, rr, ra) in enumerate(zip(*cols, strict=True)):
+                k = int(kind[i])
+                self._window_step(g0 + i, L, t, tuple(m), temp, k, rr,
+                                  tuple(ra) if k == _KIND_REF else None, apply)
+        elif n_dec:
+            self._pool_rows_vectorised(S, n_dec, kind, g0, apply)
         if finish and self._open is not None:
             apply(self._open, self._open.last + 1 + L)
             self._open = None
@@ -1614,6 +1561,88 @@ class BiasTracker:
             applied_at=np.array(log["at"], dtype=np.int64),
             shift=np.array(log["shift"], dtype=bool),
         )
+
+    def _pool_rows_vectorised(self, S: dict[str, np.ndarray], n_dec: int, kind: np.ndarray,
+                              g0: int, apply: Callable[[_OpenWindow, int], None]) -> None:
+        """:meth:`_assemble_and_apply`'s pooling with array operations: runs of one kind (and
+        one servo axis), cut into windows of at most ``U`` rows, each closed window applied."""
+        L = self.detector.n_lookahead
+        U = self._U
+        ra = S["ra"][:n_dec]
+        # z_i: the reading, less the reference's A⁻¹ ω u where a servo turns
+        z = S["m"][:n_dec].copy()
+        is_ref = kind == _KIND_REF
+        if is_ref.any():
+            z[is_ref] -= (S["rr"][:n_dec][is_ref, None] * ra[is_ref]) @ self._A_inv.T
+        # run starts: kind changes, or a different servo axis within reference samples
+        new_run = np.ones(n_dec, dtype=bool)
+        if n_dec > 1:
+            same_axis = np.all(ra[1:] == ra[:-1], axis=1) | ~is_ref[1:]
+            new_run[1:] = (kind[1:] != kind[:-1]) | ~same_axis
+        op = self._open
+        continues = False
+        if op is not None:
+            k0 = int(kind[0])
+            axis0 = tuple(float(x) for x in ra[0]) if k0 == _KIND_REF else None
+            continues = k0 == op.kind and axis0 == op.axis
+            if not continues:
+                apply(op, g0 + L)  # closed by the decision on S[0], made at g0 + L
+                self._open = op = None
+        new_run[0] = not continues
+        idx = np.arange(n_dec)
+        run_start = np.maximum.accumulate(np.where(new_run, idx, 0))
+        offset = np.where(run_start == 0, op.count if continues and op else 0, 0)
+        pos = idx - run_start + offset
+        active = kind != _KIND_NONE
+        win_start = active & ((pos % U == 0) | new_run)
+        if continues:
+            win_start[0] = False
+        starts = np.flatnonzero(win_start)
+        # windows: [start, end) in decided rows; the first may be the continued open window
+        bounds = list(starts)
+        if continues:
+            bounds = [0, *bounds]
+        bounds_arr = np.array(bounds, dtype=np.int64)
+        # each window runs to the earlier of the next window start or the end of its run
+        ends_at = np.flatnonzero(np.append(new_run[1:], True))  # last row of each run
+        # exclusive end of the run of each row
+        run_id = np.cumsum(new_run) - int(new_run[0])  # the first run may continue
+        run_end = ends_at[run_id] + 1
+        for wi, b in enumerate(bounds_arr):
+            nxt = bounds_arr[wi + 1] if wi + 1 < bounds_arr.size else n_dec
+            e = int(min(nxt, run_end[b]))
+            rows = slice(int(b), e)
+            cnt = e - int(b)
+            sum_z = z[rows].sum(axis=0).tolist()
+            sum_temp = float(np.sum(S["temp"][rows])) if self._temp_model else 0.0
+            sum_omega = float(np.sum(S["rr"][rows])) if kind[b] == _KIND_REF else 0.0
+            if wi == 0 and continues and op is not None:
+                w = op
+                w.count += cnt
+                w.sum_z = [a + b for a, b in zip(w.sum_z, sum_z, strict=True)]
+                w.sum_temp += sum_temp
+                w.sum_omega += sum_omega
+                w.last = g0 + e - 1
+                w.t_last = float(S["t"][e - 1])
+            else:
+                w = _OpenWindow(
+                    kind=int(kind[b]),
+                    axis=tuple(float(x) for x in ra[b]) if kind[b] == _KIND_REF else None,
+                    last=g0 + e - 1,
+                    count=cnt,
+                    sum_z=sum_z,
+                    sum_temp=sum_temp,
+                    sum_omega=sum_omega,
+                    t_last=float(S["t"][e - 1]),
+                )
+            if w.count == U:
+                apply(w, w.last + L)
+                self._open = None
+            elif e < n_dec:  # ended by a row of another kind (or another axis)
+                apply(w, w.last + 1 + L)
+                self._open = None
+            else:
+                self._open = w
 
     def _bound(self, k: int) -> float:
         b = self._bound_cache.get(k)

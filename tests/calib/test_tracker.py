@@ -120,14 +120,26 @@ def test_streaming_batch_and_chunks_agree():
     kw = dict(reference_rate=s.reference_rate, reference_axis=s.reference_axis)
     st = settings(reference_axis_std=1e-4)
     batch = BiasTracker(st, cal).process(s.t, s.rate, s.temperature_c, **kw)
-    chunked = BiasTracker(st, cal)
-    parts = []
-    for a in range(0, s.n, 613):
-        b = min(a + 613, s.n)
-        parts.append(chunked.process(s.t[a:b], s.rate[a:b], s.temperature_c[a:b],
-                                     reference_rate=s.reference_rate[a:b],
-                                     reference_axis=s.reference_axis[a:b]).bias)
-    np.testing.assert_allclose(np.vstack(parts), batch.bias, rtol=0, atol=1e-15)
+    # 613-sample chunks pool with array operations, 10-sample ones a row at a time (as a FIFO
+    # drain hands them over): the same windows, the same log, the same estimates
+    for size in (613, 10):
+        chunked = BiasTracker(st, cal)
+        parts = []
+        for a in range(0, s.n, size):
+            b = min(a + size, s.n)
+            parts.append(chunked.process(s.t[a:b], s.rate[a:b], s.temperature_c[a:b],
+                                         reference_rate=s.reference_rate[a:b],
+                                         reference_axis=s.reference_axis[a:b]))
+        np.testing.assert_allclose(np.vstack([p.bias for p in parts]), batch.bias, rtol=0,
+                                   atol=1e-15)
+        np.testing.assert_allclose(np.vstack([p.bias_std for p in parts]), batch.bias_std,
+                                   rtol=1e-12)
+        for f in ("t", "count", "applied_at", "alarm", "shift"):
+            np.testing.assert_array_equal(
+                np.concatenate([getattr(p.updates, f) for p in parts]),
+                getattr(batch.updates, f))
+        np.testing.assert_allclose(np.concatenate([p.updates.nis for p in parts]),
+                                   batch.updates.nis, rtol=1e-9)
     stream = BiasTracker(st, cal)
     bias, std, corr = [], [], []
     for i in range(s.n):
