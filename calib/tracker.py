@@ -1240,10 +1240,10 @@ class BiasTracker:
         n = t.size
         if m.shape != (n, 3):
             raise CalibInputError(f"rate must have shape ({n}, 3) to match t, got {m.shape}")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(m))):
+        if not (np.isfinite(t).all() and np.isfinite(m).all()):
             raise CalibInputError("t and rate must be finite; drop or repair bad samples first")
-        if n > 1 and np.any(np.diff(t) <= 0):
-            i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        if n > 1 and not (t[1:] > t[:-1]).all():
+            i = int(np.flatnonzero(~(t[1:] > t[:-1]))[0])
             raise CalibInputError(f"t must increase strictly; t[{i + 1}]={t[i + 1]} <= t[{i}]")
         if n and self._t_last is not None and t[0] <= self._t_last:
             raise CalibInputError(
@@ -1255,7 +1255,7 @@ class BiasTracker:
             temp = np.asarray(temperature, dtype=float).reshape(-1)
             if temp.shape != (n,):
                 raise CalibInputError(f"temperature must have shape ({n},), got {temp.shape}")
-        if self._temp_model and not np.all(np.isfinite(temp)):
+        if self._temp_model and not np.isfinite(temp).all():
             raise CalibInputError(
                 "the temperature model needs a finite temperature for every sample; "
                 "give temperature or turn temperature_model off"
@@ -1266,7 +1266,7 @@ class BiasTracker:
             ext = np.asarray(still, dtype=float).reshape(-1)
             if ext.shape != (n,):
                 raise CalibInputError(f"still must have shape ({n},), got {ext.shape}")
-            if not np.all(np.isnan(ext) | (ext == 0) | (ext == 1)):
+            if not (np.isnan(ext) | (ext == 0) | (ext == 1)).all():
                 raise CalibInputError(
                     "still must hold True/False (or NaN: let the detector decide)"
                 )
@@ -1291,17 +1291,17 @@ class BiasTracker:
                     raise CalibInputError(
                         "reference-rate updates need a calibration (its scale and scale_std)"
                     )
-                if not np.all(np.isfinite(self.scale_std)):
+                if not np.isfinite(self.scale_std).all():
                     raise CalibInputError(
                         "the calibration has no scale_std; reference-rate updates need it"
                     )
                 axes = ra[has]
-                if not np.all(np.isfinite(axes)):
+                if not np.isfinite(axes).all():
                     raise CalibInputError("reference_axis must be finite where reference_rate is")
-                norms = np.linalg.norm(axes, axis=1)
-                if np.any(np.abs(norms - 1.0) > 1e-6):
+                norms = np.sqrt((axes * axes).sum(axis=1))
+                if (np.abs(norms - 1.0) > 1e-6).any():
                     raise CalibInputError("reference_axis rows must be unit vectors")
-                if np.any(ext[has] == 1):
+                if (ext[has] == 1).any():
                     raise CalibInputError("a sample cannot be still while a servo turns it")
         return t, m, temp, ext, rr, ra
 
