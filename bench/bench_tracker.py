@@ -284,6 +284,24 @@ def _speed_rows(label: str, s, n: int, st, ref: list[dict], replays: int,
     return rows
 
 
+def _block_row(session, blk: int, what: str) -> list[str]:
+    """Per sample, process() on consecutive blocks of ``blk`` samples of ``session`` (with the
+    encoder's reference), each call's time divided by its samples."""
+    s, n, st, _ = session
+    rr, ra = _reference(s)
+    lat = []
+    tb = BiasTracker(st, s.calibration)
+    for a in range(0, n - blk + 1, blk):
+        t0 = time.perf_counter()
+        tb.process(s.t[a:a + blk], s.rate[a:a + blk], s.temperature_c[a:a + blk],
+                   reference_rate=rr[a:a + blk], reference_axis=ra[a:a + blk])
+        lat.append((time.perf_counter() - t0) / blk)
+    lb = np.array(lat) * 1e6
+    return [f"process() on {blk}-sample blocks ({what}), 1 kHz jig",
+            f"{np.median(lb):.1f} / {np.percentile(lb, 99):.1f} / {lb.mean():.1f}", "",
+            f"- / - / {5 * lb.mean():.0f} us", f"{1e5 / s.odr_hz:.0f} us", ""]
+
+
 def _equivalence_rows(label: str, s, n: int, st, ref: list[dict]) -> list[list[str]]:
     """How far feed()'s corrected rates (each with the estimate of the last processed block)
     are from update()'s (the estimate at that sample, equal to the batch run's): RMS error of
@@ -328,23 +346,13 @@ def _streaming(n_max: int, replays: int = 3) -> None:
     old_us = (time.perf_counter() - t0) / n_old * 1e6
     rows.append(["one-sample process() (update() before), 1 kHz hand-held",
                  f"- / - / {old_us:.0f}", "", f"- / - / {5 * old_us:.0f} us", "100 us", ""])
-    # the kit's live loop (gyrocal track --live): process() on the blocks it collects
+    # process() on the blocks of track --live's loop, and on the FIFO drains of using.md's example
     from gyrocal.kit.tracking import LIVE_CHUNK_S
 
-    s, n, st, ref = jig1k
-    blk = max(1, int(round(LIVE_CHUNK_S * s.odr_hz)))
-    rr, ra = _reference(s)
-    lat = []
-    tb = BiasTracker(st, s.calibration)
-    for a in range(0, n - blk + 1, blk):
-        t0 = time.perf_counter()
-        tb.process(s.t[a:a + blk], s.rate[a:a + blk], s.temperature_c[a:a + blk],
-                   reference_rate=rr[a:a + blk], reference_axis=ra[a:a + blk])
-        lat.append((time.perf_counter() - t0) / blk)
-    lb = np.array(lat) * 1e6
-    rows.append([f"process() on {blk}-sample blocks (track --live's loop), 1 kHz jig",
-                 f"{np.median(lb):.1f} / {np.percentile(lb, 99):.1f} / {lb.mean():.1f}", "",
-                 f"- / - / {5 * lb.mean():.0f} us", "100 us", ""])
+    s = jig1k[0]
+    for blk, what in ((max(1, int(round(LIVE_CHUNK_S * s.odr_hz))), "track --live's loop"),
+                      (50, "FIFO drains, as in using.md")):
+        rows.append(_block_row(jig1k, blk, what))
     spent = [0.0]
     orig = trk.quiet_windows
 
