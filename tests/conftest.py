@@ -22,8 +22,8 @@ import os
 # One BLAS thread per process, set before numpy loads OpenBLAS (here, in the main process, which
 # xdist's workers and the tests' subprocesses inherit it from). The suite runs one worker per core;
 # OpenBLAS's default of one thread per core puts two threads on each core, which spin waiting for
-# each other: `python -m bench blas` measured the calib tests at 1.17 times their CPU on a quiet
-# host, the window and Allan tests at 1.8 times with other work on the machine.
+# each other: `python -m bench blas` measured the calib tests at 1.17 times their CPU and the
+# window and Allan tests at 1.7 times on a quiet host (1.8 with other work on the machine).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
