@@ -17,11 +17,21 @@ Under pytest-xdist (``pytest -n 2``, the README's command) the scheduler below i
 
 from __future__ import annotations
 
-from typing import Any
+import os
 
-import pytest
+# One BLAS thread per process, set before numpy loads OpenBLAS (here, in the main process, which
+# xdist's workers and the tests' subprocesses inherit it from). The suite runs one worker per core;
+# OpenBLAS's default of one thread per core puts two threads on each core, which spin waiting for
+# each other: `python -m bench blas` measured the calib tests at 1.17 times their CPU and the
+# window and Allan tests at 1.7 times on a quiet host (1.8 with other work on the machine).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from tests.test_docs import CHAINS, xdist_unit
+from typing import Any  # noqa: E402
+
+import pytest  # noqa: E402
+
+from tests.test_docs import CHAINS, xdist_unit  # noqa: E402
 
 #: Modules whose module-scoped fixtures run emulated calibrations (tens of CPU seconds): one
 #: work unit each, so one worker builds the fixture once.

@@ -354,8 +354,12 @@ class GimbalJig:
         force = self._gravity(t, th[1::2])
         step = np.where(t > before, t - before, np.inf)[:, None]
         w, alpha = w_both[:, 1], (w_both[:, 1] - w_both[:, 0]) / step
-        # α × r + ω × (ω × r), the second as ω (ω·r) − r |ω|²
-        acc = np.cross(alpha, r) + w * (w @ r)[:, None] - r * np.einsum("ni,ni->n", w, w)[:, None]
+        # α × r + ω × (ω × r), the second as ω (ω·r) − r |ω|²; α × r written out (numpy.cross's
+        # products and differences in its order, without its per-call set-up)
+        a0, a1, a2 = alpha[:, 0], alpha[:, 1], alpha[:, 2]
+        alpha_r = np.column_stack((a1 * r[2] - a2 * r[1], a2 * r[0] - a0 * r[2],
+                                   a0 * r[1] - a1 * r[0]))
+        acc = alpha_r + w * (w @ r)[:, None] - r * np.einsum("ni,ni->n", w, w)[:, None]
         return force + acc / STANDARD_GRAVITY
 
     def _gravity(self, t: np.ndarray, th: np.ndarray) -> np.ndarray:
