@@ -152,6 +152,8 @@ __all__ = [
 ENCODER_TICK_RAD = 2.0 * math.pi / 4096.0
 
 _KIND_NONE, _KIND_STILL, _KIND_REF = 0, 1, 2
+#: What each Kalman step logs (:meth:`BiasTracker._step_rest`), gathered into an UpdateLog.
+_LOG_KEYS = ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at", "shift")
 _DONE = object()  # a finished generator's next()
 #: Decided rows that a batch pools one at a time, as update() does (numpy's fixed cost per
 #: call outweighs the work below this).
@@ -476,8 +478,8 @@ class _QBank:
         of ``q = K²`` per axis and its posterior standard deviation (the tracker uses their sum).
 
         Each filter has ``h = [−1]`` or ``[−1, −ΔT]``: ``Ph = P h``, ``S = hᵀ P h + R``,
-        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry. A slice is one or
-        one array operation (about a microsecond or two), so that spread over the calls that
+        ``K = Ph / S``, ``x += K y``, ``P −= K Phᵀ``, written out per entry. A slice is one
+        array operation (about a microsecond or two), so that spread over the calls that
         follow a step each pays little."""
         z_a, R_a = np.array(z), np.array(R)
         yield
@@ -659,12 +661,9 @@ class BiasTracker:
         self._n_shifts = 0
         kf.F = np.eye(dim)
         kf.Q = np.zeros((dim, dim))
-        # H = [−I] or [−I, −(T − T_ref) I]: the fixed part, scaled per window
-        self._H0 = -np.hstack([np.eye(3)] * (dim // 3))
         self._kf = kf
         self._dim = dim
-        self._sigma2 = s.noise_std**2
-        self._sigma2_l = self._sigma2.tolist()
+        self._sigma2_l = (s.noise_std**2).tolist()  # per-sample white-noise variance
         # the reference's variance terms (_reference_variance): (A⁻¹)∘² σ_A², its row sums
         ai2 = self._A_inv**2
         self._ai2_astd2 = (ai2 @ self._A_std**2).tolist()
@@ -886,21 +885,14 @@ class BiasTracker:
         if self._k == 0 or self._finished or self._nbuf:
             return None
         try:
-            if type(sample) is np.ndarray and sample.dtype == np.float64 \
-                    and sample.shape == (3,):
-                m0, m1, m2 = sample.tolist()  # the common case: no new array
-            else:
-                m = np.array(sample, dtype=float)
-                if m.shape != (3,):
-                    return None
-                m0, m1, m2 = m.tolist()
+            m0, m1, m2 = _three_floats(sample)
             tf = float(t)
             temp = math.nan if temperature is None else float(temperature)
         except (TypeError, ValueError):
             return None
         if specific_force is not None and self._G_rows is not None:  # m + G f
             try:
-                f0, f1, f2 = (float(v) for v in specific_force)
+                f0, f1, f2 = _three_floats(specific_force)
             except (TypeError, ValueError):
                 return None
             if not (math.isfinite(f0) and math.isfinite(f1) and math.isfinite(f2)):
@@ -978,11 +970,7 @@ class BiasTracker:
                 or not self._ref_ready):
             return None
         try:
-            if type(reference_axis) is np.ndarray and reference_axis.dtype == np.float64 \
-                    and reference_axis.shape == (3,):
-                u0, u1, u2 = reference_axis.tolist()
-            else:
-                u0, u1, u2 = (float(v) for v in reference_axis)
+            u0, u1, u2 = _three_floats(reference_axis)
         except (TypeError, ValueError):
             return None
         if not (math.isfinite(u0) and math.isfinite(u1) and math.isfinite(u2)
@@ -1530,10 +1518,7 @@ class BiasTracker:
         (:meth:`_pool_rows_vectorised`); both close the same windows at the same rows."""
         L = self.detector.n_lookahead
         snaps = [self._snapshot(-1)]
-        log: dict[str, list[Any]] = {
-            k: [] for k in ("t", "kind", "count", "nis", "nis_sum", "nis_bound", "alarm", "at",
-                            "shift")
-        }
+        log: dict[str, list[Any]] = {k: [] for k in _LOG_KEYS}
 
         def apply(w: _OpenWindow, close: int) -> None:
             self._apply_window(w, log, close)
@@ -2012,6 +1997,19 @@ class BiasTracker:
         }
 
 
+def _three_floats(v: Any) -> tuple[float, float, float]:
+    """``v`` (a reading, an axis, a specific force) as three Python floats for :meth:`update`'s
+    scalar path, without a new array when it is one of three float64 already; ``ValueError`` (or
+    ``TypeError``) for anything that is not exactly three numbers, which the general path then
+    checks and names."""
+    if not (type(v) is np.ndarray and v.dtype == np.float64):
+        v = np.asarray(v, dtype=float)
+    if v.shape != (3,):
+        raise ValueError("not three numbers")
+    a, b, c = v.tolist()
+    return a, b, c
+
+
 class _Discard:
     """A list that keeps nothing (the update log of :meth:`BiasTracker.update`)."""
 
@@ -2020,8 +2018,7 @@ class _Discard:
 
 
 #: A throwaway update log (:meth:`BiasTracker.update` returns no log): appending costs nothing.
-_NO_LOG: dict[str, Any] = {k: _Discard() for k in ("t", "kind", "count", "nis", "nis_sum",
-                                                   "nis_bound", "alarm", "at", "shift")}
+_NO_LOG: dict[str, Any] = {k: _Discard() for k in _LOG_KEYS}
 
 
 def _concat(parts: list[TrackResult], g_first: int) -> TrackResult:
