@@ -304,8 +304,8 @@ def _block_row(session, blk: int, what: str) -> list[str]:
 
 def _equivalence_rows(label: str, s, n: int, st, ref: list[dict]) -> list[list[str]]:
     """How far feed()'s corrected rates (each with the estimate of the last processed block)
-    are from update()'s (the estimate at that sample, equal to the batch run's): RMS error of
-    each against the session's true rate, and of the bias each corrects with."""
+    are from update()'s (the estimate at that sample, equal to the batch run's): the RMS error
+    of each against the session's true rate."""
     rate, tt, temp = s.rate, s.t, s.temperature_c
     out = {}
     for name in ("update", "feed"):
