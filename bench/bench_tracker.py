@@ -412,6 +412,8 @@ def main(argv: list[str]) -> None:
     args = ap.parse_args(argv)
     if args.sessions < 0:
         ap.error("--sessions must be at least 0")
+    if args.stream_samples < 100:
+        ap.error("--stream-samples must be at least 100 (the speed table's percentiles)")
     try:
         seeds = [int(x) for x in args.seeds.split(",") if x]
     except ValueError:
