@@ -46,7 +46,12 @@ def main(argv: list[str]) -> int:
             importlib.import_module(f"bench.bench_{name}").main(extra)
         except KeyboardInterrupt:
             raise
-        except BaseException:  # any failure, SystemExit included, is reported
+        except SystemExit as e:  # its own argument check: argparse has said what is wrong
+            if e.code in (0, None):
+                continue
+            print(f"=== bench {name}: FAILED (bad arguments, exit {e.code}) ===", flush=True)
+            failed.append(name)
+        except BaseException:  # any other failure is reported with its traceback
             traceback.print_exc(file=sys.stdout)
             print(f"=== bench {name}: FAILED after {time.perf_counter() - t0:.1f} s ===",
                   flush=True)

@@ -32,6 +32,16 @@ def test_a_failing_benchmark_is_marked_and_the_rest_still_run(monkeypatch, capsy
     assert bench_main.main([]) == 0
 
 
+def test_a_benchmarks_argument_error_is_its_message_not_a_traceback(capsys):
+    # a bench's own argparse check (bench tracker's --stream-samples) ends that bench with its
+    # message and exit 2 reported, and no traceback
+    assert bench_main.main(["tracker", "--stream-samples=5"]) == 1
+    out, err = capsys.readouterr()
+    assert "--stream-samples must be at least 100" in err
+    assert "Traceback" not in out + err
+    assert "=== bench tracker: FAILED (bad arguments, exit 2) ===" in out
+
+
 class FlakySyncRead:
     """A GroupSyncRead whose status packets are lost on the listed calls."""
 
