@@ -132,6 +132,7 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
     folder) to ``out`` (xz CSV, :data:`HEADER`; ``preset``: the xz level, the strongest by
     default, 30 s for the six trials). Refuses to overwrite ``out``."""
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
     if out.exists():
         raise FileExistsError(f"{out} exists; remove it first")
@@ -141,7 +142,15 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
                                 "folder (bench/data/README.md)")
     lines = [HEADER]
     for name in TRIALS:
-        m = loadmat(src / f"{name}.mat")
+        try:
+            m = loadmat(src / f"{name}.mat")
+        except MatReadError as exc:
+            raise ValueError(f"{src / name}.mat is not a MATLAB file ({exc}): give BROAD's "
+                             "data_mat folder (bench/data/README.md)") from None
+        lack = [k for k in ("sampling_rate", "imu_gyr", "opt_quat") if k not in m]
+        if lack:
+            raise ValueError(f"{src / name}.mat has no {', '.join(lack)}: not a BROAD trial "
+                             "(bench/data/README.md)")
         fs = float(m["sampling_rate"][0, 0])
         if not math.isclose(fs, FS_HZ, rel_tol=1e-9):
             raise ValueError(f"{name}: sampling rate {fs} Hz, expected {FS_HZ}")
@@ -265,10 +274,10 @@ def leave_one_out_bias(trials: list[Trial], i: int) -> tuple[np.ndarray, np.ndar
 
 if __name__ == "__main__":
     if len(sys.argv) != 3:
-        print("usage: python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz")
+        print("usage: python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz", file=sys.stderr)
         sys.exit(2)
     try:
         convert(Path(sys.argv[1]), Path(sys.argv[2]))
-    except (OSError, ValueError, KeyError) as exc:
-        print(f"error: {exc}")
+    except (OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)

@@ -109,6 +109,31 @@ def test_the_converter_writes_what_load_reads_and_refuses_to_overwrite(tmp_path)
         rg.convert(src, out)
 
 
+def test_the_converter_says_which_file_is_not_a_broad_trial(tmp_path):
+    """A file that is not MATLAB, or a MATLAB file without BROAD's fields, is named in a
+    ValueError (the command prints it and exits 2); nothing is written."""
+    import subprocess
+    import sys
+
+    from scipy.io import savemat
+
+    src = tmp_path / "data_mat"
+    src.mkdir()
+    for name in rg.TRIALS:
+        (src / f"{name}.mat").write_text("not a mat file\n")
+    out = tmp_path / rg.FILE_NAME
+    with pytest.raises(ValueError, match=f"{rg.TRIALS[0]}.mat is not a MATLAB file"):
+        rg.convert(src, out)
+    savemat(src / f"{rg.TRIALS[0]}.mat", {"imu_gyr": np.zeros((4, 3))})
+    with pytest.raises(ValueError, match=f"{rg.TRIALS[0]}.mat has no sampling_rate, opt_quat"):
+        rg.convert(src, out)
+    run = subprocess.run([sys.executable, "-m", "bench.real_gyro", str(src), str(out)],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert "not a BROAD trial" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data_mat"]
+
+
 # ------------------------------------------------------------------------- the real excerpt
 #: Samples per trial, as BROAD's files hold them (bench/data/README.md).
 SAMPLES = {
