@@ -242,18 +242,17 @@ def reference_variance(trials: list[Trial], blks: list[np.ndarray]) -> np.ndarra
     low-pass filter) has died out, short enough that the bias's own drift (``σ²(τ)`` grows as
     ``K² τ / 3`` for a random walk ``K``) does not count, as it would in the Allan variance at
     the block length itself."""
-    d2 = []
+    d2, tau, block_s = [], 0.0, 0.0
     for tr, blk in zip(trials, blks, strict=True):
         m = int(round(WHITE_TAU_S * tr.odr_hz))
         for a, b, _ in blk:
             k = (b - a) // m
             means = tr.rate[a:a + k * m].reshape(k, m, 3).mean(axis=1)
             d2.append(np.diff(means, axis=0) ** 2)
+            tau, block_s = m / tr.odr_hz, (b - a) / tr.odr_hz
     if not d2:
         raise ValueError("no blocks")
     avar = 0.5 * np.concatenate(d2).mean(axis=0)
-    tau = m / trials[-1].odr_hz
-    block_s = (blks[-1][0, 1] - blks[-1][0, 0]) / trials[-1].odr_hz
     return avar * tau / block_s
 
 

@@ -69,6 +69,12 @@ def test_the_reference_scatter_is_the_white_noise_over_the_block():
     # N^2 / W = sigma^2 / (fs W); 1750 differences of 0.25-s means per axis: 3.4 % standard
     # error (differences of consecutive means share one mean: a little more)
     np.testing.assert_allclose(s2, sigma**2 / (FS * rg.BLOCK_S), rtol=0.12)
+    # a trial without a rest (no blocks) adds nothing, wherever it stands
+    idle = rg.Trial("moving", FS, tr.t[:1000], tr.rate[:1000], np.zeros(1000, dtype=bool))
+    assert rg.blocks(idle).shape == (0, 3)
+    np.testing.assert_allclose(rg.reference_variance([tr, idle], [blk, rg.blocks(idle)]), s2)
+    with pytest.raises(ValueError, match="no blocks"):
+        rg.reference_variance([idle], [rg.blocks(idle)])
 
 
 def test_the_calibration_of_a_trial_comes_from_the_other_trials_only():
