@@ -539,7 +539,7 @@ def _real_sensor(imufusion) -> None:
 
     try:
         trials = rg.load()
-    except FileNotFoundError as exc:
+    except (OSError, ValueError) as exc:
         print(f"real sensor: skipped ({exc})\n")
         return
     for block_s in _REAL_BLOCKS_S:

@@ -26,9 +26,9 @@ Usage::
 
 (an xz-compressed CSV, :data:`HEADER`: one row per sample, in time order within each trial,
 sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials under 1.5 MB)
-and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO``, then
-``bench/data/``, then ``shared/data/`` beside the repository or beside one of its two parent
-folders (a work tree kept in a folder of work trees).
+and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO`` when that is
+set (there only), else in ``bench/data/``, then ``shared/data/`` beside the repository or beside
+one of its two parent folders (a work tree kept in a folder of work trees).
 """
 
 from __future__ import annotations
@@ -168,13 +168,12 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
 def locate() -> Path | None:
     """The excerpt's path, or None when it is nowhere it is looked for (module docstring)."""
     env = os.environ.get("GYROCAL_REAL_GYRO")
+    if env:  # the one place when given: a wrong path is not quietly replaced by another file
+        return Path(env) if Path(env).is_file() else None
     repo = Path(__file__).resolve().parent.parent
     places = [repo / "bench" / "data" / FILE_NAME]
     places += [up / "shared" / "data" / FILE_NAME for up in repo.parents[:3]]
-    for p in ([Path(env)] if env else []) + places:
-        if p.is_file():
-            return p
-    return None
+    return next((p for p in places if p.is_file()), None)
 
 
 def load(path: Path | None = None) -> list[Trial]:
@@ -185,21 +184,26 @@ def load(path: Path | None = None) -> list[Trial]:
     FileNotFoundError
         No excerpt was given or found (the message says how to make one).
     ValueError
-        The file is not the excerpt (its header).
+        The file is not the excerpt: not xz, cut short, or not its header or columns.
     """
     path = path or locate()
     if path is None:
+        env = os.environ.get("GYROCAL_REAL_GYRO")
         raise FileNotFoundError(
-            f"no {FILE_NAME}: build it with `python -m bench.real_gyro BROAD/data_mat "
-            f"bench/data/{FILE_NAME}` from a copy of BROAD (bench/data/README.md), or point "
-            "GYROCAL_REAL_GYRO at it")
-    with lzma.open(path, "rt", encoding="ascii") as fh:
-        head = fh.readline().strip()
-        if head != HEADER:
-            raise ValueError(f"{path}: header {head!r}, expected {HEADER!r}")
-        rows = fh.read().split()
-    names = np.array([r.split(",", 1)[0] for r in rows])
-    nums = np.array([r.split(",")[1:] for r in rows], dtype=np.int64).reshape(-1, 4)
+            (f"GYROCAL_REAL_GYRO={env} is not a file; " if env else f"no {FILE_NAME}: ")
+            + f"build it with `python -m bench.real_gyro BROAD/data_mat bench/data/{FILE_NAME}` "
+            "from a copy of BROAD (bench/data/README.md), or point GYROCAL_REAL_GYRO at it")
+    try:
+        with lzma.open(path, "rt", encoding="ascii") as fh:
+            head = fh.readline().strip()
+            if head != HEADER:
+                raise ValueError(f"header {head!r}, expected {HEADER!r}")
+            rows = fh.read().split()
+        names = np.array([r.split(",", 1)[0] for r in rows])
+        nums = np.array([r.split(",")[1:] for r in rows], dtype=np.int64).reshape(-1, 4)
+    except (lzma.LZMAError, EOFError, UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"{path} is not the excerpt ({exc}): rebuild it with `python -m "
+                         "bench.real_gyro` (bench/data/README.md)") from None
     trials = []
     cut = np.flatnonzero(names[1:] != names[:-1]) + 1
     for lo, hi in zip(np.r_[0, cut], np.r_[cut, names.size], strict=True):

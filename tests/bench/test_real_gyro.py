@@ -140,6 +140,37 @@ def test_the_converter_says_which_file_is_not_a_broad_trial(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["data_mat"]
 
 
+def test_a_file_that_is_not_the_excerpt_is_refused_and_the_bench_skips_it(tmp_path, monkeypatch,
+                                                                          capsys):
+    """Not xz, cut short, or rows of the wrong width: a ValueError naming the file; a
+    GYROCAL_REAL_GYRO that names no file is said to, not replaced by another copy; the
+    tracker bench prints why it skips the real-sensor tables instead of a traceback."""
+    import lzma
+
+    from bench.bench_tracker import _real_sensor
+
+    plain = tmp_path / "plain.csv.xz"
+    plain.write_text(rg.HEADER + "\n")
+    narrow = tmp_path / "narrow.csv.xz"
+    with lzma.open(narrow, "wt", encoding="ascii") as fh:
+        fh.write(rg.HEADER + "\nt,1,2,3\n")
+    cut = tmp_path / "cut.csv.xz"
+    with lzma.open(cut, "wt", encoding="ascii") as fh:
+        fh.write(rg.HEADER + "\n" + "t,1,2,3,0\n" * 5000)
+    cut.write_bytes(cut.read_bytes()[:-40])
+    for bad in (plain, narrow, cut):
+        with pytest.raises(ValueError, match=f"{bad.name} is not the excerpt"):
+            rg.load(bad)
+    monkeypatch.setenv("GYROCAL_REAL_GYRO", str(tmp_path / "missing.csv.xz"))
+    assert rg.locate() is None
+    with pytest.raises(FileNotFoundError, match="GYROCAL_REAL_GYRO=.*missing.csv.xz is not a"):
+        rg.load()
+    monkeypatch.setenv("GYROCAL_REAL_GYRO", str(narrow))
+    assert rg.locate() == narrow
+    _real_sensor(None)
+    assert capsys.readouterr().out.startswith(f"real sensor: skipped ({narrow} is not the")
+
+
 # ------------------------------------------------------------------------- the real excerpt
 #: Samples per trial, as BROAD's files hold them (bench/data/README.md).
 SAMPLES = {
