@@ -29,10 +29,8 @@ prints the table of the sensors that finished.
 from __future__ import annotations
 
 import io
-import os
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
@@ -341,8 +339,10 @@ def independent_recordings(seeds: list[int]) -> None:
     (tests/kit/contract_fullmodel_recording.py: scipy rotations, a skewed gimbal, 60° poses, a
     pose moving two servos at once, ±2 % cross-axis, MPU-9250 noise and LSB, 4096-tick
     encoders)."""
-    with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
-        rs = list(pool.map(_independent_recording, seeds))
+    rs = pooled(_independent_recording, seeds, lambda r: f"recording {r['seed']}: "
+                f"{r['method']}, GM {r['gm']:.2e} per rad/s (predicted {r['gm_pred']:.2e})")
+    if not rs:
+        return
     z = np.array([r["z"] for r in rs])
     zf = z[:, np.any(z != 0, axis=0)]
     gm = np.array([r["gm"] for r in rs])
@@ -357,7 +357,7 @@ def independent_recordings(seeds: list[int]) -> None:
           float(np.sqrt(np.mean([r["gm_diag"] ** 2 for r in rs]))),
           float(np.sqrt(np.mean([r["gm_ils"] ** 2 for r in rs])))]],
         title="gyrocal estimate on the independent sample-level generator (seeds "
-              f"{seeds[0]}..{seeds[-1]}; GM = general-motion RMS rate error per rad/s)")
+              f"{rs[0]['seed']}..{rs[-1]['seed']}; GM = general-motion RMS rate error per rad/s)")
 
 
 def independent_default_plan(seeds: list[int]) -> None:
@@ -454,8 +454,8 @@ def _steps_of(segs: list[dict], enc: np.ndarray, chain: list[int]) -> list[tuple
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     n = next((a.split("=", 1)[1] for a in argv if a.startswith("--seeds=")), None)
-    if n is not None and not n.isdigit():
-        raise SystemExit(f"--seeds needs a whole number of sensors, got {n!r}")
+    if n is not None and not (n.isdigit() and int(n) > 0):
+        raise SystemExit(f"--seeds needs a positive whole number of sensors, got {n!r}")
     seeds = list(range(int(n) if n is not None else 3 if quick else 12))
     if "--independent-default" in argv:
         independent_default_plan(seeds)
