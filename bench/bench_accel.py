@@ -128,17 +128,25 @@ def _true_directions3(angles: np.ndarray, mount: np.ndarray, tilts: list[np.ndar
                       @ _axis_rotation(ax[2], a[2]) @ mount).T @ [0, 0, 1.0] for a in angles])
 
 
-def _fit_error(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
-               rng: np.random.Generator, generator: str) -> float:
-    """RMS calibrated-force error (mg) of our fit on rests in ``true_dirs``."""
+def _rest_means(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
+                rng: np.random.Generator, generator: str) -> tuple[np.ndarray, np.ndarray]:
+    """The rests' mean readings (m/s²) with gravity along ``true_dirs`` and their standard
+    deviations: the emulated chip's reading plus the window mean's noise, or the independent
+    generator's (``tests/calib/accel_truth.py``)."""
     g = STANDARD_GRAVITY
     if generator == "emulator":
         means = AccelTruth(sensing_g, bias_g).reading(true_dirs) * g
         means += rng.standard_normal(means.shape) * WINDOW_STD
-        std = np.full(means.shape, WINDOW_STD)
-    else:
-        means, std = indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
-                                      DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
+        return means, np.full(means.shape, WINDOW_STD)
+    return indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
+                            DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
+
+
+def _fit_error(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
+               rng: np.random.Generator, generator: str) -> float:
+    """RMS calibrated-force error (mg) of our fit on rests in ``true_dirs``."""
+    g = STANDARD_GRAVITY
+    means, std = _rest_means(sensing_g, bias_g, true_dirs, rng, generator)
     fit = fit_accelerometer(means, std, g)
     truth_a = in_frame(np.linalg.inv(sensing_g))
     q = g * sphere_points(2000)
@@ -151,13 +159,7 @@ def _errors(sensing_g: np.ndarray, bias_g: np.ndarray, dirs: np.ndarray, true_di
             rng: np.random.Generator, generator: str) -> tuple[float, float]:
     """RMS calibrated-force error (mg) of ours and of the six-position method."""
     g = STANDARD_GRAVITY
-    if generator == "emulator":  # the emulated chip's reading (noise: of the window mean)
-        means = AccelTruth(sensing_g, bias_g).reading(true_dirs) * g
-        means += rng.standard_normal(means.shape) * WINDOW_STD
-        std = np.full(means.shape, WINDOW_STD)
-    else:
-        means, std = indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
-                                      DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
+    means, std = _rest_means(sensing_g, bias_g, true_dirs, rng, generator)
     fit = fit_accelerometer(means, std, g)
     six_rows = [int(np.argmin(np.linalg.norm(dirs - t, axis=1))) for t in TOUR_DIRECTIONS[:6]]
     a6, b6 = six_position(means[six_rows], g)
