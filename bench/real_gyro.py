@@ -25,7 +25,7 @@ Usage::
     python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz   # write the excerpt
 
 (an xz-compressed CSV, :data:`HEADER`: one row per sample, in time order within each trial,
-sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials under 1.5 MB)
+sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials near 1.6 MB)
 and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO`` when that is
 set (there only), else in ``bench/data/``, then ``shared/data/`` beside the repository or beside
 one of its two parent folders (a work tree kept in a folder of work trees).
@@ -130,7 +130,7 @@ def optical_still(quat: np.ndarray, fs: float) -> np.ndarray:
 def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None:
     """Write the excerpt of the BROAD trials in :data:`TRIALS` (``src``: BROAD's ``data_mat``
     folder) to ``out`` (xz CSV, :data:`HEADER`; ``preset``: the xz level, the strongest by
-    default, 30 s for the six trials). Refuses to overwrite ``out``."""
+    default). Refuses to overwrite ``out``."""
     from scipy.io import loadmat
     from scipy.io.matlab import MatReadError
 
@@ -266,8 +266,9 @@ def leave_one_out_bias(trials: list[Trial], i: int) -> tuple[np.ndarray, np.ndar
     rest's bias, and the standard deviation of those (rad/s, per axis)."""
     firsts = []
     for j, tr in enumerate(trials):
-        if j != i and tr.rests():
-            lo, hi = tr.rests()[0]
+        rests = tr.rests() if j != i else []
+        if rests:
+            lo, hi = rests[0]
             firsts.append(-tr.rate[lo:hi].mean(axis=0))
     if len(firsts) < 2:
         raise ValueError("need two other trials with a rest")
