@@ -184,12 +184,15 @@ def _sensor(generator: str, seed: int, rng: np.random.Generator
 
 
 def main(argv: list[str]) -> None:
-    seeds, mount_deg = 100, 3.0
-    for a in argv:
-        if a.startswith("--seeds="):
-            seeds = int(a.split("=", 1)[1])
-        elif a.startswith("--mount-deg="):
-            mount_deg = float(a.split("=", 1)[1])
+    opts = dict(a.split("=", 1) for a in argv if "=" in a)
+    try:
+        seeds = int(opts.get("--seeds", "100"))
+        mount_deg = float(opts.get("--mount-deg", "3"))
+    except ValueError:
+        seeds, mount_deg = 0, math.nan
+    if seeds < 1 or not math.isfinite(mount_deg):
+        raise SystemExit("--seeds needs a positive whole number and --mount-deg a number of "
+                         f"degrees, got {opts.get('--seeds')!r} and {opts.get('--mount-deg')!r}")
     print_table(["rests", "N", "distinct", "identifiable", "condition", "worst σ|f| mg",
                  "added jig s"], _designs(),
                 f"accelerometer design (window σ {1e3 * WINDOW_STD / STANDARD_GRAVITY:.3f} mg, "
