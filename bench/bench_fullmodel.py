@@ -368,16 +368,14 @@ def independent_default_plan(seeds: list[int]) -> None:
     general-motion RMS rate error per rad/s (:func:`gyrocal.calib.design.general_motion_rms`,
     against the generator's truth) with the value its covariance predicts."""
     import csv
-    import io
     import json
-    import tempfile
-    from contextlib import redirect_stderr, redirect_stdout
 
     from gyrocal.calib.design import general_motion_rms, predicted_general_motion_rms
-    from gyrocal.calib.estimators import fit_full_matrix, matrix_in_frame
+    from gyrocal.calib.estimators import fit_full_matrix
     from gyrocal.kit.cli import main as cli
     from gyrocal.kit.pipeline import extract_recording
     from gyrocal.kit.recording import load_recording
+    from tests.calib.fullmodel_truth import truth_in_frame
     from tests.kit.contract_fullmodel_recording import write_recording
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -388,7 +386,7 @@ def independent_default_plan(seeds: list[int]) -> None:
         src = run / "recording"
         chain = [int(m["id"]) for m in
                  json.loads((src / "manifest.json").read_text())["gimbal"]["motors"]]
-        segs = list(csv.DictReader(open(src / "segments.csv", encoding="ascii")))
+        segs = list(csv.DictReader((src / "segments.csv").read_text("ascii").splitlines()))
         enc = np.loadtxt(src / "encoder.csv", delimiter=",", skiprows=1)
     steps = _steps_of(segs, enc, chain)
     rows, zs, gms = [], [], []
@@ -398,7 +396,7 @@ def independent_default_plan(seeds: list[int]) -> None:
             truth = write_recording(Path(tmp) / "rec", seed=seed, g_sensitivity=G, steps=steps)
             obs = extract_recording(load_recording(Path(tmp) / "rec")).observations
         sensing = np.diag(1 / truth["scale"]) @ truth["misalignment"]
-        C = matrix_in_frame(sensing)
+        C = truth_in_frame(sensing)
         fit = fit_full_matrix(obs)
         gm = general_motion_rms(fit.matrix, fit.bias, sensing, truth["bias"])
         gms.append(gm)
