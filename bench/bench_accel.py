@@ -31,6 +31,7 @@ Usage: ``python -m bench accel [--seeds=N] [--mount-deg=D]``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -142,17 +143,24 @@ def _rest_means(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray
                             DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
 
 
+def _sphere_rms_mg(sensing_g: np.ndarray, bias_g: np.ndarray,
+                   *calibrations: Callable[[np.ndarray], np.ndarray]) -> list[float]:
+    """RMS calibrated-force error (mg) over 2000 gravity directions of each calibration (a
+    function of raw readings, m/s²), against the independent contract's truth
+    (:func:`tests.calib.accel_truth.truth_matrix`, not the frame code under test)."""
+    g = STANDARD_GRAVITY
+    reading = g * sphere_points(2000) @ sensing_g.T - bias_g * g
+    truth_f = (reading + bias_g * g) @ indep.truth_matrix(sensing_g).T
+    return [1e3 * math.sqrt(np.mean(np.sum((apply(reading) - truth_f) ** 2, axis=1))) / g
+            for apply in calibrations]
+
+
 def _fit_error(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
                rng: np.random.Generator, generator: str) -> float:
     """RMS calibrated-force error (mg) of our fit on rests in ``true_dirs``."""
-    g = STANDARD_GRAVITY
     means, std = _rest_means(sensing_g, bias_g, true_dirs, rng, generator)
-    fit = fit_accelerometer(means, std, g)
-    truth_a = in_frame(np.linalg.inv(sensing_g))
-    q = g * sphere_points(2000)
-    reading = q @ sensing_g.T - bias_g * g
-    err = fit.apply(reading) - (reading + bias_g * g) @ truth_a.T
-    return 1e3 * math.sqrt(np.mean(np.sum(err**2, axis=1))) / g
+    return _sphere_rms_mg(sensing_g, bias_g,
+                          fit_accelerometer(means, std, STANDARD_GRAVITY).apply)[0]
 
 
 def _errors(sensing_g: np.ndarray, bias_g: np.ndarray, dirs: np.ndarray, true_dirs: np.ndarray,
@@ -163,14 +171,9 @@ def _errors(sensing_g: np.ndarray, bias_g: np.ndarray, dirs: np.ndarray, true_di
     fit = fit_accelerometer(means, std, g)
     six_rows = [int(np.argmin(np.linalg.norm(dirs - t, axis=1))) for t in TOUR_DIRECTIONS[:6]]
     a6, b6 = six_position(means[six_rows], g)
-    truth_a = in_frame(np.linalg.inv(sensing_g))
-    q = g * sphere_points(2000)
-    reading = q @ sensing_g.T - bias_g * g
-    truth_f = (reading + bias_g * g) @ truth_a.T
-    ours = fit.apply(reading) - truth_f
-    six = (reading + b6) @ in_frame(a6).T - truth_f
-    rms = [1e3 * math.sqrt(np.mean(np.sum(e**2, axis=1))) / g for e in (ours, six)]
-    return rms[0], rms[1]
+    ours, six = _sphere_rms_mg(sensing_g, bias_g, fit.apply,
+                               lambda reading: (reading + b6) @ in_frame(a6).T)
+    return ours, six
 
 
 def _sensor(generator: str, seed: int, rng: np.random.Generator
