@@ -117,9 +117,15 @@ def optical_still(quat: np.ndarray, fs: float) -> np.ndarray:
     # the median of the angle around each sample; inf (missing) anywhere in reach: not still
     win = sliding_window_view(turn, 2 * mh + 1)
     ok[mh: n - mh] = (np.median(win, axis=1) < STILL_DEG) & np.isfinite(win).all(axis=1)
-    out = np.zeros(n, dtype=bool)
+    return trimmed(ok, fs)
+
+
+def trimmed(still: np.ndarray, fs: float) -> np.ndarray:
+    """``still`` with each stretch of still samples shortened by :data:`TRIM_S` at both ends
+    and dropped when then shorter than :data:`MIN_REST_S` (``fs``: sampling rate, Hz)."""
+    out = np.zeros(still.size, dtype=bool)
     trim = int(round(TRIM_S * fs))
-    d = np.diff(np.r_[0, ok.astype(np.int8), 0])
+    d = np.diff(np.r_[0, still.astype(np.int8), 0])
     for lo, hi in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
         lo, hi = lo + trim, hi - trim
         if hi - lo >= MIN_REST_S * fs:
