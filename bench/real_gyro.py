@@ -140,8 +140,13 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
     from scipy.io import loadmat
     from scipy.io.matlab import MatReadError
 
+    from gyrocal.kit.fileio import atomic_write_bytes
+
     if out.exists():
         raise FileExistsError(f"{out} exists; remove it first")
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"{out.parent} is not a folder: create it first, or write the "
+                                "excerpt elsewhere")
     missing = [f"{n}.mat" for n in TRIALS if not (src / f"{n}.mat").is_file()]
     if missing:
         raise FileNotFoundError(f"{src} lacks {', '.join(missing)}: give BROAD's data_mat "
@@ -165,10 +170,8 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
         cols = [gyr[:, 0].astype(str), gyr[:, 1].astype(str), gyr[:, 2].astype(str),
                 still.astype(np.int8).astype(str)]
         lines += [f"{name},{a},{b},{c},{d}" for a, b, c, d in zip(*cols, strict=True)]
-    tmp = out.with_name(out.name + ".part")
-    with lzma.open(tmp, "wt", encoding="ascii", preset=preset) as fh:
-        fh.write("\n".join(lines) + "\n")
-    tmp.replace(out)
+    text = "\n".join(lines) + "\n"
+    atomic_write_bytes(out, lzma.compress(text.encode("ascii"), preset=preset))
 
 
 def locate() -> Path | None:

@@ -113,6 +113,9 @@ def test_the_converter_writes_what_load_reads_and_refuses_to_overwrite(tmp_path)
         np.testing.assert_allclose(np.diff(tr.t), 1.0 / FS)
     with pytest.raises(FileExistsError):
         rg.convert(src, out)
+    with pytest.raises(FileNotFoundError, match="create it first"):
+        rg.convert(src, tmp_path / "no-such-folder" / rg.FILE_NAME)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["data_mat", rg.FILE_NAME])
 
 
 def test_the_converter_says_which_file_is_not_a_broad_trial(tmp_path):
