@@ -135,6 +135,7 @@ def main(argv: list[str]) -> None:
     total = time.perf_counter() - t0
     by = {p: [r for r in results if r["protocol"] == p] for p in ("full", "auto", "paper")}
     if not all(by.values()):
+        print("# no tables: stopped before every protocol had a finished run", file=sys.stderr)
         return
     bad = [r for r in results if r["code"] not in (0, 3)]
     walls = np.array([r["wall_s"] for r in by["full"]])
