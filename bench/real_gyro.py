@@ -208,6 +208,8 @@ def load(path: Path | None = None) -> list[Trial]:
             if head != HEADER:
                 raise ValueError(f"header {head!r}, expected {HEADER!r}")
             rows = fh.read().split()
+        if not rows:
+            raise ValueError("no samples after the header")
         names = np.array([r.split(",", 1)[0] for r in rows])
         nums = np.array([r.split(",")[1:] for r in rows], dtype=np.int64).reshape(-1, 4)
     except (lzma.LZMAError, EOFError, UnicodeDecodeError, ValueError) as exc:

@@ -161,7 +161,10 @@ def test_a_file_that_is_not_the_excerpt_is_refused_and_the_bench_skips_it(tmp_pa
     with lzma.open(cut, "wt", encoding="ascii") as fh:
         fh.write(rg.HEADER + "\n" + "t,1,2,3,0\n" * 5000)
     cut.write_bytes(cut.read_bytes()[:-40])
-    for bad in (plain, narrow, cut):
+    empty = tmp_path / "empty.csv.xz"
+    with lzma.open(empty, "wt", encoding="ascii") as fh:
+        fh.write(rg.HEADER + "\n")
+    for bad in (plain, narrow, cut, empty):
         with pytest.raises(ValueError, match=f"{bad.name} is not the excerpt"):
             rg.load(bad)
     monkeypatch.setenv("GYROCAL_REAL_GYRO", str(tmp_path / "missing.csv.xz"))
