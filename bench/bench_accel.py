@@ -31,6 +31,7 @@ Usage: ``python -m bench accel [--seeds=N] [--mount-deg=D]``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -128,47 +129,51 @@ def _true_directions3(angles: np.ndarray, mount: np.ndarray, tilts: list[np.ndar
                       @ _axis_rotation(ax[2], a[2]) @ mount).T @ [0, 0, 1.0] for a in angles])
 
 
-def _fit_error(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
-               rng: np.random.Generator, generator: str) -> float:
-    """RMS calibrated-force error (mg) of our fit on rests in ``true_dirs``."""
+def _rest_means(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
+                rng: np.random.Generator, generator: str) -> tuple[np.ndarray, np.ndarray]:
+    """The rests' mean readings (m/s²) with gravity along ``true_dirs`` and their standard
+    deviations: the emulated chip's reading plus the window mean's noise, or the independent
+    generator's (``tests/calib/accel_truth.py``)."""
     g = STANDARD_GRAVITY
     if generator == "emulator":
         means = AccelTruth(sensing_g, bias_g).reading(true_dirs) * g
         means += rng.standard_normal(means.shape) * WINDOW_STD
-        std = np.full(means.shape, WINDOW_STD)
-    else:
-        means, std = indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
-                                      DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
-    fit = fit_accelerometer(means, std, g)
-    truth_a = in_frame(np.linalg.inv(sensing_g))
-    q = g * sphere_points(2000)
-    reading = q @ sensing_g.T - bias_g * g
-    err = fit.apply(reading) - (reading + bias_g * g) @ truth_a.T
-    return 1e3 * math.sqrt(np.mean(np.sum(err**2, axis=1))) / g
+        return means, np.full(means.shape, WINDOW_STD)
+    return indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
+                            DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
+
+
+def _sphere_rms_mg(sensing_g: np.ndarray, bias_g: np.ndarray,
+                   *calibrations: Callable[[np.ndarray], np.ndarray]) -> list[float]:
+    """RMS calibrated-force error (mg) over 2000 gravity directions of each calibration (a
+    function of raw readings, m/s²), against the independent contract's truth
+    (:func:`tests.calib.accel_truth.truth_matrix`, not the frame code under test)."""
+    g = STANDARD_GRAVITY
+    reading = g * sphere_points(2000) @ sensing_g.T - bias_g * g
+    truth_f = (reading + bias_g * g) @ indep.truth_matrix(sensing_g).T
+    return [1e3 * math.sqrt(np.mean(np.sum((apply(reading) - truth_f) ** 2, axis=1))) / g
+            for apply in calibrations]
+
+
+def _fit_error(sensing_g: np.ndarray, bias_g: np.ndarray, true_dirs: np.ndarray,
+               rng: np.random.Generator, generator: str) -> float:
+    """RMS calibrated-force error (mg) of our fit on rests in ``true_dirs``."""
+    means, std = _rest_means(sensing_g, bias_g, true_dirs, rng, generator)
+    return _sphere_rms_mg(sensing_g, bias_g,
+                          fit_accelerometer(means, std, STANDARD_GRAVITY).apply)[0]
 
 
 def _errors(sensing_g: np.ndarray, bias_g: np.ndarray, dirs: np.ndarray, true_dirs: np.ndarray,
             rng: np.random.Generator, generator: str) -> tuple[float, float]:
     """RMS calibrated-force error (mg) of ours and of the six-position method."""
     g = STANDARD_GRAVITY
-    if generator == "emulator":  # the emulated chip's reading (noise: of the window mean)
-        means = AccelTruth(sensing_g, bias_g).reading(true_dirs) * g
-        means += rng.standard_normal(means.shape) * WINDOW_STD
-        std = np.full(means.shape, WINDOW_STD)
-    else:
-        means, std = indep.rest_means(rng, sensing_g, bias_g * g, true_dirs, g,
-                                      DENSITY_G * math.sqrt(ODR_HZ) * g, N_SAMPLES)
+    means, std = _rest_means(sensing_g, bias_g, true_dirs, rng, generator)
     fit = fit_accelerometer(means, std, g)
     six_rows = [int(np.argmin(np.linalg.norm(dirs - t, axis=1))) for t in TOUR_DIRECTIONS[:6]]
     a6, b6 = six_position(means[six_rows], g)
-    truth_a = in_frame(np.linalg.inv(sensing_g))
-    q = g * sphere_points(2000)
-    reading = q @ sensing_g.T - bias_g * g
-    truth_f = (reading + bias_g * g) @ truth_a.T
-    ours = fit.apply(reading) - truth_f
-    six = (reading + b6) @ in_frame(a6).T - truth_f
-    rms = [1e3 * math.sqrt(np.mean(np.sum(e**2, axis=1))) / g for e in (ours, six)]
-    return rms[0], rms[1]
+    ours, six = _sphere_rms_mg(sensing_g, bias_g, fit.apply,
+                               lambda reading: (reading + b6) @ in_frame(a6).T)
+    return ours, six
 
 
 def _sensor(generator: str, seed: int, rng: np.random.Generator
@@ -182,12 +187,15 @@ def _sensor(generator: str, seed: int, rng: np.random.Generator
 
 
 def main(argv: list[str]) -> None:
-    seeds, mount_deg = 100, 3.0
-    for a in argv:
-        if a.startswith("--seeds="):
-            seeds = int(a.split("=", 1)[1])
-        elif a.startswith("--mount-deg="):
-            mount_deg = float(a.split("=", 1)[1])
+    opts = dict(a.split("=", 1) for a in argv if "=" in a)
+    try:
+        seeds = int(opts.get("--seeds", "100"))
+        mount_deg = float(opts.get("--mount-deg", "3"))
+    except ValueError:
+        seeds, mount_deg = 0, math.nan
+    if seeds < 1 or not math.isfinite(mount_deg):
+        raise SystemExit("--seeds needs a positive whole number and --mount-deg a number of "
+                         f"degrees, got {opts.get('--seeds')!r} and {opts.get('--mount-deg')!r}")
     print_table(["rests", "N", "distinct", "identifiable", "condition", "worst σ|f| mg",
                  "added jig s"], _designs(),
                 f"accelerometer design (window σ {1e3 * WINDOW_STD / STANDARD_GRAVITY:.3f} mg, "

@@ -13,17 +13,16 @@
    these ratios is 1 when windowing loses nothing.
 
 Usage: ``python -m bench calibrate [--quick] [--seeds=N]`` (30 seeds; 6 with ``--quick``).
-Runs after the first table go two at a time without the HTML report (its plots took about
-1.5 min of wall time a run on a loaded machine, and ran 3 × N times: the run of the last
-session, killed before the pool finished, printed only the first table); a line per run lands
-on stderr as it finishes, and Ctrl-C prints the tables of the runs that finished.
+The first table's runs write the HTML report, as a user's default run does; the 3 × N runs
+after it go two at a time without it (its plots cost more wall time than the rest of a run on a
+loaded host). A line per run lands on stderr as it finishes, and Ctrl-C prints the tables of
+the runs that finished (once every protocol has one).
 """
 
 from __future__ import annotations
 
 import io
 import json
-import os
 import sys
 import tempfile
 import time
@@ -32,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.table import pooled, print_table
+from bench.table import WORKERS, pooled, print_table
 
 
-def _run(args: tuple[int, str] | tuple[int, str, bool]) -> dict:
-    """One emulated calibration; returns errors and timings (run in a worker process). A third
-    item True also writes the HTML report (as a user's default run does)."""
+def _run(args: tuple[int, str, bool]) -> dict:
+    """One emulated calibration ``(seed, protocol, with the HTML report)``; returns errors and
+    timings (run in a worker process)."""
     from gyrocal.calib.estimators import estimate, paired_axis_batch
     from gyrocal.kit.cli import main
     from gyrocal.kit.config import default_config
@@ -45,8 +44,8 @@ def _run(args: tuple[int, str] | tuple[int, str, bool]) -> dict:
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.sim import build_sim
 
-    seed, protocol = args[0], args[1]
-    report = [] if len(args) > 2 and args[2] else ["--no-report"]
+    seed, protocol, with_report = args
+    report = [] if with_report else ["--no-report"]
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
         t0 = time.perf_counter()
@@ -122,7 +121,6 @@ def main(argv: list[str]) -> None:
     if n is not None and not (n.isdigit() and int(n) > 0):
         raise SystemExit(f"--seeds needs a positive whole number, got {n!r}")
     seeds = list(range(int(n) if n is not None else 6 if quick else 30))
-    workers = min(2, os.cpu_count() or 1)
     # One run at a time first: the wall time a user sees.
     alone = [_run((100 + s, "full", True))["wall_s"] for s in range(3)]
     print_table(["runs", "wall s median", "wall s min", "wall s max"],
@@ -130,13 +128,14 @@ def main(argv: list[str]) -> None:
                 title="gyrocal calibrate --sim (default protocol, HTML report included), one run "
                       "at a time")
     sys.stdout.flush()
-    jobs = [(s, p) for s in seeds for p in ("full", "auto", "paper")]
+    jobs = [(s, p, False) for s in seeds for p in ("full", "auto", "paper")]
     t0 = time.perf_counter()
     results = pooled(_run, jobs, lambda r: f"seed {r['seed']} {r['protocol']}: exit "
                      f"{r['code']}, jig {r['jig_s']:.1f} s, wall {r['wall_s']:.0f} s")
     total = time.perf_counter() - t0
     by = {p: [r for r in results if r["protocol"] == p] for p in ("full", "auto", "paper")}
     if not all(by.values()):
+        print("# no tables: stopped before every protocol had a finished run", file=sys.stderr)
         return
     bad = [r for r in results if r["code"] not in (0, 3)]
     walls = np.array([r["wall_s"] for r in by["full"]])
@@ -145,7 +144,7 @@ def main(argv: list[str]) -> None:
         [[p, len(rs), np.mean([r["jig_s"] for r in rs]), np.median([r["wall_s"] for r in rs]),
           np.max([r["wall_s"] for r in rs]), sum(r["code"] == 3 for r in rs)]
          for p, rs in by.items()],
-        title=f"gyrocal calibrate --sim, end to end ({workers} processes in parallel, "
+        title=f"gyrocal calibrate --sim, end to end ({WORKERS} processes in parallel, "
               f"{total:.0f} s in all; other failures: {len(bad)})",
     )
     print(f"wall time of one default run: median {np.median(walls):.2f} s, "

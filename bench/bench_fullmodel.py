@@ -29,10 +29,8 @@ prints the table of the sensors that finished.
 from __future__ import annotations
 
 import io
-import os
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
@@ -341,8 +339,10 @@ def independent_recordings(seeds: list[int]) -> None:
     (tests/kit/contract_fullmodel_recording.py: scipy rotations, a skewed gimbal, 60° poses, a
     pose moving two servos at once, ±2 % cross-axis, MPU-9250 noise and LSB, 4096-tick
     encoders)."""
-    with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
-        rs = list(pool.map(_independent_recording, seeds))
+    rs = pooled(_independent_recording, seeds, lambda r: f"recording {r['seed']}: "
+                f"{r['method']}, GM {r['gm']:.2e} per rad/s (predicted {r['gm_pred']:.2e})")
+    if not rs:
+        return
     z = np.array([r["z"] for r in rs])
     zf = z[:, np.any(z != 0, axis=0)]
     gm = np.array([r["gm"] for r in rs])
@@ -357,7 +357,7 @@ def independent_recordings(seeds: list[int]) -> None:
           float(np.sqrt(np.mean([r["gm_diag"] ** 2 for r in rs]))),
           float(np.sqrt(np.mean([r["gm_ils"] ** 2 for r in rs])))]],
         title="gyrocal estimate on the independent sample-level generator (seeds "
-              f"{seeds[0]}..{seeds[-1]}; GM = general-motion RMS rate error per rad/s)")
+              f"{rs[0]['seed']}..{rs[-1]['seed']}; GM = general-motion RMS rate error per rad/s)")
 
 
 def independent_default_plan(seeds: list[int]) -> None:
@@ -368,16 +368,14 @@ def independent_default_plan(seeds: list[int]) -> None:
     general-motion RMS rate error per rad/s (:func:`gyrocal.calib.design.general_motion_rms`,
     against the generator's truth) with the value its covariance predicts."""
     import csv
-    import io
     import json
-    import tempfile
-    from contextlib import redirect_stderr, redirect_stdout
 
     from gyrocal.calib.design import general_motion_rms, predicted_general_motion_rms
-    from gyrocal.calib.estimators import fit_full_matrix, matrix_in_frame
+    from gyrocal.calib.estimators import fit_full_matrix
     from gyrocal.kit.cli import main as cli
     from gyrocal.kit.pipeline import extract_recording
     from gyrocal.kit.recording import load_recording
+    from tests.calib.fullmodel_truth import truth_in_frame
     from tests.kit.contract_fullmodel_recording import write_recording
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -388,7 +386,7 @@ def independent_default_plan(seeds: list[int]) -> None:
         src = run / "recording"
         chain = [int(m["id"]) for m in
                  json.loads((src / "manifest.json").read_text())["gimbal"]["motors"]]
-        segs = list(csv.DictReader(open(src / "segments.csv", encoding="ascii")))
+        segs = list(csv.DictReader((src / "segments.csv").read_text("ascii").splitlines()))
         enc = np.loadtxt(src / "encoder.csv", delimiter=",", skiprows=1)
     steps = _steps_of(segs, enc, chain)
     rows, zs, gms = [], [], []
@@ -398,7 +396,7 @@ def independent_default_plan(seeds: list[int]) -> None:
             truth = write_recording(Path(tmp) / "rec", seed=seed, g_sensitivity=G, steps=steps)
             obs = extract_recording(load_recording(Path(tmp) / "rec")).observations
         sensing = np.diag(1 / truth["scale"]) @ truth["misalignment"]
-        C = matrix_in_frame(sensing)
+        C = truth_in_frame(sensing)
         fit = fit_full_matrix(obs)
         gm = general_motion_rms(fit.matrix, fit.bias, sensing, truth["bias"])
         gms.append(gm)
@@ -454,8 +452,8 @@ def _steps_of(segs: list[dict], enc: np.ndarray, chain: list[int]) -> list[tuple
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     n = next((a.split("=", 1)[1] for a in argv if a.startswith("--seeds=")), None)
-    if n is not None and not n.isdigit():
-        raise SystemExit(f"--seeds needs a whole number of sensors, got {n!r}")
+    if n is not None and not (n.isdigit() and int(n) > 0):
+        raise SystemExit(f"--seeds needs a positive whole number of sensors, got {n!r}")
     seeds = list(range(int(n) if n is not None else 3 if quick else 12))
     if "--independent-default" in argv:
         independent_default_plan(seeds)

@@ -48,7 +48,7 @@ from typing import Any
 from bench.table import print_table
 from gyrocal.drivers.dynamixel import Gimbal
 from gyrocal.drivers.imu import open_imu
-from gyrocal.kit.busload import bus_loads
+from gyrocal.kit.busload import REFUSE_LOAD, WARN_LOAD, bus_loads
 from gyrocal.kit.config import load_config
 from gyrocal.kit.errors import GyrocalError
 from gyrocal.kit.plate import RecordingGroup
@@ -81,8 +81,8 @@ def _config(n: int, odr_hz: float, tmp: Path, buses: int = 1) -> object:
 
 
 def planned_load(cfg: Any) -> str:
-    """The busiest bus's planned load (:func:`gyrocal.kit.busload.bus_loads`), as "NN %" per
-    bus."""
+    """Every bus's planned load (:func:`gyrocal.kit.busload.bus_loads`), "NN %" each, joined
+    by " / " in bus order."""
     loads = bus_loads(cfg.imus(), cfg["gimbal"]["sample_hz"])
     return " / ".join(f"{100 * b.load:.0f} %" for b in loads)
 
@@ -172,8 +172,8 @@ def main(argv: list[str]) -> None:
                      "planned bus load", "loss-free", "what failed", "CPU µs/sample",
                      "CPU s per s"], rows,
                     f"Table 1: one 400 kHz emulated bus, loop 200 Hz, {seconds:g} s rest each "
-                    "(planned load: gyrocal.kit.busload, which calibrate refuses above 100 % "
-                    "and warns about above 90 %)")
+                    f"(planned load: gyrocal.kit.busload, which calibrate refuses above "
+                    f"{100 * REFUSE_LOAD:.0f} % and warns about above {100 * WARN_LOAD:.0f} %)")
         two_rows, best_two = [], 0.0
         for r in rates:
             res = drain(4, r, seconds, tmp, buses=2)

@@ -541,7 +541,7 @@ def _real_sensor(imufusion) -> None:
 
     try:
         trials = rg.load()
-    except FileNotFoundError as exc:
+    except (OSError, ValueError) as exc:
         print(f"real sensor: skipped ({exc})\n")
         return
     for block_s in _REAL_BLOCKS_S:
@@ -649,11 +649,10 @@ def _reference_check(imufusion) -> None:
     rows = []
     for fam, seed in _CHECK:
         s = generate(fam, seed)
-        still = np.zeros(s.t.size, dtype=bool)
+        rest = np.zeros(s.t.size, dtype=bool)
         for a, b in s.rests:
-            if b - a - 2 * rg.TRIM_S >= rg.MIN_REST_S:
-                still |= (s.t >= a + rg.TRIM_S) & (s.t < b - rg.TRIM_S)
-        tr = rg.Trial(fam, s.odr_hz, s.t, s.rate, still)
+            rest |= (s.t >= a) & (s.t < b)
+        tr = rg.Trial(fam, s.odr_hz, s.t, s.rate, rg.trimmed(rest, s.odr_hz))
         blk = rg.blocks(tr)
         ref = rg.reference_bias(tr, blk)
         s2 = rg.reference_variance([tr], [blk])

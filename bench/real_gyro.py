@@ -25,10 +25,10 @@ Usage::
     python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz   # write the excerpt
 
 (an xz-compressed CSV, :data:`HEADER`: one row per sample, in time order within each trial,
-sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials under 1.5 MB)
-and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO``, then
-``bench/data/``, then ``shared/data/`` beside the repository or beside one of its two parent
-folders (a work tree kept in a folder of work trees).
+sample ``k`` of a trial at ``k / FS_HZ`` s; xz rather than gzip keeps six trials near 1.6 MB)
+and :func:`load` reads it back. The file is looked for at ``$GYROCAL_REAL_GYRO`` when that is
+set (there only), else in ``bench/data/``, then ``shared/data/`` beside the repository or beside
+one of its two parent folders (a work tree kept in a folder of work trees).
 """
 
 from __future__ import annotations
@@ -117,9 +117,15 @@ def optical_still(quat: np.ndarray, fs: float) -> np.ndarray:
     # the median of the angle around each sample; inf (missing) anywhere in reach: not still
     win = sliding_window_view(turn, 2 * mh + 1)
     ok[mh: n - mh] = (np.median(win, axis=1) < STILL_DEG) & np.isfinite(win).all(axis=1)
-    out = np.zeros(n, dtype=bool)
+    return trimmed(ok, fs)
+
+
+def trimmed(still: np.ndarray, fs: float) -> np.ndarray:
+    """``still`` with each stretch of still samples shortened by :data:`TRIM_S` at both ends
+    and dropped when then shorter than :data:`MIN_REST_S` (``fs``: sampling rate, Hz)."""
+    out = np.zeros(still.size, dtype=bool)
     trim = int(round(TRIM_S * fs))
-    d = np.diff(np.r_[0, ok.astype(np.int8), 0])
+    d = np.diff(np.r_[0, still.astype(np.int8), 0])
     for lo, hi in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
         lo, hi = lo + trim, hi - trim
         if hi - lo >= MIN_REST_S * fs:
@@ -130,18 +136,32 @@ def optical_still(quat: np.ndarray, fs: float) -> np.ndarray:
 def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None:
     """Write the excerpt of the BROAD trials in :data:`TRIALS` (``src``: BROAD's ``data_mat``
     folder) to ``out`` (xz CSV, :data:`HEADER`; ``preset``: the xz level, the strongest by
-    default, 30 s for the six trials). Refuses to overwrite ``out``."""
+    default). Refuses to overwrite ``out``."""
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
+
+    from gyrocal.kit.fileio import atomic_write_bytes
 
     if out.exists():
         raise FileExistsError(f"{out} exists; remove it first")
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"{out.parent} is not a folder: create it first, or write the "
+                                "excerpt elsewhere")
     missing = [f"{n}.mat" for n in TRIALS if not (src / f"{n}.mat").is_file()]
     if missing:
         raise FileNotFoundError(f"{src} lacks {', '.join(missing)}: give BROAD's data_mat "
                                 "folder (bench/data/README.md)")
     lines = [HEADER]
     for name in TRIALS:
-        m = loadmat(src / f"{name}.mat")
+        try:
+            m = loadmat(src / f"{name}.mat")
+        except MatReadError as exc:
+            raise ValueError(f"{src / name}.mat is not a MATLAB file ({exc}): give BROAD's "
+                             "data_mat folder (bench/data/README.md)") from None
+        lack = [k for k in ("sampling_rate", "imu_gyr", "opt_quat") if k not in m]
+        if lack:
+            raise ValueError(f"{src / name}.mat has no {', '.join(lack)}: not a BROAD trial "
+                             "(bench/data/README.md)")
         fs = float(m["sampling_rate"][0, 0])
         if not math.isclose(fs, FS_HZ, rel_tol=1e-9):
             raise ValueError(f"{name}: sampling rate {fs} Hz, expected {FS_HZ}")
@@ -150,22 +170,19 @@ def convert(src: Path, out: Path, preset: int = 9 | lzma.PRESET_EXTREME) -> None
         cols = [gyr[:, 0].astype(str), gyr[:, 1].astype(str), gyr[:, 2].astype(str),
                 still.astype(np.int8).astype(str)]
         lines += [f"{name},{a},{b},{c},{d}" for a, b, c, d in zip(*cols, strict=True)]
-    tmp = out.with_name(out.name + ".part")
-    with lzma.open(tmp, "wt", encoding="ascii", preset=preset) as fh:
-        fh.write("\n".join(lines) + "\n")
-    tmp.replace(out)
+    text = "\n".join(lines) + "\n"
+    atomic_write_bytes(out, lzma.compress(text.encode("ascii"), preset=preset))
 
 
 def locate() -> Path | None:
     """The excerpt's path, or None when it is nowhere it is looked for (module docstring)."""
     env = os.environ.get("GYROCAL_REAL_GYRO")
+    if env:  # the one place when given: a wrong path is not quietly replaced by another file
+        return Path(env) if Path(env).is_file() else None
     repo = Path(__file__).resolve().parent.parent
     places = [repo / "bench" / "data" / FILE_NAME]
     places += [up / "shared" / "data" / FILE_NAME for up in repo.parents[:3]]
-    for p in ([Path(env)] if env else []) + places:
-        if p.is_file():
-            return p
-    return None
+    return next((p for p in places if p.is_file()), None)
 
 
 def load(path: Path | None = None) -> list[Trial]:
@@ -176,21 +193,28 @@ def load(path: Path | None = None) -> list[Trial]:
     FileNotFoundError
         No excerpt was given or found (the message says how to make one).
     ValueError
-        The file is not the excerpt (its header).
+        The file is not the excerpt: not xz, cut short, or not its header or columns.
     """
     path = path or locate()
     if path is None:
+        env = os.environ.get("GYROCAL_REAL_GYRO")
         raise FileNotFoundError(
-            f"no {FILE_NAME}: build it with `python -m bench.real_gyro BROAD/data_mat "
-            f"bench/data/{FILE_NAME}` from a copy of BROAD (bench/data/README.md), or point "
-            "GYROCAL_REAL_GYRO at it")
-    with lzma.open(path, "rt", encoding="ascii") as fh:
-        head = fh.readline().strip()
-        if head != HEADER:
-            raise ValueError(f"{path}: header {head!r}, expected {HEADER!r}")
-        rows = fh.read().split()
-    names = np.array([r.split(",", 1)[0] for r in rows])
-    nums = np.array([r.split(",")[1:] for r in rows], dtype=np.int64).reshape(-1, 4)
+            (f"GYROCAL_REAL_GYRO={env} is not a file; " if env else f"no {FILE_NAME}: ")
+            + f"build it with `python -m bench.real_gyro BROAD/data_mat bench/data/{FILE_NAME}` "
+            "from a copy of BROAD (bench/data/README.md), or point GYROCAL_REAL_GYRO at it")
+    try:
+        with lzma.open(path, "rt", encoding="ascii") as fh:
+            head = fh.readline().strip()
+            if head != HEADER:
+                raise ValueError(f"header {head!r}, expected {HEADER!r}")
+            rows = fh.read().split()
+        if not rows:
+            raise ValueError("no samples after the header")
+        names = np.array([r.split(",", 1)[0] for r in rows])
+        nums = np.array([r.split(",")[1:] for r in rows], dtype=np.int64).reshape(-1, 4)
+    except (lzma.LZMAError, EOFError, UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"{path} is not the excerpt ({exc}): rebuild it with `python -m "
+                         "bench.real_gyro` (bench/data/README.md)") from None
     trials = []
     cut = np.flatnonzero(names[1:] != names[:-1]) + 1
     for lo, hi in zip(np.r_[0, cut], np.r_[cut, names.size], strict=True):
@@ -233,18 +257,17 @@ def reference_variance(trials: list[Trial], blks: list[np.ndarray]) -> np.ndarra
     low-pass filter) has died out, short enough that the bias's own drift (``σ²(τ)`` grows as
     ``K² τ / 3`` for a random walk ``K``) does not count, as it would in the Allan variance at
     the block length itself."""
-    d2 = []
+    d2, tau, block_s = [], 0.0, 0.0
     for tr, blk in zip(trials, blks, strict=True):
         m = int(round(WHITE_TAU_S * tr.odr_hz))
         for a, b, _ in blk:
             k = (b - a) // m
             means = tr.rate[a:a + k * m].reshape(k, m, 3).mean(axis=1)
             d2.append(np.diff(means, axis=0) ** 2)
+            tau, block_s = m / tr.odr_hz, (b - a) / tr.odr_hz
     if not d2:
         raise ValueError("no blocks")
     avar = 0.5 * np.concatenate(d2).mean(axis=0)
-    tau = m / trials[-1].odr_hz
-    block_s = (blks[-1][0, 1] - blks[-1][0, 0]) / trials[-1].odr_hz
     return avar * tau / block_s
 
 
@@ -254,8 +277,9 @@ def leave_one_out_bias(trials: list[Trial], i: int) -> tuple[np.ndarray, np.ndar
     rest's bias, and the standard deviation of those (rad/s, per axis)."""
     firsts = []
     for j, tr in enumerate(trials):
-        if j != i and tr.rests():
-            lo, hi = tr.rests()[0]
+        rests = tr.rests() if j != i else []
+        if rests:
+            lo, hi = rests[0]
             firsts.append(-tr.rate[lo:hi].mean(axis=0))
     if len(firsts) < 2:
         raise ValueError("need two other trials with a rest")
@@ -265,10 +289,10 @@ def leave_one_out_bias(trials: list[Trial], i: int) -> tuple[np.ndarray, np.ndar
 
 if __name__ == "__main__":
     if len(sys.argv) != 3:
-        print("usage: python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz")
+        print("usage: python -m bench.real_gyro BROAD_DATA_MAT_DIR OUT.csv.xz", file=sys.stderr)
         sys.exit(2)
     try:
         convert(Path(sys.argv[1]), Path(sys.argv[2]))
-    except (OSError, ValueError, KeyError) as exc:
-        print(f"error: {exc}")
+    except (OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)

@@ -7,6 +7,9 @@ import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 
+#: Processes :func:`pooled` runs at once (the benches' host has two cores to share).
+WORKERS = min(2, os.cpu_count() or 1)
+
 
 def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]], title: str = "") -> None:
     """Print ``rows`` under ``headers`` as an aligned text table (floats to 4 digits)."""
@@ -29,11 +32,11 @@ def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]], title:
 
 
 def pooled(fn: Callable, jobs: Sequence, describe: Callable[[dict], str]) -> list[dict]:
-    """``fn`` over ``jobs`` on up to two processes, in order, each result described on stderr as
-    it arrives; Ctrl-C stops the pool and returns the results that finished (the benches then
-    print their tables from those)."""
+    """``fn`` over ``jobs`` on :data:`WORKERS` processes, in order, each result described on
+    stderr as it arrives; Ctrl-C stops the pool and returns the results that finished (the
+    benches then print their tables from those)."""
     results: list[dict] = []
-    pool = ProcessPoolExecutor(min(2, os.cpu_count() or 1))
+    pool = ProcessPoolExecutor(WORKERS)
     try:
         for r in pool.map(fn, jobs):
             results.append(r)

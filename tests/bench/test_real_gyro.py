@@ -69,6 +69,12 @@ def test_the_reference_scatter_is_the_white_noise_over_the_block():
     # N^2 / W = sigma^2 / (fs W); 1750 differences of 0.25-s means per axis: 3.4 % standard
     # error (differences of consecutive means share one mean: a little more)
     np.testing.assert_allclose(s2, sigma**2 / (FS * rg.BLOCK_S), rtol=0.12)
+    # a trial without a rest (no blocks) adds nothing, wherever it stands
+    idle = rg.Trial("moving", FS, tr.t[:1000], tr.rate[:1000], np.zeros(1000, dtype=bool))
+    assert rg.blocks(idle).shape == (0, 3)
+    np.testing.assert_allclose(rg.reference_variance([tr, idle], [blk, rg.blocks(idle)]), s2)
+    with pytest.raises(ValueError, match="no blocks"):
+        rg.reference_variance([idle], [rg.blocks(idle)])
 
 
 def test_the_calibration_of_a_trial_comes_from_the_other_trials_only():
@@ -107,6 +113,68 @@ def test_the_converter_writes_what_load_reads_and_refuses_to_overwrite(tmp_path)
         np.testing.assert_allclose(np.diff(tr.t), 1.0 / FS)
     with pytest.raises(FileExistsError):
         rg.convert(src, out)
+    with pytest.raises(FileNotFoundError, match="create it first"):
+        rg.convert(src, tmp_path / "no-such-folder" / rg.FILE_NAME)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["data_mat", rg.FILE_NAME])
+
+
+def test_the_converter_says_which_file_is_not_a_broad_trial(tmp_path):
+    """A file that is not MATLAB, or a MATLAB file without BROAD's fields, is named in a
+    ValueError (the command prints it and exits 2); nothing is written."""
+    import subprocess
+    import sys
+
+    from scipy.io import savemat
+
+    src = tmp_path / "data_mat"
+    src.mkdir()
+    for name in rg.TRIALS:
+        (src / f"{name}.mat").write_text("not a mat file\n")
+    out = tmp_path / rg.FILE_NAME
+    with pytest.raises(ValueError, match=f"{rg.TRIALS[0]}.mat is not a MATLAB file"):
+        rg.convert(src, out)
+    savemat(src / f"{rg.TRIALS[0]}.mat", {"imu_gyr": np.zeros((4, 3))})
+    with pytest.raises(ValueError, match=f"{rg.TRIALS[0]}.mat has no sampling_rate, opt_quat"):
+        rg.convert(src, out)
+    run = subprocess.run([sys.executable, "-m", "bench.real_gyro", str(src), str(out)],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert "not a BROAD trial" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data_mat"]
+
+
+def test_a_file_that_is_not_the_excerpt_is_refused_and_the_bench_skips_it(tmp_path, monkeypatch,
+                                                                          capsys):
+    """Not xz, cut short, or rows of the wrong width: a ValueError naming the file; a
+    GYROCAL_REAL_GYRO that names no file is said to, not replaced by another copy; the
+    tracker bench prints why it skips the real-sensor tables instead of a traceback."""
+    import lzma
+
+    from bench.bench_tracker import _real_sensor
+
+    plain = tmp_path / "plain.csv.xz"
+    plain.write_text(rg.HEADER + "\n")
+    narrow = tmp_path / "narrow.csv.xz"
+    with lzma.open(narrow, "wt", encoding="ascii") as fh:
+        fh.write(rg.HEADER + "\nt,1,2,3\n")
+    cut = tmp_path / "cut.csv.xz"
+    with lzma.open(cut, "wt", encoding="ascii") as fh:
+        fh.write(rg.HEADER + "\n" + "t,1,2,3,0\n" * 5000)
+    cut.write_bytes(cut.read_bytes()[:-40])
+    empty = tmp_path / "empty.csv.xz"
+    with lzma.open(empty, "wt", encoding="ascii") as fh:
+        fh.write(rg.HEADER + "\n")
+    for bad in (plain, narrow, cut, empty):
+        with pytest.raises(ValueError, match=f"{bad.name} is not the excerpt"):
+            rg.load(bad)
+    monkeypatch.setenv("GYROCAL_REAL_GYRO", str(tmp_path / "missing.csv.xz"))
+    assert rg.locate() is None
+    with pytest.raises(FileNotFoundError, match="GYROCAL_REAL_GYRO=.*missing.csv.xz is not a"):
+        rg.load()
+    monkeypatch.setenv("GYROCAL_REAL_GYRO", str(narrow))
+    assert rg.locate() == narrow
+    _real_sensor(None)
+    assert capsys.readouterr().out.startswith(f"real sensor: skipped ({narrow} is not the")
 
 
 # ------------------------------------------------------------------------- the real excerpt
