@@ -492,7 +492,7 @@ def white_noise_density(t: Any, accel: Any, spans: Any, *, tau_s: float = NOISE_
     difference of consecutive block means, pooled over the windows' ``K`` differences (IEEE Std
     952-1997 Annex C), and for white noise ``σ²(τ) = N²/τ``:
 
-    .. math:: N = \sqrt{	au \, rac{1}{2K} \sum_k (ar a_{k+1} - ar a_k)^2}.
+    .. math:: N = \sqrt{\tau \, \frac{1}{2K} \sum_k (\bar a_{k+1} - \bar a_k)^2}.
 
     First differences make it blind to a constant offset and nearly so to slow drift. The
     standard deviation is ``N sqrt(3/(4K))``: the differences of independent block means are
