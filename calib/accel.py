@@ -426,6 +426,20 @@ def fit_accelerometer(
                             int(res.nfev), bool(res.status > 0))
 
 
+def _window_bounds(t: Any, accel: Any, spans: Any
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``t`` (N,) and ``accel`` (N, 3) as arrays, checked to match, and each ``[start, end]``
+    span's sample range ``[lo, hi)`` (both ends included), for :func:`still_means` and
+    :func:`white_noise_density`."""
+    tt = np.asarray(t, dtype=float).reshape(-1)
+    a = np.asarray(accel, dtype=float)
+    if a.shape != (tt.size, 3):
+        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
+    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
+    return (tt, a, np.searchsorted(tt, sp[:, 0], side="left"),
+            np.searchsorted(tt, sp[:, 1], side="right"))
+
+
 def still_means(t: Any, accel: Any, spans: Any, *, min_samples: int = 10
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each still window's mean accelerometer reading and the standard deviation of that mean,
@@ -455,13 +469,7 @@ def still_means(t: Any, accel: Any, spans: Any, *, min_samples: int = 10
     used : (M,) ndarray of int
         Indices into ``spans`` of the windows kept.
     """
-    tt = np.asarray(t, dtype=float).reshape(-1)
-    a = np.asarray(accel, dtype=float)
-    if a.shape != (tt.size, 3):
-        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
-    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
-    lo = np.searchsorted(tt, sp[:, 0], side="left")
-    hi = np.searchsorted(tt, sp[:, 1], side="right")
+    _, a, lo, hi = _window_bounds(t, accel, spans)
     used = np.flatnonzero(hi - lo >= max(int(min_samples), 3))
     means = np.array([a[lo[i]:hi[i]].mean(axis=0) for i in used]).reshape(-1, 3)
     if not np.all(np.isfinite(means)):
@@ -526,18 +534,13 @@ def white_noise_density(t: Any, accel: Any, spans: Any, *, tau_s: float = NOISE_
     CalibInputError
         If the windows hold fewer than three differences of block means in all.
     """
-    tt = np.asarray(t, dtype=float).reshape(-1)
-    a = np.asarray(accel, dtype=float)
-    if a.shape != (tt.size, 3):
-        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
+    tt, a, lo, hi = _window_bounds(t, accel, spans)
     tau = scalar(tau_s, "tau_s", positive=True)
-    if tt.size < 2 or not np.all(np.diff(tt) > 0):
+    steps = np.diff(tt)
+    if steps.size < 1 or not np.all(steps > 0):
         raise CalibInputError("t must hold at least two increasing sample times")
-    dt = float(np.median(np.diff(tt)))
+    dt = float(np.median(steps))
     m = max(1, int(round(tau / dt)))
-    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
-    lo = np.searchsorted(tt, sp[:, 0], side="left")
-    hi = np.searchsorted(tt, sp[:, 1], side="right")
     sq, k = np.zeros(3), 0
     for i0, i1 in zip(lo, hi, strict=True):
         blocks = (i1 - i0) // m
