@@ -266,6 +266,11 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     accel = float(cfg["gimbal"]["acceleration"])
     accel_rests = p["name"] == "full" and bool(p["accel_rests"])
     max_turns = float(cfg["gimbal"]["max_turns"])
+    # the planned protocols stay within their budget (the full one's is at least
+    # FULL_TIME_BUDGET_S; with the accelerometer's rests the whole run, their moves included),
+    # also when fixed values override the plan (checked below)
+    limit = (max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full"
+             else p["time_budget_s"])
     noise = {} if noise_std is None else {"noise_std": noise_std}
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
@@ -279,11 +284,9 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
                 f"protocol 'full' (the default) needs a three-servo gimbal; gimbal.ids lists "
                 f"{len(cfg['gimbal']['ids'])}: set protocol.name = \"auto\" (or --protocol auto) "
                 "to calibrate the diagonal model with fewer servos")
-        # With the accelerometer's rests the whole run, their moves included, fits the budget.
-        budget = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if full else p["time_budget_s"]
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
-                             time_budget_s=budget, odr_hz=imu.odr_hz, accel=accel,
+                             time_budget_s=limit, odr_hz=imu.odr_hz, accel=accel,
                              model="full" if full else "diagonal",
                              axes=_nominal_axes(cfg["gimbal"]["axes"]) if full else None,
                              accel_rests=accel_rests, max_turns=max_turns, **noise)
@@ -310,10 +313,6 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             # the 1e-3 limit)
             plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),
                                     max_turns=max_turns)
-    # the planned protocols stay within their budget (the full one's is at least
-    # FULL_TIME_BUDGET_S) also when fixed values override the plan
-    limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (
-        p["time_budget_s"])
     if p["name"] != "paper" and plan.jig_time_s - plan.accel_time_s > limit * (1 + 1e-9):
         raise InputError(
             f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "
