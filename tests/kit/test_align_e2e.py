@@ -22,6 +22,8 @@ import numpy as np
 import pytest
 
 from gyrocal.kit.cli import main
+from gyrocal.kit.pipeline import extract_recording
+from gyrocal.kit.recording import load_recording
 from tests.kit.conftest import _once
 
 SEED = 7
@@ -88,3 +90,17 @@ def _angle_and_sigma(err: str) -> tuple[float, float]:
     text = err.split("differ by ")[1]
     angle, rest = text.split("° ± ", 1)
     return float(angle), float(rest.split("°")[0])
+
+
+def test_no_turn_window_reads_a_held_servo_while_it_settles(aligned_run):
+    """A pose move used to be followed at once by the base's turn: its rest-to-rest window
+    (0.15 s before the motion) began while the posed servo settled by its last single ticks,
+    so the window read that servo's pose as moving instead of on a still angle. This run (seed
+    7) shows it without the planner's still time after a pose move (window 8, the middle servo,
+    with calib.design.POSE_SETTLE_S = 0); the shared default run (seed 5) does not, so the
+    check lives here (tests/calib/test_accel_rests.py checks the plan)."""
+    d, code = aligned_run
+    assert code == 0
+    obs = extract_recording(load_recording(d / "recording")).observations
+    held = np.arange(obs.pose.shape[1])[None, :] != obs.motor_index[:, None]
+    assert np.all(obs.pose_still[held] >= 0)
