@@ -38,12 +38,13 @@ def test_the_default_run_is_the_full_model_on_a_datasheet_sensor(rec, full_run):
     assert rec.manifest["protocol"]["name"] == "full"
     assert rec.manifest["protocol"]["model"] == "full"
     assert any(s.kind == "move" for s in rec.segments)
-    # (the accelerometer's rests add their moves beyond the gyro's 45 s: protocol.accel_rests)
+    # the accelerometer's rests (protocol.accel_rests) add moves, and the whole run, those
+    # included, stays within the 45 s: the planner fits the gyro's part into what they leave
     added = rec.manifest["protocol"]["accel_time_s"]
     assert 0 < added < 10.0
-    assert rec.manifest["protocol"]["planned_jig_time_s"] - added <= 45.0
+    assert rec.manifest["protocol"]["planned_jig_time_s"] <= 45.0
     last = max(s.t_end for s in rec.segments)
-    assert last - min(s.t_start for s in rec.segments) <= 45.0 + added + 1.0
+    assert last - min(s.t_start for s in rec.segments) <= 45.0 + 1.0
     cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
     assert cal.is_full and cal.method == "full-matrix" and cal.frame == "gyro-x-xy"
     C, b = _sensing(rec.truth), np.asarray(rec.truth["bias"])
