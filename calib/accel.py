@@ -851,20 +851,18 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     ext_ref = np.concatenate([[0.0], ref])
     th_ext = np.concatenate([np.zeros((n, 1)), th], axis=1)
 
-    # carrying is linear: K_r (N, 3, 3), its columns the carried unit vectors
-    K = np.stack([chain_axes(np.vstack([e, ax]), ext_ref, th_ext)[:, 0] for e in np.eye(3)],
-                 axis=2)
+    def carrier(axes_now: np.ndarray) -> np.ndarray:
+        """Carrying is linear: K_r (N, 3, 3), its columns the carried unit vectors."""
+        return np.stack([chain_axes(np.vstack([e, axes_now]), ext_ref, th_ext)[:, 0]
+                         for e in np.eye(3)], axis=2)
 
-    def carried(g0: np.ndarray) -> np.ndarray:
-        return K @ g0
+    K = carrier(ax)
 
     # start: R = I, γ₀ from the rest nearest the reference angles carried back
     k0 = int(np.argmin(np.abs(th - ref).sum(axis=1)))
     back = chain_axes(np.vstack([u[k0], ax]), np.concatenate([[0.0], th[k0]]),
                       np.concatenate([[0.0], ref])[None])[0, 0]
-    e1 = np.cross(back, [1.0, 0, 0] if abs(back[0]) < 0.9 else [0, 1.0, 0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(back, e1)
+    e1, e2 = _across(back)
 
     def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g0 = back + p[3] * e1 + p[4] * e2
@@ -872,7 +870,7 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
 
     def resid(p: np.ndarray) -> np.ndarray:
         R, g0 = unpack(p)
-        return ((carried(g0) @ R.T - u) / sd[:, None]).ravel()
+        return ((K @ g0 @ R.T - u) / sd[:, None]).ravel()
 
     from scipy import optimize  # imported where a fit needs it (seconds on a Pi)
 
@@ -883,13 +881,11 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
 
     def resid_at(p: np.ndarray) -> np.ndarray:
         g = g0 + p[3] * e1 + p[4] * e2
-        return ((carried(g / np.linalg.norm(g)) @ (_expm_so3(p[:3]) @ R).T - u)
+        return ((K @ (g / np.linalg.norm(g)) @ (_expm_so3(p[:3]) @ R).T - u)
                 / sd[:, None]).ravel()
 
-    def resid_axes(axes_now: np.ndarray, R: np.ndarray, g0: np.ndarray) -> np.ndarray:
-        Kn = np.stack([chain_axes(np.vstack([e, axes_now]), ext_ref, th_ext)[:, 0]
-                       for e in np.eye(3)], axis=2)
-        return (((Kn @ g0) @ R.T - u) / sd[:, None]).ravel()
+    def resid_axes(axes_now: np.ndarray) -> np.ndarray:
+        return ((carrier(axes_now) @ g0 @ R.T - u) / sd[:, None]).ravel()
 
     jac = optimize.approx_fprime(np.zeros(5), resid_at, 1e-7)
     jtj = jac.T @ jac
@@ -905,9 +901,17 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     cov = spread * inv[:3, :3]
     if axes_std is not None:
         cov = cov + _axes_covariance(ax, np.asarray(axes_std, dtype=float), jac, inv,
-                                     lambda a: resid_axes(a, R, g0))
-    ang = np.arcsin(np.clip(np.linalg.norm(np.cross(carried(g0) @ R.T, u), axis=1), 0, 1))
+                                     resid_axes)
+    ang = np.arcsin(np.clip(np.linalg.norm(np.cross(K @ g0 @ R.T, u), axis=1), 0, 1))
     return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
+
+
+def _across(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors across the direction ``v`` and each other, ``(t1, v̂ × t1)``."""
+    v = v / np.linalg.norm(v)
+    t1 = np.cross(v, [1.0, 0, 0] if abs(v[0]) < 0.9 else [0, 1.0, 0])
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(v, t1)
 
 
 def _axes_covariance(axes: np.ndarray, axes_std: np.ndarray, jac: np.ndarray,
@@ -919,11 +923,7 @@ def _axes_covariance(axes: np.ndarray, axes_std: np.ndarray, jac: np.ndarray,
     if axes_std.shape != (axes.shape[0],) or not np.all(np.isfinite(axes_std) & (axes_std >= 0)):
         raise CalibInputError(f"axes_std must be {axes.shape[0]} finite non-negative σ, got "
                               f"{axes_std!r}")
-    tangents = []
-    for a in axes:
-        t1 = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
-        t1 /= np.linalg.norm(t1)
-        tangents.append((t1, np.cross(a / np.linalg.norm(a), t1)))
+    tangents = [_across(a) for a in axes]
 
     def tilted(q: np.ndarray) -> np.ndarray:
         out = axes.copy()
