@@ -29,6 +29,7 @@ from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
     "FULL_TIME_BUDGET_S",
+    "MIN_REST_S",
     "PAPER_DESIGN",
     "DesignScore",
     "Plan",
@@ -302,6 +303,10 @@ def gravity_poses(
 #: detector does not count as motion) come up to the driver's settle time (30 ms) and a poll
 #: before the move is reported finished; without this still time the window read them.
 POSE_SETTLE_S = 0.2
+
+#: Shortest rest the planner lays out, s (:func:`plan_protocol`'s ``min_rest_s``): settling
+#: plus a bias measurement, and a still window for the accelerometer.
+MIN_REST_S = 0.6
 
 #: Shortest time budget the full-model protocol is planned within, s (issue 10's target: the
 #: twelve parameters in at most 45 s of jig time).
@@ -829,7 +834,7 @@ def plan_protocol(
     odr_hz: float = 200.0,
     accel: float = 10.0,
     reference_rate: float = 1.0,
-    min_rest_s: float = 0.6,
+    min_rest_s: float = MIN_REST_S,
     max_scale_error: float = 1.25,
     model: str = "diagonal",
     axes: np.ndarray | None = None,

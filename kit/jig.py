@@ -24,11 +24,6 @@ __all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "run_jig", "sim_effects"]
 
 
-#: Shortest rest (s) from which :func:`choose_plan` tilts rests for the accelerometer: the
-#: planner's own minimum rest (calib.design's ``min_rest_s``).
-ACCEL_MIN_REST_S = 0.6
-
-
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
     """Say on stderr when the chip runs at a rate other than the one configured (``--odr 201``
     runs an MPU-9250 at 1000/(1 + 4) = 200 Hz)."""
@@ -255,6 +250,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
 
     from gyrocal.calib.design import (
         FULL_TIME_BUDGET_S,
+        MIN_REST_S,
         jig_time,
         paper_plan,
         plan_accel_rests,
@@ -304,7 +300,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses),
             gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
-        if accel_rests and plan.rest_s >= ACCEL_MIN_REST_S:
+        if accel_rests and plan.rest_s >= MIN_REST_S:
             # tilt the fixed protocol's rests for the accelerometer (calib.design.
             # plan_accel_rests): the turns the gyro sees are unchanged; the moves add
             # plan.accel_time_s. Not with rests shorter than the planner's own minimum: the
