@@ -557,7 +557,7 @@ def predict_full_uncertainty(
             period[poses[(i - 2 * S) // 2][1]] += 1
     n_still = len(ids)
     G = np.zeros((B, n, n_still))
-    n_rest = 2 * S + 1 + 2 * len(poses) + len(gravity or ())
+    n_rest = len(_rest_poses(S, poses, gravity or ()))
     rest_std = np.zeros((B, n_rest, 3))
     for c, (speed, turns, rest_s) in enumerate(candidates):
         win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
@@ -600,25 +600,33 @@ def _design_forces(axes: np.ndarray, u: np.ndarray, pose: np.ndarray,
     """The mean specific force of each turn (``(u·γ) u`` over whole revolutions) and each rest
     (``γ``) of a :func:`full_schedule` design, in the coordinates of the directions it varies
     along (the ``basis`` rows, also returned): the ``force``/``rest_force`` of
-    :func:`gyrocal.calib.estimators.full_matrix_batch`. Rests as :func:`protocol_sequence` runs
-    them: ``2S + 1`` at home, two per posed pair in its pose, one per gravity pose."""
+    :func:`gyrocal.calib.estimators.full_matrix_batch`; the rests those of
+    :func:`_rest_poses`."""
     from gyrocal.calib.kinematics import carried_up
 
     S = axes.shape[0]
     zero = np.zeros(S)
     g0 = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
-    rest_pose = [zero] * (2 * S + 1)
-    for _, moved, angle in poses:
-        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 2
-    for moved, angle in gravity:
-        rest_pose.append(np.where(np.arange(S) == moved, angle, 0.0))
     gam = carried_up(axes, zero, zero, g0, pose)
     f_win = u * np.sum(u * gam, axis=1, keepdims=True)
-    f_rest = carried_up(axes, zero, zero, g0, np.array(rest_pose))
+    f_rest = carried_up(axes, zero, zero, g0, _rest_poses(S, poses, gravity))
     every = np.concatenate([f_win, f_rest])
     _, sv, vt = np.linalg.svd(every - every.mean(axis=0))
     basis = vt[sv > 1e-6 * max(float(sv[0]), 1e-300)]
     return f_win @ basis.T, f_rest @ basis.T, basis
+
+
+def _rest_poses(S: int, poses: tuple[tuple[int, int, float], ...],
+                gravity: tuple[tuple[int, float], ...]) -> np.ndarray:
+    """Every servo's angle from home at each rest of a full-model design, ``(R, S)``, as
+    :func:`protocol_sequence` runs them: ``2S + 1`` at home, two per posed pair in its pose,
+    one per gravity pose."""
+    rest_pose = [np.zeros(S)] * (2 * S + 1)
+    for _, moved, angle in poses:
+        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 2
+    for moved, angle in gravity:
+        rest_pose.append(np.where(np.arange(S) == moved, angle, 0.0))
+    return np.array(rest_pose).reshape(-1, S)
 
 
 def _with_g_variance(grad: np.ndarray, res: Any, basis: np.ndarray) -> np.ndarray:
