@@ -513,7 +513,7 @@ def white_noise_density(t: Any, accel: Any, spans: Any, *, tau_s: float = NOISE_
         Sample times, s, increasing.
     accel : (N, 3) array_like
         Readings, m/s².
-    spans : (K, 2) array_like
+    spans : (W, 2) array_like
         ``[start, end]`` of each still window on the same clock.
     tau_s : float
         Averaging time; it should exceed the low-pass's time constant several times.
