@@ -912,27 +912,28 @@ def plan_protocol(
         raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
     budget = time_budget_s
-    best: Plan | None = None
+    tilted: Plan | None = None  # the last gyro protocol with the accelerometer's rests
     for _ in range(8):
         best = (_plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
                            axes) if model == "full"
                 else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
                                     min_rest_s))
         if best is None:
-            raise CalibInputError(
-                f"no {'full-model ' if model == 'full' else ''}protocol fits "
-                f"{time_budget_s:g} s with speeds up to {top:.2f} rad/s"
-                f"{' and the accelerometer rests' if accel_rests else ''}; raise the time budget")
+            break
         if not accel_rests:
             return best
-        best = plan_accel_rests(best, axes=axes, max_turns=max_turns)
-        over = best.jig_time_s - time_budget_s
+        tilted = plan_accel_rests(best, axes=axes, max_turns=max_turns)
+        over = tilted.jig_time_s - time_budget_s
         if over <= 1e-9:
-            return best
+            return tilted
         # below this gyro protocol's own time by the overshoot (the candidates' times jump)
-        budget = best.jig_time_s - best.accel_time_s - over - 1e-6
+        budget = tilted.jig_time_s - tilted.accel_time_s - over - 1e-6
+    if tilted is None:
+        raise CalibInputError(
+            f"no {'full-model ' if model == 'full' else ''}protocol fits {time_budget_s:g} s "
+            f"with speeds up to {top:.2f} rad/s; raise the time budget")
     raise CalibInputError(
-        f"the accelerometer's rests take {best.accel_time_s:.1f} s (their moves and rests) of "
+        f"the accelerometer's rests take {tilted.accel_time_s:.1f} s (their moves and rests) of "
         f"the {time_budget_s:g} s budget and no {model} protocol fits the rest; raise the time "
         "budget or turn the accelerometer's rests off")
 
