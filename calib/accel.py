@@ -426,6 +426,20 @@ def fit_accelerometer(
                             int(res.nfev), bool(res.status > 0))
 
 
+def _window_bounds(t: Any, accel: Any, spans: Any
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``t`` (N,) and ``accel`` (N, 3) as arrays, checked to match, and each ``[start, end]``
+    span's sample range ``[lo, hi)`` (both ends included), for :func:`still_means` and
+    :func:`white_noise_density`."""
+    tt = np.asarray(t, dtype=float).reshape(-1)
+    a = np.asarray(accel, dtype=float)
+    if a.shape != (tt.size, 3):
+        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
+    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
+    return (tt, a, np.searchsorted(tt, sp[:, 0], side="left"),
+            np.searchsorted(tt, sp[:, 1], side="right"))
+
+
 def still_means(t: Any, accel: Any, spans: Any, *, min_samples: int = 10
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each still window's mean accelerometer reading and the standard deviation of that mean,
@@ -455,13 +469,7 @@ def still_means(t: Any, accel: Any, spans: Any, *, min_samples: int = 10
     used : (M,) ndarray of int
         Indices into ``spans`` of the windows kept.
     """
-    tt = np.asarray(t, dtype=float).reshape(-1)
-    a = np.asarray(accel, dtype=float)
-    if a.shape != (tt.size, 3):
-        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
-    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
-    lo = np.searchsorted(tt, sp[:, 0], side="left")
-    hi = np.searchsorted(tt, sp[:, 1], side="right")
+    _, a, lo, hi = _window_bounds(t, accel, spans)
     used = np.flatnonzero(hi - lo >= max(int(min_samples), 3))
     means = np.array([a[lo[i]:hi[i]].mean(axis=0) for i in used]).reshape(-1, 3)
     if not np.all(np.isfinite(means)):
@@ -492,7 +500,7 @@ def white_noise_density(t: Any, accel: Any, spans: Any, *, tau_s: float = NOISE_
     difference of consecutive block means, pooled over the windows' ``K`` differences (IEEE Std
     952-1997 Annex C), and for white noise ``σ²(τ) = N²/τ``:
 
-    .. math:: N = \sqrt{	au \, rac{1}{2K} \sum_k (ar a_{k+1} - ar a_k)^2}.
+    .. math:: N = \sqrt{\tau \, \frac{1}{2K} \sum_k (\bar a_{k+1} - \bar a_k)^2}.
 
     First differences make it blind to a constant offset and nearly so to slow drift. The
     standard deviation is ``N sqrt(3/(4K))``: the differences of independent block means are
@@ -505,7 +513,7 @@ def white_noise_density(t: Any, accel: Any, spans: Any, *, tau_s: float = NOISE_
         Sample times, s, increasing.
     accel : (N, 3) array_like
         Readings, m/s².
-    spans : (K, 2) array_like
+    spans : (W, 2) array_like
         ``[start, end]`` of each still window on the same clock.
     tau_s : float
         Averaging time; it should exceed the low-pass's time constant several times.
@@ -526,18 +534,13 @@ def white_noise_density(t: Any, accel: Any, spans: Any, *, tau_s: float = NOISE_
     CalibInputError
         If the windows hold fewer than three differences of block means in all.
     """
-    tt = np.asarray(t, dtype=float).reshape(-1)
-    a = np.asarray(accel, dtype=float)
-    if a.shape != (tt.size, 3):
-        raise CalibInputError(f"accel must have shape ({tt.size}, 3) to match t, got {a.shape}")
+    tt, a, lo, hi = _window_bounds(t, accel, spans)
     tau = scalar(tau_s, "tau_s", positive=True)
-    if tt.size < 2 or not np.all(np.diff(tt) > 0):
+    steps = np.diff(tt)
+    if steps.size < 1 or not np.all(steps > 0):
         raise CalibInputError("t must hold at least two increasing sample times")
-    dt = float(np.median(np.diff(tt)))
+    dt = float(np.median(steps))
     m = max(1, int(round(tau / dt)))
-    sp = np.asarray(spans, dtype=float).reshape(-1, 2)
-    lo = np.searchsorted(tt, sp[:, 0], side="left")
-    hi = np.searchsorted(tt, sp[:, 1], side="right")
     sq, k = np.zeros(3), 0
     for i0, i1 in zip(lo, hi, strict=True):
         blocks = (i1 - i0) // m
@@ -848,20 +851,18 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     ext_ref = np.concatenate([[0.0], ref])
     th_ext = np.concatenate([np.zeros((n, 1)), th], axis=1)
 
-    # carrying is linear: K_r (N, 3, 3), its columns the carried unit vectors
-    K = np.stack([chain_axes(np.vstack([e, ax]), ext_ref, th_ext)[:, 0] for e in np.eye(3)],
-                 axis=2)
+    def carrier(axes_now: np.ndarray) -> np.ndarray:
+        """Carrying is linear: K_r (N, 3, 3), its columns the carried unit vectors."""
+        return np.stack([chain_axes(np.vstack([e, axes_now]), ext_ref, th_ext)[:, 0]
+                         for e in np.eye(3)], axis=2)
 
-    def carried(g0: np.ndarray) -> np.ndarray:
-        return K @ g0
+    K = carrier(ax)
 
     # start: R = I, γ₀ from the rest nearest the reference angles carried back
     k0 = int(np.argmin(np.abs(th - ref).sum(axis=1)))
     back = chain_axes(np.vstack([u[k0], ax]), np.concatenate([[0.0], th[k0]]),
                       np.concatenate([[0.0], ref])[None])[0, 0]
-    e1 = np.cross(back, [1.0, 0, 0] if abs(back[0]) < 0.9 else [0, 1.0, 0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(back, e1)
+    e1, e2 = _across(back)
 
     def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g0 = back + p[3] * e1 + p[4] * e2
@@ -869,7 +870,7 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
 
     def resid(p: np.ndarray) -> np.ndarray:
         R, g0 = unpack(p)
-        return ((carried(g0) @ R.T - u) / sd[:, None]).ravel()
+        return ((K @ g0 @ R.T - u) / sd[:, None]).ravel()
 
     from scipy import optimize  # imported where a fit needs it (seconds on a Pi)
 
@@ -880,13 +881,11 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
 
     def resid_at(p: np.ndarray) -> np.ndarray:
         g = g0 + p[3] * e1 + p[4] * e2
-        return ((carried(g / np.linalg.norm(g)) @ (_expm_so3(p[:3]) @ R).T - u)
+        return ((K @ (g / np.linalg.norm(g)) @ (_expm_so3(p[:3]) @ R).T - u)
                 / sd[:, None]).ravel()
 
-    def resid_axes(axes_now: np.ndarray, R: np.ndarray, g0: np.ndarray) -> np.ndarray:
-        Kn = np.stack([chain_axes(np.vstack([e, axes_now]), ext_ref, th_ext)[:, 0]
-                       for e in np.eye(3)], axis=2)
-        return (((Kn @ g0) @ R.T - u) / sd[:, None]).ravel()
+    def resid_axes(axes_now: np.ndarray) -> np.ndarray:
+        return ((carrier(axes_now) @ g0 @ R.T - u) / sd[:, None]).ravel()
 
     jac = optimize.approx_fprime(np.zeros(5), resid_at, 1e-7)
     jtj = jac.T @ jac
@@ -902,9 +901,17 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
     cov = spread * inv[:3, :3]
     if axes_std is not None:
         cov = cov + _axes_covariance(ax, np.asarray(axes_std, dtype=float), jac, inv,
-                                     lambda a: resid_axes(a, R, g0))
-    ang = np.arcsin(np.clip(np.linalg.norm(np.cross(carried(g0) @ R.T, u), axis=1), 0, 1))
+                                     resid_axes)
+    ang = np.arcsin(np.clip(np.linalg.norm(np.cross(K @ g0 @ R.T, u), axis=1), 0, 1))
     return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
+
+
+def _across(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors across the direction ``v`` and each other, ``(t1, v̂ × t1)``."""
+    v = v / np.linalg.norm(v)
+    t1 = np.cross(v, [1.0, 0, 0] if abs(v[0]) < 0.9 else [0, 1.0, 0])
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(v, t1)
 
 
 def _axes_covariance(axes: np.ndarray, axes_std: np.ndarray, jac: np.ndarray,
@@ -916,11 +923,7 @@ def _axes_covariance(axes: np.ndarray, axes_std: np.ndarray, jac: np.ndarray,
     if axes_std.shape != (axes.shape[0],) or not np.all(np.isfinite(axes_std) & (axes_std >= 0)):
         raise CalibInputError(f"axes_std must be {axes.shape[0]} finite non-negative σ, got "
                               f"{axes_std!r}")
-    tangents = []
-    for a in axes:
-        t1 = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
-        t1 /= np.linalg.norm(t1)
-        tangents.append((t1, np.cross(a / np.linalg.norm(a), t1)))
+    tangents = [_across(a) for a in axes]
 
     def tilted(q: np.ndarray) -> np.ndarray:
         out = axes.copy()

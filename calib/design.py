@@ -29,6 +29,7 @@ from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
     "FULL_TIME_BUDGET_S",
+    "MIN_REST_S",
     "PAPER_DESIGN",
     "DesignScore",
     "Plan",
@@ -303,6 +304,10 @@ def gravity_poses(
 #: before the move is reported finished; without this still time the window read them.
 POSE_SETTLE_S = 0.2
 
+#: Shortest rest the planner lays out, s (:func:`plan_protocol`'s ``min_rest_s``): settling
+#: plus a bias measurement, and a still window for the accelerometer.
+MIN_REST_S = 0.6
+
 #: Shortest time budget the full-model protocol is planned within, s (issue 10's target: the
 #: twelve parameters in at most 45 s of jig time).
 FULL_TIME_BUDGET_S = 45.0
@@ -552,7 +557,7 @@ def predict_full_uncertainty(
             period[poses[(i - 2 * S) // 2][1]] += 1
     n_still = len(ids)
     G = np.zeros((B, n, n_still))
-    n_rest = 2 * S + 1 + 2 * len(poses) + len(gravity or ())
+    n_rest = len(_rest_poses(S, poses, gravity or ()))
     rest_std = np.zeros((B, n_rest, 3))
     for c, (speed, turns, rest_s) in enumerate(candidates):
         win = _turn_window(speed, turns, rest_s, accel, odr_hz, noise_std, encoder_ticks,
@@ -595,25 +600,33 @@ def _design_forces(axes: np.ndarray, u: np.ndarray, pose: np.ndarray,
     """The mean specific force of each turn (``(u·γ) u`` over whole revolutions) and each rest
     (``γ``) of a :func:`full_schedule` design, in the coordinates of the directions it varies
     along (the ``basis`` rows, also returned): the ``force``/``rest_force`` of
-    :func:`gyrocal.calib.estimators.full_matrix_batch`. Rests as :func:`protocol_sequence` runs
-    them: ``2S + 1`` at home, two per posed pair in its pose, one per gravity pose."""
+    :func:`gyrocal.calib.estimators.full_matrix_batch`; the rests those of
+    :func:`_rest_poses`."""
     from gyrocal.calib.kinematics import carried_up
 
     S = axes.shape[0]
     zero = np.zeros(S)
     g0 = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
-    rest_pose = [zero] * (2 * S + 1)
-    for _, moved, angle in poses:
-        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 2
-    for moved, angle in gravity:
-        rest_pose.append(np.where(np.arange(S) == moved, angle, 0.0))
     gam = carried_up(axes, zero, zero, g0, pose)
     f_win = u * np.sum(u * gam, axis=1, keepdims=True)
-    f_rest = carried_up(axes, zero, zero, g0, np.array(rest_pose))
+    f_rest = carried_up(axes, zero, zero, g0, _rest_poses(S, poses, gravity))
     every = np.concatenate([f_win, f_rest])
     _, sv, vt = np.linalg.svd(every - every.mean(axis=0))
     basis = vt[sv > 1e-6 * max(float(sv[0]), 1e-300)]
     return f_win @ basis.T, f_rest @ basis.T, basis
+
+
+def _rest_poses(S: int, poses: tuple[tuple[int, int, float], ...],
+                gravity: tuple[tuple[int, float], ...]) -> np.ndarray:
+    """Every servo's angle from home at each rest of a full-model design, ``(R, S)``, as
+    :func:`protocol_sequence` runs them: ``2S + 1`` at home, two per posed pair in its pose,
+    one per gravity pose."""
+    rest_pose = [np.zeros(S)] * (2 * S + 1)
+    for _, moved, angle in poses:
+        rest_pose += [np.where(np.arange(S) == moved, angle, 0.0)] * 2
+    for moved, angle in gravity:
+        rest_pose.append(np.where(np.arange(S) == moved, angle, 0.0))
+    return np.array(rest_pose).reshape(-1, S)
 
 
 def _with_g_variance(grad: np.ndarray, res: Any, basis: np.ndarray) -> np.ndarray:
@@ -829,7 +842,7 @@ def plan_protocol(
     odr_hz: float = 200.0,
     accel: float = 10.0,
     reference_rate: float = 1.0,
-    min_rest_s: float = 0.6,
+    min_rest_s: float = MIN_REST_S,
     max_scale_error: float = 1.25,
     model: str = "diagonal",
     axes: np.ndarray | None = None,
@@ -899,27 +912,28 @@ def plan_protocol(
         raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
     top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
     budget = time_budget_s
-    best: Plan | None = None
+    tilted: Plan | None = None  # the last gyro protocol with the accelerometer's rests
     for _ in range(8):
         best = (_plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
                            axes) if model == "full"
                 else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
                                     min_rest_s))
         if best is None:
-            raise CalibInputError(
-                f"no {'full-model ' if model == 'full' else ''}protocol fits "
-                f"{time_budget_s:g} s with speeds up to {top:.2f} rad/s"
-                f"{' and the accelerometer rests' if accel_rests else ''}; raise the time budget")
+            break
         if not accel_rests:
             return best
-        best = plan_accel_rests(best, axes=axes, max_turns=max_turns)
-        over = best.jig_time_s - time_budget_s
+        tilted = plan_accel_rests(best, axes=axes, max_turns=max_turns)
+        over = tilted.jig_time_s - time_budget_s
         if over <= 1e-9:
-            return best
+            return tilted
         # below this gyro protocol's own time by the overshoot (the candidates' times jump)
-        budget = best.jig_time_s - best.accel_time_s - over - 1e-6
+        budget = tilted.jig_time_s - tilted.accel_time_s - over - 1e-6
+    if tilted is None:
+        raise CalibInputError(
+            f"no {'full-model ' if model == 'full' else ''}protocol fits {time_budget_s:g} s "
+            f"with speeds up to {top:.2f} rad/s; raise the time budget")
     raise CalibInputError(
-        f"the accelerometer's rests take {best.accel_time_s:.1f} s (their moves and rests) of "
+        f"the accelerometer's rests take {tilted.accel_time_s:.1f} s (their moves and rests) of "
         f"the {time_budget_s:g} s budget and no {model} protocol fits the rest; raise the time "
         "budget or turn the accelerometer's rests off")
 

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrocal.calib.errors import CalibInputError
+
 __all__ = ["TimebaseFit", "median_step", "refit_sample_times"]
 
 
@@ -125,11 +127,16 @@ def median_step(t: np.ndarray, block: int = _BLOCK) -> float:
     float
         The median step, the mean of the two middle steps for an even number of steps (as
         ``numpy.median``).
+
+    Raises
+    ------
+    CalibInputError
+        With fewer than two times.
     """
     t = np.asarray(t, dtype=float)
     m = t.size - 1
     if m < 1:
-        raise ValueError("median_step needs at least two times")
+        raise CalibInputError(f"t must hold at least two sample times for a step, got {t.size}")
     if m <= block:
         return float(np.median(np.subtract(t[1:], t[:-1])))
     lo_k, hi_k = (m - 1) // 2, m // 2

@@ -24,11 +24,6 @@ __all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "run_jig", "sim_effects"]
 
 
-#: Shortest rest (s) from which :func:`choose_plan` tilts rests for the accelerometer: the
-#: planner's own minimum rest (calib.design's ``min_rest_s``).
-ACCEL_MIN_REST_S = 0.6
-
-
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
     """Say on stderr when the chip runs at a rate other than the one configured (``--odr 201``
     runs an MPU-9250 at 1000/(1 + 4) = 200 Hz)."""
@@ -255,6 +250,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
 
     from gyrocal.calib.design import (
         FULL_TIME_BUDGET_S,
+        MIN_REST_S,
         jig_time,
         paper_plan,
         plan_accel_rests,
@@ -266,6 +262,11 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     accel = float(cfg["gimbal"]["acceleration"])
     accel_rests = p["name"] == "full" and bool(p["accel_rests"])
     max_turns = float(cfg["gimbal"]["max_turns"])
+    # the planned protocols stay within their budget (the full one's is at least
+    # FULL_TIME_BUDGET_S; with the accelerometer's rests the whole run, their moves included),
+    # also when fixed values override the plan (checked below)
+    limit = (max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full"
+             else p["time_budget_s"])
     noise = {} if noise_std is None else {"noise_std": noise_std}
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
@@ -279,11 +280,9 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
                 f"protocol 'full' (the default) needs a three-servo gimbal; gimbal.ids lists "
                 f"{len(cfg['gimbal']['ids'])}: set protocol.name = \"auto\" (or --protocol auto) "
                 "to calibrate the diagonal model with fewer servos")
-        # With the accelerometer's rests the whole run, their moves included, fits the budget.
-        budget = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if full else p["time_budget_s"]
         plan = plan_protocol(servo_max_speed=gimbal.top_speed,
                              full_scale=math.radians(imu.full_scale_dps),
-                             time_budget_s=budget, odr_hz=imu.odr_hz, accel=accel,
+                             time_budget_s=limit, odr_hz=imu.odr_hz, accel=accel,
                              model="full" if full else "diagonal",
                              axes=_nominal_axes(cfg["gimbal"]["axes"]) if full else None,
                              accel_rests=accel_rests, max_turns=max_turns, **noise)
@@ -301,7 +300,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             plan.speed, plan.turns, plan.rest_s, accel,
             move_angles=tuple(abs(a) for _, _, a in plan.poses),
             gravity_angles=tuple(abs(a) for _, a in plan.gravity_poses)))
-        if accel_rests and plan.rest_s >= ACCEL_MIN_REST_S:
+        if accel_rests and plan.rest_s >= MIN_REST_S:
             # tilt the fixed protocol's rests for the accelerometer (calib.design.
             # plan_accel_rests): the turns the gyro sees are unchanged; the moves add
             # plan.accel_time_s. Not with rests shorter than the planner's own minimum: the
@@ -310,10 +309,6 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
             # the 1e-3 limit)
             plan = plan_accel_rests(plan, axes=_nominal_axes(cfg["gimbal"]["axes"]),
                                     max_turns=max_turns)
-    # the planned protocols stay within their budget (the full one's is at least
-    # FULL_TIME_BUDGET_S) also when fixed values override the plan
-    limit = max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full" else (
-        p["time_budget_s"])
     if p["name"] != "paper" and plan.jig_time_s - plan.accel_time_s > limit * (1 + 1e-9):
         raise InputError(
             f"the protocol needs about {plan.jig_time_s:.0f} s of jig time, more than "

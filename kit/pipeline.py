@@ -179,12 +179,16 @@ def recording_gravity(rec: Recording) -> float:
 def fit_recording_accelerometer(
     rec: Recording, ex: ExtractedWindows, gravity_m_s2: float
 ) -> tuple[AccelCalibration | None, str | None]:
-    """Fit the accelerometer to the recording's still windows (module docstring).
+    """Fit the accelerometer to the recording's still windows (module docstring), and measure
+    its white-noise density there (:func:`gyrocal.calib.accel.white_noise_density`).
 
     Returns
     -------
     (AccelCalibration, None)
-        When the recording has accelerometer columns and its rests determine the fit;
+        When the recording has accelerometer columns and its rests determine the fit and the
+        density;
+    (AccelCalibration, note)
+        the fit without the density, and why (rests too short for its blocks);
     (None, note)
         with what is missing otherwise (``(None, None)`` for a recording without the columns).
     """

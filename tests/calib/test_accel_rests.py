@@ -21,6 +21,7 @@ from gyrocal.calib.design import (
     protocol_sequence,
     score_full_design,
 )
+from gyrocal.calib.errors import CalibInputError
 
 AXES = np.eye(3)
 UP = np.array([0.0, 0.0, 1.0])
@@ -192,3 +193,16 @@ def test_a_turn_after_a_pose_move_has_still_time_before_it(plans):
                 assert seq[k - 1][0] in ("rest", "still"), f"step {k} turns right after a move"
                 if seq[k - 1][0] == "still":
                     assert seq[k - 1][1] >= 0.15 + 0.03
+
+
+def test_a_budget_the_accelerometer_s_rests_do_not_fit_says_so_and_what_to_do():
+    # 18 s holds the diagonal gyro protocol alone (17.4 s) but not with the rests' moves; 12 s
+    # holds neither, and the rests are then not what is blamed
+    kw = dict(servo_max_speed=4.8, full_scale=math.radians(500), accel_rests=True, max_turns=3.0)
+    assert plan_protocol(time_budget_s=18.0, **{**kw, "accel_rests": False}).jig_time_s <= 18.0
+    with pytest.raises(CalibInputError, match=r"the accelerometer's rests take \d+\.\d s .*"
+                       r"turn the accelerometer's rests off"):
+        plan_protocol(time_budget_s=18.0, **kw)
+    with pytest.raises(CalibInputError, match=r"no protocol fits 12 s .*; raise the time "
+                       r"budget$"):
+        plan_protocol(time_budget_s=12.0, **kw)

@@ -93,7 +93,13 @@ def test_the_design_s_specific_forces_match_the_independent_generator():
     # tests/calib/gsens_truth.py (scipy rotations, a numeric mean over each revolution) with a
     # unit g-sensitivity on a square gimbal: each window's and rest's mean reading less its rate
     # part is its specific force, what the planner models each turn and rest to see.
-    from gyrocal.calib.design import _design_forces, full_schedule, gravity_poses
+    from gyrocal.calib.design import (
+        Plan,
+        _design_forces,
+        full_schedule,
+        gravity_poses,
+        protocol_sequence,
+    )
     from gyrocal.calib.kinematics import chain_axes
     from tests.calib.gsens_truth import gsens_observations
 
@@ -105,10 +111,16 @@ def test_the_design_s_specific_forces_match_the_independent_generator():
     u = chain_axes(np.eye(3), np.zeros(3), pose)[np.arange(len(sched)), midx]
     f_win, f_rest, basis = _design_forces(np.eye(3), u, pose, poses, grav, None)
     assert basis.shape == (3, 3)
-    rest_poses = [np.zeros(3)] * 7
-    for _, moved, angle in poses:  # a posed pair's two turns, a rest before each
-        rest_poses += [np.where(np.arange(3) == moved, angle, 0.0)] * 2
-    rest_poses += [np.where(np.arange(3) == m, a, 0.0) for m, a in grav]
+    # the rests where the protocol the jig runs holds them (calib.design.protocol_sequence;
+    # a restated layout once counted three rests per posed pair where the protocol runs two)
+    plan = Plan(1.0, 1, 1.0, 10.0, 0.0, (0.0,) * 3, (0.0,) * 3, 0.0, 1.0, poses=poses,
+                gravity_poses=grav)
+    here, rest_poses = np.zeros(3), []
+    for step in protocol_sequence(plan):
+        if step[0] == "rest":
+            rest_poses.append(here.copy())
+        elif step[0] == "move":
+            here[step[1]] = step[2]
     links = [np.eye(3)[j] for j in range(3)]
     obs = gsens_observations(np.eye(3), np.zeros(3), np.eye(3), links, np.eye(3), sched,
                              rest_poses, speed=1.0, n_avg=64)

@@ -100,3 +100,12 @@ def test_median_step_equals_numpy_median_of_the_steps(kind, block):
             d[rng.integers(0, n - 1, 5)] = rng.uniform(0, 10, 5)
         t = 100.0 + np.concatenate([[0.0], np.cumsum(d)])
         assert median_step(t, block) == float(np.median(np.diff(t)))
+
+
+def test_median_step_of_fewer_than_two_times_says_so():
+    from gyrocal.calib.errors import CalibInputError
+    from gyrocal.calib.timebase import median_step
+
+    for t in (np.array([]), np.array([1.0])):
+        with pytest.raises(CalibInputError, match="at least two sample times"):
+            median_step(t)

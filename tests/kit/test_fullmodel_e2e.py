@@ -12,7 +12,7 @@ import pytest
 from gyrocal.calib.design import general_motion_rms, predicted_general_motion_rms
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.kit.cli import build_parser
-from gyrocal.kit.pipeline import estimate_recording, extract_recording
+from gyrocal.kit.pipeline import estimate_recording
 from gyrocal.kit.recording import load_recording
 from tests.calib.fullmodel_truth import truth_in_frame
 
@@ -38,12 +38,13 @@ def test_the_default_run_is_the_full_model_on_a_datasheet_sensor(rec, full_run):
     assert rec.manifest["protocol"]["name"] == "full"
     assert rec.manifest["protocol"]["model"] == "full"
     assert any(s.kind == "move" for s in rec.segments)
-    # (the accelerometer's rests add their moves beyond the gyro's 45 s: protocol.accel_rests)
+    # the accelerometer's rests (protocol.accel_rests) add moves, and the whole run, those
+    # included, stays within the 45 s: the planner fits the gyro's part into what they leave
     added = rec.manifest["protocol"]["accel_time_s"]
     assert 0 < added < 10.0
-    assert rec.manifest["protocol"]["planned_jig_time_s"] - added <= 45.0
+    assert rec.manifest["protocol"]["planned_jig_time_s"] <= 45.0
     last = max(s.t_end for s in rec.segments)
-    assert last - min(s.t_start for s in rec.segments) <= 45.0 + added + 1.0
+    assert last - min(s.t_start for s in rec.segments) <= 45.0 + 1.0
     cal = GyroCalibration.from_json((full_run[0] / "calibration.json").read_text())
     assert cal.is_full and cal.method == "full-matrix" and cal.frame == "gyro-x-xy"
     C, b = _sensing(rec.truth), np.asarray(rec.truth["bias"])
@@ -130,14 +131,3 @@ def _gyro_notes(est):
     """The estimate's notes about the gyro (the recording has accelerometer columns too)."""
     return [n for n in est.notes if "accelerometer" not in n]
 
-
-def test_no_turn_window_reads_a_held_servo_while_it_settles(rec):
-    # a pose move used to be followed at once by the base's turn: its rest-to-rest window
-    # (0.15 s before the motion) began while the posed servo settled by its last single ticks,
-    # so the window read that servo's pose as moving instead of on a still angle (seed 0 of
-    # the old plan: window 8, the middle servo; this test's seed escaped it by chance); the
-    # planner now holds still 0.2 s after a move (tests/calib/test_accel_rests.py checks the
-    # plan)
-    obs = extract_recording(rec).observations
-    held = np.arange(obs.pose.shape[1])[None, :] != obs.motor_index[:, None]
-    assert np.all(obs.pose_still[held] >= 0)
