@@ -24,6 +24,9 @@ JSON_MAX_ROWS = 200_000
 #: Samples handed to the tracker at a time on a replay (bounds its working memory).
 REPLAY_CHUNK = 16_384
 
+#: The prior bias std without --cal when --initial-bias-std is not given, rad/s.
+DEFAULT_INITIAL_BIAS_STD = 0.1
+
 #: The --live bias random walk when none is given, rad/s/√s: conservative for consumer MEMS gyros.
 DEFAULT_RATE_RANDOM_WALK = 1e-4
 
@@ -90,8 +93,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "when every sample of a recording has a temperature; off live)")
     m.add_argument("--tempco-std", type=float, default=1e-3, metavar="RAD_S_PER_C",
                    help="prior std of the temperature coefficient (default 1e-3)")
-    m.add_argument("--initial-bias-std", type=float, default=0.1, metavar="RAD_S",
-                   help="prior bias std without --cal (default 0.1)")
+    m.add_argument("--initial-bias-std", type=float, default=None, metavar="RAD_S",
+                   help="prior bias std (default: the calibration's bias_std with --cal, "
+                   f"else {DEFAULT_INITIAL_BIAS_STD})")
     d = p.add_argument_group("still detection and updates")
     d.add_argument("--still", choices=("auto", "detect", "segments"), default="auto",
                    help="auto: the recording's rest segments are still, the detector decides "
@@ -241,17 +245,18 @@ def _build_tracker(
             st = replace(st, tempco=prior[0], tempco_std=prior[1])
             notes.append("temperature coefficient seeded from the calibration's thermal model")
         try:
-            return BiasTracker(st, cal, keep_states=keep_states), cal
+            return BiasTracker(st, cal, initial_bias_std=args.initial_bias_std,
+                               keep_states=keep_states), cal
         except ValueError as exc:
             raise InputError(f"--cal {args.cal}: {exc}") from None
     guess = first_still_mean(whole, st.noise_std, odr, st.still, **piecewise)
     if guess is None:
         raise InputError(f"{where}: no still second found to start from; give --cal")
+    b0_std = DEFAULT_INITIAL_BIAS_STD if args.initial_bias_std is None else args.initial_bias_std
     notes.append("no --cal: starting from the first still second's bias "
-                 f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- "
-                 f"{args.initial_bias_std:g}")
+                 f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- {b0_std:g}")
     try:
-        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std,
+        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=b0_std,
                               keep_states=keep_states)
     except ValueError as exc:
         raise InputError(str(exc)) from None
