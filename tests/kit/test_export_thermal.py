@@ -195,7 +195,7 @@ def test_px4_thermal_id_comes_from_the_calibrations_chip_bus_and_address(capsys,
 
 
 @pytest.mark.parametrize("bad", ["-5", "0", str(1 << 24), "abc"])
-def test_a_device_id_outside_pxs_24_bits_is_refused(bad, capsys, tmp_path):
+def test_a_device_id_outside_px4s_24_bits_is_refused(bad, capsys, tmp_path):
     """--device-id must fit PX4's DeviceId (24 bits, not 0): anything else is exit 2 naming the
     value, before a .params file with an ID PX4 can never match is written."""
     (tmp_path / "t.json").write_text(make_cal().to_json())
