@@ -239,13 +239,13 @@ def main(argv: list[str]) -> None:
             readers = {name: _reader(rec, work, "new", name) for name in PARSER_COLUMNS
                        if name != "pandas" or have_fast}
             old_cpu = _reader(rec, work, "old", None)[0] if have_old else math.nan
+            measured = [readers.get(name) for name in PARSER_COLUMNS]  # None: not installed
             read_rows.append([label, f"{mb:.0f}", n_rows,
-                              "(no git)" if not have_old else f"{old_cpu:.2f} s",
-                              *(f"{cpu:.2f} s / {rss:.0f} MiB" if name in readers else "(absent)"
-                                for name in PARSER_COLUMNS for cpu, rss in
-                                [readers.get(name, (math.nan, math.nan))]),
-                              *(f"{old_cpu / readers[name][0]:.1f}x" if name in readers
-                                else "" for name in PARSER_COLUMNS),
+                              f"{old_cpu:.2f} s" if have_old else "(no git)",
+                              *(f"{m[0]:.2f} s / {m[1]:.0f} MiB" if m else "(absent)"
+                                for m in measured),
+                              *(f"{old_cpu / m[0]:.1f}x" if m and have_old else ""
+                                for m in measured),
                               f"{readers['decimal'][0] / n_rows * 1e6:.2f}"])
             cells = [label, _cell(*sim)]
             cells.append(_cell(*_command([*before, "estimate", str(rec)])) if before

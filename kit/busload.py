@@ -66,13 +66,11 @@ class BusLoad:
 
 
 def sample_bytes(model: str) -> int:
-    """Bytes the reader of ``model`` drains per sample (chip data ``fifo_sample_bytes``)."""
-    from gyrocal.drivers.imu import chips
+    """Bytes the reader of ``model`` drains per sample (its chip family's data
+    ``fifo_sample_bytes``)."""
+    from gyrocal.drivers.imu import READERS
 
-    family = {"mpu9250": chips.MPU9250, "mpu9255": chips.MPU9250, "mpu6500": chips.MPU9250,
-              "lsm9ds1": chips.LSM9DS1, "icm20948": chips.ICM20948,
-              "icm42688p": chips.ICM42688P, "lsm6dsox": chips.LSM6DSOX}[model]
-    return int(family.extra["fifo_sample_bytes"])
+    return int(READERS[model].family.extra["fifo_sample_bytes"])
 
 
 def sensor_bits_per_s(model: str, odr_hz: float, loop_hz: float) -> float:

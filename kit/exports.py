@@ -266,12 +266,22 @@ def _kalibr_topic_and_rate(options: Mapping[str, Any], odr_hz: Any) -> tuple[str
     if not _ROS_TOPIC.match(rostopic):
         raise InputError(f"--rostopic {_one_line(rostopic, 60)!r} is not a ROS topic name "
                          "(letters, digits, _, /; e.g. /imu0)")
-    rate = options.get("update_rate")
+    rate = _positive_option(options, "update_rate", " of Hz")
     if rate is None:
         return rostopic, float(odr_hz) if _num_text(odr_hz) is not None and odr_hz > 0 else None
-    if not (float(rate) > 0 and math.isfinite(float(rate))):
-        raise InputError(f"--update-rate must be a positive number of Hz, got {rate!r}")
-    return rostopic, float(rate)
+    return rostopic, rate
+
+
+def _positive_option(options: Mapping[str, Any], name: str, unit: str = "") -> float | None:
+    """Option ``name`` as a float, None when not given; :class:`InputError` naming the flag
+    unless it is a positive finite number."""
+    v = options.get(name)
+    if v is None:
+        return None
+    if not (float(v) > 0 and math.isfinite(float(v))):
+        raise InputError(f"--{name.replace('_', '-')} must be a positive number{unit}, "
+                         f"got {v!r}")
+    return float(v)
 
 
 def _render_kalibr(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
@@ -299,11 +309,8 @@ def _render_kalibr_noise(
     rostopic, rate = _kalibr_topic_and_rate(options, nc.odr_hz)
     if rate is None:
         raise InputError("the noise document has no usable odr_hz; give --update-rate HZ")
-    acc_n = options.get("accel_noise_density")
-    acc_w = options.get("accel_random_walk")
-    for name, v in (("--accel-noise-density", acc_n), ("--accel-random-walk", acc_w)):
-        if v is not None and not (float(v) > 0 and math.isfinite(float(v))):
-            raise InputError(f"{name} must be a positive number, got {v!r}")
+    acc_n = _positive_option(options, "accel_noise_density")
+    acc_w = _positive_option(options, "accel_random_walk")
     placeholder = acc_n is None or acc_w is None
     if placeholder:
         notes.append(
@@ -311,8 +318,8 @@ def _render_kalibr_noise(
             "give --accel-noise-density and --accel-random-walk from your accelerometer's "
             "datasheet or Allan analysis"
         )
-    acc_n = KALIBR_ACCEL_NOISE_DENSITY if acc_n is None else float(acc_n)
-    acc_w = KALIBR_ACCEL_RANDOM_WALK if acc_w is None else float(acc_w)
+    acc_n = KALIBR_ACCEL_NOISE_DENSITY if acc_n is None else acc_n
+    acc_w = KALIBR_ACCEL_RANDOM_WALK if acc_w is None else acc_w
     unresolved = [ax for ax, k in zip("xyz", k_axes, strict=True) if not k > 0]
     sensor = _one_line(nc.sensor.get("model", "unknown") if nc.sensor else "unknown")
 
@@ -388,7 +395,8 @@ def _render_kalibr_intrinsics(
     if options.get("accel_random_walk") is not None:
         raise InputError("--accel-random-walk applies to a gyrocal-noise document, not a "
                          "calibration")
-    acc_n, acc_n_note = _kalibr_accel_noise(cal.accelerometer, options.get("accel_noise_density"))
+    acc_n, acc_n_note = _kalibr_accel_noise(cal.accelerometer,
+                                            _positive_option(options, "accel_noise_density"))
     rostopic, rate = _kalibr_topic_and_rate(options, cal.sensor.get("odr_hz"))
     inverse = _inverse3(cal.full_matrix.tolist())
     eye = [[float(i == j) for j in range(3)] for i in range(3)]
@@ -468,15 +476,13 @@ def _render_kalibr_intrinsics(
     return "\n".join(lines) + "\n", notes
 
 
-def _kalibr_accel_noise(acc: Any, given: Any) -> tuple[float | None, str]:
+def _kalibr_accel_noise(acc: Any, given: float | None) -> tuple[float | None, str]:
     """Kalibr's ``accelerometer_noise_density`` (m/s²/√Hz, continuous time) for a calibration
     and where it comes from, in words: ``--accel-noise-density`` when given (it wins), else the
     largest axis of the calibration's measured ``accelerometer.noise_density``
     (:func:`gyrocal.calib.accel.white_noise_density`), else none."""
     if given is not None:
-        if not (float(given) > 0 and math.isfinite(float(given))):
-            raise InputError(f"--accel-noise-density must be a positive number, got {given!r}")
-        return float(given), "accelerometer_noise_density from --accel-noise-density"
+        return given, "accelerometer_noise_density from --accel-noise-density"
     if acc is None or acc.noise_density is None:
         return None, ("accelerometer_noise_density left out: the calibration has no measured "
                       "accelerometer noise; give --accel-noise-density N (m/s^2/sqrt(Hz))")

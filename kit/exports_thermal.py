@@ -34,7 +34,13 @@ from typing import Any
 
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, g_sensitivity_note, register
-from gyrocal.kit.px4_ids import MAV_INT32, MAV_REAL32, px4_device_id, qgc_params
+from gyrocal.kit.px4_ids import (
+    MAV_INT32,
+    MAV_REAL32,
+    device_id_arg,
+    px4_device_id,
+    qgc_params,
+)
 
 __all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "check_imu_index", "px4_params"]
 
@@ -118,10 +124,9 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     cal = _model(doc, "px4-thermal")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
     dev = options.get("device_id")
-    dev_note = None
+    how = None
     if dev is None:
         dev, how = px4_device_id(doc.get("sensor"))
-        dev_note = f"TC_G{inst}_ID from the calibration: {how}" if dev is not None else None
     rows = px4_params(cal, inst, 0 if dev is None else int(dev))
     text = qgc_params("gyro thermal compensation written by gyrocal from a temperature_model",
                       rows)
@@ -130,10 +135,11 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
              f"the whole bias is in TC_G{inst}_X0_*: set CAL_GYRO{inst}_XOFF/YOFF/ZOFF to 0, or "
              "the bias is removed twice"]
     if dev is None:
-        notes.append(f"TC_G{inst}_ID is 0: set it to the gyro's device ID (CAL_GYRO{inst}_ID on "
-                     "the vehicle) with --device-id, or PX4 will not use these parameters")
-    elif dev_note is not None:
-        notes.append(dev_note)
+        notes.append(f"TC_G{inst}_ID is 0 ({how}): set it to the gyro's device ID "
+                     f"(CAL_GYRO{inst}_ID on the vehicle) with --device-id, or PX4 will not use "
+                     "these parameters")
+    elif how is not None:
+        notes.append(f"TC_G{inst}_ID from the calibration: {how}")
     if cal.accelerometer is not None:
         notes.append(_ACCEL_ELSEWHERE.format(fmt="px4-accel"))
     return text, notes
@@ -164,8 +170,10 @@ register(Exporter(
     name="px4-thermal", accepts=("gyrocal-calibration",),
     description="PX4 gyro thermal compensation parameters TC_Gn_* (QGroundControl .params)",
     render=_render_px4, suffix=".params",
-    options=(_INDEX, ExportOption("device_id", int, "px4-thermal: the gyro's device ID for "
-                                                    "TC_Gn_ID (CAL_GYROn_ID on the vehicle)")),
+    options=(_INDEX, ExportOption("device_id", device_id_arg,
+                                  "px4-thermal: the gyro's device ID for TC_Gn_ID "
+                                  "(CAL_GYROn_ID on the vehicle; default from the "
+                                  "calibration's chip, bus and address)")),
 ))
 register(Exporter(
     name="ardupilot-thermal", accepts=("gyrocal-calibration",),

@@ -17,13 +17,18 @@ numbers its own buses, so a sensor moved there has the ID its vehicle reports.
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ["MAV_INT32", "MAV_REAL32", "PX4_DEVTYPE", "PX4_I2C", "px4_device_id", "qgc_params"]
+__all__ = ["MAV_INT32", "MAV_REAL32", "PX4_DEVTYPE", "PX4_I2C", "device_id_arg",
+           "px4_device_id", "qgc_params"]
 
 #: ``DeviceBusType_I2C`` (Device.hpp).
 PX4_I2C = 1
+
+#: Largest device ID: the 24 bits of ``union DeviceId`` (bus_type, bus, address, devtype).
+MAX_DEVICE_ID = (1 << 24) - 1
 
 #: MAV_PARAM_TYPE of an integer and of a float parameter (MAVLink common.xml)
 MAV_INT32, MAV_REAL32 = 6, 9
@@ -80,3 +85,19 @@ def px4_device_id(sensor: Mapping[str, Any] | None) -> tuple[int | None, str]:
                     f"{PX4_DEVTYPE[model]:#04x} ({model}); the bus as gyrocal read it "
                     "(/dev/i2c-N): on a flight controller with its own bus numbering, check it "
                     "against the vehicle's")
+
+
+def device_id_arg(text: str) -> int:
+    """``--device-id``: a PX4 device ID as the vehicle shows it (``CAL_GYRO<n>_ID``), decimal
+    or hex (``0x246809``), within the 24 bits of ``union DeviceId`` and not 0 (no device)."""
+    try:
+        value = int(text.strip(), 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a device ID; give the number the vehicle shows as CAL_GYROn_ID "
+            "(e.g. 2385929)") from None
+    if not 1 <= value <= MAX_DEVICE_ID:
+        raise argparse.ArgumentTypeError(
+            f"{text} is not a PX4 device ID (1..{MAX_DEVICE_ID}, the 24 bits of bus type, bus, "
+            "address and devtype); give the number the vehicle shows as CAL_GYROn_ID")
+    return value

@@ -24,6 +24,9 @@ JSON_MAX_ROWS = 200_000
 #: Samples handed to the tracker at a time on a replay (bounds its working memory).
 REPLAY_CHUNK = 16_384
 
+#: The prior bias std without --cal when --initial-bias-std is not given, rad/s.
+DEFAULT_INITIAL_BIAS_STD = 0.1
+
 #: The --live bias random walk when none is given, rad/s/√s: conservative for consumer MEMS gyros.
 DEFAULT_RATE_RANDOM_WALK = 1e-4
 
@@ -90,8 +93,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "when every sample of a recording has a temperature; off live)")
     m.add_argument("--tempco-std", type=float, default=1e-3, metavar="RAD_S_PER_C",
                    help="prior std of the temperature coefficient (default 1e-3)")
-    m.add_argument("--initial-bias-std", type=float, default=0.1, metavar="RAD_S",
-                   help="prior bias std without --cal (default 0.1)")
+    m.add_argument("--initial-bias-std", type=float, default=None, metavar="RAD_S",
+                   help="prior bias std (default: the calibration's bias_std with --cal, "
+                   f"else {DEFAULT_INITIAL_BIAS_STD})")
     d = p.add_argument_group("still detection and updates")
     d.add_argument("--still", choices=("auto", "detect", "segments"), default="auto",
                    help="auto: the recording's rest segments are still, the detector decides "
@@ -181,14 +185,24 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
         raise InputError(str(exc)) from None
 
 
+def _documents(args: argparse.Namespace) -> tuple[Any, Any]:
+    """The ``--cal`` calibration and the ``--noise`` document, read and checked (None where the
+    flag is not given)."""
+    from gyrocal.kit.tracking import load_calibration, load_noise
+
+    return (load_calibration(args.cal) if args.cal else None,
+            load_noise(args.noise) if args.noise else None)
+
+
 def _build_tracker(
     args: argparse.Namespace, odr: float, rate: Any, notes: list[str], what: str,
-    where: str, *, keep_states: bool = False,
+    where: str, *, keep_states: bool = False, documents: tuple[Any, Any] | None = None,
 ) -> tuple[Any, Any]:
     """The tracker from the flags: calibration, noise model (``rate``, an ``(n, 3)`` array or a
     :class:`gyrocal.kit.tracking.SpilledImu` read a piece at a time, gives the estimates the
     flags leave open: the white noise, and without --cal the first still second's bias).
-    ``what`` names the data in notes, ``where`` in errors.
+    ``what`` names the data in notes, ``where`` in errors; ``documents`` are
+    :func:`_documents`, when the caller read them already.
 
     Returns
     -------
@@ -196,14 +210,13 @@ def _build_tracker(
     """
     from gyrocal.calib.stationarity import first_still_mean, quiet_noise_std
     from gyrocal.calib.tracker import BiasTracker
-    from gyrocal.kit.tracking import SpilledImu, load_calibration, load_noise
+    from gyrocal.kit.tracking import SpilledImu
 
     # the readings whole, or n and a reader of rows lo:hi (the same arithmetic)
     spilled = isinstance(rate, SpilledImu)
     whole = None if spilled else rate
     piecewise: dict[str, Any] = {"n": rate.n, "read": rate.rate} if spilled else {}
-    cal = load_calibration(args.cal) if args.cal else None
-    noise = load_noise(args.noise) if args.noise else None
+    cal, noise = _documents(args) if documents is None else documents
     if args.noise_density is not None:
         n_density: Any = args.noise_density
     elif noise is not None:
@@ -241,17 +254,18 @@ def _build_tracker(
             st = replace(st, tempco=prior[0], tempco_std=prior[1])
             notes.append("temperature coefficient seeded from the calibration's thermal model")
         try:
-            return BiasTracker(st, cal, keep_states=keep_states), cal
+            return BiasTracker(st, cal, initial_bias_std=args.initial_bias_std,
+                               keep_states=keep_states), cal
         except ValueError as exc:
             raise InputError(f"--cal {args.cal}: {exc}") from None
     guess = first_still_mean(whole, st.noise_std, odr, st.still, **piecewise)
     if guess is None:
         raise InputError(f"{where}: no still second found to start from; give --cal")
+    b0_std = DEFAULT_INITIAL_BIAS_STD if args.initial_bias_std is None else args.initial_bias_std
     notes.append("no --cal: starting from the first still second's bias "
-                 f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- "
-                 f"{args.initial_bias_std:g}")
+                 f"({', '.join(f'{-x:.4g}' for x in guess)} rad/s) +- {b0_std:g}")
     try:
-        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=args.initial_bias_std,
+        tracker = BiasTracker(st, initial_bias=-guess, initial_bias_std=b0_std,
                               keep_states=keep_states)
     except ValueError as exc:
         raise InputError(str(exc)) from None
@@ -412,7 +426,6 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
         LiveSource,
         live_gravity,
         live_truth,
-        load_calibration,
         run_live,
         tracker_notes,
     )
@@ -434,11 +447,10 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
         if rec_path.is_dir() and any(rec_path.iterdir()) and not args.force:
             raise OutputExistsError(f"{rec_path} already holds files; choose another --record or "
                                     "pass --force")
+    documents = _documents(args)  # before the jig opens: a bad file is exit 2, nothing moves
     gravity, g_note = None, ""
-    if args.cal is not None:  # (read before the jig opens: a bad file is exit 2, nothing moves)
-        g_cal = load_calibration(args.cal)
-        if g_cal.g_sensitivity is not None:
-            gravity, g_note = live_gravity(g_cal, cfg["gimbal"]["ids"])
+    if documents[0] is not None and documents[0].g_sensitivity is not None:
+        gravity, g_note = live_gravity(documents[0], cfg["gimbal"]["ids"])
     jig = Jig(cfg, args)
     where = "the emulated jig" if jig.sim is not None else f"the jig on {cfg['gimbal']['port']}"
     if plan is not None and math.degrees(plan.speed) > 0.8 * float(jig.imu.full_scale_dps):
@@ -467,7 +479,8 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
 
     def build(warm: Batch) -> Any:
         tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
-                                    f"the first {LIVE_WARMUP_S:g} s", where)
+                                    f"the first {LIVE_WARMUP_S:g} s", where,
+                                    documents=documents)
         if tracker.applies_g_sensitivity:
             notes.append(g_note)
         built.append(tracker)

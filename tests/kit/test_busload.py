@@ -4,7 +4,7 @@ do; the same sensors on two buses pass."""
 
 import pytest
 
-from gyrocal.kit.busload import bus_loads, check_bus_loads
+from gyrocal.kit.busload import bus_loads, check_bus_loads, sample_bytes
 from gyrocal.kit.cli import main
 from gyrocal.kit.errors import InputError
 
@@ -18,10 +18,20 @@ def test_load_worked_out_by_hand():
     # a 5-byte FIFO count read per 200 Hz loop, 9 bits a byte
     (b,) = bus_loads([{"name": "x", "model": "mpu9250", "bus": 1, "odr_hz": 1000.0}], 200.0)
     assert b.bus == 1 and b.load == pytest.approx(9 * (14 * 1000 * 35 / 32 + 5 * 200) / 400e3)
-    assert 14 * 9 * 1000 / 400e3 == pytest.approx(0.315)  # the payload alone: 31.5 %
     # an LSM6DSOX sample is three 7-byte words (timestamp, gyro, accelerometer)
     (b,) = bus_loads([{"model": "lsm6dsox", "bus": 2, "odr_hz": 416.0}], 100.0)
     assert b.load == pytest.approx(9 * (21 * 416 * 35 / 32 + 5 * 100) / 400e3)
+
+
+@pytest.mark.parametrize("model,frame", [
+    ("mpu9250", 14), ("mpu6500", 14),  # FIFO frame: accel 6, temperature 2, gyro 6
+    ("icm20948", 14),  # FIFO_EN_2 frame ACCEL_XOUT_H..TEMP_OUT_L (DS-000189)
+    ("icm42688p", 16),  # FIFO packet 3: header, accel 6, gyro 6, temperature 1, timestamp 2
+    ("lsm9ds1", 12),  # FIFO slot: gyro 6 + accel 6
+    ("lsm6dsox", 21),  # three FIFO words of tag + 6 bytes: timestamp, gyro, accel
+])
+def test_bytes_per_sample_are_the_chips_fifo_frames(model, frame):
+    assert sample_bytes(model) == frame
 
 
 def test_four_sensors_at_1khz_are_refused_on_one_bus_and_on_two():

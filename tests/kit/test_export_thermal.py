@@ -192,3 +192,27 @@ def test_px4_thermal_id_comes_from_the_calibrations_chip_bus_and_address(capsys,
     assert "TC_G0_ID from the calibration: device ID 2385929" in err
     out, err = export_text(capsys, tmp_path, cal, "px4-thermal", "--device-id", "7")
     assert "1\t1\tTC_G0_ID\t7\t6" in out and "device ID 2385929" not in err
+
+
+@pytest.mark.parametrize("bad", ["-5", "0", str(1 << 24), "abc"])
+def test_a_device_id_outside_px4s_24_bits_is_refused(bad, capsys, tmp_path):
+    """--device-id must fit PX4's DeviceId (24 bits, not 0): anything else is exit 2 naming the
+    value, before a .params file with an ID PX4 can never match is written."""
+    (tmp_path / "t.json").write_text(make_cal().to_json())
+    code = main(["export", str(tmp_path / "t.json"), "--format", "px4-thermal",
+                 f"--device-id={bad}"])
+    out, err = capsys.readouterr()
+    assert code == 2 and bad in err and "CAL_GYROn_ID" in err and "TC_G0" not in out
+
+
+def test_px4_thermal_says_why_it_could_not_make_the_id(capsys, tmp_path):
+    """A chip PX4 has no devtype for leaves TC_G0_ID 0, and the note says why as well as what
+    to do."""
+    from dataclasses import replace
+
+    cal = replace(make_cal(), sensor={"model": "lsm6dsox", "i2c_bus": 1, "i2c_address": 0x6A})
+    out, err = export_text(capsys, tmp_path, cal, "px4-thermal")
+    assert "1\t1\tTC_G0_ID\t0\t6" in out
+    assert "TC_G0_ID is 0 (PX4 has no device type for the sensor model 'lsm6dsox'" in err
+    out, err = export_text(capsys, tmp_path, cal, "px4-thermal", "--device-id", "0x246809")
+    assert "1\t1\tTC_G0_ID\t2385929\t6" in out
