@@ -256,8 +256,9 @@ def _build_tracker(
         try:
             return BiasTracker(st, cal, initial_bias_std=args.initial_bias_std,
                                keep_states=keep_states), cal
-        except ValueError as exc:
-            raise InputError(f"--cal {args.cal}: {exc}") from None
+        except ValueError as exc:  # the library names its parameter; say the flag that sets it
+            msg = str(exc).replace("pass initial_bias_std", "give --initial-bias-std")
+            raise InputError(f"--cal {args.cal}: {msg}") from None
     guess = first_still_mean(whole, st.noise_std, odr, st.still, **piecewise)
     if guess is None:
         raise InputError(f"{where}: no still second found to start from; give --cal")

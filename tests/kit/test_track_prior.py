@@ -20,7 +20,8 @@ def test_initial_bias_std_seeds_a_calibration_without_bias_std(tmp_path, capsys)
             "--no-tempco", "--json"]
     capsys.readouterr()
     assert main(base) == 2
-    assert "no usable bias_std" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no usable bias_std" in err and "give --initial-bias-std" in err, err
     stds = {}
     for prior in (0.01, 0.3):
         out = tmp_path / f"t{prior}.json"
