@@ -33,7 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--verification", metavar="FILE",
                    help="a `gyrocal verify --json` document to include in report.html")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
-                   help="estimator when no CAL is given (default paired-axis)")
+                   help="estimator when no CAL is given (default auto: the full model when the "
+                        "recording's poses determine it, else paired-axis)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
         est = estimate_recording(rec, args.method)
         cal, extracted = est.calibration, est.extracted
-        what = f"a {args.method} estimate from the recording (no CAL given)"
+        what = f"the {args.method} estimate from the recording (no CAL given)"
     for w in extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     verification = None
