@@ -213,7 +213,8 @@ def calibrate_plate(dirs: Sequence[Path], names: Sequence[str], models: Sequence
                 from gyrocal.kit.report_html import write_run_report
 
                 write_run_report(rec, cal, est.extracted, d / "plots", title=f"{title} {name}",
-                                 html_path=d / "report.html", force=force)
+                                 html_path=d / "report.html", force=force,
+                                 calibration=str(Path(source).parent / "calibration.json"))
         except GyrocalError as exc:
             out.append(SensorOutcome(name, model, f"not calibrated: {exc}", exit_code_for(exc)))
             continue

@@ -3,40 +3,119 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gyrocal.calib.model import GyroCalibration
 
-__all__ = ["accelerometer_rows", "calibration_table"]
+__all__ = ["TruthError", "accelerometer_rows", "calibration_table", "error_against_truth"]
+
+
+@dataclass(frozen=True)
+class TruthError:
+    """A calibration's error against a simulated recording's truth, each parameter in units of
+    its own standard deviation (what the terminal table and the HTML report both print).
+
+    Attributes
+    ----------
+    bias : ndarray (3,)
+        ``(b − b_true) / σ_b`` per axis (the bias is added to the raw reading, so it compares in
+        any frame).
+    matrix : ndarray (3, 3) or None
+        ``(A − A_true) / σ_A`` of the full model's free entries (0 where ``A`` is fixed by its
+        frame, σ = 0); ``A_true`` is the simulated sensor's in the gyro's frame
+        (:func:`gyrocal.calib.estimators.matrix_in_frame`, hardware_docs/method.md §9). None
+        for the diagonal model, or when the matrix is in another frame (``matrix_note``).
+    scale : ndarray (3,) or None
+        ``(k − k_true) / σ_k`` of the diagonal model (paper Eq. 1); None for the full model.
+    matrix_note : str or None
+        Why the matrix was not compared, when it was not.
+    accel_matrix, accel_bias : ndarray or None
+        The accelerometer's (``f = A (a + b)``, lower triangle of ``A`` and ``b``), where the
+        calibration and the truth both have one.
+    """
+
+    bias: np.ndarray
+    matrix: np.ndarray | None = None
+    scale: np.ndarray | None = None
+    matrix_note: str | None = None
+    accel_matrix: np.ndarray | None = None
+    accel_bias: np.ndarray | None = None
+
+    @property
+    def matrix_max(self) -> float | None:
+        """``max |err/σ|`` over the gyro's matrix (or its scale factors), None if not compared."""
+        z = self.matrix if self.matrix is not None else self.scale
+        return None if z is None else float(np.max(np.abs(z)))
+
+    @property
+    def accel_matrix_max(self) -> float | None:
+        """``max |err/σ|`` over the accelerometer's matrix, None without one."""
+        return None if self.accel_matrix is None else float(np.max(np.abs(self.accel_matrix)))
+
+
+def error_against_truth(cal: GyroCalibration, truth: Mapping[str, Any] | None
+                        ) -> TruthError | None:
+    """The calibration's error against a simulated recording's ``truth`` (its manifest's
+    ``scale``, ``bias``, ``misalignment``, ``accelerometer``), in units of each parameter's own
+    standard deviation; None without a truth.
+
+    A truth with a temperature model (``truth.temperature``) is taken at the calibration's mean
+    die temperature (:func:`gyrocal.kit.thermal.truth_at`). The one computation behind the
+    terminal's table (:func:`calibration_table`) and the HTML report
+    (:mod:`gyrocal.kit.report_html`).
+    """
+    from gyrocal.kit.thermal import truth_at
+
+    truth = truth_at(truth, cal.temperature_c)
+    if truth is None:
+        return None
+    bias = (np.asarray(cal.bias) - np.asarray(truth["bias"])) / np.asarray(cal.bias_std)
+    matrix = scale = note = None
+    if cal.matrix is None:
+        scale = (np.asarray(cal.scale) - np.asarray(truth["scale"])) / np.asarray(cal.scale_std)
+    elif cal.frame == "accel-x-xy":  # --align-gyro-to-accel: A is full there
+        note = "matrix not compared (it is in the accelerometer's frame)"
+    else:
+        A, At = np.asarray(cal.matrix), _truth_matrix(truth)
+        S = (np.asarray(cal.matrix_std) if cal.matrix_std is not None
+             else np.full((3, 3), np.nan))
+        free = S > 0
+        matrix = np.where(free, (A - At) / np.where(free, S, 1.0), 0.0)
+    acc, acc_truth = cal.accelerometer, truth.get("accelerometer")
+    acc_m = acc_b = None
+    if acc is not None and isinstance(acc_truth, Mapping) and {"matrix", "bias_m_s2"} <= set(
+            acc_truth):
+        il = np.tril_indices(3)
+        acc_m = (acc.matrix - np.asarray(acc_truth["matrix"]))[il] / acc.std[:6]
+        acc_b = (acc.bias - np.asarray(acc_truth["bias_m_s2"])) / acc.std[6:]
+    return TruthError(bias, matrix, scale, note, acc_m, acc_b)
 
 
 def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = None) -> str:
     """The result table: scale and bias with standard deviations, the verdict, the axes.
 
-    With ``truth`` (a simulated recording's ``{"scale", "bias"}``) each row also shows the error
-    in units of its own standard deviation; a truth with a temperature model (``truth.
-    temperature``) is taken at the calibration's mean die temperature.
+    With ``truth`` (a simulated recording's ``{"scale", "bias"}``) the table also shows the
+    error in units of each parameter's standard deviation (:func:`error_against_truth`).
     """
-    from gyrocal.kit.thermal import truth_at
-
-    truth = truth_at(truth, cal.temperature_c)
+    err = error_against_truth(cal, truth)
     lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
     if cal.matrix is not None:
-        lines += _matrix_rows(cal, truth)
+        lines += _matrix_rows(cal, err)
     else:
-        lines += _diagonal_rows(cal, truth)
+        lines += _diagonal_rows(cal, err)
     _verdict(cal, lines)
     if cal.accelerometer is not None:
-        lines += accelerometer_rows(cal.accelerometer, (truth or {}).get("accelerometer"))
+        lines += accelerometer_rows(cal.accelerometer, err)
     return "\n".join(lines)
 
 
-def accelerometer_rows(acc: Any, truth: Mapping[str, Any] | None = None) -> list[str]:
+def accelerometer_rows(acc: Any, err: TruthError | None = None) -> list[str]:
     """The accelerometer's part of the summary: ``f = A (a + bias)`` (calib.accel) with standard
-    deviations, the gravity it was fitted against and its χ² verdict; with a simulated truth
-    (``truth.accelerometer``: ``matrix``, ``bias_m_s2``) the largest error in σ."""
+    deviations, the gravity it was fitted against and its χ² verdict; with the error against a
+    simulated truth (:func:`error_against_truth`) the largest error in σ."""
     std = acc.std
     S = np.zeros((3, 3))
     S[np.tril_indices(3)] = std[:6]
@@ -48,12 +127,10 @@ def accelerometer_rows(acc: Any, truth: Mapping[str, Any] | None = None) -> list
         lines.append(f"{ax:<5}" + "".join(f"{acc.matrix[j, i]:>13.6f}{S[j, i]:>10.1e}"
                                           for i in range(3))
                      + f"{acc.bias[j]:>14.5f}{std[6 + j]:>10.1e}")
-    if truth is not None and "matrix" in truth and "bias_m_s2" in truth:
-        il = np.tril_indices(3)
-        em = (acc.matrix - np.asarray(truth["matrix"]))[il] / std[:6]
-        eb = (acc.bias - np.asarray(truth["bias_m_s2"])) / std[6:]
+    if err is not None and err.accel_bias is not None:
         lines.append(f"error against the simulated truth, in σ: matrix max |err/σ| = "
-                     f"{np.max(np.abs(em)):.2f}, bias " + " ".join(f"{v:+.2f}" for v in eb))
+                     f"{err.accel_matrix_max:.2f}, bias "
+                     + " ".join(f"{v:+.2f}" for v in err.accel_bias))
     c = acc.consistency
     verdict = "consistent" if c.ok else "NOT consistent"
     lines.append(f"accelerometer consistency: {verdict} with the measured noise (chi2 = "
@@ -70,7 +147,7 @@ def _truth_matrix(truth: Mapping[str, Any]) -> np.ndarray:
     return matrix_in_frame(np.diag(1.0 / np.asarray(truth["scale"], dtype=float)) @ mis)
 
 
-def _matrix_rows(cal: GyroCalibration, truth: Mapping[str, Any] | None) -> list[str]:
+def _matrix_rows(cal: GyroCalibration, err: TruthError | None) -> list[str]:
     A = np.asarray(cal.matrix)
     S = np.asarray(cal.matrix_std) if cal.matrix_std is not None else np.full((3, 3), np.nan)
     aligned = cal.frame == "accel-x-xy"  # --align-gyro-to-accel: A is full there
@@ -80,40 +157,29 @@ def _matrix_rows(cal: GyroCalibration, truth: Mapping[str, Any] | None) -> list[
     head = f"{'row':<5}" + "".join(f"{'A_' + c:>13}{'± std':>10}" for c in "xyz")
     head += f"{'bias rad/s':>14}{'± std':>10}"
     lines.append(head)
-    At = _truth_matrix(truth) if truth is not None else None
     for j, ax in enumerate("xyz"):
         row = f"{ax:<5}" + "".join(f"{A[j, i]:>13.6f}{S[j, i]:>10.1e}" for i in range(3))
         row += f"{cal.bias[j]:>14.6f}{cal.bias_std[j]:>10.1e}"
         lines.append(row)
-    if At is not None and truth is not None:
-        # the bias is added to the raw reading, so it compares in any frame; the true matrix is
-        # known here in the gyro's frame only
-        zb = (np.asarray(cal.bias) - np.asarray(truth["bias"])) / np.asarray(cal.bias_std)
-        if aligned:
-            text = "matrix not compared (it is in the accelerometer's frame)"
-        else:
-            free = S > 0
-            z = np.where(free, (A - At) / np.where(free, S, 1.0), 0.0)
-            text = f"matrix max |err/σ| = {np.max(np.abs(z)):.2f}"
+    if err is not None:
+        text = err.matrix_note or f"matrix max |err/σ| = {err.matrix_max:.2f}"
         lines.append(f"error against the simulated truth, in σ: {text}, bias "
-                     + " ".join(f"{v:+.2f}" for v in zb))
+                     + " ".join(f"{v:+.2f}" for v in err.bias))
     lines.append("")
     return lines
 
 
-def _diagonal_rows(cal: GyroCalibration, truth: Mapping[str, Any] | None) -> list[str]:
+def _diagonal_rows(cal: GyroCalibration, err: TruthError | None) -> list[str]:
     lines = ["model: g = scale * (m + bias), rad/s", ""]
     head = f"{'axis':<5}{'scale':>12}{'± std':>11}{'bias rad/s':>14}{'± std':>11}"
-    if truth is not None:
+    if err is not None:
         head += f"{'scale err/σ':>13}{'bias err/σ':>12}"
     lines.append(head)
     for j, ax in enumerate("xyz"):
         row = (f"{ax:<5}{cal.scale[j]:>12.6f}{cal.scale_std[j]:>11.2e}"
                f"{cal.bias[j]:>14.6f}{cal.bias_std[j]:>11.2e}")
-        if truth is not None:
-            ks = (cal.scale[j] - truth["scale"][j]) / cal.scale_std[j]
-            bs = (cal.bias[j] - truth["bias"][j]) / cal.bias_std[j]
-            row += f"{ks:>13.2f}{bs:>12.2f}"
+        if err is not None and err.scale is not None:
+            row += f"{err.scale[j]:>13.2f}{err.bias[j]:>12.2f}"
         lines.append(row)
     lines.append("")
     return lines

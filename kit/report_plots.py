@@ -15,8 +15,9 @@ calibration's prediction (the full model's ``A`` where it has one), and :func:`e
     and the servo angles.
 ``turn-NN-servoM-pos|neg.png``
     One rotate segment: the rate about the servo's axis (raw, calibrated, encoder reference) with
-    the window's trapezoid weight shaded; calibrated minus reference on one averaging weight, and
-    the window mean the fit used; the raw rates of all three axes.
+    the window's trapezoid weight shaded; calibrated minus reference on one averaging weight, the
+    part of it the gyro's delay explains on the speed ramps (:func:`ramp_lag`), and the window
+    mean the fit used; the raw rates of all three axes.
 ``rests.png``
     Each rest window's mean reading with its standard error against ``-bias``.
 ``residuals.png``
@@ -56,6 +57,7 @@ __all__ = [
     "encoder_rate",
     "nominal_axis",
     "plan_report",
+    "ramp_lag",
     "servo_axes",
     "window_axes",
     "window_forces",
@@ -319,6 +321,24 @@ def boxcar_mean(t: np.ndarray, x: np.ndarray, at: np.ndarray, half_span_s: float
     return np.where((lo >= t[0]) & (hi <= t[-1]), r, np.nan)
 
 
+def ramp_lag(difference: np.ndarray, slope: np.ndarray) -> float | None:
+    r"""The gyro's delay against the encoder that best explains ``difference`` (calibrated minus
+    reference rate) by the reference's rate of change ``slope``: a reading delayed by ``δ`` is
+    ``ω(t − δ) ≈ ω(t) − δ ω̇(t)``, so ``δ = −Σ d ω̇ / Σ ω̇²`` (least squares; the fit that
+    :func:`gyrocal.kit.verify.verify_recording` makes of its several-servo blocks). None where
+    the rate does not change (no ramp) or nothing is finite.
+
+    On a window from rest to rest, ``−δ ω̇`` integrates to ``−δ (ω_end − ω_start) = 0``: the
+    ramps' error does not reach the window's mean, which is what the fit uses.
+    """
+    d, s = np.asarray(difference, dtype=float), np.asarray(slope, dtype=float)
+    ok = np.isfinite(d) & np.isfinite(s)
+    ss = float(np.sum(s[ok] ** 2))
+    if not ok.any() or ss == 0.0:
+        return None
+    return -float(np.sum(d[ok] * s[ok])) / ss
+
+
 @dataclass(frozen=True)
 class Residuals:
     """Whitened residuals of the windows against a calibration.
@@ -497,6 +517,26 @@ def _mark_gaps(ax: Any, gaps: list[tuple[float, float]]) -> None:
                    label="gap in the gyro stream" if k == 0 else None)
 
 
+def _difference_panel(ax: Any, t: np.ndarray, gu: np.ndarray, et: np.ndarray,
+                      ea: np.ndarray, h: float = 0.25) -> None:
+    """Calibrated minus reference rate, both averaged over ``2h``, and what the gyro's delay
+    makes of it on the speed ramps (:func:`ramp_lag`), said in the legend."""
+    ref = encoder_rate(et, ea, t, h)
+    diff = boxcar_mean(t, gu, t, h) - ref
+    ax.plot(t, diff, color="C0", lw=1.0,
+            label=f"calibrated − reference, both averaged over {2 * h:g} s")
+    slope = np.gradient(ref, t)
+    lag = ramp_lag(diff, slope)
+    if lag is not None:
+        ax.plot(t, -lag * slope, color="k", lw=1.0, ls=":",
+                label=f"−delay × angular acceleration, delay {lag * 1e3:.1f} ms fitted: the "
+                      "ramps' error is timing, not calibration")
+    finite = diff[np.isfinite(diff)]
+    if finite.size:
+        span = max(float(np.percentile(np.abs(finite), 98)), 1e-4)
+        ax.set_ylim(-2.5 * span, 2.5 * span)
+
+
 def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
                window: Window | None, axis: ServoAxis, extracted: ExtractedWindows,
                window_index: int | None) -> Any:
@@ -543,15 +583,8 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
 
     # 2: calibrated minus reference on one weight, and the window mean the fit used
     ax = axs[1]
-    h = 0.25
     if t.size > 2:
-        diff = boxcar_mean(t, g @ u, t, h) - encoder_rate(et, ea, t, h)
-        ax.plot(t, diff, color="C0", lw=1.0,
-                label=f"calibrated − reference, both averaged over {2 * h:g} s")
-        finite = diff[np.isfinite(diff)]
-        if finite.size:
-            span = max(float(np.percentile(np.abs(finite), 98)), 1e-4)
-            ax.set_ylim(-2.5 * span, 2.5 * span)
+        _difference_panel(ax, t, g @ u, et, ea)
     if window is not None and window_index is not None:
         obs = extracted.observations.with_pooled_noise()
         forces = window_forces(obs, cal)

@@ -323,6 +323,48 @@ class Verification:
             "flag_ratio": FLAG_RATIO,
         }
 
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> Verification:
+        """The verification a :meth:`to_dict` document (``gyrocal verify --json``) holds.
+
+        Raises
+        ------
+        InputError
+            If a field is missing or malformed (the message names it).
+        """
+        def vec(name: str) -> np.ndarray:
+            v = doc.get(name, [None] * 3)
+            if not isinstance(v, list) or len(v) != 3 or not all(
+                    x is None or (isinstance(x, (int, float)) and not isinstance(x, bool))
+                    for x in v):
+                raise InputError(f"{name} must be 3 numbers (null for n/a), got {v!r:.80}")
+            return np.array([np.nan if x is None else float(x) for x in v])
+
+        missing = [k for k in ("rms_before", "rms_diagonal", "rms_predicted", "blocks",
+                               "block_s", "reference") if k not in doc]
+        if missing:
+            raise InputError(f"not a `gyrocal verify --json` document: no {', '.join(missing)}")
+        blocks = doc["blocks"]
+        if not isinstance(blocks, Mapping) or not all(
+                isinstance(blocks.get(k), int) for k in (*KINDS, "ramp_excluded")):
+            raise InputError(f"blocks must give a count for each of {', '.join(KINDS)} and "
+                             f"ramp_excluded, got {blocks!r:.80}")
+        full = vec("rms_full")
+        try:
+            return cls(
+                rms_before=vec("rms_before"), rms_diagonal=vec("rms_diagonal"), rms_full=full,
+                rms_predicted=vec("rms_predicted"),
+                rms_by_kind={k: vec(f"rms_{k}") for k in KINDS},
+                predicted_by_kind={k: vec(f"rms_predicted_{k}") for k in KINDS},
+                blocks={k: int(blocks[k]) for k in (*KINDS, "ramp_excluded")},
+                block_s=float(doc["block_s"]), reference=str(doc["reference"]),
+                full=bool(np.any(np.isfinite(full))), delay_s=float(doc.get("delay_s", 0.0)),
+                g_sensitivity=str(doc.get("g_sensitivity", "none")),
+                gravity_pairs=int(doc.get("gravity_pairs", 0)),
+                rms_gravity=vec("rms_gravity"), predicted_gravity=vec("rms_predicted_gravity"))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"malformed `gyrocal verify --json` document: {exc}") from None
+
 
 def _kinematics(rec: Recording, cal: GyroCalibration) -> tuple[dict[str, Any], str]:
     """The chain to compute the reference with: the calibration's, else home-pose axes."""

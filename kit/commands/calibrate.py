@@ -173,7 +173,8 @@ def run(args: argparse.Namespace) -> int:
 
                 write_run_report(rec, cal, est.extracted, work / "plots",
                                  title=f"{out} (gyrocal calibrate)",
-                                 html_path=work / "report.html", force=args.force)
+                                 html_path=work / "report.html", force=args.force,
+                                 calibration=str(out / "calibration.json"))
     rec_dir, cal_path = out / "recording", out / "calibration.json"
     if cal is None:
         print(f"wrote {rec_dir}/ (emulated IMU at rest: the servos were tested, nothing to fit)")

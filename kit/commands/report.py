@@ -10,10 +10,12 @@ DESCRIPTION = (
     "Write PNG plots of a Recording v1 into --out DIR: an overview; for each turn the raw and "
     "the calibrated rate about the servo's axis against the encoder reference, with the window "
     "the estimator used shaded by its weight; the rest windows against -bias; and each window's "
-    "residual in standard deviations. With CAL (Calibration v1 JSON) the plots use that "
-    "calibration; without it one is estimated from the recording. Also writes report.html, one "
-    "self-contained page (results, verdict, servo axes, verification, environment, the plots "
-    "inline) to read or send. Prints the list of files. "
+    "residual in standard deviations. With CAL (a Calibration JSON, version 1 or 2) the plots "
+    "use that calibration; without it one is estimated from the recording. Also writes "
+    "report.html, one self-contained page to read or send: a summary (verdict, model, largest "
+    "cross-axis term, misalignment, what to do next), the fitted model with its standard "
+    "deviations, the verification, the noise, the environment and the plots inline. Prints the "
+    "list of files. "
     "Needs matplotlib: pip install 'gyrocal[plot]'."
 )
 
@@ -24,13 +26,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
     p.add_argument("cal", nargs="?", metavar="CAL",
-                   help="Calibration v1 JSON (default: estimate one from the recording)")
+                   help="Calibration JSON, version 1 or 2 (default: estimate one from the "
+                        "recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
     p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
     p.add_argument("--verification", metavar="FILE",
                    help="a `gyrocal verify --json` document to include in report.html")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
-                   help="estimator when no CAL is given (default paired-axis)")
+                   help="estimator when no CAL is given (default auto: the full model when the "
+                        "recording's poses determine it, else paired-axis)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
         est = estimate_recording(rec, args.method)
         cal, extracted = est.calibration, est.extracted
-        what = f"a {args.method} estimate from the recording (no CAL given)"
+        what = f"the {args.method} estimate from the recording (no CAL given)"
     for w in extracted.warnings:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     verification = None
@@ -63,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
         verification = read_json(args.verification, "verification")
     written = write_run_report(rec, cal, extracted, args.out, title=f"{rec.path} with {what}",
-                               verification=verification, force=args.force)
+                               verification=verification, force=args.force,
+                               calibration=args.cal)
     print(f"gyrocal report: {len(written) - 1} plots and a page of {rec.path} with {what}")
     width = max(len(str(p)) for p, _ in written)
     for path, desc in written:

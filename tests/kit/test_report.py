@@ -15,10 +15,12 @@ from gyrocal.kit.report_plots import (
     boxcar_mean,
     encoder_rate,
     nominal_axis,
+    ramp_lag,
     servo_axes,
     window_axes,
     window_residuals,
 )
+from tests.kit.browser import needs_chromium, render
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -241,14 +243,102 @@ def full(full_run):
     return d, rec, extract(rec), cal
 
 
-def test_report_of_a_full_calibration_draws_every_posed_turn(full, tmp_path, capsys):
-    d, rec, _, _ = full
-    out_dir = tmp_path / "plots"
-    assert main(["report", str(d / "recording"), str(d / "calibration.json"), "--out",
-                 str(out_dir)]) == 0, capsys.readouterr().err
+@pytest.fixture(scope="module")
+def full_report(full, tmp_path_factory):
+    """`gyrocal report` of the shared default run's recording and calibration (the page a user
+    of `gyrocal calibrate --sim` gets), with its standard output."""
+    d = full[0]
+    out_dir = tmp_path_factory.mktemp("full-report") / "plots"
+    code = main(["report", str(d / "recording"), str(d / "calibration.json"), "--out",
+                 str(out_dir)])
+    assert code == 0
+    return out_dir
+
+
+def test_report_of_a_full_calibration_draws_every_posed_turn(full, full_report):
+    _, rec, _, _ = full
     names = expected_names(rec)
     assert len(names) == 10 + 3  # six home turns and two posed pairs
-    check_pngs(out_dir, names)
+    check_pngs(full_report, names)
+
+
+def _section(text, tag_id):
+    import re
+
+    m = re.search(rf"<(section|table|p) id={tag_id}>.*?</(section|table|p)>", text, re.S)
+    assert m, tag_id
+    return m.group(0)
+
+
+def test_the_page_shows_the_full_model_and_the_terminal_s_error_against_truth(full,
+                                                                             full_report):
+    from gyrocal.kit.report import calibration_table
+
+    _, rec, _, cal = full
+    text = (full_report / "report.html").read_text(encoding="utf-8")
+    summary = _section(text, "summary")
+    assert "g = A (m + b + G f)" in summary and "consistent" in summary
+    # the largest cross-axis term, found here from the calibration's matrix
+    A = np.asarray(cal.matrix)
+    off = [(abs(A[j, i]), j, i) for j in range(3) for i in range(3) if i != j]
+    _, j, i = max(off)
+    assert f"A<sub>{'xyz'[j]}{'xyz'[i]}</sub> = {A[j, i]:+.4f}" in summary
+    worst = max(float(a["misalignment_deg"]) for a in cal.axes.values())
+    assert f"{worst:.2f}° ±" in summary  # the worst servo axis's misalignment
+    # every entry of the matrix, of G and of the accelerometer's matrix, with its σ
+    result = _section(text, "result")
+    for j in range(3):
+        for i in range(j + 1):
+            assert f"{A[j, i]:.6f} ± {cal.matrix_std[j][i]:.1e}" in result
+    G = _section(text, "g-sensitivity")
+    assert f"{cal.g_sensitivity['matrix'][2][1]:.6f}" in G
+    assert f"{cal.accelerometer.matrix[2, 0]:.6f}" in _section(text, "accelerometer")
+    # the error against the truth: the very numbers the terminal prints for the same files
+    # (issue 31: the page said 2.88 where the terminal said 0.72)
+    line = next(x for x in calibration_table(cal, rec.truth).splitlines()
+                if x.startswith("error against the simulated truth, in σ: matrix"))
+    matrix_max, bias = line.split("= ")[1].split(", bias ")
+    truth = _section(text, "truth")
+    assert f"<td class=n>{matrix_max}</td>" in truth and f"<td class=n>{bias}</td>" in truth
+    assert "scale err/σ" not in text
+
+
+def test_the_page_gives_the_gyro_noise_the_emulated_sensor_has(full, full_report):
+    from gyrocal.drivers.emulated.imu_chips import TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ as N
+    from gyrocal.kit.report_html import gyro_noise
+
+    _, rec, ex, _ = full
+    noise = gyro_noise(rec, ex)
+    # the emulated MPU-9250's white rate noise is its datasheet's 0.01 °/s/√Hz
+    assert np.all(np.abs(noise.gyro - N) < 4 * noise.gyro_std), (noise.gyro, noise.gyro_std)
+    table = _section((full_report / "report.html").read_text(encoding="utf-8"), "noise")
+    assert f"{noise.gyro[0]:.3e} ± {noise.gyro_std[0]:.1e}" in table
+
+
+@needs_chromium
+def test_a_browser_shows_one_summarised_page_with_the_turns_folded(full_report, tmp_path):
+    # issue 31: the default run's page was 11,551 px tall at 1280 px, ten turn plots open
+    dom, height, decoded, images = render(full_report / "report.html", tmp_path)
+    assert decoded == images == 13
+    assert height < 6000, height
+    assert '<section id="summary">' in dom and "largest cross-axis term" in dom
+    assert dom.index('id="summary"') < dom.index('id="result"') < dom.index("<figure>")
+    assert dom.count("<figure>") - dom.split('<details id="turns">')[1].count("<figure>") == 3
+
+
+def test_the_ramp_lag_is_the_delay_of_a_delayed_reading():
+    # a trapezoidal turn (1 rad/s² ramps to 3 rad/s) read 4 ms late: the difference of the
+    # boxcar means is -delay x angular acceleration, and the lag fit gives the delay back
+    t = np.arange(0.0, 8.0, 0.005)
+
+    def rate(x):
+        return np.clip(np.minimum(x - 1.0, 7.0 - x), 0.0, 3.0)
+
+    theta = np.concatenate([[0.0], np.cumsum(np.diff(t) * (rate(t[1:]) + rate(t[:-1])) / 2)])
+    ref = encoder_rate(t, theta, t, 0.25)
+    diff = boxcar_mean(t, rate(t - 0.004), t, 0.25) - ref
+    assert ramp_lag(diff, np.gradient(ref, t)) == pytest.approx(0.004, rel=0.02)
+    assert ramp_lag(np.zeros(5), np.zeros(5)) is None  # no ramp, no delay to fit
 
 
 def test_posed_turns_take_their_axis_from_the_calibration_kinematics(full):

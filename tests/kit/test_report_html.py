@@ -2,15 +2,28 @@
 
 import json
 import re
-import shutil
-import subprocess
-from pathlib import Path
 
 import pytest
 
 from gyrocal.kit.cli import main
+from tests.kit.browser import needs_chromium, render
 
-CHROMIUM = Path("/usr/bin/chromium")
+
+def verification_document(ok: bool) -> dict:
+    """A `gyrocal verify --json` document as the command writes it (Verification.to_dict), with
+    errors within (ok) or beyond 3 times the prediction on y."""
+    import numpy as np
+
+    from gyrocal.kit.verify import KINDS, Verification
+
+    full = np.array([0.003, 0.004 if ok else 0.02, 0.0025])
+    v = Verification(
+        rms_before=np.array([0.1, 0.2, 0.3]), rms_diagonal=full, rms_full=np.full(3, np.nan),
+        rms_predicted=np.array([0.004, 0.005, 0.004]),
+        rms_by_kind={k: full for k in KINDS}, predicted_by_kind={k: full for k in KINDS},
+        blocks={"rest": 20, "one_servo": 18, "several_servos": 0, "ramp_excluded": 22},
+        block_s=0.5, reference="home-pose axes", full=False)
+    return {"calibration": "cal.json", "recording": "rec", **v.to_dict()}
 
 
 @pytest.fixture(scope="module")
@@ -20,7 +33,7 @@ def report(tmp_path_factory):
     rec = d / "rec"
     assert main(["simulate-recording", str(rec), "--seed", "5", "--turns", "1"]) == 0
     verification = d / "v.json"
-    verification.write_text(json.dumps({"rms_before": [0.1, 0.2, 0.3], "blocks": 12}))
+    verification.write_text(json.dumps(verification_document(ok=False)))
     assert main(["report", str(rec), "--out", str(d / "out"),
                  "--verification", str(verification)]) == 0
     truth = json.loads((rec / "manifest.json").read_text())["truth"]
@@ -33,8 +46,45 @@ def test_the_page_is_self_contained_and_holds_the_results(report):
     assert not re.search(r"""(src|href)=['"](?!data:)""", text)  # nothing outside the file
     assert text.count("data:image/png;base64,") == len(list(page.parent.glob("*.png"))) > 3
     assert "id=result" in text and "id=verdict" in text and "id=axes" in text
-    assert "rms_before" in text and "0.1 0.2 0.3" in text
-    assert "gyrocal" in text and "chip" in text and "jig" in text  # environment
+    assert "gyrocal" in text and "chip" in text and "servo 1" in text  # environment
+
+
+def test_the_verification_verdict_is_said_in_words_with_its_units(report):
+    page, _ = report
+    text = page.read_text(encoding="utf-8")
+    # the document's y axis is 0.02 / 0.005 = 4 times its prediction: over the limit of 3
+    verdict = re.search(r"<p id=verification-verdict>(.*?)</p>", text).group(1)
+    assert "FAILED" in verdict and "axis y: error 0.02 rad/s is 4.0 times" in verdict
+    assert "FAILED" in re.search(r"<section id=summary>.*?</section>", text, re.S).group(0)
+    table = re.search(r"<table id=verification>.*?</table>", text).group(0)
+    assert "<td class=n>0.20000</td>" in table and "n/a" in table  # before y; no full column
+    assert "rad/s" in text[text.index("id=verification-verdict"):text.index("id=verification>")]
+
+
+def test_a_document_that_is_not_a_verification_is_refused_before_drawing(report, tmp_path,
+                                                                         capsys):
+    page, _ = report
+    bad = tmp_path / "v.json"
+    bad.write_text(json.dumps({"rms_before": [0.1, 0.2, 0.3], "blocks": 12}))
+    out = tmp_path / "out"
+    assert main(["report", str(page.parent.parent / "rec"), "--out", str(out),
+                 "--verification", str(bad)]) == 2
+    assert "not a `gyrocal verify --json` document" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_user_strings_are_escaped(tmp_path):
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.report_html import environment, render_html
+
+    cal = GyroCalibration(scale=(1, 1, 1), bias=(0, 0, 0), method="<b>m</b>",
+                          axes={"7": {"axis": [1, 0, 0], "nearest": "<x>",
+                                        "misalignment_deg": 0.1, "std_deg": 0.01}})
+    env = environment({"sensor": {"model": "<script>", "note": {"a": "<s>"}}})
+    page = render_html(cal, title="<t>", env=env, calibration="a&b.json")
+    for raw in ("<b>m</b>", "<x>", "<script>", "<s>", "<t>", "a&b.json"):
+        assert raw not in page, raw
+    assert "&lt;script&gt;" in page and "a&amp;b.json" in page
 
 
 def test_the_existing_page_is_not_replaced_without_force(report, capsys):
@@ -44,37 +94,16 @@ def test_the_existing_page_is_not_replaced_without_force(report, capsys):
     assert "report.html already exists" in capsys.readouterr().err
 
 
-def _chromium(*args, user_data):
-    return subprocess.run(
-        [str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--no-first-run", f"--user-data-dir={user_data}", *args],
-        capture_output=True, text=True, timeout=120, check=False,
-    )
-
-
-@pytest.mark.skipif(not CHROMIUM.exists(), reason="no /usr/bin/chromium (Debian: apt-get install "
-                                                  "chromium) to render the report in a browser")
+@needs_chromium
 def test_a_headless_browser_renders_the_tables_and_decodes_every_plot(report, tmp_path):
-    page, truth = report
-    # A copy with one script that counts the images the browser decoded (the page has none).
-    probe = tmp_path / "probe.html"
-    probe.write_text(page.read_text(encoding="utf-8").replace(
-        "</body>", "<script>window.onload=()=>{const i=[...document.images];document.title="
-        "'decoded '+i.filter(x=>x.complete&&x.naturalWidth>100).length+' of '+i.length;"
-        "document.body.dataset.rows=document.querySelectorAll('#result tr').length}</script>"
-        "</body>"), encoding="utf-8")
-    done = _chromium("--virtual-time-budget=10000", "--dump-dom", probe.as_uri(),
-                     user_data=tmp_path / "profile")
-    assert done.returncode == 0, done.stderr[-2000:]
+    page, _ = report
+    dom, height, decoded, images = render(page, tmp_path)
     n = len(list(page.parent.glob("*.png")))
-    assert f"<title>decoded {n} of {n}</title>" in done.stdout
-    assert 'data-rows="4"' in done.stdout  # header and x, y, z
-    shot = tmp_path / "shot.png"
-    done = _chromium("--window-size=1200,1600", f"--screenshot={shot}", page.as_uri(),
-                     user_data=tmp_path / "profile2")
-    assert done.returncode == 0 and shot.stat().st_size > 20_000
-    shutil.rmtree(tmp_path / "profile", ignore_errors=True)
+    assert decoded == images == n  # the folded turn plots too
+    result = re.search(r'<table id="result">.*?</table>', dom, re.S).group(0)
+    assert result.count("<tr>") == 4  # header and x, y, z
+    assert "not calibrated" in re.search(r'<section id="summary">.*?</section>', dom,
+                                         re.S).group(0)  # a diagonal model's cross-axis terms
 
 
 def test_calibrate_writes_the_page_when_the_plot_extra_is_installed(tmp_path, capsys):
