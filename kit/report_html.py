@@ -89,7 +89,7 @@ def _verdict(cal: GyroCalibration) -> str:
     c = cal.consistency
     if c is None:
         return "<p id=verdict>consistency: not tested (no redundant observations)</p>"
-    cls, word = ("ok", "consistent") if c.ok else ("bad", "NOT consistent")
+    cls, word = ("ok", c.verdict) if c.ok else ("bad", "NOT consistent")
     return (f"<p id=verdict>consistency: <span class={cls}>{word}</span> with the measured "
             f"noise (χ² = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})</p>")
 
