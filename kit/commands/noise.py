@@ -49,7 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="which samples of a recording: all, or its longest rest segment "
                         "(auto: all if the recording has no rotations)")
     p.add_argument("--min-tau", type=float, default=None, metavar="S",
-                   help="shortest averaging time to read N at (default 10 samples)")
+                   help="shortest averaging time of the white-noise slope N is read on "
+                        "(default 10 samples; N is read near 1 s where the curve allows)")
     p.add_argument("--json", action="store_true", help="print the gyrocal-noise v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the document to FILE (atomically)")
     p.add_argument("--force", action="store_true", help="replace existing --out and --plot files")
