@@ -20,11 +20,11 @@ does. The rule, in order:
    by inflating the scatter it is judged against), exceeds the two-sided level ``α/N`` of
    Student's t (Bonferroni over the ``N`` residuals). A slipped mount, a bump during a rest.
 4. **not consistent** when the excess scatter, relative to the measured signal (gravity for
-   the accelerometer, the turn rate for the gyro), exceeds :data:`SCATTER_TOLERANCE`: a
-   model error (a cross-axis term left out of a diagonal fit, a wrong gravity) leaves residuals
-   of the size of the error, a fraction of a percent of the signal and more, while the real
-   rests of a fit whose model holds scatter by a few 1e-4 (imu_tk's Xsens session: 1.2e-4 g
-   beyond the noise; imucal's Ferraris session: 3.5e-4 g).
+   the accelerometer, the turn rate for the gyro), exceeds :data:`SCATTER_TOLERANCE` (1e-3
+   of g, 1e-4 of the rate): a model error (a cross-axis term left out of a diagonal fit, a
+   mount that slipped mid-run) leaves residuals of the size of the error, while the real rests
+   of an accelerometer fit whose model holds scatter by a few 1e-4 g (imu_tk's Xsens session:
+   1.2e-4 g beyond the noise; imucal's Ferraris session: 3.5e-4 g).
 5. Otherwise **consistent, with X % scatter beyond the noise (σ widened)**, ``X = 100
    (sqrt(χ²/dof) − 1)`` the residuals' excess over the white noise.
 """
@@ -44,11 +44,19 @@ from gyrocal.calib.model import Consistency
 __all__ = ["SCATTER_TOLERANCE", "Dispersion", "additive", "multiplicative"]
 
 #: The largest excess between-window scatter, relative to the measured signal, taken for
-#: ordinary real-world scatter rather than a model error (the module's rule 4): real rests of
-#: fits whose model holds scatter by 1.2e-4 g (imu_tk's Xsens session) and 3.5e-4 g (imucal's
-#: Ferraris session) beyond their white noise; the 2 % cross-axis term of imu_tk's Xsens left
-#: out of the fit leaves 5e-3 g (tests/calib/test_dispersion.py).
-SCATTER_TOLERANCE = 1e-3
+#: ordinary real-world scatter rather than a model error (the module's rule 4), one row per fit:
+#:
+#: * ``accelerometer``, of gravity: the real rests of fits whose model holds scatter by 1.2e-4 g
+#:   (imu_tk's Xsens session) and 3.5e-4 g (imucal's Ferraris session) beyond their white
+#:   noise; the 2 % cross-axis term of imu_tk's Xsens left out of the fit leaves 3.8e-3 g
+#:   (``python -m bench real``).
+#: * ``gyro``, of the turn rate: the jig's windows are whole revolutions timed by the encoders
+#:   (DESIGN.md fact 2); the realistic emulator's honest run passes the white-noise test
+#:   outright (χ² 45.5 on 42 dof, ``gyrocal calibrate --sim``), a 0.5° slip of the mount
+#:   mid-run leaves 4.2e-4 of the rate (``--sim-fault slip:30:0.5``) and the cross-axis terms
+#:   a diagonal fit leaves out 3.1e-3 (``estimate --method iterative-ls``). No real jig's
+#:   scatter is measured yet: revisit this row with one.
+SCATTER_TOLERANCE = {"accelerometer": 1e-3, "gyro": 1e-4}
 
 
 @dataclass(frozen=True)
@@ -108,7 +116,8 @@ def _rule(chi2: float, dof: int, z_widened: np.ndarray, scatter: Callable[[int |
                   "that only it sees")
     elif everything > tolerance:
         reason = (f"the windows scatter by {everything:.2g} of the signal beyond the noise, "
-                  f"over the {tolerance:g} that real windows show: a model error")
+                  f"over the {tolerance:g} that real windows show: a model error (a term "
+                  "the model leaves out, a mount that moved)")
     else:
         reason = ""
     return Consistency(chi2=chi2, dof=dof, p_value=p, ok=not reason, excess=excess,
@@ -116,7 +125,8 @@ def _rule(chi2: float, dof: int, z_widened: np.ndarray, scatter: Callable[[int |
 
 
 def additive(e: np.ndarray, sigma: np.ndarray, dof: int, signal: float, *, alpha: float,
-             tolerance: float = SCATTER_TOLERANCE, names: list[str] | None = None,
+             tolerance: float = SCATTER_TOLERANCE["accelerometer"],
+             names: list[str] | None = None,
              jacobian: np.ndarray | None = None) -> Dispersion:
     """The verdict for residuals ``e`` with known white-noise σ (module docstring).
 
@@ -180,8 +190,9 @@ def additive(e: np.ndarray, sigma: np.ndarray, dof: int, signal: float, *, alpha
 
 
 def multiplicative(z: np.ndarray, dof: int, noise_ratio: float, *, alpha: float,
-                   tolerance: float = SCATTER_TOLERANCE, names: list[str] | None = None,
-                   chi2: float | None = None) -> Dispersion:
+                   tolerance: float = SCATTER_TOLERANCE["gyro"],
+                   names: list[str] | None = None,
+                   chi2: float | None = None, groups: np.ndarray | None = None) -> Dispersion:
     """The verdict for whitened residuals ``z`` (module docstring).
 
     Parameters
@@ -198,6 +209,9 @@ def multiplicative(z: np.ndarray, dof: int, noise_ratio: float, *, alpha: float,
     chi2 : float, optional
         The fit's χ² when it is not ``Σ z²`` (correlated residuals: ``z`` then each residual
         over its own σ, for rule 3 only).
+    groups : (N,) array_like of int, optional
+        Which window each residual belongs to (a window's three components): the scatter
+        "without" a window that does not fit leaves out all of them.
 
     Returns
     -------
@@ -211,9 +225,14 @@ def multiplicative(z: np.ndarray, dof: int, noise_ratio: float, *, alpha: float,
         return Dispersion(Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= alpha))
     r2 = chi2 / dof
     c = dof / z.size
+    g = np.arange(z.size) if groups is None else np.asarray(groups)
 
     def scatter(i: int | None) -> float:
-        r2_i = r2 if i is None else (chi2 - z[i] ** 2 / c) / max(dof - 1, 1)
+        if i is None:
+            r2_i = r2
+        else:
+            same = g == g[i]
+            r2_i = (chi2 - float(np.sum(z[same] ** 2)) / c) / max(dof - int(same.sum()), 1)
         return math.sqrt(max(r2_i - 1.0, 0.0)) * noise_ratio
 
     return Dispersion(_rule(chi2, dof, z / math.sqrt(r2), scatter, alpha, tolerance, names),

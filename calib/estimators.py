@@ -335,12 +335,15 @@ def _judged(z: np.ndarray, dof: int, obs: ObservationSet, names: list[str] | Non
         signal = float(np.median(np.abs(obs.rate))) if obs.rate.size else 1.0
         noise = float(np.median(obs.mean_std)) if obs.mean_std.size else 0.0
         noise_ratio = noise / signal if signal > 0 else 0.0
+    groups = None
     if names is None:
-        names = [f"turn {i} ({a})" for i in range(obs.rate.size) for a in "xyz"]
+        names = [f"turn {i}" for i in range(obs.rate.size) for _ in "xyz"]
         rests = 0 if obs.rest_mean is None else obs.rest_mean.shape[0]
-        names += [f"rest {i} ({a})" for i in range(rests) for a in "xyz"]
+        names += [f"rest {i}" for i in range(rests) for _ in "xyz"]
         names += [f"still angle {i}" for i in range(z.size - len(names))]
-    return multiplicative(z, dof, noise_ratio, alpha=CONSISTENCY_ALPHA, names=names, chi2=chi2)
+        groups = np.unique(names, return_inverse=True)[1]
+    return multiplicative(z, dof, noise_ratio, alpha=CONSISTENCY_ALPHA, names=names, chi2=chi2,
+                          groups=groups)
 
 
 def _ils_solve(
@@ -1540,7 +1543,9 @@ def fit_full_matrix(
         cov = cov * factor
     it = int(res.iterations[0])
     deficiency = int(res.rank_deficiency[0])
-    worst = float(np.sqrt(np.max(np.diag(cov)[:9]))) if np.all(np.isfinite(cov)) else np.inf
+    geometry = res.covariance[0]  # what the poses determine: before any widening by scatter
+    worst = (float(np.sqrt(np.max(np.diag(geometry)[:9]))) if np.all(np.isfinite(geometry))
+             else np.inf)
     determined = deficiency == 0 and worst <= max_matrix_std
     ok = bool(res.converged[0]) and bool(np.all(np.isfinite(A))) and determined
     if not determined:
