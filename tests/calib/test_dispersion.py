@@ -187,3 +187,19 @@ def test_imucal_six_orientations_do_not_fit_cross_axis_terms():
     assert fit.consistency.ok, fit.consistency.verdict
     i = [PARAMETER_NAMES.index(n) for n in ("A00", "A11", "A22")]
     assert np.all(np.abs(fit.scale - IMUCAL_SCALES) < 3 * fit.std[i])
+
+
+def test_rests_that_cannot_determine_the_scales_are_refused_naming_the_rests_to_add():
+    """Fourteen rests within 25° of +z (independent generator's spiral): the scales and the
+    z bias are not determined at real rests' scatter; the fit refuses, saying which rests to
+    add, instead of returning whatever the weak directions absorb."""
+    from gyrocal.calib.errors import CalibInputError
+
+    d = fibonacci_directions(400)
+    d = d[d[:, 2] > 0.9][:14]
+    rng = np.random.default_rng(12)
+    c = np.diag([1.01, 0.99, 1.0])  # no mount rotation: the rests stay near the z axis
+    means, std = rest_means(rng, c, np.zeros(3), d, G, SAMPLE_STD, SAMPLES)
+    with pytest.raises(CalibInputError, match=r"A00, A11, A22, bz; add rests with gravity "
+                                              r"along \+x and -x"):
+        fit_accelerometer(means, std, G)
