@@ -60,7 +60,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import chdtrc
 
 from gyrocal.calib.design import sphere_points
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
@@ -78,6 +77,7 @@ __all__ = [
     "AccelDesign",
     "FrameRotation",
     "accel_design",
+    "determined_terms",
     "align_gyro",
     "frame_rotation",
     "GravityTour",
@@ -186,6 +186,10 @@ class AccelCalibration:
         Its standard deviation.
     noise_tau_s : float or None
         The averaging time the density was read at, s.
+    fixed : tuple of str
+        :data:`PARAMETER_NAMES` the rests could not determine (the design check,
+        :func:`determined_terms`): held at zero, with the datasheet's bound as their σ.
+        Written as ``fixed`` only when not empty; a document without it reads as none fixed.
     """
 
     matrix: np.ndarray
@@ -199,6 +203,18 @@ class AccelCalibration:
     noise_density: np.ndarray | None = None
     noise_density_std: np.ndarray | None = None
     noise_tau_s: float | None = None
+    fixed: tuple[str, ...] = ()
+
+    @property
+    def advice(self) -> str:
+        """What rests would determine the :attr:`fixed` terms (empty when none is fixed)."""
+        if not self.fixed:
+            return ""
+        pairs = [_CROSS_AXES[PARAMETER_NAMES.index(n)] for n in self.fixed]
+        between = ", ".join(f"+{_AXES[i]} and +{_AXES[j]}" for i, j in pairs)
+        return (f"{', '.join(self.fixed)} held at zero (not determined by the rests, or a "
+                f"diagonal fit asked for); rests with gravity between {between} (45° from "
+                "each), and their opposites, determine them")
 
     @property
     def std(self) -> np.ndarray:
@@ -232,7 +248,8 @@ class AccelCalibration:
                 **({} if self.noise_density is None else {
                     "noise_density": np.asarray(self.noise_density).tolist(),
                     "noise_density_std": np.asarray(self.noise_density_std).tolist(),
-                    "noise_tau_s": self.noise_tau_s})}
+                    "noise_tau_s": self.noise_tau_s}),
+                **({"fixed": list(self.fixed)} if self.fixed else {})}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> AccelCalibration:
@@ -268,8 +285,13 @@ class AccelCalibration:
                                              "integer")
         if not isinstance(conv, bool):
             raise CalibrationFormatError("'accelerometer.converged' must be true or false")
+        fixed = d.get("fixed", [])
+        if (not isinstance(fixed, list) or any(f not in PARAMETER_NAMES for f in fixed)
+                or any(PARAMETER_NAMES.index(f) not in _CROSS for f in fixed)):
+            raise CalibrationFormatError("'accelerometer.fixed' must list cross-axis terms of "
+                                         f"{PARAMETER_NAMES}")
         return cls(m, b, c, g, Consistency.from_dict(d["consistency"]), rests, its, conv,
-                   *_read_noise(d))
+                   *_read_noise(d), fixed=tuple(fixed))
 
 
 def _read_noise(d: Mapping[str, Any]) -> tuple[Any, Any, Any]:
@@ -301,7 +323,7 @@ def _read_noise(d: Mapping[str, Any]) -> tuple[Any, Any, Any]:
 _DOC_MODEL = "f = matrix @ (a + bias)"
 _DOC_FIELDS = ("model", "frame", "matrix", "bias", "matrix_std", "bias_std", "covariance",
                "gravity_m_s2", "consistency", "rests", "iterations", "converged",
-               "noise_density", "noise_density_std", "noise_tau_s")
+               "noise_density", "noise_density_std", "noise_tau_s", "fixed")
 
 
 def _lower(v: np.ndarray) -> np.ndarray:
@@ -353,11 +375,115 @@ def _window_covariance(mean_std: Any, n: int) -> np.ndarray:
                           f"means) or ({n}, 3, 3) (their covariances), got {s.shape}")
 
 
+#: The scatter of a real rest's mean beyond its white noise, relative to gravity, that the
+#: design check assumes (real rests scatter by 1.2e-4 g on imu_tk's Xsens session and 3.5e-4 g
+#: on imucal's Ferraris session beyond their white noise: :mod:`gyrocal.calib.dispersion`):
+#: poses that determine a term only at the white noise of long rests let that scatter,
+#: multiplied by the poor geometry, into the fit (scales of 0.55 on imucal's rests).
+REAL_SCATTER = 3e-4
+#: A cross-axis term is fitted only when the rests determine it to this σ at
+#: :data:`REAL_SCATTER`: a quarter of the ±2 % cross-axis sensitivity of a consumer
+#: accelerometer (MPU-9250, PS-MPU-9250A-01 Rev 1.0 Table 2), so that the fit can tell it from
+#: zero; otherwise it stays zero with that bound as its σ (:data:`CROSS_AXIS_PRIOR`).
+CROSS_AXIS_LIMIT = 0.005
+#: σ of a cross-axis term the rests cannot determine: ±2 % as a uniform bound (datasheet above).
+CROSS_AXIS_PRIOR = 0.02 / math.sqrt(3.0)
+#: A scale (relative) or bias (relative to gravity) the rests determine worse than this at
+#: :data:`REAL_SCATTER` is refused, naming the poses to add.
+SCALE_BIAS_LIMIT = 0.01
+_CROSS = (1, 3, 4)  # A10, A20, A21 in PARAMETER_NAMES
+_AXES = "xyz"
+#: For each cross term, the axes between which gravity must point to determine it.
+_CROSS_AXES = {1: (0, 1), 3: (0, 2), 4: (1, 2)}
+
+
+def _inputs(means: Any, mean_std: Any, gravity: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The checked rest means (N, 3), their covariances (N, 3, 3) and gravity."""
+    a = np.asarray(means, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a)):
+        raise CalibInputError(f"means must be a finite (N, 3) array, got shape {a.shape}")
+    n = a.shape[0]
+    if n < 10:
+        raise CalibInputError(f"means needs at least 10 rest windows (9 parameters and a "
+                              f"consistency test), got {n}; add rests in more orientations")
+    cov = _window_covariance(mean_std, n)
+    g = scalar(gravity, "gravity", positive=True)
+    norms = np.linalg.norm(a, axis=1)
+    if np.any(norms < 0.5 * g) or np.any(norms > 1.5 * g):
+        raise CalibInputError("means must be readings of a still sensor in m/s² (norms near "
+                              f"gravity {g:.3f}); got norms {norms.min():.3g}..{norms.max():.3g}")
+    return a, cov, g
+
+
+def _design_std(p: np.ndarray, a: np.ndarray, g: float, sigma: np.ndarray,
+                free: np.ndarray) -> np.ndarray:
+    """Predicted σ (9,) of the free parameters (inf where not determined; 0 where fixed)."""
+    jac = _jacobian(p, a, g, sigma)[:, free]
+    jtj = jac.T @ jac
+    out = np.zeros(9)
+    if np.linalg.cond(jtj) > 1e14:
+        out[free] = np.inf
+        return out
+    out[free] = np.sqrt(np.clip(np.diag(np.linalg.inv(jtj)), 0.0, None))
+    return out
+
+
+def determined_terms(means: np.ndarray, cov: np.ndarray, gravity: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Which of :data:`PARAMETER_NAMES` the rests determine (the design check).
+
+    At the nominal sensor (unit matrix scaled to the rests' mean norm, zero bias) each rest's
+    scatter is taken as its white noise or :data:`REAL_SCATTER` of gravity, whichever is
+    larger; the cross-axis term with the largest predicted σ is fixed at zero while that σ
+    exceeds :data:`CROSS_AXIS_LIMIT`, and the σ are predicted again.
+
+    Returns
+    -------
+    free : (9,) ndarray of bool
+        The parameters to fit.
+    std : (9,) ndarray
+        Their predicted σ at that scatter (0 for the fixed ones).
+
+    Raises
+    ------
+    CalibInputError
+        When a scale or bias is still not determined to :data:`SCALE_BIAS_LIMIT`, naming the
+        rests to add.
+    """
+    p0 = np.concatenate([_entries(np.eye(3) * gravity / np.linalg.norm(means, axis=1).mean()),
+                         np.zeros(3)])
+    sigma = np.maximum(_sigma(p0, means, cov), REAL_SCATTER * gravity)
+    free = np.ones(9, dtype=bool)
+    std = _design_std(p0, means, gravity, sigma, free)
+    while True:
+        worst = max((i for i in _CROSS if free[i]), key=lambda i: std[i], default=None)
+        if worst is None or std[worst] <= CROSS_AXIS_LIMIT:
+            break
+        free[worst] = False
+        std = _design_std(p0, means, gravity, sigma, free)
+    limits = np.r_[SCALE_BIAS_LIMIT, 0, SCALE_BIAS_LIMIT, 0, 0, SCALE_BIAS_LIMIT,
+                   np.full(3, SCALE_BIAS_LIMIT * gravity)]
+    bad = [i for i in (0, 2, 5, 6, 7, 8) if not std[i] <= limits[i]]
+    if bad:
+        axes = sorted({_AXES[i // 2] if i < 6 else _AXES[i - 6] for i in bad})
+        raise CalibInputError(
+            "the rests' gravity directions cannot determine the accelerometer's "
+            f"{', '.join(PARAMETER_NAMES[i] for i in bad)}; add rests with gravity along "
+            + " and ".join(f"+{x} and -{x}" for x in axes))
+    return free, std
+
+
 def fit_accelerometer(
     means: Any, mean_std: Any, gravity: float = STANDARD_GRAVITY, *,
-    max_nfev: int = 200,
+    max_nfev: int = 200, cross_axis: bool = True,
 ) -> AccelCalibration:
     """Fit ``f = A (a + b)`` to rest windows' mean readings against gravity's magnitude.
+
+    Steps: the design check (:func:`determined_terms`: cross-axis terms the rests cannot
+    determine stay zero, with the datasheet's bound as σ, and are listed in ``fixed``); the
+    fit weighted by each rest's white noise; the verdict with the excess between-rest scatter
+    (:func:`gyrocal.calib.dispersion.additive`); when that excess is positive, the fit again
+    weighted by the white noise plus the excess, whose covariance is reported.
 
     Parameters
     ----------
@@ -373,57 +499,84 @@ def fit_accelerometer(
         :func:`normal_gravity` of the site.
     max_nfev : int
         Solver's evaluation limit; reaching it gives ``converged`` false, not an error.
+    cross_axis : bool
+        False fits scales and bias only (a diagonal model, six parameters); the cross-axis
+        terms are then ``fixed``.
 
     Returns
     -------
     AccelCalibration
     """
-    a = np.asarray(means, dtype=float)
-    if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a)):
-        raise CalibInputError(f"means must be a finite (N, 3) array, got shape {a.shape}")
-    n = a.shape[0]
-    if n < 10:
-        raise CalibInputError(f"means needs at least 10 rest windows (9 parameters and a "
-                              f"consistency test), got {n}; add rests in more orientations")
-    cov = _window_covariance(mean_std, n)
-    g = scalar(gravity, "gravity", positive=True)
-    norms = np.linalg.norm(a, axis=1)
-    if np.any(norms < 0.5 * g) or np.any(norms > 1.5 * g):
-        raise CalibInputError("means must be readings of a still sensor in m/s² (norms near "
-                              f"gravity {g:.3f}); got norms {norms.min():.3g}..{norms.max():.3g}")
-    # Start: unit matrix and zero bias, scale fixed to the mean norm.
-    p = np.concatenate([_entries(np.eye(3) * g / norms.mean()), np.zeros(3)])
-    from scipy import optimize  # imported where a fit needs it (seconds on a Pi)
+    from gyrocal.calib.dispersion import additive
 
-    res = None
-    for _ in range(2):  # weights at the start, then at the first solution
-        sigma = _sigma(p, a, cov)
-        res = optimize.least_squares(_residuals, p, jac=_jacobian, args=(a, g, sigma),
-                                     method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
-                                     max_nfev=max_nfev)
-        p = res.x
-    assert res is not None
+    a, cov, g = _inputs(means, mean_std, gravity)
+    free, _ = determined_terms(a, cov, g)
+    if not cross_axis:
+        free[list(_CROSS)] = False
+    p = np.concatenate([_entries(np.eye(3) * g / np.linalg.norm(a, axis=1).mean()),
+                        np.zeros(3)])
+    p, res = _solve(p, a, g, lambda q: _sigma(q, a, cov), free, max_nfev)
     sigma = _sigma(p, a, cov)
-    r = _residuals(p, a, g, sigma)
-    jac = _jacobian(p, a, g, sigma)
-    jtj = jac.T @ jac
-    if np.linalg.cond(jtj) > 1e14:
-        raise CalibInputError("the rests' gravity directions cannot determine the nine "
-                              "accelerometer parameters (too few distinct orientations); "
-                              "add rests in other poses")
-    covariance = np.linalg.inv(jtj)
-    chi2 = float(r @ r)
-    dof = n - 9
-    pv = float(chdtrc(dof, chi2))
+    e = np.linalg.norm((a + p[6:]) @ _lower(p[:6]).T, axis=1) - g
+    verdict = additive(e, sigma, a.shape[0] - int(free.sum()), g, alpha=CONSISTENCY_LEVEL,
+                       names=[f"rest {i}" for i in range(a.shape[0])],
+                       jacobian=_jacobian(p, a, g, np.ones(a.shape[0]))[:, free])
+    if verdict.tau2 > 0:
+        p, res = _solve(p, a, g, lambda q: np.sqrt(_sigma(q, a, cov) ** 2 + verdict.tau2),
+                        free, max_nfev)
+        sigma = np.sqrt(_sigma(p, a, cov) ** 2 + verdict.tau2)
+    covariance = _covariance(p, a, g, sigma, free)
     matrix, bias = _unpack(p)
     if np.any(np.diag(matrix) <= 0):  # the sign-flipped twin of the same fit
         flip = np.sign(np.diag(matrix))
         matrix = matrix * flip[:, None]
         j = np.concatenate([flip[_IU[0]], np.ones(3)])
         covariance = covariance * np.outer(j, j)
-    return AccelCalibration(matrix, bias, covariance, g,
-                            Consistency(chi2, dof, pv, pv >= CONSISTENCY_LEVEL), n,
-                            int(res.nfev), bool(res.status > 0))
+    return AccelCalibration(matrix, bias, covariance, g, verdict.consistency, a.shape[0],
+                            int(res.nfev), bool(res.status > 0),
+                            fixed=tuple(PARAMETER_NAMES[i] for i in np.flatnonzero(~free)))
+
+
+def _solve(p: np.ndarray, a: np.ndarray, g: float, weights: Any, free: np.ndarray,
+           max_nfev: int) -> tuple[np.ndarray, Any]:
+    """Levenberg–Marquardt on the free parameters, weighted at the start and again at the
+    first solution; the fixed ones keep their values in ``p``."""
+    from scipy import optimize  # imported where a fit needs it (seconds on a Pi)
+
+    p = p.copy()
+
+    def resid(x: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+        p[free] = x
+        return _residuals(p, a, g, sigma)
+
+    def jac(x: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+        p[free] = x
+        return _jacobian(p, a, g, sigma)[:, free]
+
+    res = None
+    for _ in range(2):
+        sigma = weights(p)
+        res = optimize.least_squares(resid, p[free], jac=jac, args=(sigma,), method="lm",
+                                     xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_nfev)
+        p[free] = res.x
+    return p, res
+
+
+def _covariance(p: np.ndarray, a: np.ndarray, g: float, sigma: np.ndarray,
+                free: np.ndarray) -> np.ndarray:
+    """``(JᵀJ)⁻¹`` of the free parameters; a fixed cross-axis term gets the datasheet's
+    bound as its σ (:data:`CROSS_AXIS_PRIOR`)."""
+    jac = _jacobian(p, a, g, sigma)[:, free]
+    jtj = jac.T @ jac
+    if np.linalg.cond(jtj) > 1e14:
+        raise CalibInputError("the rests' gravity directions cannot determine the nine "
+                              "accelerometer parameters (too few distinct orientations); "
+                              "add rests in other poses")
+    out = np.zeros((9, 9))
+    out[np.ix_(free, free)] = np.linalg.inv(jtj)
+    fixed = np.flatnonzero(~free)
+    out[fixed, fixed] = CROSS_AXIS_PRIOR**2
+    return out
 
 
 def _window_bounds(t: Any, accel: Any, spans: Any

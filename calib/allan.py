@@ -28,9 +28,13 @@ How (per axis):
 1. The three-term model ``σ²(τ) = N²/τ + (0.664 B)² + K² τ/3`` is fitted to the curve by
    non-negative weighted least squares, the weights the inverse variances ``edf/(2σ⁴)`` of the
    Allan variance estimates (Greenhall edf of the noise type that dominates at each τ).
-2. ``N`` and ``K`` are each read at one averaging time, the one where that term is best
-   determined: ``N² = (σ̂²(τ) − the other fitted terms)·τ`` and likewise for ``K²``. Their
-   standard deviation is that of the one Allan variance estimate they come from,
+2. ``N`` is read on the white-noise slope (where ``N²/τ`` is at least half the model): at the
+   point nearest τ = 1 s when the curve has one there (IEEE Std 952's reading), else where it
+   is best determined; its 95 % interval is widened to hold ``N`` read at every point of that
+   slope, so a curve's short-τ structure is in the interval (:func:`_read_white`). ``K`` is
+   read at the one averaging time where it is best determined. Each is read as
+   ``N² = (σ̂²(τ) − the other fitted terms)·τ``, and likewise ``K²``; the standard deviation
+   is that of the one Allan variance estimate they come from,
    ``σ²·√(2/edf)``, carried through. Reading at one τ keeps the uncertainty honest: the
    estimates at different τ of one record are correlated, which a joint fit's covariance would
    ignore.
@@ -735,6 +739,45 @@ def _read_off(
     return value, (hi68 - lo68) / 2.0, lo95, hi95, float(tau[i])
 
 
+#: ``N`` is read at τ = 1 s (IEEE Std 952's reading of the slope −½ line) when the curve has a
+#: point within this factor of 1 s where white noise dominates.
+_ONE_SECOND_FACTOR = math.sqrt(2.0)
+#: Share of the fitted model the white-noise term must have at a τ for that τ to be on the
+#: white-noise slope.
+_WHITE_SHARE = 0.5
+
+
+def _read_white(avar: np.ndarray, tau: np.ndarray, edf: np.ndarray, coef: np.ndarray,
+                usable: np.ndarray) -> tuple[float, float, float, float, float]:
+    """``N`` from the white-noise slope of the curve, with an interval that covers its shape.
+
+    The white-noise slope is the usable τ where ``N²/τ`` is at least :data:`_WHITE_SHARE` of
+    the fitted model. ``N`` is read (as :func:`_read_off`) at the point nearest τ = 1 s when one
+    lies within :data:`_ONE_SECOND_FACTOR` of it, the IEEE reading, clear of the correlation and
+    the short-τ bumps (vibration, a low-pass filter) a real curve has near ten samples; else at
+    the best-determined τ of the slope. The 95 % interval is that one estimate's chi-square
+    interval widened to hold ``N`` read at every other point of the slope: where the curve
+    departs from slope −½ (real gyros: 1.25–1.9× at ten samples on some BROAD axes), the
+    departure is part of the uncertainty, not hidden by the statistics of one point.
+    """
+    A = _basis(tau)
+    terms = A * coef[None, :]
+    model = np.maximum(terms.sum(axis=1), 1e-300)
+    white = usable & (terms[:, 0] >= _WHITE_SHARE * model)
+    if not np.any(white):
+        return _read_off(avar, tau, edf, coef, 0, usable)
+    near = white & (np.abs(np.log(tau)) <= math.log(_ONE_SECOND_FACTOR))
+    pick = np.zeros_like(white)
+    if np.any(near):
+        pick[int(np.argmin(np.where(near, np.abs(np.log(tau)), np.inf)))] = True
+    else:
+        pick = white
+    value, std, lo95, hi95, t = _read_off(avar, tau, edf, coef, 0, pick)
+    others = model - terms[:, 0]
+    along = np.sqrt(np.maximum(avar - others, 0.0) * tau)[white]
+    return value, std, min(lo95, float(along.min())), max(hi95, float(along.max())), t
+
+
 #: Decades of averaging time the curve must span above the shortest τ read for ``N``, so that the
 #: three terms of the model (slopes −½, 0, +½) can be told apart.
 _SPAN_DECADES = 2
@@ -830,7 +873,7 @@ def characterise_noise(
         fit["K"].append(math.sqrt(coef[2]))
         edf_n = curve.edf[:, 0]
         edf_k = curve.edf[:, 2]
-        out["N"].append(_read_off(avar, tau, edf_n, coef, 0, usable_n))
+        out["N"].append(_read_white(avar, tau, edf_n, coef, usable_n))
         out["K"].append(_read_off(avar, tau, edf_k, coef, 2, np.ones_like(usable_n)))
         edf_b = curve.edf[:, 1]
         vb, sb, lob, hib, tb = _read_off(avar, tau, edf_b, coef, 1, np.ones_like(usable_n))

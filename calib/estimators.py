@@ -45,9 +45,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.special import chdtrc
 
 from gyrocal.calib import kinematics
+from gyrocal.calib.dispersion import Dispersion, multiplicative
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.calib.observations import ObservationSet
@@ -308,8 +308,10 @@ def _sq_noise_cov(theta: np.ndarray, obs: ObservationSet) -> np.ndarray:
     return S + np.outer(two_w, two_w) * obs.reference_covariance()
 
 
-def _sq_consistency(e: np.ndarray, S: np.ndarray, H: np.ndarray) -> Consistency | None:
-    """Chi-square of residuals ``e = (I - H) δ`` with ``Cov δ = S``."""
+def _sq_consistency(e: np.ndarray, S: np.ndarray, H: np.ndarray, obs: ObservationSet
+                    ) -> Dispersion | None:
+    """The verdict on residuals ``e = (I - H) δ`` with ``Cov δ = S``: whitened by the
+    pseudo-inverse square root of their covariance, so that ``Σ z² = eᵀ Cov(e)⁺ e``."""
     n = e.size
     dof = n - 6
     if dof <= 0:
@@ -317,8 +319,31 @@ def _sq_consistency(e: np.ndarray, S: np.ndarray, H: np.ndarray) -> Consistency 
     R = np.eye(n) - H
     cov_e = R @ S @ R.T
     chi2 = float(e @ np.linalg.pinv(cov_e, rcond=1e-10, hermitian=True) @ e)
-    p = float(chdtrc(dof, chi2))
-    return Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
+    sd = np.sqrt(np.clip(np.diag(cov_e), 1e-300, None))
+    # a squared norm's residual is twice the rate's relative error times ω²
+    ratio = float(np.median(sd / (2 * obs.rate**2)))
+    return _judged(e / sd, dof, obs, [f"turn {i}" for i in range(n)], chi2, ratio)
+
+
+def _judged(z: np.ndarray, dof: int, obs: ObservationSet, names: list[str] | None = None,
+            chi2: float | None = None, noise_ratio: float | None = None) -> Dispersion:
+    """The verdict on whitened residuals ``z`` (:func:`gyrocal.calib.dispersion.multiplicative`),
+    the scatter compared with the turn rate: by default a typical window mean's noise over the
+    median turn rate. Without ``names`` the residuals are the window-fits' layout: three per
+    turn, three per rest, one per still angle."""
+    if noise_ratio is None:
+        signal = float(np.median(np.abs(obs.rate))) if obs.rate.size else 1.0
+        noise = float(np.median(obs.mean_std)) if obs.mean_std.size else 0.0
+        noise_ratio = noise / signal if signal > 0 else 0.0
+    groups = None
+    if names is None:
+        names = [f"turn {i}" for i in range(obs.rate.size) for _ in "xyz"]
+        rests = 0 if obs.rest_mean is None else obs.rest_mean.shape[0]
+        names += [f"rest {i}" for i in range(rests) for _ in "xyz"]
+        names += [f"still angle {i}" for i in range(z.size - len(names))]
+        groups = np.unique(names, return_inverse=True)[1]
+    return multiplicative(z, dof, noise_ratio, alpha=CONSISTENCY_ALPHA, names=names, chi2=chi2,
+                          groups=groups)
 
 
 def _ils_solve(
@@ -477,7 +502,9 @@ def fit_iterative_ls(
         # e = (I - H) δ to first order, with H = (X + 1∇γᵀ) A⁻¹ Xᵀ
         e = Y - gamma - X @ beta
         H = (X + np.outer(ones, grad_gamma)) @ Ainv_Xt
-        consistency = _sq_consistency(e, S, H)
+        verdict = _sq_consistency(e, S, H, obs)
+        if verdict is not None:
+            consistency, cov = verdict.consistency, cov * verdict.factor
     # History of iterates: β⁽¹⁾ = β_Y, then β_Y − γ⁽ⁿ⁾ v.
     hist_beta = by[None, :] - np.array([0.0, *gammas])[:, None] * v[None, :]
     hist = np.concatenate(_theta_from_beta(hist_beta), axis=1)
@@ -637,7 +664,9 @@ def fit_levenberg_marquardt(
         S = _sq_noise_cov(theta, obs)
         JtJ_inv = np.linalg.pinv(J.T @ J)
         cov = JtJ_inv @ J.T @ S @ J @ JtJ_inv
-        consistency = _sq_consistency(res.fun, S, J @ JtJ_inv @ J.T)
+        verdict = _sq_consistency(res.fun, S, J @ JtJ_inv @ J.T, obs)
+        if verdict is not None:
+            consistency, cov = verdict.consistency, cov * verdict.factor
     return FitResult(
         method="levenberg-marquardt",
         scale=theta[:3],
@@ -894,12 +923,10 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     )
     k, b, cov = res.scale[0], res.bias[0], res.covariance[0]
     ok = bool(res.converged[0]) and np.all(np.isfinite(k)) and np.all(k > 0)
-    dof = res.dof
     consistency = None
-    if dof > 0:
-        chi2 = float(res.chi2[0])
-        p = float(chdtrc(dof, chi2))
-        consistency = Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
+    if res.dof > 0:
+        verdict = _judged(res.residuals[0], res.dof, obs)
+        consistency, cov = verdict.consistency, cov * verdict.factor
     # each servo's axis in the first pose it turned in (the home pose of gyrocal's protocols)
     axes = {m: res.axes[0, first[m]].copy() for m in order}
     axes_std = {}
@@ -1509,9 +1536,16 @@ def fit_full_matrix(
             g_note = (f"; g-sensitivity fitted along {basis.shape[1]} of 3 directions of "
                       "gravity (the others are in the bias): rest in more orientations")
     A, b, cov = res.matrix[0], res.bias[0], res.covariance[0]
+    consistency, factor = None, 1.0
+    if res.dof > 0:
+        verdict = _judged(res.residuals[0], res.dof, obs)
+        consistency, factor = verdict.consistency, verdict.factor
+        cov = cov * factor
     it = int(res.iterations[0])
     deficiency = int(res.rank_deficiency[0])
-    worst = float(np.sqrt(np.max(np.diag(cov)[:9]))) if np.all(np.isfinite(cov)) else np.inf
+    geometry = res.covariance[0]  # what the poses determine: before any widening by scatter
+    worst = (float(np.sqrt(np.max(np.diag(geometry)[:9]))) if np.all(np.isfinite(geometry))
+             else np.inf)
     determined = deficiency == 0 and worst <= max_matrix_std
     ok = bool(res.converged[0]) and bool(np.all(np.isfinite(A))) and determined
     if not determined:
@@ -1526,11 +1560,6 @@ def fit_full_matrix(
         status, message = "converged", f"converged in {it} steps{g_note}"
     else:
         status, message = "max-iterations", f"no convergence in {max_iter} steps"
-    consistency = None
-    if res.dof > 0:
-        chi2 = float(res.chi2[0])
-        p = float(chdtrc(res.dof, chi2))
-        consistency = Consistency(chi2=chi2, dof=res.dof, p_value=p, ok=p >= CONSISTENCY_ALPHA)
     ref = obs.pose[0]
     kin = {
         "chain": list(obs.chain),
@@ -1556,18 +1585,19 @@ def fit_full_matrix(
         matrix=A.copy(),
         frame=FULL_FRAME,
         kinematics=kin,
-        **_g_terms(res, basis),
+        **_g_terms(res, basis, factor),
     )
 
 
-def _g_terms(res: FullMatrixBatch, basis: np.ndarray) -> dict[str, Any]:
+def _g_terms(res: FullMatrixBatch, basis: np.ndarray, factor: float = 1.0) -> dict[str, Any]:
     """``G`` (3×3) and its 9×9 covariance from the fit's ``G_k`` along ``basis`` (3, k):
-    ``G = G_k Vᵀ``, ``d vec(G) / d vec(G_k) = I₃ ⊗ V``."""
+    ``G = G_k Vᵀ``, ``d vec(G) / d vec(G_k) = I₃ ⊗ V``; the covariance times the verdict's
+    variance ``factor``."""
     if res.g_sensitivity is None:
         return {}
     T = np.kron(np.eye(3), basis)
     return {"g_sensitivity": res.g_sensitivity[0] @ basis.T,
-            "g_sensitivity_cov": T @ res.g_covariance[0] @ T.T,  # type: ignore[index]
+            "g_sensitivity_cov": factor * T @ res.g_covariance[0] @ T.T,  # type: ignore[index]
             "g_directions": basis.T.copy()}
 
 

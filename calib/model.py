@@ -56,6 +56,8 @@ LIMITS: dict[str, tuple[float, float]] = {
 }
 
 _CONSISTENCY_FIELDS = ("chi2", "dof", "p_value", "ok")
+#: Optional since the over-dispersion rule (DESIGN.md fact 7): absent in older documents.
+_CONSISTENCY_EXTRA = ("excess", "scatter", "reason")
 _V1_FIELDS = (
     "format", "version", "model", "scale", "bias", "scale_std", "bias_std", "covariance",
     "method", "iterations", "consistency", "sensor", "temperature_c", "created", "source", "axes",
@@ -158,17 +160,48 @@ class Consistency:
     p_value : float
         Probability of a chi-square this large or larger if the model and noise are right.
     ok : bool
-        Whether the residuals are consistent (``p_value`` at or above the test's level).
+        Whether the fit is consistent: ``p_value`` at or above the test's level, or the excess
+        scatter ordinary by the rule of :mod:`gyrocal.calib.dispersion` (DESIGN.md fact 7).
+    excess : float
+        How much more the residuals scatter than the white noise explains, as a fraction
+        (``sqrt(χ²/dof) − 1`` before the widening); 0 when the white noise explains them. The
+        fit's σ are widened by the excess (between-window) variance when it is positive.
+        Written (with ``scatter`` and ``reason``) only when positive; a document without them
+        reads as 0.
+    scatter : float
+        The excess between-window scatter relative to the measured signal (gravity, the turn
+        rate), the number the rule compares with its tolerance.
+    reason : str
+        Why the fit is not consistent (a window that does not fit, or scatter beyond what
+        real windows show), empty otherwise.
     """
 
     chi2: float
     dof: int
     p_value: float
     ok: bool
+    excess: float = 0.0
+    scatter: float = 0.0
+    reason: str = ""
+
+    @property
+    def verdict(self) -> str:
+        """``consistent``, ``consistent, with X % scatter beyond the noise (σ widened)`` or
+        ``not consistent`` (with its reason): the rule of :mod:`gyrocal.calib.dispersion`."""
+        if not self.ok:
+            return "not consistent" + (f" ({self.reason})" if self.reason else "")
+        if self.excess > 0:
+            return (f"consistent, with {100 * self.excess:.0f} % scatter beyond the noise "
+                    "(σ widened)")
+        return "consistent"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        return {"chi2": self.chi2, "dof": self.dof, "p_value": self.p_value, "ok": self.ok}
+        d: dict[str, Any] = {"chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
+                             "ok": self.ok}
+        if self.excess > 0 or self.reason:
+            d.update(excess=self.excess, scatter=self.scatter, reason=self.reason)
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Consistency:
@@ -178,7 +211,7 @@ class Consistency:
         """
         if not isinstance(d, Mapping):
             raise CalibrationFormatError("'consistency' must be an object")
-        _refuse_unknown(d, _CONSISTENCY_FIELDS, "'consistency'")
+        _refuse_unknown(d, _CONSISTENCY_FIELDS + _CONSISTENCY_EXTRA, "'consistency'")
         for name in _CONSISTENCY_FIELDS:
             if name not in d:
                 raise CalibrationFormatError(f"'consistency' lacks the field {name!r}")
@@ -190,7 +223,13 @@ class Consistency:
         _number(dof, "consistency.dof", *LIMITS["count"])
         chi2 = _number(d["chi2"], "consistency.chi2", 0.0)
         p = _number(d["p_value"], "consistency.p_value", 0.0, 1.0)
-        return cls(chi2=chi2, dof=int(dof), p_value=p, ok=ok)
+        excess = _number(d.get("excess", 0.0), "consistency.excess", 0.0)
+        scatter = _number(d.get("scatter", 0.0), "consistency.scatter", 0.0)
+        reason = d.get("reason", "")
+        if not isinstance(reason, str):
+            raise CalibrationFormatError("'consistency.reason' must be a string")
+        return cls(chi2=chi2, dof=int(dof), p_value=p, ok=ok, excess=excess, scatter=scatter,
+                   reason=reason)
 
 
 def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, float, float]:

@@ -33,9 +33,11 @@ from gyrocal.kit.recording import Recording, now_iso
 __all__ = [
     "AUTO",
     "CROSS_AXIS_DATASHEET",
+    "PLAUSIBLE_NOISE_DENSITY",
     "PLAUSIBLE_SCALE",
     "Estimate",
     "check_plausible",
+    "check_plausible_noise",
     "estimate_recording",
     "extract_recording",
     "fit_recording_accelerometer",
@@ -46,6 +48,11 @@ __all__ = [
 #: few percent (MPU-9250 ±3 %, PS-MPU-9250A-01 table 1; LSM9DS1 a similar figure), so anything
 #: outside 0.5..2 is a unit or setup mistake, not a sensor.
 PLAUSIBLE_SCALE = (0.5, 2.0)
+#: The largest white-noise density a MEMS gyro recording in rad/s can have, rad/s/√Hz: 11×
+#: the MPU-9250's typical 0.01 °/s/√Hz (PS-MPU-9250A-01 §3.1) and 5× the noisiest real gyro of
+#: the corpus (imu_tk's Xsens, 4.2e-4; BROAD 0.7–1.3e-4, Fusion's 1.1–2.3e-4, imucal's 1.1e-4:
+#: bench/real_corpus.py). The same readings in °/s are 57× larger: 3.8e-3 and up.
+PLAUSIBLE_NOISE_DENSITY = 2e-3
 #: The gyro's full scale assumed when the recording does not say (the largest of the chips), °/s.
 _DEFAULT_FULL_SCALE_DPS = 2000.0
 
@@ -263,6 +270,40 @@ def _scale_cause(k: float) -> str:
                 "the sensitivity (full-scale range) the readings were converted with")
     return ("the gyro reads far less than the encoders turned: check the gyro's units and "
             "sensitivity, and that the sensor is fixed to the turning stage")
+
+
+def check_plausible_noise(density: Any, *, allow: bool = False) -> list[str]:
+    """Refuse a gyro white-noise density no MEMS gyro in rad/s has: readings in °/s.
+
+    Parameters
+    ----------
+    density : sequence of 3 float
+        The measured white-noise density per axis, rad/s/√Hz.
+    allow : bool
+        Return the problems instead of raising (``--allow-implausible``).
+
+    Returns
+    -------
+    list of str
+        The problems found (empty when plausible).
+
+    Raises
+    ------
+    EstimationError
+        If a problem is found and ``allow`` is false (exit 6), as :func:`check_plausible`.
+    """
+    n = np.asarray(density, dtype=float)
+    limit = PLAUSIBLE_NOISE_DENSITY
+    bad = [j for j in range(n.size) if not (math.isfinite(n[j]) and n[j] <= limit)]
+    if not bad:
+        return []
+    values = ", ".join(f"{'xyz'[j]} = {n[j]:.3g}" for j in bad)
+    problem = (f"white-noise density {values} rad/s/sqrt(Hz) above the {limit:g} "
+               "a MEMS gyro has: the readings look like °/s (57x rad/s); convert them to rad/s")
+    if not allow:
+        raise EstimationError(f"implausible gyro readings: {problem}. If the sensor really is "
+                              "like this, pass --allow-implausible.")
+    return [problem]
 
 
 def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = None, *,

@@ -132,10 +132,18 @@ def accelerometer_rows(acc: Any, err: TruthError | None = None) -> list[str]:
                      f"{err.accel_matrix_max:.2f}, bias "
                      + " ".join(f"{v:+.2f}" for v in err.accel_bias))
     c = acc.consistency
-    verdict = "consistent" if c.ok else "NOT consistent"
-    lines.append(f"accelerometer consistency: {verdict} with the measured noise (chi2 = "
+    lines.append(f"accelerometer consistency: {_words(c)} (chi2 = "
                  f"{c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})")
+    if acc.fixed:
+        lines.append(f"  {acc.advice}")
     return lines
+
+
+def _words(c: Any) -> str:
+    """The verdict as the report prints it (:attr:`Consistency.verdict`, DESIGN.md fact 7)."""
+    if not c.ok:
+        return "NOT consistent with the measured noise" + (f" ({c.reason})" if c.reason else "")
+    return c.verdict if c.excess > 0 else "consistent with the measured noise"
 
 
 def _truth_matrix(truth: Mapping[str, Any]) -> np.ndarray:
@@ -190,9 +198,8 @@ def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
     if c is None:
         lines.append("consistency: not tested (no redundant observations)")
     else:
-        verdict = "consistent" if c.ok else "NOT consistent"
         lines.append(
-            f"consistency: {verdict} with the measured noise "
+            f"consistency: {_words(c)} "
             f"(chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})"
         )
         if not c.ok:

@@ -230,9 +230,12 @@ def _misalignment_text(cal: GyroCalibration) -> str:
 def _consistency_text(c: Any, what: str = "") -> str:
     if c is None:
         return f"{what}consistency not tested (no redundant observations)"
-    cls, word = ("ok", "consistent") if c.ok else ("bad", "NOT consistent")
-    return (f"{what}<span class={cls}>{word}</span> with the measured noise (χ² = {c.chi2:.1f} "
-            f"on {c.dof} dof, p = {c.p_value:.3g})")
+    cls = "ok" if c.ok else "bad"
+    # the rule of gyrocal.calib.dispersion: consistent, consistent with scatter (σ widened), or
+    # not consistent with its reason
+    word = c.verdict if hasattr(c, "verdict") else ("consistent" if c.ok else "not consistent")
+    return (f"{what}<span class={cls}>{_e(word)}</span>: residuals against the measured noise "
+            f"(χ² = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})")
 
 
 def _model_name(cal: GyroCalibration) -> str:

@@ -49,7 +49,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="which samples of a recording: all, or its longest rest segment "
                         "(auto: all if the recording has no rotations)")
     p.add_argument("--min-tau", type=float, default=None, metavar="S",
-                   help="shortest averaging time to read N at (default 10 samples)")
+                   help="shortest averaging time of the white-noise slope N is read on "
+                        "(default 10 samples; N is read near 1 s where the curve allows)")
+    p.add_argument("--allow-implausible", action="store_true",
+                   help="accept a white-noise density no MEMS gyro in rad/s has (readings in "
+                        "°/s are refused: exit 6)")
     p.add_argument("--json", action="store_true", help="print the gyrocal-noise v1 document")
     p.add_argument("--out", metavar="FILE", help="also write the document to FILE (atomically)")
     p.add_argument("--force", action="store_true", help="replace existing --out and --plot files")
@@ -149,6 +153,12 @@ def run(args: argparse.Namespace) -> int:
         with open_still(args.recording, args.span) as still:  # streamed: bounded memory
             odr, meta = still.odr_hz, still.meta
             nc = characterise_noise(still.phase, odr, min_tau_s=args.min_tau)
+        from gyrocal.kit.pipeline import check_plausible_noise
+
+        for problem in check_plausible_noise(nc.noise_density.value,
+                                             allow=args.allow_implausible):
+            print(f"gyrocal: warning: {problem} (accepted: --allow-implausible)",
+                  file=sys.stderr)
     from gyrocal.calib.noise_sim import FLICKER_FLOOR
 
     nc = nc.with_meta(created=now_iso(), **meta)

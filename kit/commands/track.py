@@ -227,6 +227,9 @@ def _build_tracker(
         except ValueError as exc:
             raise InputError(f"{where}: {exc}") from None
         n_density = tuple(float(x) for x in sigma / math.sqrt(odr))
+        from gyrocal.kit.pipeline import check_plausible_noise
+
+        notes += [f"WARNING: {p}" for p in check_plausible_noise(n_density, allow=True)]
         notes.append("noise density estimated from the sample-to-sample scatter of the "
                      f"quietest seconds of {what}: "
                      + ", ".join(f"{x:.3g}" for x in n_density) + " rad/s/sqrt(Hz) "

@@ -111,3 +111,27 @@ def test_a_gap_in_a_later_block_and_a_record_too_short_are_refused(tmp_path, cap
     p.write_text("\n".join(lines) + "\n")
     assert main(["noise", str(rec)]) == 2
     assert "only 39 samples to analyse" in capsys.readouterr().err
+
+
+def test_a_recording_in_degrees_per_second_is_refused_by_noise_and_flagged_by_track(
+        tmp_path, capsys):
+    """An MPU-9250's white noise (0.01 °/s/√Hz, its datasheet's typical) written in °/s where
+    rad/s belong: before, `noise` printed N 57× too big without a word and `track` tracked it;
+    now `noise` refuses (exit 6, as `estimate` refuses an implausible calibration) unless
+    --allow-implausible, and `track` says so in its notes."""
+    model = NoiseModel(noise_density=0.01, rate_random_walk=1e-5)  # °/s/√Hz read as rad/s/√Hz
+    s = simulate_still(np.random.default_rng(7), 120.0, model=model)
+    rec = write_session(tmp_path / "rec", s)
+    assert main(["noise", str(rec)]) == 6
+    err = capsys.readouterr().err
+    assert "look like °/s" in err and "--allow-implausible" in err
+    assert main(["noise", str(rec), "--allow-implausible"]) == 0
+    assert "look like °/s" in capsys.readouterr().err
+    assert main(["track", str(rec)]) == 0
+    out = capsys.readouterr()
+    assert "look like °/s" in out.out + out.err
+    # the same sensor in rad/s is accepted without a word
+    rad = simulate_still(np.random.default_rng(7), 120.0,
+                         model=NoiseModel(noise_density=1.75e-4, rate_random_walk=1e-5))
+    assert main(["noise", str(write_session(tmp_path / "rad", rad))]) == 0
+    assert "°/s" not in capsys.readouterr().err
