@@ -28,9 +28,8 @@ scales as ``|T| diag(A)`` with ``T`` from :mod:`gyrocal.kit.consumer_frames` (``
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from gyrocal.kit.consumer_frames import FrameMapping, frame_mapping
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, register
 from gyrocal.kit.exports_thermal import (
@@ -40,6 +39,9 @@ from gyrocal.kit.exports_thermal import (
     check_imu_index,
 )
 from gyrocal.kit.px4_ids import MAV_INT32, MAV_REAL32, px4_device_id, qgc_params
+
+if TYPE_CHECKING:  # numpy stays out of 'gyrocal export --help'
+    from gyrocal.kit.consumer_frames import FrameMapping
 
 __all__ = ["accel_offsets_scales", "ardupilot_accel_params", "cross_axis_note",
            "px4_accel_params"]
@@ -95,6 +97,8 @@ def cross_axis_note(acc: Any, stack: str) -> str:
 
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping
+
     acc = _accelerometer(doc, "px4-accel")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's CAL_ACC0..CAL_ACC3")
     frame = frame_mapping("px4", doc.get("sensor"), options)
@@ -112,6 +116,8 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
 
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
                       ) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping
+
     acc = _accelerometer(doc, "ardupilot-accel")
     imu = check_imu_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_ACC, INS_ACC2, INS_ACC3")
     lines = ["# ArduPilot accelerometer calibration written by gyrocal from a Calibration's "

@@ -23,9 +23,8 @@ a g-sensitivity: notes on stderr say what is left out and how large it is.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from gyrocal.kit.consumer_frames import FrameMapping, frame_mapping, gyro_model_note
 from gyrocal.kit.exports import Exporter, g_sensitivity_note, register
 from gyrocal.kit.exports_accel import ardupilot_accel_params, cross_axis_note, px4_accel_params
 from gyrocal.kit.exports_thermal import (
@@ -37,6 +36,9 @@ from gyrocal.kit.exports_thermal import (
     check_imu_index,
 )
 from gyrocal.kit.px4_ids import MAV_INT32, MAV_REAL32, px4_device_id, qgc_params
+
+if TYPE_CHECKING:  # numpy stays out of 'gyrocal export --help'
+    from gyrocal.kit.consumer_frames import FrameMapping
 
 __all__ = ["px4_gyro_params"]
 
@@ -65,6 +67,8 @@ def _temperature_note(cal: Any, thermal_format: str) -> list[str]:
 
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping, gyro_model_note
+
     cal = _calibration(doc)
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's CAL_GYRO0..3 / CAL_ACC0..3")
     frame = frame_mapping("px4", doc.get("sensor"), options)
@@ -92,6 +96,8 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
 
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
                       ) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping, gyro_model_note
+
     cal = _calibration(doc)
     imu = check_imu_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_GYR(OFFS), "
                           "INS_GYR2OFFS, INS_GYR3OFFS")

@@ -35,9 +35,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from gyrocal.kit.consumer_frames import FrameMapping, frame_mapping, gyro_model_note
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, g_sensitivity_note, register
 from gyrocal.kit.px4_ids import (
@@ -47,6 +46,9 @@ from gyrocal.kit.px4_ids import (
     px4_device_id,
     qgc_params,
 )
+
+if TYPE_CHECKING:  # numpy stays out of 'gyrocal export --help'
+    from gyrocal.kit.consumer_frames import FrameMapping
 
 __all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "AXES_OPTION", "DEVICE_ID_OPTION", "INDEX_OPTION",
            "ROTATION_OPTION",
@@ -133,6 +135,8 @@ def check_imu_index(value: Any, lo: int, hi: int, what: str) -> int:
 
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping, gyro_model_note
+
     cal = _model(doc, "px4-thermal")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
     dev = options.get("device_id")
@@ -160,6 +164,8 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
 
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
                       ) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping, gyro_model_note
+
     cal = _model(doc, "ardupilot-thermal")
     imu = check_imu_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_TCAL1..3")
     lines = ["# ArduPilot gyro temperature calibration written by gyrocal from a "

@@ -259,3 +259,24 @@ def test_the_table_in_using_md_is_the_code_s_table():
         if r.chip in rows:
             assert rows[r.chip][r.stack] == r.gyro.replace(",", ", ").replace("-", "−"), r
             assert r.accel == r.gyro
+
+
+def test_an_emulated_run_gives_back_a_still_rate_to_its_own_precision(full_run, capsys):
+    """The default ``gyrocal calibrate --sim`` run (an MPU-9250, the shared session run): a
+    still chip in zero g (reading ``−bias`` of the emulator's truth) reads zero on both stacks
+    within 4 σ of the calibration's own bias, and with the chip-axis values of before
+    (``--driver-axes x,y,z``) it did not."""
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.recording import load_recording
+
+    d, code = full_run
+    assert code == 0
+    cal = GyroCalibration.from_json((d / "calibration.json").read_text())
+    raw = -np.asarray(load_recording(d / "recording").truth["bias"])
+    for stack in STACKS:
+        four_sigma = 4 * np.abs(DRIVERS[stack, "mpu9250"](np.asarray(cal.bias_std)))
+        p, _ = export(capsys, d / "calibration.json", stack)
+        got = GYRO[stack](p, "mpu9250", raw)
+        assert np.all(np.abs(got) <= four_sigma), (stack, got, four_sigma)
+        p, _ = export(capsys, d / "calibration.json", stack, "--driver-axes", "x,y,z")
+        assert np.max(np.abs(GYRO[stack](p, "mpu9250", raw))) > 10 * np.max(four_sigma)
