@@ -111,7 +111,9 @@ DRIVER_FRAMES: tuple[DriverFrame, ...] = (
                 "gyro.y = gyro_y, gyro.z = -gyro_z (accel the same) under the same 'flip y & z' "
                 "comment",
                 "a mirror image of the chip's axes (only z flipped); the driver runs on SPI "
-                "(it sets CTRL_REG9 I2C_DISABLE)"),
+                "(it sets CTRL_REG9 I2C_DISABLE); an older version (@050fa47) published the "
+                "accelerometer's z from the chip's y (accel.z = math::negate(accel_y)), so on "
+                "such firmware no CAL_ACC value makes its z right"),
     DriverFrame("px4", "lsm6dsox", "x,y,z", "x,y,z",
                 f"{_PX4} src/drivers/imu/st/lsm6dso/LSM6DSO.cpp @ed717f0, LSM6DSO::FIFORead: "
                 "gyro.x/y/z = data_x/y/z (accel the same), no remap; WHO_AM_I 0x6C "
