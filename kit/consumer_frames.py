@@ -9,27 +9,32 @@ terms) and applies the accelerometer scales:
 PX4 (PX4-Autopilot)
     driver ``Process*``/``FIFORead`` remap → ``PX4Gyroscope::updateFIFO`` /
     ``PX4Accelerometer::updateFIFO`` ``rotate_3i(_rotation, …)``, the driver's ``-R`` rotation
-    (``src/lib/drivers/gyroscope/PX4Gyroscope.cpp``) →
-    ``calibration::Gyroscope::Correct``: ``_rotation * (data − _thermal_offset − _offset)`` and
+    (``src/lib/drivers/gyroscope/PX4Gyroscope.cpp@000f5fd:148``) →
+    ``calibration::Gyroscope::Correct``: ``_rotation * (data − _thermal_offset − _offset)``
+    (``src/lib/sensor_calibration/Gyroscope.hpp@13db2eb:77``) and
     ``calibration::Accelerometer::Correct``: ``_rotation * ((data − _thermal_offset −
-    _offset) ⊙ _scale)`` (``src/lib/sensor_calibration/Gyroscope.hpp``,
-    ``Accelerometer.hpp``), whose ``_rotation`` (``SENS_BOARD_ROT``, or ``CAL_GYROn_ROT`` /
-    ``CAL_ACCn_ROT`` for an external sensor) turns the corrected vector *after* the offsets.
+    _offset) ⊙ _scale)`` (``Accelerometer.hpp@011a413:84``), whose ``_rotation``
+    (``SENS_BOARD_ROT``, or ``CAL_GYROn_ROT`` / ``CAL_ACCn_ROT`` for an external sensor) turns the
+    corrected vector *after* the offsets; ``_thermal_offset`` is
+    ``TemperatureCompensation::calc_thermal_offsets_3D``
+    (``src/modules/temperature_compensation/TemperatureCompensation.cpp@09f282b:283-308``).
 
 ArduPilot (ArduPilot/ardupilot, ``libraries/AP_InertialSensor``)
     backend remap → ``AP_InertialSensor_Backend::_rotate_and_correct_gyro``: ``gyro.rotate(
     _gyro_orientation)`` (the rotation the board's hwdef gives the IMU at probe) →
     ``TCal::correct_gyro`` (``INS_TCALn_*``) → ``gyro -= _gyro_offset`` (``INS_GYROFFS_*``) →
-    ``gyro.rotate(_board_orientation)`` (``AHRS_ORIENTATION``); ``_rotate_and_correct_accel`` the
-    same with ``accel -= _accel_offset`` then ``accel ⊙ _accel_scale`` (``INS_ACCOFFS_*``,
-    ``INS_ACCSCAL_*``). Read at ArduPilot ``AP_InertialSensor_Backend.cpp`` (the stored version
-    whose ``_rotate_and_correct_gyro`` says "gyro calibration is always assumed to have been
-    done in sensor frame").
+    ``gyro.rotate(_board_orientation)`` (``AHRS_ORIENTATION``) (``AP_InertialSensor_Backend.cpp``
+    :140, :152, :156, :159); ``_rotate_and_correct_accel`` the same (:103, :119) with ``accel -=
+    _accel_offset`` (:123) then ``accel ⊙ _accel_scale`` (:128-130) (``INS_ACCOFFS_*``,
+    ``INS_ACCSCAL_*``). Lines of the stored version that has the orientation and ``TCal`` steps
+    (29096 characters; the source index gives no commit for it: the versions it does date,
+    @010cfbe and @ee45378, predate both steps). ``TCal::correct_sensor``:
+    ``AP_InertialSensor_tempcal.cpp@025810d:210-227`` (``TEMP_REFERENCE`` 35.0 at :40).
 
 So a parameter for published axis ``i`` belongs to the chip axis the driver puts there, with the
 driver's sign: :data:`DRIVER_FRAMES` holds each driver's remap as the published axes in the
-chip's terms (``"x,-y,-z"``: published x = chip x, y = −chip y, z = −chip z), with the file and
-the statement it comes from. :data:`ROTATIONS` holds the stacks' ``enum Rotation`` entries that
+chip's terms (``"x,-y,-z"``: published x = chip x, y = −chip y, z = −chip z), with the file,
+line and statement it comes from. :data:`ROTATIONS` holds the stacks' ``enum Rotation`` entries that
 are whole quarter turns (PX4 ``src/lib/conversion/rotation.h``; ArduPilot
 ``libraries/AP_Math/rotations.h``; both turn a vector by ``Rz(yaw) Ry(pitch) Rx(roll)``, as their
 ``rotate`` cases show, e.g. ``ROTATION_ROLL_90_YAW_90``: ``x, y, z ← z, x, y``).
@@ -88,62 +93,74 @@ class DriverFrame:
 
 _PX4 = "PX4-Autopilot"
 _AP = "ArduPilot libraries/AP_InertialSensor/"
-_PX4_FLIP = ("'flip y & z to publish right handed with z down': gyro.y = -gyro_y, "
-             "gyro.z = -gyro_z (accel the same)")
-_AP_SWAP = ("Vector3f(int16_val(data, 1), int16_val(data, 0), -int16_val(data, 2)) for the "
-            "accel and the same order of the gyro words")
+_PX4_FLIP = "'flip y & z to publish right handed with z down': y = -y, z = -z"
+_AP_SWAP = "Vector3f(int16_val(data, 1), int16_val(data, 0), -int16_val(data, 2))"
 
-#: One row per stack and chip: the remap of each mainline driver, read from its source.
+#: One row per stack and chip: the remap of each mainline driver, read from its source and cited
+#: as ``file@commit:line`` (the commit the source index stores; lines counted from its text).
+#: PX4 has no row for the MPU-9255: its mpu9250 drivers take only WHO_AM_I 0x71 and its mpu6500
+#: driver only 0x70 (the MPU-9255 answers 0x73), so no PX4 driver reads it.
 DRIVER_FRAMES: tuple[DriverFrame, ...] = (
     DriverFrame("px4", "mpu9250", "x,-y,-z", "x,-y,-z",
-                f"{_PX4} src/drivers/imu/invensense/mpu9250/MPU9250_I2C.cpp @023e613, "
-                f"MPU9250_I2C::ProcessGyro / ProcessAccel: {_PX4_FLIP} (MPU9250.cpp, the SPI "
-                "driver @02f4ad6, the same)"),
+                f"{_PX4} src/drivers/imu/invensense/mpu9250/MPU9250_I2C.cpp@023e613:536-537 "
+                "(ProcessAccel) and :566-567 (ProcessGyro), "
+                f"{_PX4_FLIP} (gyro.y = -gyro_y, gyro.z = -gyro_z; accel the same); the SPI "
+                "driver MPU9250.cpp@02f4ad6:578-579 and :607-608 the same; both take only "
+                "WHO_AM_I 0x71 (InvenSense_MPU9250_registers.hpp@033e9ce:62, "
+                "MPU9250.cpp@02f4ad6:140)"),
+    DriverFrame("px4", "mpu6500", "x,-y,-z", "x,-y,-z",
+                f"{_PX4} src/drivers/imu/invensense/mpu6500/MPU6500.cpp@542f41f:547-548 "
+                f"(ProcessAccel) and :577-578 (ProcessGyro), {_PX4_FLIP}; WHO_AM_I 0x70 "
+                "(MPU6500.cpp@542f41f:113, InvenSense_MPU6500_registers.hpp@0860a61)",
+                "an older version (@050fa47, ProcessAccel) published the accelerometer's z from "
+                "the chip's y (accel.z = math::negate(accel_y)), so on such firmware no CAL_ACC "
+                "value makes its z right"),
     DriverFrame("px4", "icm20948", "x,-y,-z", "x,-y,-z",
-                f"{_PX4} src/drivers/imu/invensense/icm20948/ICM20948.cpp @023e613, "
-                f"ICM20948::ProcessGyro / ProcessAccel: {_PX4_FLIP}"),
+                f"{_PX4} src/drivers/imu/invensense/icm20948/ICM20948.cpp@023e613:666-667 "
+                f"(ProcessAccel) and :696-697 (ProcessGyro), {_PX4_FLIP}"),
     DriverFrame("px4", "icm42688p", "x,-y,-z", "x,-y,-z",
-                f"{_PX4} src/drivers/imu/invensense/icm42688p/ICM42688P.cpp @00d281a, "
-                f"ICM42688P::ProcessGyro / ProcessAccel ('correct frame for publication'): "
-                f"{_PX4_FLIP}"),
+                f"{_PX4} src/drivers/imu/invensense/icm42688p/ICM42688P.cpp@00d281a:723-724 "
+                "(ProcessAccel) and :805-806 (ProcessGyro), under 'correct frame for "
+                f"publication' (:718, :800): {_PX4_FLIP}"),
     DriverFrame("px4", "lsm9ds1", "x,y,-z", "x,y,-z",
-                f"{_PX4} src/drivers/imu/st/lsm9ds1/LSM9DS1.cpp @26d971b, LSM9DS1::FIFORead: "
-                "gyro.y = gyro_y, gyro.z = -gyro_z (accel the same) under the same 'flip y & z' "
-                "comment",
+                f"{_PX4} src/drivers/imu/st/lsm9ds1/LSM9DS1.cpp@26d971b:362-363 and :390-391 "
+                "(FIFORead): gyro.y = gyro_y, gyro.z = -gyro_z (accel the same) under the same "
+                "'flip y & z' comment",
                 "a mirror image of the chip's axes (only z flipped); the driver runs on SPI "
-                "(it sets CTRL_REG9 I2C_DISABLE); an older version (@050fa47) published the "
-                "accelerometer's z from the chip's y (accel.z = math::negate(accel_y)), so on "
-                "such firmware no CAL_ACC value makes its z right"),
+                "(it sets CTRL_REG9 I2C_DISABLE, LSM9DS1.cpp@26d971b:129); an older version "
+                "(@050fa47) published the accelerometer's z from the chip's y (accel.z = "
+                "math::negate(accel_y)), so on such firmware no CAL_ACC value makes its z "
+                "right"),
     DriverFrame("px4", "lsm6dsox", "x,y,z", "x,y,z",
-                f"{_PX4} src/drivers/imu/st/lsm6dso/LSM6DSO.cpp @ed717f0, LSM6DSO::FIFORead: "
-                "gyro.x/y/z = data_x/y/z (accel the same), no remap; WHO_AM_I 0x6C "
+                f"{_PX4} src/drivers/imu/st/lsm6dso/LSM6DSO.cpp@ed717f0:371-373 and :379-381 "
+                "(FIFORead): gyro.x/y/z = data_x/y/z (accel the same), no remap; WHO_AM_I 0x6C "
                 "(ST_LSM6DSO_Registers.hpp), which the LSM6DSOX shares",
                 "the lsm6dso driver is SPI only (lsm6dso_main.cpp: "
                 "PRINT_MODULE_USAGE_PARAMS_I2C_SPI_DRIVER(false, true))"),
     *(DriverFrame("ardupilot", chip, "y,x,-z", "y,x,-z",
-                  f"{_AP}AP_InertialSensor_Invensense.cpp @00356b1, AP_InertialSensor_Invensense"
-                  f"::_accumulate and _accumulate_sensor_rate_sampling: {_AP_SWAP} "
-                  "(int16_val(data, 5), (data, 4), -(data, 6)); _check_whoami takes the "
+                  f"{_AP}AP_InertialSensor_Invensense.cpp@00356b1:544-546 (_accumulate, accel "
+                  f"{_AP_SWAP}), :559-561 (its gyro, words 5, 4, -6), :607-609 and :635-637 "
+                  "(_accumulate_sensor_rate_sampling, the same); _check_whoami takes the "
                   "MPU-9250, MPU-9255 and MPU-6500")
       for chip in ("mpu9250", "mpu9255", "mpu6500")),
     DriverFrame("ardupilot", "icm20948", "y,x,-z", "y,x,-z",
-                f"{_AP}AP_InertialSensor_Invensensev2.cpp @0411785, "
-                "AP_InertialSensor_Invensensev2::_accumulate and "
-                f"_accumulate_sensor_rate_sampling: {_AP_SWAP} (int16_val(data, 4), (data, 3), "
-                "-(data, 5))"),
+                f"{_AP}AP_InertialSensor_Invensensev2.cpp@0411785:317-319 (_accumulate, accel "
+                f"{_AP_SWAP}), :330-332 (its gyro, words 4, 3, -5), :375-377 and :388-390 "
+                "(_accumulate_sensor_rate_sampling, the same)"),
     DriverFrame("ardupilot", "icm42688p", "x,y,z", "x,y,z",
-                f"{_AP}AP_InertialSensor_Invensensev3.cpp, AP_InertialSensor_Invensensev3::"
-                "accumulate_samples: Vector3f gyro{d.gyro[0], d.gyro[1], d.gyro[2]} (accel the "
-                "same), no remap"),
+                f"{_AP}AP_InertialSensor_Invensensev3.cpp@00ab7c1:316-317 (accumulate_samples): "
+                "Vector3f accel{d.accel[0], d.accel[1], d.accel[2]}, gyro{d.gyro[0], d.gyro[1], "
+                "d.gyro[2]}, no remap"),
     DriverFrame("ardupilot", "lsm9ds1", "x,y,-z", "x,y,-z",
-                f"{_AP}AP_InertialSensor_LSM9DS1.cpp @08b63b0, _read_data_transaction_g / _x: "
-                "Vector3f gyro_data(raw_data.x, raw_data.y, -raw_data.z) (accel the same)",
+                f"{_AP}AP_InertialSensor_LSM9DS1.cpp@08b63b0:461 (_read_data_transaction_x) and "
+                ":497 (_read_data_transaction_g): Vector3f gyro_data(raw_data.x, raw_data.y, "
+                "-raw_data.z) (accel the same)",
                 "a mirror image of the chip's axes (only z flipped); the backend is SPI only"),
     DriverFrame("ardupilot", "lsm6dsox", "x,y,z", "x,y,z",
-                f"{_AP}AP_InertialSensor_LSM6DSO.cpp @15ffc15 (LSM6DSO_WHOAMI 0x6C, which the "
-                "LSM6DSOX shares; derived from AP_InertialSensor_ASM330.cpp @15ffc15, whose "
-                "update_transaction_g / _x build Vector3f(raw_data.x, raw_data.y, raw_data.z)), "
-                "no remap"),
+                f"{_AP}AP_InertialSensor_LSM6DSO.cpp@15ffc15:34 (LSM6DSO_WHOAMI 0x6C, which the "
+                "LSM6DSOX shares; the class derives from AP_InertialSensor_ASM330, :18-19), "
+                "AP_InertialSensor_ASM330.cpp@15ffc15:398 (update_transaction_g) and :407 "
+                "(update_transaction_x): Vector3f(raw_data.x, raw_data.y, raw_data.z), no remap"),
 )
 
 #: The quarter-turn entries of each stack's ``enum Rotation`` (PX4 rotation.h, ArduPilot

@@ -6,32 +6,39 @@ The path of a gyro sample (the accelerometer's is the same with a scale after th
 
 PX4 (PX4-Autopilot)
     1. the driver reads the chip's x, y, z registers and publishes a remapped vector
-       (:data:`DRIVERS`; e.g. ``src/drivers/imu/invensense/mpu9250/MPU9250_I2C.cpp``,
-       ``MPU9250_I2C::ProcessGyro``: "flip y & z to publish right handed with z down",
-       ``gyro.y = -gyro_y``, ``gyro.z = -gyro_z``);
+       (:data:`DRIVERS`; e.g. ``src/drivers/imu/invensense/mpu9250/MPU9250_I2C.cpp@023e613``,
+       ``MPU9250_I2C::ProcessGyro``: "flip y & z to publish right handed with z down" (:564),
+       ``gyro.y = -gyro_y``, ``gyro.z = -gyro_z`` (:566-567));
     2. ``PX4Gyroscope::updateFIFO`` turns it by the driver's ``-R`` rotation
-       (``src/lib/drivers/gyroscope/PX4Gyroscope.cpp``: ``rotate_3i(_rotation, …)``);
+       (``src/lib/drivers/gyroscope/PX4Gyroscope.cpp@000f5fd:148``: ``rotate_3i(_rotation,
+       …)``);
     3. ``TemperatureCompensation::calc_thermal_offsets_3D`` gives ``_thermal_offset`` from
-       ``TC_Gn_*`` (``X0 + X1·dT + X2·dT² + X3·dT³``, ``dT = clamp(T, TMIN, TMAX) − TREF``);
-    4. ``calibration::Gyroscope::Correct`` (``src/lib/sensor_calibration/Gyroscope.hpp``):
-       ``_rotation * (data − _thermal_offset − _offset)``, ``_offset`` = ``CAL_GYROn_?OFF``,
-       ``_rotation`` = ``SENS_BOARD_ROT``; ``calibration::Accelerometer::Correct``
-       (``Accelerometer.hpp``): ``_rotation * ((data − _thermal_offset − _offset)
-       .emult(_scale))``.
+       ``TC_Gn_*`` (``X0 + X1·dT + X2·dT² + X3·dT³``, ``dT = clamp(T, TMIN, TMAX) − TREF``;
+       ``src/modules/temperature_compensation/TemperatureCompensation.cpp@09f282b:283``, the
+       clamp :290-301, the polynomial :308);
+    4. ``calibration::Gyroscope::Correct``
+       (``src/lib/sensor_calibration/Gyroscope.hpp@13db2eb:77``): ``_rotation * (data −
+       _thermal_offset − _offset)``, ``_offset`` = ``CAL_GYROn_?OFF``, ``_rotation`` =
+       ``SENS_BOARD_ROT``; ``calibration::Accelerometer::Correct`` (``Accelerometer.hpp@011a413
+       :84``): ``_rotation * ((data − _thermal_offset − _offset).emult(_scale))``.
 
 ArduPilot (ArduPilot/ardupilot, ``libraries/AP_InertialSensor``)
     1. the backend builds a remapped vector (:data:`DRIVERS`; e.g.
-       ``AP_InertialSensor_Invensense.cpp``, ``_accumulate``: ``Vector3f(int16_val(data, 1),
-       int16_val(data, 0), -int16_val(data, 2))``);
+       ``AP_InertialSensor_Invensense.cpp@00356b1:544-546``, ``_accumulate``:
+       ``Vector3f(int16_val(data, 1), int16_val(data, 0), -int16_val(data, 2))``);
     2. ``AP_InertialSensor_Backend::_rotate_and_correct_gyro``: ``gyro.rotate(
-       _gyro_orientation[instance])`` (the hwdef's rotation for the IMU);
-    3. ``_imu.tcal(instance).correct_gyro(T, caltemp, gyro)`` (``AP_InertialSensor_tempcal.cpp``,
-       ``TCal::correct_sensor``: ``v −= P(T − 35) − P(CALTEMP − 35)``, ``P(x) = (c1 + (c2 +
-       c3·x)·x)·x · 1e-6``, both temperatures clamped to ``[TMIN, TMAX]``);
+       _gyro_orientation[instance])`` (the hwdef's rotation for the IMU; :140 of the stored
+       ``AP_InertialSensor_Backend.cpp`` that has this step, for which the source index gives
+       no commit);
+    3. ``_imu.tcal(instance).correct_gyro(T, caltemp, gyro)`` (Backend :152;
+       ``AP_InertialSensor_tempcal.cpp@025810d:210``, ``TCal::correct_sensor``: ``v −= P(T − 35)
+       − P(CALTEMP − 35)`` (:221, :227; ``TEMP_REFERENCE`` 35.0 :40), ``P(x) = (c1 + (c2 +
+       c3·x)·x)·x · 1e-6`` (:204), both temperatures clamped to ``[TMIN, TMAX]`` (:215-216));
     4. ``gyro -= _imu._gyro_offset(instance)`` ("gyro calibration is always assumed to have been
-       done in sensor frame"), then ``gyro.rotate(_imu._board_orientation)``
-       (``AHRS_ORIENTATION``); ``_rotate_and_correct_accel``: ``accel -= _accel_offset``,
-       ``accel.x *= accel_scale.x`` (and y, z), then the board rotation.
+       done in sensor frame", Backend :156), then ``gyro.rotate(_imu._board_orientation)``
+       (``AHRS_ORIENTATION``, :159); ``_rotate_and_correct_accel``: ``accel -= _accel_offset``
+       (:123), ``accel.x *= accel_scale.x`` (and y, z, :128-130), then the board rotation
+       (:134).
 
 Rotations are the stacks' explicit ``rotate`` cases (ArduPilot ``AP_Math/vector3.cpp``
 ``Vector3<T>::rotate``, PX4 ``rotate_3f``), for the entries the tests use.
@@ -52,46 +59,51 @@ def _v(*xs: float) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- the drivers
 def px4_invensense(c: np.ndarray) -> np.ndarray:
-    """PX4 MPU9250_I2C.cpp / MPU9250.cpp ``ProcessGyro``/``ProcessAccel``, ICM20948.cpp and
-    ICM42688P.cpp the same: ``x = x``, ``y = -y``, ``z = -z``."""
+    """PX4 MPU9250_I2C.cpp@023e613:536-537, :566-567 / MPU9250.cpp ``ProcessGyro``/
+    ``ProcessAccel``; MPU6500.cpp@542f41f:547-548, :577-578, ICM20948.cpp@023e613:666-667,
+    :696-697 and ICM42688P.cpp@00d281a:723-724, :805-806 the same: ``x = x``, ``y = -y``,
+    ``z = -z``."""
     return _v(c[0], -c[1], -c[2])
 
 
 def px4_lsm9ds1(c: np.ndarray) -> np.ndarray:
-    """PX4 src/drivers/imu/st/lsm9ds1/LSM9DS1.cpp ``FIFORead`` (PX4-Autopilot 26d971b):
-    ``gyro.x = gyro_x``, ``gyro.y = gyro_y``, ``gyro.z = -gyro_z`` (accel the same)."""
+    """PX4 src/drivers/imu/st/lsm9ds1/LSM9DS1.cpp ``FIFORead`` (PX4-Autopilot 26d971b, :361-363,
+    :389-391): ``gyro.x = gyro_x``, ``gyro.y = gyro_y``, ``gyro.z = -gyro_z`` (accel the
+    same)."""
     return _v(c[0], c[1], -c[2])
 
 
 def px4_lsm6dso(c: np.ndarray) -> np.ndarray:
-    """PX4 src/drivers/imu/st/lsm6dso/LSM6DSO.cpp ``FIFORead``: ``gyro.x = data_x``, … (no
-    remap)."""
+    """PX4 src/drivers/imu/st/lsm6dso/LSM6DSO.cpp@ed717f0:371-373 ``FIFORead``: ``gyro.x =
+    data_x``, … (no remap)."""
     return _v(c[0], c[1], c[2])
 
 
 def ardupilot_invensense(c: np.ndarray) -> np.ndarray:
-    """ArduPilot AP_InertialSensor_Invensense.cpp ``_accumulate`` (the accel words 0, 1, 2; the
-    gyro words 4, 5, 6) and AP_InertialSensor_Invensensev2.cpp ``_accumulate`` (gyro words 3, 4,
-    5): ``Vector3f(int16_val(data, 1), int16_val(data, 0), -int16_val(data, 2))``."""
+    """ArduPilot AP_InertialSensor_Invensense.cpp@00356b1 ``_accumulate`` (the accel words 0, 1,
+    2, :544-546; the gyro words 4, 5, 6, :559-561) and AP_InertialSensor_Invensensev2.cpp@0411785
+    ``_accumulate`` (:317-319; gyro words 3, 4, 5, :330-332): ``Vector3f(int16_val(data, 1),
+    int16_val(data, 0), -int16_val(data, 2))``."""
     return _v(c[1], c[0], -c[2])
 
 
 def ardupilot_invensensev3(c: np.ndarray) -> np.ndarray:
-    """ArduPilot AP_InertialSensor_Invensensev3.cpp ``accumulate_samples``:
+    """ArduPilot AP_InertialSensor_Invensensev3.cpp@00ab7c1:317 ``accumulate_samples``:
     ``Vector3f gyro{float(d.gyro[0]), float(d.gyro[1]), float(d.gyro[2])}``."""
     return _v(c[0], c[1], c[2])
 
 
 def ardupilot_lsm9ds1(c: np.ndarray) -> np.ndarray:
-    """ArduPilot AP_InertialSensor_LSM9DS1.cpp ``_read_data_transaction_g`` / ``_x``:
+    """ArduPilot AP_InertialSensor_LSM9DS1.cpp@08b63b0:497 / :461 ``_read_data_transaction_g``
+    / ``_x``:
     ``Vector3f gyro_data(raw_data.x, raw_data.y, -raw_data.z)``."""
     return _v(c[0], c[1], -c[2])
 
 
 def ardupilot_lsm6dso(c: np.ndarray) -> np.ndarray:
-    """ArduPilot AP_InertialSensor_LSM6DSO.cpp (derived from AP_InertialSensor_ASM330.cpp,
-    ``update_transaction_g`` / ``_x``: ``Vector3f gyro_data(raw_data.x, raw_data.y,
-    raw_data.z)``)."""
+    """ArduPilot AP_InertialSensor_LSM6DSO.cpp@15ffc15 (derived from
+    AP_InertialSensor_ASM330.cpp@15ffc15, ``update_transaction_g`` / ``_x`` :398 / :407:
+    ``Vector3f gyro_data(raw_data.x, raw_data.y, raw_data.z)``)."""
     return _v(c[0], c[1], c[2])
 
 
@@ -99,8 +111,9 @@ def ardupilot_lsm6dso(c: np.ndarray) -> np.ndarray:
 DRIVERS: dict[tuple[str, str], Callable[[np.ndarray], np.ndarray]] = {
     ("px4", "mpu9250"): px4_invensense, ("px4", "icm20948"): px4_invensense,
     ("px4", "icm42688p"): px4_invensense, ("px4", "lsm9ds1"): px4_lsm9ds1,
-    ("px4", "lsm6dsox"): px4_lsm6dso,
+    ("px4", "lsm6dsox"): px4_lsm6dso, ("px4", "mpu6500"): px4_invensense,
     ("ardupilot", "mpu9250"): ardupilot_invensense, ("ardupilot", "icm20948"): ardupilot_invensense,
+    ("ardupilot", "mpu9255"): ardupilot_invensense, ("ardupilot", "mpu6500"): ardupilot_invensense,
     ("ardupilot", "icm42688p"): ardupilot_invensensev3, ("ardupilot", "lsm9ds1"): ardupilot_lsm9ds1,
     ("ardupilot", "lsm6dsox"): ardupilot_lsm6dso,
 }

@@ -243,22 +243,42 @@ def test_rotate_in_the_model_is_the_stacks_euler_convention():
 
 def test_the_table_in_using_md_is_the_code_s_table():
     """hardware_docs/using.md's table of the drivers' axes says what
-    ``gyrocal.kit.consumer_frames.DRIVER_FRAMES`` holds, row by row."""
+    ``gyrocal.kit.consumer_frames.DRIVER_FRAMES`` holds, row by row, and has a row for every
+    chip of it ("—" where a stack has no driver)."""
     from pathlib import Path
 
     from gyrocal.kit.consumer_frames import DRIVER_FRAMES
 
+    chips = {r.chip for r in DRIVER_FRAMES}
     text = (Path(__file__).parents[2] / "hardware_docs" / "using.md").read_text()
     rows = {}
     for line in text.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) == 5 and cells[0] in CHIPS:
+        if len(cells) == 5 and cells[0] in chips:
             rows[cells[0]] = {"px4": cells[2], "ardupilot": cells[4]}
-    assert sorted(rows) == sorted(CHIPS)
+    assert sorted(rows) == sorted(chips)
+    for chip, cells in rows.items():
+        for stack, cell in cells.items():
+            row = next((r for r in DRIVER_FRAMES if r.stack == stack and r.chip == chip), None)
+            want = "—" if row is None else row.gyro.replace(",", ", ").replace("-", "−")
+            assert cell == want, (chip, stack)
+            assert row is None or row.accel == row.gyro
+
+
+def test_every_row_cites_its_driver_file_commit_and_line_and_the_model_agrees():
+    """Each ``DRIVER_FRAMES`` row names the driver source as ``file@commit:line`` (the project's
+    rule for consumer facts), and its remap is what the stack's driver, written out
+    independently in :data:`tests.kit.flight_stacks.DRIVERS`, does to a reading."""
+    import re
+
+    from gyrocal.kit.consumer_frames import DRIVER_FRAMES, axes_matrix
+
+    v = np.array([0.3, -1.1, 2.7])
     for r in DRIVER_FRAMES:
-        if r.chip in rows:
-            assert rows[r.chip][r.stack] == r.gyro.replace(",", ", ").replace("-", "−"), r
-            assert r.accel == r.gyro
+        assert re.search(r"\.(?:cpp|hpp)@[0-9a-f]{7}:\d+", r.source), r
+        driver = DRIVERS[r.stack, r.chip]
+        np.testing.assert_array_equal(axes_matrix(r.gyro) @ v, driver(v), err_msg=str(r))
+        np.testing.assert_array_equal(axes_matrix(r.accel) @ v, driver(v), err_msg=str(r))
 
 
 def test_an_emulated_run_gives_back_a_still_rate_to_its_own_precision(full_run, capsys):
