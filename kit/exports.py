@@ -1234,4 +1234,4 @@ register(
 
 
 # ---------------------------------------------------------------------------- flight stacks
-from gyrocal.kit import exports_accel, exports_thermal  # noqa: E402,F401 - register formats
+from gyrocal.kit import exports_accel, exports_flight, exports_thermal  # noqa: E402,F401 - register formats

@@ -24,13 +24,18 @@ ArduPilot (``--format ardupilot-thermal``), ``INS_TCAL<n>_*`` (``AP_InertialSens
 gyrocal's ``b(T)`` is re-expanded in powers of ``T − 35``; ``GYRk = −e_k·1e6`` (no constant
 term), ``INS_GYR<n>_CALTEMP`` the model's reference and ``INS_GYROFFS`` (``INS_GYR<n>OFFS`` for
 n > 1) ``−b(reference)``. Written as a Mission Planner parameter file (``NAME,VALUE``).
+
+Both stacks add these terms after their driver has remapped the chip's axes (and turned them by
+the driver's rotation): every per-axis vector above is written in that frame
+(:mod:`gyrocal.kit.consumer_frames`, ``--driver-axes``, ``--rotation``), and a note on stderr
+names the mapping.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.exports import Exporter, ExportOption, g_sensitivity_note, register
@@ -42,15 +47,16 @@ from gyrocal.kit.px4_ids import (
     qgc_params,
 )
 
-__all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "ardupilot_params", "check_imu_index", "px4_params"]
+if TYPE_CHECKING:  # numpy stays out of 'gyrocal export --help'
+    from gyrocal.kit.consumer_frames import FrameMapping
+
+__all__ = ["ARDUPILOT_TEMP_REFERENCE_C", "AXES_OPTION", "DEVICE_ID_OPTION", "INDEX_OPTION",
+           "ROTATION_OPTION",
+           "ardupilot_gyro_offsets", "ardupilot_params", "check_imu_index", "px4_params"]
 
 #: ArduPilot's fixed reference temperature of INS_TCALn (AP_InertialSensor_tempcal.cpp).
 ARDUPILOT_TEMP_REFERENCE_C = 35.0
 _ARDUPILOT_SCALE = 1.0e6  # its SCALE_FACTOR: the coefficients are stored times 1e6
-_NOT_CARRIED = ("{stack} corrects only the gyro's bias against temperature: the calibration's "
-                "scale{matrix} is not in these parameters; apply it elsewhere or accept the "
-                "scale error")
-
 
 _ACCEL_ELSEWHERE = ("the calibration's accelerometer is not in these gyro parameters: export "
                     "it with --format {fmt}")
@@ -66,9 +72,10 @@ def _model(doc: Mapping[str, Any], fmt: str) -> Any:
     return cal
 
 
-def px4_params(cal: Any, instance: int = 0, device_id: int = 0) -> list[tuple[str, float, int]]:
-    """PX4's ``TC_G<instance>_*`` (and ``TC_G_ENABLE``) for ``cal``'s temperature model:
-    ``(name, value, MAV_PARAM_TYPE)``."""
+def px4_params(cal: Any, frame: FrameMapping, instance: int = 0,
+               device_id: int = 0) -> list[tuple[str, float, int]]:
+    """PX4's ``TC_G<instance>_*`` (and ``TC_G_ENABLE``) for ``cal``'s temperature model, in the
+    ``frame`` PX4 subtracts them in: ``(name, value, MAV_PARAM_TYPE)``."""
     tm = cal.temperature_model
     p = f"TC_G{instance}_"
     out: list[tuple[str, float, int]] = [("TC_G_ENABLE", 1, MAV_INT32),
@@ -77,9 +84,10 @@ def px4_params(cal: Any, instance: int = 0, device_id: int = 0) -> list[tuple[st
                                          (p + "TMAX", tm.range_c[1], MAV_REAL32),
                                          (p + "TREF", tm.reference_c, MAV_REAL32)]
     for k in range(4):
-        for axis in range(3):
-            c = float(tm.bias_coeffs[axis, k]) if k <= tm.bias_order else 0.0
-            out.append((f"{p}X{k}_{axis}", -c, MAV_REAL32))
+        chip = [-float(tm.bias_coeffs[axis, k]) if k <= tm.bias_order else 0.0
+                for axis in range(3)]
+        out += [(f"{p}X{k}_{axis}", v, MAV_REAL32)
+                for axis, v in enumerate(frame.vector(chip))]
     return out
 
 
@@ -93,23 +101,29 @@ def _about(reference: float, coeffs: Any, order: int) -> list[float]:
     return e
 
 
-def ardupilot_params(cal: Any, imu: int = 1) -> list[tuple[str, float]]:
+def ardupilot_gyro_offsets(bias: Any, frame: FrameMapping, imu: int = 1
+                           ) -> list[tuple[str, float]]:
+    """ArduPilot's ``INS_GYROFFS_*`` (``INS_GYR<imu>OFFS_*`` for imu > 1) removing the chip-frame
+    ``bias`` (gyrocal's reading is ``raw + bias``; ArduPilot's ``gyro -= offset``), in
+    ``frame``."""
+    offs = "INS_GYROFFS_" if imu == 1 else f"INS_GYR{imu}OFFS_"
+    return [(offs + name, v) for name, v in
+            zip("XYZ", frame.vector([-float(b) for b in bias]), strict=True)]
+
+
+def ardupilot_params(cal: Any, frame: FrameMapping, imu: int = 1) -> list[tuple[str, float]]:
     """ArduPilot's ``INS_TCAL<imu>_*``, gyro offsets and calibration temperature for ``cal``'s
-    temperature model."""
+    temperature model, in the ``frame`` ArduPilot applies them in."""
     tm = cal.temperature_model
     t = f"INS_TCAL{imu}_"
-    offs = "INS_GYROFFS_" if imu == 1 else f"INS_GYR{imu}OFFS_"
-    st = tm.at(tm.reference_c)
     out: list[tuple[str, float]] = [(t + "ENABLE", 1), (t + "TMIN", tm.range_c[0]),
                                     (t + "TMAX", tm.range_c[1])]
     e = [_about(tm.reference_c, tm.bias_coeffs[axis], tm.bias_order) for axis in range(3)]
     for k in (1, 2, 3):
-        for axis, name in enumerate("XYZ"):
-            out.append((f"{t}GYR{k}_{name}", -e[axis][k] * _ARDUPILOT_SCALE))
+        coeffs = frame.vector([-e[axis][k] * _ARDUPILOT_SCALE for axis in range(3)])
+        out += [(f"{t}GYR{k}_{name}", v) for name, v in zip("XYZ", coeffs, strict=True)]
     out.append((f"INS_GYR{imu}_CALTEMP", tm.reference_c))
-    for axis, name in enumerate("XYZ"):
-        out.append((offs + name, -float(st.bias[axis])))
-    return out
+    return out + ardupilot_gyro_offsets(tm.at(tm.reference_c).bias, frame, imu)
 
 
 def check_imu_index(value: Any, lo: int, hi: int, what: str) -> int:
@@ -121,17 +135,20 @@ def check_imu_index(value: Any, lo: int, hi: int, what: str) -> int:
 
 
 def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping, gyro_model_note
+
     cal = _model(doc, "px4-thermal")
     inst = check_imu_index(options.get("imu_index"), 0, 3, "PX4's TC_G0..TC_G3")
     dev = options.get("device_id")
     how = None
     if dev is None:
         dev, how = px4_device_id(doc.get("sensor"))
-    rows = px4_params(cal, inst, 0 if dev is None else int(dev))
+    frame = frame_mapping("px4", doc.get("sensor"), options)
+    rows = px4_params(cal, frame, inst, 0 if dev is None else int(dev))
     text = qgc_params("gyro thermal compensation written by gyrocal from a temperature_model",
                       rows)
-    notes = [_NOT_CARRIED.format(stack="PX4", matrix=" and cross-axis matrix" if cal.is_full
-                                 else ""), *g_sensitivity_note(cal, "PX4's TC_G parameters"),
+    notes = [frame.note, gyro_model_note(cal, "px4"),
+             *g_sensitivity_note(cal, "PX4's TC_G parameters"),
              f"the whole bias is in TC_G{inst}_X0_*: set CAL_GYRO{inst}_XOFF/YOFF/ZOFF to 0, or "
              "the bias is removed twice"]
     if dev is None:
@@ -147,13 +164,15 @@ def _render_px4(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
 
 def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
                       ) -> tuple[str, list[str]]:
+    from gyrocal.kit.consumer_frames import frame_mapping, gyro_model_note
+
     cal = _model(doc, "ardupilot-thermal")
     imu = check_imu_index(options.get("imu_index"), 1, 3, "ArduPilot's INS_TCAL1..3")
     lines = ["# ArduPilot gyro temperature calibration written by gyrocal from a "
              "temperature_model"]
-    lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_params(cal, imu)]
-    notes = [_NOT_CARRIED.format(stack="ArduPilot", matrix=" and cross-axis matrix"
-                                 if cal.is_full else ""),
+    frame = frame_mapping("ardupilot", doc.get("sensor"), options)
+    lines += [f"{name},{value + 0.0:.9g}" for name, value in ardupilot_params(cal, frame, imu)]
+    notes = [frame.note, gyro_model_note(cal, "ardupilot"),
              *g_sensitivity_note(cal, "ArduPilot's INS_TCAL parameters"),
              "with INS_GYR_CAL = 1 (the default) ArduPilot re-measures the gyro offsets at "
              "every boot and overwrites INS_GYROFFS and the CALTEMP; the temperature terms then "
@@ -163,20 +182,35 @@ def _render_ardupilot(doc: Mapping[str, Any], options: Mapping[str, Any]
     return "\n".join(lines) + "\n", notes
 
 
-_INDEX = ExportOption("imu_index", int, "px4-thermal / ardupilot-thermal: which gyro (PX4 "
-                                        "TC_Gn: 0-3, default 0; ArduPilot INS_TCALn: 1-3, "
-                                        "default 1)")
+AXES_OPTION = ExportOption(
+    "driver_axes", str,
+    "flight-stack formats: the axes the stack's driver publishes, in the chip's terms (e.g. "
+    "x,-y,-z), instead of the built-in table's row for the calibration's chip; x,y,z writes the "
+    "chip's own axes")
+ROTATION_OPTION = ExportOption(
+    "rotation", str,
+    "flight-stack formats: the rotation the stack's driver applies before the offsets, a "
+    "ROTATION_* name or number of the stack's enum (PX4: the driver's -R; ArduPilot: the IMU "
+    "line's rotation in the board's hwdef); default ROTATION_NONE. SENS_BOARD_ROT and "
+    "AHRS_ORIENTATION act after the offsets and need nothing here")
+
+
+DEVICE_ID_OPTION = ExportOption("device_id", device_id_arg,
+                                "px4 / px4-thermal: the gyro's device ID for CAL_GYROn_ID, "
+                                "CAL_ACCn_ID and TC_Gn_ID (CAL_GYROn_ID on the vehicle; default "
+                                "from the calibration's chip, bus and address)")
+INDEX_OPTION = ExportOption("imu_index", int,
+                            "flight-stack formats: which sensor of the vehicle (PX4 CAL_GYROn, "
+                            "CAL_ACCn, TC_Gn: 0-3, default 0; ArduPilot INS_GYROFFS, INS_GYR2OFFS, "
+                            "INS_TCAL2, ...: 1-3, default 1)")
 register(Exporter(
     name="px4-thermal", accepts=("gyrocal-calibration",),
     description="PX4 gyro thermal compensation parameters TC_Gn_* (QGroundControl .params)",
     render=_render_px4, suffix=".params",
-    options=(_INDEX, ExportOption("device_id", device_id_arg,
-                                  "px4-thermal: the gyro's device ID for TC_Gn_ID "
-                                  "(CAL_GYROn_ID on the vehicle; default from the "
-                                  "calibration's chip, bus and address)")),
+    options=(INDEX_OPTION, DEVICE_ID_OPTION, AXES_OPTION, ROTATION_OPTION),
 ))
 register(Exporter(
     name="ardupilot-thermal", accepts=("gyrocal-calibration",),
     description="ArduPilot gyro temperature calibration INS_TCALn_* (Mission Planner .param)",
-    render=_render_ardupilot, suffix=".param", options=(_INDEX,),
+    render=_render_ardupilot, suffix=".param", options=(INDEX_OPTION, AXES_OPTION, ROTATION_OPTION),
 ))

@@ -48,7 +48,9 @@ def qgc_params(what: str, rows: Iterable[tuple[str, float, int]]) -> str:
 
 #: PX4 devtype per gyrocal sensor model (PX4-Autopilot ``src/drivers/drv_sensor.h``): the
 #: accelerometer and the gyro of these combined drivers share the ID. PX4 has no driver, hence
-#: no devtype, for the MPU-9255 and the LSM6DSO/LSM6DSOX.
+#: no devtype, for the MPU-9255. Its LSM6DSO driver (src/drivers/imu/st/lsm6dso, which takes the
+#: LSM6DSOX's WHO_AM_I 0x6C) names DRV_IMU_DEVTYPE_ST_LSM6DSO, whose value the drv_sensor.h read
+#: here (PX4-Autopilot 023ba6e) does not yet define: no row until it can be checked.
 PX4_DEVTYPE: Mapping[str, int] = {
     "mpu9250": 0x24,  # DRV_IMU_DEVTYPE_MPU9250
     "mpu6500": 0x36,  # DRV_IMU_DEVTYPE_MPU6500

@@ -5,7 +5,8 @@ stderr.
 
 The accelerometer calibration is fitted to rests from the independent generator
 tests/calib/accel_truth.py; the expected values are the stacks' documented formulas written here
-(PX4 ``(raw − off) ⊙ scale``, ArduPilot ``(raw − offs) ⊙ scal``, Kalibr ``a = M f + b``).
+(PX4 ``(raw − off) ⊙ scale``, ArduPilot ``(raw − offs) ⊙ scal``, each after its driver's remap of
+the chip's axes, :mod:`tests.kit.flight_stacks`; Kalibr ``a = M f + b``).
 """
 
 import json
@@ -20,6 +21,12 @@ from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.kit.cli import main
 from tests.calib import accel_truth
 from tests.kit.c_program import compile_program, needs_gcc
+from tests.kit.flight_stacks import (
+    ardupilot_accel,
+    ardupilot_invensense,
+    px4_accel,
+    px4_invensense,
+)
 
 
 @pytest.fixture(scope="module")
@@ -127,18 +134,18 @@ def test_px4_and_ardupilot_get_offsets_and_scales_per_their_formulas(cal, cal_fi
     p = {r.split("\t")[2]: float(r.split("\t")[3]) for r in out.splitlines()
          if not r.startswith("#")}
     assert sorted(p) == sorted(f"CAL_ACC1_{a}{k}" for a in "XYZ" for k in ("OFF", "SCALE"))
-    off = np.array([p[f"CAL_ACC1_{a}OFF"] for a in "XYZ"])
-    scale = np.array([p[f"CAL_ACC1_{a}SCALE"] for a in "XYZ"])
-    assert np.allclose((raw - off) * scale, diag, rtol=1e-8)
+    # through PX4's MPU-9250 driver, which publishes (x, -y, -z), and Accelerometer::Correct
+    assert np.allclose(px4_accel(p, "mpu9250", raw, n=1), px4_invensense(diag), rtol=1e-8)
     assert "no accelerometer cross-axis terms" in err
     out, err = export(capsys, cal_file, "ardupilot-accel", "--imu-index", "2")
     q = dict((r.split(",")[0], float(r.split(",")[1])) for r in out.splitlines()
              if not r.startswith("#"))
     assert sorted(q) == sorted([f"INS_ACC2OFFS_{a}" for a in "XYZ"]
                                + [f"INS_ACC2SCAL_{a}" for a in "XYZ"])
-    offs = np.array([q[f"INS_ACC2OFFS_{a}"] for a in "XYZ"])
-    scal = np.array([q[f"INS_ACC2SCAL_{a}"] for a in "XYZ"])
-    assert np.allclose((raw - offs) * scal, diag, rtol=1e-8)
+    # through ArduPilot's Invensense backend, which builds (y, x, -z), and
+    # _rotate_and_correct_accel
+    assert np.allclose(ardupilot_accel(q, "mpu9250", raw, n=2), ardupilot_invensense(diag),
+                       rtol=1e-8)
     assert "no accelerometer cross-axis terms" in err
     out, _ = export(capsys, cal_file, "ardupilot-accel")
     assert "INS_ACCOFFS_X," in out and "INS_ACCSCAL_Z," in out

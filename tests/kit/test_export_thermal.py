@@ -13,6 +13,12 @@ from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.thermal import fit_thermal
 from gyrocal.kit.cli import main
 from tests.kit.c_program import compile_program, needs_gcc
+from tests.kit.flight_stacks import (
+    ardupilot_gyro,
+    ardupilot_invensense,
+    px4_gyro,
+    px4_invensense,
+)
 
 A0 = np.array([[1.0132, 0.0, 0.0], [0.0187, 0.9871, 0.0], [-0.0164, 0.0119, 1.0043]])
 A1 = np.array([[3e-4, 0.0, 0.0], [1e-5, -2e-4, 0.0], [0.0, 0.0, 1e-4]])
@@ -102,34 +108,6 @@ def export_text(capsys, tmp_path, cal, fmt, *options):
     return out, err
 
 
-def px4_correct(params, raw, T, n=0):
-    """PX4's TemperatureCompensation::calc_thermal_offsets_3D and Gyroscope::Correct (without
-    CAL_GYRO offsets), written out from PX4-Autopilot's source."""
-    p = {k[len(f"TC_G{n}_"):]: v for k, v in params.items() if k.startswith(f"TC_G{n}_")}
-    t = min(max(T, p["TMIN"]), p["TMAX"])
-    d = t - p["TREF"]
-    off = [p[f"X0_{i}"] + p[f"X1_{i}"] * d + p[f"X2_{i}"] * d**2 + p[f"X3_{i}"] * d**3
-           for i in range(3)]
-    return np.asarray(raw) - off
-
-
-def ardupilot_correct(params, raw, T, n=1):
-    """ArduPilot's TCal::correct_sensor (TEMP_REFERENCE 35 °C, coefficients ×1e6) and then
-    ``gyro -= INS_GYROFFS``, written out from AP_InertialSensor_tempcal.cpp."""
-    t = f"INS_TCAL{n}_"
-    lo, hi = params[t + "TMIN"], params[t + "TMAX"]
-
-    def poly(x):
-        c = [np.array([params[f"{t}GYR{k}_{a}"] for a in "XYZ"]) for k in (1, 2, 3)]
-        return (c[0] + (c[1] + c[2] * x) * x) * x * 1e-6
-
-    temp = min(max(T, lo), hi)
-    cal_temp = min(max(params[f"INS_GYR{n}_CALTEMP"], lo), hi)
-    v = np.asarray(raw) - poly(temp - 35.0) + poly(cal_temp - 35.0)
-    offs = "INS_GYROFFS_" if n == 1 else f"INS_GYR{n}OFFS_"
-    return v - np.array([params[offs + a] for a in "XYZ"])
-
-
 def gyrocal_bias_corrected(raw, T):
     """What gyrocal's model adds before the gain: raw + b(clamp(T)) (the model above)."""
     t = min(max(T, 20.0), 30.0)
@@ -148,8 +126,9 @@ def test_px4_thermal_parameters_remove_the_same_bias(full, capsys, tmp_path):
     assert (params["TC_G1_TMIN"], params["TC_G1_TMAX"], params["TC_G1_TREF"]) == (20, 30, 25)
     raw = np.array([0.3, -0.2, 0.1])
     for T in (15.0, 20.0, 22.5, 27.0, 30.0, 45.0):
-        np.testing.assert_allclose(px4_correct(params, raw, T, n=1),
-                                   gyrocal_bias_corrected(raw, T), atol=1e-7)
+        # PX4's MPU-9250 driver publishes (x, -y, -z): the parameters are in that frame
+        np.testing.assert_allclose(px4_gyro(params, "mpu9250", raw, T, n=1),
+                                   px4_invensense(gyrocal_bias_corrected(raw, T)), atol=1e-7)
     assert "set it to the gyro's device ID" in err and "scale" in err
     out, err = export_text(capsys, tmp_path, make_cal(full), "px4-thermal", "--device-id", "7")
     assert "1\t1\tTC_G0_ID\t7\t6" in out and "device ID" not in err
@@ -162,8 +141,10 @@ def test_ardupilot_thermal_parameters_remove_the_same_bias(capsys, tmp_path):
     assert params["INS_TCAL1_ENABLE"] == 1 and params["INS_GYR1_CALTEMP"] == 25.0
     raw = np.array([0.3, -0.2, 0.1])
     for T in (12.0, 20.0, 24.0, 29.5, 30.0, 50.0):
-        np.testing.assert_allclose(ardupilot_correct(params, raw, T),
-                                   gyrocal_bias_corrected(raw, T), atol=1e-7)
+        # ArduPilot's Invensense backend builds (y, x, -z): the parameters are in that frame
+        np.testing.assert_allclose(ardupilot_gyro(params, "mpu9250", raw, T),
+                                   ardupilot_invensense(gyrocal_bias_corrected(raw, T)),
+                                   atol=1e-7)
     out, _ = export_text(capsys, tmp_path, make_cal(), "ardupilot-thermal", "--imu-index", "2")
     assert "INS_TCAL2_GYR1_X," in out and "INS_GYR2OFFS_X," in out
 
