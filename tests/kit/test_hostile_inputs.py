@@ -419,3 +419,25 @@ def test_dates_outside_the_plottable_range_are_refused_at_import(tmp_path, capsy
     assert main(["history", "import", str(d), "--history", url, "--sensor-label", "imu"]) == 2
     err = capsys.readouterr().err
     assert "'created'" in err and "Traceback" not in err
+
+
+# ---- smaller items -----------------------------------------------------------------------------
+@pytest.mark.parametrize(("damage", "says"), [
+    ("duplicate id", "gimbal.motors lists servo id 1 more than once"),
+    ("underscore", "field 2 is '1_0.005"),
+])
+def test_a_recording_with_a_duplicate_servo_id_or_an_underscored_number(tmp_path, capsys,
+                                                                        damage, says):
+    rec = write_recording(tmp_path / "rec")
+    if damage == "duplicate id":  # was exit 1: tuple.index(x): x not in tuple
+        m = json.loads((rec / "manifest.json").read_text())
+        m["gimbal"]["motors"][1]["id"] = 1
+        (rec / "manifest.json").write_text(json.dumps(m))
+    else:  # float("1_0.005") is 10.005: read silently
+        lines = (rec / "imu.csv").read_text().splitlines()
+        row = lines[5].split(",")
+        row[1] = "1_0.005"
+        lines[5] = ",".join(row)
+        (rec / "imu.csv").write_text("\n".join(lines) + "\n")
+    assert main(["estimate", str(rec)]) == 2
+    assert says in _error(capsys.readouterr().err)
