@@ -520,7 +520,12 @@ class PostgresDialect(Dialect):
     def describe(self, exc: BaseException) -> str | None:
         if not isinstance(exc, self.module.Error):
             return None
-        return f"history server {self.url}: {str(exc).strip().splitlines()[0]}"
+        text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        if isinstance(exc, self.module.OperationalError):  # the server or the link went away
+            return (f"history server {self.url} is gone or unreachable ({text}); a write "
+                    "it cut short stored nothing (its transaction is rolled back): check that "
+                    "the server runs and this host reaches it, then run again")
+        return f"history server {self.url}: {text}"
 
 
 def dialect_for(url: str) -> Dialect:
