@@ -262,6 +262,11 @@ def _mode_check(d: Path, code: int | None, out: str, err: str) -> str | None:
     return None if mode == 0o750 else "silent wrong"
 
 
+def _passed(d: Path, code: int | None, out: str, err: str) -> str | None:
+    """verify of a correct calibration must pass: exit 3 condemns it (a wrong verdict)."""
+    return None if code == 0 else "silent wrong"
+
+
 def _verify_synthetic(d: Path) -> dict:
     subprocess.run([sys.executable, "-m", "gyrocal.kit", "simulate-recording", str(d / "rec")],
                    capture_output=True, check=True)
@@ -313,6 +318,11 @@ def _estimate_of(mistake: str) -> Callable[[Path], dict]:
             rec = _rewrite_imu(_contract(d), lambda r: [r[0], r[1].replace(".", "_0.", 1)
                                                         if r[1][0].isdigit() else r[1],
                                                         *r[2:]])
+        elif mistake == "truth":  # a hand-edited truth: a string for the scale
+            rec = _contract(d)
+            m = json.loads((rec / "manifest.json").read_text())
+            m["truth"] = {"scale": "abc", "bias": [0, 0, 0]}
+            (rec / "manifest.json").write_text(json.dumps(m))
         elif mistake == "duplicate id":
             rec = _contract(d)
             m = json.loads((rec / "manifest.json").read_text())
@@ -459,8 +469,8 @@ CASES: list[Case] = [
     Case("--force", "--out SYMLINK", "refuse", _force_symlink, _symlink_check, timeout_s=180,
          before_jig=True),
     Case("--force", "keeps the user's mode", "ok", _force_mode, _mode_check, timeout_s=180),
-    Case("verify", "own synthetic calibration", "ok", _verify_synthetic),
-    Case("verify", "true calibration, jittered stamps", "ok", _verify_truth_jittered),
+    Case("verify", "own synthetic calibration", "ok", _verify_synthetic, _passed),
+    Case("verify", "true calibration, jittered stamps", "ok", _verify_truth_jittered, _passed),
     Case("verify", "FIFO", "refuse", _verify_path("fifo"), timeout_s=20),
     Case("verify", "/dev/zero", "refuse", _verify_path("zero"), timeout_s=20),
     Case("verify", "symlink loop", "refuse", _verify_path("loop"), timeout_s=20),
@@ -471,6 +481,7 @@ CASES: list[Case] = [
     Case("units", "right recording", "ok", _estimate_of("ok")),
     Case("units", "1_0.5 in imu.csv", "refuse", _estimate_of("underscore"), _no_cal_written),
     Case("units", "two motors, one id", "refuse", _estimate_of("duplicate id"), _no_cal_written),
+    Case("units", "a truth with a string", "ok", _estimate_of("truth")),
     Case("formatters", "$..$ in paths (report)", "ok", _report_dollar, _plots_written),
     Case("formatters", "$..$ in a label (trend --plot)", "ok", _trend_dollar),
     Case("formatters", "escapes in history list", "ok", _history_escape, _no_escape),

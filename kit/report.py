@@ -21,15 +21,23 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
     """
     from gyrocal.kit.thermal import truth_at
 
-    truth = truth_at(truth, cal.temperature_c)
-    lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
-    if cal.matrix is not None:
-        lines += _matrix_rows(cal, truth)
-    else:
-        lines += _diagonal_rows(cal, truth)
-    _verdict(cal, lines)
-    if cal.accelerometer is not None:
-        lines += accelerometer_rows(cal.accelerometer, (truth or {}).get("accelerometer"))
+    try:
+        truth = truth_at(truth, cal.temperature_c)
+        lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
+        if cal.matrix is not None:
+            lines += _matrix_rows(cal, truth)
+        else:
+            lines += _diagonal_rows(cal, truth)
+        _verdict(cal, lines)
+        if cal.accelerometer is not None:
+            lines += accelerometer_rows(cal.accelerometer, (truth or {}).get("accelerometer"))
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError):
+        if truth is None:
+            raise
+        # a hand-edited manifest's truth (a string for a number): the calibration, already
+        # written, is shown without the comparison rather than lost to a traceback
+        return (calibration_table(cal, None) + "\n(the recording manifest's 'truth' is not "
+                "the simulator's numbers: not compared)")
     return "\n".join(lines)
 
 

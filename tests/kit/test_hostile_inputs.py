@@ -441,3 +441,14 @@ def test_a_recording_with_a_duplicate_servo_id_or_an_underscored_number(tmp_path
         (rec / "imu.csv").write_text("\n".join(lines) + "\n")
     assert main(["estimate", str(rec)]) == 2
     assert says in _error(capsys.readouterr().err)
+
+
+def test_a_truth_with_a_string_does_not_lose_the_written_calibration(tmp_path, capsys):
+    # was exit 1 after calibration.json was written (the table compared a string with a float)
+    rec = write_recording(tmp_path / "rec")
+    m = json.loads((rec / "manifest.json").read_text())
+    m["truth"] = {"scale": "abc", "bias": [0, 0, 0]}
+    (rec / "manifest.json").write_text(json.dumps(m))
+    assert main(["estimate", str(rec), "--out", str(tmp_path / "cal.json")]) == 0
+    assert "'truth' is not the simulator's numbers: not compared" in capsys.readouterr().out
+    assert (tmp_path / "cal.json").exists()
