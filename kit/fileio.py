@@ -287,9 +287,10 @@ def check_replaceable_run(out: str | os.PathLike[str], flag: str = "--out") -> N
 
     ``--force`` replaces a directory only when it holds a gyrocal run (:func:`_is_run`) and
     nothing else: every entry at its top level is one gyrocal writes (:data:`RUN_ENTRIES`), a
-    run directory of its own (a plate's sensor, a thermal run), or a staging leftover
-    (``.NAME.*``). The current directory, one of its ancestors, the root, and a symbolic link
-    are refused by name, so a run never starts only to fail at its end.
+    run directory of its own (a plate's sensor, a thermal run), or an atomic write's leftover
+    (``.NAME.*.tmp``); anything else (a ``.git``, notes) is the user's and stops it. The
+    current directory, one of its ancestors, the root, and a symbolic link are refused by name,
+    so a run never starts only to fail at its end.
 
     Raises
     ------
@@ -313,7 +314,8 @@ def check_replaceable_run(out: str | os.PathLike[str], flag: str = "--out") -> N
                          "or calibration.json); --force replaces only a gyrocal run: give a new "
                          "directory")
     foreign = [e.name for e in _entries(d)
-               if e.name not in RUN_ENTRIES and not e.name.startswith(".")
+               if e.name not in RUN_ENTRIES
+               and not (e.name.startswith(".") and e.name.endswith(".tmp"))
                and not (e.is_dir() and not e.is_symlink() and _is_run(e))]
     if foreign:
         names = ", ".join(sorted(foreign)[:3]) + (" ..." if len(foreign) > 3 else "")

@@ -67,6 +67,10 @@ def test_force_refuses_a_run_with_user_files_beside_it_by_name(tmp_path):
     (run / "plots").mkdir()
     (run / ".calibration.json.x.tmp").write_text("")
     check_replaceable_run(run)  # a whole gyrocal run (with a staging leftover) may be replaced
+    (run / ".git").mkdir()
+    with pytest.raises(InputError, match=r"holds \.git, which gyrocal did not write"):
+        check_replaceable_run(run)
+    (run / ".git").rmdir()
     # a plate run: per-sensor run directories and the summary
     plate = tmp_path / "plate"
     _gyrocal_run(plate / "imu0")
