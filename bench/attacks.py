@@ -14,7 +14,8 @@ is ``python -m gyrocal.kit``: whatever ``gyrocal`` package the environment impor
 (``PYTHONPATH`` can point it at another checkout for a before/after table).
 
 Outcome classes: ``ok`` (did its work, checks pass), ``refused`` (clean refusal, before any jig
-motion when the case says so), ``late refusal`` (refused only after the jig ran), ``silent
+motion when the case says so), ``late refusal`` (refused only after the jig ran: a staged run
+``.NAME.new-*`` is left), ``silent
 wrong`` (exit 0/3 where a refusal was due, a wrong verdict, or output that a check finds
 wrong), ``exit 1 / traceback``, ``hang``, ``data lost`` (a file the user had is gone or
 changed), ``bad message`` (a refusal that echoes kilobytes of its input).
@@ -66,7 +67,7 @@ class Case:
     setup: Callable[[Path], dict]
     check: Callable[[Path, int | None, str, str], str | None] | None = None
     timeout_s: float = 60.0
-    before_jig: bool = False  # a refusal must come before the jig moves (quickly)
+    before_jig: bool = False  # a refusal must come before the jig moves (no staged run)
 
 
 @dataclass
@@ -114,9 +115,12 @@ def _judge(case: Case, code: int | None, out: str, err: str, seconds: float) -> 
         return "silent wrong"
     if len(err) > 4000:
         return "bad message"
-    if case.before_jig and seconds > 8.0:
-        return "late refusal"
     return "refused"
+
+
+def _staged(d: Path) -> bool:
+    """Whether a run was staged under ``d`` (``.NAME.new-*``, ``.NAME.old-*``): the jig ran."""
+    return any(".new-" in p.name or ".old-" in p.name for p in d.rglob(".*"))
 
 
 def run_case(case: Case, root: Path) -> Result:
@@ -126,6 +130,8 @@ def run_case(case: Case, root: Path) -> Result:
     code, out, err, seconds = _run(spec["argv"], stdin=spec.get("stdin"),
                                    cwd=spec.get("cwd", d), timeout_s=case.timeout_s)
     outcome = _judge(case, code, out, err, seconds)
+    if case.before_jig and outcome == "refused" and _staged(d):
+        outcome = "late refusal"
     if case.check is not None and outcome not in ("hang", "exit 1 / traceback"):
         outcome = case.check(d, code, out, err) or outcome
     last = (err.strip().splitlines()[-1:] or [""])[0][:110]
