@@ -12,8 +12,14 @@ calibrations 0.
 * damaged configs: ``load_config`` on a damaged ``gyrocal init`` template.
 * damaged calibrations: ``gyrocal export --format json|yaml`` on a damaged Calibration document.
 
-Usage: ``python -m bench faults [--quick] [--signals] [--hogs=N] [--kill9=N]`` (``--quick``: 12
-signal cases, 40 inputs each, 3 kills; ``--signals``: the signal cases only; ``--hogs=N``: N
+* the outside audit's attacks (issue 27, :mod:`bench.attacks`): ``--force`` over user files,
+  ``verify``'s reference and readers, units and axes, mathtext, terminal escapes and C comments,
+  stdin bombs, a TOML key's depth, huge integers and deep nesting, a damaged history, a servo
+  adapter pulled mid-turn; one case per cause, tallied as the audit's table.
+
+Usage: ``python -m bench faults [--quick] [--signals] [--attacks] [--hogs=N] [--kill9=N]``
+(``--quick``: 12 signal cases, 40 inputs each, 3 kills; ``--signals``: the signal cases only;
+``--attacks``: the audit's attacks only; ``--hogs=N``: N
 CPU-bound processes run beside the signal cases, the loaded host on which aborts once left
 torque on; ``--kill9=N``: N SIGKILLs mid-motion, default 20).
 """
@@ -254,7 +260,24 @@ def calibration_matrix(n: int, tmp: Path) -> Counter:
     return tally
 
 
+def print_attacks() -> None:
+    """The audit's attacks (:mod:`bench.attacks`): the table per area, then every case."""
+    from bench.attacks import OUTCOMES, attack_matrix
+
+    t = time.perf_counter()
+    rows, results = attack_matrix()
+    print("\nthe audit's attacks (issue 27), one case per cause; each gyrocal run in a "
+          f"subprocess ({time.perf_counter() - t:.0f} s):")
+    print_table(["area", "cases", *OUTCOMES, "other"], rows)
+    print_table(["area", "case", "expect", "outcome", "exit", "s", "last line of stderr"],
+                [[r.case.area, r.case.name, r.case.expect, r.outcome, str(r.code),
+                  f"{r.seconds:.1f}", r.last] for r in results])
+
+
 def main(argv: list[str]) -> None:
+    if "--attacks" in argv:
+        print_attacks()
+        return
     quick = "--quick" in argv
     hogs = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--hogs=")), 0)
     n = 40 if quick else 200
@@ -265,6 +288,8 @@ def main(argv: list[str]) -> None:
                lambda: fullmodel_matrix(n // 2, tmp)),
               ("damaged configs (load_config)", lambda: config_matrix(2 * n, tmp)),
               ("damaged calibrations (export)", lambda: calibration_matrix(n, tmp)))
+    if "--signals" not in argv:
+        print_attacks()
     for name, fn in inputs if "--signals" not in argv else ():
         t = time.perf_counter()
         c = fn()

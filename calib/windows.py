@@ -66,6 +66,8 @@ __all__ = [
     "extract_observations",
     "trapezoid_weight",
     "weight_grid",
+    "window_mean",
+    "window_rate",
 ]
 
 TWO_PI = 2.0 * np.pi
@@ -175,6 +177,27 @@ def _ramp_mean(t: np.ndarray, th: np.ndarray, lo: float, hi: float) -> float:
     g = np.unique(np.concatenate([t[(t > lo) & (t < hi)], [lo, hi]]))
     v = np.interp(g, t, th)
     return float(np.sum(np.diff(g) * (v[:-1] + v[1:]) / 2) / (hi - lo))
+
+
+def window_mean(t: np.ndarray, x: np.ndarray, corners: tuple[float, float, float, float]
+                ) -> tuple[np.ndarray, float]:
+    """The window's mean of the samples ``x`` (N, k) at times ``t``: ``∫ w x dt / ∫ w dt`` with
+    the trapezoid weight of ``corners`` (module docstring), and the effective number of samples
+    ``(Σ q)² / Σ q²`` of its quadrature weights ``q`` (for the standard error of white noise)."""
+    mean, _, qw = _weighted_mean(t, np.asarray(x, dtype=float).reshape(len(t), -1), corners)
+    n_eff = float(np.sum(qw) ** 2 / np.sum(qw**2)) if qw.size and np.sum(qw**2) > 0 else 0.0
+    return mean, n_eff
+
+
+def window_rate(t: np.ndarray, th: np.ndarray, corners: tuple[float, float, float, float]
+                ) -> float:
+    """The reference rate of a window: the encoder angle's change across it, by parts
+    ``(θ̄_down − θ̄_up) / ∫ w dt`` (module docstring), ``θ̄`` the mean of the piecewise-linear
+    angle over each ramp (its value at the corner when the ramp has no length). No derivative
+    of the angle is taken, so timestamp jitter and quantisation average over the ramps."""
+    a, a2, b2, b = corners
+    wint = 0.5 * ((b - a) + (b2 - a2))
+    return (_ramp_mean(t, th, b2, b) - _ramp_mean(t, th, a, a2)) / wint
 
 
 def _ramp_angle_std(t: np.ndarray, th: np.ndarray, lo: float, hi: float, q: float) -> float:
@@ -523,8 +546,7 @@ def _turn_window(
     _, kind, corners, revs, mean, wint, qw = best
     a, a2, b2, b = corners
     d = seg.direction
-    # Reference: (mean angle over the down ramp - over the up ramp) / ∫w.
-    rate = (_ramp_mean(t, th, b2, b) - _ramp_mean(t, th, a, a2)) / wint
+    rate = window_rate(t, th, corners)
     if np.sign(rate) != d:
         raise CalibInputError(f"segment {seg.index}: reference rate has the wrong sign")
     if kind == "rest-to-rest":

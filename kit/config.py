@@ -336,6 +336,48 @@ def _merge(base: Config, data: Mapping[str, Any], source: str) -> Config:
     return cfg
 
 
+#: Most parts a key of gyrocal.toml may have (``[section]`` and ``key``, or ``section.key``:
+#: two; a little room for quoting). A dotted key of tens of thousands of parts costs the TOML
+#: parser gigabytes, so it is refused before parsing.
+MAX_KEY_PARTS = 8
+
+
+def _check_key_depth(text: str, where: str) -> None:
+    """Refuse a key (a table header or the left of ``=``) of more than :data:`MAX_KEY_PARTS`
+    dot-separated parts, by line, before the TOML parser sees it. Dots inside quotes and the
+    lines of multi-line strings are not counted.
+
+    Raises
+    ------
+    InputError
+    """
+    in_multiline: str | None = None
+    for number, line in enumerate(text.splitlines(), 1):
+        if in_multiline is not None:
+            if line.count(in_multiline) % 2 == 1:
+                in_multiline = None
+            continue
+        key, quote, dots = line, None, 0
+        if "=" in line and not line.lstrip().startswith("["):
+            key = line.split("=", 1)[0]
+            value = line.split("=", 1)[1]
+            for delim in ('"""', "\'\'\'"):
+                if value.count(delim) % 2 == 1:
+                    in_multiline = delim
+        for ch in key:
+            if quote is not None:
+                quote = None if ch == quote else quote
+            elif ch in "\"'":
+                quote = ch
+            elif ch == "#":
+                break
+            elif ch == ".":
+                dots += 1
+        if dots + 1 > MAX_KEY_PARTS:
+            raise InputError(f"{where}, line {number}: a key of {dots + 1} dotted parts; "
+                             f"gyrocal.toml's keys have at most {MAX_KEY_PARTS} (section.key)")
+
+
 def load_config(path: str | os.PathLike[str] | None) -> Config:
     """Read ``path`` (TOML) over the defaults; None gives the defaults.
 
@@ -356,7 +398,11 @@ def load_config(path: str | os.PathLike[str] | None) -> Config:
         if p.stat().st_size > _MAX_CONFIG_BYTES:
             raise InputError(f"config file {p} is larger than {_MAX_CONFIG_BYTES} bytes: not a "
                              "gyrocal.toml")
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
+        _check_key_depth(text, str(p))
+        data = tomllib.loads(text)
+    except InputError:
+        raise
     except FileNotFoundError:
         raise InputError(f"config file {p} not found; `gyrocal init` writes one") from None
     except UnicodeDecodeError as exc:

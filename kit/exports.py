@@ -17,10 +17,8 @@ from __future__ import annotations
 import json
 import math
 import re
-import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from gyrocal.calib.errors import CalibrationFormatError
@@ -144,29 +142,56 @@ def validate_document(doc: Any, where: str = "the document") -> str:
 
 
 def read_json(path: str, what: str = "document") -> Any:
-    """The JSON value in the file ``path`` (``-``: standard input).
+    """The JSON value in the file ``path`` (``-``: standard input), read through the checked
+    reader (:func:`gyrocal.kit.fileio.read_input_bytes`: a regular file, readable, bounded)
+    and parsed within bounds: an integer of more than :data:`MAX_INT_DIGITS` digits, nesting
+    deeper than Python's recursion allows, or a key given twice in one object (``bias`` twice:
+    which one was meant?) is refused.
 
     Raises
     ------
     InputError
-        Naming ``what`` and ``path``: no such file, unreadable, or not JSON.
+        Naming ``what`` and ``path``: no such file, unreadable, too large, or not JSON.
     """
-    if path == "-":
-        text, where = sys.stdin.read(), f"{what} on standard input"
-    else:
-        p = Path(path)
-        where = f"{what} {p}"
-        if not p.is_file():
-            raise InputError(f"{where} does not exist or is not a file; give a gyrocal JSON "
-                             "document")
-        try:
-            text = p.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read {where}: {exc}") from None
+    from gyrocal.kit.fileio import read_input_bytes
+
+    data, where = read_input_bytes(path, what)
     try:
-        return json.loads(text)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{where} is not UTF-8 text (byte {exc.start}); give a gyrocal JSON "
+                         "document") from None
+    try:
+        return json.loads(text, parse_int=_bounded_int, object_pairs_hook=_unique_keys)
     except json.JSONDecodeError as exc:
         raise InputError(f"{where} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"{where}: arrays or objects nested too deeply; not a gyrocal "
+                         "document") from None
+    except ValueError as exc:  # _bounded_int, _unique_keys
+        raise InputError(f"{where}: {exc}") from None
+
+
+#: Most digits an integer in a gyrocal document may have (its integers are versions, counts and
+#: servo ids; Python refuses more than 4300 digits with an error of its own).
+MAX_INT_DIGITS = 20
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_INT_DIGITS:
+        raise ValueError(f"an integer of {digits} digits; a gyrocal document has none longer "
+                         f"than {MAX_INT_DIGITS}")
+    return int(text)
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise ValueError(f"the key {k[:40]!r} is given twice in one object; keep one")
+        out[k] = v
+    return out
 
 
 def load_document(path: str, kind: str, what: str) -> Any:
@@ -926,7 +951,7 @@ def _c_float(x: float) -> str:
 def _c_comment(text: Any) -> str:
     """Text that stays inside a C block comment: one line (:func:`_one_line`), no ``*/``, and no
     ``??`` (a trigraph under ``-std=c99``)."""
-    return _one_line(text).replace("*/", "* /").replace("??", "? ?")
+    return _one_line(text).replace("*/", "* /").replace("/*", "/ *").replace("??", "? ?")
 
 
 _AXES = "XYZ"

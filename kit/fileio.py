@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import sys
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -18,8 +19,11 @@ __all__ = [
     "built_beside",
     "atomic_write_json",
     "atomic_write_text",
+    "bounded_lines",
+    "check_replaceable_run",
     "emit_text",
     "make_output_dir",
+    "read_input_bytes",
     "refuse_existing",
     "replace_dir",
     "staging_dir",
@@ -221,6 +225,7 @@ def replace_dir(staging: str | os.PathLike[str], dest: str | os.PathLike[str]) -
     if d.exists() or d.is_symlink():
         if not d.is_dir() or d.is_symlink():
             raise InputError(f"cannot replace {d}: it is not a directory; give another --out")
+        os.chmod(src, stat.S_IMODE(d.stat().st_mode))  # the user's permissions, not mkdtemp's
         old = Path(tempfile.mkdtemp(prefix=f".{d.name}.old-", dir=d.parent))
         os.rename(d, old / d.name)
     try:
@@ -253,3 +258,160 @@ def built_beside(work: Path, out: Path) -> Iterator[Path]:
     if work != out:
         with shielded():
             replace_dir(work, out)
+
+
+#: What a gyrocal run directory holds at its top level (``gyrocal calibrate``, a plate run's
+#: ``summary.json``, the emulated jig's ``sim-state.json``, the report); a sensor's or a thermal
+#: run's own directory inside it is a gyrocal run too (:func:`_is_run`).
+RUN_ENTRIES = frozenset({"calibration.json", "recording", "report.html", "plots", "summary.json",
+                         "sim-state.json"})
+
+
+def _is_run(d: Path) -> bool:
+    """Whether ``d`` holds a gyrocal run: a recording manifest (``recording/manifest.json`` of
+    format ``gyrocal-recording``) or a ``calibration.json`` of format ``gyrocal-calibration``."""
+    for f, kind in ((d / "recording" / "manifest.json", "gyrocal-recording"),
+                    (d / "calibration.json", "gyrocal-calibration")):
+        try:
+            if f.is_file() and not f.is_symlink() and f.stat().st_size < _MAX_DOCUMENT_BYTES:
+                doc = json.loads(f.read_text(encoding="utf-8"))
+                if isinstance(doc, dict) and doc.get("format") == kind:
+                    return True
+        except (OSError, ValueError, RecursionError):
+            continue
+    return False
+
+
+def check_replaceable_run(out: str | os.PathLike[str], flag: str = "--out") -> None:
+    """Refuse, before any work, an output directory that ``--force`` may not replace.
+
+    ``--force`` replaces a directory only when it holds a gyrocal run (:func:`_is_run`) and
+    nothing else: every entry at its top level is one gyrocal writes (:data:`RUN_ENTRIES`), a
+    run directory of its own (a plate's sensor, a thermal run), or an atomic write's leftover
+    (``.NAME.*.tmp``); anything else (a ``.git``, notes) is the user's and stops it. The
+    current directory, one of its ancestors, the root, and a symbolic link are refused by name,
+    so a run never starts only to fail at its end.
+
+    Raises
+    ------
+    InputError
+        Naming ``flag``, the directory and (up to three of) the entries gyrocal did not write.
+    """
+    d = Path(out)
+    if d.is_symlink():
+        raise InputError(f"{flag} {out} is a symbolic link; --force replaces a run directory "
+                         f"itself: give the directory it points to ({os.path.realpath(d)}) or a "
+                         "new name")
+    if not d.is_dir():
+        return
+    real, cwd = d.resolve(), Path.cwd().resolve()
+    if real == cwd or real in cwd.parents or real == Path(real.anchor):
+        raise InputError(f"{flag} {out} is the current directory or one above it; --force "
+                         "replaces a run directory as a whole: give the run's own directory "
+                         f"(e.g. {flag} run1)")
+    if not _is_run(d) and not any(_is_run(e) for e in _entries(d) if e.is_dir()):
+        raise InputError(f"{flag} {out} does not hold a gyrocal run (no recording/manifest.json "
+                         "or calibration.json); --force replaces only a gyrocal run: give a new "
+                         "directory")
+    foreign = [e.name for e in _entries(d)
+               if e.name not in RUN_ENTRIES
+               and not (e.name.startswith(".") and e.name.endswith(".tmp"))
+               and not (e.is_dir() and not e.is_symlink() and _is_run(e))]
+    if foreign:
+        names = ", ".join(sorted(foreign)[:3]) + (" ..." if len(foreign) > 3 else "")
+        raise InputError(f"{flag} {out} holds {names}, which gyrocal did not write; --force "
+                         "replaces only a gyrocal run: move them away or give another "
+                         f"{flag}")
+
+
+def _entries(d: Path) -> list[Path]:
+    try:
+        return sorted(d.iterdir())
+    except OSError as exc:
+        raise InputError(f"cannot list {d}: {exc.strerror or exc}") from None
+
+
+#: Largest document (calibration, noise, verification JSON) gyrocal reads, bytes: a calibration
+#: is a few kB, a thermal one with its runs a few hundred.
+_MAX_DOCUMENT_BYTES = 16 << 20
+#: Longest line of a CSV stream on standard input (``gyrocal apply -``), characters: a row of
+#: five numbers is under 200.
+MAX_LINE_CHARS = 4096
+
+
+def read_input_bytes(path: str, what: str, limit: int = _MAX_DOCUMENT_BYTES) -> tuple[bytes, str]:
+    """The bytes of the input file ``path`` (``-``: standard input), checked as every command's
+    inputs are: a regular file (not a FIFO, device or directory), readable, at most ``limit``
+    bytes (standard input: read up to the limit, no further). Returns ``(data, where)``,
+    ``where`` naming the input for messages.
+
+    Raises
+    ------
+    InputError
+        Naming ``what`` and ``path`` and what to do; never echoing the contents.
+    """
+    if path == "-":
+        where = f"{what} on standard input"
+        data = _read_stdin(limit + 1)
+    else:
+        p = Path(path)
+        where = f"{what} {p}"
+        try:
+            st = p.stat()
+        except FileNotFoundError:
+            raise InputError(f"{where} does not exist; give a gyrocal JSON document") from None
+        except OSError as exc:  # a symbolic link loop, no permission on a directory above
+            raise InputError(f"cannot read {where}: {exc.strerror or exc}") from None
+        if stat.S_ISDIR(st.st_mode):
+            raise InputError(f"{where} is a directory; give the file itself")
+        if not stat.S_ISREG(st.st_mode):
+            raise InputError(f"{where} is not a regular file (a FIFO, device or socket); give "
+                             "the path of a file")
+        if st.st_size > limit:
+            raise InputError(f"{where} is {st.st_size} bytes, more than the {limit} a gyrocal "
+                             "document can be")
+        try:
+            with open(p, "rb") as fh:
+                data = fh.read(limit + 1)
+        except OSError as exc:
+            raise InputError(f"cannot read {where}: {exc.strerror or exc}") from None
+    if len(data) > limit:
+        raise InputError(f"{where} is more than {limit} bytes, more than a gyrocal document can "
+                         "be")
+    return data, where
+
+
+def _read_stdin(n: int) -> bytes:
+    stream = getattr(sys.stdin, "buffer", None)
+    if stream is not None:
+        return stream.read(n)
+    return sys.stdin.read(n).encode("utf-8")
+
+
+def bounded_lines(stream: Any, what: str = "standard input",
+                  max_line: int = MAX_LINE_CHARS) -> Iterator[str]:
+    """The lines of the text ``stream`` as they arrive, each at most ``max_line`` characters.
+
+    One line is held at a time, so an endless stream (a live sensor through ``gyrocal apply -``)
+    runs in constant memory; a line longer than ``max_line`` (``/dev/zero``, a binary file) is
+    refused instead of being read whole.
+
+    Raises
+    ------
+    InputError
+        At the first line longer than ``max_line``, by its number (not its text).
+    """
+    number = 0
+    while True:
+        try:
+            line = stream.readline(max_line + 1)
+        except UnicodeDecodeError as exc:
+            raise InputError(f"{what}, line {number + 1}: not text ({exc.reason}); give CSV "
+                             "rows") from None
+        if not line:
+            return
+        number += 1
+        if len(line) > max_line and not line.endswith("\n"):
+            raise InputError(f"{what}, line {number}: longer than {max_line} characters; give "
+                             "CSV rows (t,gx,gy,gz,temp)")
+        yield line

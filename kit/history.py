@@ -228,7 +228,31 @@ def _utc_text(when: Any) -> str | None:
         return None
     if t.tzinfo is None:
         t = t.replace(tzinfo=UTC)
-    return t.astimezone(UTC).isoformat(timespec="seconds")
+    try:
+        return t.astimezone(UTC).isoformat(timespec="seconds")
+    except OverflowError:  # an offset that carries it past year 1 or 9999
+        return None
+
+
+#: The ``created`` times a stored calibration may have, UTC ISO-8601 (inclusive, exclusive):
+#: no MEMS gyro was calibrated before 1970, and a time past 2100 is a wrong clock or a typing
+#: slip; both would stretch the trend's time axis (and, at ``datetime``'s own edges, break it).
+CREATED_RANGE = ("1970-01-01T00:00:00+00:00", "2100-01-01T00:00:00+00:00")
+
+
+def _created_problem(created: Any) -> str | None:
+    """Why a document's ``created`` cannot be stored, or None (absent is allowed)."""
+    if created is None:
+        return None
+    text = _utc_text(created)
+    if text is None:
+        return (f"its 'created' {str(created)[:60]!r} is not an ISO-8601 time in the range of "
+                "dates (e.g. 2026-03-01T12:00:00Z)")
+    if not CREATED_RANGE[0] <= text < CREATED_RANGE[1]:
+        return (f"its 'created' {text} is outside {CREATED_RANGE[0][:4]}..."
+                f"{int(CREATED_RANGE[1][:4]) - 1}: a wrong clock or a typing slip; the trend "
+                "cannot place it in time")
+    return None
 
 
 def _now() -> str:
@@ -496,7 +520,12 @@ class PostgresDialect(Dialect):
     def describe(self, exc: BaseException) -> str | None:
         if not isinstance(exc, self.module.Error):
             return None
-        return f"history server {self.url}: {str(exc).strip().splitlines()[0]}"
+        text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        if isinstance(exc, self.module.OperationalError):  # the server or the link went away
+            return (f"history server {self.url} is gone or unreachable ({text}); a write "
+                    "it cut short stored nothing (its transaction is rolled back): check that "
+                    "the server runs and this host reaches it, then run again")
+        return f"history server {self.url}: {text}"
 
 
 def dialect_for(url: str) -> Dialect:
@@ -522,6 +551,9 @@ class HistoryStore:
         self._conn = conn
         self.dialect = dialect
         self.url = url if dialect.name == "sqlite" else getattr(dialect, "url", "postgresql")
+        #: One line per damaged row met while reading (skipped, or listed without the damaged
+        #: field), for the command to print: a bad row never hides the others.
+        self.damaged: list[str] = []
 
     def __enter__(self) -> HistoryStore:
         return self
@@ -652,6 +684,9 @@ class HistoryStore:
             raise HistoryError(f"not valid JSON: {str(exc)[:120]}") from None
         except CalibrationFormatError as exc:
             raise HistoryError(str(exc)) from None
+        problem = _created_problem(cal.created)
+        if problem is not None:
+            raise HistoryError(problem)
         identity = sensor_identity(cal.sensor)
         c = cal.consistency
         verdict = "untested" if c is None else "consistent" if c.ok else "inconsistent"
@@ -688,11 +723,32 @@ class HistoryStore:
         return int(self._read("count")[0][0])
 
     def sensors(self) -> list[SensorSummary]:
-        """Every sensor with the count and span of its calibrations, by label."""
-        return [SensorSummary(label, model, json.loads(ident), int(n), first, last,
-                              None if tmin is None else float(tmin),
-                              None if tmax is None else float(tmax))
-                for label, model, ident, n, first, last, tmin, tmax in self._read("sensors")]
+        """Every sensor with the count and span of its calibrations, by label (a sensor whose
+        stored identity is damaged is listed without it, and named in :attr:`damaged`)."""
+        out = []
+        for label, model, ident, n, first, last, tmin, tmax in self._read("sensors"):
+            identity = _json_object(ident)
+            if identity is None:
+                self.damaged.append(f"sensor {label!r}: its stored identity is not a JSON "
+                                    "object; listed without it")
+                identity = {}
+            out.append(SensorSummary(label, model, identity, int(n), first, last,
+                                     None if tmin is None else float(tmin),
+                                     None if tmax is None else float(tmax)))
+        return out
+
+    def _records(self, rows: Sequence[Sequence[Any]]) -> list[HistoryRecord]:
+        """The readable records of ``rows``; each damaged one skipped and named in
+        :attr:`damaged`."""
+        out = []
+        for row in rows:
+            problem = _damage(row)
+            if problem is None:
+                out.append(HistoryRecord._from_row(row))
+            else:
+                self.damaged.append(f"calibration #{row[0]} of sensor {row[1]!r} is damaged "
+                                    f"({problem}); skipped")
+        return out
 
     def records(self, label: str | None = None) -> list[HistoryRecord]:
         """The calibrations of sensor ``label`` (all sensors if None), oldest first.
@@ -703,13 +759,13 @@ class HistoryStore:
             If ``label`` is given and no such sensor is stored (the message lists the labels).
         """
         if label is None:
-            return [HistoryRecord._from_row(r) for r in self._read("all_records")]
+            return self._records(self._read("all_records"))
         rows = self._read("records_of", (label,))
         if not rows and not self._read("sensor_by_label", (label,)):
             known = ", ".join(repr(s.label) for s in self.sensors()) or "none yet"
             raise HistoryError(f"no sensor {label!r} in the history {self.url} (sensors: "
                                f"{known})")
-        return [HistoryRecord._from_row(r) for r in rows]
+        return self._records(rows)
 
     def get(self, record_id: int) -> HistoryRecord:
         """The record numbered ``record_id``.
@@ -723,7 +779,49 @@ class HistoryStore:
         if not rows:
             raise HistoryError(f"no calibration #{record_id} in the history {self.url}; "
                                "'gyrocal history list SENSOR' shows the numbers")
+        problem = _damage(rows[0])
+        if problem is not None:
+            raise HistoryError(f"calibration #{record_id} in the history {self.url} is damaged "
+                               f"({problem}); the other records are readable")
         return HistoryRecord._from_row(rows[0])
+
+
+def _json_object(text: Any) -> dict[str, Any] | None:
+    """``text`` parsed as a JSON object, or None if it is not one."""
+    try:
+        value = json.loads(text)
+    except (TypeError, ValueError, RecursionError):
+        return None
+    return value if isinstance(value, dict) else None
+
+
+def _damage(row: Sequence[Any]) -> str | None:
+    """What is wrong with a stored calibration row, or None: its identity and document must be
+    JSON objects (a row written by another program, or a damaged file, may not be)."""
+    if len(row) != 14:
+        return f"{len(row)} columns, not 14"
+    if _json_object(row[3]) is None:
+        return "its sensor identity is not a JSON object"
+    doc = _json_object(row[13])
+    if doc is None:
+        return "its document is not a JSON object"
+    m = doc.get("matrix")
+    if m is not None and not (isinstance(m, list) and len(m) == 3 and all(
+            isinstance(r, list) and len(r) == 3
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+            for r in m)):
+        return "its document's 'matrix' is not 3 × 3 numbers"
+    for key in ("scale", "bias"):
+        v = doc.get(key)
+        if not (isinstance(v, list) and len(v) == 3
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+            return f"its document's {key!r} is not 3 numbers"
+    try:
+        int(row[0]), int(row[9])
+        None if row[6] is None else float(row[6])
+    except (TypeError, ValueError):
+        return "a number column holds something else"
+    return None
 
 
 def open_history(url: str, *, create: bool = True,

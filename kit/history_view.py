@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import statistics
+import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -53,7 +54,17 @@ def _fmt(x: float | None, spec: str) -> str:
     return "—" if x is None else format(x, spec)
 
 
+def printable(text: str) -> str:
+    """``text`` safe to print on a terminal: control and format characters (an escape sequence's
+    ESC, a carriage return, a bidirectional override) shown as ``\\xNN`` / ``\\uNNNN`` escapes
+    instead of acting on the terminal. A stored label, method or source is user text."""
+    return "".join(ch if unicodedata.category(ch)[0] != "C" else
+                   (f"\\x{ord(ch):02x}" if ord(ch) < 0x100 else f"\\u{ord(ch):04x}")
+                   for ch in str(text))
+
+
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    rows = [[printable(c) for c in r] for r in rows]
     widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
               for i, h in enumerate(headers)]
     lines = ["  ".join(h.ljust(w) for h, w in zip(headers, widths, strict=True)).rstrip()]
@@ -91,7 +102,8 @@ def show_text(record: HistoryRecord, *, as_json: bool = False) -> str:
     if as_json:
         return _dumps({**record.summary(), "document": json.loads(record.document)})
     s = record.summary()
-    lines = [f"{k}: {'—' if v is None else v}" for k, v in s.items() if k != "identity"]
+    lines = [printable(f"{k}: {'—' if v is None else v}") for k, v in s.items()
+             if k != "identity"]
     lines.insert(3, f"identity: {json.dumps(record.identity, sort_keys=True)}")
     text = record.document if record.document.endswith("\n") else record.document + "\n"
     return "\n".join(lines) + "\n\n" + text
@@ -221,7 +233,7 @@ def trend_plot(records: Sequence[HistoryRecord], path: str | os.PathLike[str], *
         Without matplotlib (saying how to install it), or if ``path`` exists without ``force``.
     """
     from gyrocal.kit.fileio import refuse_existing
-    from gyrocal.kit.plots import require_matplotlib, save_png
+    from gyrocal.kit.plots import literal, require_matplotlib, save_png
 
     refuse_existing([path], force=force)
     plt = require_matplotlib()
@@ -251,7 +263,8 @@ def trend_plot(records: Sequence[HistoryRecord], path: str | os.PathLike[str], *
             ax.grid(True, alpha=0.3)
             if c == 0:
                 ax.legend(fontsize=7)
-    fig.suptitle(f"calibration history of {records[0].label} ({len(rows)} calibrations)")
+    fig.suptitle(f"calibration history of {literal(records[0].label)} ({len(rows)} "
+                 "calibrations)")
     fig.autofmt_xdate()
     fig.tight_layout()
     return save_png(fig, path, force=force)

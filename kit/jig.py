@@ -507,45 +507,71 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
     from gyrocal.drivers.signals import TerminatedBySignal, shielded
     from gyrocal.kit.busload import check_bus_loads
     from gyrocal.kit.errors import InterruptedRun
-    from gyrocal.kit.fileio import atomic_write_json
 
     # before anything is opened: a bus that cannot carry the plan's samples is refused
     for warning in check_bus_loads(cfg.imus(), cfg["gimbal"]["sample_hz"]):
         print(f"gyrocal: warning: {warning}", file=sys.stderr)
     jig = Jig(cfg, args, several=True)
     interrupted: BaseException | None = None
+    failed: BaseException | None = None
     try:
         record_protocol(cfg, args, jig, rec_dir, extend)
     except (KeyboardInterrupt, TerminatedBySignal) as exc:
         interrupted = exc
+    except Exception as exc:
+        failed = exc
+        raise
     finally:
         with shielded():
             jig.close()
             if jig.sim is not None:
-                atomic_write_json(out / "sim-state.json",
-                                  {"servos": jig.sim.servo_state()}, force=True)
+                _write_sim_state(jig, out, quietly=failed is not None or interrupted is not None)
+            if failed is not None:  # said before the error itself (the last line)
+                print(f"gyrocal: note: {_kept(jig, rec_dir)}", file=sys.stderr)
     if interrupted is not None:
         signum = getattr(interrupted, "signum", 2)
         what = {2: "interrupted", 15: "terminated", 1: "hung up"}.get(signum, "stopped")
-        begun = [d for d in recording_dirs(jig, rec_dir) if (d / "manifest.json").exists()]
-        kept = (f"the recording in {', '.join(map(str, begun))} is kept, marked incomplete"
-                if begun else "no recording was begun")
-        raise InterruptedRun(f"{what}: servos stopped, torque off; {kept}", signum)
+        raise InterruptedRun(f"{what}: servos stopped, torque off; {_kept(jig, rec_dir)}",
+                             signum)
     return jig
+
+
+def _kept(jig: Any, rec_dir: Path) -> str:
+    """What became of a stopped run's recording(s), for its message."""
+    begun = [d for d in recording_dirs(jig, rec_dir) if (d / "manifest.json").exists()]
+    return (f"the recording in {', '.join(map(str, begun))} is kept, marked incomplete"
+            if begun else "no recording was begun")
+
+
+def _write_sim_state(jig: Any, out: Path, *, quietly: bool) -> None:
+    """``out/sim-state.json``; with ``quietly`` (the run already failed) a failure to write it
+    is a warning, so the run's own failure (a full disk under the recording) stays the error."""
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.fileio import atomic_write_json
+
+    try:
+        atomic_write_json(out / "sim-state.json", {"servos": jig.sim.servo_state()}, force=True)
+    except InputError as exc:
+        if not quietly:
+            raise
+        print(f"gyrocal: warning: {exc}", file=sys.stderr)
 
 
 def output_dir(args: argparse.Namespace) -> tuple[Path, Path]:
     """``(out, work)``: the run's directory, and where this run writes.
 
-    A new directory is written in place. With ``--force`` over an existing run, the new run is
+    A new directory is written in place. With ``--force`` over an existing run (and only over a
+    gyrocal run: :func:`~gyrocal.kit.fileio.check_replaceable_run`), the new run is
     built in a staging directory beside it and swapped in only when it has finished
     (:func:`~gyrocal.kit.fileio.replace_dir`), so the old calibration never sits next to a new
     recording.
     """
     from gyrocal.kit.errors import OutputExistsError
-    from gyrocal.kit.fileio import make_output_dir, staging_dir
+    from gyrocal.kit.fileio import check_replaceable_run, make_output_dir, staging_dir
 
     out = Path(args.out or datetime.now().strftime("gyrocal-%Y%m%d-%H%M%S"))
+    if args.force:
+        check_replaceable_run(out)  # before the jig moves, not after the run
     if out.is_dir() and any(out.iterdir()):
         if not args.force:
             raise OutputExistsError(f"{out} already exists; pass --force to replace the run "

@@ -307,12 +307,18 @@ def check_plausible_noise(density: Any, *, allow: bool = False) -> list[str]:
 
 
 def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = None, *,
-                    allow: bool = False) -> list[str]:
+                    allow: bool = False, recording: Recording | None = None,
+                    extracted: ExtractedWindows | None = None) -> list[str]:
     """Refuse a calibration no real gyro can have: a unit or setup mistake.
 
     A scale factor outside :data:`PLAUSIBLE_SCALE` (of g = K (m + b), the paper's model; for
-    v2 the diagonal of the matrix) or a bias beyond the gyro's full scale (the recording's
-    ``sensor.full_scale_dps``) means the readings or the reference are in the wrong units.
+    v2 the diagonal of the matrix: the gyro's magnitude against the encoder rate) or a bias
+    beyond the gyro's full scale (the recording's ``sensor.full_scale_dps``) means the readings
+    or the reference are in the wrong units. With the ``recording`` and its windows
+    (``extracted``), on every protocol, also: each turn's encoder rate against the speed its
+    plan commanded (:func:`_turn_rate_problems`: angles in degrees, a wrong velocity unit), and
+    each servo's axis in the sensor frame against the axis the manifest names
+    (:func:`_axis_problems`: swapped or negated gyro columns, a sensor mounted otherwise).
 
     Parameters
     ----------
@@ -321,6 +327,10 @@ def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = Non
         The recording's sensor section (its ``full_scale_dps``).
     allow : bool
         Return the problems instead of raising (``--allow-implausible``).
+    recording : Recording, optional
+        The recording ``cal`` was fitted to (its segments and manifest).
+    extracted : ExtractedWindows, optional
+        Its windows (:func:`extract_recording`).
 
     Returns
     -------
@@ -357,8 +367,80 @@ def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = Non
             f"bias {values} rad/s beyond the gyro's full scale (±{fs_dps:g}°/s = "
             f"±{fs:.3g} rad/s): check the gyro's units (rad/s) and the sensitivity the "
             "readings were converted with")
+    if recording is not None and extracted is not None:
+        problems += _turn_rate_problems(recording, extracted)
+        problems += _axis_problems(recording, extracted, cal)
     if problems and not allow:
         raise EstimationError(
             "implausible calibration, not written: " + "; ".join(problems)
             + ". If the sensor really is like this, pass --allow-implausible.")
     return problems
+
+
+#: A turn's steady encoder rate must be within this factor of the speed its plan commanded
+#: (a servo's velocity loop holds a few percent; 57 is degrees for radians).
+_PLAN_RATE_FACTOR = 1.5
+#: A rest-to-rest window (from still time before a turn to still time after it) averages the
+#: ramps and the still margins too: its rate is at least this fraction of the commanded speed
+#: (the paper's one-turn protocol at 60 °/s with 3 s waits gives about 0.6).
+_REST_TO_REST_LOW = 0.25
+
+
+def _turn_rate_problems(rec: Recording, ex: ExtractedWindows) -> list[str]:
+    """Turns whose reference rate (the encoder angle change over the window) is not the speed
+    the plan commanded (the segment's ``speed``, rad/s): encoder angles in degrees, or a
+    velocity unit the driver converted wrongly. One line per distinct cause."""
+    speeds = {s.index: float(s.speed) for s in rec.segments
+              if s.kind == "rotate" and math.isfinite(s.speed) and s.speed > 0}
+    ratios = [(w, abs(w.rate) / speeds[w.segment]) for w in ex.windows if w.segment in speeds]
+    # a rest-to-rest window's mean includes the ramps and still margins: only slower
+    bad = [(w, r) for w, r in ratios if not (_REST_TO_REST_LOW if w.kind == "rest-to-rest"
+                                            else 1 / _PLAN_RATE_FACTOR) <= r <= _PLAN_RATE_FACTOR]
+    if not bad:
+        return []
+    w, r = bad[0]
+    deg = 180.0 / math.pi
+    cause = ("the encoder angles are probably in degrees where Recording v1 wants radians "
+             "(encoder.csv angle)" if abs(math.log(r / deg)) < math.log(1.5) else
+             "check the encoder's angle unit (radians) and the speed unit of segments.csv "
+             "(rad/s)")
+    return [f"{len(bad)} of {len(ratios)} turns ran at a rate the plan did not command (segment "
+            f"{w.segment}, servo {w.motor}: the encoders say {abs(w.rate):.4g} rad/s, the plan "
+            f"{speeds[w.segment]:.4g} rad/s): {cause}"]
+
+
+def _axis_problems(rec: Recording, ex: ExtractedWindows, cal: GyroCalibration) -> list[str]:
+    """Servos whose axis in the sensor frame (estimated by the fit, or fitted to their windows
+    under ``cal``) is nearest another signed axis than the one the manifest names
+    (``gimbal.motors[].axis``): the gyro's columns swapped or negated, or the sensor mounted
+    otherwise than the manifest says."""
+    from gyrocal.kit.report_plots import nominal_axis, servo_axes
+
+    named: dict[int, str] = {}
+    for m in (rec.manifest.get("gimbal") or {}).get("motors") or []:
+        if isinstance(m, Mapping) and isinstance(m.get("id"), int) \
+                and isinstance(m.get("axis"), str):
+            named[int(m["id"])] = m["axis"]
+    motors = sorted({int(w.motor) for w in ex.windows if w.motor is not None} & set(named))
+    try:
+        found = servo_axes(motors, cal, rec.manifest, ex.windows)
+        nominal = {m: nominal_axis(named[m]) for m in motors}
+    except InputError:
+        return []  # a malformed name or axis is reported where it is read
+    wrong = []
+    for m in motors:
+        if found[m].source == "nominal":
+            continue
+        u = np.asarray(found[m].axis, dtype=float)
+        j = int(np.argmax(np.abs(u)))
+        near = np.zeros(3)
+        near[j] = np.sign(u[j])
+        if not np.array_equal(near, nominal[m]):
+            name = ("+" if near[j] > 0 else "-") + "xyz"[j]
+            wrong.append(f"servo {m} turns about {name} in the sensor frame, the manifest says "
+                         f"{named[m]}")
+    if not wrong:
+        return []
+    return ["; ".join(wrong) + ": check that imu.csv's gx,gy,gz are the sensor's x, y, z in "
+            "that order and sign (a driver's axis map), and that the sensor is mounted as "
+            "gimbal.motors[].axis says"]

@@ -207,14 +207,22 @@ def calibrate_plate(dirs: Sequence[Path], names: Sequence[str], models: Sequence
         try:
             est = estimate_recording(rec, method, source=source)
             cal = est.calibration
-            check_plausible(cal, rec.sensor, allow=allow_implausible)
+            check_plausible(cal, rec.sensor, allow=allow_implausible, recording=rec,
+                            extracted=est.extracted)
             atomic_write_text(d / "calibration.json", cal.to_json() + "\n")
             if report:
-                from gyrocal.kit.report_html import write_run_report
+                import sys
 
-                write_run_report(rec, cal, est.extracted, d / "plots", title=f"{title} {name}",
-                                 html_path=d / "report.html", force=force,
-                                 calibration=str(Path(source).parent / "calibration.json"))
+                from gyrocal.kit.report_html import write_optional_report
+
+                failed = write_optional_report(rec, cal, est.extracted, d / "plots",
+                                               title=f"{title} {name}",
+                                               html_path=d / "report.html", force=force,
+                                               written_already=f"{name}/calibration.json",
+                                               calibration=str(Path(source).parent
+                                                               / "calibration.json"))
+                if failed:
+                    print(f"gyrocal: warning: sensor {name}: {failed}", file=sys.stderr)
         except GyrocalError as exc:
             out.append(SensorOutcome(name, model, f"not calibrated: {exc}", exit_code_for(exc)))
             continue

@@ -12,7 +12,14 @@ import numpy as np
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.fileio import atomic_write_bytes
 
-__all__ = ["require_matplotlib", "save_png", "study_boxplots", "speed_sweep_plot"]
+__all__ = ["literal", "require_matplotlib", "save_png", "study_boxplots", "speed_sweep_plot"]
+
+
+def literal(text: object) -> str:
+    """``text`` for a matplotlib title or label, shown as written: a ``$`` would open mathtext
+    (``$\\foo{$`` in a path stops the figure with a parse error, valid math renders as math), so
+    each is escaped (``\\$``, matplotlib's literal dollar sign)."""
+    return str(text).replace("$", r"\$")
 
 
 def require_matplotlib() -> Any:
@@ -78,7 +85,7 @@ def study_boxplots(
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.set_title(f"error of {names[j]}")
         ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
-    fig.suptitle(title)
+    fig.suptitle(literal(title))
     return save_png(fig, path, force=force)
 
 

@@ -454,6 +454,13 @@ def read_manifest(root: Path) -> dict[str, Any]:
     for key in ("sensor", "gimbal", "protocol"):
         if not isinstance(manifest.get(key, {}), dict):
             raise RecordingError(f"{mpath}: {key!r} must be an object")
+    motors = (manifest.get("gimbal") or {}).get("motors")
+    ids = [m.get("id") for m in (motors if isinstance(motors, list) else [])
+           if isinstance(m, dict)]
+    twice = sorted({i for i in ids if isinstance(i, int) and ids.count(i) > 1})
+    if twice:
+        raise RecordingError(f"{mpath}: gimbal.motors lists servo id {twice[0]} more than once; "
+                             "each servo of the chain has its own id")
     return manifest
 
 
@@ -572,6 +579,8 @@ def _parse_exact(block: bytes, first: int, path: Path, ncols: int, empty_col: in
                 out[r, c] = math.nan
                 continue
             try:
+                if "_" in s:  # float() reads "1_0.5" as 10.5; a CSV number has no underscore
+                    raise ValueError(s)
                 v = float(s)
             except ValueError:
                 raise RecordingError(
@@ -831,6 +840,8 @@ def read_segments(root: Path, warnings: list[str]) -> tuple[Segment, ...]:
         rows = _split_rows(block.decode("ascii", errors="replace"), first, spath, 7)
         for i, row in enumerate(rows, start=first):
             try:
+                if any("_" in f for f in row):  # int() and float() read "1_0" as 10
+                    raise ValueError(f"a number with an underscore: {','.join(row)[:60]}")
                 motor = None if row[2].strip() == "" else int(row[2])
                 seg = Segment(
                     index=int(row[0]),

@@ -100,7 +100,15 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
     With ``truth`` (a simulated recording's ``{"scale", "bias"}``) the table also shows the
     error in units of each parameter's standard deviation (:func:`error_against_truth`).
     """
-    err = error_against_truth(cal, truth)
+    try:
+        err = error_against_truth(cal, truth)
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError):
+        if truth is None:
+            raise
+        # a hand-edited manifest's truth (a string for a number): the calibration, already
+        # written, is shown without the comparison rather than lost to a traceback
+        return (calibration_table(cal, None) + "\n(the recording manifest's 'truth' is not "
+                "the simulator's numbers: not compared)")
     lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
     if cal.matrix is not None:
         lines += _matrix_rows(cal, err)

@@ -615,3 +615,22 @@ def write_run_report(
                        noise=gyro_noise(rec, extracted), calibration=calibration)
     atomic_write_text(html_path, page, force=force)
     return [*written, (html_path, "the whole report as one self-contained page")]
+
+
+def write_optional_report(rec: Any, cal: GyroCalibration, extracted: Any, out_dir: Path, *,
+                          title: str, html_path: Path, force: bool = False,
+                          written_already: str = "calibration.json",
+                          calibration: str | None = None) -> str | None:
+    """:func:`write_run_report` as an optional output of a run whose calibration is already
+    written: a failure (a plot that cannot be drawn, a full disk) is returned as a warning that
+    says what was written and how to draw the report again, never raised, so that the
+    calibration and its history entry are kept. None when the report was written."""
+    try:
+        write_run_report(rec, cal, extracted, out_dir, title=title, html_path=html_path,
+                         force=force, calibration=calibration)
+    except Exception as exc:
+        partial = " (some of its plots may be there)" if Path(out_dir).exists() else ""
+        return (f"the report was not written ({str(exc)[:300] or type(exc).__name__}); "
+                f"{written_already} and the recording are complete{partial}: `gyrocal report` "
+                "draws the report again")
+    return None

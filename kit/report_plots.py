@@ -45,6 +45,7 @@ from gyrocal.calib.windows import (  # the estimator's own weight and grid: plot
     weight_grid,
 )
 from gyrocal.kit.errors import InputError, OutputExistsError
+from gyrocal.kit.plots import literal
 from gyrocal.kit.recording import Recording
 
 __all__ = [
@@ -654,7 +655,7 @@ def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     state = "complete" if rec.complete else "INCOMPLETE (interrupted run)"
-    fig.suptitle(f"{rec.path}: {rec.imu_t.size} gyro samples over "
+    fig.suptitle(f"{literal(rec.path)}: {rec.imu_t.size} gyro samples over "
                  f"{rec.imu_t[-1] - rec.imu_t[0]:.1f} s, {len(extracted.windows)} rotation "
                  f"windows, {len(extracted.rests)} rest windows; recording {state}", fontsize=10)
     return fig

@@ -262,7 +262,8 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
         est = estimate_recording(rec, cfg["protocol"]["method"],
                                  source=str(run_dir / "recording"))
         check_plausible(est.calibration, rec.sensor,
-                        allow=getattr(args, "allow_implausible", False))
+                        allow=getattr(args, "allow_implausible", False), recording=rec,
+                        extracted=est.extracted)
         atomic_write_text(run_dir / "calibration.json", est.calibration.to_json() + "\n")
         run = WarmupRun(run_dir, est.calibration, jig.clock.monotonic() - t0,
                         (*est.extracted.warnings, *est.notes))

@@ -42,12 +42,13 @@ from gyrocal.calib.kinematics import sensor_rate
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.observations import diff_noise
 from gyrocal.calib.segments import Segment
+from gyrocal.calib.windows import window_mean, window_rate
 from gyrocal.drivers.dynamixel.control_table import POSITION_UNIT_RAD
 from gyrocal.kit.errors import InputError
 from gyrocal.kit.gravity import force_source, specific_force
 from gyrocal.kit.protocol import Runner, Step
 from gyrocal.kit.recording import Recording
-from gyrocal.kit.report_plots import boxcar_mean, encoder_rate, servo_axes
+from gyrocal.kit.report_plots import encoder_rate, servo_axes
 
 __all__ = ["FLAG_RATIO", "KINDS", "GeneralMotionRunner", "Sweep", "Verification",
            "general_motion_steps", "verify_recording"]
@@ -444,10 +445,24 @@ _MIN_DELAY_BLOCKS = 3
 _EDGE_S = 0.05
 
 
-def _mean_rate(te: np.ndarray, omega: np.ndarray, a: float, b: float) -> np.ndarray:
-    """The mean of the reference rate ``omega`` (N, 3) over ``[a, b]``."""
-    mid, half = np.array(0.5 * (a + b)), 0.5 * (b - a)
-    return np.array([boxcar_mean(te, omega[:, k], mid, half) for k in range(3)], dtype=float)
+def _turned(kin: Mapping[str, Any], ang: np.ndarray) -> np.ndarray:
+    """The sensor's rotation accumulated since the first encoder reading, (N, 3) rad: each
+    reading interval's angle changes carried along the servos' axes at the interval's middle
+    (:func:`~gyrocal.calib.kinematics.sensor_rate` is linear in the rates). Its change over a
+    window is the encoder's angle change the estimator takes (no derivative of jittered
+    readings), in the sensor frame even while several servos turn."""
+    step = sensor_rate(kin, 0.5 * (ang[1:] + ang[:-1]), np.diff(ang, axis=0))
+    return np.vstack([np.zeros((1, 3)), np.cumsum(step, axis=0)])
+
+
+def _mean_rate(te: np.ndarray, turned: np.ndarray, corners: tuple[float, float, float, float]
+               ) -> np.ndarray:
+    """The reference rate over a window: the change of ``turned`` across it
+    (:func:`gyrocal.calib.windows.window_rate`, the estimator's reference); NaN where the
+    encoder readings do not cover it."""
+    if corners[0] < te[0] or corners[3] > te[-1]:
+        return np.full(3, np.nan)
+    return np.array([window_rate(te, turned[:, k], corners) for k in range(3)], dtype=float)
 
 
 def _param_variance(cal: GyroCalibration, x: np.ndarray, gf: np.ndarray,
@@ -483,7 +498,7 @@ def _param_variance(cal: GyroCalibration, x: np.ndarray, gf: np.ndarray,
 
 
 def _block_rows(rec: Recording, t: np.ndarray, m: np.ndarray, te: np.ndarray, ang: np.ndarray,
-                omega: np.ndarray, force: np.ndarray | None, block_s: float
+                turned: np.ndarray, force: np.ndarray | None, block_s: float
                 ) -> list[tuple[Any, ...]]:
     """Every segment cut into ``block_s`` blocks: per block ``(kind, gyro mean, reference mean,
     readings, count, reference slope, reference variance, mean specific force or None)``.
@@ -494,23 +509,26 @@ def _block_rows(rec: Recording, t: np.ndarray, m: np.ndarray, te: np.ndarray, an
         When no segment is long enough for one block.
     """
     rows: list[tuple[Any, ...]] = []
+    ramp = min(_EDGE_S, block_s / 4)
     for start, end in sorted({(s.t_start, s.t_end) for s in rec.segments}):
         for i in range(int((end - start) // block_s)):
             a = start + i * block_s
             b = a + block_s
-            sel = (t >= a) & (t < b)
+            sel = (t >= a) & (t <= b)
             kind = _block_kind(te, ang, a, b) if sel.sum() >= 3 else None
             if kind is None:
                 continue
-            ref = _mean_rate(te, omega, a, b)
-            h = _EDGE_S / 2
-            slope = (_mean_rate(te, omega, b - 2 * h, b) - _mean_rate(te, omega, a, a + 2 * h)) \
-                / (b - a - 2 * h)
+            # gyro and reference with one trapezoid weight on one clock (DESIGN.md fact 2)
+            corners = (a, a + ramp, b - ramp, b)
+            ref = _mean_rate(te, turned, corners)
+            slope = (_mean_rate(te, turned, (b - ramp, b - ramp, b, b))
+                     - _mean_rate(te, turned, (a, a, a + ramp, a + ramp))) / (b - a - ramp)
             if not (np.all(np.isfinite(ref)) and np.all(np.isfinite(slope))):
                 continue
-            rows.append((kind, m[sel].mean(axis=0), ref, m[sel], int(sel.sum()), slope,
+            gyro, n_eff = window_mean(t, m, corners)
+            rows.append((kind, gyro, ref, m[sel], n_eff, slope,
                          _reference_variance(te, ang, a, b),
-                         None if force is None else force[sel].mean(axis=0)))
+                         None if force is None else window_mean(t, force, corners)[0]))
     if not rows:
         raise InputError(f"{rec.path}: no segment is long enough for {block_s:g} s blocks")
     return rows
@@ -540,11 +558,11 @@ def verify_recording(rec: Recording, cal: GyroCalibration, block_s: float = 0.5)
         raise InputError(f"{rec.path}: too few gyro samples to verify")
     kin, source = _kinematics(rec, cal)
     te, ang = _encoders(rec, list(kin["chain"]))
-    omega = sensor_rate(kin, ang, np.gradient(ang, te, axis=0))  # (N, 3) at the encoder times
+    turned = _turned(kin, ang)
     g_note = "none" if cal.g_sensitivity is None else (force_source(rec, cal) or "applied")
     force = specific_force(rec, cal, t) if g_note == "applied" else None
     diag = GyroCalibration(scale=cal.scale, bias=cal.bias)
-    rows = _block_rows(rec, t, m, te, ang, omega, force, block_s)
+    rows = _block_rows(rec, t, m, te, ang, turned, force, block_s)
     ramps = sum(r[0] == "ramp" for r in rows)
     used = [r for r in rows if r[0] != "ramp"]
     if not used:

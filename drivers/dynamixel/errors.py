@@ -27,6 +27,7 @@ __all__ = [
     "ServoCommunicationError",
     "ServoHardwareError",
     "ServoIdentityError",
+    "ServoLinkLostError",
     "ServoStatusError",
     "ShutdownError",
     "StallError",
@@ -64,6 +65,11 @@ class ServoCommunicationError(CommunicationError):
         self.instruction = instruction
         self.result_text = result_text
         self.attempts = attempts
+
+
+class ServoLinkLostError(CommunicationError):
+    """The serial port itself failed (EIO, a vanished device): the USB adapter was unplugged or
+    lost power, or its cable broke. Nothing more can be sent to the servos through it."""
 
 
 class ServoStatusError(DriverError):

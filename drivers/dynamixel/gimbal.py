@@ -38,9 +38,11 @@ from __future__ import annotations
 import math
 import signal
 import struct
+import termios
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from dynamixel_sdk import (
@@ -73,6 +75,7 @@ from gyrocal.drivers.dynamixel.control_table import (
 from gyrocal.drivers.dynamixel.errors import (
     ServoCommunicationError,
     ServoIdentityError,
+    ServoLinkLostError,
     ServoStatusError,
     ShutdownError,
     StallError,
@@ -372,7 +375,7 @@ class Gimbal:
         self.stall_timeout_s = float(stall_timeout_s)
         self.min_speed_fraction = float(min_speed_fraction)
         if isinstance(port, str):
-            self.port = PortHandler(port)
+            self.port = _CheckedPort(port)
             self._owns_port = True
         else:
             self.port = port
@@ -1174,6 +1177,16 @@ class Gimbal:
         self.port.is_using = False
         self.motion = None
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
+        try:
+            self._stop_and_confirm(known)
+        except ServoLinkLostError as exc:
+            raise ShutdownError(
+                f"could NOT confirm torque off on servo(s) {', '.join(map(str, known))}: the "
+                f"servo link is gone ({exc}). The servos stop by themselves when their Bus "
+                "Watchdog runs out, if it was armed; switch the servo power off before touching "
+                "the gimbal, then check the USB adapter and its cable.") from None
+
+    def _stop_and_confirm(self, known: list[int]) -> None:
         unconfirmed: dict[int, str] = dict.fromkeys(known, "")
         deadline = self.clock.monotonic() + STOP_CONFIRM_S
         rounds = 0
@@ -1183,6 +1196,8 @@ class Gimbal:
             for name in ("Goal Velocity", "Torque Enable"):
                 try:
                     self._sync_write(name, 0, list(unconfirmed))
+                except ServoLinkLostError:
+                    raise
                 except CommunicationError:
                     pass
             for i in list(unconfirmed):
@@ -1210,6 +1225,8 @@ class Gimbal:
             if self._read_item(dxl_id, "Torque Enable", allow_alert=True) != 0:
                 return "it still reads torque on"
             self._write_item(dxl_id, "Bus Watchdog", 0, allow_alert=True)
+        except ServoLinkLostError:
+            raise  # the port is gone: no other servo can answer either
         except (CommunicationError, ServoStatusError) as exc:
             return str(exc)
         return None
@@ -1402,6 +1419,45 @@ class Gimbal:
         if result != COMM_SUCCESS:
             raise ServoCommunicationError(None, f"SYNC_WRITE {name}={raw}",
                                           self.ph.getTxRxResult(result), 1)
+
+
+class _CheckedPort(PortHandler):
+    """dynamixel-sdk's ``PortHandler`` whose port I/O failures are :class:`ServoLinkLostError`.
+
+    pyserial raises ``SerialException`` (an OSError) from a read or write on a device that went
+    away, and ``termios.error`` (not an OSError) from ``reset_input_buffer`` (``tcflush``) and
+    ``in_waiting``: an unplugged USB-serial adapter gives EIO on all of them. dynamixel-sdk
+    passes them through (``port_handler.py``: ``clearPort``, ``getBytesAvailable``,
+    ``readPort``, ``writePort`` call pyserial directly), so they are named here, once.
+    """
+
+    def _lost(self, exc: BaseException) -> ServoLinkLostError:
+        return ServoLinkLostError(f"the servo port {self.getPortName()!r} failed: {exc} (the USB "
+                                  "adapter was unplugged or lost power?)")
+
+    def clearPort(self) -> None:
+        try:
+            super().clearPort()
+        except (OSError, termios.error) as exc:
+            raise self._lost(exc) from exc
+
+    def getBytesAvailable(self) -> int:
+        try:
+            return int(super().getBytesAvailable())
+        except (OSError, termios.error) as exc:
+            raise self._lost(exc) from exc
+
+    def readPort(self, length: int) -> Any:
+        try:
+            return super().readPort(length)
+        except (OSError, termios.error) as exc:
+            raise self._lost(exc) from exc
+
+    def writePort(self, packet: Any) -> int:
+        try:
+            return int(super().writePort(packet))
+        except (OSError, termios.error) as exc:
+            raise self._lost(exc) from exc
 
 
 def _shutdown_after(cause: BaseException, shutdown: ShutdownError) -> ShutdownError:

@@ -40,7 +40,9 @@ def run(args: argparse.Namespace) -> int:
     if note:
         print(note, file=sys.stderr)
     if args.source == "-":
-        apply.stream(cal, sys.stdin, sys.stdout)
+        from gyrocal.kit.fileio import bounded_lines
+
+        apply.stream(cal, bounded_lines(sys.stdin), sys.stdout)
         return 0
     src = Path(args.source)
     if src.is_dir():
@@ -52,9 +54,11 @@ def run(args: argparse.Namespace) -> int:
     elif src.is_file():
         import io
 
+        from gyrocal.kit.fileio import bounded_lines
+
         buf = io.StringIO()
         with open(src, encoding="ascii", errors="replace") as fh:
-            apply.stream(cal, fh, buf)
+            apply.stream(cal, bounded_lines(fh, str(src)), buf)
         text = buf.getvalue()
     else:
         raise InputError(f"{src} is neither a recording directory nor a file; give the "

@@ -151,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
         refuse_existing([out / "report.html", out / "plots"], force=args.force)
     if len(cfg.imus()) > 1:
         return _run_plate(cfg, args, out, work, report, history)
+    report_failed = None
     with built_beside(work, out):
         run_jig(cfg, args, work, work / "recording")
         if getattr(args, "sim_imu", False):
@@ -166,20 +167,22 @@ def run(args: argparse.Namespace) -> int:
                 cal, aligned_note = align_to_accelerometer(
                     cal, rec, est.extracted, getattr(est.fit, "axes_std_rad", None))
                 est = replace(est, notes=(*est.notes, aligned_note))
-            check_plausible(cal, rec.sensor, allow=args.allow_implausible)
+            check_plausible(cal, rec.sensor, allow=args.allow_implausible, recording=rec,
+                            extracted=est.extracted)
             atomic_write_text(work / "calibration.json", cal.to_json() + "\n")
             if report:
-                from gyrocal.kit.report_html import write_run_report
+                from gyrocal.kit.report_html import write_optional_report
 
-                write_run_report(rec, cal, est.extracted, work / "plots",
-                                 title=f"{out} (gyrocal calibrate)",
-                                 html_path=work / "report.html", force=args.force,
-                                 calibration=str(out / "calibration.json"))
+                report_failed = write_optional_report(
+                    rec, cal, est.extracted, work / "plots", title=f"{out} (gyrocal calibrate)",
+                    html_path=work / "report.html", force=args.force,
+                    calibration=str(out / "calibration.json"))
+                report = report_failed is None
     rec_dir, cal_path = out / "recording", out / "calibration.json"
     if cal is None:
         print(f"wrote {rec_dir}/ (emulated IMU at rest: the servos were tested, nothing to fit)")
         return 0
-    for w in est.extracted.warnings:
+    for w in (*est.extracted.warnings, *filter(None, [report_failed])):
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     for note in est.notes:
         print(f"gyrocal: note: {note}", file=sys.stderr)

@@ -84,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         cal, note = align_to_accelerometer(
             cal, rec, est.extracted, getattr(est.fit, "axes_std_rad", None))
         print(f"gyrocal: note: {note}", file=sys.stderr)
-    for problem in check_plausible(cal, rec.sensor, allow=args.allow_implausible):
+    for problem in check_plausible(cal, rec.sensor, allow=args.allow_implausible,
+                                   recording=rec, extracted=est.extracted):
         print(f"gyrocal: warning: {problem} (accepted: --allow-implausible)", file=sys.stderr)
     if args.out:
         atomic_write_text(args.out, cal.to_json() + "\n", force=args.force)

@@ -106,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"gyrocal: error: {path}: {why}", file=sys.stderr)
             sys.stdout.write(out)
             return 2 if report.refused else 0
+        for line in store.damaged:
+            print(f"gyrocal: warning: {view.printable(line)}", file=sys.stderr)
     sys.stdout.write(out)
     return 0
 

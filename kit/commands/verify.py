@@ -41,23 +41,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command."""
-    from gyrocal.calib.errors import CalibrationFormatError
-    from gyrocal.calib.model import GyroCalibration
     from gyrocal.kit.errors import InconsistentCalibrationError, InputError
+    from gyrocal.kit.exports import load_document
     from gyrocal.kit.fileio import make_output_dir
     from gyrocal.kit.jig import load_cli_config, run_jig
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.verify import verify_recording
 
     path = Path(args.calibration)
-    try:
-        cal = GyroCalibration.from_json(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"calibration file {path} not found") from None
-    except (CalibrationFormatError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: {str(exc)[:200]}") from None
-    except IsADirectoryError:
-        raise InputError(f"calibration file {path} is a directory; give a JSON file") from None
+    cal = load_document(args.calibration, "gyrocal-calibration", "calibration file")
     if getattr(args, "sim_imu", False):
         raise InputError("verify needs a sensor that sees the motion; --sim-imu emulates one at "
                          "rest (it tests the servos only): use --sim, or the real sensor")

@@ -110,3 +110,29 @@ def test_a_second_process_on_the_bus_is_refused_naming_the_first(rig, tmp_path):
     assert r.returncode == 4
     assert f"in use by process {os.getpid()}" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_a_pulled_servo_adapter_exits_4_saying_torque_was_not_confirmed(tmp_path):
+    """The PTY ends mid-turn, as a USB-serial adapter pulled out: every read, write and
+    ``tcflush`` then fails with EIO (pyserial's SerialException, ``termios.error``). It was exit 1
+    and a traceback from ``clearPort()`` in ``Gimbal.close()``."""
+    rig = ServoRig(ids=(1, 2))
+    try:
+        config = write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids, **LOADED_HOST)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu", "--config",
+             str(config), "--out", str(tmp_path / "run"), "--quiet"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        moving = rig.wait_for("Present Velocity", lambda v: any(v.values()), within_s=60.0)
+        assert any(moving.values())
+        rig.close()  # the adapter is gone, mid-turn
+        _, err = proc.communicate(timeout=120)
+    finally:
+        rig.close()
+    assert proc.returncode == 4, err
+    assert "Traceback" not in err
+    assert "could NOT confirm torque off on servo(s) 1, 2: the servo link is gone" in err
+    assert "the USB adapter was unplugged" in err
+    assert "is kept, marked incomplete" in err
+    manifest = json.loads((tmp_path / "run" / "recording" / "manifest.json").read_text())
+    assert manifest["complete"] is False
