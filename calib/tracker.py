@@ -58,10 +58,11 @@ still (n,) or None, reference_rate, reference_axis)`` and carries everything a l
 window), so a recording processed at once and the same samples fed one at a time through
 :meth:`BiasTracker.update` give the same estimates. The still decision on a sample comes
 ``lookahead_s`` after it (see :mod:`gyrocal.calib.stationarity`); an external ``still`` flag
-overrides the detector's decision for its sample. The detector's rate test is centred on the
-tracker's own bias estimate, refreshed every ``detector_refresh_s`` of samples (counted from the
-first, so any way of cutting the stream into batches refreshes it at the same samples), so a
-drifting bias does not hide still periods.
+overrides the detector's decision for its sample. The detector never looks at the estimate it
+feeds (a detector gated on the tracker's own bias never sees a sensor whose bias moved since
+calibration, so the filter would never correct it): its variance test needs no bias, and its
+rate test is centred on the seed (the calibration's bias) with room for the chip's whole
+zero-rate tolerance (``zero_rate_tolerance``).
 
 :meth:`BiasTracker.update` does the arithmetic of a one-sample :meth:`process` call in scalar
 code (the detector's window by running sums, :class:`gyrocal.calib.stationarity.StreamingQuiet`;
@@ -119,7 +120,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -141,6 +142,7 @@ if TYPE_CHECKING:
     from gyrocal.calib.allan import NoiseCharacterisation
 
 __all__ = [
+    "BiasMoved",
     "BiasTracker",
     "Health",
     "TrackResult",
@@ -209,9 +211,18 @@ class TrackerSettings:
         Reference value and decision threshold of the per-axis two-sided CUSUM test on the
         normalised innovations (in units of their standard deviation); ``cusum_h = inf`` turns
         the test off.
-    detector_refresh_s : float
-        The still detector's rate test is centred on the tracker's own bias estimate, refreshed
-        at every multiple of this many seconds of samples.
+    zero_rate_tolerance : float
+        How far the bias may lie from the seed, rad/s: the still detector's rate test accepts a
+        window whose mean, less the seed's bias, is within this plus ``still.rate_sigma`` σ
+        (unless ``still.rate_threshold`` sets the limit). Default ±5 °/s, the MPU-9250's
+        initial zero-rate tolerance (PS-MPU-9250A-01 §3.1), so a bias that moved anywhere
+        within the chip's tolerance since calibration is still seen at rest.
+    moved_sigma : float
+        The first update window whose innovation on an axis exceeds this many of its standard
+        deviations (the seed's σ, the window's noise and the random walk since) says the bias
+        moved since calibration (:attr:`BiasTracker.bias_moved`): the seed's variance on that
+        axis is widened by the squared innovation before the update, so the estimate jumps to
+        the measured bias at the first rest.
     stream_block_s : float
         Samples fused per :meth:`BiasTracker.feed` block, s.
     """
@@ -236,7 +247,8 @@ class TrackerSettings:
     adapt_memory_s: float = 600.0
     cusum_k: float = 0.5
     cusum_h: float = 10.0
-    detector_refresh_s: float = 1.0
+    zero_rate_tolerance: float = math.radians(5.0)
+    moved_sigma: float = 5.0
     stream_block_s: float = 0.25
 
     def __post_init__(self) -> None:
@@ -270,7 +282,8 @@ class TrackerSettings:
         if not (isinstance(self.cusum_h, (int, float)) and self.cusum_h > 0):
             raise CalibInputError(f"cusum_h must be a positive number (inf: off), got "
                                   f"{self.cusum_h!r}")
-        scalar(self.detector_refresh_s, "detector_refresh_s", positive=True)
+        scalar(self.zero_rate_tolerance, "zero_rate_tolerance", nonneg=True)
+        scalar(self.moved_sigma, "moved_sigma", positive=True)
         scalar(self.stream_block_s, "stream_block_s", positive=True)
         if not isinstance(self.still, StillSettings):
             raise CalibInputError("still must be a StillSettings")
@@ -332,6 +345,52 @@ class Health:
     def ok(self) -> bool:
         """Neither flag raised."""
         return self.nis_ok and not self.stale
+
+
+@dataclass(frozen=True, eq=False)
+class BiasMoved:
+    """The bias moved since calibration: the first update window's measured bias lies beyond
+    what the seed's σ allows (:attr:`TrackerSettings.moved_sigma`).
+
+    Attributes
+    ----------
+    t : float
+        Time of that window's last sample, s.
+    moved : ndarray (3,)
+        Measured bias less the seed (at the window's temperature), rad/s.
+    sigma : ndarray (3,)
+        The standard deviation the seed allowed for that difference (the seed's σ, the random
+        walk since, the window's noise), rad/s.
+    axes : tuple of str
+        The axes beyond ``moved_sigma`` σ (their prior was widened to take the measurement).
+    kind : str
+        ``"still"`` or ``"reference"``: the window that showed it.
+    """
+
+    t: float
+    moved: np.ndarray
+    sigma: np.ndarray
+    axes: tuple[str, ...]
+    kind: str
+
+    @property
+    def magnitude(self) -> float:
+        """Length of :attr:`moved`, rad/s."""
+        return float(np.linalg.norm(self.moved))
+
+    def message(self) -> str:
+        """One line for a user: how far, on which axes, against what σ."""
+        return ("the bias moved by " + ", ".join(f"{v:+.3g}" for v in self.moved)
+                + " rad/s (x, y, z; |.| " + f"{self.magnitude:.3g}) since calibration, beyond "
+                + "the calibration's sigma (" + ", ".join(f"{v:.2g}" for v in self.sigma)
+                + f") on {', '.join(self.axes)}: found at t = {self.t:.1f} s and followed "
+                "from there")
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {"t": self.t, "moved": [float(v) for v in self.moved],
+                "sigma": [float(v) for v in self.sigma], "axes": list(self.axes),
+                "kind": self.kind, "magnitude": self.magnitude}
 
 
 @dataclass(frozen=True, eq=False)
@@ -670,11 +729,15 @@ class BiasTracker:
         self._ai2_rowsum = ai2.sum(axis=1).tolist()
         # steps update() left to its following calls (generators, a slice per call)
         self._todo: deque[Iterator[None]] = deque()
-        self.detector = StillDetector.build(s.noise_std, s.odr_hz, s.still)
-        self._det_bias = b0.copy()
+        det = StillDetector.build(s.noise_std, s.odr_hz, s.still)
+        if s.still.rate_threshold is None:  # room for the bias to have moved from the seed
+            det = replace(det, rate_limit=det.rate_limit + s.zero_rate_tolerance)
+        self.detector = det
+        # the detector's rate test is centred on the seed, never on the estimate (module
+        # docstring): fixed for the tracker's life
+        self._det_bias = b0.astype(float).copy()
         self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
-        self._refresh = max(1, int(round(s.detector_refresh_s * s.odr_hz)))
         # feed(): the block buffer and the estimate it corrects with
         self._nbuf = 0
         self._buf_m: np.ndarray | None = None
@@ -712,6 +775,9 @@ class BiasTracker:
         self._n_updates = 0
         self._n_alarms = 0
         self._finished = False
+        # the seed check (_seed_check): armed until a full window passed it or it fired
+        self._seed_armed = True
+        self._moved: BiasMoved | None = None
         # bias, bias_std and time since the last update at the latest sample (the prior before)
         self._last: dict[str, Any] = {"bias": b0.astype(float), "bias_std": b0_std, "since": 0.0}
         self._last_decision: tuple[int, bool] | None = None
@@ -809,6 +875,12 @@ class BiasTracker:
             updates=self._n_updates,
             alarms=self._n_alarms,
         )
+
+    @property
+    def bias_moved(self) -> BiasMoved | None:
+        """Set when the first rest (or reference turn) found the bias beyond what the seed's σ
+        allows (``moved_sigma``): how far it moved since calibration; None otherwise."""
+        return self._moved
 
     @property
     def last_decision(self) -> tuple[int, bool] | None:
@@ -925,8 +997,6 @@ class BiasTracker:
         if self._todo:  # a slice of a step an earlier call left
             self._advance()
         k = self._k
-        if k % self._refresh == 0:
-            self._refresh_detector_bias()
         if self._t_ref is None and math.isfinite(temp):
             self._t_ref = temp
         # detector: the window ending at this sample, and the run of quiet windows
@@ -1356,21 +1426,7 @@ class BiasTracker:
                 "rr": np.array([r[4] for r in q]),
                 "ra": np.array([(math.nan,) * 3 if r[5] is None else r[5] for r in q]),
             }
-        # The detector's rate test is centred on the bias estimate, refreshed at every multiple
-        # of D samples counted from the first: cut the batch there, so that any way of
-        # feeding the same samples refreshes it at the same samples.
-        D = self._refresh
-        n = cols[0].size
-        cuts = [0, *range((-self._k) % D or D, n, D), n] if n else [0, 0]
-        if len(cuts) == 2:
-            return self._process(*cols, finish=finish)
-        parts = []
-        g_first = self._k
-        for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:], strict=True)):
-            if b > a:
-                parts.append(self._process(*(c[a:b] for c in cols),
-                                           finish=finish and j == len(cuts) - 2))
-        return _concat(parts, g_first)
+        return self._process(*cols, finish=finish)
 
     @staticmethod
     def _force(specific_force: Any, n: int) -> np.ndarray:
@@ -1388,16 +1444,6 @@ class BiasTracker:
             raise CalibInputError("specific_force contains NaN or inf")
         return f
 
-    def _refresh_detector_bias(self) -> None:
-        """Centre the detector's rate test on the current bias estimate (at the latest
-        sample's temperature with the temperature model)."""
-        x = self._kf.x.reshape(-1)
-        b = x[:3].copy()
-        if self._temp_model and self._t_ref is not None and math.isfinite(self._temp_last):
-            b += x[3:] * (self._temp_last - self._t_ref)
-        self._det_bias = b
-        self._det_bias_l = b.tolist()
-
     def _process(
         self,
         t: np.ndarray,
@@ -1409,10 +1455,8 @@ class BiasTracker:
         *,
         finish: bool,
     ) -> TrackResult:
-        """:meth:`process` on validated columns that do not cross a detector refresh."""
+        """:meth:`process` on validated columns."""
         n = t.size
-        if n and self._k and self._k % self._refresh == 0:
-            self._refresh_detector_bias()
         if n:
             if self._k == 0:
                 self._t_state = float(t[0])
@@ -1661,9 +1705,12 @@ class BiasTracker:
         P = self._kf.P.tolist()
         tm = self._temp_model
         dT = w.sum_temp / n - (self._t_ref if self._t_ref is not None else 0.0) if tm else 0.0
+        wide = self._seed_check(w, z, x, P, R, q, dt, dT) if self._seed_armed else None
         pre = []  # per axis: predicted P00, P01, P11, innovation y, S, gains k0, k1
         for i in range(3):
             p00 = P[i][i] + q[i] * dt
+            if wide is not None:
+                p00 += wide[i]
             if tm:
                 p01 = P[i][i + 3]
                 p11 = P[i + 3][i + 3] + q[i + 3] * dt
@@ -1684,12 +1731,45 @@ class BiasTracker:
         self._t_state = max(self._t_state, w.t_last)
         self._t_update = w.t_last
         self._n_updates += 1
-        rest = self._step_rest(pre, z, R, dt, dT, w, log, close)
+        rest = self._step_rest(pre, z, R, dt, dT, w, log, close, wide)
         if defer:
             self._todo.append(rest)
         else:
             for _ in rest:
                 pass
+
+    def _seed_check(self, w: _OpenWindow, z: list[float], x: list[float], P: list[list[float]],
+                    R: list[float], q: list[float], dt: float, dT: float) -> list[float] | None:
+        """Whether the bias moved since calibration, on the first update windows: the
+        innovation ``y`` of each axis against its standard deviation ``√S`` (``S`` the seed's
+        variance, the random walk since and the window's noise). Beyond ``moved_sigma`` the
+        axis's prior variance is to be widened by ``y²`` (returned per axis, None when no axis
+        is beyond), so the update takes the measured bias, and :attr:`bias_moved` says so. The
+        check stays armed until a full window (``update_interval_s``) has passed it or it
+        fired."""
+        tm = self._temp_model
+        ys, ss = [], []
+        for i in range(3):
+            p00 = P[i][i] + q[i] * dt
+            if tm:
+                p01, p11 = P[i][i + 3], P[i + 3][i + 3] + q[i + 3] * dt
+                ys.append(z[i] + x[i] + dT * x[i + 3])
+                ss.append(p00 + 2 * dT * p01 + dT * dT * p11 + R[i])
+            else:
+                ys.append(z[i] + x[i])
+                ss.append(p00 + R[i])
+        thr = self.settings.moved_sigma
+        beyond = [abs(y) > thr * math.sqrt(v) for y, v in zip(ys, ss, strict=True)]
+        if any(beyond):
+            self._seed_armed = False
+            self._moved = BiasMoved(
+                t=w.t_last, moved=np.array([-y for y in ys]), sigma=np.sqrt(np.array(ss)),
+                axes=tuple(a for a, b in zip("xyz", beyond, strict=True) if b),
+                kind="reference" if w.kind == _KIND_REF else "still")
+            return [y * y if b else 0.0 for y, b in zip(ys, beyond, strict=True)]
+        if w.count >= self._U:
+            self._seed_armed = False
+        return None
 
     def _reference_variance(self, R: list[float], omega: float,
                             u: tuple[float, float, float], dur: float) -> list[float]:
@@ -1711,8 +1791,8 @@ class BiasTracker:
         return out
 
     def _step_rest(self, pre: list[tuple[float, ...]], z: list[float], R: list[float],
-                   dt: float, dT: float, w: _OpenWindow, log: dict[str, list[Any]], close: int
-                   ) -> Iterator[None]:
+                   dt: float, dT: float, w: _OpenWindow, log: dict[str, list[Any]], close: int,
+                   wide: list[float] | None = None) -> Iterator[None]:
         """The rest of a Kalman step whose state :meth:`_apply_window` applied: the covariance
         in Joseph form, ``P = (I − k h) P⁻ (I − k h)ᵀ + k r kᵀ`` per axis, the NIS and CUSUM
         tests, then the process-noise bank (:meth:`_QBank.steps`), yielding between slices."""
@@ -1762,6 +1842,8 @@ class BiasTracker:
                 kf.P = P
             self._nis_hist.clear()
         self._nis_ok = not alarm
+        if wide is not None:  # the seed was wider than it said (_seed_check): so was the state
+            self._widen_kept(wide)  # before this update, for the smoother
         self._keep_state(kf.Q, brk=bool(alarm and s.recover) or (shift and s.recover))
         yield
         log["shift"].append(shift)
@@ -1776,6 +1858,8 @@ class BiasTracker:
         if self._bank is not None:
             yield
             bank = self._bank
+            if wide is not None:  # the seed's widening, before the bank's update as before ours
+                bank.widen(np.array(wide))
             yield from bank.steps(z, R, dT if tm else None, dt)
             # a detected step widened every filter of the bank as the tracker's own (after the
             # bank's update, as the tracker's widening came after its own)
@@ -1783,6 +1867,15 @@ class BiasTracker:
                 bank.widen(np.array(bank_extra))
             yield
             self._q[:3] = bank.q + bank.q_std
+
+    def _widen_kept(self, extra: list[float]) -> None:
+        """Widen the last kept state's bias variance by ``extra`` (per axis): the prior the
+        seed check found too narrow, so the smoother carries the first rest's bias back."""
+        if self._states is None or not self._states["P"]:
+            return
+        P = self._states["P"][-1]
+        for i in range(3):
+            P[i, i] += extra[i]
 
     def _keep_state(self, Q: np.ndarray, brk: bool = False) -> None:
         """Store the state after an update (and the process noise its prediction added); ``brk``:
