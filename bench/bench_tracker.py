@@ -326,7 +326,7 @@ def _streaming(n_max: int, replays: int = 3) -> None:
     reference on the turning samples), the jig at its own 200 Hz, process() on the blocks of
     track --live, batch throughput, and the baseline: the one-sample process() call update()
     made before it had a scalar path; then feed()'s accuracy beside update()'s."""
-    import gyrocal.calib.tracker as trk
+    import gyrocal.calib.tracker.core as trk  # where process() finds quiet_windows
 
     hand = _stream_session("1 kHz hand-held, 2-5 s rests", None, n_max)
     jig1k = _stream_session("jig turns, 6-15 s rests", 1000.0, n_max)
