@@ -698,6 +698,8 @@ def run(args: argparse.Namespace) -> int:
         }
         if every is not None:
             doc["decimated_every_s"] = lambda: every
+        if tr.bias_moved is not None:  # the first rest found the calibration's bias stale
+            doc["bias_moved"] = tr.bias_moved.as_dict
         # written in pieces: the Python objects of a few thousand rows at a time
         emit_text(json_pieces(doc), args.out, force=args.force)
     if not args.json:
