@@ -87,28 +87,43 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             raise CalibInputError("calibration must be a GyroCalibration")
         self.settings = settings
         self.calibration = calibration
+        b0, b0_std = self._seed(initial_bias, initial_bias_std)
+        self._init_model()
+        self._init_filter(b0, b0_std)
+        self._init_detector(b0)
+        self._init_stream(b0, b0_std, keep_states)
+
+    def _seed(self, initial_bias: Any, initial_bias_std: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The prior bias and its standard deviation: given, else the calibration's."""
+        cal = self.calibration
         if initial_bias is not None:
             b0 = vec3(initial_bias, "initial_bias")
-        elif calibration is not None:
-            b0 = np.asarray(calibration.bias)
+        elif cal is not None:
+            b0 = np.asarray(cal.bias)
         else:
             b0 = np.zeros(3)
         if initial_bias_std is not None:
             b0_std = vec3(initial_bias_std, "initial_bias_std", positive=True)
-        elif calibration is not None:
-            b0_std = np.asarray(calibration.bias_std)
+        elif cal is not None:
+            b0_std = np.asarray(cal.bias_std)
             if not np.all(np.isfinite(b0_std) & (b0_std > 0)):
                 raise CalibInputError(
                     "the calibration has no usable bias_std; pass initial_bias_std (rad/s)"
                 )
         else:
             raise CalibInputError("give a calibration or initial_bias_std to seed the tracker")
-        if calibration is not None:
-            self.scale = np.asarray(calibration.scale)
-            self.scale_std = np.asarray(calibration.scale_std)
-            # the model's matrix A (diag(scale) for v1), its inverse and entry uncertainties
-            self._A = calibration.full_matrix
-            a_std = calibration.matrix_std
+        return b0, b0_std
+
+    def _init_model(self) -> None:
+        """The calibration's model terms: the matrix ``A`` (``diag(scale)`` for v1), its
+        inverse and entry uncertainties, the g-sensitivity ``G``, the reference's variance
+        terms."""
+        cal = self.calibration
+        if cal is not None:
+            self.scale = np.asarray(cal.scale)
+            self.scale_std = np.asarray(cal.scale_std)
+            self._A = cal.full_matrix
+            a_std = cal.matrix_std
             self._A_std = np.diag(self.scale_std) if a_std is None else np.array(a_std)
         else:
             self.scale = np.ones(3)
@@ -117,12 +132,25 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             self._A_std = np.diag(self.scale_std)
         self._A_inv = np.linalg.inv(self._A)
         self._A_inv_rows = self._A_inv.tolist()  # update()'s scalar reference arithmetic
-        g_sens = None if calibration is None else calibration.g_sensitivity
+        g_sens = None if cal is None else cal.g_sensitivity
         self._G = None if g_sens is None else np.array(g_sens["matrix"], dtype=float)
         self._G_rows = None if self._G is None else self._G.tolist()
         self._ref_ready = bool(np.all(np.isfinite(self.scale_std)))
+        # the reference's variance terms (_reference_variance): (A⁻¹)∘² σ_A², its row sums
+        ai2 = self._A_inv**2
+        self._ai2_astd2 = (ai2 @ self._A_std**2).tolist()
+        self._ai2_rowsum = ai2.sum(axis=1).tolist()
+        if self.settings.t_ref_c is not None:
+            self._t_ref: float | None = float(self.settings.t_ref_c)
+        elif cal is not None and cal.temperature_c is not None:
+            self._t_ref = float(cal.temperature_c)
+        else:
+            self._t_ref = None
 
-        s = settings
+    def _init_filter(self, b0: np.ndarray, b0_std: np.ndarray) -> None:
+        """The Kalman filter (``x, P, F, Q``), the process noise and its bank, the health
+        tests' state."""
+        s = self.settings
         self._temp_model = bool(s.temperature_model)
         dim = 6 if self._temp_model else 3
         kf = KalmanFilter(dim_x=dim, dim_z=3)
@@ -136,6 +164,11 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             kf.x = b0.astype(float).copy()
             kf.P = np.diag(b0_std**2)
             self._q = k_rw**2
+        kf.F = np.eye(dim)
+        kf.Q = np.zeros((dim, dim))
+        self._kf = kf
+        self._dim = dim
+        self._sigma2_l = (s.noise_std**2).tolist()  # per-sample white-noise variance
         # Process-noise estimate: a bank of filters over a grid of K (see QBank)
         self._bank = (
             QBank(b0, b0_std, s, kf.x[3:] if self._temp_model else None) if self._adaptive
@@ -147,54 +180,6 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         self._cu_sum = [[0.0] * 3, [0.0] * 3]
         self._cu_n = [[0.0] * 3, [0.0] * 3]
         self._n_shifts = 0
-        kf.F = np.eye(dim)
-        kf.Q = np.zeros((dim, dim))
-        self._kf = kf
-        self._dim = dim
-        self._sigma2_l = (s.noise_std**2).tolist()  # per-sample white-noise variance
-        # the reference's variance terms (_reference_variance): (A⁻¹)∘² σ_A², its row sums
-        ai2 = self._A_inv**2
-        self._ai2_astd2 = (ai2 @ self._A_std**2).tolist()
-        self._ai2_rowsum = ai2.sum(axis=1).tolist()
-        # steps update() left to its following calls (generators, a slice per call)
-        self._todo: deque[Iterator[None]] = deque()
-        det = StillDetector.build(s.noise_std, s.odr_hz, s.still)
-        if s.still.rate_threshold is None:  # room for the bias to have moved from the seed
-            det = replace(det, rate_limit=det.rate_limit + s.zero_rate_tolerance)
-        self.detector = det
-        # the detector's rate test is centred on the seed, never on the estimate (module
-        # docstring): fixed for the tracker's life
-        self._det_bias = b0.astype(float).copy()
-        self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
-        self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
-        # feed(): the block buffer and the estimate it corrects with
-        self._nbuf = 0
-        self._buf_m: np.ndarray | None = None
-        self._fed = False
-        self._fx = np.asarray(kf.x, dtype=float).reshape(-1).copy()
-        self._temp_last = math.nan
-        if s.t_ref_c is not None:
-            self._t_ref: float | None = float(s.t_ref_c)
-        elif calibration is not None and calibration.temperature_c is not None:
-            self._t_ref = float(calibration.temperature_c)
-        else:
-            self._t_ref = None
-        # Streaming state.
-        self._k = 0
-        self._t_last: float | None = None
-        self._t_state = 0.0
-        self._t_update = 0.0
-        self._hist = np.zeros((0, 3))
-        self._run = 0
-        self._pending: dict[str, np.ndarray] = {}
-        # update()'s own queue of samples awaiting their still decision (t, m, temp, ext), and
-        # the output terms of the current state (rebuilt after each measurement update)
-        # (t, m, temp, ext, reference rate, reference axis or None)
-        self._pq: deque[tuple[Any, ...]] = deque()
-        self._out_terms: tuple[Any, ...] | None = None
-        # update()'s detector window (None while self._hist holds it, for process())
-        self._sq: StreamingQuiet | None = None
-        self._open: OpenWindow | None = None
         self._nis_hist: deque[float] = deque(maxlen=s.nis_window)
         self._nis_ok = True
         self._nis_last = math.nan
@@ -203,10 +188,50 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         self._bound_cache: dict[int, float] = {}
         self._n_updates = 0
         self._n_alarms = 0
-        self._finished = False
         # the seed check (_seed_check): armed until a full window passed it or it fired
         self._seed_armed = True
         self._moved: BiasMoved | None = None
+
+    def _init_detector(self, b0: np.ndarray) -> None:
+        """The still detector: its rate test centred on the seed, never on the estimate
+        (:mod:`gyrocal.calib.tracker`), with room for the chip's zero-rate tolerance, fixed
+        for the tracker's life."""
+        s = self.settings
+        det = StillDetector.build(s.noise_std, s.odr_hz, s.still)
+        if s.still.rate_threshold is None:  # room for the bias to have moved from the seed
+            det = replace(det, rate_limit=det.rate_limit + s.zero_rate_tolerance)
+        self.detector = det
+        self._det_bias = b0.astype(float).copy()
+        self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
+        self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
+
+    def _init_stream(self, b0: np.ndarray, b0_std: np.ndarray, keep_states: bool) -> None:
+        """What carries across batches and samples: the detector's last window, the samples
+        awaiting their decision, the open update window, feed()'s block, the kept states."""
+        # steps update() left to its following calls (generators, a slice per call)
+        self._todo: deque[Iterator[None]] = deque()
+        # feed(): the block buffer and the estimate it corrects with
+        self._nbuf = 0
+        self._buf_m: np.ndarray | None = None
+        self._fed = False
+        self._fx = np.asarray(self._kf.x, dtype=float).reshape(-1).copy()
+        self._temp_last = math.nan
+        self._k = 0
+        self._t_last: float | None = None
+        self._t_state = 0.0
+        self._t_update = 0.0
+        self._hist = np.zeros((0, 3))
+        self._run = 0
+        self._pending: dict[str, np.ndarray] = {}
+        # update()'s own queue of samples awaiting their still decision
+        # (t, m, temp, ext, reference rate, reference axis or None), and the output terms of
+        # the current state (rebuilt after each measurement update)
+        self._pq: deque[tuple[Any, ...]] = deque()
+        self._out_terms: tuple[Any, ...] | None = None
+        # update()'s detector window (None while self._hist holds it, for process())
+        self._sq: StreamingQuiet | None = None
+        self._open: OpenWindow | None = None
+        self._finished = False
         # bias, bias_std and time since the last update at the latest sample (the prior before)
         self._last: dict[str, Any] = {"bias": b0.astype(float), "bias_std": b0_std, "since": 0.0}
         self._last_decision: tuple[int, bool] | None = None
@@ -574,6 +599,7 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             updates=log,
             decision_index=g0 + np.arange(n_dec, dtype=np.int64),
             decision_still=still_d.copy(),
+            bias_moved=self._moved,
         )
 
     def _outputs(

@@ -157,6 +157,9 @@ class TrackResult:
         including samples of earlier calls that were awaiting their look-ahead.
     decision_still : ndarray (d,) of bool
         Those decisions.
+    bias_moved : BiasMoved or None
+        The tracker's seed check by the end of the call (:attr:`BiasTracker.bias_moved`): set
+        once the first rest found the bias beyond what the calibration's σ allows.
     """
 
     t: np.ndarray
@@ -170,3 +173,4 @@ class TrackResult:
     updates: UpdateLog
     decision_index: np.ndarray
     decision_still: np.ndarray
+    bias_moved: BiasMoved | None = None

@@ -53,6 +53,7 @@ def test_a_stale_seed_converges_at_the_first_rest_and_is_reported(session, d):
     assert np.all(np.abs(err) < 5e-4)
     moved = tr.bias_moved
     assert moved is not None and moved.axes == ("x", "y", "z")
+    assert r.bias_moved is moved  # on the result too
     assert moved.t < s.rests[0][1]
     # what moved: the true bias less the seed, i.e. -offset (to the first window's noise)
     np.testing.assert_allclose(moved.moved, -offset, atol=1e-3)
