@@ -594,7 +594,10 @@ def _real_stale(imufusion, trials, block_s: float = 2.0) -> None:
     own scatter, as :func:`_real_table`), ours causal (the live estimate at the sample before
     each block) and smoothed (:func:`_held_out`), Fusion at its defaults and tuned, each from
     the same seed; the ratios causal against causal first. The last column: how often the
-    tracker said the bias moved since calibration (:attr:`BiasTracker.bias_moved`)."""
+    tracker said the bias moved since calibration (:attr:`BiasTracker.bias_moved`). Fusion's
+    stationary gate compares the reading less its own offset with its threshold
+    (``FusionBiasUpdate``, xioTechnologies/Fusion ``Fusion/FusionBias.c``), so from a seed
+    off by more than the threshold it never updates, as our detector did before issue 30."""
     from bench import real_gyro as rg
     from gyrocal.calib.model import GyroCalibration
 
