@@ -9,6 +9,9 @@ A window of ``n_w`` consecutive readings ending at sample ``e`` is *quiet* when,
   sensor reads ``−bias``), is at most a rate threshold, by default ``5 σ``: this catches a steady
   rotation, which the variance test cannot see. It is loose on purpose: it also bounds how far
   the bias may drift from the reference before the detector stops calling the sensor still.
+  The bias tracker (:mod:`gyrocal.calib.tracker`) centres it on its seed (the calibration's
+  bias), never on its own estimate, and widens it by the chip's zero-rate tolerance: a
+  detector gated on the estimate it feeds never sees a sensor whose bias moved.
 
 A sample ``j`` is *still* when every window ending in ``[j − n_min + 1, j + L]`` is quiet: the
 sensor has been quiet for ``min_still_s`` (it has settled), and stays quiet for ``lookahead_s``

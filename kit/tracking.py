@@ -60,7 +60,9 @@ class Tracked:
 
     ``t``, ``bias``, ``bias_std``, ``nis_ok`` and ``since_update_s`` hold the samples ``rows``
     (global indices; None: every sample), ``still`` every sample; ``since_max`` is the longest
-    time without an update over every sample, s.
+    time without an update over every sample, s; ``bias_moved`` the tracker's
+    :class:`gyrocal.calib.tracker.BiasMoved` when the first rest found the bias beyond what the
+    calibration's sigma allows (None otherwise).
     """
 
     t: np.ndarray
@@ -75,6 +77,7 @@ class Tracked:
     shift_t: np.ndarray
     rows: np.ndarray | None = None
     since_max: float = math.nan
+    bias_moved: Any = None
 
 
 class _Kept:
@@ -170,6 +173,7 @@ def run_tracker(tracker: Any, batches: Iterable[Batch], *,
         shift_t=np.concatenate(upd["sh"]),
         rows=kept.rows,
         since_max=since_max,
+        bias_moved=tracker.bias_moved,
     )
 
 
@@ -1106,9 +1110,13 @@ def live_truth(jig: Any, source: LiveSource, tr: Tracked) -> LiveTruth | None:
 
 
 def tracker_notes(tracker: Any) -> list[str]:
-    """What the tracker learnt from the data that the user should know: the bias random walk
-    it estimated (when none was given) and whether the temperature coefficient matters."""
+    """What the tracker learnt from the data that the user should know: whether the bias moved
+    since calibration (beyond its sigma), the bias random walk it estimated (when none was
+    given) and whether the temperature coefficient matters."""
     out: list[str] = []
+    if tracker.bias_moved is not None:
+        out.append(tracker.bias_moved.message() + ": recalibrate the bias (or give "
+                   "--initial-bias-std to say the calibration is older than its sigma)")
     k = tracker.rate_random_walk_estimate
     if k is not None:
         out.append("bias random walk estimated from the innovations: "

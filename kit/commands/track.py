@@ -108,7 +108,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d.add_argument("--min-still", type=float, default=0.5, metavar="S")
     d.add_argument("--lookahead", type=float, default=0.2, metavar="S")
     d.add_argument("--still-rate-threshold", type=float, default=None, metavar="RAD_S",
-                   help="rate gate of the detector (default 5 sigma of the white noise)")
+                   help="rate gate of the detector about the calibration's bias (default "
+                        "5 deg/s, the MPU-9250's zero-rate tolerance, plus 5 sigma of the "
+                        "white noise: a bias that moved since calibration is still seen)")
     d.add_argument("--update-interval", type=float, default=0.25, metavar="S")
     d.add_argument("--causal", action="store_true",
                    help="a recording: the filter's causal estimate at each sample (as live) "
@@ -701,6 +703,8 @@ def run(args: argparse.Namespace) -> int:
         }
         if every is not None:
             doc["decimated_every_s"] = lambda: every
+        if tr.bias_moved is not None:  # the first rest found the calibration's bias stale
+            doc["bias_moved"] = tr.bias_moved.as_dict
         # written in pieces: the Python objects of a few thousand rows at a time
         emit_text(json_pieces(doc), args.out, force=args.force)
     if not args.json:

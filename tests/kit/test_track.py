@@ -210,3 +210,27 @@ def test_json_decimates_on_request_and_on_long_sessions_and_says_so(random_rec, 
     assert "decimated" not in err and len(doc["t"]) == s.n
     assert main(["track", str(rec), "--every", "-1"]) == 2
     assert "--every must be" in capsys.readouterr().err
+
+
+def test_a_stale_calibration_is_said_on_stderr_and_in_the_json(random_rec, tmp_path, capsys):
+    """A calibration whose bias is 20 mrad/s off (0.6 deg/s: a power cycle's worth on an
+    MPU-9250) while claiming its fit's sigma: track follows the sensor from the first rest and
+    says how far the bias moved (issue 30), in the notes and as bias_moved in --json."""
+    from dataclasses import replace
+
+    from gyrocal.calib.model import GyroCalibration
+
+    s, rec, cal_path = random_rec
+    cal = GyroCalibration.from_json(cal_path.read_text())
+    off = np.array([0.02, -0.02, 0.02])
+    stale = tmp_path / "stale.json"
+    stale.write_text(replace(cal, bias=tuple(np.asarray(cal.bias) + off)).to_json())
+    doc, err = run_json(capsys, str(rec), "--cal", str(stale), "--rate-random-walk", "1e-5",
+                        "--causal", "--every", "1")
+    assert "the bias moved by" in err and "recalibrate" in err
+    moved = doc["bias_moved"]
+    assert moved["axes"] == ["x", "y", "z"]
+    np.testing.assert_allclose(moved["moved"], -off, atol=2e-3)
+    i = np.searchsorted(s.t, np.array(doc["t"]) - 1e-9)
+    late = s.t[i] > 60  # the causal estimate, long after the first rest
+    assert np.all(np.abs(np.array(doc["bias"])[late] - s.true_bias[i][late]) < 1e-3)
