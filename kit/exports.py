@@ -2,12 +2,15 @@
 
 :data:`EXPORTERS` maps a format name (``gyrocal export --format NAME``) to an :class:`Exporter`
 that names the document kinds it accepts and renders one of them as text. A new format is one
-:func:`register` call with a render function; its options become ``gyrocal export`` flags.
+:func:`register` call with a render function; its options become ``gyrocal export`` flags. The
+formats for other programs live in their own modules, registered at the end of this one:
+:mod:`gyrocal.kit.exports_ros` (Kalibr, ROS, imu_calib), :mod:`gyrocal.kit.exports_accel` and
+:mod:`gyrocal.kit.exports_thermal` (the flight stacks).
 
 Document kinds (the ``format`` field of the JSON):
 
-``gyrocal-calibration`` (v1)
-    Calibration v1 (:class:`gyrocal.calib.model.GyroCalibration`).
+``gyrocal-calibration`` (v2, the full matrix, or v1, the diagonal model)
+    A Calibration (:class:`gyrocal.calib.model.GyroCalibration`).
 ``gyrocal-noise`` (v1)
     Noise figures from ``gyrocal noise`` (:class:`gyrocal.calib.allan.NoiseCharacterisation`).
 """
@@ -783,7 +786,7 @@ register(
         options=(
             ExportOption("c_prefix", str,
                          "c-header: prefix of the macros and the function (default GYROCAL: "
-                         "GYROCAL_SCALE_X, gyrocal_apply)"),
+                         "GYROCAL_MATRIX_XX, gyrocal_apply)"),
         ),
         suffix=".h",
     )

@@ -62,6 +62,7 @@ __all__ = [
     "KALIBR_IMU_FIELDS",
     "KalibrField",
     "imu_calib_params",
+    "kalibr_intrinsics",
     "reading_covariance",
 ]
 
@@ -603,7 +604,7 @@ def _render_ros(doc: Mapping[str, Any], options: Mapping[str, Any]) -> tuple[str
     if node is not None and not _ROS_NODE.match(node):
         raise InputError(f"--ros-node {node!r} is not a ROS node name (e.g. imu_filter, or /**)")
     nc = _noise_option(options)
-    rate = _message_rate(options, cal.sensor.get("odr_hz"))
+    rate = _message_rate(options, cal.sensor.get("odr_hz"), None if nc is None else nc.odr_hz)
     params, missing = _ros_params(cal, frame)
     cov_params, cov_lines, notes = _ros_message_covariances(cal, nc, rate)
     params = {**cov_params, **({"covariance_rate_hz": rate} if rate is not None else {}),

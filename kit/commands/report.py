@@ -10,7 +10,7 @@ DESCRIPTION = (
     "Write PNG plots of a Recording v1 into --out DIR: an overview; for each turn the raw and "
     "the calibrated rate about the servo's axis against the encoder reference, with the window "
     "the estimator used shaded by its weight; the rest windows against -bias; and each window's "
-    "residual in standard deviations. With CAL (Calibration v1 JSON) the plots use that "
+    "residual in standard deviations. With CAL (a Calibration JSON, v2 or v1) the plots use that "
     "calibration; without it one is estimated from the recording. Also writes report.html, one "
     "self-contained page (results, verdict, servo axes, verification, environment, the plots "
     "inline) to read or send. Prints the list of files. "
@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
     p.add_argument("cal", nargs="?", metavar="CAL",
-                   help="Calibration v1 JSON (default: estimate one from the recording)")
+                   help="Calibration JSON, v2 or v1 (default: estimate one from the recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
     p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
     p.add_argument("--verification", metavar="FILE",

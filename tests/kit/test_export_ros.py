@@ -183,3 +183,16 @@ def test_imu_calib_needs_an_accelerometer(tmp_path, capsys):
     p.write_text(GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0)).to_json())
     _, err = export(capsys, p, "--format", "imu-calib", code=2)
     assert "needs a calibration with an 'accelerometer'" in err
+
+
+# ------------------------------------------------------------------ help
+@pytest.mark.parametrize("argv", [["--help"], ["export", "--help"]])
+def test_help_describes_calibration_v2_as_the_default(argv, capsys):
+    assert main(argv) == 0
+    out = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    assert "g = A (m + b)" in out
+    assert ("v2, the full model" if argv[0] == "export" else "Calibration v2;") in out
+    assert "scale factors and biases" not in out and "a Calibration v1 from" not in out
+    if argv[0] == "export":
+        for word in ("imu-calib", "--noise", "kalibr", "re-estimates"):
+            assert word in out
