@@ -38,9 +38,7 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from gyrocal.kit import __version__
 from gyrocal.kit.errors import InputError
@@ -57,6 +55,12 @@ from gyrocal.kit.exports import (
     load_document,
     register,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
+
+# numpy is imported inside the functions: `gyrocal export --help` loads this module and must
+# stay light (tests/kit/test_cli_imports.py).
 
 __all__ = [
     "KALIBR_IMU_FIELDS",
@@ -358,6 +362,8 @@ def kalibr_intrinsics(cal: Any) -> tuple[dict[str, Any], list[str], list[str]]:
     zero. The accelerometer's ``a_meas = M_accel a_i + b`` against gyrocal's ``f = A (a + b)``
     gives ``M_accel = A⁻¹``. Kalibr has no fixed bias (it estimates one as a random walk).
     """
+    import numpy as np
+
     from gyrocal.calib.accel import STANDARD_GRAVITY
 
     eye = np.eye(3).tolist()
@@ -404,6 +410,8 @@ def kalibr_intrinsics(cal: Any) -> tuple[dict[str, Any], list[str], list[str]]:
 
 
 def _inverse(a: Any, what: str) -> list[list[float]]:
+    import numpy as np
+
     m = np.asarray(a, dtype=float)
     if not abs(np.linalg.det(m)) > 0:
         raise InputError(f"{what} is singular: it cannot be inverted for Kalibr")
@@ -473,6 +481,8 @@ def reading_covariance(density: Any, rate_hz: float, matrix: Any) -> np.ndarray:
     (3, 3) ndarray
         Unit² (rad/s)² or (m/s²)².
     """
+    import numpy as np
+
     var = np.asarray(density, dtype=float) ** 2 * float(rate_hz)
     a = np.asarray(matrix, dtype=float)
     return a @ np.diag(var) @ a.T
@@ -704,6 +714,8 @@ def imu_calib_params(acc: Any) -> tuple[list[float], list[float]]:
     accelerometer calibration ``f = A (a + b)``: ``corrected = SM·raw − bias`` with
     ``SM = A``, ``bias = −A b`` (dpkoch/imu_calib ``src/accel_calib/accel_calib.cpp``, lines
     80 and 205)."""
+    import numpy as np
+
     a = np.asarray(acc.matrix, dtype=float)
     return ([float(x) + 0.0 for x in a.ravel()],
             [float(x) + 0.0 for x in -(a @ np.asarray(acc.bias, dtype=float))])
@@ -731,6 +743,8 @@ def _render_imu_calib(doc: Mapping[str, Any], options: Mapping[str, Any]
         f"SM: [{', '.join(_yaml_float(x) for x in sm)}]",
         f"bias: [{', '.join(_yaml_float(x) for x in bias)}]",
     ]
+    import numpy as np
+
     worst = max(abs(x) for x in (np.asarray(cal.full_matrix) - np.eye(3)).ravel())
     notes = [
         "imu_calib calibrates the gyro only by a bias it averages at start-up "
