@@ -94,8 +94,12 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gyrocal",
         description=(
-            "Calibrate a MEMS gyroscope on a Dynamixel gimbal: spin it about each axis, time the "
-            "turns with the servo encoders, and fit scale factors and biases with uncertainties."
+            "Calibrate a MEMS gyroscope on a Dynamixel gimbal: spin it about each axis (and with "
+            "an inner servo posed), time the turns with the servo encoders, and fit the full "
+            "model g = A (m + b), a 3x3 matrix A (scale factors and cross-axis terms) and biases "
+            "b, with uncertainties (Calibration v2; the accelerometer and the gyro's "
+            "g-sensitivity too when the IMU's accelerometer is read). --protocol auto or paper "
+            "give the paper's diagonal model (Calibration v1)."
         ),
         epilog=_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,

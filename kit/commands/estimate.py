@@ -35,8 +35,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "WGS-84 normal gravity there (with --height)")
     p.add_argument("--height", type=float, metavar="M", default=0.0,
                    help="height above the WGS-84 ellipsoid, m, with --latitude (default 0)")
-    p.add_argument("--json", action="store_true", help="print the Calibration v1 document")
-    p.add_argument("--out", metavar="FILE", help="also write the Calibration v1 document here")
+    p.add_argument("--json", action="store_true",
+                   help="print the Calibration document (v2 for the full matrix, v1 for the "
+                   "diagonal model)")
+    p.add_argument("--out", metavar="FILE",
+                   help="also write the Calibration document (v2 or v1) here")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--allow-implausible", action="store_true",
                    help="accept a scale outside 0.5..2 or a bias beyond the gyro's range "

@@ -7,9 +7,11 @@ import sys
 
 HELP = "write a calibration or noise document in another tool's format (json, kalibr, ...)"
 DESCRIPTION = (
-    "Render a gyrocal JSON document (a Calibration v1 from 'gyrocal estimate/calibrate', or a "
-    "noise document from 'gyrocal noise') in the format another tool reads. DOC is the JSON file, "
-    "or - for standard input."
+    "Render a gyrocal JSON document (a Calibration from 'gyrocal calibrate/estimate': v2, the full "
+    "model g = A (m + b) with a 3x3 matrix A, by default, or v1, the paper's diagonal model; or a "
+    "noise document from 'gyrocal noise') in the format another tool reads, written in that "
+    "tool's terms (notes on stderr say what it cannot carry). DOC is the JSON file, or - for "
+    "standard input."
 )
 
 

@@ -10,12 +10,11 @@ DESCRIPTION = (
     "Write PNG plots of a Recording v1 into --out DIR: an overview; for each turn the raw and "
     "the calibrated rate about the servo's axis against the encoder reference, with the window "
     "the estimator used shaded by its weight; the rest windows against -bias; and each window's "
-    "residual in standard deviations. With CAL (a Calibration JSON, version 1 or 2) the plots "
-    "use that calibration; without it one is estimated from the recording. Also writes "
-    "report.html, one self-contained page to read or send: a summary (verdict, model, largest "
-    "cross-axis term, misalignment, what to do next), the fitted model with its standard "
-    "deviations, the verification, the noise, the environment and the plots inline. Prints the "
-    "list of files. "
+    "residual in standard deviations. With CAL (a Calibration JSON, v2 or v1) the plots use that "
+    "calibration; without it one is estimated from the recording. Also writes report.html, one "
+    "self-contained page to read or send: a summary (verdict, model, largest cross-axis term, "
+    "misalignment, what to do next), the fitted model with its standard deviations, the "
+    "verification, the noise, the environment and the plots inline. Prints the list of files. "
     "Needs matplotlib: pip install 'gyrocal[plot]'."
 )
 
@@ -26,8 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
     p.add_argument("cal", nargs="?", metavar="CAL",
-                   help="Calibration JSON, version 1 or 2 (default: estimate one from the "
-                        "recording)")
+                   help="Calibration JSON, v2 or v1 (default: estimate one from the recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")
     p.add_argument("--force", action="store_true", help="replace existing plots in DIR")
     p.add_argument("--verification", metavar="FILE",

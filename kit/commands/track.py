@@ -38,8 +38,8 @@ DESCRIPTION = (
     "and print or plot the bias over time with its uncertainty. --json prints "
     '{"t": [N], "bias": [N][3], "bias_std": [N][3], "still": [N]} in rad/s, one row per gyro '
     "sample (or per --every seconds, with \"decimated_every_s\"; sessions longer than "
-    f"{JSON_MAX_ROWS:,} samples are decimated by default), the bias in the Calibration v1 "
-    "convention (g = scale * (m + bias), so a still sensor reads -bias). Nothing needs tuning: "
+    f"{JSON_MAX_ROWS:,} samples are decimated by default), the bias in the Calibration's "
+    "convention (g = A (m + bias), so a still sensor reads -bias). Nothing needs tuning: "
     "the white noise comes from the still seconds, the bias random walk from the filter's "
     "innovations, the temperature state is on when every sample has a temperature; figures "
     "given as flags win. A recording is replayed whole, so each sample's estimate is smoothed "

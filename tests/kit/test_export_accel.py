@@ -27,6 +27,7 @@ from tests.kit.flight_stacks import (
     px4_accel,
     px4_invensense,
 )
+from tests.kit.ros_readers import noise_file
 
 
 @pytest.fixture(scope="module")
@@ -116,8 +117,8 @@ def test_yaml_and_ros_carry_the_accelerometer(cal, cal_file, capsys):
 
 
 def test_kalibr_gets_the_accelerometer_matrix_and_says_what_has_no_place(cal, cal_file, capsys):
-    out, err = export(capsys, cal_file, "kalibr")
-    doc = yaml.safe_load(out)
+    out, err = export(capsys, cal_file, "kalibr", "--noise", str(noise_file(cal_file.parent)))
+    doc = yaml.safe_load(out)["gyrocal_intrinsics"]
     M = np.asarray(doc["accelerometers"]["M"])
     # Kalibr: a_meas = M f + b; gyrocal: f = A (a + b_acc), so a = A^-1 f - b_acc
     f = np.array([0.3, -9.5, 2.0])
@@ -177,8 +178,8 @@ def test_the_thermal_formats_say_the_accelerometer_goes_elsewhere(cal, tmp_path,
 
 def test_kalibr_writes_the_measured_accelerometer_noise_unless_given(cal, tmp_path, capsys):
     """accelerometer_noise_density: the calibration's measured density (largest axis) when the
-    user gives none, --accel-noise-density when given; stderr says which; left out (and said)
-    when the calibration has none."""
+    user gives none, --accel-noise-density when given; stderr says which; a placeholder (said
+    in the file and on stderr) when the calibration has none, since Kalibr requires it."""
     from dataclasses import replace
 
     noisy = replace(cal, accelerometer=replace(
@@ -186,18 +187,21 @@ def test_kalibr_writes_the_measured_accelerometer_noise_unless_given(cal, tmp_pa
         noise_density_std=np.array([2e-4, 3e-4, 2e-4]), noise_tau_s=0.1))
     p = tmp_path / "noisy.json"
     p.write_text(noisy.to_json())
-    out, err = export(capsys, p, "kalibr")
+    noise = str(noise_file(tmp_path))
+    out, err = export(capsys, p, "kalibr", "--noise", noise)
     assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(2.6e-3, rel=1e-6)
     assert "measured on the run's rests (largest axis, y" in err
-    out, err = export(capsys, p, "kalibr", "--accel-noise-density", "5e-3")
+    out, err = export(capsys, p, "kalibr", "--accel-noise-density", "5e-3", "--noise", noise)
     assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(5e-3)
     assert "from --accel-noise-density" in err
     p2 = tmp_path / "plain.json"
     p2.write_text(cal.to_json())
-    out, err = export(capsys, p2, "kalibr")
-    assert "accelerometer_noise_density" not in yaml.safe_load(out)
-    assert "left out: the calibration has no measured accelerometer noise" in err
-    assert main(["export", str(p), "--format", "kalibr", "--accel-noise-density", "-1"]) == 2
+    out, err = export(capsys, p2, "kalibr", "--noise", noise)
+    assert yaml.safe_load(out)["accelerometer_noise_density"] == pytest.approx(1e-2)
+    assert "NOT MEASURED, a placeholder" in out
+    assert "placeholder (the calibration has no measured accelerometer noise)" in err
+    assert main(["export", str(p), "--format", "kalibr", "--accel-noise-density", "-1",
+                 "--noise", str(noise)]) == 2
     assert "must be a positive number" in capsys.readouterr().err
 
 

@@ -142,7 +142,7 @@ def test_ros_parameters_structure_and_values(cal, cal_file, capsys):
     assert p["units"] == "rad/s"
     assert p["scale"] == list(cal.scale) and p["bias"] == list(cal.bias)
     assert p["scale_std"] == list(cal.scale_std) and p["bias_std"] == list(cal.bias_std)
-    assert p["covariance"] == [x for row in cal.covariance for x in row]  # row-major
+    assert p["parameter_covariance"] == [x for row in cal.covariance for x in row]  # row-major
     assert p["sensor_model"] == "mpu9250" and p["consistent"] is True
     assert p["source"] == cal.source
     assert yaml11_floats_ok(out)
@@ -168,7 +168,7 @@ def test_ros_leaves_out_missing_uncertainties_and_says_so(tmp_path, capsys):
     params = parse_yaml(out)["gyro_calibration"]
     assert "bias_std" not in params and "covariance" not in params
     assert params["scale"] == [1.0, 1.0, 1.0]
-    assert "no scale_std, bias_std, covariance" in err
+    assert "no scale_std, bias_std, parameter_covariance" in err
 
 
 @pytest.mark.parametrize("flags, match", [

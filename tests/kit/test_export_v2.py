@@ -15,6 +15,7 @@ import yaml
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.kit.cli import main
 from tests.kit.c_program import compile_program, needs_gcc
+from tests.kit.ros_readers import KalibrImuConfig, noise_file
 
 # A ±2 % cross-axis matrix in the gyro-x-xy convention (lower triangular) and a bias, rad/s.
 A = [[1.0132, 0.0, 0.0], [0.0187, 0.9871, 0.0], [-0.0164, 0.0119, 1.0043]]
@@ -78,10 +79,10 @@ def test_ros_carries_the_matrix_row_major(capsys, tmp_path):
     assert p["matrix"] == [x for row in A for x in row]
     assert p["bias"] == B and p["scale"] == [A[i][i] for i in range(3)]
     assert p["matrix_frame_convention"] == "gyro-x-xy"
-    assert len(p["covariance"]) == 144 and len(p["matrix_std"]) == 9
+    assert len(p["parameter_covariance"]) == 144 and len(p["matrix_std"]) == 9
     assert p["sensor_model"] == HOSTILE and p["source"] == HOSTILE
     assert p["model"] == "omega = matrix * (omega_raw + bias)"
-    assert err == ""
+    assert "angular_velocity_covariance is all zeros" in err  # no --noise
     out, _ = export(capsys, tmp_path, make_full(), "ros", "--ros-node", "/imu")
     p2 = yaml.safe_load(out)["/imu"]["ros__parameters"]["gyro_calibration"]
     assert p2["matrix"][3] == A[1][0]
@@ -92,7 +93,7 @@ def test_ros_says_which_uncertainties_it_leaves_out(capsys, tmp_path):
     out, err = export(capsys, tmp_path, cal, "ros")
     p = yaml.safe_load(out)["gyro_calibration"]
     assert "matrix_std" not in p and "covariance" not in p
-    assert "no matrix_std, covariance: left out" in err
+    assert "no matrix_std, parameter_covariance: left out" in err
 
 
 C_MAIN = r"""
@@ -134,27 +135,33 @@ def test_c_header_applies_the_full_matrix_like_the_equation(capsys, tmp_path):
 
 
 def test_kalibr_intrinsics_invert_the_matrix(capsys, tmp_path):
-    out, err = export(capsys, tmp_path, make_full(), "kalibr", "--rostopic", "/imu/data")
+    out, err = export(capsys, tmp_path, make_full(), "kalibr", "--rostopic", "/imu/data",
+                      "--noise", str(noise_file(tmp_path)))
     k = yaml.safe_load(out)
-    assert k["model"] == "scale-misalignment" and k["rostopic"] == "/imu/data"
-    assert k["update_rate"] == 200
+    assert k["rostopic"] == "/imu/data" and k["update_rate"] == 200
+    i = k["gyrocal_intrinsics"]  # informative: Kalibr reads none of it
+    assert i["kalibr_model"] == "scale-misalignment" and "model" not in k
     # Kalibr's w_meas = M w + b against gyrocal's m = A^-1 g - bias: M A = I.
-    np.testing.assert_allclose(np.array(k["gyroscopes"]["M"]) @ np.array(A), np.eye(3),
+    np.testing.assert_allclose(np.array(i["gyroscopes"]["M"]) @ np.array(A), np.eye(3),
                                atol=1e-12)
-    assert np.allclose(np.triu(k["gyroscopes"]["M"], 1), 0)  # lower triangular, as Kalibr's
-    assert k["gyroscopes"]["C_gyro_i"] == np.eye(3).tolist()
-    assert k["gyroscopes"]["A"] == np.zeros((3, 3)).tolist()
-    assert k["accelerometers"]["M"] == np.eye(3).tolist()
-    assert "no place for a fixed gyro bias" in err and "placeholders" in err
+    assert np.allclose(np.triu(i["gyroscopes"]["M"], 1), 0)  # lower triangular, as Kalibr's
+    assert i["gyroscopes"]["C_gyro_i"] == np.eye(3).tolist()
+    assert i["gyroscopes"]["A"] == np.zeros((3, 3)).tolist()
+    assert i["accelerometers"]["M"] == np.eye(3).tolist()
+    assert i["gyro_bias_added_rad_s"] == B
+    assert "no place for a fixed gyro bias" in err and "re-estimates the IMU intrinsics" in err
 
 
 def test_kalibr_of_a_v1_calibration_is_diagonal_and_says_so(capsys, tmp_path):
     cal = GyroCalibration(scale=(0.5, 2.0, 1.25), bias=(0.0, 0.0, 0.0),
                           sensor={"model": "mpu9250", "odr_hz": "fast"})
-    out, err = export(capsys, tmp_path, cal, "kalibr")
+    out, err = export(capsys, tmp_path, cal, "kalibr", "--noise", str(noise_file(tmp_path)))
     k = yaml.safe_load(out)
-    assert k["gyroscopes"]["M"] == [[2.0, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.8]]
-    assert "update_rate" not in k and "give --update-rate" in err and "M is diagonal" in err
+    M = k["gyrocal_intrinsics"]["gyroscopes"]["M"]
+    assert M == [[2.0, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.8]]
+    assert k["update_rate"] == 200  # the noise document's rate: the calibration's is no number
+    assert "M is diagonal" in err
+    KalibrImuConfig(out).printDetails()
 
 
 @pytest.mark.parametrize("fmt", ["yaml", "ros", "c-header", "kalibr"])
@@ -164,7 +171,8 @@ def test_string_numbers_and_hostile_text_in_a_v1_or_v2_calibration(capsys, tmp_p
               "evil\nkey": "x"}
     cal = make_full(sensor=sensor) if full else GyroCalibration(
         scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0), sensor=sensor, source=HOSTILE)
-    out, _ = export(capsys, tmp_path, cal, fmt)
+    extra = ["--noise", str(noise_file(tmp_path))] if fmt == "kalibr" else []
+    out, _ = export(capsys, tmp_path, cal, fmt, *extra)
     if fmt == "c-header":
         head, body = out.split("\n */\n", 1)  # the opening comment, then code only
         assert "evil" not in body and "pwned" not in body
@@ -179,5 +187,5 @@ def test_string_numbers_and_hostile_text_in_a_v1_or_v2_calibration(capsys, tmp_p
 
 def test_hostile_rostopic_is_refused(capsys, tmp_path):
     out, err = export(capsys, tmp_path, make_full(), "kalibr", "--rostopic", "/imu\nevil: 1",
-                      code=2)
+                      "--noise", str(noise_file(tmp_path)), code=2)
     assert "is not a ROS topic name" in err
