@@ -187,10 +187,11 @@ def stream(cal: Any, lines: Iterable[str], out: TextIO, err: TextIO | None = Non
     Raises
     ------
     InputError
-        A malformed row (its line number and text), or a row of the other layout.
+        A malformed row (its line number and text), a row of the other layout, or a time
+        before the previous row's.
     """
     fields: tuple[int, ...] | None = None
-    n = 0
+    n, before = 0, -math.inf
     for number, line in enumerate(lines, 1):
         layout = _layout(line, number)
         if layout is None:
@@ -204,6 +205,10 @@ def stream(cal: Any, lines: Iterable[str], out: TextIO, err: TextIO | None = Non
                                  "first; give one layout per stream")
             continue
         t, rate, temp, accel = _parse(line, number, fields)
+        if t < before:  # the Recording v1 reader's rule (kit.recording: non-decreasing time)
+            raise InputError(f"line {number}: time goes backwards ({t} < {before}); give the "
+                             "rows in the order they were read")
+        before = t
         acc_rows = None if accel is None else accel[None, :]
         (row,) = format_rows(np.array([t]), calibrated(cal, rate[None, :], np.array([temp]),
                                                        acc_rows),

@@ -245,3 +245,13 @@ def test_a_row_of_the_other_layout_is_refused(monkeypatch, capsys, tmp_path):
     assert "line 3: expected 't,gx,gy,gz,temp,ax,ay,az' (8 comma-separated fields)" in res.err
     res = run_stdin(monkeypatch, capsys, cal, "t,gx,gy,gz,temp,ax\n", code=2)
     assert "unknown header" in res.err and "Traceback" not in res.err
+
+
+def test_a_stream_whose_time_goes_backwards_is_refused_by_line(monkeypatch, capsys, tmp_path):
+    """The Recording v1 reader's rule (kit.recording: non-decreasing time) holds on a stream
+    too; equal times (two samples in one FIFO stamp) pass."""
+    cal = tmp_path / "cal.json"
+    cal.write_text(GyroCalibration(scale=SCALE, bias=BIAS).to_json())
+    rows = "t,gx,gy,gz,temp\n1.0,0,0,0,25\n1.0,0,0,0,25\n0.5,0,0,0,25\n"
+    res = run_stdin(monkeypatch, capsys, cal, rows, code=2)
+    assert "line 4: time goes backwards (0.5 < 1.0)" in res.err and "Traceback" not in res.err
