@@ -90,9 +90,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
                          "servos on a port (or 'gyrocal emulate --pty') with an emulated IMU "
                          "use --sim-imu --port PORT")
     if args.sim or sim_imu:
-        from gyrocal.kit.sim import SIM_BAUD, SIM_CROSS_AXIS, build_sim_plate
+        from gyrocal.kit.sim import SIM_BAUD, SIM_SENSOR, build_sim_plate
 
-        cross_axis = getattr(args, "sim_cross_axis", None)
         if sim_imu and len(cfg.imus()) > 1:
             raise InputError("--sim-imu emulates one IMU at rest; the config lists "
                              f"{len(cfg.imus())} sensors ([[imu]] tables): use --sim, or a "
@@ -101,7 +100,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
         sim = build_sim_plate(
             cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
             realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
-            cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis,
+            cross_axis=getattr(args, "sim_cross_axis", None),
+            sensor=getattr(args, "sim_sensor", None) or SIM_SENSOR,
             realism=sim_effects(args), temperature=getattr(args, "sim_temperature", None),
             self_heating=getattr(args, "sim_self_heating", None))[0]
         if sim_imu:

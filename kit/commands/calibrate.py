@@ -57,9 +57,18 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
+    p.add_argument("--sim-sensor", choices=("datasheet", "paper", "paper-extreme"),
+                   default="datasheet",
+                   help="the emulated sensor's true scale factors and biases, drawn by seed: "
+                        "datasheet (default): within the chip's datasheet tolerances (MPU-9250: "
+                        "scale ±3 %%, bias ±5 °/s); paper: the paper's exaggerated sensor of its "
+                        "simulations (scale 0.8..1.2, bias ±0.1 rad/s); paper-extreme: its "
+                        "extreme one (scale 1.2..2.0, |bias| 0.1..0.2 rad/s). The paper's "
+                        "sensor is --sim-sensor paper --sim-cross-axis 0 --sim-realism off")
     p.add_argument("--sim-cross-axis", type=float, metavar="FRACTION",
-                   help="largest cross-axis term of the emulated sensor, drawn by seed (default "
-                        "0.02, the MPU-9250 datasheet's ±2 %%; 0 = the paper's sensor)")
+                   help="largest cross-axis term of the emulated sensor, drawn by seed (default: "
+                        "the chip's datasheet figure, 0.02 for the MPU-9250's ±2 %%; 0 = none, "
+                        "as in the paper's model)")
     p.add_argument("--sim-realism", choices=("on", "off"), default="on",
                    help="the emulated sensor's imperfections beyond its calibration errors "
                         "(coloured noise, DLPF delay, g-sensitivity, gravity and lever arm, "
