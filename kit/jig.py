@@ -15,13 +15,14 @@ import argparse
 import contextlib
 import math
 import sys
+from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 __all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "measure_still_noise", "note_rounded_odr", "output_dir", "record_protocol",
-           "run_jig", "sim_effects"]
+           "run_jig", "sim_effects", "time_budget"]
 
 
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
@@ -243,13 +244,25 @@ def _nominal_axes(names: list[str]) -> Any:
     return out
 
 
+def time_budget(protocol: Mapping[str, Any]) -> float:
+    """The jig time the planner may use for the config's ``[protocol]``: ``time_budget_s``, or
+    the protocol's own when it is 0 (the default): at least
+    :data:`~gyrocal.calib.design.FULL_TIME_BUDGET_S` for ``full``,
+    :data:`~gyrocal.calib.design.AUTO_TIME_BUDGET_S` for ``auto`` (``paper`` is not planned)."""
+    from gyrocal.calib.design import AUTO_TIME_BUDGET_S, FULL_TIME_BUDGET_S
+
+    given = float(protocol["time_budget_s"])
+    if protocol["name"] == "full":
+        return max(given, FULL_TIME_BUDGET_S)
+    return given or AUTO_TIME_BUDGET_S
+
+
 def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:
     """The protocol: planned for this servo and gyro (and its measured noise), or the paper's;
     fixed values override."""
     from dataclasses import replace
 
     from gyrocal.calib.design import (
-        FULL_TIME_BUDGET_S,
         MIN_REST_S,
         jig_time,
         paper_plan,
@@ -265,8 +278,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     # the planned protocols stay within their budget (the full one's is at least
     # FULL_TIME_BUDGET_S; with the accelerometer's rests the whole run, their moves included),
     # also when fixed values override the plan (checked below)
-    limit = (max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full"
-             else p["time_budget_s"])
+    limit = time_budget(p)
     noise = {} if noise_std is None else {"noise_std": noise_std}
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
