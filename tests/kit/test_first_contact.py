@@ -89,6 +89,12 @@ def test_the_readme_and_the_flags_agree_on_the_papers_sensor():
     assert recipe in " ".join(readme.split())
     assert recipe in " ".join(helps.split())
     assert "0 = the paper's sensor" not in " ".join(helps.split())
+    # the flag offers exactly the sensors kit.sim draws (the parser does not import kit.sim)
+    from gyrocal.kit.sim import SIM_SENSOR, SIM_SENSORS
+
+    flag = next(a for a in build_parser(["calibrate"])._subparsers._group_actions[0].choices[
+        "calibrate"]._actions if a.dest == "sim_sensor")
+    assert tuple(flag.choices) == tuple(SIM_SENSORS) and flag.default == SIM_SENSOR
 
 
 def test_init_writes_a_time_budget_the_default_protocol_fits(tmp_path):
