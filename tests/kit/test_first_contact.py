@@ -210,3 +210,17 @@ def test_setup_md_shows_what_doctor_sim_prints(tmp_path, monkeypatch, capsys):
     capsys.readouterr()
     assert main(["doctor", "--sim"]) == 0
     assert capsys.readouterr().out == sample
+
+
+def test_doctor_warns_of_a_bias_only_beyond_the_chips_datasheet(capsys):
+    # The default emulated LSM9DS1 has biases up to its datasheet's ±30 °/s (0.52 rad/s;
+    # DocID025715 Table 3, G_TyOff): doctor used to call anything above 0.3 rad/s unusual.
+    lsm = ["--imu-model", "lsm9ds1", "--imu-address", "0x6B", "--odr", "238"]
+    assert main(["doctor", "--sim", *lsm]) == 0
+    out = capsys.readouterr().out
+    mean = re.search(r"at rest: mean \[(.*?)\] rad/s", out).group(1)
+    assert max(abs(float(x)) for x in mean.split()) > 0.3  # seed 0 draws one above 0.3
+    assert "a large rate at rest" not in out
+    # an MPU-9250 (±5 °/s) reading 0.5 rad/s at rest is warned of, beyond 0.3 rad/s
+    assert main(["doctor", "--sim", "--sim-bias", "0.5", "0", "0"]) == 0
+    assert "a large rate at rest (> 0.3 rad/s)" in capsys.readouterr().out
