@@ -786,10 +786,15 @@ _SPAN_DECADES = 2
 def min_still_samples(odr_hz: float, min_tau_s: float | None = None) -> int:
     """Samples a still record needs for :func:`characterise_noise` to separate its three terms.
 
-    The curve reaches ``τ_max = n/(4·odr)`` (Stable32's stop ratio for the overlapping Allan
-    deviation, as :func:`allan_deviation` uses) and must span ``_SPAN_DECADES`` decades above
-    the shortest averaging time ``N`` is read at (default 10 samples), so
-    ``n ≥ 4 · 10^decades · m_min``.
+    The curve's averaging factors run two per octave up to ``n/4`` (:func:`_taus_m`, Stable32's
+    stop ratio for the overlapping Allan deviation) and must span ``_SPAN_DECADES`` decades
+    above the shortest averaging time ``N`` is read at (default 10 samples), to the grid's own
+    resolution: its top point must lie within one grid step (half an octave) below
+    ``10^decades · m_min``. Records that give the same grid give the same curve points, so the
+    count is the least ``n`` whose grid holds that point: 2900 samples for ``m_min = 10``
+    (top point 724, 1.86 decades), where ``n ≥ 4 · 10^decades · m_min`` = 4000 asked for a point
+    (1000) the grid never has below 4096 samples and refused records, such as a 20 s session at
+    200 Hz (3998 samples), whose curves equal those it accepted.
 
     Parameters
     ----------
@@ -804,7 +809,10 @@ def min_still_samples(odr_hz: float, min_tau_s: float | None = None) -> int:
     """
     fs = scalar(odr_hz, "odr_hz", positive=True)
     m_min = 10 if min_tau_s is None else max(1, math.ceil(min_tau_s * fs - 1e-9))
-    return 4 * 10**_SPAN_DECADES * m_min
+    per_octave = 2  # as _taus_m
+    span = math.log2(10**_SPAN_DECADES * m_min)  # octaves
+    top = math.ceil(per_octave * span - 1 - 1e-9) / per_octave  # the grid point a step below
+    return 4 * math.ceil(2.0**top)
 
 
 def characterise_noise(

@@ -145,8 +145,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "name": Key(PROTOCOLS[0], "full: planned with poses for the full matrix (three "
                     "servos, at least 45 s); auto: planned for this servo and gyro, diagonal "
                     "model only; paper: 60 deg/s, one turn, 3 s waits", str, PROTOCOLS),
-        "time_budget_s": Key(30.0, "longest jig time the planner may use, s (1..3600)",
-                             (int, float), check=_within(1, 3600)),
+        "time_budget_s": Key(0.0, "longest jig time the planner may use, s (1..3600; 0: the "
+                             "protocol's own, 45 s for full, 30 s for auto; full takes at least "
+                             "45 s whatever is set)", (int, float),
+                             check=_within(1, 3600, zero="the protocol's own")),
         "speed_dps": Key(0.0, "fixed turn speed, deg/s (1..2000; 0: planned)", (int, float),
                          check=_within(1, 2000, zero="planned")),
         "turns": Key(0, "fixed whole turns per direction (1..256; 0: planned)", int,

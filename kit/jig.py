@@ -15,13 +15,14 @@ import argparse
 import contextlib
 import math
 import sys
+from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 __all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "measure_still_noise", "note_rounded_odr", "output_dir", "record_protocol",
-           "run_jig", "sim_effects"]
+           "run_jig", "sim_effects", "time_budget"]
 
 
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
@@ -90,9 +91,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
                          "servos on a port (or 'gyrocal emulate --pty') with an emulated IMU "
                          "use --sim-imu --port PORT")
     if args.sim or sim_imu:
-        from gyrocal.kit.sim import SIM_BAUD, SIM_CROSS_AXIS, build_sim_plate
+        from gyrocal.kit.sim import SIM_BAUD, SIM_SENSOR, build_sim_plate
 
-        cross_axis = getattr(args, "sim_cross_axis", None)
         if sim_imu and len(cfg.imus()) > 1:
             raise InputError("--sim-imu emulates one IMU at rest; the config lists "
                              f"{len(cfg.imus())} sensors ([[imu]] tables): use --sim, or a "
@@ -101,7 +101,8 @@ def jig_endpoints(cfg: Any, args: argparse.Namespace) -> tuple[Any, Any, Any, in
         sim = build_sim_plate(
             cfg, seed=args.sim_seed, scale=args.sim_scale, bias=args.sim_bias,
             realtime=args.realtime or sim_imu, noise_seed=args.sim_noise_seed,
-            cross_axis=SIM_CROSS_AXIS if cross_axis is None else cross_axis,
+            cross_axis=getattr(args, "sim_cross_axis", None),
+            sensor=getattr(args, "sim_sensor", None) or SIM_SENSOR,
             realism=sim_effects(args), temperature=getattr(args, "sim_temperature", None),
             self_heating=getattr(args, "sim_self_heating", None))[0]
         if sim_imu:
@@ -243,13 +244,25 @@ def _nominal_axes(names: list[str]) -> Any:
     return out
 
 
+def time_budget(protocol: Mapping[str, Any]) -> float:
+    """The jig time the planner may use for the config's ``[protocol]``: ``time_budget_s``, or
+    the protocol's own when it is 0 (the default): at least
+    :data:`~gyrocal.calib.design.FULL_TIME_BUDGET_S` for ``full``,
+    :data:`~gyrocal.calib.design.AUTO_TIME_BUDGET_S` for ``auto`` (``paper`` is not planned)."""
+    from gyrocal.calib.design import AUTO_TIME_BUDGET_S, FULL_TIME_BUDGET_S
+
+    given = float(protocol["time_budget_s"])
+    if protocol["name"] == "full":
+        return max(given, FULL_TIME_BUDGET_S)
+    return given or AUTO_TIME_BUDGET_S
+
+
 def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:
     """The protocol: planned for this servo and gyro (and its measured noise), or the paper's;
     fixed values override."""
     from dataclasses import replace
 
     from gyrocal.calib.design import (
-        FULL_TIME_BUDGET_S,
         MIN_REST_S,
         jig_time,
         paper_plan,
@@ -265,8 +278,7 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     # the planned protocols stay within their budget (the full one's is at least
     # FULL_TIME_BUDGET_S; with the accelerometer's rests the whole run, their moves included),
     # also when fixed values override the plan (checked below)
-    limit = (max(p["time_budget_s"], FULL_TIME_BUDGET_S) if p["name"] == "full"
-             else p["time_budget_s"])
+    limit = time_budget(p)
     noise = {} if noise_std is None else {"noise_std": noise_std}
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)

@@ -630,6 +630,8 @@ class Runner:
                 self.step_index = i
                 self.step_desc = step.describe()
                 if step.kind == "still":  # still time after a turn, before a move: no segment
+                    # announced as every step is, so the numbers the user reads have no gaps
+                    self._event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}")
                     self._data = None
                     self._run_rest(step)
                     continue

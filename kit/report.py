@@ -127,8 +127,12 @@ def accelerometer_rows(acc: Any, err: TruthError | None = None) -> list[str]:
     std = acc.std
     S = np.zeros((3, 3))
     S[np.tril_indices(3)] = std[:6]
-    lines = ["", f"accelerometer: f = A (a + bias), m/s²; frame accel-x-xy, {acc.rests} still "
-             f"windows against gravity {acc.gravity:.5f} m/s²", ""]
+    lines = ["", f"accelerometer, calibrated from the same run: the rests between the turns held "
+             f"the sensor still in {acc.rests} orientations, each a look at gravity.",
+             "It is in the calibration file too: a flight stack calibrates its accelerometer with "
+             "it, and applying a gyro's g-sensitivity needs the specific force it measures.",
+             f"model: f = A (a + bias), m/s²; frame accel-x-xy, fitted against gravity "
+             f"{acc.gravity:.5f} m/s²", ""]
     lines.append(f"{'row':<5}" + "".join(f"{'A_' + c:>13}{'± std':>10}" for c in "xyz")
                  + f"{'bias m/s²':>14}{'± std':>10}")
     for j, ax in enumerate("xyz"):

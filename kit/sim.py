@@ -14,18 +14,20 @@ from typing import Any
 
 import numpy as np
 
-from gyrocal.calib.simulate import NORMAL, draw_sensors
+from gyrocal.calib.simulate import EXTREME, NORMAL, SensorPreset, draw_sensors
 from gyrocal.drivers.clock import Clock, SystemClock, VirtualClock
 from gyrocal.drivers.emulated.accel import ACCEL_DATASHEET, draw_accel_truth
 from gyrocal.drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
 from gyrocal.drivers.emulated.imu_chips import SensorRealism, SensorTruth, make_emulated_imu
 from gyrocal.drivers.imu import READERS
+from gyrocal.drivers.imu.chips import MPU9250
 from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
-__all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SimJig", "build_sim",
-           "build_sim_plate", "plate_seed",
-           "realism_sizes", "sim_misalignment", "sim_realism", "sim_thermal", "sim_truth"]
+__all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SIM_SENSOR",
+           "SIM_SENSORS", "SimJig", "build_sim", "build_sim_plate", "plate_seed",
+           "realism_sizes", "sensor_preset", "sim_cross_axis", "sim_misalignment",
+           "sim_realism", "sim_thermal", "sim_truth"]
 
 #: Servo model of the emulated jig.
 SIM_SERVO_MODEL = "XM430-W350"
@@ -125,16 +127,29 @@ class SimJig:
 
 
 #: The MPU-9250 datasheet's cross-axis sensitivity, ±2 % (PS-MPU-9250A-01 §3.1, Gyroscope
-#: Specifications), the default of ``--sim-cross-axis``: the emulated sensor has cross-axis terms
-#: as a real one does (``--sim-cross-axis 0`` gives the paper's sensor).
-DATASHEET_CROSS_AXIS = 0.02
+#: Specifications): the default of ``--sim-cross-axis`` for the default chip. Each chip's own
+#: figure is its ``ChipFamily.gyro_errors.cross_axis``; ``--sim-cross-axis 0`` gives a sensor
+#: without cross-axis terms, as the paper's model has none.
+DATASHEET_CROSS_AXIS = MPU9250.gyro_errors.cross_axis
 SIM_CROSS_AXIS = DATASHEET_CROSS_AXIS
+
+#: ``--sim-sensor``: where the emulated sensor's true scale factors and biases are drawn from.
+SIM_SENSORS: dict[str, str] = {
+    "datasheet": "within the chip's datasheet tolerances: sensitivity (scale) tolerance and "
+                 "initial zero-rate offset (ChipFamily.gyro_errors; MPU-9250: ±3 %, ±5 °/s)",
+    "paper": "the paper's normal conditions (its Section III simulations): scale U(0.8, 1.2), "
+             "bias U(-0.1, 0.1) rad/s, beyond any datasheet of today's chips",
+    "paper-extreme": "the paper's extreme conditions: scale U(1.2, 2.0), |bias| U(0.1, 0.2) "
+                     "rad/s with a random sign",
+}
+#: The default ``--sim-sensor``: a sensor as its datasheet allows.
+SIM_SENSOR = "datasheet"
 
 
 def sim_misalignment(seed: int, cross_axis: float = SIM_CROSS_AXIS) -> np.ndarray:
     """The emulated sensor's cross-axis matrix (``SensorTruth.misalignment``): the identity plus
     off-diagonal terms drawn by ``seed`` and scaled so that the largest is ``±cross_axis``
-    (0 gives the paper's sensor, the identity).
+    (0 gives the identity, as in the paper's model).
 
     Raises
     ------
@@ -240,11 +255,56 @@ def sim_realism(family: str, seed: int, effects: Collection[str]) -> tuple[Senso
     return realism, (ppm if "clock" in on else 0.0)
 
 
+def sensor_preset(sensor: str = SIM_SENSOR, family: str = "mpu9250") -> SensorPreset:
+    """The distribution ``--sim-sensor SENSOR`` draws a ``family`` chip's true scale factors and
+    biases from (:data:`SIM_SENSORS`).
+
+    ``datasheet`` is the chip's sensitivity tolerance and initial zero-rate offset
+    (:class:`~gyrocal.drivers.imu.chips.GyroErrors`); ``paper`` and ``paper-extreme`` are the
+    paper's normal and extreme conditions (Section III), whatever the chip.
+
+    Raises
+    ------
+    InputError
+        If ``sensor`` is not one of :data:`SIM_SENSORS`.
+    """
+    if sensor == "paper":
+        return NORMAL
+    if sensor == "paper-extreme":
+        return EXTREME
+    if sensor != "datasheet":
+        raise InputError(f"--sim-sensor {sensor!r}: choose one of " + ", ".join(SIM_SENSORS))
+    errors = _family(family).gyro_errors
+    return SensorPreset((1.0 - errors.scale_tolerance, 1.0 + errors.scale_tolerance),
+                        (0.0, errors.zero_rate_rad_s))
+
+
+def sim_cross_axis(family: str = "mpu9250") -> float:
+    """The default ``--sim-cross-axis`` of a ``family`` chip: its datasheet's cross-axis
+    sensitivity (``ChipFamily.gyro_errors.cross_axis``)."""
+    return _family(family).gyro_errors.cross_axis
+
+
+def _family(name: str) -> Any:
+    """The chip family named ``name`` (a family or a model name)."""
+    for reader in READERS.values():
+        if reader.family.name == name:
+            return reader.family
+    return READERS[name].family
+
+
 def sim_truth(
-    seed: int, scale: list[float] | None = None, bias: list[float] | None = None
+    seed: int, scale: list[float] | None = None, bias: list[float] | None = None, *,
+    sensor: str = SIM_SENSOR, family: str = "mpu9250",
 ) -> tuple[np.ndarray, np.ndarray]:
-    """True scale and bias: drawn from the paper's normal conditions by ``seed`` unless given."""
-    k, b = draw_sensors(np.random.default_rng(seed), 1, NORMAL)
+    """True scale and bias: drawn by ``seed`` from :func:`sensor_preset` ``(sensor, family)``
+    unless given.
+
+    The draw is the same stream of uniforms for every ``sensor``, so a seed's sensor keeps the
+    sign and the place within its range of each term: a ``datasheet`` scale is
+    ``1 + (k - 1) · tol / 0.2`` of the ``paper`` one ``k``.
+    """
+    k, b = draw_sensors(np.random.default_rng(seed), 1, sensor_preset(sensor, family))
     k, b = k[0], b[0]
     if scale is not None:
         k = np.asarray(scale, dtype=float)
@@ -267,10 +327,11 @@ def build_sim(
     noise_density_rad_s_sqrt_hz: float | None = None,
     mount_deg: float = 3.0,
     noise_seed: int | None = None,
-    cross_axis: float = SIM_CROSS_AXIS,
+    cross_axis: float | None = None,
     realism: Collection[str] | None = None,
     temperature: str | None = None,
     self_heating: str | None = None,
+    sensor: str = SIM_SENSOR,
 ) -> SimJig:
     """Assemble the emulated jig described by ``cfg`` (IDs, axes, IMU model and address).
 
@@ -278,7 +339,7 @@ def build_sim(
     ----------
     cfg : Config
     seed : int
-        Seeds the sensor's true errors (paper's normal conditions) and the jig's geometry (the
+        Seeds the sensor's true errors (drawn as ``sensor`` says) and the jig's geometry (the
         mount misalignment and the servo axes' tilts): which sensor on which jig.
     noise_seed : int, optional
         Seeds what differs from run to run on the same jig: the gyro noise and the servos'
@@ -291,15 +352,19 @@ def build_sim(
         Gyro white-noise density; the chip's typical figure when omitted.
     mount_deg : float
         Misalignment of the sensor's mount, degrees (random axis).
-    cross_axis : float
+    cross_axis : float, optional
         Largest off-diagonal term of the sensor's cross-axis matrix, drawn by ``seed``
-        (:func:`sim_misalignment`; 0 = the paper's sensor).
+        (:func:`sim_misalignment`); the chip's datasheet figure when omitted
+        (:func:`sim_cross_axis`), 0 for none (the paper's model has none).
     realism : collection of str, optional
         The :data:`REALISM_EFFECTS` that are on; all of them when omitted, none with ``()``.
     temperature, self_heating : str, optional
         ``--sim-temperature`` and ``--sim-self-heating`` (:func:`sim_thermal`): either turns on
         the die's warm-up and temperature coefficients drawn by ``seed``; without both the die
         stays at 25 °C and the sensor has no temperature terms.
+    sensor : str
+        ``--sim-sensor`` (:data:`SIM_SENSORS`): the true scale factors and biases within the
+        chip's datasheet tolerances (default), or the paper's normal or extreme conditions.
     """
     clock: Clock = SystemClock() if realtime else VirtualClock()
     g = cfg["gimbal"]
@@ -313,23 +378,28 @@ def build_sim(
                     wobble_deg=SIM_WOBBLE_DEG if "wobble" in effects else 0.0,
                     lever_arm_m=SIM_LEVER_ARM_M if "gravity" in effects else (0.0, 0.0, 0.0))
     plate = SimJig(clock, port, servo_bus, jig, None, 0, SensorTruth(), effects)
-    return _add_sensor(plate, cfg["imu"], seed, run_seed, sim_truth(seed, scale, bias),
+    family = READERS[cfg["imu"]["model"]].family.name
+    truth = sim_truth(seed, scale, bias, sensor=sensor, family=family)
+    return _add_sensor(plate, cfg["imu"], seed, run_seed, truth,
                        cross_axis=cross_axis, noise_density=noise_density_rad_s_sqrt_hz,
                        temperature=temperature, self_heating=self_heating)
 
 
 def _add_sensor(plate: SimJig, imu_cfg: dict[str, Any], seed: int, run_seed: int,
-                scale_bias: tuple[np.ndarray, np.ndarray], *, cross_axis: float,
+                scale_bias: tuple[np.ndarray, np.ndarray], *, cross_axis: float | None,
                 noise_density: float | None, temperature: str | None,
                 self_heating: str | None, bus: Any = None) -> SimJig:
     """One emulated sensor on the plate's jig: its truth drawn by ``seed`` (scale, bias from
-    ``scale_bias``), its chip on ``bus`` (a new emulated bus when None); the returned
+    ``scale_bias``; its cross-axis terms up to ``cross_axis``, the chip's datasheet figure when
+    None), its chip on ``bus`` (a new emulated bus when None); the returned
     :class:`SimJig` shares the plate's clock, servos and joints."""
     k, b = scale_bias
     family = READERS[imu_cfg["model"]].family
     sensor_realism, ppm = sim_realism(family.name, seed, plate.realism)
     truth_kw: dict[str, Any] = {"scale": tuple(k), "bias": tuple(b),
-                                "misalignment": sim_misalignment(seed, cross_axis),
+                                "misalignment": sim_misalignment(
+                                    seed, sim_cross_axis(family.name) if cross_axis is None
+                                    else cross_axis),
                                 "realism": sensor_realism, "clock_ppm": ppm}
     if "accel-errors" in plate.realism:
         truth_kw["accelerometer"] = draw_accel_truth(family.name, seed)
@@ -410,8 +480,10 @@ def build_sim_plate(cfg: Config, *, seed: int = 0, noise_seed: int | None = None
                         wobble_deg=SIM_WOBBLE_DEG if "wobble" in first.realism else 0.0,
                         lever_arm_m=tuple(arm))
         plate = replace(first, jig=jig)
-        view = _add_sensor(plate, sensor, sk, plate_seed(run_seed, k), sim_truth(sk),
-                           cross_axis=options.get("cross_axis", SIM_CROSS_AXIS),
+        truth = sim_truth(sk, sensor=options.get("sensor", SIM_SENSOR),
+                          family=READERS[sensor["model"]].family.name)
+        view = _add_sensor(plate, sensor, sk, plate_seed(run_seed, k), truth,
+                           cross_axis=options.get("cross_axis"),
                            noise_density=options.get("noise_density_rad_s_sqrt_hz"),
                            temperature=options.get("temperature"),
                            self_heating=options.get("self_heating"),

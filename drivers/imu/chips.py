@@ -51,6 +51,7 @@ __all__ = [
     "ChipModel",
     "AccelErrors",
     "AccelRange",
+    "GyroErrors",
     "GyroRange",
     "RAD_PER_DEG",
     "STANDARD_GRAVITY_M_S2",
@@ -119,6 +120,40 @@ class AccelErrors:
         figs = (self.scale_tolerance, self.cross_axis, self.noise_g_sqrt_hz, *self.zero_g_g)
         if len(self.zero_g_g) != 3 or not all(math.isfinite(x) and x >= 0 for x in figs):
             raise ValueError(f"accelerometer error figures must be finite and >= 0: {self!r}")
+
+
+@dataclass(frozen=True)
+class GyroErrors:
+    """The gyro's calibration error sizes a chip's datasheet gives: the emulated sensor of
+    ``--sim`` draws its scale, zero-rate offset and cross-axis terms within them
+    (:func:`gyrocal.kit.sim.sim_truth`, ``--sim-sensor datasheet``).
+
+    Parameters
+    ----------
+    scale_tolerance : float
+        Sensitivity (scale factor) initial tolerance at 25 °C, fraction (±).
+    cross_axis : float
+        Cross-axis sensitivity, fraction (±).
+    zero_rate_dps : float
+        Initial zero-rate output (bias) tolerance, °/s (±).
+    source : str
+        The datasheet, its revision and table; what is not in it is named as a stand-in (⚠).
+    """
+
+    scale_tolerance: float
+    cross_axis: float
+    zero_rate_dps: float
+    source: str
+
+    def __post_init__(self) -> None:
+        figs = (self.scale_tolerance, self.cross_axis, self.zero_rate_dps)
+        if not all(math.isfinite(x) and x >= 0 for x in figs):
+            raise ValueError(f"gyro error figures must be finite and >= 0: {self!r}")
+
+    @property
+    def zero_rate_rad_s(self) -> float:
+        """The zero-rate offset tolerance in rad/s."""
+        return self.zero_rate_dps * RAD_PER_DEG
 
 
 @dataclass(frozen=True)
@@ -204,6 +239,8 @@ class ChipFamily:
         2 g margin over gravity for the jig's lever-arm accelerations and knocks.
     accel_errors : AccelErrors
         The accelerometer's datasheet error sizes (scale, cross-axis, zero-g, noise density).
+    gyro_errors : GyroErrors
+        The gyro's datasheet error sizes (scale tolerance, cross-axis, zero-rate offset).
     extra : mapping
         Further chip facts by name.
     """
@@ -223,6 +260,7 @@ class ChipFamily:
     temperature_lsb_per_c: float
     accel_range: AccelRange
     accel_errors: AccelErrors
+    gyro_errors: GyroErrors
     extra: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     def model_for(self, who_am_i: int) -> ChipModel | None:
@@ -377,6 +415,11 @@ MPU9250 = ChipFamily(
     # Noise Power Spectral Density (low-noise mode) 300 µg/√Hz
     accel_errors=AccelErrors(0.03, 0.02, (0.060, 0.060, 0.080), 300e-6,
                              "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.2 Table 2 ⚠"),
+    # PS-MPU-9250A-01 rev 1.0 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance
+    # ±3 %, Cross-Axis Sensitivity ±2 %, Initial ZRO Tolerance ±5 °/s (25 °C) ⚠ one source (the
+    # older MPU-6000/6050 sheet PS-MPU-6000A-00 gives ±20 °/s, which PX4's MPU-9250 self-test
+    # comment quotes)
+    gyro_errors=GyroErrors(0.03, 0.02, 5.0, "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.1 Table 1 ⚠"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
@@ -518,6 +561,12 @@ LSM9DS1 = ChipFamily(
     accel_errors=AccelErrors(0.03, 0.02, (0.090, 0.090, 0.090), 300e-6,
                              "zero-g: LSM9DS1 DocID025715 Rev 3 Table 3; scale, cross-axis, "
                              "noise: stand-in (not in the datasheet) ⚠"),
+    # DocID025715 Rev 3 Table 3: G_TyOff ±30 dps (zero-rate level) ✓✓ (the datasheet and
+    # SparkFun's LSM9DS1 notes quoting it). Table 3 gives no gyro sensitivity tolerance or
+    # cross-axis figure: the MPU-9250's Table 1 figures stand in ⚠
+    gyro_errors=GyroErrors(0.03, 0.02, 30.0,
+                           "zero-rate: LSM9DS1 DocID025715 Rev 3 Table 3 (G_TyOff); scale, "
+                           "cross-axis: stand-in (not in the datasheet) ⚠"),
     # bytes the reader drains per sample: one FIFO slot, gyro XYZ and accel XYZ int16 (§2.7)
     extra=MappingProxyType({"fifo_sample_bytes": 12.0}),
 )
@@ -709,6 +758,10 @@ ICM42688P = ChipFamily(
     accel_errors=AccelErrors(0.005, 0.01, (0.020, 0.020, 0.020), 70e-6,
                              "ICM-42688-P DS-000347 rev 1.2 §3.2 Table 2 (noise X/Y 65, "
                              "Z 70 µg/√Hz) ⚠"),
+    # DS-000347 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±0.5 %,
+    # Cross-Axis Sensitivity ±1.25 % ⚠ one source; Initial ZRO Tolerance (board-level)
+    # ±0.5 °/s ✓✓ (Table 1 and open code quoting it)
+    gyro_errors=GyroErrors(0.005, 0.0125, 0.5, "ICM-42688-P DS-000347 §3.1 Table 1 ⚠"),
     extra=MappingProxyType(
         {
             "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
@@ -866,6 +919,12 @@ LSM6DSOX = ChipFamily(
     accel_errors=AccelErrors(0.01, 0.02, (0.020, 0.020, 0.020), 75e-6,
                              "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
                              "datasheet) ⚠"),
+    # LSM6DSO DS12140 Rev 3 Table 2 (as for the accelerometer; DS12814's own table not read ⚠):
+    # G_So% sensitivity tolerance ±1 %, G_TyOff zero-rate level ±1 dps ✓✓ (also the LSM6DSOX
+    # table as quoted by open code). ST gives no cross-axis figure: the MPU-9250's ±2 % stands in
+    gyro_errors=GyroErrors(0.01, 0.02, 1.0,
+                           "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
+                           "datasheet) ⚠"),
     extra=MappingProxyType(
         {
             "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
@@ -993,6 +1052,10 @@ ICM20948 = ChipFamily(
     # and Noise Spectral Density 230 µg/√Hz ⚠ one source
     accel_errors=AccelErrors(0.005, 0.02, (0.050, 0.050, 0.050), 230e-6,
                              "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 ⚠"),
+    # DS-000189 rev 1.3 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±1.5 %,
+    # Cross-Axis Sensitivity ±2 % ⚠ one source; Initial ZRO Tolerance (board-level) ±5 °/s ✓✓
+    # (Table 1 and open code quoting it)
+    gyro_errors=GyroErrors(0.015, 0.02, 5.0, "ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 ⚠"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)

@@ -57,9 +57,18 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
                    help="true scale factors of the emulated sensor (default: drawn by seed)")
     p.add_argument("--sim-bias", type=_floats3("--sim-bias"), nargs=3, metavar="B",
                    help="true biases of the emulated sensor, rad/s (default: drawn by seed)")
+    p.add_argument("--sim-sensor", choices=("datasheet", "paper", "paper-extreme"),
+                   default="datasheet",
+                   help="the emulated sensor's true scale factors and biases, drawn by seed: "
+                        "datasheet (default): within the chip's datasheet tolerances (MPU-9250: "
+                        "scale ±3 %%, bias ±5 °/s); paper: the paper's exaggerated sensor of its "
+                        "simulations (scale 0.8..1.2, bias ±0.1 rad/s); paper-extreme: its "
+                        "extreme one (scale 1.2..2.0, |bias| 0.1..0.2 rad/s). The paper's "
+                        "sensor is --sim-sensor paper --sim-cross-axis 0 --sim-realism off")
     p.add_argument("--sim-cross-axis", type=float, metavar="FRACTION",
-                   help="largest cross-axis term of the emulated sensor, drawn by seed (default "
-                        "0.02, the MPU-9250 datasheet's ±2 %%; 0 = the paper's sensor)")
+                   help="largest cross-axis term of the emulated sensor, drawn by seed (default: "
+                        "the chip's datasheet figure, 0.02 for the MPU-9250's ±2 %%; 0 = none, "
+                        "as in the paper's model)")
     p.add_argument("--sim-realism", choices=("on", "off"), default="on",
                    help="the emulated sensor's imperfections beyond its calibration errors "
                         "(coloured noise, DLPF delay, g-sensitivity, gravity and lever arm, "
@@ -192,9 +201,83 @@ def run(args: argparse.Namespace) -> int:
         print()
     else:
         print(calibration_table(cal, rec.truth))
-        print(f"\nwrote {cal_path} and {rec_dir}/"
-              + (f", and the report {out / 'report.html'}" if report else ""))
+        print()
+        print(_what_next(args, out, cal, report))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0
+
+
+#: The flags that say which jig (or emulated jig) a run used, by their ``args`` names: the
+#: next commands need them to reach the same sensor.
+_JIG_FLAGS = ("config", "sim_seed", "sim_sensor", "sim_scale", "sim_bias", "sim_cross_axis",
+              "sim_realism", "sim_without", "sim_temperature", "sim_self_heating", "port",
+              "baud", "imu_model", "imu_bus", "imu_address", "range_dps", "odr")
+#: Their values when not given (the flags left out of the next commands).
+_JIG_DEFAULTS: dict[str, Any] = {"sim_seed": 0, "sim_sensor": "datasheet", "sim_realism": "on",
+                                 "sim_without": []}
+
+
+def _jig_flags(args: argparse.Namespace) -> str:
+    """The run's jig-defining flags as a command line (``--sim`` first when it was given)."""
+    import shlex
+
+    parts = ["--sim"] if args.sim else []
+    for name in _JIG_FLAGS:
+        value = getattr(args, name, None)
+        if value is None or value == _JIG_DEFAULTS.get(name):
+            continue
+        flag = "--" + name.replace("_", "-")
+        if name == "sim_without":
+            parts += [f"{flag} {shlex.quote(v)}" for v in value]
+        elif isinstance(value, list):
+            parts.append(flag + "".join(f" {v:g}" for v in value))
+        elif name == "imu_address":
+            parts.append(f"{flag} 0x{value:02X}")
+        else:
+            parts.append(f"{flag} {shlex.quote(str(value))}")
+    return "".join(" " + p for p in parts)
+
+
+def _what_next(args: argparse.Namespace, out: Path, cal: Any, report: bool) -> str:
+    """What the run wrote and the commands a user runs next: verify it on a new run, export it
+    for their flight stack or tool, read the report (or how to get it: the ``plot`` extra)."""
+    import shlex
+
+    from gyrocal.kit.exports import EXPORTERS
+
+    cal_path, rec_dir = out / "calibration.json", out / "recording"
+    q = shlex.quote
+    kind = "the full model" if cal.matrix is not None else "the paper's diagonal model"
+    wrote = (f"wrote {cal_path} (Calibration v{2 if cal.matrix is not None else 1}: {kind}), "
+             f"{rec_dir}/ (what the jig recorded)")
+    has_matplotlib = importlib.util.find_spec("matplotlib") is not None
+    if report:
+        wrote += f", and the report {out / 'report.html'} (plots in {out / 'plots'}/)"
+    formats = ", ".join(n for n, e in EXPORTERS.items() if "gyrocal-calibration" in e.accepts)
+    steps = [
+        ("check it on a new run, in motion the calibration never saw:",
+         f"gyrocal verify {q(str(cal_path))}{_jig_flags(args)}"),
+        (f"write it for your flight stack or tool (FORMAT: {formats}; gyrocal export --help):",
+         f"gyrocal export {q(str(cal_path))} --format FORMAT"),
+    ]
+    if report:
+        steps.append(("read the result, its verdict and plots on one page:",
+                      str(out / "report.html")))
+    else:
+        why = ("no report was written: it needs the plot extra (pip install 'gyrocal[plot]'), "
+               "then" if not has_matplotlib else "the plots and report.html (not written: "
+               "--no-report)")
+        steps.append((f"{why}:", f"gyrocal report {q(str(rec_dir))} {q(str(cal_path))} --out "
+                                 f"{q(str(out / 'plots'))}"))
+    if cal.consistency is not None and not cal.consistency.ok:
+        steps = [("the calibration is NOT consistent with the measured noise: do not use it. "
+                  "hardware_docs/running.md (the consistency verdict) lists the causes; fix "
+                  "them and calibrate again. To see which turn or rest is off:", ""), *steps[2:]]
+    lines = [wrote + ".", "", "next:"]
+    for why, command in steps:
+        lines.append(f"  {why}")
+        if command:
+            lines.append(f"    {command}")
+    return "\n".join(lines)
 
 
 def _run_plate(cfg: Any, args: argparse.Namespace, out: Path, work: Path, report: bool,

@@ -92,7 +92,7 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
 
     from gyrocal.calib.observations import diff_noise
     from gyrocal.drivers.errors import DriverError
-    from gyrocal.drivers.imu import open_imu
+    from gyrocal.drivers.imu import READERS, open_imu
     from gyrocal.kit.jig import note_rounded_odr
 
     imu_cfg = cfg["imu"]
@@ -136,9 +136,13 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
         rep.ok(f"at rest: mean [{mean[0]:+.4f} {mean[1]:+.4f} {mean[2]:+.4f}] rad/s, noise "
                f"[{sigma[0]:.4f} {sigma[1]:.4f} {sigma[2]:.4f}] rad/s per sample, "
                f"{np.mean(temp):.1f} °C")
-        if np.any(np.abs(mean) > 0.3):
-            rep.warn("a large rate at rest (> 0.3 rad/s)",
-                     "keep the jig still while doctor runs; a bias this large is unusual")
+        # 0.3 rad/s, or the chip's datasheet zero-rate offset where it allows more (LSM9DS1:
+        # ±30 °/s, ChipFamily.gyro_errors)
+        limit = max(0.3, READERS[imu_cfg["model"]].family.gyro_errors.zero_rate_rad_s)
+        if np.any(np.abs(mean) > limit):
+            rep.warn(f"a large rate at rest (> {limit:.2g} rad/s)",
+                     "keep the jig still while doctor runs; a bias this large is beyond what "
+                     "the chip's datasheet allows")
         if np.any(sigma < 1e-6):
             rep.bad("an axis does not change at all", "the chip may be broken (a stuck axis)")
     except DriverError as exc:

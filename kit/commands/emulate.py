@@ -41,8 +41,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="XM430-W350",
                         help="servo model: XM430-W350 (default) or XL430-W250")
     parser.add_argument("--baud", type=int, default=1_000_000,
-                        help="the servos' configured baud rate (a PTY ignores it, but clients "
-                             "must set one dynamixel-sdk accepts; default 1000000)")
+                        help="the servos' configured baud rate (default 1000000). A PTY moves "
+                             "bytes at any speed, but the servos hear only a client whose port "
+                             "is set to this rate, as on a real bus: a client at another rate "
+                             "gets no reply at all (dynamixel-sdk: 'There is no status packet!'; "
+                             "gyrocal doctor finds no servo), whatever it sends")
     parser.add_argument("--seed", type=argtypes.seed, default=0, help="random seed (default 0)")
     parser.add_argument("--duration", type=float, default=None,
                         help="stop after this many seconds (default: until Ctrl-C or SIGTERM)")

@@ -76,12 +76,19 @@ def run(args: argparse.Namespace) -> int:
                 extend=(GeneralMotionRunner, partial(general_motion_steps, axes=axes)))
     rec = load_recording(rec_dir)
     v = verify_recording(rec, cal, args.block)
+    if v.blocks["one_servo"] + v.blocks["several_servos"] == 0:
+        print(f"gyrocal: note: no {args.block:g} s block lies inside a steady turn (every "
+              "turning block is on an acceleration ramp), so this checks only the rests: the "
+              "biases, and g-sensitivity with the gravity pairs; give --block 0.5 or shorter "
+              "to check the scale factors and cross-axis terms", file=sys.stderr)
     if args.json:
         json.dump({"calibration": str(path), "recording": str(rec_dir), **v.to_dict()},
                   sys.stdout, indent=2)
         print()
     else:
         print(v.table())
+        if v.ok:
+            print(f"\npassed: the calibration holds for this sensor and jig; worst {v.verdict()}")
         print(f"\nrecording: {rec_dir}")
     if not v.ok:
         raise InconsistentCalibrationError(

@@ -203,13 +203,33 @@ def test_a_record_too_short_for_three_terms_is_refused_saying_how_much_is_needed
     # 0.6 s of still data (a rest between turns) used to give B = 0 ± 0 and K = 0 ± 0.
     from gyrocal.calib.allan import min_still_samples
 
-    assert min_still_samples(200.0) == 4000  # τ from 10 samples up to n/4: two decades
+    # τ from 10 samples up to n/4 on a grid of two points per octave: its top point 724 is the
+    # one within half an octave below two decades (1000)
+    assert min_still_samples(200.0) == 2900
     rng = np.random.default_rng(41)
-    with pytest.raises(CalibInputError, match=r"121 samples \(0.605 s at 200 Hz\).*at least 4000 "
-                                              r"samples \(20 s\)"):
+    with pytest.raises(CalibInputError, match=r"121 samples \(0.605 s at 200 Hz\).*at least 2900 "
+                                              r"samples \(14.5 s\)"):
         characterise_noise(rng.normal(size=(121, 3)) * 1e-3, ODR)
-    nc = characterise_noise(rng.normal(size=(4000, 3)) * 1e-3, ODR)  # just enough: it runs
+    with pytest.raises(CalibInputError, match=r"2899 samples"):
+        characterise_noise(rng.normal(size=(2899, 3)) * 1e-3, ODR)
+    nc = characterise_noise(rng.normal(size=(2900, 3)) * 1e-3, ODR)  # just enough: it runs
     assert all(v > 0 for v in nc.noise_density.value)
+
+
+def test_the_needed_samples_are_the_least_that_give_the_two_decade_curve():
+    # Every record from 2900 to 4095 samples gives the same averaging times (top m = 724); the
+    # count asked before (4000) refused a 20 s still session at 200 Hz that lost a sample at
+    # each end (3998, the documented `track --live --duration 20 --record` flow) although its
+    # curve had the same points as the 4000 it accepted.
+    from gyrocal.calib.allan import _taus_m, allan_deviation
+
+    assert all(np.array_equal(_taus_m(n), _taus_m(4000)) for n in range(2900, 4096))
+    assert not np.array_equal(_taus_m(2899), _taus_m(4000))
+    x = np.random.default_rng(43).normal(size=(4000, 3)) * 1e-3
+    assert np.array_equal(allan_deviation(x[:3998], ODR).tau_s, allan_deviation(x, ODR).tau_s)
+    nc = characterise_noise(x[:3998], ODR)
+    # white noise of 1e-3 rad/s per sample at 200 Hz: N = 1e-3/√200 (IEEE Std 952 Annex C)
+    assert np.allclose(nc.noise_density.value, 1e-3 / np.sqrt(ODR), rtol=0.1)
 
 
 def _phase_record(rate, odr, chunk):

@@ -36,8 +36,9 @@ def record(out: Path, extra: list[str]) -> Path:
     from gyrocal.kit.protocol import Runner, Step
     from gyrocal.kit.recording import RecordingWriter
 
+    # the sensor the runs were pinned with: the paper's (the --sim default before issue 31)
     args = build_parser(["calibrate"]).parse_args(
-        ["calibrate", "--sim", "--sim-seed", str(SEED), *extra])
+        ["calibrate", "--sim", "--sim-seed", str(SEED), "--sim-sensor", "paper", *extra])
     jig = Jig(load_cli_config(args), args)
     steps = [Step("rest", rest_s=0.6),
              Step("move", motor=2, angle=0.5, speed=3.0),

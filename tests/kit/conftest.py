@@ -1,7 +1,8 @@
 """Session-wide emulated runs shared by the kit tests (each costs tens of seconds of CPU).
 
 ``full_run`` is one ``gyrocal calibrate --sim`` at the defaults (the full model's protocol, an
-emulated sensor with the datasheet's ±2 % cross-axis terms and every realism effect);
+emulated sensor within the datasheet's tolerances, its ±2 % cross-axis terms included, and every
+realism effect);
 ``verify_run`` is one ``gyrocal verify --sim`` of that calibration on the same emulated sensor
 and jig (every realism effect too: verify applies the calibration's g-sensitivity), with a short
 diagonal protocol (18 s) before its general-motion sweeps. Under pytest-xdist the workers share
@@ -22,11 +23,13 @@ from gyrocal.kit.cli import main
 
 #: The emulated sensor and jig of the shared runs (seed of ``--sim-seed``).
 SHARED_SEED = 5
-#: ``full_run`` and ``verify_run`` are the default ``--sim`` sensor: the datasheet's cross-axis
-#: terms and every realism effect (coloured noise, g-sensitivity, DLPF, ...), which the full
-#: model with g-sensitivity must handle; ``paper_full_run`` the paper's sensor (what each realism
-#: effect costs is measured by ``python -m bench realism``).
-PAPER_REALISM = ("--sim-realism", "off")
+#: ``full_run`` and ``verify_run`` are the default ``--sim`` sensor: scale, bias and cross-axis
+#: terms within the datasheet's tolerances and every realism effect (coloured noise,
+#: g-sensitivity, DLPF, ...), which the full model with g-sensitivity must handle;
+#: ``paper_full_run`` the paper's exaggerated sensor (``--sim-sensor paper``: scale ±20 %, bias
+#: ±0.1 rad/s) without realism effects (what each realism effect costs is measured by
+#: ``python -m bench realism``).
+PAPER_REALISM = ("--sim-sensor", "paper", "--sim-realism", "off")
 
 
 def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
@@ -60,8 +63,9 @@ def full_run(tmp_path_factory):
 @pytest.fixture(scope="session")
 def paper_full_run(tmp_path_factory):
     """``(directory, exit code)`` of ``gyrocal calibrate --sim`` with the full protocol on the
-    paper's sensor (cross-axis terms, no realism effects): for what compares with a truth that
-    has no g-sensitivity or coloured noise in it (the tracker's bias)."""
+    paper's exaggerated sensor (``--sim-sensor paper``, the datasheet's cross-axis terms, no
+    realism effects): for what compares with a truth that has no g-sensitivity or coloured noise
+    in it (the tracker's bias)."""
     return _once(tmp_path_factory, "calibrate-paper", lambda d: main(
         ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), *PAPER_REALISM, "--out", str(d),
          "--quiet", "--no-report"]))
