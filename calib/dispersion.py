@@ -36,7 +36,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 from scipy.special import chdtrc, fdtri
 
 from gyrocal.calib.model import Consistency
@@ -164,6 +163,10 @@ def additive(e: np.ndarray, sigma: np.ndarray, dof: int, signal: float, *, alpha
         return Dispersion(Consistency(chi2=chi2, dof=dof, p_value=p, ok=p >= alpha))
 
     def tau2_of(keep: np.ndarray, k: int) -> float:
+        # here, not at the top: scipy.optimize costs a Pi a second to import, and a fit whose
+        # χ² passes never gets here (tests/kit/test_cli_imports.py)
+        from scipy.optimize import brentq
+
         ee, ss = e[keep], s2[keep]
         if float(np.sum(ee * ee / ss)) <= k:
             return 0.0

@@ -228,7 +228,7 @@ def test_top_level_help_lists_the_exit_codes(capsys):
         (["calibrate", "--sim", "--sim-fault", "stall:9:1"], "no servo 9"),
         (["calibrate", "--sim", "--config", "/nonexistent/g.toml"], "gyrocal init"),
         (["calibrate", "--sim", "--imu-model", "bmi160"], "imu.model is 'bmi160'"),
-        (["verify", "/nonexistent/cal.json", "--recording", "x"], "not found"),
+        (["verify", "/nonexistent/cal.json", "--recording", "x"], "does not exist"),
         (["estimate", "/nonexistent/rec"], "not a directory"),
         (["doctor", "--sim", "--range-dps", "300"], "imu.range_dps is 300"),
     ],

@@ -76,7 +76,10 @@ def test_full_model_holds_in_general_motion_and_the_diagonal_one_does_not(noisy)
     c = np.diag(diag.covariance)
     pred_diag = np.sqrt(c[:3].sum() / 3 + c[3:].sum())
     assert err_full < 2.5 * pred_full, (err_full, pred_full)
-    assert err_diag > 10 * pred_diag, (err_diag, pred_diag)
+    # the diagonal fit's verdict names the model error; its σ, widened by the excess scatter
+    # (calib.dispersion), still do not reach its error in general motion
+    assert not diag.consistency.ok and "model" in diag.consistency.reason, diag.consistency
+    assert err_diag > 2.5 * pred_diag, (err_diag, pred_diag)
     assert err_full < 5e-4 < err_diag
 
 

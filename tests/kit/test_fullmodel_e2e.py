@@ -87,10 +87,12 @@ def test_full_model_recovers_the_matrix_and_holds_in_general_motion(rec):
     assert err <= 2.5 * pred, (err, pred)
     assert err < 5e-4
     # The paper's diagonal model on the same recording: its error in general motion is the
-    # cross-axis error, far beyond what its own covariance predicts.
+    # cross-axis error, which its verdict calls a model error and which stays beyond what its
+    # own covariance predicts even with σ widened by the excess scatter (calib.dispersion)
     diag = estimate_recording(rec, "paired-axis").fit
     err_d = general_motion_rms(np.diag(diag.scale), diag.bias, C, b)
-    assert err_d > 10 * predicted_general_motion_rms(diag.covariance), err_d
+    assert not diag.consistency.ok and "model" in diag.consistency.reason, diag.consistency
+    assert err_d > 2.5 * predicted_general_motion_rms(diag.covariance), err_d
     assert err_d > 10 * err
 
 
