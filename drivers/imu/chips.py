@@ -50,6 +50,7 @@ __all__ = [
     "ChipFamily",
     "ChipModel",
     "AccelErrors",
+    "GyroZeroRate",
     "AccelRange",
     "GyroRange",
     "RAD_PER_DEG",
@@ -119,6 +120,33 @@ class AccelErrors:
         figs = (self.scale_tolerance, self.cross_axis, self.noise_g_sqrt_hz, *self.zero_g_g)
         if len(self.zero_g_g) != 3 or not all(math.isfinite(x) and x >= 0 for x in figs):
             raise ValueError(f"accelerometer error figures must be finite and >= 0: {self!r}")
+
+
+@dataclass(frozen=True)
+class GyroZeroRate:
+    """The gyro's initial zero-rate output (bias) tolerance a chip's datasheet gives: how far a
+    new part's bias may lie from zero, and so how far it may move between one calibration and
+    the next power-up (the bias tracker's ``zero_rate_tolerance``).
+
+    Parameters
+    ----------
+    tolerance_dps : float
+        The initial ZRO tolerance (typical zero-rate level), ± °/s.
+    source : str
+        The datasheet, its table and row; ⚠ marks a figure read from one source only.
+    """
+
+    tolerance_dps: float
+    source: str
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.tolerance_dps) and self.tolerance_dps > 0):
+            raise ValueError(f"zero-rate tolerance must be finite and > 0: {self!r}")
+
+    @property
+    def tolerance_rad_s(self) -> float:
+        """The tolerance in rad/s."""
+        return self.tolerance_dps * RAD_PER_DEG
 
 
 @dataclass(frozen=True)
@@ -204,6 +232,8 @@ class ChipFamily:
         2 g margin over gravity for the jig's lever-arm accelerations and knocks.
     accel_errors : AccelErrors
         The accelerometer's datasheet error sizes (scale, cross-axis, zero-g, noise density).
+    zero_rate : GyroZeroRate
+        The gyro's initial zero-rate (bias) tolerance.
     extra : mapping
         Further chip facts by name.
     """
@@ -223,6 +253,7 @@ class ChipFamily:
     temperature_lsb_per_c: float
     accel_range: AccelRange
     accel_errors: AccelErrors
+    zero_rate: GyroZeroRate
     extra: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     def model_for(self, who_am_i: int) -> ChipModel | None:
@@ -377,6 +408,10 @@ MPU9250 = ChipFamily(
     # Noise Power Spectral Density (low-noise mode) 300 µg/√Hz
     accel_errors=AccelErrors(0.03, 0.02, (0.060, 0.060, 0.080), 300e-6,
                              "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.2 Table 2 ⚠"),
+    # PS-MPU-9250A-01 rev 1.0 §3.1 Table 1: "Initial ZRO Tolerance 25 °C ±5 º/s" (read in the
+    # datasheet; the MPU-6500's PS-MPU-6500A-01 Table 1 is not re-read for its alias)
+    zero_rate=GyroZeroRate(5.0, "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.1 Table 1, Initial ZRO "
+                           "Tolerance"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
@@ -518,6 +553,10 @@ LSM9DS1 = ChipFamily(
     accel_errors=AccelErrors(0.03, 0.02, (0.090, 0.090, 0.090), 300e-6,
                              "zero-g: LSM9DS1 DocID025715 Rev 3 Table 3; scale, cross-axis, "
                              "noise: stand-in (not in the datasheet) ⚠"),
+    # DocID025715 Table 3: "G_TyOff angular rate typical zero-rate level ±30 dps" (at
+    # FS ±2000 dps) ⚠ read in an ST engineer's answer quoting the datasheet's page 12, the
+    # table itself not read
+    zero_rate=GyroZeroRate(30.0, "LSM9DS1 DocID025715 Table 3, G_TyOff (FS ±2000 dps) ⚠"),
     # bytes the reader drains per sample: one FIFO slot, gyro XYZ and accel XYZ int16 (§2.7)
     extra=MappingProxyType({"fifo_sample_bytes": 12.0}),
 )
@@ -709,6 +748,10 @@ ICM42688P = ChipFamily(
     accel_errors=AccelErrors(0.005, 0.01, (0.020, 0.020, 0.020), 70e-6,
                              "ICM-42688-P DS-000347 rev 1.2 §3.2 Table 2 (noise X/Y 65, "
                              "Z 70 µg/√Hz) ⚠"),
+    # DS-000347 §3.1 Table 1: "ZRO Initial Tolerance, board-level ±0.5 dps" ⚠ read in one
+    # secondary comparison table (0.5 dps typical), the datasheet's table itself not read
+    zero_rate=GyroZeroRate(0.5, "ICM-42688-P DS-000347 §3.1 Table 1, ZRO Initial Tolerance "
+                           "(board-level) ⚠"),
     extra=MappingProxyType(
         {
             "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
@@ -866,6 +909,9 @@ LSM6DSOX = ChipFamily(
     accel_errors=AccelErrors(0.01, 0.02, (0.020, 0.020, 0.020), 75e-6,
                              "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
                              "datasheet) ⚠"),
+    # DS12814 Table 2: "G_TyOff angular rate zero-rate level ±1 dps" ⚠ not found in a source
+    # read here (the LSM6DSO's DS12140 Table 2 gives the same row); to check against the PDF
+    zero_rate=GyroZeroRate(1.0, "LSM6DSOX DS12814 Table 2, G_TyOff ⚠"),
     extra=MappingProxyType(
         {
             "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
@@ -993,6 +1039,10 @@ ICM20948 = ChipFamily(
     # and Noise Spectral Density 230 µg/√Hz ⚠ one source
     accel_errors=AccelErrors(0.005, 0.02, (0.050, 0.050, 0.050), 230e-6,
                              "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 ⚠"),
+    # DS-000189 rev 1.3 §3.1 Table 1: "Initial ZRO Tolerance, board-level ±5 dps" ⚠ as the
+    # MPU-9250's; the table itself not read here
+    zero_rate=GyroZeroRate(5.0, "ICM-20948 DS-000189 rev 1.3 §3.1 Table 1, Initial ZRO "
+                           "Tolerance ⚠"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)
