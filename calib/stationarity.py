@@ -13,6 +13,12 @@ A window of ``n_w`` consecutive readings ending at sample ``e`` is *quiet* when,
   bias), never on its own estimate, and widens it by the chip's zero-rate tolerance: a
   detector gated on the estimate it feeds never sees a sensor whose bias moved.
 
+Where an accelerometer sits beside the gyro, its readings veto a still decision the gyro makes
+(:func:`accel_detector`, :func:`accel_quiet_windows`): a steady turn slower than the rate test's
+room passes both gyro tests, but it tilts gravity, and the least-squares slope of the
+accelerometer's readings over the samples behind the decision (``accel_window_s``, ending
+``lookahead_s`` after the sample) shows it.
+
 A sample ``j`` is *still* when every window ending in ``[j − n_min + 1, j + L]`` is quiet: the
 sensor has been quiet for ``min_still_s`` (it has settled), and stays quiet for ``lookahead_s``
 after ``j`` (so the start of a motion, which takes a few samples to show in a window, is not
@@ -75,10 +81,11 @@ class StillSettings:
         Default rate threshold in units of the per-sample noise ``σ``.
     rate_threshold : float or None
         Explicit rate threshold, rad/s (overrides ``rate_sigma``).
-    accel_window_s : float
-        Length of the accelerometer's slope window (:func:`accel_detector`), longer than the
-        gyro's: a slow turn tilts gravity by ``ω · window`` across it, which must outgrow the
-        accelerometer's noise to show.
+    accel_window_s : float or None
+        Length of the accelerometer's slope window (:func:`accel_detector`); None (the
+        default): ``window_s + min_still_s + lookahead_s``, the span of the readings the gyro's
+        windows behind one still decision cover, so the veto adds no settling time (a slow turn
+        tilts gravity by ``ω · window`` across it, which must outgrow the noise to show).
     """
 
     window_s: float = 0.2
@@ -87,11 +94,12 @@ class StillSettings:
     variance_alpha: float = 1e-6
     rate_sigma: float = 5.0
     rate_threshold: float | None = None
-    accel_window_s: float = 1.0
+    accel_window_s: float | None = None
 
     def __post_init__(self) -> None:
         scalar(self.window_s, "window_s", positive=True)
-        scalar(self.accel_window_s, "accel_window_s", positive=True)
+        if self.accel_window_s is not None:
+            scalar(self.accel_window_s, "accel_window_s", positive=True)
         for name in ("min_still_s", "lookahead_s", "rate_sigma"):
             scalar(getattr(self, name), name, nonneg=True)
         if not (0 < scalar(self.variance_alpha, "variance_alpha") < 1):
@@ -200,8 +208,9 @@ def accel_detector(
     sample offsets from the window's middle); the limit is ``z`` of those, ``z`` the normal
     quantile a still sensor's window exceeds with probability ``variance_alpha`` (two-sided).
     A turn at ``ω`` about an axis at an angle ``β`` to gravity moves the specific force at up to
-    ``g ω sin β`` per second: at 100 Hz over 1 s with ``σ_a = 0.02 m/s²`` the limit is
-    0.1 m/s² per second, reached by a horizontal turn at 0.6 °/s.
+    ``g ω sin β`` per second: at 100 Hz over the default 0.9 s with ``σ_a = 0.02 m/s²`` the
+    limit is 0.04 m/s² per second: a horizontal turn at 0.35 °/s is refused (one at 0.25 °/s
+    half the time).
 
     Parameters
     ----------
@@ -211,7 +220,7 @@ def accel_detector(
     odr_hz : float
         Sample rate, Hz (one accelerometer reading per gyro sample).
     settings : StillSettings, optional
-        Its ``accel_window_s`` and ``variance_alpha``.
+        Its ``accel_window_s`` (or the gyro's windows' span) and ``variance_alpha``.
 
     Returns
     -------
@@ -220,7 +229,9 @@ def accel_detector(
     s = settings or StillSettings()
     sigma = vec3(accel_noise_std, "accel_noise_std", positive=True)
     fs = scalar(odr_hz, "odr_hz", positive=True)
-    n = max(3, int(round(s.accel_window_s * fs)))
+    span = (s.window_s + s.min_still_s + s.lookahead_s if s.accel_window_s is None
+            else s.accel_window_s)
+    n = max(3, int(round(span * fs)))
     d = n * (n * n - 1) / 12.0
     z = float(ndtri(1.0 - s.variance_alpha / 2.0))
     return AccelStillDetector(n, z * sigma / math.sqrt(d))

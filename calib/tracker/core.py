@@ -565,14 +565,15 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         if n:
             centred = np.concatenate([self._hist, m + self._det_bias[None, :]])
             quiet = quiet_windows(centred, det, self._hist.shape[0])
-            if acc is not None:
-                quiet &= self._accel_quiet(acc)
             run = run_lengths(quiet, self._run)
+            # the accelerometer's veto: its window ending at the same row as the gyro's run
+            a_quiet = None if acc is None else self._accel_quiet(acc)
             self._run = int(run[-1])
             keep = det.history
             self._hist = centred[-keep:] if keep else centred[:0]
         else:
             run = np.zeros(0, dtype=np.int64)
+            a_quiet = None
         # ---- samples awaiting a decision: the pending ones, then this batch
         cols = {"t": t, "m": m, "temp": temp, "ext": ext, "rr": rr, "ra": ra}
         if self._pending:
@@ -588,7 +589,10 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         n_conf = min(n_dec, total - L) if total > L else 0
         if n_conf > 0:
             # decision on S[i] uses the run at S[i + L], i.e. batch row i + L - P0 (>= 0)
-            det_still[:n_conf] = run[np.arange(n_conf) + L - P0] >= det.n_min + L
+            at = np.arange(n_conf) + L - P0
+            det_still[:n_conf] = run[at] >= det.n_min + L
+            if a_quiet is not None:
+                det_still[:n_conf] &= a_quiet[at]
         ext_d = S["ext"][:n_dec]
         still_d = np.where(np.isnan(ext_d), det_still, ext_d > 0.5)
         has_ref = np.isfinite(S["rr"][:n_dec])
