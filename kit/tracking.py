@@ -348,9 +348,9 @@ def steady_only(enc_t: np.ndarray, enc_angle: np.ndarray, t: np.ndarray, rate: n
 
 def replay_chunks(batch: Batch, ref: Reference | None, size: int,
                   gravity: Any = None) -> Iterator[Batch]:
-    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` and the
-    specific force of ``gravity`` over its samples (a recording replayed in bounded working
-    memory)."""
+    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref``, the
+    specific force of ``gravity`` and the batch's accelerometer readings over its samples (a
+    recording replayed in bounded working memory)."""
     n = batch.t.size
     for a in range(0, n, size):
         b = min(a + size, n)
@@ -359,7 +359,8 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int,
                     None if batch.temperature is None else batch.temperature[a:b],
                     None if batch.still is None else batch.still[a:b],
                     *(rr_ra if rr_ra is not None else (None, None)),
-                    None if gravity is None else gravity.at(batch.t[a:b]))
+                    None if gravity is None else gravity.at(batch.t[a:b]),
+                    None if batch.accel is None else batch.accel[a:b])
 
 
 def live_gravity(cal: Any, ids: Iterable[int]

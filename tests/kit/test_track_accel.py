@@ -76,3 +76,23 @@ def test_chip_zero_rate_tolerance_is_the_datasheets(model):
 def test_an_unknown_chip_keeps_the_default():
     assert chip_zero_rate("simulated") == (None, None)
     assert chip_zero_rate(None) == (None, None)
+
+
+def test_streamed_replay_carries_the_accelerometer_as_the_whole_recording(recs):
+    """The temporary-file replay (SpilledImu, spilled_chunks) hands the tracker the same
+    accelerometer readings as the recording loaded whole (load_recording's imu_accel)."""
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.tracking import Batch, SpilledImu, replay_chunks, run_tracker, spilled_chunks
+    from tests.calib.test_tracker_accel_still import tracker
+
+    _, with_accel, _ = recs
+    rec = load_recording(with_accel)
+    whole = run_tracker(tracker(True), replay_chunks(
+        Batch(rec.imu_t, rec.imu_rate, accel=rec.imu_accel), None, 1009))
+    with SpilledImu(with_accel, []) as imu:
+        assert imu.has_accel
+        assert np.array_equal(imu.accel(0, imu.n), rec.imu_accel)
+        streamed = run_tracker(tracker(True), spilled_chunks(imu, None, 997, accel=True))
+    assert np.array_equal(streamed.still, whole.still)
+    assert np.allclose(streamed.bias, whole.bias, rtol=0, atol=1e-12)
+    assert 0.2 < whole.still.mean() < 0.5  # the rests, not the turn
