@@ -78,8 +78,11 @@ class TrackerSettings:
         How far the bias may lie from the seed, rad/s: the still detector's rate test accepts a
         window whose mean, less the seed's bias, is within this plus ``still.rate_sigma`` σ
         (unless ``still.rate_threshold`` sets the limit). Default ±5 °/s, the MPU-9250's
-        initial zero-rate tolerance (PS-MPU-9250A-01 §3.1), so a bias that moved anywhere
-        within the chip's tolerance since calibration is still seen at rest.
+        initial zero-rate tolerance (PS-MPU-9250A-01 §3.1 Table 1), so a bias that moved
+        anywhere within the chip's tolerance since calibration is still seen at rest; ``gyrocal
+        track`` gives the chip's own datasheet figure (``ChipFamily.zero_rate`` in the chip
+        data, joined by the kit: this module knows no chip). A steady turn slower than this
+        gate passes the gyro's tests: ``accel_noise_std`` lets the accelerometer veto it.
     moved_sigma : float
         The first update window whose innovation on an axis exceeds this many of its standard
         deviations (the seed's σ, the window's noise and the random walk since) says the bias
