@@ -13,6 +13,12 @@ A window of ``n_w`` consecutive readings ending at sample ``e`` is *quiet* when,
   bias), never on its own estimate, and widens it by the chip's zero-rate tolerance: a
   detector gated on the estimate it feeds never sees a sensor whose bias moved.
 
+Where an accelerometer sits beside the gyro, its readings veto a still decision the gyro makes
+(:func:`accel_detector`, :func:`accel_quiet_windows`): a steady turn slower than the rate test's
+room passes both gyro tests, but it tilts gravity, and the least-squares slope of the
+accelerometer's readings over the samples behind the decision (``accel_window_s``, ending
+``lookahead_s`` after the sample) shows it.
+
 A sample ``j`` is *still* when every window ending in ``[j − n_min + 1, j + L]`` is quiet: the
 sensor has been quiet for ``min_still_s`` (it has settled), and stays quiet for ``lookahead_s``
 after ``j`` (so the start of a motion, which takes a few samples to show in a window, is not
@@ -33,7 +39,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import chdtri
+from scipy.special import chdtri, ndtri
 
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.validation import scalar, vec3
@@ -41,7 +47,10 @@ from gyrocal.calib.validation import scalar, vec3
 __all__ = [
     "StillDetector",
     "StillSettings",
+    "AccelStillDetector",
     "StreamingQuiet",
+    "accel_detector",
+    "accel_quiet_windows",
     "detect_still",
     "first_still_mean",
     "quiet_windows",
@@ -72,6 +81,11 @@ class StillSettings:
         Default rate threshold in units of the per-sample noise ``σ``.
     rate_threshold : float or None
         Explicit rate threshold, rad/s (overrides ``rate_sigma``).
+    accel_window_s : float or None
+        Length of the accelerometer's slope window (:func:`accel_detector`); None (the
+        default): ``window_s + min_still_s + lookahead_s``, the span of the readings the gyro's
+        windows behind one still decision cover, so the veto adds no settling time (a slow turn
+        tilts gravity by ``ω · window`` across it, which must outgrow the noise to show).
     """
 
     window_s: float = 0.2
@@ -80,9 +94,12 @@ class StillSettings:
     variance_alpha: float = 1e-6
     rate_sigma: float = 5.0
     rate_threshold: float | None = None
+    accel_window_s: float | None = None
 
     def __post_init__(self) -> None:
         scalar(self.window_s, "window_s", positive=True)
+        if self.accel_window_s is not None:
+            scalar(self.accel_window_s, "accel_window_s", positive=True)
         for name in ("min_still_s", "lookahead_s", "rate_sigma"):
             scalar(getattr(self, name), name, nonneg=True)
         if not (0 < scalar(self.variance_alpha, "variance_alpha") < 1):
@@ -150,6 +167,106 @@ class StillDetector:
     def history(self) -> int:
         """Samples a batch needs from before it to test its first window (``n_window − 1``)."""
         return self.n_window - 1
+
+
+@dataclass(frozen=True)
+class AccelStillDetector:
+    """The accelerometer's stillness test, a veto on the gyro's still flag (build it with
+    :func:`accel_detector`; use it with :func:`accel_quiet_windows`).
+
+    A window of ``n_window`` accelerometer readings is quiet when, on every axis, the slope of
+    its least-squares line is within ``slope_limit`` of zero: a turn at a constant rate, which
+    the gyro's tests cannot see (its variance is the noise's, its mean within the seed's rate
+    gate), tilts gravity steadily and puts a ramp on the specific force; vibration and noise
+    put none (they leave the line's slope at the noise's). The variance is not tested: a
+    vibrating sensor is not turning.
+
+    Attributes
+    ----------
+    n_window : int
+        Readings per window.
+    slope_limit : ndarray (3,)
+        Per-axis limit on the slope, readings' unit per sample.
+    """
+
+    n_window: int
+    slope_limit: np.ndarray
+
+    @property
+    def history(self) -> int:
+        """Rows a batch needs from before it to test its first window (``n_window − 1``)."""
+        return self.n_window - 1
+
+
+def accel_detector(
+    accel_noise_std: np.ndarray | float, odr_hz: float, settings: StillSettings | None = None
+) -> AccelStillDetector:
+    """The accelerometer's slope test for one sensor at one sample rate.
+
+    The least-squares slope of ``n`` readings with white noise ``σ_a`` (per sample) has
+    standard deviation ``σ_a / sqrt(D)``, ``D = n (n² − 1) / 12`` (the sum of the squared
+    sample offsets from the window's middle); the limit is ``z`` of those, ``z`` the normal
+    quantile a still sensor's window exceeds with probability ``variance_alpha`` (two-sided).
+    A turn at ``ω`` about an axis at an angle ``β`` to gravity moves the specific force at up to
+    ``g ω sin β`` per second: at 100 Hz over the default 0.9 s with ``σ_a = 0.02 m/s²`` the
+    limit is 0.04 m/s² per second: a horizontal turn at 0.35 °/s is refused (one at 0.25 °/s
+    half the time).
+
+    Parameters
+    ----------
+    accel_noise_std : float or array_like (3,)
+        Per-sample white-noise standard deviation of each accelerometer axis, in the unit of
+        the readings it will test (m/s²).
+    odr_hz : float
+        Sample rate, Hz (one accelerometer reading per gyro sample).
+    settings : StillSettings, optional
+        Its ``accel_window_s`` (or the gyro's windows' span) and ``variance_alpha``.
+
+    Returns
+    -------
+    AccelStillDetector
+    """
+    s = settings or StillSettings()
+    sigma = vec3(accel_noise_std, "accel_noise_std", positive=True)
+    fs = scalar(odr_hz, "odr_hz", positive=True)
+    span = (s.window_s + s.min_still_s + s.lookahead_s if s.accel_window_s is None
+            else s.accel_window_s)
+    n = max(3, int(round(span * fs)))
+    d = n * (n * n - 1) / 12.0
+    z = float(ndtri(1.0 - s.variance_alpha / 2.0))
+    return AccelStillDetector(n, z * sigma / math.sqrt(d))
+
+
+def accel_quiet_windows(accel: np.ndarray, detector: AccelStillDetector, n_history: int
+                        ) -> np.ndarray:
+    """Quiet flags of the accelerometer's windows ending at each of the last
+    ``len(accel) − n_history`` rows (False where a window would reach before the data).
+
+    The slope of the window ending at row ``e`` is ``Σ (k − k̄) y_k / D`` over its rows, from
+    running sums of ``y`` and ``k y`` taken block by block about the block's mean and first row
+    (as :func:`quiet_windows` keeps its sums free of cancellation).
+    """
+    nw = detector.n_window
+    x = np.asarray(accel, dtype=float)
+    n = x.shape[0] - n_history
+    out = np.zeros(n, dtype=bool)
+    first = max(0, nw - 1 - n_history)
+    d = nw * (nw * nw - 1) / 12.0
+    for b in range(first, n, _BLOCK):
+        e = min(n, b + _BLOCK)
+        rows = x[n_history + b - (nw - 1): n_history + e]
+        y = rows - rows.mean(axis=0)
+        k = np.arange(rows.shape[0], dtype=float)[:, None]
+        c1 = np.zeros((rows.shape[0] + 1, 3))
+        ck = np.zeros_like(c1)
+        np.cumsum(y, axis=0, out=c1[1:])
+        np.cumsum(k * y, axis=0, out=ck[1:])
+        s1 = c1[nw:] - c1[:-nw]
+        sk = ck[nw:] - ck[:-nw]
+        mid = np.arange(nw - 1, rows.shape[0], dtype=float)[:, None] - (nw - 1) / 2.0
+        slope = (sk - mid * s1) / d
+        out[b:e] = (np.abs(slope) <= detector.slope_limit).all(axis=1)
+    return out
 
 
 def quiet_windows(

@@ -762,15 +762,15 @@ def _read_columns(
 
 
 def iter_imu(
-    path: str | os.PathLike[str], warnings: list[str] | None = None
-) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    path: str | os.PathLike[str], warnings: list[str] | None = None, *, accel: bool = False
+) -> Iterator[tuple[np.ndarray, ...]]:
     """Stream ``imu.csv`` of a recording in blocks of some 60 000 rows.
 
     For commands that need one pass over the samples (``noise``, ``track``): memory stays
     bounded whatever the recording's length. Every check of :func:`load_recording` applies
     (file and line of a bad row, a partial last row dropped with a warning, time going
     backwards refused). The accelerometer's optional columns (``ax,ay,az``) are checked and
-    left out.
+    left out unless ``accel`` asks for them.
 
     Parameters
     ----------
@@ -793,7 +793,11 @@ def iter_imu(
     header = imu_header(root / "imu.csv")
     for arr in _csv_blocks(root / "imu.csv", header, header.count(",") + 1, sink,
                            empty_col=_TEMP_COL):
-        yield arr[:, 0], arr[:, 1:4], arr[:, 4]
+        if not accel:
+            yield arr[:, 0], arr[:, 1:4], arr[:, 4]
+        else:
+            yield (arr[:, 0], arr[:, 1:4], arr[:, 4],
+                   arr[:, 5:8] if header == IMU_HEADER_ACCEL else None)
 
 
 def imu_header(path: Path) -> str:

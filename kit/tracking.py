@@ -52,6 +52,8 @@ class Batch:
     reference_axis: np.ndarray | None = None
     #: Specific force at the sensor (n, 3), g, for the calibration's g-sensitivity (or None).
     specific_force: np.ndarray | None = None
+    #: The accelerometer's readings (n, 3), m/s², for the still detector's veto (or None).
+    accel: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -150,7 +152,10 @@ def run_tracker(tracker: Any, batches: Iterable[Batch], *,
         res = tracker.process(
             current.t, current.rate, current.temperature, current.still,
             reference_rate=current.reference_rate, reference_axis=current.reference_axis,
-            specific_force=current.specific_force, finish=nxt is None,
+            specific_force=current.specific_force,
+            accel=current.accel if getattr(tracker, "accel_detector", None) is not None
+            else None,
+            finish=nxt is None,
         )
         kept.add(res)
         if res.t.size:
@@ -205,7 +210,7 @@ def chunks(batch: Batch, size: int) -> Iterator[Batch]:
         sl = slice(a, min(a + size, n))
         yield Batch(*(None if x is None else x[sl] for x in (
             batch.t, batch.rate, batch.temperature, batch.still, batch.reference_rate,
-            batch.reference_axis, batch.specific_force)))
+            batch.reference_axis, batch.specific_force, batch.accel)))
 
 
 def load_calibration(path: str) -> Any:
@@ -343,9 +348,9 @@ def steady_only(enc_t: np.ndarray, enc_angle: np.ndarray, t: np.ndarray, rate: n
 
 def replay_chunks(batch: Batch, ref: Reference | None, size: int,
                   gravity: Any = None) -> Iterator[Batch]:
-    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref`` and the
-    specific force of ``gravity`` over its samples (a recording replayed in bounded working
-    memory)."""
+    """``batch`` in runs of ``size`` samples, each with the reference rates of ``ref``, the
+    specific force of ``gravity`` and the batch's accelerometer readings over its samples (a
+    recording replayed in bounded working memory)."""
     n = batch.t.size
     for a in range(0, n, size):
         b = min(a + size, n)
@@ -354,7 +359,8 @@ def replay_chunks(batch: Batch, ref: Reference | None, size: int,
                     None if batch.temperature is None else batch.temperature[a:b],
                     None if batch.still is None else batch.still[a:b],
                     *(rr_ra if rr_ra is not None else (None, None)),
-                    None if gravity is None else gravity.at(batch.t[a:b]))
+                    None if gravity is None else gravity.at(batch.t[a:b]),
+                    None if batch.accel is None else batch.accel[a:b])
 
 
 def live_gravity(cal: Any, ids: Iterable[int]
@@ -391,6 +397,21 @@ def live_gravity(cal: Any, ids: Iterable[int]
 
     return force, ("the calibration's g-sensitivity is applied live: the specific force comes "
                    "from the servo encoders and the calibration's home pose")
+
+
+def chip_zero_rate(model: Any) -> tuple[float | None, str | None]:
+    """The gyro's initial zero-rate tolerance of the chip ``model`` (a Recording v1 manifest's
+    ``sensor.model``, a config's ``imu.model``), rad/s, from the chip data
+    (:attr:`gyrocal.drivers.imu.chips.ChipFamily.gyro_errors`), with the note saying so; ``(None,
+    None)`` for a model gyrocal does not know (the tracker's default then stands)."""
+    from gyrocal.drivers.imu import READER_CLASSES, READERS
+
+    if not isinstance(model, str) or model not in READER_CLASSES:
+        return None, None
+    ge = READERS[model].family.gyro_errors
+    return ge.zero_rate_rad_s, (f"still detector's rate gate widened by the {model} gyro's "
+                                f"zero-rate tolerance, +-{ge.zero_rate_dps:g} deg/s "
+                                f"({ge.source})")
 
 
 #: Seconds on each side of a rotate segment whose encoder readings a streamed replay keeps
@@ -469,8 +490,9 @@ class _NearTurns:
 class SpilledImu:
     """A recording's gyro samples read once, block by block
     (:func:`gyrocal.kit.recording.iter_imu`, with all its checks): the times kept in memory
-    (8 bytes a sample), the readings and temperatures written to a temporary file (32 bytes a
-    sample, deleted on :meth:`close`) and read back a piece at a time, so a replay's working
+    (8 bytes a sample), the readings and temperatures (and the accelerometer's, where
+    ``imu.csv`` has them) written to a temporary file (32 bytes a sample, 56 with the
+    accelerometer; deleted on :meth:`close`) and read back a piece at a time, so a replay's working
     memory does not grow with the recording's rate columns.
 
     Parameters
@@ -488,25 +510,29 @@ class SpilledImu:
         Whether every sample has a temperature.
     """
 
-    ROW = 4 * 8  # gx, gy, gz, temp as float64
-
     def __init__(self, root: Any, warnings: list[str]) -> None:
         import tempfile
+        from pathlib import Path
 
-        from gyrocal.kit.recording import imu_rows_bound, iter_imu
+        from gyrocal.kit.recording import IMU_HEADER_ACCEL, imu_header, imu_rows_bound, iter_imu
 
         t = np.empty(imu_rows_bound(root))
+        #: Whether imu.csv has the accelerometer's columns (kept as columns 4-6 of a row).
+        self.has_accel = imu_header(Path(root) / "imu.csv") == IMU_HEADER_ACCEL
+        self.width = 7 if self.has_accel else 4
         self._fh = tempfile.TemporaryFile(prefix="gyrocal-replay-")
         n = 0
         complete = True
         try:
-            for tb, rate, temp in iter_imu(root, warnings):
+            for tb, rate, temp, acc in iter_imu(root, warnings, accel=True):
                 k = tb.size
                 t[n:n + k] = tb
                 complete = complete and bool(np.isfinite(temp).all())
-                rows = np.empty((k, 4))
+                rows = np.empty((k, self.width))
                 rows[:, :3] = rate
                 rows[:, 3] = temp
+                if acc is not None:
+                    rows[:, 4:7] = acc
                 self._fh.write(rows.data)
                 n += k
             self._fh.flush()
@@ -519,11 +545,12 @@ class SpilledImu:
 
     def rows(self, lo: int, hi: int) -> np.ndarray:
         """Samples ``lo:hi`` as an ``(hi − lo, 4)`` array: rate x, y, z (rad/s), temperature
-        (°C or NaN)."""
+        (°C or NaN); ``(hi − lo, 7)`` with the accelerometer's x, y, z (m/s²) after them when
+        the recording has them (:attr:`has_accel`)."""
         lo, hi = max(0, int(lo)), min(self.n, int(hi))
-        out = np.empty((max(hi - lo, 0), 4))
+        out = np.empty((max(hi - lo, 0), self.width))
         view = memoryview(out).cast("B")
-        self._fh.seek(lo * self.ROW)
+        self._fh.seek(lo * self.width * 8)
         got = 0
         while got < len(view):
             k = self._fh.readinto(view[got:])
@@ -535,6 +562,13 @@ class SpilledImu:
     def rate(self, lo: int, hi: int) -> np.ndarray:
         """Readings of samples ``lo:hi``, ``(hi − lo, 3)`` rad/s."""
         return np.ascontiguousarray(self.rows(lo, hi)[:, :3])
+
+    def accel(self, lo: int, hi: int) -> np.ndarray:
+        """The accelerometer's readings of samples ``lo:hi``, ``(hi − lo, 3)`` m/s² (only with
+        :attr:`has_accel`)."""
+        if not self.has_accel:
+            raise ValueError("this recording has no accelerometer columns")
+        return np.ascontiguousarray(self.rows(lo, hi)[:, 4:7])
 
     def close(self) -> None:
         """Delete the temporary file."""
@@ -639,12 +673,13 @@ class StillPlan:
 def spilled_chunks(
     imu: SpilledImu, ref: Reference | None, size: int, *, still: StillPlan | None = None,
     temperature: bool = False, rows: np.ndarray | None = None,
-    kept_temperature: list[np.ndarray] | None = None,
+    kept_temperature: list[np.ndarray] | None = None, accel: bool = False,
 ) -> Iterator[Batch]:
     """A :class:`SpilledImu` in runs of ``size`` samples, each with its reference rates
     (``ref``), still flags (``still``) and, with ``temperature``, the die temperature: a
     recording replayed in bounded working memory. ``kept_temperature`` receives the
-    temperatures of the samples ``rows`` (None: all), for the smoother."""
+    temperatures of the samples ``rows`` (None: all), for the smoother; with ``accel``, the
+    accelerometer's readings (the still detector's veto)."""
     n = imu.n
     for a in range(0, n, size):
         b = min(a + size, n)
@@ -661,18 +696,21 @@ def spilled_chunks(
                 kept_temperature.append(temp[rows[lo:hi] - a])
         yield Batch(imu.t[a:b], np.ascontiguousarray(block[:, :3]),
                     temp if temperature else None, flags,
-                    *(rr_ra if rr_ra is not None else (None, None)))
+                    *(rr_ra if rr_ra is not None else (None, None)),
+                    accel=np.ascontiguousarray(block[:, 4:7]) if accel else None)
 
 
 class ReplaySource:
     """A recording ready to replay through the tracker (:func:`gyrocal.kit.commands.track`):
     its spilled readings, reference rates, still plan, whether the tracker takes the
-    temperature, and the specific force for a calibration's g-sensitivity (``gravity``). A
-    context manager: leaving it deletes the temporary file."""
+    temperature, the specific force for a calibration's g-sensitivity (``gravity``) and
+    whether the batches carry the accelerometer's readings (``accel``: the tracker's still
+    detector uses them). A context manager: leaving it deletes the temporary file."""
 
     def __init__(self, imu: SpilledImu, ref: Reference | None, still: StillPlan | None,
-                 temperature: bool, gravity: Any = None) -> None:
+                 temperature: bool, gravity: Any = None, accel: bool = False) -> None:
         self.imu = imu
+        self.accel = accel
         self.ref = ref
         self.still = still
         self.temperature = temperature
@@ -690,7 +728,8 @@ class ReplaySource:
         self._temps = []
         pieces = spilled_chunks(self.imu, self.ref, size, still=self.still,
                                 temperature=self.temperature, rows=rows,
-                                kept_temperature=self._temps if self.temperature else None)
+                                kept_temperature=self._temps if self.temperature else None,
+                                accel=self.accel)
         if self.gravity is None:
             return pieces
         gravity = self.gravity
@@ -898,6 +937,7 @@ class LiveSource:
         rate = np.vstack([b.rate for b, _ in parts])
         temp = np.concatenate([np.asarray(b.temperature_c, dtype=float) for b, _ in parts])
         moved = np.concatenate([np.full(len(b), mv) for b, mv in parts])
+        accel = np.vstack([np.asarray(b.accel, dtype=float).reshape(-1, 3) for b, _ in parts])
         self.samples += t.size
         if not planned:
             self.moved_samples += int(moved.sum())
@@ -907,7 +947,7 @@ class LiveSource:
         else:
             still = np.where(moved, 0.0, np.nan)
         return Batch(t, rate, temp if self.temperature else None, still,
-                     specific_force=self._force(t + self.t0))
+                     specific_force=self._force(t + self.t0), accel=accel)
 
     def _force(self, t: np.ndarray) -> np.ndarray | None:
         """``f`` at jig times ``t`` from the servo readings (interpolated linearly, held
@@ -976,7 +1016,7 @@ class LiveSource:
         ra = np.full((t.size, 3), np.nan)
         ra[np.isfinite(rr)] = p.axes[motor]
         return Batch(batch.t, batch.rate, batch.temperature, np.zeros(t.size), rr, ra,
-                     batch.specific_force)
+                     batch.specific_force, batch.accel)
 
     def batches(self, first: Batch, duration_s: float, chunk_s: float) -> Iterator[Batch]:
         """``first``, then a batch every ``chunk_s`` (and the turn pairs of the plan) until

@@ -8,7 +8,8 @@ an encoder-known rate. Read the pieces in this order, each a module of its own:
 1. :mod:`.settings`: the noise model and tuning (:class:`TrackerSettings`).
 2. :mod:`gyrocal.calib.stationarity`: when the sensor is still, from its readings' variance
    and a rate test centred on the seed, never on the estimate it feeds (a detector gated on
-   the tracker's own bias never sees a sensor whose bias moved since calibration).
+   the tracker's own bias never sees a sensor whose bias moved since calibration), and the
+   accelerometer's veto where ``accel_noise_std`` is given (a steady slow turn tilts gravity).
 3. :mod:`.pooling`: decided samples pooled into update windows (the measurements).
 4. :mod:`.step`: one Kalman step per window (the model's equations), the seed check that
    reports a bias that moved since calibration, and the NIS and CUSUM health tests.

@@ -26,6 +26,8 @@ from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.stationarity import (
     StillDetector,
     StreamingQuiet,
+    accel_detector,
+    accel_quiet_windows,
     quiet_windows,
     run_lengths,
 )
@@ -201,6 +203,10 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         if s.still.rate_threshold is None:  # room for the bias to have moved from the seed
             det = replace(det, rate_limit=det.rate_limit + s.zero_rate_tolerance)
         self.detector = det
+        # the accelerometer's veto (None: the gyro alone decides) and its last window's rows
+        self.accel_detector = (None if s.accel_noise_std is None
+                               else accel_detector(s.accel_noise_std, s.odr_hz, s.still))
+        self._ahist = np.zeros((0, 3))
         self._det_bias = b0.astype(float).copy()
         self._det_bias_l = self._det_bias.tolist()  # update()'s scalar copy
         self._U = max(1, int(round(s.update_interval_s * s.odr_hz)))
@@ -433,6 +439,7 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         reference_rate: Any = None,
         reference_axis: Any = None,
         specific_force: Any = None,
+        accel: Any = None,
         finish: bool = False,
     ) -> TrackResult:
         """Feed a batch of readings (vectorised); returns per-sample estimates.
@@ -455,6 +462,10 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             Specific force at the sensor, g, sensor frame: with the calibration's
             g-sensitivity ``G`` the readings count as ``m + G f`` (module docstring); ignored
             without it.
+        accel : array_like (n, 3), optional
+            The accelerometer's reading of each sample (m/s², the unit of
+            ``accel_noise_std``): required when the settings give ``accel_noise_std`` (the
+            still detector's accelerometer veto), refused otherwise.
         finish : bool
             The stream ends with this batch: decide the samples still awaiting their look-ahead
             (as not still, unless flagged), close the open update window and apply it. Further
@@ -471,6 +482,7 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
                                   "process() or update()")
         self._catch_up()
         cols = self._validate(t, rate, temperature, still, reference_rate, reference_axis)
+        acc = self._accel(accel, cols[0].size)
         if specific_force is not None and self._G is not None:
             cols = (cols[0], cols[1] + self._force(specific_force, cols[0].size) @ self._G.T,
                     *cols[2:])
@@ -486,7 +498,30 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
                 "rr": np.array([r[4] for r in q]),
                 "ra": np.array([(math.nan,) * 3 if r[5] is None else r[5] for r in q]),
             }
-        return self._process(*cols, finish=finish)
+        return self._process(*cols, acc=acc, finish=finish)
+
+    def _accel(self, accel: Any, n: int) -> np.ndarray | None:
+        """``accel`` as (n, 3), checked against the settings (CalibInputError naming the
+        problem)."""
+        if self.accel_detector is None:
+            if accel is not None:
+                raise CalibInputError("accel was given but the settings have no "
+                                      "accel_noise_std: give it to use the accelerometer")
+            return None
+        if accel is None and n == 0:
+            return None
+        if accel is None:
+            raise CalibInputError("this tracker's still detector uses the accelerometer "
+                                  "(accel_noise_std): give accel for every sample")
+        try:
+            a = np.asarray(accel, dtype=float)
+        except (TypeError, ValueError):
+            raise CalibInputError("accel must be numbers (m/s²)") from None
+        if a.shape != (n, 3):
+            raise CalibInputError(f"accel must have shape ({n}, 3), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise CalibInputError("accel contains NaN or inf")
+        return a
 
     @staticmethod
     def _force(specific_force: Any, n: int) -> np.ndarray:
@@ -513,9 +548,10 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         rr: np.ndarray,
         ra: np.ndarray,
         *,
+        acc: np.ndarray | None = None,
         finish: bool,
     ) -> TrackResult:
-        """:meth:`process` on validated columns."""
+        """:meth:`process` on validated columns (``acc``: the accelerometer's, or None)."""
         n = t.size
         if n:
             if self._k == 0:
@@ -530,11 +566,14 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             centred = np.concatenate([self._hist, m + self._det_bias[None, :]])
             quiet = quiet_windows(centred, det, self._hist.shape[0])
             run = run_lengths(quiet, self._run)
+            # the accelerometer's veto: its window ending at the same row as the gyro's run
+            a_quiet = None if acc is None else self._accel_quiet(acc)
             self._run = int(run[-1])
             keep = det.history
             self._hist = centred[-keep:] if keep else centred[:0]
         else:
             run = np.zeros(0, dtype=np.int64)
+            a_quiet = None
         # ---- samples awaiting a decision: the pending ones, then this batch
         cols = {"t": t, "m": m, "temp": temp, "ext": ext, "rr": rr, "ra": ra}
         if self._pending:
@@ -550,7 +589,10 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
         n_conf = min(n_dec, total - L) if total > L else 0
         if n_conf > 0:
             # decision on S[i] uses the run at S[i + L], i.e. batch row i + L - P0 (>= 0)
-            det_still[:n_conf] = run[np.arange(n_conf) + L - P0] >= det.n_min + L
+            at = np.arange(n_conf) + L - P0
+            det_still[:n_conf] = run[at] >= det.n_min + L
+            if a_quiet is not None:
+                det_still[:n_conf] &= a_quiet[at]
         ext_d = S["ext"][:n_dec]
         still_d = np.where(np.isnan(ext_d), det_still, ext_d > 0.5)
         has_ref = np.isfinite(S["rr"][:n_dec])
@@ -601,6 +643,16 @@ class BiasTracker(Streaming, WindowPooling, KalmanStep, Replay):
             decision_still=still_d.copy(),
             bias_moved=self._moved,
         )
+
+    def _accel_quiet(self, acc: np.ndarray) -> np.ndarray:
+        """The accelerometer's quiet flags of the windows ending at each row of ``acc``,
+        carrying its last window's rows across batches."""
+        adet = self.accel_detector
+        assert adet is not None
+        rows = np.concatenate([self._ahist, acc])
+        quiet = accel_quiet_windows(rows, adet, self._ahist.shape[0])
+        self._ahist = rows[-adet.history:] if adet.history else rows[:0]
+        return quiet
 
     def _outputs(
         self,

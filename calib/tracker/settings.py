@@ -78,8 +78,11 @@ class TrackerSettings:
         How far the bias may lie from the seed, rad/s: the still detector's rate test accepts a
         window whose mean, less the seed's bias, is within this plus ``still.rate_sigma`` σ
         (unless ``still.rate_threshold`` sets the limit). Default ±5 °/s, the MPU-9250's
-        initial zero-rate tolerance (PS-MPU-9250A-01 §3.1), so a bias that moved anywhere
-        within the chip's tolerance since calibration is still seen at rest.
+        initial zero-rate tolerance (PS-MPU-9250A-01 §3.1 Table 1), so a bias that moved
+        anywhere within the chip's tolerance since calibration is still seen at rest; ``gyrocal
+        track`` gives the chip's own datasheet figure (``ChipFamily.gyro_errors`` in the chip
+        data, joined by the kit: this module knows no chip). A steady turn slower than this
+        gate passes the gyro's tests: ``accel_noise_std`` lets the accelerometer veto it.
     moved_sigma : float
         The first update window whose innovation on an axis exceeds this many of its standard
         deviations (the seed's σ, the window's noise and the random walk since) says the bias
@@ -88,6 +91,13 @@ class TrackerSettings:
         the measured bias at the first rest.
     stream_block_s : float
         Samples fused per :meth:`BiasTracker.feed` block, s.
+    accel_noise_std : tuple of 3 float or None
+        Per-sample white-noise standard deviation of the accelerometer beside the gyro, in the
+        unit of the ``accel`` readings given to :meth:`BiasTracker.process` (m/s²). Given, the
+        still detector also runs the accelerometer's variance test
+        (:func:`gyrocal.calib.stationarity.accel_detector`), which vetoes the gyro's still flag
+        where the accelerometer moves, and every batch must carry ``accel``; None (the
+        default): the gyro alone decides.
     """
 
     odr_hz: float
@@ -113,6 +123,7 @@ class TrackerSettings:
     zero_rate_tolerance: float = math.radians(5.0)
     moved_sigma: float = 5.0
     stream_block_s: float = 0.25
+    accel_noise_std: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "odr_hz", scalar(self.odr_hz, "odr_hz", positive=True))
@@ -123,8 +134,9 @@ class TrackerSettings:
             ("tempco", {}),
             ("tempco_std", {"positive": True}),
             ("tempco_random_walk", {"nonneg": True}),
+            ("accel_noise_std", {"positive": True}),
         ):
-            if getattr(self, name) is None and name == "rate_random_walk":
+            if getattr(self, name) is None and name in ("rate_random_walk", "accel_noise_std"):
                 continue
             a = vec3(getattr(self, name), name, **kw)
             object.__setattr__(self, name, tuple(float(x) for x in a))

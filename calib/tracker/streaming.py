@@ -64,6 +64,7 @@ class Streaming:
         reference_rate: float | None = None,
         reference_axis: Any = None,
         specific_force: Any = None,
+        accel: Any = None,
     ) -> np.ndarray:
         """Feed one reading; returns its corrected rate ``A (m + bias [+ G f])``, rad/s.
 
@@ -84,13 +85,17 @@ class Streaming:
         specific_force : array_like (3,), optional
             Specific force at the sensor, g, sensor frame: with the calibration's
             g-sensitivity the reading counts as ``m + G f`` (ignored without it).
+        accel : array_like (3,), optional
+            The accelerometer's reading, m/s² (required with ``accel_noise_std``: the
+            detector's accelerometer veto; such a tracker takes the one-sample
+            :meth:`process` path, the scalar path being the gyro's alone).
 
         Returns
         -------
         ndarray (3,)
         """
-        fast = self._update_fast(sample, t, temperature, still, reference_rate, reference_axis,
-                                 specific_force)
+        fast = None if self.accel_detector is not None else self._update_fast(
+            sample, t, temperature, still, reference_rate, reference_axis, specific_force)
         if fast is not None:
             return fast
         m = np.asarray(sample, dtype=float)
@@ -109,6 +114,7 @@ class Streaming:
             else np.asarray(reference_axis, dtype=float).reshape(1, -1),
             specific_force=None if specific_force is None
             else np.asarray(specific_force, dtype=float).reshape(1, -1),
+            accel=None if accel is None else np.asarray(accel, dtype=float).reshape(1, -1),
         )
         return res.corrected[0]
 
@@ -275,7 +281,7 @@ class Streaming:
     def feed(
         self, sample: Any, t: float, temperature: float | None = None, still: bool | None = None,
         specific_force: Any = None, *, reference_rate: float | None = None,
-        reference_axis: Any = None,
+        reference_axis: Any = None, accel: Any = None,
     ) -> np.ndarray:
         """Fast streaming: buffer one reading, return it corrected with the latest estimate.
 
@@ -302,6 +308,8 @@ class Streaming:
             Rate of the turning servo from its encoder, rad/s (jig only; as in :meth:`update`).
         reference_axis : array_like (3,), optional
             That servo's unit axis in the sensor frame (with ``reference_rate``).
+        accel : array_like (3,), optional
+            The accelerometer's reading, m/s² (as in :meth:`process`).
 
         Returns
         -------
@@ -326,7 +334,9 @@ class Streaming:
             self._buf_still = np.full(B, np.nan)
             self._buf_rr = np.full(B, np.nan)
             self._buf_ra = np.full((B, 3), np.nan)
+            self._buf_acc = np.full((B, 3), np.nan)
             self._buf_has_ref = False
+            self._buf_has_acc = False
         m = self._buf_m[i]
         try:
             m[:] = sample
@@ -334,9 +344,13 @@ class Streaming:
                 self._buf_ra[i] = reference_axis
                 self._buf_rr[i] = reference_rate
                 self._buf_has_ref = True
+            if accel is not None:
+                self._buf_acc[i] = accel
+                self._buf_has_acc = True
         except (TypeError, ValueError):
             raise CalibInputError(
-                "sample and reference_axis must be 3 numbers each, and reference_rate a number"
+                "sample, reference_axis and accel must be 3 numbers each, and reference_rate a "
+                "number"
             ) from None
         if specific_force is not None and self._G is not None:
             m += self._G @ self._force(specific_force, 1)[0]
@@ -379,6 +393,10 @@ class Streaming:
                 self._buf_rr[:n] = np.nan
                 self._buf_ra[:n] = np.nan
                 self._buf_has_ref = False
+            if self._buf_has_acc:
+                ref["accel"] = self._buf_acc[:n].copy()
+                self._buf_acc[:n] = np.nan
+                self._buf_has_acc = False
             self._buf_temp[:n] = np.nan
             self._buf_still[:n] = np.nan
         else:

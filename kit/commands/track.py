@@ -109,8 +109,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d.add_argument("--lookahead", type=float, default=0.2, metavar="S")
     d.add_argument("--still-rate-threshold", type=float, default=None, metavar="RAD_S",
                    help="rate gate of the detector about the calibration's bias (default "
-                        "5 deg/s, the MPU-9250's zero-rate tolerance, plus 5 sigma of the "
-                        "white noise: a bias that moved since calibration is still seen)")
+                        "the chip's datasheet zero-rate tolerance, 5 deg/s when the chip is not "
+                        "known, plus 5 sigma of the white noise: a bias that moved since "
+                        "calibration is still seen)")
     d.add_argument("--update-interval", type=float, default=0.25, metavar="S")
     d.add_argument("--causal", action="store_true",
                    help="a recording: the filter's causal estimate at each sample (as live) "
@@ -187,6 +188,44 @@ def _settings(args: argparse.Namespace, odr: float, n_density: Any, k: Any,
         raise InputError(str(exc)) from None
 
 
+def _chip_and_accel(st: Any, odr: float, chip: str | None, accel: Any, notes: list[str],
+                    where: str, accel_lsb: Any = None) -> Any:
+    """``st`` with the chip's zero-rate tolerance (:func:`gyrocal.kit.tracking.chip_zero_rate`)
+    and the accelerometer's noise (from its quietest seconds,
+    :func:`gyrocal.calib.stationarity.quiet_noise_std`, at least the rounding noise
+    ``lsb/√12`` of its converter step ``accel_lsb``, m/s²) where they are known."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from gyrocal.calib.stationarity import quiet_noise_std
+    from gyrocal.kit.tracking import chip_zero_rate
+
+    tol, note = chip_zero_rate(chip)
+    if tol is not None:
+        st = replace(st, zero_rate_tolerance=tol)
+        if st.still.rate_threshold is None:
+            notes.append(str(note))
+    if accel is None:
+        return st
+    whole, piecewise = (accel, {}) if not isinstance(accel, tuple) else (
+        None, {"n": accel[0], "read": accel[1]})
+    step = (float(accel_lsb) if isinstance(accel_lsb, (int, float)) and accel_lsb > 0
+            else 0.0) / math.sqrt(12.0)
+    try:
+        sigma = np.maximum(quiet_noise_std(whole, max(8, int(round(odr))), **piecewise), step)
+    except ValueError:
+        if not step:
+            notes.append("the accelerometer's readings do not change from sample to sample "
+                         "(quantised to silence?): the gyro alone decides when it is still")
+            return st
+        sigma = np.full(3, step)
+    notes.append("the accelerometer vetoes the still detector where it moves (per-sample noise "
+                 "from its quietest seconds: " + ", ".join(f"{x:.3g}" for x in sigma)
+                 + " m/s^2)")
+    return replace(st, accel_noise_std=tuple(float(x) for x in sigma))
+
+
 def _documents(args: argparse.Namespace) -> tuple[Any, Any]:
     """The ``--cal`` calibration and the ``--noise`` document, read and checked (None where the
     flag is not given)."""
@@ -199,12 +238,17 @@ def _documents(args: argparse.Namespace) -> tuple[Any, Any]:
 def _build_tracker(
     args: argparse.Namespace, odr: float, rate: Any, notes: list[str], what: str,
     where: str, *, keep_states: bool = False, documents: tuple[Any, Any] | None = None,
+    chip: str | None = None, accel: Any = None, accel_lsb: Any = None,
 ) -> tuple[Any, Any]:
     """The tracker from the flags: calibration, noise model (``rate``, an ``(n, 3)`` array or a
     :class:`gyrocal.kit.tracking.SpilledImu` read a piece at a time, gives the estimates the
     flags leave open: the white noise, and without --cal the first still second's bias).
     ``what`` names the data in notes, ``where`` in errors; ``documents`` are
-    :func:`_documents`, when the caller read them already.
+    :func:`_documents`, when the caller read them already; ``chip`` is the sensor's model
+    (its datasheet's zero-rate tolerance widens the detector's rate gate); ``accel`` the
+    accelerometer's readings (an ``(n, 3)`` array, m/s², or ``(n, read)``), whose noise sets
+    the detector's accelerometer veto (None: the gyro alone decides), ``accel_lsb`` its
+    converter step, m/s² (the noise's floor).
 
     Returns
     -------
@@ -249,6 +293,7 @@ def _build_tracker(
         if stds:
             axis_std = math.radians(max(stds))
     st = _settings(args, odr, n_density, k, axis_std)
+    st = _chip_and_accel(st, odr, chip, accel, notes, where, accel_lsb)
     if cal is not None:
         from dataclasses import replace
 
@@ -311,8 +356,11 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
         if args.tempco and not imu.temperature_complete:
             raise InputError(f"{rec.path}: --tempco needs a temperature on every sample "
                              "(imu.csv temp column); this recording lacks some")
-        tracker, cal = _build_tracker(args, odr, imu, notes, "the recording", str(rec.path),
-                                      keep_states=not args.causal)
+        tracker, cal = _build_tracker(
+            args, odr, imu, notes, "the recording", str(rec.path), keep_states=not args.causal,
+            chip=(rec.manifest.get("sensor") or {}).get("model"),
+            accel=(imu.n, imu.accel) if imu.has_accel else None,
+            accel_lsb=(rec.manifest.get("sensor") or {}).get("accel_sensitivity_m_s2_per_lsb"))
         still = None
         if args.still == "segments":
             still = StillPlan(rests(rec.imu_t, rec.segments, imu.rate), 0.0)
@@ -342,7 +390,8 @@ def _replay(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Any, str]:
     except BaseException:
         imu.close()
         raise
-    return tracker, ReplaySource(imu, ref, still, bool(args.tempco), gravity), str(rec.path)
+    return tracker, ReplaySource(imu, ref, still, bool(args.tempco), gravity,
+                                 accel=tracker.accel_detector is not None), str(rec.path)
 
 
 def _simulate(args: argparse.Namespace, notes: list[str]) -> tuple[Any, Batch, Any, str]:
@@ -486,7 +535,9 @@ def _run_live(args: argparse.Namespace, notes: list[str]) -> tuple[Tracked, Any,
     def build(warm: Batch) -> Any:
         tracker, _ = _build_tracker(args, float(jig.imu.odr_hz), warm.rate, notes,
                                     f"the first {LIVE_WARMUP_S:g} s", where,
-                                    documents=documents)
+                                    documents=documents, chip=jig.imu.info.model,
+                                    accel=warm.accel,
+                                    accel_lsb=jig.imu.info.accel_sensitivity_m_s2_per_lsb)
         if tracker.applies_g_sensitivity:
             notes.append(g_note)
         built.append(tracker)

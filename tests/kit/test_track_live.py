@@ -39,6 +39,9 @@ def test_live_sim_tracks_the_true_bias_within_its_uncertainty(capsys):
     j = int(np.argmax(np.abs(true_bias)))  # the opposite sign would be far outside the band
     assert abs(final[j] + true_bias[j]) > 100 * final_std[j]
     assert "tracking live on the emulated jig" in err and "no --cal" in err
+    # the chip's accelerometer joins the still detector, its datasheet ZRO widens the gate
+    assert "the accelerometer vetoes the still detector" in err
+    assert "mpu9250 gyro's zero-rate tolerance, +-5 deg/s" in err
 
 
 def test_live_with_a_calibration_and_the_jig_as_still_flag(tmp_path, capsys):
