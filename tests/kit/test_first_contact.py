@@ -184,7 +184,7 @@ def test_the_accelerometer_table_says_why_it_is_there():
     from gyrocal.kit.report import accelerometer_rows
 
     acc = SimpleNamespace(std=np.full(9, 1e-3), rests=12, gravity=9.80665,
-                          matrix=np.eye(3), bias=np.zeros(3),
+                          matrix=np.eye(3), bias=np.zeros(3), fixed=(),
                           consistency=Consistency(chi2=2.0, dof=3, p_value=0.5, ok=True))
     text = "\n".join(accelerometer_rows(acc))
     assert "calibrated from the same run" in text and "12 orientations" in text
