@@ -305,6 +305,32 @@ class EmulatedServo:
                 self.advance_to(float(t.max()))
             return self.motor.motion(t)
 
+    def peek_motion(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`true_motion` as it stands now, without its side effects: no timed event is
+        applied and no grid cell is frozen, so a later command or event may still change what
+        it returned (:meth:`motion_revision` then moves)."""
+        with self.lock:
+            return self.motor.motion(np.asarray(t, dtype=float).reshape(-1), freeze=False)
+
+    def motion_revision(self) -> int:
+        """Moves whenever the motor is commanded: a :meth:`peek_motion` from before may be
+        out of date."""
+        return self.motor.revision
+
+    def next_due(self) -> float:
+        """The time of the next timed event (Bus Watchdog, scheduled fault), ``inf`` for none:
+        a :meth:`true_motion` reaching it applies it first."""
+        with self.lock:
+            due = math.inf if self._watchdog_deadline is None else self._watchdog_deadline
+            return min(due, self._events[0][0]) if self._events else due
+
+    def touch(self, t: float) -> None:
+        """What :meth:`true_motion` does besides returning the motion, for times whose latest
+        is ``t``: apply the events due by then, and freeze the grid through ``t``."""
+        with self.lock:
+            self.advance_to(t)
+            self.motor.sample(t)
+
     def _schedule(self, t: float, kind: str, **args) -> None:
         with self.lock:
             self._events.append((float(t), kind, args))
