@@ -461,7 +461,7 @@ class _EmulatedImu(ABC):
         self._accel_rng = Normals(np.random.default_rng([seed, 3]))
         #: How far ahead of the clock samples are computed on a motion source that allows it
         #: (0: each when the clock reaches it).
-        self.lookahead_s = 0.1
+        self.lookahead_s = 0.25
         self._ahead: _Ahead | None = None
         r = self.truth.realism
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,

@@ -231,6 +231,8 @@ class GimbalJig:
         if not np.all(np.isfinite(self.lever_arm_m)):
             raise ValueError(f"lever_arm_m must be finite, got {lever_arm_m!r}")
         self.slips: list[Slip] = []
+        self._peek_joints: list[Joint] | None = None
+        self._can_peek = False
         t_home = home_time
         if t_home is None:
             clock = getattr(self.joints[0], "clock", None)
@@ -279,10 +281,13 @@ class GimbalJig:
     def lookahead(self) -> tuple[object, ...] | None:
         """What a look-ahead (``peek=True``) depends on: equal tuples mean equal values. None
         when a joint cannot be looked ahead on."""
-        if not all(_peeks(j) for j in self.joints):
+        joints = self.joints
+        if self._peek_joints is not joints:  # whether they can, once per list of joints
+            self._peek_joints, self._can_peek = joints, all(_peeks(j) for j in joints)
+        if not self._can_peek:
             return None
-        return (tuple(j.motion_revision() for j in self.joints),  # type: ignore[attr-defined]
-                tuple(map(id, self.slips)), self.wobble_rad, self.lever_arm_m.tobytes(),
+        return ([j.motion_revision() for j in joints],  # type: ignore[attr-defined]
+                list(map(id, self.slips)), self.wobble_rad, self.lever_arm_m.tobytes(),
                 self.mount.tobytes())
 
     def due_by(self, t: float) -> bool:

@@ -482,12 +482,13 @@ class EmulatedServo:
             self.advance_to(now)
             self._refresh(now, address, length)
             out = bytearray(self._mem[address: address + length])
-            for i in range(length):
-                a = address + i
-                target = self._indirect_target(a)
-                if target is not None:
-                    self._refresh(now, target, 1)
-                    out[i] = self._mem[target]
+            end = address + length
+            if end > 224 and address <= 251 or end > 634 and address <= 661:  # Indirect Data
+                for i in range(length):
+                    target = self._indirect_target(address + i)
+                    if target is not None:
+                        self._refresh(now, target, 1)
+                        out[i] = self._mem[target]
             return 0, bytes(out)
 
     def _indirect_target(self, address: int) -> int | None:
