@@ -412,6 +412,7 @@ class _Ahead:
     gyro: np.ndarray | None = None
     gm: np.ndarray | None = None
     walk: np.ndarray | None = None
+    frames: bytes | None = None
 
 
 @dataclass
@@ -792,6 +793,15 @@ class _EmulatedImu(ABC):
                 a.coloured_start = c.state()
             a.coloured_from = j
             gyro = a.gyro[i:j]  # type: ignore[index]
+            if a.frames is not None and self.faults.stuck_axis is None:
+                size = len(a.frames) // a.t.size
+                self._t_last = float(a.t[i])
+                self._note_temperature(float(a.temperature[i]))
+                self._ingest_frames(a.frames[i * size: j * size])
+                self._latest = _Sample(gyro[-1], a.accel[i], int(a.temp[i]))
+                self._k += 1
+                self._after_samples()
+                return True
         self._emit(a.t[i:j], a.m[i:j], a.accel[i:j], a.temperature[i:j], n, 0, gyro,
                    a.temp[i:j])
         return True
@@ -812,6 +822,18 @@ class _EmulatedImu(ABC):
         gyro = np.clip(np.rint(m / a.sensitivity), -32768, 32767).astype(np.int64)
         a.gyro = np.concatenate((np.zeros((i, 3), dtype=np.int64), gyro))
         a.coloured_from, a.coloured_start = i, c.state()
+        a.frames = self._frames_ahead(a.gyro, a.accel, a.temp)
+
+    def _frames_ahead(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray
+                      ) -> bytes | None:
+        """What :meth:`_ingest` would push into the FIFO for these samples, one drain of one
+        sample at a time, the same number of bytes each (for :meth:`_ingest_frames`); None
+        when the chip does not say (its :meth:`_ingest` then runs)."""
+        return None
+
+    def _ingest_frames(self, data: bytes) -> None:
+        """:meth:`_ingest` of one sample, its FIFO bytes given (:meth:`_frames_ahead`)."""
+        raise NotImplementedError
 
     def _look_ahead(self, token: tuple[Any, ...], k_first: int, count: int,
                     period: float) -> _Ahead:
@@ -1203,6 +1225,14 @@ class EmulatedMPU9250(_EmulatedImu):
                 del fifo[: len(fifo) - cap]
                 return
         fifo += data
+
+    def _frames_ahead(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray
+                      ) -> bytes | None:
+        return self._frames(gyro, accel, temp) if self._fifo_on() else None
+
+    def _ingest_frames(self, data: bytes) -> None:
+        self._int_status |= _MB.INT_STATUS_RAW_DATA_RDY
+        self._push(data)
 
     def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
                 skipped: int) -> None:
