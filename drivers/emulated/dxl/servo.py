@@ -26,6 +26,7 @@ Behaviour modelled (hardware reference §5, §5.1, §5.2, §6):
 from __future__ import annotations
 
 import math
+import struct
 import threading
 
 import numpy as np
@@ -68,6 +69,11 @@ _RAM_START = 64  # Torque Enable: the first RAM item
 _GOAL_ITEMS = ("Goal PWM", "Goal Current", "Goal Velocity", "Goal Position")
 _PROFILE_KIND = {"hold": 0, "step": 0, "rectangular": 1, "triangular": 2, "trapezoidal": 3,
                  "velocity": 0}
+#: Per item size: the range a live value is clamped to before its bytes are taken (as
+#: two's complement), and the little-endian packer of those bytes.
+_LIMITS = {n: (-(1 << (8 * n - 1)), (1 << (8 * n)) - 1) for n in (1, 2, 4)}
+_PACK = {1: struct.Struct("<B").pack_into, 2: struct.Struct("<H").pack_into,
+         4: struct.Struct("<I").pack_into}
 #: Deceleration of a shaft whose torque has been switched off (gearbox friction), rad/s².
 _FREE_DECEL = 40.0
 #: Deceleration of a stop forced by a stall, rad/s² (a Bus Watchdog trip stops at once).
@@ -699,9 +705,9 @@ class EmulatedServo:
             values[146] = (1, round(self._temperature))
         for addr, (size, value) in values.items():
             if addr < hi and addr + size > lo:
-                bits = 8 * size
-                value = max(-(1 << (bits - 1)), min((1 << bits) - 1, value))
-                mem[addr: addr + size] = (value & ((1 << bits) - 1)).to_bytes(size, "little")
+                lim = _LIMITS[size]
+                value = max(lim[0], min(lim[1], value)) & lim[1]
+                _PACK[size](mem, addr, value)
 
     def reg_write(self, address: int, data: bytes) -> int:
         """REG_WRITE: validate and hold the write until ACTION (§4.4)."""
