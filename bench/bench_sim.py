@@ -182,8 +182,8 @@ def main(argv: list[str]) -> None:
         best: dict[str, dict] = {}
         outs: dict[str, Path] = {}
         for i in range(repeat):
-            for name, path in checkouts:
-                out = Path(tmp) / f"run-{len(outs)}-{i}"
+            for j, (name, path) in enumerate(checkouts):
+                out = Path(tmp) / f"run-{j}-{i}"
                 print(f"running {name} ({i + 1}/{repeat}) ...", file=sys.stderr, flush=True)
                 r = _run(path, out, seed, extra)
                 if name not in best or r["total"] < best[name]["total"]:

@@ -41,10 +41,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.accel import AccelTruth
+from gyrocal.drivers.emulated.iir import lfilter
 from gyrocal.drivers.emulated.magnetometers import (
     AuxPort,
     EmulatedAK8963,
@@ -968,8 +968,7 @@ class _EmulatedImu(ABC):
                 prev_x = prev_y = x[0]
             else:
                 prev_x, prev_y = state[1][0], state[1][1]
-            y, _ = lfilter([b, b], [1.0, a], x, axis=0,
-                           zi=(b * prev_x - a * prev_y)[None, :])
+            y, _ = lfilter([b, b], [1.0, a], x, zi=(b * prev_x - a * prev_y)[None, :])
             out[lo:hi] = y.reshape(omega[lo:hi].shape)
             state = (fc, np.stack([x[-1], y[-1]]))
         return out, state

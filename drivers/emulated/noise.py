@@ -30,7 +30,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
+
+from gyrocal.drivers.emulated.iir import lfilter
 
 __all__ = ["FLICKER_TIME_CONSTANTS_S", "ColouredNoise", "Normals", "allan_deviation",
            "flicker_component_sigma"]
@@ -225,15 +226,16 @@ class ColouredNoise:
 #: :data:`FLICKER_TIME_CONSTANTS_S` as an array.
 _TAU = np.asarray(FLICKER_TIME_CONSTANTS_S)
 #: Up to this many steps :func:`_first_order` runs its loop in numpy over the components; longer
-#: runs go through one C filter per component.
+#: runs go through one first-order filter per component
+#: (:func:`~gyrocal.drivers.emulated.iir.lfilter`).
 _LOOP_STEPS = 24
 
 
 def _first_order(coef: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``x_k = coef_k x_k−1 + w_k`` from ``x0`` for each component: ``coef`` (J, n), ``w``
-    (J, n, 3), ``x0`` (J, 3); returns every ``x_k``, (J, n, 3). A component whose ``coef`` is
-    constant goes through ``scipy.signal.lfilter`` on long runs, which computes the same products
-    and sums in the same order."""
+    """``x_k = coef_k x_k−1 + w_k`` from ``x0`` for each component: ``coef`` (J, n), ``w`` (J,
+    n, 3), ``x0`` (J, 3); returns every ``x_k``, (J, n, 3). A component whose ``coef`` is
+    constant goes through :func:`~gyrocal.drivers.emulated.iir.lfilter` on long runs, which
+    computes the same products and sums in the same order."""
     J, n = coef.shape
     y = np.empty_like(w)
     if n <= _LOOP_STEPS:
@@ -245,7 +247,7 @@ def _first_order(coef: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
     for j in range(J):
         c = coef[j]
         if np.all(c == c[0]):
-            y[j], _ = lfilter([1.0], [1.0, -c[0]], w[j], axis=0, zi=(c[0] * x0[j])[None, :])
+            y[j], _ = lfilter([1.0], [1.0, -c[0]], w[j], zi=(c[0] * x0[j])[None, :])
         else:
             x = x0[j]
             for i in range(n):

@@ -37,7 +37,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter
+
+from gyrocal.drivers.emulated.iir import lfilter
 
 __all__ = [
     "MotorParams",
@@ -354,7 +355,7 @@ class ServoMotor:
         r = math.exp(-zeta * w * self.dt)
         th = w * self.dt * math.sqrt(1.0 - zeta * zeta)
         self._c1, self._c2 = 2.0 * r * math.cos(th), -r * r
-        h = lfilter([1.0], [1.0, -self._c1, -self._c2],
+        h, _ = lfilter([1.0], [1.0, -self._c1, -self._c2],
                     np.r_[1.0, np.zeros(int(40.0 / (zeta * w * self.dt)))])
         dh = np.diff(np.r_[0.0, h]) / self.dt
         self._g = self.params.noise_fraction / math.sqrt(float(np.sum(dh * dh))) \
