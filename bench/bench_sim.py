@@ -9,7 +9,8 @@ temporary directory), one after the other in the same invocation, and prints:
 * each run's CPU seconds (process time of the whole command, imports included: a loaded host
   changes it little), the jig time it recorded (the last IMU sample's time) and CPU per jig
   second (the target is 0.2 or less);
-* the CPU of each part and its share: the IMU chip's sample generation (``_sync``; within it
+* the CPU of each part (the CPU time of the thread it runs in, so the writer's thread is not
+  counted in the loop's parts) and its share: the IMU chip's sample generation (``_sync``; within it
   the true rates at the chip's internal rate, and the DLPF), the IMU reader with the emulated
   I²C bus around it, the servo packets (the real dynamixel-sdk encoding and decoding every
   packet, and the emulated servos), the emulated clock, the recording writer (its own thread,
@@ -44,15 +45,16 @@ ROOT = Path(__file__).resolve().parents[1]
 #: The commit before the emulated jig was made fast (issue 25).
 BEFORE = "ffa5743"
 
-#: Runs in the child: time the parts with process time (the writer's thread with thread time),
-#: run the command, print JSON. A part's time excludes the parts timed inside it.
+#: Runs in the child: time the parts with the CPU time of the thread they run in (the loop's, the
+#: writer's), the whole with process time; run the command, print JSON. A part's time excludes
+#: the parts timed inside it.
 _CHILD = r"""
 import collections, functools, json, sys, threading, time
 T0 = time.process_time()
 cpu = collections.Counter()
 stack = threading.local()
 
-def timed(obj, name, label, clock=time.process_time):
+def timed(obj, name, label, clock=time.thread_time):
     f = getattr(obj, name, None)
     if f is None:
         return
@@ -96,12 +98,10 @@ timed(ic._EmulatedImu, "_lowpass", "chip DLPF")
 timed(gim.Gimbal, "sample", "servo packets (dynamixel-sdk + emulated servos)")
 timed(clk.VirtualClock, "sleep", "clock")
 timed(kb.Backlog, "_put", "queue to the writer")
-timed(kb.Backlog, "_handle", "recording writer (thread)", time.thread_time)
+timed(kb.Backlog, "_handle", "recording writer (thread)")
 t = time.process_time()
 code = cli.main(sys.argv[1:])
 end = time.process_time()
-# the writer's thread time is inside the loop's process time: take it out of the loop
-cpu["loop, other"] -= cpu["recording writer (thread)"]
 cpu["total"] = end - T0
 cpu["rest (fit, outputs)"] = cpu["total"] - sum(v for k, v in cpu.items() if k != "total")
 print(json.dumps({"code": code, **cpu}))
