@@ -1,69 +1,130 @@
-"""CPU time of one emulated calibration, and where it goes (the emulators' share).
+"""CPU time of one emulated calibration per second of jig time, where it goes, and against the
+code before the emulators were made fast (issue 25).
 
-``python -m bench sim`` runs ``gyrocal calibrate --sim --sim-seed 3 --quiet --no-report`` (the full
-protocol, every realism effect) in a fresh interpreter and prints its CPU seconds (process time,
-so a loaded machine changes it little), with the CPU spent inside the emulated IMU chip's sample
-generation (``_sync``: the jig's true rate at the sub-sample times, its specific force, the
-coloured noise, the DLPF) and inside the gimbal driver's sync reads of the emulated servos.
+``python -m bench sim`` runs ``gyrocal calibrate --sim --sim-seed 3 --quiet --no-report`` (the
+full protocol, every realism effect on) in a fresh interpreter, for this checkout and for the
+code before the change (``git archive`` of :data:`BEFORE` from this repository, unpacked in a
+temporary directory), one after the other in the same invocation, and prints:
 
-``--ref=DIR`` also runs the same command on another checkout of the repository (for example
-``git worktree add /tmp/before <commit>``), in the same session, and says whether the two
-recordings are byte-identical (the emulators must record the same run for the same seed however
-fast they are). ``--seed=S`` changes the seed.
+* each run's CPU seconds (process time of the whole command, imports included: a loaded host
+  changes it little), the jig time it recorded (the last IMU sample's time) and CPU per jig
+  second (the target is 0.2 or less);
+* the CPU of each part (the CPU time of the thread it runs in, so the writer's thread is not
+  counted in the loop's parts) and its share: the IMU chip's sample generation (``_sync``; within it
+  the true rates at the chip's internal rate, and the DLPF), the IMU reader with the emulated
+  I²C bus around it, the servo packets (the real dynamixel-sdk encoding and decoding every
+  packet, and the emulated servos), the emulated clock, the recording writer (its own thread,
+  thread time), the queue between the loop and the writer, the rest of the protocol loop, the
+  plan, the imports, and the rest (fitting, outputs);
+* the ratio of the two runs' CPU, and whether the two recordings are byte-identical
+  (``imu.csv``, ``encoder.csv``, ``segments.csv``, and ``manifest.json`` less its ``created``
+  wall-clock stamp), with each file's SHA-256.
+
+Options: ``--seed=S``; ``--ref=DIR`` compares with another checkout instead of :data:`BEFORE`;
+``--ref-commit=REV`` archives another commit; ``--repeat=N`` runs each N times, alternating,
+and keeps each one's least CPU (the host is shared); ``--args="..."`` adds arguments to the
+command (e.g. ``--args="--config plate.toml"``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import shlex
 import subprocess
 import sys
+import tarfile
 import tempfile
+from io import BytesIO
 from pathlib import Path
 
 from bench.table import print_table
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The commit before the emulated jig was made fast (issue 25).
+BEFORE = "ffa5743"
 
-#: Runs in the child: time the parts with process time, run the command, print JSON.
+#: Runs in the child: time the parts with the CPU time of the thread they run in (the loop's, the
+#: writer's), the whole with process time; run the command, print JSON. A part's time excludes
+#: the parts timed inside it.
 _CHILD = r"""
-import collections, functools, json, sys, time
-import gyrocal.drivers.emulated.imu_chips as ic
-import gyrocal.drivers.emulated.noise as noise
-import gyrocal.drivers.dynamixel.gimbal as gim
-from gyrocal.kit.cli import main
-
+import collections, functools, json, sys, threading, time
+T0 = time.process_time()
 cpu = collections.Counter()
+stack = threading.local()
 
-def timed(cls, name, label):
-    f = getattr(cls, name)
-    depth = [0]
+def timed(obj, name, label, clock=time.thread_time):
+    f = getattr(obj, name, None)
+    if f is None:
+        return
     @functools.wraps(f)
     def g(*a, **k):
-        if depth[0]:
+        st = getattr(stack, "s", None)
+        if st is None:
+            st = stack.s = []
+        if st and st[-1][0] == label:  # re-entered: counted once
             return f(*a, **k)
-        depth[0] += 1
-        t = time.process_time()
+        t = clock()
+        st.append([label, 0.0])
         try:
             return f(*a, **k)
         finally:
-            cpu[label] += time.process_time() - t
-            depth[0] -= 1
-    setattr(cls, name, g)
+            _, inner = st.pop()
+            spent = clock() - t
+            cpu[label] += spent - inner
+            if st:
+                st[-1][1] += spent
+    setattr(obj, name, g)
 
-timed(ic._EmulatedImu, "_sync", "chip")
-timed(ic._EmulatedImu, "_internal_rates", "rates")
-timed(ic._EmulatedImu, "_specific_force", "force")
-timed(noise.ColouredNoise, "draw", "coloured")
-timed(gim.Gimbal, "sample", "servos")
-t0 = time.process_time()
-code = main(sys.argv[1:])
-cpu["total"] = time.process_time() - t0
+import gyrocal.kit.cli as cli
+import gyrocal.kit.sim  # the emulators: imported before the parts are timed
+import gyrocal.kit.jig as kj
+import gyrocal.kit.protocol as kp
+import gyrocal.kit.backlog as kb
+import gyrocal.kit.pipeline  # the fit
+import gyrocal.drivers.clock as clk
+import gyrocal.drivers.emulated.imu_chips as ic
+import gyrocal.drivers.dynamixel.gimbal as gim
+import gyrocal.drivers.imu.base as ib
+cpu["imports"] = time.process_time() - T0
+timed(kj, "choose_plan", "plan")
+timed(kp.Runner, "run", "loop, other")
+timed(ib.ImuReader, "read", "IMU reader and I2C bus")
+timed(ic._EmulatedImu, "_sync", "chip samples, other")
+timed(ic._EmulatedImu, "_internal_rates", "chip true rates (internal rate)")
+timed(ic._EmulatedImu, "_filtered", "chip DLPF")
+timed(ic._EmulatedImu, "_lowpass", "chip DLPF")
+timed(gim.Gimbal, "sample", "servo packets (dynamixel-sdk + emulated servos)")
+timed(clk.VirtualClock, "sleep", "clock")
+timed(kb.Backlog, "_put", "queue to the writer")
+timed(kb.Backlog, "_handle", "recording writer (thread)")
+t = time.process_time()
+code = cli.main(sys.argv[1:])
+end = time.process_time()
+cpu["total"] = end - T0
+cpu["rest (fit, outputs)"] = cpu["total"] - sum(v for k, v in cpu.items() if k != "total")
 print(json.dumps({"code": code, **cpu}))
 """
 
+#: The rows of the parts table, in order.
+PARTS = ("chip samples, other", "chip true rates (internal rate)", "chip DLPF",
+         "IMU reader and I2C bus", "servo packets (dynamixel-sdk + emulated servos)", "clock",
+         "recording writer (thread)", "queue to the writer", "loop, other", "plan", "imports",
+         "rest (fit, outputs)")
+FILES = ("imu.csv", "encoder.csv", "segments.csv", "manifest.json")
 
-def _run(checkout: Path, out: Path, seed: int) -> dict:
+
+def _archive(rev: str, dest: Path) -> Path:
+    """Unpack ``git archive REV`` of this repository into ``dest``."""
+    data = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True,
+                          check=True).stdout
+    with tarfile.open(fileobj=BytesIO(data)) as tar:
+        tar.extractall(dest, filter="data")
+    return dest
+
+
+def _run(checkout: Path, out: Path, seed: int, extra: list[str]) -> dict:
     """Run the calibration with ``gyrocal`` imported from ``checkout``."""
     shim = out.parent / f"shim-{out.name}" / "gyrocal"
     shim.mkdir(parents=True)
@@ -71,34 +132,87 @@ def _run(checkout: Path, out: Path, seed: int) -> dict:
     env = {**os.environ, "PYTHONPATH": str(shim.parent)}
     done = subprocess.run(
         [sys.executable, "-c", _CHILD, "calibrate", "--sim", "--sim-seed", str(seed), "--out",
-         str(out), "--quiet", "--no-report"],
-        env=env, capture_output=True, text=True, check=False)
+         str(out), "--quiet", "--no-report", *extra],
+        env=env, capture_output=True, text=True, check=False, cwd=out.parent)
     lines = [x for x in done.stdout.splitlines() if x.startswith("{")]
     if not lines:
         raise RuntimeError(f"{checkout}: the run printed no result\n{done.stderr[-2000:]}")
-    return json.loads(lines[-1])
+    r = json.loads(lines[-1])
+    r["jig_s"] = _jig_seconds(out)
+    return r
+
+
+def _recordings(out: Path) -> list[Path]:
+    return sorted(p.parent for p in out.rglob("manifest.json")
+                  if (p.parent / "imu.csv").exists())
+
+
+def _jig_seconds(out: Path) -> float:
+    """The recorded jig time: the latest IMU sample's time over the run's recordings."""
+    last = 0.0
+    for rec in _recordings(out):
+        with open(rec / "imu.csv", "rb") as fh:
+            fh.seek(max(0, fh.seek(0, 2) - 400))
+            row = fh.read().splitlines()[-1].decode()
+        last = max(last, float(row.split(",")[0]))
+    return last
+
+
+def _digest(path: Path) -> str:
+    """SHA-256 of a recording file; a manifest's without its wall-clock ``created`` stamp."""
+    if path.name == "manifest.json":
+        m = json.loads(path.read_text())
+        m.pop("created", None)
+        return hashlib.sha256(json.dumps(m, sort_keys=True).encode()).hexdigest()
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def main(argv: list[str]) -> None:
     opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
     seed = int(opts.get("seed", 3))
-    checkouts = [("this checkout", ROOT)]
-    if "ref" in opts:
-        checkouts.append((f"--ref {opts['ref']}", Path(opts["ref"]).resolve()))
-    rows = []
+    repeat = max(1, int(opts.get("repeat", 1)))
+    extra = shlex.split(opts.get("args", ""))
     with tempfile.TemporaryDirectory() as tmp:
-        runs = []
-        for name, path in checkouts:
-            out = Path(tmp) / f"run{len(runs)}"
-            r = _run(path, out, seed)
-            runs.append(out)
-            same = "—" if len(runs) == 1 else (
-                "yes" if all((runs[0] / "recording" / f).read_bytes()
-                             == (out / "recording" / f).read_bytes()
-                             for f in ("imu.csv", "encoder.csv", "segments.csv")) else "NO")
-            rows.append([name, r["code"], r["total"], r.get("chip", 0.0), r.get("rates", 0.0),
-                         r.get("force", 0.0), r.get("coloured", 0.0), r.get("servos", 0.0), same])
-    print_table(["code", "exit", "CPU s", "IMU chip", "  true rates", "  specific force",
-                 "  coloured noise", "servo reads", "same recording"], rows,
-                title=f"gyrocal calibrate --sim --sim-seed {seed} --quiet --no-report: CPU "
-                      "seconds (process time) in all and in the emulators' parts")
+        if "ref" in opts:
+            ref, ref_name = Path(opts["ref"]).resolve(), f"--ref {opts['ref']}"
+        else:
+            rev = opts.get("ref-commit", BEFORE)
+            ref, ref_name = _archive(rev, Path(tmp) / "before"), f"before ({rev})"
+        checkouts = [("this checkout", ROOT), (ref_name, ref)]
+        best: dict[str, dict] = {}
+        outs: dict[str, Path] = {}
+        for i in range(repeat):
+            for j, (name, path) in enumerate(checkouts):
+                out = Path(tmp) / f"run-{j}-{i}"
+                print(f"running {name} ({i + 1}/{repeat}) ...", file=sys.stderr, flush=True)
+                r = _run(path, out, seed, extra)
+                if name not in best or r["total"] < best[name]["total"]:
+                    best[name], outs[name] = r, out
+        names = [n for n, _ in checkouts]
+        now, before = best[names[0]], best[names[1]]
+        cmd = " ".join(["gyrocal calibrate --sim --sim-seed", str(seed), *extra,
+                        "--quiet --no-report"])
+        print_table(
+            ["code", "exit", "CPU s", "jig s", "CPU per jig s"],
+            [[n, best[n]["code"], best[n]["total"], best[n]["jig_s"],
+              best[n]["total"] / max(best[n]["jig_s"], 1e-9)] for n in names],
+            title=f"{cmd}: CPU seconds (process time, the least of {repeat} run(s) each)")
+        print_table(
+            ["part", *[f"{n} CPU s" for n in names], *[f"{n} share" for n in names]],
+            [[p, *[best[n].get(p, 0.0) for n in names],
+              *[f"{100 * best[n].get(p, 0.0) / best[n]['total']:.1f} %" for n in names]]
+             for p in PARTS],
+            title="where the CPU goes (a part excludes the parts inside it)")
+        print(f"CPU ratio, {names[1]} / {names[0]}: {before['total'] / now['total']:.2f}")
+        rows = []
+        recs = [_recordings(outs[n]) for n in names]
+        for a, b in zip(*recs, strict=False):
+            for f in FILES:
+                da, db = _digest(a / f), _digest(b / f)
+                rel = a.relative_to(outs[names[0]]) / f
+                rows.append([str(rel), da[:16], db[:16], "yes" if da == db else "NO"])
+        if len(recs[0]) != len(recs[1]):
+            rows.append(["(number of recordings)", len(recs[0]), len(recs[1]), "NO"])
+        print()
+        print_table(["file", f"{names[0]} sha256", f"{names[1]} sha256", "identical"], rows,
+                    title="the recordings, byte for byte (manifest less its `created` stamp)")

@@ -85,7 +85,7 @@ class VirtualClock:
             If ``seconds`` is negative or not finite.
         """
         seconds = float(seconds)
-        if not seconds >= 0.0 or seconds == float("inf"):
+        if not 0.0 <= seconds < math.inf:
             raise ValueError(f"sleep needs a finite, non-negative duration, got {seconds!r}")
         self._t += seconds
         while self._stalls and self._stalls[0][0] <= self._t:

@@ -15,7 +15,6 @@ import contextlib
 import importlib
 import importlib.util
 import sys
-import traceback
 import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -198,6 +197,8 @@ def _report(exc: BaseException, show_traceback: bool) -> int:
         raise exc
     code = exit_code_for(exc)  # every error becomes a message and a documented exit code
     if code == 1 or show_traceback:
+        import traceback  # only here: its import costs a tenth of a bare Python start
+
         traceback.print_exception(exc)
     print(f"gyrocal: error: {exc}", file=sys.stderr)
     return code

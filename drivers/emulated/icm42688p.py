@@ -144,10 +144,8 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
     def _accel_counts_1g(self) -> int:
         return 32768 // _ACCEL_FS_G[(self._regs[_R.ACCEL_CONFIG0] >> _B.FS_SEL_SHIFT) & 0x03]
 
-    def _temperature_counts(self, temperature_c: np.ndarray) -> np.ndarray:
-        if np.size(temperature_c):
-            self._last_temp_c = float(np.asarray(temperature_c).reshape(-1)[-1])
-        return super()._temperature_counts(temperature_c)
+    def _note_temperature(self, temperature_c: float) -> None:
+        self._last_temp_c = temperature_c  # what TEMP_DATA shows
 
     def cutoff_hz(self) -> float | None:
         """The emulated output filter's bandwidth: the UI filter's (GYRO_ACCEL_CONFIG0.

@@ -11,7 +11,15 @@ never
 later than ``T``, as its contract requires), turns the rates into readings through
 :class:`SensorTruth`, quantizes and clips them to the configured range, and pushes them into the
 FIFO with the chip's FIFO semantics (size, overflow flag, stop-when-full or overwrite; §1.7,
-§2.7). :class:`SensorRealism` adds what makes a chip imperfect beyond its calibration errors:
+§2.7). On a motion source that can be looked ahead on (the emulated gimbal:
+:meth:`GimbalJig.lookahead <gyrocal.drivers.emulated.jig.GimbalJig.lookahead>`) the chip computes
+its samples for :attr:`_EmulatedImu.lookahead_s` ahead in one vectorised step and hands them
+out as the clock reaches them; they are those it would have computed then, to the last bit (the
+same motion, the same draws of each random stream in the same order; the coloured noise as
+drains of one sample each take it, computed again after a drain of several), and a command to a
+servo, a timed event due or a register write makes it compute again.
+
+:class:`SensorRealism` adds what makes a chip imperfect beyond its calibration errors:
 coloured noise, the MPU-9250's DLPF delay, g-sensitivity and an accelerometer that sees the
 specific force of a motion source that has one (:meth:`GimbalJig.specific_force
 <gyrocal.drivers.emulated.jig.GimbalJig.specific_force>`); without it the accelerometer reads a
@@ -33,10 +41,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.accel import AccelTruth
+from gyrocal.drivers.emulated.iir import lfilter
 from gyrocal.drivers.emulated.magnetometers import (
     AuxPort,
     EmulatedAK8963,
@@ -44,7 +52,7 @@ from gyrocal.drivers.emulated.magnetometers import (
     MagneticField,
 )
 from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
-from gyrocal.drivers.emulated.noise import ColouredNoise
+from gyrocal.drivers.emulated.noise import ColouredNoise, Normals
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
@@ -360,6 +368,53 @@ class ChipFaults:
     fifo_capacity: int | None = None
 
 
+class _Peeking:
+    """A :class:`~gyrocal.drivers.emulated.noise.Normals` seen through ``standard_normal``
+    without using it up: counts what was asked for."""
+
+    def __init__(self, normals: Normals) -> None:
+        self.normals = normals
+        self.used = 0
+
+    def standard_normal(self, shape: int | tuple[int, ...]) -> np.ndarray:
+        n = math.prod(shape) if isinstance(shape, tuple) else int(shape)
+        self.used += n
+        return self.normals.peek(self.used)[self.used - n:].reshape(shape)
+
+
+@dataclass
+class _Ahead:
+    """Samples computed ahead (:meth:`_EmulatedImu._look_ahead`) from sample ``k_first`` of the
+    grid: their times ``t``, the latest time each read the motion at (``t_read``), the reading
+    before the coloured noise ``m`` (the true rate through the filter and the sensor's errors,
+    the g-sensitivity, the white noise), the accelerometer's counts, the die temperature and
+    its counts; the filter's state after each (``lpf``), and the accelerometer's normals each
+    used. From sample ``coloured_from`` on, the coloured noise as one-sample drains would give
+    it from the state ``coloured_start`` (its states after each sample) and the gyro counts
+    with it."""
+
+    token: tuple[Any, ...]
+    k_first: int
+    t: np.ndarray
+    t_read: np.ndarray
+    m: np.ndarray
+    accel: np.ndarray
+    temperature: np.ndarray
+    temp: np.ndarray
+    lpf: np.ndarray | None
+    fc: float | None
+    accel_draws: int
+    start_lpf: Any
+    sensitivity: float
+    next: int = 0
+    coloured_from: int = -1
+    coloured_start: tuple[Any, Any] | None = None
+    gyro: np.ndarray | None = None
+    gm: np.ndarray | None = None
+    walk: np.ndarray | None = None
+    frames: bytes | None = None
+
+
 @dataclass
 class _Sample:
     """The latest sample, for the output registers."""
@@ -401,12 +456,17 @@ class _EmulatedImu(ABC):
         self.motion: MotionSource = motion if motion is not None else ConstantRate()
         self.truth = truth if truth is not None else SensorTruth()
         self.faults = faults if faults is not None else ChipFaults()
-        self._noise_rng = np.random.default_rng([seed, 0])
+        self._noise_rng = Normals(np.random.default_rng([seed, 0]))
         self._fault_rng = np.random.default_rng([seed, 1])
-        self._accel_rng = np.random.default_rng([seed, 3])  # its own: the gyro's draws stay
+        # its own: the gyro's draws stay
+        self._accel_rng = Normals(np.random.default_rng([seed, 3]))
+        #: How far ahead of the clock samples are computed on a motion source that allows it
+        #: (0: each when the clock reaches it).
+        self.lookahead_s = 0.25
+        self._ahead: _Ahead | None = None
         r = self.truth.realism
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
-                                       np.random.default_rng([seed, 2]))
+                                       Normals(np.random.default_rng([seed, 2])))
         self._lpf: tuple[float, np.ndarray] | None = None
         self._created = clock.monotonic()
         self._power_on_reset()
@@ -431,6 +491,8 @@ class _EmulatedImu(ABC):
         self._sync()
         if not data:
             return
+        if len(data) > 1:
+            self._ahead = None  # a register write may change what the samples are
         self._ptr = self._mask(data[0])
         for value in data[1:]:
             self._write_register(self._ptr, value)
@@ -576,8 +638,9 @@ class _EmulatedImu(ABC):
         odr = self._odr_hz()
         self._period = None if odr is None else 1.0 / (odr * (1.0 + self.truth.clock_ppm * 1e-6))
         self._t_last = self._origin
+        self._ahead = None
 
-    def _true_rate(self, t: np.ndarray, period: float) -> np.ndarray:
+    def _true_rate(self, t: np.ndarray, period: float, peek: bool = False) -> np.ndarray:
         """The true rate each output sample carries: its mean over the sample period.
 
         A real gyro samples internally at kHz rates, low-pass filters (the DLPF) and decimates
@@ -588,15 +651,22 @@ class _EmulatedImu(ABC):
         :class:`~gyrocal.drivers.emulated.motion.MotionSource` contract requires.
         """
         S = self.subsamples
+        rate = self.motion.rate
+        if peek:
+            rate = self._peek_rate
         if S == 1:
-            return np.asarray(self.motion.rate(t), dtype=float)
+            return np.asarray(rate(t), dtype=float)
         offsets = period * ((np.arange(S) + 0.5) / S - 1.0)  # midpoints of S slices
         ts = (t[:, None] + offsets[None, :]).reshape(-1)
-        w = np.asarray(self.motion.rate(ts), dtype=float).reshape(t.size, S, 3)
+        w = np.asarray(rate(ts), dtype=float).reshape(t.size, S, 3)
         return w.mean(axis=1)
 
+    def _peek_rate(self, t: np.ndarray) -> np.ndarray:
+        return self.motion.rate(t, peek=True)  # type: ignore[call-arg]
+
     def _sync(self) -> None:
-        """Generate every sample with time ≤ now."""
+        """Generate every sample with time ≤ now: from the samples computed ahead when they
+        hold (:meth:`_release_ahead`), else here."""
         period = self._period
         if period is None:
             return
@@ -609,6 +679,9 @@ class _EmulatedImu(ABC):
             return
         head, tail = self._head_tail(n)
         head, tail = min(head, n), min(tail, n)
+        if head + tail >= n and self._release_ahead(n, period):
+            return
+        self._ahead = None
         if head + tail >= n:
             ks = np.arange(self._k + 1, k_end + 1)
             head, skipped = n, 0
@@ -630,38 +703,190 @@ class _EmulatedImu(ABC):
                 realism.g_sensitivity_rad_s_per_g).T
         odr = 1.0 / period
         m = m + self._noise_rng.standard_normal(m.shape) * self.truth.sigma_rad_s(odr)
-        if self._coloured.active:
-            m = m + self._coloured.draw(np.diff(t, prepend=self._t_last))
-        self._t_last = float(t[-1])
-        gyro = np.clip(np.rint(m / self._sensitivity_rad_s_per_lsb()), -32768, 32767)
-        gyro = gyro.astype(np.int64)
-        f = self.faults
-        if f.stuck_axis is not None:
-            gyro[t >= f.stuck_from_s, f.stuck_axis] = f.stuck_counts
         accel = np.clip(np.rint(self.truth.accel_reading(force, self._accel_rng, odr)
                                 * self._accel_counts_1g()),
                         -32768, 32767).astype(np.int64)
-        temp = self._temperature_counts(temperature)
+        self._emit(t, m, accel, temperature, head, skipped)
+
+    def _emit(self, t: np.ndarray, m: np.ndarray, accel: np.ndarray, temperature: np.ndarray,
+              head: int, skipped: int, gyro: np.ndarray | None = None,
+              temp: np.ndarray | None = None) -> None:
+        """The last steps of new samples: the coloured noise on the reading ``m`` (rad/s),
+        quantized to the configured range (``gyro``: these counts, computed ahead), a stuck
+        axis, the temperature's counts; into the FIFO (:meth:`_ingest`) and the output
+        registers."""
+        if gyro is None:
+            if self._coloured.active:
+                m = m + self._coloured.draw(np.diff(t, prepend=self._t_last))
+            gyro = np.clip(np.rint(m / self._sensitivity_rad_s_per_lsb()), -32768, 32767)
+            gyro = gyro.astype(np.int64)
+        self._t_last = float(t[-1])
+        f = self.faults
+        if f.stuck_axis is not None:
+            gyro = gyro.copy()
+            gyro[t >= f.stuck_from_s, f.stuck_axis] = f.stuck_counts
+        if temp is None:
+            temp = self._temperature_counts(temperature)
+        self._note_temperature(float(temperature[-1]))
         self._ingest(gyro, accel, temp, head, skipped)
         self._latest = _Sample(gyro[-1].copy(), accel[-1].copy(), int(temp[-1]))
-        self._k = k_end
+        self._k += gyro.shape[0] + skipped
         self._after_samples()
 
-    def _true_force(self, t: np.ndarray, accel_force: np.ndarray) -> np.ndarray:
+    def _note_temperature(self, temperature_c: float) -> None:  # noqa: B027 - a hook
+        """The die temperature of the newest sample (a chip whose registers show it keeps it)."""
+
+    # -- samples computed ahead -----------------------------------------------------------------
+
+    def _lookahead_token(self) -> tuple[Any, ...] | None:
+        """What samples computed ahead depend on besides the chip's registers (a write to them
+        drops the samples): equal tokens, equal samples. None when the motion source cannot be
+        looked ahead on, or :attr:`lookahead_s` is 0."""
+        look = getattr(self.motion, "lookahead", None)
+        if look is None or self.lookahead_s <= 0:
+            return None
+        state = look()
+        if state is None:
+            return None
+        return (state, id(self.motion), id(self.truth), self.subsamples, self._origin,
+                self._period, self._created)
+
+    def _release_ahead(self, n: int, period: float) -> bool:
+        """Hand out the next ``n`` samples from those computed ahead (computing them first when
+        none hold), exactly as :meth:`_sync` would compute them now. False (and nothing done)
+        when that cannot be: a motion source without look-ahead, or a servo's timed event due
+        by the last time the samples read the motion at (reading it would apply the event)."""
+        token = self._lookahead_token()
+        if token is None:
+            return False
+        a = self._ahead
+        if (a is None or a.token != token or a.start_lpf is not self._lpf
+                or a.k_first + a.next != self._k + 1 or a.next + n > a.t.size):
+            a = None
+        if a is not None:
+            t_read = float(a.t_read[a.next + n - 1])
+        else:
+            t_read = max(self._origin + period * (self._k + n) - self._pure_delay_s(period),
+                         self._created)
+        if self.motion.due_by(t_read):  # type: ignore[attr-defined]
+            return False
+        if a is None:
+            count = max(n, math.ceil(self.lookahead_s / period))
+            a = self._ahead = self._look_ahead(token, self._k + 1, count, period)
+        i, j = a.next, a.next + n
+        self.motion.touch(t_read)  # type: ignore[attr-defined]
+        self._noise_rng.skip(3 * n)
+        self._accel_rng.skip(a.accel_draws * n)
+        if a.lpf is not None:
+            self._lpf = a.start_lpf = (a.fc, a.lpf[j - 1])
+        a.next = j
+        gyro = None
+        if n == 1:
+            c = self._coloured
+            start = a.coloured_start
+            state = c.state()
+            if a.coloured_from != i or start is None or any(
+                    x is not y for x, y in zip(start, state, strict=True)):
+                self._coloured_ahead(a, i)
+            if a.gm is not None:
+                c.resume(a.gm[i], a.walk[i], 1)  # type: ignore[index]
+                a.coloured_start = c.state()
+            a.coloured_from = j
+            gyro = a.gyro[i:j]  # type: ignore[index]
+            if a.frames is not None and self.faults.stuck_axis is None:
+                size = len(a.frames) // a.t.size
+                self._t_last = float(a.t[i])
+                self._note_temperature(float(a.temperature[i]))
+                self._ingest_frames(a.frames[i * size: j * size])
+                self._latest = _Sample(gyro[-1], a.accel[i], int(a.temp[i]))
+                self._k += 1
+                self._after_samples()
+                return True
+        self._emit(a.t[i:j], a.m[i:j], a.accel[i:j], a.temperature[i:j], n, 0, gyro,
+                   a.temp[i:j])
+        return True
+
+    def _coloured_ahead(self, a: _Ahead, i: int) -> None:
+        """The coloured noise and the gyro counts of ``a``'s samples from ``i`` on, as drains
+        of one sample each would give them from the coloured noise's present state."""
+        c = self._coloured
+        m = a.m[i:]
+        if c.active:
+            dt = np.diff(a.t[i:], prepend=self._t_last)
+            noise, a.gm, a.walk = c.ahead(dt)
+            a.gm, a.walk = np.concatenate((np.empty((i,) + a.gm.shape[1:]), a.gm)), \
+                np.concatenate((np.empty((i, 3)), a.walk))
+            m = m + noise
+        else:
+            a.gm = a.walk = None
+        gyro = np.clip(np.rint(m / a.sensitivity), -32768, 32767).astype(np.int64)
+        a.gyro = np.concatenate((np.zeros((i, 3), dtype=np.int64), gyro))
+        a.coloured_from, a.coloured_start = i, c.state()
+        a.frames = self._frames_ahead(a.gyro, a.accel, a.temp)
+
+    def _frames_ahead(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray
+                      ) -> bytes | None:
+        """What :meth:`_ingest` would push into the FIFO for these samples, one drain of one
+        sample at a time, the same number of bytes each (for :meth:`_ingest_frames`); None
+        when the chip does not say (its :meth:`_ingest` then runs)."""
+        return None
+
+    def _ingest_frames(self, data: bytes) -> None:
+        """:meth:`_ingest` of one sample, its FIFO bytes given (:meth:`_frames_ahead`)."""
+        raise NotImplementedError
+
+    def _look_ahead(self, token: tuple[Any, ...], k_first: int, count: int,
+                    period: float) -> _Ahead:
+        """Samples ``k_first`` … ``k_first + count − 1`` computed ahead, as :meth:`_sync`
+        computes them up to the coloured noise: the motion as the servos plan it now (nothing
+        frozen, no event applied), the filter from its present state, the white noise and the
+        accelerometer's noise the next values of their streams (left in them until handed
+        out)."""
+        t = self._origin + period * np.arange(k_first, k_first + count)
+        t_eval = np.maximum(t - self._pure_delay_s(period), self._created)
+        start_lpf = self._lpf
+        rates = self._internal_rates(t_eval, period, peek=True)
+        out, _ = self._lowpass(rates, count, 0, start_lpf)
+        states = None
+        if out is not rates:  # filtered: the state after each sample is its last internal one
+            x, y = rates.reshape(count, -1, 3)[:, -1], out.reshape(count, -1, 3)[:, -1]
+            states = np.stack([x, y], axis=1)
+        omega = out if out.ndim == 2 else out[:, -1]
+        temperature = self.truth.temperature_at(t)
+        m = self.truth.reading(omega, temperature)
+        force = self._specific_force(t_eval, peek=True)
+        realism = self.truth.realism
+        if realism.g_sensitivity_rad_s_per_g != _ZERO33:
+            m = m + self._true_force(t_eval, force, peek=True) @ np.asarray(
+                realism.g_sensitivity_rad_s_per_g).T
+        odr = 1.0 / period
+        m = m + self._noise_rng.peek(3 * count).reshape(count, 3) * self.truth.sigma_rad_s(odr)
+        peeking = _Peeking(self._accel_rng)
+        accel = np.clip(np.rint(self.truth.accel_reading(force, peeking, odr)  # type: ignore[arg-type]
+                                * self._accel_counts_1g()),
+                        -32768, 32767).astype(np.int64)
+        return _Ahead(token, k_first, t, t_eval, m, accel, temperature,
+                      self._temperature_counts(temperature), states, self._lowpass_hz(),
+                      peeking.used // count, start_lpf, self._sensitivity_rad_s_per_lsb())
+
+    def _true_force(self, t: np.ndarray, accel_force: np.ndarray, peek: bool = False
+                    ) -> np.ndarray:
         """The specific force (N, 3) in g the gyro's g-sensitivity sees at ``t``: the motion
         source's true one whenever it has one, whether or not the accelerometer is shown it
         (the ``gravity`` knob is the accelerometer's), else ``accel_force``."""
         spf = getattr(self.motion, "specific_force", None)
         if self.truth.realism.specific_force or spf is None:
             return accel_force
-        return np.asarray(spf(t), dtype=float).reshape(t.size, 3)
+        force = spf(t, peek=True) if peek else spf(t)
+        return np.asarray(force, dtype=float).reshape(t.size, 3)
 
-    def _specific_force(self, t: np.ndarray) -> np.ndarray:
+    def _specific_force(self, t: np.ndarray, peek: bool = False) -> np.ndarray:
         """The true specific force (N, 3) in g at ``t``: the motion source's when
         :attr:`SensorRealism.specific_force` is on and it has one, else +1 g on z."""
         spf = getattr(self.motion, "specific_force", None)
         if self.truth.realism.specific_force and spf is not None:
-            return np.asarray(spf(t), dtype=float).reshape(t.size, 3)
+            force = spf(t, peek=True) if peek else spf(t)
+            return np.asarray(force, dtype=float).reshape(t.size, 3)
         force = np.zeros((t.size, 3))
         force[:, 2] = 1.0
         return force
@@ -690,16 +915,16 @@ class _EmulatedImu(ABC):
         rate; a chip that low-passes at its internal rate before decimating says more)."""
         return 1
 
-    def _internal_rates(self, t: np.ndarray, period: float) -> np.ndarray:
+    def _internal_rates(self, t: np.ndarray, period: float, peek: bool = False) -> np.ndarray:
         """The true rate of each new output sample (n, 3), or, for a chip that filters at its
         internal rate, of the ``D`` internal samples ending at each (n, D, 3): each the mean over
-        :meth:`_average_window_s` (:meth:`_true_rate`)."""
+        :meth:`_average_window_s` (:meth:`_true_rate`; ``peek``: looking ahead)."""
         D = self._internal_per_output(period)
         if D == 1:
-            return self._true_rate(t, self._average_window_s(period))
+            return self._true_rate(t, self._average_window_s(period), peek)
         step = period / D
         t_int = (t[:, None] - step * np.arange(D - 1, -1, -1)[None, :]).reshape(-1)
-        return self._true_rate(t_int, min(step, self._average_window_s(period))).reshape(
+        return self._true_rate(t_int, min(step, self._average_window_s(period)), peek).reshape(
             t.size, D, 3)
 
     def _filter_rate_hz(self) -> float | None:
@@ -718,10 +943,19 @@ class _EmulatedImu(ABC):
         published, so this stands in with the datasheet's bandwidth ⚠. The state carries across
         calls; it restarts (at rest on its first input) after skipped samples and when the
         cutoff or rate changes."""
+        out, state = self._lowpass(omega, head, skipped, self._lpf)
+        if out is omega:
+            return omega if omega.ndim == 2 else omega[:, -1]
+        self._lpf = state
+        return out if omega.ndim == 2 else out[:, -1]
+
+    def _lowpass(self, omega: np.ndarray, head: int, skipped: int, state: Any
+                 ) -> tuple[np.ndarray, Any]:
+        """:meth:`_filtered`'s filter from ``state``, without decimating: the filtered rates
+        (``omega`` itself when there is no filter) and the state after them."""
         fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        D = omega.shape[1] if omega.ndim == 3 else 1
         if fc is None or rate is None or omega.shape[0] == 0:
-            return omega if D == 1 else omega[:, -1]
+            return omega, state
         k = math.tan(math.pi * fc / rate)
         b, a = k / (1 + k), (k - 1) / (k + 1)
         out = np.empty_like(omega)
@@ -730,16 +964,14 @@ class _EmulatedImu(ABC):
             if hi <= lo:
                 continue
             x = omega[lo:hi].reshape(-1, 3)
-            state = self._lpf
             if state is None or state[0] != fc or (i == 1 and skipped):
                 prev_x = prev_y = x[0]
             else:
                 prev_x, prev_y = state[1][0], state[1][1]
-            y, _ = lfilter([b, b], [1.0, a], x, axis=0,
-                           zi=(b * prev_x - a * prev_y)[None, :])
+            y, _ = lfilter([b, b], [1.0, a], x, zi=(b * prev_x - a * prev_y)[None, :])
             out[lo:hi] = y.reshape(omega[lo:hi].shape)
-            self._lpf = (fc, np.stack([x[-1], y[-1]]))
-        return out if D == 1 else out[:, -1]
+            state = (fc, np.stack([x[-1], y[-1]]))
+        return out, state
 
     def filter_delay_s(self) -> float | None:
         """Group delay at DC of the emulated output filter, s: ``1 / (2 k · odr)`` with
@@ -992,6 +1224,14 @@ class EmulatedMPU9250(_EmulatedImu):
                 del fifo[: len(fifo) - cap]
                 return
         fifo += data
+
+    def _frames_ahead(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray
+                      ) -> bytes | None:
+        return self._frames(gyro, accel, temp) if self._fifo_on() else None
+
+    def _ingest_frames(self, data: bytes) -> None:
+        self._int_status |= _MB.INT_STATUS_RAW_DATA_RDY
+        self._push(data)
 
     def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
                 skipped: int) -> None:

@@ -26,6 +26,14 @@ away from the point where the joint axes meet.
 Joint angles and rates come from the servos' motor models (:meth:`EmulatedServo.true_motion`),
 whose angle is the exact integral of their rate, so the sensor's true rate and the encoders are
 consistent to the last bit. Everything is vectorised over the requested times.
+
+**Looking ahead**: an emulated chip may compute its samples before the clock reaches them
+(:meth:`GimbalJig.rate` and :meth:`GimbalJig.specific_force` with ``peek=True``: the servos'
+motion as planned now, nothing frozen, no timed event applied). :meth:`GimbalJig.lookahead`
+says what such values depend on (it changes when a servo is commanded or the mount slips), and
+:meth:`GimbalJig.due_by` whether a servo's timed event falls before a time; when neither
+stops it, :meth:`GimbalJig.touch` does what reading the motion then would have done, and the
+values are exactly those of a read at that time.
 """
 
 from __future__ import annotations
@@ -60,6 +68,12 @@ class Joint(Protocol):
     def true_motion(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Shaft angle (rad) and rate (rad/s) at the times ``t``."""
         ...
+
+
+def _peeks(joint: object) -> bool:
+    """Whether a joint can be looked ahead on (an :class:`EmulatedServo`)."""
+    return all(hasattr(joint, a) for a in ("peek_motion", "motion_revision", "next_due",
+                                           "touch"))
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -217,6 +231,8 @@ class GimbalJig:
         if not np.all(np.isfinite(self.lever_arm_m)):
             raise ValueError(f"lever_arm_m must be finite, got {lever_arm_m!r}")
         self.slips: list[Slip] = []
+        self._peek_joints: list[Joint] | None = None
+        self._can_peek = False
         t_home = home_time
         if t_home is None:
             clock = getattr(self.joints[0], "clock", None)
@@ -250,14 +266,40 @@ class GimbalJig:
         self.slips.sort(key=lambda s: s.t_start)
         return slip
 
-    def joint_angles(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Joint angles from home (rad) and rates (rad/s), each shape (N, n_joints)."""
+    def joint_angles(self, t: np.ndarray, *, peek: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """Joint angles from home (rad) and rates (rad/s), each shape (N, n_joints); with
+        ``peek`` as the servos plan them now (see the module's "Looking ahead")."""
         t = np.asarray(t, dtype=float).reshape(-1)
         th = np.empty((t.size, len(self.joints)))
         rate = np.empty_like(th)
         for i, j in enumerate(self.joints):
-            th[:, i], rate[:, i] = j.true_motion(t)
+            th[:, i], rate[:, i] = j.peek_motion(t) if peek else j.true_motion(t)
         return th - self.home_angles, rate
+
+    # ---- looking ahead ---------------------------------------------------------------------
+    def lookahead(self) -> tuple[object, ...] | None:
+        """What a look-ahead (``peek=True``) depends on: equal tuples mean equal values. None
+        when a joint cannot be looked ahead on."""
+        joints = self.joints
+        if self._peek_joints is not joints:  # whether they can, once per list of joints
+            self._peek_joints, self._can_peek = joints, all(_peeks(j) for j in joints)
+        if not self._can_peek:
+            return None
+        return ([j.motion_revision() for j in joints],  # type: ignore[attr-defined]
+                list(map(id, self.slips)), self.wobble_rad, self.lever_arm_m.tobytes(),
+                self.mount.tobytes())
+
+    def due_by(self, t: float) -> bool:
+        """Whether a servo has a timed event (Bus Watchdog, fault) due by ``t``: a read
+        reaching ``t`` would apply it first, so a look-ahead past it does not hold."""
+        return any(j.next_due() <= t for j in self.joints)  # type: ignore[attr-defined]
+
+    def touch(self, t: float) -> None:
+        """What reading the motion at times whose latest is ``t`` does besides returning it:
+        each servo applies its events due by then and freezes its motion through ``t``."""
+        for j in self.joints:
+            j.touch(t)  # type: ignore[attr-defined]
 
     def _chain(self, th: np.ndarray) -> list[np.ndarray]:
         """Cumulative rotations R_1..i for i = 0..n (R_1..0 = I), each (N, 3, 3)."""
@@ -287,18 +329,18 @@ class GimbalJig:
             r = r @ m
         return r
 
-    def orientation(self, t: np.ndarray) -> np.ndarray:
+    def orientation(self, t: np.ndarray, *, peek: bool = False) -> np.ndarray:
         """The sensor's orientation ``R_sensor(t)`` (sensor → base), shape (N, 3, 3)."""
         t = np.asarray(t, dtype=float).reshape(-1)
-        th, _ = self.joint_angles(t)
+        th, _ = self.joint_angles(t, peek=peek)
         return self._sensor_orientation(self._chain(th)[-1], t)
 
-    def rate(self, t: np.ndarray) -> np.ndarray:
+    def rate(self, t: np.ndarray, *, peek: bool = False) -> np.ndarray:
         """True angular rate of the sensor in its own frame, rad/s, shape (len(t), 3)."""
         t = np.asarray(t, dtype=float).reshape(-1)
         if t.size == 0:
             return np.zeros((0, 3))
-        return self._rate(t, *self.joint_angles(t))
+        return self._rate(t, *self.joint_angles(t, peek=peek))
 
     def _rate(self, t: np.ndarray, th: np.ndarray, dth: np.ndarray) -> np.ndarray:
         """:meth:`rate` from the joint angles and rates at ``t``."""
@@ -337,7 +379,8 @@ class GimbalJig:
                                         np.array([self.home_time]))
         return home[0, 2, :]
 
-    def specific_force(self, t: np.ndarray, dt: float = 2e-4) -> np.ndarray:
+    def specific_force(self, t: np.ndarray, dt: float = 2e-4, *, peek: bool = False
+                       ) -> np.ndarray:
         """The specific force at the sensor in its own frame, in g, shape (N, 3): gravity
         ``R_sensorᵀ (0, 0, 1)`` plus ``(α × r + ω × (ω × r)) / g₀`` with ``r`` the lever arm
         and ``α`` the backward difference of the rate over ``dt`` (α and ω in the sensor frame:
@@ -345,11 +388,11 @@ class GimbalJig:
         t = np.asarray(t, dtype=float).reshape(-1)
         r = self.lever_arm_m
         if not (t.size and np.any(r)):
-            return self.orientation(t)[:, 2, :]  # third row of R: Rᵀ e_z
+            return self.orientation(t, peek=peek)[:, 2, :]  # third row of R: Rᵀ e_z
         # one evaluation of the joints for the rates at t - dt and t and the orientation at t
         before = np.maximum(t - dt, self.home_time)  # the joints have no earlier motion
         both = np.column_stack([before, t]).reshape(-1)
-        th, dth = self.joint_angles(both)
+        th, dth = self.joint_angles(both, peek=peek)
         w_both = self._rate(both, th, dth).reshape(t.size, 2, 3)
         force = self._gravity(t, th[1::2])
         step = np.where(t > before, t - before, np.inf)[:, None]

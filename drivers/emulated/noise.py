@@ -20,7 +20,9 @@ of the IEEE Std 952 noise model that an Allan deviation plot shows:
 
 Each process is generated exactly in discrete time (``x_k+1 = φ x_k + sqrt(1 − φ²) q w_k`` with
 ``φ = e^(−Δt/T)``), so the statistics do not depend on the sample rate, and the state carries
-across calls.
+across calls. :meth:`ColouredNoise.ahead` computes what a run of one-step calls would give
+without drawing (an emulated chip computing its samples ahead), and :meth:`ColouredNoise.resume`
+takes up one of its states, as if those calls had been made.
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
-__all__ = ["FLICKER_TIME_CONSTANTS_S", "ColouredNoise", "allan_deviation",
+from gyrocal.drivers.emulated.iir import lfilter
+
+__all__ = ["FLICKER_TIME_CONSTANTS_S", "ColouredNoise", "Normals", "allan_deviation",
            "flicker_component_sigma"]
 
 #: Correlation times of the Gauss–Markov processes that stand in for flicker noise, s: a decade
@@ -70,6 +73,46 @@ def allan_deviation(tau: np.ndarray, white_density: float, bias_instability: flo
                    + rate_random_walk**2 * tau / 3.0)
 
 
+class Normals:
+    """A generator's standard normals handed out in order: :meth:`standard_normal` gives what
+    ``rng.standard_normal(shape)`` would (numpy's :class:`~numpy.random.Generator` draws the
+    same stream whatever the sizes of its calls), drawn ahead in chunks so that :meth:`peek`
+    can show the next values without using them up.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Seeded by the caller; drawn from by this object only from then on.
+    """
+
+    _CHUNK = 3 * 1024
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self._buf = np.zeros(0)
+        self._pos = 0
+
+    def peek(self, n: int) -> np.ndarray:
+        """The next ``n`` values, left in the stream."""
+        if self._pos + n > self._buf.size:
+            self._buf = np.concatenate((self._buf[self._pos:],
+                                        self.rng.standard_normal(max(n, self._CHUNK))))
+            self._pos = 0
+        return self._buf[self._pos: self._pos + n]
+
+    def skip(self, n: int) -> None:
+        """Use up the next ``n`` values."""
+        self.peek(n)
+        self._pos += n
+
+    def standard_normal(self, shape: int | tuple[int, ...]) -> np.ndarray:
+        """The next values, as an array of ``shape``."""
+        n = math.prod(shape) if isinstance(shape, tuple) else int(shape)
+        out = self.peek(n).reshape(shape)
+        self._pos += n
+        return out
+
+
 class ColouredNoise:
     """Bias instability and rate random walk on three axes, generated sample by sample.
 
@@ -79,8 +122,8 @@ class ColouredNoise:
         ``B`` in rad/s (0 = none).
     rate_random_walk : float
         ``K`` in rad/s/√s (0 = none).
-    rng : numpy.random.Generator
-        Seeded by the caller.
+    rng : numpy.random.Generator or Normals
+        Seeded by the caller (a :class:`Normals` for :meth:`ahead`).
     """
 
     def __init__(self, bias_instability: float, rate_random_walk: float,
@@ -130,19 +173,69 @@ class ColouredNoise:
             out += walk
         return out
 
+    @property
+    def draws_per_step(self) -> int:
+        """Normals a one-step :meth:`draw` takes from the generator."""
+        return 3 * ((_TAU.size if self.q > 0 else 0) + (self.k > 0))
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The present state (the Gauss–Markov components', the walk's), for :meth:`resume`."""
+        return self._gm, self._walk
+
+    def ahead(self, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What :meth:`draw` would return called once for each step of ``dt`` (N,) in turn,
+        to the last bit, without drawing: ``(noise (N, 3), states (N, J, 3), walks (N, 3))``,
+        ``states[i]`` and ``walks[i]`` the state after step ``i`` (:meth:`resume`). The
+        generator must be a :class:`Normals`."""
+        dt = np.asarray(dt, dtype=float).reshape(-1)
+        n = dt.size
+        n_gm = _TAU.size if self.q > 0 else 0
+        out = np.zeros((n, 3))
+        gms = np.empty((n, n_gm, 3))
+        walks = np.empty((n, 3))
+        if n == 0 or not self.active:
+            return out, gms, walks
+        per = n_gm + (self.k > 0)
+        # each one-step draw's normals, (components, 1, 3) in the generator's order
+        z = self._rng.peek(3 * per * n).reshape(n, per, 3)  # type: ignore[union-attr]
+        if n_gm:
+            phi = np.exp(-dt[None, :] / _TAU[:, None])  # (component, step)
+            w = z[:, :n_gm] * (self.q * np.sqrt(1.0 - phi**2)).T[:, :, None]
+            x = self._gm
+            for i in range(n):  # a one-step draw filters with its own step's φ
+                x = phi[:, i, None] * x + w[i]
+                gms[i] = x
+            for j in range(n_gm):
+                out += gms[:, j]
+        if self.k > 0:
+            steps = z[:, -1] * (self.k * np.sqrt(dt))[:, None]
+            walks = np.cumsum(np.vstack((self._walk[None, :], steps)), axis=0)[1:]
+            out += walks
+        return out, gms, walks
+
+    def resume(self, gm: np.ndarray, walk: np.ndarray, steps: int) -> None:
+        """Take up a state :meth:`ahead` gave, after ``steps`` one-step draws: as if they had
+        been made."""
+        if self.q > 0:
+            self._gm = gm
+        if self.k > 0:
+            self._walk = walk
+        self._rng.skip(self.draws_per_step * steps)  # type: ignore[union-attr]
+
 
 #: :data:`FLICKER_TIME_CONSTANTS_S` as an array.
 _TAU = np.asarray(FLICKER_TIME_CONSTANTS_S)
 #: Up to this many steps :func:`_first_order` runs its loop in numpy over the components; longer
-#: runs go through one C filter per component.
+#: runs go through one first-order filter per component
+#: (:func:`~gyrocal.drivers.emulated.iir.lfilter`).
 _LOOP_STEPS = 24
 
 
 def _first_order(coef: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``x_k = coef_k x_k−1 + w_k`` from ``x0`` for each component: ``coef`` (J, n), ``w``
-    (J, n, 3), ``x0`` (J, 3); returns every ``x_k``, (J, n, 3). A component whose ``coef`` is
-    constant goes through ``scipy.signal.lfilter`` on long runs, which computes the same products
-    and sums in the same order."""
+    """``x_k = coef_k x_k−1 + w_k`` from ``x0`` for each component: ``coef`` (J, n), ``w`` (J,
+    n, 3), ``x0`` (J, 3); returns every ``x_k``, (J, n, 3). A component whose ``coef`` is
+    constant goes through :func:`~gyrocal.drivers.emulated.iir.lfilter` on long runs, which
+    computes the same products and sums in the same order."""
     J, n = coef.shape
     y = np.empty_like(w)
     if n <= _LOOP_STEPS:
@@ -154,7 +247,7 @@ def _first_order(coef: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
     for j in range(J):
         c = coef[j]
         if np.all(c == c[0]):
-            y[j], _ = lfilter([1.0], [1.0, -c[0]], w[j], axis=0, zi=(c[0] * x0[j])[None, :])
+            y[j], _ = lfilter([1.0], [1.0, -c[0]], w[j], zi=(c[0] * x0[j])[None, :])
         else:
             x = x0[j]
             for i in range(n):

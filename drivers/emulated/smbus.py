@@ -499,12 +499,13 @@ class EmulatedSMBus:
         clock = ad.clock
         t0 = clock.monotonic()
         bits = 0
+        bus_hz, sleep, monotonic = ad.bus_hz, clock.sleep, clock.monotonic
 
         def spend(n: int) -> None:  # wait until the bus has clocked ``n`` more bits since t0
             nonlocal bits
             bits += n
-            if ad.bus_hz > 0:
-                clock.sleep(t0 + bits / ad.bus_hz - clock.monotonic())
+            if bus_hz > 0:
+                sleep(t0 + bits / bus_hz - monotonic())
 
         first = plan[0]
         register = first.data[0] if first.data else None

@@ -957,6 +957,14 @@ class ImuReader(ABC):
             return
         limit = max(self.stuck_min_samples, math.ceil(self.stuck_after_s * self.info.odr_hz))
         n = counts.shape[0]
+        if n == 1:  # the usual drain at a fast loop: the same bookkeeping, without the arrays
+            row, last, runs = counts[0].tolist(), self._run_value.tolist(), self._run_length
+            for axis in range(3):
+                if runs[axis] + 1 >= limit:
+                    self._find_stuck_run(counts[:, axis], saturated[:, axis], axis, limit)
+                runs[axis] = runs[axis] + 1 if row[axis] == last[axis] else 1
+            self._run_value = counts[-1].copy()
+            return
         same_as_before = counts == np.vstack((self._run_value[None, :], counts[:-1]))
         for axis in range(3):
             col = same_as_before[:, axis]

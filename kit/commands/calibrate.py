@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -171,6 +169,8 @@ def run(args: argparse.Namespace) -> int:
                                      source=str(out / "recording"))
             cal = est.calibration
             if cfg["protocol"]["align_gyro_to_accel"]:
+                from dataclasses import replace
+
                 from gyrocal.kit.alignment import align_to_accelerometer
 
                 cal, aligned_note = align_to_accelerometer(
@@ -197,6 +197,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"gyrocal: note: {note}", file=sys.stderr)
     store_and_say(history, cal_path.read_text(encoding="utf-8"), str(out.resolve()))
     if args.json:
+        import json
+
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()
     else:
@@ -301,6 +303,8 @@ def _run_plate(cfg: Any, args: argparse.Namespace, out: Path, work: Path, report
             store_and_say(target, (out / o.name / "calibration.json").read_text(encoding="utf-8"),
                           str((out / o.name).resolve()))
     if args.json:
+        import json
+
         json.dump(summary_document(outcomes), sys.stdout, indent=2)
         print()
     else:

@@ -23,7 +23,11 @@ How the angle is made, all vectorised with numpy over blocks of grid points:
 
 Grid points are computed ahead of the clock (a look-ahead block) and may be recomputed when a
 command arrives, but never once anything has read them: reads freeze the grid up to the cell
-they used, so a rate handed out to the IMU is never changed afterwards.
+they used, so a rate handed out to the IMU is never changed afterwards. A read with
+``freeze=False`` (an emulated chip computing its samples ahead, see
+:class:`~gyrocal.drivers.emulated.jig.GimbalJig`) sees the same points without freezing them;
+:attr:`ServoMotor.revision` counts the commands, so such a reader knows when what it saw may
+have changed.
 """
 
 from __future__ import annotations
@@ -33,7 +37,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter
+
+from gyrocal.drivers.emulated.iir import lfilter
 
 __all__ = [
     "MotorParams",
@@ -350,7 +355,7 @@ class ServoMotor:
         r = math.exp(-zeta * w * self.dt)
         th = w * self.dt * math.sqrt(1.0 - zeta * zeta)
         self._c1, self._c2 = 2.0 * r * math.cos(th), -r * r
-        h = lfilter([1.0], [1.0, -self._c1, -self._c2],
+        h, _ = lfilter([1.0], [1.0, -self._c1, -self._c2],
                     np.r_[1.0, np.zeros(int(40.0 / (zeta * w * self.dt)))])
         dh = np.diff(np.r_[0.0, h]) / self.dt
         self._g = self.params.noise_fraction / math.sqrt(float(np.sum(dh * dh))) \
@@ -359,6 +364,8 @@ class ServoMotor:
         self.plan: Plan = plan_hold(self.t_start, 0.0)
         self._grid = _Grid()
         self._frozen = -1  # highest global index a reader has used
+        #: Commands so far: grid points not yet frozen may have changed when this moves.
+        self.revision = 0
         self._append(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1))
 
     # ---- grid bookkeeping ----------------------------------------------------------------
@@ -440,11 +447,14 @@ class ServoMotor:
             np.int64)
 
     # ---- public --------------------------------------------------------------------------
-    def motion(self, t: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def motion(self, t: Sequence[float] | np.ndarray, *, freeze: bool = True
+               ) -> tuple[np.ndarray, np.ndarray]:
         """Shaft angle (rad) and rate (rad/s) at the times ``t``.
 
         The rate is constant on each grid cell and the angle is its exact integral. Reading
-        freezes the grid cells used: later commands never change them.
+        freezes the grid cells used: later commands never change them. With ``freeze=False``
+        the cells are only looked at: a later command may still change them (and moves
+        :attr:`revision`).
 
         Raises
         ------
@@ -463,7 +473,8 @@ class ServoMotor:
                 f"time {float(t.min()):.6f} s is before the motor's kept history "
                 f"(from {self.t_start + g.k0 * self.dt:.6f} s); increase MotorParams.history_s"
             )
-        self._frozen = max(self._frozen, kmax + 1)
+        if freeze:
+            self._frozen = max(self._frozen, kmax + 1)
         j = k - g.k0
         p0 = g.p[j]
         rate = (g.p[j + 1] - p0) / self.dt
@@ -504,6 +515,7 @@ class ServoMotor:
         Plan
             The new plan.
         """
+        self.revision += 1
         k_switch = max(int(self._index(t)) + 1, self._frozen + 1, 1)
         self._ensure(k_switch - 1)
         g = self._grid

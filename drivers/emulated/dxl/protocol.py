@@ -90,6 +90,8 @@ def stuff(body: bytes) -> bytes:
     ``body`` starts at the INST byte; the two bytes before it (LEN_L, LEN_H) never complete a
     header pattern with it, because the SDK and the e-manual scan from the instruction byte on.
     """
+    if b"\xff\xff\xfd" not in body:  # nothing to stuff (the usual case)
+        return bytes(body)
     out = bytearray()
     for b in body:
         out.append(b)
@@ -100,6 +102,8 @@ def stuff(body: bytes) -> bytes:
 
 def remove_stuffing(body: bytes) -> bytes:
     """Undo :func:`stuff`: drop the extra 0xFD of every ``FF FF FD FD``."""
+    if b"\xff\xff\xfd\xfd" not in body:  # nothing was stuffed (the usual case)
+        return bytes(body)
     out = bytearray()
     i = 0
     n = len(body)

@@ -26,6 +26,7 @@ Behaviour modelled (hardware reference §5, §5.1, §5.2, §6):
 from __future__ import annotations
 
 import math
+import struct
 import threading
 
 import numpy as np
@@ -68,6 +69,11 @@ _RAM_START = 64  # Torque Enable: the first RAM item
 _GOAL_ITEMS = ("Goal PWM", "Goal Current", "Goal Velocity", "Goal Position")
 _PROFILE_KIND = {"hold": 0, "step": 0, "rectangular": 1, "triangular": 2, "trapezoidal": 3,
                  "velocity": 0}
+#: Per item size: the range a live value is clamped to before its bytes are taken (as
+#: two's complement), and the little-endian packer of those bytes.
+_LIMITS = {n: (-(1 << (8 * n - 1)), (1 << (8 * n)) - 1) for n in (1, 2, 4)}
+_PACK = {1: struct.Struct("<B").pack_into, 2: struct.Struct("<H").pack_into,
+         4: struct.Struct("<I").pack_into}
 #: Deceleration of a shaft whose torque has been switched off (gearbox friction), rad/s².
 _FREE_DECEL = 40.0
 #: Deceleration of a stop forced by a stall, rad/s² (a Bus Watchdog trip stops at once).
@@ -305,6 +311,32 @@ class EmulatedServo:
                 self.advance_to(float(t.max()))
             return self.motor.motion(t)
 
+    def peek_motion(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`true_motion` as it stands now, without its side effects: no timed event is
+        applied and no grid cell is frozen, so a later command or event may still change what
+        it returned (:meth:`motion_revision` then moves)."""
+        with self.lock:
+            return self.motor.motion(np.asarray(t, dtype=float).reshape(-1), freeze=False)
+
+    def motion_revision(self) -> int:
+        """Moves whenever the motor is commanded: a :meth:`peek_motion` from before may be
+        out of date."""
+        return self.motor.revision
+
+    def next_due(self) -> float:
+        """The time of the next timed event (Bus Watchdog, scheduled fault), ``inf`` for none:
+        a :meth:`true_motion` reaching it applies it first."""
+        with self.lock:
+            due = math.inf if self._watchdog_deadline is None else self._watchdog_deadline
+            return min(due, self._events[0][0]) if self._events else due
+
+    def touch(self, t: float) -> None:
+        """What :meth:`true_motion` does besides returning the motion, for times whose latest
+        is ``t``: apply the events due by then, and freeze the grid through ``t``."""
+        with self.lock:
+            self.advance_to(t)
+            self.motor.sample(t)
+
     def _schedule(self, t: float, kind: str, **args) -> None:
         with self.lock:
             self._events.append((float(t), kind, args))
@@ -456,12 +488,13 @@ class EmulatedServo:
             self.advance_to(now)
             self._refresh(now, address, length)
             out = bytearray(self._mem[address: address + length])
-            for i in range(length):
-                a = address + i
-                target = self._indirect_target(a)
-                if target is not None:
-                    self._refresh(now, target, 1)
-                    out[i] = self._mem[target]
+            end = address + length
+            if end > 224 and address <= 251 or end > 634 and address <= 661:  # Indirect Data
+                for i in range(length):
+                    target = self._indirect_target(address + i)
+                    if target is not None:
+                        self._refresh(now, target, 1)
+                        out[i] = self._mem[target]
             return 0, bytes(out)
 
     def _indirect_target(self, address: int) -> int | None:
@@ -672,9 +705,9 @@ class EmulatedServo:
             values[146] = (1, round(self._temperature))
         for addr, (size, value) in values.items():
             if addr < hi and addr + size > lo:
-                bits = 8 * size
-                value = max(-(1 << (bits - 1)), min((1 << bits) - 1, value))
-                mem[addr: addr + size] = (value & ((1 << bits) - 1)).to_bytes(size, "little")
+                lim = _LIMITS[size]
+                value = max(lim[0], min(lim[1], value)) & lim[1]
+                _PACK[size](mem, addr, value)
 
     def reg_write(self, address: int, data: bytes) -> int:
         """REG_WRITE: validate and hold the write until ACTION (§4.4)."""
