@@ -281,14 +281,20 @@ def _verify_synthetic(d: Path) -> dict:
     return {"argv": ["verify", str(d / "cal.json"), "--recording", str(d / "rec")]}
 
 
-def _verify_truth_jittered(d: Path) -> dict:
-    rec = _contract(d)
-    rng = np.random.default_rng(27)
+def jitter_encoder_times(rec: Path, seed: int = 27, half_width_s: float = 0.003) -> None:
+    """Move each of ``rec``'s encoder time stamps by a uniform ±``half_width_s`` (seeded; the
+    readings of one sync read keep one stamp), as a host's read times scatter."""
+    rng = np.random.default_rng(seed)
     lines = (rec / "encoder.csv").read_text().splitlines()
     rows = [x.split(",") for x in lines[1:]]
-    jitter = {t: rng.uniform(-0.003, 0.003) for t in {r[0] for r in rows}}
+    jitter = {t: rng.uniform(-half_width_s, half_width_s) for t in {r[0] for r in rows}}
     (rec / "encoder.csv").write_text("\n".join(
         [lines[0]] + [f"{float(r[0]) + jitter[r[0]]:.6f},{r[1]},{r[2]}" for r in rows]) + "\n")
+
+
+def _verify_truth_jittered(d: Path) -> dict:
+    rec = _contract(d)
+    jitter_encoder_times(rec)
     (d / "truth.json").write_text(_cal_doc(scale=(1.01, 0.99, 1.02),
                                            bias=(0.01, -0.02, 0.005)))
     return {"argv": ["verify", str(d / "truth.json"), "--recording", str(rec)]}

@@ -19,6 +19,7 @@ import sys
 import numpy as np
 import pytest
 
+from bench.attacks import jitter_encoder_times
 from gyrocal.kit.cli import main
 from gyrocal.kit.errors import InputError
 from tests.kit.contract_recording import write_recording
@@ -145,12 +146,7 @@ def jittered(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("jittered")
     rec = write_recording(d / "rec")
-    rng = np.random.default_rng(27)
-    lines = (rec / "encoder.csv").read_text().splitlines()
-    rows = [x.split(",") for x in lines[1:]]
-    jitter = {t: rng.uniform(-0.003, 0.003) for t in {r[0] for r in rows}}
-    (rec / "encoder.csv").write_text("\n".join(
-        [lines[0]] + [f"{float(r[0]) + jitter[r[0]]:.6f},{r[1]},{r[2]}" for r in rows]) + "\n")
+    jitter_encoder_times(rec, seed=27, half_width_s=0.003)
     truth = GyroCalibration(scale=(1.01, 0.99, 1.02), bias=(0.01, -0.02, 0.005),
                             scale_std=(1e-4,) * 3, bias_std=(1e-4,) * 3,
                             sensor={"model": "mpu9250"})
