@@ -455,8 +455,18 @@ def _toml_value(v: Any) -> str:
     return repr(v)
 
 
-def template() -> str:
-    """A commented ``gyrocal.toml`` with every key at its default."""
+def template(model: str | None = None) -> str:
+    """A commented ``gyrocal.toml`` with every key at its default; with ``model``, the
+    ``[imu]`` of that chip: its default address (:func:`gyrocal.drivers.imu.chip_addresses`)
+    and the rate it has nearest the default (:func:`gyrocal.drivers.imu.nearest_offered_rate`).
+    """
+    values = {s: {k: key.default for k, key in keys.items()} for s, keys in SCHEMA.items()}
+    if model is not None:
+        from gyrocal.drivers.imu import chip_addresses, nearest_offered_rate
+
+        values["imu"].update(model=_validate("imu", "model", model),
+                             address=chip_addresses(model)[0],
+                             odr_hz=nearest_offered_rate(model, values["imu"]["odr_hz"]))
     lines = [
         "# gyrocal configuration. Every key is optional; shown here at its default.",
         "# Command-line flags override these values. See hardware_docs/running.md.",
@@ -467,9 +477,9 @@ def template() -> str:
             lines.append(f"# {key.help}")
             if key.choices is not None:
                 lines.append(f"# allowed: {', '.join(_toml_value(c) for c in key.choices)}")
-            value = _toml_value(key.default)
-            if name == "address" and key.default:
-                value = hex(key.default)
+            value = _toml_value(values[section][name])
+            if name == "address" and values[section][name]:
+                value = hex(values[section][name])
             lines.append(f"{name} = {value}")
     lines += ["", "# Several sensors on the plate (hardware_docs/running.md): replace [imu] by one",
               "# [[imu]] table per sensor, each with the [imu] keys and a name, e.g.",

@@ -83,3 +83,16 @@ def test_the_sensor_is_resolved_to_the_chips_address_and_rate_with_a_note(capsys
     assert "answers at its other address, 0x6B" in capsys.readouterr().err
     given = resolve_sensor({**sensor, "address": 0x6A}, bus)  # an address given is kept
     assert given["address"] == 0x6A
+
+
+@pytest.mark.parametrize("model", sorted(DATASHEET))
+def test_init_writes_the_chips_address_and_a_rate_it_has(model, tmp_path, capsys):
+    from gyrocal.kit.config import load_config
+
+    path = tmp_path / "gyrocal.toml"
+    assert main(["init", str(path), "--imu-model", model]) == 0
+    imu = load_config(path)["imu"]
+    address, at200 = DATASHEET[model][:2]
+    assert (imu["model"], imu["address"]) == (model, address)
+    assert imu["odr_hz"] == pytest.approx(at200, rel=1e-12)
+    assert nearest_offered_rate(model, imu["odr_hz"]) == imu["odr_hz"]  # no rounding note
