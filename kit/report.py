@@ -221,7 +221,7 @@ def inconsistency_causes(cal: GyroCalibration) -> str:
     if cal.matrix is None:
         causes = ["the model is too simple: the diagonal model leaves the cross-axis terms and "
                   "the g-sensitivity in the residuals; calibrate the full model with "
-                  "--protocol full (if it fell back to the diagonal model, the note above "
+                  "--protocol full (if it fell back to the diagonal model, a note on stderr "
                   "says why)", slip, saturation]
     else:
         causes = [slip, saturation]
