@@ -91,7 +91,9 @@ def _ids(v: Any) -> str | None:
 
 
 def _address(v: Any) -> str | None:
-    return None if 0x03 <= v <= 0x77 else "must be a 7-bit I2C address (0x03..0x77)"
+    if v == 0 or 0x03 <= v <= 0x77:
+        return None
+    return "must be a 7-bit I2C address (0x03..0x77), or 0 for the chip's own"
 
 
 def _history(what: str) -> Callable[[Any], str | None]:
@@ -133,12 +135,14 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "imu": {
         "model": Key("mpu9250", "sensor chip", str, IMU_MODELS),
         "bus": Key(1, "I2C bus number: /dev/i2c-N (0..1023)", int, check=_within(0, 1023)),
-        "address": Key(0x68, "7-bit I2C address (MPU-9250, ICM-20948, ICM-42688-P: 0x68/0x69; "
-                       "LSM9DS1 A/G, LSM6DSOX: 0x6A/0x6B)",
+        "address": Key(0, "7-bit I2C address (MPU-9250, ICM-20948, ICM-42688-P: 0x68/0x69; "
+                       "LSM9DS1 A/G, LSM6DSOX: 0x6A/0x6B); 0: the chip's own (the one of its "
+                       "addresses where it answers; its first on the emulated jig)",
                        int, check=_address),
         "range_dps": Key(500, "gyro full-scale range, degrees per second", int,
                          (245, 250, 500, 1000, 2000)),
-        "odr_hz": Key(200.0, "gyro output data rate, Hz (1..8000)", (int, float),
+        "odr_hz": Key(200.0, "gyro output data rate, Hz (1..8000); the chip runs at the "
+                      "nearest rate it has (a note says which)", (int, float),
                       check=_within(1, 8000)),
     },
     "protocol": {
@@ -259,6 +263,14 @@ def _validate(section: str, name: str, value: Any) -> Any:
     return value
 
 
+def _default_address(sensor: Mapping[str, Any]) -> int:
+    """The sensor's address, its chip's default (:func:`gyrocal.drivers.imu.chip_addresses`)
+    when ``address`` is 0."""
+    from gyrocal.drivers.imu import chip_addresses
+
+    return int(sensor["address"]) or chip_addresses(sensor["model"])[0]
+
+
 def _sensor_list(tables: list[Any], source: str) -> tuple[dict[str, Any], ...]:
     """The ``[[imu]]`` tables validated: each over the ``[imu]`` defaults, named, and at its own
     address on its bus."""
@@ -284,11 +296,11 @@ def _sensor_list(tables: list[Any], source: str) -> tuple[dict[str, Any], ...]:
                                  + ", ".join(SCHEMA["imu"]))
             sensor[name] = _validate("imu", name, value)
         sensor["name"] = table.get("name", f"{sensor['model']}-{sensor['bus']}-"
-                                           f"{sensor['address']:02x}")
+                                           f"{_default_address(sensor):02x}")
         out.append(sensor)
     seen: dict[Any, str] = {}
     for s in out:
-        for key, what in (((s["bus"], s["address"]), "the same I2C bus and address"),
+        for key, what in (((s["bus"], _default_address(s)), "the same I2C bus and address"),
                           (s["name"].lower(), "the same name")):
             if key in seen:
                 raise InputError(
@@ -443,8 +455,18 @@ def _toml_value(v: Any) -> str:
     return repr(v)
 
 
-def template() -> str:
-    """A commented ``gyrocal.toml`` with every key at its default."""
+def template(model: str | None = None) -> str:
+    """A commented ``gyrocal.toml`` with every key at its default; with ``model``, the
+    ``[imu]`` of that chip: its default address (:func:`gyrocal.drivers.imu.chip_addresses`)
+    and the rate it has nearest the default (:func:`gyrocal.drivers.imu.nearest_offered_rate`).
+    """
+    values = {s: {k: key.default for k, key in keys.items()} for s, keys in SCHEMA.items()}
+    if model is not None:
+        from gyrocal.drivers.imu import chip_addresses, nearest_offered_rate
+
+        values["imu"].update(model=_validate("imu", "model", model),
+                             address=chip_addresses(model)[0],
+                             odr_hz=nearest_offered_rate(model, values["imu"]["odr_hz"]))
     lines = [
         "# gyrocal configuration. Every key is optional; shown here at its default.",
         "# Command-line flags override these values. See hardware_docs/running.md.",
@@ -455,9 +477,9 @@ def template() -> str:
             lines.append(f"# {key.help}")
             if key.choices is not None:
                 lines.append(f"# allowed: {', '.join(_toml_value(c) for c in key.choices)}")
-            value = _toml_value(key.default)
-            if name == "address":
-                value = hex(key.default)
+            value = _toml_value(values[section][name])
+            if name == "address" and values[section][name]:
+                value = hex(values[section][name])
             lines.append(f"{name} = {value}")
     lines += ["", "# Several sensors on the plate (hardware_docs/running.md): replace [imu] by one",
               "# [[imu]] table per sensor, each with the [imu] keys and a name, e.g.",

@@ -22,7 +22,7 @@ from typing import Any
 
 __all__ = ["Jig", "choose_plan", "jig_endpoints", "load_cli_config",
            "measure_still_noise", "note_rounded_odr", "output_dir", "record_protocol",
-           "run_jig", "sim_effects", "time_budget"]
+           "resolve_sensor", "run_jig", "sim_effects", "time_budget"]
 
 
 def note_rounded_odr(asked_hz: float, info: Any) -> None:
@@ -32,6 +32,42 @@ def note_rounded_odr(asked_hz: float, info: Any) -> None:
         print(f"gyrocal: note: imu.odr_hz {asked_hz:g} is not a rate the {info.model} can do; "
               f"it runs at the nearest, {info.odr_hz:.6g} Hz (the recording says so)",
               file=sys.stderr)
+
+
+def resolve_sensor(sensor: Mapping[str, Any], bus: Any) -> dict[str, Any]:
+    """The sensor's ``[imu]`` keys with what its chip will use: the output data rate nearest
+    ``odr_hz`` that the chip has (:func:`gyrocal.drivers.imu.nearest_offered_rate`; the reader
+    says so after it configures, :func:`note_rounded_odr`), and for ``address = 0`` the one of
+    the chip's addresses where it answers (:func:`gyrocal.drivers.imu.find_address`; a note
+    when it is not the chip's first).
+
+    Parameters
+    ----------
+    sensor : mapping
+        One of :meth:`gyrocal.kit.config.Config.imus`.
+    bus : smbus2.SMBus-like, int or str
+        The sensor's bus (the emulated one with ``--sim``), or an adapter number to open.
+
+    Raises
+    ------
+    ConfigurationError
+        If the chip answers at none of its addresses, or at several.
+    """
+    from gyrocal.drivers.imu import chip_addresses, find_address, nearest_offered_rate, open_bus
+
+    out = dict(sensor)
+    out["odr_hz"] = nearest_offered_rate(sensor["model"], sensor["odr_hz"])
+    if not sensor["address"]:
+        handle = open_bus(bus) if isinstance(bus, (int, str)) else bus
+        try:
+            out["address"] = find_address(sensor["model"], handle)
+        finally:
+            if handle is not bus:
+                handle.close()
+        if out["address"] != chip_addresses(sensor["model"])[0]:
+            print(f"gyrocal: note: the {sensor['model']} answers at its other address, "
+                  f"0x{out['address']:02X} (imu.address 0: the chip's own)", file=sys.stderr)
+    return out
 
 
 def load_cli_config(args: argparse.Namespace) -> Any:
@@ -161,8 +197,9 @@ class Jig:
         try:
             for k, s in enumerate(sensors):
                 where = self.sims[k].imu_bus if self.sims else (bus if k == 0 else s["bus"])
-                self.imus.append(open_imu(s["model"], where, s["address"], clock=self.clock,
-                                          range_dps=s["range_dps"], odr_hz=s["odr_hz"]))
+                chip = resolve_sensor(s, where)
+                self.imus.append(open_imu(s["model"], where, chip["address"], clock=self.clock,
+                                          range_dps=s["range_dps"], odr_hz=chip["odr_hz"]))
                 note_rounded_odr(s["odr_hz"], self.imus[-1].info)
         except BaseException:
             self.close()
@@ -415,7 +452,7 @@ def _writers(cfg: Any, args: argparse.Namespace, jig: Jig, plan: Any, noise_std:
             sensor, gimbal_info, protocol, truth = _manifest_parts(cfg, jig, plan, noise_std, k)
             extra = site if len(dirs) == 1 else {**site, "plate": {
                 "sensor": jig.names[k], "sensors": list(jig.names),
-                "address": cfg.imus()[k]["address"], "bus": cfg.imus()[k]["bus"]}}
+                "address": int(jig.imus[k].info.address), "bus": cfg.imus()[k]["bus"]}}
             writers.append(RecordingWriter(d, sensor=sensor, gimbal=gimbal_info,
                                            protocol=protocol, truth=truth, force=args.force,
                                            extra=extra, accel=True))

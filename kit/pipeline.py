@@ -36,6 +36,7 @@ __all__ = [
     "PLAUSIBLE_NOISE_DENSITY",
     "PLAUSIBLE_SCALE",
     "Estimate",
+    "plausible_bounds",
     "check_plausible",
     "check_plausible_noise",
     "estimate_recording",
@@ -48,11 +49,25 @@ __all__ = [
 #: few percent (MPU-9250 ±3 %, PS-MPU-9250A-01 table 1; LSM9DS1 a similar figure), so anything
 #: outside 0.5..2 is a unit or setup mistake, not a sensor.
 PLAUSIBLE_SCALE = (0.5, 2.0)
+#: The paper's extreme sensors: scale factors up to 2.0 and biases up to ±0.2 rad/s (the
+#: emulator's ``--sim-sensor paper-extreme``, :data:`gyrocal.kit.sim` SENSORS); a chip's
+#: plausibility bounds admit them (:func:`plausible_bounds`).
+PAPER_EXTREME_SCALE = 2.0
+PAPER_EXTREME_BIAS_RAD_S = 0.2
+#: Margin of the plausibility bounds over the larger of the datasheet tolerance and the paper's
+#: extremes: a refusal is a unit or setup mistake, not a sensor at the edge of its tolerance.
+PLAUSIBLE_MARGIN = 2.0
+#: The power-of-two scales a full-scale setting mix-up gives (readings converted with the
+#: sensitivity of a range one or two steps away: 250/500/1000/2000 °/s are factors of 2).
+FULL_SCALE_MIXUPS = (0.25, 0.5, 2.0, 4.0)
 #: The largest white-noise density a MEMS gyro recording in rad/s can have, rad/s/√Hz: 11×
 #: the MPU-9250's typical 0.01 °/s/√Hz (PS-MPU-9250A-01 §3.1) and 5× the noisiest real gyro of
 #: the corpus (imu_tk's Xsens, 4.2e-4; BROAD 0.7–1.3e-4, Fusion's 1.1–2.3e-4, imucal's 1.1e-4:
 #: bench/real_corpus.py). The same readings in °/s are 57× larger: 3.8e-3 and up.
 PLAUSIBLE_NOISE_DENSITY = 2e-3
+#: How near (ratio) every axis's scale must be to one power of two to be named a full-scale
+#: mix-up: beyond any datasheet's sensitivity tolerance (±3 % at most) and a cross-axis share.
+_MIXUP_TOLERANCE = 0.05
 #: The gyro's full scale assumed when the recording does not say (the largest of the chips), °/s.
 _DEFAULT_FULL_SCALE_DPS = 2000.0
 
@@ -256,6 +271,51 @@ def estimate_recording(
     return Estimate(calibration=cal, fit=fit, extracted=ex, notes=notes)
 
 
+def plausible_bounds(model: Any) -> tuple[float, float, float | None, str]:
+    """The scale factors and bias a calibration of a ``model`` gyro may have, and their source.
+
+    The scale bound is the paper's extreme scale (:data:`PAPER_EXTREME_SCALE`) widened by the
+    chip's sensitivity tolerance (``ChipFamily.gyro_errors.scale_tolerance``, the datasheet's
+    "Sensitivity Scale Factor Tolerance") and 5 %, either way in ratio; the bias bound is
+    :data:`PLAUSIBLE_MARGIN` times the larger of the chip's zero-rate offset tolerance
+    (``gyro_errors.zero_rate_dps``) and the paper's extreme bias. A model gyrocal has no
+    datasheet for gets :data:`PLAUSIBLE_SCALE` and no bias bound (the full scale still holds).
+
+    Returns
+    -------
+    lo, hi : float
+        The scale factors allowed.
+    bias : float or None
+        The largest |bias| allowed, rad/s.
+    source : str
+        Where the figures come from (said in a refusal).
+    """
+    from gyrocal.drivers.imu import READER_CLASSES, READERS
+
+    key = str(model or "").strip().lower().replace("-", "")
+    if key not in READER_CLASSES:
+        return PLAUSIBLE_SCALE[0], PLAUSIBLE_SCALE[1], None, "any MEMS gyro"
+    family = READERS[key].family
+    err = family.gyro_errors
+    hi = PAPER_EXTREME_SCALE * (1.0 + err.scale_tolerance) * 1.05
+    bias = PLAUSIBLE_MARGIN * max(err.zero_rate_rad_s, PAPER_EXTREME_BIAS_RAD_S)
+    source = (f"the {family.title} datasheet (sensitivity ±{100 * err.scale_tolerance:g} %, "
+              f"zero-rate offset ±{err.zero_rate_dps:g} °/s) with room for the paper's extreme "
+              f"sensors (scale up to {PAPER_EXTREME_SCALE:g}, bias "
+              f"±{PAPER_EXTREME_BIAS_RAD_S:g} rad/s)")
+    return 1.0 / hi, hi, bias, source
+
+
+def _full_scale_mixup(k: np.ndarray, tolerance: float) -> float | None:
+    """The power of two (:data:`FULL_SCALE_MIXUPS`) every axis's scale ``k`` is within
+    ``tolerance`` (ratio) of, or ``None``: the sensitivity of another full-scale range."""
+    for p in FULL_SCALE_MIXUPS:
+        if all(math.isfinite(x) and x > 0 and abs(math.log(x / p)) <= math.log1p(tolerance)
+               for x in k):
+            return p
+    return None
+
+
 def _scale_cause(k: float) -> str:
     """The likely cause of an implausible scale factor ``k`` (reference rate / gyro rate)."""
     deg = math.pi / 180.0
@@ -311,10 +371,13 @@ def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = Non
                     extracted: ExtractedWindows | None = None) -> list[str]:
     """Refuse a calibration no real gyro can have: a unit or setup mistake.
 
-    A scale factor outside :data:`PLAUSIBLE_SCALE` (of g = K (m + b), the paper's model; for
-    v2 the diagonal of the matrix: the gyro's magnitude against the encoder rate) or a bias
-    beyond the gyro's full scale (the recording's ``sensor.full_scale_dps``) means the readings
-    or the reference are in the wrong units. With the ``recording`` and its windows
+    A scale factor outside the chip's :func:`plausible_bounds` (of g = K (m + b), the paper's
+    model; for v2 the diagonal of the matrix: the gyro's magnitude against the encoder rate), or
+    a bias beyond the gyro's full scale (the recording's ``sensor.full_scale_dps``), means the
+    readings or the reference are in the wrong units; a bias beyond the chip's zero-rate offset
+    bound, a sensor that moved during the first rest or another chip than ``sensor.model``; a
+    scale near one power of two on every axis (:data:`FULL_SCALE_MIXUPS`), readings converted
+    with another full-scale range's sensitivity. With the ``recording`` and its windows
     (``extracted``), on every protocol, also: each turn's encoder rate against the speed its
     plan commanded (:func:`_turn_rate_problems`: angles in degrees, a wrong velocity unit), and
     each servo's axis in the sensor frame against the axis the manifest names
@@ -342,7 +405,7 @@ def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = Non
     EstimationError
         If a problem is found and ``allow`` is false (exit 6), naming the likely cause.
     """
-    lo, hi = PLAUSIBLE_SCALE
+    lo, hi, bias_limit, source = plausible_bounds((sensor or {}).get("model"))
     matrix = getattr(cal, "matrix", None)
     k = np.diag(np.asarray(matrix, dtype=float)) if matrix is not None else np.asarray(
         cal.scale, dtype=float)
@@ -353,14 +416,31 @@ def check_plausible(cal: GyroCalibration, sensor: Mapping[str, Any] | None = Non
         fs_dps = _DEFAULT_FULL_SCALE_DPS
     fs = math.radians(fs_dps)
     problems = []
+    mixup = _full_scale_mixup(k, _MIXUP_TOLERANCE)
     bad = [j for j in range(3) if not (math.isfinite(k[j]) and lo <= k[j] <= hi)]
-    if bad:
+    if mixup is not None:
+        values = ", ".join(f"{'xyz'[j]} = {k[j]:.4g}" for j in range(3))
+        problems.append(
+            f"scale {values}: every axis about {mixup:g}, a power of two: the readings were "
+            "probably converted with the sensitivity of another full-scale range; check "
+            "imu.range_dps against the range the chip was set to (and the recording's "
+            "sensor.full_scale_dps and sensitivity)")
+    elif bad:
         causes = dict.fromkeys(  # one line per distinct cause, in axis order
             _scale_cause(k[j]) if math.isfinite(k[j]) and k[j] > 0
             else "the fit did not find a usable scale: check the recording" for j in bad)
         values = ", ".join(f"{'xyz'[j]} = {k[j]:.4g}" for j in bad)
-        problems.append(f"scale {values} outside {lo:g}..{hi:g}: " + "; ".join(causes))
+        problems.append(f"scale {values} outside {lo:.3g}..{hi:.3g} ({source}): "
+                        + "; ".join(causes))
     bad = [j for j in range(3) if not (math.isfinite(b[j]) and abs(b[j]) <= fs)]
+    beyond = [j for j in range(3) if j not in bad and bias_limit is not None
+              and abs(b[j]) > bias_limit]
+    if beyond:
+        values = ", ".join(f"{'xyz'[j]} = {b[j]:.4g}" for j in beyond)
+        problems.append(
+            f"bias {values} rad/s beyond ±{bias_limit:.3g} rad/s ({source}): check that the "
+            "sensor was still and warmed up at the start, that imu.model names the chip on the "
+            "jig, and the gyro's units (rad/s)")
     if bad:
         values = ", ".join(f"{'xyz'[j]} = {b[j]:.4g}" for j in bad)
         problems.append(

@@ -331,7 +331,8 @@ def describe_plate(outcomes: Sequence[SensorOutcome], sensors: Sequence[dict[str
 
     lines = []
     for o, sensor in zip(outcomes, sensors, strict=True):
-        lines.append(f"== sensor {o.name}: {sensor['model']} at 0x{sensor['address']:02X} on bus "
+        at = f"0x{sensor['address']:02X}" if sensor["address"] else "its own address"
+        lines.append(f"== sensor {o.name}: {sensor['model']} at {at} on bus "
                      f"{sensor['bus']}: "
                      f"{o.verdict.upper() if o.passed else 'FAILED: ' + o.verdict}")
         if o.calibration is not None:

@@ -10,7 +10,8 @@ import numpy as np
 
 from gyrocal.calib.model import GyroCalibration
 
-__all__ = ["TruthError", "accelerometer_rows", "calibration_table", "error_against_truth"]
+__all__ = ["TruthError", "accelerometer_rows", "calibration_table", "error_against_truth",
+           "inconsistency_causes"]
 
 
 @dataclass(frozen=True)
@@ -205,6 +206,29 @@ def _diagonal_rows(cal: GyroCalibration, err: TruthError | None) -> list[str]:
     return lines
 
 
+def inconsistency_causes(cal: GyroCalibration) -> str:
+    """What to do when the fit's residuals are larger than the noise explains, the likely
+    causes most likely first.
+
+    A diagonal calibration (the paper's model, protocols ``paper`` and ``auto``) leaves the
+    cross-axis terms (±2 % on the datasheets) and the g-sensitivity in its residuals, hundreds of
+    times the noise on a realistic sensor: the model is the likeliest cause, then a sensor that
+    slipped or flexed on the mount, then saturation. The full model has no such terms left out.
+    """
+    slip = "the sensor slipped or flexed on the mount: tighten it and repeat the run"
+    saturation = ("the gyro saturated during the turns: a larger imu.range_dps, or a slower "
+                  "protocol.speed_dps")
+    if cal.matrix is None:
+        causes = ["the model is too simple: the diagonal model leaves the cross-axis terms and "
+                  "the g-sensitivity in the residuals; calibrate the full model with "
+                  "--protocol full (if it fell back to the diagonal model, a note on stderr "
+                  "says why)", slip, saturation]
+    else:
+        causes = [slip, saturation]
+    return "the residuals are larger than the noise explains; likely causes, most likely " \
+        "first: " + "; ".join(f"({i}) {c}" for i, c in enumerate(causes, 1))
+
+
 def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
     c = cal.consistency
     if c is None:
@@ -215,10 +239,7 @@ def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
             f"(chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})"
         )
         if not c.ok:
-            lines.append(
-                "  the residuals are larger than the noise explains: check the mount (did the "
-                "sensor slip or flex?), the gyro range (saturation), and repeat the run"
-            )
+            lines.append("  " + inconsistency_causes(cal))
     if cal.axes:
         lines.append("")
         lines.append("servo axes in the sensor frame (mounting misalignment):")

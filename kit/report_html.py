@@ -28,7 +28,7 @@ import numpy as np
 
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.kit import __version__
-from gyrocal.kit.report import TruthError, error_against_truth
+from gyrocal.kit.report import TruthError, error_against_truth, inconsistency_causes
 
 __all__ = ["NoiseFigures", "environment", "gyro_noise", "render_html", "write_run_report"]
 
@@ -253,9 +253,7 @@ def _next_steps(cal: GyroCalibration, verification: Any, calibration: str | None
     path = _e(calibration) if calibration else "CAL"
     steps = []
     if c is not None and not c.ok:
-        steps.append("the fit's residuals are larger than the noise explains: check the mount "
-                     "(did the sensor slip or flex?), the gyro range (saturation), and repeat "
-                     "the run")
+        steps.append(_e(inconsistency_causes(cal)))
     if verification is not None and not verification.ok:
         steps.append("the verification failed: the model does not hold for this sensor or jig "
                      "(a diagonal calibration cannot correct cross-axis terms: calibrate the full "

@@ -56,6 +56,9 @@ __all__ = [
     "MPU9250Reader",
     "SensorFaultError",
     "SensorInfo",
+    "chip_addresses",
+    "find_address",
+    "nearest_offered_rate",
     "open_bus",
     "open_imu",
 ]
@@ -103,6 +106,69 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+def _model_key(model: str) -> str:
+    key = str(model).strip().lower().replace("-", "")
+    if key not in READER_CLASSES:
+        raise ConfigurationError(
+            f"unknown IMU model {model!r}; choose one of {', '.join(MODELS)}"
+        )
+    return key
+
+
+def chip_addresses(model: str) -> tuple[int, ...]:
+    """The 7-bit I²C addresses a chip of ``model`` can have, its default (strap low) first
+    (:attr:`gyrocal.drivers.imu.chips.ChipFamily.addresses`).
+
+    Raises
+    ------
+    ConfigurationError
+        For an unknown model.
+    """
+    return tuple(_reader_class(_model_key(model)).family.addresses)
+
+
+def nearest_offered_rate(model: str, odr_hz: float) -> float:
+    """The output data rate of ``model``'s reader nearest ``odr_hz`` (ties to the faster), one
+    the chip does exactly (:meth:`ImuReader.offered_rates_hz`: 200 Hz asked of an ICM-20948
+    gives 1125/6 = 187.5 Hz, of an LSM9DS1 238 Hz, of an LSM6DSOX 6667/32 = 208.3 Hz).
+
+    Raises
+    ------
+    ConfigurationError
+        For an unknown model or a rate that is not a positive finite number.
+    """
+    odr = float(odr_hz)
+    if not (odr > 0 and odr < float("inf")):
+        raise ConfigurationError(f"odr_hz={odr_hz!r} must be a positive number of Hz")
+    rates = _reader_class(_model_key(model)).offered_rates_hz()
+    return min(rates, key=lambda r: (abs(r - odr), -r))
+
+
+def find_address(model: str, bus: Any) -> int:
+    """Where a chip of ``model`` answers on ``bus``: its identity register read at each of
+    :func:`chip_addresses` (:func:`gyrocal.drivers.imu.detect.scan_bus`, reads only). When none
+    answers as that chip, its first address, where the reader's own identity check then says
+    what is there, or that nothing answers (:meth:`ImuReader.configure`).
+
+    Raises
+    ------
+    ConfigurationError
+        For an unknown model, or when a chip of the model answers at several of its addresses
+        (the message says to give the address).
+    """
+    from gyrocal.drivers.imu.detect import scan_bus
+
+    cls = _reader_class(_model_key(model))
+    addresses = tuple(cls.family.addresses)
+    mine = [c.address for c in scan_bus(bus, addresses)
+            if c.model is not None and _reader_class(_model_key(c.model)) is cls]
+    if len(mine) > 1:
+        raise ConfigurationError(
+            f"a {cls.family.title} answers at each of " + ", ".join(f"0x{a:02X}" for a in mine)
+            + "; give the one to calibrate (imu.address, or --imu-address)")
+    return mine[0] if mine else addresses[0]
+
+
 def open_imu(
     model: str,
     bus: Any,
@@ -142,11 +208,7 @@ def open_imu(
     ConfigurationError
         For an unknown model or settings the chip cannot do.
     """
-    key = str(model).strip().lower().replace("-", "")
-    if key not in READER_CLASSES:
-        raise ConfigurationError(
-            f"unknown IMU model {model!r}; choose one of {', '.join(MODELS)}"
-        )
+    key = _model_key(model)
     reader = _reader_class(key)(bus, address, clock=clock, **options)
     try:
         reader.configure(range_dps=range_dps, odr_hz=odr_hz, lowpass_hz=lowpass_hz)

@@ -644,6 +644,12 @@ class ImuReader(ABC):
         """The accelerometer range :meth:`configure` sets (the family's, as data)."""
         return self.family.accel_range
 
+    @classmethod
+    @abstractmethod
+    def offered_rates_hz(cls) -> tuple[float, ...]:
+        """Every output data rate the reader can configure, Hz, ascending (from the chip's
+        tables in :mod:`gyrocal.drivers.imu.chips`)."""
+
     @abstractmethod
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         """Validate the rate and filter: return (odr_hz, lowpass_hz, chip setting)."""

@@ -82,6 +82,12 @@ class ICM20948Reader(ImuReader):
             self._bank(0)  # left in another user bank: back to bank 0
             return super()._identify()
 
+    @classmethod
+    def offered_rates_hz(cls) -> tuple[float, ...]:
+        """1125/(1 + GYRO_SMPLRT_DIV) Hz for GYRO_SMPLRT_DIV 0..255 (DS-000189; the DLPF on)."""
+        base = ICM20948.extra["internal_rate_hz"]
+        return tuple(base / (1 + div) for div in range(255, -1, -1))
+
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         actual, div = divided_rate("ICM-20948", ICM20948.extra["internal_rate_hz"], odr_hz,
                                    "GYRO_SMPLRT_DIV", (0, 1, 2, 4, 9, 24, 99))

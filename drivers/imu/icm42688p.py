@@ -79,6 +79,11 @@ class ICM42688PReader(TimestampedFifoReader):
     def _register_names(self) -> dict[int, str]:
         return _REG_NAMES
 
+    @classmethod
+    def offered_rates_hz(cls) -> tuple[float, ...]:
+        """The GYRO_ODR rates of :data:`ICM42688P_ODR` the reader streams over I²C."""
+        return tuple(sorted(r for r in ICM42688P_ODR if r <= ICM42688P_MAX_READER_ODR_HZ))
+
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         odr = nearest_rate("ICM-42688-P", (r for r in ICM42688P_ODR
                                            if r <= ICM42688P_MAX_READER_ODR_HZ), odr_hz)

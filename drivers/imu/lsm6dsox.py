@@ -78,6 +78,13 @@ class LSM6DSOXReader(TimestampedFifoReader):
     def _register_names(self) -> dict[int, str]:
         return _REG_NAMES
 
+    @classmethod
+    def offered_rates_hz(cls) -> tuple[float, ...]:
+        """The actual rates (6667 Hz / 2^k) of :data:`LSM6DSOX_ODR` codes 2 and up that the
+        reader streams over I²C."""
+        return tuple(sorted(actual for code, (_, actual) in LSM6DSOX_ODR.items()
+                            if code >= 2 and actual <= LSM6DSOX_MAX_READER_ODR_HZ))
+
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         offered = {code: (nominal, actual) for code, (nominal, actual) in LSM6DSOX_ODR.items()
                    if code >= 2 and actual <= LSM6DSOX_MAX_READER_ODR_HZ}

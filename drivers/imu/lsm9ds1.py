@@ -74,6 +74,11 @@ class LSM9DS1Reader(ImuReader):
     def _register_names(self) -> dict[int, str]:
         return _REG_NAMES
 
+    @classmethod
+    def offered_rates_hz(cls) -> tuple[float, ...]:
+        """The CTRL_REG1_G ODR_G rates of :data:`LSM9DS1_ODR`."""
+        return tuple(sorted(LSM9DS1_ODR))
+
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         rates = sorted(LSM9DS1_ODR)
         odr = min(rates, key=lambda r: abs(r - odr_hz))

@@ -75,6 +75,12 @@ class MPU9250Reader(ImuReader):
         bytes each."""
         return 14 if self.temperature_in_fifo else 12
 
+    @classmethod
+    def offered_rates_hz(cls) -> tuple[float, ...]:
+        """1000/(1 + SMPLRT_DIV) Hz for SMPLRT_DIV 0..255 (register map §4.4; the DLPF on)."""
+        base = MPU9250.extra["internal_rate_hz"]
+        return tuple(base / (1 + div) for div in range(255, -1, -1))
+
     def _choose_rate(self, odr_hz: float, lowpass_hz: float | None) -> tuple[float, float, Any]:
         actual, div = divided_rate("MPU-9250", MPU9250.extra["internal_rate_hz"], odr_hz,
                                    "SMPLRT_DIV", (0, 1, 2, 3, 4, 7, 9, 19, 49, 99))

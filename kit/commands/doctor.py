@@ -76,11 +76,12 @@ def _scan_imus(rep: _Report, cfg: Any, args: argparse.Namespace, bus: Any) -> bo
         rep.ok(f"0x{chip.address:02X}: {what}{who}"
                + (f", model '{chip.model}'" if chip.model else ""))
     supported = [c for c in found if c.model]
-    wanted = (str(imu_cfg["model"]).replace("-", "").lower(), imu_cfg["address"])
-    if any((c.model, c.address) == wanted for c in supported) or not supported:
+    model, address = str(imu_cfg["model"]).replace("-", "").lower(), imu_cfg["address"]
+    if any(c.model == model and address in (0, c.address) for c in supported) or not supported:
         return True
     other = supported[0]
-    rep.bad(f"the configured {imu_cfg['model']} at 0x{imu_cfg['address']:02X} "
+    at = f"at 0x{address:02X}" if address else "at its addresses"
+    rep.bad(f"the configured {imu_cfg['model']} {at} "
             f"is not on the bus, but an {other.title} is at 0x{other.address:02X}",
             f"set imu.model = \"{other.model}\" and imu.address = 0x{other.address:02X} in "
             f"the config (or --imu-model {other.model} --imu-address 0x{other.address:02X})")
@@ -93,14 +94,20 @@ def _check_imu(rep: _Report, cfg: Any, args: argparse.Namespace, clock: Any, bus
     from gyrocal.calib.observations import diff_noise
     from gyrocal.drivers.errors import DriverError
     from gyrocal.drivers.imu import READERS, open_imu
-    from gyrocal.kit.jig import note_rounded_odr
+    from gyrocal.kit.jig import note_rounded_odr, resolve_sensor
 
     imu_cfg = cfg["imu"]
     where = "the emulated bus" if args.sim else f"/dev/i2c-{imu_cfg['bus']}"
-    rep.section(f"IMU ({imu_cfg['model']} at 0x{imu_cfg['address']:02X} on {where})")
     try:
-        reader = open_imu(imu_cfg["model"], bus, imu_cfg["address"], clock=clock,
-                          range_dps=imu_cfg["range_dps"], odr_hz=imu_cfg["odr_hz"])
+        chip = resolve_sensor(imu_cfg, bus)
+    except DriverError as exc:  # the chip answers at several of its addresses
+        rep.section(f"IMU ({imu_cfg['model']} on {where})")
+        rep.bad(str(exc))
+        return
+    rep.section(f"IMU ({imu_cfg['model']} at 0x{chip['address']:02X} on {where})")
+    try:
+        reader = open_imu(imu_cfg["model"], bus, chip["address"], clock=clock,
+                          range_dps=imu_cfg["range_dps"], odr_hz=chip["odr_hz"])
     except DriverError as exc:  # the drivers' messages say what to do
         rep.bad(str(exc))
         return

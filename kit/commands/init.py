@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from gyrocal.drivers.imu import MODELS
+
 HELP = "write a commented gyrocal.toml to edit"
 DESCRIPTION = (
     "Write a configuration file with every key, its default and what it means: the serial port "
@@ -16,6 +18,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     p.add_argument("path", nargs="?", default="gyrocal.toml", help="default: gyrocal.toml")
     p.add_argument("--force", action="store_true", help="replace an existing file")
+    p.add_argument("--imu-model", choices=MODELS, default=None,
+                   help="write [imu] for this chip: its default address and the output data "
+                        "rate it has nearest the default")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -23,6 +28,6 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.config import template
     from gyrocal.kit.fileio import atomic_write_text
 
-    atomic_write_text(args.path, template(), force=args.force)
+    atomic_write_text(args.path, template(args.imu_model), force=args.force)
     print(f"wrote {args.path}; edit it, then run `gyrocal doctor --config {args.path}`")
     return 0
