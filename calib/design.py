@@ -19,6 +19,7 @@ G-criterion, now in rad/s and for our paired-axis estimator with its rests) is s
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -918,8 +919,8 @@ def plan_protocol(
     budget = time_budget_s
     tilted: Plan | None = None  # the last gyro protocol with the accelerometer's rests
     for _ in range(8):
-        best = (_plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
-                           axes) if model == "full"
+        best = (_plan_full_cached(top, budget, noise_std, odr_hz, accel, reference_rate,
+                                  min_rest_s, _hashable(axes)) if model == "full"
                 else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
                                     min_rest_s))
         if best is None:
@@ -969,6 +970,17 @@ def _plan_diagonal(
                 if best is None or cand.rate_error_std < best.rate_error_std * (1 - 1e-9):
                     best = cand
     return best
+
+
+@functools.lru_cache(maxsize=32)
+def _plan_full_cached(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None,
+) -> Plan | None:
+    """:func:`_plan_full` for the same inputs computed once (a plan is immutable): the
+    emulated calibrations of one process that measure the same noise plan once."""
+    return _plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
+                      _array(axes_key))
 
 
 def _plan_full(
@@ -1217,14 +1229,55 @@ def plan_accel_rests(
     CalibInputError
         If ``target_ratio`` or ``beam`` is not positive.
     """
-    from gyrocal.calib.accel import accel_design
-
     if not target_ratio > 0 or int(beam) < 1:
         raise CalibInputError(f"target_ratio and beam must be positive, got {target_ratio!r}, "
                               f"{beam!r}")
-    S = 3 if axes is None else len(axes)
     gyro_time = plan.jig_time_s - plan.accel_time_s
-    plan = replace(plan, accel_moves=(), accel_extra_rests=0)
+    moves, extra, added, ratio = _accel_rest_moves(
+        _turns_only(plan), _hashable(axes), _hashable(up), max_turns, settle_s, target_ratio,
+        int(beam))
+    return replace(plan, accel_moves=moves, accel_extra_rests=extra, accel_time_s=added,
+                   accel_std_ratio=ratio, jig_time_s=float(gyro_time + added))
+
+
+_Key = tuple[tuple[int, ...], tuple[float, ...]]
+
+
+def _hashable(a: np.ndarray | None) -> _Key | None:
+    """``a`` as its shape and its values (exact floats), a cache key."""
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=float)
+    return a.shape, tuple(a.ravel().tolist())
+
+
+def _array(key: _Key | None) -> np.ndarray | None:
+    """The array of :func:`_hashable`."""
+    return None if key is None else np.array(key[1], dtype=float).reshape(key[0])
+
+
+def _turns_only(plan: Plan) -> Plan:
+    """``plan`` with only what its sequence of steps depends on (speed, turns, rests, poses):
+    the predicted figures, which scale with the measured noise, and its times zeroed."""
+    return replace(plan, jig_time_s=0.0, scale_std=(0.0,) * 3, bias_std=(0.0,) * 3,  # type: ignore[arg-type]
+                   rate_error_std=0.0, matrix_std=None, accel_moves=(), accel_extra_rests=0,
+                   accel_time_s=0.0, accel_std_ratio=None)
+
+
+@functools.lru_cache(maxsize=32)
+def _accel_rest_moves(
+    plan: Plan, axes_key: _Key | None, up_key: _Key | None, max_turns: float | None,
+    settle_s: float, target_ratio: float, beam: int,
+) -> tuple[tuple[tuple[int, int, float], ...], int, float, float]:
+    """The beam search of :func:`plan_accel_rests`: ``(accel_moves, accel_extra_rests,
+    accel_time_s, accel_std_ratio)``. A pure function of the protocol's steps and the nominal
+    gimbal, cached: a plan's predicted figures follow the measured noise, its steps mostly do
+    not, so the runs of ``gyrocal thermal`` (and the emulated calibrations of one process)
+    search once per distinct protocol."""
+    from gyrocal.calib.accel import accel_design
+
+    axes, up = _array(axes_key), _array(up_key)
+    S = 3 if axes is None else len(axes)
     n_rests = sum(st[0] == "rest" for st in _base_sequence(plan, S))
     extra = max(ACCEL_MIN_RESTS - n_rests, 0)
     base = _base_sequence(replace(plan, accel_extra_rests=extra), S)
@@ -1326,6 +1379,5 @@ def plan_accel_rests(
     ok = [x for x in results if x[1] <= target_ratio]
     added, ratio, moves = (min(ok, key=lambda x: (x[0], x[1])) if ok
                            else min(results, key=lambda x: (x[1], x[0])))
-    return replace(plan, accel_moves=tuple((int(r), int(s), float(a)) for r, s, a in moves),
-                   accel_extra_rests=extra, accel_time_s=float(added),
-                   accel_std_ratio=float(ratio), jig_time_s=float(gyro_time + added))
+    return (tuple((int(r), int(s), float(a)) for r, s, a in moves), extra, float(added),
+            float(ratio))

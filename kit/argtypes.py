@@ -8,8 +8,9 @@ error (exit 2), never in a traceback from deep inside the kit.
 from __future__ import annotations
 
 import argparse
+import os
 
-__all__ = ["i2c_address", "seed"]
+__all__ = ["i2c_address", "recording_dir", "seed"]
 
 #: 7-bit I²C addresses a device may use (0x00–0x02 and 0x78–0x7F are reserved by the I²C-bus
 #: specification, NXP UM10204 §3.1.12, Table 4).
@@ -44,3 +45,13 @@ def i2c_address(text: str) -> int:
             f"{text} is outside the 7-bit I2C addresses a device may use, {lo:#04x}..{hi:#04x}"
         )
     return value
+
+
+def recording_dir(text: str) -> str:
+    """A recording directory that exists (``text`` unchanged); its contents are checked when it
+    is read (:func:`gyrocal.kit.recording.read_manifest`). Checked here so a mistyped path is a
+    usage error before the command imports its modules."""
+    if not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(
+            f"{text} is not a directory: give the recording directory")
+    return text

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from gyrocal.drivers.imu import MODELS as IMU_MODELS
+from gyrocal.kit.choices import METHODS, PROTOCOLS
 from gyrocal.kit.errors import InputError
 
 __all__ = [
@@ -32,14 +33,6 @@ __all__ = [
     "template",
 ]
 
-#: The estimators a user may choose, the default first: ``auto`` (the full model when the
-#: recording's poses determine it, else paired-axis; :mod:`gyrocal.kit.pipeline`) and the names of
-#: :data:`gyrocal.calib.estimators.METHODS` (kept here so the command line does not import scipy
-#: to show its help).
-METHODS = ("auto", "paired-axis", "iterative-ls", "levenberg-marquardt", "full-matrix")
-#: The protocols, the default first: planned with poses for the full matrix (hardware_docs/method.md
-#: §9), planned for the jig without poses (the paper's diagonal model), or the paper's.
-PROTOCOLS = ("full", "auto", "paper")
 
 
 #: A gyrocal.toml is a few kB; anything far larger is a wrong file.

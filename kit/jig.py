@@ -464,9 +464,11 @@ def _writers(cfg: Any, args: argparse.Namespace, jig: Jig, plan: Any, noise_std:
 
 
 def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
-                    extend: Any = None) -> None:
+                    extend: Any = None, plan: Any = None) -> Any:
     """Open the gimbal, plan, and run the protocol into a Recording v1 at ``rec_dir``, or one
-    per sensor (:func:`recording_dirs`) (``extend``: see :func:`run_jig`).
+    per sensor (:func:`recording_dirs`) (``extend``: see :func:`run_jig`). A ``plan`` given
+    (a :class:`~gyrocal.calib.design.Plan` of an earlier run on this jig) is run as it is;
+    the still noise is measured either way. Returns the plan run.
 
     Raises
     ------
@@ -480,7 +482,8 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
     quiet = getattr(args, "quiet", False)
     with jig.gimbal:
         noise_std = _still_noise(jig)
-        plan = choose_plan(cfg, jig.gimbal, _planning_sensor(jig), noise_std)
+        if plan is None:
+            plan = choose_plan(cfg, jig.gimbal, _planning_sensor(jig), noise_std)
         steps = build_steps(plan, cfg["gimbal"]["ids"])
         runner_class = Runner
         if extend is not None:
@@ -530,6 +533,7 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                     w.update_manifest(truth={**w.manifest["truth"], "axes": jig.sims[k].turn_axes(
                         cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
             writer.finish()
+    return plan
 
 
 def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,

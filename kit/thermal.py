@@ -237,7 +237,10 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
     ``wait_s`` between runs, into ``work/run-NN/recording`` and ``work/run-NN/calibration.json``.
 
     The servos stop with torque off after every run and after any failure (each run opens and
-    closes the gimbal as ``gyrocal calibrate`` does); the caller closes the jig.
+    closes the gimbal as ``gyrocal calibrate`` does); the caller closes the jig. Every run
+    runs the protocol planned for the first (:func:`~gyrocal.kit.jig.choose_plan`, its still
+    noise): the calibrations the thermal model compares come from one protocol, and the plan's
+    search (a few CPU seconds) is made once.
 
     Returns
     -------
@@ -254,10 +257,11 @@ def run_warmup(jig: Any, cfg: Any, args: argparse.Namespace, work: Path, runs: i
     from gyrocal.kit.recording import load_recording
 
     out: list[WarmupRun] = []
+    plan = None
     for i in range(runs):
         run_dir = work / f"run-{i + 1:02d}"
         t0 = jig.clock.monotonic()
-        record_protocol(cfg, args, jig, run_dir / "recording")
+        plan = record_protocol(cfg, args, jig, run_dir / "recording", plan=plan)
         rec = load_recording(run_dir / "recording")
         est = estimate_recording(rec, cfg["protocol"]["method"],
                                  source=str(run_dir / "recording"))

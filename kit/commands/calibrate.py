@@ -105,7 +105,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from gyrocal.kit.config import METHODS, PROTOCOLS
+    from gyrocal.kit.choices import METHODS, PROTOCOLS
 
     add_common_jig_arguments(p)
     p.add_argument("--out", metavar="DIR",

@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gyrocal.kit import argtypes
+
 HELP = "estimate a calibration from a recording directory"
 DESCRIPTION = (
     "Window a Recording v1 directory (whole revolutions at steady speed, encoder reference over "
@@ -20,9 +22,9 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from gyrocal.kit.config import METHODS
+    from gyrocal.kit.choices import METHODS
 
-    p.add_argument("recording", help="a Recording v1 directory")
+    p.add_argument("recording", type=argtypes.recording_dir, help="a Recording v1 directory")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator (default: auto = full-matrix when the poses determine it, "
                    "else paired-axis)")
@@ -129,11 +131,11 @@ def _gravity(args: argparse.Namespace) -> float | None:
 def _history(args: argparse.Namespace) -> Any:
     """Where to store the calibration (``--history``; the config's ``[history]`` is read, from
     ./gyrocal.toml, only then), or None."""
+    if args.history is None and args.sensor_label is None:
+        return None  # before the imports, as in _gravity
     from gyrocal.kit.commands.history import history_target_from
     from gyrocal.kit.config import default_config, load_config
 
-    if args.history is None and args.sensor_label is None:
-        return None
     path = "gyrocal.toml" if Path("gyrocal.toml").is_file() else None
     cfg = load_config(path) if args.history is not None else default_config()
     return history_target_from(args, cfg["history"])

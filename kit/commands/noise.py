@@ -30,7 +30,7 @@ RAD2DEG = 180.0 / math.pi
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the flags."""
-    p.add_argument("recording", nargs="?", metavar="RECORDING",
+    p.add_argument("recording", nargs="?", metavar="RECORDING", type=argtypes.recording_dir,
                    help="Recording v1 directory of the sensor at rest")
     p.add_argument("--sim", action="store_true",
                    help="use a simulated still sensor with known noise instead of a recording")

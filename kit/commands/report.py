@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from gyrocal.kit import argtypes
+
 HELP = "plot a recording: raw and calibrated rates per turn against the encoder, windows, residuals"
 DESCRIPTION = (
     "Write PNG plots of a Recording v1 into --out DIR: an overview; for each turn the raw and "
@@ -21,9 +23,10 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
-    from gyrocal.kit.config import METHODS
+    from gyrocal.kit.choices import METHODS
 
-    p.add_argument("recording", metavar="RECORDING", help="Recording v1 directory")
+    p.add_argument("recording", metavar="RECORDING", type=argtypes.recording_dir,
+                   help="Recording v1 directory")
     p.add_argument("cal", nargs="?", metavar="CAL",
                    help="Calibration JSON, v2 or v1 (default: estimate one from the recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="directory for the PNG files")

@@ -57,7 +57,8 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the flags."""
-    p.add_argument("recording", nargs="?", metavar="RECORDING", help="Recording v1 directory")
+    p.add_argument("recording", nargs="?", metavar="RECORDING", type=argtypes.recording_dir,
+                   help="Recording v1 directory")
     src = p.add_argument_group("simulation (--sim)")
     src.add_argument("--sim", action="store_true",
                      help="track a synthetic session instead of a recording; with --live, run "

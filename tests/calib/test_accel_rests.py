@@ -206,3 +206,30 @@ def test_a_budget_the_accelerometer_s_rests_do_not_fit_says_so_and_what_to_do():
     with pytest.raises(CalibInputError, match=r"no protocol fits 12 s .*; raise the time "
                        r"budget$"):
         plan_protocol(time_budget_s=12.0, **kw)
+
+
+def test_the_search_is_cached_for_the_same_steps_whatever_the_predicted_figures(plans):
+    """The beam search runs once per protocol (issue 25: ``gyrocal thermal`` planned it for
+    each of its runs): a plan that differs only in its noise-scaled predictions (another
+    measured noise) reuses it, and the cached result is the search's own."""
+    from dataclasses import replace
+
+    from gyrocal.calib import design
+
+    gyro, tilted = plans
+    noisier = replace(gyro, scale_std=tuple(2 * x for x in gyro.scale_std),  # type: ignore[arg-type]
+                      bias_std=tuple(2 * x for x in gyro.bias_std),  # type: ignore[arg-type]
+                      rate_error_std=2 * gyro.rate_error_std, matrix_std=None)
+    hits = design._accel_rest_moves.cache_info().hits
+    again = plan_accel_rests(noisier, max_turns=3.0)
+    assert design._accel_rest_moves.cache_info().hits == hits + 1
+    assert again.accel_moves == tilted.accel_moves and again.jig_time_s == tilted.jig_time_s
+    assert again.rate_error_std == noisier.rate_error_std  # its own figures are kept
+    fresh = design._accel_rest_moves.__wrapped__(design._turns_only(gyro), None, None, 3.0,
+                                                 0.1, ACCEL_STD_RATIO_TARGET, 24)
+    assert fresh == (tilted.accel_moves, tilted.accel_extra_rests, tilted.accel_time_s,
+                     tilted.accel_std_ratio)
+    misses = design._accel_rest_moves.cache_info().misses
+    plan_accel_rests(replace(gyro, turns=gyro.turns + 1), max_turns=4.0)
+    info = design._accel_rest_moves.cache_info()  # other steps: searched
+    assert (info.hits, info.misses) == (hits + 1, misses + 1)

@@ -61,8 +61,10 @@ def test_missing_and_truncated_recordings_exit_2(recording, tmp_path, capsys):
     assert "segments.csv is missing" in capsys.readouterr().err
 
 
-def test_bad_usage_exits_2(capsys):
+def test_bad_usage_exits_2(capsys, tmp_path):
     assert main(["estimate"]) == 2
-    assert main(["estimate", "x", "--method", "newton"]) == 2
+    assert main(["estimate", str(tmp_path), "--method", "newton"]) == 2
     assert "invalid choice" in capsys.readouterr().err
+    assert main(["estimate", str(tmp_path / "x")]) == 2  # a usage error, before any import
+    assert "x is not a directory: give the recording directory" in capsys.readouterr().err
     assert main(["simulate-recording", "x", "--speed", "-1"]) == 2
