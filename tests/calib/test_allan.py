@@ -228,8 +228,12 @@ def test_the_needed_samples_are_the_least_that_give_the_two_decade_curve():
     x = np.random.default_rng(43).normal(size=(4000, 3)) * 1e-3
     assert np.array_equal(allan_deviation(x[:3998], ODR).tau_s, allan_deviation(x, ODR).tau_s)
     nc = characterise_noise(x[:3998], ODR)
-    # white noise of 1e-3 rad/s per sample at 200 Hz: N = 1e-3/√200 (IEEE Std 952 Annex C)
-    assert np.allclose(nc.noise_density.value, 1e-3 / np.sqrt(ODR), rtol=0.1)
+    # white noise of 1e-3 rad/s per sample at 200 Hz: N = 1e-3/√200 (IEEE Std 952 Annex C),
+    # inside the stated 95 % interval (N is read near τ = 1 s: 20 clusters of a 20 s record,
+    # so the interval is wide, ±25 %)
+    nd, truth = nc.noise_density, 1e-3 / np.sqrt(ODR)
+    assert np.all(np.array(nd.lo95) <= truth) and np.all(truth <= np.array(nd.hi95)), nd
+    assert np.all(np.array(nd.hi95) < 2 * truth)
 
 
 def _phase_record(rate, odr, chunk):
