@@ -22,8 +22,8 @@
 code before a change: ``--python=/work/venv-main/bin/python``); the comparison with the truth
 is this installation's.
 
-Usage: ``python -m bench coverage [--seeds=N] [--first=S] [--python=PATH] [--independent]
-[--walk=K]``.
+Usage: ``python -m bench coverage [--quick (3 seeds)] [--seeds=N] [--first=S] [--python=PATH]
+[--independent] [--walk=K,K]``.
 """
 
 from __future__ import annotations
@@ -133,7 +133,15 @@ def main(argv: list[str]) -> None:
     def opt(name: str, default: str) -> str:
         return next((a.split("=", 1)[1] for a in argv if a.startswith(f"--{name}=")), default)
 
-    seeds, first = int(opt("seeds", "40")), int(opt("first", "0"))
+    try:
+        seeds = int(opt("seeds", "3" if "--quick" in argv else "40"))
+        first = int(opt("first", "0"))
+    except ValueError:
+        print("bench coverage: --seeds and --first take whole numbers", file=sys.stderr)
+        raise SystemExit(2) from None
+    if seeds < 1:
+        print("bench coverage: --seeds must be at least 1", file=sys.stderr)
+        raise SystemExit(2)
     python = opt("python", sys.executable)
     seed_list = range(first, first + seeds)
     if "--independent" in argv:
