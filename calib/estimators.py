@@ -41,13 +41,14 @@ squares is minimised by Levenberg-Marquardt with an analytic Jacobian; the covar
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gyrocal.calib import kinematics
 from gyrocal.calib.dispersion import Dispersion, multiplicative
+from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.calib.observations import ObservationSet
@@ -62,6 +63,7 @@ __all__ = [
     "METHODS",
     "FullMatrixBatch",
     "FitResult",
+    "add_bias_drift",
     "estimate",
     "fit_full_matrix",
     "full_matrix_batch",
@@ -130,6 +132,9 @@ class FitResult:
     g_directions : numpy.ndarray, shape (k, 3), or None
         The directions of specific force the run determined ``G`` along
         (:func:`gravity_directions`); ``G`` is zero along the others, which stay in the bias.
+    bias_drift : BiasDrift or None
+        The bias instability and rate random walk whose variance over the run
+        :func:`add_bias_drift` added to ``covariance``'s bias block; None before.
     """
 
     method: str
@@ -151,6 +156,7 @@ class FitResult:
     g_sensitivity: np.ndarray | None = None
     g_sensitivity_cov: np.ndarray | None = None
     g_directions: np.ndarray | None = None
+    bias_drift: BiasDrift | None = None
 
     @property
     def scale_std(self) -> np.ndarray:
@@ -227,7 +233,38 @@ class FitResult:
             created=created,
             source=source,
             axes=axes,
+            bias_drift=self.bias_drift,
         )
+
+
+def add_bias_drift(fit: FitResult, drift: BiasDrift) -> FitResult:
+    """``fit`` with the bias's wander within the run added to its bias covariance.
+
+    The fit's covariance counts the white noise only, but the bias it estimates is an average
+    over rests and windows spread over the run, during which the bias itself wanders (bias
+    instability, rate random walk); :attr:`BiasDrift.run_variance` (``B² + K² T / 12`` per
+    component, :mod:`gyrocal.calib.drift`) is added to the diagonal of the bias block. The
+    wander is independent of the white noise and common to every window, so it adds to the bias
+    alone (its correlation with the matrix, through the windows' weights, is neglected).
+
+    Parameters
+    ----------
+    fit : FitResult
+        A fit (any method); returned unchanged if it already carries a ``bias_drift``.
+    drift : BiasDrift
+        The figures and the run's span.
+
+    Returns
+    -------
+    FitResult
+        A new result with ``covariance`` and ``bias_drift`` set.
+    """
+    if fit.bias_drift is not None:
+        return fit
+    cov = np.array(fit.covariance, dtype=float)
+    idx = np.arange(cov.shape[0] - 3, cov.shape[0])
+    cov[idx, idx] += drift.run_variance
+    return replace(fit, covariance=cov, bias_drift=drift)
 
 
 def _nearest_axis(u: np.ndarray) -> str:

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
 if TYPE_CHECKING:
@@ -77,6 +78,7 @@ class GSensitivityWarning(UserWarning):
 
 _THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
 _ACCEL_FIELDS = ("accelerometer",)  # either version (issue 15; calib.accel)
+_DRIFT_FIELDS = ("bias_drift",)  # either version, optional (issue 30; calib.drift)
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
 #: Optional, together (the gravity reference of ``g_sensitivity``): absent means unknown.
 _KINEMATICS_HOME = ("home_angles_rad", "up_servo")
@@ -316,6 +318,11 @@ class GyroCalibration:
     accelerometer : AccelCalibration or None
         The accelerometer's calibration from the same run's rests (:mod:`gyrocal.calib.accel`),
         written as the document's ``accelerometer`` in either version.
+    bias_drift : BiasDrift or None
+        The bias instability and rate random walk the bias's σ includes (their variance over
+        the run) and the bias's expected wander in the hour after the calibration
+        (:mod:`gyrocal.calib.drift`), written as the document's ``bias_drift`` in either
+        version; None in older documents (σ then has the white noise only).
     """
 
     scale: tuple[float, float, float]
@@ -338,6 +345,7 @@ class GyroCalibration:
     temperature_model: ThermalModel | None = field(default=None, hash=False)
     g_sensitivity: dict[str, Any] | None = field(default=None, hash=False)
     accelerometer: AccelCalibration | None = field(default=None, hash=False)
+    bias_drift: BiasDrift | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
@@ -533,6 +541,8 @@ class GyroCalibration:
             doc["temperature_model"] = self.temperature_model.to_dict()
         if self.accelerometer is not None:
             doc["accelerometer"] = self.accelerometer.to_dict()
+        if self.bias_drift is not None:
+            doc["bias_drift"] = self.bias_drift.to_dict()
         return doc
 
     def to_json(self) -> str:
@@ -554,7 +564,8 @@ class GyroCalibration:
         if not isinstance(doc, Mapping):
             raise CalibrationFormatError("a calibration document must be a JSON object")
         full = _check_header(doc)
-        known = _V1_FIELDS + _THERMAL_FIELDS + _ACCEL_FIELDS + (_V2_FIELDS if full else ())
+        known = (_V1_FIELDS + _THERMAL_FIELDS + _ACCEL_FIELDS + _DRIFT_FIELDS
+                 + (_V2_FIELDS if full else ()))
         _refuse_unknown(doc, known,
                         f"a version {VERSION_FULL if full else VERSION} calibration")
         kw = _read_model(doc, full)
@@ -752,6 +763,8 @@ def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:
         "axes": None if axes is None else dict(axes),
         "temperature_model": _read_thermal(doc.get("temperature_model")),
         "accelerometer": _read_accel(doc.get("accelerometer")),
+        "bias_drift": (None if doc.get("bias_drift") is None
+                       else BiasDrift.from_dict(doc["bias_drift"])),
     }
 
 

@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from gyrocal.calib.accel import AccelCalibration
+from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
-from gyrocal.calib.estimators import FitResult, estimate
+from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
 from gyrocal.kit.errors import EstimationError, InputError
@@ -232,6 +233,24 @@ def fit_recording_accelerometer(
     return replace(fit, noise_density=density, noise_density_std=std, noise_tau_s=tau), None
 
 
+def chip_bias_drift(model: Any, ex: ExtractedWindows) -> BiasDrift:
+    """The bias instability and rate random walk of the chip ``model`` (a manifest's
+    ``sensor.model``) from the chip data (:class:`gyrocal.drivers.imu.chips.GyroErrors`; the
+    stated assumption there for a chip without the figures, or a model gyrocal does not know),
+    over the span of the run's windows and rests (:mod:`gyrocal.calib.drift`)."""
+    from gyrocal.drivers.imu import READER_CLASSES, READERS
+    from gyrocal.drivers.imu.chips import GyroErrors
+
+    if isinstance(model, str) and model in READER_CLASSES:
+        ge = READERS[model].family.gyro_errors
+    else:
+        ge = GyroErrors(0.0, 0.0, 0.0, "")
+    spans = [w.corners for w in (*ex.windows, *ex.rests)]
+    span = max(c[3] for c in spans) - min(c[0] for c in spans) if spans else 0.0
+    return BiasDrift(ge.bias_instability_rad_s, ge.rate_random_walk_rad_s_sqrt_s, span,
+                     source=ge.drift_source)
+
+
 def estimate_recording(
     rec: Recording, method: str = AUTO, *, source: str | None = None,
     gravity_m_s2: float | None = None,
@@ -251,6 +270,9 @@ def estimate_recording(
     fit, notes = _fit(ex, method, rec.sensor.get("model"), rec.path)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
+    drift = chip_bias_drift(rec.sensor.get("model"), ex)
+    fit = add_bias_drift(fit, drift)
+    notes = (*notes, drift.note())
     cal = fit.to_calibration(
         sensor=rec.sensor,
         temperature_c=ex.observations.temperature_c,

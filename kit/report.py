@@ -229,6 +229,18 @@ def inconsistency_causes(cal: GyroCalibration) -> str:
         "first: " + "; ".join(f"({i}) {c}" for i, c in enumerate(causes, 1))
 
 
+def _drift_rows(d: Any) -> list[str]:
+    """The bias's wander (:class:`gyrocal.calib.drift.BiasDrift`): what its σ includes, and
+    how far it may move in the hour after the calibration."""
+    run = np.sqrt(d.run_variance)
+    return [f"bias wander in the {d.horizon_s / 3600:g} h after calibration (1 sigma): "
+            + " ".join(f"{x:.1e}" for x in d.wander) + " rad/s"
+            f" (bias instability {max(d.bias_instability):.2g} rad/s, rate random walk "
+            f"{max(d.rate_random_walk):.2g} rad/s/√s: {d.source});",
+            f"  the bias ± std above includes its wander over the {d.span_s:.0f} s run, "
+            + " ".join(f"{x:.1e}" for x in run) + " rad/s"]
+
+
 def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
     c = cal.consistency
     if c is None:
@@ -249,5 +261,8 @@ def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
                 f"  servo {motor}: [{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]  nearest {info['nearest']}"
                 f", off by {info['misalignment_deg']:.2f}° ± {info['std_deg']:.3f}°"
             )
+    if cal.bias_drift is not None:
+        lines.append("")
+        lines += _drift_rows(cal.bias_drift)
     if cal.temperature_c is not None:
         lines.append(f"\nmean die temperature: {cal.temperature_c:.1f} °C")

@@ -122,6 +122,17 @@ class AccelErrors:
             raise ValueError(f"accelerometer error figures must be finite and >= 0: {self!r}")
 
 
+#: Bias instability ``B`` (°/h) and rate random walk ``K`` (rad/s/√s) taken for a gyro whose
+#: datasheet gives neither (none of the chips here publishes them) ⚠: typical of consumer MEMS
+#: gyros (an Allan floor of 0.664·B near 10-100 s, the random walk crossing it near 1000 s), the
+#: same figures the emulated sensor of ``--sim`` has (``gyrocal.kit.sim.SIM_REALISM_FIGURES``).
+#: Measure a sensor's own with ``gyrocal noise`` on a long still recording.
+ASSUMED_BIAS_INSTABILITY_DEG_H = 10.0
+ASSUMED_RATE_RANDOM_WALK = 2e-6
+ASSUMED_DRIFT_SOURCE = ("assumed typical of consumer MEMS gyros, not in the datasheet "
+                        "(drivers/imu/chips.py) ⚠")
+
+
 @dataclass(frozen=True)
 class GyroErrors:
     """The gyro's calibration error sizes a chip's datasheet gives: the emulated sensor of
@@ -138,15 +149,26 @@ class GyroErrors:
         Initial zero-rate output (bias) tolerance, °/s (±).
     source : str
         The datasheet, its revision and table; what is not in it is named as a stand-in (⚠).
+    bias_instability_deg_h : float
+        Bias instability ``B`` (IEEE Std 952 flicker coefficient), °/h; the calibration's bias
+        σ includes its wander over the run (:mod:`gyrocal.calib.drift`).
+    rate_random_walk_rad_s_sqrt_s : float
+        Rate random walk ``K``, rad/s/√s.
+    drift_source : str
+        Where ``B`` and ``K`` come from.
     """
 
     scale_tolerance: float
     cross_axis: float
     zero_rate_dps: float
     source: str
+    bias_instability_deg_h: float = ASSUMED_BIAS_INSTABILITY_DEG_H
+    rate_random_walk_rad_s_sqrt_s: float = ASSUMED_RATE_RANDOM_WALK
+    drift_source: str = ASSUMED_DRIFT_SOURCE
 
     def __post_init__(self) -> None:
-        figs = (self.scale_tolerance, self.cross_axis, self.zero_rate_dps)
+        figs = (self.scale_tolerance, self.cross_axis, self.zero_rate_dps,
+                self.bias_instability_deg_h, self.rate_random_walk_rad_s_sqrt_s)
         if not all(math.isfinite(x) and x >= 0 for x in figs):
             raise ValueError(f"gyro error figures must be finite and >= 0: {self!r}")
 
@@ -154,6 +176,11 @@ class GyroErrors:
     def zero_rate_rad_s(self) -> float:
         """The zero-rate offset tolerance in rad/s."""
         return self.zero_rate_dps * RAD_PER_DEG
+
+    @property
+    def bias_instability_rad_s(self) -> float:
+        """The bias instability ``B`` in rad/s."""
+        return self.bias_instability_deg_h * RAD_PER_DEG / 3600.0
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,76 @@
+"""The bias's wander within and after a run (calib/drift.py) and where a calibration carries it."""
+
+import json
+
+import numpy as np
+import pytest
+
+from gyrocal.calib.drift import BiasDrift
+from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
+from gyrocal.calib.estimators import FitResult, add_bias_drift
+from gyrocal.calib.model import GyroCalibration
+from tests.calib.test_model import make_cal, make_full
+
+
+def test_random_walk_run_average_variance_matches_a_direct_simulation():
+    # independent truth: random walks drawn step by step, each averaged uniformly over the run
+    # and compared with its value at the run's centre
+    rng = np.random.default_rng(30)
+    K, T, n, walks = 3e-5, 400.0, 400, 20000
+    dt = T / n
+    w = np.cumsum(rng.standard_normal((walks, n)) * K * np.sqrt(dt), axis=1)
+    mid = w[:, n // 2 - 1]  # the walk at t = T/2
+    err = w.mean(axis=1) - mid
+    want = BiasDrift(0.0, K, T).run_variance
+    assert want == pytest.approx(np.full(3, K**2 * T / 12))
+    # sample variance of 20000 draws: relative standard error sqrt(2/20000) = 1 %
+    assert np.var(err) == pytest.approx(want[0], rel=0.05)
+    # about the run's start instead the variance is K² T / 3, four times more: the centre matters
+    assert np.var(w.mean(axis=1)) == pytest.approx(4 * want[0], rel=0.05)
+
+
+def test_bias_instability_adds_its_square_and_the_hour_after_adds_the_walk():
+    d = BiasDrift((1e-5, 2e-5, 3e-5), 2e-6, 60.0)
+    B = np.array([1e-5, 2e-5, 3e-5])
+    assert d.run_variance == pytest.approx(B**2 + 4e-12 * 60 / 12)
+    assert d.wander == pytest.approx(np.sqrt(B**2 + 4e-12 * 3600))
+    with pytest.raises(CalibInputError, match="span_s"):
+        BiasDrift(1e-5, 2e-6, -1.0)
+    with pytest.raises(CalibInputError, match="rate_random_walk"):
+        BiasDrift(1e-5, (1.0, float("nan"), 1.0), 10.0)
+
+
+@pytest.mark.parametrize("full", [False, True])
+def test_added_variance_lands_on_the_bias_diagonal_only(full):
+    n = 12 if full else 6
+    cov = np.diag(np.arange(1, n + 1) * 1e-10)
+    cov[0, n - 1] = cov[n - 1, 0] = 3e-11
+    fit = FitResult(method="m", scale=np.ones(3), bias=np.zeros(3), covariance=cov,
+                    iterations=1, success=True, status="converged", message="",
+                    matrix=np.eye(3) if full else None)
+    d = BiasDrift((4e-5, 5e-5, 6e-5), 1e-6, 100.0)
+    out = add_bias_drift(fit, d)
+    added = out.covariance - cov
+    assert np.allclose(added[-3:, -3:], np.diag(d.run_variance), rtol=1e-12, atol=0)
+    added[-3:, -3:] -= np.diag(d.run_variance)
+    assert np.all(np.abs(added) < 1e-20)  # rounding of ~1e-9 sums
+    assert add_bias_drift(out, d) is out  # not added twice
+    cal = out.to_calibration()
+    assert cal.bias_drift == d
+    assert np.allclose(np.square(cal.bias_std), np.diag(cov)[-3:] + d.run_variance)
+
+
+@pytest.mark.parametrize("make", [make_cal, make_full])
+def test_documents_without_bias_drift_still_read_and_with_it_round_trip(make):
+    old = make()  # what the code before bias_drift wrote: no such field
+    doc = old.to_dict()
+    assert "bias_drift" not in doc
+    assert GyroCalibration.from_json(json.dumps(doc)).bias_drift is None
+    d = BiasDrift((4e-5, 5e-5, 6e-5), 2e-6, 42.0, source="assumed ⚠")
+    doc = make(bias_drift=d).to_dict()
+    back = GyroCalibration.from_json(json.dumps(doc))
+    assert back.bias_drift == d
+    assert doc["bias_drift"]["wander"] == pytest.approx(list(d.wander))
+    doc["bias_drift"]["bais_instability"] = doc["bias_drift"].pop("bias_instability")
+    with pytest.raises(CalibrationFormatError, match="bias_drift.bais_instability"):
+        GyroCalibration.from_dict(doc)
