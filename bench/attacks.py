@@ -4,7 +4,9 @@ One case per cause the audit reproduced, by area: ``--force`` over user files an
 values, ``verify`` of correct calibrations and of hostile calibration paths, unit and axis
 mistakes, strings that reach a formatter (matplotlib mathtext, a terminal, a C comment), input
 bombs (a TOML key of 50,000 parts, endless standard input, a huge integer, deep nesting, a key
-given twice), a damaged history, and a servo adapter pulled mid-turn.
+given twice), a damaged history, a servo adapter pulled mid-turn, the servo emulator frozen
+(SIGSTOP) mid-turn with and without its port's buffer full (a hung port), and a disk that fills
+during the recording or the plots.
 
 Every case says what a right outcome is (``expect``: ``ok`` = the command does its work, exit 0
 or 3; ``refuse`` = a clean refusal, exit 2, 4 or 6 with one ``gyrocal: error:`` line) and how its
@@ -27,6 +29,7 @@ import json
 import os
 import resource
 import shutil
+import signal
 import sqlite3
 import stat
 import subprocess
@@ -129,6 +132,8 @@ def run_case(case: Case, root: Path) -> Result:
     spec = case.setup(d)
     code, out, err, seconds = _run(spec["argv"], stdin=spec.get("stdin"),
                                    cwd=spec.get("cwd", d), timeout_s=case.timeout_s)
+    while _EMULATORS:
+        _EMULATORS.pop().close()
     outcome = _judge(case, code, out, err, seconds)
     if case.before_jig and outcome == "refused" and _staged(d):
         outcome = "late refusal"
@@ -458,6 +463,100 @@ def _pulled_adapter(d: Path) -> dict:
                      "--quiet"]}
 
 
+class FrozenEmulator:
+    """``gyrocal emulate --pty`` in a process of its own, which can be frozen with SIGSTOP.
+
+    Frozen, the servos answer nothing and the PTY keeps what the kit writes until its buffer is
+    full; :meth:`freeze` with ``fill=True`` fills it first, so the kit's next write blocks (a hung
+    port: an adapter or driver that stopped taking data). :meth:`close` thaws and ends it.
+    """
+
+    def __init__(self, ids: tuple[int, ...] = (1, 2)) -> None:
+        self.ids = tuple(ids)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "gyrocal.kit", "emulate", "--pty",
+             "--ids", ",".join(map(str, self.ids))],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        self.path = self.proc.stdout.readline().strip()
+        self.frozen_at: float | None = None
+
+    def freeze(self, *, fill: bool = False) -> int:
+        """SIGSTOP the emulator; with ``fill``, write into its PTY until it takes no more.
+        Returns the bytes written."""
+        os.kill(self.proc.pid, signal.SIGSTOP)
+        self.frozen_at = time.monotonic()
+        written = 0
+        if fill:
+            fd = os.open(self.path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+            try:
+                # whole pages, then the last bytes one by one; again after a pause until a round
+                # takes nothing (the kernel moves data on to the reader's side in the background)
+                while True:
+                    before = written
+                    for size in (4096, 1):
+                        while True:
+                            try:
+                                written += os.write(fd, b"\0" * size)
+                            except BlockingIOError:
+                                break
+                    if written == before:
+                        break
+                    time.sleep(0.05)
+            finally:
+                os.close(fd)
+        return written
+
+    def close(self) -> None:
+        """Thaw and stop the emulator."""
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGCONT)
+            self.proc.terminate()
+            self.proc.wait(timeout=30)
+        self.proc.stdout.close()
+
+
+def turning(recording: Path, rad: float = 0.2) -> bool:
+    """Whether ``recording/encoder.csv`` (flushed row by row) has a servo ``rad`` from home."""
+    try:
+        rows = (recording / "encoder.csv").read_text().splitlines()[1:]
+    except OSError:
+        return False
+    return any(abs(float(r.split(",")[2])) > rad for r in rows if r.count(",") == 2)
+
+
+def freeze_when_turning(emulator: FrozenEmulator, recording: Path, *, fill: bool,
+                        within_s: float = 120.0) -> threading.Thread:
+    """Freeze ``emulator`` (see :meth:`FrozenEmulator.freeze`) once the run recording into
+    ``recording`` has a servo turning, from a thread; the thread is returned started."""
+    def watch() -> None:
+        deadline = time.monotonic() + within_s
+        while not turning(recording) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        emulator.freeze(fill=fill)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def _frozen_link(fill: bool) -> Callable[[Path], dict]:
+    def setup(d: Path) -> dict:
+        from bench.signal_rig import write_config
+
+        emulator = FrozenEmulator()
+        _EMULATORS.append(emulator)
+        cfg = write_config(d / "gyrocal.toml", emulator.path, ids=emulator.ids, retries=30,
+                           watchdog_s=2.5)
+        freeze_when_turning(emulator, d / "run" / "recording", fill=fill)
+        return {"argv": ["calibrate", "--sim-imu", "--config", str(cfg), "--out",
+                         str(d / "run"), "--quiet"]}
+    return setup
+
+
+#: Emulator processes the frozen-link cases started (ended after the case: :func:`run_case`).
+_EMULATORS: list[FrozenEmulator] = []
+
+
 def _link_message(d: Path, code: int | None, out: str, err: str) -> str | None:
     m = d / "run" / "recording" / "manifest.json"
     if code != 4 or "torque off" not in err or not m.exists() \
@@ -510,6 +609,10 @@ CASES: list[Case] = [
     Case("history", "created 0001-01-01 +01:00", "refuse", _created("0001-01-01T00:00:00+01:00")),
     Case("servo link", "adapter pulled mid-turn", "refuse", _pulled_adapter, _link_message,
          timeout_s=180),
+    Case("servo link", "emulator frozen mid-turn", "refuse", _frozen_link(False),
+         _link_message, timeout_s=180),
+    Case("servo link", "port hung mid-turn (frozen, full)", "refuse", _frozen_link(True),
+         _link_message, timeout_s=180),
 ]
 
 OUTCOMES = ["ok", "refused", "late refusal", "silent wrong", "exit 1 / traceback", "hang",
