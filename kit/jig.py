@@ -479,8 +479,11 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 progress.close()
                 # The servo link's timing, on a failed run too: the longest gap between polls
                 # while a servo moved, against the Bus Watchdog that would have stopped it
-                # (hardware reference §5). A failed write must not hide the run's own error.
-                with contextlib.suppress(OSError):
+                # (hardware reference §5). A failed write (atomic_write_json's InputError on a full
+                # disk) must not hide the run's own error.
+                from gyrocal.kit.errors import InputError
+
+                with contextlib.suppress(OSError, InputError):
                     writer.update_manifest(protocol={
                         **writer.manifest["protocol"],
                         "worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
