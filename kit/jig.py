@@ -542,7 +542,9 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
             if jig.sim is not None:
                 _write_sim_state(jig, out, quietly=failed is not None or interrupted is not None)
             if failed is not None:  # said before the error itself (the last line)
-                print(f"gyrocal: note: {_kept(jig, rec_dir)}", file=sys.stderr)
+                stopped = ("servos stopped, torque off confirmed on every servo; "
+                           if getattr(jig.gimbal, "torque_off_confirmed", None) else "")
+                print(f"gyrocal: note: {stopped}{_kept(jig, rec_dir)}", file=sys.stderr)
     if interrupted is not None:
         signum = getattr(interrupted, "signum", 2)
         what = {2: "interrupted", 15: "terminated", 1: "hung up"}.get(signum, "stopped")

@@ -404,6 +404,8 @@ class Gimbal:
         #: The time since the previous packet of the motion at the latest poll, s (0 at rest).
         self.last_poll_gap_s = 0.0
         self.is_open = False
+        #: Whether the last stop read Torque Enable 0 back from every servo (None: no stop yet).
+        self.torque_off_confirmed: bool | None = None
         self._tick_state: dict[int, tuple[int, float, float]] = {}
         self._group: GroupSyncRead | None = None
         self._old_handlers: dict[int, object] = {}
@@ -1190,9 +1192,11 @@ class Gimbal:
     def _stop(self) -> None:
         self.port.is_using = False
         self.motion = None
+        self.torque_off_confirmed = False
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
         try:
             self._stop_and_confirm(known)
+            self.torque_off_confirmed = True
         except ServoLinkLostError as exc:
             what = ("the servo port hangs" if isinstance(exc, ServoPortHungError)
                     else "the servo link is gone")
