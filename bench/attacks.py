@@ -25,6 +25,7 @@ changed), ``bad message`` (a refusal that echoes kilobytes of its input).
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import resource
@@ -41,6 +42,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -87,10 +89,15 @@ def _limit() -> None:
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
 
 
-def _run(argv: list[str], *, stdin: bytes | None, cwd: Path, timeout_s: float
+def _run(argv: list[str], *, stdin: bytes | None, cwd: Path, timeout_s: float,
+         full_disk: tuple[int | None, int | None] | None = None
          ) -> tuple[int | None, str, str, float]:
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "gyrocal.kit", *argv], cwd=cwd,
+    head = ["-m", "gyrocal.kit"]
+    if full_disk is not None:  # the command on a disk that fills (FullDisk)
+        head = ["-c", _FULL_DISK_MAIN.format(root=str(Path(__file__).resolve().parents[1])),
+                *("-" if v is None else str(v) for v in full_disk)]
+    proc = subprocess.Popen([sys.executable, *head, *argv], cwd=cwd,
                             stdin=subprocess.PIPE if stdin is not None else subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_limit)
     try:
@@ -131,7 +138,8 @@ def run_case(case: Case, root: Path) -> Result:
     d.mkdir(parents=True)
     spec = case.setup(d)
     code, out, err, seconds = _run(spec["argv"], stdin=spec.get("stdin"),
-                                   cwd=spec.get("cwd", d), timeout_s=case.timeout_s)
+                                   cwd=spec.get("cwd", d), timeout_s=case.timeout_s,
+                                   full_disk=spec.get("full_disk"))
     while _EMULATORS:
         _EMULATORS.pop().close()
     outcome = _judge(case, code, out, err, seconds)
@@ -553,6 +561,96 @@ def _frozen_link(fill: bool) -> Callable[[Path], dict]:
     return setup
 
 
+class FullDisk:
+    """A disk that fills: the recording writer's files (:mod:`gyrocal.kit.recording`) and every
+    atomic write (:mod:`gyrocal.kit.fileio`: ``manifest.json``, ``sim-state.json``, each plot)
+    share ``left`` bytes (None: no limit) and ``files_left`` new atomic files (None: no limit);
+    past either, a write, a flush or a new file fails with ``OSError(ENOSPC)`` as on a full
+    filesystem. Portable (no root, no small filesystem): ``patch`` is ``setattr`` in a
+    subprocess, or pytest's ``monkeypatch.setattr``.
+    """
+
+    def __init__(self, patch: Callable[..., None], left: int | None,
+                 files_left: int | None = None) -> None:
+        import builtins
+        import types
+
+        from gyrocal.kit import fileio, recording
+
+        self.left = left
+        self.files_left = files_left
+        disk = self
+
+        class File:
+            def __init__(self, fh: Any) -> None:
+                self._fh = fh
+
+            def write(self, text: str) -> int:
+                disk.take(len(text))
+                return self._fh.write(text)
+
+            def flush(self) -> None:
+                disk.take(0)
+                self._fh.flush()
+
+            def __getattr__(self, name: str) -> Any:
+                return getattr(self._fh, name)
+
+        def open_(path: Any, *args: Any, **kwargs: Any) -> File:
+            return File(builtins.open(path, *args, **kwargs))
+
+        def mkstemp(*args: Any, **kwargs: Any) -> tuple[int, str]:
+            if disk.files_left is not None:
+                disk.files_left -= 1
+            disk.take(0)
+            return tempfile.mkstemp(*args, **kwargs)
+
+        if patch is setattr:  # the module has no ``open`` of its own (builtins'), pytest needs
+            recording.open = open_
+        else:  # raising=False to add it
+            patch(recording, "open", open_, raising=False)
+        patch(fileio, "tempfile", types.SimpleNamespace(mkstemp=mkstemp))
+
+    def take(self, n: int) -> None:
+        """Use ``n`` bytes; ENOSPC once the space or the files are gone."""
+        if self.left is not None:
+            self.left -= n
+        if (self.left is not None and self.left < 0) or \
+                (self.files_left is not None and self.files_left < 0):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+
+#: The code a disk-full case runs instead of ``-m gyrocal.kit``: a :class:`FullDisk` with the
+#: bytes and files of ``sys.argv[1:3]`` ("-": no limit), then ``gyrocal`` with the rest.
+_FULL_DISK_MAIN = (
+    "import sys; sys.path.insert(0, {root!r}); from bench.attacks import FullDisk; "
+    "lim = [None if a == '-' else int(a) for a in sys.argv[1:3]]; FullDisk(setattr, *lim); "
+    "from gyrocal.kit.cli import main; sys.exit(main(sys.argv[3:]))")
+
+
+def _disk_full(left: int | None, files_left: int | None, report: bool) -> Callable[[Path], dict]:
+    def setup(d: Path) -> dict:
+        argv = _calibrate(d, str(d / "out"))
+        if report:
+            argv.remove("--no-report")
+        return {"argv": argv, "full_disk": (left, files_left)}
+    return setup
+
+
+def _disk_full_named(what: str) -> Callable:
+    def check(d: Path, code: int | None, out: str, err: str) -> str | None:
+        last = (err.strip().splitlines() or [""])[-1]
+        if what == "recording":
+            m = d / "out" / "recording" / "manifest.json"
+            ok = (code == 2 and "the recording's imu.csv" in last and m.exists()
+                  and json.loads(m.read_text()).get("complete") is False)
+        else:  # the plots: the calibration kept, and the warning says so
+            ok = (code in (0, 3) and (d / "out" / "calibration.json").exists()
+                  and "calibration.json and the recording are complete" in err)
+        return None if ok else "silent wrong"
+    return check
+
+
 #: Emulator processes the frozen-link cases started (ended after the case: :func:`run_case`).
 _EMULATORS: list[FrozenEmulator] = []
 
@@ -610,9 +708,13 @@ CASES: list[Case] = [
     Case("servo link", "adapter pulled mid-turn", "refuse", _pulled_adapter, _link_message,
          timeout_s=180),
     Case("servo link", "emulator frozen mid-turn", "refuse", _frozen_link(False),
-         _link_message, timeout_s=180),
+         _link_message, timeout_s=120),
     Case("servo link", "port hung mid-turn (frozen, full)", "refuse", _frozen_link(True),
-         _link_message, timeout_s=180),
+         _link_message, timeout_s=120),
+    Case("disk full", "during the recording", "refuse", _disk_full(20_000, None, False),
+         _disk_full_named("recording"), timeout_s=180),
+    Case("disk full", "while plotting", "ok", _disk_full(None, 3, True),
+         _disk_full_named("plots"), timeout_s=300),
 ]
 
 OUTCOMES = ["ok", "refused", "late refusal", "silent wrong", "exit 1 / traceback", "hang",

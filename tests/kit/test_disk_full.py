@@ -1,71 +1,21 @@
 """A disk that fills during a run: the failure is named where it happened, and what was written
 is said (issue 27).
 
-The disk is simulated (portable, no root, no small filesystem): :class:`FullDisk` gives every
-file the recording writer opens, and every atomic write (:mod:`gyrocal.kit.fileio`, through
-which ``manifest.json``, ``sim-state.json`` and each plot are written), a shared quota of bytes;
-past it a write fails with ``OSError(ENOSPC)`` as on a full filesystem, and so does creating a
-new file.
+The disk is simulated (portable, no root, no small filesystem): ``bench.attacks.FullDisk``
+gives the recording writer's files and every atomic write (``manifest.json``,
+``sim-state.json``, each plot) a shared quota; past it a write fails with ``OSError(ENOSPC)``.
 """
 
 from __future__ import annotations
 
-import builtins
-import errno
 import json
-import tempfile
-import types
 
 import pytest
 
-from gyrocal.kit import fileio, recording
+from bench.attacks import FullDisk
+from gyrocal.kit import recording
 from gyrocal.kit.cli import main
 from gyrocal.kit.errors import InputError
-
-
-class FullDisk:
-    """``left`` bytes of free space shared by the patched writes (None: not full yet)."""
-
-    def __init__(self, monkeypatch: pytest.MonkeyPatch, left: int | None,
-                 files_left: int | None = None) -> None:
-        self.left = left
-        self.files_left = files_left  # new files (atomic writes) that may still be created
-        disk = self
-
-        class File:
-            def __init__(self, fh):
-                self._fh = fh
-
-            def write(self, text):
-                disk.take(len(text))
-                return self._fh.write(text)
-
-            def flush(self):
-                disk.take(0)
-                return self._fh.flush()
-
-            def __getattr__(self, name):
-                return getattr(self._fh, name)
-
-        def open_(path, *args, **kwargs):
-            return File(builtins.open(path, *args, **kwargs))
-
-        def mkstemp(*args, **kwargs):
-            if disk.files_left is not None:
-                disk.files_left -= 1
-            disk.take(0)
-            return tempfile.mkstemp(*args, **kwargs)
-
-        monkeypatch.setattr(recording, "open", open_, raising=False)
-        monkeypatch.setattr(fileio, "tempfile", types.SimpleNamespace(mkstemp=mkstemp))
-
-    def take(self, n: int) -> None:
-        if self.left is not None:
-            self.left -= n
-        if (self.left is not None and self.left < 0) or \
-                (self.files_left is not None and self.files_left < 0):
-            raise OSError(errno.ENOSPC, "No space left on device")
-
 
 SHORT = "[gimbal]\nsample_hz = 100.0\n[protocol]\nspeed_dps = 240\nturns = 1\nrest_s = 0.4\n"
 
@@ -75,7 +25,7 @@ def test_a_disk_full_during_the_recording_names_the_recording(tmp_path, monkeypa
     named; and once the manifest could not be written either, the failure to write
     ``manifest.json`` (in the jig's own clean-up) replaced it."""
     (tmp_path / "g.toml").write_text(SHORT)
-    FullDisk(monkeypatch, left=20_000)  # the disk fills a few hundred samples in
+    FullDisk(monkeypatch.setattr, left=20_000)  # the disk fills a few hundred samples in
     code = main(["calibrate", "--sim", "--config", str(tmp_path / "g.toml"), "--out",
                  str(tmp_path / "out"), "--quiet", "--no-report", "--sim-realism", "off"])
     err = capsys.readouterr().err
@@ -92,7 +42,7 @@ def test_a_disk_full_during_the_recording_names_the_recording(tmp_path, monkeypa
 
 def test_a_recording_that_cannot_be_flushed_at_its_end_is_not_marked_complete(tmp_path,
                                                                                monkeypatch):
-    disk = FullDisk(monkeypatch, left=None)
+    disk = FullDisk(monkeypatch.setattr, left=None)
     w = recording.RecordingWriter(tmp_path / "rec", sensor={}, gimbal={}, protocol={})
     w.append_encoder(0.0, [1], [0.0])
     disk.left = -1  # full from here: the flushes at the end, and the manifest
@@ -112,7 +62,7 @@ def test_a_disk_full_while_plotting_says_the_calibration_is_complete(tmp_path, m
     assert main(["simulate-recording", str(tmp_path / "rec"), "--seed", "4"]) == 0
     rec = load_recording(tmp_path / "rec")
     est = estimate_recording(rec)
-    FullDisk(monkeypatch, left=None, files_left=1)  # room for one plot
+    FullDisk(monkeypatch.setattr, left=None, files_left=1)  # room for one plot
     note = write_optional_report(rec, est.calibration, est.extracted, tmp_path / "plots",
                                  title="t", html_path=tmp_path / "report.html")
     assert len(list((tmp_path / "plots").glob("*.png"))) == 1  # half a plots/
