@@ -90,7 +90,7 @@ def _limit() -> None:
 
 
 def _run(argv: list[str], *, stdin: bytes | None, cwd: Path, timeout_s: float,
-         full_disk: tuple[int | None, int | None] | None = None
+         full_disk: tuple[int | None, int | None, str | None] | None = None
          ) -> tuple[int | None, str, str, float]:
     t0 = time.perf_counter()
     head = ["-m", "gyrocal.kit"]
@@ -564,14 +564,15 @@ def _frozen_link(fill: bool) -> Callable[[Path], dict]:
 class FullDisk:
     """A disk that fills: the recording writer's files (:mod:`gyrocal.kit.recording`) and every
     atomic write (:mod:`gyrocal.kit.fileio`: ``manifest.json``, ``sim-state.json``, each plot)
-    share ``left`` bytes (None: no limit) and ``files_left`` new atomic files (None: no limit);
-    past either, a write, a flush or a new file fails with ``OSError(ENOSPC)`` as on a full
-    filesystem. Portable (no root, no small filesystem): ``patch`` is ``setattr`` in a
-    subprocess, or pytest's ``monkeypatch.setattr``.
+    share ``left`` bytes (None: no limit) and ``files_left`` new atomic files (None: no limit;
+    with ``files_in``, only those in a directory of that name count: ``"plots"``); past either,
+    a write, a flush or a new file fails with ``OSError(ENOSPC)`` as on a full filesystem.
+    Portable (no root, no small filesystem): ``patch`` is ``setattr`` in a subprocess, or
+    pytest's ``monkeypatch.setattr``.
     """
 
     def __init__(self, patch: Callable[..., None], left: int | None,
-                 files_left: int | None = None) -> None:
+                 files_left: int | None = None, files_in: str | None = None) -> None:
         import builtins
         import types
 
@@ -600,7 +601,8 @@ class FullDisk:
             return File(builtins.open(path, *args, **kwargs))
 
         def mkstemp(*args: Any, **kwargs: Any) -> tuple[int, str]:
-            if disk.files_left is not None:
+            counts = files_in is None or Path(kwargs.get("dir", "")).name == files_in
+            if disk.files_left is not None and counts:
                 disk.files_left -= 1
             disk.take(0)
             return tempfile.mkstemp(*args, **kwargs)
@@ -621,19 +623,21 @@ class FullDisk:
 
 
 #: The code a disk-full case runs instead of ``-m gyrocal.kit``: a :class:`FullDisk` with the
-#: bytes and files of ``sys.argv[1:3]`` ("-": no limit), then ``gyrocal`` with the rest.
+#: bytes, files and directory of ``sys.argv[1:4]`` ("-": none), then ``gyrocal`` with the rest.
 _FULL_DISK_MAIN = (
     "import sys; sys.path.insert(0, {root!r}); from bench.attacks import FullDisk; "
-    "lim = [None if a == '-' else int(a) for a in sys.argv[1:3]]; FullDisk(setattr, *lim); "
-    "from gyrocal.kit.cli import main; sys.exit(main(sys.argv[3:]))")
+    "lim = [None if a == '-' else int(a) for a in sys.argv[1:3]]; "
+    "FullDisk(setattr, *lim, None if sys.argv[3] == '-' else sys.argv[3]); "
+    "from gyrocal.kit.cli import main; sys.exit(main(sys.argv[4:]))")
 
 
-def _disk_full(left: int | None, files_left: int | None, report: bool) -> Callable[[Path], dict]:
+def _disk_full(left: int | None, files_left: int | None, files_in: str | None
+               ) -> Callable[[Path], dict]:
     def setup(d: Path) -> dict:
         argv = _calibrate(d, str(d / "out"))
-        if report:
+        if files_in == "plots":
             argv.remove("--no-report")
-        return {"argv": argv, "full_disk": (left, files_left)}
+        return {"argv": argv, "full_disk": (left, files_left, files_in)}
     return setup
 
 
@@ -711,9 +715,9 @@ CASES: list[Case] = [
          _link_message, timeout_s=120),
     Case("servo link", "port hung mid-turn (frozen, full)", "refuse", _frozen_link(True),
          _link_message, timeout_s=120),
-    Case("disk full", "during the recording", "refuse", _disk_full(20_000, None, False),
+    Case("disk full", "during the recording", "refuse", _disk_full(20_000, None, None),
          _disk_full_named("recording"), timeout_s=180),
-    Case("disk full", "while plotting", "ok", _disk_full(None, 3, True),
+    Case("disk full", "while plotting", "ok", _disk_full(None, 1, "plots"),
          _disk_full_named("plots"), timeout_s=300),
 ]
 
