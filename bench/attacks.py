@@ -4,7 +4,9 @@ One case per cause the audit reproduced, by area: ``--force`` over user files an
 values, ``verify`` of correct calibrations and of hostile calibration paths, unit and axis
 mistakes, strings that reach a formatter (matplotlib mathtext, a terminal, a C comment), input
 bombs (a TOML key of 50,000 parts, endless standard input, a huge integer, deep nesting, a key
-given twice), a damaged history, and a servo adapter pulled mid-turn.
+given twice), a damaged history, a servo adapter pulled mid-turn, the servo emulator frozen
+(SIGSTOP) mid-turn with and without its port's buffer full (a hung port), and a disk that fills
+during the recording or the plots.
 
 Every case says what a right outcome is (``expect``: ``ok`` = the command does its work, exit 0
 or 3; ``refuse`` = a clean refusal, exit 2, 4 or 6 with one ``gyrocal: error:`` line) and how its
@@ -23,10 +25,12 @@ changed), ``bad message`` (a refusal that echoes kilobytes of its input).
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import resource
 import shutil
+import signal
 import sqlite3
 import stat
 import subprocess
@@ -38,6 +42,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -84,10 +89,15 @@ def _limit() -> None:
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
 
 
-def _run(argv: list[str], *, stdin: bytes | None, cwd: Path, timeout_s: float
+def _run(argv: list[str], *, stdin: bytes | None, cwd: Path, timeout_s: float,
+         full_disk: tuple[int | None, int | None, str | None] | None = None
          ) -> tuple[int | None, str, str, float]:
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "gyrocal.kit", *argv], cwd=cwd,
+    head = ["-m", "gyrocal.kit"]
+    if full_disk is not None:  # the command on a disk that fills (FullDisk)
+        head = ["-c", _FULL_DISK_MAIN.format(root=str(Path(__file__).resolve().parents[1])),
+                *("-" if v is None else str(v) for v in full_disk)]
+    proc = subprocess.Popen([sys.executable, *head, *argv], cwd=cwd,
                             stdin=subprocess.PIPE if stdin is not None else subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_limit)
     try:
@@ -128,7 +138,10 @@ def run_case(case: Case, root: Path) -> Result:
     d.mkdir(parents=True)
     spec = case.setup(d)
     code, out, err, seconds = _run(spec["argv"], stdin=spec.get("stdin"),
-                                   cwd=spec.get("cwd", d), timeout_s=case.timeout_s)
+                                   cwd=spec.get("cwd", d), timeout_s=case.timeout_s,
+                                   full_disk=spec.get("full_disk"))
+    while _EMULATORS:
+        _EMULATORS.pop().close()
     outcome = _judge(case, code, out, err, seconds)
     if case.before_jig and outcome == "refused" and _staged(d):
         outcome = "late refusal"
@@ -464,6 +477,194 @@ def _pulled_adapter(d: Path) -> dict:
                      "--quiet"]}
 
 
+class FrozenEmulator:
+    """``gyrocal emulate --pty`` in a process of its own, which can be frozen with SIGSTOP.
+
+    Frozen, the servos answer nothing and the PTY keeps what the kit writes until its buffer is
+    full; :meth:`freeze` with ``fill=True`` fills it first, so the kit's next write blocks (a hung
+    port: an adapter or driver that stopped taking data). :meth:`close` thaws and ends it.
+    """
+
+    def __init__(self, ids: tuple[int, ...] = (1, 2)) -> None:
+        self.ids = tuple(ids)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "gyrocal.kit", "emulate", "--pty",
+             "--ids", ",".join(map(str, self.ids))],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        self.path = self.proc.stdout.readline().strip()
+        self.frozen_at: float | None = None
+
+    def freeze(self, *, fill: bool = False) -> int:
+        """SIGSTOP the emulator; with ``fill``, write into its PTY until it takes no more.
+        Returns the bytes written."""
+        os.kill(self.proc.pid, signal.SIGSTOP)
+        self.frozen_at = time.monotonic()
+        written = 0
+        if fill:
+            fd = os.open(self.path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+            try:
+                # whole pages, then the last bytes one by one; again after a pause until a round
+                # takes nothing (the kernel moves data on to the reader's side in the background)
+                while True:
+                    before = written
+                    for size in (4096, 1):
+                        while True:
+                            try:
+                                written += os.write(fd, b"\0" * size)
+                            except BlockingIOError:
+                                break
+                    if written == before:
+                        break
+                    time.sleep(0.05)
+            finally:
+                os.close(fd)
+        return written
+
+    def close(self) -> None:
+        """Thaw and stop the emulator."""
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGCONT)
+            self.proc.terminate()
+            self.proc.wait(timeout=30)
+        self.proc.stdout.close()
+
+
+def turning(recording: Path, rad: float = 0.2) -> bool:
+    """Whether ``recording/encoder.csv`` (flushed row by row) has a servo ``rad`` from home."""
+    try:
+        rows = (recording / "encoder.csv").read_text().splitlines()[1:]
+    except OSError:
+        return False
+    return any(abs(float(r.split(",")[2])) > rad for r in rows if r.count(",") == 2)
+
+
+def freeze_when_turning(emulator: FrozenEmulator, recording: Path, *, fill: bool,
+                        within_s: float = 120.0) -> threading.Thread:
+    """Freeze ``emulator`` (see :meth:`FrozenEmulator.freeze`) once the run recording into
+    ``recording`` has a servo turning, from a thread; the thread is returned started."""
+    def watch() -> None:
+        deadline = time.monotonic() + within_s
+        while not turning(recording) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        emulator.freeze(fill=fill)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def _frozen_link(fill: bool) -> Callable[[Path], dict]:
+    def setup(d: Path) -> dict:
+        from bench.signal_rig import write_config
+
+        emulator = FrozenEmulator()
+        _EMULATORS.append(emulator)
+        cfg = write_config(d / "gyrocal.toml", emulator.path, ids=emulator.ids, retries=30,
+                           watchdog_s=2.5)
+        freeze_when_turning(emulator, d / "run" / "recording", fill=fill)
+        return {"argv": ["calibrate", "--sim-imu", "--config", str(cfg), "--out",
+                         str(d / "run"), "--quiet"]}
+    return setup
+
+
+class FullDisk:
+    """A disk that fills: the recording writer's files (:mod:`gyrocal.kit.recording`) and every
+    atomic write (:mod:`gyrocal.kit.fileio`: ``manifest.json``, ``sim-state.json``, each plot)
+    share ``left`` bytes (None: no limit) and ``files_left`` new atomic files (None: no limit;
+    with ``files_in``, only those in a directory of that name count: ``"plots"``); past either,
+    a write, a flush or a new file fails with ``OSError(ENOSPC)`` as on a full filesystem.
+    Portable (no root, no small filesystem): ``patch`` is ``setattr`` in a subprocess, or
+    pytest's ``monkeypatch.setattr``.
+    """
+
+    def __init__(self, patch: Callable[..., None], left: int | None,
+                 files_left: int | None = None, files_in: str | None = None) -> None:
+        import builtins
+        import types
+
+        from gyrocal.kit import fileio, recording
+
+        self.left = left
+        self.files_left = files_left
+        disk = self
+
+        class File:
+            def __init__(self, fh: Any) -> None:
+                self._fh = fh
+
+            def write(self, text: str) -> int:
+                disk.take(len(text))
+                return self._fh.write(text)
+
+            def flush(self) -> None:
+                disk.take(0)
+                self._fh.flush()
+
+            def __getattr__(self, name: str) -> Any:
+                return getattr(self._fh, name)
+
+        def open_(path: Any, *args: Any, **kwargs: Any) -> File:
+            return File(builtins.open(path, *args, **kwargs))
+
+        def mkstemp(*args: Any, **kwargs: Any) -> tuple[int, str]:
+            counts = files_in is None or Path(kwargs.get("dir", "")).name == files_in
+            if disk.files_left is not None and counts:
+                disk.files_left -= 1
+            disk.take(0)
+            return tempfile.mkstemp(*args, **kwargs)
+
+        if patch is setattr:  # the module has no ``open`` of its own (builtins'), pytest needs
+            recording.open = open_
+        else:  # raising=False to add it
+            patch(recording, "open", open_, raising=False)
+        patch(fileio, "tempfile", types.SimpleNamespace(mkstemp=mkstemp))
+
+    def take(self, n: int) -> None:
+        """Use ``n`` bytes; ENOSPC once the space or the files are gone."""
+        if self.left is not None:
+            self.left -= n
+        if (self.left is not None and self.left < 0) or \
+                (self.files_left is not None and self.files_left < 0):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+
+#: The code a disk-full case runs instead of ``-m gyrocal.kit``: a :class:`FullDisk` with the
+#: bytes, files and directory of ``sys.argv[1:4]`` ("-": none), then ``gyrocal`` with the rest.
+_FULL_DISK_MAIN = (
+    "import sys; sys.path.insert(0, {root!r}); from bench.attacks import FullDisk; "
+    "lim = [None if a == '-' else int(a) for a in sys.argv[1:3]]; "
+    "FullDisk(setattr, *lim, None if sys.argv[3] == '-' else sys.argv[3]); "
+    "from gyrocal.kit.cli import main; sys.exit(main(sys.argv[4:]))")
+
+
+def _disk_full(left: int | None, files_left: int | None, files_in: str | None
+               ) -> Callable[[Path], dict]:
+    def setup(d: Path) -> dict:
+        argv = _calibrate(d, str(d / "out"))
+        if files_in == "plots":
+            argv.remove("--no-report")
+        return {"argv": argv, "full_disk": (left, files_left, files_in)}
+    return setup
+
+
+def _disk_full_named(what: str) -> Callable:
+    def check(d: Path, code: int | None, out: str, err: str) -> str | None:
+        last = (err.strip().splitlines() or [""])[-1]
+        if what == "recording":
+            m = d / "out" / "recording" / "manifest.json"
+            ok = (code == 2 and "the recording's imu.csv" in last and m.exists()
+                  and json.loads(m.read_text()).get("complete") is False)
+        else:  # the plots: the calibration kept, and the warning says so
+            ok = (code in (0, 3) and (d / "out" / "calibration.json").exists()
+                  and "calibration.json and the recording are complete" in err)
+        return None if ok else "silent wrong"
+    return check
+
+
+#: Emulator processes the frozen-link cases started (ended after the case: :func:`run_case`).
+_EMULATORS: list[FrozenEmulator] = []
+
+
 def _link_message(d: Path, code: int | None, out: str, err: str) -> str | None:
     m = d / "run" / "recording" / "manifest.json"
     if code != 4 or "torque off" not in err or not m.exists() \
@@ -516,6 +717,14 @@ CASES: list[Case] = [
     Case("history", "created 0001-01-01 +01:00", "refuse", _created("0001-01-01T00:00:00+01:00")),
     Case("servo link", "adapter pulled mid-turn", "refuse", _pulled_adapter, _link_message,
          timeout_s=180),
+    Case("servo link", "emulator frozen mid-turn", "refuse", _frozen_link(False),
+         _link_message, timeout_s=120),
+    Case("servo link", "port hung mid-turn (frozen, full)", "refuse", _frozen_link(True),
+         _link_message, timeout_s=120),
+    Case("disk full", "during the recording", "refuse", _disk_full(20_000, None, None),
+         _disk_full_named("recording"), timeout_s=180),
+    Case("disk full", "while plotting", "ok", _disk_full(None, 1, "plots"),
+         _disk_full_named("plots"), timeout_s=300),
 ]
 
 OUTCOMES = ["ok", "refused", "late refusal", "silent wrong", "exit 1 / traceback", "hang",

@@ -14,6 +14,8 @@ import ast
 import contextlib
 import importlib
 import importlib.util
+import os
+import signal
 import sys
 import warnings
 from collections.abc import Iterator, Sequence
@@ -165,13 +167,55 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return int(exc.code or 0)
             show_traceback = args.traceback
             with _chip_notices_as_notes():
-                return int(args._run(args) or 0)
+                code = int(args._run(args) or 0)
+            sys.stdout.flush()  # here, so that a reader gone (head) is seen as such
+            return code
         except BaseException as exc:
+            if _stdout_closed(exc):
+                return _quiet_stdout()
             with signals.shielded():  # a second signal cannot cut the report short
                 return _report(exc, show_traceback)
     finally:
         signals.restore(old)
         warnings.showwarning = old_show
+
+
+def _stdout_closed(exc: BaseException) -> bool:
+    """Whether ``exc`` is (or was caused by) standard output's reader having gone: a
+    ``BrokenPipeError`` while standard output can no longer be flushed."""
+    chain: BaseException | None = exc
+    while chain is not None and not isinstance(chain, BrokenPipeError):
+        chain = chain.__cause__ or chain.__context__
+    if chain is None:
+        return False
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return True
+    except (OSError, ValueError):
+        return False
+    try:  # nothing was left to flush: ask the pipe itself (POLLERR once its reader closed it)
+        import select
+
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _quiet_stdout() -> int:
+    """End quietly after standard output's reader went away (``gyrocal verify ... | head``): the
+    rest of the output goes to ``os.devnull`` so that Python's flush at exit cannot fail again
+    (Python docs, signal module, "Note on SIGPIPE"), and the exit code is a shell's for a
+    command ended by SIGPIPE, 128 + 13."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # no file descriptor (a replaced sys.stdout): nothing to do
+        pass
+    return 128 + signal.SIGPIPE
 
 
 def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,

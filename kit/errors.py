@@ -35,6 +35,7 @@ EXIT_CODES: dict[int, str] = {
     6: "the estimation failed (too little data, no convergence)",
     129: "hung up (SIGHUP); servos stopped, torque off, recording (if begun) kept",
     130: "interrupted by Ctrl-C (SIGINT); servos stopped, torque off, recording (if begun) kept",
+    141: "standard output was closed by its reader (a pipe into head): the output stops there",
     143: "terminated (SIGTERM); servos stopped, torque off, recording (if begun) kept",
 }
 

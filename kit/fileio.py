@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import stat
@@ -111,8 +112,7 @@ def atomic_write_bytes(
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
     except OSError as exc:
-        raise InputError(f"cannot write {dest}: {exc.strerror or exc}; choose a directory you "
-                         "may write to") from None
+        raise InputError(f"cannot write {dest}: {exc.strerror or exc}; {_advice(exc)}") from None
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual file mode
         with os.fdopen(fd, "wb") as fh:
@@ -127,9 +127,22 @@ def atomic_write_bytes(
         except FileNotFoundError:
             pass
         if isinstance(exc, OSError):
-            raise InputError(f"cannot write {dest}: {exc.strerror or exc}") from None
+            raise InputError(f"cannot write {dest}: {exc.strerror or exc}"
+                             + (f"; {_advice(exc)}" if exc.errno in _FULL else "")) from None
         raise
     return dest
+
+
+#: errno values of a full disk or quota (no space, no inode, over quota).
+_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+
+def _advice(exc: OSError) -> str:
+    """What to do about a file that cannot be written: free space on a full disk, else another
+    directory."""
+    if exc.errno in _FULL:
+        return "free space on that disk or choose another directory"
+    return "choose a directory you may write to"
 
 
 def _umask() -> int:

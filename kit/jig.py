@@ -519,8 +519,11 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 progress.close()
                 # The servo link's timing, on a failed run too: the longest gap between polls
                 # while a servo moved, against the Bus Watchdog that would have stopped it
-                # (hardware reference §5). A failed write must not hide the run's own error.
-                with contextlib.suppress(OSError):
+                # (hardware reference §5). A failed write (atomic_write_json's InputError on a full
+                # disk) must not hide the run's own error.
+                from gyrocal.kit.errors import InputError
+
+                with contextlib.suppress(OSError, InputError):
                     writer.update_manifest(protocol={
                         **writer.manifest["protocol"],
                         "worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
@@ -580,7 +583,9 @@ def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,
             if jig.sim is not None:
                 _write_sim_state(jig, out, quietly=failed is not None or interrupted is not None)
             if failed is not None:  # said before the error itself (the last line)
-                print(f"gyrocal: note: {_kept(jig, rec_dir)}", file=sys.stderr)
+                stopped = ("servos stopped, torque off confirmed on every servo; "
+                           if getattr(jig.gimbal, "torque_off_confirmed", None) else "")
+                print(f"gyrocal: note: {stopped}{_kept(jig, rec_dir)}", file=sys.stderr)
     if interrupted is not None:
         signum = getattr(interrupted, "signum", 2)
         what = {2: "interrupted", 15: "terminated", 1: "hung up"}.get(signum, "stopped")

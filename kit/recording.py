@@ -21,6 +21,7 @@ back (also one written by another tool that follows the layout) into arrays.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import math
@@ -150,10 +151,24 @@ class RecordingWriter:
         self.n_segments = 0
 
     def _open(self, name: str, header: str) -> TextIO:
-        fh = open(self.path / name, "w", encoding="ascii", newline="\n")
-        fh.write(header + "\n")
-        fh.flush()
+        with self._writing(name):
+            fh = open(self.path / name, "w", encoding="ascii", newline="\n")
+            fh.write(header + "\n")
+            fh.flush()
         return fh
+
+    @contextlib.contextmanager
+    def _writing(self, name: str) -> Iterator[None]:
+        """A write to the recording's file ``name``: an OSError (a full disk, a failing card)
+        becomes an :class:`InputError` naming the recording's file, so that it, not a later
+        write elsewhere, is what the run reports."""
+        try:
+            yield
+        except OSError as exc:
+            raise InputError(
+                f"cannot write the recording's {name} ({self.path / name}): "
+                f"{exc.strerror or exc}; free space on that disk (or write the recording "
+                "elsewhere) and run again") from None
 
     def _write_manifest(self) -> None:
         atomic_write_json(self.path / "manifest.json", self.manifest, force=True)
@@ -196,8 +211,9 @@ class RecordingWriter:
         text = "".join([line % tuple(row) for row in np.column_stack(cols).tolist()])
         # an absent temperature is an empty field
         text = text.replace(",nan,", ",,") if self.accel else text.replace(",nan\n", ",\n")
-        self._imu.write(text)
-        self._imu.flush()
+        with self._writing("imu.csv"):
+            self._imu.write(text)
+            self._imu.flush()
         self.n_imu += t.size
 
     def append_encoder(self, t: float | np.ndarray, motor: Sequence[int] | np.ndarray,
@@ -212,32 +228,52 @@ class RecordingWriter:
             raise ValueError("append_encoder: motor and angle differ in length")
         rows = "".join([f"{ti:.9f},{mi},{ai:.12g}\n" for ti, mi, ai
                         in zip(t.tolist(), motor.tolist(), angle.tolist(), strict=True)])
-        self._enc.write(rows)
-        self._enc.flush()
+        with self._writing("encoder.csv"):
+            self._enc.write(rows)
+            self._enc.flush()
         self.n_encoder += motor.size
 
     def append_segment(self, seg: Segment) -> None:
         """Append one finished protocol segment."""
         motor = "" if seg.motor is None else str(int(seg.motor))
-        self._seg.write(
-            f"{seg.index},{seg.kind},{motor},{seg.direction},{seg.speed:.9g},"
-            f"{seg.t_start:.9f},{seg.t_end:.9f}\n"
-        )
-        self._seg.flush()
+        with self._writing("segments.csv"):
+            self._seg.write(
+                f"{seg.index},{seg.kind},{motor},{seg.direction},{seg.speed:.9g},"
+                f"{seg.t_start:.9f},{seg.t_end:.9f}\n"
+            )
+            self._seg.flush()
         self.n_segments += 1
 
     def close(self, complete: bool = False) -> None:
-        """Flush and close the files; with ``complete`` mark the manifest complete."""
+        """Flush and close the files; with ``complete`` mark the manifest complete.
+
+        Every file is closed even if one cannot be flushed (a full disk); the first such
+        failure is then raised, naming its file, and the manifest is not marked complete.
+        """
         if self._closed:
             return
-        for fh in (self._imu, self._enc, self._seg):
-            fh.flush()
-            os.fsync(fh.fileno())
-            fh.close()
         self._closed = True
-        if complete:
+        failed: InputError | None = None
+        for name, fh in (("imu.csv", self._imu), ("encoder.csv", self._enc),
+                         ("segments.csv", self._seg)):
+            try:
+                with self._writing(name):
+                    fh.flush()
+                    os.fsync(fh.fileno())
+            except InputError as exc:
+                failed = failed or exc
+            finally:
+                with contextlib.suppress(OSError):  # closed even if its last flush failed
+                    fh.close()
+        if complete and failed is None:
             self.manifest["complete"] = True
-        self._write_manifest()
+        try:
+            self._write_manifest()
+        except InputError:
+            if failed is None:
+                raise
+        if failed is not None:  # the data's own file first: the manifest only follows it
+            raise failed
 
     def finish(self) -> None:
         """Close and mark the recording complete (a clean finish)."""
@@ -247,7 +283,12 @@ class RecordingWriter:
         return self
 
     def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
-        self.close(complete=False)
+        try:
+            self.close(complete=False)
+        except InputError:
+            if exc is None:
+                raise
+            # the error that ended the run stays the error (a full disk: it named the file)
 
 
 @dataclass(frozen=True, eq=False)

@@ -28,6 +28,7 @@ __all__ = [
     "ServoHardwareError",
     "ServoIdentityError",
     "ServoLinkLostError",
+    "ServoPortHungError",
     "ServoStatusError",
     "ShutdownError",
     "StallError",
@@ -70,6 +71,13 @@ class ServoCommunicationError(CommunicationError):
 class ServoLinkLostError(CommunicationError):
     """The serial port itself failed (EIO, a vanished device): the USB adapter was unplugged or
     lost power, or its cable broke. Nothing more can be sent to the servos through it."""
+
+
+class ServoPortHungError(ServoLinkLostError):
+    """The serial port stopped taking data: a write did not complete within its timeout (a
+    hung USB-serial adapter or driver, flow control held off, a frozen device on the other end
+    of a pseudo-terminal). Treated as a lost link: the stop tries once more, bounded, and
+    says whether torque off was confirmed."""
 
 
 class ServoStatusError(DriverError):

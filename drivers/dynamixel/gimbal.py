@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import serial
 from dynamixel_sdk import (
     BROADCAST_ID,
     COMM_SUCCESS,
@@ -76,6 +77,7 @@ from gyrocal.drivers.dynamixel.errors import (
     ServoCommunicationError,
     ServoIdentityError,
     ServoLinkLostError,
+    ServoPortHungError,
     ServoStatusError,
     ShutdownError,
     StallError,
@@ -109,6 +111,13 @@ STALE_REPLY_WAIT_S = 0.01
 #: gives up and says so: long enough to ride out a host stalled for a second or a burst of
 #: noise on the bus, short enough that a user waiting at Ctrl-C is told promptly.
 STOP_CONFIRM_S = 2.0
+#: The longest a write to the servo port may block, s. dynamixel-sdk opens pyserial with
+#: ``timeout=0`` (reads return at once; its status wait is bounded by its packet timeout) but
+#: no ``write_timeout``, so a write blocks for ever once the port's output buffer is full: a hung
+#: adapter, flow control held off, a frozen emulator on a PTY. A healthy port never fills it (the
+#: kit waits for each status packet; its longest packet, ~40 bytes, takes 42 ms at 9600 bps), so
+#: 0.5 s is over ten times the longest legitimate wait.
+WRITE_TIMEOUT_S = 0.5
 #: Pause between two rounds of the stop (lets a starved bus or servo catch up).
 STOP_RETRY_PAUSE_S = 0.05
 
@@ -395,6 +404,8 @@ class Gimbal:
         #: The time since the previous packet of the motion at the latest poll, s (0 at rest).
         self.last_poll_gap_s = 0.0
         self.is_open = False
+        #: Whether the last stop read Torque Enable 0 back from every servo (None: no stop yet).
+        self.torque_off_confirmed: bool | None = None
         self._tick_state: dict[int, tuple[int, float, float]] = {}
         self._group: GroupSyncRead | None = None
         self._old_handlers: dict[int, object] = {}
@@ -588,8 +599,10 @@ class Gimbal:
     def _close_port(self) -> None:
         try:
             if getattr(self.port, "is_open", False):
+                if isinstance(self.port, _CheckedPort):
+                    self.port.drop_output()  # else close() waits for it to drain (30 s)
                 self.port.closePort()
-        except OSError:
+        except (OSError, termios.error, ServoLinkLostError):
             pass
 
     def __enter__(self) -> Gimbal:
@@ -1151,12 +1164,15 @@ class Gimbal:
         decodes the previous write's CRC as its value. Waiting out the longest status packet
         (the Return Delay Time, at most 508 µs, e-Manual §2.4.8, plus the packet at the slowest
         baud rate) and clearing the input (dynamixel-sdk ``clearPort``: ``reset_input_buffer``)
-        removes it.
+        removes it. Output not yet sent (a port that hung with its buffer full) is dropped too,
+        so that the stop's packets are the next to go out.
         """
         if not getattr(self.port, "is_open", False):  # never opened: nothing can be in flight
             return
         self.clock.sleep(STALE_REPLY_WAIT_S)
         self.port.clearPort()
+        if isinstance(self.port, _CheckedPort):
+            self.port.drop_output()
 
     def stop(self) -> None:
         """Stop every servo: Goal Velocity 0, Torque Enable 0, confirmed by read-back.
@@ -1176,13 +1192,17 @@ class Gimbal:
     def _stop(self) -> None:
         self.port.is_using = False
         self.motion = None
+        self.torque_off_confirmed = False
         known = [i for i in self.ids if i in self.models]  # identified (open may have failed)
         try:
             self._stop_and_confirm(known)
+            self.torque_off_confirmed = True
         except ServoLinkLostError as exc:
+            what = ("the servo port hangs" if isinstance(exc, ServoPortHungError)
+                    else "the servo link is gone")
             raise ShutdownError(
-                f"could NOT confirm torque off on servo(s) {', '.join(map(str, known))}: the "
-                f"servo link is gone ({exc}). The servos stop by themselves when their Bus "
+                f"could NOT confirm torque off on servo(s) {', '.join(map(str, known))}: {what} "
+                f"({exc}). The servos stop by themselves when their Bus "
                 "Watchdog runs out, if it was armed; switch the servo power off before touching "
                 "the gimbal, then check the USB adapter and its cable.") from None
 
@@ -1428,8 +1448,22 @@ class _CheckedPort(PortHandler):
     away, and ``termios.error`` (not an OSError) from ``reset_input_buffer`` (``tcflush``) and
     ``in_waiting``: an unplugged USB-serial adapter gives EIO on all of them. dynamixel-sdk
     passes them through (``port_handler.py``: ``clearPort``, ``getBytesAvailable``,
-    ``readPort``, ``writePort`` call pyserial directly), so they are named here, once.
+    ``readPort``, ``writePort`` call pyserial directly), so they are named here, once. Writes
+    are bounded by :data:`WRITE_TIMEOUT_S` (pyserial's ``write_timeout``; dynamixel-sdk sets
+    none) and a write that times out is :class:`ServoPortHungError`.
     """
+
+    def setupPort(self, cflag_baud: int) -> bool:
+        ok = bool(super().setupPort(cflag_baud))
+        self.ser.write_timeout = WRITE_TIMEOUT_S
+        return ok
+
+    def drop_output(self) -> None:
+        """Discard output not yet sent (``tcflush(TCOFLUSH)``): what a hung port still holds."""
+        try:
+            self.ser.reset_output_buffer()
+        except (OSError, termios.error) as exc:
+            raise self._lost(exc) from exc
 
     def _lost(self, exc: BaseException) -> ServoLinkLostError:
         return ServoLinkLostError(f"the servo port {self.getPortName()!r} failed: {exc} (the USB "
@@ -1456,6 +1490,11 @@ class _CheckedPort(PortHandler):
     def writePort(self, packet: Any) -> int:
         try:
             return int(super().writePort(packet))
+        except serial.SerialTimeoutException as exc:
+            raise ServoPortHungError(
+                f"the servo port {self.getPortName()!r} took no data for {WRITE_TIMEOUT_S:g} s "
+                "(a hung USB adapter or driver, or the device on the other end stopped "
+                "reading)") from exc
         except (OSError, termios.error) as exc:
             raise self._lost(exc) from exc
 

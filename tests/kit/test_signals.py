@@ -14,10 +14,12 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 from dynamixel_sdk import PortHandler
 
+from bench.attacks import FrozenEmulator, freeze_when_turning, turning
 from bench.signal_rig import BUS_WATCHDOG, PRESENT_VELOCITY, ServoRig, write_config
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
@@ -136,3 +138,38 @@ def test_a_pulled_servo_adapter_exits_4_saying_torque_was_not_confirmed(tmp_path
     assert "is kept, marked incomplete" in err
     manifest = json.loads((tmp_path / "run" / "recording" / "manifest.json").read_text())
     assert manifest["complete"] is False
+
+
+@pytest.mark.parametrize("hung", [False, True], ids=["frozen", "hung-port"])
+def test_a_frozen_servo_link_mid_turn_exits_4_in_bounded_time(tmp_path, hung):
+    """``gyrocal emulate --pty`` stopped with SIGSTOP mid-turn: the servos answer nothing
+    (``frozen``), and with the PTY's buffer full as well the kit's next write blocks
+    (``hung-port``: an adapter or driver that takes no more data). The hung port blocked the
+    kit for ever before writes had a timeout, Ctrl-C included (the stop waited in the write)."""
+    emulator = FrozenEmulator(ids=(1, 2))
+    try:
+        config = write_config(tmp_path / "gyrocal.toml", emulator.path, ids=emulator.ids,
+                              **LOADED_HOST)
+        run = tmp_path / "run"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "gyrocal.kit", "calibrate", "--sim-imu", "--config",
+             str(config), "--out", str(run), "--quiet"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        freeze_when_turning(emulator, run / "recording", fill=hung).join(timeout=120)
+        assert emulator.frozen_at is not None and turning(run / "recording")
+        _, err = proc.communicate(timeout=120)
+        after_freeze_s = time.monotonic() - emulator.frozen_at
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        emulator.close()
+    assert proc.returncode == 4, err
+    assert "Traceback" not in err
+    # each transaction's retries (31 here) and the two stops (2 s each) bound it
+    assert after_freeze_s < 60.0
+    assert "could not confirm torque off on servo(s) 1, 2" in err
+    assert "torque off confirmed" not in err
+    if hung:
+        assert f"the servo port {emulator.path!r} took no data for 0.5 s" in err
+    assert "is kept, marked incomplete" in err
+    assert json.loads((run / "recording" / "manifest.json").read_text())["complete"] is False
