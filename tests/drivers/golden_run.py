@@ -21,7 +21,7 @@ from pathlib import Path
 
 #: The pinned runs: name -> extra ``calibrate`` arguments.
 RUNS = {
-    "mpu9250": [],
+    "mpu9250": ["--imu-address", "0x68"],  # given: the probe of imu.address 0 reads the bus
     "lsm9ds1": ["--imu-model", "lsm9ds1", "--imu-address", "0x6B", "--odr", "238"],
 }
 #: The files a run pins.

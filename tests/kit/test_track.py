@@ -164,7 +164,7 @@ def test_out_file_is_atomic_and_not_overwritten(random_rec, tmp_path, capsys):
     "argv, match",
     [
         ([], "RECORDING or --sim"),
-        (["--sim", "REC"], "RECORDING or --sim"),
+        (["--sim", "."], "RECORDING or --sim"),  # an existing directory with --sim
         (["--sim", "--causal"], "--causal applies to a recording"),
         (["{rec}", "--cal", "{missing}"], "does not exist"),
         (["{rec}", "--update-interval", "0"], "update_interval_s"),

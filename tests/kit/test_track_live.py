@@ -118,7 +118,7 @@ def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, capsys):
 
 
 @pytest.mark.parametrize("argv, match", [
-    (["--live", "some/recording"], "RECORDING or --live"),
+    (["--live", "."], "RECORDING or --live"),  # an existing directory with --live
     (["--live", "--sim", "--seed", "3"], "--seed applies to the synthetic session"),
     (["--live", "--sim", "--step-at", "3"], "--step-at applies to the synthetic session"),
     (["--live", "--sim", "--duration", "1"], "--duration must be at least 2 s"),
