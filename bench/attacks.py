@@ -477,6 +477,29 @@ def _pulled_adapter(d: Path) -> dict:
                      "--quiet"]}
 
 
+def fill_tty(path: str) -> int:
+    """Write NULs into the terminal ``path`` until its buffers take no more (the bytes written):
+    whole pages, then the last bytes one by one; again after a pause until a round takes nothing
+    (the kernel moves data on to the reader's side in the background)."""
+    fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    written = 0
+    try:
+        while True:
+            before = written
+            for size in (4096, 1):
+                while True:
+                    try:
+                        written += os.write(fd, b"\0" * size)
+                    except BlockingIOError:
+                        break
+            if written == before:
+                break
+            time.sleep(0.05)
+    finally:
+        os.close(fd)
+    return written
+
+
 class FrozenEmulator:
     """``gyrocal emulate --pty`` in a process of its own, which can be frozen with SIGSTOP.
 
@@ -499,26 +522,7 @@ class FrozenEmulator:
         Returns the bytes written."""
         os.kill(self.proc.pid, signal.SIGSTOP)
         self.frozen_at = time.monotonic()
-        written = 0
-        if fill:
-            fd = os.open(self.path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
-            try:
-                # whole pages, then the last bytes one by one; again after a pause until a round
-                # takes nothing (the kernel moves data on to the reader's side in the background)
-                while True:
-                    before = written
-                    for size in (4096, 1):
-                        while True:
-                            try:
-                                written += os.write(fd, b"\0" * size)
-                            except BlockingIOError:
-                                break
-                    if written == before:
-                        break
-                    time.sleep(0.05)
-            finally:
-                os.close(fd)
-        return written
+        return fill_tty(self.path) if fill else 0
 
     def close(self) -> None:
         """Thaw and stop the emulator."""

@@ -14,6 +14,7 @@ import tty
 
 import pytest
 
+from bench.attacks import fill_tty
 from gyrocal.drivers.dynamixel.errors import ServoPortHungError
 from gyrocal.drivers.dynamixel.gimbal import WRITE_TIMEOUT_S, _CheckedPort
 
@@ -32,33 +33,13 @@ def unread_pty():
     os.close(slave)
 
 
-def _fill(path: str) -> int:
-    fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
-    written = 0
-    try:
-        # the kernel moves data on to the reader's side in the background: fill until a
-        # round after a pause takes nothing
-        while True:
-            before = written
-            for size in (4096, 1):
-                while True:
-                    try:
-                        written += os.write(fd, b"\0" * size)
-                    except BlockingIOError:
-                        break
-            if written == before:
-                break
-            time.sleep(0.05)
-    finally:
-        os.close(fd)
-    return written
 
 
 def test_a_write_to_a_full_port_fails_named_within_the_timeout(unread_pty):
     port = _CheckedPort(unread_pty)
     assert port.openPort()
     try:
-        assert _fill(unread_pty) > 0
+        assert fill_tty(unread_pty) > 0
         t0 = time.monotonic()
         with pytest.raises(ServoPortHungError, match="took no data for 0.5 s"):
             port.writePort([0xFF, 0xFF, 0xFD, 0x00, 0x01, 0x03, 0x00, 0x01, 0x19, 0x4E])
