@@ -343,8 +343,13 @@ def _verdict(cal: Any) -> str:
     c = cal.consistency
     if c is None:
         return "not tested (no redundant observations)"
-    return (f"chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g} "
-            f"({'consistent' if c.ok else 'NOT consistent'} with the measured noise)")
+    return f"chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g} ({_verdict_words(c)})"
+
+
+def _verdict_words(c: Any) -> str:
+    """:attr:`gyrocal.calib.model.Consistency.verdict` (consistent, consistent with scatter and
+    σ widened, or not consistent with its reason), in ASCII for the files other tools read."""
+    return c.verdict.replace("σ", "sigma")
 
 
 def _one_line(text: Any, limit: int = 200) -> str:
@@ -732,7 +737,7 @@ def _c_accel(acc: Any, P: str, fn: str) -> list[str]:
 def _consistency_text(c: Any) -> str:
     if c is None:
         return "not tested"
-    return (f"{'consistent' if c.ok else 'NOT consistent'} with the measured noise "
+    return (f"{_verdict_words(c)}: residuals against the measured noise "
             f"(chi2 = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g})")
 
 

@@ -716,7 +716,7 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
     c = cal.consistency
     if c is not None:
         text += (f"; the fit: χ² = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g} "
-                 f"({'consistent' if c.ok else 'NOT consistent'})")
+                 f"({c.verdict})")
     sources = set(res.axis_sources.values())
     if not sources <= {"calibration", "kinematics"}:
         text += "\nservo axes: " + ", ".join(f"servo {m} {s}" for m, s in

@@ -147,3 +147,20 @@ def test_registry_is_extensible():
             export(doc, "nope")
     finally:
         del EXPORTERS["test-bias"]
+
+
+@pytest.mark.parametrize("fmt", ["yaml", "c-header"])
+def test_the_files_say_the_verdict_of_the_dispersion_rule(fmt, tmp_path, capsys):
+    """A fit whose σ were widened by excess scatter says so in the exported file (the words of
+    Consistency.verdict, in ASCII), not 'consistent with the measured noise' from ok alone."""
+    from gyrocal.calib.model import Consistency, GyroCalibration
+
+    widened = Consistency(60.0, 42, 0.03, True, excess=0.2, scatter=2e-5, reason="")
+    cal = tmp_path / "cal.json"
+    cal.write_text(GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0),
+                                   scale_std=(1e-4,) * 3, bias_std=(1e-4,) * 3,
+                                   consistency=widened).to_json())
+    assert main(["export", str(cal), "--format", fmt]) == 0
+    out = capsys.readouterr().out
+    assert "consistent, with 20 % scatter beyond the noise (sigma widened)" in out
+    assert "with the measured noise)" not in out
