@@ -33,13 +33,13 @@ from gyrocal.kit.recording import Recording, now_iso
 
 __all__ = [
     "AUTO",
-    "CROSS_AXIS_DATASHEET",
     "PLAUSIBLE_NOISE_DENSITY",
     "PLAUSIBLE_SCALE",
     "Estimate",
     "plausible_bounds",
     "check_plausible",
     "check_plausible_noise",
+    "datasheet_cross_axis",
     "estimate_recording",
     "extract_recording",
     "fit_recording_accelerometer",
@@ -74,12 +74,19 @@ _DEFAULT_FULL_SCALE_DPS = 2000.0
 
 #: The method that chooses the full model when the poses determine it, else the diagonal one.
 AUTO = "auto"
-#: Cross-axis sensitivity the datasheets allow, by sensor model (fraction of the rate):
-#: MPU-9250 product specification (PS-MPU-9250A-01) §3.1, Gyroscope Specifications,
-#: "Cross-Axis Sensitivity ±2 %"; for sensors whose datasheet gives no figure (the LSM9DS1's
-#: does not) the MPU-9250's is used as the typical MEMS value.
-CROSS_AXIS_DATASHEET = {"mpu9250": 0.02}
+#: Cross-axis sensitivity for a model the chip data does not know: the MPU-9250's ±2 %
+#: (PS-MPU-9250A-01 §3.1), the typical MEMS value.
 _CROSS_AXIS_DEFAULT = 0.02
+
+
+def datasheet_cross_axis(sensor_model: str | None) -> float | None:
+    """The gyro's cross-axis sensitivity its datasheet allows (fraction of the rate), from the
+    chip data (:attr:`gyrocal.drivers.imu.chips.ChipFamily.gyro_errors`, each figure with its
+    source); None for a model gyrocal does not read."""
+    from gyrocal.drivers.imu import READER_CLASSES, READERS
+
+    model = str(sensor_model or "").lower()
+    return READERS[model].family.gyro_errors.cross_axis if model in READER_CLASSES else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,7 +152,7 @@ def _chain(rec: Recording) -> tuple[int, ...] | None:
 def diagonal_note(sensor_model: str | None, reason: str) -> str:
     """What a user must know about a diagonal calibration: cross-axis terms are not in it, and
     how large the error they leave can be."""
-    frac = CROSS_AXIS_DATASHEET.get(str(sensor_model or "").lower(), _CROSS_AXIS_DEFAULT)
+    frac = datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
     return (
         f"cross-axis terms were NOT calibrated ({reason}); the diagonal model is exact only "
         f"about the six calibration axes: in other directions the calibrated rate can be off "

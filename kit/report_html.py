@@ -201,9 +201,9 @@ def _largest_cross_axis(cal: GyroCalibration) -> tuple[int, int] | None:
 def _cross_axis_text(cal: GyroCalibration) -> str:
     where = _largest_cross_axis(cal)
     if where is None:
-        from gyrocal.kit.pipeline import CROSS_AXIS_DATASHEET
+        from gyrocal.kit.pipeline import datasheet_cross_axis
 
-        allowed = CROSS_AXIS_DATASHEET.get(str(cal.sensor.get("model", "")).lower())
+        allowed = datasheet_cross_axis(cal.sensor.get("model"))
         size = (f"its datasheet allows up to ±{allowed * 100:g} %" if allowed else
                 "MEMS datasheets allow a few %")
         return (f"<span class=bad>not calibrated</span>: this diagonal model has no cross-axis "

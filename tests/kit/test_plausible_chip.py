@@ -68,3 +68,13 @@ def test_a_sensor_without_a_datasheet_keeps_the_general_bounds():
     assert _check("bmi088", (1.0, 1.0, 1.0), (1.0, 0.0, 0.0)) == []
     with pytest.raises(EstimationError, match="outside 0.5..2"):
         _check("bmi088", (2.1, 1.0, 1.0), (0.0, 0.0, 0.0))
+
+
+def test_the_diagonal_note_gives_each_chips_own_cross_axis_figure():
+    """The size the diagonal model may miss is the chip's datasheet cross-axis figure
+    (ICM-42688-P DS-000347 §3.1 Table 1: ±1.25 %), not the MPU-9250's for every chip."""
+    from gyrocal.kit.pipeline import diagonal_note
+
+    assert "±1.25 % of the rate" in diagonal_note("icm42688p", "no poses")
+    assert "±2 % of the rate" in diagonal_note("mpu9250", "no poses")
+    assert "±2 % of the rate" in diagonal_note("unknown-chip", "no poses")
