@@ -496,6 +496,34 @@ class ObservationSet:
         _, first = np.unique(self.motor, return_index=True)
         return tuple(int(self.motor[i]) for i in sorted(first))
 
+    def by_seat(self, seat: np.ndarray) -> ObservationSet:
+        """The windows of a single-servo run with each seat of the cube as its own axis.
+
+        On the single-servo jig the user re-seats the sensor between groups of turns of the one
+        servo (:data:`gyrocal.calib.design.SEATS`); its axis in the sensor frame differs per
+        seat by the seat's turn and its seating error, both unknown to the fit, exactly as each
+        servo's axis of a gimbal is. So a window's "servo" becomes its seat number (``seat``,
+        one per window, 1-based), and the chain is the seats with no poses (each seat's axis a
+        free unit vector; :func:`gyrocal.calib.estimators.fit_full_matrix` and
+        :func:`~gyrocal.calib.estimators.fit_paired_axis` then fit them as they fit servos).
+        The rests, the references and their still angles are unchanged; the gravity fields
+        (a gimbal's) are dropped.
+
+        Raises
+        ------
+        CalibInputError
+            If ``seat`` is not one positive integer per window.
+        """
+        seat = np.asarray(seat)
+        if seat.shape != (self.n_windows,) or not np.all(seat == np.round(seat)) or (
+                seat.size and seat.min() < 1):
+            raise CalibInputError(f"seat must give one seat number (1, 2, ...) per window "
+                                  f"({self.n_windows}), got shape {seat.shape}")
+        seat = seat.astype(np.int64)
+        chain = tuple(int(s) for s in np.unique(seat))
+        return replace(self, motor=seat, chain=chain, pose=np.zeros((seat.size, len(chain))),
+                       pose_still=None, rest_pose=None, home_pose=None, gravity=None)
+
     def with_pooled_noise(self, alpha: float = 0.01) -> ObservationSet:
         """The same set with each axis's noise pooled over all windows and rests where they are
         homogeneous (:func:`pool_noise`); standard errors scale with the noise."""

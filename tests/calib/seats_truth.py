@@ -1,0 +1,78 @@
+"""An independent generator of single-servo sessions: one servo, a cube re-seated by hand.
+
+Built from first principles with scipy's rotations and none of gyrocal's seat table, planner,
+kinematics, simulator or emulator: the servo stands with its shaft along the base's +z (tilted
+by a small random angle); the user seats the cube so that a chosen sensor direction ``d`` is up,
+which puts the sensor at ``R_seat`` with ``R_seat d = z`` (the shortest rotation), then turns it
+about the vertical by a random angle and seats it with a random error of ``seat_error_rad``. A
+turn of the servo at rate ``w`` is a rate ``w R_sensorᵀ a`` in the sensor frame. The sensor reads
+``m = C ω − b`` (``C = diag(1/scale) @ misalignment``, the emulator's ``SensorTruth``
+convention); the truth in the frame gyro-x-xy is ``truth_in_frame(C)`` (the LQ decomposition).
+The seat directions are written out here, not taken from gyrocal.calib.design.SEATS.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gyrocal.calib.observations import ObservationSet
+
+R2 = 0.5**0.5
+#: The sensor direction each seat puts up (a face, or the edge between two faces).
+FACES = {"+x": (1, 0, 0), "+y": (0, 1, 0), "+z": (0, 0, 1)}
+EDGES = {"+x+y": (R2, R2, 0), "+y+z": (0, R2, R2), "+z+x": (R2, 0, R2)}
+
+
+def seat_rotation(up: np.ndarray, rng: np.random.Generator, seat_error_rad: float) -> np.ndarray:
+    """The sensor's orientation (sensor → base) with ``up`` (sensor frame) along +z, a random
+    yaw about +z and a random seating error."""
+    up = np.asarray(up, float) / np.linalg.norm(up)
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(up, z)
+    s, c = np.linalg.norm(axis), float(up @ z)
+    to_z = (Rotation.from_rotvec(axis / s * np.arctan2(s, c)) if s > 1e-12
+            else Rotation.identity() if c > 0 else Rotation.from_rotvec([np.pi, 0, 0]))
+    yaw = Rotation.from_rotvec(z * rng.uniform(0, 2 * np.pi))
+    err = Rotation.from_rotvec(rng.normal(size=3) / np.sqrt(3) * seat_error_rad)
+    return (err * yaw * to_z).as_matrix()
+
+
+def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
+            rng: np.random.Generator, speed: float = 3.0, noise: float = 0.0,
+            count: int = 2000, seat_error_rad: float = 0.01, shaft_tilt_rad: float = 0.005,
+            servo_id: int = 1) -> tuple[ObservationSet, np.ndarray, np.ndarray]:
+    """Window means of turns −, + in each seat and three rests per seat.
+
+    Returns
+    -------
+    obs : ObservationSet
+        Every window is the one servo's (``motor`` = ``servo_id``), no chain: as a recording
+        without the seats would give.
+    seat : ndarray of int
+        Each window's seat number (1-based, in ``seats``' order).
+    axes : ndarray (S, 3)
+        Each seat's true turning axis in the sensor frame.
+    """
+    shaft = Rotation.from_rotvec(rng.normal(size=3) * shaft_tilt_rad).apply([0.0, 0.0, 1.0])
+    mean, rate, seat, axes = [], [], [], []
+    for k, up in enumerate(seats.values(), start=1):
+        R = seat_rotation(np.array(up), rng, seat_error_rad)
+        u = R.T @ shaft
+        axes.append(u)
+        for d in (-1, 1):
+            mean.append(C @ u * d * speed - bias)
+            rate.append(d * speed)
+            seat.append(k)
+    n, r = len(rate), 3 * len(seats)
+    mean = np.array(mean)
+    rest = np.tile(-bias, (r, 1))
+    if noise:
+        mean = mean + rng.normal(0, noise / np.sqrt(count), mean.shape)
+        rest = rest + rng.normal(0, noise / np.sqrt(count), rest.shape)
+    obs = ObservationSet(
+        mean=mean, rate=np.array(rate), motor=np.full(n, servo_id),
+        direction=np.sign(rate).astype(int), count=np.full(n, count),
+        noise=np.full((n, 3), noise or 1e-3), rest_mean=rest, rest_count=np.full(r, count),
+        rest_noise=np.full((r, 3), noise or 1e-3))
+    return obs, np.array(seat), np.array(axes)

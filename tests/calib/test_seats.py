@@ -1,0 +1,90 @@
+"""The single-servo jig's seats: the same estimators on sessions of an independent generator
+(tests/calib/seats_truth.py), and the planner's seat sets (calib.design.plan_seats)."""
+
+import numpy as np
+import pytest
+
+from gyrocal.calib.design import SEAT_SETS, SEATS, plan_seats, seat_axes
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import FULL_FRAME, estimate
+from tests.calib.fullmodel_truth import draw_truth, truth_in_frame
+from tests.calib.seats_truth import EDGES, FACES, session
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_faces_and_edges_determine_the_full_matrix_within_its_sigma(seed):
+    rng = np.random.default_rng(seed)
+    C, bias, _, _ = draw_truth(rng)
+    obs, seat, _ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng, noise=0.03, count=800)
+    fit = estimate(obs.by_seat(seat), "full-matrix")
+    assert fit.success, fit.message
+    assert fit.frame == FULL_FRAME
+    err = np.concatenate([(fit.matrix - truth_in_frame(C)).ravel(), fit.bias - bias])
+    std = np.sqrt(np.diag(fit.covariance))
+    free = std > 0
+    assert np.all(np.abs(err[free]) < 4.5 * std[free]), (err, std)
+    assert np.all(err[~free] == 0)  # the frame's three zeros
+    assert fit.consistency is not None and fit.consistency.ok
+
+
+def test_noise_free_seats_recover_the_matrix_whatever_the_seating_error():
+    # 3° of seating error per seat and a tilted shaft: the seats' axes are free unknowns, so the
+    # matrix comes out exact all the same.
+    rng = np.random.default_rng(7)
+    C, bias, _, _ = draw_truth(rng)
+    obs, seat, axes = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng,
+                              seat_error_rad=np.radians(3), shaft_tilt_rad=0.02)
+    fit = estimate(obs.by_seat(seat), "full-matrix")
+    assert fit.success, fit.message
+    np.testing.assert_allclose(fit.matrix, truth_in_frame(C), atol=1e-9)
+    np.testing.assert_allclose(fit.bias, bias, atol=1e-9)
+
+
+def test_faces_alone_leave_the_matrix_undetermined_and_fit_the_diagonal():
+    rng = np.random.default_rng(3)
+    scale = np.array([1.02, 0.98, 1.01])
+    bias = np.array([0.03, -0.02, 0.01])
+    obs, seat, _ = session(FACES, C=np.diag(1 / scale), bias=bias, rng=rng)
+    by_seat = obs.by_seat(seat)
+    full = estimate(by_seat, "full-matrix")
+    assert not full.success and full.status == "not-determined"
+    diag = estimate(by_seat, "paired-axis")
+    assert diag.success
+    np.testing.assert_allclose(diag.scale, scale, atol=1e-9)
+    np.testing.assert_allclose(diag.bias, bias, atol=1e-9)
+
+
+def test_one_axis_for_all_seats_is_not_a_calibration():
+    # Without the seats every window is the one servo's: the fits cannot pair the turns.
+    rng = np.random.default_rng(4)
+    C, bias, _, _ = draw_truth(rng)
+    obs, seat, _ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng)
+    assert obs.motors == (1,)
+    assert obs.by_seat(seat).chain == (1, 2, 3, 4, 5, 6)
+
+
+def test_by_seat_refuses_a_seat_list_of_the_wrong_length():
+    rng = np.random.default_rng(5)
+    C, bias, _, _ = draw_truth(rng)
+    obs, seat, _ = session(FACES, C=C, bias=bias, rng=rng)
+    with pytest.raises(CalibInputError, match="one seat number"):
+        obs.by_seat(seat[:-1])
+
+
+def test_seat_table_is_unit_and_matches_the_generators_own_directions():
+    for name, (up, _) in SEATS.items():
+        assert abs(np.linalg.norm(up) - 1) < 1e-12, name
+    for name, up in {**FACES, **EDGES}.items():
+        np.testing.assert_allclose(SEATS[name][0], up, atol=1e-12)
+    with pytest.raises(CalibInputError, match="not one of"):
+        seat_axes(("+w",))
+
+
+def test_planner_full_model_takes_edge_seats_and_diagonal_the_faces():
+    full = plan_seats(servo_max_speed=4.8, full_scale=np.radians(500), noise_std=0.02)
+    assert full.model == "full"
+    assert any(SEATS[s][1] == "V-block" for s in full.seats)
+    assert max(max(abs(x) for x in row) for row in full.matrix_std) < 1e-3
+    diag = plan_seats(servo_max_speed=4.8, full_scale=np.radians(500), noise_std=0.02,
+                      model="diagonal")
+    assert diag.seats == SEAT_SETS["faces"] and diag.model == "diagonal"
