@@ -1572,6 +1572,15 @@ def fit_full_matrix(
         if basis.shape[1] < 3:
             g_note = (f"; g-sensitivity fitted along {basis.shape[1]} of 3 directions of "
                       "gravity (the others are in the bias): rest in more orientations")
+    elif g_sensitivity and obs.force is not None:
+        # the specific force is measured (the single-servo jig's seats: ObservationSet.by_seat)
+        basis = gravity_directions(obs.force, obs.rest_force, obs.mean_std,  # type: ignore[arg-type]
+                                   obs.rest_mean_std, max_std=max_g_std)  # type: ignore[arg-type]
+        if basis.shape[1]:
+            res = run((obs.force @ basis, obs.rest_force @ basis))  # type: ignore[operator]
+        if basis.shape[1] < 3:
+            g_note = (f"; g-sensitivity fitted along {basis.shape[1]} of 3 directions of "
+                      "gravity (the others are in the bias): seat the cube in more orientations")
     A, b, cov = res.matrix[0], res.bias[0], res.covariance[0]
     consistency, factor = None, 1.0
     if res.dof > 0:

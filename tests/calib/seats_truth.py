@@ -41,8 +41,14 @@ def seat_rotation(up: np.ndarray, rng: np.random.Generator, seat_error_rad: floa
 def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
             rng: np.random.Generator, speed: float = 3.0, noise: float = 0.0,
             count: int = 2000, seat_error_rad: float = 0.01, shaft_tilt_rad: float = 0.005,
-            servo_id: int = 1) -> tuple[ObservationSet, np.ndarray, np.ndarray]:
+            servo_id: int = 1, g_sensitivity: np.ndarray | None = None,
+            ) -> tuple[ObservationSet, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Window means of turns −, + in each seat and three rests per seat.
+
+    With ``g_sensitivity`` ``G`` (rad/s per g) the sensor reads ``m = C ω − b − G f`` with
+    ``f`` the specific force, +1 g along the base's +z in the sensor frame (``R_sensorᵀ z``; a
+    turn about the vertical shaft over whole revolutions keeps its component along the axis,
+    which is all of it up to the shaft's tilt).
 
     Returns
     -------
@@ -53,20 +59,28 @@ def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
         Each window's seat number (1-based, in ``seats``' order).
     axes : ndarray (S, 3)
         Each seat's true turning axis in the sensor frame.
+    rest_seat : ndarray of int
+        Each rest's seat number.
+    up : ndarray (S, 3)
+        Gravity ("up", g) in the sensor frame in each seat, as a still accelerometer reads it.
     """
     shaft = Rotation.from_rotvec(rng.normal(size=3) * shaft_tilt_rad).apply([0.0, 0.0, 1.0])
-    mean, rate, seat, axes = [], [], [], []
+    G = np.zeros((3, 3)) if g_sensitivity is None else np.asarray(g_sensitivity, float)
+    mean, rate, seat, axes, ups = [], [], [], [], []
     for k, up in enumerate(seats.values(), start=1):
         R = seat_rotation(np.array(up), rng, seat_error_rad)
         u = R.T @ shaft
+        g_up = R.T @ np.array([0.0, 0.0, 1.0])
         axes.append(u)
+        ups.append(g_up)
         for d in (-1, 1):
-            mean.append(C @ u * d * speed - bias)
+            mean.append(C @ u * d * speed - bias - G @ ((u @ g_up) * u))
             rate.append(d * speed)
             seat.append(k)
     n, r = len(rate), 3 * len(seats)
     mean = np.array(mean)
-    rest = np.tile(-bias, (r, 1))
+    rest_seat = np.repeat(np.arange(1, len(seats) + 1), 3)
+    rest = -bias - np.array(ups)[rest_seat - 1] @ G.T
     if noise:
         mean = mean + rng.normal(0, noise / np.sqrt(count), mean.shape)
         rest = rest + rng.normal(0, noise / np.sqrt(count), rest.shape)
@@ -75,4 +89,4 @@ def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
         direction=np.sign(rate).astype(int), count=np.full(n, count),
         noise=np.full((n, 3), noise or 1e-3), rest_mean=rest, rest_count=np.full(r, count),
         rest_noise=np.full((r, 3), noise or 1e-3))
-    return obs, np.array(seat), np.array(axes)
+    return obs, np.array(seat), np.array(axes), rest_seat, np.array(ups)

@@ -15,7 +15,7 @@ from tests.calib.seats_truth import EDGES, FACES, session
 def test_faces_and_edges_determine_the_full_matrix_within_its_sigma(seed):
     rng = np.random.default_rng(seed)
     C, bias, _, _ = draw_truth(rng)
-    obs, seat, _ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng, noise=0.03, count=800)
+    obs, seat, *_ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng, noise=0.03, count=800)
     fit = estimate(obs.by_seat(seat), "full-matrix")
     assert fit.success, fit.message
     assert fit.frame == FULL_FRAME
@@ -32,7 +32,7 @@ def test_noise_free_seats_recover_the_matrix_whatever_the_seating_error():
     # matrix comes out exact all the same.
     rng = np.random.default_rng(7)
     C, bias, _, _ = draw_truth(rng)
-    obs, seat, axes = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng,
+    obs, seat, *_ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng,
                               seat_error_rad=np.radians(3), shaft_tilt_rad=0.02)
     fit = estimate(obs.by_seat(seat), "full-matrix")
     assert fit.success, fit.message
@@ -44,7 +44,7 @@ def test_faces_alone_leave_the_matrix_undetermined_and_fit_the_diagonal():
     rng = np.random.default_rng(3)
     scale = np.array([1.02, 0.98, 1.01])
     bias = np.array([0.03, -0.02, 0.01])
-    obs, seat, _ = session(FACES, C=np.diag(1 / scale), bias=bias, rng=rng)
+    obs, seat, *_ = session(FACES, C=np.diag(1 / scale), bias=bias, rng=rng)
     by_seat = obs.by_seat(seat)
     full = estimate(by_seat, "full-matrix")
     assert not full.success and full.status == "not-determined"
@@ -58,7 +58,7 @@ def test_one_axis_for_all_seats_is_not_a_calibration():
     # Without the seats every window is the one servo's: the fits cannot pair the turns.
     rng = np.random.default_rng(4)
     C, bias, _, _ = draw_truth(rng)
-    obs, seat, _ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng)
+    obs, seat, *_ = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng)
     assert obs.motors == (1,)
     assert obs.by_seat(seat).chain == (1, 2, 3, 4, 5, 6)
 
@@ -66,7 +66,7 @@ def test_one_axis_for_all_seats_is_not_a_calibration():
 def test_by_seat_refuses_a_seat_list_of_the_wrong_length():
     rng = np.random.default_rng(5)
     C, bias, _, _ = draw_truth(rng)
-    obs, seat, _ = session(FACES, C=C, bias=bias, rng=rng)
+    obs, seat, *_ = session(FACES, C=C, bias=bias, rng=rng)
     with pytest.raises(CalibInputError, match="one seat number"):
         obs.by_seat(seat[:-1])
 
@@ -88,3 +88,33 @@ def test_planner_full_model_takes_edge_seats_and_diagonal_the_faces():
     diag = plan_seats(servo_max_speed=4.8, full_scale=np.radians(500), noise_std=0.02,
                       model="diagonal")
     assert diag.seats == SEAT_SETS["faces"] and diag.model == "diagonal"
+
+
+def test_g_sensitivity_is_fitted_from_the_gravity_each_seat_read():
+    # Gravity along the shaft in every seat: G u of each seat is a different bias. With each
+    # seat's gravity (the accelerometer's reading at the seat check) the fit models it.
+    rng = np.random.default_rng(11)
+    C, bias, _, _ = draw_truth(rng)
+    G = rng.uniform(-1, 1, (3, 3)) * np.radians(0.1)  # the MPU-9250's 0.1 °/s/g per term
+    # a plumb shaft: the windows' force is then exactly the rests' (a tilt t of the shaft
+    # leaves G γ − G (u·γ) u ≈ |G| t in each turn's offset: 3e-5 rad/s at 1° and 0.1 °/s/g)
+    obs, seat, _, rest_seat, up = session({**FACES, **EDGES}, C=C, bias=bias, rng=rng,
+                                          g_sensitivity=G, shaft_tilt_rad=0.0)
+    plain = estimate(obs.by_seat(seat), "full-matrix")
+    # each seat's G u is a bias of its own: one bias fits none of them (A stays right, as the
+    # two turns of a seat share it)
+    assert np.max(np.abs(plain.bias - bias)) > 1e-4
+    assert not plain.consistency.ok
+    fit = estimate(obs.by_seat(seat, rest_seat, up), "full-matrix")
+    assert fit.success, fit.message
+    np.testing.assert_allclose(fit.matrix, truth_in_frame(C), atol=1e-9)
+    np.testing.assert_allclose(fit.bias, bias, atol=1e-9)
+    np.testing.assert_allclose(fit.g_sensitivity, G, atol=1e-9)
+
+
+def test_by_seat_refuses_forces_that_do_not_match_the_seats():
+    rng = np.random.default_rng(12)
+    C, bias, _, _ = draw_truth(rng)
+    obs, seat, _, rest_seat, up = session(FACES, C=C, bias=bias, rng=rng)
+    with pytest.raises(CalibInputError, match="seat_force"):
+        obs.by_seat(seat, rest_seat, up[:2])
