@@ -45,10 +45,12 @@ JIG_KINDS: dict[str, JigKind] = {
     "single-servo": JigKind(
         "single-servo", "one Dynamixel servo turns a printed cube that the user re-seats on "
         "its faces and edges when prompted", "single-servo.md",
-        "the global rotation of the sensor frame (fixed by gyro-x-xy, as on the gimbal); "
-        "g-sensitivity (the servo stands vertical, so in each seat gravity lies along the "
-        "turning axis and its term stays in that seat's bias); with faces only (no V-block "
-        "edge seats) the three cross-axis terms, up to the datasheet's cross-axis sensitivity"),
+        "the global rotation of the sensor frame (fixed by gyro-x-xy, as on the gimbal); with "
+        "the faces only (no V-block edge seats) the three cross-axis terms, up to the "
+        "datasheet's cross-axis sensitivity (each seat's axis is a free unknown, so a seat "
+        "sees only the rate's magnitude along it); g-sensitivity along any direction the "
+        "seats' gravity does not span (the shaft is vertical: a seat sees gravity along its "
+        "axis only)"),
 }
 
 #: The jig of a run that names none: the three-servo gimbal.

@@ -227,7 +227,8 @@ def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
                       if not seats else
                       f"the {len(obs.chain)} seats of the cube do not determine them: "
                       "seat it on edges too, in the V-block (hardware_docs/single-servo.md)")
-        return estimate(obs, "paired-axis"), (diagonal_note(sensor_model, reason),)
+        return (_without_chain(estimate(obs, "paired-axis"), seats),
+                (diagonal_note(sensor_model, reason),))
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
 

@@ -42,6 +42,7 @@ def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
             rng: np.random.Generator, speed: float = 3.0, noise: float = 0.0,
             count: int = 2000, seat_error_rad: float = 0.01, shaft_tilt_rad: float = 0.005,
             servo_id: int = 1, g_sensitivity: np.ndarray | None = None,
+            still_std: float = 0.0, turns: int = 2,
             ) -> tuple[ObservationSet, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Window means of turns −, + in each seat and three rests per seat.
 
@@ -49,6 +50,12 @@ def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
     ``f`` the specific force, +1 g along the base's +z in the sensor frame (``R_sensorᵀ z``; a
     turn about the vertical shaft over whole revolutions keeps its component along the axis,
     which is all of it up to the shaft's tilt).
+
+    With ``still_std`` each window's reference is rest to rest: the encoder's still angle
+    before and after the turn, each read with an error of ``still_std`` (rad), divided by the
+    turn's time (``turns`` revolutions at ``speed``). The one servo's still angles are numbered
+    in running order, so a re-seat, which does not move the servo, shares the still angle
+    between the last turn of a seat and the first of the next.
 
     Returns
     -------
@@ -84,9 +91,16 @@ def session(seats: dict[str, tuple], *, C: np.ndarray, bias: np.ndarray,
     if noise:
         mean = mean + rng.normal(0, noise / np.sqrt(count), mean.shape)
         rest = rest + rng.normal(0, noise / np.sqrt(count), rest.shape)
+    ref: dict = {}
+    if still_std:
+        T = 2 * np.pi * turns / speed
+        z = rng.normal(0, still_std, n + 1)  # reading − true of each still angle
+        ref = {"ref_start": np.arange(n), "ref_end": np.arange(1, n + 1),
+               "ref_gain": np.full(n, 1 / T), "still_angle_std": still_std,
+               "rate": np.array(rate) + (z[1:] - z[:-1]) / T}
     obs = ObservationSet(
-        mean=mean, rate=np.array(rate), motor=np.full(n, servo_id),
+        mean=mean, rate=ref.pop("rate", np.array(rate)), motor=np.full(n, servo_id),
         direction=np.sign(rate).astype(int), count=np.full(n, count),
         noise=np.full((n, 3), noise or 1e-3), rest_mean=rest, rest_count=np.full(r, count),
-        rest_noise=np.full((r, 3), noise or 1e-3))
+        rest_noise=np.full((r, 3), noise or 1e-3), **ref)
     return obs, np.array(seat), np.array(axes), rest_seat, np.array(ups)

@@ -118,3 +118,37 @@ def test_by_seat_refuses_forces_that_do_not_match_the_seats():
     obs, seat, _, rest_seat, up = session(FACES, C=C, bias=bias, rng=rng)
     with pytest.raises(CalibInputError, match="seat_force"):
         obs.by_seat(seat, rest_seat, up[:2])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_six_edges_alone_pass_the_axis_check_and_determine_the_matrix(seed):
+    # (x + y)/√2 and its kind: 0.707 on two axes; a degree of seating error and the shaft's
+    # tilt tip one below 0.7 (seed 1: z at most 0.69), which the axis check refused before
+    rng = np.random.default_rng([seed, 0x51])
+    C, bias, _, _ = draw_truth(rng)
+    G = rng.uniform(-1, 1, (3, 3)) * np.radians(0.1)
+    edges = {s: SEATS[s][0] for s in SEAT_SETS["edges"]}
+    obs, seat, _, rest_seat, up = session(
+        edges, C=C, bias=bias, rng=rng, speed=4.3, noise=1.7e-3, count=580,
+        seat_error_rad=np.radians(1), shaft_tilt_rad=np.radians(0.3), g_sensitivity=G)
+    fit = estimate(obs.by_seat(seat, rest_seat, up), "full-matrix")
+    assert fit.success, fit.message
+    err = np.concatenate([(fit.matrix - truth_in_frame(C)).ravel(), fit.bias - bias])
+    std = np.sqrt(np.diag(fit.covariance))
+    assert np.all(np.abs(err[std > 0]) < 4.5 * std[std > 0])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_still_angles_shared_across_a_reseat_converge(seed):
+    # The one servo's still angle between two seats is referenced by turns of both: moving it
+    # is no symmetry of the fit (the gimbal's encoder-zero gauge must leave it alone)
+    rng = np.random.default_rng([seed, 0x57])
+    C, bias, _, _ = draw_truth(rng)
+    edges = {s: SEATS[s][0] for s in SEAT_SETS["edges"]}
+    obs, seat, *_ = session(edges, C=C, bias=bias, rng=rng, speed=4.3, noise=1.7e-3,
+                            count=580, still_std=2 * np.pi / 4096 / np.sqrt(12), turns=1)
+    fit = estimate(obs.by_seat(seat), "full-matrix")
+    assert fit.success, fit.message
+    err = np.concatenate([(fit.matrix - truth_in_frame(C)).ravel(), fit.bias - bias])
+    std = np.sqrt(np.diag(fit.covariance))
+    assert np.all(np.abs(err[std > 0]) < 4.5 * std[std > 0])
