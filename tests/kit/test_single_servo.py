@@ -87,3 +87,26 @@ def test_single_servo_refuses_a_config_of_several_servos(tmp_path, capsys):
     assert main(["calibrate", "--sim", "--jig", "single-servo", "--config", str(cfg),
                  "--out", str(tmp_path / "o"), "--quiet", "--no-report"]) == 2
     assert "set gimbal.ids = [3]" in capsys.readouterr().err
+
+
+def test_terminal_seater_waits_for_enter_and_refuses_a_closed_terminal():
+    import io
+    import os
+
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.seating import TerminalSeater
+
+    r, w = os.pipe()
+    with os.fdopen(r) as inp, os.fdopen(w, "w") as out_w:
+        said = io.StringIO()
+        seater = TerminalSeater(inp, said)
+        seater.prompt("+x", seat_prompt("+x", 1, 3))
+        assert "face +x up" in said.getvalue()
+        assert not seater.ready()  # nothing typed: the runner's loop goes on
+        out_w.write("\n")
+        out_w.flush()
+        assert seater.ready()
+        seater.prompt("+y", seat_prompt("+y", 2, 3))
+        out_w.close()
+        with pytest.raises(InputError, match="interactive terminal"):
+            seater.ready()
