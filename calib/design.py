@@ -30,6 +30,9 @@ from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
     "AUTO_TIME_BUDGET_S",
+    "SEATS",
+    "SEAT_HANDLING_S",
+    "SEAT_SETS",
     "FULL_TIME_BUDGET_S",
     "MIN_REST_S",
     "PAPER_DESIGN",
@@ -42,6 +45,8 @@ __all__ = [
     "paper_plan",
     "plan_accel_rests",
     "plan_protocol",
+    "plan_seats",
+    "seat_axes",
     "protocol_sequence",
     "predict_full_uncertainty",
     "predicted_general_motion_rms",
@@ -217,6 +222,10 @@ class Plan:
         Predicted worst-direction σ of the calibrated specific force's magnitude over the σ of
         one rest window's mean per axis (:attr:`gyrocal.calib.accel.AccelDesign.worst_force_std`
         at ``window_std = 1``); None without accelerometer rests.
+    seats : tuple of str
+        Single-servo jig only (:func:`plan_seats`): the cube's seats in running order
+        (:data:`SEATS` names); per seat the user re-seats the cube, then rest, turn −, rest,
+        turn +, and a rest. Empty on the gimbal.
     """
 
     speed: float
@@ -235,11 +244,13 @@ class Plan:
     accel_extra_rests: int = 0
     accel_time_s: float = 0.0
     accel_std_ratio: float | None = None
+    seats: tuple[str, ...] = ()
 
     @property
     def model(self) -> str:
-        """``"full"`` when the plan has posed turns, else ``"diagonal"``."""
-        return "full" if self.poses else "diagonal"
+        """``"full"`` when the plan has posed turns (or, on the single-servo jig, seats that
+        determine the matrix), else ``"diagonal"``."""
+        return "full" if self.poses or (self.seats and self.matrix_std) else "diagonal"
 
     @property
     def speed_dps(self) -> float:
@@ -1381,3 +1392,153 @@ def _accel_rest_moves(
                            else min(results, key=lambda x: (x[1], x[0])))
     return (tuple((int(r), int(s), float(a)) for r, s, a in moves), extra, float(added),
             float(ratio))
+
+
+# ------------------------------------------------------------- the single-servo jig's seats
+#: The seats of the single-servo jig's cube (hardware_docs/single-servo.md): the servo stands
+#: with its shaft vertical, and each seat puts one sensor direction up along it. A face seat
+#: (``"+x"``) lays the cube on the flat adapter with that face up; an edge seat (``"+x+y"``)
+#: lays it in the adapter's 90° V-block with the edge between the two faces up. Name → (the
+#: sensor direction up, unit; the adapter part that holds it).
+SEATS: dict[str, tuple[tuple[float, float, float], str]] = {
+    "+x": ((1.0, 0.0, 0.0), "flat"),
+    "+y": ((0.0, 1.0, 0.0), "flat"),
+    "+z": ((0.0, 0.0, 1.0), "flat"),
+    "+x+y": ((0.5**0.5, 0.5**0.5, 0.0), "V-block"),
+    "+y+z": ((0.0, 0.5**0.5, 0.5**0.5), "V-block"),
+    "+z+x": ((0.5**0.5, 0.0, 0.5**0.5), "V-block"),
+    "+x-y": ((0.5**0.5, -(0.5**0.5), 0.0), "V-block"),
+    "+y-z": ((0.0, 0.5**0.5, -(0.5**0.5)), "V-block"),
+    "+z-x": ((-(0.5**0.5), 0.0, 0.5**0.5), "V-block"),
+}
+
+#: The seat sets the planner considers. ``faces`` (the flat adapter alone) sees only the
+#: diagonal model: a seat's axis is a free unknown (the seating error), so each seat tells the
+#: fit one number about the matrix, ``|A⁻¹ v| = 1`` for its mean reading direction ``v``, and
+#: axes along x, y, z leave the three off-diagonal terms of ``AᵀA`` unseen. Six seats whose
+#: ``u uᵀ`` span the symmetric matrices (faces and edges) determine all six, hence ``A`` in the
+#: frame gyro-x-xy (hardware_docs/method.md §9).
+SEAT_SETS: dict[str, tuple[str, ...]] = {
+    "faces": ("+z", "+x", "+y"),
+    "faces-edges": ("+z", "+x", "+y", "+x+y", "+y+z", "+z+x"),
+    "edges": ("+x+y", "+y+z", "+z+x", "+x-y", "+y-z", "+z-x"),
+    "faces-all-edges": ("+z", "+x", "+y", "+x+y", "+y+z", "+z+x", "+x-y", "+y-z", "+z-x"),
+}
+
+#: Time a user takes to re-seat the cube and press Enter, s ⚠ (assumed: lift, turn, seat,
+#: confirm); counted in a single-servo plan's ``jig_time_s`` once per seat after the first.
+SEAT_HANDLING_S = 10.0
+
+#: Time budget of a single-servo plan's turns and rests (the re-seats not counted), s.
+SEAT_TIME_BUDGET_S = 60.0
+
+
+def seat_axes(seats: tuple[str, ...]) -> np.ndarray:
+    """The nominal turning axis of each seat in the sensor frame, ``(S, 3)`` (:data:`SEATS`).
+
+    Raises
+    ------
+    CalibInputError
+        If a seat is not one of :data:`SEATS`.
+    """
+    bad = [s for s in seats if s not in SEATS]
+    if bad:
+        raise CalibInputError(f"seat {bad[0]!r} is not one of " + ", ".join(SEATS))
+    return np.array([SEATS[s][0] for s in seats], dtype=float)
+
+
+def seat_jig_time(speed: float, turns: int, rest_s: float, accel: float, n_seats: int,
+                  handling_s: float = SEAT_HANDLING_S) -> float:
+    """Jig time of a single-servo plan: per seat a rest, turn −, rest, turn + and a final rest
+    (:func:`jig_time` with one "servo" per seat and a rest more per seat), and the re-seats."""
+    turn = profile_duration(2 * np.pi * turns, speed, accel) + 0.1
+    return float(n_seats * (2 * turn + 3 * rest_s) + (n_seats - 1) * handling_s)
+
+
+def plan_seats(
+    *,
+    servo_max_speed: float,
+    full_scale: float,
+    model: str = "full",
+    noise_std: float = 0.035,
+    odr_hz: float = 200.0,
+    accel: float = 10.0,
+    reference_rate: float = 1.0,
+    time_budget_s: float = SEAT_TIME_BUDGET_S,
+    min_rest_s: float = MIN_REST_S,
+    max_scale_error: float = 1.25,
+) -> Plan:
+    """The single-servo jig's plan: which seats of the cube, and speed, turns and rests.
+
+    Each seat's axis is a free unknown of the fit (the cube is seated by hand: its seating
+    error), exactly as each gimbal servo's axis is, so the seats are scored as that many
+    independent servos with no poses: :func:`predict_uncertainty` for ``model="diagonal"``
+    (the three faces, which see only the paper's model) and :func:`predict_full_uncertainty`
+    for ``"full"`` over the sets of :data:`SEAT_SETS` that determine the matrix; the plan
+    minimises the worst-direction σ of a calibrated rate at ``reference_rate`` within
+    ``time_budget_s`` of turns and rests (the re-seats, :data:`SEAT_HANDLING_S` each, come on
+    top). Arguments as :func:`plan_protocol`.
+
+    Returns
+    -------
+    Plan
+        With ``seats``; ``matrix_std`` for the full model.
+
+    Raises
+    ------
+    CalibInputError
+        If an argument is not positive, the model unknown, or nothing fits the budget.
+    """
+    for name, v in (("servo_max_speed", servo_max_speed), ("full_scale", full_scale),
+                    ("time_budget_s", time_budget_s), ("noise_std", noise_std),
+                    ("odr_hz", odr_hz), ("accel", accel), ("reference_rate", reference_rate)):
+        if not (v > 0 and np.isfinite(v)):
+            raise CalibInputError(f"{name} must be a positive number, got {v!r}")
+    if model not in ("diagonal", "full"):
+        raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
+    top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
+    best = _plan_seats_cached(model, float(top), float(time_budget_s), float(noise_std),
+                              float(odr_hz), float(accel), float(reference_rate),
+                              float(min_rest_s))
+    if best is None:
+        raise CalibInputError(f"no single-servo protocol fits {time_budget_s:g} s of turns and "
+                              f"rests with speeds up to {top:.2f} rad/s; raise the time budget")
+    return best
+
+
+@functools.lru_cache(maxsize=16)
+def _plan_seats_cached(model: str, top: float, budget: float, noise_std: float, odr_hz: float,
+                       accel: float, reference_rate: float, min_rest_s: float) -> Plan | None:
+    """:func:`plan_seats`' search, once per distinct input (a plan is immutable)."""
+    speeds = np.unique(np.concatenate([np.linspace(min(1.0, top), top, 6), [top]]))
+    rests = sorted({min_rest_s, 1.0, 1.5})
+    sets = ["faces"] if model == "diagonal" else [k for k in SEAT_SETS if k != "faces"]
+    best: Plan | None = None
+    for name in sets:
+        seats = SEAT_SETS[name]
+        S = len(seats)
+        cands = [(float(sp), t, float(r)) for sp in speeds for t in (1, 2, 3) for r in rests
+                 if seat_jig_time(sp, t, r, accel, S, 0.0) <= budget]
+        if not cands:
+            continue
+        if model == "diagonal":
+            preds = [predict_uncertainty(sp, t, r, noise_std=noise_std, odr_hz=odr_hz,
+                                         accel=accel, reference_rate=reference_rate)
+                     for sp, t, r in cands]
+            err = np.array([p[2] for p in preds])
+            i = int(np.argmin(err))
+            ks, bs, ms = preds[i][0], preds[i][1], None
+        else:
+            mstd, bstd, err = predict_full_uncertainty(
+                cands, (), noise_std=noise_std, odr_hz=odr_hz, accel=accel,
+                reference_rate=reference_rate, axes=seat_axes(seats))
+            i = int(np.argmin(err))
+            ks, bs = np.diag(mstd[i]), bstd[i]
+            ms = tuple(tuple(float(x) for x in row) for row in mstd[i])
+        if best is not None and not err[i] < best.rate_error_std * (1 - 1e-9):
+            continue
+        sp, t, r = cands[i]
+        best = Plan(sp, t, r, float(accel), seat_jig_time(sp, t, r, accel, S),
+                    tuple(float(x) for x in ks), tuple(float(x) for x in bs),  # type: ignore[arg-type]
+                    float(err[i]), float(reference_rate), matrix_std=ms, seats=seats)
+    return best

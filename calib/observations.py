@@ -9,6 +9,7 @@ every servo still: its mean reading is minus the bias.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -163,6 +164,11 @@ class ObservationSet:
         points along ``sign`` times that servo's positive axis (the gimbal stands with that axis
         vertical). With ``rest_pose`` and ``home_pose`` it lets the full-matrix fit model
         g-sensitivity; without it, none is fitted.
+    force, rest_force : array_like, shape (n, 3) and (r, 3), optional
+        The mean specific force of each window and rest, g, sensor frame, when it is known
+        otherwise than through a gimbal's kinematics (the single-servo jig: gravity read by the
+        accelerometer in each seat, :meth:`by_seat`); given together. The full-matrix fit then
+        models g-sensitivity with them.
 
     Raises
     ------
@@ -195,6 +201,8 @@ class ObservationSet:
     home_pose: np.ndarray | None = None
     gravity: tuple[int, int] | None = None
     turn_phase: np.ndarray | None = None
+    force: np.ndarray | None = None
+    rest_force: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -289,6 +297,16 @@ class ObservationSet:
         if pose_still is not None and np.any(pose_still >= 0) and not self.still_angle_std > 0:
             raise CalibInputError("still_angle_std must be positive when pose_still is used")
         self._gravity_fields(r_mean.shape[0])
+        self._force_fields(n, r_mean.shape[0])
+
+    def _force_fields(self, n: int, r: int) -> None:
+        """Check and freeze ``force`` and ``rest_force``."""
+        if self.force is None and self.rest_force is None:
+            return
+        if self.force is None or self.rest_force is None:
+            raise CalibInputError("force and rest_force go together")
+        object.__setattr__(self, "force", _ro(_arr(self.force, "force", (n, 3))))
+        object.__setattr__(self, "rest_force", _ro(_arr(self.rest_force, "rest_force", (r, 3))))
 
     def _gravity_fields(self, r: int) -> None:
         """Check and freeze ``rest_pose``, ``home_pose`` and ``gravity``."""
@@ -495,6 +513,55 @@ class ObservationSet:
         """The servo IDs that turned, in order of first appearance."""
         _, first = np.unique(self.motor, return_index=True)
         return tuple(int(self.motor[i]) for i in sorted(first))
+
+    def by_seat(self, seat: np.ndarray, rest_seat: np.ndarray | None = None,
+                seat_force: np.ndarray | None = None) -> ObservationSet:
+        """The windows of a single-servo run with each seat of the cube as its own axis.
+
+        On the single-servo jig the user re-seats the sensor between groups of turns of the one
+        servo (:data:`gyrocal.calib.design.SEATS`); its axis in the sensor frame differs per
+        seat by the seat's turn and its seating error, both unknown to the fit, exactly as each
+        servo's axis of a gimbal is. So a window's "servo" becomes its seat number (``seat``,
+        one per window, 1-based), and the chain is the seats with no poses (each seat's axis a
+        free unit vector; :func:`gyrocal.calib.estimators.fit_full_matrix` and
+        :func:`~gyrocal.calib.estimators.fit_paired_axis` then fit them as they fit servos).
+        The rests, the references and their still angles are unchanged; the gravity fields
+        (a gimbal's) are dropped.
+
+        With ``rest_seat`` (each rest's seat) and ``seat_force`` (``(S, 3)``: the specific force
+        in each seat, g, as the accelerometer read it at rest), every window and rest gets its
+        seat's force (:attr:`force`): the shaft is vertical, so a turn over whole revolutions
+        sees gravity along its axis all the time, as the rests do, and the full-matrix fit
+        models g-sensitivity ``G f`` with them (without, ``G u`` of each seat would be a
+        different bias per seat).
+
+        Raises
+        ------
+        CalibInputError
+            If ``seat`` is not one positive integer per window, or ``rest_seat`` and
+            ``seat_force`` do not match.
+        """
+        seat = np.asarray(seat)
+        if seat.shape != (self.n_windows,) or not np.all(seat == np.round(seat)) or (
+                seat.size and seat.min() < 1):
+            raise CalibInputError(f"seat must give one seat number (1, 2, ...) per window "
+                                  f"({self.n_windows}), got shape {seat.shape}")
+        seat = seat.astype(np.int64)
+        chain = tuple(int(s) for s in np.unique(seat))
+        force: dict[str, Any] = {}
+        if seat_force is not None or rest_seat is not None:
+            sf = np.asarray(seat_force, dtype=float)
+            rs = np.asarray(rest_seat)
+            if (sf.ndim != 2 or sf.shape[1] != 3 or rs.shape != (self.n_rests,)
+                    or not np.all(np.isfinite(sf))
+                    or (rs.size and not 1 <= rs.min() <= rs.max() <= sf.shape[0])
+                    or seat.max() > sf.shape[0]):
+                raise CalibInputError(
+                    f"seat_force must be (seats, 3) finite and rest_seat one seat number per "
+                    f"rest ({self.n_rests}) within them, got {sf.shape} and {rs.shape}")
+            force = {"force": sf[seat - 1], "rest_force": sf[rs.astype(np.int64) - 1]}
+        return replace(self, motor=seat, chain=chain, pose=np.zeros((seat.size, len(chain))),
+                       pose_still=None, rest_pose=None, home_pose=None, gravity=None, **force)
 
     def with_pooled_noise(self, alpha: float = 0.01) -> ObservationSet:
         """The same set with each axis's noise pooled over all windows and rests where they are

@@ -78,7 +78,7 @@ def load_cli_config(args: argparse.Namespace) -> Any:
     if path is None and Path("gyrocal.toml").exists():
         path = "gyrocal.toml"
     cfg = load_config(path)
-    return apply_overrides(cfg, {
+    cfg = apply_overrides(cfg, {
         "gimbal.port": args.port, "gimbal.baud": args.baud, "imu.model": args.imu_model,
         "imu.bus": args.imu_bus, "imu.address": args.imu_address,
         "imu.range_dps": args.range_dps, "imu.odr_hz": args.odr,
@@ -87,6 +87,37 @@ def load_cli_config(args: argparse.Namespace) -> Any:
         "protocol.accel_rests": getattr(args, "accel_rests", None),
         "protocol.align_gyro_to_accel": getattr(args, "align_gyro_to_accel", None),
     })
+    return single_servo_config(cfg) if jig_kind(args) == "single-servo" else cfg
+
+
+def jig_kind(args: argparse.Namespace) -> str:
+    """The run's kind of jig (``--jig``, :data:`gyrocal.kit.jig_kinds.JIG_KINDS`)."""
+    from gyrocal.kit.jig_kinds import DEFAULT_JIG
+
+    return getattr(args, "jig", None) or DEFAULT_JIG
+
+
+def single_servo_config(cfg: Any) -> Any:
+    """``cfg`` for the single-servo jig: its one servo. A config that leaves ``gimbal.ids`` and
+    ``gimbal.axes`` at their defaults drives servo 1 (the gimbal's base); the servo's axis is
+    the cube's "up", ``z`` of the first seat (the seats say the others).
+
+    Raises
+    ------
+    InputError
+        If the config lists several servos of its own.
+    """
+    from gyrocal.kit.config import apply_overrides, default_config
+    from gyrocal.kit.errors import InputError
+
+    g, default = cfg["gimbal"], default_config()["gimbal"]
+    ids = g["ids"]
+    if (ids, g["axes"]) == (default["ids"], default["axes"]):
+        ids = ids[:1]
+    elif len(ids) != 1:
+        raise InputError(f"the single-servo jig drives one servo; gimbal.ids lists {len(ids)}: "
+                         f"set gimbal.ids = [{ids[0]}] (hardware_docs/single-servo.md)")
+    return apply_overrides(cfg, {"gimbal.ids": list(ids), "gimbal.axes": ["z"]})
 
 
 def sim_effects(args: argparse.Namespace) -> list[str]:
@@ -294,9 +325,11 @@ def time_budget(protocol: Mapping[str, Any]) -> float:
     return given or AUTO_TIME_BUDGET_S
 
 
-def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None) -> Any:
+def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None,
+                jig: str = "gimbal") -> Any:
     """The protocol: planned for this servo and gyro (and its measured noise), or the paper's;
-    fixed values override."""
+    fixed values override. On the single-servo jig (``jig``), the cube's seats
+    (:func:`seat_plan`)."""
     from dataclasses import replace
 
     from gyrocal.calib.design import (
@@ -317,6 +350,8 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     # also when fixed values override the plan (checked below)
     limit = time_budget(p)
     noise = {} if noise_std is None else {"noise_std": noise_std}
+    if jig == "single-servo":
+        return seat_plan(cfg, gimbal, imu, noise)
     if p["name"] == "paper":
         plan = paper_plan(accel=accel, odr_hz=imu.odr_hz, **noise)
     else:
@@ -377,6 +412,42 @@ def choose_plan(cfg: Any, gimbal: Any, imu: Any, noise_std: float | None = None)
     return plan
 
 
+def seat_plan(cfg: Any, gimbal: Any, imu: Any, noise: Mapping[str, float]) -> Any:
+    """The single-servo jig's plan (:func:`gyrocal.calib.design.plan_seats`): protocol
+    ``full`` (the default) plans the seats that determine the full matrix (faces and V-block
+    edges); ``auto`` and ``paper`` the three faces (the diagonal model, the flat adapter
+    alone); fixed speed, turns and rests override the planned ones."""
+    from dataclasses import replace
+
+    from gyrocal.calib.design import SEAT_TIME_BUDGET_S, plan_seats, seat_jig_time
+    from gyrocal.calib.errors import CalibInputError
+    from gyrocal.kit.errors import InputError
+
+    p = cfg["protocol"]
+    try:
+        plan = plan_seats(servo_max_speed=gimbal.top_speed,
+                          full_scale=math.radians(imu.full_scale_dps), odr_hz=imu.odr_hz,
+                          accel=float(cfg["gimbal"]["acceleration"]),
+                          model="full" if p["name"] == "full" else "diagonal",
+                          time_budget_s=float(p["time_budget_s"]) or SEAT_TIME_BUDGET_S,
+                          **noise)
+    except CalibInputError as exc:
+        raise InputError(f"{exc} (protocol.time_budget_s)") from None
+    fixed = {k: v for k, v in (("speed", math.radians(p["speed_dps"])), ("turns", p["turns"]),
+                               ("rest_s", float(p["rest_s"]))) if v}
+    if fixed:
+        plan = replace(plan, **fixed)
+        plan = replace(plan, jig_time_s=seat_jig_time(plan.speed, plan.turns, plan.rest_s,
+                                                      plan.accel, len(plan.seats)))
+    if plan.speed > gimbal.top_speed:
+        raise InputError(f"protocol speed {plan.speed_dps:.0f}°/s exceeds the servo's top speed "
+                         f"{math.degrees(gimbal.top_speed):.0f}°/s; lower protocol.speed_dps")
+    if plan.turns > cfg["gimbal"]["max_turns"]:
+        raise InputError(f"protocol turns {plan.turns} exceed gimbal.max_turns "
+                         f"{cfg['gimbal']['max_turns']} (the cable-wrap limit)")
+    return plan
+
+
 def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: int = 0
                     ) -> tuple[dict, dict, dict, dict | None]:
     """The manifest's ``sensor``, ``gimbal``, ``protocol`` and ``truth`` (sim only) of sensor
@@ -403,6 +474,8 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: i
                 "planning_noise_std": noise_std,
                 "sample_hz": cfg["gimbal"]["sample_hz"],
                 "discarded": []}  # attempts repeated after a failed check (the runner's)
+    if plan.seats:  # the single-servo jig: the seats planned; the runner lists those taken
+        protocol.update(jig="single-servo", planned_seats=list(plan.seats), seats=[])
     truth = None
     if jig.sims:
         sim = jig.sims[k]
@@ -483,7 +556,8 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
     with jig.gimbal:
         noise_std = _still_noise(jig)
         if plan is None:
-            plan = choose_plan(cfg, jig.gimbal, _planning_sensor(jig), noise_std)
+            plan = choose_plan(cfg, jig.gimbal, _planning_sensor(jig), noise_std,
+                               jig=jig_kind(args))
         steps = build_steps(plan, cfg["gimbal"]["ids"])
         runner_class = Runner
         if extend is not None:
@@ -495,6 +569,8 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 f"protocol {cfg['protocol']['name']}: {plan.turns} turn(s) each way at "
                 f"{plan.speed_dps:.0f}°/s, {plan.rest_s:.1f} s rests, "
                 + (f"{len(plan.poses)} posed pairs for the full matrix, " if plan.poses else "")
+                + (f"{len(plan.seats)} seats of the cube ({', '.join(plan.seats)}), "
+                   if plan.seats else "")
                 + f"about {plan.jig_time_s:.0f} s of jig time"
                 + (f", {len(jig.imus)} sensors" if len(jig.imus) > 1 else "")
                 + (" (emulated jig)" if jig.sim is not None else "")
@@ -505,6 +581,7 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                 steps, sample_hz=cfg["gimbal"]["sample_hz"],
                 on_progress=None if quiet else progress.update,
                 on_event=None if quiet else progress.event, sensor_names=jig.names,
+                seater=_seater(jig, args) if plan.seats else None,
             )
             for f in jig.arm_faults():
                 if not quiet:
@@ -529,7 +606,10 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                         "worst_poll_interval_s": jig.gimbal.worst_poll_interval_s,
                         "bus_watchdog_s": jig.gimbal.watchdog_s})
             for k, w in enumerate(getattr(writer, "writers", [writer])):
-                if jig.sims and k not in runner.failed:
+                if jig.sims and plan.seats:
+                    w.update_manifest(truth={**w.manifest["truth"], "axes": _seat_axes_truth(
+                        jig, runner)})
+                elif jig.sims and k not in runner.failed:
                     # The true axis of each servo during its turns (the holding servos rest
                     # somewhere within their ticks, which tilts the axes slightly off the
                     # ideal home pose).
@@ -537,6 +617,40 @@ def record_protocol(cfg: Any, args: argparse.Namespace, jig: Jig, rec_dir: Path,
                         cfg["gimbal"]["ids"], runner.turn_times(), runner.t0)})
             writer.finish()
     return plan
+
+
+def _seater(jig: Jig, args: argparse.Namespace) -> Any:
+    """Who re-seats the cube: the emulated hand with ``--sim`` (seeded by ``--sim-seed``), else
+    the user at the terminal."""
+    from gyrocal.kit.errors import InputError
+    from gyrocal.kit.seating import EmulatedSeater, TerminalSeater
+
+    if jig.sim is not None:
+        from gyrocal.drivers.emulated.seater import CubeSeater
+
+        return EmulatedSeater(CubeSeater(jig.sim.jig, jig.clock, seed=args.sim_seed,
+                                         wrong=jig.sim.wrong_seats))
+    if jig.imu_sim is not None:
+        raise InputError("--sim-imu emulates an IMU at rest: nobody re-seats it; run the "
+                         "single-servo jig with --sim, or on the hardware")
+    return TerminalSeater()
+
+
+def _seat_axes_truth(jig: Jig, runner: Any) -> dict[str, list[float]]:
+    """The servo's true axis in the sensor frame in each seat taken (the manifest's
+    ``truth.axes`` by seat number, 1-based, as the fit numbers them), at the middle of the
+    seat's first turn."""
+    import numpy as np
+
+    starts = [s["t_start"] for s in runner.seats]
+    out: dict[str, list[float]] = {}
+    for times in runner.turn_times().values():
+        for t in times:
+            k = int(np.searchsorted(starts, t, side="right"))
+            if k and str(k) not in out:
+                out[str(k)] = jig.sim.jig.joint_axes_sensor(
+                    np.array([t + runner.t0]))[0, 0].tolist()
+    return out
 
 
 def run_jig(cfg: Any, args: argparse.Namespace, out: Path, rec_dir: Path,

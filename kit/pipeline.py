@@ -113,12 +113,61 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
             rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
             imu_temp=rec.imu_temp, chain=_chain(rec),
         )
+        starts = seat_starts(rec.manifest)
+        if starts is not None:
+            return replace(ex, observations=_by_seat(ex, rec.manifest, starts))
         up = gravity_servo(rec.manifest)
         if up is not None and ex.observations.chain is not None:
             ex = replace(ex, observations=replace(ex.observations, gravity=up))
         return ex
     except CalibInputError as exc:
         raise InputError(f"{rec.path}: {exc}") from None
+
+
+def seat_starts(manifest: Mapping[str, Any]) -> np.ndarray | None:
+    """The start times of the cube's seats of a single-servo recording (the manifest's
+    ``protocol.jig`` ``"single-servo"`` and its ``protocol.seats``: each seat's ``t_start`` on
+    the recording clock, in order), or None for a recording of another jig.
+
+    Each window then turns about its seat's own axis (:meth:`gyrocal.calib.observations.
+    ObservationSet.by_seat`: seat ``k`` is the ``k``-th listed, from its ``t_start`` on).
+
+    Raises
+    ------
+    CalibInputError
+        If a single-servo recording lists no seats or a seat without a time.
+    """
+    protocol = manifest.get("protocol") or {}
+    if not isinstance(protocol, Mapping) or protocol.get("jig") != "single-servo":
+        return None
+    seats = protocol.get("seats")
+    try:
+        starts = np.array([float(s["t_start"]) for s in seats], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        raise CalibInputError("a single-servo recording's manifest must list protocol.seats, "
+                              "each with its t_start (s, recording clock)") from None
+    if not starts.size or not np.all(np.isfinite(starts)) or np.any(np.diff(starts) <= 0):
+        raise CalibInputError("protocol.seats of a single-servo recording must list at least "
+                              "one seat, with increasing finite t_start")
+    return starts
+
+
+def _by_seat(ex: ExtractedWindows, manifest: Mapping[str, Any], starts: np.ndarray) -> Any:
+    """The observations of a single-servo recording with each seat its own axis
+    (:meth:`~gyrocal.calib.observations.ObservationSet.by_seat`), each window and rest in the
+    seat it began in; with the gravity each seat's check read (``protocol.seats[].gravity``),
+    the specific force of every window for the g-sensitivity model."""
+    def seat_of(windows: Any) -> np.ndarray:
+        return np.searchsorted(starts, [w.corners[0] for w in windows], side="right")
+
+    seats = manifest["protocol"]["seats"]
+    try:
+        force = np.array([[float(x) for x in s["gravity"]] for s in seats])
+    except (KeyError, TypeError, ValueError):
+        force = None
+    if force is None or force.shape != (len(seats), 3):
+        return ex.observations.by_seat(seat_of(ex.windows))
+    return ex.observations.by_seat(seat_of(ex.windows), seat_of(ex.rests), force)
 
 
 def gravity_servo(manifest: Mapping[str, Any]) -> tuple[int, int] | None:
@@ -163,21 +212,32 @@ def diagonal_note(sensor_model: str | None, reason: str) -> str:
 
 
 def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
-         path: object) -> tuple[FitResult, tuple[str, ...]]:
+         path: object, seats: bool = False) -> tuple[FitResult, tuple[str, ...]]:
     obs = ex.observations
     try:
         if method != AUTO:
-            return estimate(obs, method), ()
+            return _without_chain(estimate(obs, method), seats), ()
         if obs.chain is None:
             reason = "the recording's manifest does not list the gimbal's servos in chain order"
         else:
             full = estimate(obs, "full-matrix")
             if full.success:
-                return full, ()
-            reason = f"the recording's poses do not determine them: {full.message}"
-        return estimate(obs, "paired-axis"), (diagonal_note(sensor_model, reason),)
+                return _without_chain(full, seats), ()
+            reason = (f"the recording's poses do not determine them: {full.message}"
+                      if not seats else
+                      f"the {len(obs.chain)} seats of the cube do not determine them: "
+                      "seat it on edges too, in the V-block (hardware_docs/single-servo.md)")
+        return (_without_chain(estimate(obs, "paired-axis"), seats),
+                (diagonal_note(sensor_model, reason),))
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
+
+
+def _without_chain(fit: FitResult, seats: bool) -> FitResult:
+    """A single-servo fit without the kinematics and servo axes: its "servos" are the cube's
+    seats, not a gimbal's, so nothing may carry gravity or poses through them, nor read them as
+    a servo's mounting misalignment."""
+    return replace(fit, kinematics=None, axes=None, axes_std_rad=None) if seats else fit
 
 
 def local_gravity(section: Mapping[str, Any]) -> tuple[float, str]:
@@ -274,7 +334,8 @@ def estimate_recording(
         If the estimator fails (the message says why).
     """
     ex = extract_recording(rec)
-    fit, notes = _fit(ex, method, rec.sensor.get("model"), rec.path)
+    fit, notes = _fit(ex, method, rec.sensor.get("model"), rec.path,
+                      seats=seat_starts(rec.manifest) is not None)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
     drift = chip_bias_drift(rec.sensor.get("model"), ex)
@@ -525,6 +586,10 @@ def _axis_problems(rec: Recording, ex: ExtractedWindows, cal: GyroCalibration) -
     otherwise than the manifest says."""
     from gyrocal.kit.report_plots import nominal_axis, servo_axes
 
+    if seat_starts(rec.manifest) is not None:
+        # the single-servo jig: the one servo's axis is another in each seat, and each seat was
+        # checked against gravity as it was taken (gyrocal.kit.seating.check_seat)
+        return []
     named: dict[int, str] = {}
     for m in (rec.manifest.get("gimbal") or {}).get("motors") or []:
         if isinstance(m, Mapping) and isinstance(m.get("id"), int) \

@@ -57,13 +57,15 @@ __all__ = ["CheckFailure", "Runner", "Step", "build_steps"]
 class Step:
     """One step of the protocol."""
 
-    kind: str  # "rest", "rotate", "move" or "still" (still time only: no segment, no check)
+    kind: str  # "rest", "rotate", "move", "still" (still time only: no segment, no check) or
+    # "seat" (the single-servo jig: the user re-seats the cube; no segment)
     motor: int | None = None
     direction: int = 0
     turns: int = 0
     speed: float = 0.0
     rest_s: float = 0.0
     angle: float = 0.0  # a move's goal, rad from home
+    seat: str = ""  # a "seat" step's seat (gyrocal.calib.design.SEATS)
 
     def describe(self) -> str:
         """Human-readable, e.g. ``turn servo 2, 2 turns at 200°/s, negative``."""
@@ -71,6 +73,8 @@ class Step:
             return f"rest {self.rest_s:.1f} s"
         if self.kind == "still":
             return f"hold still {self.rest_s:.1f} s"
+        if self.kind == "seat":
+            return f"re-seat the cube with {self.seat} up"
         if self.kind == "move":
             return f"move servo {self.motor} to {math.degrees(self.angle):+.0f}°"
         sign = "positive" if self.direction > 0 else "negative"
@@ -101,6 +105,8 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
     from gyrocal.calib.design import protocol_sequence
     from gyrocal.calib.errors import CalibInputError
 
+    if plan.seats:
+        return _seat_steps(plan, ids)
     try:
         seq = protocol_sequence(plan, len(ids))
     except CalibInputError as exc:
@@ -116,6 +122,22 @@ def build_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
                               speed=plan.speed))
         else:
             steps.append(Step("move", motor=int(ids[st[1]]), angle=st[2], speed=plan.speed))
+    return steps
+
+
+def _seat_steps(plan: Plan, ids: Sequence[int]) -> list[Step]:
+    """A single-servo plan (:attr:`~gyrocal.calib.design.Plan.seats`) as steps: per seat, the
+    re-seat, then rest, turn −, rest, turn +, rest."""
+    if len(ids) != 1:
+        raise ValueError(f"a single-servo plan drives one servo, got servos {list(ids)}")
+    steps: list[Step] = []
+    for seat in plan.seats:
+        steps.append(Step("seat", seat=seat))
+        for d in (-1, 1):
+            steps += [Step("rest", rest_s=plan.rest_s),
+                      Step("rotate", motor=int(ids[0]), direction=d, turns=plan.turns,
+                           speed=plan.speed)]
+        steps.append(Step("rest", rest_s=plan.rest_s))
     return steps
 
 
@@ -138,6 +160,7 @@ class _StepData:
     def __init__(self) -> None:
         self.imu_t: list[np.ndarray] = []
         self.imu_rate: list[np.ndarray] = []
+        self.imu_accel: list[np.ndarray] = []
         self.saturated = 0
         self.gaps: list[Any] = []
         self.max_poll_gap = 0.0  # longest gap the servos went without a packet in motion, s
@@ -191,6 +214,12 @@ class Runner:
         before the run stops with :class:`~gyrocal.kit.backlog.BacklogError`.
     sensor_names : sequence of str, optional
         Each sensor's name, for messages (several sensors).
+    seater : gyrocal.kit.seating.Seater, optional
+        Who re-seats the cube at a ``seat`` step (the single-servo jig); each seat taken is
+        listed in the manifest's ``protocol.seats`` with its start time and the gravity the
+        check read.
+    max_seat_tries : int
+        Prompts per seat before a cube still seated wrong stops the run.
     """
 
     def __init__(
@@ -210,6 +239,8 @@ class Runner:
         gap_limit_s: float | None = None,
         backlog_s: float = 5.0,
         sensor_names: Sequence[str] | None = None,
+        seater: Any = None,
+        max_seat_tries: int = 3,
     ) -> None:
         self.gimbal = gimbal
         self.imus = list(imu) if isinstance(imu, (list, tuple)) else [imu]
@@ -258,6 +289,10 @@ class Runner:
         self._posed: set[int] = set()  # indices of the segments turned in a pose
         self.last_rate = np.zeros(3)
         self.last_speed = 0.0
+        self.seater = seater
+        self.max_seat_tries = int(max_seat_tries)
+        #: The seats taken (single-servo jig), as the manifest's ``protocol.seats`` lists them.
+        self.seats: list[dict[str, Any]] = []
 
     # ------------------------------------------------------------------ loop
     def now(self) -> float:
@@ -293,6 +328,8 @@ class Runner:
             if d is not None:
                 d.imu_t.append(t)
                 d.imu_rate.append(batch.rate)
+                if batch.accel is not None:
+                    d.imu_accel.append(batch.accel)
                 d.saturated += int(np.any(batch.saturated, axis=-1).sum())
         if batch.gaps and d is not None:
             d.gaps.extend(batch.gaps)
@@ -629,6 +666,9 @@ class Runner:
             for i, step in enumerate(self.steps):
                 self.step_index = i
                 self.step_desc = step.describe()
+                if step.kind == "seat":
+                    self._run_seat(i, step)
+                    continue
                 if step.kind == "still":  # still time after a turn, before a move: no segment
                     # announced as every step is, so the numbers the user reads have no gaps
                     self._event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}")
@@ -644,6 +684,52 @@ class Runner:
             if k not in self.failed:
                 imu.stop()
         self.backlog.close()
+
+    def _run_seat(self, i: int, step: Step) -> None:
+        """A re-seat of the cube (single-servo jig): prompt, keep the loop going until the
+        user is done, then check the seat from gravity over
+        :data:`~gyrocal.kit.seating.SEAT_CHECK_S` of still time; a wrong seat is prompted
+        again with what is wrong (:func:`~gyrocal.kit.seating.check_seat`), up to
+        :attr:`max_seat_tries` times. No segment: the windows never reach into a re-seat.
+
+        Raises
+        ------
+        ProtocolCheckError
+            When the cube is still seated wrong after the last prompt.
+        """
+        from gyrocal.kit.seating import SEAT_CHECK_S, check_seat, seat_prompt
+
+        if self.seater is None:
+            raise ValueError("a seat step needs a seater (the single-servo jig's user)")
+        total = sum(s.kind == "seat" for s in self.steps)
+        number = len(self.seats) + 1
+        problem = None
+        for _ in range(self.max_seat_tries):
+            self._event(f"step {i + 1}/{len(self.steps)}: {self.step_desc}")
+            self.seater.prompt(step.seat, seat_prompt(step.seat, number, total, problem))
+            self._data = None
+            while not self.seater.ready():
+                self._tick()
+            t_seated = self.now()
+            self._data = self._new_data()
+            self._run_rest(Step("rest", rest_s=SEAT_CHECK_S))
+            accel = (np.concatenate(self._data[0].imu_accel) if self._data[0].imu_accel
+                     else np.zeros((0, 3)))
+            self._data = None
+            problem = check_seat(accel, step.seat)
+            if problem is None:
+                up = accel.mean(axis=0)
+                self.seats.append({"seat": step.seat, "t_start": t_seated,
+                                   "gravity": (up / np.linalg.norm(up)).tolist()})
+                self.backlog.put_manifest(protocol={"seats": list(self.seats)})
+                return
+            self._event(f"check failed: {problem}")
+            self.discarded.append({"step": i, "kind": "seat", "seat": step.seat,
+                                   "t_start": t_seated, "t_end": self.now(), "check": "seat",
+                                   "disturbed": False})
+            self.backlog.put_manifest(protocol={"discarded": list(self.discarded)})
+        raise ProtocolCheckError(f"{problem} (asked {self.max_seat_tries} times): seat the cube "
+                                 "as the prompt says (hardware_docs/single-servo.md)")
 
     def _abort(self, exc: BaseException) -> None:
         """On the way out with ``exc``: stop the servos first (the queue may take a while),

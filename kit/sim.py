@@ -67,6 +67,9 @@ class SimJig:
     #: Every sensor's view of a plate of several (:func:`build_sim_plate`), this one first;
     #: empty for a single sensor.
     plate: list[Any] = field(default_factory=list, repr=False)
+    #: Re-seats (0-based prompts) at which the emulated user seats the single-servo jig's cube
+    #: wrong (``--sim-fault seat:N``; :class:`~gyrocal.drivers.emulated.seater.CubeSeater`).
+    wrong_seats: set[int] = field(default_factory=set, repr=False)
 
     def truth_manifest(self) -> dict[str, Any]:
         """The manifest's ``truth``: the sensor's errors, the axes, and one line per realism
@@ -548,6 +551,8 @@ FAULTS: dict[str, tuple[str, str]] = {
     "pause": ("AT:SECONDS", "the host stalls for SECONDS at AT: no servo poll, no FIFO drain "
               "(the emulated clock only)"),
     "imu-chip": ("MODEL", "the board carries a MODEL chip instead of the configured one"),
+    "seat": ("N", "the single-servo jig's user seats the cube wrong (a quarter turn off) at "
+             "the N-th prompt (0-based)"),
 }
 
 
@@ -625,6 +630,9 @@ def apply_fault(sim: SimJig, spec: str, t0: float = 0.0) -> str:
         return f"the host stalls for {num(1):g} s at {num(0):g} s"
     if kind == "imu-chip":
         return _swap_imu(sim, spec, parts[0] if parts else "")
+    if kind == "seat":
+        sim.wrong_seats.add(num(0, int))
+        return f"the cube is seated wrong at prompt {num(0, int)}"
     chip = sim.chip
     if kind == "fifo":
         chip.faults.fifo_capacity = num(0, int)

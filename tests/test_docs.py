@@ -373,6 +373,8 @@ CHAINS: dict[str, tuple[str, ...]] = {
     # using.md and history.md read running.md's run1 and its gyrocal.toml
     "running": ("hardware_docs/running.md", "hardware_docs/using.md", "hardware_docs/history.md",
                 "hardware_docs/formats.md", "hardware_docs/method.md"),
+    # the single-servo jig's page runs its own emulated run
+    "single-servo": ("hardware_docs/single-servo.md",),
     "intro": ("README.md", "hardware_docs/README.md", "hardware_docs/bom.md",
               "hardware_docs/wiring.md", "hardware_docs/chips.md", "hardware_docs/mechanical.md",
               "hardware_docs/setup.md"),

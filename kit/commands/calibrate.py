@@ -87,7 +87,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
     p.add_argument("--sim-fault", action="append", default=[], metavar="KIND:ARGS",
                    help="arm a fault of the emulated jig (repeatable): "
                         "stall:SERVO:AT[:FRACTION[:S]], silent:SERVO:AT, alert:SERVO:AT[:BITS], "
-                        "slip:AT:DEG, fifo:CAPACITY, nack:PROBABILITY, imu-dead:AT "
+                        "slip:AT:DEG, fifo:CAPACITY, nack:PROBABILITY, imu-dead:AT, seat:N "
                         "(AT: seconds into the recording)")
     p.add_argument("--sim-imu", action="store_true",
                    help="drive the real servos on --port (or gimbal.port) with an emulated IMU "
@@ -106,8 +106,13 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     from gyrocal.kit.choices import METHODS, PROTOCOLS
+    from gyrocal.kit.jig_kinds import DEFAULT_JIG, JIG_KINDS
 
     add_common_jig_arguments(p)
+    p.add_argument("--jig", choices=tuple(JIG_KINDS), default=DEFAULT_JIG,
+                   help="the kind of jig: " + "; ".join(
+                       f"{k.name}: {k.description} (hardware_docs/{k.hardware_docs})"
+                       for k in JIG_KINDS.values()) + f" (default {DEFAULT_JIG})")
     p.add_argument("--out", metavar="DIR",
                    help="output directory (default: ./gyrocal-YYYYmmdd-HHMMSS)")
     p.add_argument("--force", action="store_true",
