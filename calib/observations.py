@@ -163,6 +163,9 @@ class ObservationSet:
         points along ``sign`` times that servo's positive axis (the gimbal stands with that axis
         vertical). With ``rest_pose`` and ``home_pose`` it lets the full-matrix fit model
         g-sensitivity; without it, none is fitted.
+    own_axes : bool
+        Each rotation window turns about an axis of its own (:meth:`pose_groups`): a hand jig,
+        where nothing holds the axis from one turn to the next (:mod:`gyrocal.calib.hand`).
 
     Raises
     ------
@@ -195,6 +198,7 @@ class ObservationSet:
     home_pose: np.ndarray | None = None
     gravity: tuple[int, int] | None = None
     turn_phase: np.ndarray | None = None
+    own_axes: bool = False
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -418,13 +422,15 @@ class ObservationSet:
         in :attr:`chain` at the same angle, within ``tolerance_rad`` and modulo whole turns
         (the servo then turned about one axis in the sensor frame: the servos inside it move
         the sensor and the axis together, :func:`gyrocal.calib.kinematics.chain_axes`);
-        without poses, one group per servo. Groups are numbered in the order of their first
-        window.
+        without poses, one group per servo; with :attr:`own_axes`, one group per window.
+        Groups are numbered in the order of their first window.
 
         Returns
         -------
         ndarray of int, shape (n,)
         """
+        if self.own_axes:
+            return np.arange(self.n_windows, dtype=np.int64)
         chain = [int(c) for c in (self.chain or ())]
         reps: list[tuple[int, np.ndarray | None]] = []
         out = np.zeros(self.n_windows, dtype=np.int64)

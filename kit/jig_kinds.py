@@ -1,0 +1,58 @@
+"""The kinds of jig gyrocal calibrates on, one row each (plain data: the command line's
+``--jig`` choices, the benches' tables and the documents read it; importing it imports nothing
+beyond the standard library).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["DEFAULT_JIG", "JIG_KINDS", "JigKind"]
+
+
+@dataclass(frozen=True)
+class JigKind:
+    """One kind of jig.
+
+    Attributes
+    ----------
+    name : str
+        The ``--jig`` value and the Recording v1 manifest's ``jig.kind``.
+    description : str
+        One line: what turns the sensor and what times the turns.
+    hardware_docs : str
+        The page of ``hardware_docs/`` that says what to build and how to run it.
+    undetermined : str
+        What this jig cannot determine, and why (empty when it determines the full model).
+    """
+
+    name: str
+    description: str
+    hardware_docs: str
+    undetermined: str
+
+
+#: The jig kinds by name, the default first.
+JIG_KINDS: dict[str, JigKind] = {
+    "gimbal": JigKind(
+        "gimbal",
+        "three Dynamixel servos in a gimbal; the encoders time every revolution, and turns "
+        "with another servo posed at a known encoder angle tilt the axes by known rotations",
+        "mechanical.md",
+        "",
+    ),
+    "hand": JigKind(
+        "hand",
+        "no servo: the sensor on a square box turned by hand one whole turn about each box "
+        "axis against a stop, between rests (Ferraris); rests and turns are found in the data "
+        "and each turn's mean rate is 360° over its rest-to-rest duration",
+        "hand-jig.md",
+        "the cross-axis terms: the turn axes are the box's, set by hand against a stop and "
+        "measured by nothing, so each is fitted as a free direction that absorbs them "
+        "(Calibration v1, diagonal); the stop's repeatability (0.1° is 2.8e-4 of a turn) "
+        "limits each turn's reference",
+    ),
+}
+
+#: The jig of a run that does not say (today's users: the gimbal).
+DEFAULT_JIG = "gimbal"
