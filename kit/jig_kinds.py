@@ -47,10 +47,9 @@ JIG_KINDS: dict[str, JigKind] = {
         "axis against a stop, between rests (Ferraris); rests and turns are found in the data "
         "and each turn's mean rate is 360° over its rest-to-rest duration",
         "hand-jig.md",
-        "the cross-axis terms: the turn axes are the box's, set by hand against a stop and "
-        "measured by nothing, so each is fitted as a free direction that absorbs them "
-        "(Calibration v1, diagonal); the stop's repeatability (0.1° is 2.8e-4 of a turn) "
-        "limits each turn's reference",
+        "the turn axes are the box's, set by hand against a stop and measured by nothing, so "
+        "each turn's axis is fitted as a free direction, which absorbs the cross-axis terms; "
+        "the stop's repeatability (0.1° is 2.8e-4 of a turn) limits each turn's reference",
     ),
 }
 

@@ -37,6 +37,7 @@ __all__ = [
     "PLAUSIBLE_SCALE",
     "Estimate",
     "plausible_bounds",
+    "recording_jig",
     "check_plausible",
     "check_plausible_noise",
     "datasheet_cross_axis",
@@ -109,6 +110,14 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
         If the recording cannot be windowed (truncated, a servo without encoder data, ...).
     """
     try:
+        if recording_jig(rec) == "hand":
+            from gyrocal.calib.hand import STOP_STD_RAD, hand_observations
+
+            stop = (rec.manifest.get("jig") or {}).get("stop_std_deg")
+            stop_rad = (math.radians(stop) if isinstance(stop, (int, float))
+                        and not isinstance(stop, bool) and stop > 0 else STOP_STD_RAD)
+            return hand_observations(rec.imu_t, rec.imu_rate, imu_temp=rec.imu_temp,
+                                     stop_std_rad=stop_rad)[0]
         ex = extract_observations(
             rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
             imu_temp=rec.imu_temp, chain=_chain(rec),
@@ -119,6 +128,25 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
         return ex
     except CalibInputError as exc:
         raise InputError(f"{rec.path}: {exc}") from None
+
+
+def recording_jig(rec: Recording) -> str:
+    """The jig kind the recording was made on: the manifest's ``jig.kind``, a key of
+    :data:`gyrocal.kit.jig_kinds.JIG_KINDS` (``gimbal`` when the manifest does not say).
+
+    Raises
+    ------
+    InputError
+        If the manifest names a kind gyrocal does not know.
+    """
+    from gyrocal.kit.jig_kinds import DEFAULT_JIG, JIG_KINDS
+
+    jig = rec.manifest.get("jig")
+    kind = jig.get("kind", DEFAULT_JIG) if isinstance(jig, Mapping) else DEFAULT_JIG
+    if kind not in JIG_KINDS:
+        raise InputError(f"{rec.path}: manifest jig.kind {kind!r} is not one of "
+                         f"{', '.join(JIG_KINDS)}")
+    return str(kind)
 
 
 def gravity_servo(manifest: Mapping[str, Any]) -> tuple[int, int] | None:
@@ -149,16 +177,19 @@ def _chain(rec: Recording) -> tuple[int, ...] | None:
     return chain
 
 
-def diagonal_note(sensor_model: str | None, reason: str) -> str:
+def diagonal_note(sensor_model: str | None, reason: str, *, jig: str = "gimbal") -> str:
     """What a user must know about a diagonal calibration: cross-axis terms are not in it, and
-    how large the error they leave can be."""
+    how large the error they leave can be; how to calibrate them (on a gimbal: record with a
+    posed protocol; on another ``jig``: a gimbal's posed protocol does)."""
     frac = datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
+    how = ("Record with a posed protocol (gyrocal calibrate's default) to calibrate the full "
+           "matrix." if jig == "gimbal" else
+           "A gimbal's posed protocol (gyrocal calibrate's default) calibrates the full matrix.")
     return (
         f"cross-axis terms were NOT calibrated ({reason}); the diagonal model is exact only "
         f"about the six calibration axes: in other directions the calibrated rate can be off "
         f"by up to the sensor's cross-axis sensitivity, ±{100 * frac:g} % of the rate "
-        f"(datasheet). Record with a posed protocol (gyrocal calibrate's default) to calibrate "
-        "the full matrix."
+        f"(datasheet). {how}"
     )
 
 
@@ -168,14 +199,19 @@ def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
     try:
         if method != AUTO:
             return estimate(obs, method), ()
-        if obs.chain is None:
+        jig = "gimbal"
+        if obs.own_axes:
+            from gyrocal.kit.jig_kinds import JIG_KINDS
+
+            jig, reason = "hand", JIG_KINDS["hand"].undetermined
+        elif obs.chain is None:
             reason = "the recording's manifest does not list the gimbal's servos in chain order"
         else:
             full = estimate(obs, "full-matrix")
             if full.success:
                 return full, ()
             reason = f"the recording's poses do not determine them: {full.message}"
-        return estimate(obs, "paired-axis"), (diagonal_note(sensor_model, reason),)
+        return estimate(obs, "paired-axis"), (diagonal_note(sensor_model, reason, jig=jig),)
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
 
