@@ -8,9 +8,10 @@ lays it on the next face. A hand is irregular, and the emulator draws that from 
 * each turn's speed rises and falls unevenly (a raised-sine envelope times a random low-order
   ripple, so the speed varies within the turn, never reverses, and is zero at both ends);
 * rests last a random 2–5 s;
-* the turn axis wobbles by a small angle about the box axis (a slow random tilt that starts and
-  ends at zero, so the face comes back flat), and each return to the stop misses it by the
-  stop's repeatability.
+* the turn axis wobbles by a small angle about the box axis (a slow random tilt that starts
+  and ends at zero, its rate's mean taken off so that the face comes back flat; "up" is held
+  during a turn, the accelerometer's rests are what count), and each return to the stop misses
+  it by the stop's repeatability.
 
 The true rate and the specific force are tabulated once on a 1 ms grid and interpolated, so the
 emulated chip samples them like any other motion source.
@@ -154,7 +155,9 @@ class HandMotion:
                 axis = e + tilt[:, None] * (np.cos(phase)[:, None] * perp[0]
                                             + np.sin(phase)[:, None] * perp[1])
                 axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-                w_box[sl] = angle * v[:, None] * axis
+                w = angle * v[:, None] * axis
+                off = np.sum(w, axis=0) - np.sum(w[:, ph.axis]) * e  # the box comes back flat
+                w_box[sl] = w - np.outer(v / v.sum(), off)
             else:  # a re-seat turns "up" in the box frame
                 w_box[sl] = angle * v[:, None] * e
                 frac = np.cumsum(v) * (ph.t_end - ph.t_start) / m

@@ -1,0 +1,97 @@
+"""The hand jig (calib/hand.py): rests and whole turns from the data, the same estimator.
+
+Truth comes from the independent generator (tests/calib/hand_truth.py: scipy rotations, a
+speed family and a wobble of its own, nothing shared with the emulator or the code under test).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.estimators import estimate
+from gyrocal.calib.hand import (
+    AXIS_MOTORS,
+    STOP_STD_RAD,
+    find_hand_turns,
+    hand_observations,
+)
+from tests.calib import hand_truth as ht
+
+
+@pytest.fixture(scope="module")
+def session():
+    rng = np.random.default_rng(7)
+    C, bias, mount = ht.draw_sensor(rng)
+    t, m, acc, truth = ht.hand_session(rng, C, bias, mount)
+    return t, m, acc, truth
+
+
+def test_the_turns_and_rests_are_found_and_reseats_are_not_turns(session):
+    """Six whole turns (each box axis both ways) between rests; the 90° and 180° re-seats are
+    motions, not turns (15 rests: the schedule of hand_truth.hand_session)."""
+    t, m, _, _ = session
+    found = find_hand_turns(t, m)
+    assert len(found.rests) == 15
+    assert sorted((u.axis, u.direction) for u in found.turns) == [
+        (a, d) for a in range(3) for d in (-1, 1)]
+    assert len(found.moves) == 8
+    assert sorted(round(np.degrees(a) / 90) for *_, a in found.moves) == [1, 1] + [2] * 6
+
+
+def test_each_turn_window_runs_rest_to_rest_with_360_degrees_over_its_duration(session):
+    """The reference of every window is 2π over its weighted duration (∫w = the window's
+    length less half its two ramps), whatever the hand's speed profile."""
+    t, m, _, _ = session
+    ex, _ = hand_observations(t, m)
+    assert len(ex.windows) == 6
+    for w in ex.windows:
+        a, a2, b2, b = w.corners
+        assert w.kind == "rest-to-rest" and w.motor in AXIS_MOTORS
+        np.testing.assert_allclose(abs(w.rate), 2 * np.pi / (0.5 * ((b - a) + (b2 - a2))),
+                                   rtol=1e-12)
+    obs = ex.observations
+    assert obs.own_axes and obs.still_angle_std == STOP_STD_RAD
+
+
+def test_the_fit_recovers_the_generators_scale_and_bias_within_sigma(session):
+    """A sensor without cross-axis terms on a box mounted 2° off: the diagonal model holds,
+    so scale and bias are within 3σ of the truth and the verdict is consistent."""
+    t, m, _, truth = session
+    ex, _ = hand_observations(t, m)
+    fit = estimate(ex.observations, "paired-axis")
+    sd = np.sqrt(np.diag(fit.covariance))
+    assert fit.success and fit.consistency.ok, fit.consistency
+    assert np.all(np.abs(fit.scale - truth.scale) < 3 * sd[:3]), (fit.scale, truth.scale, sd)
+    assert np.all(np.abs(fit.bias - truth.bias) < 3 * sd[3:]), (fit.bias, truth.bias, sd)
+    assert np.all(sd[:3] < 1e-3)  # a few 1e-4: the stop (2.8e-4 of a turn) and the noise
+
+
+def test_one_turn_per_axis_suffices_when_rests_measure_the_bias():
+    """imucal's session turns each axis once (one way); the rests give the bias, so the
+    paired-axis fit takes it (before: "needs at least 6 rotation windows, got 3")."""
+    rng = np.random.default_rng(3)
+    C, bias, mount = ht.draw_sensor(rng)
+    t, m, _, truth = ht.hand_session(rng, C, bias, mount, both_ways=False)
+    ex, _ = hand_observations(t, m)
+    assert ex.observations.n_windows == 3
+    fit = estimate(ex.observations, "paired-axis")
+    sd = np.sqrt(np.diag(fit.covariance))
+    assert np.all(np.abs(fit.scale - truth.scale) < 3.5 * sd[:3]), (fit.scale, truth.scale)
+
+
+def test_a_recording_without_a_whole_turn_is_refused_saying_what_to_do():
+    rng = np.random.default_rng(1)
+    t = np.arange(2000) * 0.01
+    m = rng.normal(0, 4e-3, (2000, 3)) + 0.02
+    m[800:1000, 2] += np.pi / 2 / 2.0  # a quarter turn in 2 s
+    with pytest.raises(CalibInputError, match="no whole turn between two rests"):
+        hand_observations(t, m)
+
+
+def test_a_recording_that_never_rests_is_refused():
+    t = np.arange(1000) * 0.01
+    m = np.column_stack([np.sin(3 * t), np.cos(2 * t), np.sin(5 * t)]) * 2.0
+    with pytest.raises(CalibInputError, match="no rest found"):
+        find_hand_turns(t, m)
