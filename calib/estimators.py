@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyrocal.calib import kinematics
-from gyrocal.calib.dispersion import Dispersion, multiplicative
+from gyrocal.calib.dispersion import SCATTER_TOLERANCE, Dispersion, multiplicative
 from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.model import Consistency, GyroCalibration
@@ -382,8 +382,9 @@ def _judged(z: np.ndarray, dof: int, obs: ObservationSet, names: list[str] | Non
         names += [f"rest {i}" for i in range(rests) for _ in "xyz"]
         names += [f"still angle {i}" for i in range(z.size - len(names))]
         groups = np.unique(names, return_inverse=True)[1]
+    tolerance = SCATTER_TOLERANCE["hand" if obs.own_axes else "gyro"]
     return multiplicative(z, dof, noise_ratio, alpha=CONSISTENCY_ALPHA, names=names, chi2=chi2,
-                          groups=groups)
+                          groups=groups, tolerance=tolerance)
 
 
 def _ils_solve(

@@ -52,6 +52,7 @@ __all__ = [
     "find_hand_turns",
     "hand_observations",
     "reference_tracks",
+    "rest_g_sensitivity",
 ]
 
 TWO_PI = 2.0 * np.pi
@@ -140,6 +141,8 @@ class HandTurns:
         The bias (Calibration v1 sign) the rate test used: minus the rests' median reading.
     noise : ndarray (3,)
         Per-sample white noise, rad/s.
+    g_sensitivity : ndarray (3, 3) or None
+        ``G`` of :func:`rest_g_sensitivity` where :func:`hand_observations` took it off.
     """
 
     t: np.ndarray
@@ -148,6 +151,7 @@ class HandTurns:
     moves: tuple[tuple[float, float, float], ...]
     bias: np.ndarray
     noise: np.ndarray
+    g_sensitivity: np.ndarray | None = None
 
 
 def _still(rate: np.ndarray, noise: np.ndarray, fs: float, s: HandSettings) -> tuple[
@@ -303,12 +307,45 @@ def reference_tracks(found: HandTurns) -> tuple[tuple[Segment, ...], np.ndarray,
             np.concatenate(ys))
 
 
+def rest_g_sensitivity(t: np.ndarray, rate: np.ndarray, accel: np.ndarray,
+                       rests: Sequence[tuple[float, float]]) -> np.ndarray | None:
+    """The gyro's g-sensitivity ``G`` ((rad/s) per (m/s²)) from the rests on several faces:
+    each rest's mean reading is ``c + G ā`` (``ā`` its mean specific force), fitted by least
+    squares (imucal's Eq. 9, ``K_ga = (U_p − U_a) / 2g`` from the ± faces, generalised to any
+    rests). None when the rests' specific forces do not span three directions (fewer than
+    four rests, or all within 30° of a plane).
+
+    A box turned about its vertical axis holds one face up for the whole turn, so ``G ā`` is a
+    constant offset of that turn's window (the MPU-9250 allows 0.1 °/s/g, 1.7e-3 rad/s: 1e-3 of
+    a 1.7 rad/s turn), which the bias from rests on all six faces does not carry.
+    """
+    m, a = [], []
+    for lo, hi in rests:
+        sel = (t >= lo) & (t <= hi)
+        m.append(rate[sel].mean(axis=0))
+        a.append(accel[sel].mean(axis=0))
+    if len(m) < 4:
+        return None
+    A = np.column_stack([np.ones(len(a)), np.array(a)])
+    sv = np.linalg.svd(A[:, 1:] / np.linalg.norm(A[:, 1:], axis=1, keepdims=True),
+                       compute_uv=False)
+    if sv[-1] < 0.5 * np.sqrt(len(a) / 3.0):  # directions within about 30° of a plane
+        return None
+    coef = np.linalg.lstsq(A, np.array(m), rcond=None)[0]
+    return coef[1:].T
+
+
 def hand_observations(t: np.ndarray, rate: np.ndarray, *, imu_temp: np.ndarray | None = None,
-                      stop_std_rad: float = STOP_STD_RAD,
+                      accel: np.ndarray | None = None, stop_std_rad: float = STOP_STD_RAD,
                       settings: HandSettings | None = None) -> tuple[ExtractedWindows, HandTurns]:
     """The observations of a hand-rotation recording: :func:`find_hand_turns`, then
     :func:`reference_tracks` through :func:`gyrocal.calib.windows.extract_observations` with
     rest-to-rest windows only and the stop's repeatability as the still angles' prior.
+
+    With the accelerometer, the g-sensitivity the rests show (:func:`rest_g_sensitivity`) is
+    taken off the readings first (``m − G a``): each turn is then read as in free fall, and the
+    bias is the zero-g bias, the mean over opposite faces (imucal's ``b_g`` over its six);
+    :attr:`HandTurns.g_sensitivity` holds ``G``. Calibration v1 has no term for it.
 
     Parameters
     ----------
@@ -316,6 +353,8 @@ def hand_observations(t: np.ndarray, rate: np.ndarray, *, imu_temp: np.ndarray |
         Sample times (s) and gyro readings (rad/s, datasheet sensitivity only).
     imu_temp : ndarray (N,), optional
         Die temperature, °C.
+    accel : ndarray (N, 3), optional
+        The accelerometer's specific force, m/s², of the same samples.
     stop_std_rad : float
         Repeatability of a face brought back against the stop, rad (:data:`STOP_STD_RAD`).
     settings : HandSettings, optional
@@ -332,6 +371,15 @@ def hand_observations(t: np.ndarray, rate: np.ndarray, *, imu_temp: np.ndarray |
     if not stop_std_rad > 0:
         raise CalibInputError(f"stop_std_rad must be positive, got {stop_std_rad!r}")
     found = find_hand_turns(t, rate, settings)
+    if accel is not None:
+        acc = np.asarray(accel, dtype=float)
+        if acc.shape != np.shape(rate) or not np.all(np.isfinite(acc)):
+            raise CalibInputError(f"accel must be finite with the shape of rate "
+                                  f"{np.shape(rate)}, got {acc.shape}")
+        G = rest_g_sensitivity(found.t, np.asarray(rate, dtype=float), acc, found.rests)
+        if G is not None:
+            rate = np.asarray(rate, dtype=float) - acc @ G.T
+            found = replace(found, g_sensitivity=G)
     if not found.turns:
         raise CalibInputError(
             f"no whole turn between two rests among {len(found.moves)} motions "

@@ -117,7 +117,7 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
             stop_rad = (math.radians(stop) if isinstance(stop, (int, float))
                         and not isinstance(stop, bool) and stop > 0 else STOP_STD_RAD)
             return hand_observations(rec.imu_t, rec.imu_rate, imu_temp=rec.imu_temp,
-                                     stop_std_rad=stop_rad)[0]
+                                     accel=rec.imu_accel, stop_std_rad=stop_rad)[0]
         ex = extract_observations(
             rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
             imu_temp=rec.imu_temp, chain=_chain(rec),

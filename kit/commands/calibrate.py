@@ -106,6 +106,7 @@ def add_common_jig_arguments(p: argparse.ArgumentParser, *, sim_flag: bool = Tru
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Register the arguments."""
     from gyrocal.kit.choices import METHODS, PROTOCOLS
+    from gyrocal.kit.jig_kinds import DEFAULT_JIG, JIG_KINDS
 
     add_common_jig_arguments(p)
     p.add_argument("--out", metavar="DIR",
@@ -121,6 +122,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default); auto: planned for this jig, diagonal model; paper: 60°/s, "
                         "one turn, 3 s waits")
     p.add_argument("--method", choices=METHODS)
+    p.add_argument("--jig", choices=tuple(JIG_KINDS), default=DEFAULT_JIG,
+                   help="the jig (default gimbal): " + "; ".join(
+                       f"{k.name}: {k.description} (hardware_docs/{k.hardware_docs})"
+                       for k in JIG_KINDS.values()) + ". hand records only with --sim")
     p.add_argument("--align-gyro-to-accel", action="store_true", default=None,
                    help="express the gyro calibration in the calibrated accelerometer's frame "
                         "(accel-x-xy), as imu_tk does: the rotation between the frames is "
@@ -160,7 +165,12 @@ def run(args: argparse.Namespace) -> int:
         return _run_plate(cfg, args, out, work, report, history)
     report_failed = None
     with built_beside(work, out):
-        run_jig(cfg, args, work, work / "recording")
+        if getattr(args, "jig", "gimbal") == "hand":
+            from gyrocal.kit.hand import record_hand_sim
+
+            record_hand_sim(cfg, args, work / "recording")
+        else:
+            run_jig(cfg, args, work, work / "recording")
         if getattr(args, "sim_imu", False):
             cal = None
         else:
