@@ -141,7 +141,7 @@ class HandMotion:
             if ph.kind == "rest":
                 continue
             m = i1 - i0 + 1
-            v = _profile(rng, m) / (ph.t_end - ph.t_start)
+            v = _profile(rng, m) / ((i1 - i0) * _DT)  # over the grid span the table holds
             e = np.zeros(3)
             e[ph.axis] = 1.0
             angle = ph.angle
@@ -154,13 +154,12 @@ class HandMotion:
                 perp = np.eye(3)[[k for k in range(3) if k != ph.axis]]
                 axis = e + tilt[:, None] * (np.cos(phase)[:, None] * perp[0]
                                             + np.sin(phase)[:, None] * perp[1])
-                axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-                w = angle * v[:, None] * axis
+                w = angle * v[:, None] * axis  # along e: exactly the turn's angle in all
                 off = np.sum(w, axis=0) - np.sum(w[:, ph.axis]) * e  # the box comes back flat
                 w_box[sl] = w - np.outer(v / v.sum(), off)
             else:  # a re-seat turns "up" in the box frame
                 w_box[sl] = angle * v[:, None] * e
-                frac = np.cumsum(v) * (ph.t_end - ph.t_start) / m
+                frac = np.cumsum(v) * _DT
                 up_box[sl] = np.einsum("nij,j->ni", rotation_matrices(e, -angle * frac), up)
                 up = up_box[i1].copy()
         self._w = w_box @ self.mount.T
