@@ -70,10 +70,12 @@ def _speed(n: int, rng: np.random.Generator) -> np.ndarray:
 def hand_session(rng: np.random.Generator, C: np.ndarray, bias: np.ndarray, mount: np.ndarray,
                  *, fs: float = 100.0, noise: float = 4e-3, stop_deg: float = 0.1,
                  wobble_deg: float = 1.0, both_ways: bool = True, turn_s=(2.5, 5.0),
-                 rest_s=(2.0, 4.5)) -> tuple[np.ndarray, np.ndarray, np.ndarray, HandTruth]:
+                 rest_s=(2.0, 4.5), g_sensitivity: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, HandTruth]:
     """A session: rest on +z, turns about box z (+ then −), a 180° flip to −z and back, 90° to
     +x, turns about x, the flip, 90° to +y, turns about y, the flip, rests between.
-    ``both_ways=False``: one turn per axis (imucal's session has three).
+    ``both_ways=False``: one turn per axis (imucal's session has three). ``g_sensitivity``
+    (3×3, rad/s per g) adds ``G f`` to the reading, ``f`` the specific force in g.
 
     The box's orientation (box → world) is written in the world frame, sample by sample: at a
     rest it holds; a turn is ``Tilt(t) Rot(ẑ, φ(t)) R₀`` (``Tilt`` a small tilt about a
@@ -133,21 +135,9 @@ def hand_session(rng: np.random.Generator, C: np.ndarray, bias: np.ndarray, moun
     up = R.inv().apply(z)
     w_sensor = w_box @ mount.T
     m = w_sensor @ C.T - bias + rng.normal(0, noise, (n, 3))
+    if g_sensitivity is not None:
+        m += (up @ mount.T) @ np.asarray(g_sensitivity, float).T
     m = np.round(m / LSB_RAD_S) * LSB_RAD_S
     acc = G * up @ mount.T
     t = np.arange(n) * dt
     return t, m, acc, HandTruth(C, bias, mount, tuple(angles))
-
-
-def general_motion_error(scale: np.ndarray, bias: np.ndarray, C: np.ndarray, true_bias:
-                         np.ndarray, rate: float = 1.0, n: int = 400) -> float:
-    """RMS over ``n`` directions (Fibonacci sphere) of the calibrated rate's error at ``rate``
-    rad/s relative to it, for a diagonal calibration ``g = scale ∘ (m + bias)`` of the sensor
-    ``m = C ω − true_bias``."""
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    phi = np.pi * (1 + 5**0.5) * k
-    d = np.column_stack([np.sqrt(1 - z**2) * np.cos(phi), np.sqrt(1 - z**2) * np.sin(phi), z])
-    w = rate * d
-    g = scale * (w @ C.T - true_bias + bias)
-    return float(np.sqrt(np.mean(np.sum((g - w) ** 2, axis=1))) / rate)
