@@ -390,14 +390,3 @@ def hand_observations(t: np.ndarray, rate: np.ndarray, *, imu_temp: np.ndarray |
                               imu_temp=imu_temp, encoder_ticks=_TICKS, refit_time=False,
                               window="rest-to-rest", still_angle_std=stop_std_rad)
     return replace(ex, observations=replace(ex.observations, own_axes=True)), found
-
-
-def describe(found: HandTurns, axes: Sequence[str] = ("x", "y", "z")) -> str:
-    """One line: rests, turns per axis and direction, re-seats."""
-    per = {}
-    for turn in found.turns:
-        key = f"{'+' if turn.direction > 0 else '-'}{axes[turn.axis]}"
-        per[key] = per.get(key, 0) + 1
-    turns = ", ".join(f"{k} ×{v}" for k, v in sorted(per.items())) or "none"
-    return (f"{len(found.rests)} rests, turns {turns}, {len(found.moves)} other motions "
-            "(re-seats)")

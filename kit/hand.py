@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-__all__ = ["POLL_S", "hand_jig_time_s", "record_hand_sim"]
+__all__ = ["POLL_S", "record_hand_sim"]
 
 #: How often the reader drains the FIFO, s (the gimbal runner's poll period at its default
 #: sample_hz of 50).
@@ -88,9 +88,3 @@ def record_hand_sim(cfg: Any, args: argparse.Namespace, rec_dir: Path) -> Any:
     finally:
         imu.close()
     return sim
-
-
-def hand_jig_time_s(sim: Any) -> float:
-    """The emulated hand session's length, s (the jig time of the benches)."""
-    return float(sim.jig.duration)
-

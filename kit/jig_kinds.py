@@ -1,17 +1,20 @@
 """The kinds of jig gyrocal calibrates on, one row each (plain data: the command line's
-``--jig`` choices, the benches' tables and the documents read it; importing it imports nothing
-beyond the standard library).
+``--jig`` choices, the benches' tables and the documents read it).
+
+:class:`JigKind` is a frozen record built on :class:`typing.NamedTuple` rather than a dataclass:
+building the parser, ``--help`` and an argument error must not import :mod:`dataclasses`
+(``tests/kit/test_cli_imports.py``, issue 25's start-up time), and ``calibrate --jig`` takes its
+choices from :data:`JIG_KINDS`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 __all__ = ["DEFAULT_JIG", "JIG_KINDS", "JigKind"]
 
 
-@dataclass(frozen=True)
-class JigKind:
+class JigKind(NamedTuple):
     """One kind of jig.
 
     Attributes
