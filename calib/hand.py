@@ -64,6 +64,9 @@ MOVE_MOTOR = 0
 #: and a face of a few centimetres; hardware_docs/hand-jig.md). Over one turn of ``T`` s it is
 #: a reference error of ``0.1° / 360° = 2.8e-4`` of the rate.
 STOP_STD_RAD = float(np.radians(0.1))
+#: The largest motion taken as a step of a turn made in steps, rad (135°: a quarter or a third
+#: of a turn is a step, a half-turn flip to the opposite face is not).
+_PART_MAX_RAD = float(np.radians(135.0))
 #: Encoder counts per turn of the virtual servos (a Dynamixel X's, so the window code's tick
 #: thresholds keep their meaning); the virtual angle is exact, its prior is ``stop_std_rad``.
 _TICKS = 4096
@@ -235,16 +238,57 @@ def find_hand_turns(t: np.ndarray, rate: np.ndarray,
     rests = _spans(still, t, s.min_rest_s)
     if rests:
         bias = -np.mean(np.concatenate([rate[a:b + 1] for a, b in rests]), axis=0)
-    turns, moves = [], []
+    turns, moves = _turns_and_moves(t, rate, bias, rests, s)
+    return HandTurns(t, tuple((float(t[a]), float(t[b])) for a, b in rests), tuple(turns),
+                     tuple(moves), bias, noise)
+
+
+def _part_key(angle: np.ndarray, s: HandSettings) -> tuple[int, int] | None:
+    """``(axis, sign)`` of a motion that may be part of a turn made in steps (under
+    :data:`_PART_MAX_RAD`, about one sensor axis), else None."""
+    size = float(np.linalg.norm(angle))
+    axis = int(np.argmax(np.abs(angle)))
+    if not 0 < size < _PART_MAX_RAD or abs(angle[axis]) < s.axis_fraction * size:
+        return None
+    return axis, int(np.sign(angle[axis]))
+
+
+def _turns_and_moves(t: np.ndarray, rate: np.ndarray, bias: np.ndarray,
+                     rests: Sequence[tuple[int, int]], s: HandSettings
+                     ) -> tuple[list[HandTurn], list[tuple[float, float, float]]]:
+    """Each motion between two rests is a whole turn (:func:`_classify`) or a move; consecutive
+    parts about one axis in one sense, each under :data:`_PART_MAX_RAD`, whose sum reaches a
+    whole turn make one turn from the rest before the first to the rest after the last (a turn
+    made in steps, as imucal's example session describes its operator's quarter turns)."""
+    turns: list[HandTurn] = []
+    moves: list[tuple[float, float, float]] = []
+    pending: list[tuple[int, int, np.ndarray]] = []  # parts: start, end sample, angle
+
+    def flush() -> None:
+        for lo, hi, ang in pending:
+            moves.append((float(t[lo]), float(t[hi]), float(np.linalg.norm(ang))))
+        pending.clear()
+
     for (_, a1), (b0, _) in zip(rests[:-1], rests[1:], strict=True):
         turn = _classify(t, rate, bias, a1, b0, s)
         if turn is not None:
+            flush()
             turns.append(turn)
-        else:
-            ang = float(np.linalg.norm(_integral(t[a1:b0 + 1], rate[a1:b0 + 1] + bias)))
-            moves.append((float(t[a1]), float(t[b0]), ang))
-    return HandTurns(t, tuple((float(t[a]), float(t[b])) for a, b in rests), tuple(turns),
-                     tuple(moves), bias, noise)
+            continue
+        angle = _integral(t[a1:b0 + 1], rate[a1:b0 + 1] + bias)
+        key = _part_key(angle, s)
+        if key is None or (pending and _part_key(pending[0][2], s) != key):
+            flush()
+        if key is None:
+            moves.append((float(t[a1]), float(t[b0]), float(np.linalg.norm(angle))))
+            continue
+        pending.append((a1, b0, angle))
+        merged = _classify(t, rate, bias, pending[0][0], b0, s)
+        if merged is not None:
+            turns.append(merged)
+            pending.clear()
+    flush()
+    return turns, moves
 
 
 def reference_tracks(found: HandTurns) -> tuple[tuple[Segment, ...], np.ndarray, np.ndarray,

@@ -70,12 +70,15 @@ def _speed(n: int, rng: np.random.Generator) -> np.ndarray:
 def hand_session(rng: np.random.Generator, C: np.ndarray, bias: np.ndarray, mount: np.ndarray,
                  *, fs: float = 100.0, noise: float = 4e-3, stop_deg: float = 0.1,
                  wobble_deg: float = 1.0, both_ways: bool = True, turn_s=(2.5, 5.0),
-                 rest_s=(2.0, 4.5), g_sensitivity: np.ndarray | None = None
+                 rest_s=(2.0, 4.5), g_sensitivity: np.ndarray | None = None,
+                 turn_steps: int = 1, step_pause_s: float = 1.5
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, HandTruth]:
     """A session: rest on +z, turns about box z (+ then −), a 180° flip to −z and back, 90° to
     +x, turns about x, the flip, 90° to +y, turns about y, the flip, rests between.
     ``both_ways=False``: one turn per axis (imucal's session has three). ``g_sensitivity``
     (3×3, rad/s per g) adds ``G f`` to the reading, ``f`` the specific force in g.
+    ``turn_steps`` > 1 makes each turn in that many equal steps with ``step_pause_s`` still
+    between them (imucal's example: "split up in 4 sections of 90 deg").
 
     The box's orientation (box → world) is written in the world frame, sample by sample: at a
     rest it holds; a turn is ``Tilt(t) Rot(ẑ, φ(t)) R₀`` (``Tilt`` a small tilt about a
@@ -120,7 +123,10 @@ def hand_session(rng: np.random.Generator, C: np.ndarray, bias: np.ndarray, moun
         for d in ((1, -1) if both_ways else (1,)):
             ang = d * (2 * np.pi + rng.normal(0, np.radians(stop_deg)))
             angles.append(ang)
-            turn(ang, rng.uniform(*turn_s))
+            for step in range(turn_steps):
+                if step:
+                    rest(step_pause_s)
+                turn(ang / turn_steps, rng.uniform(*turn_s) / turn_steps)
             rest(rng.uniform(*rest_s))
         for _ in range(2):  # the opposite face and back, for the accelerometer
             reseat(e[0], np.pi)

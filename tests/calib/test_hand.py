@@ -118,3 +118,20 @@ def test_the_faces_g_sensitivity_is_measured_and_taken_off_the_turns():
     assert fit.consistency.ok
     assert np.all(np.abs(fit.scale - truth.scale) < 3 * sd[:3])
     assert np.all(np.abs(fit.bias - truth.bias) < 3 * sd[3:])
+
+
+def test_a_turn_made_in_quarter_steps_with_pauses_is_one_turn():
+    """imucal's example notes its operator turned in four 90° steps: with 1.5 s pauses
+    (rests of their own) the steps about one axis in one sense add up to one whole turn,
+    windowed from the rest before the first to the rest after the last; the half-turn flips to
+    the opposite faces stay re-seats."""
+    rng = np.random.default_rng(9)
+    C, bias, mount = ht.draw_sensor(rng)
+    t, m, _, truth = ht.hand_session(rng, C, bias, mount, turn_steps=4)
+    found = find_hand_turns(t, m)
+    assert sorted((u.axis, u.direction) for u in found.turns) == [
+        (a, d) for a in range(3) for d in (-1, 1)]
+    assert sorted(round(np.degrees(a) / 90) for *_, a in found.moves) == [1, 1] + [2] * 6
+    fit = estimate(hand_observations(t, m)[0].observations, "paired-axis")
+    sd = np.sqrt(np.diag(fit.covariance))
+    assert fit.consistency.ok and np.all(np.abs(fit.scale - truth.scale) < 3 * sd[:3])
