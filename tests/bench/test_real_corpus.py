@@ -134,3 +134,22 @@ def test_gyrocal_on_imucals_real_ferraris_session_agrees_with_imucals_own(tmp_pa
     assert doc["consistency"]["ok"]
     with pytest.raises(FileExistsError):
         rc.write_recording(s, tmp_path / "rec")
+
+
+@pytest.mark.skipif(rc.locate("imucal") is None, reason=rc.missing_reason("imucal"))
+def test_the_model_of_imucals_calibration_is_imucals_own():
+    """rc.imucal_ferraris_gyro against imucal's FerrarisCalibration itself (the test extra),
+    run as its examples/basic_ferraris.py runs it, on the same labelled session."""
+    imucal = pytest.importorskip("imucal")
+    pd = pytest.importorskip("pandas")
+    s = rc.load("imucal")
+    data = pd.DataFrame(np.column_stack([s.accel, np.degrees(s.gyro)]),
+                        columns=["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"])
+    sections = pd.DataFrame({n: {"start": lo, "end": hi} for n, lo, hi in s.sections}).T
+    regions = imucal.ferraris_regions_from_section_list(data, sections)
+    cal = imucal.FerrarisCalibration().compute(regions, sampling_rate_hz=rc.IMUCAL_FS_HZ,
+                                               from_acc_unit="m/s^2", from_gyr_unit="deg/s")
+    own = rc.imucal_ferraris_gyro(s)
+    for mine, theirs in ((own.K, cal.K_g), (own.R, cal.R_g), (own.b, cal.b_g),
+                         (own.K_ga, cal.K_ga)):
+        np.testing.assert_allclose(mine, theirs, rtol=1e-12, atol=1e-15)
