@@ -93,3 +93,13 @@ def test_the_emulated_hand_turns_whole_turns_and_lays_each_face_up():
     ups = {tuple(np.round(motion.specific_force(np.array([(p.t_start + p.t_end) / 2]))[0]
                           @ axes.T).astype(int)) for p in rests}
     assert ups == {(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)}
+
+
+def test_noise_on_a_hand_recording_takes_a_rest_the_data_show(hand_recording, capsys):
+    """A hand recording has no segments: `gyrocal noise` takes the longest rest the data show
+    (before: the whole recording, turns included, as "all"); 4.5 s is too short for the Allan
+    curve, which it says."""
+    root, _ = hand_recording
+    assert main(["noise", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert "using the longest rest the hand jig's data show" in err and "too short" in err
