@@ -90,16 +90,19 @@ class HandSettings:
     still : StillSettings or None
         The still detector's settings (its defaults when None).
     rate_limit : float
-        The first pass's rate threshold, rad/s, above any MEMS gyro's zero-rate offset: the
-        bias is unknown until the first rests are found (DESIGN.md fact 8: the detector does
-        not rest on an estimate it feeds).
+        The first pass's rate threshold, rad/s: above the largest zero-rate tolerance of the
+        chips gyrocal reads (the LSM9DS1's ±30 °/s, 0.52 rad/s: ``drivers/imu/chips.py``),
+        since the bias is unknown until the first rests are found (DESIGN.md fact 8: the
+        detector does not rest on an estimate it feeds). The first pass only sets the median
+        reading the second pass's rate test is centred on; its variance test rejects a hand's
+        motion, which is never steady.
     """
 
     min_rest_s: float = 1.0
     turn_tolerance: float = 0.2
     axis_fraction: float = 0.9
     still: StillSettings | None = None
-    rate_limit: float = 0.35
+    rate_limit: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -162,8 +165,7 @@ def _still(rate: np.ndarray, noise: np.ndarray, fs: float, s: HandSettings) -> t
     """Still flags in two passes: a loose rate limit to find the rests, then the detector's own
     rate test about minus their median reading."""
     base = s.still or StillSettings()
-    loose = StillSettings(base.window_s, base.min_still_s, base.lookahead_s,
-                          base.variance_alpha, base.rate_sigma, s.rate_limit)
+    loose = replace(base, rate_threshold=s.rate_limit)
     first = detect_still(rate, noise, fs, settings=loose)
     if not first.any():
         raise CalibInputError("no rest found in the recording: hold the sensor still on a face "

@@ -135,3 +135,16 @@ def test_a_turn_made_in_quarter_steps_with_pauses_is_one_turn():
     fit = estimate(hand_observations(t, m)[0].observations, "paired-axis")
     sd = np.sqrt(np.diag(fit.covariance))
     assert fit.consistency.ok and np.all(np.abs(fit.scale - truth.scale) < 3 * sd[:3])
+
+
+def test_a_bias_at_the_lsm9ds1s_zero_rate_tolerance_still_finds_the_rests():
+    """±30 °/s (0.52 rad/s) is the LSM9DS1's zero-rate level: the first pass's rate limit is
+    above it, so the rests and turns are found and the bias is recovered within 3σ."""
+    rng = np.random.default_rng(13)
+    C, _, mount = ht.draw_sensor(rng)
+    bias = np.array([0.5, -0.45, 0.3])
+    t, m, _, truth = ht.hand_session(rng, C, bias, mount)
+    ex, found = hand_observations(t, m)
+    assert len(found.turns) == 6
+    fit = estimate(ex.observations, "paired-axis")
+    assert np.all(np.abs(fit.bias - bias) < 3 * np.sqrt(np.diag(fit.covariance))[3:])
