@@ -18,8 +18,10 @@ Columns: the model written (Calibration v2 full, v1 diagonal), the RMS error of 
 rate over all directions per rad/s (:func:`gyrocal.calib.design.general_motion_rms`: what no
 output frame removes) and the RMS its covariance predicts (which, for a diagonal model, cannot
 hold the cross-axis terms it leaves out), the bias error (RMS over the axes, the zero-g bias)
-beside its σ, the jig time (the recording's span) and the verdicts that passed. imucal's real
-Ferraris session (when its excerpt is present) follows: gyrocal's result beside imucal's own.
+beside its σ, for a diagonal model its scales' error in their σ against the scales it converges
+to on that sensor and those turn axes (:func:`diagonal_truth`), the jig time (the recording's
+span) and the verdicts that passed. imucal's real Ferraris session (when its excerpt is
+present) follows: gyrocal's result beside imucal's own.
 
 Usage: ``python -m bench jigs [--seeds=N]`` (N sensors per row, default 2; the emulator rows cost
 about 40 CPU s per gimbal run and 10 per hand run).
@@ -37,12 +39,26 @@ import numpy as np
 from bench.table import print_table
 
 
-def _scores(fit, C: np.ndarray, b: np.ndarray, jig_s: float) -> dict:
+def diagonal_truth(C: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The scales a diagonal model fitted to turns about ``axes`` (rows, unit, sensor frame)
+    converges to on the sensor ``m = C ω − b``: each turn's free axis ``k ∘ (C u)`` is a unit
+    vector, ``Σ_j k_j² (C u)_j² = 1`` (the paper's squared-norm equation, Eq. 3), linear in
+    ``k²``."""
+    v = (np.asarray(axes, float) @ np.asarray(C, float).T) ** 2  # row a: (C u_a)_j²
+    return np.sqrt(np.linalg.solve(v, np.ones(3)))
+
+
+def _scores(fit, C: np.ndarray, b: np.ndarray, jig_s: float,
+            axes: np.ndarray | None = None) -> dict:
     from gyrocal.calib.design import general_motion_rms, predicted_general_motion_rms
 
     M = fit.matrix if fit.matrix is not None else np.diag(fit.scale)
-    sd_b = np.sqrt(np.diag(fit.covariance))[-3:]
-    return {"model": "v2 full" if fit.matrix is not None else "v1 diagonal",
+    sd = np.sqrt(np.diag(fit.covariance))
+    sd_b = sd[-3:]
+    z = float("nan")
+    if fit.matrix is None and axes is not None:
+        z = float(np.sqrt(np.mean(((fit.scale - diagonal_truth(C, axes)) / sd[:3]) ** 2)))
+    return {"z_scale": z, "model": "v2 full" if fit.matrix is not None else "v1 diagonal",
             "gm": general_motion_rms(M, fit.bias, C, b),
             "gm_pred": predicted_general_motion_rms(fit.covariance),
             "bias": float(np.sqrt(np.mean((fit.bias - b) ** 2))),
@@ -64,20 +80,21 @@ def _emulator(kind: str, seed: int) -> dict:
         fit = estimate_recording(rec).fit
     t = rec.truth
     C = np.diag(1 / np.asarray(t["scale"])) @ np.asarray(t["misalignment"])
-    return _scores(fit, C, np.asarray(t["bias"]), float(rec.imu_t[-1] - rec.imu_t[0]))
+    return _scores(fit, C, np.asarray(t["bias"]), float(rec.imu_t[-1] - rec.imu_t[0]),
+                   t.get("box_axes"))
 
 
-def _gimbal_recording(path: Path, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """The gimbal's independent recording at ``path``; its ``(C, b)``."""
+def _gimbal_recording(path: Path, seed: int) -> tuple[np.ndarray, np.ndarray, None]:
+    """The gimbal's independent recording at ``path``; its ``(C, b, None)``."""
     from tests.kit.contract_fullmodel_recording import write_recording
 
     truth = write_recording(path, seed=seed)
-    return np.diag(1 / truth["scale"]) @ truth["misalignment"], truth["bias"]
+    return np.diag(1 / truth["scale"]) @ truth["misalignment"], truth["bias"], None
 
 
-def _hand_recording(path: Path, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def _hand_recording(path: Path, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The hand jig's independent recording at ``path`` (±2 % cross-axis, the MPU-9250's noise
-    and up to its 0.1 °/s/g g-sensitivity); its ``(C, b)``."""
+    and up to its 0.1 °/s/g g-sensitivity); its ``(C, b, turn axes)``."""
     from gyrocal.kit.recording import RecordingWriter
     from tests.calib import hand_truth as ht
 
@@ -90,7 +107,7 @@ def _hand_recording(path: Path, seed: int) -> tuple[np.ndarray, np.ndarray]:
                          extra={"jig": {"kind": "hand"}}, accel=True) as w:
         w.append_imu(t, m, np.full(t.size, np.nan), accel=acc)
         w.finish()
-    return C, b
+    return C, b, mount.T  # the box axes in the sensor frame, rows
 
 
 #: Each jig kind's independent generator (a kind without one gets a row that says so).
@@ -103,10 +120,10 @@ def _independent(kind: str, seed: int) -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "rec"
-        C, b = INDEPENDENT[kind](path, seed)
+        C, b, axes = INDEPENDENT[kind](path, seed)
         rec = load_recording(path)
         fit = estimate_recording(rec).fit
-    return _scores(fit, C, b, float(rec.imu_t[-1] - rec.imu_t[0]))
+    return _scores(fit, C, b, float(rec.imu_t[-1] - rec.imu_t[0]), axes)
 
 
 def _real_imucal() -> None:
@@ -152,7 +169,7 @@ def main(argv: list[str]) -> None:
         for source, fn in (("emulator", _emulator), ("independent", _independent)):
             if source == "independent" and kind not in INDEPENDENT:
                 rows.append([kind, source, 0, "no independent generator yet (INDEPENDENT)",
-                             "", "", "", "", "", ""])
+                             "", "", "", "", "", "", ""])
                 continue
             rs = [fn(kind, s) for s in range(seeds)]
             rows.append([kind, source, len(rs), rs[0]["model"],
@@ -160,12 +177,15 @@ def main(argv: list[str]) -> None:
                          f"{np.sqrt(np.mean([r['gm_pred'] ** 2 for r in rs])):.1e}",
                          f"{np.sqrt(np.mean([r['bias'] ** 2 for r in rs])):.1e}",
                          f"{np.sqrt(np.mean([r['bias_sd'] ** 2 for r in rs])):.1e}",
+                         f"{np.sqrt(np.nanmean([r['z_scale'] ** 2 for r in rs])):.2f}"
+                         if rs[0]["model"].startswith("v1") else "-",
                          f"{np.mean([r['jig_s'] for r in rs]):.0f}",
                          f"{sum(r['ok'] for r in rs)}/{len(rs)}"])
     print_table(["jig", "data", "runs", "model", "general-motion RMS err per rad/s",
-                 "predicted (own σ)", "bias err RMS rad/s", "bias σ", "jig time s",
-                 "verdict ok"], rows)
+                 "predicted (own σ)", "bias err RMS rad/s", "bias σ", "v1 scale err/σ RMS",
+                 "jig time s", "verdict ok"], rows)
     print("(general-motion error: over all directions at 1 rad/s, what no output frame "
           "removes; a diagonal model's includes the ±2 % cross-axis terms it cannot determine, "
-          "which its own σ does not predict)\n")
+          "which its own σ does not predict. v1 scale err/σ: against the scales a diagonal "
+          "model converges to on that sensor and those turn axes, diagonal_truth)\n")
     _real_imucal()
