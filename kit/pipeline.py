@@ -118,6 +118,12 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
                         and not isinstance(stop, bool) and stop > 0 else STOP_STD_RAD)
             return hand_observations(rec.imu_t, rec.imu_rate, imu_temp=rec.imu_temp,
                                      accel=rec.imu_accel, stop_std_rad=stop_rad)[0]
+        if rec.enc_t.size == 0 and not any(s.kind == "rotate" for s in rec.segments):
+            raise InputError(
+                f"{rec.path}: no encoder readings and no turns in segments.csv, so no gimbal "
+                "turn to window; if the sensor was turned by hand (whole turns against a stop "
+                "between rests), say so in manifest.json: \"jig\": {\"kind\": \"hand\"} "
+                "(hardware_docs/hand-jig.md)")
         ex = extract_observations(
             rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
             imu_temp=rec.imu_temp, chain=_chain(rec),

@@ -103,3 +103,15 @@ def test_noise_on_a_hand_recording_takes_a_rest_the_data_show(hand_recording, ca
     assert main(["noise", str(root)]) == 2
     err = capsys.readouterr().err
     assert "using the longest rest the hand jig's data show" in err and "too short" in err
+
+
+def test_a_recording_without_turns_or_jig_kind_is_told_about_the_hand_jig(tmp_path, capsys):
+    """A hand session written without ``jig.kind`` (another tool's): the gimbal's windowing
+    has nothing to window, and the message says how to mark it."""
+    root = tmp_path / "rec"
+    with RecordingWriter(root, sensor={"model": "mpu9250"}, gimbal={"motors": []},
+                         protocol={}) as w:
+        w.append_imu(np.arange(200) * 0.01, np.zeros((200, 3)))
+        w.finish()
+    assert main(["estimate", str(root)]) == 2
+    assert '"jig": {"kind": "hand"}' in capsys.readouterr().err
