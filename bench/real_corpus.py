@@ -24,6 +24,13 @@ gives each source's repository, commit, licence and sha256, input and output):
 Usage::
 
     python -m bench.real_corpus NAME SOURCE... OUT.csv.xz     # write one excerpt
+    python -m bench.real_corpus recording imucal OUT_DIR      # imucal's session as a recording
+
+The second writes imucal's Ferraris session (from its excerpt) as a Recording v1 directory of
+the hand jig (:func:`write_recording`: manifest ``jig.kind`` ``hand``, no encoder, no
+segments), which ``gyrocal estimate OUT_DIR`` reads: the rests and the three turns are found in
+the data (:mod:`gyrocal.calib.hand`). :func:`imucal_ferraris_gyro` is imucal's own gyro
+calibration of the session, its equations modelled from its source, to set beside gyrocal's.
 
 and :func:`load` reads one back as a :class:`Session` in SI units. A file is looked for at
 ``$GYROCAL_REAL_DATA/<file>`` when that variable is set (there only), else in ``bench/data/``,
@@ -303,9 +310,128 @@ def still_spans(gyro: np.ndarray, accel: np.ndarray, fs: float, *, window_s: flo
     return out
 
 
+#: imucal's Ferraris sections (``imucal/ferraris_calibration.py`` L160-170, FERRARIS_SECTIONS)
+#: and its default turn angle, degrees (L175, ``expected_angle=-360``: clockwise, the gyro reads
+#: negative) and gravity (L174, ``grav=9.81``).
+IMUCAL_FACES = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
+IMUCAL_TURNS = ("x_rot", "y_rot", "z_rot")
+IMUCAL_ANGLE_DEG = -360.0
+IMUCAL_GRAV = 9.81
+
+
+@dataclass(frozen=True)
+class ImucalGyro:
+    """imucal's gyro calibration (its units: readings in °/s): ``ω = R⁻¹ K⁻¹ (m − b − K_ga a)``.
+
+    Attributes
+    ----------
+    K : (3, 3) ndarray
+        Diagonal scaling (``K_g``); ``1 / diag(K)`` is comparable with gyrocal's scale.
+    R : (3, 3) ndarray
+        Rows of unit norm (``R_g``: the sensing axes in the box frame).
+    b : (3,) ndarray
+        Offset, °/s (``b_g``; gyrocal's bias in rad/s is ``-radians(b)``).
+    K_ga : (3, 3) ndarray
+        g-sensitivity, (°/s) per (m/s²).
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    b: np.ndarray
+    K_ga: np.ndarray
+
+    @property
+    def scale(self) -> np.ndarray:
+        """``1 / diag(K)``: gyrocal's diagonal scale of the same sensor (to first order in the
+        axes' misalignment)."""
+        return 1.0 / np.diag(self.K)
+
+
+def _section(s: Session, name: str) -> slice:
+    lo, hi = next((a, b) for n, a, b in s.sections if n == name)
+    return slice(lo, hi)
+
+
+def imucal_ferraris_gyro(s: Session) -> ImucalGyro:
+    """imucal 2.6.0's ``FerrarisCalibration.compute`` on its labelled session, gyro part, with
+    ``sampling_rate_hz`` :data:`IMUCAL_FS_HZ` (``examples/basic_ferraris.py``), modelled from
+    ``imucal/ferraris_calibration.py`` of mad-lab-fau/imucal at commit 8716e4c:
+
+    * L210-249: the accelerometer's ``b_a`` (Eq. 20, half the sum of the ±face means),
+      ``K_a`` (Eq. 23, row norms of the difference over ``2 g``) and ``R_a`` (Eq. 22);
+    * L259-271: ``b_g``, the mean gyro reading over the six faces;
+    * L278-295: ``K_ga = (U_g_p − U_g_a) / (2 g)`` (Eq. 9), from the ±face gyro means;
+    * L300-305 with ``ferraris_calibration_info.py`` L109-110 and L131-134: each turn's
+      readings less ``b_g + K_ga a_cal``, ``a_cal = R_a⁻¹ K_a⁻¹ (a − b_a)``;
+    * L309-323: ``W_s`` the sum of each turn over the sampling rate (Eq. 13/14), ``M = W_s /
+      expected_angle`` (Eq. 15), ``K_g`` the row norms of ``M`` (Eq. 12), ``R_g = K_g⁻¹ M``.
+
+    ``tests/bench/test_real_corpus.py`` checks it against imucal 2.6.0 itself (the ``test``
+    extra): every matrix agrees to rounding.
+
+    Parameters
+    ----------
+    s : Session
+        :func:`load` ``("imucal")`` (gyro in rad/s: converted back to imucal's °/s here).
+    """
+    gyr, acc = np.degrees(s.gyro), s.accel
+    mean = {n: (acc[_section(s, n)].mean(axis=0), gyr[_section(s, n)].mean(axis=0))
+            for n in IMUCAL_FACES}
+    U_a_p = np.column_stack([mean[f"{a}_p"][0] for a in "xyz"])
+    U_a_n = np.column_stack([mean[f"{a}_a"][0] for a in "xyz"])
+    b_a = np.diag((U_a_p + U_a_n) / 2)
+    U_a_d = U_a_p - U_a_n
+    K_a = np.diag(np.sqrt(np.diag(U_a_d @ U_a_d.T) / (4 * IMUCAL_GRAV**2)))
+    R_a = np.linalg.inv(K_a) @ U_a_d / (2 * IMUCAL_GRAV)
+    b_g = np.mean(np.vstack([gyr[_section(s, n)] for n in IMUCAL_FACES]), axis=0)
+    U_g_p = np.column_stack([mean[f"{a}_p"][1] for a in "xyz"])
+    U_g_a = np.column_stack([mean[f"{a}_a"][1] for a in "xyz"])
+    K_ga = (U_g_p - U_g_a) / (2 * IMUCAL_GRAV)
+    acc_mat = np.linalg.inv(R_a) @ np.linalg.inv(K_a)
+    W_s = np.zeros((3, 3))
+    for j, name in enumerate(IMUCAL_TURNS):
+        sl = _section(s, name)
+        a_cal = (acc_mat @ (acc[sl] - b_a).T).T
+        W_s[:, j] = np.sum(gyr[sl] - (K_ga @ a_cal.T).T - b_g, axis=0) / IMUCAL_FS_HZ
+    M = W_s @ np.linalg.inv(IMUCAL_ANGLE_DEG * np.eye(3))
+    K_g = np.diag(np.sqrt(np.diag(M @ M.T)))
+    return ImucalGyro(K_g, np.linalg.inv(K_g) @ M, b_g, K_ga)
+
+
+def write_recording(s: Session, out: Path) -> None:
+    """Write a session as a Recording v1 of the hand jig (module docstring): ``imu.csv`` with
+    the gyro (rad/s) and the accelerometer (m/s²) at the session's sample times, empty
+    ``encoder.csv`` and ``segments.csv`` (the rests and turns are found in the data), the
+    manifest's ``jig`` ``{"kind": "hand"}`` and ``source``. Refuses to overwrite ``out``."""
+    from gyrocal.kit.recording import RecordingWriter
+
+    if out.exists():
+        raise FileExistsError(f"{out} exists; remove it first")
+    lsb = {"imucal": IMUCAL_GYR_LSB}.get(s.name)
+    sensor = {"model": f"{s.name}-session", "odr_hz": s.odr_hz}
+    if lsb is not None:
+        sensor.update(full_scale_dps=2000.0, sensitivity_rad_s_per_lsb=float(np.radians(lsb)))
+    extra = {"jig": {"kind": "hand"}, "site": {"gravity_m_s2": s.gravity,
+                                                "gravity_from": "the source's own"},
+             "source": f"bench.real_corpus {s.name} (bench/data/README.md)"}
+    with RecordingWriter(out, sensor=sensor, gimbal={"motors": []},
+                         protocol={"name": "hand", "source": s.name}, extra=extra,
+                         accel=True) as w:
+        w.append_imu(s.t, s.gyro, np.full(s.t.size, np.nan), accel=s.accel)
+        w.finish()
+
+
 def main(argv: list[str]) -> int:
+    if len(argv) == 3 and argv[0] == "recording":
+        try:
+            write_recording(load(argv[1]), Path(argv[2]))
+        except (OSError, ValueError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        return 0
     if len(argv) < 3 or argv[0] not in SOURCES or len(argv) != len(SOURCES[argv[0]]) + 2:
         print("usage: python -m bench.real_corpus NAME SOURCE... OUT.csv.xz\n"
+              "       python -m bench.real_corpus recording imucal OUT_DIR\n"
               + "\n".join(f"  {n}: {' '.join(s)}" for n, s in SOURCES.items()), file=sys.stderr)
         return 2
     try:
@@ -319,5 +445,6 @@ def main(argv: list[str]) -> int:
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))
 
-__all__ = ["FILES", "Session", "convert", "imutk_static_intervals", "load", "locate",
-           "missing_reason", "still_spans"]
+__all__ = ["FILES", "ImucalGyro", "Session", "convert", "imucal_ferraris_gyro",
+           "imutk_static_intervals", "load", "locate", "missing_reason", "still_spans",
+           "write_recording"]

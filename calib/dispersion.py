@@ -21,10 +21,10 @@ does. The rule, in order:
    Student's t (Bonferroni over the ``N`` residuals). A slipped mount, a bump during a rest.
 4. **not consistent** when the excess scatter, relative to the measured signal (gravity for
    the accelerometer, the turn rate for the gyro), exceeds :data:`SCATTER_TOLERANCE` (1e-3
-   of g, 1e-4 of the rate): a model error (a cross-axis term left out of a diagonal fit, a
-   mount that slipped mid-run) leaves residuals of the size of the error, while the real rests
-   of an accelerometer fit whose model holds scatter by a few 1e-4 g (imu_tk's Xsens session:
-   1.2e-4 g beyond the noise; imucal's Ferraris session: 3.5e-4 g).
+   of g, 1e-4 of the rate, 3e-4 on the hand jig): a model error (a cross-axis term left out
+   of a diagonal fit, a mount that slipped mid-run) leaves residuals of the size of the error,
+   while the real rests of an accelerometer fit whose model holds scatter by a few 1e-4 g
+   (imu_tk's Xsens session: 1.2e-4 g beyond the noise; imucal's Ferraris session: 3.5e-4 g).
 5. Otherwise **consistent, with X % scatter beyond the noise (σ widened)**, ``X = 100
    (sqrt(χ²/dof) − 1)`` the residuals' excess over the white noise.
 """
@@ -55,7 +55,13 @@ __all__ = ["SCATTER_TOLERANCE", "Dispersion", "additive", "multiplicative"]
 #:   mid-run leaves 4.2e-4 of the rate (``--sim-fault slip:30:0.5``) and the cross-axis terms
 #:   a diagonal fit leaves out 3.1e-3 (``estimate --method iterative-ls``). No real jig's
 #:   scatter is measured yet: revisit this row with one.
-SCATTER_TOLERANCE = {"accelerometer": 1e-3, "gyro": 1e-4}
+#: * ``hand``, of the turn rate, for the hand jig (:mod:`gyrocal.calib.hand`), whose bias comes
+#:   from rests on six faces laid by hand over a minute or two: imucal's real Ferraris session
+#:   scatters by 2.4e-4 of the rate beyond the white noise, all of it in the rests (the bias
+#:   wanders between them; ``python -m bench jigs``), the emulated hand jig by 0
+#:   (``gyrocal calibrate --sim --jig hand``); a slipped mount leaves about 4e-4 (the gyro
+#:   row's), which this row still calls a model error.
+SCATTER_TOLERANCE = {"accelerometer": 1e-3, "gyro": 1e-4, "hand": 3e-4}
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyrocal.calib import kinematics
-from gyrocal.calib.dispersion import Dispersion, multiplicative
+from gyrocal.calib.dispersion import SCATTER_TOLERANCE, Dispersion, multiplicative
 from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.model import Consistency, GyroCalibration
@@ -278,7 +278,10 @@ def _misalignment_deg(u: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------------------------- validation
-def _validate_common(obs: ObservationSet, method: str, min_windows: int) -> None:
+def _validate_common(obs: ObservationSet, method: str, min_windows: int,
+                     one_way: bool = False) -> None:
+    """Refuse a set the method cannot fit. ``one_way``: rests measure the bias, so one turn
+    per axis suffices (a hand jig's Ferraris session; DESIGN.md fact 3)."""
     if not isinstance(obs, ObservationSet):
         raise CalibInputError(f"obs must be an ObservationSet, got {type(obs).__name__}")
     if obs.n_windows < min_windows:
@@ -286,7 +289,7 @@ def _validate_common(obs: ObservationSet, method: str, min_windows: int) -> None
             f"{method} needs at least {min_windows} rotation windows, got {obs.n_windows}; "
             "turn every servo both ways (the paper's six observations, ±x, ±y, ±z)"
         )
-    for m in obs.motors:
+    for m in obs.motors if not one_way else ():
         dirs = set(obs.direction[obs.motor == m].tolist())
         if dirs != {-1, 1}:
             only = "positive" if dirs == {1} else "negative"
@@ -381,8 +384,9 @@ def _judged(z: np.ndarray, dof: int, obs: ObservationSet, names: list[str] | Non
         names += [f"rest {i}" for i in range(rests) for _ in "xyz"]
         names += [f"still angle {i}" for i in range(z.size - len(names))]
         groups = np.unique(names, return_inverse=True)[1]
+    tolerance = SCATTER_TOLERANCE["hand" if obs.own_axes else "gyro"]
     return multiplicative(z, dof, noise_ratio, alpha=CONSISTENCY_ALPHA, names=names, chi2=chi2,
-                          groups=groups)
+                          groups=groups, tolerance=tolerance)
 
 
 def _ils_solve(
@@ -755,23 +759,29 @@ def _paired_initial(
     rest_mean: np.ndarray,
     rest_std: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A closed-form start: per-servo regressions ``m̄ = ω d_s + c_s`` and the rests."""
+    """A closed-form start: per-servo regressions ``m̄ = ω d_s + c_s`` and the rests (a servo
+    whose windows all share one rate, such as a single turn, takes ``d_s`` through the rests'
+    bias instead)."""
     B = mean.shape[0]
     d = np.zeros((B, n_servos, 3))
     c = np.zeros((B, n_servos, 3))
+    if rest_mean.shape[1]:
+        wr = 1.0 / rest_std**2
+        b_rest = -np.sum(wr * rest_mean, axis=1) / np.sum(wr, axis=1)
     for s in range(n_servos):
         sel = sidx == s
         w = rate[:, sel]  # (B, ns)
         m = mean[:, sel, :]
         wm, mm = w.mean(axis=1), m.mean(axis=1)
         dw = w - wm[:, None]
-        d[:, s] = np.einsum("bi,bij->bj", dw, m - mm[:, None, :]) / np.sum(dw**2, axis=1)[:, None]
+        spread = np.sum(dw**2, axis=1)
+        if rest_mean.shape[1] and np.any(spread <= 1e-12 * np.sum(w**2, axis=1)):
+            d[:, s] = np.mean((m + b_rest[:, None, :]) / w[..., None], axis=1)
+            c[:, s] = -b_rest
+            continue
+        d[:, s] = np.einsum("bi,bij->bj", dw, m - mm[:, None, :]) / spread[:, None]
         c[:, s] = mm - d[:, s] * wm[:, None]
-    if rest_mean.shape[1]:
-        wr = 1.0 / rest_std**2
-        b0 = -np.sum(wr * rest_mean, axis=1) / np.sum(wr, axis=1)
-    else:
-        b0 = -c.mean(axis=1)
+    b0 = b_rest if rest_mean.shape[1] else -c.mean(axis=1)
     dom = np.argmax(np.abs(d), axis=2)  # (B, S) dominant sensor axis of each servo
     k0 = np.ones((B, 3))
     for j in range(3):
@@ -931,7 +941,8 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     Parameters
     ----------
     obs : ObservationSet
-        Rotation windows of every servo in both directions covering ±x, ±y, ±z, and rest windows.
+        Rotation windows of every servo in both directions covering ±x, ±y, ±z, and rest windows;
+        with rest windows, one turn per servo suffices (the rests measure the bias).
     max_iter : int
         Most Levenberg-Marquardt steps.
 
@@ -941,7 +952,11 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
         With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``.
     """
     motors = obs.motors
-    _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
+    # With rests the bias is measured directly, and one turn per axis determines its scale and
+    # its axis's two angles (three readings).
+    one_way = obs.rest_mean is not None and obs.n_rests > 0
+    _validate_common(obs, "paired-axis", len(motors) if one_way else max(6, 2 * len(motors)),
+                     one_way)
     obs = obs.with_pooled_noise()
     # One axis per servo and gimbal pose: a servo turned with the gimbal posed turns about
     # another sensor-frame axis (a recording of the full model's protocol).

@@ -169,6 +169,9 @@ class ObservationSet:
         otherwise than through a gimbal's kinematics (the single-servo jig: gravity read by the
         accelerometer in each seat, :meth:`by_seat`); given together. The full-matrix fit then
         models g-sensitivity with them.
+    own_axes : bool
+        Each rotation window turns about an axis of its own (:meth:`pose_groups`): a hand jig,
+        where nothing holds the axis from one turn to the next (:mod:`gyrocal.calib.hand`).
 
     Raises
     ------
@@ -203,6 +206,7 @@ class ObservationSet:
     turn_phase: np.ndarray | None = None
     force: np.ndarray | None = None
     rest_force: np.ndarray | None = None
+    own_axes: bool = False
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -436,13 +440,15 @@ class ObservationSet:
         in :attr:`chain` at the same angle, within ``tolerance_rad`` and modulo whole turns
         (the servo then turned about one axis in the sensor frame: the servos inside it move
         the sensor and the axis together, :func:`gyrocal.calib.kinematics.chain_axes`);
-        without poses, one group per servo. Groups are numbered in the order of their first
-        window.
+        without poses, one group per servo; with :attr:`own_axes`, one group per window.
+        Groups are numbered in the order of their first window.
 
         Returns
         -------
         ndarray of int, shape (n,)
         """
+        if self.own_axes:
+            return np.arange(self.n_windows, dtype=np.int64)
         chain = [int(c) for c in (self.chain or ())]
         reps: list[tuple[int, np.ndarray | None]] = []
         out = np.zeros(self.n_windows, dtype=np.int64)

@@ -640,7 +640,7 @@ def _assemble(
     turns: Sequence[_Turn], noise: np.ndarray, mean_std: np.ndarray,
     rest_windows: Sequence[Window], rest_samples: Sequence[np.ndarray], tau: np.ndarray,
     temp: np.ndarray | None, q: float, chain: tuple[int, ...] | None,
-    pose: np.ndarray | None, pose_still: np.ndarray | None,
+    pose: np.ndarray | None, pose_still: np.ndarray | None, still_std: float | None = None,
 ) -> ObservationSet:
     """Stage 6: the observation set (rests with the correlation factor, shared still angles
     renumbered, the chain and poses when asked for)."""
@@ -670,7 +670,7 @@ def _assemble(
             ref_gain=np.array([r[2] for r in refs]),
         )
     if used:
-        ref_kw["still_angle_std"] = q / np.sqrt(12.0)
+        ref_kw["still_angle_std"] = q / np.sqrt(12.0) if still_std is None else still_std
     if pose_still is not None:
         pose_still = np.vectorize(lambda i: renumber.get(int(i), -1), otypes=[np.int64])(
             pose_still)
@@ -735,6 +735,7 @@ def extract_observations(
     refit_time: bool = True,
     window: str = "auto",
     chain: Sequence[int] | None = None,
+    still_angle_std: float | None = None,
 ) -> ExtractedWindows:
     """Turn a calibration run's raw streams into observations (DESIGN.md fact 2).
 
@@ -779,6 +780,10 @@ def extract_observations(
     chain : sequence of int, optional
         The gimbal's servo IDs, base first. When given, each window's pose (every chain servo's
         mean encoder angle over the window) goes into the observations, for the full model.
+    still_angle_std : float, optional
+        Prior standard deviation of a still angle, rad; default the encoder's quantisation
+        ``q/√12``. A hand jig's reference angles are a stop's, read to its repeatability
+        (:mod:`gyrocal.calib.hand`).
 
     Returns
     -------
@@ -833,7 +838,7 @@ def extract_observations(
         for i, w in enumerate(turns):  # the turning servo's own angle does not carry its axis
             pose_still[i, chain_t.index(int(w.window.motor))] = -1  # type: ignore[arg-type]
     obs = _assemble(turns, noise, mean_std, rest_windows, rest_samples, tau, temp, q, chain_t,
-                    pose, pose_still)
+                    pose, pose_still, still_angle_std)
     if chain_t is not None:  # where gravity points in each rest, and the home pose
         rest_pose = np.array([tracks.pose(chain_t, w.corners[0], w.corners[3])[0]
                               for w in rest_windows]).reshape(len(rest_windows), len(chain_t))

@@ -475,7 +475,7 @@ def _manifest_parts(cfg: Any, jig: Jig, plan: Any, noise_std: float | None, k: i
                 "sample_hz": cfg["gimbal"]["sample_hz"],
                 "discarded": []}  # attempts repeated after a failed check (the runner's)
     if plan.seats:  # the single-servo jig: the seats planned; the runner lists those taken
-        protocol.update(jig="single-servo", planned_seats=list(plan.seats), seats=[])
+        protocol.update(planned_seats=list(plan.seats), seats=[])
     truth = None
     if jig.sims:
         sim = jig.sims[k]
@@ -526,6 +526,8 @@ def _writers(cfg: Any, args: argparse.Namespace, jig: Jig, plan: Any, noise_std:
             extra = site if len(dirs) == 1 else {**site, "plate": {
                 "sensor": jig.names[k], "sensors": list(jig.names),
                 "address": int(jig.imus[k].info.address), "bus": cfg.imus()[k]["bus"]}}
+            if plan.seats:  # the jig kind, as every recording not made on the gimbal says it
+                extra = {**extra, "jig": {"kind": "single-servo"}}
             writers.append(RecordingWriter(d, sensor=sensor, gimbal=gimbal_info,
                                            protocol=protocol, truth=truth, force=args.force,
                                            extra=extra, accel=True))

@@ -37,6 +37,7 @@ __all__ = [
     "PLAUSIBLE_SCALE",
     "Estimate",
     "plausible_bounds",
+    "recording_jig",
     "check_plausible",
     "check_plausible_noise",
     "datasheet_cross_axis",
@@ -109,6 +110,20 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
         If the recording cannot be windowed (truncated, a servo without encoder data, ...).
     """
     try:
+        if recording_jig(rec) == "hand":
+            from gyrocal.calib.hand import STOP_STD_RAD, hand_observations
+
+            stop = (rec.manifest.get("jig") or {}).get("stop_std_deg")
+            stop_rad = (math.radians(stop) if isinstance(stop, (int, float))
+                        and not isinstance(stop, bool) and stop > 0 else STOP_STD_RAD)
+            return hand_observations(rec.imu_t, rec.imu_rate, imu_temp=rec.imu_temp,
+                                     accel=rec.imu_accel, stop_std_rad=stop_rad)[0]
+        if rec.enc_t.size == 0 and not any(s.kind == "rotate" for s in rec.segments):
+            raise InputError(
+                f"{rec.path}: no encoder readings and no turns in segments.csv, so no gimbal "
+                "turn to window; if the sensor was turned by hand (whole turns against a stop "
+                "between rests), say so in manifest.json: \"jig\": {\"kind\": \"hand\"} "
+                "(hardware_docs/hand-jig.md)")
         ex = extract_observations(
             rec.imu_t, rec.imu_rate, rec.enc_t, rec.enc_motor, rec.enc_angle, rec.segments,
             imu_temp=rec.imu_temp, chain=_chain(rec),
@@ -126,7 +141,7 @@ def extract_recording(rec: Recording) -> ExtractedWindows:
 
 def seat_starts(manifest: Mapping[str, Any]) -> np.ndarray | None:
     """The start times of the cube's seats of a single-servo recording (the manifest's
-    ``protocol.jig`` ``"single-servo"`` and its ``protocol.seats``: each seat's ``t_start`` on
+    ``jig.kind`` ``"single-servo"`` and its ``protocol.seats``: each seat's ``t_start`` on
     the recording clock, in order), or None for a recording of another jig.
 
     Each window then turns about its seat's own axis (:meth:`gyrocal.calib.observations.
@@ -137,10 +152,10 @@ def seat_starts(manifest: Mapping[str, Any]) -> np.ndarray | None:
     CalibInputError
         If a single-servo recording lists no seats or a seat without a time.
     """
-    protocol = manifest.get("protocol") or {}
-    if not isinstance(protocol, Mapping) or protocol.get("jig") != "single-servo":
+    if manifest_jig(manifest) != "single-servo":
         return None
-    seats = protocol.get("seats")
+    protocol = manifest.get("protocol")
+    seats = protocol.get("seats") if isinstance(protocol, Mapping) else None
     try:
         starts = np.array([float(s["t_start"]) for s in seats], dtype=float)
     except (KeyError, TypeError, ValueError):
@@ -168,6 +183,39 @@ def _by_seat(ex: ExtractedWindows, manifest: Mapping[str, Any], starts: np.ndarr
     if force is None or force.shape != (len(seats), 3):
         return ex.observations.by_seat(seat_of(ex.windows))
     return ex.observations.by_seat(seat_of(ex.windows), seat_of(ex.rests), force)
+
+
+def manifest_jig(manifest: Mapping[str, Any]) -> str:
+    """The jig kind a recording was made on: its manifest's ``jig.kind``, a key of
+    :data:`gyrocal.kit.jig_kinds.JIG_KINDS` (``gimbal`` when the manifest does not say).
+
+    Raises
+    ------
+    CalibInputError
+        If the manifest names a kind gyrocal does not know.
+    """
+    from gyrocal.kit.jig_kinds import DEFAULT_JIG, JIG_KINDS
+
+    jig = manifest.get("jig")
+    kind = jig.get("kind", DEFAULT_JIG) if isinstance(jig, Mapping) else DEFAULT_JIG
+    if kind not in JIG_KINDS:
+        raise CalibInputError(f"manifest jig.kind {kind!r} is not one of "
+                              f"{', '.join(JIG_KINDS)}")
+    return str(kind)
+
+
+def recording_jig(rec: Recording) -> str:
+    """The jig kind the recording was made on (:func:`manifest_jig`).
+
+    Raises
+    ------
+    InputError
+        If the manifest names a kind gyrocal does not know.
+    """
+    try:
+        return manifest_jig(rec.manifest)
+    except CalibInputError as exc:
+        raise InputError(f"{rec.path}: {exc}") from None
 
 
 def gravity_servo(manifest: Mapping[str, Any]) -> tuple[int, int] | None:
@@ -198,16 +246,19 @@ def _chain(rec: Recording) -> tuple[int, ...] | None:
     return chain
 
 
-def diagonal_note(sensor_model: str | None, reason: str) -> str:
+def diagonal_note(sensor_model: str | None, reason: str, *, jig: str = "gimbal") -> str:
     """What a user must know about a diagonal calibration: cross-axis terms are not in it, and
-    how large the error they leave can be."""
+    how large the error they leave can be; how to calibrate them (on a gimbal: record with a
+    posed protocol; on another ``jig``: a gimbal's posed protocol does)."""
     frac = datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
+    how = ("Record with a posed protocol (gyrocal calibrate's default) to calibrate the full "
+           "matrix." if jig == "gimbal" else
+           "A gimbal's posed protocol (gyrocal calibrate's default) calibrates the full matrix.")
     return (
         f"cross-axis terms were NOT calibrated ({reason}); the diagonal model is exact only "
         f"about the six calibration axes: in other directions the calibrated rate can be off "
         f"by up to the sensor's cross-axis sensitivity, ±{100 * frac:g} % of the rate "
-        f"(datasheet). Record with a posed protocol (gyrocal calibrate's default) to calibrate "
-        "the full matrix."
+        f"(datasheet). {how}"
     )
 
 
@@ -217,7 +268,12 @@ def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
     try:
         if method != AUTO:
             return _without_chain(estimate(obs, method), seats), ()
-        if obs.chain is None:
+        jig = "single-servo" if seats else "gimbal"
+        if obs.own_axes:
+            from gyrocal.kit.jig_kinds import JIG_KINDS
+
+            jig, reason = "hand", JIG_KINDS["hand"].undetermined
+        elif obs.chain is None:
             reason = "the recording's manifest does not list the gimbal's servos in chain order"
         else:
             full = estimate(obs, "full-matrix")
@@ -228,7 +284,7 @@ def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
                       f"the {len(obs.chain)} seats of the cube do not determine them: "
                       "seat it on edges too, in the V-block (hardware_docs/single-servo.md)")
         return (_without_chain(estimate(obs, "paired-axis"), seats),
-                (diagonal_note(sensor_model, reason),))
+                (diagonal_note(sensor_model, reason, jig=jig),))
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
 

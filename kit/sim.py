@@ -24,8 +24,9 @@ from gyrocal.drivers.imu.chips import MPU9250
 from gyrocal.kit.config import Config
 from gyrocal.kit.errors import InputError
 
-__all__ = ["DATASHEET_CROSS_AXIS", "REALISM_EFFECTS", "SIM_CROSS_AXIS", "SIM_SENSOR",
-           "SIM_SENSORS", "SimJig", "build_sim", "build_sim_plate", "plate_seed",
+__all__ = ["DATASHEET_CROSS_AXIS", "HAND_STOP_DEG", "HAND_WOBBLE_DEG", "REALISM_EFFECTS",
+           "SIM_CROSS_AXIS", "SIM_SENSOR", "SIM_SENSORS", "SimJig", "build_hand_sim",
+           "build_sim", "build_sim_plate", "plate_seed",
            "realism_sizes", "sensor_preset", "sim_cross_axis", "sim_misalignment",
            "sim_realism", "sim_thermal", "sim_truth"]
 
@@ -658,3 +659,50 @@ def _swap_imu(sim: SimJig, spec: str, model: str) -> str:
     address = sim.imu_address if sim.imu_address in possible else possible[0]
     make_emulated_imu(key, old.clock, old.motion, old.truth, bus=sim.imu_bus, address=address)
     return f"the board carries an {READERS[key].family.title} at 0x{address:02X}"
+
+
+#: The hand jig's emulated stop repeatability and axis wobble, degrees (``--jig hand``:
+#: hardware_docs/hand-jig.md, what to expect of a box turned by hand against a firm edge).
+HAND_STOP_DEG = 0.1
+HAND_WOBBLE_DEG = 1.0
+
+
+def build_hand_sim(cfg: Config, *, seed: int = 0, noise_seed: int | None = None,
+                   mount_deg: float = 3.0, lead_s: float = 1.0, **options: Any) -> SimJig:
+    """The emulated hand jig (``--sim --jig hand``): the configured IMU on a box turned by a
+    hand (:class:`gyrocal.drivers.emulated.hand.HandMotion`: irregular speed within each turn,
+    rests of varying length, a wobbling axis, the stop's repeatability), no servos.
+
+    Parameters
+    ----------
+    cfg : Config
+    seed, noise_seed, mount_deg
+        As for :func:`build_sim` (``seed`` draws the sensor, the mount on the box and the
+        hand's schedule; ``noise_seed`` the noise and the hand's speed profiles).
+    lead_s : float
+        Still time before the schedule starts (the reader's start-up), s.
+    **options
+        :func:`build_sim`'s ``scale``, ``bias``, ``cross_axis``, ``realism``, ``temperature``,
+        ``self_heating``, ``sensor``, ``noise_density_rad_s_sqrt_hz``.
+    """
+    from gyrocal.drivers.emulated.hand import HandMotion, hand_schedule
+
+    clock = VirtualClock()
+    run_seed = seed if noise_seed is None else noise_seed
+    realism = options.get("realism")
+    effects = frozenset(REALISM_EFFECTS if realism is None else realism)
+    rng = np.random.default_rng([int(seed), 0x4A4F])
+    axis = rng.normal(size=3)
+    motion = HandMotion(hand_schedule(seed), t0=clock.monotonic() + lead_s,
+                        mount=tuple(axis / np.linalg.norm(axis) * math.radians(mount_deg)),
+                        wobble_deg=HAND_WOBBLE_DEG if "wobble" in effects else 0.0,
+                        stop_deg=HAND_STOP_DEG, seed=run_seed)
+    plate = SimJig(clock, None, None, motion, None, 0, SensorTruth(), effects)
+    family = READERS[cfg["imu"]["model"]].family.name
+    truth = sim_truth(seed, options.get("scale"), options.get("bias"),
+                      sensor=options.get("sensor") or SIM_SENSOR, family=family)
+    return _add_sensor(plate, cfg["imu"], seed, run_seed, truth,
+                       cross_axis=options.get("cross_axis"),
+                       noise_density=options.get("noise_density_rad_s_sqrt_hz"),
+                       temperature=options.get("temperature"),
+                       self_heating=options.get("self_heating"))

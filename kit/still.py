@@ -59,14 +59,40 @@ class StillRecord:
     meta: dict[str, Any]
 
 
-def _span(root: Path, span: str, segments: tuple[Any, ...]) -> tuple[float, float]:
-    """The time window of ``span`` (``auto``, ``all`` or ``longest-rest``), with a note."""
+def _hand_rest(root: Path) -> tuple[float, float]:
+    """The longest rest of a hand-jig recording (no segments: the rests are found in the data,
+    :func:`gyrocal.calib.hand.find_hand_turns`), with a note."""
+    import numpy as np
+
+    from gyrocal.calib.errors import CalibInputError
+    from gyrocal.calib.hand import find_hand_turns
+
+    blocks = list(iter_imu(root, []))
+    t = np.concatenate([b[0] for b in blocks])
+    rate = np.concatenate([b[1] for b in blocks])
+    try:
+        rests = find_hand_turns(t, rate).rests
+    except CalibInputError as exc:
+        raise InputError(f"{root}: {exc}") from None
+    lo, hi = max(rests, key=lambda r: r[1] - r[0])
+    print(f"gyrocal: note: using the longest rest the hand jig's data show ({lo:.1f}-{hi:.1f} "
+          f"s, {hi - lo:.1f} s)", file=sys.stderr)
+    return lo, hi
+
+
+def _span(root: Path, span: str, segments: tuple[Any, ...],
+          hand: bool = False) -> tuple[float, float]:
+    """The time window of ``span`` (``auto``, ``all`` or ``longest-rest``), with a note; on a
+    ``hand``-jig recording the rests come from the data (:func:`_hand_rest`)."""
     import math
 
     if span == "auto":
-        span = "longest-rest" if any(s.kind == "rotate" for s in segments) else "all"
+        span = ("longest-rest" if hand or any(s.kind == "rotate" for s in segments)
+                else "all")
     if span == "all":
         return -math.inf, math.inf
+    if hand and not segments:
+        return _hand_rest(root)
     rests = [s for s in segments if s.kind == "rest"]
     if not rests:
         raise InputError(f"{root} has no rest segment; record the sensor still, or pass --span all")
@@ -157,7 +183,8 @@ def open_still(path: str | os.PathLike[str], span: str = "auto") -> Iterator[Sti
         A Recording v1 directory.
     span : {"auto", "all", "longest-rest"}
         All samples, or the longest rest segment (``auto``: all if the recording has no
-        rotations).
+        rotations); on a hand-jig recording (manifest ``jig.kind`` ``hand``) the longest rest
+        the data show.
 
     Yields
     ------
@@ -179,7 +206,9 @@ def open_still(path: str | os.PathLike[str], span: str = "auto") -> Iterator[Sti
     manifest = read_manifest(root)
     warnings: list[str] = []
     segments = read_segments(root, warnings)
-    lo, hi = _span(root, span, segments)
+    jig = manifest.get("jig")
+    lo, hi = _span(root, span, segments,
+                   hand=isinstance(jig, dict) and jig.get("kind") == "hand")
     sink: dict[str, Any] = {}
     with tempfile.TemporaryFile(prefix="gyrocal-phase-") as fh:
         fh.write(np.zeros((1, 3)).tobytes())

@@ -378,6 +378,8 @@ CHAINS: dict[str, tuple[str, ...]] = {
     "intro": ("README.md", "hardware_docs/README.md", "hardware_docs/bom.md",
               "hardware_docs/wiring.md", "hardware_docs/chips.md", "hardware_docs/mechanical.md",
               "hardware_docs/setup.md"),
+    # the hand jig's page writes and reads its own run (hand1)
+    "hand": ("hardware_docs/hand-jig.md",),
 }
 
 

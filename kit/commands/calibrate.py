@@ -112,7 +112,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jig", choices=tuple(JIG_KINDS), default=DEFAULT_JIG,
                    help="the kind of jig: " + "; ".join(
                        f"{k.name}: {k.description} (hardware_docs/{k.hardware_docs})"
-                       for k in JIG_KINDS.values()) + f" (default {DEFAULT_JIG})")
+                       for k in JIG_KINDS.values()) + f" (default {DEFAULT_JIG}; hand records "
+                   "only with --sim)")
     p.add_argument("--out", metavar="DIR",
                    help="output directory (default: ./gyrocal-YYYYmmdd-HHMMSS)")
     p.add_argument("--force", action="store_true",
@@ -165,7 +166,12 @@ def run(args: argparse.Namespace) -> int:
         return _run_plate(cfg, args, out, work, report, history)
     report_failed = None
     with built_beside(work, out):
-        run_jig(cfg, args, work, work / "recording")
+        if getattr(args, "jig", "gimbal") == "hand":
+            from gyrocal.kit.hand import record_hand_sim
+
+            record_hand_sim(cfg, args, work / "recording")
+        else:
+            run_jig(cfg, args, work, work / "recording")
         if getattr(args, "sim_imu", False):
             cal = None
         else:

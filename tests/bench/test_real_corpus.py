@@ -111,3 +111,45 @@ def test_the_excerpt_is_the_stated_file(name):
     rows, hz = {"imutk": (51175, 100.0), "imucal": (10376, 102.4), "fusion": (13514, 99.2)}[name]
     assert s.t.size == rows and s.odr_hz == pytest.approx(hz, rel=5e-3)
     assert np.all(np.isfinite(s.gyro)) and np.all(np.isfinite(s.accel))
+
+
+#: imucal 2.6.0's own gyro calibration of its session: rc.imucal_ferraris_gyro models its
+#: equations (imucal/ferraris_calibration.py L210-323, ferraris_calibration_info.py L109-134).
+@pytest.mark.skipif(rc.locate("imucal") is None, reason=rc.missing_reason("imucal"))
+def test_gyrocal_on_imucals_real_ferraris_session_agrees_with_imucals_own(tmp_path, capsys):
+    """imucal's real session as a hand-jig Recording v1 (before: "needs at least 6 rotation
+    windows, got 3"): the three turns and 13 rests are found, the scales agree with imucal's
+    to 2e-4 and the biases to 3e-5 rad/s (each within one σ), and the verdict holds."""
+    from gyrocal.kit.cli import main
+
+    s = rc.load("imucal")
+    rc.write_recording(s, tmp_path / "rec")
+    assert main(["estimate", str(tmp_path / "rec"), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    own = rc.imucal_ferraris_gyro(s)
+    scale, bias = np.array(doc["scale"]), np.array(doc["bias"])
+    assert np.all(np.abs(scale - own.scale) < np.minimum(2e-4, doc["scale_std"])), scale
+    own_bias = -np.radians(own.b)
+    assert np.all(np.abs(bias - own_bias) < np.minimum(3e-5, doc["bias_std"])), bias
+    assert doc["consistency"]["ok"]
+    with pytest.raises(FileExistsError):
+        rc.write_recording(s, tmp_path / "rec")
+
+
+@pytest.mark.skipif(rc.locate("imucal") is None, reason=rc.missing_reason("imucal"))
+def test_the_model_of_imucals_calibration_is_imucals_own():
+    """rc.imucal_ferraris_gyro against imucal's FerrarisCalibration itself (the test extra),
+    run as its examples/basic_ferraris.py runs it, on the same labelled session."""
+    imucal = pytest.importorskip("imucal")
+    pd = pytest.importorskip("pandas")
+    s = rc.load("imucal")
+    data = pd.DataFrame(np.column_stack([s.accel, np.degrees(s.gyro)]),
+                        columns=["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"])
+    sections = pd.DataFrame({n: {"start": lo, "end": hi} for n, lo, hi in s.sections}).T
+    regions = imucal.ferraris_regions_from_section_list(data, sections)
+    cal = imucal.FerrarisCalibration().compute(regions, sampling_rate_hz=rc.IMUCAL_FS_HZ,
+                                               from_acc_unit="m/s^2", from_gyr_unit="deg/s")
+    own = rc.imucal_ferraris_gyro(s)
+    for mine, theirs in ((own.K, cal.K_g), (own.R, cal.R_g), (own.b, cal.b_g),
+                         (own.K_ga, cal.K_ga)):
+        np.testing.assert_allclose(mine, theirs, rtol=1e-12, atol=1e-15)

@@ -49,8 +49,9 @@ def test_the_single_servo_run_calibrates_the_full_matrix_within_its_sigma(run):
 
 def test_each_seat_taken_reads_its_gravity_and_the_wrong_one_was_refused(run):
     _, out = run
-    p = json.loads((out / "recording" / "manifest.json").read_text())["protocol"]
-    assert p["jig"] == "single-servo"
+    manifest = json.loads((out / "recording" / "manifest.json").read_text())
+    p = manifest["protocol"]
+    assert manifest["jig"]["kind"] == "single-servo"
     assert [s["seat"] for s in p["seats"]] == p["planned_seats"]
     for s in p["seats"]:
         cos = float(np.dot(s["gravity"], SEATS[s["seat"]][0]))

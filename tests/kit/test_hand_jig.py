@@ -1,0 +1,117 @@
+"""The hand jig through the kit: `--jig` choices, `gyrocal estimate` on a hand Recording v1
+written from the independent generator (tests/calib/hand_truth.py), the emulated hand's motion
+checked against its own schedule."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from gyrocal.drivers.emulated.hand import HandMotion, hand_schedule
+from gyrocal.kit.cli import main
+from gyrocal.kit.jig_kinds import DEFAULT_JIG, JIG_KINDS
+from gyrocal.kit.recording import RecordingWriter
+from tests.calib import hand_truth as ht
+
+
+def test_calibrate_offers_the_jig_kinds_of_the_table():
+    from gyrocal.kit.commands import calibrate
+
+    p = argparse.ArgumentParser()
+    calibrate.add_arguments(p)
+    action = next(a for a in p._actions if a.dest == "jig")
+    assert tuple(action.choices) == tuple(JIG_KINDS) and action.default == DEFAULT_JIG
+    assert DEFAULT_JIG == "gimbal" and {"gimbal", "hand"} <= set(JIG_KINDS)
+    assert all(k.name == name for name, k in JIG_KINDS.items())
+
+
+@pytest.fixture(scope="module")
+def hand_recording(tmp_path_factory):
+    rng = np.random.default_rng(11)
+    C, bias, mount = ht.draw_sensor(rng)
+    t, m, acc, truth = ht.hand_session(rng, C, bias, mount)
+    root = tmp_path_factory.mktemp("hand") / "rec"
+    with RecordingWriter(root, sensor={"model": "mpu9250", "odr_hz": 100.0},
+                         gimbal={"motors": []}, protocol={"name": "hand"},
+                         extra={"jig": {"kind": "hand"}}, accel=True) as w:
+        w.append_imu(t, m, np.full(t.size, np.nan), accel=acc)
+        w.finish()
+    return root, truth
+
+
+def test_estimate_reads_a_hand_recording_and_says_what_it_cannot_determine(
+        hand_recording, capsys):
+    """Calibration v1 (the diagonal model) with the hand jig's reason on stderr; scale and
+    bias within 3σ of the generator's truth."""
+    root, truth = hand_recording
+    assert main(["estimate", str(root), "--json"]) == 0
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
+    assert doc["version"] == 1 and doc["method"] == "paired-axis"
+    assert "turn axes are the box's" in out.err and "gimbal's posed protocol" in out.err
+    assert np.all(np.abs(np.array(doc["scale"]) - truth.scale) < 3 * np.array(doc["scale_std"]))
+    assert np.all(np.abs(np.array(doc["bias"]) - truth.bias) < 3 * np.array(doc["bias_std"]))
+
+
+def test_a_manifest_naming_an_unknown_jig_is_refused(tmp_path, capsys):
+    root = tmp_path / "rec"
+    with RecordingWriter(root, sensor={"model": "mpu9250"}, gimbal={"motors": []},
+                         protocol={}, extra={"jig": {"kind": "table"}}) as w:
+        w.append_imu(np.arange(20) * 0.01, np.zeros((20, 3)))
+        w.finish()
+    assert main(["estimate", str(root)]) == 2
+    assert "jig.kind 'table' is not one of gimbal, hand" in capsys.readouterr().err
+
+
+def test_calibrate_refuses_the_hand_jig_without_sim(tmp_path, capsys):
+    assert main(["calibrate", "--jig", "hand", "--out", str(tmp_path / "o")]) == 2
+    assert "--jig hand records only on the emulated jig" in capsys.readouterr().err
+
+
+def test_the_emulated_hand_turns_whole_turns_and_lays_each_face_up():
+    """Each turn of the emulated hand integrates to its drawn angle (2π plus the stop's
+    error) about its box axis, whatever its speed profile; at rests the specific force is the
+    face laid up, in the sensor frame through the mount."""
+    sched = hand_schedule(4)
+    motion = HandMotion(sched, mount=(0.02, -0.01, 0.03), wobble_deg=1.0, seed=4)
+    axes = motion.box_axes()
+    turns = [p for p in sched if p.kind == "turn"]
+    assert len(turns) == 6 and len(motion.turn_angles) == 6
+    for p, angle in zip(turns, motion.turn_angles, strict=True):
+        t = np.linspace(p.t_start, p.t_end, 20001)
+        w = motion.rate(t)
+        total = np.sum((w[1:] + w[:-1]) / 2 * np.diff(t)[:, None], axis=0)
+        np.testing.assert_allclose(total, angle * axes[p.axis], atol=2e-4)
+        assert abs(abs(angle) - 2 * np.pi) < np.radians(0.5)
+        speed = np.linalg.norm(w, axis=1)
+        assert speed.max() > 1.3 * np.mean(speed)  # the speed varies within the turn
+    rests = [p for p in sched if p.kind == "rest"]
+    assert len({round(p.t_end - p.t_start, 3) for p in rests}) == len(rests)  # varying rests
+    ups = {tuple(np.round(motion.specific_force(np.array([(p.t_start + p.t_end) / 2]))[0]
+                          @ axes.T).astype(int)) for p in rests}
+    assert ups == {(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)}
+
+
+def test_noise_on_a_hand_recording_takes_a_rest_the_data_show(hand_recording, capsys):
+    """A hand recording has no segments: `gyrocal noise` takes the longest rest the data show
+    (before: the whole recording, turns included, as "all"); 4.5 s is too short for the Allan
+    curve, which it says."""
+    root, _ = hand_recording
+    assert main(["noise", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert "using the longest rest the hand jig's data show" in err and "too short" in err
+
+
+def test_a_recording_without_turns_or_jig_kind_is_told_about_the_hand_jig(tmp_path, capsys):
+    """A hand session written without ``jig.kind`` (another tool's): the gimbal's windowing
+    has nothing to window, and the message says how to mark it."""
+    root = tmp_path / "rec"
+    with RecordingWriter(root, sensor={"model": "mpu9250"}, gimbal={"motors": []},
+                         protocol={}) as w:
+        w.append_imu(np.arange(200) * 0.01, np.zeros((200, 3)))
+        w.finish()
+    assert main(["estimate", str(root)]) == 2
+    assert '"jig": {"kind": "hand"}' in capsys.readouterr().err
