@@ -160,12 +160,26 @@ def _real_imucal() -> None:
           + ", ".join(f"{a:.2f}°" for a in angles) + "\n")
 
 
+def _single_servo_rows(seeds: int) -> list[list]:
+    """The single-servo jig's rows (:func:`bench.bench_single_servo.single_servo_rows`, the V-block
+    edges and the faces alone) in this table's columns; what it does not measure is blank."""
+    from bench.bench_single_servo import single_servo_rows
+
+    return [["single-servo", f"{r['source']} ({r['protocol']})", r["sensors"], r["method"],
+             f"{r['gm']:.1e}", "", f"{r['bias']:.1e}", "", "-",
+             f"{r['jig_s'] if r['jig_s'] is not None else r['plan_s']:.0f}",
+             f"{r['consistent']}/{r['sensors']}"] for r in single_servo_rows(list(range(seeds)))]
+
+
 def main(argv: list[str]) -> None:
     from gyrocal.kit.jig_kinds import JIG_KINDS
 
     seeds = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--seeds=")), 2)
     rows = []
     for kind in JIG_KINDS:
+        if kind == "single-servo":  # its own runs: the seats' emulator and generator
+            rows += _single_servo_rows(seeds)
+            continue
         for source, fn in (("emulator", _emulator), ("independent", _independent)):
             if source == "independent" and kind not in INDEPENDENT:
                 rows.append([kind, source, 0, "no independent generator yet (INDEPENDENT)",
