@@ -59,7 +59,6 @@ if TYPE_CHECKING:
 __all__ = [
     "CONSISTENCY_ALPHA",
     "FULL_FRAME",
-    "MAX_MATRIX_STD",
     "METHODS",
     "FullMatrixBatch",
     "FitResult",
@@ -1464,14 +1463,9 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
 MAX_G_STD = 1.75e-3
 
 
-#: Largest one-sigma uncertainty of a matrix element for which the full model counts as
-#: determined: a twentieth of the ±2 % cross-axis sensitivity the MPU-9250 datasheet allows.
-MAX_MATRIX_STD = 1e-3
-
-
 def fit_full_matrix(
-    obs: ObservationSet, *, max_iter: int = 50, max_matrix_std: float = MAX_MATRIX_STD,
-    g_sensitivity: bool = True, max_g_std: float = MAX_G_STD,
+    obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: bool = True,
+    max_g_std: float = MAX_G_STD,
 ) -> FitResult:
     r"""Full-matrix fit: ``g = A (m + b)`` with ``A`` a full 3×3 matrix, from a posed protocol.
 
@@ -1501,10 +1495,6 @@ def fit_full_matrix(
         and rest windows.
     max_iter : int
         Most Levenberg-Marquardt steps.
-    max_matrix_std : float
-        The fit succeeds only if every matrix element's one-sigma uncertainty is at most this
-        (:data:`MAX_MATRIX_STD`): a schedule whose poses leave a direction unobservable on a
-        square gimbal sees it only through the gimbal's small tilts, with a huge uncertainty.
     g_sensitivity : bool
         When ``obs`` says where gravity points (:attr:`ObservationSet.has_gravity`), fit
         ``g = A (m + b + G f)`` (``hardware_docs/method.md`` §10): ``f`` each window's mean
@@ -1580,18 +1570,15 @@ def fit_full_matrix(
         cov = cov * factor
     it = int(res.iterations[0])
     deficiency = int(res.rank_deficiency[0])
-    geometry = res.covariance[0]  # what the poses determine: before any widening by scatter
-    worst = (float(np.sqrt(np.max(np.diag(geometry)[:9]))) if np.all(np.isfinite(geometry))
-             else np.inf)
-    determined = deficiency == 0 and worst <= max_matrix_std
+    determined = deficiency == 0 and bool(np.all(np.isfinite(res.covariance[0])))
     ok = bool(res.converged[0]) and bool(np.all(np.isfinite(A))) and determined
     if not determined:
         status = "not-determined"
-        how = (f"leave {deficiency} combination(s) of the matrix and the servo axes undetermined"
-               if deficiency else
-               f"determine the matrix only to ±{worst:.1e} (one sigma; limit {max_matrix_std:g})")
+        what = (f"{deficiency} combination(s)" if deficiency else "a combination (its "
+                "uncertainty is not finite)")
         message = (
-            f"the poses {how}: turn outer servos with the servos inside them at other angles "
+            f"the poses leave {what} of the matrix and the servo axes "
+            "undetermined: turn outer servos with the servos inside them at other angles "
             "(two posed pairs of turns at least; hardware_docs/method.md, observability)")
     elif ok:
         status, message = "converged", f"converged in {it} steps{g_note}"

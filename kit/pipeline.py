@@ -1,9 +1,12 @@
 """From a recording to a calibration: windows, fit, Calibration v1 or v2 (shared by the commands).
 
 With the method ``auto`` (the default) the full model ``g = A (m + b)`` is fitted when the
-recording's poses determine it (hardware_docs/method.md §9); otherwise the paper's diagonal model
-is fitted with the paired-axis estimator, and the estimate carries a note saying that cross-axis
-terms were not calibrated and how large the error they leave can be.
+recording's poses determine it (hardware_docs/method.md §9), and so is the paper's diagonal model
+with the paired-axis estimator; the full model is kept when its predicted general-motion error is
+below the diagonal model's, which includes the cross-axis terms the datasheet allows
+(:func:`gyrocal.calib.design.choose_model`). The calibration carries both figures
+(``model_choice``) and a note says them; a diagonal one also says that cross-axis terms were not
+calibrated and how large the error they leave can be.
 
 When the recording's ``imu.csv`` has the accelerometer's columns, the same run's still windows
 (the rests, held in the orientations the protocol's poses give) are the accelerometer's
@@ -26,7 +29,7 @@ from gyrocal.calib.accel import AccelCalibration
 from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
-from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.model import GyroCalibration, ModelChoice
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
 from gyrocal.kit.errors import EstimationError, InputError
 from gyrocal.kit.recording import Recording, now_iso
@@ -40,6 +43,8 @@ __all__ = [
     "check_plausible",
     "check_plausible_noise",
     "datasheet_cross_axis",
+    "diagonal_note",
+    "sensor_cross_axis",
     "estimate_recording",
     "extract_recording",
     "fit_recording_accelerometer",
@@ -149,10 +154,17 @@ def _chain(rec: Recording) -> tuple[int, ...] | None:
     return chain
 
 
+def sensor_cross_axis(sensor_model: str | None) -> float:
+    """The cross-axis sensitivity a diagonal calibration of ``sensor_model`` leaves out: the
+    datasheet's (:func:`datasheet_cross_axis`), or the typical ±2 % for a model gyrocal does
+    not read."""
+    return datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
+
+
 def diagonal_note(sensor_model: str | None, reason: str) -> str:
     """What a user must know about a diagonal calibration: cross-axis terms are not in it, and
     how large the error they leave can be."""
-    frac = datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
+    frac = sensor_cross_axis(sensor_model)
     return (
         f"cross-axis terms were NOT calibrated ({reason}); the diagonal model is exact only "
         f"about the six calibration axes: in other directions the calibrated rate can be off "
@@ -162,22 +174,38 @@ def diagonal_note(sensor_model: str | None, reason: str) -> str:
     )
 
 
-def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
-         path: object) -> tuple[FitResult, tuple[str, ...]]:
+def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None, drift: BiasDrift,
+         path: object) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
+    """Fit ``method``, or with ``auto`` both models and keep the one predicted better
+    (:func:`gyrocal.calib.design.choose_model`); each fit with the bias's wander in its σ
+    (:func:`gyrocal.calib.estimators.add_bias_drift`), so the figures are the calibration's."""
+    from gyrocal.calib.design import choose_model
+
     obs = ex.observations
     try:
         if method != AUTO:
-            return estimate(obs, method), ()
-        if obs.chain is None:
-            reason = "the recording's manifest does not list the gimbal's servos in chain order"
-        else:
+            return add_bias_drift(estimate(obs, method), drift), None, ()
+        full, reason = None, ("the recording's manifest does not list the gimbal's servos in "
+                              "chain order")
+        if obs.chain is not None:
             full = estimate(obs, "full-matrix")
-            if full.success:
-                return full, ()
             reason = f"the recording's poses do not determine them: {full.message}"
-        return estimate(obs, "paired-axis"), (diagonal_note(sensor_model, reason),)
+            full = add_bias_drift(full, drift) if full.success else None
+        diag = estimate(obs, "paired-axis")
+        if not diag.success:
+            return (full, None, ()) if full is not None else (diag, None, ())
+        diag = add_bias_drift(diag, drift)
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
+    choice = choose_model(None if full is None else full.covariance,
+                          None if full is None else full.matrix, diag.covariance, diag.scale,
+                          sensor_cross_axis(sensor_model))
+    if choice.chosen == "full":
+        return full, choice, (choice.sentence(),)  # type: ignore[return-value]
+    if full is not None:
+        reason = (f"the full model's predicted general-motion error, {choice.full:.2g} per "
+                  f"rad/s, is above the diagonal model's, {choice.diagonal:.2g}")
+    return diag, choice, (diagonal_note(sensor_model, reason), choice.sentence())
 
 
 def local_gravity(section: Mapping[str, Any]) -> tuple[float, str]:
@@ -274,18 +302,17 @@ def estimate_recording(
         If the estimator fails (the message says why).
     """
     ex = extract_recording(rec)
-    fit, notes = _fit(ex, method, rec.sensor.get("model"), rec.path)
+    drift = chip_bias_drift(rec.sensor.get("model"), ex)
+    fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), drift, rec.path)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
-    drift = chip_bias_drift(rec.sensor.get("model"), ex)
-    fit = add_bias_drift(fit, drift)
     notes = (*notes, drift.note())
-    cal = fit.to_calibration(
+    cal = replace(fit.to_calibration(
         sensor=rec.sensor,
         temperature_c=ex.observations.temperature_c,
         created=now_iso(),
         source=source if source is not None else str(rec.path),
-    )
+    ), model_choice=choice)
     g = recording_gravity(rec) if gravity_m_s2 is None else gravity_m_s2
     accel, accel_note = fit_recording_accelerometer(rec, ex, g)
     if accel is not None:
