@@ -21,17 +21,18 @@
 6. The model choice (issue 28): general-motion error and consistency-verdict rate of ``gyrocal
    estimate``'s method ``auto`` (the full model kept when its predicted general-motion error is
    below the diagonal model's) on normal and the paper's extreme sensors (scale 1.2–2.0, |bias|
-   0.1–0.2 rad/s), a full (posed) and a diagonal (home turns only) protocol, on the emulator
-   (``gyrocal calibrate --sim``, ``--sim-sensor paper-extreme``, ``--protocol auto``) and on the
-   independent generator (tests/kit/contract_fullmodel_recording.py, ``extreme=True``), on
-   held-out seeds :data:`CHOICE_SEEDS` (none of them looked at while writing the code).
+   0.1–0.2 rad/s), full (posed) and diagonal (home turns only) protocols, on the emulator
+   (``gyrocal calibrate --sim``, ``--sim-sensor paper-extreme``; :data:`EMULATED_PROTOCOLS`) and
+   on the independent generator (tests/kit/contract_fullmodel_recording.py, ``extreme=True``;
+   :data:`CHOICE_PROTOCOLS`), on held-out seeds from :data:`CHOICE_SEEDS` (none of them looked
+   at while writing the code).
 
 Usage: ``python -m bench fullmodel [--quick] [--seeds=N] [--jig-only] [--independent-default]
 [--model-choice [--no-emulator]]``:
 ``--seeds`` sensors in the jig table (default 12; 3 with ``--quick``), ``--jig-only`` the jig
 table and the verify sweep time alone, ``--independent-default`` only the default plan's schedule
 (accelerometer rests included) on ``--seeds`` independent recordings, ``--model-choice`` only
-section 6 (``--seeds`` sensors per row, default 12 independent and 4 emulated;
+section 6 (``--seeds`` sensors per row, default 12 independent and 3 emulated;
 ``--no-emulator`` the independent rows alone). The jig table runs seed
 by seed (a line per sensor as it lands, on stderr); Ctrl-C
 prints the table of the sensors that finished.
@@ -474,16 +475,31 @@ def _home_steps(rest: float = 0.8) -> list[tuple]:
     return [*steps, ("rest", rest)]
 
 
+#: The independent generator's protocols of section 6: its own 60° pose schedule (two turns at
+#: 4 rad/s), the default plan's schedule (one turn at 4.3 rad/s, 45° poses, the gravity rest)
+#: and the home turns alone; the last two with g-sensitivity within ±0.1 °/s/g.
+CHOICE_PROTOCOLS = ("full 60°", "full default", "diagonal")
+#: The emulator's: ``gyrocal calibrate --sim``'s default (full), and the diagonal protocols
+#: ``--protocol auto`` (planned, no poses) and ``--protocol paper`` (the paper's six turns).
+EMULATED_PROTOCOLS = ("full", "auto", "paper")
+
+
 def _choice_independent(job: tuple[int, bool, str]) -> dict:
     """``gyrocal estimate`` (method auto) on one independent recording."""
     from gyrocal.kit.pipeline import estimate_recording
     from gyrocal.kit.recording import load_recording
-    from tests.kit.contract_fullmodel_recording import write_recording
+    from tests.kit.contract_fullmodel_recording import default_plan_steps, write_recording
 
     seed, extreme, protocol = job
+    G = np.random.default_rng([seed, 0x65]).uniform(-1, 1, (3, 3)) * np.radians(0.1)
+    kw: dict = {}
+    if protocol == "full default":
+        kw = dict(steps=default_plan_steps(), speed=4.3, move_speed=4.3, turns=1,
+                  g_sensitivity=G)
+    elif protocol == "diagonal":
+        kw = dict(steps=_home_steps(), g_sensitivity=G)
     with tempfile.TemporaryDirectory() as tmp:
-        write_recording(Path(tmp) / "rec", seed=seed, extreme=extreme,
-                        steps=None if protocol == "full" else _home_steps())
+        write_recording(Path(tmp) / "rec", seed=seed, extreme=extreme, **kw)
         rec = load_recording(Path(tmp) / "rec")
         cal = estimate_recording(rec).calibration
     return _choice_row(seed, extreme, protocol, "independent", cal, rec.truth, None)
@@ -497,7 +513,7 @@ def _choice_emulated(job: tuple[int, bool, str]) -> dict:
 
     seed, extreme, protocol = job
     flags = (["--sim-sensor", "paper-extreme"] if extreme else []) + (
-        [] if protocol == "full" else ["--protocol", "auto"])
+        [] if protocol == "full" else ["--protocol", protocol])
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp) / "run"
         with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
@@ -527,16 +543,16 @@ def _choice_row(seed: int, extreme: bool, protocol: str, data: str, cal, truth,
 def model_choice_table(n_independent: int, n_emulated: int) -> None:
     """Section 6 (module docstring)."""
     jobs = [(CHOICE_SEEDS + i, extreme, protocol) for extreme in (False, True)
-            for protocol in ("full", "diagonal") for i in range(n_independent)]
+            for protocol in CHOICE_PROTOCOLS for i in range(n_independent)]
     rs = pooled(_choice_independent, jobs, _describe_choice)
     if n_emulated:
         rs += pooled(_choice_emulated, [(CHOICE_SEEDS + i, e, p) for e in (False, True)
-                                        for p in ("full", "diagonal")
+                                        for p in EMULATED_PROTOCOLS
                                         for i in range(n_emulated)], _describe_choice)
     rows = []
     for data in ("independent", "emulator"):
         for sensor in ("normal", "extreme"):
-            for protocol in ("full", "diagonal"):
+            for protocol in (*CHOICE_PROTOCOLS, *EMULATED_PROTOCOLS):
                 g = [r for r in rs if (r["data"], r["sensor"], r["protocol"])
                      == (data, sensor, protocol)]
                 if not g:
@@ -571,7 +587,7 @@ def main(argv: list[str]) -> None:
     seeds = list(range(int(n) if n is not None else 3 if quick else 12))
     if "--model-choice" in argv:
         model_choice_table(int(n) if n is not None else 12,
-                           0 if "--no-emulator" in argv else int(n) if n is not None else 4)
+                           0 if "--no-emulator" in argv else int(n) if n is not None else 3)
         return
     if "--independent-default" in argv:
         independent_default_plan(seeds)

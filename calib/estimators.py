@@ -742,6 +742,8 @@ class PairedAxisBatch:
     iterations: np.ndarray  # (B,)
     converged: np.ndarray  # (B,) bool
     residuals: np.ndarray  # (B, 3n + 3r) whitened
+    g_sensitivity: np.ndarray | None = None  # (B, 3, k): G along the force's k directions
+    g_covariance: np.ndarray | None = None  # (B, 3k, 3k), G row-major
 
 
 def _paired_initial(
@@ -793,6 +795,8 @@ def paired_axis_batch(
     *,
     ref_matrix: np.ndarray | None = None,
     still_std: float = 0.0,
+    force: np.ndarray | None = None,
+    rest_force: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-10,
 ) -> PairedAxisBatch:
@@ -819,6 +823,11 @@ def paired_axis_batch(
         share a still angle get correlated reference errors, as they have.
     still_std : float
         Prior standard deviation of a still angle, rad.
+    force, rest_force : ndarray, shape (B, n, k) and (B, r, k), optional
+        The mean specific force of each window and rest along ``k`` directions, g
+        (:func:`fit_paired_axis`). Given, the model gains g-sensitivity,
+        ``E[m̄] = ω u ⊘ k − b − G f`` (``3k`` more parameters, ``G`` row-major, after the
+        still angles), as in :func:`full_matrix_batch`.
     max_iter : int
         Most Levenberg-Marquardt steps.
     xtol : float
@@ -837,22 +846,27 @@ def paired_axis_batch(
     n_still = G.shape[1]
     if n_still and not still_std > 0:
         raise CalibInputError("still_std must be positive when ref_matrix has still angles")
-    P = 6 + 2 * S + n_still
+    nk = 0 if force is None else np.shape(force)[-1]
+    f_win = np.zeros((B, n, 0)) if force is None else np.broadcast_to(force, (B, n, nk))
+    f_rest = np.zeros((B, r, 0)) if rest_force is None else np.broadcast_to(rest_force, (B, r, nk))
+    P0 = 6 + 2 * S + n_still
+    P = P0 + 3 * nk
     k, b, u = _paired_initial(mean, rate, motor_index, S, rest_mean, rest_std)
     z = np.zeros((B, n_still))  # still-angle errors (reading minus true), rad
+    gs = np.zeros((B, 3, nk))
     var_m = mean_std**2
     var_w = rate_std[:, :, None, None] ** 2
     eye3 = np.eye(3)
 
-    def evaluate(k, b, u, z, with_jac):
+    def evaluate(k, b, u, z, gs, with_jac):
         ui = u[:, motor_index, :]  # (B, n, 3)
         ci = ui / k[:, None, :]
         w = (rate - z @ G.T)[:, :, None]  # the true reference: measured minus its error
-        e = mean - (w * ci - b[:, None, :])  # (B, n, 3)
+        e = mean - (w * ci - b[:, None, :] - np.einsum("bpq,bnq->bnp", gs, f_win))  # (B, n, 3)
         C = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
         L = np.linalg.cholesky(C)  # (B, n, 3, 3)
         ew = np.linalg.solve(L, e[..., None])[..., 0]  # whitened: L⁻¹ e
-        er = (rest_mean + b[:, None, :]) / rest_std
+        er = (rest_mean + b[:, None, :] + np.einsum("bpq,brq->brp", gs, f_rest)) / rest_std
         ez = z / still_std if n_still else z
         E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r), ez], axis=1)
         if not with_jac:
@@ -867,10 +881,14 @@ def paired_axis_batch(
         J[:, ar, :, cols] = np.moveaxis(-w * t1[:, motor_index, :] / k[:, None, :], 1, 0)
         J[:, ar, :, cols + 1] = np.moveaxis(-w * t2[:, motor_index, :] / k[:, None, :], 1, 0)
         if n_still:  # d e_i / d z_a = G_ia c_i (the true rate falls by G z)
-            J[:, :, :, 6 + 2 * S:] = ci[..., None] * G[None, :, None, :]
+            J[:, :, :, 6 + 2 * S:P0] = ci[..., None] * G[None, :, None, :]
+        for p in range(3 if nk else 0):  # d e_p / d G_pq = f_q
+            J[:, :, p, P0 + nk * p : P0 + nk * p + nk] = f_win
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
         Jr = np.zeros((B, r, 3, P))
         Jr[:, :, idx, 3 + idx] = 1.0 / rest_std
+        for p in range(3 if nk else 0):
+            Jr[:, :, p, P0 + nk * p : P0 + nk * p + nk] = f_rest / rest_std[:, :, p : p + 1]
         Jz = np.zeros((B, n_still, P))
         Jz[:, np.arange(n_still), 6 + 2 * S + np.arange(n_still)] = (
             1.0 / still_std if n_still else 0.0
@@ -879,7 +897,7 @@ def paired_axis_batch(
         return E, J, (t1, t2)
 
     def retract(state, step, tb):
-        k, b, u, z = state
+        k, b, u, z, gs = state
         t1, t2 = tb
         da = step[:, 6 : 6 + 2 * S : 2][..., None]
         db = step[:, 7 : 6 + 2 * S : 2][..., None]
@@ -888,12 +906,13 @@ def paired_axis_batch(
         k_new = k + step[:, :3]
         ok = np.all(k_new > 0, axis=1)  # scale factors stay positive
         k_new = np.where(ok[:, None], k_new, k)
-        return (k_new, b + step[:, 3:6], u_new, z + step[:, 6 + 2 * S :]), ok
+        gs_new = gs + step[:, P0:].reshape(B, 3, nk) if nk else gs
+        return (k_new, b + step[:, 3:6], u_new, z + step[:, 6 + 2 * S : P0], gs_new), ok
 
     state, E, J, iterations, converged = _lm_batch(
-        evaluate, retract, (k, b, u, z), max_iter=max_iter, xtol=xtol,
+        evaluate, retract, (k, b, u, z, gs), max_iter=max_iter, xtol=xtol,
         step_scale=lambda state: 1.0 + np.max(np.abs(state[0]), axis=1))
-    k, b, u, z = state
+    k, b, u, z, gs = state
     cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
     return PairedAxisBatch(
         scale=k,
@@ -905,10 +924,13 @@ def paired_axis_batch(
         iterations=iterations,
         converged=converged,
         residuals=E,
+        g_sensitivity=gs if nk else None,
+        g_covariance=cov[:, P0:, P0:] if nk else None,
     )
 
 
-def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
+def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: bool = True,
+                    max_g_std: float | None = None) -> FitResult:
     r"""Paired-axis fit: scale, bias and each servo's axis from every window's full mean vector.
 
     Model (paper Eq. 1 inverted): a window of servo ``s`` at signed reference rate ``ω_i`` reads
@@ -925,17 +947,33 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     protocol) has one axis per pose (:meth:`ObservationSet.pose_groups`; ``S`` counts them) and
     ``axes`` reports the first.
 
+    On the home-pose protocols (each servo turned in one pose: the paper's, ``auto``) with
+    gravity known (:attr:`ObservationSet.has_gravity`), the model gains the g-sensitivity
+    ``G`` along the directions of specific force the run determines
+    (:func:`gravity_directions`: the rests, all in the home pose, and the vertical servo's turns
+    against the horizontal ones' zero mean force determine ``G γ``, ``γ`` the home "up"), as
+    :func:`fit_full_matrix` does; ``b`` is then the zero-g bias. Without it the rests and the
+    horizontal turns disagree on the bias by ``G γ`` (up to 1.7e-3 rad/s on an MPU-9250),
+    tens of σ.
+
     Parameters
     ----------
     obs : ObservationSet
         Rotation windows of every servo in both directions covering ±x, ±y, ±z, and rest windows.
     max_iter : int
         Most Levenberg-Marquardt steps.
+    g_sensitivity : bool
+        Fit ``G`` where the run determines it (above).
+    max_g_std : float, optional
+        Largest one-sigma uncertainty of ``G`` along a direction for it to be fitted
+        (default :data:`MAX_G_STD`).
 
     Returns
     -------
     FitResult
-        With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``.
+        With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``; with
+        ``g_sensitivity`` (3×3, zero along the directions not fitted), its 9×9 covariance and
+        ``g_directions`` where ``G`` was fitted.
     """
     motors = obs.motors
     _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
@@ -945,24 +983,32 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     groups = obs.pose_groups()
     first = {int(m): int(groups[i]) for i, m in reversed(list(enumerate(obs.motor)))}
     order = sorted(motors)
-    res = paired_axis_batch(
-        obs.mean[None],
-        obs.rate[None],
-        groups,
-        obs.mean_std[None],
-        obs.rate_std[None],
-        obs.rest_mean[None],  # type: ignore[index]
-        obs.rest_mean_std[None],  # type: ignore[index]
-        ref_matrix=obs.reference_matrix(),
-        still_std=obs.still_angle_std,
-        max_iter=max_iter,
-    )
+
+    def run(force: tuple[np.ndarray, np.ndarray] | None) -> PairedAxisBatch:
+        return paired_axis_batch(
+            obs.mean[None], obs.rate[None], groups, obs.mean_std[None], obs.rate_std[None],
+            obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
+            ref_matrix=obs.reference_matrix(), still_std=obs.still_angle_std,
+            force=None if force is None else force[0][None],
+            rest_force=None if force is None else force[1][None], max_iter=max_iter)
+
+    res = run(None)
+    basis = np.zeros((3, 0))
+    if g_sensitivity and _home_pose_gravity(obs, groups):
+        # one pass: the forces of the fitted axes (G moves them far less than their σ)
+        axes0 = np.array([res.axes[0, first[int(m)]] for m in obs.chain])  # type: ignore[union-attr]
+        force = obs.specific_force(axes0, np.asarray(obs.home_pose, dtype=float))
+        basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
+                                   max_std=MAX_G_STD if max_g_std is None else max_g_std)
+        if basis.shape[1]:
+            res = run((force[0] @ basis, force[1] @ basis))
     k, b, cov = res.scale[0], res.bias[0], res.covariance[0]
     ok = bool(res.converged[0]) and np.all(np.isfinite(k)) and np.all(k > 0)
-    consistency = None
+    consistency, factor = None, 1.0
     if res.dof > 0:
         verdict = _judged(res.residuals[0], res.dof, obs)
-        consistency, cov = verdict.consistency, cov * verdict.factor
+        consistency, factor = verdict.consistency, verdict.factor
+        cov = cov * factor
     # each servo's axis in the first pose it turned in (the home pose of gyrocal's protocols)
     axes = {m: res.axes[0, first[m]].copy() for m in order}
     axes_std = {}
@@ -984,7 +1030,16 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
         residuals=res.residuals[0].copy(),
         axes=axes,
         axes_std_rad=axes_std,
+        **_g_terms(res, basis, factor),  # type: ignore[arg-type]
     )
+
+
+def _home_pose_gravity(obs: ObservationSet, groups: np.ndarray) -> bool:
+    """Whether :func:`fit_paired_axis` can model g-sensitivity: gravity known, the chain's
+    every servo turned, each in one pose (its axis then fixes the specific force)."""
+    return (obs.has_gravity and obs.chain is not None and obs.home_pose is not None
+            and set(obs.chain) == set(int(m) for m in obs.motors)
+            and len(np.unique(groups)) == len(obs.motors))
 
 
 #: The estimators by name.
@@ -1613,7 +1668,8 @@ def fit_full_matrix(
     )
 
 
-def _g_terms(res: FullMatrixBatch, basis: np.ndarray, factor: float = 1.0) -> dict[str, Any]:
+def _g_terms(res: FullMatrixBatch | PairedAxisBatch, basis: np.ndarray,
+             factor: float = 1.0) -> dict[str, Any]:
     """``G`` (3×3) and its 9×9 covariance from the fit's ``G_k`` along ``basis`` (3, k):
     ``G = G_k Vᵀ``, ``d vec(G) / d vec(G_k) = I₃ ⊗ V``; the covariance times the verdict's
     variance ``factor``."""

@@ -43,6 +43,7 @@ __all__ = [
     "check_plausible",
     "check_plausible_noise",
     "datasheet_cross_axis",
+    "diagonal_g_note",
     "diagonal_note",
     "sensor_cross_axis",
     "estimate_recording",
@@ -172,6 +173,27 @@ def diagonal_note(sensor_model: str | None, reason: str) -> str:
         f"(datasheet). Record with a posed protocol (gyrocal calibrate's default) to calibrate "
         "the full matrix."
     )
+
+
+def diagonal_g_note(fit: FitResult) -> str | None:
+    """What a diagonal fit did with g-sensitivity, and what the diagonal calibration leaves out.
+
+    :func:`gyrocal.calib.estimators.fit_paired_axis` fits ``G`` along the directions of gravity
+    the run determines (on the home-pose protocols, the home "up": the rests against the
+    horizontal turns), so the bias is the zero-g bias; Calibration v1 has no ``G``, so the
+    calibrated rate is off by ``k ∘ (G f)`` in use: the note states that size. None for a
+    full-model fit or a fit without ``G``.
+    """
+    if fit.matrix is not None or fit.g_sensitivity is None:
+        return None
+    kG = np.diag(fit.scale) @ np.asarray(fit.g_sensitivity)
+    per_g = float(np.max(np.linalg.norm(kG, axis=1)))
+    k = 0 if fit.g_directions is None else len(fit.g_directions)
+    return (f"g-sensitivity fitted along {k} of 3 directions of gravity (the rests against the "
+            f"horizontal turns), so the bias is the zero-g bias; the diagonal model "
+            f"(Calibration v1) cannot carry it: in use the calibrated rate is off by up to "
+            f"{per_g:.2g} rad/s per g of specific force ({math.degrees(per_g):.2g} °/s/g), "
+            "which the full model (--protocol full) calibrates")
 
 
 def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None, drift: BiasDrift,
@@ -306,7 +328,7 @@ def estimate_recording(
     fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), drift, rec.path)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
-    notes = (*notes, drift.note())
+    notes = (*notes, *filter(None, [diagonal_g_note(fit)]), drift.note())
     cal = replace(fit.to_calibration(
         sensor=rec.sensor,
         temperature_c=ex.observations.temperature_c,

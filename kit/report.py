@@ -252,9 +252,10 @@ def inconsistency_causes(cal: GyroCalibration) -> str:
                   "protocol.speed_dps")
     if cal.matrix is None:
         causes = ["the model is too simple: the diagonal model leaves the cross-axis terms and "
-                  "the g-sensitivity in the residuals; calibrate the full model with "
-                  "--protocol full (if it fell back to the diagonal model, a note on stderr "
-                  "says why)", slip, saturation]
+                  "the g-sensitivity the rests do not determine in the residuals; calibrate "
+                  "the full model with "
+                  "--protocol full (a note on stderr gives both models' predicted errors "
+                  "when the full one was not kept)", slip, saturation]
     else:
         causes = [slip, saturation]
     return "the residuals are larger than the noise explains; likely causes, most likely " \
