@@ -78,7 +78,8 @@ _MIXUP_TOLERANCE = 0.05
 #: The gyro's full scale assumed when the recording does not say (the largest of the chips), °/s.
 _DEFAULT_FULL_SCALE_DPS = 2000.0
 
-#: The method that chooses the full model when the poses determine it, else the diagonal one.
+#: The method that chooses the full model when the poses determine it and it is predicted better
+#: in general motion (:func:`gyrocal.calib.design.choose_model`), else the diagonal one.
 AUTO = "auto"
 #: Cross-axis sensitivity for a model the chip data does not know: the MPU-9250's ±2 %
 #: (PS-MPU-9250A-01 §3.1), the typical MEMS value.

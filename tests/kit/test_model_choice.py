@@ -90,6 +90,14 @@ def test_a_normal_sensor_is_within_5e_4_and_the_table_shows_the_truths_error(tmp
     assert cal.is_full and cal.consistency.ok and err <= 5e-4, err
     table = calibration_table(cal, rec.truth)
     assert f"general-motion error against the simulated truth: {err:.2g} per rad/s" in table
+    # the HTML report says the same two things (error_against_truth behind both)
+    import html
+
+    from gyrocal.kit.report_html import render_html
+
+    page = render_html(cal, title="t", truth=rec.truth)
+    assert html.escape(cal.model_choice.sentence(), quote=False) in page.replace("&#x27;", "'")
+    assert f"general-motion error, RMS per rad/s</th><td class=n>{err:.2g}<" in page
 
 
 def test_a_recording_without_poses_gets_the_diagonal_model_with_both_figures(tmp_path, capsys):
