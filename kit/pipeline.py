@@ -200,31 +200,42 @@ def diagonal_g_note(fit: FitResult) -> str | None:
 def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None, drift: BiasDrift,
          path: object) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
     """Fit ``method``, or with ``auto`` both models and keep the one predicted better
-    (:func:`gyrocal.calib.design.choose_model`); each fit with the bias's wander in its σ
+    (:func:`_fit_auto`); each fit with the bias's wander in its σ
     (:func:`gyrocal.calib.estimators.add_bias_drift`), so the figures are the calibration's."""
-    from gyrocal.calib.design import choose_model
-
-    obs = ex.observations
     try:
         if method != AUTO:
-            return add_bias_drift(estimate(obs, method), drift), None, ()
-        full, reason = None, ("the recording's manifest does not list the gimbal's servos in "
-                              "chain order")
-        if obs.chain is not None:
-            full = estimate(obs, "full-matrix")
-            reason = f"the recording's poses do not determine them: {full.message}"
-            full = add_bias_drift(full, drift) if full.success else None
-        diag = estimate(obs, "paired-axis")
-        if not diag.success:
-            return (full, None, ()) if full is not None else (diag, None, ())
-        diag = add_bias_drift(diag, drift)
+            return add_bias_drift(estimate(ex.observations, method), drift), None, ()
+        return _fit_auto(ex.observations, sensor_model, drift)
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
+
+
+def _fit_auto(obs: Any, sensor_model: str | None, drift: BiasDrift
+              ) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
+    """The full model (where the chain is known) and the diagonal one, and the one whose
+    predicted general-motion error is smaller (:func:`gyrocal.calib.design.choose_model`),
+    with the notes that say why."""
+    from gyrocal.calib.design import choose_model
+
+    full, reason = None, "the recording's manifest does not list the gimbal's servos in chain order"
+    if obs.chain is not None:
+        full = estimate(obs, "full-matrix")
+        reason = f"the recording's poses do not determine them: {full.message}"
+        full = add_bias_drift(full, drift) if full.success else None
+    try:
+        diag = estimate(obs, "paired-axis")
+    except CalibInputError:
+        if full is None:
+            raise
+        return full, None, ()  # a full model and no diagonal one to weigh it against
+    if not diag.success:
+        return (full, None, ()) if full is not None else (diag, None, ())
+    diag = add_bias_drift(diag, drift)
     choice = choose_model(None if full is None else full.covariance,
                           None if full is None else full.matrix, diag.covariance, diag.scale,
                           sensor_cross_axis(sensor_model))
-    if choice.chosen == "full":
-        return full, choice, (choice.sentence(),)  # type: ignore[return-value]
+    if full is not None and choice.chosen == "full":
+        return full, choice, (choice.sentence(),)
     if full is not None:
         reason = (f"the full model's predicted general-motion error, {choice.full:.2g} per "
                   f"rad/s, is above the diagonal model's, {choice.diagonal:.2g}")
