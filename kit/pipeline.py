@@ -190,8 +190,8 @@ def diagonal_g_note(fit: FitResult) -> str | None:
     kG = np.diag(fit.scale) @ np.asarray(fit.g_sensitivity)
     per_g = float(np.max(np.linalg.norm(kG, axis=1)))
     k = 0 if fit.g_directions is None else len(fit.g_directions)
-    return (f"g-sensitivity fitted along {k} of 3 directions of gravity (the rests against the "
-            f"horizontal turns), so the bias is the zero-g bias; the diagonal model "
+    return (f"g-sensitivity fitted along {k} of 3 directions of gravity (where the rests and "
+            f"turns see gravity differently), so the bias is the zero-g bias; the diagonal model "
             f"(Calibration v1) cannot carry it: in use the calibrated rate is off by up to "
             f"{per_g:.2g} rad/s per g of specific force ({math.degrees(per_g):.2g} °/s/g), "
             "which the full model (--protocol full) calibrates")
