@@ -952,9 +952,10 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
     ``G`` along the directions of specific force the run determines
     (:func:`gravity_directions`: the rests, all in the home pose, and the vertical servo's turns
     against the horizontal ones' zero mean force determine ``G γ``, ``γ`` the home "up"), as
-    :func:`fit_full_matrix` does; ``b`` is then the zero-g bias. Without it the rests and the
-    horizontal turns disagree on the bias by ``G γ`` (up to 1.7e-3 rad/s on an MPU-9250),
-    tens of σ.
+    :func:`fit_full_matrix` does, where the data need it (:func:`_g_needed`: a sensor without
+    g-sensitivity keeps the paper's model); ``b`` is then the zero-g bias. Without it the rests
+    and the horizontal turns disagree on the bias by ``G γ`` (up to 1.7e-3 rad/s on an
+    MPU-9250), tens of σ.
 
     Parameters
     ----------
@@ -973,7 +974,8 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
     FitResult
         With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``; with
         ``g_sensitivity`` (3×3, zero along the directions not fitted), its 9×9 covariance and
-        ``g_directions`` where ``G`` was fitted.
+        ``g_directions`` where ``G`` was fitted; ``extra["g_left_out_per_g"]`` (the largest
+        ``‖(k ∘ G)_i‖``, rad/s per g) where ``G`` was determined but not needed.
     """
     motors = obs.motors
     _validate_common(obs, "paired-axis", max(6, 2 * len(motors)))
@@ -994,6 +996,7 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
 
     res = run(None)
     basis = np.zeros((3, 0))
+    extra: dict[str, Any] = {}
     if g_sensitivity and _home_pose_gravity(obs, groups):
         # one pass: the forces of the fitted axes (G moves them far less than their σ)
         axes0 = np.array([res.axes[0, first[int(m)]] for m in obs.chain])  # type: ignore[union-attr]
@@ -1001,7 +1004,13 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
         basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
                                    max_std=MAX_G_STD if max_g_std is None else max_g_std)
         if basis.shape[1]:
-            res = run((force[0] @ basis, force[1] @ basis))
+            with_g = run((force[0] @ basis, force[1] @ basis))
+            if _g_needed(res, with_g, 3 * basis.shape[1]):
+                res = with_g
+            else:  # what is left in the bias: the size of the G the data did not need
+                kG = with_g.scale[0][:, None] * (with_g.g_sensitivity[0] @ basis.T)  # type: ignore[index]
+                extra["g_left_out_per_g"] = float(np.max(np.linalg.norm(kG, axis=1)))
+                basis = np.zeros((3, 0))
     k, b, cov = res.scale[0], res.bias[0], res.covariance[0]
     ok = bool(res.converged[0]) and np.all(np.isfinite(k)) and np.all(k > 0)
     consistency, factor = None, 1.0
@@ -1030,8 +1039,20 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
         residuals=res.residuals[0].copy(),
         axes=axes,
         axes_std_rad=axes_std,
+        extra=extra,
         **_g_terms(res, basis, factor),  # type: ignore[arg-type]
     )
+
+
+def _g_needed(without: PairedAxisBatch, with_g: PairedAxisBatch, n_terms: int) -> bool:
+    """Whether the data need the g-sensitivity terms: the likelihood-ratio test of the nested
+    models at :data:`CONSISTENCY_ALPHA`, ``χ²_without − χ²_with`` beyond the ``1 − α`` quantile
+    of ``χ²(n_terms)``. A diagonal calibration cannot carry ``G`` (Calibration v1), so terms the
+    noise explains are left in the bias rather than fitted."""
+    from scipy.special import chdtri
+
+    drop = float(without.chi2[0] - with_g.chi2[0])
+    return bool(with_g.converged[0]) and drop > float(chdtri(n_terms, CONSISTENCY_ALPHA))
 
 
 def _home_pose_gravity(obs: ObservationSet, groups: np.ndarray) -> bool:

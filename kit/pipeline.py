@@ -182,9 +182,15 @@ def diagonal_g_note(fit: FitResult) -> str | None:
     :func:`gyrocal.calib.estimators.fit_paired_axis` fits ``G`` along the directions of gravity
     the run determines (on the home-pose protocols, the home "up": the rests against the
     horizontal turns), so the bias is the zero-g bias; Calibration v1 has no ``G``, so the
-    calibrated rate is off by ``k ∘ (G f)`` in use: the note states that size. None for a
-    full-model fit or a fit without ``G``.
+    calibrated rate is off by ``k ∘ (G f)`` in use: the note states that size. Where the data
+    did not need ``G`` (``extra["g_left_out_per_g"]``), the note says how large the ``G`` left
+    in the bias is. None for a full-model fit, or a fit where gravity was not modelled.
     """
+    left = fit.extra.get("g_left_out_per_g") if fit.matrix is None else None
+    if left is not None:
+        return (f"g-sensitivity not fitted: the rests and the turns agree within their noise; "
+                f"the g-sensitivity they determine, up to {left:.2g} rad/s per g, is what the "
+                "noise explains and stays in the bias")
     if fit.matrix is not None or fit.g_sensitivity is None:
         return None
     kG = np.diag(fit.scale) @ np.asarray(fit.g_sensitivity)

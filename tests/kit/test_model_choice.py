@@ -151,3 +151,18 @@ def test_the_home_pose_protocol_fits_the_g_sensitivity_its_rests_determine(tmp_p
     assert "g_sensitivity" not in est.calibration.to_dict()  # Calibration v1 has no G
     plain = fit_paired_axis(extract_recording(rec).observations, g_sensitivity=False)
     assert not plain.consistency.ok and plain.consistency.chi2 > 10 * plain.consistency.dof
+
+
+def test_a_sensor_without_g_sensitivity_keeps_the_papers_model_and_says_so(tmp_path):
+    # The same protocol on the paper's sensor (no G, no cross-axis terms): the G the rests
+    # determine is noise (likelihood-ratio test at 1 %), so none is fitted and the note says
+    # how large the one left in the bias is.
+    truth = write_recording(tmp_path / "rec", seed=4, steps=_home_steps(), cross=0.0)
+    est = estimate_recording(load_recording(tmp_path / "rec"))
+    fit = est.fit
+    assert fit.method == "paired-axis" and fit.g_sensitivity is None and fit.consistency.ok
+    left = fit.extra["g_left_out_per_g"]
+    assert 0 < left < 5e-4
+    assert any("g-sensitivity not fitted" in n and f"{left:.2g} rad/s per g" in n
+               for n in est.notes), est.notes
+    assert np.all(np.abs(fit.bias - truth["bias"]) < 4 * fit.bias_std)
