@@ -18,10 +18,22 @@
    tests/kit/contract_fullmodel_recording.py (60° poses, a two-servo pose move): errors in σ, χ²
    false alarms, general-motion error of the full model against the diagonal ones.
 
-Usage: ``python -m bench fullmodel [--quick] [--seeds=N] [--jig-only] [--independent-default]``:
+6. The model choice (issue 28): general-motion error and consistency-verdict rate of ``gyrocal
+   estimate``'s method ``auto`` (the full model kept when its predicted general-motion error is
+   below the diagonal model's) on normal and the paper's extreme sensors (scale 1.2–2.0, |bias|
+   0.1–0.2 rad/s), full (posed) and diagonal (home turns only) protocols, on the emulator
+   (``gyrocal calibrate --sim``, ``--sim-sensor paper-extreme``; :data:`EMULATED_PROTOCOLS`) and
+   on the independent generator (tests/kit/contract_fullmodel_recording.py, ``extreme=True``;
+   :data:`CHOICE_PROTOCOLS`), on held-out seeds from :data:`CHOICE_SEEDS` (none of them looked
+   at while writing the code).
+
+Usage: ``python -m bench fullmodel [--quick] [--seeds=N] [--jig-only] [--independent-default]
+[--model-choice [--no-emulator]]``:
 ``--seeds`` sensors in the jig table (default 12; 3 with ``--quick``), ``--jig-only`` the jig
 table and the verify sweep time alone, ``--independent-default`` only the default plan's schedule
-(accelerometer rests included) on ``--seeds`` independent recordings. The jig table runs seed
+(accelerometer rests included) on ``--seeds`` independent recordings, ``--model-choice`` only
+section 6 (``--seeds`` sensors per row, default 12 independent and 3 emulated;
+``--no-emulator`` the independent rows alone). The jig table runs seed
 by seed (a line per sensor as it lands, on stderr); Ctrl-C
 prints the table of the sensors that finished.
 """
@@ -449,12 +461,134 @@ def _steps_of(segs: list[dict], enc: np.ndarray, chain: list[int]) -> list[tuple
     return steps
 
 
+#: Held-out seeds of the model-choice table (section 6): the tests and the development runs use
+#: seeds below 100.
+CHOICE_SEEDS = 1000
+
+
+def _home_steps(rest: float = 0.8) -> list[tuple]:
+    """A diagonal protocol for the independent generator: each servo turned both ways in the
+    home pose, a rest before every turn and after the last (no poses)."""
+    steps: list[tuple] = []
+    for s in range(3):
+        steps += [("rest", rest), ("rotate", s, 1), ("rest", rest), ("rotate", s, -1)]
+    return [*steps, ("rest", rest)]
+
+
+#: The independent generator's protocols of section 6: its own 60° pose schedule (two turns at
+#: 4 rad/s), the default plan's schedule (one turn at 4.3 rad/s, 45° poses, the gravity rest)
+#: and the home turns alone; the last two with g-sensitivity within ±0.1 °/s/g.
+CHOICE_PROTOCOLS = ("full 60°", "full default", "diagonal")
+#: The emulator's: ``gyrocal calibrate --sim``'s default (full), and the diagonal protocols
+#: ``--protocol auto`` (planned, no poses) and ``--protocol paper`` (the paper's six turns).
+EMULATED_PROTOCOLS = ("full", "auto", "paper")
+
+
+def _choice_independent(job: tuple[int, bool, str]) -> dict:
+    """``gyrocal estimate`` (method auto) on one independent recording."""
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+    from tests.kit.contract_fullmodel_recording import default_plan_steps, write_recording
+
+    seed, extreme, protocol = job
+    G = np.random.default_rng([seed, 0x65]).uniform(-1, 1, (3, 3)) * np.radians(0.1)
+    kw: dict = {}
+    if protocol == "full default":
+        kw = dict(steps=default_plan_steps(), speed=4.3, move_speed=4.3, turns=1,
+                  g_sensitivity=G)
+    elif protocol == "diagonal":
+        kw = dict(steps=_home_steps(), g_sensitivity=G)
+    with tempfile.TemporaryDirectory() as tmp:
+        write_recording(Path(tmp) / "rec", seed=seed, extreme=extreme, **kw)
+        rec = load_recording(Path(tmp) / "rec")
+        cal = estimate_recording(rec).calibration
+    return _choice_row(seed, extreme, protocol, "independent", cal, rec.truth, None)
+
+
+def _choice_emulated(job: tuple[int, bool, str]) -> dict:
+    """``gyrocal calibrate --sim`` (default realism) on one emulated sensor."""
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit.cli import main as cli
+    from gyrocal.kit.recording import load_recording
+
+    seed, extreme, protocol = job
+    flags = (["--sim-sensor", "paper-extreme"] if extreme else []) + (
+        [] if protocol == "full" else ["--protocol", protocol])
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp) / "run"
+        with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            code = cli(["calibrate", "--sim", "--sim-seed", str(seed), "--out", str(d),
+                        "--quiet", "--no-report", *flags])
+        rec = load_recording(d / "recording")
+        path = d / "calibration.json"
+        cal = GyroCalibration.from_json(path.read_text()) if path.exists() else None
+    return _choice_row(seed, extreme, protocol, "emulator", cal, rec.truth, code)
+
+
+def _choice_row(seed: int, extreme: bool, protocol: str, data: str, cal, truth,
+                code: int | None) -> dict:
+    from gyrocal.kit.report import error_against_truth
+
+    row = {"seed": seed, "sensor": "extreme" if extreme else "normal", "protocol": protocol,
+           "data": data, "code": code}
+    if cal is None:
+        return {**row, "model": "none", "gm": float("nan"), "pred": float("nan"), "ok": False}
+    mc = cal.model_choice
+    pred = (float("nan") if mc is None else mc.full if mc.chosen == "full" else mc.diagonal)
+    return {**row, "model": "full" if cal.is_full else "diagonal",
+            "gm": error_against_truth(cal, truth).general_motion, "pred": pred,
+            "ok": cal.consistency is not None and cal.consistency.ok}
+
+
+def model_choice_table(n_independent: int, n_emulated: int) -> None:
+    """Section 6 (module docstring)."""
+    jobs = [(CHOICE_SEEDS + i, extreme, protocol) for extreme in (False, True)
+            for protocol in CHOICE_PROTOCOLS for i in range(n_independent)]
+    rs = pooled(_choice_independent, jobs, _describe_choice)
+    if n_emulated:
+        rs += pooled(_choice_emulated, [(CHOICE_SEEDS + i, e, p) for e in (False, True)
+                                        for p in EMULATED_PROTOCOLS
+                                        for i in range(n_emulated)], _describe_choice)
+    rows = []
+    for data in ("independent", "emulator"):
+        for sensor in ("normal", "extreme"):
+            for protocol in (*CHOICE_PROTOCOLS, *EMULATED_PROTOCOLS):
+                g = [r for r in rs if (r["data"], r["sensor"], r["protocol"])
+                     == (data, sensor, protocol)]
+                if not g:
+                    continue
+                gm = np.array([r["gm"] for r in g])
+                rows.append([data, sensor, protocol, len(g),
+                             sum(r["model"] == "full" for r in g),
+                             float(np.sqrt(np.nanmean(gm**2))), float(np.nanmax(gm)),
+                             float(np.nanmean([r["pred"] for r in g])),
+                             f"{sum(r['ok'] for r in g)}/{len(g)}",
+                             "" if data == "independent" else
+                             " ".join(str(r["code"]) for r in g)])
+    print_table(["data", "sensor", "protocol", "runs", "full model kept",
+                 "GM RMS per rad/s", "GM worst", "predicted (mean)", "verdict ok",
+                 "exit codes"], rows,
+                title="Model choice by predicted general-motion error (gyrocal estimate, method "
+                      f"auto), ±2 % cross-axis; held-out seeds from {CHOICE_SEEDS}; targets on "
+                      "the full protocol: GM <= 5e-4 normal, <= 1e-3 extreme")
+
+
+def _describe_choice(r: dict) -> str:
+    return (f"{r['data']} {r['sensor']} {r['protocol']} seed {r['seed']}: {r['model']}, GM "
+            f"{r['gm']:.2e} (predicted {r['pred']:.2e}), verdict ok {r['ok']}"
+            + ("" if r["code"] is None else f", exit {r['code']}"))
+
+
 def main(argv: list[str]) -> None:
     quick = "--quick" in argv
     n = next((a.split("=", 1)[1] for a in argv if a.startswith("--seeds=")), None)
     if n is not None and not (n.isdigit() and int(n) > 0):
         raise SystemExit(f"--seeds needs a positive whole number of sensors, got {n!r}")
     seeds = list(range(int(n) if n is not None else 3 if quick else 12))
+    if "--model-choice" in argv:
+        model_choice_table(int(n) if n is not None else 12,
+                           0 if "--no-emulator" in argv else int(n) if n is not None else 3)
+        return
     if "--independent-default" in argv:
         independent_default_plan(seeds)
         return

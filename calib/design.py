@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.calib.errors import CalibInputError
+from gyrocal.calib.model import ModelChoice
 from gyrocal.calib.simulate import profile_duration
 
 __all__ = [
@@ -42,6 +43,8 @@ __all__ = [
     "full_schedule",
     "gravity_poses",
     "general_motion_rms",
+    "choose_model",
+    "cross_axis_general_motion_rms",
     "paper_plan",
     "plan_accel_rests",
     "plan_protocol",
@@ -840,13 +843,87 @@ def general_motion_rms(matrix: np.ndarray, bias: np.ndarray, sensing: np.ndarray
     return float(np.sqrt(ms))
 
 
-def predicted_general_motion_rms(covariance: np.ndarray, rate: float = 1.0) -> float:
-    """The RMS :func:`general_motion_rms` a calibration's own covariance predicts (at nominal
-    ``C ≈ I``): ``sqrt(tr Cov(A)/3 + tr Cov(b)/rate²)``; a 6×6 covariance is the diagonal
-    model's (scale, bias), a 12×12 the full one's (matrix row-major, bias)."""
-    c = np.diag(np.asarray(covariance, dtype=float))
-    n = 3 if c.size == 6 else 9
-    return float(np.sqrt(c[:n].sum() / 3.0 + c[n:].sum() / rate**2))
+def predicted_general_motion_rms(covariance: np.ndarray, rate: float = 1.0,
+                                 matrix: np.ndarray | None = None) -> float:
+    """The RMS :func:`general_motion_rms` a calibration's own covariance predicts.
+
+    A 6×6 covariance is the diagonal model's (scale, bias), a 12×12 the full one's (matrix
+    row-major, bias). To first order the error matrix is ``dA C`` with ``C = A⁻¹`` and the bias
+    error is ``A db``; :func:`general_motion_rms` counts only the symmetric part of the first
+    (its antisymmetric part is a rotation of the output frame), so the prediction is
+    ``sqrt(E‖sym(dA C)‖²_F / 3 + E|A db|² / rate²)``. Without ``matrix`` it is taken at
+    ``A = I``.
+
+    Parameters
+    ----------
+    covariance : ndarray, shape (6, 6) or (12, 12)
+    rate : float
+        The general motion's rate, rad/s (the bias term is per rad/s of it).
+    matrix : ndarray, shape (3, 3), optional
+        The calibration's ``A`` (``diag(scale)`` for the diagonal model): the paper's extreme
+        sensors (scale up to 2) have ``C`` far from ``I``.
+    """
+    cov = np.asarray(covariance, dtype=float)
+    if cov.shape == (6, 6):  # the diagonal model: A's diagonal entries 0, 4, 8
+        idx = [0, 4, 8, 9, 10, 11]
+        full = np.zeros((12, 12))
+        full[np.ix_(idx, idx)] = cov
+        cov = full
+    A = np.eye(3) if matrix is None else np.asarray(matrix, dtype=float)
+    # vec_r(dA C) = (I ⊗ Cᵀ) vec_r(dA); sym(E) = (E + Eᵀ)/2 = ((I + K)/2) vec_r(E), K the
+    # commutation matrix of 3×3 matrices
+    K = np.eye(9)[[3 * (k % 3) + k // 3 for k in range(9)]]
+    T = 0.5 * (np.eye(9) + K) @ np.kron(np.eye(3), np.linalg.inv(A).T)
+    ms = np.trace(T @ cov[:9, :9] @ T.T) / 3.0 + np.trace(A @ cov[9:, 9:] @ A.T) / rate**2
+    return float(np.sqrt(max(ms, 0.0)))
+
+
+def cross_axis_general_motion_rms(cross_axis: float) -> float:
+    """The RMS :func:`general_motion_rms` that cross-axis terms a calibration leaves out give.
+
+    With the six off-diagonal terms of ``C`` independent and uniform within the datasheet's
+    ``±cross_axis`` (variance ``c²/3`` each), the symmetric part of the off-diagonal matrix
+    (its antisymmetric part is a rotation, which no choice of output frame counts) has
+    ``E‖·‖²_F = 3 · 2 · (2c²/3)/4 = c²``, so the error is ``c/√3`` per rad/s; a diagonal
+    calibration of the six home-pose turns leaves exactly these terms
+    (hardware_docs/method.md §9, observability).
+    """
+    return float(cross_axis) / float(np.sqrt(3.0))
+
+
+def choose_model(full_covariance: np.ndarray | None, full_matrix: np.ndarray | None,
+                 diagonal_covariance: np.ndarray, diagonal_scale: np.ndarray,
+                 cross_axis: float, rate: float = 1.0) -> ModelChoice:
+    """Which model a recording's calibration should have: the full model when its predicted
+    general-motion error is below the diagonal model's, which includes the cross-axis terms
+    it leaves out.
+
+    Parameters
+    ----------
+    full_covariance, full_matrix : ndarray (12, 12) and (3, 3), or None
+        The full-model fit's covariance and ``A``; None when it is not determined.
+    diagonal_covariance : ndarray, shape (6, 6)
+        The diagonal fit's (scale, bias) covariance.
+    diagonal_scale : ndarray, shape (3,)
+    cross_axis : float
+        The cross-axis sensitivity the sensor's datasheet allows, a fraction of the rate
+        (:func:`cross_axis_general_motion_rms`).
+    rate : float
+        Rate of the general motion, rad/s.
+
+    Returns
+    -------
+    ModelChoice
+        Both predicted figures (:func:`predicted_general_motion_rms`); ``chosen`` says which.
+    """
+    full = None
+    if full_covariance is not None and np.all(np.isfinite(full_covariance)):
+        full = predicted_general_motion_rms(full_covariance, rate, full_matrix)
+    cross = cross_axis_general_motion_rms(cross_axis)
+    fit = predicted_general_motion_rms(diagonal_covariance, rate,
+                                       np.diag(np.asarray(diagonal_scale, dtype=float)))
+    return ModelChoice(full=full, diagonal=float(np.hypot(fit, cross)),
+                       diagonal_cross_axis=cross, cross_axis=float(cross_axis))
 
 
 def plan_protocol(

@@ -59,7 +59,6 @@ if TYPE_CHECKING:
 __all__ = [
     "CONSISTENCY_ALPHA",
     "FULL_FRAME",
-    "MAX_MATRIX_STD",
     "METHODS",
     "FullMatrixBatch",
     "FitResult",
@@ -749,6 +748,8 @@ class PairedAxisBatch:
     iterations: np.ndarray  # (B,)
     converged: np.ndarray  # (B,) bool
     residuals: np.ndarray  # (B, 3n + 3r) whitened
+    g_sensitivity: np.ndarray | None = None  # (B, 3, k): G along the force's k directions
+    g_covariance: np.ndarray | None = None  # (B, 3k, 3k), G row-major
 
 
 def _paired_initial(
@@ -806,6 +807,8 @@ def paired_axis_batch(
     *,
     ref_matrix: np.ndarray | None = None,
     still_std: float = 0.0,
+    force: np.ndarray | None = None,
+    rest_force: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-10,
 ) -> PairedAxisBatch:
@@ -832,6 +835,11 @@ def paired_axis_batch(
         share a still angle get correlated reference errors, as they have.
     still_std : float
         Prior standard deviation of a still angle, rad.
+    force, rest_force : ndarray, shape (B, n, k) and (B, r, k), optional
+        The mean specific force of each window and rest along ``k`` directions, g
+        (:func:`fit_paired_axis`). Given, the model gains g-sensitivity,
+        ``E[m̄] = ω u ⊘ k − b − G f`` (``3k`` more parameters, ``G`` row-major, after the
+        still angles), as in :func:`full_matrix_batch`.
     max_iter : int
         Most Levenberg-Marquardt steps.
     xtol : float
@@ -850,22 +858,27 @@ def paired_axis_batch(
     n_still = G.shape[1]
     if n_still and not still_std > 0:
         raise CalibInputError("still_std must be positive when ref_matrix has still angles")
-    P = 6 + 2 * S + n_still
+    nk = 0 if force is None else np.shape(force)[-1]
+    f_win = np.zeros((B, n, 0)) if force is None else np.broadcast_to(force, (B, n, nk))
+    f_rest = np.zeros((B, r, 0)) if rest_force is None else np.broadcast_to(rest_force, (B, r, nk))
+    P0 = 6 + 2 * S + n_still
+    P = P0 + 3 * nk
     k, b, u = _paired_initial(mean, rate, motor_index, S, rest_mean, rest_std)
     z = np.zeros((B, n_still))  # still-angle errors (reading minus true), rad
+    gs = np.zeros((B, 3, nk))
     var_m = mean_std**2
     var_w = rate_std[:, :, None, None] ** 2
     eye3 = np.eye(3)
 
-    def evaluate(k, b, u, z, with_jac):
+    def evaluate(k, b, u, z, gs, with_jac):
         ui = u[:, motor_index, :]  # (B, n, 3)
         ci = ui / k[:, None, :]
         w = (rate - z @ G.T)[:, :, None]  # the true reference: measured minus its error
-        e = mean - (w * ci - b[:, None, :])  # (B, n, 3)
+        e = mean - (w * ci - b[:, None, :] - np.einsum("bpq,bnq->bnp", gs, f_win))  # (B, n, 3)
         C = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
         L = np.linalg.cholesky(C)  # (B, n, 3, 3)
         ew = np.linalg.solve(L, e[..., None])[..., 0]  # whitened: L⁻¹ e
-        er = (rest_mean + b[:, None, :]) / rest_std
+        er = (rest_mean + b[:, None, :] + np.einsum("bpq,brq->brp", gs, f_rest)) / rest_std
         ez = z / still_std if n_still else z
         E = np.concatenate([ew.reshape(B, 3 * n), er.reshape(B, 3 * r), ez], axis=1)
         if not with_jac:
@@ -880,10 +893,14 @@ def paired_axis_batch(
         J[:, ar, :, cols] = np.moveaxis(-w * t1[:, motor_index, :] / k[:, None, :], 1, 0)
         J[:, ar, :, cols + 1] = np.moveaxis(-w * t2[:, motor_index, :] / k[:, None, :], 1, 0)
         if n_still:  # d e_i / d z_a = G_ia c_i (the true rate falls by G z)
-            J[:, :, :, 6 + 2 * S:] = ci[..., None] * G[None, :, None, :]
+            J[:, :, :, 6 + 2 * S:P0] = ci[..., None] * G[None, :, None, :]
+        for p in range(3 if nk else 0):  # d e_p / d G_pq = f_q
+            J[:, :, p, P0 + nk * p : P0 + nk * p + nk] = f_win
         Jw = np.linalg.solve(L, J).reshape(B, 3 * n, P)
         Jr = np.zeros((B, r, 3, P))
         Jr[:, :, idx, 3 + idx] = 1.0 / rest_std
+        for p in range(3 if nk else 0):
+            Jr[:, :, p, P0 + nk * p : P0 + nk * p + nk] = f_rest / rest_std[:, :, p : p + 1]
         Jz = np.zeros((B, n_still, P))
         Jz[:, np.arange(n_still), 6 + 2 * S + np.arange(n_still)] = (
             1.0 / still_std if n_still else 0.0
@@ -892,7 +909,7 @@ def paired_axis_batch(
         return E, J, (t1, t2)
 
     def retract(state, step, tb):
-        k, b, u, z = state
+        k, b, u, z, gs = state
         t1, t2 = tb
         da = step[:, 6 : 6 + 2 * S : 2][..., None]
         db = step[:, 7 : 6 + 2 * S : 2][..., None]
@@ -901,12 +918,13 @@ def paired_axis_batch(
         k_new = k + step[:, :3]
         ok = np.all(k_new > 0, axis=1)  # scale factors stay positive
         k_new = np.where(ok[:, None], k_new, k)
-        return (k_new, b + step[:, 3:6], u_new, z + step[:, 6 + 2 * S :]), ok
+        gs_new = gs + step[:, P0:].reshape(B, 3, nk) if nk else gs
+        return (k_new, b + step[:, 3:6], u_new, z + step[:, 6 + 2 * S : P0], gs_new), ok
 
     state, E, J, iterations, converged = _lm_batch(
-        evaluate, retract, (k, b, u, z), max_iter=max_iter, xtol=xtol,
+        evaluate, retract, (k, b, u, z, gs), max_iter=max_iter, xtol=xtol,
         step_scale=lambda state: 1.0 + np.max(np.abs(state[0]), axis=1))
-    k, b, u, z = state
+    k, b, u, z, gs = state
     cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
     return PairedAxisBatch(
         scale=k,
@@ -918,10 +936,13 @@ def paired_axis_batch(
         iterations=iterations,
         converged=converged,
         residuals=E,
+        g_sensitivity=gs if nk else None,
+        g_covariance=cov[:, P0:, P0:] if nk else None,
     )
 
 
-def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
+def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: bool = True,
+                    max_g_std: float | None = None) -> FitResult:
     r"""Paired-axis fit: scale, bias and each servo's axis from every window's full mean vector.
 
     Model (paper Eq. 1 inverted): a window of servo ``s`` at signed reference rate ``ω_i`` reads
@@ -938,6 +959,16 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     protocol) has one axis per pose (:meth:`ObservationSet.pose_groups`; ``S`` counts them) and
     ``axes`` reports the first.
 
+    On the home-pose protocols (each servo turned in one pose: the paper's, ``auto``) with
+    gravity known (:attr:`ObservationSet.has_gravity`), the model gains the g-sensitivity
+    ``G`` along the directions of specific force the run determines
+    (:func:`gravity_directions`: the rests, all in the home pose, and the vertical servo's turns
+    against the horizontal ones' zero mean force determine ``G γ``, ``γ`` the home "up"), as
+    :func:`fit_full_matrix` does, where the data need it (:func:`_g_needed`: a sensor without
+    g-sensitivity keeps the paper's model); ``b`` is then the zero-g bias. Without it the rests
+    and the horizontal turns disagree on the bias by ``G γ`` (up to 1.7e-3 rad/s on an
+    MPU-9250), tens of σ.
+
     Parameters
     ----------
     obs : ObservationSet
@@ -945,11 +976,19 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
         with rest windows, one turn per servo suffices (the rests measure the bias).
     max_iter : int
         Most Levenberg-Marquardt steps.
+    g_sensitivity : bool
+        Fit ``G`` where the run determines it (above).
+    max_g_std : float, optional
+        Largest one-sigma uncertainty of ``G`` along a direction for it to be fitted
+        (default :data:`MAX_G_STD`).
 
     Returns
     -------
     FitResult
-        With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``.
+        With ``axes`` (each servo's unit axis in the sensor frame) and ``axes_std_rad``; with
+        ``g_sensitivity`` (3×3, zero along the directions not fitted), its 9×9 covariance and
+        ``g_directions`` where ``G`` was fitted; ``extra["g_left_out_per_g"]`` (the largest
+        ``‖(k ∘ G)_i‖``, rad/s per g) where ``G`` was determined but not needed.
     """
     motors = obs.motors
     # With rests the bias is measured directly, and one turn per axis determines its scale and
@@ -963,24 +1002,39 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
     groups = obs.pose_groups()
     first = {int(m): int(groups[i]) for i, m in reversed(list(enumerate(obs.motor)))}
     order = sorted(motors)
-    res = paired_axis_batch(
-        obs.mean[None],
-        obs.rate[None],
-        groups,
-        obs.mean_std[None],
-        obs.rate_std[None],
-        obs.rest_mean[None],  # type: ignore[index]
-        obs.rest_mean_std[None],  # type: ignore[index]
-        ref_matrix=obs.reference_matrix(),
-        still_std=obs.still_angle_std,
-        max_iter=max_iter,
-    )
+
+    def run(force: tuple[np.ndarray, np.ndarray] | None) -> PairedAxisBatch:
+        return paired_axis_batch(
+            obs.mean[None], obs.rate[None], groups, obs.mean_std[None], obs.rate_std[None],
+            obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
+            ref_matrix=obs.reference_matrix(), still_std=obs.still_angle_std,
+            force=None if force is None else force[0][None],
+            rest_force=None if force is None else force[1][None], max_iter=max_iter)
+
+    res = run(None)
+    basis = np.zeros((3, 0))
+    extra: dict[str, Any] = {}
+    if g_sensitivity and _home_pose_gravity(obs, groups):
+        # one pass: the forces of the fitted axes (G moves them far less than their σ)
+        axes0 = np.array([res.axes[0, first[int(m)]] for m in obs.chain])  # type: ignore[union-attr]
+        force = obs.specific_force(axes0, np.asarray(obs.home_pose, dtype=float))
+        basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
+                                   max_std=MAX_G_STD if max_g_std is None else max_g_std)
+        if basis.shape[1]:
+            with_g = run((force[0] @ basis, force[1] @ basis))
+            if _g_needed(res, with_g, 3 * basis.shape[1]):
+                res = with_g
+            else:  # what is left in the bias: the size of the G the data did not need
+                kG = with_g.scale[0][:, None] * (with_g.g_sensitivity[0] @ basis.T)  # type: ignore[index]
+                extra["g_left_out_per_g"] = float(np.max(np.linalg.norm(kG, axis=1)))
+                basis = np.zeros((3, 0))
     k, b, cov = res.scale[0], res.bias[0], res.covariance[0]
     ok = bool(res.converged[0]) and np.all(np.isfinite(k)) and np.all(k > 0)
-    consistency = None
+    consistency, factor = None, 1.0
     if res.dof > 0:
         verdict = _judged(res.residuals[0], res.dof, obs)
-        consistency, cov = verdict.consistency, cov * verdict.factor
+        consistency, factor = verdict.consistency, verdict.factor
+        cov = cov * factor
     # each servo's axis in the first pose it turned in (the home pose of gyrocal's protocols)
     axes = {m: res.axes[0, first[m]].copy() for m in order}
     axes_std = {}
@@ -1002,7 +1056,28 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50) -> FitResult:
         residuals=res.residuals[0].copy(),
         axes=axes,
         axes_std_rad=axes_std,
+        extra=extra,
+        **_g_terms(res, basis, factor),  # type: ignore[arg-type]
     )
+
+
+def _g_needed(without: PairedAxisBatch, with_g: PairedAxisBatch, n_terms: int) -> bool:
+    """Whether the data need the g-sensitivity terms: the likelihood-ratio test of the nested
+    models at :data:`CONSISTENCY_ALPHA`, ``χ²_without − χ²_with`` beyond the ``1 − α`` quantile
+    of ``χ²(n_terms)``. A diagonal calibration cannot carry ``G`` (Calibration v1), so terms the
+    noise explains are left in the bias rather than fitted."""
+    from scipy.special import chdtri
+
+    drop = float(without.chi2[0] - with_g.chi2[0])
+    return bool(with_g.converged[0]) and drop > float(chdtri(n_terms, CONSISTENCY_ALPHA))
+
+
+def _home_pose_gravity(obs: ObservationSet, groups: np.ndarray) -> bool:
+    """Whether :func:`fit_paired_axis` can model g-sensitivity: gravity known, the chain's
+    every servo turned, each in one pose (its axis then fixes the specific force)."""
+    return (obs.has_gravity and obs.chain is not None and obs.home_pose is not None
+            and set(obs.chain) == set(int(m) for m in obs.motors)
+            and len(np.unique(groups)) == len(obs.motors))
 
 
 #: The estimators by name.
@@ -1488,14 +1563,9 @@ def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: 
 MAX_G_STD = 1.75e-3
 
 
-#: Largest one-sigma uncertainty of a matrix element for which the full model counts as
-#: determined: a twentieth of the ±2 % cross-axis sensitivity the MPU-9250 datasheet allows.
-MAX_MATRIX_STD = 1e-3
-
-
 def fit_full_matrix(
-    obs: ObservationSet, *, max_iter: int = 50, max_matrix_std: float = MAX_MATRIX_STD,
-    g_sensitivity: bool = True, max_g_std: float = MAX_G_STD,
+    obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: bool = True,
+    max_g_std: float = MAX_G_STD,
 ) -> FitResult:
     r"""Full-matrix fit: ``g = A (m + b)`` with ``A`` a full 3×3 matrix, from a posed protocol.
 
@@ -1525,10 +1595,6 @@ def fit_full_matrix(
         and rest windows.
     max_iter : int
         Most Levenberg-Marquardt steps.
-    max_matrix_std : float
-        The fit succeeds only if every matrix element's one-sigma uncertainty is at most this
-        (:data:`MAX_MATRIX_STD`): a schedule whose poses leave a direction unobservable on a
-        square gimbal sees it only through the gimbal's small tilts, with a huge uncertainty.
     g_sensitivity : bool
         When ``obs`` says where gravity points (:attr:`ObservationSet.has_gravity`), fit
         ``g = A (m + b + G f)`` (``hardware_docs/method.md`` §10): ``f`` each window's mean
@@ -1613,18 +1679,15 @@ def fit_full_matrix(
         cov = cov * factor
     it = int(res.iterations[0])
     deficiency = int(res.rank_deficiency[0])
-    geometry = res.covariance[0]  # what the poses determine: before any widening by scatter
-    worst = (float(np.sqrt(np.max(np.diag(geometry)[:9]))) if np.all(np.isfinite(geometry))
-             else np.inf)
-    determined = deficiency == 0 and worst <= max_matrix_std
+    determined = deficiency == 0 and bool(np.all(np.isfinite(res.covariance[0])))
     ok = bool(res.converged[0]) and bool(np.all(np.isfinite(A))) and determined
     if not determined:
         status = "not-determined"
-        how = (f"leave {deficiency} combination(s) of the matrix and the servo axes undetermined"
-               if deficiency else
-               f"determine the matrix only to ±{worst:.1e} (one sigma; limit {max_matrix_std:g})")
+        what = (f"{deficiency} combination(s)" if deficiency else "a combination (its "
+                "uncertainty is not finite)")
         message = (
-            f"the poses {how}: turn outer servos with the servos inside them at other angles "
+            f"the poses leave {what} of the matrix and the servo axes "
+            "undetermined: turn outer servos with the servos inside them at other angles "
             "(two posed pairs of turns at least; hardware_docs/method.md, observability)")
     elif ok:
         status, message = "converged", f"converged in {it} steps{g_note}"
@@ -1659,7 +1722,8 @@ def fit_full_matrix(
     )
 
 
-def _g_terms(res: FullMatrixBatch, basis: np.ndarray, factor: float = 1.0) -> dict[str, Any]:
+def _g_terms(res: FullMatrixBatch | PairedAxisBatch, basis: np.ndarray,
+             factor: float = 1.0) -> dict[str, Any]:
     """``G`` (3×3) and its 9×9 covariance from the fit's ``G_k`` along ``basis`` (3, k):
     ``G = G_k Vᵀ``, ``d vec(G) / d vec(G_k) = I₃ ⊗ V``; the covariance times the verdict's
     variance ``factor``."""

@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from gyrocal.calib.thermal import ThermalModel
 
 __all__ = ["FORMAT", "LIMITS", "MODEL_G", "VERSION", "VERSION_FULL", "Consistency",
-           "GSensitivityWarning", "GyroCalibration"]
+           "GSensitivityWarning", "GyroCalibration", "ModelChoice"]
 
 FORMAT = "gyrocal-calibration"
 VERSION = 1
@@ -79,6 +79,8 @@ class GSensitivityWarning(UserWarning):
 _THERMAL_FIELDS = ("temperature_model",)  # either version (issue 13; calib.thermal)
 _ACCEL_FIELDS = ("accelerometer",)  # either version (issue 15; calib.accel)
 _DRIFT_FIELDS = ("bias_drift",)  # either version, optional (issue 30; calib.drift)
+_CHOICE_FIELDS = ("model_choice",)  # either version, optional (issue 28; calib.design)
+_CHOICE_KEYS = ("full", "diagonal", "diagonal_cross_axis", "cross_axis")
 _KINEMATICS_FIELDS = ("chain", "axes", "reference_angles_rad")
 #: Optional, together (the gravity reference of ``g_sensitivity``): absent means unknown.
 _KINEMATICS_HOME = ("home_angles_rad", "up_servo")
@@ -234,6 +236,72 @@ class Consistency:
                    reason=reason)
 
 
+@dataclass(frozen=True)
+class ModelChoice:
+    """Why a calibration has the model it has: each model's predicted error in general motion.
+
+    The full model ``g = A (m + b)`` is kept when its predicted RMS error over all directions of
+    a general motion is below the diagonal model's, which also leaves out the cross-axis terms
+    (:func:`gyrocal.calib.design.choose_model`). Figures are RMS rate errors per rad/s of a
+    motion at 1 rad/s (:func:`gyrocal.calib.design.general_motion_rms`).
+
+    Attributes
+    ----------
+    full : float or None
+        The full model's predicted error, from its covariance; None when the recording cannot
+        determine it (no poses, or poses that leave a combination undetermined).
+    diagonal : float
+        The diagonal model's: its covariance's share and the cross-axis terms' in quadrature.
+    diagonal_cross_axis : float
+        The cross-axis terms' share of ``diagonal``
+        (:func:`gyrocal.calib.design.cross_axis_general_motion_rms`).
+    cross_axis : float
+        The cross-axis sensitivity the sensor's datasheet allows, a fraction of the rate.
+    """
+
+    full: float | None
+    diagonal: float
+    diagonal_cross_axis: float
+    cross_axis: float
+
+    @property
+    def chosen(self) -> str:
+        """``"full"`` when the full model is determined and predicted better, else
+        ``"diagonal"``."""
+        return "full" if self.full is not None and self.full < self.diagonal else "diagonal"
+
+    def sentence(self) -> str:
+        """Both predicted figures and the choice, as the note, the terminal and the report say
+        it."""
+        full = ("not determined by this recording" if self.full is None
+                else f"{self.full:.2g}")
+        diag_fit = math.sqrt(max(self.diagonal**2 - self.diagonal_cross_axis**2, 0.0))
+        return (f"model chosen by predicted general-motion error (RMS per rad/s): full "
+                f"{full}, diagonal {self.diagonal:.2g} ({diag_fit:.2g} from its uncertainty "
+                f"and {self.diagonal_cross_axis:.2g} from the cross-axis terms it leaves out, "
+                f"±{100 * self.cross_axis:g} % on the datasheet): the {self.chosen} model")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {"full": self.full, "diagonal": self.diagonal,
+                "diagonal_cross_axis": self.diagonal_cross_axis, "cross_axis": self.cross_axis}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> ModelChoice:
+        """Inverse of :meth:`to_dict`; raises :class:`CalibrationFormatError` on bad fields."""
+        if not isinstance(d, Mapping):
+            raise CalibrationFormatError("'model_choice' must be an object")
+        _refuse_unknown(d, _CHOICE_KEYS, "'model_choice'")
+        for name in _CHOICE_KEYS:
+            if name not in d:
+                raise CalibrationFormatError(f"'model_choice' lacks the field {name!r}")
+        full = None if d["full"] is None else _number(d["full"], "model_choice.full", 0.0)
+        return cls(full=full, diagonal=_number(d["diagonal"], "model_choice.diagonal", 0.0),
+                   diagonal_cross_axis=_number(d["diagonal_cross_axis"],
+                                               "model_choice.diagonal_cross_axis", 0.0),
+                   cross_axis=_number(d["cross_axis"], "model_choice.cross_axis", 0.0, 1.0))
+
+
 def _vec3(value: Any, name: str, *, positive: bool = False) -> tuple[float, float, float]:
     try:
         a = np.asarray(value, dtype=float)
@@ -323,6 +391,10 @@ class GyroCalibration:
         the run) and the bias's expected wander in the hour after the calibration
         (:mod:`gyrocal.calib.drift`), written as the document's ``bias_drift`` in either
         version; None in older documents (σ then has the white noise only).
+    model_choice : ModelChoice or None
+        Each model's predicted general-motion error, which chose this one (``gyrocal
+        estimate``'s method ``auto``), written as the document's ``model_choice`` in either
+        version; None for a method given by name, and in older documents.
     """
 
     scale: tuple[float, float, float]
@@ -346,6 +418,7 @@ class GyroCalibration:
     g_sensitivity: dict[str, Any] | None = field(default=None, hash=False)
     accelerometer: AccelCalibration | None = field(default=None, hash=False)
     bias_drift: BiasDrift | None = field(default=None, hash=False)
+    model_choice: ModelChoice | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scale", _vec3(self.scale, "scale", positive=True))
@@ -543,6 +616,8 @@ class GyroCalibration:
             doc["accelerometer"] = self.accelerometer.to_dict()
         if self.bias_drift is not None:
             doc["bias_drift"] = self.bias_drift.to_dict()
+        if self.model_choice is not None:
+            doc["model_choice"] = self.model_choice.to_dict()
         return doc
 
     def to_json(self) -> str:
@@ -564,7 +639,7 @@ class GyroCalibration:
         if not isinstance(doc, Mapping):
             raise CalibrationFormatError("a calibration document must be a JSON object")
         full = _check_header(doc)
-        known = (_V1_FIELDS + _THERMAL_FIELDS + _ACCEL_FIELDS + _DRIFT_FIELDS
+        known = (_V1_FIELDS + _THERMAL_FIELDS + _ACCEL_FIELDS + _DRIFT_FIELDS + _CHOICE_FIELDS
                  + (_V2_FIELDS if full else ()))
         _refuse_unknown(doc, known,
                         f"a version {VERSION_FULL if full else VERSION} calibration")
@@ -765,6 +840,8 @@ def _read_about(doc: Mapping[str, Any]) -> dict[str, Any]:
         "accelerometer": _read_accel(doc.get("accelerometer")),
         "bias_drift": (None if doc.get("bias_drift") is None
                        else BiasDrift.from_dict(doc["bias_drift"])),
+        "model_choice": (None if doc.get("model_choice") is None
+                         else ModelChoice.from_dict(doc["model_choice"])),
     }
 
 

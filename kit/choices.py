@@ -10,7 +10,8 @@ from __future__ import annotations
 __all__ = ["METHODS", "PROTOCOLS"]
 
 #: The estimators a user may choose, the default first: ``auto`` (the full model when the
-#: recording's poses determine it, else paired-axis; :mod:`gyrocal.kit.pipeline`) and the names of
+#: recording's poses determine it and it is predicted better in general motion, else
+#: paired-axis; :mod:`gyrocal.kit.pipeline`) and the names of
 #: :data:`gyrocal.calib.estimators.METHODS` (kept here so the command line does not import scipy
 #: to show its help).
 METHODS = ("auto", "paired-axis", "iterative-ls", "levenberg-marquardt", "full-matrix")

@@ -1,9 +1,12 @@
 """From a recording to a calibration: windows, fit, Calibration v1 or v2 (shared by the commands).
 
 With the method ``auto`` (the default) the full model ``g = A (m + b)`` is fitted when the
-recording's poses determine it (hardware_docs/method.md §9); otherwise the paper's diagonal model
-is fitted with the paired-axis estimator, and the estimate carries a note saying that cross-axis
-terms were not calibrated and how large the error they leave can be.
+recording's poses determine it (hardware_docs/method.md §9), and so is the paper's diagonal model
+with the paired-axis estimator; the full model is kept when its predicted general-motion error is
+below the diagonal model's, which includes the cross-axis terms the datasheet allows
+(:func:`gyrocal.calib.design.choose_model`). The calibration carries both figures
+(``model_choice``) and a note says them; a diagonal one also says that cross-axis terms were not
+calibrated and how large the error they leave can be.
 
 When the recording's ``imu.csv`` has the accelerometer's columns, the same run's still windows
 (the rests, held in the orientations the protocol's poses give) are the accelerometer's
@@ -26,7 +29,7 @@ from gyrocal.calib.accel import AccelCalibration
 from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
-from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.model import GyroCalibration, ModelChoice
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
 from gyrocal.kit.errors import EstimationError, InputError
 from gyrocal.kit.recording import Recording, now_iso
@@ -41,6 +44,9 @@ __all__ = [
     "check_plausible",
     "check_plausible_noise",
     "datasheet_cross_axis",
+    "diagonal_g_note",
+    "diagonal_note",
+    "sensor_cross_axis",
     "estimate_recording",
     "extract_recording",
     "fit_recording_accelerometer",
@@ -73,7 +79,8 @@ _MIXUP_TOLERANCE = 0.05
 #: The gyro's full scale assumed when the recording does not say (the largest of the chips), °/s.
 _DEFAULT_FULL_SCALE_DPS = 2000.0
 
-#: The method that chooses the full model when the poses determine it, else the diagonal one.
+#: The method that chooses the full model when the poses determine it and it is predicted better
+#: in general motion (:func:`gyrocal.calib.design.choose_model`), else the diagonal one.
 AUTO = "auto"
 #: Cross-axis sensitivity for a model the chip data does not know: the MPU-9250's ±2 %
 #: (PS-MPU-9250A-01 §3.1), the typical MEMS value.
@@ -246,11 +253,18 @@ def _chain(rec: Recording) -> tuple[int, ...] | None:
     return chain
 
 
+def sensor_cross_axis(sensor_model: str | None) -> float:
+    """The cross-axis sensitivity a diagonal calibration of ``sensor_model`` leaves out: the
+    datasheet's (:func:`datasheet_cross_axis`), or the typical ±2 % for a model gyrocal does
+    not read."""
+    return datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
+
+
 def diagonal_note(sensor_model: str | None, reason: str, *, jig: str = "gimbal") -> str:
     """What a user must know about a diagonal calibration: cross-axis terms are not in it, and
     how large the error they leave can be; how to calibrate them (on a gimbal: record with a
     posed protocol; on another ``jig``: a gimbal's posed protocol does)."""
-    frac = datasheet_cross_axis(sensor_model) or _CROSS_AXIS_DEFAULT
+    frac = sensor_cross_axis(sensor_model)
     how = ("Record with a posed protocol (gyrocal calibrate's default) to calibrate the full "
            "matrix." if jig == "gimbal" else
            "A gimbal's posed protocol (gyrocal calibrate's default) calibrates the full matrix.")
@@ -262,31 +276,94 @@ def diagonal_note(sensor_model: str | None, reason: str, *, jig: str = "gimbal")
     )
 
 
-def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None,
-         path: object, seats: bool = False) -> tuple[FitResult, tuple[str, ...]]:
-    obs = ex.observations
+def diagonal_g_note(fit: FitResult) -> str | None:
+    """What a diagonal fit did with g-sensitivity, and what the diagonal calibration leaves out.
+
+    :func:`gyrocal.calib.estimators.fit_paired_axis` fits ``G`` along the directions of gravity
+    the run determines (on the home-pose protocols, the home "up": the rests against the
+    horizontal turns), so the bias is the zero-g bias; Calibration v1 has no ``G``, so the
+    calibrated rate is off by ``k ∘ (G f)`` in use: the note states that size. Where the data
+    did not need ``G`` (``extra["g_left_out_per_g"]``), the note says how large the ``G`` left
+    in the bias is. None for a full-model fit, or a fit where gravity was not modelled.
+    """
+    left = fit.extra.get("g_left_out_per_g") if fit.matrix is None else None
+    if left is not None:
+        return (f"g-sensitivity not fitted: the rests and the turns agree within their noise; "
+                f"the g-sensitivity they determine, up to {left:.2g} rad/s per g, is what the "
+                "noise explains and stays in the bias")
+    if fit.matrix is not None or fit.g_sensitivity is None:
+        return None
+    kG = np.diag(fit.scale) @ np.asarray(fit.g_sensitivity)
+    per_g = float(np.max(np.linalg.norm(kG, axis=1)))
+    k = 0 if fit.g_directions is None else len(fit.g_directions)
+    return (f"g-sensitivity fitted along {k} of 3 directions of gravity (where the rests and "
+            f"turns see gravity differently), so the bias is the zero-g bias; the diagonal model "
+            f"(Calibration v1) cannot carry it: in use the calibrated rate is off by up to "
+            f"{per_g:.2g} rad/s per g of specific force ({math.degrees(per_g):.2g} °/s/g), "
+            "which the full model (--protocol full) calibrates")
+
+
+def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None, drift: BiasDrift,
+         path: object, seats: bool = False
+         ) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
+    """Fit ``method``, or with ``auto`` both models and keep the one predicted better
+    (:func:`_fit_auto`); each fit with the bias's wander in its σ
+    (:func:`gyrocal.calib.estimators.add_bias_drift`), so the figures are the calibration's.
+    ``seats``: a single-servo recording (:func:`_without_chain`)."""
     try:
         if method != AUTO:
-            return _without_chain(estimate(obs, method), seats), ()
-        jig = "single-servo" if seats else "gimbal"
-        if obs.own_axes:
-            from gyrocal.kit.jig_kinds import JIG_KINDS
-
-            jig, reason = "hand", JIG_KINDS["hand"].undetermined
-        elif obs.chain is None:
-            reason = "the recording's manifest does not list the gimbal's servos in chain order"
-        else:
-            full = estimate(obs, "full-matrix")
-            if full.success:
-                return _without_chain(full, seats), ()
-            reason = (f"the recording's poses do not determine them: {full.message}"
-                      if not seats else
-                      f"the {len(obs.chain)} seats of the cube do not determine them: "
-                      "seat it on edges too, in the V-block (hardware_docs/single-servo.md)")
-        return (_without_chain(estimate(obs, "paired-axis"), seats),
-                (diagonal_note(sensor_model, reason, jig=jig),))
+            fit = estimate(ex.observations, method)
+            return _without_chain(_with_drift(fit, drift), seats), None, ()
+        return _fit_auto(ex.observations, sensor_model, drift, seats)
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
+
+
+def _with_drift(fit: FitResult, drift: BiasDrift) -> FitResult:
+    """``fit`` with the bias's wander in its σ (a failed fit as it is)."""
+    return add_bias_drift(fit, drift) if fit.success else fit
+
+
+def _fit_auto(obs: Any, sensor_model: str | None, drift: BiasDrift, seats: bool = False
+              ) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
+    """The full model (where the chain is known) and the diagonal one, and the one whose
+    predicted general-motion error is smaller (:func:`gyrocal.calib.design.choose_model`),
+    with the notes that say why. A hand recording (each turn its own axis) has the diagonal
+    model only (:data:`gyrocal.kit.jig_kinds.JIG_KINDS`' ``undetermined``)."""
+    from gyrocal.calib.design import choose_model
+
+    if obs.own_axes:
+        from gyrocal.kit.jig_kinds import JIG_KINDS
+
+        diag = _with_drift(estimate(obs, "paired-axis"), drift)
+        return diag, None, (diagonal_note(sensor_model, JIG_KINDS["hand"].undetermined,
+                                          jig="hand"),)
+    jig = "single-servo" if seats else "gimbal"
+    full, reason = None, "the recording's manifest does not list the gimbal's servos in chain order"
+    if obs.chain is not None:
+        full = estimate(obs, "full-matrix")
+        reason = (f"the recording's poses do not determine them: {full.message}" if not seats
+                  else f"the {len(obs.chain)} seats of the cube do not determine them: seat it "
+                  "on edges too, in the V-block (hardware_docs/single-servo.md)")
+        full = _without_chain(add_bias_drift(full, drift), seats) if full.success else None
+    try:
+        diag = estimate(obs, "paired-axis")
+    except CalibInputError:
+        if full is None:
+            raise
+        return full, None, ()  # a full model and no diagonal one to weigh it against
+    if not diag.success:
+        return (full, None, ()) if full is not None else (diag, None, ())
+    diag = _without_chain(add_bias_drift(diag, drift), seats)
+    choice = choose_model(None if full is None else full.covariance,
+                          None if full is None else full.matrix, diag.covariance, diag.scale,
+                          sensor_cross_axis(sensor_model))
+    if full is not None and choice.chosen == "full":
+        return full, choice, (choice.sentence(),)
+    if full is not None:
+        reason = (f"the full model's predicted general-motion error, {choice.full:.2g} per "
+                  f"rad/s, is above the diagonal model's, {choice.diagonal:.2g}")
+    return diag, choice, (diagonal_note(sensor_model, reason, jig=jig), choice.sentence())
 
 
 def _without_chain(fit: FitResult, seats: bool) -> FitResult:
@@ -390,19 +467,18 @@ def estimate_recording(
         If the estimator fails (the message says why).
     """
     ex = extract_recording(rec)
-    fit, notes = _fit(ex, method, rec.sensor.get("model"), rec.path,
-                      seats=seat_starts(rec.manifest) is not None)
+    drift = chip_bias_drift(rec.sensor.get("model"), ex)
+    fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), drift, rec.path,
+                              seats=seat_starts(rec.manifest) is not None)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
-    drift = chip_bias_drift(rec.sensor.get("model"), ex)
-    fit = add_bias_drift(fit, drift)
-    notes = (*notes, drift.note())
-    cal = fit.to_calibration(
+    notes = (*notes, *filter(None, [diagonal_g_note(fit)]), drift.note())
+    cal = replace(fit.to_calibration(
         sensor=rec.sensor,
         temperature_c=ex.observations.temperature_c,
         created=now_iso(),
         source=source if source is not None else str(rec.path),
-    )
+    ), model_choice=choice)
     g = recording_gravity(rec) if gravity_m_s2 is None else gravity_m_s2
     accel, accel_note = fit_recording_accelerometer(rec, ex, g)
     if accel is not None:

@@ -11,7 +11,7 @@ import numpy as np
 from gyrocal.calib.model import GyroCalibration
 
 __all__ = ["TruthError", "accelerometer_rows", "calibration_table", "error_against_truth",
-           "inconsistency_causes"]
+           "inconsistency_causes", "model_choice_rows"]
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,10 @@ class TruthError:
     accel_matrix, accel_bias : ndarray or None
         The accelerometer's (``f = A (a + b)``, lower triangle of ``A`` and ``b``), where the
         calibration and the truth both have one.
+    general_motion : float or None
+        The calibrated rate's RMS error over all directions of a motion at 1 rad/s, per rad/s
+        (:func:`gyrocal.calib.design.general_motion_rms`, in any output frame): what the
+        calibration's ``model_choice`` predicts.
     """
 
     bias: np.ndarray
@@ -44,6 +48,7 @@ class TruthError:
     matrix_note: str | None = None
     accel_matrix: np.ndarray | None = None
     accel_bias: np.ndarray | None = None
+    general_motion: float | None = None
 
     @property
     def matrix_max(self) -> float | None:
@@ -92,7 +97,18 @@ def error_against_truth(cal: GyroCalibration, truth: Mapping[str, Any] | None
         il = np.tril_indices(3)
         acc_m = (acc.matrix - np.asarray(acc_truth["matrix"]))[il] / acc.std[:6]
         acc_b = (acc.bias - np.asarray(acc_truth["bias_m_s2"])) / acc.std[6:]
-    return TruthError(bias, matrix, scale, note, acc_m, acc_b)
+    return TruthError(bias, matrix, scale, note, acc_m, acc_b, _general_motion(cal, truth))
+
+
+def _general_motion(cal: GyroCalibration, truth: Mapping[str, Any]) -> float:
+    """:func:`gyrocal.calib.design.general_motion_rms` of ``cal`` against the truth's sensor
+    ``C = diag(1/scale) @ misalignment`` and bias."""
+    from gyrocal.calib.design import general_motion_rms
+
+    mis = np.asarray(truth.get("misalignment", np.eye(3)), dtype=float)
+    sensing = np.diag(1.0 / np.asarray(truth["scale"], dtype=float)) @ mis
+    return general_motion_rms(cal.full_matrix, np.asarray(cal.bias), sensing,
+                              np.asarray(truth["bias"], dtype=float))
 
 
 def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = None) -> str:
@@ -115,10 +131,26 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
         lines += _matrix_rows(cal, err)
     else:
         lines += _diagonal_rows(cal, err)
+    lines += model_choice_rows(cal, err)
     _verdict(cal, lines)
     if cal.accelerometer is not None:
         lines += accelerometer_rows(cal.accelerometer, err)
     return "\n".join(lines)
+
+
+def model_choice_rows(cal: GyroCalibration, err: TruthError | None = None) -> list[str]:
+    """Why the calibration has its model (:attr:`GyroCalibration.model_choice`: each model's
+    predicted general-motion error), and with a simulated truth the error it actually has
+    (:func:`error_against_truth`); nothing for a calibration without either."""
+    import textwrap
+
+    lines = []
+    if cal.model_choice is not None:
+        lines += textwrap.wrap(cal.model_choice.sentence(), 100)
+    if err is not None and err.general_motion is not None:
+        lines.append(f"general-motion error against the simulated truth: {err.general_motion:.2g}"
+                     " per rad/s (RMS over all directions at 1 rad/s)")
+    return [*lines, ""] if lines else []
 
 
 def accelerometer_rows(acc: Any, err: TruthError | None = None) -> list[str]:
@@ -220,9 +252,10 @@ def inconsistency_causes(cal: GyroCalibration) -> str:
                   "protocol.speed_dps")
     if cal.matrix is None:
         causes = ["the model is too simple: the diagonal model leaves the cross-axis terms and "
-                  "the g-sensitivity in the residuals; calibrate the full model with "
-                  "--protocol full (if it fell back to the diagonal model, a note on stderr "
-                  "says why)", slip, saturation]
+                  "the g-sensitivity the rests do not determine in the residuals; calibrate "
+                  "the full model with "
+                  "--protocol full (a note on stderr gives both models' predicted errors "
+                  "when the full one was not kept)", slip, saturation]
     else:
         causes = [slip, saturation]
     return "the residuals are larger than the noise explains; likely causes, most likely " \

@@ -281,6 +281,8 @@ def _summary(cal: GyroCalibration, err: TruthError | None, verification: Any,
         rows.append(("verification", f"{word}: {_e(verification.verdict())}"))
     rows.append(("model", f"{_e(_model_name(cal))}; fitted by {_e(cal.method)} in "
                           f"{cal.iterations} iterations"))
+    if cal.model_choice is not None:
+        rows.append(("model choice", _e(cal.model_choice.sentence())))
     rows.append(("largest cross-axis term", _cross_axis_text(cal)))
     rows.append(("misalignment", _misalignment_text(cal)))
     if cal.g_sensitivity is not None:
@@ -392,6 +394,8 @@ def _truth_section(err: TruthError) -> str:
     else:
         rows.append(("gyro matrix A", _e(err.matrix_note)))
     rows.append(("gyro bias x y z, err/σ", zs(err.bias)))
+    if err.general_motion is not None:
+        rows.append(("gyro general-motion error, RMS per rad/s", f"{err.general_motion:.2g}"))
     if err.accel_bias is not None:
         rows.append(("accelerometer matrix, largest |err/σ|", f"{err.accel_matrix_max:.2f}"))
         rows.append(("accelerometer bias x y z, err/σ", zs(err.accel_bias)))

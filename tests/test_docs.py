@@ -61,7 +61,7 @@ from typing import Any
 
 import pytest
 
-from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.model import GyroCalibration, ModelChoice
 from gyrocal.kit.cli import main as gyrocal_main
 from gyrocal.kit.config import SCHEMA, load_config
 from gyrocal.kit.errors import EXIT_CODES
@@ -659,6 +659,8 @@ def test_calibration_v2_fields_match_a_v2_document() -> None:
                     "home_angles_rad": [0.0], "up_servo": [1, 1]},
         g_sensitivity={"matrix": [[0.0] * 3] * 3, "matrix_std": [[0.0] * 3] * 3,
                        "directions": eye},
+        model_choice=ModelChoice(full=1e-4, diagonal=1.2e-2, diagonal_cross_axis=1.15e-2,
+                                 cross_axis=0.02),
     )
     v1 = _paths(GyroCalibration(scale=(1.0, 1.0, 1.0), bias=(0.0, 0.0, 0.0)).to_dict())
     real = _paths(cal.to_dict()) - v1

@@ -14,8 +14,9 @@ HELP = "estimate a calibration from a recording directory"
 DESCRIPTION = (
     "Window a Recording v1 directory (whole revolutions at steady speed, encoder reference over "
     "the same windows, rests as bias windows) and fit the full model g = A (m + b) when the "
-    "recording's poses determine it, else the paper's six parameters (and say that cross-axis "
-    "terms were not calibrated). Prints the result table, or the Calibration document with "
+    "recording's poses determine it and its predicted error in general motion is below the "
+    "paper's six parameters' (a note says both), else those (and say that cross-axis terms "
+    "were not calibrated). Prints the result table, or the Calibration document with "
     "--json. Exits 3 if the fit is not consistent with the measured noise."
 )
 
@@ -26,8 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("recording", type=argtypes.recording_dir, help="a Recording v1 directory")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
-                   help="estimator (default: auto = full-matrix when the poses determine it, "
-                   "else paired-axis)")
+                   help="estimator (default: auto = full-matrix when the poses determine it "
+                   "and it is predicted better in general motion, else paired-axis)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--gravity", type=float, metavar="M_S2",
                    help="local gravity magnitude for the accelerometer fit, m/s² (9.7..9.9; "

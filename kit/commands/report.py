@@ -35,7 +35,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a `gyrocal verify --json` document to include in report.html")
     p.add_argument("--method", choices=METHODS, default=METHODS[0],
                    help="estimator when no CAL is given (default auto: the full model when the "
-                        "recording's poses determine it, else paired-axis)")
+                        "recording's poses determine it and it is predicted better in general "
+                        "motion, else paired-axis)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,6 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
+from gyrocal.calib.design import choose_model
 from gyrocal.calib.estimators import FULL_FRAME, estimate, fit_full_matrix
 from tests.calib.fullmodel_truth import (
     HOME,
@@ -65,17 +66,26 @@ EXTRA = {"middle|inner 90": (1, [0, 0, Q]), "base|middle 90": (0, [0, Q, 0]),
 def test_rank_table_of_method_md(k):
     # hardware_docs/method.md: on a square gimbal the six home turns leave 3 directions
     # unobservable, each posed pair of turns removes two, and any two posed pairs give full rank.
+    # Where the rank is short only near the true geometry (a 45° pose), the fit sees the missing
+    # direction through rounding-level tilts: it converges with an uncertainty that makes the
+    # model choice keep the diagonal model (issue 28).
     rng = np.random.default_rng(2)
     C, bias, links, mount = draw_truth(rng, tilt_rad=0.0, mount_rad=0.0)
     for keys in itertools.combinations(EXTRA, k):
         sched = HOME + [(EXTRA[key][0], np.array(EXTRA[key][1], float), d)
                         for key in keys for d in (1, -1)]
-        fit = fit_full_matrix(posed_observations(C, bias, links, mount, sched))
+        obs = posed_observations(C, bias, links, mount, sched)
+        fit = fit_full_matrix(obs)
         want = max(3 - 2 * k, 0)
         if want:
-            assert fit.status == "not-determined", keys
             if "90" in " ".join(keys) or not keys:  # exact rank at the true, square geometry
+                assert fit.status == "not-determined", keys
                 assert f"leave {want} combination" in fit.message, (keys, fit.message)
+            elif fit.success:
+                diag = estimate(obs, "paired-axis")
+                choice = choose_model(fit.covariance, fit.matrix, diag.covariance, diag.scale,
+                                      0.02)
+                assert choice.chosen == "diagonal", (keys, choice)
         else:
             assert fit.success, (keys, fit.message)
 

@@ -45,22 +45,29 @@ TICKS = 4096
 LSB_500DPS = np.radians(1 / 65.5)
 
 
-def draw_sensor(seed: int, cross: float = 0.02, tilt_rad: float = 0.02, mount_rad: float = 0.05
-                ) -> dict:
+def draw_sensor(seed: int, cross: float = 0.02, tilt_rad: float = 0.02, mount_rad: float = 0.05,
+                extreme: bool = False) -> dict:
     """A sensor and a skewed gimbal: off-diagonal terms up to ``cross`` (the largest exactly
     ``cross``), scale 0.9–1.1, bias up to 0.1 rad/s, link axes tilted by up to ``tilt_rad``,
-    the mount rotated by up to ``mount_rad``."""
+    the mount rotated by up to ``mount_rad``. With ``extreme``, the paper's extreme sensor
+    instead (Section III: scale U(1.2, 2.0), |bias| U(0.1, 0.2) rad/s with either sign), drawn
+    from a stream of its own so the rest of the draw is the same."""
     rng = np.random.default_rng([seed, 0x1DE])
     off = rng.uniform(-1, 1, (3, 3)) * (1 - np.eye(3))
     mis = np.eye(3) + cross * off / np.max(np.abs(off)) if cross else np.eye(3)
     links = [np.eye(3)[j] + rng.uniform(-tilt_rad, tilt_rad, 3) for j in range(3)]
-    return {
+    truth = {
         "scale": rng.uniform(0.9, 1.1, 3),
         "bias": rng.uniform(-0.1, 0.1, 3),
         "misalignment": mis,
         "links": [v / np.linalg.norm(v) for v in links],
         "mount": Rotation.from_rotvec(rng.uniform(-mount_rad, mount_rad, 3)).as_matrix(),
     }
+    if extreme:
+        ext = np.random.default_rng([seed, 0xE7])
+        truth["scale"] = ext.uniform(1.2, 2.0, 3)
+        truth["bias"] = ext.choice([-1.0, 1.0], 3) * ext.uniform(0.1, 0.2, 3)
+    return truth
 
 
 def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.ndarray
@@ -153,7 +160,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     temp_ramp: tuple[float, float] | None = None,
                     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
                     accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
-                    tour: bool = True) -> dict:
+                    tour: bool = True, extreme: bool = False) -> dict:
     """Write a Recording v1 directory at ``path``; returns the truth (``draw_sensor``). With
     ``g_sensitivity`` (3×3, rad/s per g) the reading gains ``G f`` (``f`` from
     :func:`specific_force`) and the schedule a gravity rest. ``steps`` replaces the schedule
@@ -170,8 +177,9 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     accelerometer's columns and (unless ``tour`` is false) the tour (module docstring), gravity
     ``gravity_m_s2`` also written to the manifest's ``site``; an ``accel_truth`` with a
     ``reading`` (a function of the specific force in g giving the reading in g, such as an
-    emulated accelerometer's) reads through it instead."""
-    truth = draw_sensor(seed, cross)
+    emulated accelerometer's) reads through it instead. With ``extreme`` the sensor is the
+    paper's extreme one (:func:`draw_sensor`)."""
+    truth = draw_sensor(seed, cross, extreme=extreme)
     rng = np.random.default_rng([seed, 0x5A3])
     path = Path(path)
     path.mkdir(parents=True)
