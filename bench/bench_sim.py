@@ -18,12 +18,14 @@ temporary directory), one after the other in the same invocation, and prints:
   plan, the imports, and the rest (fitting, outputs);
 * the ratio of the two runs' CPU, and whether the two recordings are byte-identical
   (``imu.csv``, ``encoder.csv``, ``segments.csv``, and ``manifest.json`` less its ``created``
-  wall-clock stamp), with each file's SHA-256.
+  wall-clock stamp), with each file's SHA-256;
+* the CPU of the report's plots (``gyrocal report RECORDING CALIBRATION`` of each run, drawn by
+  its own checkout: ``write_report``'s process time, the target is under 5 s) and their ratio.
 
 Options: ``--seed=S``; ``--ref=DIR`` compares with another checkout instead of :data:`BEFORE`;
 ``--ref-commit=REV`` archives another commit; ``--repeat=N`` runs each N times, alternating,
 and keeps each one's least CPU (the host is shared); ``--args="..."`` adds arguments to the
-command (e.g. ``--args="--config plate.toml"``).
+command (e.g. ``--args="--config plate.toml"``); ``--no-plots`` leaves the plots out.
 """
 
 from __future__ import annotations
@@ -107,6 +109,28 @@ cpu["rest (fit, outputs)"] = cpu["total"] - sum(v for k, v in cpu.items() if k !
 print(json.dumps({"code": code, **cpu}))
 """
 
+#: Runs in the child: ``gyrocal report RECORDING CALIBRATION --out DIR`` (the report a default
+#: ``calibrate --sim`` run writes), timing ``write_report`` (every plot, drawn and written) with
+#: the process time; prints JSON.
+_PLOT_CHILD = r"""
+import json, sys, time
+T0 = time.process_time()
+import gyrocal.kit.cli as cli
+import gyrocal.kit.report_plots as rp
+cpu = {"plots": 0.0}
+draw = rp.write_report
+def timed(*a, **k):
+    t = time.process_time()
+    try:
+        return draw(*a, **k)
+    finally:
+        cpu["plots"] += time.process_time() - t
+rp.write_report = timed
+code = cli.main(sys.argv[1:])
+cpu["report"] = time.process_time() - T0
+print(json.dumps({"code": code, **cpu}))
+"""
+
 #: The rows of the parts table, in order.
 PARTS = ("chip samples, other", "chip true rates (internal rate)", "chip DLPF",
          "IMU reader and I2C bus", "servo packets (dynamixel-sdk + emulated servos)", "clock",
@@ -140,6 +164,20 @@ def _run(checkout: Path, out: Path, seed: int, extra: list[str]) -> dict:
     r = json.loads(lines[-1])
     r["jig_s"] = _jig_seconds(out)
     return r
+
+
+def _plots(out: Path, k: int) -> dict:
+    """Time the report's plots of the run in ``out`` with the checkout its shim imports, into
+    ``out/plots-k``."""
+    env = {**os.environ, "PYTHONPATH": str(out.parent / f"shim-{out.name}")}
+    done = subprocess.run(
+        [sys.executable, "-c", _PLOT_CHILD, "report", str(out / "recording"),
+         str(out / "calibration.json"), "--out", str(out / f"plots-{k}")],
+        env=env, capture_output=True, text=True, check=False, cwd=out.parent)
+    lines = [x for x in done.stdout.splitlines() if x.startswith("{")]
+    if not lines:
+        raise RuntimeError(f"{out}: the report printed no result\n{done.stderr[-2000:]}")
+    return json.loads(lines[-1])
 
 
 def _recordings(out: Path) -> list[Path]:
@@ -216,3 +254,25 @@ def main(argv: list[str]) -> None:
         print()
         print_table(["file", f"{names[0]} sha256", f"{names[1]} sha256", "identical"], rows,
                     title="the recordings, byte for byte (manifest less its `created` stamp)")
+        if "no-plots" not in {a.lstrip("-") for a in argv}:
+            _plot_table(names, outs, repeat)
+
+
+def _plot_table(names: list[str], outs: dict[str, Path], repeat: int) -> None:
+    """The report's plots of each checkout's run, drawn by that checkout, alternating."""
+    best: dict[str, dict] = {}
+    for i in range(repeat):
+        for name in names:
+            print(f"drawing the report of {name} ({i + 1}/{repeat}) ...", file=sys.stderr,
+                  flush=True)
+            r = _plots(outs[name], i)
+            if name not in best or r["plots"] < best[name]["plots"]:
+                best[name] = r
+    print()
+    print_table(
+        ["code", "exit", "plots CPU s", "whole command CPU s"],
+        [[n, best[n]["code"], best[n]["plots"], best[n]["report"]] for n in names],
+        title="gyrocal report RECORDING CALIBRATION of that run: the plots (write_report, "
+              f"process time; target < 5 s), the least of {repeat} run(s) each")
+    print(f"plot CPU ratio, {names[1]} / {names[0]}: "
+          f"{best[names[1]]['plots'] / best[names[0]]['plots']:.2f}")

@@ -37,9 +37,11 @@ def require_matplotlib() -> Any:
 
 
 def save_png(
-    fig: Any, path: str | os.PathLike[str], *, force: bool = False, dpi: int = 110
+    fig: Any, path: str | os.PathLike[str], *, force: bool = False, dpi: int = 110,
+    keep: bool = False,
 ) -> Path:
-    """Render ``fig`` as PNG, close it, and write it atomically (:mod:`gyrocal.kit.fileio`).
+    """Render ``fig`` as PNG, close it (unless ``keep``: a figure drawn again for the next
+    file), and write it atomically (:mod:`gyrocal.kit.fileio`).
 
     Raises
     ------
@@ -62,7 +64,8 @@ def save_png(
             fig.set_layout_engine(None)
         fig.savefig(buf, format="png", dpi=dpi)
     finally:
-        plt.close(fig)
+        if not keep:
+            plt.close(fig)
     try:
         return atomic_write_bytes(path, buf.getvalue(), force=force)
     except OSError as exc:

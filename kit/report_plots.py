@@ -45,7 +45,7 @@ from gyrocal.calib.windows import (  # the estimator's own weight and grid: plot
     weight_grid,
 )
 from gyrocal.kit.errors import InputError, OutputExistsError
-from gyrocal.kit.plots import literal
+from gyrocal.kit.plots import literal, save_png
 from gyrocal.kit.recording import Recording
 
 __all__ = [
@@ -538,7 +538,58 @@ def _difference_panel(ax: Any, t: np.ndarray, gu: np.ndarray, et: np.ndarray,
         ax.set_ylim(-2.5 * span, 2.5 * span)
 
 
-def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
+class _TurnFigure:
+    """The turn plots' figure, drawn once and reused: every turn plot has the same three
+    panels, and a fresh figure costs its axes, ticks and tick labels again (a third of a turn
+    plot's time). :meth:`get` hands it back emptied of the last turn's artists, with the
+    axes' limits, data limits and positions as a new figure has them, so that a turn plot is
+    drawn as on a figure of its own (``tests/kit/test_report.py`` compares the pixels)."""
+
+    def __init__(self, plt: Any) -> None:
+        self.plt = plt
+        self.fig: Any = None
+        self.axs: Any = None
+        self._positions: list[Any] = []
+
+    def get(self) -> tuple[Any, Any]:
+        """The figure and its three axes, ready for a turn."""
+        if self.fig is None:
+            self.fig, self.axs = self.plt.subplots(
+                3, 1, sharex=True, figsize=(10, 8.5), constrained_layout=True,
+                gridspec_kw={"height_ratios": [1.3, 1.0, 1.0]})
+            self._positions = [ax.get_position(original=True) for ax in self.axs]
+            return self.fig, self.axs
+        from matplotlib.transforms import Bbox
+
+        self.fig.set_layout_engine("constrained")
+        for ax, pos in zip(self.axs, self._positions, strict=True):
+            for artist in [*ax.lines, *ax.collections, *ax.patches, *ax.texts]:
+                artist.remove()
+            if ax.get_legend() is not None:
+                ax.get_legend().remove()
+            ax.dataLim.set_points(Bbox.null().get_points())
+            ax.ignore_existing_data_limits = True
+            ax.set_autoscale_on(True)
+            # as the layout engine places axes (the public set_position would take the axes
+            # out of the layout)
+            ax._set_position(pos)
+        return self.fig, self.axs
+
+    def close(self) -> None:
+        """Close the figure (after the last turn)."""
+        if self.fig is not None:
+            self.plt.close(self.fig)
+            self.fig = None
+
+
+def _inside(legend: Any) -> None:
+    """A legend drawn inside its axes: the layout need not measure it (it lies within the
+    axes' box, which the layout keeps clear anyway), which spares finding its best place twice
+    per layout pass."""
+    legend.set_in_layout(False)
+
+
+def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: Segment,
                window: Window | None, axis: ServoAxis, extracted: ExtractedWindows,
                window_index: int | None) -> Any:
     margin = 0.3
@@ -554,8 +605,7 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
     f = (specific_force(rec, cal, t) if cal.g_sensitivity is not None and t.size
          and force_source(rec, cal) is None else None)
     g = calibrated(cal, m, f) if m.shape[0] else np.zeros((0, 3))
-    fig, axs = plt.subplots(3, 1, sharex=True, figsize=(10, 8.5), constrained_layout=True,
-                            gridspec_kw={"height_ratios": [1.3, 1.0, 1.0]})
+    fig, axs = figures.get()
     sense = "positive" if seg.direction > 0 else "negative"
     head = (f"segment {seg.index}: servo {seg.motor} turns {sense}; axis "
             f"[{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}] ({axis.source})")
@@ -580,7 +630,7 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
     _mark_gaps(ax, gaps)
     ax.set_ylabel("rate about the servo axis\nrad/s")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8, ncol=2)
+    _inside(ax.legend(loc="best", fontsize=8, ncol=2))
 
     # 2: calibrated minus reference on one weight, and the window mean the fit used
     ax = axs[1]
@@ -602,7 +652,7 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
     ax.set_ylabel("calibrated − reference\nrad/s")
     ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    _inside(ax.legend(loc="upper right", fontsize=8))
 
     # 3: raw rates, all axes
     ax = axs[2]
@@ -615,7 +665,7 @@ def _turn_plot(plt: Any, rec: Recording, cal: GyroCalibration, seg: Segment,
     ax.set_ylabel("raw gyro rates\nrad/s")
     ax.set_xlabel("t on the recording clock, s")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8, ncol=3)
+    _inside(ax.legend(loc="best", fontsize=8, ncol=3))
     ax.set_xlim(lo, hi)
     return fig
 
@@ -765,7 +815,7 @@ def write_report(
         If matplotlib is missing, or ``out_dir`` cannot be created.
     """
     from gyrocal.kit.fileio import make_output_dir
-    from gyrocal.kit.plots import require_matplotlib, save_png
+    from gyrocal.kit.plots import require_matplotlib
 
     plt = require_matplotlib()
     out = Path(out_dir)
@@ -785,20 +835,33 @@ def write_report(
     axes = window_axes(extracted, cal, rec.manifest)
     index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}
     written: list[tuple[Path, str]] = []
-    for p in plan:
-        if p.kind == "overview":
-            fig = _overview_plot(plt, rec, extracted)
-        elif p.kind == "turn":
-            seg = p.segment
-            i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
-            # a turn with no window (skipped by the extraction) is drawn about the servo's
-            # home axis
-            axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
-            fig = _turn_plot(plt, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
-        elif p.kind == "rests":
-            fig = _rests_plot(plt, extracted, cal, rec.truth)
-        else:
-            fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
-        save_png(fig, out / p.name, force=force, dpi=100)
-        written.append((out / p.name, p.description))
+    turns = _TurnFigure(plt)
+    try:
+        for p in plan:
+            written.append(_draw(plt, p, out, rec, cal, extracted, turns, home, axes, index,
+                                 force))
+    finally:
+        turns.close()
     return written
+
+
+def _draw(plt: Any, p: PlannedPlot, out: Path, rec: Recording, cal: GyroCalibration,
+          extracted: ExtractedWindows, turns: _TurnFigure, home: Mapping[int, ServoAxis],
+          axes: list[ServoAxis], index: Mapping[int, tuple[int, Window]], force: bool
+          ) -> tuple[Path, str]:
+    """Draw and write one planned plot; the turn plots on the one reused figure."""
+    if p.kind == "overview":
+        fig = _overview_plot(plt, rec, extracted)
+    elif p.kind == "turn":
+        seg = p.segment
+        i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
+        # a turn with no window (skipped by the extraction) is drawn about the servo's
+        # home axis
+        axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
+        fig = _turn_plot(turns, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
+    elif p.kind == "rests":
+        fig = _rests_plot(plt, extracted, cal, rec.truth)
+    else:
+        fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
+    save_png(fig, out / p.name, force=force, dpi=100, keep=p.kind == "turn")
+    return out / p.name, p.description

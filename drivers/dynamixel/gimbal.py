@@ -670,22 +670,24 @@ class Gimbal:
             if err & 0x7F:
                 raise ServoStatusError(i, "SYNC_READ", err, self.ph.getRxPacketError(err & 0x7F))
         t_mid = 0.5 * (t0 + t1)
-        n = len(self.ids)
-        ticks = np.empty(n, dtype=np.int64)
-        vel = np.empty(n) if self.sample_layout == "motion" else None
-        tms = np.empty(n) if self.sample_layout == "motion" else None
-        moving = np.empty(n, dtype=bool) if self.sample_layout == "motion" else None
-        for k, dxl_id in enumerate(self.ids):
-            data = blocks[dxl_id][1]
-            if self.sample_layout == "motion":
-                tick, mov, _, _, _, v_raw, ticks[k] = _MOTION_STRUCT.unpack(data)
-                moving[k] = bool(mov)
-                vel[k] = v_raw * VELOCITY_UNIT_RAD_S
-                tms[k] = self._unwrap_tick(dxl_id, tick, t_mid)
-            else:
-                ticks[k] = _POSITION_STRUCT.unpack(data)[0]
-        angles = np.array([(ticks[k] - self.home_ticks[i]) * POSITION_UNIT_RAD
-                           for k, i in enumerate(self.ids)])
+        home = self.home_ticks
+        if self.sample_layout == "motion":
+            tick_list, vel_list, tms_list, moving_list = [], [], [], []
+            for dxl_id in self.ids:
+                tick, mov, _, _, _, v_raw, present = _MOTION_STRUCT.unpack(blocks[dxl_id][1])
+                tick_list.append(present)
+                moving_list.append(bool(mov))
+                vel_list.append(v_raw * VELOCITY_UNIT_RAD_S)
+                tms_list.append(self._unwrap_tick(dxl_id, tick, t_mid))
+            vel, tms = np.array(vel_list), np.array(tms_list)
+            moving = np.array(moving_list, dtype=bool)
+        else:
+            tick_list = [_POSITION_STRUCT.unpack(blocks[i][1])[0] for i in self.ids]
+            vel = tms = moving = None
+        ticks = np.array(tick_list, dtype=np.int64)
+        # the same doubles as the int64 arithmetic: an exact difference, then one product
+        angles = np.array([(present - home[i]) * POSITION_UNIT_RAD
+                           for present, i in zip(tick_list, self.ids, strict=True)])
         s = GimbalSample(t_mid, t0, t1, self.ids, angles, ticks, vel, tms, moving)
         self.last_sample = s
         return s

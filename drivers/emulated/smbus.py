@@ -27,7 +27,7 @@ import re
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 from smbus2 import I2cFunc
 
@@ -58,9 +58,8 @@ class I2CDevice(Protocol):
         ...
 
 
-@dataclass(frozen=True)
-class Transaction:
-    """One logged bus call.
+class Transaction(NamedTuple):
+    """One logged bus call (a named tuple: one is made for every call on the bus).
 
     Parameters
     ----------
@@ -117,6 +116,7 @@ class _Msg:
     recv_len: bool = False
 
 
+_I2C_FUNC = int(I2cFunc.I2C)
 #: What every adapter can do, as ``smbus2.I2cFunc`` bits (the kernel's I2C_FUNC_SMBUS_EMUL plus
 #: block reads and block process calls).
 _SMBUS_FUNCS = (
@@ -444,7 +444,7 @@ class EmulatedSMBus:
         Read messages are filled in place, as smbus2 does; there is no 32-byte limit.
         """
         self._check_open()
-        if not self._adapter.funcs & I2cFunc.I2C:
+        if not self._adapter.funcs & _I2C_FUNC:
             raise _oserror(errno.EOPNOTSUPP)
         plan: list[_Msg] = []
         reads = []
@@ -467,7 +467,7 @@ class EmulatedSMBus:
     def _smbus(self, op: str, func: int, plan: list[_Msg], *, pec: bool = True) -> list[int]:
         """An SMBus call: check the adapter supports it, add PEC, run it, check PEC."""
         self._check_open()
-        if not self._adapter.funcs & func:
+        if not self._adapter.funcs & int(func):  # as ints: an enum's & is slow
             raise _oserror(errno.EOPNOTSUPP)
         for m in plan:
             if not 0 <= m.addr <= 0x7F:
@@ -500,22 +500,17 @@ class EmulatedSMBus:
         t0 = clock.monotonic()
         bits = 0
         bus_hz, sleep, monotonic = ad.bus_hz, clock.sleep, clock.monotonic
-
-        def spend(n: int) -> None:  # wait until the bus has clocked ``n`` more bits since t0
-            nonlocal bits
-            bits += n
-            if bus_hz > 0:
-                sleep(t0 + bits / bus_hz - monotonic())
-
+        # Each step waits until the bus has clocked its bits since t0 (no wait with bus_hz 0):
+        # a (repeated) START and the address byte, the data bytes at 9 bits (8 + ACK), a STOP.
         first = plan[0]
         register = first.data[0] if first.data else None
-        written = b"".join(m.data[1:] if i == 0 else m.data
-                           for i, m in enumerate(plan) if m.data)
         reads: list[bytes] = []
         failure: int | None = None
         try:
             for m in plan:
-                spend(1 + 9)  # (repeated) START + address byte
+                bits += 1 + 9
+                if bus_hz > 0:
+                    sleep(t0 + bits / bus_hz - monotonic())
                 dev = ad.devices.get(m.addr)
                 refusal = errno.EREMOTEIO if dev is None else dev.i2c_ack()
                 if refusal is not None:
@@ -523,7 +518,9 @@ class EmulatedSMBus:
                     raise _oserror(failure)
                 assert dev is not None
                 if m.data is not None:
-                    spend(9 * len(m.data))
+                    bits += 9 * len(m.data)
+                    if bus_hz > 0:
+                        sleep(t0 + bits / bus_hz - monotonic())
                     if m.data:  # a Quick Command is the address alone
                         dev.i2c_write(m.data)
                     continue
@@ -540,22 +537,19 @@ class EmulatedSMBus:
                     data += bytes(dev.i2c_read(1))
                 if len(data) != length:
                     raise RuntimeError(f"device returned {len(data)} bytes for {length}")
-                spend(9 * length)
+                bits += 9 * length
+                if bus_hz > 0:
+                    sleep(t0 + bits / bus_hz - monotonic())
                 reads.append(data)
-            spend(1)  # STOP
+            bits += 1  # STOP
+            if bus_hz > 0:
+                sleep(t0 + bits / bus_hz - monotonic())
         finally:
-            ad.log.append(
-                Transaction(
-                    t=t0,
-                    op=op,
-                    address=first.addr,
-                    register=register,
-                    written=written,
-                    read_length=sum(len(r) for r in reads),
-                    errno=failure,
-                    duration_s=clock.monotonic() - t0,
-                )
-            )
+            written = b"".join(m.data[1:] if i == 0 else m.data
+                               for i, m in enumerate(plan) if m.data)
+            ad.log.append(Transaction(t0, op, first.addr, register, written,
+                                      sum(len(r) for r in reads), failure,
+                                      clock.monotonic() - t0))
         return reads
 
     def __repr__(self) -> str:

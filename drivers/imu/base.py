@@ -850,8 +850,10 @@ class ImuReader(ABC):
         """
         if index.size == 0:
             return ()
-        gaps = []
         start = self._next_index
+        if self._pending_gap is None and not self.numbers_from_timestamps:
+            return ()  # numbered consecutively from the next expected (_stream_index): no skip
+        gaps = []
         if self._pending_gap is not None:
             first, reason = self._pending_gap
             self._pending_gap = None

@@ -402,3 +402,29 @@ def test_servo_axes_apply_the_g_sensitivity_with_each_window_s_force():
     np.testing.assert_allclose(with_f.axis, u, atol=1e-15)
     without = servo_axes([3], cal, {}, one)[3]
     assert np.linalg.norm(without.axis - u) > 4e-3  # G f = (4e-3, -3e-3, 2e-3) off
+
+
+def test_a_turn_drawn_on_the_reused_figure_is_the_turn_drawn_alone(full, full_report, tmp_path):
+    """The turn plots share one figure (kit.report_plots._TurnFigure): the last turn, drawn
+    after every other, must be the very pixels of that turn drawn on a figure of its own."""
+    import matplotlib.image as mpimg
+
+    from gyrocal.kit import report_plots as rp
+    from gyrocal.kit.plots import require_matplotlib
+
+    _, rec, extracted, cal = full
+    plt = require_matplotlib()
+    last = [p for p in rp.plan_report(rec, extracted) if p.kind == "turn"][-1]
+    motors = sorted({int(s.motor) for s in rec.segments if s.kind == "rotate"})
+    home = servo_axes(motors, cal, rec.manifest, extracted.windows)
+    axes = window_axes(extracted, cal, rec.manifest)
+    index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}
+    alone = rp._TurnFigure(plt)
+    try:
+        path, _ = rp._draw(plt, last, tmp_path, rec, cal, extracted, alone, home, axes, index,
+                           False)
+    finally:
+        alone.close()
+    reused = mpimg.imread(full_report / last.name)
+    assert reused.shape == mpimg.imread(path).shape
+    assert np.array_equal(reused, mpimg.imread(path))

@@ -95,15 +95,20 @@ class EmulatedPortHandler(PortHandler):
         """Up to ``length`` received bytes; replies are sent (and time spent) as needed."""
         if not self.is_open:
             return b""
-        while len(self._rx) < length and self._pending:
-            reply = self._pending.popleft()
+        rx, pending = self._rx, self._pending
+        if 0 < length <= len(rx):  # the rest of a status already received (the usual 2nd read)
+            out = bytes(rx[:length])
+            del rx[:length]
+            return out
+        while len(rx) < length and pending:
+            reply = pending.popleft()
             self._spend(reply.delay_s)
             data = reply.produce()
             if data:
                 self._spend(len(data) * self._byte_time())
-                self._rx += data
+                rx += data
                 self.bytes_received += len(data)
-        if not self._rx and not self._pending:
+        if not rx and not pending:
             # Nothing more will arrive: wait out the SDK's packet timeout on the clock.
             remaining_ms = self.packet_start_time + self.packet_timeout - self.getCurrentTime()
             self.clock.sleep(max(remaining_ms, 0.0) / 1000.0 + 1e-6)

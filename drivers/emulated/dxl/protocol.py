@@ -79,9 +79,14 @@ def crc16(data: bytes | bytearray, crc: int = 0) -> int:
     crc : int
         A running CRC to continue (used by Fast Sync Read, §4.6).
     """
+    table = _TABLE
     for b in data:
-        crc = ((crc << 8) ^ _TABLE[((crc >> 8) ^ b) & 0xFF]) & 0xFFFF
+        crc = ((crc << 8) ^ table[((crc >> 8) ^ b) & 0xFF]) & 0xFFFF
     return crc
+
+
+#: The CRC of the header every packet starts with (the rest of a packet continues it).
+_HEADER_CRC = crc16(HEADER)
 
 
 def stuff(body: bytes) -> bytes:
@@ -123,7 +128,7 @@ def _frame(dxl_id: int, body: bytes) -> bytes:
     length = len(stuffed) + 2
     head = HEADER + bytes([dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF])
     packet = head + stuffed
-    crc = crc16(packet)
+    crc = crc16(packet[4:], _HEADER_CRC)
     return packet + bytes([crc & 0xFF, crc >> 8])
 
 

@@ -74,6 +74,16 @@ _PROFILE_KIND = {"hold": 0, "step": 0, "rectangular": 1, "triangular": 2, "trape
 _LIMITS = {n: (-(1 << (8 * n - 1)), (1 << (8 * n)) - 1) for n in (1, 2, 4)}
 _PACK = {1: struct.Struct("<B").pack_into, 2: struct.Struct("<H").pack_into,
          4: struct.Struct("<I").pack_into}
+
+
+def _put(mem: bytearray, lo: int, hi: int, address: int, size: int, value: int) -> None:
+    """Store a live value of ``size`` bytes at ``address`` if it overlaps ``lo..hi``, clamped
+    to the item's range (:data:`_LIMITS`)."""
+    if address < hi and address + size > lo:
+        low, high = _LIMITS[size]
+        _PACK[size](mem, address, max(low, min(high, value)) & high)
+
+
 #: Deceleration of a shaft whose torque has been switched off (gearbox friction), rad/s².
 _FREE_DECEL = 40.0
 #: Deceleration of a stop forced by a stall, rad/s² (a Bus Watchdog trip stops at once).
@@ -169,6 +179,8 @@ class EmulatedServo:
         else:
             self._abs0 = float(int(initial_ticks) % TICKS_PER_TURN)
         self._mem = bytearray(self.table.size)
+        #: Item name -> (address, end, signed), filled as items are read (:meth:`_get`).
+        self._where: dict[str, tuple[int, int, bool]] = {}
         self._factory = {"ID": int(dxl_id), "Baud Rate": codes[baudrate],
                          "Firmware Version": int(firmware)}
         if velocity_limit is not None:
@@ -220,8 +232,13 @@ class EmulatedServo:
 
     # ---- raw memory ----------------------------------------------------------------------
     def _get(self, name: str) -> int:
-        item = self.table[name]
-        return item.from_bytes(self._mem[item.address: item.end])
+        where = self._where.get(name)
+        if where is None:  # first use of the item (or an unknown name: the table says so)
+            item = self.table[name]
+            where = self._where[name] = (item.address, item.end, item.signed)
+        address, end, signed = where
+        # ControlItem.from_bytes without its checks: little-endian, two's complement if signed
+        return int.from_bytes(self._mem[address:end], "little", signed=signed)
 
     def _set(self, name: str, raw: int) -> None:
         item = self.table[name]
@@ -284,6 +301,13 @@ class EmulatedServo:
 
     def advance_to(self, t: float) -> None:
         """Apply every timed event (watchdog, scheduled faults) due by ``t``."""
+        wd = self._watchdog_deadline
+        try:
+            event_due = self._events[0][0] <= t
+        except IndexError:  # no event (read without the lock: another thread may pop one)
+            event_due = False
+        if not event_due and (wd is None or wd > t):
+            return  # nothing due (the usual case); whatever is due is applied under the lock
         with self.lock:
             while True:
                 due = []
@@ -679,35 +703,31 @@ class EmulatedServo:
         running = bool(torque) and plan.running(now)
         speed_frac = min(abs(rate) / self._max_speed(), 1.5)
         sign = 1 if vel_units >= 0 else -1
-        values = {}
         if lo < 122:
-            values[120] = (2, int(math.floor((now - self._boot_time) * 1000.0)) % TICK_MODULUS)
+            _put(mem, lo, hi, 120, 2,
+                 int(math.floor((now - self._boot_time) * 1000.0)) % TICK_MODULUS)
         if lo < 124 and hi > 122:
             moving = abs(vel_units) > int.from_bytes(mem[24:28], "little") or running
             goal = int.from_bytes(mem[116:120], "little", signed=True)
             in_position = (not running) and (abs(present - goal) <= 1 if mem[11] in (3, 4, 5)
                                              else True)
-            values[122] = (1, int(moving))
-            values[123] = (1, int(in_position) | (int(running) << 1)
-                           | (_PROFILE_KIND.get(plan.kind, 0) << 4))
+            _put(mem, lo, hi, 122, 1, int(moving))
+            _put(mem, lo, hi, 123, 1, int(in_position) | (int(running) << 1)
+                 | (_PROFILE_KIND.get(plan.kind, 0) << 4))
         if lo < 128 and hi > 124:
-            values[124] = (2, round(sign * 885 * min(speed_frac + 0.05, 1.0)) if torque else 0)
-            values[126] = (2, round(sign * (50 + 150 * speed_frac)) if torque else 0)
-        values[128] = (4, vel_units)
-        values[132] = (4, present)
+            _put(mem, lo, hi, 124, 2,
+                 round(sign * 885 * min(speed_frac + 0.05, 1.0)) if torque else 0)
+            _put(mem, lo, hi, 126, 2, round(sign * (50 + 150 * speed_frac)) if torque else 0)
+        _put(mem, lo, hi, 128, 4, vel_units)
+        _put(mem, lo, hi, 132, 4, present)
         if hi > 136 and lo < 144:
             tp, tv = self.motor.trajectory(now)
-            values[136] = (4, round(d * tv / VELOCITY_UNIT_RAD_S))
-            values[140] = (4, self._position_register(tp))
+            _put(mem, lo, hi, 136, 4, round(d * tv / VELOCITY_UNIT_RAD_S))
+            _put(mem, lo, hi, 140, 4, self._position_register(tp))
         if hi > 144:
-            values[144] = (2, round((self.supply_voltage - 0.3 * speed_frac) * 10.0))
+            _put(mem, lo, hi, 144, 2, round((self.supply_voltage - 0.3 * speed_frac) * 10.0))
             self._update_thermal(now)
-            values[146] = (1, round(self._temperature))
-        for addr, (size, value) in values.items():
-            if addr < hi and addr + size > lo:
-                lim = _LIMITS[size]
-                value = max(lim[0], min(lim[1], value)) & lim[1]
-                _PACK[size](mem, addr, value)
+            _put(mem, lo, hi, 146, 1, round(self._temperature))
 
     def reg_write(self, address: int, data: bytes) -> int:
         """REG_WRITE: validate and hold the write until ACTION (§4.4)."""
