@@ -27,7 +27,8 @@ What it models, register by register (bank 0 unless said):
   nominal period whatever the oscillator's error.
 - When the FIFO is full, stop-on-full drops new packets and stream mode drops the oldest whole
   packet (⚠ the datasheet describes stream mode only as "continuous"); either way
-  INT_STATUS.FIFO_FULL_INT is set. INT_STATUS clears when read. SIGNAL_PATH_RESET.FIFO_FLUSH
+  INT_STATUS.FIFO_FULL_INT is set. INT_STATUS clears when read; DATA_RDY_INT is set with every
+  new sample, RESET_DONE_INT after a power-on or software reset. SIGNAL_PATH_RESET.FIFO_FLUSH
   empties the FIFO. Reading FIFO_COUNTH latches the count for FIFO_COUNTL. FIFO_DATA (0x30)
   is a data port: a burst there keeps popping the FIFO, and an empty FIFO reads 0xFF (header
   bit 7: "FIFO empty", ⚠).
@@ -61,6 +62,7 @@ _ODR_BY_CODE = {code: hz for hz, code in ICM42688P_ODR.items()}
 _RESET = {
     _R.INTF_CONFIG0: 0x30, _R.TMST_CONFIG: 0x23, _R.GYRO_CONFIG0: 0x06, _R.ACCEL_CONFIG0: 0x06,
     _R.GYRO_CONFIG1: 0x16, _R.GYRO_ACCEL_CONFIG0: 0x11,
+    _R.INTF_CONFIG1: 0x91, _R.ACCEL_CONFIG1: 0x0D,  # DS-000347 register map reset values
 }
 _READ_ONLY = frozenset(
     {_R.WHO_AM_I, _R.INT_STATUS, _R.FIFO_COUNTH, _R.FIFO_COUNTL, _R.FIFO_DATA}
@@ -118,7 +120,7 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
     def _reset_state(self) -> None:
         self._fifo = bytearray()
         self._latched: int | None = None
-        self._int_status = 0
+        self._int_status = _B.INT_STATUS_RESET_DONE  # a reset has just completed
         self._lpf = None
         self._last_temp_c = 25.0
 
