@@ -673,9 +673,13 @@ def register_names(registers: object) -> dict[int, str]:
 @dataclass(frozen=True)
 class _ICM42688PRegisters:
     """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
-    kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank."""
+    kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank. The
+    reset values noted are DS-000347's bank 0 "Reset value" column as open register headers
+    transcribe it (two independent copies agree ⚠: not read in the datasheet itself); the
+    sensor data registers reset to 0x8000, the kernel's INV_ICM42600_DATA_INVALID (−32768)."""
 
     DEVICE_CONFIG: int = 0x11
+    DRIVE_CONFIG: int = 0x13  # reset 0x05
     INT_CONFIG: int = 0x14
     FIFO_CONFIG: int = 0x16
     TEMP_DATA1: int = 0x1D  # big-endian TEMP_DATA1/0, then ACCEL X/Y/Z, GYRO X/Y/Z
@@ -695,9 +699,12 @@ class _ICM42688PRegisters:
     GYRO_ACCEL_CONFIG0: int = 0x52
     ACCEL_CONFIG1: int = 0x53  # reset 0x0D (DS-000347 register map, bank 0)
     TMST_CONFIG: int = 0x54
+    APEX_CONFIG0: int = 0x56  # reset 0x82
     FIFO_CONFIG1: int = 0x5F
     FIFO_CONFIG2: int = 0x60  # FIFO_WM[7:0]
-    INT_SOURCE0: int = 0x65
+    FSYNC_CONFIG: int = 0x62  # reset 0x10
+    INT_CONFIG1: int = 0x64  # reset 0x10
+    INT_SOURCE0: int = 0x65  # reset 0x10 (RESET_DONE_INT1_EN)
     WHO_AM_I: int = 0x75
     REG_BANK_SEL: int = 0x76
 

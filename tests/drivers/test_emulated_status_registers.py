@@ -152,8 +152,13 @@ def test_icm20948_gyro_offset_registers_act_on_the_output():
 
 def test_icm42688p_reset_values_and_reset_done():
     clock, bus, addr, _ = chip("icm42688p")
-    assert bus.read_byte_data(addr, 0x4D) == 0x91  # INTF_CONFIG1
-    assert bus.read_byte_data(addr, 0x53) == 0x0D  # ACCEL_CONFIG1
+    # DS-000347 bank 0 reset values: DRIVE_CONFIG, INTF_CONFIG1, ACCEL_CONFIG1, APEX_CONFIG0,
+    # FSYNC_CONFIG, INT_CONFIG1, INT_SOURCE0
+    for register, value in ((0x13, 0x05), (0x4D, 0x91), (0x53, 0x0D), (0x56, 0x82),
+                            (0x62, 0x10), (0x64, 0x10), (0x65, 0x10)):
+        assert bus.read_byte_data(addr, register) == value, hex(register)
+    # the sensor data registers read 0x8000 until the first sample
+    assert bus.read_i2c_block_data(addr, 0x1D, 14) == [0x80, 0x00] * 7
     assert bus.read_byte_data(addr, 0x2D) & 0x10  # RESET_DONE_INT after power-on
     assert bus.read_byte_data(addr, 0x2D) & 0x10 == 0  # cleared when read
     bus.write_byte_data(addr, 0x11, 0x01)  # DEVICE_CONFIG.SOFT_RESET
@@ -162,6 +167,7 @@ def test_icm42688p_reset_values_and_reset_done():
     clock.sleep(0.01)
     assert bus.read_byte_data(addr, 0x2D) & 0x08  # DATA_RDY_INT
     assert bus.read_byte_data(addr, 0x2D) & 0x08 == 0
+    assert bus.read_i2c_block_data(addr, 0x1D, 2) != [0x80, 0x00]  # a temperature now
 
 
 def test_lsm6dsox_status_reg_set_on_new_data_cleared_by_reading_each_output():
