@@ -1056,7 +1056,9 @@ class _ICM20948Bank0:
 
     WHO_AM_I: int = 0x00
     USER_CTRL: int = 0x03
-    LP_CONFIG: int = 0x05  # reset 0x40: I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5, GYRO_CYCLE 4
+    # reset 0x40 (open header transcribing DS-000189 ⚠): I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5,
+    # GYRO_CYCLE 4
+    LP_CONFIG: int = 0x05
     PWR_MGMT_1: int = 0x06
     PWR_MGMT_2: int = 0x07
     INT_PIN_CFG: int = 0x0F  # BYPASS_EN bit 1
@@ -1087,6 +1089,9 @@ class _ICM20948Bank2:
     XG_OFFS_USRH: int = 0x03
     ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
     ACCEL_SMPLRT_DIV_2: int = 0x11  # bits [7:0]
+    # reset 0x01 (ACCEL_FCHOICE): DS-000189 as an open header transcribes its register table
+    # ("Reset Value: 0b00000001"); the same header gives GYRO_CONFIG_1 reset 0, where the
+    # emulator keeps 0x01 (DS-000189 as read for the emulator) ⚠ the two sources disagree
     ACCEL_CONFIG: int = 0x14
 
 
