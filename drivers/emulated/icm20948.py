@@ -21,28 +21,64 @@ What it models:
   overwrites the oldest; either way INT_STATUS_2.FIFO_OVERFLOW_INT is set, cleared when read.
   Reading FIFO_COUNTH latches the 13-bit count for FIFO_COUNTL; FIFO_R_W (0x72) is a data port
   that a burst keeps popping, and an empty FIFO repeats the last byte.
-- The AK09916 magnetometer behind the chip's I²C master is not emulated.
+- INT_STATUS_1.RAW_DATA_0_RDY_INT is set with every new sample and cleared when read (R/C);
+  INT_STATUS_2 likewise for the FIFO overflow.
+- Gyro offset: XG_OFFS_USR..ZG_OFFS_USR (bank 2, 0x03–0x08, int16 big-endian) are added to the
+  output as the MPU-9250's X_OFFS_USR are, ``X_OFFS_USR · 4 / 2^GYRO_FS_SEL`` counts ⚠
+  (:data:`~gyrocal.drivers.imu.chips.GYRO_OFFSET_COUNTS_PER_CODE_FS0`).
+- Reset values of bank 2: GYRO_CONFIG_1 = 0x01 and ACCEL_CONFIG = 0x01 (ACCEL_FCHOICE; DS-000189
+  ACCEL_CONFIG reset value, also in open register headers that transcribe it).
+- The I²C master (USER_CTRL.I2C_MST_EN; bank 3 SLV0–SLV4, bank 0 I2C_MST_STATUS, cleared when
+  read, and EXT_SLV_SENS_DATA_00..23; :mod:`~gyrocal.drivers.emulated.i2c_master`) runs one cycle
+  per gyro sample, with the AK09916 magnetometer die
+  (:class:`~gyrocal.drivers.emulated.magnetometers.EmulatedAK09916`) at 0x0C on its auxiliary
+  bus, measuring a true field that turns with the sensor. USER_CTRL.I2C_MST_RST clears itself.
+  With LP_CONFIG.I2C_MST_CYCLE set (reset value 0x40) the master is duty-cycled at 1.1 kHz /
+  2^I2C_MST_ODR_CONFIG instead (DS-000189 LP_CONFIG, I2C_MST_ODR_CONFIG): a driver that never
+  clears it sees that rate whatever its gyro rate.
+  With INT_PIN_CFG.BYPASS_EN set and the master off the die answers on the host bus.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.banks import UserBanks
+from gyrocal.drivers.emulated.i2c_master import AuxI2CMaster, MasterLayout
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
+from gyrocal.drivers.emulated.magnetometers import EmulatedAK09916, MagneticField
 from gyrocal.drivers.emulated.motion import MotionSource
-from gyrocal.drivers.imu.chips import ICM20948, ICM20948_BITS, ICM20948_REG, ICM20948_REG2
-
-__all__ = ["EmulatedICM20948"]
-
-_R, _R2, _B = ICM20948_REG, ICM20948_REG2, ICM20948_BITS
-_READ_ONLY = frozenset(
-    {_R.WHO_AM_I, _R.INT_STATUS_2, _R.FIFO_COUNTH, _R.FIFO_COUNTL, _R.FIFO_R_W}
-    | set(range(_R.ACCEL_XOUT_H, _R.TEMP_OUT_H + 2))
+from gyrocal.drivers.emulated.smbus import I2CDevice
+from gyrocal.drivers.imu.chips import (
+    GYRO_OFFSET_COUNTS_PER_CODE_FS0,
+    ICM20948,
+    ICM20948_BITS,
+    ICM20948_REG,
+    ICM20948_REG2,
+    ICM20948_REG3,
 )
+
+__all__ = ["AK09916_ADDRESS", "EmulatedICM20948"]
+
+_R, _R2, _R3, _B = ICM20948_REG, ICM20948_REG2, ICM20948_REG3, ICM20948_BITS
+_READ_ONLY = frozenset(
+    {_R.WHO_AM_I, _R.I2C_MST_STATUS, _R.INT_STATUS_1, _R.INT_STATUS_2, _R.FIFO_COUNTH,
+     _R.FIFO_COUNTL, _R.FIFO_R_W}
+    | set(range(_R.ACCEL_XOUT_H, _R.TEMP_OUT_H + 2))
+    | set(range(_R.EXT_SLV_SENS_DATA_00, _R.EXT_SLV_SENS_DATA_00 + 24))
+)
+#: Where the AK09916 sits on the auxiliary bus (and on the host bus in bypass).
+AK09916_ADDRESS = 0x0C
+_MASTER = MasterLayout(
+    slv0_addr=_R3.I2C_SLV0_ADDR, slv_stride=4, slv0_do=_R3.I2C_SLV0_ADDR + 3, do_stride=4,
+    slv4_addr=_R3.I2C_SLV4_ADDR, slv4_reg=_R3.I2C_SLV4_REG, slv4_ctrl=_R3.I2C_SLV4_CTRL,
+    slv4_do=_R3.I2C_SLV4_DO, slv4_di=_R3.I2C_SLV4_DI, ext_sens_data_00=_R.EXT_SLV_SENS_DATA_00)
+#: Bank 2 reset values (DS-000189 register map): GYRO_CONFIG_1 and ACCEL_CONFIG = FCHOICE.
+_BANK2_RESET = {_R2.GYRO_CONFIG_1: _B.GYRO_FCHOICE, _R2.ACCEL_CONFIG: _B.ACCEL_FCHOICE}
 _GYRO_ORDER = ((_B.FIFO_EN_2_GYRO_X, 0), (_B.FIFO_EN_2_GYRO_Y, 1), (_B.FIFO_EN_2_GYRO_Z, 2))
 
 
@@ -59,7 +95,7 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
 
     family = ICM20948
     default_who_am_i = 0xEA
-    reset_values = {_R.PWR_MGMT_1: 0x41}
+    reset_values = {_R.PWR_MGMT_1: 0x41, _R.LP_CONFIG: _B.LP_CONFIG_I2C_MST_CYCLE}
     read_only = _READ_ONLY
     soft_reset = (_R.PWR_MGMT_1, _B.PWR_MGMT_1_DEVICE_RESET)
     bank_register, bank_shift, bank_mask = _R.REG_BANK_SEL, _B.BANK_SHIFT, _B.BANK_MASK
@@ -72,10 +108,24 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
         self.output_filter = bool(output_filter)
         self._reset_banks()
         super().__init__(clock, motion, truth, **kwargs)
+        #: Devices on the auxiliary I²C bus by address: the AK09916 die.
+        self.aux: dict[int, I2CDevice] = {
+            AK09916_ADDRESS: EmulatedAK09916(clock, MagneticField(self.motion),
+                                             seed=kwargs.get("seed", 0))}
+        self.master = AuxI2CMaster(_MASTER, self.aux)
+
+    @property
+    def bypass_open(self) -> bool:
+        """Whether the auxiliary bus is switched onto the host bus: INT_PIN_CFG.BYPASS_EN set
+        and USER_CTRL.I2C_MST_EN clear (DS-000189 INT_PIN_CFG, USER_CTRL)."""
+        r = self._regs
+        return bool(r[_R.INT_PIN_CFG] & _B.INT_PIN_CFG_BYPASS_EN) and not (
+            r[_R.USER_CTRL] & _B.USER_CTRL_I2C_MST_EN)
 
     def _power_on_reset(self) -> None:
         self._reset_banks()
-        self._banks[2][_R2.GYRO_CONFIG_1] = _B.GYRO_FCHOICE
+        for register, value in _BANK2_RESET.items():
+            self._banks[2][register] = value
         super()._power_on_reset()
 
     def _write_register(self, register: int, value: int) -> None:
@@ -94,6 +144,56 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
         self._fifo_last = 0
         self._latched: int | None = None
         self._overflow = False
+        self._data_ready = False
+        self._mst_status = 0
+        self._master_k = -1
+
+    def _after_samples(self) -> None:
+        """New samples: INT_STATUS_1's data-ready bit, then, unless the master is duty-cycled
+        (:meth:`_master_period`), one I²C master cycle at the gyro's rate."""
+        self._data_ready = True
+        if self._master_period() is None:
+            self._master_cycle()
+
+    def _master_cycle(self) -> None:
+        """One I²C master cycle while USER_CTRL.I2C_MST_EN is set (slave registers in bank 3,
+        I2C_MST_STATUS and EXT_SLV_SENS_DATA in bank 0)."""
+        if self._regs[_R.USER_CTRL] & _B.USER_CTRL_I2C_MST_EN:
+            self._mst_status |= self.master.cycle(self._banks[3], self._regs)
+
+    def _master_period(self) -> float | None:
+        """The duty-cycled master's period, s: with LP_CONFIG.I2C_MST_CYCLE set (its reset
+        value) the master runs at 1.1 kHz / 2^I2C_MST_ODR_CONFIG (DS-000189 LP_CONFIG and
+        I2C_MST_ODR_CONFIG); None when it runs at the gyro's rate."""
+        if not self._regs[_R.LP_CONFIG] & _B.LP_CONFIG_I2C_MST_CYCLE:
+            return None
+        n = self._banks[3][_R3.I2C_MST_ODR_CONFIG] & _B.I2C_MST_ODR_CONFIG_MASK
+        return 2**n / self.family.extra["i2c_master_duty_base_hz"]
+
+    def _sync(self) -> None:
+        super()._sync()
+        self._duty_cycled_master()
+
+    def _duty_cycled_master(self) -> None:
+        """Run the duty-cycled master once if one of its cycles (on a grid from power-on) has
+        begun since the last bus access; repeating a cycle within one access changes nothing
+        a host can see, so one stands for several."""
+        period = self._master_period()
+        if period is None:
+            return
+        k = math.floor((self.clock.monotonic() - self._created) / period)
+        if k != self._master_k:
+            self._master_k = k
+            self._master_cycle()
+
+    def _gyro_trim_counts(self) -> np.ndarray | float:
+        """XG/YG/ZG_OFFS_USR (bank 2) as output counts at the configured range."""
+        raw = bytes(self._banks[2][_R2.XG_OFFS_USRH:_R2.XG_OFFS_USRH + 6])
+        if not any(raw):
+            return 0.0
+        fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT
+        codes = np.frombuffer(raw, dtype=">i2").astype(float)
+        return codes * GYRO_OFFSET_COUNTS_PER_CODE_FS0 / 2**fs
 
     # -- configuration --------------------------------------------------------------------------
 
@@ -186,6 +286,12 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
             v = _B.INT_STATUS_2_FIFO_OVERFLOW if self._overflow else 0
             self._overflow = False
             return v
+        if register == r.INT_STATUS_1:
+            v, self._data_ready = int(self._data_ready), False
+            return v * _B.INT_STATUS_1_RAW_DATA_0_RDY
+        if register == r.I2C_MST_STATUS:
+            v, self._mst_status = self._mst_status, 0
+            return v
         if register == r.FIFO_COUNTH:
             self._latched = len(self._fifo)
             return (self._latched >> 8) & 0x1F
@@ -205,4 +311,6 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
         if register == _R.FIFO_RST and value & _B.FIFO_RST_ALL:
             self._fifo.clear()
             self._latched = None
+        if register == _R.USER_CTRL:
+            value &= ~_B.USER_CTRL_I2C_MST_RST  # clears itself
         self._regs[register] = value

@@ -27,7 +27,8 @@ What it models, register by register (bank 0 unless said):
   nominal period whatever the oscillator's error.
 - When the FIFO is full, stop-on-full drops new packets and stream mode drops the oldest whole
   packet (⚠ the datasheet describes stream mode only as "continuous"); either way
-  INT_STATUS.FIFO_FULL_INT is set. INT_STATUS clears when read. SIGNAL_PATH_RESET.FIFO_FLUSH
+  INT_STATUS.FIFO_FULL_INT is set. INT_STATUS clears when read; DATA_RDY_INT is set with every
+  new sample, RESET_DONE_INT after a power-on or software reset. SIGNAL_PATH_RESET.FIFO_FLUSH
   empties the FIFO. Reading FIFO_COUNTH latches the count for FIFO_COUNTL. FIFO_DATA (0x30)
   is a data port: a burst there keeps popping the FIFO, and an empty FIFO reads 0xFF (header
   bit 7: "FIFO empty", ⚠).
@@ -61,7 +62,12 @@ _ODR_BY_CODE = {code: hz for hz, code in ICM42688P_ODR.items()}
 _RESET = {
     _R.INTF_CONFIG0: 0x30, _R.TMST_CONFIG: 0x23, _R.GYRO_CONFIG0: 0x06, _R.ACCEL_CONFIG0: 0x06,
     _R.GYRO_CONFIG1: 0x16, _R.GYRO_ACCEL_CONFIG0: 0x11,
+    _R.INTF_CONFIG1: 0x91, _R.ACCEL_CONFIG1: 0x0D, _R.DRIVE_CONFIG: 0x05,
+    _R.APEX_CONFIG0: 0x82, _R.FSYNC_CONFIG: 0x10, _R.INT_CONFIG1: 0x10, _R.INT_SOURCE0: 0x10,
 }
+#: The sensor data registers before the first sample (DS-000347 reset value 0x80, 0x00; the
+#: kernel's INV_ICM42600_DATA_INVALID).
+_DATA_INVALID = -32768
 _READ_ONLY = frozenset(
     {_R.WHO_AM_I, _R.INT_STATUS, _R.FIFO_COUNTH, _R.FIFO_COUNTL, _R.FIFO_DATA}
     | set(range(_R.TEMP_DATA1, _R.GYRO_DATA_X1 + 6))
@@ -118,7 +124,8 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
     def _reset_state(self) -> None:
         self._fifo = bytearray()
         self._latched: int | None = None
-        self._int_status = 0
+        self._int_status = _B.INT_STATUS_RESET_DONE  # a reset has just completed
+        self._sampled = False
         self._lpf = None
         self._last_temp_c = 25.0
 
@@ -241,9 +248,13 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
                 return
         self._fifo += data
 
+    def _after_samples(self) -> None:
+        """New samples: INT_STATUS.DATA_RDY_INT, and the data registers hold data."""
+        self._int_status |= _B.INT_STATUS_DATA_RDY
+        self._sampled = True
+
     def _ingest(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray, head: int,
                 skipped: int) -> None:
-        self._int_status |= _B.INT_STATUS_DATA_RDY
         if not self._fifo_on():
             return
         n = gyro.shape[0]
@@ -290,7 +301,9 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
             reg_lsb = self.family.extra["register_temperature_lsb_per_c"]
             t = int(np.clip(round((self._last_temp_c - 25.0) * reg_lsb), -32768, 32767))
             big = bool(self._regs[r.INTF_CONFIG0] & _B.INTF_CONFIG0_SENSOR_DATA_ENDIAN)
-            words = np.concatenate(([t], s.accel, s.gyro)).astype(">i2" if big else "<i2")
+            words = np.concatenate(([t], s.accel, s.gyro)) if self._sampled else np.full(
+                7, _DATA_INVALID)
+            words = words.astype(">i2" if big else "<i2")
             return words.tobytes()[register - r.TEMP_DATA1]
         return self._regs[register]
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.accel import AccelTruth
+from gyrocal.drivers.emulated.i2c_master import AuxI2CMaster, MasterLayout
 from gyrocal.drivers.emulated.iir import lfilter
 from gyrocal.drivers.emulated.magnetometers import (
     AuxPort,
@@ -55,6 +56,7 @@ from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
 from gyrocal.drivers.emulated.noise import ColouredNoise, Normals
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
+    GYRO_OFFSET_COUNTS_PER_CODE_FS0,
     LSM9DS1,
     LSM9DS1_BITS,
     LSM9DS1_BW_G_CUTOFF_HZ,
@@ -68,6 +70,7 @@ from gyrocal.drivers.imu.chips import (
     MPU9250_REG,
     RAD_PER_DEG,
     ChipFamily,
+    mpu9250_self_test_otp,
 )
 
 __all__ = [
@@ -704,7 +707,7 @@ class _EmulatedImu(ABC):
         odr = 1.0 / period
         m = m + self._noise_rng.standard_normal(m.shape) * self.truth.sigma_rad_s(odr)
         accel = np.clip(np.rint(self.truth.accel_reading(force, self._accel_rng, odr)
-                                * self._accel_counts_1g()),
+                                * self._accel_counts_1g()) + self._accel_trim_counts(),
                         -32768, 32767).astype(np.int64)
         self._emit(t, m, accel, temperature, head, skipped)
 
@@ -718,7 +721,8 @@ class _EmulatedImu(ABC):
         if gyro is None:
             if self._coloured.active:
                 m = m + self._coloured.draw(np.diff(t, prepend=self._t_last))
-            gyro = np.clip(np.rint(m / self._sensitivity_rad_s_per_lsb()), -32768, 32767)
+            gyro = np.clip(np.rint(m / self._sensitivity_rad_s_per_lsb())
+                           + self._gyro_trim_counts(), -32768, 32767)
             gyro = gyro.astype(np.int64)
         self._t_last = float(t[-1])
         f = self.faults
@@ -819,7 +823,8 @@ class _EmulatedImu(ABC):
             m = m + noise
         else:
             a.gm = a.walk = None
-        gyro = np.clip(np.rint(m / a.sensitivity), -32768, 32767).astype(np.int64)
+        gyro = np.clip(np.rint(m / a.sensitivity) + self._gyro_trim_counts(), -32768,
+                       32767).astype(np.int64)
         a.gyro = np.concatenate((np.zeros((i, 3), dtype=np.int64), gyro))
         a.coloured_from, a.coloured_start = i, c.state()
         a.frames = self._frames_ahead(a.gyro, a.accel, a.temp)
@@ -863,7 +868,7 @@ class _EmulatedImu(ABC):
         m = m + self._noise_rng.peek(3 * count).reshape(count, 3) * self.truth.sigma_rad_s(odr)
         peeking = _Peeking(self._accel_rng)
         accel = np.clip(np.rint(self.truth.accel_reading(force, peeking, odr)  # type: ignore[arg-type]
-                                * self._accel_counts_1g()),
+                                * self._accel_counts_1g()) + self._accel_trim_counts(),
                         -32768, 32767).astype(np.int64)
         return _Ahead(token, k_first, t, t_eval, m, accel, temperature,
                       self._temperature_counts(temperature), states, self._lowpass_hz(),
@@ -982,6 +987,15 @@ class _EmulatedImu(ABC):
             return None
         return 1.0 / (2.0 * math.tan(math.pi * fc / rate) * rate)
 
+    def _gyro_trim_counts(self) -> np.ndarray | float:
+        """Counts the chip's registers add to each gyro output (offset registers, self-test
+        actuation), at the configured range; 0 unless a chip has such registers."""
+        return 0.0
+
+    def _accel_trim_counts(self) -> np.ndarray | float:
+        """Counts the chip's registers add to each accelerometer output (self-test)."""
+        return 0.0
+
     def _after_samples(self) -> None:  # noqa: B027 - a hook, empty unless a chip needs it
         """Runs after new samples were taken (the MPU-9250's I²C master cycle)."""
 
@@ -996,9 +1010,18 @@ _MPU_READ_ONLY = frozenset(
     | set(range(_MR.ACCEL_XOUT_H, _MR.GYRO_XOUT_H + 6))
     | set(range(_MR.EXT_SENS_DATA_00, _MR.EXT_SENS_DATA_00 + 24))
 )
+#: Factory self-test codes (SELF_TEST_X/Y/Z_GYRO, SELF_TEST_X/Y/Z_ACCEL) an emulated MPU-9250
+#: holds: illustrative values ⚠ (no part's dump was read), chosen so that the responses they
+#: stand for (:func:`~gyrocal.drivers.imu.chips.mpu9250_self_test_otp`) are about 95 °/s and
+#: 0.45 g, inside the MPU-6500 family's accelerometer self-test response range (225–675 mg).
+MPU9250_SELF_TEST_CODES = (0x9C, 0xA0, 0xA3, 0x68, 0x6B, 0x70)
 #: Where the AK8963 sits on the MPU-9250's auxiliary bus (and on the host bus in bypass).
 AK8963_ADDRESS = 0x0C
 _MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
+_MPU_MASTER = MasterLayout(
+    slv0_addr=_MR.I2C_SLV0_ADDR, slv_stride=3, slv0_do=_MR.I2C_SLV0_DO, do_stride=1,
+    slv4_addr=_MR.I2C_SLV4_ADDR, slv4_reg=_MR.I2C_SLV4_REG, slv4_ctrl=_MR.I2C_SLV4_CTRL,
+    slv4_do=_MR.I2C_SLV4_DO, slv4_di=_MR.I2C_SLV4_DI, ext_sens_data_00=_MR.EXT_SENS_DATA_00)
 _MPU_DLPF_BY_CFG = {cfg: hz for hz, cfg in MPU9250_DLPF.items()}
 
 
@@ -1032,7 +1055,11 @@ class EmulatedMPU9250(_EmulatedImu):
     """
 
     family = MPU9250
-    reset_values = {_MR.PWR_MGMT_1: 0x01}
+    reset_values = {
+        _MR.PWR_MGMT_1: 0x01,
+        **{_MR.SELF_TEST_X_GYRO + i: c for i, c in enumerate(MPU9250_SELF_TEST_CODES[:3])},
+        **{_MR.SELF_TEST_X_ACCEL + i: c for i, c in enumerate(MPU9250_SELF_TEST_CODES[3:])},
+    }
     read_only = _MPU_READ_ONLY
     soft_reset = (_MR.PWR_MGMT_1, _MB.PWR_MGMT_1_H_RESET)
 
@@ -1046,6 +1073,7 @@ class EmulatedMPU9250(_EmulatedImu):
         super().__init__(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples)
         #: Devices on the auxiliary I²C bus, by address: the AK8963 die (none on an MPU-6500).
         self.aux: dict[int, I2CDevice] = {}
+        self.master = AuxI2CMaster(_MPU_MASTER, self.aux)
         if variant != "mpu6500":
             self.aux[AK8963_ADDRESS] = EmulatedAK8963(clock, MagneticField(self.motion),
                                                       seed=seed)
@@ -1059,52 +1087,11 @@ class EmulatedMPU9250(_EmulatedImu):
             r[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN)
 
     def _after_samples(self) -> None:
-        """One I²C master cycle at the sample rate (Register Map §4.7–4.13): slaves 0–3 in
-        order, each reading LENG bytes into the next EXT_SENS_DATA bytes or writing its DO byte;
-        then slave 4's single transfer, which clears its enable and sets SLV4_DONE. A slave that
-        does not acknowledge sets its NACK bit in I2C_MST_STATUS."""
-        r = self._regs
-        if not r[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN:
-            return
-        ext = _MR.EXT_SENS_DATA_00
-        for n in range(4):
-            base = _MR.I2C_SLV0_ADDR + 3 * n
-            ctrl = r[base + 2]
-            if not ctrl & _MB.I2C_SLV_EN:
-                continue
-            length = ctrl & _MB.I2C_SLV_LENG_MASK
-            got = self._aux_transfer(n, r[base], r[base + 1], r[_MR.I2C_SLV0_DO + n], length,
-                                     no_register=bool(ctrl & _MB.I2C_SLV_REG_DIS))
-            if got is None or not length or not r[base] & _MB.I2C_SLV_READ:
-                continue
-            if ctrl & _MB.I2C_SLV_BYTE_SW:
-                got = b"".join(got[i : i + 2][::-1] for i in range(0, len(got), 2))
-            room = max(0, _MR.EXT_SENS_DATA_00 + 24 - ext)
-            r[ext : ext + min(room, len(got))] = got[:room]
-            ext += len(got)
-        ctrl4 = r[_MR.I2C_SLV4_CTRL]
-        if ctrl4 & _MB.I2C_SLV_EN:
-            got = self._aux_transfer(4, r[_MR.I2C_SLV4_ADDR], r[_MR.I2C_SLV4_REG],
-                                     r[_MR.I2C_SLV4_DO], 1,
-                                     no_register=bool(ctrl4 & _MB.I2C_SLV_REG_DIS))
-            if got:
-                r[_MR.I2C_SLV4_DI] = got[0]
-            r[_MR.I2C_SLV4_CTRL] = ctrl4 & ~_MB.I2C_SLV_EN
-            self._mst_status |= _MB.I2C_MST_STATUS_SLV4_DONE
-
-    def _aux_transfer(self, n: int, addr: int, register: int, out: int, length: int, *,
-                      no_register: bool) -> bytes | None:
-        """Slave ``n``'s transfer on the auxiliary bus: the bytes read, or ``None`` on a NACK."""
-        dev = self.aux.get(addr & 0x7F)
-        if dev is None or dev.i2c_ack() is not None:
-            self._mst_status |= 1 << n  # I2C_SLVn_NACK
-            return None
-        if addr & _MB.I2C_SLV_READ:
-            if not no_register:
-                dev.i2c_write(bytes([register]))
-            return bytes(dev.i2c_read(length)) if length else b""
-        dev.i2c_write(bytes([out]) if no_register else bytes([register, out]))
-        return b""
+        """One I²C master cycle at the sample rate (Register Map §4.7–4.13;
+        :class:`~gyrocal.drivers.emulated.i2c_master.AuxI2CMaster`) while USER_CTRL.I2C_MST_EN
+        is set."""
+        if self._regs[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN:
+            self._mst_status |= self.master.cycle(self._regs, self._regs)
 
     def cutoff_hz(self) -> float | None:
         """The gyro DLPF bandwidth CONFIG.DLPF_CFG selects (register map CONFIG table,
@@ -1173,6 +1160,33 @@ class EmulatedMPU9250(_EmulatedImu):
     def _accel_counts_1g(self) -> int:
         fs = (self._regs[_MR.ACCEL_CONFIG] >> _MB.ACCEL_FS_SHIFT) & 0x03
         return int(self.family.extra["accel_lsb_per_g_2g"]) >> fs
+
+    def _self_test_counts(self, config: int, code_register: int) -> np.ndarray | float:
+        """The self-test actuation the axes GYRO_CONFIG/ACCEL_CONFIG bits 7:5 turn on, counts
+        at the configured range: the factory response their SELF_TEST codes stand for
+        (AN-MPU-9250A-03, :func:`~gyrocal.drivers.imu.chips.mpu9250_self_test_otp`)."""
+        r = self._regs
+        on = (r[config] & _MB.SELF_TEST_EN_MASK) >> _MB.SELF_TEST_EN_SHIFT
+        if not on:
+            return 0.0
+        fs = (r[config] >> _MB.GYRO_FS_SHIFT) & 0x03  # both FS fields are bits 4:3
+        return np.array([mpu9250_self_test_otp(r[code_register + i], fs)
+                         if on & (0b100 >> i) else 0.0 for i in range(3)])
+
+    def _gyro_trim_counts(self) -> np.ndarray | float:
+        """XG/YG/ZG_OFFSET (registers 19–24) added to the output, ``X_OFFS_USR · 4 /
+        2^FS_SEL`` counts (RM-MPU-9250A-00), plus any self-test actuation."""
+        r = self._regs
+        trim = self._self_test_counts(_MR.GYRO_CONFIG, _MR.SELF_TEST_X_GYRO)
+        raw = bytes(r[_MR.XG_OFFSET_H:_MR.XG_OFFSET_H + 6])
+        if any(raw):
+            fs = (r[_MR.GYRO_CONFIG] & _MB.GYRO_FS_MASK) >> _MB.GYRO_FS_SHIFT
+            codes = np.frombuffer(raw, dtype=">i2").astype(float)
+            trim = trim + codes * GYRO_OFFSET_COUNTS_PER_CODE_FS0 / 2**fs
+        return trim
+
+    def _accel_trim_counts(self) -> np.ndarray | float:
+        return self._self_test_counts(_MR.ACCEL_CONFIG, _MR.SELF_TEST_X_ACCEL)
 
     # FIFO ------------------------------------------------------------------------------------
 
@@ -1267,6 +1281,8 @@ class EmulatedMPU9250(_EmulatedImu):
         if register == r.INT_STATUS:
             v, self._int_status = self._int_status, 0
             return v
+        if self._regs[r.INT_PIN_CFG] & _MB.INT_PIN_CFG_INT_ANYRD_2CLEAR:
+            self._int_status = 0  # register 55 INT_ANYRD_2CLEAR: any read clears the status
         if register == r.I2C_MST_STATUS:
             v, self._mst_status = self._mst_status, 0
             return v
@@ -1609,15 +1625,18 @@ def make_emulated_imu(
 def _attach_magnetometer(bus: EmulatedSMBus, chip: _EmulatedImu, address: int,
                          seed: int) -> None:
     """Put the chip's magnetometer die on the host bus where a real board has it: the AK8963
-    behind the MPU-9250's bypass switch at 0x0C; the LSM9DS1's magnetometer at 0x1E beside an
-    accel/gyro at 0x6B (SDO pins tied high, as on the common boards), 0x1C beside 0x6A. A die
-    whose address is already taken on a shared bus is left off."""
+    behind the MPU-9250's bypass switch at 0x0C (the ICM-20948's AK09916 likewise); the
+    LSM9DS1's magnetometer at 0x1E beside an accel/gyro at 0x6B (SDO pins tied high, as on the
+    common boards), 0x1C beside 0x6A. A die whose address is already taken on a shared bus is
+    left off."""
     port: I2CDevice
-    if isinstance(chip, EmulatedMPU9250):
-        ak = chip.aux.get(AK8963_ADDRESS)
-        if ak is None or AK8963_ADDRESS in bus.addresses:
+    aux: dict[int, I2CDevice] | None = getattr(chip, "aux", None)
+    if aux is not None:  # the MPU-9250's AK8963, the ICM-20948's AK09916 (both at 0x0C)
+        die = aux.get(AK8963_ADDRESS)
+        if die is None or AK8963_ADDRESS in bus.addresses:
             return
-        bus.attach(AK8963_ADDRESS, AuxPort(ak, lambda: chip.bypass_open))  # type: ignore[arg-type]
+        bus.attach(AK8963_ADDRESS,
+                   AuxPort(die, lambda: chip.bypass_open))  # type: ignore[arg-type, attr-defined]
         return
     if not isinstance(chip, EmulatedLSM9DS1):
         return  # a chip without a magnetometer die

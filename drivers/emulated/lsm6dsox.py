@@ -26,6 +26,9 @@ What it models:
   while the FIFO is full. Bypass empties it. FIFO_STATUS1/2 give DIFF_FIFO (10 bits, words). Reading
   FIFO_DATA_OUT_Z_H (0x7E) pops a word, and with IF_INC the address wraps from 0x7E to 0x78 so a
   burst reads word after word (⚠ the kernel reads four words per transfer this way).
+- STATUS_REG (0x1E): XLDA, GDA, TDA set with every new sample (XLDA while the accelerometer is
+  on) and each cleared when its output registers are read ⚠ (ST's rule for its STATUS_REG,
+  AN5192; the LSM9DS1 model does the same).
 - No output low-pass is emulated (the gyro chain's bandwidth with LPF1 off is not transcribed ⚠).
 """
 
@@ -100,6 +103,13 @@ class EmulatedLSM6DSOX(_EmulatedImu):
         self._ovr_latched = False
         self._ovr_now = False
         self._slot = 0
+        self._status = 0
+
+    def _after_samples(self) -> None:
+        """New samples: STATUS_REG's GDA and TDA, and XLDA while the accelerometer is on."""
+        self._status |= _B.STATUS_GDA | _B.STATUS_TDA
+        if self._regs[_R.CTRL1_XL] >> _B.ODR_SHIFT:
+            self._status |= _B.STATUS_XLDA
 
     def _restart_sampling(self) -> None:
         super()._restart_sampling()
@@ -252,7 +262,11 @@ class EmulatedLSM6DSOX(_EmulatedImu):
             return self._status2()
         if r.TIMESTAMP0 <= register < r.TIMESTAMP0 + 4:
             return self._timestamp_now().to_bytes(4, "little")[register - r.TIMESTAMP0]
+        if register == r.STATUS_REG:
+            return self._status
         if r.OUT_TEMP_L <= register < r.OUTX_L_A + 6:
+            self._status &= ~(_B.STATUS_TDA if register < r.OUTX_L_G else
+                              _B.STATUS_GDA if register < r.OUTX_L_A else _B.STATUS_XLDA)
             s = self._latest
             words = b"".join(self._word(v) for v in (s.temp, *s.gyro, *s.accel))
             return words[register - r.OUT_TEMP_L]

@@ -16,10 +16,29 @@ AK8963 (AKM AK8963 datasheet MS1356-E, §8.3 register map; the MPU-9250 Product 
   (0 power-down, 1 single, 2 continuous 8 Hz, 6 continuous 100 Hz, 0xF fuse ROM) and BIT (bit 4:
   0 = 14-bit 0.6 µT/LSB, 1 = 16-bit 0.15 µT/LSB); CNTL2 (0x0B) SRST bit 0; ASAX..ASAZ (0x10–0x12)
   readable in fuse-ROM mode, applied as ``H · ((ASA − 128)/256 + 1)``.
-- DRDY and DOR clear when ST2 is read; DOR is set when a measurement lands while DRDY is still set;
-  HOFL when |X| + |Y| + |Z| exceeds 4912 µT.
+- DRDY and DOR return to 0 "when any one of ST2 register or measurement data register (HXL~HZH)
+  is read" (§8.3.3, quoted in several open AK8963 drivers); DOR is set when a measurement lands
+  while DRDY is still set; HOFL when |X| + |Y| + |Z| exceeds 4912 µT.
 - Axes against the accel/gyro die: x_mag = y, y_mag = x, z_mag = −z.
 - A single measurement is ready 7.2 ms after it is requested ⚠ (datasheet tSM, max).
+
+AK09916 (the ICM-20948's magnetometer die behind its I²C master; AKM AK09916 datasheet register
+map and §9.4.3 as quoted by open drivers: Pimoroni icm20948, SparkFun qwiic_icm20948, Adafruit
+adafruit_icm20x, ArduPilot AP_Compass_AK09916.cpp, PX4 ICM20948_AK09916.cpp; the register layout
+and burst rules are those of its sibling AK09911, datasheet MS1526-E-01 §7.3, §8.1–8.3 ⚠):
+
+- I²C address 0x0C; WIA1 (0x00) = 0x48 (AKM), WIA2 (0x01) = 0x09; ST1 (0x10) DRDY bit 0, DOR bit
+  1; HXL..HZH (0x11–0x16) little-endian two's complement, 0.15 µT/LSB, ±32752 (4912 µT); TMPS
+  (0x17) a dummy; ST2 (0x18) HOFL bit 3; CNTL2 (0x31) MODE[4:0] (0 power-down, 1 single, 2/4/6/8
+  continuous 10/20/50/100 Hz, 0x10 self-test, not modelled); CNTL3 (0x32) SRST bit 0 (clears
+  itself). No fuse ROM: the AK09916 has no ASA registers.
+- DRDY and DOR return to 0 "when any one of ST2 register or measurement data register (HXL to
+  TMPS) is read".
+- A burst runs 0x00→0x03→0x10→…→0x18 and back to 0x00; 0x30→0x32 and back to 0x30 (AK09911 §7.3
+  ⚠).
+- Axes against the accel/gyro die: x_mag = y, y_mag = x, z_mag = −z, as the AK8963 in the
+  MPU-9250 ⚠ (PX4 publishes the ICM-20948's accelerometer as (x, −y, −z) and its AK09916 as
+  (y_mag, −x_mag, z_mag) in the same frame: ICM20948.cpp and ICM20948_AK09916.cpp).
 
 LSM9DS1 magnetometer (ST LSM9DS1 datasheet DocID025715, Tables 20 and 108–117; melopero-lsm9ds1
 and lsm9ds1-rjg agree):
@@ -47,7 +66,9 @@ import numpy as np
 from gyrocal.drivers.clock import Clock
 
 __all__ = [
+    "AK09916_REG",
     "DEFAULT_FIELD_UT",
+    "EmulatedAK09916",
     "EmulatedAK8963",
     "EmulatedLSM9DS1Mag",
     "MagneticField",
@@ -131,7 +152,7 @@ class _MagDie:
         self._ptr = data[0] & 0x7F
         for value in data[1:]:
             self._write(self._ptr, value)
-            self._ptr = (self._ptr + 1) & 0x7F
+            self._ptr = self._next_pointer(self._ptr)
 
     def i2c_read(self, length: int) -> bytes:
         """Read ``length`` bytes from the register pointer, auto-incrementing."""
@@ -139,8 +160,12 @@ class _MagDie:
         out = bytearray()
         for _ in range(length):
             out.append(self._read(self._ptr) & 0xFF)
-            self._ptr = (self._ptr + 1) & 0x7F
+            self._ptr = self._next_pointer(self._ptr)
         return bytes(out)
+
+    def _next_pointer(self, register: int) -> int:
+        """The register a burst reaches after ``register``."""
+        return (register + 1) & 0x7F
 
     # -- measurements -------------------------------------------------------------------------
 
@@ -270,6 +295,7 @@ class EmulatedAK8963(_MagDie):
         if register == _AK["ST1"]:
             return int(self.ready) | int(self.overrun) << 1
         if _AK["HXL"] <= register < _AK["HXL"] + 6:
+            self.ready = self.overrun = False  # any data register read clears them (§8.3.3)
             return self._data[register - _AK["HXL"]]
         if register == _AK["ST2"]:
             value = (0x08 if self._overflow else 0) | (
@@ -279,6 +305,82 @@ class EmulatedAK8963(_MagDie):
         if _AK["ASAX"] <= register < _AK["ASAX"] + 3:
             # ⚠ readable in fuse-ROM access mode only (datasheet §8.3.11); 0 otherwise
             return self.asa[register - _AK["ASAX"]] if self.mode == 0x0F else 0
+        return self._regs[register]
+
+
+#: AK09916 registers (see the module's list of facts for the sources).
+AK09916_REG = {"WIA1": 0x00, "WIA2": 0x01, "ST1": 0x10, "HXL": 0x11, "TMPS": 0x17, "ST2": 0x18,
+               "CNTL1": 0x30, "CNTL2": 0x31, "CNTL3": 0x32}
+#: CNTL2.MODE → continuous measurement period, s (10, 20, 50, 100 Hz).
+_AK09916_PERIOD = {0x02: 1 / 10, 0x04: 1 / 20, 0x06: 1 / 50, 0x08: 1 / 100}
+_K = AK09916_REG
+
+
+class EmulatedAK09916(_MagDie):
+    """The AK09916 3-axis magnetometer die of the ICM-20948 (see the module's list of facts).
+
+    Parameters
+    ----------
+    clock : Clock
+        The shared clock.
+    field : MagneticField, optional
+        The true field (a constant base-frame field when omitted).
+    noise_ut : float
+        White measurement noise, µT RMS per axis (0: quantization only).
+    seed : int
+        Seed of the noise generator.
+    """
+
+    who_am_i_register = _K["WIA2"]
+    who_am_i = 0x09
+    reset_values: dict[int, int] = {_K["WIA1"]: 0x48, _K["WIA2"]: 0x09}
+
+    @property
+    def mode(self) -> int:
+        """CNTL2.MODE."""
+        return self._regs[_K["CNTL2"]] & 0x1F
+
+    def _next_pointer(self, register: int) -> int:
+        if register == 0x03:
+            return _K["ST1"]
+        if register == _K["ST2"]:
+            return _K["WIA1"]
+        if register == _K["CNTL3"]:
+            return _K["CNTL1"]
+        return (register + 1) & 0x7F
+
+    def _die_axes(self, b_sensor: np.ndarray) -> np.ndarray:
+        return np.array([b_sensor[1], b_sensor[0], -b_sensor[2]])
+
+    def _encode(self, b_die_ut: np.ndarray) -> bytes:
+        self._overflow = float(np.abs(b_die_ut).sum()) >= _AK_RANGE_UT
+        counts = np.clip(np.rint(b_die_ut / 0.15), -32752, 32752)
+        return counts.astype("<i2").tobytes()
+
+    def _single_done(self) -> None:
+        self._regs[_K["CNTL2"]] = 0
+
+    def _write(self, register: int, value: int) -> None:
+        if register == _K["CNTL3"]:
+            if value & 0x01:
+                self._reset()
+            return
+        if register == _K["CNTL2"]:
+            mode = value & 0x1F
+            self._regs[register] = mode
+            self._start(_AK09916_PERIOD.get(mode))
+            self._single_at = self.clock.monotonic() + _AK_SINGLE_S if mode == 0x01 else None
+
+    def _read(self, register: int) -> int:
+        if register == _K["ST1"]:
+            return int(self.ready) | int(self.overrun) << 1
+        if _K["HXL"] <= register <= _K["ST2"]:
+            self.ready = self.overrun = False  # HXL..TMPS or ST2 read ends the data
+            if register == _K["ST2"]:
+                return 0x08 if self._overflow else 0
+            if register == _K["TMPS"]:
+                return 0
+            return self._data[register - _K["HXL"]]
         return self._regs[register]
 
 

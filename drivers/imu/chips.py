@@ -25,6 +25,7 @@ __all__ = [
     "ICM20948_DLPF",
     "ICM20948_REG",
     "ICM20948_REG2",
+    "ICM20948_REG3",
     "ICM42688P",
     "ICM42688P_BITS",
     "ICM42688P_MAX_READER_ODR_HZ",
@@ -47,6 +48,9 @@ __all__ = [
     "MPU9250_DLPF",
     "MPU9250_DLPF_DELAY_S",
     "MPU9250_REG",
+    "MPU9250_SELF_TEST_BASE_COUNTS",
+    "GYRO_OFFSET_COUNTS_PER_CODE_FS0",
+    "mpu9250_self_test_otp",
     "ChipFamily",
     "ChipModel",
     "AccelErrors",
@@ -317,6 +321,11 @@ class ChipFamily:
 class _MPU9250Registers:
     """MPU-9250 register addresses (hardware reference §1.2) and bits."""
 
+    # RM-MPU-9250A-00 registers 0-2 and 13-15: factory self-test codes (OTP), read-only
+    SELF_TEST_X_GYRO: int = 0x00
+    SELF_TEST_X_ACCEL: int = 0x0D
+    # RM-MPU-9250A-00 registers 19-24: X/Y/Z_OFFS_USR, int16 big-endian H/L pairs (reset 0)
+    XG_OFFSET_H: int = 0x13
     SMPLRT_DIV: int = 0x19
     CONFIG: int = 0x1A
     GYRO_CONFIG: int = 0x1B
@@ -358,6 +367,10 @@ class _MPU9250Bits:
     GYRO_FS_SHIFT: int = 3
     GYRO_FS_MASK: int = 0x18
     GYRO_FCHOICE_B_MASK: int = 0x03
+    # RM-MPU-9250A-00 registers 27/28: XGYRO_Cten..ZGYRO_Cten and ax/ay/az_st_en, bits 7:5
+    # (x, y, z): the axis's self-test actuation on
+    SELF_TEST_EN_MASK: int = 0xE0
+    SELF_TEST_EN_SHIFT: int = 5
     ACCEL_FS_SHIFT: int = 3
     FIFO_EN_TEMP: int = 0x80
     FIFO_EN_GYRO_X: int = 0x40
@@ -370,6 +383,8 @@ class _MPU9250Bits:
     USER_CTRL_I2C_MST_EN: int = 0x20
     USER_CTRL_FIFO_RST: int = 0x04
     INT_PIN_CFG_BYPASS_EN: int = 0x02
+    # RM-MPU-9250A-00 register 55: 1 = any read clears INT_STATUS, 0 = reading INT_STATUS does
+    INT_PIN_CFG_INT_ANYRD_2CLEAR: int = 0x10
     I2C_SLV_READ: int = 0x80  # SLVn_ADDR bit 7: read (1) or write (0)
     I2C_SLV_EN: int = 0x80  # SLVn_CTRL bits: enable, byte swap, no register, group, length
     I2C_SLV_BYTE_SW: int = 0x40
@@ -398,6 +413,48 @@ MPU9250_DLPF: Mapping[float, int] = MappingProxyType(
 MPU9250_DLPF_DELAY_S: Mapping[float, float] = MappingProxyType(
     {184.0: 2.9e-3, 92.0: 3.9e-3, 41.0: 5.9e-3, 20.0: 9.9e-3, 10.0: 17.85e-3, 5.0: 33.48e-3}
 )
+
+#: RM-MPU-9250A-00 registers 19-24 (XG_OFFSET_H .. ZG_OFFSET_L): the offset the output gets,
+#: ``OffsetLSB = X_OFFS_USR · 4 / 2^FS_SEL`` counts at GYRO_FS_SEL, "added to the gyroscope
+#: sensor value before going into the sensor register" (one step is 0.0305 °/s at every range);
+#: Kris Winer's MPU9250 calibrateMPU9250 writes −bias/4 (bias in counts at ±250 °/s) for that
+#: reason ("Biases are additive, so change sign"). The ICM-20948's XG_OFFS_USR (DS-000189,
+#: bank 2) is taken to be the same ⚠ (its description gives only "gyro offset cancellation").
+GYRO_OFFSET_COUNTS_PER_CODE_FS0 = 4.0
+
+#: MPU-9250 self-test (AN-MPU-9250A-03 "MPU-9250 Accelerometer, Gyroscope and Compass
+#: Self-Test Implementation", and the register map's SELF_TEST registers): the factory
+#: self-test response of an axis is ``ST_OTP = 2620 / 2^FS · 1.01^(ST_code − 1)`` counts at
+#: the self-test range (FS = 0: ±250 °/s, ±2 g), the self-test code being the axis's
+#: SELF_TEST_* byte (0: no OTP value). A part passes when its response now, (output with the
+#: self-test on) − (output without), is more than 0.5 ST_OTP for the gyro and between 0.5 and
+#: 1.5 ST_OTP for the accelerometer (AN-MPU-9250A-03 pass criteria; PX4's and Kris Winer's
+#: MPU9250SelfTest use the same formula).
+MPU9250_SELF_TEST_BASE_COUNTS = 2620.0
+MPU9250_SELF_TEST_CODE_RATIO = 1.01
+
+
+def mpu9250_self_test_otp(code: int, fs: int = 0) -> float:
+    """The factory self-test response, counts, that the SELF_TEST code ``code`` stands for at
+    range ``fs`` (AN-MPU-9250A-03: ``2620 / 2^FS · 1.01^(code − 1)``; 0 for code 0).
+
+    Parameters
+    ----------
+    code : int
+        The SELF_TEST_* register byte (1..255; 0 means no factory value).
+    fs : int
+        GYRO_FS_SEL or ACCEL_FS_SEL of the range the response is read at.
+
+    Returns
+    -------
+    float
+        The response in counts.
+    """
+    if code == 0:
+        return 0.0
+    return (MPU9250_SELF_TEST_BASE_COUNTS / 2**fs
+            * MPU9250_SELF_TEST_CODE_RATIO ** (code - 1))
+
 
 MPU6500_NOTICE = (
     "WHO_AM_I 0x70: this is an MPU-6500, the MPU-9250's accel/gyro die without the AK8963 "
@@ -616,9 +673,13 @@ def register_names(registers: object) -> dict[int, str]:
 @dataclass(frozen=True)
 class _ICM42688PRegisters:
     """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
-    kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank."""
+    kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank. The
+    reset values noted are DS-000347's bank 0 "Reset value" column as open register headers
+    transcribe it (two independent copies agree ⚠: not read in the datasheet itself); the
+    sensor data registers reset to 0x8000, the kernel's INV_ICM42600_DATA_INVALID (−32768)."""
 
     DEVICE_CONFIG: int = 0x11
+    DRIVE_CONFIG: int = 0x13  # reset 0x05
     INT_CONFIG: int = 0x14
     FIFO_CONFIG: int = 0x16
     TEMP_DATA1: int = 0x1D  # big-endian TEMP_DATA1/0, then ACCEL X/Y/Z, GYRO X/Y/Z
@@ -630,15 +691,20 @@ class _ICM42688PRegisters:
     FIFO_DATA: int = 0x30
     SIGNAL_PATH_RESET: int = 0x4B
     INTF_CONFIG0: int = 0x4C
+    INTF_CONFIG1: int = 0x4D  # reset 0x91 (DS-000347 register map, bank 0)
     PWR_MGMT0: int = 0x4E
     GYRO_CONFIG0: int = 0x4F
     ACCEL_CONFIG0: int = 0x50
     GYRO_CONFIG1: int = 0x51
     GYRO_ACCEL_CONFIG0: int = 0x52
+    ACCEL_CONFIG1: int = 0x53  # reset 0x0D (DS-000347 register map, bank 0)
     TMST_CONFIG: int = 0x54
+    APEX_CONFIG0: int = 0x56  # reset 0x82
     FIFO_CONFIG1: int = 0x5F
     FIFO_CONFIG2: int = 0x60  # FIFO_WM[7:0]
-    INT_SOURCE0: int = 0x65
+    FSYNC_CONFIG: int = 0x62  # reset 0x10
+    INT_CONFIG1: int = 0x64  # reset 0x10
+    INT_SOURCE0: int = 0x65  # reset 0x10 (RESET_DONE_INT1_EN)
     WHO_AM_I: int = 0x75
     REG_BANK_SEL: int = 0x76
 
@@ -654,6 +720,9 @@ class _ICM42688PBits:
     FIFO_MODE_STREAM: int = 0b01
     FIFO_MODE_STOP_ON_FULL: int = 0b10
     INT_STATUS_DATA_RDY: int = 0x08
+    # INT_STATUS.RESET_DONE_INT: set when a reset completes, cleared when read (DS-000347
+    # INT_STATUS; the kernel's inv_icm42600_setup refuses a chip without it after SOFT_RESET)
+    INT_STATUS_RESET_DONE: int = 0x10
     INT_STATUS_FIFO_FULL: int = 0x02
     SIGNAL_PATH_RESET_FIFO_FLUSH: int = 0x02
     # INTF_CONFIG0 reset 0x30: FIFO count and sensor data big-endian, FIFO count in bytes
@@ -855,6 +924,11 @@ class _LSM6DSOXBits:
     CTRL3_C_IF_INC: int = 0x04
     CTRL3_C_SW_RESET: int = 0x01
     CTRL10_C_TIMESTAMP_EN: int = 0x20
+    # STATUS_REG (DS12814 STATUS_REG; lsm6dsox_reg.h lsm6dsox_status_reg_t): new data at the
+    # accelerometer, gyro, temperature output; reset when that output is read (AN5192 ⚠)
+    STATUS_XLDA: int = 0x01
+    STATUS_GDA: int = 0x02
+    STATUS_TDA: int = 0x04
     BDR_GY_SHIFT: int = 4
     DEC_TS_BATCH_SHIFT: int = 6
     DEC_TS_EVERY_BATCH: int = 0b01  # a timestamp word with every batch data rate event
@@ -976,16 +1050,25 @@ LSM6DSOX = ChipFamily(
 
 @dataclass(frozen=True)
 class _ICM20948Bank0:
-    """ICM-20948 user bank 0 registers (DS-000189 register map, bank 0)."""
+    """ICM-20948 user bank 0 registers (DS-000189 register map, bank 0, and each register's
+    description there; the I²C-master and status rows checked against SparkFun's
+    qwiic_icm20948.py AGB0_REG_* and Adafruit's adafruit_icm20x.py)."""
 
     WHO_AM_I: int = 0x00
     USER_CTRL: int = 0x03
+    # reset 0x40 (open header transcribing DS-000189 ⚠): I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5,
+    # GYRO_CYCLE 4
+    LP_CONFIG: int = 0x05
     PWR_MGMT_1: int = 0x06
     PWR_MGMT_2: int = 0x07
+    INT_PIN_CFG: int = 0x0F  # BYPASS_EN bit 1
+    I2C_MST_STATUS: int = 0x17  # R/C: NACK bits 4:0, SLV4_DONE bit 6
+    INT_STATUS_1: int = 0x1A  # RAW_DATA_0_RDY_INT bit 0, R/C
     INT_STATUS_2: int = 0x1B  # FIFO_OVERFLOW_INT[4:0], cleared when read
     ACCEL_XOUT_H: int = 0x2D
     GYRO_XOUT_H: int = 0x33
     TEMP_OUT_H: int = 0x39
+    EXT_SLV_SENS_DATA_00: int = 0x3B  # 24 bytes, to 0x52
     FIFO_EN_2: int = 0x67
     FIFO_RST: int = 0x68
     FIFO_MODE: int = 0x69
@@ -997,13 +1080,36 @@ class _ICM20948Bank0:
 
 @dataclass(frozen=True)
 class _ICM20948Bank2:
-    """ICM-20948 user bank 2 registers (DS-000189 register map, bank 2)."""
+    """ICM-20948 user bank 2 registers (DS-000189 register map, bank 2; XG_OFFS_USRH..ZG_OFFS_
+    USRL also in SparkFun's ICM_20948_REGISTERS.h)."""
 
     GYRO_SMPLRT_DIV: int = 0x00
     GYRO_CONFIG_1: int = 0x01
+    # X/Y/Z_OFFS_USER, int16 big-endian H/L pairs at 0x03..0x08 (reset 0)
+    XG_OFFS_USRH: int = 0x03
     ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
     ACCEL_SMPLRT_DIV_2: int = 0x11  # bits [7:0]
+    # reset 0x01 (ACCEL_FCHOICE): DS-000189 as an open header transcribes its register table
+    # ("Reset Value: 0b00000001"); the same header gives GYRO_CONFIG_1 reset 0, where the
+    # emulator keeps 0x01 (DS-000189 as read for the emulator) ⚠ the two sources disagree
     ACCEL_CONFIG: int = 0x14
+
+
+@dataclass(frozen=True)
+class _ICM20948Bank3:
+    """ICM-20948 user bank 3 registers: the auxiliary I²C master (DS-000189 register map, bank
+    3, and the register descriptions; SparkFun qwiic_icm20948.py AGB3_REG_*, Pimoroni icm20948
+    and Adafruit adafruit_icm20x use the same addresses)."""
+
+    I2C_MST_ODR_CONFIG: int = 0x00  # rate while gyro and accel are off (not modelled)
+    I2C_MST_CTRL: int = 0x01  # MULT_MST_EN, I2C_MST_P_NSR, I2C_MST_CLK (stored)
+    I2C_MST_DELAY_CTRL: int = 0x02  # (stored)
+    I2C_SLV0_ADDR: int = 0x03  # SLVn_ADDR/REG/CTRL/DO at 0x03 + 4n, n = 0..3
+    I2C_SLV4_ADDR: int = 0x13
+    I2C_SLV4_REG: int = 0x14
+    I2C_SLV4_CTRL: int = 0x15  # EN bit 7 (clears when done), INT_EN, REG_DIS, DLY
+    I2C_SLV4_DO: int = 0x16
+    I2C_SLV4_DI: int = 0x17  # the byte slave 4 read
 
 
 @dataclass(frozen=True)
@@ -1013,6 +1119,13 @@ class _ICM20948Bits:
     BANK_SHIFT: int = 4
     BANK_MASK: int = 0x30
     USER_CTRL_FIFO_EN: int = 0x40
+    USER_CTRL_I2C_MST_EN: int = 0x20
+    USER_CTRL_I2C_MST_RST: int = 0x02  # resets the I²C master, clears itself
+    INT_PIN_CFG_BYPASS_EN: int = 0x02  # INT_PIN_CFG: the aux bus on the host bus
+    # LP_CONFIG.I2C_MST_CYCLE: the I²C master runs duty-cycled at the I2C_MST_ODR_CONFIG rate
+    LP_CONFIG_I2C_MST_CYCLE: int = 0x40
+    I2C_MST_ODR_CONFIG_MASK: int = 0x0F
+    INT_STATUS_1_RAW_DATA_0_RDY: int = 0x01  # INT_STATUS_1: new sensor register data
     PWR_MGMT_1_DEVICE_RESET: int = 0x80
     PWR_MGMT_1_SLEEP: int = 0x40
     PWR_MGMT_1_CLKSEL_AUTO: int = 0x01
@@ -1035,6 +1148,7 @@ class _ICM20948Bits:
 
 ICM20948_REG = _ICM20948Bank0()
 ICM20948_REG2 = _ICM20948Bank2()
+ICM20948_REG3 = _ICM20948Bank3()
 ICM20948_BITS = _ICM20948Bits()
 
 #: Gyro DLPF bandwidth (3 dB, Hz) for each GYRO_DLPFCFG with GYRO_FCHOICE = 1, the internal
@@ -1091,6 +1205,8 @@ ICM20948 = ChipFamily(
             "fifo_frame_bytes": 14.0,
             "fifo_sample_bytes": 14.0,  # one frame per sample
             "dlpf_off_rate_hz": 9000.0,  # GYRO_FCHOICE = 0 ⚠
+            # I2C_MST_ODR_CONFIG: the duty-cycled I²C master's rate is 1.1 kHz / 2^ODR_CONFIG
+            "i2c_master_duty_base_hz": 1100.0,
             "wake_time_s": 0.010,  # ⚠ as for the MPU-9250
             "accel_lsb_per_g_2g": 16384.0,  # DS-000189 Table 2
         }

@@ -16,18 +16,12 @@ from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
 from gyrocal.drivers.emulated.magnetometers import MagneticField
 from gyrocal.drivers.emulated.motion import ConstantRate
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus
+from tests.drivers.third_party import blinka_stand_ins, fake_time
 
 DEG = np.pi / 180
 FIELD = np.array([20.0, 5.0, -44.0])
 OMEGA = np.array([10.0, -20.0, 30.0]) * DEG
 BIAS = np.array([0.5, -0.25, 1.0]) * DEG
-
-
-def fake_time(clock):
-    """A stand-in for the ``time`` module on the virtual clock."""
-    return types.SimpleNamespace(sleep=clock.sleep, time=clock.monotonic,
-                                 monotonic=clock.monotonic, perf_counter=clock.monotonic,
-                                 monotonic_ns=lambda: int(clock.monotonic() * 1e9))
 
 
 def emulated(model, *, noise=0.0, omega=OMEGA):
@@ -194,3 +188,95 @@ def test_lsm9ds1_rjg_opens_a_bus_per_call_and_reads_everything(monkeypatch):
     field_die = np.array([-FIELD[1], -FIELD[0], FIELD[2]]) * 10 / 0.14
     np.testing.assert_allclose(mag, field_die, atol=1)  # read_magnetometer does not flip
     assert bus.transactions > 10  # every call opened and closed its own SMBus handle
+
+
+# -- ICM-20948 clients ----------------------------------------------------------------------------
+# The AK09916 sits behind the ICM-20948's I²C master; its axes are (y, x, -z) of the accel/gyro
+# die (as the AK8963's in the MPU-9250) and it reads 0.15 µT/LSB, no sensitivity adjustment.
+
+MAG_DIE_UT = np.array([FIELD[1], FIELD[0], -FIELD[2]])
+MAG_DIE_COUNTS = np.rint(MAG_DIE_UT / 0.15)
+
+
+def icm20948_with_field():
+    clock, truth, bus, addr = emulated("icm20948")
+    bus.device(addr).aux[0x0C].field = MagneticField(None, FIELD)
+    return clock, truth, bus, addr
+
+
+def test_pimoroni_icm20948_finds_the_ak09916_and_reads_every_sensor(monkeypatch):
+    mod = pytest.importorskip("icm20948")
+    clock, truth, bus, addr = icm20948_with_field()
+    monkeypatch.setattr(mod, "time", fake_time(clock))
+    imu = mod.ICM20948(i2c_addr=addr, i2c_bus=bus.handle())  # raised "Unable to find AK09916"
+    # read_magnetometer_data: a single measurement through slave 0, counts * 0.15 µT
+    np.testing.assert_allclose(imu.read_magnetometer_data(), MAG_DIE_COUNTS * 0.15, atol=1e-9)
+    ax, ay, az, gx, gy, gz = imu.read_accelerometer_gyro_data()  # its ±16 g, ±250 °/s
+    np.testing.assert_allclose([ax, ay, az], [0, 0, 1], atol=1 / 2048)
+    np.testing.assert_allclose([gx, gy, gz], np.rint(expected_reading_dps(truth) * 131) / 131,
+                               atol=1e-9)
+    # its own conversion (icm20948/__init__.py read_temperature): (raw - 21) / 333.87 + 21
+    raw = round((31.0 - 21.0) * 333.87)
+    assert imu.read_temperature() == pytest.approx((raw - 21) / 333.87 + 21, abs=1e-9)
+
+
+def test_sparkfun_qwiic_icm20948_starts_the_magnetometer_and_sees_data_ready(monkeypatch):
+    mod = pytest.importorskip("qwiic_icm20948")
+    linux_i2c = pytest.importorskip("qwiic_i2c.linux_i2c")
+    import smbus2
+
+    clock, truth, bus, addr = icm20948_with_field()
+    monkeypatch.setattr(smbus2, "SMBus", bus.smbus_class())
+    monkeypatch.setattr(mod, "time", fake_time(clock))
+    dev = mod.QwiicIcm20948(address=addr, i2c_driver=linux_i2c.LinuxI2C(1))
+    assert dev.begin()
+    assert clock.monotonic() < 0.5  # SLV4_DONE answered: no polling to its 1000-read limit
+    assert dev.magWhoIAm()
+    clock.sleep(0.02)
+    assert dev.dataReady()  # INT_STATUS_1.RAW_DATA_0_RDY_INT (read 0 before issue 26)
+    dev.getAgmt()  # ±2 g, ±250 °/s after begin(); slave 0 reads ST1..ST2 of the AK09916
+    np.testing.assert_array_equal([dev.gxRaw, dev.gyRaw, dev.gzRaw],
+                                  np.rint(expected_reading_dps(truth) * 131))
+    assert [dev.axRaw, dev.ayRaw, dev.azRaw] == [0, 0, 16384]
+    np.testing.assert_array_equal([dev.mxRaw, dev.myRaw, dev.mzRaw], MAG_DIE_COUNTS)
+    assert not dev.magStat2 & 0x08  # ST2.HOFL
+
+
+def test_adafruit_icm20x_reads_the_magnetometer_through_slave_4_and_slave_0():
+    with blinka_stand_ins():
+        mod = pytest.importorskip("adafruit_icm20x")
+        from tests.drivers.third_party import BusioI2C
+
+        clock, truth, bus, addr = icm20948_with_field()
+        mod.sleep = clock.sleep  # its ``from time import sleep``
+        icm = mod.ICM20948(BusioI2C(bus), addr)
+        assert clock.monotonic() < 2.0  # no 100 × 10 ms polls of SLV4_DONE per access
+        np.testing.assert_allclose(icm.magnetic, MAG_DIE_COUNTS * 0.15, atol=1e-9)
+        # its init sets ±8 g and ±500 °/s (adafruit_icm20x.py ICM20X.initialize)
+        np.testing.assert_allclose(icm.acceleration, [0, 0, 9.80665], atol=1e-9)
+        np.testing.assert_allclose(icm.gyro, np.rint(expected_reading_dps(truth) * 65.5)
+                                   / 65.5 * DEG, atol=1e-12)
+
+
+# -- LSM6DSOX clients -----------------------------------------------------------------------------
+
+
+def test_sparkfun_qwiic_lsm6dso_sees_status_reg_data_ready_and_reads_in_its_units(monkeypatch):
+    mod = pytest.importorskip("qwiic_lsm6dso")
+    linux_i2c = pytest.importorskip("qwiic_i2c.linux_i2c")
+    import smbus2
+
+    clock, truth, bus, addr = emulated("lsm6dsox")
+    monkeypatch.setattr(smbus2, "SMBus", bus.smbus_class())
+    dev = mod.QwiicLSM6DSO(address=addr, i2c_driver=linux_i2c.LinuxI2C(1))
+    assert dev.begin()
+    assert dev.set_gyro_range(dev.FS_G_500dps) and dev.set_accel_range(dev.FS_XL_4g)
+    dev.set_gyro_data_rate(dev.ODR_104Hz)
+    dev.set_accel_data_rate(dev.ODR_104Hz)
+    clock.sleep(0.02)
+    assert dev.get_status_reg() & 0x03 == 0x03  # XLDA and GDA: its examples wait for them
+    np.testing.assert_allclose(dev.read_float_gyro_all(),
+                               np.rint(expected_reading_dps(truth) / 0.0175) * 0.0175, atol=1e-9)
+    np.testing.assert_allclose(dev.read_float_accel_all(), [0, 0, round(1 / 0.122e-3) * 0.000122],
+                               atol=1e-9)
+    assert dev.get_status_reg() & 0x03 == 0  # both outputs read

@@ -122,6 +122,8 @@ class ServoBus:
             listeners = [s for s in self.servos if s.hears(now, baudrate)]
             if instr.dxl_id != BROADCAST_ID:
                 target = next((s for s in listeners if s.dxl_id == instr.dxl_id), None)
+                if instr.crc_ok:
+                    self._shadow(listeners, instr, now)
                 if target is None:
                     return []
                 target.note_instruction(now)
@@ -131,6 +133,31 @@ class ServoBus:
             if not instr.crc_ok:
                 return []
             return self._broadcast(listeners, instr, now)
+
+    def _shadow(self, listeners: list[EmulatedServo], instr: Instruction, now: float) -> None:
+        """A packet to an ID that is some servos' Secondary (Shadow) ID (control table address
+        12): every such servo whose own ID differs executes it and none replies (e-Manual, X
+        series control table, Secondary(Shadow) ID: "Dynamixels with the same Secondary ID
+        value form a group"; "ID(7) has a higher priority"; "The EEPROM area of the Control
+        Table cannot be modified with Secondary ID(12). Only the RAM area can be modified"; "If
+        Instruction Packet ID is the same as Secondary ID(12), the Status Packet will not be
+        returned"; 253–255 deactivate it). Only the instructions that change RAM act: WRITE and
+        REG_WRITE to the RAM area, and ACTION; a READ or PING has nothing to return, and the
+        e-Manual does not say that REBOOT, CLEAR or FACTORY_RESET act by Secondary ID ⚠."""
+        group = [s for s in listeners
+                 if s.dxl_id != instr.dxl_id and s.secondary_id == instr.dxl_id]
+        if not group:
+            return
+        code, p = instr.code, instr.params
+        for s in group:
+            s.note_instruction(now)
+            if code == ACTION:
+                s.action()
+            elif code in (WRITE, REG_WRITE) and len(p) >= 3:
+                addr = p[0] | p[1] << 8
+                if not s.in_ram(addr, len(p) - 2):
+                    continue
+                s.write(addr, p[2:]) if code == WRITE else s.reg_write(addr, p[2:])
 
     def _reply(self, servo: EmulatedServo, kind: str,
                make: Callable[[], tuple[int, bytes]],

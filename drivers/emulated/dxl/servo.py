@@ -535,6 +535,21 @@ class EmulatedServo:
             return None
         return target
 
+    @property
+    def secondary_id(self) -> int | None:
+        """Secondary(Shadow) ID (address 12), or None when deactivated (253–255; e-Manual)."""
+        value = self._get("Secondary(Shadow) ID")
+        return value if value < 253 else None
+
+    def in_ram(self, address: int, length: int) -> bool:
+        """Whether ``length`` bytes from ``address`` are all in the RAM area (address 64 on)
+        and not indirect data bytes that point into EEPROM."""
+        for a in range(address, address + length):
+            t = self._indirect_target(a)
+            if (a if t is None else t) < _RAM_START:
+                return False
+        return True
+
     def write(self, address: int, data: bytes, *, apply: bool = True) -> int:
         """WRITE: the status error number (0 = done). ``apply=False`` only validates."""
         with self.lock:

@@ -1,0 +1,188 @@
+"""Data-ready and status bits, offset and self-test registers, reset values of the emulated
+chips, each against its datasheet (register addresses and formulas written out here).
+
+Sources: MPU-9250 register map RM-MPU-9250A-00 (SELF_TEST 0x00-0x02/0x0D-0x0F, XG_OFFSET_H..
+ZG_OFFSET_L 0x13-0x18 "OffsetLSB = X_OFFS_USR * 4 / 2^FS_SEL", INT_PIN_CFG 0x37 bit 4
+INT_ANYRD_2CLEAR, INT_STATUS 0x3A bit 0 RAW_DATA_RDY_INT) and the self-test application note
+AN-MPU-9250A-03 (factory trim 2620/2^FS * 1.01^(code-1); pass: gyro STR/FT > 0.5, accel
+0.5 < STR/FT < 1.5); ICM-20948 DS-000189 (INT_STATUS_1 0x1A, bank 2 XG_OFFS_USRH 0x03,
+ACCEL_CONFIG 0x14 reset 0x01); ICM-42688-P DS-000347 (INT_STATUS 0x2D: DATA_RDY bit 3,
+RESET_DONE bit 4; INTF_CONFIG1 0x4D reset 0x91, ACCEL_CONFIG1 0x53 reset 0x0D); LSM6DSOX DS12814
+(STATUS_REG 0x1E: XLDA bit 0, GDA bit 1, TDA bit 2).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from gyrocal.drivers.clock import VirtualClock
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
+from gyrocal.drivers.emulated.motion import ConstantRate
+
+DEG = math.pi / 180
+OMEGA = np.array([10.0, -20.0, 30.0]) * DEG
+
+
+def chip(model, truth=None, omega=OMEGA):
+    clock = VirtualClock()
+    truth = truth or SensorTruth(noise_density_rad_s_sqrt_hz=0.0)
+    bus, addr = make_emulated_imu(model, clock, ConstantRate(omega), truth, subsamples=1)
+    return clock, bus, addr, truth
+
+
+def be16s(data):
+    return np.frombuffer(bytes(data), dtype=">i2").astype(int)
+
+
+# -- MPU-9250 ----------------------------------------------------------------------------------
+
+
+def mpu_awake(bus, addr, fs=0):
+    bus.write_byte_data(addr, 0x6B, 0x01)  # PWR_MGMT_1: awake
+    bus.write_byte_data(addr, 0x1A, 0x01)  # CONFIG: DLPF_CFG 1, 1 kHz
+    bus.write_byte_data(addr, 0x1B, fs << 3)  # GYRO_CONFIG
+
+
+def mpu_gyro(bus, addr):
+    return be16s(bus.read_i2c_block_data(addr, 0x43, 6))
+
+
+@pytest.mark.parametrize("fs", [0, 1, 3])
+def test_mpu9250_offset_registers_add_x_offs_usr_times_4_over_2_to_fs(fs):
+    clock, bus, addr, truth = chip("mpu9250")
+    mpu_awake(bus, addr, fs)
+    clock.sleep(0.01)
+    lsb_per_dps = (131.0, 65.5, 32.8, 16.4)[fs]
+    base = np.rint(truth.reading(OMEGA[None], np.array([25.0]))[0] / DEG * lsb_per_dps)
+    np.testing.assert_array_equal(mpu_gyro(bus, addr), base)
+    codes = (400, -1000, 7)
+    bus.write_i2c_block_data(addr, 0x13, list(np.array(codes, ">i2").tobytes()))
+    clock.sleep(0.01)
+    np.testing.assert_allclose(mpu_gyro(bus, addr), base + np.array(codes) * 4 / 2**fs, atol=0.5)
+
+
+def test_mpu9250_self_test_passes_the_application_note_procedure():
+    # Kris Winer's MPU9250SelfTest / AN-MPU-9250A-03, with 20 samples instead of 200
+    clock, bus, addr, _ = chip("mpu9250")
+    w = bus.write_byte_data
+    mpu_awake(bus, addr, 0)
+    w(addr, 0x1A, 0x02)  # DLPF 92 Hz
+    w(addr, 0x1D, 0x02)
+    w(addr, 0x1C, 0x00)  # ±2 g
+
+    def average():
+        a, g = np.zeros(3), np.zeros(3)
+        for _ in range(20):
+            clock.sleep(0.001)
+            d = be16s(bus.read_i2c_block_data(addr, 0x3B, 14))
+            a, g = a + d[:3], g + d[4:]
+        return a / 20, g / 20
+
+    clock.sleep(0.05)
+    a0, g0 = average()
+    w(addr, 0x1B, 0xE0)  # XGYRO_Cten | YGYRO_Cten | ZGYRO_Cten, ±250 °/s
+    w(addr, 0x1C, 0xE0)  # ax/ay/az_st_en, ±2 g
+    clock.sleep(0.025)
+    a1, g1 = average()
+    codes = bus.read_i2c_block_data(addr, 0x00, 3) + bus.read_i2c_block_data(addr, 0x0D, 3)
+    assert all(0 < c < 256 for c in codes)
+    trim = 2620.0 * 1.01 ** (np.array(codes, dtype=float) - 1)  # FS = 0
+    assert np.all((g1 - g0) / trim[:3] > 0.5)
+    assert np.all(np.abs((a1 - a0) / trim[3:] - 1) < 0.5)
+    w(addr, 0x1B, 0x00)
+    w(addr, 0x1C, 0x00)
+    clock.sleep(0.025)
+    np.testing.assert_allclose(average()[1], g0, atol=0.5)  # self-test off: back where it was
+
+
+def test_mpu9250_raw_data_ready_set_on_new_data_cleared_by_reading_int_status():
+    clock, bus, addr, _ = chip("mpu9250")
+    mpu_awake(bus, addr)
+    clock.sleep(0.005)
+    assert bus.read_byte_data(addr, 0x3A) & 0x01
+    assert bus.read_byte_data(addr, 0x3A) & 0x01 == 0  # cleared by that read
+    clock.sleep(0.005)
+    mpu_gyro(bus, addr)  # a data read alone does not clear it (INT_ANYRD_2CLEAR = 0)
+    assert bus.read_byte_data(addr, 0x3A) & 0x01
+    bus.write_byte_data(addr, 0x37, 0x10)  # INT_ANYRD_2CLEAR: any read clears it
+    clock.sleep(0.005)
+    mpu_gyro(bus, addr)
+    assert bus.read_byte_data(addr, 0x3A) & 0x01 == 0
+
+
+# -- ICM-20948 ---------------------------------------------------------------------------------
+
+
+def icm_awake(bus, addr):
+    bus.write_byte_data(addr, 0x06, 0x01)  # PWR_MGMT_1: awake
+    bus.write_byte_data(addr, 0x7F, 0x20)  # bank 2
+    bus.write_byte_data(addr, 0x01, 0x03)  # GYRO_CONFIG_1: ±500 °/s, DLPF on
+    bus.write_byte_data(addr, 0x00, 10)  # GYRO_SMPLRT_DIV: 1125 / 11 Hz
+
+
+def test_icm20948_int_status_1_and_reset_values():
+    clock, bus, addr, truth = chip("icm20948")
+    bus.write_byte_data(addr, 0x7F, 0x20)
+    assert bus.read_byte_data(addr, 0x14) == 0x01  # ACCEL_CONFIG: ACCEL_FCHOICE
+    bus.write_byte_data(addr, 0x7F, 0x00)
+    assert bus.read_byte_data(addr, 0x05) == 0x40  # LP_CONFIG: I2C_MST_CYCLE
+    assert bus.read_byte_data(addr, 0x1A) == 0  # asleep: no data yet
+    icm_awake(bus, addr)
+    bus.write_byte_data(addr, 0x7F, 0x00)
+    clock.sleep(0.015)
+    assert bus.read_byte_data(addr, 0x1A) == 0x01  # RAW_DATA_0_RDY_INT
+    assert bus.read_byte_data(addr, 0x1A) == 0x00  # R/C
+
+
+def test_icm20948_gyro_offset_registers_act_on_the_output():
+    clock, bus, addr, truth = chip("icm20948")
+    icm_awake(bus, addr)
+    codes = (-300, 120, 0)
+    bus.write_i2c_block_data(addr, 0x03, list(np.array(codes, ">i2").tobytes()))
+    bus.write_byte_data(addr, 0x7F, 0x00)
+    clock.sleep(0.01)
+    base = np.rint(truth.reading(OMEGA[None], np.array([25.0]))[0] / DEG * 65.5)
+    got = be16s(bus.read_i2c_block_data(addr, 0x33, 6))
+    np.testing.assert_allclose(got, base + np.array(codes) * 4 / 2, atol=0.5)  # FS_SEL 1
+
+
+# -- ICM-42688-P, LSM6DSOX ---------------------------------------------------------------------
+
+
+def test_icm42688p_reset_values_and_reset_done():
+    clock, bus, addr, _ = chip("icm42688p")
+    # DS-000347 bank 0 reset values: DRIVE_CONFIG, INTF_CONFIG1, ACCEL_CONFIG1, APEX_CONFIG0,
+    # FSYNC_CONFIG, INT_CONFIG1, INT_SOURCE0
+    for register, value in ((0x13, 0x05), (0x4D, 0x91), (0x53, 0x0D), (0x56, 0x82),
+                            (0x62, 0x10), (0x64, 0x10), (0x65, 0x10)):
+        assert bus.read_byte_data(addr, register) == value, hex(register)
+    # the sensor data registers read 0x8000 until the first sample
+    assert bus.read_i2c_block_data(addr, 0x1D, 14) == [0x80, 0x00] * 7
+    assert bus.read_byte_data(addr, 0x2D) & 0x10  # RESET_DONE_INT after power-on
+    assert bus.read_byte_data(addr, 0x2D) & 0x10 == 0  # cleared when read
+    bus.write_byte_data(addr, 0x11, 0x01)  # DEVICE_CONFIG.SOFT_RESET
+    assert bus.read_byte_data(addr, 0x2D) & 0x10
+    bus.write_byte_data(addr, 0x4E, 0x0F)  # PWR_MGMT0: gyro and accel low-noise
+    clock.sleep(0.01)
+    assert bus.read_byte_data(addr, 0x2D) & 0x08  # DATA_RDY_INT
+    assert bus.read_byte_data(addr, 0x2D) & 0x08 == 0
+    assert bus.read_i2c_block_data(addr, 0x1D, 2) != [0x80, 0x00]  # a temperature now
+
+
+def test_lsm6dsox_status_reg_set_on_new_data_cleared_by_reading_each_output():
+    clock, bus, addr, _ = chip("lsm6dsox")
+    assert bus.read_byte_data(addr, 0x1E) == 0
+    bus.write_byte_data(addr, 0x11, 0x40)  # CTRL2_G: 104 Hz
+    clock.sleep(0.02)
+    assert bus.read_byte_data(addr, 0x1E) == 0x06  # GDA, TDA; the accelerometer is off
+    bus.write_byte_data(addr, 0x10, 0x40)  # CTRL1_XL: 104 Hz
+    clock.sleep(0.02)
+    assert bus.read_byte_data(addr, 0x1E) == 0x07
+    bus.read_i2c_block_data(addr, 0x22, 6)  # OUTX_L_G..OUTZ_H_G
+    assert bus.read_byte_data(addr, 0x1E) == 0x05
+    bus.read_i2c_block_data(addr, 0x28, 6)  # OUTX_L_A..
+    bus.read_i2c_block_data(addr, 0x20, 2)  # OUT_TEMP
+    assert bus.read_byte_data(addr, 0x1E) == 0x00
+    clock.sleep(0.02)
+    assert bus.read_byte_data(addr, 0x1E) == 0x07
