@@ -12,7 +12,9 @@ What it models:
   CONFIG_1 = 0x01 (DLPF on, ±250 °/s), the rest 0; PWR_MGMT_1.DEVICE_RESET restores them and
   selects bank 0.
 - The gyro samples while awake and not disabled (PWR_MGMT_2), at 1125 Hz / (1 + GYRO_SMPLRT_DIV)
-  with GYRO_FCHOICE = 1, 9 kHz with it 0 (⚠), on the chip's own clock.
+  with GYRO_FCHOICE = 1, 9 kHz with it 0 (⚠), on the chip's own clock; with GYRO_FCHOICE = 1
+  its DLPF (GYRO_DLPFCFG's bandwidth, a first-order stand-in ⚠) runs at 1125 Hz ahead of the
+  divider, the white noise entering ahead of it.
 - Data registers (bank 0) big-endian: ACCEL_XOUT_H 0x2D, GYRO_XOUT_H 0x33, TEMP_OUT_H 0x39
   (333.87 LSB/°C, 0 at 21 °C).
 - FIFO (512 bytes ⚠): frames of the sources FIFO_EN_2 enables, in register order (accelerometer,
@@ -34,7 +36,13 @@ from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.banks import UserBanks
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
-from gyrocal.drivers.imu.chips import ICM20948, ICM20948_BITS, ICM20948_REG, ICM20948_REG2
+from gyrocal.drivers.imu.chips import (
+    ICM20948,
+    ICM20948_BITS,
+    ICM20948_DLPF,
+    ICM20948_REG,
+    ICM20948_REG2,
+)
 
 __all__ = ["EmulatedICM20948"]
 
@@ -43,6 +51,7 @@ _READ_ONLY = frozenset(
     {_R.WHO_AM_I, _R.INT_STATUS_2, _R.FIFO_COUNTH, _R.FIFO_COUNTL, _R.FIFO_R_W}
     | set(range(_R.ACCEL_XOUT_H, _R.TEMP_OUT_H + 2))
 )
+_DLPF_BY_CFG = {cfg: hz for hz, cfg in ICM20948_DLPF.items()}
 _GYRO_ORDER = ((_B.FIFO_EN_2_GYRO_X, 0), (_B.FIFO_EN_2_GYRO_Y, 1), (_B.FIFO_EN_2_GYRO_Z, 2))
 
 
@@ -54,10 +63,13 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
     clock, motion, truth, faults, seed, subsamples
         As for :class:`~gyrocal.drivers.emulated.imu_chips.EmulatedMPU9250`.
     output_filter : bool
-        Accepted for a uniform interface; the DLPF is stood in for by the per-sample mean.
+        The gyro DLPF at the GYRO_CONFIG_1 setting (:meth:`cutoff_hz`), running at the
+        internal 1125 Hz ahead of GYRO_SMPLRT_DIV; ``False`` passes the per-sample mean rate
+        through unfiltered.
     """
 
     family = ICM20948
+    filters_at_internal_rate = True
     default_who_am_i = 0xEA
     reset_values = {_R.PWR_MGMT_1: 0x41}
     read_only = _READ_ONLY
@@ -106,6 +118,15 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
         if not b2[_R2.GYRO_CONFIG_1] & _B.GYRO_FCHOICE:
             return self.family.extra["dlpf_off_rate_hz"]
         return self.family.extra["internal_rate_hz"] / (1 + b2[_R2.GYRO_SMPLRT_DIV])
+
+    def cutoff_hz(self) -> float | None:
+        """The gyro DLPF's 3 dB bandwidth GYRO_CONFIG_1.GYRO_DLPFCFG selects with GYRO_FCHOICE
+        = 1 (DS-000189 GYRO_CONFIG_1 table, :data:`~gyrocal.drivers.imu.chips.ICM20948_DLPF`);
+        ``None`` with the DLPF bypassed or the gyro off."""
+        cfg = self._banks[2][_R2.GYRO_CONFIG_1]
+        if not cfg & _B.GYRO_FCHOICE or self._odr_hz() is None:
+            return None
+        return _DLPF_BY_CFG[(cfg >> _B.GYRO_DLPFCFG_SHIFT) & 0x07]
 
     def _sensitivity_rad_s_per_lsb(self) -> float:
         fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT
