@@ -143,16 +143,18 @@ def noise_rows(seconds: float) -> tuple[list[list[object]], list[list[object]]]:
     import allantools
 
     allan, per_sample = [], []
-    for model, (_, _, bands, filter_rate) in NOISE_SETTINGS.items():
+    for seed, (model, (_, _, bands, filter_rate)) in enumerate(NOISE_SETTINGS.items()):
         ge = READERS[model].family.gyro_errors
         n = ge.noise_density_rad_s_sqrt_hz
-        rate, odr, fc = still_stream(model, seconds, lowpass_hz=bands[0] if bands else None)
-        taus, adev, _, _ = allantools.oadev(rate[:, 0], rate=odr, data_type="freq",
-                                            taus=np.array([0.1, 1.0]))
+        rate, odr, fc = still_stream(model, seconds, lowpass_hz=bands[0] if bands else None,
+                                     seed=seed)
+        taus = np.array([0.1, 1.0])
+        adev = np.mean([allantools.oadev(rate[:, j], rate=odr, data_type="freq", taus=taus)[1]
+                        for j in range(3)], axis=0)
         ratio = adev * np.sqrt(taus) / n
         allan.append([model, ge.noise_density_dps_sqrt_hz, float(ratio[0]), float(ratio[1]),
                       ge.noise_source])
-        streams = [(rate, fc)] + [still_stream(model, seconds / 4, lowpass_hz=b)[::2]
+        streams = [(rate, fc)] + [still_stream(model, seconds / 4, lowpass_hz=b, seed=seed)[::2]
                                   for b in bands[1:]]
         for samples, cutoff in streams:
             sigma = float(np.mean(np.std(samples, axis=0)))
@@ -176,7 +178,7 @@ def main(argv: list[str]) -> None:
     allan, per_sample = noise_rows(noise_s)
     print_table(["chip", "N °/s/√Hz", "σ_A(0.1 s)·√τ / N", "σ_A(1 s)·√τ / N", "source"], allan,
                 title=f"Allan deviation at rest against the datasheet density ({noise_s:g} s, "
-                      "allantools oadev, x axis)")
+                      "allantools oadev, mean of the axes; 1 is right)")
     print_table(["chip", "filter Hz", "σ/sample °/s", "predicted °/s", "ratio",
                  "N√(π fc) °/s"], per_sample,
                 title="Noise per sample against the filter bandwidth (white noise ahead of the "
