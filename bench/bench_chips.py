@@ -1,4 +1,5 @@
-"""Every supported chip's reader under FIFO stress on the emulated bus (issue 15).
+"""Every supported chip on the emulated bus: its reader under FIFO stress (issue 15), and its
+noise against its datasheet (issue 26).
 
 For each chip, a smooth motion is streamed for a simulated time with a FIFO of a few tens of
 milliseconds (the ``fifo_capacity`` fault knob), so that it overflows at most drains and the
@@ -12,7 +13,20 @@ Data: gyrocal's own emulator only (register-level chips of ``drivers/emulated``)
 numbering is also checked on an independent packet generator in
 ``tests/drivers/test_timestamped_fifo_independent.py``.
 
-Usage: ``python -m bench chips [--quick]`` (``--quick``: one seed, 5 s instead of three, 10 s).
+The noise tables stream each chip at rest through its reader (the emulated sensor as
+``--sim`` builds it bar the coloured noise: its chip-table white-noise density, its filter at
+the reader's setting) and give (1) the overlapping Allan deviation at 0.1 s and 1 s, read with
+``allantools`` (the ``test`` extra) as an independent oracle, over the datasheet's density
+``N`` (the IEEE Std 952 / Kalibr convention ``σ_A(τ) = N / √τ``: 1 is right); (2) the noise
+per sample at three filter settings against ``N · √(rate · k / (1 + k))``, ``k = tan(π fc /
+rate)``, the white noise of density ``N`` drawn at the filter's rate through the first-order
+stand-in at the datasheet's bandwidth ``fc`` (≈ ``N √(π fc)`` for ``fc ≪ rate``), and that
+continuous-time figure. A datasheet's RMS noise (MPU-9250: 0.1 °/s at 92 Hz) reads its density
+as one-sided, ``σ = N √(π fc / 2)``: the emulator is √2 above that reading, on the safe side
+(:mod:`gyrocal.drivers.emulated.accel` says the same of the accelerometer).
+
+Usage: ``python -m bench chips [--quick]`` (``--quick``: one seed, 5 s instead of three, 10 s;
+the noise streams 20 s instead of 120 s).
 """
 
 from __future__ import annotations
@@ -26,7 +40,8 @@ from bench.table import print_table
 from gyrocal.drivers.clock import VirtualClock
 from gyrocal.drivers.emulated.imu_chips import ChipFaults, SensorTruth, make_emulated_imu
 from gyrocal.drivers.emulated.motion import FunctionMotion
-from gyrocal.drivers.imu import open_imu
+from gyrocal.drivers.imu import READERS, open_imu
+from gyrocal.drivers.imu.chips import RAD_PER_DEG
 
 # model -> (address, odr_hz, FIFO knob in the chip's unit: about 16 samples)
 CHIPS = {  # FIFO capacities in samples: 16, 12, 18, 16, 12 (14-byte frames, 3 words a sample)
@@ -82,6 +97,74 @@ def _run(model: str, seed: int, seconds: float) -> list[object]:
             float(np.percentile(err, 99) * 1e6), float(err.max() * 1e6)]
 
 
+# model -> (odr_hz, range_dps, three gyro filter bandwidths the reader offers at that rate,
+# the rate the chip filters at); the first bandwidth is the Allan row's
+NOISE_SETTINGS: dict[str, tuple[float, float, tuple[float, ...], float]] = {
+    "mpu9250": (1000.0, 250.0, (41.0, 184.0, 5.0), 1000.0),  # DLPF at the internal 1 kHz
+    "lsm9ds1": (952.0, 245.0, (58.0, 100.0, 33.0), 952.0),  # LPF2 at the output rate
+    "icm20948": (1125.0, 250.0, (51.2, 196.6, 5.7), 1125.0),  # DLPF at the internal 1125 Hz
+    "icm42688p": (1000.0, 250.0, (125.0, 250.0, 25.0), 1000.0),  # UI filter at the ODR
+    "lsm6dsox": (1 / (48 * 25e-6), 250.0, (), 1 / (48 * 25e-6)),  # no filter emulated
+}
+
+
+def still_stream(model: str, seconds: float, *, lowpass_hz: float | None = None,
+                 seed: int = 0) -> tuple[np.ndarray, float, float | None]:
+    """``seconds`` of a chip at rest through its reader at :data:`NOISE_SETTINGS`' rate and
+    range and the filter ``lowpass_hz`` (the reader's default when None): the gyro samples
+    (N, 3) in rad/s, the rate and the chip's filter cutoff (None: no filter)."""
+    odr, range_dps, _, _ = NOISE_SETTINGS[model]
+    clock = VirtualClock()
+    bus, addr = make_emulated_imu(model, clock, seed=seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reader = open_imu(model, bus, addr, clock=clock, range_dps=range_dps, odr_hz=odr,
+                          lowpass_hz=lowpass_hz)
+    reader.start()
+    chunks = []
+    while clock.monotonic() < seconds:
+        clock.sleep(0.02)
+        chunks.append(reader.read().rate)
+    rate = np.vstack(chunks)[int(0.5 * odr):]  # past the filter's and the reader's start
+    return rate, 1.0 / bus.device(addr).true_period_s, bus.device(addr).cutoff_hz()
+
+
+def predicted_sigma(density: float, fc: float | None, filter_rate: float) -> float:
+    """Per-sample σ of white noise of density ``density`` drawn at ``filter_rate`` through the
+    emulated first-order filter at ``fc`` (its noise gain ``Σh² = k / (1 + k)``)."""
+    if fc is None:
+        return density * math.sqrt(filter_rate)
+    k = math.tan(math.pi * fc / filter_rate)
+    return density * math.sqrt(filter_rate * k / (1.0 + k))
+
+
+def noise_rows(seconds: float) -> tuple[list[list[object]], list[list[object]]]:
+    """The Allan rows and the noise-per-sample rows (see the module docstring)."""
+    import allantools
+
+    allan, per_sample = [], []
+    for seed, (model, (_, _, bands, filter_rate)) in enumerate(NOISE_SETTINGS.items()):
+        ge = READERS[model].family.gyro_errors
+        n = ge.noise_density_rad_s_sqrt_hz
+        rate, odr, fc = still_stream(model, seconds, lowpass_hz=bands[0] if bands else None,
+                                     seed=seed)
+        taus = np.array([0.1, 1.0])
+        adev = np.mean([allantools.oadev(rate[:, j], rate=odr, data_type="freq", taus=taus)[1]
+                        for j in range(3)], axis=0)
+        ratio = adev * np.sqrt(taus) / n
+        allan.append([model, ge.noise_density_dps_sqrt_hz, float(ratio[0]), float(ratio[1]),
+                      ge.noise_source])
+        streams = [(rate, fc)] + [still_stream(model, seconds / 4, lowpass_hz=b, seed=seed)[::2]
+                                  for b in bands[1:]]
+        for samples, cutoff in streams:
+            sigma = float(np.mean(np.std(samples, axis=0)))
+            want = predicted_sigma(n, cutoff, filter_rate)
+            cont = n * math.sqrt(math.pi * cutoff) if cutoff else float("nan")
+            per_sample.append([model, cutoff or "none", sigma / RAD_PER_DEG, want / RAD_PER_DEG,
+                               sigma / want, cont / RAD_PER_DEG])
+    return allan, per_sample
+
+
 def main(argv: list[str]) -> None:
     """Print the table (see the module docstring)."""
     quick = "--quick" in argv
@@ -91,3 +174,12 @@ def main(argv: list[str]) -> None:
                  "max us"], rows,
                 title=f"FIFO stress ({seconds:g} s, ~16-sample FIFO, drains every 3-20 ms), "
                       "emulated bus")
+    noise_s = 20.0 if quick else 120.0
+    allan, per_sample = noise_rows(noise_s)
+    print_table(["chip", "N °/s/√Hz", "σ_A(0.1 s)·√τ / N", "σ_A(1 s)·√τ / N", "source"], allan,
+                title=f"Allan deviation at rest against the datasheet density ({noise_s:g} s, "
+                      "allantools oadev, mean of the axes; 1 is right)")
+    print_table(["chip", "filter Hz", "σ/sample °/s", "predicted °/s", "ratio",
+                 "N√(π fc) °/s"], per_sample,
+                title="Noise per sample against the filter bandwidth (white noise ahead of the "
+                      "filter)")

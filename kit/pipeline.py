@@ -444,7 +444,8 @@ def chip_bias_drift(model: Any, ex: ExtractedWindows) -> BiasDrift:
     if isinstance(model, str) and model in READER_CLASSES:
         ge = READERS[model].family.gyro_errors
     else:
-        ge = GyroErrors(0.0, 0.0, 0.0, "")
+        ge = GyroErrors(0.0, 0.0, 0.0, "", noise_density_dps_sqrt_hz=0.0,
+                        g_sensitivity_dps_per_g=0.0, noise_source="")
     spans = [w.corners for w in (*ex.windows, *ex.rests)]
     span = max(c[3] for c in spans) - min(c[0] for c in spans) if spans else 0.0
     return BiasDrift(ge.bias_instability_rad_s, ge.rate_random_walk_rad_s_sqrt_s, span,

@@ -173,12 +173,12 @@ def sim_misalignment(seed: int, cross_axis: float = SIM_CROSS_AXIS) -> np.ndarra
 #: (``--sim-realism off``, ``--sim-without EFFECT``): name → what it is and its size's source.
 #: ⚠ marks a size assumed for lack of a datasheet figure.
 REALISM_EFFECTS: dict[str, str] = {
-    "coloured-noise": "bias instability (flicker: Gauss–Markov sum) and rate random walk, per "
-                      "SIM_REALISM_FIGURES ⚠ (no datasheet gives them)",
-    "dlpf": "MPU-9250 DLPF at the configured bandwidth with the CONFIG table's delay "
-            "(92 Hz: 3.9 ms at 200 Hz)",
+    "coloured-noise": "bias instability (flicker: Gauss–Markov sum) and rate random walk, the "
+                      "chip's GyroErrors figures ⚠ (assumed: no datasheet gives them)",
+    "dlpf": "the chip's digital low-pass at the configured setting, the white noise entering "
+            "ahead of it (MPU-9250: 92 Hz with the CONFIG table's 3.9 ms at 200 Hz)",
     "g-sensitivity": "rate error per g of specific force, each term drawn by seed within "
-                     "the datasheet's typical figure (MPU-9250: 0.1 °/s/g)",
+                     "the chip's GyroErrors figure (MPU-9250: 0.1 °/s/g)",
     "gravity": "the accelerometer sees gravity in the true orientation and the lever-arm "
                "accelerations of a sensor SIM_LEVER_ARM_M off the axes ⚠ (jig geometry)",
     "accel-errors": "the accelerometer's scale, cross-axis, zero-g bias and noise, each term "
@@ -188,17 +188,6 @@ REALISM_EFFECTS: dict[str, str] = {
     "encoder-latency": "Present Position sampled at the servo's reply (after the instruction, "
                        "Return Delay Time and earlier replies at the bus baud), not at the "
                        "host's timestamp",
-}
-#: Coloured-noise and g-sensitivity figures per chip family. The white noise (angle random
-#: walk) is the datasheet's 0.01 °/s/√Hz (MPU-9250 PS §3.1). Bias instability and rate random
-#: walk are not in either datasheet; the values are assumed typical of consumer MEMS gyros ⚠
-#: (a flat floor of 0.664·B near 10-100 s, RRW crossing it near 1000 s). The LSM9DS1 datasheet
-#: gives no g-sensitivity figure, so it is 0 there.
-SIM_REALISM_FIGURES: dict[str, dict[str, float]] = {
-    "mpu9250": {"bias_instability_deg_h": 10.0, "rate_random_walk_rad_s_sqrt_s": 2e-6,
-                "g_sensitivity_deg_s_per_g": 0.1},
-    "lsm9ds1": {"bias_instability_deg_h": 10.0, "rate_random_walk_rad_s_sqrt_s": 2e-6,
-                "g_sensitivity_deg_s_per_g": 0.0},
 }
 #: The sensor's offset from the meeting point of the gimbal's axes, m (sensor frame) ⚠.
 SIM_LEVER_ARM_M = (0.02, -0.015, 0.03)
@@ -210,14 +199,15 @@ SIM_CLOCK_PPM = 300.0
 
 def realism_sizes(family: str = "mpu9250") -> dict[str, str]:
     """Each realism effect's size in ``--sim``, in words with its figures (⚠: assumed)."""
-    fig = SIM_REALISM_FIGURES.get(family, SIM_REALISM_FIGURES["mpu9250"])
+    ge = _family(family).gyro_errors
     acc = ACCEL_DATASHEET.get(family, ACCEL_DATASHEET["mpu9250"])
     arm = math.hypot(*SIM_LEVER_ARM_M) * 1000
     return {
-        "coloured-noise": f"B {fig['bias_instability_deg_h']:g} °/h, "
-                          f"K {fig['rate_random_walk_rad_s_sqrt_s']:g} rad/s/√s ⚠",
-        "dlpf": "92 Hz, 3.9 ms at 200 Hz (CONFIG table)" if family == "mpu9250" else "none",
-        "g-sensitivity": f"±{fig['g_sensitivity_deg_s_per_g']:g} °/s/g per term (datasheet)",
+        "coloured-noise": f"B {ge.bias_instability_deg_h:g} °/h, "
+                          f"K {ge.rate_random_walk_rad_s_sqrt_s:g} rad/s/√s ⚠",
+        "dlpf": ("92 Hz, 3.9 ms at 200 Hz (CONFIG table)" if family == "mpu9250"
+                 else "the configured setting's bandwidth"),
+        "g-sensitivity": f"±{ge.g_sensitivity_dps_per_g:g} °/s/g per term ({ge.noise_source})",
         "gravity": f"1 g in the true pose, lever arm {arm:.0f} mm ⚠",
         "accel-errors": "scale ±{:g} %, cross-axis ±{:g} %, zero-g ±{:g} mg, {:g} µg/√Hz ({})"
                         .format(100 * acc["scale_tolerance"], 100 * acc["cross_axis"],
@@ -242,15 +232,14 @@ def sim_realism(family: str, seed: int, effects: Collection[str]) -> tuple[Senso
     if unknown:
         raise InputError(f"unknown realism effect {sorted(unknown)[0]!r}; choose from "
                          + ", ".join(REALISM_EFFECTS))
-    fig = SIM_REALISM_FIGURES.get(family, SIM_REALISM_FIGURES["mpu9250"])
+    ge = _family(family).gyro_errors
     rng = np.random.default_rng([int(seed), 0x4EA1])
-    g_sens = rng.uniform(-1.0, 1.0, (3, 3)) * math.radians(fig["g_sensitivity_deg_s_per_g"])
+    g_sens = rng.uniform(-1.0, 1.0, (3, 3)) * math.radians(ge.g_sensitivity_dps_per_g)
     ppm = float(rng.uniform(-1.0, 1.0)) * SIM_CLOCK_PPM
     on = set(effects)
     realism = SensorRealism(
-        bias_instability_rad_s=(math.radians(fig["bias_instability_deg_h"]) / 3600.0
-                                if "coloured-noise" in on else 0.0),
-        rate_random_walk_rad_s_sqrt_s=(fig["rate_random_walk_rad_s_sqrt_s"]
+        bias_instability_rad_s=(ge.bias_instability_rad_s if "coloured-noise" in on else 0.0),
+        rate_random_walk_rad_s_sqrt_s=(ge.rate_random_walk_rad_s_sqrt_s
                                        if "coloured-noise" in on else 0.0),
         dlpf_delay="dlpf" in on,
         g_sensitivity_rad_s_per_g=g_sens if "g-sensitivity" in on else np.zeros((3, 3)),
@@ -407,8 +396,8 @@ def _add_sensor(plate: SimJig, imu_cfg: dict[str, Any], seed: int, run_seed: int
                                 "realism": sensor_realism, "clock_ppm": ppm}
     if "accel-errors" in plate.realism:
         truth_kw["accelerometer"] = draw_accel_truth(family.name, seed)
-    if noise_density is not None:
-        truth_kw["noise_density_rad_s_sqrt_hz"] = noise_density
+    truth_kw["noise_density_rad_s_sqrt_hz"] = (family.gyro_errors.noise_density_rad_s_sqrt_hz
+                                               if noise_density is None else noise_density)
     if temperature is not None or self_heating is not None:
         truth_kw.update(sim_thermal(seed, imu_cfg["model"], temperature, self_heating,
                                     plate.clock.monotonic()))
@@ -420,6 +409,7 @@ def _add_sensor(plate: SimJig, imu_cfg: dict[str, Any], seed: int, run_seed: int
     imu_bus, address = make_emulated_imu(
         imu_cfg["model"], plate.clock, plate.jig, truth, seed=run_seed, bus=bus,
         address=imu_cfg["address"] if imu_cfg["address"] in possible else None,
+        output_filter="dlpf" in plate.realism,
     )
     return replace(plate, imu_bus=imu_bus, imu_address=address, truth=truth)
 

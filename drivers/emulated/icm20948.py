@@ -12,7 +12,9 @@ What it models:
   CONFIG_1 = 0x01 (DLPF on, ±250 °/s), the rest 0; PWR_MGMT_1.DEVICE_RESET restores them and
   selects bank 0.
 - The gyro samples while awake and not disabled (PWR_MGMT_2), at 1125 Hz / (1 + GYRO_SMPLRT_DIV)
-  with GYRO_FCHOICE = 1, 9 kHz with it 0 (⚠), on the chip's own clock.
+  with GYRO_FCHOICE = 1, 9 kHz with it 0 (⚠), on the chip's own clock; with GYRO_FCHOICE = 1
+  its DLPF (GYRO_DLPFCFG's bandwidth, a first-order stand-in ⚠) runs at 1125 Hz ahead of the
+  divider, the white noise entering ahead of it.
 - Data registers (bank 0) big-endian: ACCEL_XOUT_H 0x2D, GYRO_XOUT_H 0x33, TEMP_OUT_H 0x39
   (333.87 LSB/°C, 0 at 21 °C).
 - FIFO (512 bytes ⚠): frames of the sources FIFO_EN_2 enables, in register order (accelerometer,
@@ -57,6 +59,7 @@ from gyrocal.drivers.imu.chips import (
     GYRO_OFFSET_COUNTS_PER_CODE_FS0,
     ICM20948,
     ICM20948_BITS,
+    ICM20948_DLPF,
     ICM20948_REG,
     ICM20948_REG2,
     ICM20948_REG3,
@@ -79,6 +82,7 @@ _MASTER = MasterLayout(
     slv4_do=_R3.I2C_SLV4_DO, slv4_di=_R3.I2C_SLV4_DI, ext_sens_data_00=_R.EXT_SLV_SENS_DATA_00)
 #: Bank 2 reset values (DS-000189 register map): GYRO_CONFIG_1 and ACCEL_CONFIG = FCHOICE.
 _BANK2_RESET = {_R2.GYRO_CONFIG_1: _B.GYRO_FCHOICE, _R2.ACCEL_CONFIG: _B.ACCEL_FCHOICE}
+_DLPF_BY_CFG = {cfg: hz for hz, cfg in ICM20948_DLPF.items()}
 _GYRO_ORDER = ((_B.FIFO_EN_2_GYRO_X, 0), (_B.FIFO_EN_2_GYRO_Y, 1), (_B.FIFO_EN_2_GYRO_Z, 2))
 
 
@@ -90,10 +94,13 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
     clock, motion, truth, faults, seed, subsamples
         As for :class:`~gyrocal.drivers.emulated.imu_chips.EmulatedMPU9250`.
     output_filter : bool
-        Accepted for a uniform interface; the DLPF is stood in for by the per-sample mean.
+        The gyro DLPF at the GYRO_CONFIG_1 setting (:meth:`cutoff_hz`), running at the
+        internal 1125 Hz ahead of GYRO_SMPLRT_DIV; ``False`` passes the per-sample mean rate
+        through unfiltered.
     """
 
     family = ICM20948
+    filters_at_internal_rate = True
     default_who_am_i = 0xEA
     reset_values = {_R.PWR_MGMT_1: 0x41, _R.LP_CONFIG: _B.LP_CONFIG_I2C_MST_CYCLE}
     read_only = _READ_ONLY
@@ -206,6 +213,15 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
         if not b2[_R2.GYRO_CONFIG_1] & _B.GYRO_FCHOICE:
             return self.family.extra["dlpf_off_rate_hz"]
         return self.family.extra["internal_rate_hz"] / (1 + b2[_R2.GYRO_SMPLRT_DIV])
+
+    def cutoff_hz(self) -> float | None:
+        """The gyro DLPF's 3 dB bandwidth GYRO_CONFIG_1.GYRO_DLPFCFG selects with GYRO_FCHOICE
+        = 1 (DS-000189 GYRO_CONFIG_1 table, :data:`~gyrocal.drivers.imu.chips.ICM20948_DLPF`);
+        ``None`` with the DLPF bypassed or the gyro off."""
+        cfg = self._banks[2][_R2.GYRO_CONFIG_1]
+        if not cfg & _B.GYRO_FCHOICE or self._odr_hz() is None:
+            return None
+        return _DLPF_BY_CFG[(cfg >> _B.GYRO_DLPFCFG_SHIFT) & 0x07]
 
     def _sensitivity_rad_s_per_lsb(self) -> float:
         fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT

@@ -68,7 +68,6 @@ from gyrocal.drivers.imu.chips import (
     MPU9250_DLPF,
     MPU9250_DLPF_DELAY_S,
     MPU9250_REG,
-    RAD_PER_DEG,
     ChipFamily,
     mpu9250_self_test_otp,
 )
@@ -82,8 +81,13 @@ __all__ = [
     "make_emulated_imu",
 ]
 
-#: The MPU-9250 datasheet's typical rate noise spectral density, 0.01 °/s/√Hz, in rad/s/√Hz.
-TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ = 0.01 * RAD_PER_DEG
+#: The MPU-9250 datasheet's typical rate noise spectral density, 0.01 °/s/√Hz, in rad/s/√Hz
+#: (its chip-table row, :attr:`~gyrocal.drivers.imu.chips.GyroErrors.noise_density_dps_sqrt_hz`).
+TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ = MPU9250.gyro_errors.noise_density_rad_s_sqrt_hz
+#: How far a restarted output filter's start is forgotten before the samples handed out: its
+#: impulse response decays to this fraction (the filter then runs on as on silicon, whatever
+#: the client's polling interval).
+_FILTER_MEMORY = 1e-7
 
 _Vec3 = tuple[float, float, float]
 
@@ -110,10 +114,11 @@ class SensorRealism:
     rate_random_walk_rad_s_sqrt_s : float
         Rate random walk ``K`` (rad/s/√s): ``σ_A(τ) = K sqrt(τ/3)``.
     dlpf_delay : bool
-        The MPU-9250's DLPF as the register map's CONFIG table gives it: a low-pass at the
-        configured bandwidth with the table's delay (a first-order filter at the cutoff plus a
-        pure delay making up the rest; the filter's order is not published ⚠). The LSM9DS1's
-        output filter is its own knob (``output_filter``); its delay is not published.
+        Whether the run has the chips' output filters on (``--sim``'s ``dlpf`` effect), for the
+        manifest: the chip's own ``output_filter`` knob (on by default) turns the filter, a
+        low-pass at the configured bandwidth with, on the MPU-9250, the CONFIG table's delay
+        (a first-order filter at the cutoff plus a pure delay making up the rest; the filter's
+        order is not published ⚠).
     g_sensitivity_rad_s_per_g : (3, 3)
         Rate error per g of specific force, ``m += G f`` (MPU-9250 datasheet: typical
         0.1 °/s/g, "Linear Acceleration Sensitivity").
@@ -166,12 +171,13 @@ class SensorTruth:
     temperature_c`` at the chip temperature ``T`` (issue 13; drivers.emulated.thermal draws
     datasheet-range coefficients and the die temperature), and white noise ``n`` of per-sample
     standard deviation
-    ``σ = noise_density_rad_s_sqrt_hz · sqrt(odr_hz)`` (the angle-random-walk convention: the
-    mean of the samples over ``τ`` seconds then has deviation ``density / sqrt(τ)``), or
-    ``noise_sigma_rad_s`` when given. ``m`` is then divided by the datasheet sensitivity,
-    rounded to counts and clipped to int16. With ``misalignment`` the identity, a perfect
-    calibration recovers ``scale`` and ``bias`` exactly; the paper's six-parameter model cannot
-    absorb a non-identity ``misalignment``.
+    ``σ = noise_density_rad_s_sqrt_hz · sqrt(rate)`` at the rate the chip's output filter runs
+    at (the angle-random-walk convention: the mean of the samples over ``τ`` seconds then has
+    deviation ``density / sqrt(τ)``), or ``noise_sigma_rad_s`` when given; the noise enters
+    ahead of the chip's filter, so the filter narrows it as on silicon. ``m`` is then divided
+    by the datasheet sensitivity, rounded to counts and clipped to int16. With
+    ``misalignment`` the identity, a perfect calibration recovers ``scale`` and ``bias``
+    exactly; the paper's six-parameter model cannot absorb a non-identity ``misalignment``.
 
     Parameters
     ----------
@@ -181,10 +187,11 @@ class SensorTruth:
         Per-axis bias at the reference temperature, rad/s.
     misalignment : (3, 3)
         Sensor-internal axis non-orthogonality, applied to the true rate first.
-    noise_density_rad_s_sqrt_hz : float or (3,)
-        White-noise density; the MPU-9250 datasheet's typical 0.01 °/s/√Hz by default.
+    noise_density_rad_s_sqrt_hz : float or (3,), optional
+        White-noise density; the emulated chip's datasheet figure
+        (:attr:`~gyrocal.drivers.imu.chips.GyroErrors.noise_density_dps_sqrt_hz`) when None.
     noise_sigma_rad_s : float or (3,), optional
-        Per-sample noise standard deviation, overriding the density.
+        Per-sample noise standard deviation at the filter's input, overriding the density.
     bias_temp_coeff_rad_s_per_c : float or (3,)
         Bias change per °C.
     bias_temp_quad_rad_s_per_c2 : float or (3,)
@@ -207,7 +214,7 @@ class SensorTruth:
     scale: Any = (1.0, 1.0, 1.0)
     bias: Any = (0.0, 0.0, 0.0)
     misalignment: Any = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-    noise_density_rad_s_sqrt_hz: Any = TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ
+    noise_density_rad_s_sqrt_hz: Any = None
     noise_sigma_rad_s: Any = None
     bias_temp_coeff_rad_s_per_c: Any = (0.0, 0.0, 0.0)
     reference_temperature_c: float = 25.0
@@ -228,7 +235,9 @@ class SensorTruth:
         if m.shape != (3, 3) or not np.all(np.isfinite(m)):
             raise ValueError(f"misalignment must be a finite 3×3 matrix, got {self.misalignment!r}")
         put(self, "misalignment", tuple(tuple(float(x) for x in row) for row in m))
-        put(self, "noise_density_rad_s_sqrt_hz", _vec3("noise", self.noise_density_rad_s_sqrt_hz))
+        if self.noise_density_rad_s_sqrt_hz is not None:
+            put(self, "noise_density_rad_s_sqrt_hz",
+                _vec3("noise", self.noise_density_rad_s_sqrt_hz))
         if self.noise_sigma_rad_s is not None:
             put(self, "noise_sigma_rad_s", _vec3("noise_sigma_rad_s", self.noise_sigma_rad_s))
         for name in ("noise_density_rad_s_sqrt_hz", "noise_sigma_rad_s"):
@@ -261,11 +270,15 @@ class SensorTruth:
             self.bias_temp_coeff_rad_s_per_c, self.bias_temp_quad_rad_s_per_c2,
             self.scale_temp_coeff_per_c)))
 
-    def sigma_rad_s(self, odr_hz: float) -> np.ndarray:
-        """Per-sample noise standard deviation (3,) at output data rate ``odr_hz``."""
+    def sigma_rad_s(self, rate_hz: float, density: float = TYPICAL_NOISE_DENSITY_RAD_S_SQRT_HZ
+                    ) -> np.ndarray:
+        """Per-sample white-noise standard deviation (3,) of samples at ``rate_hz`` (the chip
+        draws it at its filter's input rate): ``density`` stands in for an unset
+        :attr:`noise_density_rad_s_sqrt_hz` (the chip passes its datasheet's)."""
         if self.noise_sigma_rad_s is not None:
             return np.asarray(self.noise_sigma_rad_s)
-        return np.asarray(self.noise_density_rad_s_sqrt_hz) * math.sqrt(odr_hz)
+        n = self.noise_density_rad_s_sqrt_hz
+        return np.asarray(density if n is None else n) * math.sqrt(rate_hz)
 
     def temperature_at(self, t: np.ndarray) -> np.ndarray:
         """Chip temperature in °C at clock times ``t``."""
@@ -416,6 +429,7 @@ class _Ahead:
     gm: np.ndarray | None = None
     walk: np.ndarray | None = None
     frames: bytes | None = None
+    noise_draws: int = 3
 
 
 @dataclass
@@ -660,7 +674,9 @@ class _EmulatedImu(ABC):
         if S == 1:
             return np.asarray(rate(t), dtype=float)
         offsets = period * ((np.arange(S) + 0.5) / S - 1.0)  # midpoints of S slices
-        ts = (t[:, None] + offsets[None, :]).reshape(-1)
+        # nothing before the sample grid's start (a delayed output's first samples reach back
+        # past it, where an earlier configuration read the motion), so the times stay in order
+        ts = np.maximum((t[:, None] + offsets[None, :]).reshape(-1), self._origin)
         w = np.asarray(rate(ts), dtype=float).reshape(t.size, S, 3)
         return w.mean(axis=1)
 
@@ -682,21 +698,29 @@ class _EmulatedImu(ABC):
             return
         head, tail = self._head_tail(n)
         head, tail = min(head, n), min(tail, n)
-        if head + tail >= n and self._release_ahead(n, period):
+        # a filter runs on between the samples handed out: the tail starts early enough for
+        # its start to be forgotten (all of them when that reaches the head)
+        warm = self._filter_memory(period)
+        if head + tail + warm >= n and self._release_ahead(n, period):
             return
         self._ahead = None
-        if head + tail >= n:
+        if head + tail + warm >= n:
             ks = np.arange(self._k + 1, k_end + 1)
-            head, skipped = n, 0
+            head, skipped, warm = n, 0, 0
         else:
-            ks = np.concatenate(
-                (np.arange(self._k + 1, self._k + 1 + head), np.arange(k_end - tail + 1, k_end + 1))
-            )
-            skipped = n - head - tail
+            ks = np.concatenate((np.arange(self._k + 1, self._k + 1 + head),
+                                 np.arange(k_end - tail - warm + 1, k_end + 1)))
+            skipped = n - head - tail - warm
         t = self._origin + period * ks
-        # a delayed output reaches no further back than the chip's power-on
-        t_eval = np.maximum(t - self._pure_delay_s(period), self._created)
-        omega = self._filtered(self._internal_rates(t_eval, period), head, skipped)
+        # a delayed output reaches no further back than the sample grid's start
+        t_eval = np.maximum(t - self._pure_delay_s(period), self._origin)
+        rates = self._internal_rates(t_eval, period)
+        white = self._noise_rng.standard_normal(rates.shape) * self._white_sigma(period)
+        omega, white = self._filtered(rates, white, head, skipped)
+        if warm:  # the filter's run-in is not handed out: it joins the samples skipped
+            keep = np.r_[0:head, head + warm:t.size]
+            t, t_eval, omega, white = t[keep], t_eval[keep], omega[keep], white[keep]
+            skipped += warm
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         force = self._specific_force(t_eval)
@@ -704,12 +728,31 @@ class _EmulatedImu(ABC):
         if realism.g_sensitivity_rad_s_per_g != _ZERO33:
             m = m + self._true_force(t_eval, force) @ np.asarray(
                 realism.g_sensitivity_rad_s_per_g).T
+        m = m + white
         odr = 1.0 / period
-        m = m + self._noise_rng.standard_normal(m.shape) * self.truth.sigma_rad_s(odr)
         accel = np.clip(np.rint(self.truth.accel_reading(force, self._accel_rng, odr)
                                 * self._accel_counts_1g()) + self._accel_trim_counts(),
                         -32768, 32767).astype(np.int64)
         self._emit(t, m, accel, temperature, head, skipped)
+
+    def _white_sigma(self, period: float) -> np.ndarray:
+        """The white noise's per-sample σ (3,) at the filter's input: the density (the truth's,
+        else the chip's datasheet figure) times √(the rate the filter runs at)."""
+        rate = self._internal_per_output(period) / period
+        return self.truth.sigma_rad_s(rate, self.family.gyro_errors.noise_density_rad_s_sqrt_hz)
+
+    def _filter_memory(self, period: float) -> int:
+        """Output samples a restarted output filter needs before its start is forgotten to
+        :data:`_FILTER_MEMORY` (0 without a filter)."""
+        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
+        if fc is None or rate is None:
+            return 0
+        k = math.tan(math.pi * fc / rate)
+        pole = abs((1.0 - k) / (1.0 + k))
+        if pole <= _FILTER_MEMORY:
+            return 1
+        steps = math.log(_FILTER_MEMORY) / math.log(pole)
+        return math.ceil(steps / self._internal_per_output(period)) + 1
 
     def _emit(self, t: np.ndarray, m: np.ndarray, accel: np.ndarray, temperature: np.ndarray,
               head: int, skipped: int, gyro: np.ndarray | None = None,
@@ -771,7 +814,7 @@ class _EmulatedImu(ABC):
             t_read = float(a.t_read[a.next + n - 1])
         else:
             t_read = max(self._origin + period * (self._k + n) - self._pure_delay_s(period),
-                         self._created)
+                         self._origin)
         if self.motion.due_by(t_read):  # type: ignore[attr-defined]
             return False
         if a is None:
@@ -779,7 +822,7 @@ class _EmulatedImu(ABC):
             a = self._ahead = self._look_ahead(token, self._k + 1, count, period)
         i, j = a.next, a.next + n
         self.motion.touch(t_read)  # type: ignore[attr-defined]
-        self._noise_rng.skip(3 * n)
+        self._noise_rng.skip(a.noise_draws * n)
         self._accel_rng.skip(a.accel_draws * n)
         if a.lpf is not None:
             self._lpf = a.start_lpf = (a.fc, a.lpf[j - 1])
@@ -848,15 +891,19 @@ class _EmulatedImu(ABC):
         accelerometer's noise the next values of their streams (left in them until handed
         out)."""
         t = self._origin + period * np.arange(k_first, k_first + count)
-        t_eval = np.maximum(t - self._pure_delay_s(period), self._created)
+        t_eval = np.maximum(t - self._pure_delay_s(period), self._origin)
         start_lpf = self._lpf
         rates = self._internal_rates(t_eval, period, peek=True)
-        out, _ = self._lowpass(rates, count, 0, start_lpf)
+        white = (self._noise_rng.peek(rates.size).reshape(rates.shape)
+                 * self._white_sigma(period))
+        x = np.concatenate((rates, white), axis=-1)
+        out, _ = self._lowpass(x, count, 0, start_lpf)
         states = None
-        if out is not rates:  # filtered: the state after each sample is its last internal one
-            x, y = rates.reshape(count, -1, 3)[:, -1], out.reshape(count, -1, 3)[:, -1]
-            states = np.stack([x, y], axis=1)
-        omega = out if out.ndim == 2 else out[:, -1]
+        if out is not x:  # filtered: the state after each sample is its last internal one
+            states = np.stack([x.reshape(count, -1, 6)[:, -1], out.reshape(count, -1, 6)[:, -1]],
+                              axis=1)
+        out = out if out.ndim == 2 else out[:, -1]
+        omega, white = out[:, :3], out[:, 3:]
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
         force = self._specific_force(t_eval, peek=True)
@@ -865,14 +912,15 @@ class _EmulatedImu(ABC):
             m = m + self._true_force(t_eval, force, peek=True) @ np.asarray(
                 realism.g_sensitivity_rad_s_per_g).T
         odr = 1.0 / period
-        m = m + self._noise_rng.peek(3 * count).reshape(count, 3) * self.truth.sigma_rad_s(odr)
+        m = m + white
         peeking = _Peeking(self._accel_rng)
         accel = np.clip(np.rint(self.truth.accel_reading(force, peeking, odr)  # type: ignore[arg-type]
                                 * self._accel_counts_1g()) + self._accel_trim_counts(),
                         -32768, 32767).astype(np.int64)
         return _Ahead(token, k_first, t, t_eval, m, accel, temperature,
                       self._temperature_counts(temperature), states, self._lowpass_hz(),
-                      peeking.used // count, start_lpf, self._sensitivity_rad_s_per_lsb())
+                      peeking.used // count, start_lpf, self._sensitivity_rad_s_per_lsb(),
+                      noise_draws=rates.size // count)
 
     def _true_force(self, t: np.ndarray, accel_force: np.ndarray, peek: bool = False
                     ) -> np.ndarray:
@@ -901,24 +949,38 @@ class _EmulatedImu(ABC):
         datasheet figure; each chip says which)."""
         return None
 
+    #: Whether the gyro output filter (:meth:`cutoff_hz`) is emulated (the ``output_filter``
+    #: knob of the chips).
+    output_filter = True
+
     def _lowpass_hz(self) -> float | None:
         """The cutoff the emulated output path filters at (``None``: it does not filter)."""
-        return None
+        return self.cutoff_hz() if self.output_filter else None
 
     def _pure_delay_s(self, period: float) -> float:
         """A delay of the output beyond its filter's, s (the chip's datasheet delay less the
         filter's and the sub-sample average's group delays)."""
         return 0.0
 
+    #: Whether the chip's filter runs at ``family.extra["internal_rate_hz"]`` ahead of a rate
+    #: divider (the InvenSense DLPFs), rather than at the output rate.
+    filters_at_internal_rate = False
+
     def _average_window_s(self, period: float) -> float:
         """The span the true rate is averaged over for one output sample (see
-        :meth:`_true_rate`): the output period unless the chip says otherwise."""
-        return period
+        :meth:`_true_rate`): the output period, or with a filter at the internal rate one
+        internal sample only (the filter, not the decimation, is then the anti-alias filter)."""
+        if not self.filters_at_internal_rate or self._lowpass_hz() is None:
+            return period
+        return min(period, 1.0 / self.family.extra["internal_rate_hz"])
 
     def _internal_per_output(self, period: float) -> int:
-        """Internal samples the chip filters per output sample (1: it filters at the output
-        rate; a chip that low-passes at its internal rate before decimating says more)."""
-        return 1
+        """Internal samples the chip filters per output sample: 1 when it filters at the output
+        rate; with a filter at the internal rate, the rate divider's ``1 + SMPLRT_DIV``
+        (register map CONFIG, SMPLRT_DIV; hardware reference §1.4)."""
+        if not self.filters_at_internal_rate or self._lowpass_hz() is None:
+            return 1
+        return max(1, round(period * self.family.extra["internal_rate_hz"]))
 
     def _internal_rates(self, t: np.ndarray, period: float, peek: bool = False) -> np.ndarray:
         """The true rate of each new output sample (n, 3), or, for a chip that filters at its
@@ -938,21 +1000,27 @@ class _EmulatedImu(ABC):
         odr = self._odr_hz()
         return None if odr is None else odr * self._internal_per_output(1.0 / odr)
 
-    def _filtered(self, omega: np.ndarray, head: int, skipped: int) -> np.ndarray:
-        """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples (the
-        first ``head`` rows, then ``skipped`` not generated, then the rest), discretised at the
+    def _filtered(self, omega: np.ndarray, white: np.ndarray, head: int, skipped: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples and on
+        the white noise drawn for them (``white``, the same shape: the noise enters ahead of the
+        filter, so the filter narrows it as on silicon; the first ``head`` rows, then
+        ``skipped`` not generated, then the rest); returns both filtered, decimated to one row
+        per output sample. The filter is discretised at the
         filter's rate (:meth:`_filter_rate_hz`) by the bilinear transform prewarped to that
         cutoff (exactly −3 dB there). Rates given per internal sample (n, D, 3) are filtered at
         the internal rate and decimated to the last of each D (the MPU-9250's DLPF runs at
         1 kHz before SMPLRT_DIV, register map CONFIG). The chips' filter orders are not
         published, so this stands in with the datasheet's bandwidth ⚠. The state carries across
-        calls; it restarts (at rest on its first input) after skipped samples and when the
-        cutoff or rate changes."""
-        out, state = self._lowpass(omega, head, skipped, self._lpf)
-        if out is omega:
-            return omega if omega.ndim == 2 else omega[:, -1]
-        self._lpf = state
-        return out if omega.ndim == 2 else out[:, -1]
+        calls; it restarts (the rates at rest on their first input, the noise at zero) after
+        skipped samples and when the cutoff or rate changes (:meth:`_sync` runs it in early
+        enough for the restart to be forgotten)."""
+        x = np.concatenate((omega, white), axis=-1)
+        out, state = self._lowpass(x, head, skipped, self._lpf)
+        if out is not x:
+            self._lpf = state
+        out = out if out.ndim == 2 else out[:, -1]
+        return out[:, :3], out[:, 3:]
 
     def _lowpass(self, omega: np.ndarray, head: int, skipped: int, state: Any
                  ) -> tuple[np.ndarray, Any]:
@@ -968,9 +1036,11 @@ class _EmulatedImu(ABC):
         for i, (lo, hi) in enumerate(parts):
             if hi <= lo:
                 continue
-            x = omega[lo:hi].reshape(-1, 3)
+            x = omega[lo:hi].reshape(-1, omega.shape[-1])
             if state is None or state[0] != fc or (i == 1 and skipped):
-                prev_x = prev_y = x[0]
+                prev_x = x[0].copy()
+                prev_x[3:] = 0.0  # the rates at rest, the noise at zero
+                prev_y = prev_x
             else:
                 prev_x, prev_y = state[1][0], state[1][1]
             y, _ = lfilter([b, b], [1.0, a], x, zi=(b * prev_x - a * prev_y)[None, :])
@@ -1052,9 +1122,14 @@ class EmulatedMPU9250(_EmulatedImu):
         Seed of the noise and fault random generators.
     variant : str
         ``"mpu9250"``, ``"mpu9255"`` or ``"mpu6500"``: which WHO_AM_I it answers.
+    output_filter : bool
+        The gyro DLPF at the CONFIG setting (:meth:`cutoff_hz`, :meth:`delay_s`), running at
+        the internal 1 kHz ahead of SMPLRT_DIV; ``False`` passes the per-sample mean rate
+        through unfiltered.
     """
 
     family = MPU9250
+    filters_at_internal_rate = True
     reset_values = {
         _MR.PWR_MGMT_1: 0x01,
         **{_MR.SELF_TEST_X_GYRO + i: c for i, c in enumerate(MPU9250_SELF_TEST_CODES[:3])},
@@ -1065,11 +1140,13 @@ class EmulatedMPU9250(_EmulatedImu):
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
                  truth: SensorTruth | None = None, *, faults: ChipFaults | None = None,
-                 seed: int = 0, variant: str = "mpu9250", subsamples: int = 8) -> None:
+                 seed: int = 0, variant: str = "mpu9250", subsamples: int = 8,
+                 output_filter: bool = True) -> None:
         if variant not in _MPU_VARIANTS:
             raise ValueError(f"variant must be one of {', '.join(_MPU_VARIANTS)}, got {variant!r}")
         self.default_who_am_i = _MPU_VARIANTS[variant]
         self.variant = variant
+        self.output_filter = bool(output_filter)
         super().__init__(clock, motion, truth, faults=faults, seed=seed, subsamples=subsamples)
         #: Devices on the auxiliary I²C bus, by address: the AK8963 die (none on an MPU-6500).
         self.aux: dict[int, I2CDevice] = {}
@@ -1106,23 +1183,6 @@ class EmulatedMPU9250(_EmulatedImu):
         fc = self.cutoff_hz()
         return None if fc is None else MPU9250_DLPF_DELAY_S[fc]
 
-    def _lowpass_hz(self) -> float | None:
-        return self.cutoff_hz() if self.truth.realism.dlpf_delay else None
-
-    def _average_window_s(self, period: float) -> float:
-        """With the DLPF emulated, the true rate is averaged over one internal (1 kHz) sample
-        only: the DLPF, not the decimation, is the chip's anti-alias filter (§1.4)."""
-        if self._lowpass_hz() is None:
-            return period
-        return min(period, 1.0 / self.family.extra["internal_rate_hz"])
-
-    def _internal_per_output(self, period: float) -> int:
-        """With the DLPF emulated, ``1 + SMPLRT_DIV`` internal (1 kHz) samples per output
-        sample: the DLPF runs at the internal rate and SMPLRT_DIV decimates its output
-        (register map CONFIG, SMPLRT_DIV; hardware reference §1.4)."""
-        if self._lowpass_hz() is None:
-            return 1
-        return max(1, round(period * self.family.extra["internal_rate_hz"]))
 
     def _pure_delay_s(self, period: float) -> float:
         """The CONFIG table's delay less the filter's DC group delay and the sub-sample
@@ -1380,8 +1440,6 @@ class EmulatedLSM9DS1(_EmulatedImu):
             return LSM9DS1_BW_G_CUTOFF_HZ[odr][self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK]
         return LSM9DS1_LPF1_CUTOFF_HZ[odr]
 
-    def _lowpass_hz(self) -> float | None:
-        return self.cutoff_hz() if self.output_filter else None
 
     def _reset_state(self) -> None:
         self._fifo: deque[bytes] = deque()
@@ -1589,8 +1647,8 @@ def make_emulated_imu(
         True-rate evaluations averaged into each output sample (the chip's low-pass filter and
         decimation; 1 samples the rate at the instant).
     output_filter : bool
-        The LSM9DS1's output low-pass (:meth:`EmulatedLSM9DS1.cutoff_hz`); ``False`` turns it
-        off.
+        The chip's gyro output filter (its ``cutoff_hz``: the MPU-9250's and ICM-20948's DLPF,
+        the LSM9DS1's LPF1/LPF2, the ICM-42688-P's UI filter); ``False`` turns it off.
 
     Returns
     -------
@@ -1601,7 +1659,7 @@ def make_emulated_imu(
     chip: _EmulatedImu
     if key in _MPU_VARIANTS:
         chip = EmulatedMPU9250(clock, motion, truth, faults=faults, seed=seed, variant=key,
-                               subsamples=subsamples)
+                               subsamples=subsamples, output_filter=output_filter)
     elif key == "lsm9ds1":
         chip = EmulatedLSM9DS1(clock, motion, truth, faults=faults, seed=seed,
                                subsamples=subsamples, output_filter=output_filter)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import KW_ONLY, asdict, dataclass, field
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
@@ -129,7 +129,7 @@ class AccelErrors:
 #: Bias instability ``B`` (°/h) and rate random walk ``K`` (rad/s/√s) taken for a gyro whose
 #: datasheet gives neither (none of the chips here publishes them) ⚠: typical of consumer MEMS
 #: gyros (an Allan floor of 0.664·B near 10-100 s, the random walk crossing it near 1000 s), the
-#: same figures the emulated sensor of ``--sim`` has (``gyrocal.kit.sim.SIM_REALISM_FIGURES``).
+#: figures the emulated sensor of ``--sim`` has (:attr:`GyroErrors.bias_instability_deg_h`).
 #: Measure a sensor's own with ``gyrocal noise`` on a long still recording.
 ASSUMED_BIAS_INSTABILITY_DEG_H = 10.0
 ASSUMED_RATE_RANDOM_WALK = 2e-6
@@ -160,6 +160,16 @@ class GyroErrors:
         Rate random walk ``K``, rad/s/√s.
     drift_source : str
         Where ``B`` and ``K`` come from.
+    noise_density_dps_sqrt_hz : float
+        Rate noise spectral density (white noise, angle random walk), °/s/√Hz: the emulated
+        chip's white noise enters ahead of its digital filter at this density, so its Allan
+        deviation is ``N / √τ`` (the IEEE Std 952 / Kalibr continuous-time convention, per-sample
+        ``σ = N · √rate`` at the filter's input).
+    g_sensitivity_dps_per_g : float
+        Linear-acceleration (g-) sensitivity, °/s/g: each term of the emulated sensor's 3×3
+        matrix is drawn within ± this (:func:`gyrocal.kit.sim.sim_realism`).
+    noise_source : str
+        Where the noise density and g-sensitivity come from; a stand-in is named as one (⚠).
     """
 
     scale_tolerance: float
@@ -169,10 +179,15 @@ class GyroErrors:
     bias_instability_deg_h: float = ASSUMED_BIAS_INSTABILITY_DEG_H
     rate_random_walk_rad_s_sqrt_s: float = ASSUMED_RATE_RANDOM_WALK
     drift_source: str = ASSUMED_DRIFT_SOURCE
+    _: KW_ONLY
+    noise_density_dps_sqrt_hz: float
+    g_sensitivity_dps_per_g: float
+    noise_source: str
 
     def __post_init__(self) -> None:
         figs = (self.scale_tolerance, self.cross_axis, self.zero_rate_dps,
-                self.bias_instability_deg_h, self.rate_random_walk_rad_s_sqrt_s)
+                self.bias_instability_deg_h, self.rate_random_walk_rad_s_sqrt_s,
+                self.noise_density_dps_sqrt_hz, self.g_sensitivity_dps_per_g)
         if not all(math.isfinite(x) and x >= 0 for x in figs):
             raise ValueError(f"gyro error figures must be finite and >= 0: {self!r}")
 
@@ -185,6 +200,11 @@ class GyroErrors:
     def bias_instability_rad_s(self) -> float:
         """The bias instability ``B`` in rad/s."""
         return self.bias_instability_deg_h * RAD_PER_DEG / 3600.0
+
+    @property
+    def noise_density_rad_s_sqrt_hz(self) -> float:
+        """The rate noise density in rad/s/√Hz."""
+        return self.noise_density_dps_sqrt_hz * RAD_PER_DEG
 
 
 @dataclass(frozen=True)
@@ -503,7 +523,14 @@ MPU9250 = ChipFamily(
     # ±3 %, Cross-Axis Sensitivity ±2 %, Initial ZRO Tolerance ±5 °/s (25 °C) ⚠ one source (the
     # older MPU-6000/6050 sheet PS-MPU-6000A-00 gives ±20 °/s, which PX4's MPU-9250 self-test
     # comment quotes)
-    gyro_errors=GyroErrors(0.03, 0.02, 5.0, "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.1 Table 1 ⚠"),
+    # Table 1 also: Rate Noise Spectral Density 0.01 °/s/√Hz (Total RMS Noise 0.1 °/s at the
+    # 92 Hz DLPF setting) and Linear Acceleration Sensitivity 0.1 °/s/g ✓✓ (the datasheet and
+    # the MPU-6500 sheet PS-MPU-6500A-01 Table 1, the same die)
+    gyro_errors=GyroErrors(0.03, 0.02, 5.0, "MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.1 Table 1 ⚠",
+                           noise_density_dps_sqrt_hz=0.01, g_sensitivity_dps_per_g=0.1,
+                           noise_source="MPU-9250 PS-MPU-9250A-01 rev 1.0 §3.1 Table 1 (Rate "
+                                        "Noise Spectral Density, Linear Acceleration "
+                                        "Sensitivity)"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1000.0,  # §1.4, DLPF_CFG 1..6
@@ -648,9 +675,14 @@ LSM9DS1 = ChipFamily(
     # DocID025715 Rev 3 Table 3: G_TyOff ±30 dps (zero-rate level) ✓✓ (the datasheet and
     # SparkFun's LSM9DS1 notes quoting it). Table 3 gives no gyro sensitivity tolerance or
     # cross-axis figure: the MPU-9250's Table 1 figures stand in ⚠
+    # Table 3 gives no rate noise density and no g-sensitivity: the MPU-9250's 0.01 °/s/√Hz and
+    # 0.1 °/s/g stand in (a consumer gyro of the same generation) ⚠
     gyro_errors=GyroErrors(0.03, 0.02, 30.0,
                            "zero-rate: LSM9DS1 DocID025715 Rev 3 Table 3 (G_TyOff); scale, "
-                           "cross-axis: stand-in (not in the datasheet) ⚠"),
+                           "cross-axis: stand-in (not in the datasheet) ⚠",
+                           noise_density_dps_sqrt_hz=0.01, g_sensitivity_dps_per_g=0.1,
+                           noise_source="stand-in: the MPU-9250's figures (LSM9DS1 DocID025715 "
+                                        "Rev 3 Table 3 gives neither) ⚠"),
     # bytes the reader drains per sample: one FIFO slot, gyro XYZ and accel XYZ int16 (§2.7)
     extra=MappingProxyType({"fifo_sample_bytes": 12.0}),
 )
@@ -857,7 +889,13 @@ ICM42688P = ChipFamily(
     # DS-000347 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±0.5 %,
     # Cross-Axis Sensitivity ±1.25 % ⚠ one source; Initial ZRO Tolerance (board-level)
     # ±0.5 °/s ✓✓ (Table 1 and open code quoting it)
-    gyro_errors=GyroErrors(0.005, 0.0125, 0.5, "ICM-42688-P DS-000347 §3.1 Table 1 ⚠"),
+    # Table 1 also: Rate Noise Spectral Density 0.0028 °/s/√Hz (at 10 Hz) ✓✓ (the datasheet's
+    # table and its "Features" list); no linear-acceleration sensitivity row: the MPU-9250's
+    # 0.1 °/s/g stands in ⚠
+    gyro_errors=GyroErrors(0.005, 0.0125, 0.5, "ICM-42688-P DS-000347 §3.1 Table 1 ⚠",
+                           noise_density_dps_sqrt_hz=0.0028, g_sensitivity_dps_per_g=0.1,
+                           noise_source="ICM-42688-P DS-000347 §3.1 Table 1 (Rate Noise Spectral "
+                                        "Density); g-sensitivity: stand-in, the MPU-9250's ⚠"),
     extra=MappingProxyType(
         {
             "register_temperature_lsb_per_c": 132.48,  # TEMP_DATA: T = TEMP_DATA/132.48 + 25
@@ -1023,9 +1061,15 @@ LSM6DSOX = ChipFamily(
     # LSM6DSO DS12140 Rev 3 Table 2 (as for the accelerometer; DS12814's own table not read ⚠):
     # G_So% sensitivity tolerance ±1 %, G_TyOff zero-rate level ±1 dps ✓✓ (also the LSM6DSOX
     # table as quoted by open code). ST gives no cross-axis figure: the MPU-9250's ±2 % stands in
+    # Rn, rate noise density in high-performance mode, 3.8 mdps/√Hz (DS12814 Table 2; footnote:
+    # independent of ODR and FS) ⚠ one source. ST gives no g-sensitivity: the MPU-9250's
+    # 0.1 °/s/g stands in ⚠
     gyro_errors=GyroErrors(0.01, 0.02, 1.0,
                            "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
-                           "datasheet) ⚠"),
+                           "datasheet) ⚠",
+                           noise_density_dps_sqrt_hz=0.0038, g_sensitivity_dps_per_g=0.1,
+                           noise_source="LSM6DSOX DS12814 Table 2 (Rn, high-performance mode) ⚠; "
+                                        "g-sensitivity: stand-in, the MPU-9250's ⚠"),
     extra=MappingProxyType(
         {
             "timestamp_resolution_s": 25e-6,  # DS12814 TIMESTAMP registers: 25 µs LSB (typ.)
@@ -1196,7 +1240,13 @@ ICM20948 = ChipFamily(
     # DS-000189 rev 1.3 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±1.5 %,
     # Cross-Axis Sensitivity ±2 % ⚠ one source; Initial ZRO Tolerance (board-level) ±5 °/s ✓✓
     # (Table 1 and open code quoting it)
-    gyro_errors=GyroErrors(0.015, 0.02, 5.0, "ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 ⚠"),
+    # Table 1 also: Rate Noise Spectral Density 0.015 °/s/√Hz ⚠ one source; no
+    # linear-acceleration sensitivity row: the MPU-9250's 0.1 °/s/g stands in ⚠
+    gyro_errors=GyroErrors(0.015, 0.02, 5.0, "ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 ⚠",
+                           noise_density_dps_sqrt_hz=0.015, g_sensitivity_dps_per_g=0.1,
+                           noise_source="ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 (Rate Noise "
+                                        "Spectral Density) ⚠; g-sensitivity: stand-in, the "
+                                        "MPU-9250's ⚠"),
     extra=MappingProxyType(
         {
             "internal_rate_hz": 1125.0,  # DS-000189 GYRO_SMPLRT_DIV: 1.125 kHz/(1 + div)

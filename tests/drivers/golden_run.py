@@ -24,6 +24,11 @@ RUNS = {
     "mpu9250": ["--imu-address", "0x68"],  # given: the probe of imu.address 0 reads the bus
     "lsm9ds1": ["--imu-model", "lsm9ds1", "--imu-address", "0x6B", "--odr", "238"],
 }
+#: The gyro filter each run's chip has (the readers' default at the rate: the widest bandwidth
+#: not above half of it) and the rate it runs at, Hz: the MPU-9250's 92 Hz DLPF at its internal
+#: 1 kHz (register map CONFIG table), the LSM9DS1's 78 Hz LPF2 at 238 Hz (ST Table 47). With
+#: the chip-table density it gives the white noise per sample the pinned rests must show.
+FILTERS = {"mpu9250": (92.0, 1000.0), "lsm9ds1": (78.0, 238.0)}
 #: The files a run pins.
 FILES = ("imu.csv", "encoder.csv", "segments.csv")
 SEED = 7

@@ -37,7 +37,7 @@ OUT_X_L_XL, FIFO_CTRL, FIFO_SRC = 0x28, 0x2E, 0x2F
 def mpu(truth=QUIET, motion=None, **kw):
     clock = VirtualClock()
     bus, addr = make_emulated_imu("mpu9250", clock, motion or ConstantRate(), truth,
-                                  **{"subsamples": 1, **kw})
+                                  **{"subsamples": 1, "output_filter": False, **kw})
     return clock, bus, addr, bus.device(addr)
 
 
@@ -466,7 +466,8 @@ def test_each_sample_carries_the_mean_rate_over_its_period():
     for motion, check in ((ramp, "ramp"), (fast, "fast")):
         clock = VirtualClock()
         bus, addr = make_emulated_imu("mpu9250", clock, motion,
-                                      SensorTruth(noise_density_rad_s_sqrt_hz=0.0))
+                                      SensorTruth(noise_density_rad_s_sqrt_hz=0.0),
+                                      output_filter=False)
         mpu_stream(bus, addr)  # 1 kHz
         chip = bus.device(addr)
         k0 = chip.fifo_enables[-1]

@@ -48,3 +48,25 @@ def test_an_unknown_effect_is_a_usage_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "'gremlins'" in err and "coloured-noise" in err
     assert not (tmp_path / "o" / "calibration.json").exists()
+
+
+# each chip's datasheet figures, written out here (PS-MPU-9250A-01 Table 1, DocID025715 Rev 3
+# Table 3 (none: the MPU-9250's stand in), DS-000189 Table 1, DS-000347 Table 1, DS12814 Table 2)
+CHIP_FIGURES = {"mpu9250": (0.01, 0.1), "lsm9ds1": (0.01, 0.1), "icm20948": (0.015, 0.1),
+                "icm42688p": (0.0028, 0.1), "lsm6dsox": (0.0038, 0.1)}
+
+
+@pytest.mark.parametrize("model", sorted(CHIP_FIGURES))
+def test_the_emulated_sensor_has_its_chips_figures(model):
+    cfg = default_config()
+    cfg["imu"]["model"] = model
+    cfg["imu"]["address"] = 0
+    sim = build_sim(cfg, seed=3)
+    density, g_sens = CHIP_FIGURES[model]
+    np.testing.assert_allclose(sim.truth.noise_density_rad_s_sqrt_hz, math.radians(density))
+    g = np.array(sim.truth_manifest()["realism"]["g-sensitivity"]["matrix_rad_s_per_g"])
+    assert math.radians(0.5 * g_sens) < np.max(np.abs(g)) <= math.radians(g_sens)
+    assert sim.truth.realism.bias_instability_rad_s == pytest.approx(
+        math.radians(10.0) / 3600.0)  # the stated assumption (no datasheet gives it)
+    assert sim.chip.output_filter  # the dlpf effect: the chip's own filter, as configured
+    assert not build_sim(cfg, seed=3, realism=[]).chip.output_filter
