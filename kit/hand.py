@@ -142,7 +142,8 @@ class _Samples:
 
 
 def record_hand(imu: Any, clock: Any, user: Any, writer: Any, *,
-                rest_s: float = HAND_REST_S, tries: int = HAND_TRIES) -> list[dict[str, Any]]:
+                rest_s: float = HAND_REST_S, tries: int = HAND_TRIES,
+                poll_s: float = POLL_S) -> list[dict[str, Any]]:
     """Prompt ``user`` through the hand jig's steps while ``imu`` (started) is drained into
     ``writer``; each step checked by :func:`check_hand_step` and asked again with what was
     wrong.
@@ -160,6 +161,9 @@ def record_hand(imu: Any, clock: Any, user: Any, writer: Any, *,
     rest_s : float
         Rest recorded after each Enter, s.
     tries : int
+    poll_s : float
+        How often the FIFO is drained and Enter polled, s (within the FIFO's capacity at the
+        chip's rate).
 
     Returns
     -------
@@ -178,7 +182,7 @@ def record_hand(imu: Any, clock: Any, user: Any, writer: Any, *,
 
     def drain_until(done: Any) -> None:
         while not done():
-            clock.sleep(POLL_S)
+            clock.sleep(poll_s)
             batch = imu.read()
             if len(batch):
                 writer.append_imu(batch.t, batch.rate, batch.temperature_c, accel=batch.accel)

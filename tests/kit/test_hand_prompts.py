@@ -9,6 +9,7 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from gyrocal.drivers.emulated.hand import hand_schedule, hand_steps
 from gyrocal.drivers.imu import open_imu
@@ -20,6 +21,9 @@ from gyrocal.kit.sim import build_hand_sim
 
 #: The scripted user presses Enter this long after the hand's motion ends, s.
 _LATE_S = 0.2
+#: The FIFO drained every 0.1 s (20 samples of the default 200 Hz, within the MPU-9250's 512-byte
+#: FIFO's 42 of gyro and accelerometer): a fifth of the polls of the default, for the test's time.
+_POLL_S = 0.1
 
 
 class ScriptedUser:
@@ -75,28 +79,31 @@ def _record(tmp_path, seed, *, idle_before_first_turn=False):
     with _hand_writer(cfg, argparse.Namespace(), imu, root, {"name": "hand"},
                       truth=sim.truth.manifest()) as writer:
         imu.start()
-        taken = record_hand(imu, sim.clock, user, writer)
+        taken = record_hand(imu, sim.clock, user, writer, poll_s=_POLL_S)
         imu.stop()
         writer.finish()
     imu.close()
     return root, user, taken, sim
 
 
-def test_the_prompted_hand_session_is_estimated_within_its_sigma(tmp_path, capsys):
-    """Every step of the table is asked once and taken; `gyrocal estimate` reads the recording
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    """One prompted session (seed 3) whose user presses Enter once for the first turn without
+    turning."""
+    return _record(tmp_path_factory.mktemp("hand-prompts"), seed=3, idle_before_first_turn=True)
+
+
+def test_the_prompted_hand_session_is_estimated_within_its_sigma(session, capsys):
+    """Every step of the table is taken, in order; `gyrocal estimate` reads the recording
     (the hand jig's v1) and its bias and scales are within 3σ of the emulator's truth (the
     scales the diagonal model converges to on the box's axes, bench/bench_jigs.py)."""
     from bench.bench_jigs import diagonal_truth
 
-    root, user, taken, sim = _record(tmp_path, seed=3)
-    steps = hand_steps()
-    assert [(s["kind"], s["face"], s["sense"]) for s in taken] == steps
-    assert len(user.prompts) == len(steps) and [p[0] for p in user.prompts] == [
-        s[1] for s in steps]
+    root, user, taken, sim = session
+    assert [(s["kind"], s["face"], s["sense"]) for s in taken] == hand_steps()
     assert "one whole turn counter-clockwise" in user.prompts[1][1]
     manifest = json.loads((root / "manifest.json").read_text())
     assert manifest["jig"]["kind"] == "hand" and manifest["complete"]
-    assert "discarded" not in manifest["protocol"]
     assert main(["estimate", str(root), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     t = manifest["truth"]
@@ -108,13 +115,15 @@ def test_the_prompted_hand_session_is_estimated_within_its_sigma(tmp_path, capsy
                   < 3 * np.array(doc["bias_std"]))
 
 
-def test_a_turn_that_did_not_happen_is_asked_again_with_what_was_wrong(tmp_path):
+def test_a_turn_that_did_not_happen_is_asked_again_with_what_was_wrong(session):
     """The user presses Enter for the first turn without turning: the check finds no whole
     turn, says so in the repeated prompt and in the manifest's ``discarded``, and the turn made
-    when asked again is taken."""
-    root, user, taken, _ = _record(tmp_path, seed=5, idle_before_first_turn=True)
+    when asked again is taken; every other step is asked once, with its face."""
+    root, user, taken, _ = session
     texts = [text for _, text in user.prompts]
     assert len(texts) == len(hand_steps()) + 1
+    faces = [face for _, face, _ in hand_steps()]
+    assert [seat for seat, _ in user.prompts] == faces[:2] + faces[1:]
     assert texts[1].startswith("step 2/") and "no whole turn found since the last rest" not in \
         texts[1]
     assert texts[2].startswith("no whole turn found since the last rest") and "step 2/" in \
@@ -167,3 +176,20 @@ def test_ctrl_c_at_a_prompt_keeps_the_recording_marked_incomplete(tmp_path, monk
     assert "interrupted: the recording in" in err and "kept, marked incomplete" in err
     assert "Traceback" not in err
     assert not load_recording(out / "recording").complete
+
+
+def test_the_emulated_hand_lays_up_the_face_the_table_names():
+    """At each rest of the emulated hand's schedule gravity is along the face the steps of
+    hand_steps() last named (the check the prompts make on hardware; before, the quarter-turn
+    re-seats laid -x where the table says +x)."""
+    from gyrocal.drivers.emulated.hand import HandMotion
+    from gyrocal.kit.hand import FACE_UPS
+
+    sched = hand_schedule(2)
+    motion = HandMotion(sched, mount=(0.0, 0.0, 0.0), wobble_deg=0.0, seed=2)
+    faces = [face for _, face, _ in hand_steps()]  # a step per rest after the first
+    rests = [p for p in sched if p.kind == "rest"]
+    assert len(rests) == len(faces)
+    for p, face in zip(rests, faces, strict=True):
+        up = motion.specific_force(np.array([(p.t_start + p.t_end) / 2]))[0]
+        np.testing.assert_allclose(up, FACE_UPS[face], atol=1e-6)
