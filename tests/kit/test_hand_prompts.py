@@ -95,8 +95,9 @@ def session(tmp_path_factory):
 
 def test_the_prompted_hand_session_is_estimated_within_its_sigma(session, capsys):
     """Every step of the table is taken, in order; `gyrocal estimate` reads the recording
-    (the hand jig's v1) and its bias and scales are within 3σ of the emulator's truth (the
-    scales the diagonal model converges to on the box's axes, bench/bench_jigs.py)."""
+    (the hand jig's v1): its scales within 3σ of the emulator's truth (the scales the diagonal
+    model converges to on the box's axes, bench/bench_jigs.py; here -1.2, -0.2, -0.2 σ), its
+    bias within 4σ, and its verdict consistent."""
     from bench.bench_jigs import diagonal_truth
 
     root, user, taken, sim = session
@@ -109,10 +110,13 @@ def test_the_prompted_hand_session_is_estimated_within_its_sigma(session, capsys
     t = manifest["truth"]
     C = np.diag(1 / np.asarray(t["scale"])) @ np.asarray(t["misalignment"])
     scale = diagonal_truth(C, sim.jig.box_axes())
-    assert doc["version"] == 1
+    assert doc["version"] == 1 and doc["consistency"]["ok"]
     assert np.all(np.abs(np.array(doc["scale"]) - scale) < 3 * np.array(doc["scale_std"]))
+    # the zero-g bias within 4σ, as the single-servo run's: on the emulator's realistic chip the
+    # hand jig's bias error is 1.3 of its σ RMS (hardware_docs/hand-jig.md, 7.7e-5 on 5.8e-5);
+    # here 2.2, -1.7, 2.8 σ
     assert np.all(np.abs(np.array(doc["bias"]) - np.asarray(t["bias"]))
-                  < 3 * np.array(doc["bias_std"]))
+                  < 4 * np.array(doc["bias_std"]))
 
 
 def test_a_turn_that_did_not_happen_is_asked_again_with_what_was_wrong(session):
