@@ -8,6 +8,9 @@ FIFO drained, the servo polled and holding), then averages the accelerometer ove
 direction in the sensor frame is the seat's. A seat more than :data:`SEAT_TOLERANCE_DEG` off is
 refused with what was seated instead, and the user is asked again.
 
+The hand jig on hardware (:mod:`gyrocal.kit.hand`) prompts its user through the same
+:class:`Seater` (each prompt names a face of the box) and checks the face with :func:`check_seat`.
+
 Two users: :class:`TerminalSeater` prints the prompt and waits for Enter on the terminal (Ctrl-C
 stops the run with the servo's torque off, as everywhere); :class:`EmulatedSeater` re-seats the
 emulated jig's cube (:class:`gyrocal.drivers.emulated.seater.CubeSeater`), so
@@ -19,6 +22,7 @@ from __future__ import annotations
 import math
 import select
 import sys
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol, TextIO
 
 import numpy as np
@@ -61,12 +65,15 @@ def seat_prompt(seat: str, number: int, total: int, problem: str | None = None) 
 
 
 def check_seat(accel: np.ndarray, seat: str,
-               tolerance_deg: float = SEAT_TOLERANCE_DEG) -> str | None:
+               tolerance_deg: float = SEAT_TOLERANCE_DEG, *,
+               ups: Mapping[str, Sequence[float]] | None = None,
+               thing: str = "cube") -> str | None:
     """Whether a still accelerometer's readings (N, 3; any unit) say ``seat`` is up: None if
     they do, else what is wrong (the seat they say instead, or that they say none).
 
     A still accelerometer reads the specific force, +1 g along "up" (the sensor frame's up is
-    the seat's direction of :data:`~gyrocal.calib.design.SEATS`).
+    the seat's direction: ``ups``, by default the single-servo jig's
+    :data:`~gyrocal.calib.design.SEATS`; ``thing`` is what the message says is seated).
     """
     a = np.asarray(accel, dtype=float).reshape(-1, 3)
     a = a[np.all(np.isfinite(a), axis=1)]
@@ -76,15 +83,16 @@ def check_seat(accel: np.ndarray, seat: str,
     if not np.linalg.norm(m) > 0:
         return "the accelerometer reads zero: it cannot check the seat"
     up = m / np.linalg.norm(m)
-    off = {name: math.degrees(math.acos(min(1.0, float(np.dot(up, v)))))
-           for name, (v, _) in SEATS.items()}
+    seats = {name: v for name, (v, _) in SEATS.items()} if ups is None else ups
+    off = {name: math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(up, v))))))
+           for name, v in seats.items()}
     if off[seat] <= tolerance_deg:
         return None
     nearest = min(off, key=off.__getitem__)
     told = (f"{nearest} is up instead ({off[nearest]:.0f}° from it)"
             if off[nearest] <= tolerance_deg else
             f"no seat is up: gravity reads ({up[0]:+.2f}, {up[1]:+.2f}, {up[2]:+.2f})")
-    return f"the cube is not seated {seat} up ({off[seat]:.0f}° off): {told}"
+    return f"the {thing} is not seated {seat} up ({off[seat]:.0f}° off): {told}"
 
 
 class TerminalSeater:
@@ -110,8 +118,9 @@ class TerminalSeater:
             if not self.inp.readline():
                 from gyrocal.kit.errors import InputError
 
-                raise InputError("the terminal closed while waiting for a re-seat: run the "
-                                 "single-servo jig from an interactive terminal")
+                raise InputError("the terminal closed while waiting for Enter after a prompt: "
+                                 "run the single-servo or hand jig from an interactive "
+                                 "terminal")
             self._waiting = False
         return not self._waiting
 

@@ -658,7 +658,8 @@ HAND_WOBBLE_DEG = 1.0
 
 
 def build_hand_sim(cfg: Config, *, seed: int = 0, noise_seed: int | None = None,
-                   mount_deg: float = 3.0, lead_s: float = 1.0, **options: Any) -> SimJig:
+                   mount_deg: float = 3.0, lead_s: float = 1.0, schedule: Any = None,
+                   **options: Any) -> SimJig:
     """The emulated hand jig (``--sim --jig hand``): the configured IMU on a box turned by a
     hand (:class:`gyrocal.drivers.emulated.hand.HandMotion`: irregular speed within each turn,
     rests of varying length, a wobbling axis, the stop's repeatability), no servos.
@@ -671,6 +672,9 @@ def build_hand_sim(cfg: Config, *, seed: int = 0, noise_seed: int | None = None,
         hand's schedule; ``noise_seed`` the noise and the hand's speed profiles).
     lead_s : float
         Still time before the schedule starts (the reader's start-up), s.
+    schedule : list of HandPhase, optional
+        The hand's schedule (default: :func:`~gyrocal.drivers.emulated.hand.hand_schedule`
+        drawn by ``seed``).
     **options
         :func:`build_sim`'s ``scale``, ``bias``, ``cross_axis``, ``realism``, ``temperature``,
         ``self_heating``, ``sensor``, ``noise_density_rad_s_sqrt_hz``.
@@ -683,7 +687,8 @@ def build_hand_sim(cfg: Config, *, seed: int = 0, noise_seed: int | None = None,
     effects = frozenset(REALISM_EFFECTS if realism is None else realism)
     rng = np.random.default_rng([int(seed), 0x4A4F])
     axis = rng.normal(size=3)
-    motion = HandMotion(hand_schedule(seed), t0=clock.monotonic() + lead_s,
+    schedule = hand_schedule(seed) if schedule is None else schedule
+    motion = HandMotion(schedule, t0=clock.monotonic() + lead_s,
                         mount=tuple(axis / np.linalg.norm(axis) * math.radians(mount_deg)),
                         wobble_deg=HAND_WOBBLE_DEG if "wobble" in effects else 0.0,
                         stop_deg=HAND_STOP_DEG, seed=run_seed)

@@ -25,7 +25,7 @@ import numpy as np
 
 from gyrocal.drivers.emulated.jig import rotation_matrices, rotvec_to_matrix
 
-__all__ = ["HAND_FACES", "HandMotion", "HandPhase", "hand_schedule"]
+__all__ = ["HAND_FACES", "HandMotion", "HandPhase", "hand_schedule", "hand_steps"]
 
 #: The faces laid up, in order, with the turns about the vertical box axis on the first face of
 #: each axis (+z, +x, +y) and a rest on the opposite face for the accelerometer's six orientations.
@@ -59,6 +59,11 @@ class HandPhase:
     angle: float = 0.0
 
 
+def _up(face: str) -> np.ndarray:
+    """The box-frame direction of ``face`` (``"+x"``...)."""
+    return (1.0 if face[0] == "+" else -1.0) * np.eye(3)[_AXIS[face[1]]]
+
+
 def _profile(rng: np.random.Generator, n: int) -> np.ndarray:
     """A hand's speed profile on ``n`` points of ``[0, 1]``: positive inside, zero at the ends,
     integrating to 1 (per unit of the normalised time)."""
@@ -70,11 +75,32 @@ def _profile(rng: np.random.Generator, n: int) -> np.ndarray:
     return v / np.trapezoid(v, x)
 
 
+def hand_steps() -> list[tuple[str, str, int]]:
+    """The hand jig's protocol without its times, in order (one table for the emulated hand,
+    :func:`hand_schedule`, and for the prompts on hardware, :mod:`gyrocal.kit.hand`).
+
+    Returns
+    -------
+    list of (kind, face, sense)
+        ``("face", F, 0)``: lay the box with face ``F`` (of :data:`HAND_FACES`) up against the
+        stop and rest; ``("turn", F, ±1)``: with face ``F`` up, turn the box one whole turn
+        about its vertical axis (``+1`` positive about ``F``'s axis by the right-hand rule:
+        counter-clockwise seen from above) back against the stop, and rest. On each ``+a`` face
+        a turn each way, on ``-a`` a rest only (the accelerometer's sixth orientation).
+    """
+    out: list[tuple[str, str, int]] = []
+    for face in HAND_FACES:
+        out.append(("face", face, 0))
+        if face[0] == "+":
+            out += [("turn", face, sense) for sense in (1, -1)]
+    return out
+
+
 def hand_schedule(seed: int, *, turns_s: tuple[float, float] = (2.5, 5.0),
                   rests_s: tuple[float, float] = (2.0, 5.0), reseat_s: float = 2.0,
                   first_rest_s: float = 4.0) -> list[HandPhase]:
-    """The hand's schedule, drawn by ``seed``: the faces of :data:`HAND_FACES`; on ``+a`` a turn
-    each way about box axis ``a``, rests between; on ``-a`` a rest only."""
+    """The hand's schedule, drawn by ``seed``: the steps of :func:`hand_steps` with their
+    durations (rests between)."""
     rng = np.random.default_rng([int(seed), 0x4A4D])
     out: list[HandPhase] = []
     t = 0.0
@@ -84,19 +110,22 @@ def hand_schedule(seed: int, *, turns_s: tuple[float, float] = (2.5, 5.0),
         out.append(HandPhase(kind, t, t + dur, axis, angle))
         t += dur
 
-    add("rest", first_rest_s)
-    for k, face in enumerate(HAND_FACES):
-        if k:  # lay the box on this face: 180° to the opposite face, else 90°
-            prev = HAND_FACES[k - 1]
+    add("rest", first_rest_s)  # the box starts on the first face
+    prev = None
+    for kind, face, sense in hand_steps():
+        if kind == "turn":
+            add("turn", float(rng.uniform(*turns_s)), _AXIS[face[1]], sense * 2 * np.pi)
+            add("rest", float(rng.uniform(*rests_s)))
+            continue
+        if prev is not None:  # lay the box on this face: 180° to the opposite face, else 90°
             if prev[1] == face[1]:
                 add("reseat", reseat_s, (_AXIS[face[1]] + 1) % 3, np.pi)
-            else:
-                add("reseat", reseat_s, 3 - _AXIS[face[1]] - _AXIS[prev[1]], -np.pi / 2)
+            else:  # a quarter turn about the third axis, in the sense that lays ``face`` up
+                axis = 3 - _AXIS[face[1]] - _AXIS[prev[1]]
+                add("reseat", reseat_s, axis, -np.pi / 2 * float(np.dot(
+                    np.cross(np.eye(3)[axis], _up(prev)), _up(face))))
             add("rest", float(rng.uniform(*rests_s)))
-        if face[0] == "+":
-            for d in (1, -1):
-                add("turn", float(rng.uniform(*turns_s)), _AXIS[face[1]], d * 2 * np.pi)
-                add("rest", float(rng.uniform(*rests_s)))
+        prev = face
     return out
 
 
@@ -168,13 +197,27 @@ class HandMotion:
     def rate(self, t: np.ndarray) -> np.ndarray:
         """True rate in the sensor frame, rad/s, at clock times ``t`` (zero outside)."""
         tt = np.asarray(t, dtype=float).reshape(-1) - self.t0
-        return np.column_stack([np.interp(tt, self._t, self._w[:, j], left=0.0, right=0.0)
+        k = self._span(tt)
+        return np.column_stack([np.interp(tt, self._t[k], self._w[k, j], left=0.0, right=0.0)
                                 for j in range(3)])
 
     def specific_force(self, t: np.ndarray, peek: bool = False) -> np.ndarray:
         """Specific force in the sensor frame, g (+1 up at rest), at clock times ``t``."""
         tt = np.asarray(t, dtype=float).reshape(-1) - self.t0
-        return np.column_stack([np.interp(tt, self._t, self._f[:, j]) for j in range(3)])
+        k = self._span(tt)
+        return np.column_stack([np.interp(tt, self._t[k], self._f[k, j]) for j in range(3)])
+
+    def _span(self, tt: np.ndarray) -> slice:
+        """The table rows that ``np.interp`` needs for times ``tt`` (the grid's first or last row
+        kept when ``tt`` reaches outside it, so the values there are the whole table's): the
+        emulated chip asks for a few samples at a time, and interpolating on the whole table
+        each time was most of a session's cost."""
+        n = self._t.size
+        if tt.size == 0:
+            return slice(0, n)
+        lo = min(max(int(np.floor(tt.min() / _DT)) - 1, 0), n - 2)
+        hi = max(min(int(np.ceil(tt.max() / _DT)) + 2, n), lo + 2)
+        return slice(lo, hi)
 
     def box_axes(self) -> np.ndarray:
         """The box axes in the sensor frame, rows x, y, z (the true turn axes, less wobble)."""

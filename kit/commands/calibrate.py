@@ -112,8 +112,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jig", choices=tuple(JIG_KINDS), default=DEFAULT_JIG,
                    help="the kind of jig: " + "; ".join(
                        f"{k.name}: {k.description} (hardware_docs/{k.hardware_docs})"
-                       for k in JIG_KINDS.values()) + f" (default {DEFAULT_JIG}; hand records "
-                   "only with --sim)")
+                       for k in JIG_KINDS.values()) + f" (default {DEFAULT_JIG}; on hardware, hand "
+                   "opens only the IMU and prompts at the terminal for each rest and turn)")
     p.add_argument("--out", metavar="DIR",
                    help="output directory (default: ./gyrocal-YYYYmmdd-HHMMSS)")
     p.add_argument("--force", action="store_true",
@@ -167,9 +167,9 @@ def run(args: argparse.Namespace) -> int:
     report_failed = None
     with built_beside(work, out):
         if getattr(args, "jig", "gimbal") == "hand":
-            from gyrocal.kit.hand import record_hand_sim
+            from gyrocal.kit.hand import record_hand_live, record_hand_sim
 
-            record_hand_sim(cfg, args, work / "recording")
+            (record_hand_sim if args.sim else record_hand_live)(cfg, args, work / "recording")
         else:
             run_jig(cfg, args, work, work / "recording")
         if getattr(args, "sim_imu", False):

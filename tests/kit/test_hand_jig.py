@@ -66,11 +66,6 @@ def test_a_manifest_naming_an_unknown_jig_is_refused(tmp_path, capsys):
     assert "jig.kind 'table' is not one of gimbal, hand" in capsys.readouterr().err
 
 
-def test_calibrate_refuses_the_hand_jig_without_sim(tmp_path, capsys):
-    assert main(["calibrate", "--jig", "hand", "--out", str(tmp_path / "o")]) == 2
-    assert "--jig hand records only on the emulated jig" in capsys.readouterr().err
-
-
 def test_the_emulated_hand_turns_whole_turns_and_lays_each_face_up():
     """Each turn of the emulated hand integrates to its drawn angle (2π plus the stop's
     error) about its box axis, whatever its speed profile; at rests the specific force is the
