@@ -32,6 +32,8 @@ SHARED_SEED = 5
 #: ±0.1 rad/s) without realism effects (what each realism effect costs is measured by
 #: ``python -m bench realism``).
 PAPER_REALISM = ("--sim-sensor", "paper", "--sim-realism", "off")
+#: The paper's sensor and model: no cross-axis terms, the planner's diagonal protocol.
+PAPER_DIAGONAL = (*PAPER_REALISM, "--protocol", "auto", "--sim-cross-axis", "0")
 
 
 def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
@@ -88,6 +90,16 @@ def paper_full_run(tmp_path_factory):
     return _once(tmp_path_factory, "calibrate-paper", lambda d: main(
         ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), *PAPER_REALISM, "--out", str(d),
          "--quiet", "--no-report"]))
+
+
+@pytest.fixture(scope="session")
+def paper_diagonal_run(tmp_path_factory):
+    """``(directory, exit code)`` of ``gyrocal calibrate --sim`` of the paper's sensor and model
+    (:data:`PAPER_DIAGONAL`, seed 1): one axis per servo, a version 1 calibration. Seed 1 of
+    tests/kit/test_calibrate.py's runs, and tests/kit/test_report.py's run."""
+    return _once(tmp_path_factory, "calibrate-paper-diagonal", lambda d: main(
+        ["calibrate", "--sim", "--sim-seed", "1", *PAPER_DIAGONAL, "--out", str(d), "--quiet",
+         "--no-report"]))
 
 
 @pytest.fixture(scope="session")
