@@ -44,19 +44,21 @@ from tests.test_docs import xdist_unit  # noqa: E402
 #: unit in that order.
 LONG_UNITS: dict[str, float] = {
     "tests/test_docs.py::running": 183.4,
+    "tests/drivers/test_imu_streaming.py": 93.6,
     "tests/kit/test_calibrate.py": 55.3,  # 82.7 measured, less the two runs now shared
     "tests/kit/test_plate.py": 51.2,
     "tests/test_docs.py::intro": 47.0,
     "tests/kit/test_reliability.py": 45.6,
+    "tests/kit/test_track_live.py": 31.3,
     "tests/kit/test_report.py": 29.6,
-    "tests/kit/test_accel_recording.py": 20.4,  # the first to ask for the shared full_run
-    "tests/drivers/test_imu_streaming.py": 20.6,
+    "tests/kit/test_accel_recording.py": 25.4,  # the first to ask for the shared full_run
     "tests/kit/test_track.py": 19.9,
     "tests/kit/test_signals.py": 19.4,
+    "tests/calib/test_tracker.py": 19.1,
     "tests/kit/test_align_e2e.py": 18.0,
-    "tests/kit/test_track_live.py": 17.2,
     "tests/kit/test_recording_reader.py": 16.4,
-    "tests/calib/test_tracker.py": 15.6,
+    "tests/kit/test_verify_general.py": 16.0,
+    "tests/kit/test_track_v2.py": 13.9,
     "tests/kit/test_thermal.py": 11.6,
     "tests/drivers/test_imu_config.py": 11.6,
     "tests/drivers/test_dxl_gimbal.py": 10.1,
