@@ -6,11 +6,15 @@ Under pytest-xdist (``pytest -n 2``, the README's command) the scheduler below i
 * each chain of documents of ``tests/test_docs.py`` (:data:`tests.test_docs.CHAINS`: documents
   that read each other's files run in reading order in one directory) with the tests that read
   that chain's files. Split over workers, as xdist's default ``load`` scheduling does, a chain ran
-  on every worker that had one of its tests. The chains are the longest units (several emulated
-  calibrations each), so they are handed out first, one to each worker, longest first;
-* each module of :data:`MODULE_UNITS`, whose tests share a module-scoped fixture costing emulated
-  calibrations: split, every worker that ran one of its tests built the fixture again;
-* every other test, a unit of its own, so the rest is balanced as ``load`` balances it.
+  on every worker that had one of its tests;
+* every other test module, whole (as ``--dist loadfile``): a module-scoped fixture (an emulated
+  calibration, a simulated recording, a rendered report) is built by one worker only. With every
+  test a unit of its own, the two workers took a module's tests in turn and each built its
+  fixtures.
+
+The units are handed out longest first (:data:`LONG_UNITS`, measured; the rest by their number
+of tests, xdist's ``--loadscope-reorder``), so that the short ones fill the end of the run on both
+workers and no long unit starts last.
 
 ``--dist`` other than ``load`` is left as asked.
 """
@@ -31,15 +35,34 @@ from typing import Any  # noqa: E402
 
 import pytest  # noqa: E402
 
-from tests.test_docs import CHAINS, xdist_unit  # noqa: E402
+from tests.test_docs import xdist_unit  # noqa: E402
 
-#: Modules whose module-scoped fixtures run emulated calibrations (tens of CPU seconds): one
-#: work unit each, so one worker builds the fixture once.
-MODULE_UNITS = frozenset({
-    "tests/kit/test_calibrate.py",
-    "tests/kit/test_plate.py",
-    "tests/kit/test_report.py",
-})
+#: CPU seconds of the longest work units (:func:`work_unit`), each measured alone on one worker
+#: (``python -m pytest -p no:randomly`` with a plugin summing each test's CPU time, own and
+#: children's, fixtures included, on a loaded host): the scheduler hands them out first, longest
+#: first. A unit missing here keeps xdist's order after them; a figure out of date only moves a
+#: unit in that order.
+LONG_UNITS: dict[str, float] = {
+    "tests/test_docs.py::running": 183.4,
+    "tests/drivers/test_imu_streaming.py": 93.6,
+    "tests/kit/test_calibrate.py": 55.3,  # 82.7 measured, less the two runs now shared
+    "tests/kit/test_plate.py": 51.2,
+    "tests/test_docs.py::intro": 47.0,
+    "tests/kit/test_reliability.py": 45.6,
+    "tests/kit/test_track_live.py": 31.3,
+    "tests/kit/test_report.py": 29.6,
+    "tests/kit/test_accel_recording.py": 25.4,  # the first to ask for the shared full_run
+    "tests/kit/test_track.py": 19.9,
+    "tests/kit/test_signals.py": 19.4,
+    "tests/calib/test_tracker.py": 19.1,
+    "tests/kit/test_align_e2e.py": 18.0,
+    "tests/kit/test_recording_reader.py": 16.4,
+    "tests/kit/test_verify_general.py": 16.0,
+    "tests/kit/test_track_v2.py": 13.9,
+    "tests/kit/test_thermal.py": 11.6,
+    "tests/drivers/test_imu_config.py": 11.6,
+    "tests/drivers/test_dxl_gimbal.py": 10.1,
+}
 
 try:
     from xdist.scheduler import LoadScopeScheduling
@@ -50,38 +73,35 @@ except ImportError:  # plain pytest: nothing to schedule
 def work_unit(nodeid: str) -> str:
     """The work unit of a test (see the module's docstring)."""
     unit = xdist_unit(nodeid) if nodeid.startswith("tests/test_docs.py::") else None
-    if unit is not None:
-        return unit
-    module = nodeid.split("::", 1)[0]
-    return module if module in MODULE_UNITS else nodeid
+    return unit if unit is not None else nodeid.split("::", 1)[0]
 
 
-#: The documents' chains' units, in the order they are handed out.
-CHAIN_UNITS = tuple(f"tests/test_docs.py::{chain}" for chain in CHAINS)
+def longest_first(units: list[str]) -> list[str]:
+    """``units`` in the order they are handed out: those of :data:`LONG_UNITS`, longest first,
+    then the others in their given order."""
+    return sorted(units, key=lambda unit: -LONG_UNITS.get(unit, 0.0))
 
 
 if LoadScopeScheduling is not None:
 
-    class DocumentsTogether(LoadScopeScheduling):  # type: ignore[misc, valid-type]
-        """``load`` scheduling, except for the units of :func:`work_unit`, the documents'
-        chains first."""
+    class LongestFirst(LoadScopeScheduling):  # type: ignore[misc, valid-type]
+        """``load`` scheduling of the units of :func:`work_unit`, longest first."""
 
-        _chains_first = False
+        _ordered = False
 
         def _split_scope(self, nodeid: str) -> str:
             return work_unit(nodeid)
 
         def _assign_work_unit(self, node: Any) -> None:
-            if not self._chains_first:  # the queue is complete at the first assignment
-                self._chains_first = True
-                for unit in reversed(CHAIN_UNITS):
-                    if unit in self.workqueue:
-                        self.workqueue.move_to_end(unit, last=False)
+            if not self._ordered:  # the queue is complete at the first assignment
+                self._ordered = True
+                for unit in reversed(longest_first(list(self.workqueue))):
+                    self.workqueue.move_to_end(unit, last=False)
             super()._assign_work_unit(node)
 
     @pytest.hookimpl(optionalhook=True)
     def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-        """:class:`DocumentsTogether` in place of xdist's ``load`` scheduling."""
+        """:class:`LongestFirst` in place of xdist's ``load`` scheduling."""
         if config.getvalue("dist") == "load":
-            return DocumentsTogether(config, log)
+            return LongestFirst(config, log)
         return None

@@ -2,7 +2,7 @@
 
 ``full_run`` is one ``gyrocal calibrate --sim`` at the defaults (the full model's protocol, an
 emulated sensor within the datasheet's tolerances, its ±2 % cross-axis terms included, and every
-realism effect);
+realism effect), its HTML report included;
 ``verify_run`` is one ``gyrocal verify --sim`` of that calibration on the same emulated sensor
 and jig (every realism effect too: verify applies the calibration's g-sensitivity), with a short
 diagonal protocol (18 s) before its general-motion sweeps. Under pytest-xdist the workers share
@@ -11,7 +11,9 @@ them: the first to arrive runs the command under a file lock, the others read it
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
+import io
 import json
 import os
 from collections.abc import Callable
@@ -30,6 +32,8 @@ SHARED_SEED = 5
 #: ±0.1 rad/s) without realism effects (what each realism effect costs is measured by
 #: ``python -m bench realism``).
 PAPER_REALISM = ("--sim-sensor", "paper", "--sim-realism", "off")
+#: The paper's sensor and model: no cross-axis terms, the planner's diagonal protocol.
+PAPER_DIAGONAL = (*PAPER_REALISM, "--protocol", "auto", "--sim-cross-axis", "0")
 
 
 def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
@@ -52,12 +56,29 @@ def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
+def _stdout_file(directory: Path) -> Path:
+    """Where a shared run's standard output is kept: beside its directory, not in it."""
+    return directory.with_name(directory.name + ".stdout")
+
+
 @pytest.fixture(scope="session")
 def full_run(tmp_path_factory):
-    """``(directory, exit code)`` of ``gyrocal calibrate --sim`` at the defaults."""
-    return _once(tmp_path_factory, "calibrate", lambda d: main(
-        ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), "--out", str(d), "--quiet",
-         "--no-report"]))
+    """``(directory, exit code)`` of ``gyrocal calibrate --sim`` at the defaults, its report
+    included when the plot extra is installed (what it printed: :func:`full_run_stdout`)."""
+    def make(d: Path) -> int:
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            code = main(["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), "--out", str(d),
+                         "--quiet"])
+        _stdout_file(d).write_text(out.getvalue())
+        return code
+    return _once(tmp_path_factory, "calibrate", make)
+
+
+@pytest.fixture(scope="session")
+def full_run_stdout(full_run):
+    """What ``full_run``'s ``gyrocal calibrate`` printed on its standard output."""
+    return _stdout_file(full_run[0]).read_text()
 
 
 @pytest.fixture(scope="session")
@@ -69,6 +90,16 @@ def paper_full_run(tmp_path_factory):
     return _once(tmp_path_factory, "calibrate-paper", lambda d: main(
         ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), *PAPER_REALISM, "--out", str(d),
          "--quiet", "--no-report"]))
+
+
+@pytest.fixture(scope="session")
+def paper_diagonal_run(tmp_path_factory):
+    """``(directory, exit code)`` of ``gyrocal calibrate --sim`` of the paper's sensor and model
+    (:data:`PAPER_DIAGONAL`, seed 1): one axis per servo, a version 1 calibration. Seed 1 of
+    tests/kit/test_calibrate.py's runs, and tests/kit/test_report.py's run."""
+    return _once(tmp_path_factory, "calibrate-paper-diagonal", lambda d: main(
+        ["calibrate", "--sim", "--sim-seed", "1", *PAPER_DIAGONAL, "--out", str(d), "--quiet",
+         "--no-report"]))
 
 
 @pytest.fixture(scope="session")
