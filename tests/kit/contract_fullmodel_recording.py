@@ -143,13 +143,26 @@ def specific_force(links: list, mount: np.ndarray, angles: np.ndarray) -> np.nda
     return np.einsum("nki,k->ni", R, links[2])
 
 
+def flicker_noise(rng: np.random.Generator, B: float, rate_hz: float, n: int) -> np.ndarray:
+    """``n`` samples (n, 3) at ``rate_hz`` of flicker noise of one-sided spectral density
+    ``(B²/π)/f`` and no mean, made by shaping white noise's spectrum (periodic over the ``n``
+    samples): Allan deviation ``sqrt(2 ln 2) · sqrt(B²/π) ≈ 0.664 B`` (NBS TN 394; IEEE Std 952
+    Annex C)."""
+    dt = 1.0 / rate_hz
+    f = np.fft.rfftfreq(n, dt)
+    amp = np.zeros_like(f)
+    amp[1:] = np.sqrt(B**2 / np.pi / f[1:] * n / (2 * dt))
+    z = (rng.standard_normal((3, f.size)) + 1j * rng.standard_normal((3, f.size))) / np.sqrt(2)
+    return np.fft.irfft(z * amp, n, axis=1).T
+
+
 def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 2.5e-3,
                     odr: float = 200.0, enc_hz: float = 100.0, speed: float = 4.0,
                     turns: int = 2, accel: float = 10.0, rest: float = 0.8,
                     move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
-                    hold: float = 0.06, bias_walk: float = 0.0,
+                    hold: float = 0.06, bias_walk: float = 0.0, bias_flicker: float = 0.0,
                     temp_ramp: tuple[float, float] | None = None,
                     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
                     accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
@@ -164,7 +177,11 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     about 60 ms in gyrocal's emulated runs), the only still time before a turn that follows it.
     With ``bias_walk`` (rad/s/√s) the bias wanders as a random walk from ``truth["bias"]``; the
     truth then holds the walk at every gyro sample as ``bias_walk`` (n, 3), the bias being
-    ``bias + bias_walk``. With ``temp_ramp`` (°C at the start and the end) the die temperature
+    ``bias + bias_walk``. With ``bias_flicker`` (``B``, rad/s) the bias also carries flicker
+    noise (:func:`flicker_noise`: one-sided density ``B²/π / f``, Allan floor ``0.664 B``), made
+    over four hours with the recording at their start; the truth then holds it at every gyro
+    sample as ``bias_flicker`` (n, 3) and its mean over the hour from the start as
+    ``bias_flicker_hour`` (3,). With ``temp_ramp`` (°C at the start and the end) the die temperature
     ramps linearly (written in the ``temp`` column) and the bias follows it,
     ``bias + tempco (T − T_start)``. With ``accel_truth`` (:func:`draw_accel`) the
     accelerometer's columns and (unless ``tour`` is false) the tour (module docstring), gravity
@@ -234,6 +251,12 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         steps = np.random.default_rng([seed, 0xB1A5]).standard_normal(omega.shape)
         truth["bias_walk"] = np.cumsum(steps, axis=0) * bias_walk / np.sqrt(odr)
         m = m - truth["bias_walk"]
+    if bias_flicker:
+        hours = flicker_noise(np.random.default_rng([seed, 0xF11C]), bias_flicker, odr,
+                              int(4 * 3600 * odr))
+        truth["bias_flicker"] = hours[: ts.size]
+        truth["bias_flicker_hour"] = hours[: int(3600 * odr)].mean(axis=0)
+        m = m - truth["bias_flicker"]
     if g_sensitivity is not None:
         m = m + specific_force(truth["links"], truth["mount"], ang) @ np.asarray(
             g_sensitivity).T
