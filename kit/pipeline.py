@@ -27,6 +27,7 @@ from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
 from gyrocal.calib.model import GyroCalibration
+from gyrocal.calib.systematics import add_wobble
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
 from gyrocal.kit.errors import EstimationError, InputError
 from gyrocal.kit.recording import Recording, now_iso
@@ -258,6 +259,19 @@ def chip_bias_drift(model: Any, ex: ExtractedWindows) -> BiasDrift:
                      source=ge.drift_source)
 
 
+def jig_wobble_rad(manifest: Mapping[str, Any]) -> float:
+    """The largest once-per-revolution link tilt of the recording's servos, rad: the servo
+    table's ``wobble_deg`` (:class:`gyrocal.drivers.dynamixel.control_table.ServoModel`) of each
+    ``gimbal.motors[].model``; the assumed figure for a model the table does not hold."""
+    from gyrocal.drivers.dynamixel.control_table import ASSUMED_WOBBLE_DEG, MODELS
+
+    by_name = {m.name: m.wobble_deg for m in MODELS.values()}
+    motors = (manifest.get("gimbal") or {}).get("motors") or []
+    figs = [by_name.get(m.get("model"), ASSUMED_WOBBLE_DEG) for m in motors
+            if isinstance(m, Mapping)]
+    return math.radians(max(figs, default=ASSUMED_WOBBLE_DEG))
+
+
 def estimate_recording(
     rec: Recording, method: str = AUTO, *, source: str | None = None,
     gravity_m_s2: float | None = None,
@@ -278,7 +292,7 @@ def estimate_recording(
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
     drift = chip_bias_drift(rec.sensor.get("model"), ex)
-    fit = add_bias_drift(fit, drift)
+    fit = add_bias_drift(add_wobble(fit, ex.observations, jig_wobble_rad(rec.manifest)), drift)
     notes = (*notes, drift.note())
     cal = fit.to_calibration(
         sensor=rec.sensor,

@@ -63,13 +63,24 @@ def draw_sensor(seed: int, cross: float = 0.02, tilt_rad: float = 0.02, mount_ra
     }
 
 
-def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.ndarray
-                ) -> np.ndarray:
-    """Angular velocity in the sensor frame (module docstring) for angles and rates (N, 3)."""
+def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.ndarray,
+                wobble: tuple[float, list] | None = None) -> np.ndarray:
+    """Angular velocity in the sensor frame (module docstring) for angles and rates (N, 3).
+    With ``wobble = (ε, [e_0, e_1, e_2])`` each link is tilted by ``ψ_j = ε sin θ_j`` about
+    ``e_j`` (⊥ its axis, fixed to the link) after its joint's rotation, ``Rot(a_j θ_j)
+    Rot(e_j ψ_j)``: the joint's rate in the sensor frame is then ``(W_j inner)ᵀ a_j θ̇_j +
+    innerᵀ e_j ψ̇_j``."""
     n = angles.shape[0]
     out = np.zeros((n, 3))
     inner = np.broadcast_to(mount, (n, 3, 3)).copy()  # Rot_{j+1} … Rot_2 M, built inside out
     for j in (2, 1, 0):
+        if wobble is not None:
+            eps, e = wobble[0], wobble[1][j]
+            tilted = Rotation.from_rotvec(eps * np.sin(angles[:, j:j + 1]) * e[None, :]
+                                          ).as_matrix() @ inner
+            out += (np.einsum("nki,k->ni", inner, e)
+                    * (eps * np.cos(angles[:, j]) * rates[:, j])[:, None])
+            inner = tilted
         out += np.einsum("nki,k->ni", inner, links[j]) * rates[:, j:j + 1]
         rot = Rotation.from_rotvec(angles[:, j:j + 1] * links[j][None, :]).as_matrix()
         inner = rot @ inner
@@ -163,6 +174,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
                     hold: float = 0.06, bias_walk: float = 0.0, bias_flicker: float = 0.0,
+                    wobble_rad: float = 0.0,
                     temp_ramp: tuple[float, float] | None = None,
                     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
                     accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
@@ -181,7 +193,10 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     noise (:func:`flicker_noise`: one-sided density ``B²/π / f``, Allan floor ``0.664 B``), made
     over four hours with the recording at their start; the truth then holds it at every gyro
     sample as ``bias_flicker`` (n, 3) and its mean over the hour from the start as
-    ``bias_flicker_hour`` (3,). With ``temp_ramp`` (°C at the start and the end) the die temperature
+    ``bias_flicker_hour`` (3,). With ``wobble_rad`` (``ε``) each link nods by ``ε sin θ_j``
+    about an axis drawn perpendicular to its own (:func:`sensor_rate`; the gyro only, the
+    accelerometer's force is left rigid); the axes are ``truth["wobble_axes"]``. With
+    ``temp_ramp`` (°C at the start and the end) the die temperature
     ramps linearly (written in the ``temp`` column) and the bias follows it,
     ``bias + tempco (T − T_start)``. With ``accel_truth`` (:func:`draw_accel`) the
     accelerometer's columns and (unless ``tour`` is false) the tour (module docstring), gravity
@@ -240,7 +255,13 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         return ang, rate
 
     ang, rate = motion(ts)
-    omega = sensor_rate(truth["links"], truth["mount"], ang, rate)
+    wobble = None
+    if wobble_rad:
+        wrng = np.random.default_rng([seed, 0x30B])
+        axes = [np.cross(a, wrng.standard_normal(3)) for a in truth["links"]]
+        truth["wobble_axes"] = [v / np.linalg.norm(v) for v in axes]
+        wobble = (wobble_rad, truth["wobble_axes"])
+    omega = sensor_rate(truth["links"], truth["mount"], ang, rate, wobble)
     C = np.diag(1 / truth["scale"]) @ truth["misalignment"]
     m = omega @ C.T - truth["bias"] + noise * rng.standard_normal(omega.shape)
     temp = None
