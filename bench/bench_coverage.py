@@ -19,15 +19,16 @@
    generator's own K: the formula on data it did not make. ``--flicker=B`` (rad/s) adds the
    generator's flicker noise (made in the frequency domain, not the emulator's Gauss–Markov
    sum), and the truth the bias's mean over the hour from the recording's start
-   (:mod:`gyrocal.calib.drift`).
+   (:mod:`gyrocal.calib.drift`). ``--wobble=DEG`` makes every link of the generator's gimbal
+   nod by that much once per revolution (its own model, :mod:`gyrocal.calib.systematics`).
 
 ``--python=PATH`` runs the calibrations with another installation's interpreter (e.g. the
 code before a change: ``--python=/work/venv-main/bin/python``); the comparison with the truth
 is this installation's.
 
 Usage: ``python -m bench coverage [--quick (3 seeds)] [--seeds=N] [--first=S] [--python=PATH]
-[--independent] [--walk=K,K] [--flicker=B] [--keep=DIR]``. ``--keep=DIR`` keeps each emulated run in
-``DIR/seed-S`` and, where one is there already, re-fits its recording with ``gyrocal estimate``
+[--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--keep=DIR]``. ``--keep=DIR``
+keeps each emulated run in ``DIR/seed-S`` and, where one is there already, re-fits its recording with ``gyrocal estimate``
 instead of emulating it again (a change to the fit's σ measured on the same 200 runs in minutes).
 """
 
@@ -89,7 +90,8 @@ def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
         return _z(cal, truth["truth"])
 
 
-def _independent_run(job: tuple[str, int, float, float]) -> dict[str, np.ndarray] | None:
+def _independent_run(job: tuple[str, int, float, float, float]
+                     ) -> dict[str, np.ndarray] | None:
     """One recording of the independent generator with a bias random walk of ``K`` = job[2],
     fitted by ``gyrocal estimate``: z of the bias against its value at the recording's middle
     (where ``K² T / 12`` is centred) with the kit's σ, with the white-noise σ alone, and with
@@ -97,14 +99,15 @@ def _independent_run(job: tuple[str, int, float, float]) -> dict[str, np.ndarray
     figures (B = 0, K) over the calibration's span: the formula on data it did not make."""
     from gyrocal.calib.drift import BiasDrift
 
-    python, seed, walk, flicker = job
+    python, seed, walk, flicker, wobble = job
     root = Path(__file__).resolve().parent.parent
     sys.path.insert(0, str(root))
     from tests.kit.contract_fullmodel_recording import write_recording
 
     with tempfile.TemporaryDirectory() as tmp:
         rec = Path(tmp) / "rec"
-        t = write_recording(rec, seed=seed, bias_walk=walk, bias_flicker=flicker)
+        t = write_recording(rec, seed=seed, bias_walk=walk, bias_flicker=flicker,
+                            wobble_rad=np.radians(wobble))
         run = subprocess.run([python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"],
                              capture_output=True, text=True, check=False)
         if run.returncode not in (0, 3):
@@ -160,12 +163,13 @@ def main(argv: list[str]) -> None:
     python = opt("python", sys.executable)
     seed_list = range(first, first + seeds)
     if "--independent" in argv:
-        flicker = float(opt("flicker", "0"))
+        flicker, wobble = float(opt("flicker", "0")), float(opt("wobble", "0"))
         for walk in (float(w) for w in opt("walk", "2e-6,1e-4").split(",")):
-            res = pooled(_independent_run, [(python, s, walk, flicker) for s in seed_list],
-                         _describe)
+            res = pooled(_independent_run,
+                         [(python, s, walk, flicker, wobble) for s in seed_list], _describe)
             _table(res, f"Independent generator, bias random walk {walk:g} rad/s/√s, flicker "
-                        f"B {flicker:g} rad/s, seeds {first}..{first + seeds - 1}, {python}")
+                        f"B {flicker:g} rad/s, link nod {wobble:g}°, seeds {first}.."
+                        f"{first + seeds - 1}, {python}")
         return
     keep = opt("keep", "")
     res = pooled(_sim_run, [(python, s, keep) for s in seed_list], _describe)
