@@ -28,8 +28,9 @@ is this installation's.
 
 Usage: ``python -m bench coverage [--quick (3 seeds)] [--seeds=N] [--first=S] [--python=PATH]
 [--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--keep=DIR]``. ``--keep=DIR``
-keeps each emulated run in ``DIR/seed-S`` and, where one is there already, re-fits its recording with ``gyrocal estimate``
-instead of emulating it again (a change to the fit's σ measured on the same 200 runs in minutes).
+keeps each emulated run in ``DIR/seed-S`` and, where one is there already, re-fits its
+recording with ``gyrocal estimate`` instead of emulating it again (a change to the fit's σ
+measured on the same runs in minutes).
 """
 
 from __future__ import annotations
