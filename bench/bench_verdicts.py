@@ -97,7 +97,8 @@ def _emulated(run: Path) -> list[tuple[str, str, object]]:
 def _runs(root: str, limit: int) -> list[Path]:
     if not root:
         return []
-    runs = [p for p in Path(root).glob("seed-*") if (p / "recording" / "manifest.json").is_file()
+    # a run still being emulated has no calibration.json yet
+    runs = [p for p in Path(root).glob("seed-*") if (p / "calibration.json").is_file()
             and re.fullmatch(r"seed-\d+", p.name)]
     return sorted(runs, key=lambda p: int(p.name[5:]))[:limit]
 
