@@ -76,7 +76,7 @@ def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(keep) / f"seed-{seed}" if keep else Path(tmp) / "run"
         rec = d / "recording"
-        if (rec / "manifest.json").is_file() and (rec / "segments.csv").is_file():
+        if (d / "calibration.json").is_file():  # a finished run: its recording re-fitted
             cmd = [python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"]
         else:
             cmd = [python, "-m", "gyrocal.kit", "calibrate", "--sim", "--sim-seed", str(seed),
