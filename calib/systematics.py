@@ -25,6 +25,10 @@ to the fit's covariance (:func:`add_wobble`). The DLPF's group delay ``τ`` need
 a window's gyro mean over a delayed rate differs from the encoder's by ``−τ ∫ ẇ ω dt / ∫ w``,
 and the windows' weight ``w`` ramps only where the rate is steady (tapered windows) or zero
 (rest to rest), so what is left is the servo's speed ripple, which the window's noise counts.
+Measured on emulated seed 106's ten windows (the encoder's reference over each window with its
+corners moved by the MPU-9250's 3.9 ms, ``calib.windows.window_rate``): at most 6e-5 rad/s,
+2e-5 of the rate, the size of the reference's own reading scatter. The DLPF is linear and the
+same on the three axes, so it cannot turn a rate into another axis: no cross-axis term either.
 """
 
 from __future__ import annotations
