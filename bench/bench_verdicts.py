@@ -139,9 +139,14 @@ def _derive(tune: dict[tuple[str, str, str], list]) -> None:
         failed = [c for c in error if c is not None and c.p_value < 0.01]
         s_e = min((_scatter(c) for c in failed), default=math.inf)
         tol = SCATTER_TOLERANCE[kind]
-        derived = math.sqrt(s_h * s_e) if s_h > 0 and math.isfinite(s_e) else float("nan")
+        if not math.isfinite(s_e):
+            derived = "none (no model error failed χ²)"
+        elif s_h > 0:
+            derived = f"{math.sqrt(s_h * s_e):.2g}"
+        else:  # every honest fit passed χ²: any threshold under s_e separates
+            derived = f"any < {s_e:.2g}"
         rows.append([kind, len(honest), f"{s_h:.2g}", len(error), len(error) - len(failed),
-                     f"{s_e:.2g}", "yes" if s_h < s_e else "NO", f"{derived:.2g}", f"{tol:g}",
+                     f"{s_e:.2g}", "yes" if s_h < s_e else "NO", derived, f"{tol:g}",
                      "confirmed" if s_h < tol < s_e else "NOT confirmed"])
     print_table(["fit", "honest fits", "largest honest scatter", "model-error fits",
                  "of them χ² passes", "smallest failing error scatter", "separable",
