@@ -26,8 +26,10 @@ that passes it cannot be told from noise by any threshold: counted apart). A thr
 separates them when ``s_h < s_e``; the one derived is their geometric mean, and the table says
 whether :data:`SCATTER_TOLERANCE` lies in ``(s_h, s_e)`` (confirmed) or not.
 
-Usage: ``python -m bench verdicts [--tune=DIR] [--held=DIR] [--max=N]`` (``--max``: at most N
-runs of each directory, in seed order).
+Usage: ``python -m bench verdicts [--tune=DIR] [--held=DIR] [--tune-slip=DIR] [--held-slip=DIR]
+[--max=N]`` (``--max``: at most N runs of each directory, in seed order; ``--*-slip``: runs of
+``gyrocal calibrate --sim --sim-fault slip:30:0.5 --out DIR/seed-S``, a mount that slipped by
+0.5° mid-run: their gyro fit is a model error).
 """
 
 from __future__ import annotations
@@ -73,8 +75,10 @@ def _real(name: str) -> list[tuple[str, str, object]]:
             for cross in (True, False)]
 
 
-def _emulated(run: Path) -> list[tuple[str, str, object]]:
-    """(kind, honest|error, consistency) of one kept emulated run's four fits."""
+def _emulated(run: Path, slipped: bool = False) -> list[tuple[str, str, object]]:
+    """(kind, honest|error, consistency) of one kept emulated run's four fits; of a run whose
+    mount slipped (``--sim-fault slip``), the gyro's full-matrix fit only, a model error (the
+    accelerometer's fit uses the magnitude of gravity alone, which a slip does not change)."""
     from gyrocal.calib.accel import fit_accelerometer, still_means
     from gyrocal.calib.estimators import estimate
     from gyrocal.kit.pipeline import extract_recording, recording_gravity
@@ -82,6 +86,9 @@ def _emulated(run: Path) -> list[tuple[str, str, object]]:
 
     rec = load_recording(run / "recording")
     ex = extract_recording(rec)
+    if slipped:
+        return [("gyro", "model error (mount slip)",
+                 estimate(ex.observations, "full-matrix").consistency)]
     out = [("gyro", "honest", estimate(ex.observations, "full-matrix").consistency),
            ("gyro", "model error", estimate(ex.observations, "iterative-ls").consistency)]
     if rec.imu_accel is not None:
@@ -103,21 +110,23 @@ def _runs(root: str, limit: int) -> list[Path]:
     return sorted(runs, key=lambda p: int(p.name[5:]))[:limit]
 
 
-def _collect(real: list[str], root: str, limit: int) -> dict[tuple[str, str, str], list]:
+def _collect(real: list[str], root: str, slip_root: str, limit: int
+             ) -> dict[tuple[str, str, str], list]:
     """{(source, kind, honest|error): [consistency, ...]}."""
     got: dict[tuple[str, str, str], list] = {}
     for name in real:
         for kind, truth, c in _real(name):
             got.setdefault((name, kind, truth), []).append(c)
-    runs = _runs(root, limit)
-    for run in runs:
-        try:
-            fits = _emulated(run)
-        except Exception as exc:  # a run the fits refuse is named, the others still count
-            print(f"# {run.name}: {exc}", file=sys.stderr)
-            continue
-        for kind, truth, c in fits:
-            got.setdefault((f"emulated ({len(runs)} runs)", kind, truth), []).append(c)
+    for directory, slipped in ((root, False), (slip_root, True)):
+        runs = _runs(directory, limit)
+        for run in runs:
+            try:
+                fits = _emulated(run, slipped)
+            except Exception as exc:  # a run the fits refuse is named, the others still count
+                print(f"# {run.name}: {exc}", file=sys.stderr)
+                continue
+            for kind, truth, c in fits:
+                got.setdefault((f"emulated ({len(runs)} runs)", kind, truth), []).append(c)
     return got
 
 
@@ -131,7 +140,7 @@ def _derive(tune: dict[tuple[str, str, str], list]) -> None:
     rows = []
     for kind in ("accelerometer", "gyro"):
         honest = [c for (_, k, t), cs in tune.items() if k == kind and t == "honest" for c in cs]
-        error = [c for (_, k, t), cs in tune.items() if k == kind and t == "model error"
+        error = [c for (_, k, t), cs in tune.items() if k == kind and t.startswith("model error")
                  for c in cs]
         if not honest or not error:
             continue
@@ -171,8 +180,8 @@ def main(argv: list[str]) -> None:
     except ValueError:
         print("bench verdicts: --max takes a whole number", file=sys.stderr)
         raise SystemExit(2) from None
-    tune = _collect(["imutk"], opt("tune", ""), limit)
-    held = _collect(["imucal"], opt("held", ""), limit)
+    tune = _collect(["imutk"], opt("tune", ""), opt("tune-slip", ""), limit)
+    held = _collect(["imucal"], opt("held", ""), opt("held-slip", ""), limit)
     print("\n1. Thresholds derived on the tuning set (imu_tk's Xsens session, emulated seeds "
           "1000 and up)")
     _derive(tune)
