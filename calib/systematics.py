@@ -9,7 +9,8 @@ turning servo ``s`` outside ``k`` (``s < k`` in chain order) is seen in the sens
 by ``−ψ_k e_k`` (the sensor is inside the tilted link), ``δu_s = ψ_k (u_s × e_k)``, and the
 window reads ``δm̄ = ω C δu_s``. The fit, whose kinematics are rigid, takes that for a change
 of ``A``: on a geometry where a posed turn carries the off-diagonal terms, by several of their
-σ (emulated seed 106: −4.8σ).
+σ (emulated seed 106: ``A[2,1]`` off by −4.5 σ of the white noise, −2.3 σ of it the
+emulator's own nod as propagated here; with the nod's term added to the covariance, −2.6 σ).
 
 With ``e_k = cos β p₁ + sin β p₂`` (``p₁, p₂`` a basis ⊥ ``u_k`` fixed to link ``k``, carried
 into the sensor frame like ``u_k``) and ``sin(θ + φ) = sin θ cos φ + cos θ sin φ`` about the
@@ -21,14 +22,16 @@ term at once, :func:`~gyrocal.calib.estimators.full_matrix_batch`), and the wobb
 
     Σ_wobble = (1/4) Σ_q d_q d_qᵀ
 
-to the fit's covariance (:func:`add_wobble`). The DLPF's group delay ``τ`` needs no such term:
-a window's gyro mean over a delayed rate differs from the encoder's by ``−τ ∫ ẇ ω dt / ∫ w``,
-and the windows' weight ``w`` ramps only where the rate is steady (tapered windows) or zero
-(rest to rest), so what is left is the servo's speed ripple, which the window's noise counts.
-Measured on emulated seed 106's ten windows (the encoder's reference over each window with its
-corners moved by the MPU-9250's 3.9 ms, ``calib.windows.window_rate``): at most 6e-5 rad/s,
-2e-5 of the rate, the size of the reference's own reading scatter. The DLPF is linear and the
-same on the three axes, so it cannot turn a rate into another axis: no cross-axis term either.
+to the fit's covariance (:func:`add_wobble`).
+
+The DLPF's group delay ``τ`` is not added: a window's gyro mean over a delayed rate differs
+from the encoder's by ``−τ ∫ ẇ ω dt / ∫ w``, and the windows' weight ``w`` ramps only where the
+rate is steady (tapered windows) or zero (rest to rest). Measured on emulated seed 106's ten
+windows (the encoder's reference with the corners moved by the MPU-9250's 3.9 ms,
+``calib.windows.window_rate``, every servo): at most 6e-5 rad/s on the turning axis, 2e-5 of
+the rate, and exactly 0 on the others (no other servo moves inside a window). Turning the
+emulator's DLPF off on that seed still moves ``A[2,1]`` by 4.4e-4 (1.2 σ of the white noise)
+by a path this delay does not explain; it is not modelled here.
 """
 
 from __future__ import annotations
