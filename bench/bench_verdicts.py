@@ -11,12 +11,14 @@ result, and nothing of the held-out set is used to choose anything:
     * emulated default runs of seeds 1000 and up (``--tune=DIR``: runs kept by ``python -m bench
       coverage --first=1000 --keep=DIR``): the gyro's full-matrix fit (honest) and its
       diagonal fit (``iterative-ls``: the sensor's cross-axis terms left out, a model error);
-      the accelerometer's fit and its diagonal fit.
+      the accelerometer's fit and its diagonal fit; runs of seed 1000 and up whose mount slipped
+      by 0.5° mid-run (``--tune-slip=DIR``): the gyro's full-matrix fit, a model error.
 **Held-out set** (reported only)
     * imucal's Ferraris session (real, 13 rests on six faces): full and diagonal (its six
       faces do not determine the cross-axis terms, so the diagonal fit is no known error);
     * emulated default runs of seeds 0 and up (``--held=DIR``: the runs ``python -m bench
-      coverage --keep=DIR`` kept), the same four fits.
+      coverage --keep=DIR`` kept), the same four fits; slipped runs of seeds 0 and up
+      (``--held-slip=DIR``).
     Fusion's sample (two rests) and BROAD's excerpt (gyro rests only) hold no pose set: no
     accelerometer fit can be judged on them.
 
