@@ -68,6 +68,16 @@ def _z(cal: dict, truth: dict) -> dict[str, np.ndarray]:
             "matrix off-diagonal": zm[~diag & free]}
 
 
+def _refit(rec: Path) -> dict[str, np.ndarray]:
+    """z of a kept recording re-fitted in this process (``gyrocal estimate``'s own path)."""
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+
+    recording = load_recording(rec)
+    cal = estimate_recording(recording).calibration.to_dict()
+    return _z(cal, recording.manifest["truth"])
+
+
 def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
     """One default emulated calibration of seed ``job[1]``: emulated and fitted by ``gyrocal
     calibrate --sim``, or, when ``--keep=DIR`` (``job[2]``) already holds that seed's recording,
@@ -76,7 +86,10 @@ def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(keep) / f"seed-{seed}" if keep else Path(tmp) / "run"
         rec = d / "recording"
-        if (d / "calibration.json").is_file():  # a finished run: its recording re-fitted
+        finished = (d / "calibration.json").is_file()
+        if finished and python == sys.executable:  # re-fitted here: no interpreter to start
+            return _refit(rec)
+        if finished:  # a finished run: its recording re-fitted by the other installation
             cmd = [python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"]
         else:
             cmd = [python, "-m", "gyrocal.kit", "calibrate", "--sim", "--sim-seed", str(seed),
