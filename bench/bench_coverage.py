@@ -16,14 +16,21 @@
    kit assumes, and one where the walk outweighs everything else), fitted by ``gyrocal
    estimate``; the truth is the bias at the recording's middle. Besides the kit's σ (which
    assumes the chip's B and K), the bias's z with the white-noise σ plus ``K² T / 12`` of the
-   generator's own K: the formula on data it did not make.
+   generator's own K: the formula on data it did not make. ``--flicker=B`` (rad/s) adds the
+   generator's flicker noise (made in the frequency domain, not the emulator's Gauss–Markov
+   sum), and the truth the bias's mean over the hour from the recording's start
+   (:mod:`gyrocal.calib.drift`). ``--wobble=DEG`` makes every link of the generator's gimbal
+   nod by that much once per revolution (its own model, :mod:`gyrocal.calib.systematics`).
 
 ``--python=PATH`` runs the calibrations with another installation's interpreter (e.g. the
 code before a change: ``--python=/work/venv-main/bin/python``); the comparison with the truth
 is this installation's.
 
 Usage: ``python -m bench coverage [--quick (3 seeds)] [--seeds=N] [--first=S] [--python=PATH]
-[--independent] [--walk=K,K]``.
+[--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--keep=DIR]``. ``--keep=DIR``
+keeps each emulated run in ``DIR/seed-S`` and, where one is there already, re-fits its
+recording with ``gyrocal estimate`` instead of emulating it again (a change to the fit's σ
+measured on the same runs in minutes).
 """
 
 from __future__ import annotations
@@ -61,22 +68,44 @@ def _z(cal: dict, truth: dict) -> dict[str, np.ndarray]:
             "matrix off-diagonal": zm[~diag & free]}
 
 
-def _sim_run(job: tuple[str, int]) -> dict[str, np.ndarray] | None:
-    python, seed = job
+def _refit(rec: Path) -> dict[str, np.ndarray]:
+    """z of a kept recording re-fitted in this process (``gyrocal estimate``'s own path)."""
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+
+    recording = load_recording(rec)
+    cal = estimate_recording(recording).calibration.to_dict()
+    return _z(cal, recording.manifest["truth"])
+
+
+def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
+    """One default emulated calibration of seed ``job[1]``: emulated and fitted by ``gyrocal
+    calibrate --sim``, or, when ``--keep=DIR`` (``job[2]``) already holds that seed's recording,
+    that recording re-fitted by ``gyrocal estimate`` (the same recording, this code's σ)."""
+    python, seed, keep = job
     with tempfile.TemporaryDirectory() as tmp:
-        d = Path(tmp) / "run"
-        run = subprocess.run([python, "-m", "gyrocal.kit", "calibrate", "--sim", "--sim-seed",
-                              str(seed), "--out", str(d), "--quiet", "--no-report"],
-                             capture_output=True, text=True, check=False)
+        d = Path(keep) / f"seed-{seed}" if keep else Path(tmp) / "run"
+        rec = d / "recording"
+        finished = (d / "calibration.json").is_file()
+        if finished and python == sys.executable:  # re-fitted here: no interpreter to start
+            return _refit(rec)
+        if finished:  # a finished run: its recording re-fitted by the other installation
+            cmd = [python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"]
+        else:
+            cmd = [python, "-m", "gyrocal.kit", "calibrate", "--sim", "--sim-seed", str(seed),
+                   "--out", str(d), "--quiet", "--no-report", "--force"]
+        run = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if run.returncode not in (0, 3):  # 3: not consistent, still a calibration
             print(f"# seed {seed}: exit {run.returncode}: {run.stderr[-300:]}", file=sys.stderr)
             return None
-        cal = json.loads((d / "calibration.json").read_text(encoding="utf-8"))
-        truth = json.loads((d / "recording" / "manifest.json").read_text(encoding="utf-8"))
+        cal = json.loads(run.stdout if cmd[3] == "estimate"
+                         else (d / "calibration.json").read_text(encoding="utf-8"))
+        truth = json.loads((rec / "manifest.json").read_text(encoding="utf-8"))
         return _z(cal, truth["truth"])
 
 
-def _independent_run(job: tuple[str, int, float]) -> dict[str, np.ndarray] | None:
+def _independent_run(job: tuple[str, int, float, float, float]
+                     ) -> dict[str, np.ndarray] | None:
     """One recording of the independent generator with a bias random walk of ``K`` = job[2],
     fitted by ``gyrocal estimate``: z of the bias against its value at the recording's middle
     (where ``K² T / 12`` is centred) with the kit's σ, with the white-noise σ alone, and with
@@ -84,14 +113,15 @@ def _independent_run(job: tuple[str, int, float]) -> dict[str, np.ndarray] | Non
     figures (B = 0, K) over the calibration's span: the formula on data it did not make."""
     from gyrocal.calib.drift import BiasDrift
 
-    python, seed, walk = job
+    python, seed, walk, flicker, wobble = job
     root = Path(__file__).resolve().parent.parent
     sys.path.insert(0, str(root))
     from tests.kit.contract_fullmodel_recording import write_recording
 
     with tempfile.TemporaryDirectory() as tmp:
         rec = Path(tmp) / "rec"
-        t = write_recording(rec, seed=seed, bias_walk=walk)
+        t = write_recording(rec, seed=seed, bias_walk=walk, bias_flicker=flicker,
+                            wobble_rad=np.radians(wobble))
         run = subprocess.run([python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"],
                              capture_output=True, text=True, check=False)
         if run.returncode not in (0, 3):
@@ -99,13 +129,15 @@ def _independent_run(job: tuple[str, int, float]) -> dict[str, np.ndarray] | Non
             return None
         cal = json.loads(run.stdout)
         walked = np.asarray(t.get("bias_walk", np.zeros((1, 3))))
-        bias = np.asarray(t["bias"]) + walked[walked.shape[0] // 2]
+        bias = (np.asarray(t["bias"]) + walked[walked.shape[0] // 2]
+                + np.asarray(t.get("bias_flicker_hour", np.zeros(3))))
         out = _z(cal, {"scale": t["scale"], "bias": bias, "misalignment": t["misalignment"]})
         drift = cal.get("bias_drift") or {}
         std = np.asarray(cal["bias_std"])
         white2 = std**2 - np.asarray(drift.get("run_std", np.zeros(3)))**2
-        own = np.sqrt(white2 + BiasDrift(0.0, walk, float(drift.get("span_s", 0.0))).run_variance)
-        out["bias, white σ + generator's K"] = out["bias"] * std / own
+        own = np.sqrt(white2 + BiasDrift(flicker, walk,
+                                         float(drift.get("span_s", 0.0))).run_variance)
+        out["bias, white σ + generator's B, K"] = out["bias"] * std / own
         return out
 
 
@@ -145,10 +177,14 @@ def main(argv: list[str]) -> None:
     python = opt("python", sys.executable)
     seed_list = range(first, first + seeds)
     if "--independent" in argv:
+        flicker, wobble = float(opt("flicker", "0")), float(opt("wobble", "0"))
         for walk in (float(w) for w in opt("walk", "2e-6,1e-4").split(",")):
-            res = pooled(_independent_run, [(python, s, walk) for s in seed_list], _describe)
-            _table(res, f"Independent generator, bias random walk {walk:g} rad/s/√s, seeds "
-                        f"{first}..{first + seeds - 1}, {python}")
+            res = pooled(_independent_run,
+                         [(python, s, walk, flicker, wobble) for s in seed_list], _describe)
+            _table(res, f"Independent generator, bias random walk {walk:g} rad/s/√s, flicker "
+                        f"B {flicker:g} rad/s, link nod {wobble:g}°, seeds {first}.."
+                        f"{first + seeds - 1}, {python}")
         return
-    res = pooled(_sim_run, [(python, s) for s in seed_list], _describe)
+    keep = opt("keep", "")
+    res = pooled(_sim_run, [(python, s, keep) for s in seed_list], _describe)
     _table(res, f"Default `gyrocal calibrate --sim`, seeds {first}..{first + seeds - 1}, {python}")

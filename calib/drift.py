@@ -14,14 +14,29 @@ random walk (rad/s/√s) of each axis, and ``T`` the run's span (s):
 
   (the two halves are integrals of independent Wiener processes from 0, each of variance
   ``Var ∫₀^a W(s) ds = a³/3`` with ``a = T/2``).
-* **bias instability.** Flicker noise has no finite variance about a long-run mean; its size is
-  stated as ``B``, the "bias stability" of a datasheet, read as the one-sigma change of the bias
-  over the time scales of the Allan floor (IEEE Std 952 Annex C: the floor is
-  ``σ_A = B·sqrt(2 ln 2 / π) ≈ 0.664 B``; O. J. Woodman, *An introduction to inertial
-  navigation*, UCAM-CL-TR-696, 2007, §3.2.3: bias stability "usually specified as a 1σ value").
-  A run of a few hundred seconds is on that floor, so its average carries variance ``B²``.
+* **bias instability.** Flicker noise, one-sided spectral density ``h₋₁ / f`` with
+  ``h₋₁ = B² / π``: its Allan variance is ``2 ln 2 · h₋₁`` at every ``τ`` (D. W. Allan, J. A.
+  Barnes et al., NBS TN 394, 1970; IEEE Std 1139 Table 1), the floor ``σ_A = B·sqrt(2 ln 2 / π)
+  ≈ 0.664 B`` of IEEE Std 952 Annex C. Flicker has no finite variance about a long-run mean
+  (its power grows as ``ln`` of the longest time looked at), so what the run's average misses is
+  stated against a reference interval: the bias's average over the ``horizon`` the calibration
+  stands for, from the run's start (``[0, H]``, ``H = max(horizon, T)``). Flicker is the
+  continuum of first-order Gauss–Markov processes whose correlation times ``c`` are spread
+  uniformly in ``ln c`` with variance ``h₋₁`` per unit of ``ln c`` (a Gauss–Markov process of
+  variance ``s²`` has the one-sided density ``4 s² c / (1 + (2π f c)²)``, and
+  ``∫ 4 h₋₁ c / (1 + (2π f c)²) d ln c = h₋₁ / f``). For one such process the average over
+  ``[0, L]`` has ``∬ e^(−|t−u|/c) dt du = D(L) = 2 c² (L/c − 1 + e^(−L/c))`` (times ``s²``),
+  and the averages over ``[0, T]`` and ``[0, H]`` share ``(D(T) + D(H) − D(H − T)) / 2``, so
 
-The added variance of each bias component is therefore ``B² + K² T / 12``
+      Var(avg_T − avg_H) = s² [D(T)/T² + D(H)/H² − (D(T) + D(H) − D(H − T)) / (T H)]
+
+  and the flicker's share is ``B² Φ(T, H)`` with ``Φ = (1/π) ∫ [ … ]/s² d ln c``
+  (:func:`flicker_run_factor`, integrated on a grid of ``ln c``; it converges at both ends:
+  fast processes average out over ``T``, slow ones are common to the run and the horizon).
+  For a 42 s run and an hour ``Φ = 1.71``: the square of ``B`` alone (what the calibration
+  assumed before) fell short by that factor.
+
+The added variance of each bias component is therefore ``B² Φ(T, H) + K² T / 12``
 (:attr:`BiasDrift.run_variance`). In the ``horizon`` after the calibration the bias itself moves
 by ``sqrt(B² + K² · horizon)`` (one sigma; :attr:`BiasDrift.wander`): what a user should expect
 between the calibrated bias and the sensor's an hour later, beside the calibration's own σ.
@@ -38,10 +53,59 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
-__all__ = ["HORIZON_S", "BiasDrift"]
+__all__ = ["HORIZON_S", "BiasDrift", "flicker_run_factor"]
 
 #: The horizon the calibration states the bias's expected wander over, s (an hour).
 HORIZON_S = 3600.0
+
+
+#: The shortest span the flicker's share is computed for, s: a run's average is over many
+#: samples, and a span of 0 (no window) would ask for the flicker's value at one instant,
+#: whose variance is unbounded.
+_MIN_SPAN_S = 1.0
+#: The grid of ``ln c`` :func:`flicker_run_factor` integrates on: from this far below the run's
+#: span to this far above the horizon, in this many points (the integrand falls as ``c/T`` and
+#: ``H/c`` outside; the tails beyond are < 1e-5 of ``Φ``).
+_LN_C_MARGIN = 12.0
+_LN_C_POINTS = 1201
+
+
+def _avg_integral(L: np.ndarray | float, c: np.ndarray) -> np.ndarray:
+    """``D(L) / c² = 2 (x − 1 + e^(−x))`` with ``x = L / c``, without cancellation for small
+    ``x`` (module docstring)."""
+    x = np.asarray(L, dtype=float) / c
+    small = x < 1e-3
+    xs = np.where(small, x, 0.0)
+    series = xs**2 - xs**3 / 3.0 + xs**4 / 12.0
+    return np.where(small, series, 2.0 * (x + np.expm1(-np.where(small, 1.0, x))))
+
+
+def flicker_run_factor(span_s: float, horizon_s: float = HORIZON_S) -> float:
+    """``Φ(T, H)``: the variance, in units of ``B²``, of a flicker bias's average over a run of
+    ``span_s`` about its average over the horizon from the run's start (module docstring).
+
+    Parameters
+    ----------
+    span_s : float
+        ``T``, the run's span, s (taken as at least 1 s).
+    horizon_s : float
+        The horizon the calibration stands for, s; ``H = max(horizon_s, T)``.
+
+    Returns
+    -------
+    float
+        ``Φ`` (0 when the run spans the whole horizon).
+    """
+    T = max(float(span_s), _MIN_SPAN_S)
+    H = max(float(horizon_s), T)
+    if H <= T:
+        return 0.0
+    ln_c = np.linspace(np.log(T) - _LN_C_MARGIN, np.log(H) + _LN_C_MARGIN, _LN_C_POINTS)
+    c = np.exp(ln_c)
+    dT, dH, dHT = _avg_integral(T, c), _avg_integral(H, c), _avg_integral(H - T, c)
+    per_unit = c**2 * (dT / T**2 + dH / H**2 - (dT + dH - dHT) / (T * H))
+    step = ln_c[1] - ln_c[0]  # the trapezoid rule on the even grid
+    return float(step * (per_unit.sum() - 0.5 * (per_unit[0] + per_unit[-1])) / math.pi)
 
 
 def _triple(v: Any, name: str, err: type[Exception]) -> tuple[float, float, float]:
@@ -95,11 +159,16 @@ class BiasDrift:
             raise err(f"source must be a string, got {self.source!r}")
 
     @property
+    def flicker_factor(self) -> float:
+        """``Φ(T, H)`` of this run's span and horizon (:func:`flicker_run_factor`)."""
+        return flicker_run_factor(self.span_s, self.horizon_s)
+
+    @property
     def run_variance(self) -> np.ndarray:
         """Variance the wander adds to each bias component's estimate, (rad/s)²:
-        ``B² + K² T / 12`` (module docstring)."""
+        ``B² Φ(T, H) + K² T / 12`` (module docstring)."""
         B, K = np.asarray(self.bias_instability), np.asarray(self.rate_random_walk)
-        return B**2 + K**2 * self.span_s / 12.0
+        return B**2 * self.flicker_factor + K**2 * self.span_s / 12.0
 
     @property
     def wander(self) -> np.ndarray:
@@ -112,8 +181,9 @@ class BiasDrift:
         """What the calibration added to the bias's σ, and why, in one sentence."""
         add = np.sqrt(self.run_variance)
         return (f"bias sigma includes the bias's wander within the {self.span_s:.0f} s run, "
-                f"sqrt(B^2 + K^2 T/12) = {1e6 * float(add.max()):.0f} urad/s (B "
-                f"{1e6 * max(self.bias_instability):.3g} urad/s, K "
+                f"sqrt(B^2 Phi + K^2 T/12) = {1e6 * float(add.max()):.0f} urad/s (B "
+                f"{1e6 * max(self.bias_instability):.3g} urad/s, Phi "
+                f"{self.flicker_factor:.2f} for the run against its {self.horizon_s / 3600:g} h, K "
                 f"{max(self.rate_random_walk):.3g} rad/s/sqrt(s): {self.source}); in the "
                 f"{self.horizon_s / 3600:g} h after it the bias may wander by "
                 f"{1e6 * float(self.wander.max()):.0f} urad/s (1 sigma)")

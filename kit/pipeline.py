@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
 from gyrocal.calib.model import GyroCalibration, ModelChoice
+from gyrocal.calib.systematics import add_wobble
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
 from gyrocal.kit.errors import EstimationError, InputError
 from gyrocal.kit.recording import Recording, now_iso
@@ -303,28 +304,40 @@ def diagonal_g_note(fit: FitResult) -> str | None:
             "which the full model (--protocol full) calibrates")
 
 
-def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None, drift: BiasDrift,
+class _Systematics(NamedTuple):
+    """What widens a fit's σ beyond the white noise: the bias's wander over the run
+    (:class:`gyrocal.calib.drift.BiasDrift`) and the links' once-per-revolution tilt, rad
+    (:func:`jig_wobble_rad`)."""
+
+    drift: BiasDrift
+    wobble_rad: float
+
+    def widen(self, fit: FitResult, obs: Any) -> FitResult:
+        """``fit`` with both in its covariance (:func:`gyrocal.calib.systematics.add_wobble`,
+        :func:`gyrocal.calib.estimators.add_bias_drift`); a failed fit as it is."""
+        if not fit.success:
+            return fit
+        return add_bias_drift(add_wobble(fit, obs, self.wobble_rad), self.drift)
+
+
+def _fit(ex: ExtractedWindows, method: str, sensor_model: str | None, systematics: _Systematics,
          path: object, seats: bool = False
          ) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
     """Fit ``method``, or with ``auto`` both models and keep the one predicted better
-    (:func:`_fit_auto`); each fit with the bias's wander in its σ
-    (:func:`gyrocal.calib.estimators.add_bias_drift`), so the figures are the calibration's.
-    ``seats``: a single-servo recording (:func:`_without_chain`)."""
+    (:func:`_fit_auto`); each fit with the run's systematics in its σ (:class:`_Systematics`),
+    so the figures compared are the calibration's. ``seats``: a single-servo recording
+    (:func:`_without_chain`)."""
     try:
         if method != AUTO:
             fit = estimate(ex.observations, method)
-            return _without_chain(_with_drift(fit, drift), seats), None, ()
-        return _fit_auto(ex.observations, sensor_model, drift, seats)
+            return systematics.widen(_without_chain(fit, seats), ex.observations), None, ()
+        return _fit_auto(ex.observations, sensor_model, systematics, seats)
     except CalibInputError as exc:
         raise InputError(f"{path}: {exc}") from None
 
 
-def _with_drift(fit: FitResult, drift: BiasDrift) -> FitResult:
-    """``fit`` with the bias's wander in its σ (a failed fit as it is)."""
-    return add_bias_drift(fit, drift) if fit.success else fit
-
-
-def _fit_auto(obs: Any, sensor_model: str | None, drift: BiasDrift, seats: bool = False
+def _fit_auto(obs: Any, sensor_model: str | None, systematics: _Systematics,
+              seats: bool = False
               ) -> tuple[FitResult, ModelChoice | None, tuple[str, ...]]:
     """The full model (where the chain is known) and the diagonal one, and the one whose
     predicted general-motion error is smaller (:func:`gyrocal.calib.design.choose_model`),
@@ -335,7 +348,7 @@ def _fit_auto(obs: Any, sensor_model: str | None, drift: BiasDrift, seats: bool 
     if obs.own_axes:
         from gyrocal.kit.jig_kinds import JIG_KINDS
 
-        diag = _with_drift(estimate(obs, "paired-axis"), drift)
+        diag = systematics.widen(estimate(obs, "paired-axis"), obs)
         return diag, None, (diagonal_note(sensor_model, JIG_KINDS["hand"].undetermined,
                                           jig="hand"),)
     jig = "single-servo" if seats else "gimbal"
@@ -345,7 +358,7 @@ def _fit_auto(obs: Any, sensor_model: str | None, drift: BiasDrift, seats: bool 
         reason = (f"the recording's poses do not determine them: {full.message}" if not seats
                   else f"the {len(obs.chain)} seats of the cube do not determine them: seat it "
                   "on edges too, in the V-block (hardware_docs/single-servo.md)")
-        full = _without_chain(add_bias_drift(full, drift), seats) if full.success else None
+        full = systematics.widen(_without_chain(full, seats), obs) if full.success else None
     try:
         diag = estimate(obs, "paired-axis")
     except CalibInputError:
@@ -354,7 +367,7 @@ def _fit_auto(obs: Any, sensor_model: str | None, drift: BiasDrift, seats: bool 
         return full, None, ()  # a full model and no diagonal one to weigh it against
     if not diag.success:
         return (full, None, ()) if full is not None else (diag, None, ())
-    diag = _without_chain(add_bias_drift(diag, drift), seats)
+    diag = systematics.widen(_without_chain(diag, seats), obs)
     choice = choose_model(None if full is None else full.covariance,
                           None if full is None else full.matrix, diag.covariance, diag.scale,
                           sensor_cross_axis(sensor_model))
@@ -452,6 +465,19 @@ def chip_bias_drift(model: Any, ex: ExtractedWindows) -> BiasDrift:
                      source=ge.drift_source)
 
 
+def jig_wobble_rad(manifest: Mapping[str, Any]) -> float:
+    """The largest once-per-revolution link tilt of the recording's servos, rad: the servo
+    table's ``wobble_deg`` (:class:`gyrocal.drivers.dynamixel.control_table.ServoModel`) of each
+    ``gimbal.motors[].model``; the assumed figure for a model the table does not hold."""
+    from gyrocal.drivers.dynamixel.control_table import ASSUMED_WOBBLE_DEG, MODELS
+
+    by_name = {m.name: m.wobble_deg for m in MODELS.values()}
+    motors = (manifest.get("gimbal") or {}).get("motors") or []
+    figs = [by_name.get(m.get("model"), ASSUMED_WOBBLE_DEG) for m in motors
+            if isinstance(m, Mapping)]
+    return math.radians(max(figs, default=ASSUMED_WOBBLE_DEG))
+
+
 def estimate_recording(
     rec: Recording, method: str = AUTO, *, source: str | None = None,
     gravity_m_s2: float | None = None,
@@ -469,7 +495,8 @@ def estimate_recording(
     """
     ex = extract_recording(rec)
     drift = chip_bias_drift(rec.sensor.get("model"), ex)
-    fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), drift, rec.path,
+    systematics = _Systematics(drift, jig_wobble_rad(rec.manifest))
+    fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), systematics, rec.path,
                               seats=seat_starts(rec.manifest) is not None)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")

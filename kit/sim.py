@@ -16,6 +16,7 @@ import numpy as np
 
 from gyrocal.calib.simulate import EXTREME, NORMAL, SensorPreset, draw_sensors
 from gyrocal.drivers.clock import Clock, SystemClock, VirtualClock
+from gyrocal.drivers.dynamixel.control_table import XM430_W350
 from gyrocal.drivers.emulated.accel import ACCEL_DATASHEET, draw_accel_truth
 from gyrocal.drivers.emulated.dxl import GimbalJig, make_emulated_gimbal
 from gyrocal.drivers.emulated.imu_chips import SensorRealism, SensorTruth, make_emulated_imu
@@ -191,8 +192,9 @@ REALISM_EFFECTS: dict[str, str] = {
 }
 #: The sensor's offset from the meeting point of the gimbal's axes, m (sensor frame) ⚠.
 SIM_LEVER_ARM_M = (0.02, -0.015, 0.03)
-#: Once-per-revolution tilt of each turning link, degrees ⚠.
-SIM_WOBBLE_DEG = 0.05
+#: Once-per-revolution tilt of each turning link, degrees ⚠: the servo table's assumed figure,
+#: the one a calibration's σ allow for (``ServoModel.wobble_deg``).
+SIM_WOBBLE_DEG = XM430_W350.wobble_deg
 #: Largest chip clock error drawn, ppm ⚠.
 SIM_CLOCK_PPM = 300.0
 

@@ -370,6 +370,11 @@ class ServoModel:
         The gearbox ratio (motor turns per output turn).
     no_load_speed_rad_s_12v : float
         The no-load output speed at 12 V, in rad/s.
+    wobble_deg : float
+        The largest tilt of the link a servo turns, once per revolution (its horn's and
+        bracket's runout), degrees: ⚠ assumed (:data:`ASSUMED_WOBBLE_DEG`), no datasheet gives
+        it. A full-matrix calibration's σ include what it does to the matrix
+        (:mod:`gyrocal.calib.systematics`); the emulated jig nods by it.
     """
 
     name: str
@@ -379,6 +384,12 @@ class ServoModel:
     operating_modes: tuple[int, ...] = (1, 3, 4, 16)
     gear_ratio: float = 1.0
     no_load_speed_rad_s_12v: float = 4.8
+    wobble_deg: float = 0.0
+
+
+#: The link tilt per revolution assumed for every servo model, degrees ⚠ (no datasheet gives a
+#: horn's runout; a tenth of a millimetre over a 100 mm link is 0.06°).
+ASSUMED_WOBBLE_DEG = 0.05
 
 
 def _rpm(rpm: float) -> float:
@@ -426,6 +437,7 @@ XM430_W350 = ServoModel(
     operating_modes=(0, 1, 3, 4, 5, 16),
     gear_ratio=353.5,
     no_load_speed_rad_s_12v=_rpm(46.0),
+    wobble_deg=ASSUMED_WOBBLE_DEG,
 )
 
 XL430_W250 = ServoModel(
@@ -448,6 +460,7 @@ XL430_W250 = ServoModel(
     operating_modes=(1, 3, 4, 16),
     gear_ratio=258.5,
     no_load_speed_rad_s_12v=_rpm(61.0),
+    wobble_deg=ASSUMED_WOBBLE_DEG,
 )
 
 #: Fully supported models, by model number.

@@ -5,11 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from gyrocal.calib.drift import BiasDrift
+from gyrocal.calib.drift import BiasDrift, flicker_run_factor
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.estimators import FitResult, add_bias_drift
 from gyrocal.calib.model import GyroCalibration
 from tests.calib.test_model import make_cal, make_full
+from tests.kit.contract_fullmodel_recording import flicker_noise
 
 
 def test_random_walk_run_average_variance_matches_a_direct_simulation():
@@ -29,10 +30,37 @@ def test_random_walk_run_average_variance_matches_a_direct_simulation():
     assert np.var(w.mean(axis=1)) == pytest.approx(4 * want[0], rel=0.05)
 
 
-def test_bias_instability_adds_its_square_and_the_hour_after_adds_the_walk():
+def test_flicker_run_average_about_the_hours_average_matches_a_spectral_simulation():
+    # independent truth: 1/f noise of Allan floor 0.664 B made in the frequency domain (the
+    # independent generator's, not the emulator's Gauss–Markov sum, nor the formula's
+    # continuum); each 42 s run's average compared with the average over the hour from its start
+    rng = np.random.default_rng(31)
+    B, dt, T, H, per = 5e-5, 2.0, 42.0, 3600.0, 8
+    x = np.concatenate([flicker_noise(rng, B, 1 / dt, int(per * H / dt)).T
+                        for _ in range(100)])  # 300 draws of 8 hours, periodic
+    seg = x.reshape(300 * per, int(H / dt))
+    err = seg[:, : int(T / dt)].mean(axis=1) - seg.mean(axis=1)
+    want = BiasDrift(B, 0.0, T).run_variance[0]
+    assert want == pytest.approx(B**2 * flicker_run_factor(T, H))
+    assert np.var(err) == pytest.approx(want, rel=0.12)  # 2400 draws, hours apart
+    assert not np.var(err) == pytest.approx(B**2, rel=0.3)  # the old B² fell short by 1.7x
+    # the simulation is the flicker B names: its Allan deviation at 10 s is the floor
+    m = x[:, : 100 * 5].reshape(300, 100, 5).mean(axis=2)
+    adev = np.sqrt(0.5 * np.mean(np.diff(m, axis=1) ** 2))
+    assert adev == pytest.approx(np.sqrt(2 * np.log(2) / np.pi) * B, rel=0.05)
+
+
+def test_flicker_factor_falls_with_the_run_and_vanishes_over_the_whole_horizon():
+    phi = [flicker_run_factor(T) for T in (10.0, 42.0, 300.0, 1800.0)]
+    assert all(a > b > 0 for a, b in zip(phi[:-1], phi[1:], strict=True))
+    assert flicker_run_factor(3600.0) == 0.0 == flicker_run_factor(5000.0)
+    assert flicker_run_factor(0.0) == flicker_run_factor(1.0)  # a span under 1 s counts as 1 s
+
+
+def test_run_variance_adds_flicker_and_walk_and_the_hour_after_adds_the_walk():
     d = BiasDrift((1e-5, 2e-5, 3e-5), 2e-6, 60.0)
     B = np.array([1e-5, 2e-5, 3e-5])
-    assert d.run_variance == pytest.approx(B**2 + 4e-12 * 60 / 12)
+    assert d.run_variance == pytest.approx(B**2 * flicker_run_factor(60.0) + 4e-12 * 60 / 12)
     assert d.wander == pytest.approx(np.sqrt(B**2 + 4e-12 * 3600))
     with pytest.raises(CalibInputError, match="span_s"):
         BiasDrift(1e-5, 2e-6, -1.0)

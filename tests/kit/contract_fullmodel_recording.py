@@ -70,13 +70,24 @@ def draw_sensor(seed: int, cross: float = 0.02, tilt_rad: float = 0.02, mount_ra
     return truth
 
 
-def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.ndarray
-                ) -> np.ndarray:
-    """Angular velocity in the sensor frame (module docstring) for angles and rates (N, 3)."""
+def sensor_rate(links: list, mount: np.ndarray, angles: np.ndarray, rates: np.ndarray,
+                wobble: tuple[float, list] | None = None) -> np.ndarray:
+    """Angular velocity in the sensor frame (module docstring) for angles and rates (N, 3).
+    With ``wobble = (ε, [e_0, e_1, e_2])`` each link is tilted by ``ψ_j = ε sin θ_j`` about
+    ``e_j`` (⊥ its axis, fixed to the link) after its joint's rotation, ``Rot(a_j θ_j)
+    Rot(e_j ψ_j)``: the joint's rate in the sensor frame is then ``(W_j inner)ᵀ a_j θ̇_j +
+    innerᵀ e_j ψ̇_j``."""
     n = angles.shape[0]
     out = np.zeros((n, 3))
     inner = np.broadcast_to(mount, (n, 3, 3)).copy()  # Rot_{j+1} … Rot_2 M, built inside out
     for j in (2, 1, 0):
+        if wobble is not None:
+            eps, e = wobble[0], wobble[1][j]
+            tilted = Rotation.from_rotvec(eps * np.sin(angles[:, j:j + 1]) * e[None, :]
+                                          ).as_matrix() @ inner
+            out += (np.einsum("nki,k->ni", inner, e)
+                    * (eps * np.cos(angles[:, j]) * rates[:, j])[:, None])
+            inner = tilted
         out += np.einsum("nki,k->ni", inner, links[j]) * rates[:, j:j + 1]
         rot = Rotation.from_rotvec(angles[:, j:j + 1] * links[j][None, :]).as_matrix()
         inner = rot @ inner
@@ -150,13 +161,27 @@ def specific_force(links: list, mount: np.ndarray, angles: np.ndarray) -> np.nda
     return np.einsum("nki,k->ni", R, links[2])
 
 
+def flicker_noise(rng: np.random.Generator, B: float, rate_hz: float, n: int) -> np.ndarray:
+    """``n`` samples (n, 3) at ``rate_hz`` of flicker noise of one-sided spectral density
+    ``(B²/π)/f`` and no mean, made by shaping white noise's spectrum (periodic over the ``n``
+    samples): Allan deviation ``sqrt(2 ln 2) · sqrt(B²/π) ≈ 0.664 B`` (NBS TN 394; IEEE Std 952
+    Annex C)."""
+    dt = 1.0 / rate_hz
+    f = np.fft.rfftfreq(n, dt)
+    amp = np.zeros_like(f)
+    amp[1:] = np.sqrt(B**2 / np.pi / f[1:] * n / (2 * dt))
+    z = (rng.standard_normal((3, f.size)) + 1j * rng.standard_normal((3, f.size))) / np.sqrt(2)
+    return np.fft.irfft(z * amp, n, axis=1).T
+
+
 def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 2.5e-3,
                     odr: float = 200.0, enc_hz: float = 100.0, speed: float = 4.0,
                     turns: int = 2, accel: float = 10.0, rest: float = 0.8,
                     move_speed: float = 2.0, pose_deg: float = 60.0, ticks: int = TICKS,
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
-                    hold: float = 0.06, bias_walk: float = 0.0,
+                    hold: float = 0.06, bias_walk: float = 0.0, bias_flicker: float = 0.0,
+                    wobble_rad: float = 0.0,
                     temp_ramp: tuple[float, float] | None = None,
                     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
                     accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
@@ -171,7 +196,14 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     about 60 ms in gyrocal's emulated runs), the only still time before a turn that follows it.
     With ``bias_walk`` (rad/s/√s) the bias wanders as a random walk from ``truth["bias"]``; the
     truth then holds the walk at every gyro sample as ``bias_walk`` (n, 3), the bias being
-    ``bias + bias_walk``. With ``temp_ramp`` (°C at the start and the end) the die temperature
+    ``bias + bias_walk``. With ``bias_flicker`` (``B``, rad/s) the bias also carries flicker
+    noise (:func:`flicker_noise`: one-sided density ``B²/π / f``, Allan floor ``0.664 B``), made
+    over four hours with the recording at their start; the truth then holds it at every gyro
+    sample as ``bias_flicker`` (n, 3) and its mean over the hour from the start as
+    ``bias_flicker_hour`` (3,). With ``wobble_rad`` (``ε``) each link nods by ``ε sin θ_j``
+    about an axis drawn perpendicular to its own (:func:`sensor_rate`; the gyro only, the
+    accelerometer's force is left rigid); the axes are ``truth["wobble_axes"]``. With
+    ``temp_ramp`` (°C at the start and the end) the die temperature
     ramps linearly (written in the ``temp`` column) and the bias follows it,
     ``bias + tempco (T − T_start)``. With ``accel_truth`` (:func:`draw_accel`) the
     accelerometer's columns and (unless ``tour`` is false) the tour (module docstring), gravity
@@ -231,7 +263,13 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         return ang, rate
 
     ang, rate = motion(ts)
-    omega = sensor_rate(truth["links"], truth["mount"], ang, rate)
+    wobble = None
+    if wobble_rad:
+        wrng = np.random.default_rng([seed, 0x30B])
+        axes = [np.cross(a, wrng.standard_normal(3)) for a in truth["links"]]
+        truth["wobble_axes"] = [v / np.linalg.norm(v) for v in axes]
+        wobble = (wobble_rad, truth["wobble_axes"])
+    omega = sensor_rate(truth["links"], truth["mount"], ang, rate, wobble)
     C = np.diag(1 / truth["scale"]) @ truth["misalignment"]
     m = omega @ C.T - truth["bias"] + noise * rng.standard_normal(omega.shape)
     temp = None
@@ -242,6 +280,12 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         steps = np.random.default_rng([seed, 0xB1A5]).standard_normal(omega.shape)
         truth["bias_walk"] = np.cumsum(steps, axis=0) * bias_walk / np.sqrt(odr)
         m = m - truth["bias_walk"]
+    if bias_flicker:
+        hours = flicker_noise(np.random.default_rng([seed, 0xF11C]), bias_flicker, odr,
+                              int(4 * 3600 * odr))
+        truth["bias_flicker"] = hours[: ts.size]
+        truth["bias_flicker_hour"] = hours[: int(3600 * odr)].mean(axis=0)
+        m = m - truth["bias_flicker"]
     if g_sensitivity is not None:
         m = m + specific_force(truth["links"], truth["mount"], ang) @ np.asarray(
             g_sensitivity).T
