@@ -926,6 +926,25 @@ def choose_model(full_covariance: np.ndarray | None, full_matrix: np.ndarray | N
                        diagonal_cross_axis=cross, cross_axis=float(cross_axis))
 
 
+def _checked_top_speed(model: str, max_scale_error: float, **positive: float) -> float:
+    """The planners' top turn rate, rad/s (0.9 of the servo's top speed, and of the rate that
+    keeps the gyro in range at ``max_scale_error``), once ``positive`` are all positive finite
+    numbers and ``model`` is ``"diagonal"`` or ``"full"``.
+
+    Raises
+    ------
+    CalibInputError
+        Naming the first argument that is not.
+    """
+    for name, v in positive.items():
+        if not (v > 0 and np.isfinite(v)):
+            raise CalibInputError(f"{name} must be a positive number, got {v!r}")
+    if model not in ("diagonal", "full"):
+        raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
+    return min(0.9 * positive["servo_max_speed"],
+               0.9 * positive["full_scale"] / max_scale_error)
+
+
 def plan_protocol(
     *,
     servo_max_speed: float,
@@ -996,14 +1015,10 @@ def plan_protocol(
     CalibInputError
         If the arguments are not positive, or no protocol fits the budget.
     """
-    for name, v in (("servo_max_speed", servo_max_speed), ("full_scale", full_scale),
-                    ("time_budget_s", time_budget_s), ("noise_std", noise_std),
-                    ("odr_hz", odr_hz), ("accel", accel), ("reference_rate", reference_rate)):
-        if not (v > 0 and np.isfinite(v)):
-            raise CalibInputError(f"{name} must be a positive number, got {v!r}")
-    if model not in ("diagonal", "full"):
-        raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
-    top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
+    top = _checked_top_speed(model, max_scale_error, servo_max_speed=servo_max_speed,
+                             full_scale=full_scale, time_budget_s=time_budget_s,
+                             noise_std=noise_std, odr_hz=odr_hz, accel=accel,
+                             reference_rate=reference_rate)
     budget = time_budget_s
     tilted: Plan | None = None  # the last gyro protocol with the accelerometer's rests
     for _ in range(8):
@@ -1566,14 +1581,10 @@ def plan_seats(
     CalibInputError
         If an argument is not positive, the model unknown, or nothing fits the budget.
     """
-    for name, v in (("servo_max_speed", servo_max_speed), ("full_scale", full_scale),
-                    ("time_budget_s", time_budget_s), ("noise_std", noise_std),
-                    ("odr_hz", odr_hz), ("accel", accel), ("reference_rate", reference_rate)):
-        if not (v > 0 and np.isfinite(v)):
-            raise CalibInputError(f"{name} must be a positive number, got {v!r}")
-    if model not in ("diagonal", "full"):
-        raise CalibInputError(f"model must be 'diagonal' or 'full', got {model!r}")
-    top = min(0.9 * servo_max_speed, 0.9 * full_scale / max_scale_error)
+    top = _checked_top_speed(model, max_scale_error, servo_max_speed=servo_max_speed,
+                             full_scale=full_scale, time_budget_s=time_budget_s,
+                             noise_std=noise_std, odr_hz=odr_hz, accel=accel,
+                             reference_rate=reference_rate)
     best = _plan_seats_cached(model, float(top), float(time_budget_s), float(noise_std),
                               float(odr_hz), float(accel), float(reference_rate),
                               float(min_rest_s))
