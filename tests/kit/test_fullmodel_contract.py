@@ -92,7 +92,10 @@ def test_noise_free_recording_with_exact_encoders_gets_within_the_sampling_error
     assert fit.method == "full-matrix"
     A_true = truth_in_frame(sensing(truth))
     assert np.max(np.abs(fit.matrix - A_true)) < 1e-5
-    assert np.max(np.abs(fit.bias - truth["bias"])) < 1e-7
+    # every window and rest carries the bias wander the chip table assumes (~5e-5 rad/s,
+    # BiasDrift.window_variance) beside the 1e-9 noise, so the turns' sampling reaches the
+    # bias too (1.4e-7 here; 9e-11 when the rests alone pinned it)
+    assert np.max(np.abs(fit.bias - truth["bias"])) < 5e-7
 
 
 @pytest.mark.parametrize("seed", [1, 2])
