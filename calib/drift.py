@@ -63,6 +63,9 @@ HORIZON_S = 3600.0
 #: samples, and a span of 0 (no window) would ask for the flicker's value at one instant,
 #: whose variance is unbounded.
 _MIN_SPAN_S = 1.0
+#: The shortest window :meth:`BiasDrift.window_variance` computes the flicker's share for, s
+#: (ten samples at 200 Hz, the fewest a window takes, gyrocal.calib.windows).
+_MIN_WINDOW_S = 0.05
 #: The grid of ``ln c`` :func:`flicker_run_factor` integrates on: from this far below the run's
 #: span to this far above the horizon, in this many points (the integrand falls as ``c/T`` and
 #: ``H/c`` outside; the tails beyond are < 1e-5 of ``Φ``).
@@ -80,23 +83,27 @@ def _avg_integral(L: np.ndarray | float, c: np.ndarray) -> np.ndarray:
     return np.where(small, series, 2.0 * (x + np.expm1(-np.where(small, 1.0, x))))
 
 
-def flicker_run_factor(span_s: float, horizon_s: float = HORIZON_S) -> float:
+def flicker_run_factor(span_s: float, horizon_s: float = HORIZON_S, *,
+                       min_span_s: float = _MIN_SPAN_S) -> float:
     """``Φ(T, H)``: the variance, in units of ``B²``, of a flicker bias's average over a run of
     ``span_s`` about its average over the horizon from the run's start (module docstring).
 
     Parameters
     ----------
     span_s : float
-        ``T``, the run's span, s (taken as at least 1 s).
+        ``T``, the run's span, s (taken as at least ``min_span_s``).
     horizon_s : float
         The horizon the calibration stands for, s; ``H = max(horizon_s, T)``.
+    min_span_s : float
+        The shortest ``T`` computed (a run's 1 s by default; one window's mean is over a
+        fraction of a second, :meth:`BiasDrift.window_variance`).
 
     Returns
     -------
     float
         ``Φ`` (0 when the run spans the whole horizon).
     """
-    T = max(float(span_s), _MIN_SPAN_S)
+    T = max(float(span_s), min_span_s)
     H = max(float(horizon_s), T)
     if H <= T:
         return 0.0
@@ -169,6 +176,34 @@ class BiasDrift:
         ``B² Φ(T, H) + K² T / 12`` (module docstring)."""
         B, K = np.asarray(self.bias_instability), np.asarray(self.rate_random_walk)
         return B**2 * self.flicker_factor + K**2 * self.span_s / 12.0
+
+    def window_variance(self, length_s: Any) -> np.ndarray:
+        """Variance the wander adds to each window mean about the run's mean, (N, 3) (rad/s)²:
+        what a fit's residuals see of it, beside the window's white noise.
+
+        A fit takes one bias for the run, so a window whose mean is over ``L`` seconds departs
+        from it by the bias's average over ``L`` about its average over the run's span ``T``:
+        ``B² Φ(L, T)`` for the flicker (:func:`flicker_run_factor` with the run's span as the
+        horizon; a window at the run's start, the largest share, so a bound) plus ``K² T / 3``
+        for the rate random walk (the variance of a Wiener process's average over ``[0, T]``
+        about its start, a window at either end). With a quiet gyro (the ICM-42688-P's
+        0.0028 °/s/√Hz) a 0.6 s rest's white noise is ~6e-5 rad/s, and ``B = 4.8e-5 rad/s``
+        (``Φ(0.6 s, 42 s) = 1.67``) adds as much again.
+
+        Parameters
+        ----------
+        length_s : array_like, shape (N,)
+            Each window's length, s (its first to its last sample).
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 3)
+        """
+        B, K = np.asarray(self.bias_instability), np.asarray(self.rate_random_walk)
+        lengths = np.atleast_1d(np.asarray(length_s, dtype=float))
+        phi = np.array([flicker_run_factor(L, self.span_s, min_span_s=_MIN_WINDOW_S)
+                        for L in lengths])
+        return phi[:, None] * B**2 + K**2 * self.span_s / 3.0
 
     @property
     def wander(self) -> np.ndarray:

@@ -465,6 +465,22 @@ def chip_bias_drift(model: Any, ex: ExtractedWindows) -> BiasDrift:
                      source=ge.drift_source)
 
 
+def with_bias_wander(ex: ExtractedWindows, drift: BiasDrift) -> ExtractedWindows:
+    """``ex`` with each window's and rest's standard error widened by the bias's wander about
+    the run's mean over its length (:meth:`gyrocal.calib.drift.BiasDrift.window_variance`):
+    the fit takes one bias for the run, so the residuals see that wander beside the white
+    noise (a quiet gyro's rests disagree by it otherwise, and the χ² test blames a rest)."""
+    obs = ex.observations
+    if obs.mean_std is None:
+        return ex
+    turns = drift.window_variance([w.corners[3] - w.corners[0] for w in ex.windows])
+    widened = {"mean_std": np.sqrt(obs.mean_std**2 + turns)}
+    if obs.rest_mean_std is not None and ex.rests:
+        rests = drift.window_variance([w.corners[3] - w.corners[0] for w in ex.rests])
+        widened["rest_mean_std"] = np.sqrt(obs.rest_mean_std**2 + rests)
+    return replace(ex, observations=replace(obs, **widened))
+
+
 def jig_wobble_rad(manifest: Mapping[str, Any]) -> float:
     """The largest once-per-revolution link tilt of the recording's servos, rad: the servo
     table's ``wobble_deg`` (:class:`gyrocal.drivers.dynamixel.control_table.ServoModel`) of each
@@ -495,6 +511,7 @@ def estimate_recording(
     """
     ex = extract_recording(rec)
     drift = chip_bias_drift(rec.sensor.get("model"), ex)
+    ex = with_bias_wander(ex, drift)
     systematics = _Systematics(drift, jig_wobble_rad(rec.manifest))
     fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), systematics, rec.path,
                               seats=seat_starts(rec.manifest) is not None)

@@ -102,3 +102,24 @@ def test_documents_without_bias_drift_still_read_and_with_it_round_trip(make):
     doc["bias_drift"]["bais_instability"] = doc["bias_drift"].pop("bias_instability")
     with pytest.raises(CalibrationFormatError, match="bias_drift.bais_instability"):
         GyroCalibration.from_dict(doc)
+
+
+def test_window_variance_bounds_a_windows_flicker_about_the_runs_mean():
+    # independent truth: the generator's frequency-domain 1/f noise (not the formula's
+    # continuum), 3000 runs of 42 s at 20 Hz; a 0.6 s rest's mean about its run's mean.
+    # A window at the run's start is what window_variance states; one mid-run departs less,
+    # so the figure bounds every window's
+    rng = np.random.default_rng(37)
+    B, hz, L, T = 5e-5, 20.0, 0.6, 42.0
+    runs = flicker_noise(rng, B, hz, int(T * hz) * 1000).T.reshape(-1, int(T * hz))
+    start = runs[:, : int(L * hz)].mean(axis=1) - runs.mean(axis=1)
+    mid = runs[:, int(T / 2 * hz): int((T / 2 + L) * hz)].mean(axis=1) - runs.mean(axis=1)
+    want = BiasDrift(B, 0.0, T).window_variance([L])
+    assert want.shape == (1, 3) and np.all(want == want[0, 0])
+    assert np.var(start) == pytest.approx(want[0, 0], rel=0.12)
+    assert np.var(mid) < want[0, 0]
+    # B² alone, or the run's share B² Φ(T, 1 h), would not be it
+    assert not np.var(start) == pytest.approx(B**2, rel=0.3)
+    # the rate random walk's share: a Wiener average's about its start, K² T / 3
+    K = 2e-6
+    assert BiasDrift(0.0, K, T).window_variance([L, 2 * L]) == pytest.approx(K**2 * T / 3)

@@ -92,7 +92,10 @@ def test_noise_free_recording_with_exact_encoders_gets_within_the_sampling_error
     assert fit.method == "full-matrix"
     A_true = truth_in_frame(sensing(truth))
     assert np.max(np.abs(fit.matrix - A_true)) < 1e-5
-    assert np.max(np.abs(fit.bias - truth["bias"])) < 1e-7
+    # every window and rest carries the bias wander the chip table assumes (~5e-5 rad/s,
+    # BiasDrift.window_variance) beside the 1e-9 noise, so the turns' sampling reaches the
+    # bias too (1.4e-7 here; 9e-11 when the rests alone pinned it)
+    assert np.max(np.abs(fit.bias - truth["bias"])) < 5e-7
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -138,3 +141,22 @@ def test_the_default_protocols_pose_schedule_estimates_within_sigma(tmp_path, se
     assert np.all(np.abs(err) <= 4 * std + 1e-15), err / np.where(std > 0, std, 1)
     g_std = np.sqrt(np.diag(fit.g_sensitivity_cov)).reshape(3, 3)
     assert np.all(np.abs(fit.g_sensitivity + G @ (A @ C).T) < 4 * g_std)
+
+
+def test_a_quiet_gyros_bias_flicker_between_rests_is_in_the_sigma_judged(tmp_path):
+    # A quiet gyro (the ICM-42688-P's datasheet noise density, its chip-table row) whose bias
+    # carries the flicker the chip table assumes (B, the independent generator's frequency-
+    # domain 1/f noise): a 0.8 s rest's white noise is then ~5e-5 rad/s and the flicker moves
+    # each rest's mean about the run's by as much again. The fit takes one bias for the run,
+    # so the rests' σ must hold that wander (BiasDrift.window_variance) for the χ² test to
+    # pass; with the white noise alone it failed (χ² 89.8 on 51 dof, p 6.5e-4) as the plate
+    # run of hardware_docs/running.md did ("rest 10 does not fit the others").
+    from gyrocal.calib.estimators import CONSISTENCY_ALPHA
+    from gyrocal.drivers.imu import READERS
+
+    errors = READERS["icm42688p"].family.gyro_errors
+    write_recording(tmp_path / "rec", seed=0, bias_flicker=errors.bias_instability_rad_s,
+                    noise=errors.noise_density_rad_s_sqrt_hz * np.sqrt(200.0))
+    c = estimate_recording(load_recording(tmp_path / "rec")).fit.consistency
+    assert c.p_value >= CONSISTENCY_ALPHA and c.ok, c
+    assert 0.6 < c.chi2 / c.dof < 1.6, c
