@@ -483,7 +483,11 @@ def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
     standard deviation ``σ_β``. Every window's mean (turns and rests) is then moved to the run's
     mean temperature ``T̄`` (``obs.temperature_c``): ``mean − β (T_w − T̄)``, and its variance
     grows by ``(σ_β (T_w − T̄))²``, so the fit reports the bias at ``T̄`` with the drift's
-    uncertainty in it rather than a false tight figure. The scale's own temperature change
+    uncertainty in it rather than a false tight figure. That uncertainty is one slope's, common
+    to every window, so the offsets ``T_w − T̄`` go with the set (``temp_offset``,
+    ``rest_temp_offset``) for a fit that must tell the slope's error from another offset
+    pattern (the g-sensitivity test of :func:`gyrocal.calib.estimators.fit_paired_axis`). The
+    scale's own temperature change
     within a run cannot be measured here: each axis's scale is the one at the temperature of its
     own servo's turns (which do not average out over the run: the servos turn one after
     another); the kit's estimate flags it in a note when the chip's datasheet
@@ -534,6 +538,8 @@ def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
         mean_std=np.hypot(obs.mean_std, beta_std * dw),
         rest_mean=obs.rest_mean - beta * dr,
         rest_mean_std=np.hypot(obs.rest_mean_std, beta_std * dr),
+        temp_offset=dw[:, 0],
+        rest_temp_offset=dr[:, 0],
     )
     drift = ", ".join(f"{-b:+.2e} ± {s:.1e}" for b, s in zip(beta, beta_std, strict=True))
     return fixed, (
