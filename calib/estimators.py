@@ -54,6 +54,8 @@ from gyrocal.calib.model import Consistency, GyroCalibration
 from gyrocal.calib.observations import ObservationSet
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from scipy import optimize
 
 __all__ = [
@@ -1015,19 +1017,7 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
     basis = np.zeros((3, 0))
     extra: dict[str, Any] = {}
     if g_sensitivity and _home_pose_gravity(obs, groups):
-        # one pass: the forces of the fitted axes (G moves them far less than their σ)
-        axes0 = np.array([res.axes[0, first[int(m)]] for m in obs.chain])  # type: ignore[union-attr]
-        force = obs.specific_force(axes0, np.asarray(obs.home_pose, dtype=float))
-        basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
-                                   max_std=MAX_G_STD if max_g_std is None else max_g_std)
-        if basis.shape[1]:
-            with_g = run((force[0] @ basis, force[1] @ basis))
-            if _g_needed(res, with_g, 3 * basis.shape[1]):
-                res = with_g
-            else:  # what is left in the bias: the size of the G the data did not need
-                kG = with_g.scale[0][:, None] * (with_g.g_sensitivity[0] @ basis.T)  # type: ignore[index]
-                extra["g_left_out_per_g"] = float(np.max(np.linalg.norm(kG, axis=1)))
-                basis = np.zeros((3, 0))
+        res, basis, extra = _paired_axis_g(obs, res, run, first, max_g_std)
     k, b, cov = res.scale[0], res.bias[0], res.covariance[0]
     ok = bool(res.converged[0]) and np.all(np.isfinite(k)) and np.all(k > 0)
     consistency, factor = None, 1.0
@@ -1059,6 +1049,43 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
         extra=extra,
         **_g_terms(res, basis, factor),  # type: ignore[arg-type]
     )
+
+
+def _paired_axis_g(obs: ObservationSet, res: PairedAxisBatch,
+                   run: Callable[[tuple[np.ndarray, np.ndarray] | None], PairedAxisBatch],
+                   first: dict[int, int], max_g_std: float | None
+                   ) -> tuple[PairedAxisBatch, np.ndarray, dict[str, Any]]:
+    """:func:`fit_paired_axis`'s g-sensitivity step: the directions the run determines, the
+    fit with ``G`` along them where :func:`_g_needed` says the data need it, and the fit to keep
+    with its ``G`` basis (``(3, 0)`` without) and ``extra``.
+
+    A run whose die warmed was referred to its mean temperature with a drift slope measured on
+    the rests (:func:`gyrocal.calib.thermal.correct_drift`); that slope's error offsets every
+    window by ``δβ (T_w − T̄)``, and as the servos turn one after another while the die warms,
+    it separates the turns and rests much as ``G γ`` does. So the test compares the two models
+    with ``δβ`` free in both (``obs.temp_offset`` as one more regressor), so that the known
+    drift is not taken for g-sensitivity; the fits kept are those without ``δβ`` (its
+    uncertainty is already in the windows' σ).
+    """
+    # one pass: the forces of the fitted axes (G moves them far less than their σ)
+    axes0 = np.array([res.axes[0, first[int(m)]] for m in obs.chain])  # type: ignore[union-attr,index]
+    force = obs.specific_force(axes0, np.asarray(obs.home_pose, dtype=float))
+    basis = gravity_directions(*force, obs.mean_std, obs.rest_mean_std,  # type: ignore[arg-type]
+                               max_std=MAX_G_STD if max_g_std is None else max_g_std)
+    if not basis.shape[1]:
+        return res, basis, {}
+    g_force = (force[0] @ basis, force[1] @ basis)
+    with_g = run(g_force)
+    nested = (res, with_g)
+    if obs.temp_offset is not None:
+        drift = (obs.temp_offset[:, None], obs.rest_temp_offset[:, None])  # type: ignore[index]
+        nested = (run(drift), run((np.hstack([g_force[0], drift[0]]),
+                                   np.hstack([g_force[1], drift[1]]))))
+    if _g_needed(*nested, 3 * basis.shape[1]):
+        return with_g, basis, {}
+    # what is left in the bias: the size of the G the data did not need
+    kG = with_g.scale[0][:, None] * (with_g.g_sensitivity[0] @ basis.T)  # type: ignore[index]
+    return res, np.zeros((3, 0)), {"g_left_out_per_g": float(np.max(np.linalg.norm(kG, axis=1)))}
 
 
 def _g_needed(without: PairedAxisBatch, with_g: PairedAxisBatch, n_terms: int) -> bool:

@@ -169,6 +169,13 @@ class ObservationSet:
         otherwise than through a gimbal's kinematics (the single-servo jig: gravity read by the
         accelerometer in each seat, :meth:`by_seat`); given together. The full-matrix fit then
         models g-sensitivity with them.
+    temp_offset, rest_temp_offset : array_like, shape (n,) and (r,), optional
+        Each window's and rest's mean die temperature less the run's mean ``temperature_c``,
+        °C, where :func:`gyrocal.calib.thermal.correct_drift` referred the windows to the mean
+        with a drift slope measured on the rests; given together. The slope's error then
+        offsets every window in proportion to these, which
+        :func:`gyrocal.calib.estimators.fit_paired_axis` fits as a nuisance where it tests
+        whether the data need g-sensitivity.
     own_axes : bool
         Each rotation window turns about an axis of its own (:meth:`pose_groups`): a hand jig,
         where nothing holds the axis from one turn to the next (:mod:`gyrocal.calib.hand`).
@@ -207,6 +214,8 @@ class ObservationSet:
     force: np.ndarray | None = None
     rest_force: np.ndarray | None = None
     own_axes: bool = False
+    temp_offset: np.ndarray | None = None
+    rest_temp_offset: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         mean = _arr(self.mean, "mean", (None, 3))
@@ -302,6 +311,17 @@ class ObservationSet:
             raise CalibInputError("still_angle_std must be positive when pose_still is used")
         self._gravity_fields(r_mean.shape[0])
         self._force_fields(n, r_mean.shape[0])
+        self._temp_offset_fields(n, r_mean.shape[0])
+
+    def _temp_offset_fields(self, n: int, r: int) -> None:
+        """Check and freeze ``temp_offset`` and ``rest_temp_offset``."""
+        if self.temp_offset is None and self.rest_temp_offset is None:
+            return
+        if self.temp_offset is None or self.rest_temp_offset is None:
+            raise CalibInputError("temp_offset and rest_temp_offset go together")
+        object.__setattr__(self, "temp_offset", _ro(_arr(self.temp_offset, "temp_offset", (n,))))
+        object.__setattr__(self, "rest_temp_offset", _ro(_arr(
+            self.rest_temp_offset, "rest_temp_offset", (r,))))
 
     def _force_fields(self, n: int, r: int) -> None:
         """Check and freeze ``force`` and ``rest_force``."""

@@ -11,14 +11,21 @@ deviations, :func:`fit_thermal` fits
                                              diagonal model),
 
 by weighted least squares (weights ``1/σ²`` of each calibration's parameter; the correlations
-between one calibration's parameters are not used). The bias order ``p`` is chosen by the data
-with the Bayesian information criterion, ``BIC(p) = χ²(p) + 3(p + 1)·ln(3n)`` over the three
-axes (χ² with the calibrations' stated variances), among the orders that leave at least one
-redundant calibration (``p ≤ n − 2``; at most :data:`MAX_BIAS_ORDER`). The consistency check is
-the χ² of all residuals against the stated variances on its degrees of freedom; when it fails
-(p-value below :data:`~gyrocal.calib.estimators.CONSISTENCY_ALPHA`) the coefficients'
-covariances are scaled by the Birge ratio ``χ²/dof`` so that the stated uncertainty covers the
-scatter actually seen.
+between one calibration's parameters are not used). The part of each bias variance that the
+calibrations share (``bias_common_var``: the bias's wander over a run, whose slow flicker and
+random-walk components are common to calibrations made minutes apart,
+:attr:`gyrocal.calib.drift.BiasDrift.run_variance`) is not independent scatter: averaging
+``n`` calibrations does not shrink it by ``√n``. It is taken out of the weights and added back,
+whole, as the variance of the constant coefficient (one offset shared by every calibration
+moves ``c_j0`` alone), so ``σ_b(T)`` never falls below it. The bias order ``p`` is chosen by
+the data with the Bayesian information criterion, ``BIC(p) = χ²(p) + 3(p + 1)·ln(3n)`` over
+the three axes (χ² with the calibrations' stated independent variances), among the orders
+that leave at least one redundant calibration (``p ≤ n − 2``; at most
+:data:`MAX_BIAS_ORDER`). The consistency check is the χ² of all residuals against the stated
+(independent) variances on its degrees of freedom, so a wander that is in fact independent
+between calibrations shows as scatter; when it fails (p-value below
+:data:`~gyrocal.calib.estimators.CONSISTENCY_ALPHA`) the coefficients' covariances are scaled
+by the Birge ratio ``χ²/dof`` so that the stated uncertainty covers the scatter actually seen.
 
 The model is valid over the covered range ``[min T_i, max T_i]``: :meth:`ThermalModel.at`
 clamps a temperature outside it to the nearest end and says so (``clamped``); it never
@@ -75,7 +82,8 @@ class ThermalState:
     bias : (3,) ndarray
         ``b(T)``, rad/s.
     bias_std : (3,) ndarray
-        Its standard deviation from the coefficients' covariance.
+        Its standard deviation from the coefficients' covariance (with the offset the
+        calibrations share, :func:`fit_thermal`'s ``bias_common_var``).
     gain : (3, 3) ndarray or None
         ``A(T)`` (a diagonal matrix for the diagonal model); None for a bias-only model.
     gain_std : (3, 3) ndarray or None
@@ -322,6 +330,20 @@ def _positive_var(std: np.ndarray, name: str) -> np.ndarray:
     return s * s
 
 
+def _split_common(bvar: np.ndarray, common_var: np.ndarray | None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Each calibration's independent bias variance, and the variance of the offset the
+    calibrations share (per axis: the largest of theirs, so it is not understated)."""
+    if common_var is None:
+        return bvar, np.zeros(3)
+    c = np.broadcast_to(np.asarray(common_var, dtype=float), bvar.shape)
+    if not np.all(np.isfinite(c)) or np.any(c < 0) or np.any(c >= bvar):
+        raise CalibInputError(
+            "bias_common_var must be finite, at least 0 and below each calibration's bias_std² "
+            "(the part of its variance the calibrations share)")
+    return bvar - c, c.max(axis=0)
+
+
 def fit_thermal(
     temperature_c: np.ndarray,
     bias: np.ndarray,
@@ -331,6 +353,7 @@ def fit_thermal(
     *,
     reference_c: float | None = None,
     kind: str = "calibrations",
+    bias_common_var: np.ndarray | None = None,
 ) -> ThermalModel:
     """Fit bias(T) (order by BIC) and the gain linearly in T (module docstring).
 
@@ -347,6 +370,9 @@ def fit_thermal(
         ``T_ref``; the middle of the covered range by default.
     kind : str
         ``"calibrations"`` or ``"static"``, recorded in the model.
+    bias_common_var : (n, 3) or (3,) array_like, optional
+        The part of each ``bias_std²`` common to all the calibrations (module docstring), rad²/s²;
+        each must be below its ``bias_std²``. None: the calibrations' errors are independent.
 
     Returns
     -------
@@ -355,8 +381,9 @@ def fit_thermal(
     Raises
     ------
     CalibInputError
-        If shapes disagree, a value is not finite, a standard deviation is not positive, fewer
-        than two calibrations are given, or they span less than 0.1 °C.
+        If shapes disagree, a value is not finite, a standard deviation is not positive, a
+        common variance is not below its calibration's variance, fewer than two calibrations are
+        given, or they span less than 0.1 °C.
     """
     T = np.asarray(temperature_c, dtype=float)
     n = T.size
@@ -376,6 +403,7 @@ def fit_thermal(
     if b.shape != (n, 3) or not np.all(np.isfinite(b)):
         raise CalibInputError(f"bias must be finite with shape ({n}, 3), got {b.shape}")
     bvar = _positive_var(np.broadcast_to(bias_std, (n, 3)), "bias_std")
+    bvar, common = _split_common(bvar, bias_common_var)
     ref = 0.5 * (lo + hi) if reference_c is None else float(reference_c)
     x = T - ref
 
@@ -432,6 +460,7 @@ def fit_thermal(
             cov = cov * birge
             if g_std is not None:
                 g_std = g_std * math.sqrt(birge)
+    cov[:, 0, 0] += common  # the shared offset: the constant coefficient's alone
     criterion = {"name": "BIC", "bias_order": p,
                  "scores": {str(k): float(v) for k, v in scores.items()},
                  "gain_order": None if gain is None else 1,
@@ -483,7 +512,11 @@ def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
     standard deviation ``σ_β``. Every window's mean (turns and rests) is then moved to the run's
     mean temperature ``T̄`` (``obs.temperature_c``): ``mean − β (T_w − T̄)``, and its variance
     grows by ``(σ_β (T_w − T̄))²``, so the fit reports the bias at ``T̄`` with the drift's
-    uncertainty in it rather than a false tight figure. The scale's own temperature change
+    uncertainty in it rather than a false tight figure. That uncertainty is one slope's, common
+    to every window, so the offsets ``T_w − T̄`` go with the set (``temp_offset``,
+    ``rest_temp_offset``) for a fit that must tell the slope's error from another offset
+    pattern (the g-sensitivity test of :func:`gyrocal.calib.estimators.fit_paired_axis`). The
+    scale's own temperature change
     within a run cannot be measured here: each axis's scale is the one at the temperature of its
     own servo's turns (which do not average out over the run: the servos turn one after
     another); the kit's estimate flags it in a note when the chip's datasheet
@@ -534,6 +567,8 @@ def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
         mean_std=np.hypot(obs.mean_std, beta_std * dw),
         rest_mean=obs.rest_mean - beta * dr,
         rest_mean_std=np.hypot(obs.rest_mean_std, beta_std * dr),
+        temp_offset=dw[:, 0],
+        rest_temp_offset=dr[:, 0],
     )
     drift = ", ".join(f"{-b:+.2e} ± {s:.1e}" for b, s in zip(beta, beta_std, strict=True))
     return fixed, (

@@ -172,7 +172,10 @@ def collect_calibrations(paths: Sequence[str]) -> list[tuple[str, GyroCalibratio
 def fit_calibrations(cals: Sequence[GyroCalibration]) -> ThermalModel:
     """Fit the thermal model of a set of calibrations (:func:`gyrocal.calib.thermal.
     fit_thermal`): the full matrix when every one is a full-model calibration with its
-    ``matrix_std``, the paper's diagonal scale otherwise.
+    ``matrix_std``, the paper's diagonal scale otherwise. The bias's wander over each run
+    (a calibration's ``bias_drift``, part of its ``bias_std``) is shared by calibrations made
+    minutes apart, so it is passed as their common variance rather than as independent scatter
+    that the fit would average away.
 
     Raises
     ------
@@ -189,7 +192,10 @@ def fit_calibrations(cals: Sequence[GyroCalibration]) -> ThermalModel:
     try:
         return fit_thermal(np.array(temps, dtype=float), np.array([c.bias for c in cals]),
                            np.array([c.bias_std for c in cals]), np.array(gain),
-                           np.array(gain_std, dtype=float))
+                           np.array(gain_std, dtype=float),
+                           bias_common_var=np.array([np.zeros(3) if c.bias_drift is None
+                                                     else c.bias_drift.run_variance
+                                                     for c in cals]))
     except CalibInputError as exc:
         raise InputError(f"cannot fit a thermal model: {exc}") from None
 

@@ -73,6 +73,34 @@ def test_understated_uncertainties_fail_the_check_and_are_scaled_to_the_scatter(
     assert np.max(z) < 4.0  # the stated uncertainty now covers the scatter
 
 
+def test_an_offset_the_calibrations_share_is_not_averaged_away():
+    """Six calibrations whose bias errors are white scatter plus one offset common to all (the
+    bias's wander over a run, slower than the minutes between them): with that share given as
+    ``bias_common_var`` the model's σ at every temperature covers the error with unit spread, and
+    never falls below the shared σ (counted as independent, the fit divides it by √6 and its σ
+    is about half the true spread)."""
+    T = np.linspace(20.0, 26.0, 6)
+    white, common = 4e-5, 6e-5
+    grid = np.linspace(20.0, 26.0, 7)
+    z = []
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        b = truth_bias(T) + rng.normal(0, white, (6, 3)) + rng.normal(0, common, 3)
+        model = fit_thermal(T, b, np.full((6, 3), math.hypot(white, common)),
+                            bias_common_var=common**2)
+        st = [model.at(t) for t in grid]
+        assert all(np.all(s.bias_std >= common) for s in st)
+        z.append([(s.bias - tb) / s.bias_std for s, tb in zip(st, truth_bias(grid), strict=True)])
+    spread = np.std(np.array(z), axis=0)  # per temperature and axis, over the draws
+    assert np.all((spread > 0.8) & (spread < 1.2)), spread
+
+
+def test_a_common_variance_above_the_stated_one_is_refused():
+    T = np.linspace(20.0, 26.0, 4)
+    with pytest.raises(CalibInputError, match="bias_common_var"):
+        fit_thermal(T, truth_bias(T), np.full((4, 3), 1e-4), bias_common_var=2e-8)
+
+
 def test_outside_the_range_is_clamped_never_extrapolated():
     model = draw(0, np.linspace(22.0, 28.0, 6))
     hot = model.at(60.0)
