@@ -41,6 +41,7 @@ __all__ = [
     "PLAUSIBLE_SCALE",
     "Estimate",
     "plausible_bounds",
+    "judged_windows",
     "recording_jig",
     "check_plausible",
     "check_plausible_noise",
@@ -481,6 +482,22 @@ def with_bias_wander(ex: ExtractedWindows, drift: BiasDrift) -> ExtractedWindows
     return replace(ex, observations=replace(obs, **widened))
 
 
+def judged_windows(rec: Recording) -> tuple[ExtractedWindows, BiasDrift]:
+    """The recording's windows as a fit judges them (:func:`extract_recording`, each window's
+    and rest's σ widened by the bias's wander, :func:`with_bias_wander`), and the chip's bias
+    drift figures: what :func:`estimate_recording` fits and a report's residuals are read
+    against, so both give one χ².
+
+    Raises
+    ------
+    InputError
+        If the recording cannot be windowed.
+    """
+    ex = extract_recording(rec)
+    drift = chip_bias_drift(rec.sensor.get("model"), ex)
+    return with_bias_wander(ex, drift), drift
+
+
 def jig_wobble_rad(manifest: Mapping[str, Any]) -> float:
     """The largest once-per-revolution link tilt of the recording's servos, rad: the servo
     table's ``wobble_deg`` (:class:`gyrocal.drivers.dynamixel.control_table.ServoModel`) of each
@@ -509,9 +526,7 @@ def estimate_recording(
     EstimationError
         If the estimator fails (the message says why).
     """
-    ex = extract_recording(rec)
-    drift = chip_bias_drift(rec.sensor.get("model"), ex)
-    ex = with_bias_wander(ex, drift)
+    ex, drift = judged_windows(rec)
     systematics = _Systematics(drift, jig_wobble_rad(rec.manifest))
     fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), systematics, rec.path,
                               seats=seat_starts(rec.manifest) is not None)

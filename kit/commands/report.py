@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Load, window (and estimate without CAL), draw, print the index."""
     from gyrocal.kit.exports import load_document
-    from gyrocal.kit.pipeline import extract_recording
+    from gyrocal.kit.pipeline import judged_windows
     from gyrocal.kit.plots import require_matplotlib
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report_html import write_run_report
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"gyrocal: warning: {w}", file=sys.stderr)
     if args.cal:
         cal = load_document(args.cal, "gyrocal-calibration", "calibration")
-        extracted = extract_recording(rec)
+        extracted = judged_windows(rec)[0]
         what = f"calibration {args.cal}"
     else:
         from gyrocal.kit.pipeline import estimate_recording
