@@ -1367,16 +1367,36 @@ def _turns_only(plan: Plan) -> Plan:
                    accel_time_s=0.0, accel_std_ratio=None)
 
 
-@functools.lru_cache(maxsize=32)
 def _accel_rest_moves(
     plan: Plan, axes_key: _Key | None, up_key: _Key | None, max_turns: float | None,
     settle_s: float, target_ratio: float, beam: int,
 ) -> tuple[tuple[tuple[int, int, float], ...], int, float, float]:
-    """The beam search of :func:`plan_accel_rests`: ``(accel_moves, accel_extra_rests,
-    accel_time_s, accel_std_ratio)``. A pure function of the protocol's steps and the nominal
-    gimbal, cached: a plan's predicted figures follow the measured noise, its steps mostly do
-    not, so the runs of ``gyrocal thermal`` (and the emulated calibrations of one process)
-    search once per distinct protocol."""
+    """:func:`plan_accel_rests`' result, ``(accel_moves, accel_extra_rests, accel_time_s,
+    accel_std_ratio)``: the beam search's results (:func:`_accel_rest_search`, which does not
+    depend on the rest length), each with the time of the rests it adds, and the choice among
+    them (the one with the least added time within ``target_ratio``, else the smallest σ)."""
+    extra, searched = _accel_rest_search(replace(plan, rest_s=0.0), axes_key, up_key,
+                                         max_turns, settle_s, beam)
+    results = [(moved + extra * plan.rest_s, ratio, moves) for moved, ratio, moves in searched]
+    ok = [x for x in results if x[1] <= target_ratio]
+    added, ratio, moves = (min(ok, key=lambda x: (x[0], x[1])) if ok
+                           else min(results, key=lambda x: (x[1], x[0])))
+    return moves, extra, float(added), float(ratio)
+
+
+@functools.lru_cache(maxsize=32)
+def _accel_rest_search(
+    plan: Plan, axes_key: _Key | None, up_key: _Key | None, max_turns: float | None,
+    settle_s: float, beam: int,
+) -> tuple[int, tuple[tuple[float, float, tuple[tuple[int, int, float], ...]], ...]]:
+    """The beam search of :func:`plan_accel_rests`: the rests it adds, and per ``λ`` the
+    moves' added time (less the gyro protocol's own moves), the predicted σ ratio and the
+    moves. A pure function of the protocol's steps (not of its rest length: a rest is a step
+    of the search whatever it lasts) and the nominal gimbal, cached: a plan's predicted figures
+    follow the measured noise and its rest length the time budget left after the accelerometer's
+    moves (:func:`plan_protocol` plans again with a shorter one), its steps mostly do not, so a
+    calibration, the runs of ``gyrocal thermal`` and the emulated calibrations of one process
+    search once per distinct sequence of steps."""
     from gyrocal.calib.accel import accel_design
 
     axes, up = _array(axes_key), _array(up_key)
@@ -1478,12 +1498,9 @@ def _accel_rest_moves(
         design = accel_design(rest_gravity(combos[seen], axes, up), 1.0, gravity=1.0,
                               n_sphere=500)
         ratio = design.worst_force_std if design.identifiable else np.inf
-        results.append((total - fixed + extra * plan.rest_s, ratio, moves))
-    ok = [x for x in results if x[1] <= target_ratio]
-    added, ratio, moves = (min(ok, key=lambda x: (x[0], x[1])) if ok
-                           else min(results, key=lambda x: (x[1], x[0])))
-    return (tuple((int(r), int(s), float(a)) for r, s, a in moves), extra, float(added),
-            float(ratio))
+        results.append((total - fixed, ratio,
+                        tuple((int(r), int(s), float(a)) for r, s, a in moves)))
+    return extra, tuple(results)
 
 
 # ------------------------------------------------------------- the single-servo jig's seats
