@@ -1023,7 +1023,7 @@ def plan_protocol(
     tilted: Plan | None = None  # the last gyro protocol with the accelerometer's rests
     for _ in range(8):
         best = (_plan_full_cached(top, budget, noise_std, odr_hz, accel, reference_rate,
-                                  min_rest_s, _hashable(axes)) if model == "full"
+                                  min_rest_s, _hashable(axes), time_budget_s) if model == "full"
                 else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
                                     min_rest_s))
         if best is None:
@@ -1078,42 +1078,70 @@ def _plan_diagonal(
 @functools.lru_cache(maxsize=32)
 def _plan_full_cached(
     top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
-    reference_rate: float, min_rest_s: float, axes_key: _Key | None,
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None, scored_within: float,
 ) -> Plan | None:
     """:func:`_plan_full` for the same inputs computed once (a plan is immutable): the
     emulated calibrations of one process that measure the same noise plan once."""
     return _plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
-                      _array(axes_key))
+                      axes_key, scored_within)
 
 
-def _plan_full(
+@functools.lru_cache(maxsize=16)
+def _full_candidates(
     top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
-    reference_rate: float, min_rest_s: float, axes: np.ndarray | None,
-) -> Plan | None:
-    """The best full-model plan over pose sets × speeds × turns × rests within ``budget``."""
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None,
+) -> tuple[tuple[Any, ...], ...]:
+    """Per pose set of :func:`candidate_pose_sets`, the full-model candidates (speed, turns,
+    rest) within ``budget``, their jig times and their predicted figures
+    (:func:`predict_full_uncertainty`, each candidate's its own whatever the others), cached:
+    :func:`plan_protocol` plans again within a shorter budget when the accelerometer's rests
+    overshoot it, and picks among a subset of these."""
+    axes = _array(axes_key)
     speeds = np.unique(np.concatenate([np.linspace(min(1.0, top), top, 6), [top]]))
-    best: Plan | None = None
+    scored = []
     for poses in candidate_pose_sets(3):
         angles = tuple(abs(p[2]) for p in poses)
         grav = gravity_poses(poses, axes)
         g_angles = tuple(a for _, a in grav)
-        cands = [
-            (float(sp), t, float(r)) for sp in speeds for t in (1, 2, 3)
-            for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s
-            and jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles) <= budget
-        ]
-        if not cands:
+        timed = [
+            ((float(sp), t, float(r)),
+             jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles))
+            for sp in speeds for t in (1, 2, 3)
+            for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s]
+        timed = [(c, T) for c, T in timed if T <= budget]
+        if not timed:
             continue
+        cands = [c for c, _ in timed]
         ms, bs, err = predict_full_uncertainty(
             cands, poses, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
             reference_rate=reference_rate, axes=axes)
+        scored.append((poses, grav, tuple(cands), tuple(T for _, T in timed), ms, bs, err))
+    return tuple(scored)
+
+
+def _plan_full(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None, scored_within: float,
+) -> Plan | None:
+    """The best full-model plan over pose sets × speeds × turns × rests within ``budget``, of
+    the candidates scored within ``scored_within`` (at least ``budget``:
+    :func:`_full_candidates`)."""
+    axes = _array(axes_key)
+    best: Plan | None = None
+    for poses, grav, all_cands, times, all_ms, all_bs, all_err in _full_candidates(
+            top, max(budget, scored_within), noise_std, odr_hz, accel, reference_rate,
+            min_rest_s, axes_key):
+        within = [k for k, T in enumerate(times) if T <= budget]
+        if not within:
+            continue
+        cands = [all_cands[k] for k in within]
+        ms, bs, err = all_ms[within], all_bs[within], all_err[within]
         i = int(np.argmin(err))
         if best is not None and not err[i] < best.rate_error_std * (1 - 1e-9):
             continue
         sp, t, r = cands[i]
         best = Plan(
-            sp, t, r, float(accel),
-            float(jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles)),
+            sp, t, r, float(accel), float(times[within[i]]),
             tuple(float(x) for x in np.diag(ms[i])), tuple(float(x) for x in bs[i]),  # type: ignore[arg-type]
             float(err[i]), float(reference_rate),
             poses=tuple((int(a), int(b), float(c)) for a, b, c in poses),

@@ -239,8 +239,9 @@ def test_one_plan_searches_once_per_distinct_sequence_of_steps(monkeypatch):
     """Issue 25: with the accelerometer's rests over the budget, :func:`plan_protocol` plans the
     gyro again with a shorter budget; the new protocol may differ only in its rest length,
     which the search does not depend on, so it is searched once (it was searched again: seven
-    beam searches, about 0.8 CPU s, per emulated calibration). The accelerometer's moves are
-    the same and its added time is that of the moves only (the full protocol adds no rests)."""
+    beam searches, about 0.3 CPU s, per emulated calibration). The accelerometer's moves are
+    the same. The gyro's candidates are scored once too, within the whole budget; the shorter
+    budget picks among them what scoring only its own candidates picks."""
     import functools
     from dataclasses import replace
 
@@ -251,6 +252,14 @@ def test_one_plan_searches_once_per_distinct_sequence_of_steps(monkeypatch):
     uncached = design._accel_rest_search.__wrapped__
     search = functools.lru_cache(maxsize=32)(lambda *a: searched.append(a) or uncached(*a))
     monkeypatch.setattr(design, "_accel_rest_search", search)
+    scored: list = []
+    score = design._full_candidates.__wrapped__
+    monkeypatch.setattr(design, "_full_candidates", functools.lru_cache(maxsize=16)(
+        lambda *a: scored.append(a) or score(*a)))
+    planned: list = []
+    plan_full = design._plan_full_cached.__wrapped__
+    monkeypatch.setattr(design, "_plan_full_cached", functools.lru_cache(maxsize=32)(
+        lambda *a: planned.append(a) or plan_full(*a)))
     real_moves = design._accel_rest_moves
     monkeypatch.setattr(design, "_accel_rest_moves",
                         lambda plan, *a: asked.append(plan) or real_moves(plan, *a))
@@ -262,3 +271,12 @@ def test_one_plan_searches_once_per_distinct_sequence_of_steps(monkeypatch):
     assert len({replace(p, rest_s=0.0) for p in asked}) == 1
     assert len(searched) == 1
     assert plan.jig_time_s <= 45.0 and plan.rest_s == asked[-1].rest_s
+    # the gyro's candidates scored once, within the whole budget; the shorter budget picks
+    # among them the plan that scoring only those within it picks
+    assert [a[1] for a in scored] == [45.0] and len(planned) == 2
+    shorter = planned[-1][:-1]
+    alone = design._plan_full(*shorter, shorter[1])  # scored within the shorter budget only
+    assert [a[1] for a in scored] == [45.0, shorter[1]]
+    assert alone == design._plan_full(*shorter, 45.0)
+    assert (alone.speed, alone.turns, alone.rest_s, alone.poses) == (
+        plan.speed, plan.turns, plan.rest_s, plan.poses)
