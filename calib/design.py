@@ -1023,7 +1023,7 @@ def plan_protocol(
     tilted: Plan | None = None  # the last gyro protocol with the accelerometer's rests
     for _ in range(8):
         best = (_plan_full_cached(top, budget, noise_std, odr_hz, accel, reference_rate,
-                                  min_rest_s, _hashable(axes)) if model == "full"
+                                  min_rest_s, _hashable(axes), time_budget_s) if model == "full"
                 else _plan_diagonal(top, budget, noise_std, odr_hz, accel, reference_rate,
                                     min_rest_s))
         if best is None:
@@ -1078,42 +1078,70 @@ def _plan_diagonal(
 @functools.lru_cache(maxsize=32)
 def _plan_full_cached(
     top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
-    reference_rate: float, min_rest_s: float, axes_key: _Key | None,
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None, scored_within: float,
 ) -> Plan | None:
     """:func:`_plan_full` for the same inputs computed once (a plan is immutable): the
     emulated calibrations of one process that measure the same noise plan once."""
     return _plan_full(top, budget, noise_std, odr_hz, accel, reference_rate, min_rest_s,
-                      _array(axes_key))
+                      axes_key, scored_within)
 
 
-def _plan_full(
+@functools.lru_cache(maxsize=16)
+def _full_candidates(
     top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
-    reference_rate: float, min_rest_s: float, axes: np.ndarray | None,
-) -> Plan | None:
-    """The best full-model plan over pose sets × speeds × turns × rests within ``budget``."""
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None,
+) -> tuple[tuple[Any, ...], ...]:
+    """Per pose set of :func:`candidate_pose_sets`, the full-model candidates (speed, turns,
+    rest) within ``budget``, their jig times and their predicted figures
+    (:func:`predict_full_uncertainty`, each candidate's its own whatever the others), cached:
+    :func:`plan_protocol` plans again within a shorter budget when the accelerometer's rests
+    overshoot it, and picks among a subset of these."""
+    axes = _array(axes_key)
     speeds = np.unique(np.concatenate([np.linspace(min(1.0, top), top, 6), [top]]))
-    best: Plan | None = None
+    scored = []
     for poses in candidate_pose_sets(3):
         angles = tuple(abs(p[2]) for p in poses)
         grav = gravity_poses(poses, axes)
         g_angles = tuple(a for _, a in grav)
-        cands = [
-            (float(sp), t, float(r)) for sp in speeds for t in (1, 2, 3)
-            for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s
-            and jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles) <= budget
-        ]
-        if not cands:
+        timed = [
+            ((float(sp), t, float(r)),
+             jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles))
+            for sp in speeds for t in (1, 2, 3)
+            for r in sorted({min_rest_s, 1.0, 1.5}) if r >= min_rest_s]
+        timed = [(c, T) for c, T in timed if T <= budget]
+        if not timed:
             continue
+        cands = [c for c, _ in timed]
         ms, bs, err = predict_full_uncertainty(
             cands, poses, noise_std=noise_std, odr_hz=odr_hz, accel=accel,
             reference_rate=reference_rate, axes=axes)
+        scored.append((poses, grav, tuple(cands), tuple(T for _, T in timed), ms, bs, err))
+    return tuple(scored)
+
+
+def _plan_full(
+    top: float, budget: float, noise_std: float, odr_hz: float, accel: float,
+    reference_rate: float, min_rest_s: float, axes_key: _Key | None, scored_within: float,
+) -> Plan | None:
+    """The best full-model plan over pose sets × speeds × turns × rests within ``budget``, of
+    the candidates scored within ``scored_within`` (at least ``budget``:
+    :func:`_full_candidates`)."""
+    axes = _array(axes_key)
+    best: Plan | None = None
+    for poses, grav, all_cands, times, all_ms, all_bs, all_err in _full_candidates(
+            top, max(budget, scored_within), noise_std, odr_hz, accel, reference_rate,
+            min_rest_s, axes_key):
+        within = [k for k, T in enumerate(times) if T <= budget]
+        if not within:
+            continue
+        cands = [all_cands[k] for k in within]
+        ms, bs, err = all_ms[within], all_bs[within], all_err[within]
         i = int(np.argmin(err))
         if best is not None and not err[i] < best.rate_error_std * (1 - 1e-9):
             continue
         sp, t, r = cands[i]
         best = Plan(
-            sp, t, r, float(accel),
-            float(jig_time(sp, t, r, accel, move_angles=angles, gravity_angles=g_angles)),
+            sp, t, r, float(accel), float(times[within[i]]),
             tuple(float(x) for x in np.diag(ms[i])), tuple(float(x) for x in bs[i]),  # type: ignore[arg-type]
             float(err[i]), float(reference_rate),
             poses=tuple((int(a), int(b), float(c)) for a, b, c in poses),
@@ -1367,16 +1395,36 @@ def _turns_only(plan: Plan) -> Plan:
                    accel_time_s=0.0, accel_std_ratio=None)
 
 
-@functools.lru_cache(maxsize=32)
 def _accel_rest_moves(
     plan: Plan, axes_key: _Key | None, up_key: _Key | None, max_turns: float | None,
     settle_s: float, target_ratio: float, beam: int,
 ) -> tuple[tuple[tuple[int, int, float], ...], int, float, float]:
-    """The beam search of :func:`plan_accel_rests`: ``(accel_moves, accel_extra_rests,
-    accel_time_s, accel_std_ratio)``. A pure function of the protocol's steps and the nominal
-    gimbal, cached: a plan's predicted figures follow the measured noise, its steps mostly do
-    not, so the runs of ``gyrocal thermal`` (and the emulated calibrations of one process)
-    search once per distinct protocol."""
+    """:func:`plan_accel_rests`' result, ``(accel_moves, accel_extra_rests, accel_time_s,
+    accel_std_ratio)``: the beam search's results (:func:`_accel_rest_search`, which does not
+    depend on the rest length), each with the time of the rests it adds, and the choice among
+    them (the one with the least added time within ``target_ratio``, else the smallest σ)."""
+    extra, searched = _accel_rest_search(replace(plan, rest_s=0.0), axes_key, up_key,
+                                         max_turns, settle_s, beam)
+    results = [(moved + extra * plan.rest_s, ratio, moves) for moved, ratio, moves in searched]
+    ok = [x for x in results if x[1] <= target_ratio]
+    added, ratio, moves = (min(ok, key=lambda x: (x[0], x[1])) if ok
+                           else min(results, key=lambda x: (x[1], x[0])))
+    return moves, extra, float(added), float(ratio)
+
+
+@functools.lru_cache(maxsize=32)
+def _accel_rest_search(
+    plan: Plan, axes_key: _Key | None, up_key: _Key | None, max_turns: float | None,
+    settle_s: float, beam: int,
+) -> tuple[int, tuple[tuple[float, float, tuple[tuple[int, int, float], ...]], ...]]:
+    """The beam search of :func:`plan_accel_rests`: the rests it adds, and per ``λ`` the
+    moves' added time (less the gyro protocol's own moves), the predicted σ ratio and the
+    moves. A pure function of the protocol's steps (not of its rest length: a rest is a step
+    of the search whatever it lasts) and the nominal gimbal, cached: a plan's predicted figures
+    follow the measured noise and its rest length the time budget left after the accelerometer's
+    moves (:func:`plan_protocol` plans again with a shorter one), its steps mostly do not, so a
+    calibration, the runs of ``gyrocal thermal`` and the emulated calibrations of one process
+    search once per distinct sequence of steps."""
     from gyrocal.calib.accel import accel_design
 
     axes, up = _array(axes_key), _array(up_key)
@@ -1478,12 +1526,9 @@ def _accel_rest_moves(
         design = accel_design(rest_gravity(combos[seen], axes, up), 1.0, gravity=1.0,
                               n_sphere=500)
         ratio = design.worst_force_std if design.identifiable else np.inf
-        results.append((total - fixed + extra * plan.rest_s, ratio, moves))
-    ok = [x for x in results if x[1] <= target_ratio]
-    added, ratio, moves = (min(ok, key=lambda x: (x[0], x[1])) if ok
-                           else min(results, key=lambda x: (x[1], x[0])))
-    return (tuple((int(r), int(s), float(a)) for r, s, a in moves), extra, float(added),
-            float(ratio))
+        results.append((total - fixed, ratio,
+                        tuple((int(r), int(s), float(a)) for r, s, a in moves)))
+    return extra, tuple(results)
 
 
 # ------------------------------------------------------------- the single-servo jig's seats

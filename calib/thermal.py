@@ -42,7 +42,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import chdtrc  # χ² tail without scipy.stats' import cost
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.model import LIMITS, Consistency, _array, _number, _refuse_unknown
@@ -453,6 +452,10 @@ def fit_thermal(
 
     consistency = None
     if dof > 0:
+        # χ² tail without scipy.stats' import cost, imported here: calib.windows imports this
+        # module for correct_drift, which needs no scipy (a recording alone, issue 25)
+        from scipy.special import chdtrc
+
         pv = float(chdtrc(dof, chi2))
         consistency = Consistency(chi2=float(chi2), dof=int(dof), p_value=pv, ok=pv >= _ALPHA)
         if not consistency.ok:  # Birge ratio: the scatter, not the stated σ, sets the error

@@ -220,16 +220,63 @@ def test_the_search_is_cached_for_the_same_steps_whatever_the_predicted_figures(
     noisier = replace(gyro, scale_std=tuple(2 * x for x in gyro.scale_std),  # type: ignore[arg-type]
                       bias_std=tuple(2 * x for x in gyro.bias_std),  # type: ignore[arg-type]
                       rate_error_std=2 * gyro.rate_error_std, matrix_std=None)
-    hits = design._accel_rest_moves.cache_info().hits
+    hits = design._accel_rest_search.cache_info().hits
     again = plan_accel_rests(noisier, max_turns=3.0)
-    assert design._accel_rest_moves.cache_info().hits == hits + 1
+    assert design._accel_rest_search.cache_info().hits == hits + 1
     assert again.accel_moves == tilted.accel_moves and again.jig_time_s == tilted.jig_time_s
     assert again.rate_error_std == noisier.rate_error_std  # its own figures are kept
-    fresh = design._accel_rest_moves.__wrapped__(design._turns_only(gyro), None, None, 3.0,
-                                                 0.1, ACCEL_STD_RATIO_TARGET, 24)
-    assert fresh == (tilted.accel_moves, tilted.accel_extra_rests, tilted.accel_time_s,
-                     tilted.accel_std_ratio)
-    misses = design._accel_rest_moves.cache_info().misses
+    extra, fresh = design._accel_rest_search.__wrapped__(
+        replace(design._turns_only(gyro), rest_s=0.0), None, None, 3.0, 0.1, 24)
+    assert extra == tilted.accel_extra_rests == 0  # the full protocol has rests enough
+    assert (tilted.accel_time_s, tilted.accel_std_ratio, tilted.accel_moves) in fresh
+    misses = design._accel_rest_search.cache_info().misses
     plan_accel_rests(replace(gyro, turns=gyro.turns + 1), max_turns=4.0)
-    info = design._accel_rest_moves.cache_info()  # other steps: searched
+    info = design._accel_rest_search.cache_info()  # other steps: searched
     assert (info.hits, info.misses) == (hits + 1, misses + 1)
+
+
+def test_one_plan_searches_once_per_distinct_sequence_of_steps(monkeypatch):
+    """Issue 25: with the accelerometer's rests over the budget, :func:`plan_protocol` plans the
+    gyro again with a shorter budget; the new protocol may differ only in its rest length,
+    which the search does not depend on, so it is searched once (it was searched again: seven
+    beam searches, about 0.3 CPU s, per emulated calibration). The accelerometer's moves are
+    the same. The gyro's candidates are scored once too, within the whole budget; the shorter
+    budget picks among them what scoring only its own candidates picks."""
+    import functools
+    from dataclasses import replace
+
+    from gyrocal.calib import design
+
+    searched: list = []
+    asked: list = []
+    uncached = design._accel_rest_search.__wrapped__
+    search = functools.lru_cache(maxsize=32)(lambda *a: searched.append(a) or uncached(*a))
+    monkeypatch.setattr(design, "_accel_rest_search", search)
+    scored: list = []
+    score = design._full_candidates.__wrapped__
+    monkeypatch.setattr(design, "_full_candidates", functools.lru_cache(maxsize=16)(
+        lambda *a: scored.append(a) or score(*a)))
+    planned: list = []
+    plan_full = design._plan_full_cached.__wrapped__
+    monkeypatch.setattr(design, "_plan_full_cached", functools.lru_cache(maxsize=32)(
+        lambda *a: planned.append(a) or plan_full(*a)))
+    real_moves = design._accel_rest_moves
+    monkeypatch.setattr(design, "_accel_rest_moves",
+                        lambda plan, *a: asked.append(plan) or real_moves(plan, *a))
+    # the emulated jig's servo and gyro, its measured noise (calibrate --sim --sim-seed 3)
+    plan = plan_protocol(servo_max_speed=4.796164784480418, full_scale=math.radians(500),
+                         time_budget_s=45.0, noise_std=0.0025939367200543072, model="full",
+                         accel_rests=True, max_turns=3.0)
+    assert len({p.rest_s for p in asked}) == 2  # planned again with another rest length
+    assert len({replace(p, rest_s=0.0) for p in asked}) == 1
+    assert len(searched) == 1
+    assert plan.jig_time_s <= 45.0 and plan.rest_s == asked[-1].rest_s
+    # the gyro's candidates scored once, within the whole budget; the shorter budget picks
+    # among them the plan that scoring only those within it picks
+    assert [a[1] for a in scored] == [45.0] and len(planned) == 2
+    shorter = planned[-1][:-1]
+    alone = design._plan_full(*shorter, shorter[1])  # scored within the shorter budget only
+    assert [a[1] for a in scored] == [45.0, shorter[1]]
+    assert alone == design._plan_full(*shorter, 45.0)
+    assert (alone.speed, alone.turns, alone.rest_s, alone.poses) == (
+        plan.speed, plan.turns, plan.rest_s, plan.poses)

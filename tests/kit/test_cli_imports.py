@@ -134,3 +134,14 @@ def test_analysis_commands_do_not_import_scipy_stats(tmp_path):
         if argv[0] == "estimate":  # the default method needs no optimiser
             assert optimize == "False", out.stdout
         assert code in ("0", "2"), (argv, out.stdout)
+
+
+def test_the_emulated_jig_and_the_windows_import_no_scipy():
+    """Issue 25: ``calib.windows`` (drift correction, from ``calib.thermal``) and the emulated
+    jig need no scipy; ``calib.thermal`` imported ``scipy.special`` (which pulls ``numpy.f2py``,
+    about 0.3 s) at import for its χ² tail only. The fit imports it where it is used."""
+    code = ("import sys, gyrocal.kit.sim, gyrocal.calib.windows, gyrocal.calib.thermal\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy')[:3])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True)
+    assert out.stdout.strip() == "[]"
