@@ -259,16 +259,22 @@ def _what_next(args: argparse.Namespace, out: Path, cal: Any, report: bool) -> s
 
     cal_path, rec_dir = out / "calibration.json", out / "recording"
     q = shlex.quote
-    kind = "the full model" if cal.matrix is not None else "the paper's diagonal model"
+    jig = getattr(args, "jig", "gimbal")
+    kind = ("the full model" if cal.matrix is not None else
+            "the paper's diagonal model" if jig == "gimbal" else "the diagonal model")
     wrote = (f"wrote {cal_path} (Calibration v{2 if cal.matrix is not None else 1}: {kind}), "
              f"{rec_dir}/ (what the jig recorded)")
     has_matplotlib = importlib.util.find_spec("matplotlib") is not None
     if report:
         wrote += f", and the report {out / 'report.html'} (plots in {out / 'plots'}/)"
     formats = ", ".join(n for n, e in EXPORTERS.items() if "gyrocal-calibration" in e.accepts)
+    verify = (("check it on a new run, in motion the calibration never saw:",
+               f"gyrocal verify {q(str(cal_path))}{_jig_flags(args)}") if jig == "gimbal" else
+              (f"gyrocal verify turns the gimbal's three servos against their encoders, which "
+               f"the {jig} jig does not have: check this calibration on a second {jig} session "
+               "(calibrate again, compare the two within their σ) or on a gimbal", ""))
     steps = [
-        ("check it on a new run, in motion the calibration never saw:",
-         f"gyrocal verify {q(str(cal_path))}{_jig_flags(args)}"),
+        verify,
         (f"write it for your flight stack or tool (FORMAT: {formats}; gyrocal export --help):",
          f"gyrocal export {q(str(cal_path))} --format FORMAT"),
     ]

@@ -179,6 +179,17 @@ def test_calibrate_ends_with_what_it_wrote_and_what_to_do_next(monkeypatch):
     assert "gyrocal export" not in text
 
 
+def test_a_run_without_the_gimbal_is_not_sent_to_verify_on_one():
+    from gyrocal.kit.commands.calibrate import _what_next
+
+    cal = SimpleNamespace(matrix=None, consistency=SimpleNamespace(ok=True))
+    for jig in ("hand", "single-servo"):
+        text = _what_next(_args("--sim", "--jig", jig), Path("run1"), cal, report=True)
+        assert "gyrocal verify run1" not in text, text  # verify would turn an emulated gimbal
+        assert f"a second {jig} session" in text and "Calibration v1: the diagonal model" in text
+        assert "gyrocal export run1/calibration.json --format FORMAT" in text
+
+
 def test_the_accelerometer_table_says_why_it_is_there():
     from gyrocal.calib.model import Consistency
     from gyrocal.kit.report import accelerometer_rows
