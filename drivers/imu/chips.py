@@ -439,7 +439,9 @@ MPU9250_DLPF_DELAY_S: Mapping[float, float] = MappingProxyType(
 #: sensor value before going into the sensor register" (one step is 0.0305 °/s at every range);
 #: Kris Winer's MPU9250 calibrateMPU9250 writes −bias/4 (bias in counts at ±250 °/s) for that
 #: reason ("Biases are additive, so change sign"). The ICM-20948's XG_OFFS_USR (DS-000189,
-#: bank 2) is taken to be the same ⚠ (its description gives only "gyro offset cancellation").
+#: bank 2) is taken to be the same ⚠ (its description gives only "gyro offset cancellation";
+#: TDK's eMD inv_icm20948_set_offset, Icm20948SelfTest.c, writes −(bias at ±250 °/s) >> 2,
+#: "convert from 250dps to 1000dps", i.e. the same 4-count step at ±250 °/s: one vendor source).
 GYRO_OFFSET_COUNTS_PER_CODE_FS0 = 4.0
 
 #: MPU-9250 self-test (AN-MPU-9250A-03 "MPU-9250 Accelerometer, Gyroscope and Compass
@@ -448,8 +450,13 @@ GYRO_OFFSET_COUNTS_PER_CODE_FS0 = 4.0
 #: the self-test range (FS = 0: ±250 °/s, ±2 g), the self-test code being the axis's
 #: SELF_TEST_* byte (0: no OTP value). A part passes when its response now, (output with the
 #: self-test on) − (output without), is more than 0.5 ST_OTP for the gyro and between 0.5 and
-#: 1.5 ST_OTP for the accelerometer (AN-MPU-9250A-03 pass criteria; PX4's and Kris Winer's
-#: MPU9250SelfTest use the same formula).
+#: 1.5 ST_OTP for the accelerometer (AN-MPU-9250A-03 pass criteria). Checked in two open
+#: implementations: TDK InvenSense's own eMD driver for the ICM-20948, whose register-level
+#: self-test is the same (Icm20948SelfTest.c in eMD-SmartMotion-ICM20948-1.1.0, as vendored by
+#: FredBill1/RT1064_Smartcar: "st_otp = 2620/2^FS * 1.01^(st_value - 1)", the table
+#: sSelfTestEquation from 2620 at code 1, and the 0.5 / 1.5 ratio checks in
+#: inv_check_accelgyro_self_test), and kriswiner/MPU9250 MPU9250BasicAHRS.ino 987-992
+#: (MPU9250SelfTest, at FS = 0, where its ``2620/1<<FS`` is 2620).
 MPU9250_SELF_TEST_BASE_COUNTS = 2620.0
 MPU9250_SELF_TEST_CODE_RATIO = 1.01
 
@@ -706,9 +713,14 @@ def register_names(registers: object) -> dict[int, str]:
 class _ICM42688PRegisters:
     """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
     kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank. The
-    reset values noted are DS-000347's bank 0 "Reset value" column as open register headers
-    transcribe it (two independent copies agree ⚠: not read in the datasheet itself); the
-    sensor data registers reset to 0x8000, the kernel's INV_ICM42600_DATA_INVALID (−32768)."""
+    reset values noted are DS-000347's bank 0 "Reset value" column as two independent open
+    transcriptions give it, which agree on every register the emulator resets: the register
+    header ``main/boards/ICM42688.h`` of qunkejiang/alpakka_qk ("Serial IF ... Reset value"
+    per register) and a C++ register-description header (``enum class INTF_CONFIG1_BITS``,
+    "@Address: 77 (4Dh) ... @Reset value: 0x91"; its repository is not named by the code
+    index); DS-000347's own table was not read. Both give the sensor data registers 0x80,
+    0x00 (0x8000, the kernel's INV_ICM42600_DATA_INVALID, −32768), INT_STATUS 0x10
+    (RESET_DONE) and FIFO_DATA 0xFF."""
 
     DEVICE_CONFIG: int = 0x11
     DRIVE_CONFIG: int = 0x13  # reset 0x05
@@ -769,7 +781,8 @@ class _ICM42688PBits:
     FS_SEL_SHIFT: int = 5
     ODR_MASK: int = 0x0F
     GYRO_UI_FILT_BW_MASK: int = 0x0F
-    # TMST_CONFIG reset 0x23 (⚠ TDK sample code only): TMST_FSYNC_EN | TMST_EN
+    # TMST_CONFIG reset 0x23: TMST_FSYNC_EN | TMST_EN (TDK sample code; both DS-000347
+    # transcriptions named in _ICM42688PRegisters)
     TMST_TO_REGS_EN: int = 0x10
     TMST_RES_16US: int = 0x08
     TMST_DELTA_EN: int = 0x04
@@ -1100,8 +1113,9 @@ class _ICM20948Bank0:
 
     WHO_AM_I: int = 0x00
     USER_CTRL: int = 0x03
-    # reset 0x40 (open header transcribing DS-000189 ⚠): I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5,
-    # GYRO_CYCLE 4
+    # reset 0x40: I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5, GYRO_CYCLE 4 (DS-000189 rev 1.3 §8.3,
+    # p. 37, "Reset Value: 0x40", as transcribed page by page at manualshelf.com, SparkFun
+    # SEN-15335 data sheet, page 37; and an open header transcribing the register table)
     LP_CONFIG: int = 0x05
     PWR_MGMT_1: int = 0x06
     PWR_MGMT_2: int = 0x07
@@ -1133,9 +1147,12 @@ class _ICM20948Bank2:
     XG_OFFS_USRH: int = 0x03
     ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
     ACCEL_SMPLRT_DIV_2: int = 0x11  # bits [7:0]
-    # reset 0x01 (ACCEL_FCHOICE): DS-000189 as an open header transcribes its register table
-    # ("Reset Value: 0b00000001"); the same header gives GYRO_CONFIG_1 reset 0, where the
-    # emulator keeps 0x01 (DS-000189 as read for the emulator) ⚠ the two sources disagree
+    # reset 0x01 (ACCEL_FCHOICE): DS-000189 rev 1.3 §10.15, p. 64, "Reset Value: 0x01" as
+    # quoted on TDK InvenSense's developer forum ("ICM20948 Accelerometer Configuration
+    # Reading", 2023, where a part reads back 0x01), and an open header transcribing the
+    # register table ("Reset Value: 0b00000001"). The same header gives GYRO_CONFIG_1 reset 0,
+    # where the emulator keeps 0x01 (GYRO_FCHOICE, DS-000189 as read for the emulator) ⚠ the
+    # two disagree and no third source was found
     ACCEL_CONFIG: int = 0x14
 
 
