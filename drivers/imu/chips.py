@@ -903,8 +903,9 @@ ICM42688P = ChipFamily(
     # Cross-Axis Sensitivity ±1.25 % ⚠ one source; Initial ZRO Tolerance (board-level)
     # ±0.5 °/s ✓✓ (Table 1 and open code quoting it)
     # Table 1 also: Rate Noise Spectral Density 0.0028 °/s/√Hz (at 10 Hz) ✓✓ (the datasheet's
-    # table and its "Features" list); no linear-acceleration sensitivity row: the MPU-9250's
-    # 0.1 °/s/g stands in ⚠
+    # table and its "Features" list); Table 1 has no linear-acceleration sensitivity row and no
+    # bias-instability row (read in a text copy of DS-000347's §3.1): the MPU-9250's 0.1 °/s/g
+    # stands in ⚠
     gyro_errors=GyroErrors(0.005, 0.0125, 0.5, "ICM-42688-P DS-000347 §3.1 Table 1 ⚠",
                            noise_density_dps_sqrt_hz=0.0028, g_sensitivity_dps_per_g=0.1,
                            noise_source="ICM-42688-P DS-000347 §3.1 Table 1 (Rate Noise Spectral "
@@ -1075,8 +1076,9 @@ LSM6DSOX = ChipFamily(
     # G_So% sensitivity tolerance ±1 %, G_TyOff zero-rate level ±1 dps ✓✓ (also the LSM6DSOX
     # table as quoted by open code). ST gives no cross-axis figure: the MPU-9250's ±2 % stands in
     # Rn, rate noise density in high-performance mode, 3.8 mdps/√Hz (DS12814 Table 2; footnote:
-    # independent of ODR and FS) ⚠ one source. ST gives no g-sensitivity: the MPU-9250's
-    # 0.1 °/s/g stands in ⚠
+    # independent of ODR and FS) ⚠ one named source: open transcriptions of DS12814 Rev 3 and of
+    # the LSM6DSO's DS12140 agree on 3.8, but the code index names none of their repositories.
+    # ST gives no g-sensitivity: the MPU-9250's 0.1 °/s/g stands in ⚠
     gyro_errors=GyroErrors(0.01, 0.02, 1.0,
                            "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
                            "datasheet) ⚠",
@@ -1257,12 +1259,14 @@ ICM20948 = ChipFamily(
     # DS-000189 rev 1.3 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±1.5 %,
     # Cross-Axis Sensitivity ±2 % ⚠ one source; Initial ZRO Tolerance (board-level) ±5 °/s ✓✓
     # (Table 1 and open code quoting it)
-    # Table 1 also: Rate Noise Spectral Density 0.015 °/s/√Hz ⚠ one source; no
+    # Table 1 also: Rate Noise Spectral Density 0.015 °/s/√Hz ✓✓ (Table 1, and
+    # uutzinger/BioMedicalSensorBoard imu_solutions.md 43 at 557d53f, which transcribes the
+    # gyro's "0.015 degree/s / Hz" with Table 2's 230 µg/√Hz and ±0.026 %/°C); no
     # linear-acceleration sensitivity row: the MPU-9250's 0.1 °/s/g stands in ⚠
     gyro_errors=GyroErrors(0.015, 0.02, 5.0, "ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 ⚠",
                            noise_density_dps_sqrt_hz=0.015, g_sensitivity_dps_per_g=0.1,
                            noise_source="ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 (Rate Noise "
-                                        "Spectral Density) ⚠; g-sensitivity: stand-in, the "
+                                        "Spectral Density); g-sensitivity: stand-in, the "
                                         "MPU-9250's ⚠"),
     extra=MappingProxyType(
         {
