@@ -31,7 +31,7 @@ What it models, register by register (bank 0 unless said):
   new sample, RESET_DONE_INT after a power-on or software reset. SIGNAL_PATH_RESET.FIFO_FLUSH
   empties the FIFO. Reading FIFO_COUNTH latches the count for FIFO_COUNTL. FIFO_DATA (0x30)
   is a data port: a burst there keeps popping the FIFO, and an empty FIFO reads 0xFF (header
-  bit 7: "FIFO empty"; FIFO_DATA's reset value 0xFF in both DS-000347 transcriptions that
+  bit 7: "FIFO empty"; FIFO_DATA's reset value 0xFF, DS-000347 §14.24, in the sources
   :class:`~gyrocal.drivers.imu.chips._ICM42688PRegisters` names for the reset values).
 - TEMP_DATA (0x1D, 132.48 LSB/°C), ACCEL_DATA and GYRO_DATA show the latest sample.
 - The output is low-passed at the GYRO_UI_FILT_BW bandwidth (first order ⚠, as for the LSM9DS1).

@@ -713,14 +713,13 @@ def register_names(registers: object) -> dict[int, str]:
 class _ICM42688PRegisters:
     """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
     kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank. The
-    reset values noted are DS-000347's bank 0 "Reset value" column as two independent open
-    transcriptions give it, which agree on every register the emulator resets: the register
-    header ``main/boards/ICM42688.h`` of qunkejiang/alpakka_qk ("Serial IF ... Reset value"
-    per register) and a C++ register-description header (``enum class INTF_CONFIG1_BITS``,
-    "@Address: 77 (4Dh) ... @Reset value: 0x91"; its repository is not named by the code
-    index); DS-000347's own table was not read. Both give the sensor data registers 0x80,
-    0x00 (0x8000, the kernel's INV_ICM42600_DATA_INVALID, −32768), INT_STATUS 0x10
-    (RESET_DONE) and FIFO_DATA 0xFF."""
+    reset values noted are DS-000347's: its §14 register descriptions (Rev 1.8, read in a text
+    copy: §14.2 DRIVE_CONFIG, §14.21 INT_STATUS, §14.24 FIFO_DATA, §14.35-14.51 INTF_CONFIG1
+    .. INT_SOURCE0, §14.58 WHO_AM_I) and the register header ``main/boards/ICM42688.h`` of
+    qunkejiang/alpakka_qk, which transcribes the same "Reset value" per register, agree on
+    every register the emulator resets (a third, C++ transcription does too). Both give the
+    sensor data registers 0x80, 0x00 (0x8000, the kernel's INV_ICM42600_DATA_INVALID, −32768),
+    INT_STATUS 0x10 (RESET_DONE) and FIFO_DATA 0xFF."""
 
     DEVICE_CONFIG: int = 0x11
     DRIVE_CONFIG: int = 0x13  # reset 0x05
@@ -781,8 +780,8 @@ class _ICM42688PBits:
     FS_SEL_SHIFT: int = 5
     ODR_MASK: int = 0x0F
     GYRO_UI_FILT_BW_MASK: int = 0x0F
-    # TMST_CONFIG reset 0x23: TMST_FSYNC_EN | TMST_EN (TDK sample code; both DS-000347
-    # transcriptions named in _ICM42688PRegisters)
+    # TMST_CONFIG reset 0x23: TMST_FSYNC_EN | TMST_EN (DS-000347 §14.42; TDK sample code; the
+    # transcription named in _ICM42688PRegisters)
     TMST_TO_REGS_EN: int = 0x10
     TMST_RES_16US: int = 0x08
     TMST_DELTA_EN: int = 0x04
