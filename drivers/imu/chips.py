@@ -1251,10 +1251,11 @@ ICM20948 = ChipFamily(
     accel_range=AccelRange(1, 4.0, 8192.0),
     # DS-000189 rev 1.3 §3.2 Table 2: Initial Tolerance (component-level) ±0.5 % and Zero-G
     # Initial Tolerance board-level ±50 mg ✓✓ (the datasheet and open drivers' comments quoting
-    # it; component-level ±25 mg, but the sensor sits on a board); Cross-Axis Sensitivity ±2 %
-    # and Noise Spectral Density 230 µg/√Hz ⚠ one source
+    # it; component-level ±25 mg, but the sensor sits on a board); Noise Spectral Density 230
+    # µg/√Hz ✓✓ (Table 2, and uutzinger/BioMedicalSensorBoard imu_solutions.md 37);
+    # Cross-Axis Sensitivity ±2 % ⚠ one source
     accel_errors=AccelErrors(0.005, 0.02, (0.050, 0.050, 0.050), 230e-6,
-                             "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 ⚠"),
+                             "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 (cross-axis ⚠)"),
     # DS-000189 rev 1.3 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±1.5 %,
     # Cross-Axis Sensitivity ±2 % ⚠ one source; Initial ZRO Tolerance (board-level) ±5 °/s ✓✓
     # (Table 1 and open code quoting it)
