@@ -9,9 +9,10 @@ that polls a status bit that never sets spends seconds there). A driver whose ow
 is listed with the file and line in the second table; its checks are made against what the
 datasheet says, so a driver bug shows as a failed check there, not as an emulator fault.
 
-The drivers are the seventeen on PyPI for these chips (issue 26): sixteen rows of the first
-table and enhanced-icm20948, which cannot be pointed at an emulated bus (second table), as the
-Python 2 original of FaBo9Axis_MPU9250 cannot be imported on Python 3. The drivers that
+The drivers are the seventeen on PyPI for these chips (issue 26): fifteen run in the first
+table; enhanced-icm20948 is listed there too but cannot be pointed at an emulated bus, and the
+Python 2 original of FaBo9Axis_MPU9250 cannot be imported on Python 3 (both in the second
+table, with file and line). The drivers that
 install from PyPI with light dependencies are in the ``test`` extra and have tests
 (tests/drivers/test_third_party_clients.py); the others are run here when installed. Where one
 is missing the table says so and how to install it (``--no-deps`` avoids Adafruit-Blinka, whose
