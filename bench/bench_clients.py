@@ -9,11 +9,16 @@ that polls a status bit that never sets spends seconds there). A driver whose ow
 is listed with the file and line in the second table; its checks are made against what the
 datasheet says, so a driver bug shows as a failed check there, not as an emulator fault.
 
-The drivers that install from PyPI with light dependencies are in the ``test`` extra and have
-tests (tests/drivers/test_third_party_clients.py); the others are run here when installed. Where
-one is missing the table says so and how to install it (``--no-deps`` avoids Adafruit-Blinka,
-whose modules tests/drivers/third_party.py stands in for; FaBo9Axis wants the C ``smbus``
-module, stood in for by the emulated bus).
+The drivers are the seventeen on PyPI for these chips (issue 26): fifteen run in the first
+table; enhanced-icm20948 is listed there too but cannot be pointed at an emulated bus, and the
+Python 2 original of FaBo9Axis_MPU9250 cannot be imported on Python 3 (both in the second
+table, with file and line). The drivers that
+install from PyPI with light dependencies are in the ``test`` extra and have tests
+(tests/drivers/test_third_party_clients.py); the others are run here when installed. Where one
+is missing the table says so and how to install it (``--no-deps`` avoids Adafruit-Blinka, whose
+modules tests/drivers/third_party.py stands in for, as it stands in MicroPython's
+``machine.I2C``, ``utime`` and ``ustruct`` for the MicroPython drivers; FaBo9Axis wants the C
+``smbus`` module and lsm9ds1-rjg ``spidev`` and ``RPi.GPIO``, stood in for here).
 
 Data: gyrocal's own emulator (drivers/emulated), truth from its parameters; the drivers come
 from PyPI. Usage: ``python -m bench clients``.
@@ -22,6 +27,7 @@ from PyPI. Usage: ``python -m bench clients``.
 from __future__ import annotations
 
 import importlib.metadata
+import importlib.util
 import math
 import sys
 import types
@@ -37,7 +43,13 @@ from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
 from gyrocal.drivers.emulated.magnetometers import MagneticField
 from gyrocal.drivers.emulated.motion import ConstantRate
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus
-from tests.drivers.third_party import BusioI2C, blinka_stand_ins, fake_time
+from tests.drivers.third_party import (
+    BusioI2C,
+    MachineI2C,
+    blinka_stand_ins,
+    fake_time,
+    micropython_stand_ins,
+)
 
 DEG = math.pi / 180
 OMEGA_DPS = np.array([10.3, -20.6, 30.2])  # no reading lands half-way between two counts
@@ -66,6 +78,26 @@ DRIVER_BUGS = (
     ("imusensor 1.0.1", "imusensor/MPU9250/MPU9250.py:55",
      "`name[0] == 113 | name[0] == 115` compares against 113 | name[0] (precedence), so begin() "
      "prints \"The name is wrong\" for every chip, the MPU-9250's 0x71 included"),
+    ("micropython-lsm6dsox 0.1.0", "micropython_lsm6dsox/lsm6dsox.py:143, 164",
+     "_acceleration_data_rate = CBits(4, _CTRL1_XL, 2): ODR_XL is bits 7:4 (DS12814 CTRL1_XL), "
+     "so RATE_104_HZ (0100) lands on bits 5:2, setting ODR_XL to 0001 (12.5 Hz)"),
+    ("micropython-lsm6dsox 0.1.0", "micropython_lsm6dsox/lsm6dsox.py:250-257 (and 146)",
+     "the gyro_range setter caches the scale factor but never writes _gyro_range "
+     "(CTRL2_G.FS_G): any range but the reset ±250 °/s is read with the wrong scale"),
+    ("micropython-lsm6dsox 0.1.0", "micropython_lsm6dsox/lsm6dsox.py:400 with "
+     "i2c_helpers.py:121-127", "temperature indexes _raw_temp_data[0], but RegisterStruct "
+     "returns a scalar for formats of 2 bytes or less ('<h'): TypeError on any chip"),
+    ("adafruit-circuitpython-lsm9ds1 2.1.29", "adafruit_lsm9ds1.py:321, 331",
+     "read_temp_raw shifts OUT_TEMP right by 4 and temperature adds 27.5 + raw/16, i.e. "
+     "1/256 °C per LSB about 27.5 °C; DocID025715 gives 16 LSB/°C about 25 °C (the driver's "
+     "own comment calls its starting point a guess)"),
+    ("FaBo9Axis_MPU9250 1.0.0 (PyPI fabo9axis-mpu9250)", "FaBo9Axis_MPU9250/MPU9250.py:290-299",
+     "Python 2 print statements: a SyntaxError at import on Python 3 (the fork "
+     "fabo9axis-mpu9250-python3 above is the one that runs; both install the same module path)"),
+    ("enhanced-icm20948 0.1.0", "enhanced_icm20948/asm_sensors/common.hpp:5",
+     "a C++ extension over libmraa (#include <mraa/common.hpp>) that opens the I²C device "
+     "itself: it does not build without libmraa and takes no Python bus, so it cannot be run "
+     "against an emulated bus"),
     ("sparkfun-qwiic-lsm6dso 2.0.0", "qwiic_lsm6dso.py:266",
      "gyro_raw_to_dps starts at 0.004375 (±125 °/s) but CTRL2_G resets to ±250 °/s "
      "(8.75 mdps/LSB, DS12814 CTRL2_G): without set_gyro_range() its rates are half the true"),
@@ -300,6 +332,145 @@ def melopero_lsm9ds1(run: Run) -> None:
                                            [-FIELD_UT[1], -FIELD_UT[0], FIELD_UT[2]], 0.02))
 
 
+def _installed_module(package: str, filename: str, name: str) -> types.ModuleType:
+    """Load ``filename`` of the installed distribution ``package`` as module ``name`` (for a
+    single-file release whose module name another installed package also uses)."""
+    path = importlib.metadata.distribution(package).locate_file(filename)
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"{package} has no {filename}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def micropython_mpu9250(run: Run) -> None:
+    clock, bus, addr = _emulated("mpu9250")
+    with micropython_stand_ins(clock):
+        mod = importlib.import_module("mpu9250")
+        m6500 = importlib.import_module("mpu6500")
+        # its MPU6500 defaults: ±2 g in m/s², ±250 °/s in rad/s (mpu6500.py __init__)
+        imu = mod.MPU9250(MachineI2C(bus), mpu6500=m6500.MPU6500(MachineI2C(bus), address=addr,
+                                                                 gyro_sf=m6500.SF_DEG_S))
+        run.startup_s = clock.monotonic()
+        run.check("identity", imu.whoami == 0x71)
+        run.check("gyro °/s", _close(imu.gyro, _counts(READING_DPS, 131), 1e-9))
+        run.check("accel m/s²", _close(imu.acceleration, [0, 0, 9.80665], 1e-9))
+        raw = round((TEMP_C - 21) * 333.87)  # its formula: (raw − 21)/333.87 + 21 (mpu6500.py)
+        run.check("temperature °C (its formula)",
+                  abs(imu.temperature - ((raw - 21) / 333.87 + 21)) < 1e-9)
+        clock.sleep(0.2)  # continuous mode 1: 8 Hz
+        ak = bus.device(addr).aux[0x0C]
+        run.check("ASA adjustment (fuse ROM)", _close(imu.ak8963.adjustement, ak.adjustment(),
+                                                      1e-12))
+        run.check("magnetometer µT", _close(imu.magnetic, AK_DIE_UT, 0.3))
+
+
+def micropython_icm20948(run: Run) -> None:
+    clock, bus, addr = _emulated("icm20948")
+    with micropython_stand_ins(clock):
+        mod = importlib.import_module("micropython_icm20948.icm20948")
+        mod.sleep = clock.sleep
+        imu = mod.ICM20948(MachineI2C(bus), address=addr)  # ±2 g, ±500 °/s (its __init__)
+        run.startup_s = clock.monotonic()
+        clock.sleep(0.02)
+        run.check("gyro rad/s", _close(imu.gyro, _counts(READING_DPS, 65.5) * 0.017453293, 1e-9))
+        run.check("accel m/s²", _close(imu.acceleration, [0, 0, 9.80665], 1e-9))
+        # its formula: TEMP_OUT/333.87 + 21 (icm20948.py temperature), no room-temperature offset
+        raw = round((TEMP_C - 21) * 333.87)
+        run.check("temperature °C (its formula)", abs(imu.temperature - (raw / 333.87 + 21))
+                  < 1e-9)
+
+
+def micropython_lsm6dsox(run: Run) -> None:
+    clock, bus, addr = _emulated("lsm6dsox")
+    with micropython_stand_ins(clock):
+        mod = importlib.import_module("micropython_lsm6dsox.lsm6dsox")
+        mod.sleep = clock.sleep
+        imu = mod.LSM6DSOX(MachineI2C(bus), address=addr)  # ±4 g, ±250 °/s (its __init__)
+        run.startup_s = clock.monotonic()
+        clock.sleep(0.05)
+        run.check("gyro rad/s", _close(imu.gyro, _counts(READING_DPS, 1 / 0.00875) * DEG, 1e-9))
+        run.check("accel m/s²", _close(imu.acceleration, [0, 0, round(1 / 0.122e-3) * 0.122
+                                                          * 0.00980665], 1e-9))
+        ctrl1 = bus.read_byte_data(addr, 0x10)
+        run.check("accelerometer at 104 Hz as asked (CTRL1_XL.ODR_XL)", ctrl1 >> 4 == 0b0100)
+        imu.gyro_range = mod.RANGE_500_DPS
+        run.check("gyro rad/s at ±500 °/s as asked (CTRL2_G.FS_G)",
+                  _close(imu.gyro, _counts(READING_DPS, 1 / 0.0175) * DEG, 1e-9))
+        run.check("temperature °C", abs(imu.temperature - TEMP_C) < 0.01)
+
+
+def adafruit_lsm6dsox_2(run: Run) -> None:
+    with blinka_stand_ins():
+        clock, bus, addr = _emulated("lsm6dsox")
+        mod = _installed_module("adafruit-circuitpython-lsm6dsox", "adafruit_lsm6ds.py",
+                                "adafruit_lsm6ds_2_0_0")
+        mod.sleep = clock.sleep
+        dev = mod.LSM6DSOX(BusioI2C(bus), addr)  # 104 Hz, ±4 g, ±250 °/s (its __init__)
+        run.startup_s = clock.monotonic()
+        clock.sleep(0.05)
+        run.check("accel m/s²", _close(dev.acceleration, [0, 0, round(1 / 0.122e-3) * 0.122e-3
+                                                          * 9.80665], 1e-3))
+        run.check("gyro °/s", _close(dev.gyro, _counts(READING_DPS, 1 / 0.00875), 1e-6))
+
+
+def adafruit_lsm9ds1(run: Run) -> None:
+    with blinka_stand_ins():
+        mod = importlib.import_module("adafruit_lsm9ds1")
+        clock, bus, addr = _emulated("lsm9ds1")
+        mod.time = fake_time(clock)
+        dev = mod.LSM9DS1_I2C(BusioI2C(bus), xg_address=addr)  # ±2 g, ±4 gauss, ±245 °/s
+        run.startup_s = clock.monotonic()
+        clock.sleep(0.1)
+        run.check("gyro rad/s", _close(list(dev.gyro), _counts(READING_DPS, 1 / 0.00875) * DEG,
+                                       1e-9))
+        run.check("accel m/s²", _close(list(dev.acceleration),
+                                       [0, 0, round(1 / 0.061e-3) * 0.061e-3 * 9.80665], 1e-6))
+        run.check("magnetometer gauss", _close(np.array(list(dev.magnetic)) * 100,
+                                               [-FIELD_UT[1], -FIELD_UT[0], FIELD_UT[2]], 0.02))
+        # DocID025715 Table 5: 16 LSB/°C, 0 LSB at 25 °C (the hardware reference, §2.5)
+        run.check("temperature °C", abs(dev.temperature - TEMP_C) < 0.1)
+
+
+def lsm9ds1_rjg(run: Run) -> None:
+    # its I²C transport imports RPi.GPIO for a data-ready pin and the package its SPI
+    # transport's spidev: C modules built on a Raspberry Pi, unused on I²C
+    gpio = types.ModuleType("RPi.GPIO")
+    rpi = types.ModuleType("RPi")
+    rpi.GPIO = gpio  # type: ignore[attr-defined]
+    spidev = types.ModuleType("spidev")
+    spidev.SpiDev = object  # type: ignore[attr-defined]
+    sys.modules.update({"RPi": rpi, "RPi.GPIO": gpio, "spidev": spidev})
+    lsm = importlib.import_module("lsm9ds1_rjg")
+    transport = importlib.import_module("lsm9ds1_rjg.i2c_transport")
+    driver_mod = importlib.import_module("lsm9ds1_rjg.driver")
+    clock, bus, addr = _emulated("lsm9ds1")
+    transport.SMBus = bus.smbus_class()
+    driver_mod.time = fake_time(clock)
+    drv = lsm.Driver(lsm.I2CTransport(1, addr), lsm.I2CTransport(1, 0x1E))
+    drv.configure()  # ±500 °/s at 238 Hz; ±2 g; magnetometer ±4 gauss continuous
+    run.startup_s = clock.monotonic()
+    clock.sleep(0.1)
+    run.check("status GDA", drv.read_ag_status().gyroscope_data_available)
+    # it flips x to make the chip's left-handed frame right-handed (driver.py read_gyroscope)
+    expect = np.rint(READING_DPS / 0.0175)
+    run.check("gyro counts", _close(drv.read_gyroscope(), [-expect[0], expect[1], expect[2]],
+                                    0.5))
+    run.check("accel counts", _close(drv.read_acceleration(), [0, 0, round(1 / 0.061e-3)], 0.5))
+    run.check("temperature counts", drv.read_temperature() == round((TEMP_C - 25.0) * 16))
+    run.check("magnetometer counts", _close(
+        drv.read_magnetometer(), np.array([-FIELD_UT[1], -FIELD_UT[0], FIELD_UT[2]]) * 10 / 0.14,
+        1))
+
+
+def enhanced_icm20948(run: Run) -> None:
+    """enhanced-icm20948 0.1.0: a C++ extension over Intel's libmraa (enhanced_icm20948/
+    asm_sensors/common.hpp includes mraa/common.hpp) that opens the I²C device itself; there is
+    no Python bus to give it, so it cannot be run against an emulated bus."""
+    importlib.import_module("enhanced_icm20948")
+
+
 #: (driver, PyPI package, chip, function, how to install it where it is missing).
 DRIVERS: tuple[tuple[str, str, str, Callable[[Run], None], str], ...] = (
     ("mpu9250-jmdev", "mpu9250-jmdev", "mpu9250", mpu9250_jmdev, "test extra"),
@@ -318,6 +489,20 @@ DRIVERS: tuple[tuple[str, str, str, Callable[[Run], None], str], ...] = (
      "pip install --no-deps adafruit-circuitpython-lsm6ds adafruit-circuitpython-busdevice "
      "adafruit-circuitpython-register"),
     ("melopero_lsm9ds1", "melopero-lsm9ds1", "lsm9ds1", melopero_lsm9ds1, "clients extra"),
+    ("lsm9ds1-rjg", "lsm9ds1-rjg", "lsm9ds1", lsm9ds1_rjg, "clients extra"),
+    ("micropython-mpu9250", "micropython-mpu9250", "mpu9250", micropython_mpu9250,
+     "pip install --no-deps micropython-mpu9250"),
+    ("micropython-icm20948", "micropython-icm20948", "icm20948", micropython_icm20948,
+     "pip install --no-deps micropython-icm20948"),
+    ("micropython-lsm6dsox", "micropython-lsm6dsox", "lsm6dsox", micropython_lsm6dsox,
+     "pip install --no-deps micropython-lsm6dsox"),
+    ("adafruit_lsm6ds 2.0.0 (lsm6dsox)", "adafruit-circuitpython-lsm6dsox", "lsm6dsox",
+     adafruit_lsm6dsox_2, "pip install --no-deps adafruit-circuitpython-lsm6dsox "
+     "adafruit-circuitpython-busdevice adafruit-circuitpython-register"),
+    ("adafruit_lsm9ds1", "adafruit-circuitpython-lsm9ds1", "lsm9ds1", adafruit_lsm9ds1,
+     "pip install --no-deps adafruit-circuitpython-lsm9ds1 adafruit-circuitpython-busdevice"),
+    ("enhanced-icm20948", "enhanced-icm20948", "icm20948", enhanced_icm20948,
+     "needs libmraa's C++ headers to build"),
 )
 
 

@@ -8,7 +8,7 @@ What it models, register by register (bank 0 unless said):
   (the reader needs none of them), so a reader that forgets to go back to bank 0 reads the
   wrong registers, as on the chip.
 - WHO_AM_I (0x75) = 0x47. DEVICE_CONFIG.SOFT_RESET restores the reset values: INTF_CONFIG0 =
-  0x30 (big-endian data and FIFO count, count in bytes), TMST_CONFIG = 0x23 (⚠ TDK sample code),
+  0x30 (big-endian data and FIFO count, count in bytes), TMST_CONFIG = 0x23,
   GYRO_CONFIG0 = ACCEL_CONFIG0 = 0x06 (±2000 °/s / ±16 g, 1 kHz), GYRO_CONFIG1 = 0x16,
   GYRO_ACCEL_CONFIG0 = 0x11, PWR_MGMT0 = 0 (sensors off).
 - The gyro samples while PWR_MGMT0.GYRO_MODE is low-noise (11), at the GYRO_CONFIG0.GYRO_ODR
@@ -31,7 +31,8 @@ What it models, register by register (bank 0 unless said):
   new sample, RESET_DONE_INT after a power-on or software reset. SIGNAL_PATH_RESET.FIFO_FLUSH
   empties the FIFO. Reading FIFO_COUNTH latches the count for FIFO_COUNTL. FIFO_DATA (0x30)
   is a data port: a burst there keeps popping the FIFO, and an empty FIFO reads 0xFF (header
-  bit 7: "FIFO empty", ⚠).
+  bit 7: "FIFO empty"; FIFO_DATA's reset value 0xFF, DS-000347 §14.24, in the sources
+  :class:`~gyrocal.drivers.imu.chips._ICM42688PRegisters` names for the reset values).
 - TEMP_DATA (0x1D, 132.48 LSB/°C), ACCEL_DATA and GYRO_DATA show the latest sample.
 - The output is low-passed at the GYRO_UI_FILT_BW bandwidth (first order ⚠, as for the LSM9DS1).
 """

@@ -1081,9 +1081,12 @@ _MPU_READ_ONLY = frozenset(
     | set(range(_MR.EXT_SENS_DATA_00, _MR.EXT_SENS_DATA_00 + 24))
 )
 #: Factory self-test codes (SELF_TEST_X/Y/Z_GYRO, SELF_TEST_X/Y/Z_ACCEL) an emulated MPU-9250
-#: holds: illustrative values ⚠ (no part's dump was read), chosen so that the responses they
-#: stand for (:func:`~gyrocal.drivers.imu.chips.mpu9250_self_test_otp`) are about 95 °/s and
-#: 0.45 g, inside the MPU-6500 family's accelerometer self-test response range (225–675 mg).
+#: holds: a stated stand-in ⚠ (no public register dump of a part's codes was found: the
+#: self-test reports in kriswiner/MPU9250's issues give percentages, not codes), chosen so that
+#: the responses they stand for (:func:`~gyrocal.drivers.imu.chips.mpu9250_self_test_otp`) are
+#: about 94 °/s and 0.45 g: above the 60 °/s absolute gyro limit and inside the 225–675 mg
+#: accelerometer range that TDK's MPU-6500-family self-test code applies when a part has no
+#: codes (DEF_GYRO_ST_AL, DEF_ACCEL_ST_AL_MIN/MAX).
 MPU9250_SELF_TEST_CODES = (0x9C, 0xA0, 0xA3, 0x68, 0x6B, 0x70)
 #: Where the AK8963 sits on the MPU-9250's auxiliary bus (and on the host bus in bypass).
 AK8963_ADDRESS = 0x0C
@@ -1377,6 +1380,11 @@ class EmulatedMPU9250(_EmulatedImu):
 
 _LR, _LB = LSM9DS1_REG, LSM9DS1_BITS
 _LSM_ODR_BY_CODE = {code: hz for hz, code in LSM9DS1_ODR.items()}
+#: LSM9DS1 accel/gyro reset values: WHO_AM_I 0x68 (DocID025715 Table 21; ST's lsm9ds1-pid
+#: lsm9ds1_reg.h 182 LSM9DS1_IMU_ID; SparkFun's LSM9DS1_Registers.h 109), CTRL_REG4 and
+#: CTRL_REG5_XL 0x38 (DocID025715 Tables 21, 62, 64 as the hardware reference transcribes
+#: them; SparkFun's SparkFunLSM9DS1.cpp 282 and 311, "Default value: 0x38"), CTRL_REG8 0x04
+#: (Table 73; the kernel's st_lsm6dsx and lsm9ds1-rjg), the rest 0.
 _LSM_DEFAULTS = {
     _LR.WHO_AM_I: 0x68, _LR.CTRL_REG4: 0x38, _LR.CTRL_REG5_XL: 0x38, _LR.CTRL_REG8: 0x04
 }

@@ -4,8 +4,10 @@
 
 What it models:
 
-- WHO_AM_I (0x0F) = 0x6C; reset values CTRL3_C = 0x04 (IF_INC), the rest 0 (PIN_CTRL and
-  CTRL9_XL are not modelled). CTRL3_C.SW_RESET restores them; BOOT clears itself.
+- WHO_AM_I (0x0F) = 0x6C (ST's lsm6dsox-pid lsm6dsox_reg.h 178 LSM6DSOX_ID; SparkFun's
+  qwiic_lsm6dso.py 152 WHO_AM_I_VALUE); reset values CTRL3_C = 0x04 (IF_INC; DS12814's
+  register table only ⚠), the rest 0 (PIN_CTRL and CTRL9_XL are not modelled).
+  CTRL3_C.SW_RESET restores them; BOOT clears itself.
 - FUNC_CFG_ACCESS (0x01) bits 7/6 switch the other registers to the embedded-functions or
   sensor-hub page (plain memory here), so a reader that forgets to switch back reads the wrong
   registers, as on the chip.

@@ -439,7 +439,9 @@ MPU9250_DLPF_DELAY_S: Mapping[float, float] = MappingProxyType(
 #: sensor value before going into the sensor register" (one step is 0.0305 °/s at every range);
 #: Kris Winer's MPU9250 calibrateMPU9250 writes −bias/4 (bias in counts at ±250 °/s) for that
 #: reason ("Biases are additive, so change sign"). The ICM-20948's XG_OFFS_USR (DS-000189,
-#: bank 2) is taken to be the same ⚠ (its description gives only "gyro offset cancellation").
+#: bank 2) is taken to be the same ⚠ (its description gives only "gyro offset cancellation";
+#: TDK's eMD inv_icm20948_set_offset, Icm20948SelfTest.c, writes −(bias at ±250 °/s) >> 2,
+#: "convert from 250dps to 1000dps", i.e. the same 4-count step at ±250 °/s: one vendor source).
 GYRO_OFFSET_COUNTS_PER_CODE_FS0 = 4.0
 
 #: MPU-9250 self-test (AN-MPU-9250A-03 "MPU-9250 Accelerometer, Gyroscope and Compass
@@ -448,8 +450,13 @@ GYRO_OFFSET_COUNTS_PER_CODE_FS0 = 4.0
 #: the self-test range (FS = 0: ±250 °/s, ±2 g), the self-test code being the axis's
 #: SELF_TEST_* byte (0: no OTP value). A part passes when its response now, (output with the
 #: self-test on) − (output without), is more than 0.5 ST_OTP for the gyro and between 0.5 and
-#: 1.5 ST_OTP for the accelerometer (AN-MPU-9250A-03 pass criteria; PX4's and Kris Winer's
-#: MPU9250SelfTest use the same formula).
+#: 1.5 ST_OTP for the accelerometer (AN-MPU-9250A-03 pass criteria). Checked in two open
+#: implementations: TDK InvenSense's own eMD driver for the ICM-20948, whose register-level
+#: self-test is the same (Icm20948SelfTest.c in eMD-SmartMotion-ICM20948-1.1.0, as vendored by
+#: FredBill1/RT1064_Smartcar: "st_otp = 2620/2^FS * 1.01^(st_value - 1)", the table
+#: sSelfTestEquation from 2620 at code 1, and the 0.5 / 1.5 ratio checks in
+#: inv_check_accelgyro_self_test), and kriswiner/MPU9250 MPU9250BasicAHRS.ino 987-992
+#: (MPU9250SelfTest, at FS = 0, where its ``2620/1<<FS`` is 2620).
 MPU9250_SELF_TEST_BASE_COUNTS = 2620.0
 MPU9250_SELF_TEST_CODE_RATIO = 1.01
 
@@ -706,9 +713,13 @@ def register_names(registers: object) -> dict[int, str]:
 class _ICM42688PRegisters:
     """ICM-42688-P user bank 0 register addresses (DS-000347 register map, bank 0;
     kernel inv_icm42600.h). All of these are in bank 0; REG_BANK_SEL is in every bank. The
-    reset values noted are DS-000347's bank 0 "Reset value" column as open register headers
-    transcribe it (two independent copies agree ⚠: not read in the datasheet itself); the
-    sensor data registers reset to 0x8000, the kernel's INV_ICM42600_DATA_INVALID (−32768)."""
+    reset values noted are DS-000347's: its §14 register descriptions (Rev 1.8, read in a text
+    copy: §14.2 DRIVE_CONFIG, §14.21 INT_STATUS, §14.24 FIFO_DATA, §14.35-14.51 INTF_CONFIG1
+    .. INT_SOURCE0, §14.58 WHO_AM_I) and the register header ``main/boards/ICM42688.h`` of
+    qunkejiang/alpakka_qk, which transcribes the same "Reset value" per register, agree on
+    every register the emulator resets (a third, C++ transcription does too). Both give the
+    sensor data registers 0x80, 0x00 (0x8000, the kernel's INV_ICM42600_DATA_INVALID, −32768),
+    INT_STATUS 0x10 (RESET_DONE) and FIFO_DATA 0xFF."""
 
     DEVICE_CONFIG: int = 0x11
     DRIVE_CONFIG: int = 0x13  # reset 0x05
@@ -769,7 +780,8 @@ class _ICM42688PBits:
     FS_SEL_SHIFT: int = 5
     ODR_MASK: int = 0x0F
     GYRO_UI_FILT_BW_MASK: int = 0x0F
-    # TMST_CONFIG reset 0x23 (⚠ TDK sample code only): TMST_FSYNC_EN | TMST_EN
+    # TMST_CONFIG reset 0x23: TMST_FSYNC_EN | TMST_EN (DS-000347 §14.42; TDK sample code; the
+    # transcription named in _ICM42688PRegisters)
     TMST_TO_REGS_EN: int = 0x10
     TMST_RES_16US: int = 0x08
     TMST_DELTA_EN: int = 0x04
@@ -890,8 +902,9 @@ ICM42688P = ChipFamily(
     # Cross-Axis Sensitivity ±1.25 % ⚠ one source; Initial ZRO Tolerance (board-level)
     # ±0.5 °/s ✓✓ (Table 1 and open code quoting it)
     # Table 1 also: Rate Noise Spectral Density 0.0028 °/s/√Hz (at 10 Hz) ✓✓ (the datasheet's
-    # table and its "Features" list); no linear-acceleration sensitivity row: the MPU-9250's
-    # 0.1 °/s/g stands in ⚠
+    # table and its "Features" list); Table 1 has no linear-acceleration sensitivity row and no
+    # bias-instability row (read in a text copy of DS-000347's §3.1): the MPU-9250's 0.1 °/s/g
+    # stands in ⚠
     gyro_errors=GyroErrors(0.005, 0.0125, 0.5, "ICM-42688-P DS-000347 §3.1 Table 1 ⚠",
                            noise_density_dps_sqrt_hz=0.0028, g_sensitivity_dps_per_g=0.1,
                            noise_source="ICM-42688-P DS-000347 §3.1 Table 1 (Rate Noise Spectral "
@@ -1062,8 +1075,9 @@ LSM6DSOX = ChipFamily(
     # G_So% sensitivity tolerance ±1 %, G_TyOff zero-rate level ±1 dps ✓✓ (also the LSM6DSOX
     # table as quoted by open code). ST gives no cross-axis figure: the MPU-9250's ±2 % stands in
     # Rn, rate noise density in high-performance mode, 3.8 mdps/√Hz (DS12814 Table 2; footnote:
-    # independent of ODR and FS) ⚠ one source. ST gives no g-sensitivity: the MPU-9250's
-    # 0.1 °/s/g stands in ⚠
+    # independent of ODR and FS) ⚠ one named source: open transcriptions of DS12814 Rev 3 and of
+    # the LSM6DSO's DS12140 agree on 3.8, but the code index names none of their repositories.
+    # ST gives no g-sensitivity: the MPU-9250's 0.1 °/s/g stands in ⚠
     gyro_errors=GyroErrors(0.01, 0.02, 1.0,
                            "LSM6DSO DS12140 Rev 3 Table 2 (cross-axis: stand-in, not in the "
                            "datasheet) ⚠",
@@ -1100,8 +1114,9 @@ class _ICM20948Bank0:
 
     WHO_AM_I: int = 0x00
     USER_CTRL: int = 0x03
-    # reset 0x40 (open header transcribing DS-000189 ⚠): I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5,
-    # GYRO_CYCLE 4
+    # reset 0x40: I2C_MST_CYCLE bit 6, ACCEL_CYCLE 5, GYRO_CYCLE 4 (DS-000189 rev 1.3 §8.3,
+    # p. 37, "Reset Value: 0x40", as transcribed page by page at manualshelf.com, SparkFun
+    # SEN-15335 data sheet, page 37; and an open header transcribing the register table)
     LP_CONFIG: int = 0x05
     PWR_MGMT_1: int = 0x06
     PWR_MGMT_2: int = 0x07
@@ -1133,9 +1148,12 @@ class _ICM20948Bank2:
     XG_OFFS_USRH: int = 0x03
     ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
     ACCEL_SMPLRT_DIV_2: int = 0x11  # bits [7:0]
-    # reset 0x01 (ACCEL_FCHOICE): DS-000189 as an open header transcribes its register table
-    # ("Reset Value: 0b00000001"); the same header gives GYRO_CONFIG_1 reset 0, where the
-    # emulator keeps 0x01 (DS-000189 as read for the emulator) ⚠ the two sources disagree
+    # reset 0x01 (ACCEL_FCHOICE): DS-000189 rev 1.3 §10.15, p. 64, "Reset Value: 0x01" as
+    # quoted on TDK InvenSense's developer forum ("ICM20948 Accelerometer Configuration
+    # Reading", 2023, where a part reads back 0x01), and an open header transcribing the
+    # register table ("Reset Value: 0b00000001"). The same header gives GYRO_CONFIG_1 reset 0,
+    # where the emulator keeps 0x01 (GYRO_FCHOICE, DS-000189 as read for the emulator) ⚠ the
+    # two disagree and no third source was found
     ACCEL_CONFIG: int = 0x14
 
 
@@ -1233,19 +1251,22 @@ ICM20948 = ChipFamily(
     accel_range=AccelRange(1, 4.0, 8192.0),
     # DS-000189 rev 1.3 §3.2 Table 2: Initial Tolerance (component-level) ±0.5 % and Zero-G
     # Initial Tolerance board-level ±50 mg ✓✓ (the datasheet and open drivers' comments quoting
-    # it; component-level ±25 mg, but the sensor sits on a board); Cross-Axis Sensitivity ±2 %
-    # and Noise Spectral Density 230 µg/√Hz ⚠ one source
+    # it; component-level ±25 mg, but the sensor sits on a board); Noise Spectral Density 230
+    # µg/√Hz ✓✓ (Table 2, and uutzinger/BioMedicalSensorBoard imu_solutions.md 37);
+    # Cross-Axis Sensitivity ±2 % ⚠ one source
     accel_errors=AccelErrors(0.005, 0.02, (0.050, 0.050, 0.050), 230e-6,
-                             "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 ⚠"),
+                             "ICM-20948 DS-000189 rev 1.3 §3.2 Table 2 (cross-axis ⚠)"),
     # DS-000189 rev 1.3 §3.1 Table 1 (gyroscope): Sensitivity Scale Factor Tolerance ±1.5 %,
     # Cross-Axis Sensitivity ±2 % ⚠ one source; Initial ZRO Tolerance (board-level) ±5 °/s ✓✓
     # (Table 1 and open code quoting it)
-    # Table 1 also: Rate Noise Spectral Density 0.015 °/s/√Hz ⚠ one source; no
+    # Table 1 also: Rate Noise Spectral Density 0.015 °/s/√Hz ✓✓ (Table 1, and
+    # uutzinger/BioMedicalSensorBoard imu_solutions.md 43 at 557d53f, which transcribes the
+    # gyro's "0.015 degree/s / Hz" with Table 2's 230 µg/√Hz and ±0.026 %/°C); no
     # linear-acceleration sensitivity row: the MPU-9250's 0.1 °/s/g stands in ⚠
     gyro_errors=GyroErrors(0.015, 0.02, 5.0, "ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 ⚠",
                            noise_density_dps_sqrt_hz=0.015, g_sensitivity_dps_per_g=0.1,
                            noise_source="ICM-20948 DS-000189 rev 1.3 §3.1 Table 1 (Rate Noise "
-                                        "Spectral Density) ⚠; g-sensitivity: stand-in, the "
+                                        "Spectral Density); g-sensitivity: stand-in, the "
                                         "MPU-9250's ⚠"),
     extra=MappingProxyType(
         {

@@ -80,6 +80,24 @@ def test_ak8963_fuse_rom_modes_and_data_in_its_own_axes():
     assert bus.read_byte_data(0x0C, 0x02) == 0x03
 
 
+@pytest.mark.parametrize("cntl1", [0x00, 0x01, 0x02, 0x06, 0x08, 0x12, 0x16])
+def test_ak8963_asa_reads_zero_in_every_mode_but_fuse_rom(cntl1):
+    # AK8963 §8.3.11: ASAX..ASAZ hold the sensitivity adjustment in fuse-ROM access mode
+    # (MODE 1111, either output width); in power-down, single, continuous 1/2 and self-test
+    # modes (14- and 16-bit) the die does not expose them, so a driver that reads them after
+    # leaving fuse-ROM mode (imusensor MPU9250.py 76-80) gets 0, not the fuse values
+    clock, bus, addr = mpu_with_ak()
+    ak = bus.device(addr).aux[0x0C]
+    assert ak.asa != (0, 0, 0)  # so that reading 0 below is hiding, not the fuse values
+    bus.write_byte_data(addr, 0x37, 0x02)  # BYPASS_EN
+    for fuse in (0x0F, 0x1F):
+        bus.write_byte_data(0x0C, 0x0A, 0x00)
+        bus.write_byte_data(0x0C, 0x0A, fuse)
+        assert bus.read_i2c_block_data(0x0C, 0x10, 3) == list(ak.asa)
+    bus.write_byte_data(0x0C, 0x0A, cntl1)  # straight from fuse-ROM mode, as imusensor does
+    assert bus.read_i2c_block_data(0x0C, 0x10, 3) == [0, 0, 0]
+
+
 def test_ak8963_through_the_i2c_master_slave_registers_sees_the_field_turn():
     motion = Turning(0.5)
     clock, bus, addr = mpu_with_ak(motion)

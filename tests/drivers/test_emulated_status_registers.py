@@ -7,7 +7,7 @@ INT_ANYRD_2CLEAR, INT_STATUS 0x3A bit 0 RAW_DATA_RDY_INT) and the self-test appl
 AN-MPU-9250A-03 (factory trim 2620/2^FS * 1.01^(code-1); pass: gyro STR/FT > 0.5, accel
 0.5 < STR/FT < 1.5); ICM-20948 DS-000189 (INT_STATUS_1 0x1A, bank 2 XG_OFFS_USRH 0x03,
 ACCEL_CONFIG 0x14 reset 0x01); ICM-42688-P DS-000347 (INT_STATUS 0x2D: DATA_RDY bit 3,
-RESET_DONE bit 4; INTF_CONFIG1 0x4D reset 0x91, ACCEL_CONFIG1 0x53 reset 0x0D); LSM6DSOX DS12814
+RESET_DONE bit 4; the bank-0 reset values of its §14); LSM6DSOX DS12814
 (STATUS_REG 0x1E: XLDA bit 0, GDA bit 1, TDA bit 2).
 """
 
@@ -150,18 +150,32 @@ def test_icm20948_gyro_offset_registers_act_on_the_output():
 # -- ICM-42688-P, LSM6DSOX ---------------------------------------------------------------------
 
 
+#: DS-000347 Rev 1.8 §14 bank-0 reset values (register descriptions 14.1-14.59): DEVICE_CONFIG,
+#: DRIVE_CONFIG, INT_CONFIG, FIFO_CONFIG, INTF_CONFIG0, INTF_CONFIG1, PWR_MGMT0, GYRO_CONFIG0,
+#: ACCEL_CONFIG0, GYRO_CONFIG1, GYRO_ACCEL_CONFIG0, ACCEL_CONFIG1, TMST_CONFIG, APEX_CONFIG0,
+#: FIFO_CONFIG1, FSYNC_CONFIG, INT_CONFIG0, INT_CONFIG1, INT_SOURCE0, WHO_AM_I, REG_BANK_SEL
+ICM42688P_BANK0_RESET = (
+    (0x11, 0x00), (0x13, 0x05), (0x14, 0x00), (0x16, 0x00), (0x4C, 0x30), (0x4D, 0x91),
+    (0x4E, 0x00), (0x4F, 0x06), (0x50, 0x06), (0x51, 0x16), (0x52, 0x11), (0x53, 0x0D),
+    (0x54, 0x23), (0x56, 0x82), (0x5F, 0x00), (0x62, 0x10), (0x63, 0x00), (0x64, 0x10),
+    (0x65, 0x10), (0x75, 0x47), (0x76, 0x00),
+)
+
+
 def test_icm42688p_reset_values_and_reset_done():
     clock, bus, addr, _ = chip("icm42688p")
-    # DS-000347 bank 0 reset values: DRIVE_CONFIG, INTF_CONFIG1, ACCEL_CONFIG1, APEX_CONFIG0,
-    # FSYNC_CONFIG, INT_CONFIG1, INT_SOURCE0
-    for register, value in ((0x13, 0x05), (0x4D, 0x91), (0x53, 0x0D), (0x56, 0x82),
-                            (0x62, 0x10), (0x64, 0x10), (0x65, 0x10)):
+    for register, value in ICM42688P_BANK0_RESET:
         assert bus.read_byte_data(addr, register) == value, hex(register)
+    assert bus.read_byte_data(addr, 0x30) == 0xFF  # FIFO_DATA: the FIFO is empty
     # the sensor data registers read 0x8000 until the first sample
     assert bus.read_i2c_block_data(addr, 0x1D, 14) == [0x80, 0x00] * 7
     assert bus.read_byte_data(addr, 0x2D) & 0x10  # RESET_DONE_INT after power-on
     assert bus.read_byte_data(addr, 0x2D) & 0x10 == 0  # cleared when read
+    for register in (0x4C, 0x4D, 0x51, 0x52, 0x53, 0x54, 0x56, 0x62, 0x64, 0x65):
+        bus.write_byte_data(addr, register, 0x00)  # ... then a soft reset restores them all
     bus.write_byte_data(addr, 0x11, 0x01)  # DEVICE_CONFIG.SOFT_RESET
+    for register, value in ICM42688P_BANK0_RESET:
+        assert bus.read_byte_data(addr, register) == value, hex(register)
     assert bus.read_byte_data(addr, 0x2D) & 0x10
     bus.write_byte_data(addr, 0x4E, 0x0F)  # PWR_MGMT0: gyro and accel low-noise
     clock.sleep(0.01)

@@ -16,7 +16,12 @@ from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
 from gyrocal.drivers.emulated.magnetometers import MagneticField
 from gyrocal.drivers.emulated.motion import ConstantRate
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus
-from tests.drivers.third_party import blinka_stand_ins, fake_time
+from tests.drivers.third_party import (
+    MachineI2C,
+    blinka_stand_ins,
+    fake_time,
+    micropython_stand_ins,
+)
 
 DEG = np.pi / 180
 FIELD = np.array([20.0, 5.0, -44.0])
@@ -167,6 +172,11 @@ def test_lsm9ds1_rjg_opens_a_bus_per_call_and_reads_everything(monkeypatch):
     rpi.GPIO = gpio
     monkeypatch.setitem(sys.modules, "RPi", rpi)
     monkeypatch.setitem(sys.modules, "RPi.GPIO", gpio)
+    # its package imports the SPI transport's spidev too (a C module built on a Pi), unused here
+    try:
+        import spidev  # noqa: F401
+    except ImportError:
+        monkeypatch.setitem(sys.modules, "spidev", types.ModuleType("spidev"))
     lsm = pytest.importorskip("lsm9ds1_rjg")
     transport = pytest.importorskip("lsm9ds1_rjg.i2c_transport")
     driver_mod = pytest.importorskip("lsm9ds1_rjg.driver")
@@ -280,3 +290,53 @@ def test_sparkfun_qwiic_lsm6dso_sees_status_reg_data_ready_and_reads_in_its_unit
     np.testing.assert_allclose(dev.read_float_accel_all(), [0, 0, round(1 / 0.122e-3) * 0.000122],
                                atol=1e-9)
     assert dev.get_status_reg() & 0x03 == 0  # both outputs read
+
+
+# -- MicroPython drivers (machine.I2C, utime and ustruct stood in for) ---------------------------
+
+
+def test_micropython_mpu9250_reads_every_sensor_and_the_ak8963_through_the_bypass():
+    clock, truth, bus, addr = emulated("mpu9250")
+    ak = bus.device(addr).aux[0x0C]
+    ak.field = MagneticField(None, FIELD)
+    with micropython_stand_ins(clock):
+        mod = pytest.importorskip("mpu9250")
+        m6500 = pytest.importorskip("mpu6500")
+        # mpu6500.py __init__ writes PWR_MGMT_1 = 0x80 through ustruct "<b" (MicroPython wraps
+        # it to -128) and keeps the reset ranges, ±2 g and ±250 °/s (131 LSB per °/s)
+        imu = mod.MPU9250(MachineI2C(bus), mpu6500=m6500.MPU6500(
+            MachineI2C(bus), address=addr, gyro_sf=m6500.SF_DEG_S))
+        np.testing.assert_allclose(imu.gyro, np.rint(expected_reading_dps(truth) * 131) / 131,
+                                   atol=1e-9)
+        np.testing.assert_allclose(imu.acceleration, [0, 0, 9.80665], atol=1e-9)
+        # ak8963.py __init__ reads ASAX..Z in fuse-ROM mode, then powers down before mode 1
+        np.testing.assert_allclose(imu.ak8963.adjustement, ak.adjustment(), atol=1e-12)
+        clock.sleep(0.2)  # continuous mode 1 measures at 8 Hz
+        np.testing.assert_allclose(imu.magnetic, MAG_DIE_UT, atol=0.15 * 1.4)
+
+
+def test_micropython_icm20948_resets_banks_and_reads_in_its_units():
+    clock, truth, bus, addr = emulated("icm20948")
+    with micropython_stand_ins(clock):
+        mod = pytest.importorskip("micropython_icm20948.icm20948")
+        mod.sleep = clock.sleep  # its ``from time import sleep``
+        imu = mod.ICM20948(MachineI2C(bus), address=addr)  # ±2 g, ±500 °/s (its __init__)
+        clock.sleep(0.02)
+        np.testing.assert_allclose(
+            imu.gyro, np.rint(expected_reading_dps(truth) * 65.5) / 65.5 * 0.017453293,
+            atol=1e-12)
+        np.testing.assert_allclose(imu.acceleration, [0, 0, 9.80665], atol=1e-12)
+
+
+def test_micropython_lsm6dsox_reads_gyro_and_accel_at_its_ranges():
+    clock, truth, bus, addr = emulated("lsm6dsox")
+    with micropython_stand_ins(clock):
+        mod = pytest.importorskip("micropython_lsm6dsox.lsm6dsox")
+        mod.sleep = clock.sleep
+        imu = mod.LSM6DSOX(MachineI2C(bus), address=addr)  # SW_RESET, ±4 g, ±250 °/s
+        clock.sleep(0.1)  # its CTRL1_XL write leaves the accelerometer at 12.5 Hz (a driver bug)
+        np.testing.assert_allclose(
+            imu.gyro, np.rint(expected_reading_dps(truth) / 8.75e-3) * 8.75e-3 * DEG, atol=1e-12)
+        # 0.122 mg per LSB at ±4 g, times its 0.00980665 (m/s²)/mg
+        np.testing.assert_allclose(imu.acceleration, [0, 0, round(1 / 0.122e-3) * 0.122
+                                                      * 0.00980665], atol=1e-12)
