@@ -24,6 +24,7 @@ __all__ = [
     "ICM20948_BITS",
     "ICM20948_DLPF",
     "ICM20948_REG",
+    "ICM20948_REG1",
     "ICM20948_REG2",
     "ICM20948_REG3",
     "ICM42688P",
@@ -1138,12 +1139,27 @@ class _ICM20948Bank0:
 
 
 @dataclass(frozen=True)
+class _ICM20948Bank1:
+    """ICM-20948 user bank 1 registers: the factory self-test codes SELF_TEST_X/Y/Z_GYRO and
+    SELF_TEST_X/Y/Z_ACCEL (DS-000189 register map, bank 1; TDK eMD-SmartMotion-ICM20948-1.1.0
+    Icm20948Defs.h 185-190, REG_SELF_TEST1..6, as vendored by FredBill1/RT1064_Smartcar;
+    SparkFun ICM_20948_REGISTERS.h, ICM_20948_SELF_TEST_X_GYRO_t ..)."""
+
+    SELF_TEST_X_GYRO: int = 0x02  # Y, Z at 0x03, 0x04
+    SELF_TEST_X_ACCEL: int = 0x0E  # Y, Z at 0x0F, 0x10
+
+
+ICM20948_REG1 = _ICM20948Bank1()
+
+
+@dataclass(frozen=True)
 class _ICM20948Bank2:
     """ICM-20948 user bank 2 registers (DS-000189 register map, bank 2; XG_OFFS_USRH..ZG_OFFS_
     USRL also in SparkFun's ICM_20948_REGISTERS.h)."""
 
     GYRO_SMPLRT_DIV: int = 0x00
     GYRO_CONFIG_1: int = 0x01
+    GYRO_CONFIG_2: int = 0x02  # XGYRO_CTEN..ZGYRO_CTEN bits 5:3, GYRO_AVGCFG 2:0
     # X/Y/Z_OFFS_USER, int16 big-endian H/L pairs at 0x03..0x08 (reset 0)
     XG_OFFS_USRH: int = 0x03
     ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
@@ -1155,6 +1171,7 @@ class _ICM20948Bank2:
     # where the emulator keeps 0x01 (GYRO_FCHOICE, DS-000189 as read for the emulator) ⚠ the
     # two disagree and no third source was found
     ACCEL_CONFIG: int = 0x14
+    ACCEL_CONFIG_2: int = 0x15  # AX_ST_EN_REG..AZ_ST_EN_REG bits 4:2, DEC3_CFG 1:0
 
 
 @dataclass(frozen=True)
@@ -1206,6 +1223,12 @@ class _ICM20948Bits:
     FIFO_RST_ALL: int = 0x1F
     FIFO_MODE_SNAPSHOT: int = 0x01  # 1: stop writing when full; 0: stream, overwrite ⚠
     INT_STATUS_2_FIFO_OVERFLOW: int = 0x1F
+    # GYRO_CONFIG_2 XGYRO_CTEN (bit 5), YGYRO_CTEN, ZGYRO_CTEN and ACCEL_CONFIG_2 AX_ST_EN_REG
+    # (bit 4), AY_, AZ_: each axis's self-test on (DS-000189; TDK eMD Icm20948Defs.h 207 and
+    # 223, BIT_GYRO_CTEN 0x38 and BIT_ACCEL_CTEN 0x1C; SparkFun ICM_20948_GYRO_CONFIG_2_t and
+    # ICM_20948_ACCEL_CONFIG_2_t)
+    GYRO_CTEN_SHIFT: int = 3
+    ACCEL_ST_EN_SHIFT: int = 2
 
 
 ICM20948_REG = _ICM20948Bank0()
