@@ -28,6 +28,7 @@ __all__ = [
     "ICM20948_REG2",
     "ICM20948_REG3",
     "ICM42688P",
+    "ICM42688P_BANK_RESET",
     "ICM42688P_BITS",
     "ICM42688P_MAX_READER_ODR_HZ",
     "ICM42688P_ODR",
@@ -751,6 +752,39 @@ class _ICM42688PRegisters:
     INT_SOURCE0: int = 0x65  # reset 0x10 (RESET_DONE_INT1_EN)
     WHO_AM_I: int = 0x75
     REG_BANK_SEL: int = 0x76
+
+
+#: The ICM-42688-P's registers in user banks 1, 2 and 4 whose reset value is not 0, one row each:
+#: (bank, address, name, reset value). DS-000347's register descriptions of those banks (§15
+#: user bank 1, then banks 2 and 4; their text was not read here) as three open transcriptions
+#: of its per-register "Reset value" give them: qunkejiang/alpakka_qk main/src/bsp/ICM42688.h,
+#: Witty-Wizard/InertialIO src/ICM42688/Registers.h, and a C++ register-description header
+#: (``enum class GYRO_CONFIG_STATIC2_BITS``, "@Reset value: 0xA0"; its repository is not named
+#: by the code index). All three agree where they overlap; a row fewer than two give is ⚠.
+#: Registers trimmed part by part (GYRO_CONFIG_STATIC6-9, the notch filter's COSWZ;
+#: XG/YG/ZG_ST_DATA and XA/YA/ZA_ST_DATA, the self-test codes) have no datasheet value and are
+#: not here.
+ICM42688P_BANK_RESET: tuple[tuple[int, int, str, int], ...] = (
+    (1, 0x03, "SENSOR_CONFIG0", 0x80),  # three transcriptions
+    (1, 0x0B, "GYRO_CONFIG_STATIC2", 0xA0),  # AAF and notch filter on; three
+    (1, 0x0C, "GYRO_CONFIG_STATIC3", 0x0D),  # GYRO_AAF_DELT; three
+    (1, 0x0D, "GYRO_CONFIG_STATIC4", 0xAA),  # GYRO_AAF_DELTSQR[7:0]; three
+    (1, 0x0E, "GYRO_CONFIG_STATIC5", 0x80),  # GYRO_AAF_BITSHIFT, DELTSQR[11:8]; three
+    (1, 0x13, "GYRO_CONFIG_STATIC10", 0x11),  # GYRO_NF_BW_SEL; three
+    (1, 0x7A, "INTF_CONFIG4", 0x83),  # alpakka_qk and InertialIO
+    (1, 0x7C, "INTF_CONFIG6", 0x5F),  # alpakka_qk and InertialIO
+    (2, 0x03, "ACCEL_CONFIG_STATIC2", 0x30),  # ACCEL_AAF_DELT, AAF on; three
+    (2, 0x04, "ACCEL_CONFIG_STATIC3", 0x40),  # ACCEL_AAF_DELTSQR[7:0]; three
+    (2, 0x05, "ACCEL_CONFIG_STATIC4", 0x62),  # ACCEL_AAF_BITSHIFT, DELTSQR[11:8]; three
+    (4, 0x40, "APEX_CONFIG1", 0xA2),  # ⚠ alpakka_qk alone
+    (4, 0x41, "APEX_CONFIG2", 0x85),  # alpakka_qk and InertialIO, as the rows below
+    (4, 0x42, "APEX_CONFIG3", 0x51),
+    (4, 0x43, "APEX_CONFIG4", 0xA4),
+    (4, 0x44, "APEX_CONFIG5", 0x8C),
+    (4, 0x45, "APEX_CONFIG6", 0x5C),
+    (4, 0x46, "APEX_CONFIG7", 0x45),
+    (4, 0x47, "APEX_CONFIG8", 0x5B),
+)
 
 
 @dataclass(frozen=True)

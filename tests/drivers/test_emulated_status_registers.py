@@ -8,8 +8,8 @@ AN-MPU-9250A-03 (factory trim 2620/2^FS * 1.01^(code-1); pass: gyro STR/FT > 0.5
 0.5 < STR/FT < 1.5); ICM-20948 DS-000189 (INT_STATUS_1 0x1A, bank 2 XG_OFFS_USRH 0x03,
 ACCEL_CONFIG 0x14 reset 0x01; bank 1 SELF_TEST codes, bank 2 GYRO_CONFIG_2/ACCEL_CONFIG_2 self-test
 enables, through TDK's own self-test code, cited where it is modelled); ICM-42688-P DS-000347
-(INT_STATUS 0x2D: DATA_RDY bit 3, RESET_DONE bit 4; the bank-0 reset values of its §14);
-LSM6DSOX DS12814
+(INT_STATUS 0x2D: DATA_RDY bit 3, RESET_DONE bit 4; the bank-0 reset values of its §14, those of
+banks 1, 2 and 4 from §15 on); LSM6DSOX DS12814
 (STATUS_REG 0x1E: XLDA bit 0, GDA bit 1, TDA bit 2).
 """
 
@@ -281,6 +281,44 @@ def test_icm42688p_reset_values_and_reset_done():
     assert bus.read_byte_data(addr, 0x2D) & 0x08  # DATA_RDY_INT
     assert bus.read_byte_data(addr, 0x2D) & 0x08 == 0
     assert bus.read_i2c_block_data(addr, 0x1D, 2) != [0x80, 0x00]  # a temperature now
+
+
+#: DS-000347 non-zero reset values of user banks 1, 2 and 4 (§15 user bank 1 register
+#: descriptions, then banks 2 and 4), as transcribed per register by qunkejiang/alpakka_qk
+#: main/src/bsp/ICM42688.h and Witty-Wizard/InertialIO src/ICM42688/Registers.h: (bank,
+#: register, value). Bank 1: SENSOR_CONFIG0, GYRO_CONFIG_STATIC2..5, GYRO_CONFIG_STATIC10,
+#: INTF_CONFIG4, INTF_CONFIG6; bank 2: ACCEL_CONFIG_STATIC2..4; bank 4: APEX_CONFIG1..8.
+ICM42688P_BANK_1_2_4_RESET = (
+    (1, 0x03, 0x80), (1, 0x0B, 0xA0), (1, 0x0C, 0x0D), (1, 0x0D, 0xAA), (1, 0x0E, 0x80),
+    (1, 0x13, 0x11), (1, 0x7A, 0x83), (1, 0x7C, 0x5F),
+    (2, 0x03, 0x30), (2, 0x04, 0x40), (2, 0x05, 0x62),
+    (4, 0x40, 0xA2), (4, 0x41, 0x85), (4, 0x42, 0x51), (4, 0x43, 0xA4), (4, 0x44, 0x8C),
+    (4, 0x45, 0x5C), (4, 0x46, 0x45), (4, 0x47, 0x5B),
+)
+
+
+def icm42688p_bank_registers(bus, addr):
+    """Every register of banks 1, 2 and 4 but REG_BANK_SEL, as (bank, register) → value; then
+    bank 0 again."""
+    values = {}
+    for bank in (1, 2, 4):
+        bus.write_byte_data(addr, 0x76, bank)  # REG_BANK_SEL
+        values.update({(bank, r): bus.read_byte_data(addr, r) for r in range(0x80) if r != 0x76})
+    bus.write_byte_data(addr, 0x76, 0)
+    return values
+
+
+def test_icm42688p_banks_1_2_4_reset_values_after_power_on_and_soft_reset():
+    clock, bus, addr, _ = chip("icm42688p")
+    expected = {(bank, r): v for bank, r, v in ICM42688P_BANK_1_2_4_RESET}
+    got = icm42688p_bank_registers(bus, addr)
+    assert {k: v for k, v in got.items() if v} == expected  # the listed ones, and 0 elsewhere
+    for bank, register, _ in ICM42688P_BANK_1_2_4_RESET:
+        bus.write_byte_data(addr, 0x76, bank)
+        bus.write_byte_data(addr, register, 0x00)
+    bus.write_byte_data(addr, 0x76, 0)
+    bus.write_byte_data(addr, 0x11, 0x01)  # DEVICE_CONFIG.SOFT_RESET restores them
+    assert {k: v for k, v in icm42688p_bank_registers(bus, addr).items() if v} == expected
 
 
 def test_lsm6dsox_status_reg_set_on_new_data_cleared_by_reading_each_output():
