@@ -10,6 +10,7 @@ data port keeps reading it, popping one byte each; an empty FIFO returns a fill 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import ClassVar
 
 __all__ = ["UserBanks"]
@@ -29,6 +30,8 @@ class UserBanks:
     bank_mask: ClassVar[int]
     #: The banks besides 0 that hold memory.
     other_banks: ClassVar[tuple[int, ...]]
+    #: Reset values of those banks' registers that do not reset to 0: bank → register → value.
+    bank_reset_values: ClassVar[Mapping[int, Mapping[int, int]]] = {}
     #: The FIFO data port in bank 0.
     fifo_port: ClassVar[int]
 
@@ -38,9 +41,13 @@ class UserBanks:
     _ptr: int
 
     def _reset_banks(self) -> None:
-        """Select bank 0 and clear the other banks."""
+        """Select bank 0 and give the other banks their reset values
+        (:attr:`bank_reset_values`, 0 elsewhere)."""
         self._bank = 0
         self._banks = {b: bytearray(128) for b in self.other_banks}
+        for bank, values in self.bank_reset_values.items():
+            for register, value in values.items():
+                self._banks[bank][register] = value
 
     @property
     def bank(self) -> int:

@@ -30,6 +30,11 @@ What it models:
   (:data:`~gyrocal.drivers.imu.chips.GYRO_OFFSET_COUNTS_PER_CODE_FS0`).
 - Reset values of bank 2: GYRO_CONFIG_1 = 0x01 and ACCEL_CONFIG = 0x01 (ACCEL_FCHOICE; DS-000189
   ACCEL_CONFIG reset value, also in open register headers that transcribe it).
+- Self-test: bank 1 SELF_TEST_X/Y/Z_GYRO (0x02-0x04) and _ACCEL (0x0E-0x10) hold factory codes
+  (:data:`~gyrocal.drivers.emulated.self_test.FACTORY_SELF_TEST_CODES`, a stand-in ⚠), and
+  bank 2 GYRO_CONFIG_2.XGYRO_CTEN..ZGYRO_CTEN and ACCEL_CONFIG_2.AX_ST_EN..AZ_ST_EN move each
+  axis's output by the response its code stands for at the configured range, as on the
+  MPU-9250 (:mod:`~gyrocal.drivers.emulated.self_test`).
 - The I²C master (USER_CTRL.I2C_MST_EN; bank 3 SLV0–SLV4, bank 0 I2C_MST_STATUS, cleared when
   read, and EXT_SLV_SENS_DATA_00..23; :mod:`~gyrocal.drivers.emulated.i2c_master`) runs one cycle
   per gyro sample, with the AK09916 magnetometer die
@@ -54,6 +59,11 @@ from gyrocal.drivers.emulated.i2c_master import AuxI2CMaster, MasterLayout
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.magnetometers import EmulatedAK09916, MagneticField
 from gyrocal.drivers.emulated.motion import MotionSource
+from gyrocal.drivers.emulated.self_test import (
+    FACTORY_SELF_TEST_CODES,
+    SelfTestLayout,
+    self_test_counts,
+)
 from gyrocal.drivers.emulated.smbus import I2CDevice
 from gyrocal.drivers.imu.chips import (
     GYRO_OFFSET_COUNTS_PER_CODE_FS0,
@@ -61,19 +71,29 @@ from gyrocal.drivers.imu.chips import (
     ICM20948_BITS,
     ICM20948_DLPF,
     ICM20948_REG,
+    ICM20948_REG1,
     ICM20948_REG2,
     ICM20948_REG3,
 )
 
 __all__ = ["AK09916_ADDRESS", "EmulatedICM20948"]
 
-_R, _R2, _R3, _B = ICM20948_REG, ICM20948_REG2, ICM20948_REG3, ICM20948_BITS
+_R, _R1, _R2, _R3, _B = (ICM20948_REG, ICM20948_REG1, ICM20948_REG2, ICM20948_REG3,
+                         ICM20948_BITS)
 _READ_ONLY = frozenset(
     {_R.WHO_AM_I, _R.I2C_MST_STATUS, _R.INT_STATUS_1, _R.INT_STATUS_2, _R.FIFO_COUNTH,
      _R.FIFO_COUNTL, _R.FIFO_R_W}
     | set(range(_R.ACCEL_XOUT_H, _R.TEMP_OUT_H + 2))
     | set(range(_R.EXT_SLV_SENS_DATA_00, _R.EXT_SLV_SENS_DATA_00 + 24))
 )
+#: Where the self-test codes (bank 1) and their enable bits and ranges (bank 2) are.
+_GYRO_SELF_TEST = SelfTestLayout(_R1.SELF_TEST_X_GYRO, _R2.GYRO_CONFIG_2, _B.GYRO_CTEN_SHIFT,
+                                 _R2.GYRO_CONFIG_1, _B.GYRO_FS_SEL_SHIFT)
+_ACCEL_SELF_TEST = SelfTestLayout(_R1.SELF_TEST_X_ACCEL, _R2.ACCEL_CONFIG_2,
+                                  _B.ACCEL_ST_EN_SHIFT, _R2.ACCEL_CONFIG, _B.ACCEL_FS_SEL_SHIFT)
+#: Bank 1 reset values: the factory self-test codes.
+_BANK1_RESET = {**_GYRO_SELF_TEST.codes_reset(FACTORY_SELF_TEST_CODES[:3]),
+                **_ACCEL_SELF_TEST.codes_reset(FACTORY_SELF_TEST_CODES[3:])}
 #: Where the AK09916 sits on the auxiliary bus (and on the host bus in bypass).
 AK09916_ADDRESS = 0x0C
 _MASTER = MasterLayout(
@@ -107,6 +127,7 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
     soft_reset = (_R.PWR_MGMT_1, _B.PWR_MGMT_1_DEVICE_RESET)
     bank_register, bank_shift, bank_mask = _R.REG_BANK_SEL, _B.BANK_SHIFT, _B.BANK_MASK
     other_banks = (1, 2, 3)
+    bank_reset_values = {1: _BANK1_RESET, 2: _BANK2_RESET}
     fifo_port = _R.FIFO_R_W
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
@@ -131,8 +152,6 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
 
     def _power_on_reset(self) -> None:
         self._reset_banks()
-        for register, value in _BANK2_RESET.items():
-            self._banks[2][register] = value
         super()._power_on_reset()
 
     def _write_register(self, register: int, value: int) -> None:
@@ -194,13 +213,19 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
             self._master_cycle()
 
     def _gyro_trim_counts(self) -> np.ndarray | float:
-        """XG/YG/ZG_OFFS_USR (bank 2) as output counts at the configured range."""
+        """XG/YG/ZG_OFFS_USR (bank 2) as output counts at the configured range, plus any
+        self-test actuation (:func:`~gyrocal.drivers.emulated.self_test.self_test_counts`)."""
+        trim = self_test_counts(_GYRO_SELF_TEST, self._banks[1], self._banks[2])
         raw = bytes(self._banks[2][_R2.XG_OFFS_USRH:_R2.XG_OFFS_USRH + 6])
         if not any(raw):
-            return 0.0
+            return trim
         fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT
         codes = np.frombuffer(raw, dtype=">i2").astype(float)
-        return codes * GYRO_OFFSET_COUNTS_PER_CODE_FS0 / 2**fs
+        return trim + codes * GYRO_OFFSET_COUNTS_PER_CODE_FS0 / 2**fs
+
+    def _accel_trim_counts(self) -> np.ndarray | float:
+        """The accelerometer's self-test actuation (ACCEL_CONFIG_2, bank 2)."""
+        return self_test_counts(_ACCEL_SELF_TEST, self._banks[1], self._banks[2])
 
     # -- configuration --------------------------------------------------------------------------
 

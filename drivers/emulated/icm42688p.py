@@ -6,7 +6,10 @@ What it models, register by register (bank 0 unless said):
 
 - REG_BANK_SEL (0x76, in every bank) selects user bank 0..4; banks 1..4 are plain memory here
   (the reader needs none of them), so a reader that forgets to go back to bank 0 reads the
-  wrong registers, as on the chip.
+  wrong registers, as on the chip. They hold their datasheet reset values (GYRO_CONFIG_STATIC2
+  = 0xA0 and the others of :data:`~gyrocal.drivers.imu.chips.ICM42688P_BANK_RESET`) after
+  power-on and SOFT_RESET; what they configure (anti-alias and notch filters, APEX) is not
+  emulated.
 - WHO_AM_I (0x75) = 0x47. DEVICE_CONFIG.SOFT_RESET restores the reset values: INTF_CONFIG0 =
   0x30 (big-endian data and FIFO count, count in bytes), TMST_CONFIG = 0x23,
   GYRO_CONFIG0 = ACCEL_CONFIG0 = 0x06 (±2000 °/s / ±16 g, 1 kHz), GYRO_CONFIG1 = 0x16,
@@ -50,6 +53,7 @@ from gyrocal.drivers.emulated.imu_chips import EmulatedLSM9DS1, SensorTruth, _Em
 from gyrocal.drivers.emulated.motion import MotionSource
 from gyrocal.drivers.imu.chips import (
     ICM42688P,
+    ICM42688P_BANK_RESET,
     ICM42688P_BITS,
     ICM42688P_ODR,
     ICM42688P_REG,
@@ -66,6 +70,10 @@ _RESET = {
     _R.INTF_CONFIG1: 0x91, _R.ACCEL_CONFIG1: 0x0D, _R.DRIVE_CONFIG: 0x05,
     _R.APEX_CONFIG0: 0x82, _R.FSYNC_CONFIG: 0x10, _R.INT_CONFIG1: 0x10, _R.INT_SOURCE0: 0x10,
 }
+#: Banks 1, 2 and 4's registers that do not reset to 0 (DS-000347 §15 on;
+#: :data:`~gyrocal.drivers.imu.chips.ICM42688P_BANK_RESET`).
+_BANK_RESET = {bank: {address: value for b, address, _, value in ICM42688P_BANK_RESET if b == bank}
+               for bank in {row[0] for row in ICM42688P_BANK_RESET}}
 #: The sensor data registers before the first sample (DS-000347 reset value 0x80, 0x00; the
 #: kernel's INV_ICM42600_DATA_INVALID).
 _DATA_INVALID = -32768
@@ -95,6 +103,7 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
     read_only = _READ_ONLY
     soft_reset = (_R.DEVICE_CONFIG, _B.DEVICE_CONFIG_SOFT_RESET)
     bank_register, bank_mask, other_banks = _R.REG_BANK_SEL, 0x07, (1, 2, 3, 4)
+    bank_reset_values = _BANK_RESET
     fifo_port = _R.FIFO_DATA
 
     def __init__(self, clock: Clock, motion: MotionSource | None = None,
@@ -109,7 +118,7 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
     # -- banks, reset ---------------------------------------------------------------------------
 
     def _power_on_reset(self) -> None:
-        self._bank = 0
+        self._reset_banks()  # bank 0 selected, banks 1-4 at their reset values
         self._power_on_t = self.clock.monotonic()  # the timestamp counter restarts
         super()._power_on_reset()
 

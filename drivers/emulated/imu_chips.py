@@ -54,6 +54,11 @@ from gyrocal.drivers.emulated.magnetometers import (
 )
 from gyrocal.drivers.emulated.motion import ConstantRate, MotionSource
 from gyrocal.drivers.emulated.noise import ColouredNoise, Normals
+from gyrocal.drivers.emulated.self_test import (
+    FACTORY_SELF_TEST_CODES,
+    SelfTestLayout,
+    self_test_counts,
+)
 from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     GYRO_OFFSET_COUNTS_PER_CODE_FS0,
@@ -69,7 +74,6 @@ from gyrocal.drivers.imu.chips import (
     MPU9250_DLPF_DELAY_S,
     MPU9250_REG,
     ChipFamily,
-    mpu9250_self_test_otp,
 )
 
 __all__ = [
@@ -1080,14 +1084,14 @@ _MPU_READ_ONLY = frozenset(
     | set(range(_MR.ACCEL_XOUT_H, _MR.GYRO_XOUT_H + 6))
     | set(range(_MR.EXT_SENS_DATA_00, _MR.EXT_SENS_DATA_00 + 24))
 )
-#: Factory self-test codes (SELF_TEST_X/Y/Z_GYRO, SELF_TEST_X/Y/Z_ACCEL) an emulated MPU-9250
-#: holds: a stated stand-in ⚠ (no public register dump of a part's codes was found: the
-#: self-test reports in kriswiner/MPU9250's issues give percentages, not codes), chosen so that
-#: the responses they stand for (:func:`~gyrocal.drivers.imu.chips.mpu9250_self_test_otp`) are
-#: about 94 °/s and 0.45 g: above the 60 °/s absolute gyro limit and inside the 225–675 mg
-#: accelerometer range that TDK's MPU-6500-family self-test code applies when a part has no
-#: codes (DEF_GYRO_ST_AL, DEF_ACCEL_ST_AL_MIN/MAX).
-MPU9250_SELF_TEST_CODES = (0x9C, 0xA0, 0xA3, 0x68, 0x6B, 0x70)
+#: Where the MPU-9250 keeps its gyro and accelerometer self-test (RM-MPU-9250A-00 registers
+#: 0-2, 13-15 and 27/28: XGYRO_Cten..ZGYRO_Cten and ax/ay/az_st_en in bits 7:5 of GYRO_CONFIG
+#: and ACCEL_CONFIG, beside the FS_SEL fields in bits 4:3).
+_MPU_GYRO_SELF_TEST = SelfTestLayout(_MR.SELF_TEST_X_GYRO, _MR.GYRO_CONFIG,
+                                     _MB.SELF_TEST_EN_SHIFT, _MR.GYRO_CONFIG, _MB.GYRO_FS_SHIFT)
+_MPU_ACCEL_SELF_TEST = SelfTestLayout(_MR.SELF_TEST_X_ACCEL, _MR.ACCEL_CONFIG,
+                                      _MB.SELF_TEST_EN_SHIFT, _MR.ACCEL_CONFIG,
+                                      _MB.ACCEL_FS_SHIFT)
 #: Where the AK8963 sits on the MPU-9250's auxiliary bus (and on the host bus in bypass).
 AK8963_ADDRESS = 0x0C
 _MPU_VARIANTS = {m.name: m.who_am_i for m in MPU9250.models}
@@ -1135,8 +1139,8 @@ class EmulatedMPU9250(_EmulatedImu):
     filters_at_internal_rate = True
     reset_values = {
         _MR.PWR_MGMT_1: 0x01,
-        **{_MR.SELF_TEST_X_GYRO + i: c for i, c in enumerate(MPU9250_SELF_TEST_CODES[:3])},
-        **{_MR.SELF_TEST_X_ACCEL + i: c for i, c in enumerate(MPU9250_SELF_TEST_CODES[3:])},
+        **_MPU_GYRO_SELF_TEST.codes_reset(FACTORY_SELF_TEST_CODES[:3]),
+        **_MPU_ACCEL_SELF_TEST.codes_reset(FACTORY_SELF_TEST_CODES[3:]),
     }
     read_only = _MPU_READ_ONLY
     soft_reset = (_MR.PWR_MGMT_1, _MB.PWR_MGMT_1_H_RESET)
@@ -1224,23 +1228,12 @@ class EmulatedMPU9250(_EmulatedImu):
         fs = (self._regs[_MR.ACCEL_CONFIG] >> _MB.ACCEL_FS_SHIFT) & 0x03
         return int(self.family.extra["accel_lsb_per_g_2g"]) >> fs
 
-    def _self_test_counts(self, config: int, code_register: int) -> np.ndarray | float:
-        """The self-test actuation the axes GYRO_CONFIG/ACCEL_CONFIG bits 7:5 turn on, counts
-        at the configured range: the factory response their SELF_TEST codes stand for
-        (AN-MPU-9250A-03, :func:`~gyrocal.drivers.imu.chips.mpu9250_self_test_otp`)."""
-        r = self._regs
-        on = (r[config] & _MB.SELF_TEST_EN_MASK) >> _MB.SELF_TEST_EN_SHIFT
-        if not on:
-            return 0.0
-        fs = (r[config] >> _MB.GYRO_FS_SHIFT) & 0x03  # both FS fields are bits 4:3
-        return np.array([mpu9250_self_test_otp(r[code_register + i], fs)
-                         if on & (0b100 >> i) else 0.0 for i in range(3)])
-
     def _gyro_trim_counts(self) -> np.ndarray | float:
         """XG/YG/ZG_OFFSET (registers 19–24) added to the output, ``X_OFFS_USR · 4 /
-        2^FS_SEL`` counts (RM-MPU-9250A-00), plus any self-test actuation."""
+        2^FS_SEL`` counts (RM-MPU-9250A-00), plus any self-test actuation
+        (:func:`~gyrocal.drivers.emulated.self_test.self_test_counts`)."""
         r = self._regs
-        trim = self._self_test_counts(_MR.GYRO_CONFIG, _MR.SELF_TEST_X_GYRO)
+        trim = self_test_counts(_MPU_GYRO_SELF_TEST, r, r)
         raw = bytes(r[_MR.XG_OFFSET_H:_MR.XG_OFFSET_H + 6])
         if any(raw):
             fs = (r[_MR.GYRO_CONFIG] & _MB.GYRO_FS_MASK) >> _MB.GYRO_FS_SHIFT
@@ -1249,7 +1242,7 @@ class EmulatedMPU9250(_EmulatedImu):
         return trim
 
     def _accel_trim_counts(self) -> np.ndarray | float:
-        return self._self_test_counts(_MR.ACCEL_CONFIG, _MR.SELF_TEST_X_ACCEL)
+        return self_test_counts(_MPU_ACCEL_SELF_TEST, self._regs, self._regs)
 
     # FIFO ------------------------------------------------------------------------------------
 

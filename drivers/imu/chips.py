@@ -24,9 +24,11 @@ __all__ = [
     "ICM20948_BITS",
     "ICM20948_DLPF",
     "ICM20948_REG",
+    "ICM20948_REG1",
     "ICM20948_REG2",
     "ICM20948_REG3",
     "ICM42688P",
+    "ICM42688P_BANK_RESET",
     "ICM42688P_BITS",
     "ICM42688P_MAX_READER_ODR_HZ",
     "ICM42688P_ODR",
@@ -752,6 +754,39 @@ class _ICM42688PRegisters:
     REG_BANK_SEL: int = 0x76
 
 
+#: The ICM-42688-P's registers in user banks 1, 2 and 4 whose reset value is not 0, one row each:
+#: (bank, address, name, reset value). DS-000347's register descriptions of those banks (§15
+#: user bank 1, then banks 2 and 4; their text was not read here) as three open transcriptions
+#: of its per-register "Reset value" give them: qunkejiang/alpakka_qk main/src/bsp/ICM42688.h,
+#: Witty-Wizard/InertialIO src/ICM42688/Registers.h, and a C++ register-description header
+#: (``enum class GYRO_CONFIG_STATIC2_BITS``, "@Reset value: 0xA0"; its repository is not named
+#: by the code index). All three agree where they overlap; a row fewer than two give is ⚠.
+#: Registers trimmed part by part (GYRO_CONFIG_STATIC6-9, the notch filter's COSWZ;
+#: XG/YG/ZG_ST_DATA and XA/YA/ZA_ST_DATA, the self-test codes) have no datasheet value and are
+#: not here.
+ICM42688P_BANK_RESET: tuple[tuple[int, int, str, int], ...] = (
+    (1, 0x03, "SENSOR_CONFIG0", 0x80),  # three transcriptions
+    (1, 0x0B, "GYRO_CONFIG_STATIC2", 0xA0),  # AAF and notch filter on; three
+    (1, 0x0C, "GYRO_CONFIG_STATIC3", 0x0D),  # GYRO_AAF_DELT; three
+    (1, 0x0D, "GYRO_CONFIG_STATIC4", 0xAA),  # GYRO_AAF_DELTSQR[7:0]; three
+    (1, 0x0E, "GYRO_CONFIG_STATIC5", 0x80),  # GYRO_AAF_BITSHIFT, DELTSQR[11:8]; three
+    (1, 0x13, "GYRO_CONFIG_STATIC10", 0x11),  # GYRO_NF_BW_SEL; three
+    (1, 0x7A, "INTF_CONFIG4", 0x83),  # alpakka_qk and InertialIO
+    (1, 0x7C, "INTF_CONFIG6", 0x5F),  # alpakka_qk and InertialIO
+    (2, 0x03, "ACCEL_CONFIG_STATIC2", 0x30),  # ACCEL_AAF_DELT, AAF on; three
+    (2, 0x04, "ACCEL_CONFIG_STATIC3", 0x40),  # ACCEL_AAF_DELTSQR[7:0]; three
+    (2, 0x05, "ACCEL_CONFIG_STATIC4", 0x62),  # ACCEL_AAF_BITSHIFT, DELTSQR[11:8]; three
+    (4, 0x40, "APEX_CONFIG1", 0xA2),  # ⚠ alpakka_qk alone
+    (4, 0x41, "APEX_CONFIG2", 0x85),  # alpakka_qk and InertialIO, as the rows below
+    (4, 0x42, "APEX_CONFIG3", 0x51),
+    (4, 0x43, "APEX_CONFIG4", 0xA4),
+    (4, 0x44, "APEX_CONFIG5", 0x8C),
+    (4, 0x45, "APEX_CONFIG6", 0x5C),
+    (4, 0x46, "APEX_CONFIG7", 0x45),
+    (4, 0x47, "APEX_CONFIG8", 0x5B),
+)
+
+
 @dataclass(frozen=True)
 class _ICM42688PBits:
     """ICM-42688-P register bits and fields (DS-000347 register map and FIFO packet
@@ -1138,12 +1173,27 @@ class _ICM20948Bank0:
 
 
 @dataclass(frozen=True)
+class _ICM20948Bank1:
+    """ICM-20948 user bank 1 registers: the factory self-test codes SELF_TEST_X/Y/Z_GYRO and
+    SELF_TEST_X/Y/Z_ACCEL (DS-000189 register map, bank 1; TDK eMD-SmartMotion-ICM20948-1.1.0
+    Icm20948Defs.h 185-190, REG_SELF_TEST1..6, as vendored by FredBill1/RT1064_Smartcar;
+    SparkFun ICM_20948_REGISTERS.h, ICM_20948_SELF_TEST_X_GYRO_t ..)."""
+
+    SELF_TEST_X_GYRO: int = 0x02  # Y, Z at 0x03, 0x04
+    SELF_TEST_X_ACCEL: int = 0x0E  # Y, Z at 0x0F, 0x10
+
+
+ICM20948_REG1 = _ICM20948Bank1()
+
+
+@dataclass(frozen=True)
 class _ICM20948Bank2:
     """ICM-20948 user bank 2 registers (DS-000189 register map, bank 2; XG_OFFS_USRH..ZG_OFFS_
     USRL also in SparkFun's ICM_20948_REGISTERS.h)."""
 
     GYRO_SMPLRT_DIV: int = 0x00
     GYRO_CONFIG_1: int = 0x01
+    GYRO_CONFIG_2: int = 0x02  # XGYRO_CTEN..ZGYRO_CTEN bits 5:3, GYRO_AVGCFG 2:0
     # X/Y/Z_OFFS_USER, int16 big-endian H/L pairs at 0x03..0x08 (reset 0)
     XG_OFFS_USRH: int = 0x03
     ACCEL_SMPLRT_DIV_1: int = 0x10  # bits [11:8] of the accelerometer's rate divider
@@ -1155,6 +1205,7 @@ class _ICM20948Bank2:
     # where the emulator keeps 0x01 (GYRO_FCHOICE, DS-000189 as read for the emulator) ⚠ the
     # two disagree and no third source was found
     ACCEL_CONFIG: int = 0x14
+    ACCEL_CONFIG_2: int = 0x15  # AX_ST_EN_REG..AZ_ST_EN_REG bits 4:2, DEC3_CFG 1:0
 
 
 @dataclass(frozen=True)
@@ -1206,6 +1257,12 @@ class _ICM20948Bits:
     FIFO_RST_ALL: int = 0x1F
     FIFO_MODE_SNAPSHOT: int = 0x01  # 1: stop writing when full; 0: stream, overwrite ⚠
     INT_STATUS_2_FIFO_OVERFLOW: int = 0x1F
+    # GYRO_CONFIG_2 XGYRO_CTEN (bit 5), YGYRO_CTEN, ZGYRO_CTEN and ACCEL_CONFIG_2 AX_ST_EN_REG
+    # (bit 4), AY_, AZ_: each axis's self-test on (DS-000189; TDK eMD Icm20948Defs.h 207 and
+    # 223, BIT_GYRO_CTEN 0x38 and BIT_ACCEL_CTEN 0x1C; SparkFun ICM_20948_GYRO_CONFIG_2_t and
+    # ICM_20948_ACCEL_CONFIG_2_t)
+    GYRO_CTEN_SHIFT: int = 3
+    ACCEL_ST_EN_SHIFT: int = 2
 
 
 ICM20948_REG = _ICM20948Bank0()

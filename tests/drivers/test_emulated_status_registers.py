@@ -6,8 +6,10 @@ ZG_OFFSET_L 0x13-0x18 "OffsetLSB = X_OFFS_USR * 4 / 2^FS_SEL", INT_PIN_CFG 0x37 
 INT_ANYRD_2CLEAR, INT_STATUS 0x3A bit 0 RAW_DATA_RDY_INT) and the self-test application note
 AN-MPU-9250A-03 (factory trim 2620/2^FS * 1.01^(code-1); pass: gyro STR/FT > 0.5, accel
 0.5 < STR/FT < 1.5); ICM-20948 DS-000189 (INT_STATUS_1 0x1A, bank 2 XG_OFFS_USRH 0x03,
-ACCEL_CONFIG 0x14 reset 0x01); ICM-42688-P DS-000347 (INT_STATUS 0x2D: DATA_RDY bit 3,
-RESET_DONE bit 4; the bank-0 reset values of its §14); LSM6DSOX DS12814
+ACCEL_CONFIG 0x14 reset 0x01; bank 1 SELF_TEST codes, bank 2 GYRO_CONFIG_2/ACCEL_CONFIG_2 self-test
+enables, through TDK's own self-test code, cited where it is modelled); ICM-42688-P DS-000347
+(INT_STATUS 0x2D: DATA_RDY bit 3, RESET_DONE bit 4; the bank-0 reset values of its §14, those of
+banks 1, 2 and 4 from §15 on); LSM6DSOX DS12814
 (STATUS_REG 0x1E: XLDA bit 0, GDA bit 1, TDA bit 2).
 """
 
@@ -147,6 +149,103 @@ def test_icm20948_gyro_offset_registers_act_on_the_output():
     np.testing.assert_allclose(got, base + np.array(codes) * 4 / 2, atol=0.5)  # FS_SEL 1
 
 
+# -- TDK's own ICM-20948 self-test, modelled from its source ---------------------------------
+#
+# TDK InvenSense eMD-SmartMotion-ICM20948-1.1.0 as vendored by FredBill1/RT1064_Smartcar (commit
+# e3bff2e4), Libraries/eMD-SmartMotion-ICM20948-1.1.0-MP/Invn/Devices/Drivers/ICM20948/:
+# Icm20948SelfTest.c (line numbers below are this file's) and Icm20948Defs.h (addresses: bank 1
+# REG_SELF_TEST1..6 0x02-0x04, 0x0E-0x10 at 185-190; bank 2 GYRO_CONFIG_1 0x01, GYRO_CONFIG_2
+# 0x02 with BIT_GYRO_CTEN 0x38, ACCEL_CONFIG 0x14, ACCEL_CONFIG_2 0x15 with BIT_ACCEL_CTEN
+# 0x1C at 202-223; bank 0 PWR_MGMT_1 0x06, PWR_MGMT_2 0x07, LP_CONFIG 0x05, ACCEL_XOUT_H 0x2D,
+# GYRO_XOUT_H 0x33; GYRO_ENGINE_UP_TIME 50 ms at 283). Registers are written bank by bank
+# through REG_BANK_SEL 0x7F (USER_BANK in bits 5:4), as inv_icm20948_write_single_mems_reg
+# does for an address BANK_n | reg.
+
+EMD_SAMPLES = 200  # DEF_ST_SAMPLES, line 37
+
+
+def emd_write(bus, addr, bank, register, value):
+    bus.write_byte_data(addr, 0x7F, bank << 4)
+    bus.write_byte_data(addr, register, value)
+
+
+def emd_setup(bus, addr, clock):
+    """inv_setup_selftest, lines 254-320: the factory codes (gyro, accel) it reads."""
+    emd_write(bus, addr, 0, 0x06, 0x01)  # 266: PWR_MGMT_1 = BIT_CLK_PLL
+    emd_write(bus, addr, 0, 0x07, 0x38 | 0x07)  # 269: accel and gyro standby
+    emd_write(bus, addr, 0, 0x06, 0x80)  # 274: BIT_H_RESET
+    clock.sleep(0.100)  # 275
+    emd_write(bus, addr, 0, 0x06, 0x01)  # 278
+    emd_write(bus, addr, 0, 0x05, 0x40 | 0x20 | 0x10)  # 283: LP_CONFIG, the three cycle bits
+    emd_write(bus, addr, 2, 0x00, 10)  # 287: GYRO_SMPLRT_DIV = SELFTEST_GYRO_SMPLRT_DIV
+    emd_write(bus, addr, 2, 0x01, (0 << 3) | 1)  # 289: GYRO_CONFIG_1 = SELFTEST_GYRO_FS
+    emd_write(bus, addr, 2, 0x02, 3)  # 291: GYRO_CONFIG_2 = SELFTEST_GYRO_AVGCFG
+    emd_write(bus, addr, 2, 0x10, 0)  # 294: ACCEL_SMPLRT_DIV_1
+    emd_write(bus, addr, 2, 0x11, 10)  # 296: ACCEL_SMPLRT_DIV_2
+    emd_write(bus, addr, 2, 0x14, (7 << 3) | 1)  # 298: ACCEL_CONFIG = SELFTEST_ACCEL_FS
+    emd_write(bus, addr, 2, 0x15, 2)  # 300: ACCEL_CONFIG_2 = SELFTEST_ACCEL_DEC3_CFG
+    bus.write_byte_data(addr, 0x7F, 1 << 4)  # 304-314: REG_SELF_TEST1..6, bank 1
+    gyro_codes = [bus.read_byte_data(addr, r) for r in (0x02, 0x03, 0x04)]
+    accel_codes = [bus.read_byte_data(addr, r) for r in (0x0E, 0x0F, 0x10)]
+    clock.sleep(0.050)  # 317: GYRO_ENGINE_UP_TIME
+    return gyro_codes, accel_codes
+
+
+def emd_mean(bus, addr, clock, register):
+    """inv_selftest_read_samples (322-359) and the division after it (380, 405): 200 reads of
+    X/Y/Z as int16, 10 ms apart, summed, divided in C's int arithmetic (toward zero)."""
+    bus.write_byte_data(addr, 0x7F, 0x00)
+    total = np.zeros(3, dtype=np.int64)
+    for _ in range(EMD_SAMPLES):
+        total += be16s(bus.read_i2c_block_data(addr, register, 6))
+        clock.sleep(0.010)  # 354: WAIT_TIME_BTW_2_SAMPLESREAD
+    return np.trunc(total / EMD_SAMPLES).astype(int)
+
+
+def emd_test(bus, addr, clock, gyro):
+    """inv_do_test_accelgyro, lines 362-409: the means without and with the self-test on."""
+    normal = emd_mean(bus, addr, clock, 0x33 if gyro else 0x2D)
+    if gyro:
+        emd_write(bus, addr, 2, 0x02, 0x38 | 3)  # 387: BIT_GYRO_CTEN | SELFTEST_GYRO_AVGCFG
+    else:
+        emd_write(bus, addr, 2, 0x15, 0x1C | 2)  # 390: BIT_ACCEL_CTEN | DEC3_CFG
+    clock.sleep(0.020)  # 396: DEF_ST_STABLE_TIME
+    return normal, emd_mean(bus, addr, clock, 0x33 if gyro else 0x2D)
+
+
+def emd_check(codes, normal, st, gyro):
+    """inv_check_accelgyro_self_test, lines 204-252: True when the sensor passes."""
+    if 0 in codes:
+        return False  # 218-223: a code of 0 fails
+    # 219, sSelfTestEquation (70-103): 2620 * 1.01^(code - 1), truncated to uint16 (the table
+    # holds exactly these for codes 1..255)
+    otp = np.array([int(2620 * 1.01 ** (c - 1)) for c in codes])
+    diff = st - normal  # 234
+    low = np.all(diff >= otp >> 1)  # 241: fails below LOWER_BOUND_CHECK, value >> 1
+    high = gyro or np.all(diff <= otp + (otp >> 1))  # 245: above UPPER_BOUND_CHECK (accel)
+    return bool(low and high)
+
+
+def emd_run_selftest(bus, addr, clock):
+    """inv_icm20948_run_selftest, lines 411-463, less the compass: (accel << 1) | gyro."""
+    gyro_codes, accel_codes = emd_setup(bus, addr, clock)
+    gyro = emd_check(gyro_codes, *emd_test(bus, addr, clock, True), True)  # 428-437, 454
+    accel = emd_check(accel_codes, *emd_test(bus, addr, clock, False), False)  # 440-449, 453
+    return (accel << 1) | gyro  # 461-463
+
+
+@pytest.mark.parametrize("response", [True, False], ids=["with-response", "response-removed"])
+def test_icm20948_passes_tdks_own_self_test_and_fails_without_its_response(
+        response, monkeypatch):
+    if not response:  # the codes stay, the actuation they stand for is gone
+        monkeypatch.setattr("gyrocal.drivers.emulated.icm20948.self_test_counts",
+                            lambda *args: 0.0)
+    clock = VirtualClock()
+    truth = SensorTruth(bias=np.array([0.5, -1.0, 2.0]) * DEG)  # the datasheet noise density
+    bus, addr = make_emulated_imu("icm20948", clock, truth=truth, seed=7)
+    assert emd_run_selftest(bus, addr, clock) == (0b11 if response else 0b00)
+
+
 # -- ICM-42688-P, LSM6DSOX ---------------------------------------------------------------------
 
 
@@ -182,6 +281,44 @@ def test_icm42688p_reset_values_and_reset_done():
     assert bus.read_byte_data(addr, 0x2D) & 0x08  # DATA_RDY_INT
     assert bus.read_byte_data(addr, 0x2D) & 0x08 == 0
     assert bus.read_i2c_block_data(addr, 0x1D, 2) != [0x80, 0x00]  # a temperature now
+
+
+#: DS-000347 non-zero reset values of user banks 1, 2 and 4 (§15 user bank 1 register
+#: descriptions, then banks 2 and 4), as transcribed per register by qunkejiang/alpakka_qk
+#: main/src/bsp/ICM42688.h and Witty-Wizard/InertialIO src/ICM42688/Registers.h: (bank,
+#: register, value). Bank 1: SENSOR_CONFIG0, GYRO_CONFIG_STATIC2..5, GYRO_CONFIG_STATIC10,
+#: INTF_CONFIG4, INTF_CONFIG6; bank 2: ACCEL_CONFIG_STATIC2..4; bank 4: APEX_CONFIG1..8.
+ICM42688P_BANK_1_2_4_RESET = (
+    (1, 0x03, 0x80), (1, 0x0B, 0xA0), (1, 0x0C, 0x0D), (1, 0x0D, 0xAA), (1, 0x0E, 0x80),
+    (1, 0x13, 0x11), (1, 0x7A, 0x83), (1, 0x7C, 0x5F),
+    (2, 0x03, 0x30), (2, 0x04, 0x40), (2, 0x05, 0x62),
+    (4, 0x40, 0xA2), (4, 0x41, 0x85), (4, 0x42, 0x51), (4, 0x43, 0xA4), (4, 0x44, 0x8C),
+    (4, 0x45, 0x5C), (4, 0x46, 0x45), (4, 0x47, 0x5B),
+)
+
+
+def icm42688p_bank_registers(bus, addr):
+    """Every register of banks 1, 2 and 4 but REG_BANK_SEL, as (bank, register) → value; then
+    bank 0 again."""
+    values = {}
+    for bank in (1, 2, 4):
+        bus.write_byte_data(addr, 0x76, bank)  # REG_BANK_SEL
+        values.update({(bank, r): bus.read_byte_data(addr, r) for r in range(0x80) if r != 0x76})
+    bus.write_byte_data(addr, 0x76, 0)
+    return values
+
+
+def test_icm42688p_banks_1_2_4_reset_values_after_power_on_and_soft_reset():
+    clock, bus, addr, _ = chip("icm42688p")
+    expected = {(bank, r): v for bank, r, v in ICM42688P_BANK_1_2_4_RESET}
+    got = icm42688p_bank_registers(bus, addr)
+    assert {k: v for k, v in got.items() if v} == expected  # the listed ones, and 0 elsewhere
+    for bank, register, _ in ICM42688P_BANK_1_2_4_RESET:
+        bus.write_byte_data(addr, 0x76, bank)
+        bus.write_byte_data(addr, register, 0x00)
+    bus.write_byte_data(addr, 0x76, 0)
+    bus.write_byte_data(addr, 0x11, 0x01)  # DEVICE_CONFIG.SOFT_RESET restores them
+    assert {k: v for k, v in icm42688p_bank_registers(bus, addr).items() if v} == expected
 
 
 def test_lsm6dsox_status_reg_set_on_new_data_cleared_by_reading_each_output():
