@@ -33,7 +33,10 @@ What it models, register by register (bank 0 unless said):
   is a data port: a burst there keeps popping the FIFO, and an empty FIFO reads 0xFF (header
   bit 7: "FIFO empty", ⚠).
 - TEMP_DATA (0x1D, 132.48 LSB/°C), ACCEL_DATA and GYRO_DATA show the latest sample.
-- The output is low-passed at the GYRO_UI_FILT_BW bandwidth (first order ⚠, as for the LSM9DS1).
+- The output is low-passed by the UI filter: GYRO_UI_FILT_BW's bandwidth, GYRO_CONFIG1.
+  GYRO_UI_FILT_ORD's order (first, second or third; second at reset), as that many equal
+  first-order sections ⚠ (the shape is not published), run at the ODR with the white noise
+  entering ahead of it.
 """
 
 from __future__ import annotations
@@ -45,13 +48,14 @@ import numpy as np
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.banks import UserBanks
-from gyrocal.drivers.emulated.imu_chips import EmulatedLSM9DS1, SensorTruth, _EmulatedImu
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
 from gyrocal.drivers.imu.chips import (
     ICM42688P,
     ICM42688P_BITS,
     ICM42688P_ODR,
     ICM42688P_REG,
+    ICM42688P_UI_FILT_ORDER,
     icm42688p_bandwidth_hz,
 )
 
@@ -167,8 +171,12 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
         # there the per-sample mean is the only filter emulated
         return bandwidth if bandwidth < 0.5 * odr else None
 
-    #: The LSM9DS1's first-order output filter, driven by this chip's :meth:`cutoff_hz`.
-    _filtered = EmulatedLSM9DS1._filtered
+    def filter_order(self) -> int:
+        """The UI filter's order, GYRO_CONFIG1.GYRO_UI_FILT_ORD (:data:`~gyrocal.drivers.imu.
+        chips.ICM42688P_UI_FILT_ORDER`; second at reset, 0x16)."""
+        code = (self._regs[_R.GYRO_CONFIG1] & _B.GYRO_UI_FILT_ORD_MASK) >> (
+            _B.GYRO_UI_FILT_ORD_SHIFT)
+        return ICM42688P_UI_FILT_ORDER.get(code, ICM42688P_UI_FILT_ORDER[0b01])
 
     # -- FIFO -----------------------------------------------------------------------------------
 

@@ -65,10 +65,10 @@ from gyrocal.drivers.imu.chips import (
     LSM9DS1_REG,
     MPU9250,
     MPU9250_BITS,
-    MPU9250_DLPF,
-    MPU9250_DLPF_DELAY_S,
+    MPU9250_GYRO_FILTER,
     MPU9250_REG,
     ChipFamily,
+    FilterSetting,
     mpu9250_self_test_otp,
 )
 
@@ -418,7 +418,7 @@ class _Ahead:
     temperature: np.ndarray
     temp: np.ndarray
     lpf: np.ndarray | None
-    fc: float | None
+    fc: tuple[float, int] | None
     accel_draws: int
     start_lpf: Any
     sensitivity: float
@@ -743,15 +743,16 @@ class _EmulatedImu(ABC):
 
     def _filter_memory(self, period: float) -> int:
         """Output samples a restarted output filter needs before its start is forgotten to
-        :data:`_FILTER_MEMORY` (0 without a filter)."""
-        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        if fc is None or rate is None:
+        :data:`_FILTER_MEMORY` (0 without a filter): each of its ``order`` sections' poles
+        decays that far in turn (an upper bound for the cascade)."""
+        section, rate = self._filter_section(), self._filter_rate_hz()
+        if section is None or rate is None:
             return 0
-        k = math.tan(math.pi * fc / rate)
+        k, order = section
         pole = abs((1.0 - k) / (1.0 + k))
         if pole <= _FILTER_MEMORY:
             return 1
-        steps = math.log(_FILTER_MEMORY) / math.log(pole)
+        steps = order * math.log(_FILTER_MEMORY) / math.log(pole)
         return math.ceil(steps / self._internal_per_output(period)) + 1
 
     def _emit(self, t: np.ndarray, m: np.ndarray, accel: np.ndarray, temperature: np.ndarray,
@@ -897,11 +898,10 @@ class _EmulatedImu(ABC):
         white = (self._noise_rng.peek(rates.size).reshape(rates.shape)
                  * self._white_sigma(period))
         x = np.concatenate((rates, white), axis=-1)
-        out, _ = self._lowpass(x, count, 0, start_lpf)
+        out, _, stages = self._lowpass(x, count, 0, start_lpf, stages=True)
         states = None
-        if out is not x:  # filtered: the state after each sample is its last internal one
-            states = np.stack([x.reshape(count, -1, 6)[:, -1], out.reshape(count, -1, 6)[:, -1]],
-                              axis=1)
+        if stages is not None:  # filtered: the state after each sample is its last internal one
+            states = np.stack([v.reshape(count, -1, 6)[:, -1] for v in stages], axis=1)
         out = out if out.ndim == 2 else out[:, -1]
         omega, white = out[:, :3], out[:, 3:]
         temperature = self.truth.temperature_at(t)
@@ -918,7 +918,7 @@ class _EmulatedImu(ABC):
                                 * self._accel_counts_1g()) + self._accel_trim_counts(),
                         -32768, 32767).astype(np.int64)
         return _Ahead(token, k_first, t, t_eval, m, accel, temperature,
-                      self._temperature_counts(temperature), states, self._lowpass_hz(),
+                      self._temperature_counts(temperature), states, self._filter_key(),
                       peeking.used // count, start_lpf, self._sensitivity_rad_s_per_lsb(),
                       noise_draws=rates.size // count)
 
@@ -949,6 +949,12 @@ class _EmulatedImu(ABC):
         datasheet figure; each chip says which)."""
         return None
 
+    def filter_setting(self) -> FilterSetting | None:
+        """The configured row of the chip's gyro filter table (its bandwidth, the datasheet's
+        delay and noise bandwidth where given, the source); ``None`` for a chip without such a
+        table or with the filter off."""
+        return None
+
     #: Whether the gyro output filter (:meth:`cutoff_hz`) is emulated (the ``output_filter``
     #: knob of the chips).
     output_filter = True
@@ -956,6 +962,29 @@ class _EmulatedImu(ABC):
     def _lowpass_hz(self) -> float | None:
         """The cutoff the emulated output path filters at (``None``: it does not filter)."""
         return self.cutoff_hz() if self.output_filter else None
+
+    def filter_order(self) -> int:
+        """The order of the gyro output filter (its first-order sections in cascade): 1 unless
+        a chip's register selects another (the ICM-42688-P's GYRO_UI_FILT_ORD)."""
+        return 1
+
+    def _filter_key(self) -> tuple[float, int] | None:
+        """What the output filter's state belongs to: its cutoff and order (``None``: no
+        filter)."""
+        fc = self._lowpass_hz()
+        return None if fc is None else (fc, self.filter_order())
+
+    def _filter_section(self) -> tuple[float, int] | None:
+        """The output filter as ``(k, order)``: ``order`` equal first-order low-passes
+        ``b (1 + z⁻¹) / (1 + a z⁻¹)``, ``b = k / (1 + k)``, ``a = (k − 1) / (k + 1)``, each the
+        bilinear transform prewarped so that the cascade is exactly −3 dB at the cutoff ``fc``:
+        ``k = tan(π fc / rate) / √(2^(1/order) − 1)``; ``None`` without a filter."""
+        key, rate = self._filter_key(), self._filter_rate_hz()
+        if key is None or rate is None:
+            return None
+        fc, order = key
+        k = math.tan(math.pi * fc / rate)
+        return (k if order == 1 else k / math.sqrt(2.0 ** (1.0 / order) - 1.0)), order
 
     def _pure_delay_s(self, period: float) -> float:
         """A delay of the output beyond its filter's, s (the chip's datasheet delay less the
@@ -1002,60 +1031,72 @@ class _EmulatedImu(ABC):
 
     def _filtered(self, omega: np.ndarray, white: np.ndarray, head: int, skipped: int
                   ) -> tuple[np.ndarray, np.ndarray]:
-        """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples and on
+        """The output filter (:meth:`_filter_section`: the chip's order of first-order
+        low-passes at its cutoff, :meth:`_lowpass_hz`) on the true rates of new samples and on
         the white noise drawn for them (``white``, the same shape: the noise enters ahead of the
         filter, so the filter narrows it as on silicon; the first ``head`` rows, then
         ``skipped`` not generated, then the rest); returns both filtered, decimated to one row
-        per output sample. The filter is discretised at the
-        filter's rate (:meth:`_filter_rate_hz`) by the bilinear transform prewarped to that
-        cutoff (exactly −3 dB there). Rates given per internal sample (n, D, 3) are filtered at
-        the internal rate and decimated to the last of each D (the MPU-9250's DLPF runs at
-        1 kHz before SMPLRT_DIV, register map CONFIG). The chips' filter orders are not
-        published, so this stands in with the datasheet's bandwidth ⚠. The state carries across
-        calls; it restarts (the rates at rest on their first input, the noise at zero) after
-        skipped samples and when the cutoff or rate changes (:meth:`_sync` runs it in early
-        enough for the restart to be forgotten)."""
+        per output sample. The filter runs at :meth:`_filter_rate_hz`. Rates given per internal
+        sample (n, D, 3) are filtered at the internal rate and decimated to the last of each D
+        (the MPU-9250's DLPF runs at 1 kHz before SMPLRT_DIV, register map CONFIG). The chips'
+        filter shapes are not published, so this stands in with the datasheet's bandwidth and
+        the register's order ⚠. The state carries across calls; it restarts (the rates at rest
+        on their first input, the noise at zero) after skipped samples and when the cutoff,
+        order or rate changes (:meth:`_sync` runs it in early enough for the restart to be
+        forgotten)."""
         x = np.concatenate((omega, white), axis=-1)
-        out, state = self._lowpass(x, head, skipped, self._lpf)
+        out, state, _ = self._lowpass(x, head, skipped, self._lpf)
         if out is not x:
             self._lpf = state
         out = out if out.ndim == 2 else out[:, -1]
         return out[:, :3], out[:, 3:]
 
-    def _lowpass(self, omega: np.ndarray, head: int, skipped: int, state: Any
-                 ) -> tuple[np.ndarray, Any]:
+    def _lowpass(self, omega: np.ndarray, head: int, skipped: int, state: Any,
+                 stages: bool = False) -> tuple[np.ndarray, Any, list[np.ndarray] | None]:
         """:meth:`_filtered`'s filter from ``state``, without decimating: the filtered rates
-        (``omega`` itself when there is no filter) and the state after them."""
-        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        if fc is None or rate is None or omega.shape[0] == 0:
-            return omega, state
-        k = math.tan(math.pi * fc / rate)
+        (``omega`` itself when there is no filter), the state after them (the last input and
+        each section's last output) and, with ``stages``, the input and each section's output
+        (the state after every row; ``None`` without a filter)."""
+        section, key = self._filter_section(), self._filter_key()
+        if section is None or omega.shape[0] == 0:
+            return omega, state, None
+        k, order = section
         b, a = k / (1 + k), (k - 1) / (k + 1)
         out = np.empty_like(omega)
+        every = [np.empty_like(omega) for _ in range(order + 1)] if stages else None
         parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
         for i, (lo, hi) in enumerate(parts):
             if hi <= lo:
                 continue
             x = omega[lo:hi].reshape(-1, omega.shape[-1])
-            if state is None or state[0] != fc or (i == 1 and skipped):
-                prev_x = x[0].copy()
-                prev_x[3:] = 0.0  # the rates at rest, the noise at zero
-                prev_y = prev_x
+            if state is None or state[0] != key or (i == 1 and skipped):
+                rest = x[0].copy()
+                rest[3:] = 0.0  # the rates at rest, the noise at zero
+                prev = np.repeat(rest[None, :], order + 1, axis=0)
             else:
-                prev_x, prev_y = state[1][0], state[1][1]
-            y, _ = lfilter([b, b], [1.0, a], x, zi=(b * prev_x - a * prev_y)[None, :])
-            out[lo:hi] = y.reshape(omega[lo:hi].shape)
-            state = (fc, np.stack([x[-1], y[-1]]))
-        return out, state
+                prev = state[1]
+            ys = [x]
+            for n in range(order):
+                zi = (b * prev[n] - a * prev[n + 1])[None, :]
+                y, _ = lfilter([b, b], [1.0, a], ys[-1], zi=zi)
+                ys.append(y)
+            out[lo:hi] = ys[-1].reshape(omega[lo:hi].shape)
+            if every is not None:
+                for v, y in zip(every, ys, strict=True):
+                    v[lo:hi] = y.reshape(omega[lo:hi].shape)
+            state = (key, np.stack([y[-1] for y in ys]))
+        return out, state, every
 
     def filter_delay_s(self) -> float | None:
-        """Group delay at DC of the emulated output filter, s: ``1 / (2 k · odr)`` with
-        ``k = tan(π fc / odr)`` for the bilinear first-order low-pass (its numerator's half
-        sample plus its pole's ``(1 − k) / 2k`` samples); ``None`` without a filter."""
-        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        if fc is None or rate is None:
+        """Group delay at DC of the emulated output filter, s: ``order / (2 k · rate)`` for
+        ``order`` bilinear first-order sections (each its numerator's half sample plus its
+        pole's ``(1 − k) / 2k`` samples, :meth:`_filter_section`'s ``k``); ``None`` without
+        a filter."""
+        section, rate = self._filter_section(), self._filter_rate_hz()
+        if section is None or rate is None:
             return None
-        return 1.0 / (2.0 * math.tan(math.pi * fc / rate) * rate)
+        k, order = section
+        return order / (2.0 * k * rate)
 
     def _gyro_trim_counts(self) -> np.ndarray | float:
         """Counts the chip's registers add to each gyro output (offset registers, self-test
@@ -1092,7 +1133,7 @@ _MPU_MASTER = MasterLayout(
     slv0_addr=_MR.I2C_SLV0_ADDR, slv_stride=3, slv0_do=_MR.I2C_SLV0_DO, do_stride=1,
     slv4_addr=_MR.I2C_SLV4_ADDR, slv4_reg=_MR.I2C_SLV4_REG, slv4_ctrl=_MR.I2C_SLV4_CTRL,
     slv4_do=_MR.I2C_SLV4_DO, slv4_di=_MR.I2C_SLV4_DI, ext_sens_data_00=_MR.EXT_SENS_DATA_00)
-_MPU_DLPF_BY_CFG = {cfg: hz for hz, cfg in MPU9250_DLPF.items()}
+_MPU_DLPF_BY_CFG = {f.code: f for f in MPU9250_GYRO_FILTER}
 
 
 class EmulatedMPU9250(_EmulatedImu):
@@ -1170,18 +1211,24 @@ class EmulatedMPU9250(_EmulatedImu):
         if self._regs[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN:
             self._mst_status |= self.master.cycle(self._regs, self._regs)
 
-    def cutoff_hz(self) -> float | None:
-        """The gyro DLPF bandwidth CONFIG.DLPF_CFG selects (register map CONFIG table,
-        hardware reference §1.4), for DLPF_CFG 1..6 with FCHOICE_B = 00; ``None`` otherwise."""
+    def filter_setting(self) -> FilterSetting | None:
+        """The gyro DLPF's row of :data:`~gyrocal.drivers.imu.chips.MPU9250_GYRO_FILTER`
+        CONFIG.DLPF_CFG selects (register map CONFIG table, hardware reference §1.4), for
+        DLPF_CFG 1..6 with FCHOICE_B = 00; ``None`` otherwise."""
         r = self._regs
         if r[_MR.GYRO_CONFIG] & _MB.GYRO_FCHOICE_B_MASK or self._odr_hz() is None:
             return None
         return _MPU_DLPF_BY_CFG.get(r[_MR.CONFIG] & _MB.CONFIG_DLPF_MASK)
 
+    def cutoff_hz(self) -> float | None:
+        """The gyro DLPF bandwidth (:meth:`filter_setting`); ``None`` without one."""
+        setting = self.filter_setting()
+        return None if setting is None else setting.bandwidth_hz
+
     def delay_s(self) -> float | None:
         """The datasheet's gyro delay for the configured DLPF (CONFIG table), s."""
-        fc = self.cutoff_hz()
-        return None if fc is None else MPU9250_DLPF_DELAY_S[fc]
+        setting = self.filter_setting()
+        return None if setting is None else setting.delay_s
 
 
     def _pure_delay_s(self, period: float) -> float:

@@ -15,8 +15,8 @@ import pytest
 from bench.bench_chips import NOISE_SETTINGS, still_stream
 from gyrocal.drivers.clock import VirtualClock
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
-from gyrocal.drivers.emulated.motion import FunctionMotion
-from gyrocal.drivers.imu import READERS
+from gyrocal.drivers.emulated.motion import ConstantRate, FunctionMotion
+from gyrocal.drivers.imu import READERS, open_imu
 from gyrocal.drivers.imu.chips import MPU9250_REG
 
 # the datasheets' rate noise spectral densities, °/s/√Hz, written out here (the LSM9DS1's is a
@@ -40,12 +40,39 @@ def test_white_noise_allan_deviation_is_the_datasheet_density(model):
     assert ratio == pytest.approx(1.0, abs=0.08)  # ~3 × 45 independent 0.1 s means
 
 
-def _filtered_sigma(density_dps: float, fc: float, rate: float) -> float:
-    # white noise of density N drawn at `rate` through a bilinear first-order low-pass at fc:
-    # h0 = b, h_n = b (1 − a)(−a)^(n−1), so Σh² = 2b² / (1 + a) = k / (1 + k)
-    k = math.tan(math.pi * fc / rate)
+# the order of each chip's filter at the settings the readers leave: the ICM-42688-P's
+# GYRO_CONFIG1 resets to 0x16, GYRO_UI_FILT_ORD (bits 3:2) = 01, second order (DS-000347)
+ORDER = {"mpu9250": 1, "lsm9ds1": 1, "icm20948": 1, "icm42688p": 2}
+
+
+def _impulse_response(fc: float, rate: float, order: int, n: int = 4000) -> np.ndarray:
+    # `order` equal bilinear first-order low-passes b (1 + z⁻¹) / (1 + a z⁻¹), prewarped so the
+    # cascade is −3 dB at fc: one section's impulse response in closed form, h0 = b,
+    # h_n = b (1 − a)(−a)^(n−1), convolved with itself
+    k = math.tan(math.pi * fc / rate) / math.sqrt(2.0 ** (1.0 / order) - 1.0)
     b, a = k / (1 + k), (k - 1) / (k + 1)
-    return math.radians(density_dps) * math.sqrt(rate * 2 * b * b / (1 + a))
+    one = np.concatenate(([b], b * (1 - a) * (-a) ** np.arange(n - 1)))
+    h = one
+    for _ in range(order - 1):
+        h = np.convolve(h, one)[:n]
+    return h
+
+
+def _filtered_sigma(density_dps: float, fc: float, rate: float, order: int = 1) -> float:
+    # white noise of density N drawn at `rate` (per-sample σ = N √rate) through the cascade:
+    # σ = N √(rate Σh²); for one section Σh² = 2b² / (1 + a) = k / (1 + k)
+    h = _impulse_response(fc, rate, order)
+    return math.radians(density_dps) * math.sqrt(rate * float(np.sum(h * h)))
+
+
+def _sigma_tolerance(fc: float, rate: float, order: int, samples: int) -> float:
+    # the relative standard error of σ estimated from `samples` correlated samples of noise
+    # through the filter: var(s²) ≈ 2σ⁴ Σρ_k² / n (ρ the output's autocorrelation, from the
+    # impulse response), so σ's relative error is √(Σρ² / 2n); 3.5 of them, plus 1 % for
+    # the quantization and the stand-in
+    h = _impulse_response(fc, rate, order)
+    rho = np.correlate(h, h, mode="full") / np.sum(h * h)
+    return 3.5 * math.sqrt(float(np.sum(rho * rho)) / (2 * samples)) + 0.01
 
 
 @pytest.mark.parametrize("model", ["mpu9250", "lsm9ds1", "icm20948", "icm42688p"])
@@ -56,8 +83,10 @@ def test_noise_per_sample_follows_the_filter_bandwidth(model):
         rate, _, fc = still_stream(model, 1.5, lowpass_hz=band, seed=5)
         assert fc == pytest.approx(band, abs=0.5)  # the reader's setting reached the chip
         sigma = float(np.mean(np.std(rate, axis=0)))
+        # the streams' ODR is the filter's rate (NOISE_SETTINGS): one output per filter step
+        tol = _sigma_tolerance(band, filter_rate, ORDER[model], 3 * rate.shape[0])
         assert sigma == pytest.approx(_filtered_sigma(DATASHEET_DENSITY[model], band,
-                                                      filter_rate), rel=0.06)
+                                                      filter_rate, ORDER[model]), rel=tol)
         sigmas.append(sigma)
     # narrowest against widest: smaller, not one figure for every setting (the noise used to
     # be added after the filter)
@@ -123,3 +152,116 @@ def test_polling_slower_than_the_odr_keeps_the_filter_running():
     t_step = chip.sample_time(np.asarray(both))
     after = np.asarray([got[k] for k in both])[(t_step > 0.3) & (t_step < 0.3026)]
     assert after.size and np.all(after < 60.0)
+
+
+# DS-000189 GYRO_CONFIG_1 table, written out here: GYRO_DLPFCFG → (3 dB bandwidth, noise
+# bandwidth) in Hz (SparkFun's qwiic_icm20948.py lines 107-115 carry the same figures)
+ICM20948_DATASHEET_DLPF = {0: (196.6, 229.8), 3: (51.2, 73.3), 6: (5.7, 8.9)}
+
+
+@pytest.mark.parametrize("band", [196.6, 51.2])
+def test_icm20948_noise_per_sample_is_the_datasheet_noise_bandwidth(band):
+    # white noise of two-sided density N through a filter of noise bandwidth NBW: σ = N √(2 NBW)
+    # (the emulator's convention, bench.bench_chips); the first-order stand-in's noise bandwidth
+    # is within 7 % of the datasheet's at 196.6 Hz, 4 % at 51.2 Hz
+    nbw = dict(ICM20948_DATASHEET_DLPF.values())[band]
+    rate, _, fc = still_stream("icm20948", 1.5, lowpass_hz=band, seed=7)
+    assert fc == band
+    sigma = float(np.mean(np.std(rate, axis=0)))
+    want = math.radians(DATASHEET_DENSITY["icm20948"]) * math.sqrt(2 * nbw)
+    # the statistical tolerance plus the stand-in's 3.6 % (√(213.7 / 229.8) at 196.6 Hz)
+    tol = _sigma_tolerance(band, 1125.0, 1, 3 * rate.shape[0]) + 0.036
+    assert sigma == pytest.approx(want, rel=tol)
+
+
+def test_each_chip_table_row_is_the_datasheet_row():
+    from gyrocal.drivers.imu.chips import ICM20948_GYRO_FILTER, MPU9250_GYRO_FILTER
+
+    rows = {f.code: (f.bandwidth_hz, f.noise_bandwidth_hz) for f in ICM20948_GYRO_FILTER}
+    assert all(rows[code] == row for code, row in ICM20948_DATASHEET_DLPF.items())
+    # RM-MPU-9250A-00 CONFIG table: DLPF_CFG → (bandwidth Hz, delay ms)
+    mpu = {1: (184, 2.9), 2: (92, 3.9), 3: (41, 5.9), 4: (20, 9.9), 5: (10, 17.85), 6: (5, 33.48)}
+    assert {f.code: (f.bandwidth_hz, round(f.delay_s * 1e3, 2)) for f in MPU9250_GYRO_FILTER} == mpu
+
+
+def _raw_icm42688p(motion, *, bw_code: int, order_bits: int | None, seed: int = 0,
+                   truth: SensorTruth | None = None, fs_code: int = 3):
+    clock = VirtualClock()
+    bus, addr = make_emulated_imu("icm42688p", clock, motion,
+                                  truth or SensorTruth(noise_sigma_rad_s=0.0), seed=seed)
+    chip = bus.device(addr)
+    bus.write_byte_data(addr, 0x52, 0x10 | bw_code)  # GYRO_ACCEL_CONFIG0.GYRO_UI_FILT_BW
+    if order_bits is not None:  # GYRO_CONFIG1 with GYRO_UI_FILT_ORD in bits 3:2
+        bus.write_byte_data(addr, 0x51, 0x12 | order_bits << 2)
+    # GYRO_CONFIG0: 1 kHz; FS 3 ±250 °/s (131 LSB/(°/s)), 7 ±15.625 °/s (2097.2)
+    bus.write_byte_data(addr, 0x4F, (fs_code << 5) | 0b0110)
+    bus.write_byte_data(addr, 0x4E, 0x0F)  # gyro and accelerometer low-noise
+    return clock, bus, addr, chip
+
+
+def test_icm42688p_ui_filter_resets_to_second_order_and_follows_its_register():
+    # DS-000347: GYRO_CONFIG1 resets to 0x16, GYRO_UI_FILT_ORD = 01 (second order); 00 first,
+    # 10 third
+    _, bus, addr, chip = _raw_icm42688p(ConstantRate(), bw_code=7, order_bits=None)
+    assert bus.read_byte_data(addr, 0x51) == 0x16
+    assert chip.filter_order() == 2
+    for bits, order in ((0b00, 1), (0b01, 2), (0b10, 3)):
+        bus.write_byte_data(addr, 0x51, 0x12 | bits << 2)
+        assert chip.filter_order() == order
+
+
+def _sine_gain(chip, clock, bus, addr, f: float) -> float:
+    ks, xs = [], []
+    while clock.monotonic() < 0.6:
+        clock.sleep(1e-3)
+        hi, lo = bus.read_i2c_block_data(addr, 0x25, 2)  # GYRO_DATA_X1/X0, big-endian
+        xs.append(int.from_bytes(bytes((hi, lo)), "big", signed=True) / 131.0)
+        ks.append(chip.samples_taken)
+    t = chip.sample_time(np.asarray(ks))
+    keep = t > 0.2
+    basis = np.column_stack([np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t)])[keep]
+    return math.hypot(*np.linalg.lstsq(basis, np.asarray(xs)[keep], rcond=None)[0]) / 100.0
+
+
+@pytest.mark.parametrize("order_bits,order", [(0b00, 1), (0b01, 2), (0b10, 3)])
+def test_a_sine_through_the_icm42688p_ui_filter_keeps_what_its_response_says(order_bits, order):
+    # GYRO_UI_FILT_BW 7 at 1 kHz: max(400, 1000)/40 = 25 Hz (DS-000347). A sine at the
+    # bandwidth keeps 1/√2 whatever the order (the datasheet's −3 dB point); at 4× it keeps
+    # the cascade's |H|, less the higher the order; both times the per-sample mean's sinc
+    for f in (25.0, 100.0):
+        motion = FunctionMotion(lambda t, f=f: np.column_stack(
+            [math.radians(100.0) * np.sin(2 * np.pi * f * t), 0 * t, 0 * t]))
+        clock, bus, addr, chip = _raw_icm42688p(motion, bw_code=7, order_bits=order_bits)
+        assert chip.cutoff_hz() == 25.0 and chip.filter_order() == order
+        gain = _sine_gain(chip, clock, bus, addr, f)
+        h = _impulse_response(25.0, 1000.0, order)
+        want = abs(np.sum(h * np.exp(-2j * np.pi * f / 1000.0 * np.arange(h.size))))
+        assert want * np.sinc(f / 1000.0) == pytest.approx(gain, abs=0.01)
+        if f == 25.0:
+            assert want == pytest.approx(1 / math.sqrt(2), abs=1e-9)
+    assert gain < {1: 0.25, 2: 0.14, 3: 0.09}[order]  # 4 fc: 0.243, 0.131, 0.085 analog
+
+
+def test_icm42688p_noise_per_sample_follows_bandwidth_and_order():
+    # narrow setting (25 Hz at 1 kHz): σ ≈ N √(2 ENBW) with the analog prototype's noise
+    # bandwidth, ENBW = f_s √π Γ(n − ½) / (2 Γ(n)), f_s = fc / √(2^(1/n) − 1) per section;
+    # streamed through the reader (FIFO), the order set in GYRO_CONFIG1 after it started
+    n_dps = DATASHEET_DENSITY["icm42688p"]
+    for order_bits, order in ((0b00, 1), (0b01, 2)):
+        clock = VirtualClock()
+        bus, addr = make_emulated_imu("icm42688p", clock, seed=order)
+        reader = open_imu("icm42688p", bus, addr, clock=clock, range_dps=15.625, odr_hz=1000,
+                          lowpass_hz=25)
+        reader.start()
+        bus.write_byte_data(addr, 0x51, 0x12 | order_bits << 2)
+        assert bus.device(addr).filter_order() == order
+        chunks = []
+        while clock.monotonic() < 3.0:
+            clock.sleep(0.02)
+            chunks.append(reader.read().rate)
+        kept = np.vstack(chunks)[500:]
+        sigma = float(np.mean(np.std(kept, axis=0)))
+        fs = 25.0 / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+        enbw = fs * math.sqrt(math.pi) * math.gamma(order - 0.5) / (2 * math.gamma(order))
+        tol = _sigma_tolerance(25.0, 1000.0, order, kept.size)
+        assert sigma == pytest.approx(math.radians(n_dps) * math.sqrt(2 * enbw), rel=tol)
