@@ -81,8 +81,9 @@ class SimJig:
         lines: dict[str, Any] = {
             "coloured-noise": {"bias_instability_rad_s": r.bias_instability_rad_s,
                                "rate_random_walk_rad_s_sqrt_s": r.rate_random_walk_rad_s_sqrt_s},
-            "dlpf": {"cutoff_hz": self.chip.cutoff_hz(), "delay_s": getattr(
-                self.chip, "delay_s", lambda: None)()} if r.dlpf_delay else "off",
+            "dlpf": {"cutoff_hz": self.chip.cutoff_hz(), "order": self.chip.filter_order(),
+                     "delay_s": getattr(self.chip, "delay_s", lambda: None)()
+                     } if r.dlpf_delay else "off",
             "g-sensitivity": {
                 "matrix_rad_s_per_g": [list(x) for x in r.g_sensitivity_rad_s_per_g],
                 # what it adds to the bias in the home pose, where a calibration's rests are

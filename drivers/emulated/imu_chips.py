@@ -1477,15 +1477,25 @@ class EmulatedLSM9DS1(_EmulatedImu):
         super().__init__(clock, motion, truth, **kwargs)
 
     def cutoff_hz(self) -> float | None:
-        """The gyro output's −3 dB bandwidth (datasheet Figure 28): the LPF1 cutoff of Table 46
-        with CTRL_REG2_G.OUT_SEL = 00, the LPF2 cutoff BW_G selects in Table 47 with OUT_SEL =
-        1x (01 adds only the high-pass, which is off here); ``None`` with the gyro off."""
+        """The gyro output's −3 dB bandwidth (datasheet Figure 28; :meth:`filter_setting`);
+        ``None`` with the gyro off."""
+        setting = self.filter_setting()
+        return None if setting is None else setting.bandwidth_hz
+
+    def filter_setting(self) -> FilterSetting | None:
+        """The gyro output filter's setting: the LPF1 cutoff of ST Table 46 with
+        CTRL_REG2_G.OUT_SEL = 00, the LPF2 cutoff BW_G selects in Table 47 with OUT_SEL = 1x
+        (01 adds only the high-pass, which is off here); the datasheet gives no delay or noise
+        bandwidth. ``None`` with the gyro off."""
         odr = self._odr_hz()
         if odr is None:
             return None
         if self._regs[_LR.CTRL_REG2_G] & _LB.OUT_SEL_LPF2:
-            return LSM9DS1_BW_G_CUTOFF_HZ[odr][self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK]
-        return LSM9DS1_LPF1_CUTOFF_HZ[odr]
+            code = self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK
+            return FilterSetting(code, LSM9DS1_BW_G_CUTOFF_HZ[odr][code], None, None,
+                                 "ST DocID025715 Table 47 (BW_G), hardware reference §2.3 ⚠")
+        return FilterSetting(0, LSM9DS1_LPF1_CUTOFF_HZ[odr], None, None,
+                             "ST DocID025715 Table 46 (LPF1), hardware reference §2.3")
 
 
     def _reset_state(self) -> None:
