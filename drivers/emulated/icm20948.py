@@ -16,7 +16,9 @@ What it models:
   its DLPF (GYRO_DLPFCFG's row of :data:`~gyrocal.drivers.imu.chips.ICM20948_GYRO_FILTER`:
   its 3 dB bandwidth, a first-order stand-in ⚠ whose noise bandwidth is within 7 % of the
   table's NBW; DS-000189 gives no delay) runs at 1125 Hz ahead of the divider, the white noise
-  entering ahead of it.
+  entering ahead of it; the accelerometer's DLPF (ACCEL_CONFIG.ACCEL_DLPFCFG with
+  ACCEL_FCHOICE = 1, the reset: 246 Hz; :data:`~gyrocal.drivers.imu.chips.
+  ICM20948_ACCEL_FILTER`) likewise.
 - Data registers (bank 0) big-endian: ACCEL_XOUT_H 0x2D, GYRO_XOUT_H 0x33, TEMP_OUT_H 0x39
   (333.87 LSB/°C, 0 at 21 °C).
 - FIFO (512 bytes ⚠): frames of the sources FIFO_EN_2 enables, in register order (accelerometer,
@@ -60,6 +62,7 @@ from gyrocal.drivers.emulated.smbus import I2CDevice
 from gyrocal.drivers.imu.chips import (
     GYRO_OFFSET_COUNTS_PER_CODE_FS0,
     ICM20948,
+    ICM20948_ACCEL_FILTER,
     ICM20948_BITS,
     ICM20948_GYRO_FILTER,
     ICM20948_REG,
@@ -232,6 +235,16 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
         if not cfg & _B.GYRO_FCHOICE or self._odr_hz() is None:
             return None
         return _DLPF_BY_CFG[(cfg >> _B.GYRO_DLPFCFG_SHIFT) & 0x07]
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer DLPF's row of :data:`~gyrocal.drivers.imu.chips.
+        ICM20948_ACCEL_FILTER` for ACCEL_CONFIG.ACCEL_DLPFCFG with ACCEL_FCHOICE = 1 (the reset
+        value: 246 Hz), at the internal 1125 Hz; ``None`` with it bypassed or the chip not
+        sampling."""
+        cfg = self._banks[2][_R2.ACCEL_CONFIG]
+        if not cfg & _B.ACCEL_FCHOICE or self._odr_hz() is None:
+            return None
+        return ICM20948_ACCEL_FILTER[(cfg >> _B.ACCEL_DLPFCFG_SHIFT) & 0x07]
 
     def _sensitivity_rad_s_per_lsb(self) -> float:
         fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT

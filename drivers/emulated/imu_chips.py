@@ -64,6 +64,7 @@ from gyrocal.drivers.imu.chips import (
     LSM9DS1_ODR,
     LSM9DS1_REG,
     MPU9250,
+    MPU9250_ACCEL_FILTER,
     MPU9250_BITS,
     MPU9250_GYRO_FILTER,
     MPU9250_REG,
@@ -430,6 +431,56 @@ class _Ahead:
     walk: np.ndarray | None = None
     frames: bytes | None = None
     noise_draws: int = 3
+    accel_lpf: np.ndarray | None = None
+    accel_key: tuple[float, int, float] | None = None
+    start_accel_lpf: Any = None
+
+
+def _memory(k: float, order: int, steps: int) -> int:
+    """Output samples (of ``steps`` filter steps each) before a restarted cascade of ``order``
+    sections of :func:`_cascade`'s ``k`` forgets its start to :data:`_FILTER_MEMORY`: each
+    section's pole decays that far in turn (an upper bound)."""
+    pole = abs((1.0 - k) / (1.0 + k))
+    if pole <= _FILTER_MEMORY:
+        return 1
+    return math.ceil(order * math.log(_FILTER_MEMORY) / math.log(pole) / steps) + 1
+
+
+def _cascade(x6: np.ndarray, head: int, skipped: int, state: Any, key: Any, k: float,
+             order: int, stages: bool) -> tuple[np.ndarray, Any, list[np.ndarray] | None]:
+    """``order`` equal bilinear first-order low-passes ``b (1 + z⁻¹) / (1 + a z⁻¹)``, ``b = k /
+    (1 + k)``, ``a = (k − 1) / (k + 1)``, along the first axis of ``x6`` (rows, or rows of
+    internal samples; its last axis a signal's three columns, then its white noise's three),
+    from ``state`` = ``(key, (order + 1, 6) last input and sections' outputs)``; restarted (the
+    signal at rest on its first row, the noise at zero) when the state is for another ``key``
+    or none, and after ``skipped`` rows not given (the first ``head`` rows, then the rest).
+    Returns the output, the state after it and, with ``stages``, the input and every
+    section's output."""
+    b, a = k / (1 + k), (k - 1) / (k + 1)
+    out = np.empty_like(x6)
+    every = [np.empty_like(x6) for _ in range(order + 1)] if stages else None
+    parts = [(0, head), (head, x6.shape[0])] if skipped else [(0, x6.shape[0])]
+    for i, (lo, hi) in enumerate(parts):
+        if hi <= lo:
+            continue
+        x = x6[lo:hi].reshape(-1, x6.shape[-1])
+        if state is None or state[0] != key or (i == 1 and skipped):
+            rest = x[0].copy()
+            rest[3:] = 0.0  # the signal at rest, the noise at zero
+            prev = np.repeat(rest[None, :], order + 1, axis=0)
+        else:
+            prev = state[1]
+        ys = [x]
+        for n in range(order):
+            zi = (b * prev[n] - a * prev[n + 1])[None, :]
+            y, _ = lfilter([b, b], [1.0, a], ys[-1], zi=zi)
+            ys.append(y)
+        out[lo:hi] = ys[-1].reshape(x6[lo:hi].shape)
+        if every is not None:
+            for v, y in zip(every, ys, strict=True):
+                v[lo:hi] = y.reshape(x6[lo:hi].shape)
+        state = (key, np.stack([y[-1] for y in ys]))
+    return out, state, every
 
 
 @dataclass
@@ -485,6 +536,7 @@ class _EmulatedImu(ABC):
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
                                        Normals(np.random.default_rng([seed, 2])))
         self._lpf: tuple[float, np.ndarray] | None = None
+        self._accel_lpf: tuple[Any, np.ndarray] | None = None
         self._created = clock.monotonic()
         self._power_on_reset()
 
@@ -547,6 +599,7 @@ class _EmulatedImu(ABC):
         self._latest = _Sample()
         #: :attr:`samples_taken` at each FIFO enable: the FIFO's first sample is the next one.
         self.fifo_enables: list[int] = []
+        self._accel_lpf = None
         self._reset_state()
         self._restart_sampling()
 
@@ -717,22 +770,29 @@ class _EmulatedImu(ABC):
         rates = self._internal_rates(t_eval, period)
         white = self._noise_rng.standard_normal(rates.shape) * self._white_sigma(period)
         omega, white = self._filtered(rates, white, head, skipped)
+        odr = 1.0 / period
+        force = accel = None
+        if self._accel_filter_key(odr) is not None:  # it runs through the run-in rows too
+            force = self._specific_force(t_eval)
+            accel, self._accel_lpf, _ = self._accel_counts(force, self._accel_rng, odr, head,
+                                                           skipped, self._accel_lpf)
         if warm:  # the filter's run-in is not handed out: it joins the samples skipped
             keep = np.r_[0:head, head + warm:t.size]
             t, t_eval, omega, white = t[keep], t_eval[keep], omega[keep], white[keep]
+            if accel is not None:
+                force, accel = force[keep], accel[keep]  # type: ignore[index]
             skipped += warm
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
-        force = self._specific_force(t_eval)
+        if force is None:
+            force = self._specific_force(t_eval)
         realism = self.truth.realism
         if realism.g_sensitivity_rad_s_per_g != _ZERO33:
             m = m + self._true_force(t_eval, force) @ np.asarray(
                 realism.g_sensitivity_rad_s_per_g).T
         m = m + white
-        odr = 1.0 / period
-        accel = np.clip(np.rint(self.truth.accel_reading(force, self._accel_rng, odr)
-                                * self._accel_counts_1g()) + self._accel_trim_counts(),
-                        -32768, 32767).astype(np.int64)
+        if accel is None:
+            accel, _, _ = self._accel_counts(force, self._accel_rng, odr, head, skipped, None)
         self._emit(t, m, accel, temperature, head, skipped)
 
     def _white_sigma(self, period: float) -> np.ndarray:
@@ -745,15 +805,18 @@ class _EmulatedImu(ABC):
         """Output samples a restarted output filter needs before its start is forgotten to
         :data:`_FILTER_MEMORY` (0 without a filter): each of its ``order`` sections' poles
         decays that far in turn (an upper bound for the cascade)."""
+        memory = 0
         section, rate = self._filter_section(), self._filter_rate_hz()
-        if section is None or rate is None:
-            return 0
-        k, order = section
-        pole = abs((1.0 - k) / (1.0 + k))
-        if pole <= _FILTER_MEMORY:
-            return 1
-        steps = order * math.log(_FILTER_MEMORY) / math.log(pole)
-        return math.ceil(steps / self._internal_per_output(period)) + 1
+        if section is not None and rate is not None:
+            memory = _memory(*section, self._internal_per_output(period))
+        accel = self._accel_filter_key(1.0 / period)
+        if accel is not None:  # the accelerometer's filter, as :meth:`_accel_counts` runs it
+            fc, order, rate = accel
+            steps = max(1, round(rate * period))
+            k = math.tan(math.pi * fc / (steps / period))
+            k = k if order == 1 else k / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+            memory = max(memory, _memory(k, order, steps))
+        return memory
 
     def _emit(self, t: np.ndarray, m: np.ndarray, accel: np.ndarray, temperature: np.ndarray,
               head: int, skipped: int, gyro: np.ndarray | None = None,
@@ -809,6 +872,7 @@ class _EmulatedImu(ABC):
             return False
         a = self._ahead
         if (a is None or a.token != token or a.start_lpf is not self._lpf
+                or a.start_accel_lpf is not self._accel_lpf
                 or a.k_first + a.next != self._k + 1 or a.next + n > a.t.size):
             a = None
         if a is not None:
@@ -827,6 +891,8 @@ class _EmulatedImu(ABC):
         self._accel_rng.skip(a.accel_draws * n)
         if a.lpf is not None:
             self._lpf = a.start_lpf = (a.fc, a.lpf[j - 1])
+        if a.accel_lpf is not None:
+            self._accel_lpf = a.start_accel_lpf = (a.accel_key, a.accel_lpf[j - 1])
         a.next = j
         gyro = None
         if n == 1:
@@ -914,13 +980,14 @@ class _EmulatedImu(ABC):
         odr = 1.0 / period
         m = m + white
         peeking = _Peeking(self._accel_rng)
-        accel = np.clip(np.rint(self.truth.accel_reading(force, peeking, odr)  # type: ignore[arg-type]
-                                * self._accel_counts_1g()) + self._accel_trim_counts(),
-                        -32768, 32767).astype(np.int64)
+        start_accel = self._accel_lpf
+        accel, _, accel_states = self._accel_counts(force, peeking, odr, count, 0,  # type: ignore[arg-type]
+                                                    start_accel, stages=True)
         return _Ahead(token, k_first, t, t_eval, m, accel, temperature,
                       self._temperature_counts(temperature), states, self._filter_key(),
                       peeking.used // count, start_lpf, self._sensitivity_rad_s_per_lsb(),
-                      noise_draws=rates.size // count)
+                      noise_draws=rates.size // count, accel_lpf=accel_states,
+                      accel_key=self._accel_filter_key(odr), start_accel_lpf=start_accel)
 
     def _true_force(self, t: np.ndarray, accel_force: np.ndarray, peek: bool = False
                     ) -> np.ndarray:
@@ -1060,32 +1127,7 @@ class _EmulatedImu(ABC):
         section, key = self._filter_section(), self._filter_key()
         if section is None or omega.shape[0] == 0:
             return omega, state, None
-        k, order = section
-        b, a = k / (1 + k), (k - 1) / (k + 1)
-        out = np.empty_like(omega)
-        every = [np.empty_like(omega) for _ in range(order + 1)] if stages else None
-        parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
-        for i, (lo, hi) in enumerate(parts):
-            if hi <= lo:
-                continue
-            x = omega[lo:hi].reshape(-1, omega.shape[-1])
-            if state is None or state[0] != key or (i == 1 and skipped):
-                rest = x[0].copy()
-                rest[3:] = 0.0  # the rates at rest, the noise at zero
-                prev = np.repeat(rest[None, :], order + 1, axis=0)
-            else:
-                prev = state[1]
-            ys = [x]
-            for n in range(order):
-                zi = (b * prev[n] - a * prev[n + 1])[None, :]
-                y, _ = lfilter([b, b], [1.0, a], ys[-1], zi=zi)
-                ys.append(y)
-            out[lo:hi] = ys[-1].reshape(omega[lo:hi].shape)
-            if every is not None:
-                for v, y in zip(every, ys, strict=True):
-                    v[lo:hi] = y.reshape(omega[lo:hi].shape)
-            state = (key, np.stack([y[-1] for y in ys]))
-        return out, state, every
+        return _cascade(omega, head, skipped, state, key, *section, stages)
 
     def filter_delay_s(self) -> float | None:
         """Group delay at DC of the emulated output filter, s: ``order / (2 k · rate)`` for
@@ -1097,6 +1139,70 @@ class _EmulatedImu(ABC):
             return None
         k, order = section
         return order / (2.0 * k * rate)
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The configured row of the chip's accelerometer filter table (its bandwidth, delay
+        and noise bandwidth where the datasheet gives them, the source); ``None`` for a chip
+        whose accelerometer filter is not emulated or is off."""
+        return None
+
+    def accel_filter_order(self) -> int:
+        """The accelerometer filter's order: 1 unless a register selects another (the
+        ICM-42688-P's ACCEL_UI_FILT_ORD)."""
+        return 1
+
+    def _accel_filter_rate_hz(self, odr: float) -> float:
+        """The rate the accelerometer filter runs at: the chip's internal rate ahead of its
+        divider where the filter runs there (the InvenSense DLPFs), else the output rate."""
+        if self.filters_at_internal_rate:
+            return max(odr, float(self.family.extra["internal_rate_hz"]))
+        return odr
+
+    def _accel_filter_key(self, odr: float) -> tuple[float, int, float] | None:
+        """The emulated accelerometer filter as ``(bandwidth, order, rate)`` (with the chip's
+        ``output_filter`` knob, the ``dlpf`` effect), ``None`` without one or with a bandwidth
+        at or above half its rate."""
+        setting = self.accel_filter_setting() if self.output_filter else None
+        if setting is None:
+            return None
+        rate = self._accel_filter_rate_hz(odr)
+        if setting.bandwidth_hz >= 0.5 * rate:
+            return None
+        return setting.bandwidth_hz, self.accel_filter_order(), rate
+
+    def _accel_counts(self, force: np.ndarray, rng: Any, odr: float, head: int, skipped: int,
+                      state: Any, stages: bool = False
+                      ) -> tuple[np.ndarray, Any, np.ndarray | None]:
+        """The accelerometer's counts (n, 3) for the true specific force at the output samples:
+        its errors (:meth:`SensorTruth.accel_reading`), its filter (:meth:`_accel_filter_key`)
+        with the white noise drawn ahead of it at the filter's rate, ``D`` internal samples per
+        output sample (the force held over them), decimated to the last of each; without a
+        filter, the noise per output sample. Returns the counts, the filter's state after them
+        and, with ``stages``, its state after each output sample ((n, order + 1, 6); else
+        ``None``)."""
+        key = self._accel_filter_key(odr)
+        if key is None:
+            reading = self.truth.accel_reading(force, rng, odr)
+            states = None
+        else:
+            fc, order, rate = key
+            n, steps = force.shape[0], max(1, round(rate / odr))
+            clean = self.truth.accel_reading(force)
+            acc = self.truth.accelerometer
+            density = 0.0 if acc is None else acc.noise_density_g_sqrt_hz
+            noise = (rng.standard_normal((n, steps, 3)) * density * math.sqrt(odr * steps)
+                     if density > 0 else np.zeros((n, steps, 3)))
+            x = np.concatenate((np.repeat(clean[:, None, :], steps, axis=1), noise), axis=-1)
+            k = math.tan(math.pi * fc / (odr * steps))
+            k = k if order == 1 else k / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+            out, state, every = _cascade(x, head, skipped, state, key, k, order, stages)
+            last = out[:, -1]
+            reading = last[:, :3] + last[:, 3:]
+            states = (None if every is None
+                      else np.stack([v[:, -1] for v in every], axis=1))
+        counts = np.clip(np.rint(reading * self._accel_counts_1g()) + self._accel_trim_counts(),
+                         -32768, 32767).astype(np.int64)
+        return counts, state, states
 
     def _gyro_trim_counts(self) -> np.ndarray | float:
         """Counts the chip's registers add to each gyro output (offset registers, self-test
@@ -1164,9 +1270,10 @@ class EmulatedMPU9250(_EmulatedImu):
     variant : str
         ``"mpu9250"``, ``"mpu9255"`` or ``"mpu6500"``: which WHO_AM_I it answers.
     output_filter : bool
-        The gyro DLPF at the CONFIG setting (:meth:`cutoff_hz`, :meth:`delay_s`), running at
-        the internal 1 kHz ahead of SMPLRT_DIV; ``False`` passes the per-sample mean rate
-        through unfiltered.
+        The gyro DLPF at the CONFIG setting (:meth:`cutoff_hz`, :meth:`delay_s`) and the
+        accelerometer's at the ACCEL_CONFIG_2 setting (:meth:`accel_filter_setting`), running
+        at the internal 1 kHz ahead of SMPLRT_DIV, the white noise entering ahead of each;
+        ``False`` passes the per-sample mean rate and unfiltered accelerometer noise.
     """
 
     family = MPU9250
@@ -1229,6 +1336,16 @@ class EmulatedMPU9250(_EmulatedImu):
         """The datasheet's gyro delay for the configured DLPF (CONFIG table), s."""
         setting = self.filter_setting()
         return None if setting is None else setting.delay_s
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer DLPF's row of :data:`~gyrocal.drivers.imu.chips.
+        MPU9250_ACCEL_FILTER` ACCEL_CONFIG_2.A_DLPFCFG selects with ACCEL_FCHOICE_B = 0 (reset:
+        218.1 Hz), running at the internal 1 kHz ahead of SMPLRT_DIV; ``None`` with it bypassed
+        or the chip not sampling."""
+        r = self._regs
+        if r[_MR.ACCEL_CONFIG_2] & _MB.ACCEL_FCHOICE_B or self._odr_hz() is None:
+            return None
+        return MPU9250_ACCEL_FILTER[r[_MR.ACCEL_CONFIG_2] & _MB.A_DLPFCFG_MASK]
 
 
     def _pure_delay_s(self, period: float) -> float:

@@ -54,7 +54,9 @@ __all__ = [
     "ChipFamily",
     "ChipModel",
     "FilterSetting",
+    "ICM20948_ACCEL_FILTER",
     "ICM20948_GYRO_FILTER",
+    "MPU9250_ACCEL_FILTER",
     "ICM42688P_UI_FILT_ORDER",
     "MPU9250_GYRO_FILTER",
     "AccelErrors",
@@ -425,6 +427,10 @@ class _MPU9250Bits:
     SELF_TEST_EN_MASK: int = 0xE0
     SELF_TEST_EN_SHIFT: int = 5
     ACCEL_FS_SHIFT: int = 3
+    # ACCEL_CONFIG_2: A_DLPFCFG bits 2:0; ACCEL_FCHOICE_B bit 3 (1: the DLPF bypassed, 4 kHz)
+    # (hardware reference §1.2: the bit's position conflicts between sources, bit 3 believed ⚠)
+    A_DLPFCFG_MASK: int = 0x07
+    ACCEL_FCHOICE_B: int = 0x08
     FIFO_EN_TEMP: int = 0x80
     FIFO_EN_GYRO_X: int = 0x40
     FIFO_EN_GYRO_Y: int = 0x20
@@ -478,6 +484,25 @@ MPU9250_DLPF: Mapping[float, int] = MappingProxyType(
 #: :data:`MPU9250_GYRO_FILTER`).
 MPU9250_DLPF_DELAY_S: Mapping[float, float] = MappingProxyType(
     {f.bandwidth_hz: f.delay_s for f in MPU9250_GYRO_FILTER}  # type: ignore[misc]
+)
+
+#: Accelerometer DLPF settings with ACCEL_FCHOICE_B = 0, one row per A_DLPFCFG (ACCEL_CONFIG_2
+#: bits 2:0, reset 0): the bandwidth and delay of the register map's ACCEL_CONFIG_2 table
+#: (RM-MPU-9250A-00 register 29), ✓✓ with the mpu9250 crate's ``Dlpf`` enum docs
+#: (docs.rs/mpu9250: "Accelerometer: bandwidth=218.1Hz, delay=1.88ms" ...) and, for the
+#: bandwidths, Zephyr's ICM-20689 (same accelerometer block) ``ICM20689_DT_ACCEL_DLPF_*``
+#: (218.1, 99.0, 44.8, 21.2, 10.2, 5.1, 420.0 Hz). The accelerometer filters at 1 kHz ahead of
+#: SMPLRT_DIV (as the gyro's DLPF).
+_MPU_ACCEL_TABLE = "RM-MPU-9250A-00 ACCEL_CONFIG_2 table ✓✓ (mpu9250 crate Dlpf docs)"
+MPU9250_ACCEL_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(0, 218.1, 1.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(1, 218.1, 1.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(2, 99.0, 2.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(3, 44.8, 4.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(4, 21.2, 8.87e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(5, 10.2, 16.83e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(6, 5.05, 32.48e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(7, 420.0, 1.38e-3, None, _MPU_ACCEL_TABLE),
 )
 
 #: RM-MPU-9250A-00 registers 19-24 (XG_OFFSET_H .. ZG_OFFSET_L): the offset the output gets,
@@ -817,6 +842,9 @@ class _ICM42688PBits:
     GYRO_UI_FILT_BW_MASK: int = 0x0F
     GYRO_UI_FILT_ORD_SHIFT: int = 2  # GYRO_CONFIG1 bits 3:2 (:data:`ICM42688P_UI_FILT_ORDER`)
     GYRO_UI_FILT_ORD_MASK: int = 0x0C
+    ACCEL_UI_FILT_BW_SHIFT: int = 4  # GYRO_ACCEL_CONFIG0 bits 7:4 (reset 1)
+    ACCEL_UI_FILT_ORD_SHIFT: int = 3  # ACCEL_CONFIG1 bits 4:3 (reset 0x0D: 01, second order)
+    ACCEL_UI_FILT_ORD_MASK: int = 0x18
     # TMST_CONFIG reset 0x23 (⚠ TDK sample code only): TMST_FSYNC_EN | TMST_EN
     TMST_TO_REGS_EN: int = 0x10
     TMST_RES_16US: int = 0x08
@@ -1237,6 +1265,7 @@ class _ICM20948Bits:
     GYRO_FCHOICE: int = 0x01  # 1: the DLPF is on and the rate is 1125/(1 + GYRO_SMPLRT_DIV)
     ACCEL_FS_SEL_SHIFT: int = 1
     ACCEL_FCHOICE: int = 0x01  # 1: the accelerometer DLPF is on, rate 1125/(1 + ACCEL_SMPLRT_DIV)
+    ACCEL_DLPFCFG_SHIFT: int = 3  # ACCEL_CONFIG bits 5:3 (qwiic_icm20948.py:532-534)
     FIFO_EN_2_ACCEL: int = 0x10
     FIFO_EN_2_GYRO_Z: int = 0x08
     FIFO_EN_2_GYRO_Y: int = 0x04
@@ -1271,6 +1300,22 @@ ICM20948_GYRO_FILTER: tuple[FilterSetting, ...] = (
 #: :data:`ICM20948_GYRO_FILTER` as the reader uses it: the bandwidth in Hz to GYRO_DLPFCFG.
 ICM20948_DLPF: Mapping[float, int] = MappingProxyType(
     {f.bandwidth_hz: f.code for f in ICM20948_GYRO_FILTER}
+)
+
+#: Accelerometer DLPF settings with ACCEL_FCHOICE = 1 (its reset value), the internal rate
+#: 1125 Hz, one row per ACCEL_DLPFCFG (ACCEL_CONFIG bits 5:3, reset 0): DS-000189's
+#: ACCEL_CONFIG table, 3 dB and noise bandwidths, ✓✓ with SparkFun's qwiic_icm20948.py lines
+#: 96-104 (``acc_d246bw_n265bw`` ...). No delay is given.
+_ICM20948_ACCEL_TABLE = "DS-000189 ACCEL_CONFIG table ✓✓ (qwiic_icm20948.py:96-104)"
+ICM20948_ACCEL_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(0, 246.0, None, 265.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(1, 246.0, None, 265.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(2, 111.4, None, 136.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(3, 50.4, None, 68.8, _ICM20948_ACCEL_TABLE),
+    FilterSetting(4, 23.9, None, 34.4, _ICM20948_ACCEL_TABLE),
+    FilterSetting(5, 11.5, None, 17.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(6, 5.7, None, 8.3, _ICM20948_ACCEL_TABLE),
+    FilterSetting(7, 473.0, None, 499.0, _ICM20948_ACCEL_TABLE),
 )
 
 ICM20948 = ChipFamily(

@@ -297,3 +297,103 @@ def test_a_cascade_runs_on_whatever_the_clients_polling():
     got = np.asarray([slow[k] for k in both])
     assert np.max(np.abs(got - want[np.asarray(both) - 1])) <= 2  # counts: rounding, ~1e-7
     assert got[chip.sample_time(np.asarray(both)) < 0.3026].max() < 0.6 * 100 * 131
+
+
+# -- the accelerometers' filters ---------------------------------------------------------------
+
+# RM-MPU-9250A-00 ACCEL_CONFIG_2 table, written out here: A_DLPFCFG → (bandwidth Hz, delay ms);
+# DS-000189 ACCEL_CONFIG table: ACCEL_DLPFCFG → (3 dB Hz, noise bandwidth Hz)
+MPU9250_DATASHEET_ACCEL = {0: (218.1, 1.88), 1: (218.1, 1.88), 2: (99.0, 2.88), 3: (44.8, 4.88),
+                           4: (21.2, 8.87), 5: (10.2, 16.83), 6: (5.05, 32.48), 7: (420.0, 1.38)}
+ICM20948_DATASHEET_ACCEL = {0: (246.0, 265.0), 3: (50.4, 68.8), 6: (5.7, 8.3), 7: (473.0, 499.0)}
+
+
+def test_each_accel_filter_table_row_is_the_datasheet_row():
+    from gyrocal.drivers.imu.chips import ICM20948_ACCEL_FILTER, MPU9250_ACCEL_FILTER
+
+    assert {f.code: (f.bandwidth_hz, round(f.delay_s * 1e3, 2))
+            for f in MPU9250_ACCEL_FILTER} == MPU9250_DATASHEET_ACCEL
+    rows = {f.code: (f.bandwidth_hz, f.noise_bandwidth_hz) for f in ICM20948_ACCEL_FILTER}
+    assert all(rows[code] == row for code, row in ICM20948_DATASHEET_ACCEL.items())
+
+
+def _accel_stream(model: str, seconds: float, odr: float, write=(), seed: int = 3):
+    # the chip at rest through its reader, its accelerometer at the datasheet's noise density
+    # (the chip table's, m/s²), registers in `write` set after the reader started
+    from gyrocal.drivers.emulated.accel import AccelTruth
+
+    density_g = READERS[model].family.accel_errors.noise_g_sqrt_hz
+    clock = VirtualClock()
+    truth = SensorTruth(accelerometer=AccelTruth(noise_density_g_sqrt_hz=density_g))
+    bus, addr = make_emulated_imu(model, clock, truth=truth, seed=seed)
+    reader = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=odr)
+    reader.start()
+    for register, value in write:
+        bus.write_byte_data(addr, register, value)
+    chunks = []
+    while clock.monotonic() < seconds:
+        clock.sleep(0.02)
+        chunks.append(reader.read().accel)
+    return np.vstack(chunks)[int(0.3 * odr):], density_g * 9.80665, bus.device(addr)
+
+
+@pytest.mark.parametrize("a_dlpfcfg,odr", [(0, 1000.0), (0, 200.0), (3, 1000.0)])
+def test_mpu9250_accel_noise_enters_ahead_of_its_dlpf(a_dlpfcfg, odr):
+    # ACCEL_CONFIG_2 A_DLPFCFG (reset 0: 218.1 Hz) at the internal 1 kHz, whatever SMPLRT_DIV:
+    # σ = N √(1000 Σh²) at 1 kHz and at 200 Hz alike (it used to be N √odr), smaller at 44.8 Hz
+    a, n_m_s2, chip = _accel_stream("mpu9250", 2.0, odr, [(0x1D, a_dlpfcfg)])
+    bandwidth = MPU9250_DATASHEET_ACCEL[a_dlpfcfg][0]
+    assert chip.accel_filter_setting().bandwidth_hz == bandwidth
+    sigma = float(np.mean(np.std(a, axis=0)))
+    want = _filtered_sigma(math.degrees(n_m_s2), bandwidth, 1000.0)
+    assert sigma == pytest.approx(want, rel=_sigma_tolerance(bandwidth, 1000.0, 1, a.size * 5))
+
+
+def test_icm20948_accel_noise_is_the_datasheet_noise_bandwidth():
+    # reset ACCEL_CONFIG (ACCEL_FCHOICE = 1, ACCEL_DLPFCFG 0): 246 Hz, NBW 265 Hz at 1125 Hz;
+    # σ = N √(2 NBW) in the emulator's convention, the first-order stand-in's within 2 %
+    a, n_m_s2, chip = _accel_stream("icm20948", 2.0, 1125.0)
+    assert chip.accel_filter_setting().noise_bandwidth_hz == 265.0
+    sigma = float(np.mean(np.std(a, axis=0)))
+    tol = _sigma_tolerance(246.0, 1125.0, 1, a.size) + 0.02
+    assert sigma == pytest.approx(n_m_s2 * math.sqrt(2 * 265.0), rel=tol)
+
+
+def test_icm42688p_accel_ui_filter_is_second_order_at_reset():
+    # DS-000347: ACCEL_CONFIG1 resets to 0x0D (ACCEL_UI_FILT_ORD = 01), GYRO_ACCEL_CONFIG0 to
+    # 0x11 (ACCEL_UI_FILT_BW 1: max(400, 1000)/4 = 250 Hz at 1 kHz)
+    a, n_m_s2, chip = _accel_stream("icm42688p", 2.0, 1000.0)
+    assert chip.accel_filter_order() == 2 and chip.accel_filter_setting().bandwidth_hz == 250.0
+    sigma = float(np.mean(np.std(a, axis=0)))
+    want = _filtered_sigma(math.degrees(n_m_s2), 250.0, 1000.0, 2)
+    assert sigma == pytest.approx(want, rel=_sigma_tolerance(250.0, 1000.0, 2, a.size))
+
+
+def test_the_accel_filter_runs_on_whatever_the_clients_polling():
+    # the MPU-9250's 5.05 Hz accelerometer DLPF (A_DLPFCFG 6) with its noise: ACCEL_XOUT read
+    # every 1 ms and every 2.6 ms give the same counts at the same samples
+    from gyrocal.drivers.emulated.accel import AccelTruth
+
+    seen = []
+    for dt in (1e-3, 2.6e-3):
+        clock = VirtualClock()
+        truth = SensorTruth(noise_sigma_rad_s=0.0,
+                            accelerometer=AccelTruth(noise_density_g_sqrt_hz=300e-6))
+        bus, addr = make_emulated_imu("mpu9250", clock, truth=truth, seed=4)
+        chip = bus.device(addr)
+        for reg, value in ((MPU9250_REG.PWR_MGMT_1, 0x01), (MPU9250_REG.CONFIG, 3),
+                           (MPU9250_REG.SMPLRT_DIV, 0), (0x1D, 6)):
+            chip.i2c_write(bytes([reg, value]))
+        got = {}
+        while clock.monotonic() < 0.4:
+            clock.sleep(dt)
+            chip.i2c_write(bytes([0x3B]))  # ACCEL_XOUT_H
+            got[chip.samples_taken] = int(np.frombuffer(chip.i2c_read(2), ">i2")[0])
+        seen.append(got)
+    both = sorted(set(seen[0]) & set(seen[1]))
+    assert len(both) > 100
+    assert max(abs(seen[0][k] - seen[1][k]) for k in both) <= 1
+    # and the filter narrows the noise: 300 µg/√Hz through 5.05 Hz, ≈ N √(π fc) = 1.2 mg,
+    # about 20 counts at ±2 g, not the unfiltered N √1000 ≈ 9.5 mg
+    x = np.asarray([seen[1][k] for k in both if k > 150]) / 16384.0
+    assert 0.5e-3 < np.std(x) < 2.5e-3
