@@ -196,14 +196,79 @@ def _per_sample_row(model: str, samples: np.ndarray, cutoff: float | None, chip:
     setting = chip.filter_setting()  # type: ignore[attr-defined]
     nbw = setting.noise_bandwidth_hz if setting is not None else None
     datasheet = n * math.sqrt(2 * nbw) if nbw else float("nan")
-    delay = chip.filter_delay_s()  # type: ignore[attr-defined]
-    if delay is not None:
-        delay += chip._pure_delay_s(chip.true_period_s)  # type: ignore[attr-defined]
+    delay = chip.output_delay_s()  # type: ignore[attr-defined]
     ds_delay = setting.delay_s if setting is not None else None
     return [model, cutoff or "none", order or "-", sigma / RAD_PER_DEG, want / RAD_PER_DEG,
             sigma / want, cont / RAD_PER_DEG, datasheet / RAD_PER_DEG,
             float("nan") if delay is None else delay * 1e3,
             float("nan") if ds_delay is None else ds_delay * 1e3]
+
+
+# model -> (odr_hz, three accelerometer filter settings as register writes after the reader
+# started: (label, [(register, value) or (register, mask, value) read-modify-write, ...]))
+ACCEL_SETTINGS: dict[str, tuple[float, tuple[tuple[str, list[tuple[int, ...]]], ...]]] = {
+    # ACCEL_CONFIG_2 (0x1D) A_DLPFCFG 0 (the reset), 3, 6
+    "mpu9250": (1000.0, (("A_DLPFCFG 0", [(0x1D, 0)]), ("A_DLPFCFG 3", [(0x1D, 3)]),
+                         ("A_DLPFCFG 6", [(0x1D, 6)]))),
+    # bank 2 (REG_BANK_SEL 0x7F = 0x20) ACCEL_CONFIG (0x14) bits 5:3 ACCEL_DLPFCFG 0, 3, 6
+    "icm20948": (1125.0, tuple((f"ACCEL_DLPFCFG {c}", [(0x7F, 0x20), (0x14, 0x38, c << 3),
+                                                       (0x7F, 0x00)]) for c in (0, 3, 6))),
+    # GYRO_ACCEL_CONFIG0 (0x52) bits 7:4 ACCEL_UI_FILT_BW 1 (the reset), 3, 7
+    "icm42688p": (1000.0, tuple((f"ACCEL_UI_FILT_BW {c}", [(0x52, 0xF0, c << 4)])
+                                for c in (1, 3, 7))),
+}
+
+
+def accel_still_stream(model: str, seconds: float, odr: float, write=(), seed: int = 3
+                       ) -> tuple[np.ndarray, float, object]:
+    """``seconds`` of a chip at rest through its reader at ``odr``, its accelerometer with the
+    chip table's noise density and no other error, the register writes ``write`` made after
+    the reader started ((register, value), or (register, mask, value) to change the masked
+    bits): the accelerometer samples (N, 3) in m/s² past the filter's start, the density in
+    m/s²/√Hz and the emulated chip."""
+    from gyrocal.drivers.emulated.accel import AccelTruth
+
+    density_g = READERS[model].family.accel_errors.noise_g_sqrt_hz
+    clock = VirtualClock()
+    truth = SensorTruth(accelerometer=AccelTruth(noise_density_g_sqrt_hz=density_g))
+    bus, addr = make_emulated_imu(model, clock, truth=truth, seed=seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reader = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=odr)
+    reader.start()
+    for w in write:
+        register, value = w[0], w[-1]
+        if len(w) == 3:
+            value = (bus.read_byte_data(addr, register) & ~w[1] & 0xFF) | value
+        bus.write_byte_data(addr, register, value)
+    chunks = []
+    while clock.monotonic() < seconds:
+        clock.sleep(0.02)
+        chunks.append(reader.read().accel)
+    return np.vstack(chunks)[int(0.3 * odr):], density_g * 9.80665, bus.device(addr)
+
+
+def accel_rows(seconds: float) -> list[list[object]]:
+    """The accelerometer's noise per sample at three filter settings per chip against the
+    design (:func:`predicted_sigma` at the filter's rate) and, where the datasheet gives one,
+    its noise bandwidth."""
+    rows: list[list[object]] = []
+    for model, (odr, settings) in ACCEL_SETTINGS.items():
+        for label, write in settings:
+            a, n, chip = accel_still_stream(model, seconds, odr, write)
+            setting = chip.accel_filter_setting()  # type: ignore[attr-defined]
+            key = chip._accel_filter_key(odr)  # type: ignore[attr-defined]
+            fc, order, rate = key if key is not None else (None, 0, odr)
+            sigma = float(np.mean(np.std(a, axis=0)))
+            want = predicted_sigma(n, fc, rate, max(order, 1))
+            nbw = setting.noise_bandwidth_hz if setting is not None else None
+            rows.append([model, label, setting.bandwidth_hz if setting else "none",
+                         order or "-", rate, sigma * 1e3 / 9.80665, want * 1e3 / 9.80665,
+                         sigma / want,
+                         n * math.sqrt(2 * nbw) * 1e3 / 9.80665 if nbw else float("nan"),
+                         setting.delay_s * 1e3 if setting and setting.delay_s else float("nan"),
+                         n * math.sqrt(odr) * 1e3 / 9.80665])
+    return rows
 
 
 def main(argv: list[str]) -> None:
@@ -225,3 +290,9 @@ def main(argv: list[str]) -> None:
                  "datasheet delay ms"], per_sample,
                 title="Noise per sample against the filter bandwidth (white noise ahead of the "
                       "filter)")
+    accel = accel_rows(5.0 if quick else 20.0)
+    print_table(["chip", "setting", "filter Hz", "order", "filter rate Hz", "σ/sample mg",
+                 "predicted mg", "ratio", "N√(2 NBW) datasheet mg", "datasheet delay ms",
+                 "unfiltered N√odr mg"], accel,
+                title="Accelerometer noise per sample against its filter (white noise ahead of "
+                      "the filter, the chip table's density)")

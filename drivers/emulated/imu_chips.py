@@ -802,9 +802,9 @@ class _EmulatedImu(ABC):
         return self.truth.sigma_rad_s(rate, self.family.gyro_errors.noise_density_rad_s_sqrt_hz)
 
     def _filter_memory(self, period: float) -> int:
-        """Output samples a restarted output filter needs before its start is forgotten to
-        :data:`_FILTER_MEMORY` (0 without a filter): each of its ``order`` sections' poles
-        decays that far in turn (an upper bound for the cascade)."""
+        """Output samples the restarted output filters (the gyro's and the accelerometer's)
+        need before their start is forgotten to :data:`_FILTER_MEMORY` (0 without a filter):
+        each of a cascade's sections' poles decays that far in turn (an upper bound)."""
         memory = 0
         section, rate = self._filter_section(), self._filter_rate_hz()
         if section is not None and rate is not None:
@@ -1139,6 +1139,16 @@ class _EmulatedImu(ABC):
             return None
         k, order = section
         return order / (2.0 * k * rate)
+
+    def output_delay_s(self) -> float | None:
+        """The emulated gyro output's delay at DC, s: its filter's group delay
+        (:meth:`filter_delay_s`), the per-sample mean's half window and any pure delay (the
+        MPU-9250's CONFIG table delay makes up the rest); ``None`` without a filter."""
+        filt, period = self.filter_delay_s(), self.true_period_s
+        if filt is None or period is None:
+            return None
+        boxcar = 0.5 * self._average_window_s(period) if self.subsamples > 1 else 0.0
+        return filt + boxcar + self._pure_delay_s(period)
 
     def accel_filter_setting(self) -> FilterSetting | None:
         """The configured row of the chip's accelerometer filter table (its bandwidth, delay

@@ -12,7 +12,7 @@ import allantools
 import numpy as np
 import pytest
 
-from bench.bench_chips import NOISE_SETTINGS, still_stream
+from bench.bench_chips import NOISE_SETTINGS, accel_still_stream, still_stream
 from gyrocal.drivers.clock import VirtualClock
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, make_emulated_imu
 from gyrocal.drivers.emulated.motion import ConstantRate, FunctionMotion
@@ -317,31 +317,11 @@ def test_each_accel_filter_table_row_is_the_datasheet_row():
     assert all(rows[code] == row for code, row in ICM20948_DATASHEET_ACCEL.items())
 
 
-def _accel_stream(model: str, seconds: float, odr: float, write=(), seed: int = 3):
-    # the chip at rest through its reader, its accelerometer at the datasheet's noise density
-    # (the chip table's, m/s²), registers in `write` set after the reader started
-    from gyrocal.drivers.emulated.accel import AccelTruth
-
-    density_g = READERS[model].family.accel_errors.noise_g_sqrt_hz
-    clock = VirtualClock()
-    truth = SensorTruth(accelerometer=AccelTruth(noise_density_g_sqrt_hz=density_g))
-    bus, addr = make_emulated_imu(model, clock, truth=truth, seed=seed)
-    reader = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=odr)
-    reader.start()
-    for register, value in write:
-        bus.write_byte_data(addr, register, value)
-    chunks = []
-    while clock.monotonic() < seconds:
-        clock.sleep(0.02)
-        chunks.append(reader.read().accel)
-    return np.vstack(chunks)[int(0.3 * odr):], density_g * 9.80665, bus.device(addr)
-
-
 @pytest.mark.parametrize("a_dlpfcfg,odr", [(0, 1000.0), (0, 200.0), (3, 1000.0)])
 def test_mpu9250_accel_noise_enters_ahead_of_its_dlpf(a_dlpfcfg, odr):
     # ACCEL_CONFIG_2 A_DLPFCFG (reset 0: 218.1 Hz) at the internal 1 kHz, whatever SMPLRT_DIV:
     # σ = N √(1000 Σh²) at 1 kHz and at 200 Hz alike (it used to be N √odr), smaller at 44.8 Hz
-    a, n_m_s2, chip = _accel_stream("mpu9250", 2.0, odr, [(0x1D, a_dlpfcfg)])
+    a, n_m_s2, chip = accel_still_stream("mpu9250", 2.0, odr, [(0x1D, a_dlpfcfg)])
     bandwidth = MPU9250_DATASHEET_ACCEL[a_dlpfcfg][0]
     assert chip.accel_filter_setting().bandwidth_hz == bandwidth
     sigma = float(np.mean(np.std(a, axis=0)))
@@ -352,7 +332,7 @@ def test_mpu9250_accel_noise_enters_ahead_of_its_dlpf(a_dlpfcfg, odr):
 def test_icm20948_accel_noise_is_the_datasheet_noise_bandwidth():
     # reset ACCEL_CONFIG (ACCEL_FCHOICE = 1, ACCEL_DLPFCFG 0): 246 Hz, NBW 265 Hz at 1125 Hz;
     # σ = N √(2 NBW) in the emulator's convention, the first-order stand-in's within 2 %
-    a, n_m_s2, chip = _accel_stream("icm20948", 2.0, 1125.0)
+    a, n_m_s2, chip = accel_still_stream("icm20948", 2.0, 1125.0)
     assert chip.accel_filter_setting().noise_bandwidth_hz == 265.0
     sigma = float(np.mean(np.std(a, axis=0)))
     tol = _sigma_tolerance(246.0, 1125.0, 1, a.size) + 0.02
@@ -362,7 +342,7 @@ def test_icm20948_accel_noise_is_the_datasheet_noise_bandwidth():
 def test_icm42688p_accel_ui_filter_is_second_order_at_reset():
     # DS-000347: ACCEL_CONFIG1 resets to 0x0D (ACCEL_UI_FILT_ORD = 01), GYRO_ACCEL_CONFIG0 to
     # 0x11 (ACCEL_UI_FILT_BW 1: max(400, 1000)/4 = 250 Hz at 1 kHz)
-    a, n_m_s2, chip = _accel_stream("icm42688p", 2.0, 1000.0)
+    a, n_m_s2, chip = accel_still_stream("icm42688p", 2.0, 1000.0)
     assert chip.accel_filter_order() == 2 and chip.accel_filter_setting().bandwidth_hz == 250.0
     sigma = float(np.mean(np.std(a, axis=0)))
     want = _filtered_sigma(math.degrees(n_m_s2), 250.0, 1000.0, 2)
