@@ -18,11 +18,15 @@ The noise tables stream each chip at rest through its reader (the emulated senso
 the reader's setting) and give (1) the overlapping Allan deviation at 0.1 s and 1 s, read with
 ``allantools`` (the ``test`` extra) as an independent oracle, over the datasheet's density
 ``N`` (the IEEE Std 952 / Kalibr convention ``σ_A(τ) = N / √τ``: 1 is right); (2) the noise
-per sample at three filter settings against ``N · √(rate · k / (1 + k))``, ``k = tan(π fc /
-rate)``, the white noise of density ``N`` drawn at the filter's rate through the first-order
-stand-in at the datasheet's bandwidth ``fc`` (≈ ``N √(π fc)`` for ``fc ≪ rate``), and that
-continuous-time figure. A datasheet's RMS noise (MPU-9250: 0.1 °/s at 92 Hz) reads its density
-as one-sided, ``σ = N √(π fc / 2)``: the emulator is √2 above that reading, on the safe side
+per sample at three filter settings against ``N · √(rate · Σh²)``, the white noise of density
+``N`` drawn at the filter's rate through the stand-in at the datasheet's bandwidth ``fc`` (its
+impulse response ``h``: ``order`` equal bilinear first-order sections, the ICM-42688-P's
+second order at reset), against ``N √(2 ENBW)`` with the analog prototype's noise bandwidth
+(``π fc / 2`` for one section), and, where the datasheet gives a noise bandwidth (the
+ICM-20948's NBW column), against ``N √(2 NBW)``; with the filter's delay (its group delay at DC
+plus any pure delay) beside the datasheet's (the MPU-9250's CONFIG table; the others give none).
+A datasheet's RMS noise (MPU-9250: 0.1 °/s at 92 Hz) reads its density as one-sided,
+``σ = N √NBW``: the emulator is √2 above that reading, on the safe side
 (:mod:`gyrocal.drivers.emulated.accel` says the same of the accelerometer).
 
 Usage: ``python -m bench chips [--quick]`` (``--quick``: one seed, 5 s instead of three, 10 s;
@@ -109,10 +113,12 @@ NOISE_SETTINGS: dict[str, tuple[float, float, tuple[float, ...], float]] = {
 
 
 def still_stream(model: str, seconds: float, *, lowpass_hz: float | None = None,
-                 seed: int = 0) -> tuple[np.ndarray, float, float | None]:
+                 seed: int = 0, chip_out: list[object] | None = None
+                 ) -> tuple[np.ndarray, float, float | None]:
     """``seconds`` of a chip at rest through its reader at :data:`NOISE_SETTINGS`' rate and
     range and the filter ``lowpass_hz`` (the reader's default when None): the gyro samples
-    (N, 3) in rad/s, the rate and the chip's filter cutoff (None: no filter)."""
+    (N, 3) in rad/s, the rate and the chip's filter cutoff (None: no filter); the emulated
+    chip is appended to ``chip_out`` when given."""
     odr, range_dps, _, _ = NOISE_SETTINGS[model]
     clock = VirtualClock()
     bus, addr = make_emulated_imu(model, clock, seed=seed)
@@ -126,16 +132,34 @@ def still_stream(model: str, seconds: float, *, lowpass_hz: float | None = None,
         clock.sleep(0.02)
         chunks.append(reader.read().rate)
     rate = np.vstack(chunks)[int(0.5 * odr):]  # past the filter's and the reader's start
+    if chip_out is not None:
+        chip_out.append(bus.device(addr))
     return rate, 1.0 / bus.device(addr).true_period_s, bus.device(addr).cutoff_hz()
 
 
-def predicted_sigma(density: float, fc: float | None, filter_rate: float) -> float:
-    """Per-sample σ of white noise of density ``density`` drawn at ``filter_rate`` through the
-    emulated first-order filter at ``fc`` (its noise gain ``Σh² = k / (1 + k)``)."""
+def predicted_sigma(density: float, fc: float | None, filter_rate: float, order: int = 1
+                    ) -> float:
+    """Per-sample σ of white noise of density ``density`` drawn at ``filter_rate`` through
+    ``order`` equal bilinear first-order sections, −3 dB together at ``fc``: ``density ·
+    √(rate Σh²)``, the impulse response ``h`` in closed form (one section: ``h₀ = b``,
+    ``hₙ = b (1 − a)(−a)^(n−1)``, ``Σh² = k / (1 + k)``), convolved ``order`` times."""
     if fc is None:
         return density * math.sqrt(filter_rate)
-    k = math.tan(math.pi * fc / filter_rate)
-    return density * math.sqrt(filter_rate * k / (1.0 + k))
+    k = math.tan(math.pi * fc / filter_rate) / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+    b, a = k / (1 + k), (k - 1) / (k + 1)
+    one = np.concatenate(([b], b * (1 - a) * (-a) ** np.arange(3999)))
+    h = one
+    for _ in range(order - 1):
+        h = np.convolve(h, one)[:4000]
+    return density * math.sqrt(filter_rate * float(np.sum(h * h)))
+
+
+def analog_enbw_hz(fc: float, order: int) -> float:
+    """The noise bandwidth of ``order`` equal analog first-order low-passes, −3 dB together at
+    ``fc``: ``f_s √π Γ(n − ½) / (2 Γ(n))``, ``f_s = fc / √(2^(1/n) − 1)`` (``π fc / 2`` for
+    one)."""
+    fs = fc / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+    return fs * math.sqrt(math.pi) * math.gamma(order - 0.5) / (2.0 * math.gamma(order))
 
 
 def noise_rows(seconds: float) -> tuple[list[list[object]], list[list[object]]]:
@@ -146,23 +170,105 @@ def noise_rows(seconds: float) -> tuple[list[list[object]], list[list[object]]]:
     for seed, (model, (_, _, bands, filter_rate)) in enumerate(NOISE_SETTINGS.items()):
         ge = READERS[model].family.gyro_errors
         n = ge.noise_density_rad_s_sqrt_hz
+        chips: list[object] = []
         rate, odr, fc = still_stream(model, seconds, lowpass_hz=bands[0] if bands else None,
-                                     seed=seed)
+                                     seed=seed, chip_out=chips)
         taus = np.array([0.1, 1.0])
         adev = np.mean([allantools.oadev(rate[:, j], rate=odr, data_type="freq", taus=taus)[1]
                         for j in range(3)], axis=0)
         ratio = adev * np.sqrt(taus) / n
         allan.append([model, ge.noise_density_dps_sqrt_hz, float(ratio[0]), float(ratio[1]),
                       ge.noise_source])
-        streams = [(rate, fc)] + [still_stream(model, seconds / 4, lowpass_hz=b, seed=seed)[::2]
-                                  for b in bands[1:]]
-        for samples, cutoff in streams:
-            sigma = float(np.mean(np.std(samples, axis=0)))
-            want = predicted_sigma(n, cutoff, filter_rate)
-            cont = n * math.sqrt(math.pi * cutoff) if cutoff else float("nan")
-            per_sample.append([model, cutoff or "none", sigma / RAD_PER_DEG, want / RAD_PER_DEG,
-                               sigma / want, cont / RAD_PER_DEG])
+        streams = [(rate, fc)] + [still_stream(model, seconds / 4, lowpass_hz=b, seed=seed,
+                                               chip_out=chips)[::2] for b in bands[1:]]
+        for (samples, cutoff), chip in zip(streams, chips, strict=True):
+            per_sample.append(_per_sample_row(model, samples, cutoff, chip, n, filter_rate))
     return allan, per_sample
+
+
+def _per_sample_row(model: str, samples: np.ndarray, cutoff: float | None, chip: object,
+                    n: float, filter_rate: float) -> list[object]:
+    """One row of the noise-per-sample table (see the module docstring)."""
+    order = chip.filter_order() if cutoff else 0  # type: ignore[attr-defined]
+    sigma = float(np.mean(np.std(samples, axis=0)))
+    want = predicted_sigma(n, cutoff, filter_rate, max(order, 1))
+    cont = n * math.sqrt(2 * analog_enbw_hz(cutoff, order)) if cutoff else float("nan")
+    setting = chip.filter_setting()  # type: ignore[attr-defined]
+    nbw = setting.noise_bandwidth_hz if setting is not None else None
+    datasheet = n * math.sqrt(2 * nbw) if nbw else float("nan")
+    delay = chip.output_delay_s()  # type: ignore[attr-defined]
+    ds_delay = setting.delay_s if setting is not None else None
+    return [model, cutoff or "none", order or "-", sigma / RAD_PER_DEG, want / RAD_PER_DEG,
+            sigma / want, cont / RAD_PER_DEG, datasheet / RAD_PER_DEG,
+            float("nan") if delay is None else delay * 1e3,
+            float("nan") if ds_delay is None else ds_delay * 1e3]
+
+
+# model -> (odr_hz, three accelerometer filter settings as register writes after the reader
+# started: (label, [(register, value) or (register, mask, value) read-modify-write, ...]))
+ACCEL_SETTINGS: dict[str, tuple[float, tuple[tuple[str, list[tuple[int, ...]]], ...]]] = {
+    # ACCEL_CONFIG_2 (0x1D) A_DLPFCFG 0 (the reset), 3, 6
+    "mpu9250": (1000.0, (("A_DLPFCFG 0", [(0x1D, 0)]), ("A_DLPFCFG 3", [(0x1D, 3)]),
+                         ("A_DLPFCFG 6", [(0x1D, 6)]))),
+    # bank 2 (REG_BANK_SEL 0x7F = 0x20) ACCEL_CONFIG (0x14) bits 5:3 ACCEL_DLPFCFG 0, 3, 6
+    "icm20948": (1125.0, tuple((f"ACCEL_DLPFCFG {c}", [(0x7F, 0x20), (0x14, 0x38, c << 3),
+                                                       (0x7F, 0x00)]) for c in (0, 3, 6))),
+    # GYRO_ACCEL_CONFIG0 (0x52) bits 7:4 ACCEL_UI_FILT_BW 1 (the reset), 3, 7
+    "icm42688p": (1000.0, tuple((f"ACCEL_UI_FILT_BW {c}", [(0x52, 0xF0, c << 4)])
+                                for c in (1, 3, 7))),
+}
+
+
+def accel_still_stream(model: str, seconds: float, odr: float, write=(), seed: int = 3
+                       ) -> tuple[np.ndarray, float, object]:
+    """``seconds`` of a chip at rest through its reader at ``odr``, its accelerometer with the
+    chip table's noise density and no other error, the register writes ``write`` made after
+    the reader started ((register, value), or (register, mask, value) to change the masked
+    bits): the accelerometer samples (N, 3) in m/s² past the filter's start, the density in
+    m/s²/√Hz and the emulated chip."""
+    from gyrocal.drivers.emulated.accel import AccelTruth
+
+    density_g = READERS[model].family.accel_errors.noise_g_sqrt_hz
+    clock = VirtualClock()
+    truth = SensorTruth(accelerometer=AccelTruth(noise_density_g_sqrt_hz=density_g))
+    bus, addr = make_emulated_imu(model, clock, truth=truth, seed=seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reader = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=odr)
+    reader.start()
+    for w in write:
+        register, value = w[0], w[-1]
+        if len(w) == 3:
+            value = (bus.read_byte_data(addr, register) & ~w[1] & 0xFF) | value
+        bus.write_byte_data(addr, register, value)
+    chunks = []
+    while clock.monotonic() < seconds:
+        clock.sleep(0.02)
+        chunks.append(reader.read().accel)
+    return np.vstack(chunks)[int(0.3 * odr):], density_g * 9.80665, bus.device(addr)
+
+
+def accel_rows(seconds: float) -> list[list[object]]:
+    """The accelerometer's noise per sample at three filter settings per chip against the
+    design (:func:`predicted_sigma` at the filter's rate) and, where the datasheet gives one,
+    its noise bandwidth."""
+    rows: list[list[object]] = []
+    for model, (odr, settings) in ACCEL_SETTINGS.items():
+        for label, write in settings:
+            a, n, chip = accel_still_stream(model, seconds, odr, write)
+            setting = chip.accel_filter_setting()  # type: ignore[attr-defined]
+            key = chip._accel_filter_key(odr)  # type: ignore[attr-defined]
+            fc, order, rate = key if key is not None else (None, 0, odr)
+            sigma = float(np.mean(np.std(a, axis=0)))
+            want = predicted_sigma(n, fc, rate, max(order, 1))
+            nbw = setting.noise_bandwidth_hz if setting is not None else None
+            rows.append([model, label, setting.bandwidth_hz if setting else "none",
+                         order or "-", rate, sigma * 1e3 / 9.80665, want * 1e3 / 9.80665,
+                         sigma / want,
+                         n * math.sqrt(2 * nbw) * 1e3 / 9.80665 if nbw else float("nan"),
+                         setting.delay_s * 1e3 if setting and setting.delay_s else float("nan"),
+                         n * math.sqrt(odr) * 1e3 / 9.80665])
+    return rows
 
 
 def main(argv: list[str]) -> None:
@@ -179,7 +285,14 @@ def main(argv: list[str]) -> None:
     print_table(["chip", "N °/s/√Hz", "σ_A(0.1 s)·√τ / N", "σ_A(1 s)·√τ / N", "source"], allan,
                 title=f"Allan deviation at rest against the datasheet density ({noise_s:g} s, "
                       "allantools oadev, mean of the axes; 1 is right)")
-    print_table(["chip", "filter Hz", "σ/sample °/s", "predicted °/s", "ratio",
-                 "N√(π fc) °/s"], per_sample,
+    print_table(["chip", "filter Hz", "order", "σ/sample °/s", "predicted °/s", "ratio",
+                 "N√(2 ENBW) °/s", "N√(2 NBW) datasheet °/s", "delay ms",
+                 "datasheet delay ms"], per_sample,
                 title="Noise per sample against the filter bandwidth (white noise ahead of the "
                       "filter)")
+    accel = accel_rows(5.0 if quick else 20.0)
+    print_table(["chip", "setting", "filter Hz", "order", "filter rate Hz", "σ/sample mg",
+                 "predicted mg", "ratio", "N√(2 NBW) datasheet mg", "datasheet delay ms",
+                 "unfiltered N√odr mg"], accel,
+                title="Accelerometer noise per sample against its filter (white noise ahead of "
+                      "the filter, the chip table's density)")

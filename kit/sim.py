@@ -81,8 +81,9 @@ class SimJig:
         lines: dict[str, Any] = {
             "coloured-noise": {"bias_instability_rad_s": r.bias_instability_rad_s,
                                "rate_random_walk_rad_s_sqrt_s": r.rate_random_walk_rad_s_sqrt_s},
-            "dlpf": {"cutoff_hz": self.chip.cutoff_hz(), "delay_s": getattr(
-                self.chip, "delay_s", lambda: None)()} if r.dlpf_delay else "off",
+            "dlpf": {"cutoff_hz": self.chip.cutoff_hz(), "order": self.chip.filter_order(),
+                     "delay_s": getattr(self.chip, "delay_s", lambda: None)()
+                     } if r.dlpf_delay else "off",
             "g-sensitivity": {
                 "matrix_rad_s_per_g": [list(x) for x in r.g_sensitivity_rad_s_per_g],
                 # what it adds to the bias in the home pose, where a calibration's rests are
@@ -176,8 +177,9 @@ def sim_misalignment(seed: int, cross_axis: float = SIM_CROSS_AXIS) -> np.ndarra
 REALISM_EFFECTS: dict[str, str] = {
     "coloured-noise": "bias instability (flicker: Gauss–Markov sum) and rate random walk, the "
                       "chip's GyroErrors figures ⚠ (assumed: no datasheet gives them)",
-    "dlpf": "the chip's digital low-pass at the configured setting, the white noise entering "
-            "ahead of it (MPU-9250: 92 Hz with the CONFIG table's 3.9 ms at 200 Hz)",
+    "dlpf": "the chip's digital low-passes at the configured settings, gyro and "
+            "accelerometer, the white noise entering ahead of each (MPU-9250: 92 Hz with the "
+            "CONFIG table's 3.9 ms at 200 Hz; its accelerometer 218.1 Hz at 1 kHz)",
     "g-sensitivity": "rate error per g of specific force, each term drawn by seed within "
                      "the chip's GyroErrors figure (MPU-9250: 0.1 °/s/g)",
     "gravity": "the accelerometer sees gravity in the true orientation and the lever-arm "

@@ -9,7 +9,9 @@ with ``f`` the true specific force in the sensor frame (in g; the jig's
 :meth:`~gyrocal.drivers.emulated.jig.GimbalJig.specific_force`), ``C`` the sensing matrix (its
 diagonal the scale factors, its off-diagonal terms the cross-axis sensitivities), ``b`` the
 zero-g bias and ``n`` white noise of per-sample standard deviation ``density · sqrt(odr)``
-(independent samples, no low-pass: ``density`` is then the continuous-time white-noise density
+(independent samples, no low-pass; a chip with an emulated accelerometer filter draws it at the
+filter's rate ahead of the filter instead, ``_EmulatedImu._accel_counts``: ``density`` is the
+continuous-time white-noise density
 ``σ_c`` of Kalibr's IMU noise model, ``σ_d = σ_c · sqrt(odr)``; a datasheet's one-sided density
 ``D``, with ``σ = D · sqrt(B)`` over a noise bandwidth ``B``, would give ``σ_c = D / sqrt(2)``
 at ``B = odr/2``, so the emulator is ``sqrt(2)`` noisier than the datasheet's figure: on the

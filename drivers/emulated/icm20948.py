@@ -13,8 +13,12 @@ What it models:
   selects bank 0.
 - The gyro samples while awake and not disabled (PWR_MGMT_2), at 1125 Hz / (1 + GYRO_SMPLRT_DIV)
   with GYRO_FCHOICE = 1, 9 kHz with it 0 (⚠), on the chip's own clock; with GYRO_FCHOICE = 1
-  its DLPF (GYRO_DLPFCFG's bandwidth, a first-order stand-in ⚠) runs at 1125 Hz ahead of the
-  divider, the white noise entering ahead of it.
+  its DLPF (GYRO_DLPFCFG's row of :data:`~gyrocal.drivers.imu.chips.ICM20948_GYRO_FILTER`:
+  its 3 dB bandwidth, a first-order stand-in ⚠ whose noise bandwidth is within 7 % of the
+  table's NBW; DS-000189 gives no delay) runs at 1125 Hz ahead of the divider, the white noise
+  entering ahead of it; the accelerometer's DLPF (ACCEL_CONFIG.ACCEL_DLPFCFG with
+  ACCEL_FCHOICE = 1, the reset: 246 Hz; :data:`~gyrocal.drivers.imu.chips.
+  ICM20948_ACCEL_FILTER`) likewise.
 - Data registers (bank 0) big-endian: ACCEL_XOUT_H 0x2D, GYRO_XOUT_H 0x33, TEMP_OUT_H 0x39
   (333.87 LSB/°C, 0 at 21 °C).
 - FIFO (512 bytes ⚠): frames of the sources FIFO_EN_2 enables, in register order (accelerometer,
@@ -68,12 +72,14 @@ from gyrocal.drivers.emulated.smbus import I2CDevice
 from gyrocal.drivers.imu.chips import (
     GYRO_OFFSET_COUNTS_PER_CODE_FS0,
     ICM20948,
+    ICM20948_ACCEL_FILTER,
     ICM20948_BITS,
-    ICM20948_DLPF,
+    ICM20948_GYRO_FILTER,
     ICM20948_REG,
     ICM20948_REG1,
     ICM20948_REG2,
     ICM20948_REG3,
+    FilterSetting,
 )
 
 __all__ = ["AK09916_ADDRESS", "EmulatedICM20948"]
@@ -102,7 +108,7 @@ _MASTER = MasterLayout(
     slv4_do=_R3.I2C_SLV4_DO, slv4_di=_R3.I2C_SLV4_DI, ext_sens_data_00=_R.EXT_SLV_SENS_DATA_00)
 #: Bank 2 reset values (DS-000189 register map): GYRO_CONFIG_1 and ACCEL_CONFIG = FCHOICE.
 _BANK2_RESET = {_R2.GYRO_CONFIG_1: _B.GYRO_FCHOICE, _R2.ACCEL_CONFIG: _B.ACCEL_FCHOICE}
-_DLPF_BY_CFG = {cfg: hz for hz, cfg in ICM20948_DLPF.items()}
+_DLPF_BY_CFG = {f.code: f for f in ICM20948_GYRO_FILTER}
 _GYRO_ORDER = ((_B.FIFO_EN_2_GYRO_X, 0), (_B.FIFO_EN_2_GYRO_Y, 1), (_B.FIFO_EN_2_GYRO_Z, 2))
 
 
@@ -241,12 +247,29 @@ class EmulatedICM20948(UserBanks, _EmulatedImu):
 
     def cutoff_hz(self) -> float | None:
         """The gyro DLPF's 3 dB bandwidth GYRO_CONFIG_1.GYRO_DLPFCFG selects with GYRO_FCHOICE
-        = 1 (DS-000189 GYRO_CONFIG_1 table, :data:`~gyrocal.drivers.imu.chips.ICM20948_DLPF`);
-        ``None`` with the DLPF bypassed or the gyro off."""
+        = 1 (DS-000189 GYRO_CONFIG_1 table, :meth:`filter_setting`); ``None`` with the DLPF
+        bypassed or the gyro off."""
+        setting = self.filter_setting()
+        return None if setting is None else setting.bandwidth_hz
+
+    def filter_setting(self) -> FilterSetting | None:
+        """The gyro DLPF's row of :data:`~gyrocal.drivers.imu.chips.ICM20948_GYRO_FILTER` for
+        GYRO_CONFIG_1.GYRO_DLPFCFG with GYRO_FCHOICE = 1; ``None`` with the DLPF bypassed or
+        the gyro off."""
         cfg = self._banks[2][_R2.GYRO_CONFIG_1]
         if not cfg & _B.GYRO_FCHOICE or self._odr_hz() is None:
             return None
         return _DLPF_BY_CFG[(cfg >> _B.GYRO_DLPFCFG_SHIFT) & 0x07]
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer DLPF's row of :data:`~gyrocal.drivers.imu.chips.
+        ICM20948_ACCEL_FILTER` for ACCEL_CONFIG.ACCEL_DLPFCFG with ACCEL_FCHOICE = 1 (the reset
+        value: 246 Hz), at the internal 1125 Hz; ``None`` with it bypassed or the chip not
+        sampling."""
+        cfg = self._banks[2][_R2.ACCEL_CONFIG]
+        if not cfg & _B.ACCEL_FCHOICE or self._odr_hz() is None:
+            return None
+        return ICM20948_ACCEL_FILTER[(cfg >> _B.ACCEL_DLPFCFG_SHIFT) & 0x07]
 
     def _sensitivity_rad_s_per_lsb(self) -> float:
         fs = (self._banks[2][_R2.GYRO_CONFIG_1] & _B.GYRO_FS_SEL_MASK) >> _B.GYRO_FS_SEL_SHIFT

@@ -37,7 +37,11 @@ What it models, register by register (bank 0 unless said):
   bit 7: "FIFO empty"; FIFO_DATA's reset value 0xFF, DS-000347 §14.24, in the sources
   :class:`~gyrocal.drivers.imu.chips._ICM42688PRegisters` names for the reset values).
 - TEMP_DATA (0x1D, 132.48 LSB/°C), ACCEL_DATA and GYRO_DATA show the latest sample.
-- The output is low-passed at the GYRO_UI_FILT_BW bandwidth (first order ⚠, as for the LSM9DS1).
+- The output is low-passed by the UI filter: GYRO_UI_FILT_BW's bandwidth, GYRO_CONFIG1.
+  GYRO_UI_FILT_ORD's order (first, second or third; second at reset), as that many equal
+  first-order sections ⚠ (the shape is not published), run at the ODR with the white noise
+  entering ahead of it; the accelerometer likewise by ACCEL_UI_FILT_BW (GYRO_ACCEL_CONFIG0 bits
+  7:4) and ACCEL_CONFIG1.ACCEL_UI_FILT_ORD (second order at reset, 0x0D).
 """
 
 from __future__ import annotations
@@ -49,7 +53,7 @@ import numpy as np
 
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.banks import UserBanks
-from gyrocal.drivers.emulated.imu_chips import EmulatedLSM9DS1, SensorTruth, _EmulatedImu
+from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
 from gyrocal.drivers.imu.chips import (
     ICM42688P,
@@ -57,6 +61,8 @@ from gyrocal.drivers.imu.chips import (
     ICM42688P_BITS,
     ICM42688P_ODR,
     ICM42688P_REG,
+    ICM42688P_UI_FILT_ORDER,
+    FilterSetting,
     icm42688p_bandwidth_hz,
 )
 
@@ -177,8 +183,31 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
         # there the per-sample mean is the only filter emulated
         return bandwidth if bandwidth < 0.5 * odr else None
 
-    #: The LSM9DS1's first-order output filter, driven by this chip's :meth:`cutoff_hz`.
-    _filtered = EmulatedLSM9DS1._filtered
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer UI filter: GYRO_ACCEL_CONFIG0.ACCEL_UI_FILT_BW's bandwidth (the
+        gyro's formula, DS-000347; reset 1) at the ODR, which the emulated accelerometer shares
+        with the gyro; ``None`` with the chip not sampling."""
+        odr = self._odr_hz()
+        if odr is None:
+            return None
+        code = self._regs[_R.GYRO_ACCEL_CONFIG0] >> _B.ACCEL_UI_FILT_BW_SHIFT
+        return FilterSetting(code, icm42688p_bandwidth_hz(odr, code if code <= 7 else 0), None,
+                             None, "DS-000347 GYRO_ACCEL_CONFIG0.ACCEL_UI_FILT_BW")
+
+    def accel_filter_order(self) -> int:
+        """The accelerometer UI filter's order, ACCEL_CONFIG1.ACCEL_UI_FILT_ORD (the gyro's
+        codes, :data:`~gyrocal.drivers.imu.chips.ICM42688P_UI_FILT_ORDER`; second at reset,
+        0x0D)."""
+        code = (self._regs[_R.ACCEL_CONFIG1] & _B.ACCEL_UI_FILT_ORD_MASK) >> (
+            _B.ACCEL_UI_FILT_ORD_SHIFT)
+        return ICM42688P_UI_FILT_ORDER.get(code, ICM42688P_UI_FILT_ORDER[0b01])
+
+    def filter_order(self) -> int:
+        """The UI filter's order, GYRO_CONFIG1.GYRO_UI_FILT_ORD (:data:`~gyrocal.drivers.imu.
+        chips.ICM42688P_UI_FILT_ORDER`; second at reset, 0x16)."""
+        code = (self._regs[_R.GYRO_CONFIG1] & _B.GYRO_UI_FILT_ORD_MASK) >> (
+            _B.GYRO_UI_FILT_ORD_SHIFT)
+        return ICM42688P_UI_FILT_ORDER.get(code, ICM42688P_UI_FILT_ORDER[0b01])
 
     # -- FIFO -----------------------------------------------------------------------------------
 

@@ -69,11 +69,12 @@ from gyrocal.drivers.imu.chips import (
     LSM9DS1_ODR,
     LSM9DS1_REG,
     MPU9250,
+    MPU9250_ACCEL_FILTER,
     MPU9250_BITS,
-    MPU9250_DLPF,
-    MPU9250_DLPF_DELAY_S,
+    MPU9250_GYRO_FILTER,
     MPU9250_REG,
     ChipFamily,
+    FilterSetting,
 )
 
 __all__ = [
@@ -422,7 +423,7 @@ class _Ahead:
     temperature: np.ndarray
     temp: np.ndarray
     lpf: np.ndarray | None
-    fc: float | None
+    fc: tuple[float, int] | None
     accel_draws: int
     start_lpf: Any
     sensitivity: float
@@ -434,6 +435,56 @@ class _Ahead:
     walk: np.ndarray | None = None
     frames: bytes | None = None
     noise_draws: int = 3
+    accel_lpf: np.ndarray | None = None
+    accel_key: tuple[float, int, float] | None = None
+    start_accel_lpf: Any = None
+
+
+def _memory(k: float, order: int, steps: int) -> int:
+    """Output samples (of ``steps`` filter steps each) before a restarted cascade of ``order``
+    sections of :func:`_cascade`'s ``k`` forgets its start to :data:`_FILTER_MEMORY`: each
+    section's pole decays that far in turn (an upper bound)."""
+    pole = abs((1.0 - k) / (1.0 + k))
+    if pole <= _FILTER_MEMORY:
+        return 1
+    return math.ceil(order * math.log(_FILTER_MEMORY) / math.log(pole) / steps) + 1
+
+
+def _cascade(x6: np.ndarray, head: int, skipped: int, state: Any, key: Any, k: float,
+             order: int, stages: bool) -> tuple[np.ndarray, Any, list[np.ndarray] | None]:
+    """``order`` equal bilinear first-order low-passes ``b (1 + z⁻¹) / (1 + a z⁻¹)``, ``b = k /
+    (1 + k)``, ``a = (k − 1) / (k + 1)``, along the first axis of ``x6`` (rows, or rows of
+    internal samples; its last axis a signal's three columns, then its white noise's three),
+    from ``state`` = ``(key, (order + 1, 6) last input and sections' outputs)``; restarted (the
+    signal at rest on its first row, the noise at zero) when the state is for another ``key``
+    or none, and after ``skipped`` rows not given (the first ``head`` rows, then the rest).
+    Returns the output, the state after it and, with ``stages``, the input and every
+    section's output."""
+    b, a = k / (1 + k), (k - 1) / (k + 1)
+    out = np.empty_like(x6)
+    every = [np.empty_like(x6) for _ in range(order + 1)] if stages else None
+    parts = [(0, head), (head, x6.shape[0])] if skipped else [(0, x6.shape[0])]
+    for i, (lo, hi) in enumerate(parts):
+        if hi <= lo:
+            continue
+        x = x6[lo:hi].reshape(-1, x6.shape[-1])
+        if state is None or state[0] != key or (i == 1 and skipped):
+            rest = x[0].copy()
+            rest[3:] = 0.0  # the signal at rest, the noise at zero
+            prev = np.repeat(rest[None, :], order + 1, axis=0)
+        else:
+            prev = state[1]
+        ys = [x]
+        for n in range(order):
+            zi = (b * prev[n] - a * prev[n + 1])[None, :]
+            y, _ = lfilter([b, b], [1.0, a], ys[-1], zi=zi)
+            ys.append(y)
+        out[lo:hi] = ys[-1].reshape(x6[lo:hi].shape)
+        if every is not None:
+            for v, y in zip(every, ys, strict=True):
+                v[lo:hi] = y.reshape(x6[lo:hi].shape)
+        state = (key, np.stack([y[-1] for y in ys]))
+    return out, state, every
 
 
 @dataclass
@@ -489,6 +540,7 @@ class _EmulatedImu(ABC):
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
                                        Normals(np.random.default_rng([seed, 2])))
         self._lpf: tuple[float, np.ndarray] | None = None
+        self._accel_lpf: tuple[Any, np.ndarray] | None = None
         self._created = clock.monotonic()
         self._power_on_reset()
 
@@ -551,6 +603,7 @@ class _EmulatedImu(ABC):
         self._latest = _Sample()
         #: :attr:`samples_taken` at each FIFO enable: the FIFO's first sample is the next one.
         self.fifo_enables: list[int] = []
+        self._accel_lpf = None
         self._reset_state()
         self._restart_sampling()
 
@@ -721,22 +774,29 @@ class _EmulatedImu(ABC):
         rates = self._internal_rates(t_eval, period)
         white = self._noise_rng.standard_normal(rates.shape) * self._white_sigma(period)
         omega, white = self._filtered(rates, white, head, skipped)
+        odr = 1.0 / period
+        force = accel = None
+        if self._accel_filter_key(odr) is not None:  # it runs through the run-in rows too
+            force = self._specific_force(t_eval)
+            accel, self._accel_lpf, _ = self._accel_counts(force, self._accel_rng, odr, head,
+                                                           skipped, self._accel_lpf)
         if warm:  # the filter's run-in is not handed out: it joins the samples skipped
             keep = np.r_[0:head, head + warm:t.size]
             t, t_eval, omega, white = t[keep], t_eval[keep], omega[keep], white[keep]
+            if accel is not None:
+                force, accel = force[keep], accel[keep]  # type: ignore[index]
             skipped += warm
         temperature = self.truth.temperature_at(t)
         m = self.truth.reading(omega, temperature)
-        force = self._specific_force(t_eval)
+        if force is None:
+            force = self._specific_force(t_eval)
         realism = self.truth.realism
         if realism.g_sensitivity_rad_s_per_g != _ZERO33:
             m = m + self._true_force(t_eval, force) @ np.asarray(
                 realism.g_sensitivity_rad_s_per_g).T
         m = m + white
-        odr = 1.0 / period
-        accel = np.clip(np.rint(self.truth.accel_reading(force, self._accel_rng, odr)
-                                * self._accel_counts_1g()) + self._accel_trim_counts(),
-                        -32768, 32767).astype(np.int64)
+        if accel is None:
+            accel, _, _ = self._accel_counts(force, self._accel_rng, odr, head, skipped, None)
         self._emit(t, m, accel, temperature, head, skipped)
 
     def _white_sigma(self, period: float) -> np.ndarray:
@@ -746,17 +806,21 @@ class _EmulatedImu(ABC):
         return self.truth.sigma_rad_s(rate, self.family.gyro_errors.noise_density_rad_s_sqrt_hz)
 
     def _filter_memory(self, period: float) -> int:
-        """Output samples a restarted output filter needs before its start is forgotten to
-        :data:`_FILTER_MEMORY` (0 without a filter)."""
-        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        if fc is None or rate is None:
-            return 0
-        k = math.tan(math.pi * fc / rate)
-        pole = abs((1.0 - k) / (1.0 + k))
-        if pole <= _FILTER_MEMORY:
-            return 1
-        steps = math.log(_FILTER_MEMORY) / math.log(pole)
-        return math.ceil(steps / self._internal_per_output(period)) + 1
+        """Output samples the restarted output filters (the gyro's and the accelerometer's)
+        need before their start is forgotten to :data:`_FILTER_MEMORY` (0 without a filter):
+        each of a cascade's sections' poles decays that far in turn (an upper bound)."""
+        memory = 0
+        section, rate = self._filter_section(), self._filter_rate_hz()
+        if section is not None and rate is not None:
+            memory = _memory(*section, self._internal_per_output(period))
+        accel = self._accel_filter_key(1.0 / period)
+        if accel is not None:  # the accelerometer's filter, as :meth:`_accel_counts` runs it
+            fc, order, rate = accel
+            steps = max(1, round(rate * period))
+            k = math.tan(math.pi * fc / (steps / period))
+            k = k if order == 1 else k / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+            memory = max(memory, _memory(k, order, steps))
+        return memory
 
     def _emit(self, t: np.ndarray, m: np.ndarray, accel: np.ndarray, temperature: np.ndarray,
               head: int, skipped: int, gyro: np.ndarray | None = None,
@@ -812,6 +876,7 @@ class _EmulatedImu(ABC):
             return False
         a = self._ahead
         if (a is None or a.token != token or a.start_lpf is not self._lpf
+                or a.start_accel_lpf is not self._accel_lpf
                 or a.k_first + a.next != self._k + 1 or a.next + n > a.t.size):
             a = None
         if a is not None:
@@ -830,6 +895,8 @@ class _EmulatedImu(ABC):
         self._accel_rng.skip(a.accel_draws * n)
         if a.lpf is not None:
             self._lpf = a.start_lpf = (a.fc, a.lpf[j - 1])
+        if a.accel_lpf is not None:
+            self._accel_lpf = a.start_accel_lpf = (a.accel_key, a.accel_lpf[j - 1])
         a.next = j
         gyro = None
         if n == 1:
@@ -901,11 +968,10 @@ class _EmulatedImu(ABC):
         white = (self._noise_rng.peek(rates.size).reshape(rates.shape)
                  * self._white_sigma(period))
         x = np.concatenate((rates, white), axis=-1)
-        out, _ = self._lowpass(x, count, 0, start_lpf)
+        out, _, stages = self._lowpass(x, count, 0, start_lpf, stages=True)
         states = None
-        if out is not x:  # filtered: the state after each sample is its last internal one
-            states = np.stack([x.reshape(count, -1, 6)[:, -1], out.reshape(count, -1, 6)[:, -1]],
-                              axis=1)
+        if stages is not None:  # filtered: the state after each sample is its last internal one
+            states = np.stack([v.reshape(count, -1, 6)[:, -1] for v in stages], axis=1)
         out = out if out.ndim == 2 else out[:, -1]
         omega, white = out[:, :3], out[:, 3:]
         temperature = self.truth.temperature_at(t)
@@ -918,13 +984,14 @@ class _EmulatedImu(ABC):
         odr = 1.0 / period
         m = m + white
         peeking = _Peeking(self._accel_rng)
-        accel = np.clip(np.rint(self.truth.accel_reading(force, peeking, odr)  # type: ignore[arg-type]
-                                * self._accel_counts_1g()) + self._accel_trim_counts(),
-                        -32768, 32767).astype(np.int64)
+        start_accel = self._accel_lpf
+        accel, _, accel_states = self._accel_counts(force, peeking, odr, count, 0,  # type: ignore[arg-type]
+                                                    start_accel, stages=True)
         return _Ahead(token, k_first, t, t_eval, m, accel, temperature,
-                      self._temperature_counts(temperature), states, self._lowpass_hz(),
+                      self._temperature_counts(temperature), states, self._filter_key(),
                       peeking.used // count, start_lpf, self._sensitivity_rad_s_per_lsb(),
-                      noise_draws=rates.size // count)
+                      noise_draws=rates.size // count, accel_lpf=accel_states,
+                      accel_key=self._accel_filter_key(odr), start_accel_lpf=start_accel)
 
     def _true_force(self, t: np.ndarray, accel_force: np.ndarray, peek: bool = False
                     ) -> np.ndarray:
@@ -953,6 +1020,12 @@ class _EmulatedImu(ABC):
         datasheet figure; each chip says which)."""
         return None
 
+    def filter_setting(self) -> FilterSetting | None:
+        """The configured row of the chip's gyro filter table (its bandwidth, the datasheet's
+        delay and noise bandwidth where given, the source); ``None`` for a chip without such a
+        table or with the filter off."""
+        return None
+
     #: Whether the gyro output filter (:meth:`cutoff_hz`) is emulated (the ``output_filter``
     #: knob of the chips).
     output_filter = True
@@ -960,6 +1033,29 @@ class _EmulatedImu(ABC):
     def _lowpass_hz(self) -> float | None:
         """The cutoff the emulated output path filters at (``None``: it does not filter)."""
         return self.cutoff_hz() if self.output_filter else None
+
+    def filter_order(self) -> int:
+        """The order of the gyro output filter (its first-order sections in cascade): 1 unless
+        a chip's register selects another (the ICM-42688-P's GYRO_UI_FILT_ORD)."""
+        return 1
+
+    def _filter_key(self) -> tuple[float, int] | None:
+        """What the output filter's state belongs to: its cutoff and order (``None``: no
+        filter)."""
+        fc = self._lowpass_hz()
+        return None if fc is None else (fc, self.filter_order())
+
+    def _filter_section(self) -> tuple[float, int] | None:
+        """The output filter as ``(k, order)``: ``order`` equal first-order low-passes
+        ``b (1 + z⁻¹) / (1 + a z⁻¹)``, ``b = k / (1 + k)``, ``a = (k − 1) / (k + 1)``, each the
+        bilinear transform prewarped so that the cascade is exactly −3 dB at the cutoff ``fc``:
+        ``k = tan(π fc / rate) / √(2^(1/order) − 1)``; ``None`` without a filter."""
+        key, rate = self._filter_key(), self._filter_rate_hz()
+        if key is None or rate is None:
+            return None
+        fc, order = key
+        k = math.tan(math.pi * fc / rate)
+        return (k if order == 1 else k / math.sqrt(2.0 ** (1.0 / order) - 1.0)), order
 
     def _pure_delay_s(self, period: float) -> float:
         """A delay of the output beyond its filter's, s (the chip's datasheet delay less the
@@ -1006,60 +1102,121 @@ class _EmulatedImu(ABC):
 
     def _filtered(self, omega: np.ndarray, white: np.ndarray, head: int, skipped: int
                   ) -> tuple[np.ndarray, np.ndarray]:
-        """A first-order low-pass at :meth:`_lowpass_hz` on the true rates of new samples and on
+        """The output filter (:meth:`_filter_section`: the chip's order of first-order
+        low-passes at its cutoff, :meth:`_lowpass_hz`) on the true rates of new samples and on
         the white noise drawn for them (``white``, the same shape: the noise enters ahead of the
         filter, so the filter narrows it as on silicon; the first ``head`` rows, then
         ``skipped`` not generated, then the rest); returns both filtered, decimated to one row
-        per output sample. The filter is discretised at the
-        filter's rate (:meth:`_filter_rate_hz`) by the bilinear transform prewarped to that
-        cutoff (exactly −3 dB there). Rates given per internal sample (n, D, 3) are filtered at
-        the internal rate and decimated to the last of each D (the MPU-9250's DLPF runs at
-        1 kHz before SMPLRT_DIV, register map CONFIG). The chips' filter orders are not
-        published, so this stands in with the datasheet's bandwidth ⚠. The state carries across
-        calls; it restarts (the rates at rest on their first input, the noise at zero) after
-        skipped samples and when the cutoff or rate changes (:meth:`_sync` runs it in early
-        enough for the restart to be forgotten)."""
+        per output sample. The filter runs at :meth:`_filter_rate_hz`. Rates given per internal
+        sample (n, D, 3) are filtered at the internal rate and decimated to the last of each D
+        (the MPU-9250's DLPF runs at 1 kHz before SMPLRT_DIV, register map CONFIG). The chips'
+        filter shapes are not published, so this stands in with the datasheet's bandwidth and
+        the register's order ⚠. The state carries across calls; it restarts (the rates at rest
+        on their first input, the noise at zero) after skipped samples and when the cutoff,
+        order or rate changes (:meth:`_sync` runs it in early enough for the restart to be
+        forgotten)."""
         x = np.concatenate((omega, white), axis=-1)
-        out, state = self._lowpass(x, head, skipped, self._lpf)
+        out, state, _ = self._lowpass(x, head, skipped, self._lpf)
         if out is not x:
             self._lpf = state
         out = out if out.ndim == 2 else out[:, -1]
         return out[:, :3], out[:, 3:]
 
-    def _lowpass(self, omega: np.ndarray, head: int, skipped: int, state: Any
-                 ) -> tuple[np.ndarray, Any]:
+    def _lowpass(self, omega: np.ndarray, head: int, skipped: int, state: Any,
+                 stages: bool = False) -> tuple[np.ndarray, Any, list[np.ndarray] | None]:
         """:meth:`_filtered`'s filter from ``state``, without decimating: the filtered rates
-        (``omega`` itself when there is no filter) and the state after them."""
-        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        if fc is None or rate is None or omega.shape[0] == 0:
-            return omega, state
-        k = math.tan(math.pi * fc / rate)
-        b, a = k / (1 + k), (k - 1) / (k + 1)
-        out = np.empty_like(omega)
-        parts = [(0, head), (head, omega.shape[0])] if skipped else [(0, omega.shape[0])]
-        for i, (lo, hi) in enumerate(parts):
-            if hi <= lo:
-                continue
-            x = omega[lo:hi].reshape(-1, omega.shape[-1])
-            if state is None or state[0] != fc or (i == 1 and skipped):
-                prev_x = x[0].copy()
-                prev_x[3:] = 0.0  # the rates at rest, the noise at zero
-                prev_y = prev_x
-            else:
-                prev_x, prev_y = state[1][0], state[1][1]
-            y, _ = lfilter([b, b], [1.0, a], x, zi=(b * prev_x - a * prev_y)[None, :])
-            out[lo:hi] = y.reshape(omega[lo:hi].shape)
-            state = (fc, np.stack([x[-1], y[-1]]))
-        return out, state
+        (``omega`` itself when there is no filter), the state after them (the last input and
+        each section's last output) and, with ``stages``, the input and each section's output
+        (the state after every row; ``None`` without a filter)."""
+        section, key = self._filter_section(), self._filter_key()
+        if section is None or omega.shape[0] == 0:
+            return omega, state, None
+        return _cascade(omega, head, skipped, state, key, *section, stages)
 
     def filter_delay_s(self) -> float | None:
-        """Group delay at DC of the emulated output filter, s: ``1 / (2 k · odr)`` with
-        ``k = tan(π fc / odr)`` for the bilinear first-order low-pass (its numerator's half
-        sample plus its pole's ``(1 − k) / 2k`` samples); ``None`` without a filter."""
-        fc, rate = self._lowpass_hz(), self._filter_rate_hz()
-        if fc is None or rate is None:
+        """Group delay at DC of the emulated output filter, s: ``order / (2 k · rate)`` for
+        ``order`` bilinear first-order sections (each its numerator's half sample plus its
+        pole's ``(1 − k) / 2k`` samples, :meth:`_filter_section`'s ``k``); ``None`` without
+        a filter."""
+        section, rate = self._filter_section(), self._filter_rate_hz()
+        if section is None or rate is None:
             return None
-        return 1.0 / (2.0 * math.tan(math.pi * fc / rate) * rate)
+        k, order = section
+        return order / (2.0 * k * rate)
+
+    def output_delay_s(self) -> float | None:
+        """The emulated gyro output's delay at DC, s: its filter's group delay
+        (:meth:`filter_delay_s`), the per-sample mean's half window and any pure delay (the
+        MPU-9250's CONFIG table delay makes up the rest); ``None`` without a filter."""
+        filt, period = self.filter_delay_s(), self.true_period_s
+        if filt is None or period is None:
+            return None
+        boxcar = 0.5 * self._average_window_s(period) if self.subsamples > 1 else 0.0
+        return filt + boxcar + self._pure_delay_s(period)
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The configured row of the chip's accelerometer filter table (its bandwidth, delay
+        and noise bandwidth where the datasheet gives them, the source); ``None`` for a chip
+        whose accelerometer filter is not emulated or is off."""
+        return None
+
+    def accel_filter_order(self) -> int:
+        """The accelerometer filter's order: 1 unless a register selects another (the
+        ICM-42688-P's ACCEL_UI_FILT_ORD)."""
+        return 1
+
+    def _accel_filter_rate_hz(self, odr: float) -> float:
+        """The rate the accelerometer filter runs at: the chip's internal rate ahead of its
+        divider where the filter runs there (the InvenSense DLPFs), else the output rate."""
+        if self.filters_at_internal_rate:
+            return max(odr, float(self.family.extra["internal_rate_hz"]))
+        return odr
+
+    def _accel_filter_key(self, odr: float) -> tuple[float, int, float] | None:
+        """The emulated accelerometer filter as ``(bandwidth, order, rate)`` (with the chip's
+        ``output_filter`` knob, the ``dlpf`` effect), ``None`` without one or with a bandwidth
+        at or above half its rate."""
+        setting = self.accel_filter_setting() if self.output_filter else None
+        if setting is None:
+            return None
+        rate = self._accel_filter_rate_hz(odr)
+        if setting.bandwidth_hz >= 0.5 * rate:
+            return None
+        return setting.bandwidth_hz, self.accel_filter_order(), rate
+
+    def _accel_counts(self, force: np.ndarray, rng: Any, odr: float, head: int, skipped: int,
+                      state: Any, stages: bool = False
+                      ) -> tuple[np.ndarray, Any, np.ndarray | None]:
+        """The accelerometer's counts (n, 3) for the true specific force at the output samples:
+        its errors (:meth:`SensorTruth.accel_reading`), its filter (:meth:`_accel_filter_key`)
+        with the white noise drawn ahead of it at the filter's rate, ``D`` internal samples per
+        output sample (the force held over them), decimated to the last of each; without a
+        filter, the noise per output sample. Returns the counts, the filter's state after them
+        and, with ``stages``, its state after each output sample ((n, order + 1, 6); else
+        ``None``)."""
+        key = self._accel_filter_key(odr)
+        if key is None:
+            reading = self.truth.accel_reading(force, rng, odr)
+            states = None
+        else:
+            fc, order, rate = key
+            n, steps = force.shape[0], max(1, round(rate / odr))
+            clean = self.truth.accel_reading(force)
+            acc = self.truth.accelerometer
+            density = 0.0 if acc is None else acc.noise_density_g_sqrt_hz
+            noise = (rng.standard_normal((n, steps, 3)) * density * math.sqrt(odr * steps)
+                     if density > 0 else np.zeros((n, steps, 3)))
+            x = np.concatenate((np.repeat(clean[:, None, :], steps, axis=1), noise), axis=-1)
+            k = math.tan(math.pi * fc / (odr * steps))
+            k = k if order == 1 else k / math.sqrt(2.0 ** (1.0 / order) - 1.0)
+            out, state, every = _cascade(x, head, skipped, state, key, k, order, stages)
+            last = out[:, -1]
+            reading = last[:, :3] + last[:, 3:]
+            states = (None if every is None
+                      else np.stack([v[:, -1] for v in every], axis=1))
+        counts = np.clip(np.rint(reading * self._accel_counts_1g()) + self._accel_trim_counts(),
+                         -32768, 32767).astype(np.int64)
+        return counts, state, states
 
     def _gyro_trim_counts(self) -> np.ndarray | float:
         """Counts the chip's registers add to each gyro output (offset registers, self-test
@@ -1099,7 +1256,7 @@ _MPU_MASTER = MasterLayout(
     slv0_addr=_MR.I2C_SLV0_ADDR, slv_stride=3, slv0_do=_MR.I2C_SLV0_DO, do_stride=1,
     slv4_addr=_MR.I2C_SLV4_ADDR, slv4_reg=_MR.I2C_SLV4_REG, slv4_ctrl=_MR.I2C_SLV4_CTRL,
     slv4_do=_MR.I2C_SLV4_DO, slv4_di=_MR.I2C_SLV4_DI, ext_sens_data_00=_MR.EXT_SENS_DATA_00)
-_MPU_DLPF_BY_CFG = {cfg: hz for hz, cfg in MPU9250_DLPF.items()}
+_MPU_DLPF_BY_CFG = {f.code: f for f in MPU9250_GYRO_FILTER}
 
 
 class EmulatedMPU9250(_EmulatedImu):
@@ -1130,9 +1287,10 @@ class EmulatedMPU9250(_EmulatedImu):
     variant : str
         ``"mpu9250"``, ``"mpu9255"`` or ``"mpu6500"``: which WHO_AM_I it answers.
     output_filter : bool
-        The gyro DLPF at the CONFIG setting (:meth:`cutoff_hz`, :meth:`delay_s`), running at
-        the internal 1 kHz ahead of SMPLRT_DIV; ``False`` passes the per-sample mean rate
-        through unfiltered.
+        The gyro DLPF at the CONFIG setting (:meth:`cutoff_hz`, :meth:`delay_s`) and the
+        accelerometer's at the ACCEL_CONFIG_2 setting (:meth:`accel_filter_setting`), running
+        at the internal 1 kHz ahead of SMPLRT_DIV, the white noise entering ahead of each;
+        ``False`` passes the per-sample mean rate and unfiltered accelerometer noise.
     """
 
     family = MPU9250
@@ -1177,18 +1335,34 @@ class EmulatedMPU9250(_EmulatedImu):
         if self._regs[_MR.USER_CTRL] & _MB.USER_CTRL_I2C_MST_EN:
             self._mst_status |= self.master.cycle(self._regs, self._regs)
 
-    def cutoff_hz(self) -> float | None:
-        """The gyro DLPF bandwidth CONFIG.DLPF_CFG selects (register map CONFIG table,
-        hardware reference §1.4), for DLPF_CFG 1..6 with FCHOICE_B = 00; ``None`` otherwise."""
+    def filter_setting(self) -> FilterSetting | None:
+        """The gyro DLPF's row of :data:`~gyrocal.drivers.imu.chips.MPU9250_GYRO_FILTER`
+        CONFIG.DLPF_CFG selects (register map CONFIG table, hardware reference §1.4), for
+        DLPF_CFG 1..6 with FCHOICE_B = 00; ``None`` otherwise."""
         r = self._regs
         if r[_MR.GYRO_CONFIG] & _MB.GYRO_FCHOICE_B_MASK or self._odr_hz() is None:
             return None
         return _MPU_DLPF_BY_CFG.get(r[_MR.CONFIG] & _MB.CONFIG_DLPF_MASK)
 
+    def cutoff_hz(self) -> float | None:
+        """The gyro DLPF bandwidth (:meth:`filter_setting`); ``None`` without one."""
+        setting = self.filter_setting()
+        return None if setting is None else setting.bandwidth_hz
+
     def delay_s(self) -> float | None:
         """The datasheet's gyro delay for the configured DLPF (CONFIG table), s."""
-        fc = self.cutoff_hz()
-        return None if fc is None else MPU9250_DLPF_DELAY_S[fc]
+        setting = self.filter_setting()
+        return None if setting is None else setting.delay_s
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer DLPF's row of :data:`~gyrocal.drivers.imu.chips.
+        MPU9250_ACCEL_FILTER` ACCEL_CONFIG_2.A_DLPFCFG selects with ACCEL_FCHOICE_B = 0 (reset:
+        218.1 Hz), running at the internal 1 kHz ahead of SMPLRT_DIV; ``None`` with it bypassed
+        or the chip not sampling."""
+        r = self._regs
+        if r[_MR.ACCEL_CONFIG_2] & _MB.ACCEL_FCHOICE_B or self._odr_hz() is None:
+            return None
+        return MPU9250_ACCEL_FILTER[r[_MR.ACCEL_CONFIG_2] & _MB.A_DLPFCFG_MASK]
 
 
     def _pure_delay_s(self, period: float) -> float:
@@ -1431,15 +1605,25 @@ class EmulatedLSM9DS1(_EmulatedImu):
         super().__init__(clock, motion, truth, **kwargs)
 
     def cutoff_hz(self) -> float | None:
-        """The gyro output's −3 dB bandwidth (datasheet Figure 28): the LPF1 cutoff of Table 46
-        with CTRL_REG2_G.OUT_SEL = 00, the LPF2 cutoff BW_G selects in Table 47 with OUT_SEL =
-        1x (01 adds only the high-pass, which is off here); ``None`` with the gyro off."""
+        """The gyro output's −3 dB bandwidth (datasheet Figure 28; :meth:`filter_setting`);
+        ``None`` with the gyro off."""
+        setting = self.filter_setting()
+        return None if setting is None else setting.bandwidth_hz
+
+    def filter_setting(self) -> FilterSetting | None:
+        """The gyro output filter's setting: the LPF1 cutoff of ST Table 46 with
+        CTRL_REG2_G.OUT_SEL = 00, the LPF2 cutoff BW_G selects in Table 47 with OUT_SEL = 1x
+        (01 adds only the high-pass, which is off here); the datasheet gives no delay or noise
+        bandwidth. ``None`` with the gyro off."""
         odr = self._odr_hz()
         if odr is None:
             return None
         if self._regs[_LR.CTRL_REG2_G] & _LB.OUT_SEL_LPF2:
-            return LSM9DS1_BW_G_CUTOFF_HZ[odr][self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK]
-        return LSM9DS1_LPF1_CUTOFF_HZ[odr]
+            code = self._regs[_LR.CTRL_REG1_G] & _LB.BW_G_MASK
+            return FilterSetting(code, LSM9DS1_BW_G_CUTOFF_HZ[odr][code], None, None,
+                                 "ST DocID025715 Table 47 (BW_G), hardware reference §2.3 ⚠")
+        return FilterSetting(0, LSM9DS1_LPF1_CUTOFF_HZ[odr], None, None,
+                             "ST DocID025715 Table 46 (LPF1), hardware reference §2.3")
 
 
     def _reset_state(self) -> None:

@@ -55,6 +55,12 @@ __all__ = [
     "mpu9250_self_test_otp",
     "ChipFamily",
     "ChipModel",
+    "FilterSetting",
+    "ICM20948_ACCEL_FILTER",
+    "ICM20948_GYRO_FILTER",
+    "MPU9250_ACCEL_FILTER",
+    "ICM42688P_UI_FILT_ORDER",
+    "MPU9250_GYRO_FILTER",
     "AccelErrors",
     "AccelRange",
     "GyroErrors",
@@ -234,6 +240,35 @@ class GyroRange:
 
 
 @dataclass(frozen=True)
+class FilterSetting:
+    """One setting of a chip's digital low-pass filter: a row of its datasheet's filter table.
+
+    Parameters
+    ----------
+    code : int
+        The register field value that selects it (MPU-9250 ``DLPF_CFG``, ICM-20948
+        ``GYRO_DLPFCFG``).
+    bandwidth_hz : float
+        The −3 dB bandwidth.
+    delay_s : float or None
+        The datasheet's delay; ``None`` where the datasheet gives none (the emulator then has
+        only its filter's own group delay).
+    noise_bandwidth_hz : float or None
+        The datasheet's noise bandwidth (white noise of one-sided density ``N`` comes out of the
+        filter with ``σ = N √NBW``, of two-sided ``N``: ``σ = N √(2 NBW)``); ``None`` where
+        the datasheet gives none.
+    source : str
+        Where the row comes from; ⚠ marks a single source.
+    """
+
+    code: int
+    bandwidth_hz: float
+    delay_s: float | None
+    noise_bandwidth_hz: float | None
+    source: str
+
+
+@dataclass(frozen=True)
 class ChipModel:
     """A chip accepted by a reader, identified by its WHO_AM_I value.
 
@@ -394,6 +429,10 @@ class _MPU9250Bits:
     SELF_TEST_EN_MASK: int = 0xE0
     SELF_TEST_EN_SHIFT: int = 5
     ACCEL_FS_SHIFT: int = 3
+    # ACCEL_CONFIG_2: A_DLPFCFG bits 2:0; ACCEL_FCHOICE_B bit 3 (1: the DLPF bypassed, 4 kHz)
+    # (hardware reference §1.2: the bit's position conflicts between sources, bit 3 believed ⚠)
+    A_DLPFCFG_MASK: int = 0x07
+    ACCEL_FCHOICE_B: int = 0x08
     FIFO_EN_TEMP: int = 0x80
     FIFO_EN_GYRO_X: int = 0x40
     FIFO_EN_GYRO_Y: int = 0x20
@@ -424,16 +463,48 @@ MPU9250_REG = _MPU9250Registers()
 MPU9250_BITS = _MPU9250Bits()
 
 #: Gyro DLPF settings usable with the FIFO over I²C: FCHOICE_B = 00, DLPF_CFG 1..6, internal
-#: rate 1 kHz, so SAMPLE_RATE = 1000 / (1 + SMPLRT_DIV) (hardware reference §1.4). Maps the
-#: bandwidth in Hz to DLPF_CFG. DLPF_CFG 0 and 7 and FCHOICE_B != 00 sample at 8 or 32 kHz, more
+#: rate 1 kHz, so SAMPLE_RATE = 1000 / (1 + SMPLRT_DIV) (hardware reference §1.4), one row per
+#: DLPF_CFG: the bandwidth and the delay of the register map's CONFIG table (RM-MPU-9250A-00
+#: register 26), ✓✓ with the mpu9250 crate's ``Dlpf`` enum docs (docs.rs/mpu9250, "Gyroscope:
+#: bandwidth=41Hz, delay=5.9ms") and libcaer's DAVIS_CONFIG_IMU_GYRO_DLPF. The register map
+#: gives no noise bandwidth. DLPF_CFG 0 and 7 and FCHOICE_B != 00 sample at 8 or 32 kHz, more
 #: than a 400 kHz I²C bus can carry out of the FIFO, and are not offered.
-MPU9250_DLPF: Mapping[float, int] = MappingProxyType(
-    {184.0: 1, 92.0: 2, 41.0: 3, 20.0: 4, 10.0: 5, 5.0: 6}
+_MPU_CONFIG_TABLE = "RM-MPU-9250A-00 CONFIG table ✓✓ (mpu9250 crate Dlpf docs)"
+MPU9250_GYRO_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(1, 184.0, 2.9e-3, None, _MPU_CONFIG_TABLE),
+    FilterSetting(2, 92.0, 3.9e-3, None, _MPU_CONFIG_TABLE),
+    FilterSetting(3, 41.0, 5.9e-3, None, _MPU_CONFIG_TABLE),
+    FilterSetting(4, 20.0, 9.9e-3, None, _MPU_CONFIG_TABLE),
+    FilterSetting(5, 10.0, 17.85e-3, None, _MPU_CONFIG_TABLE),
+    FilterSetting(6, 5.0, 33.48e-3, None, _MPU_CONFIG_TABLE),
 )
-#: The gyro's delay for each DLPF bandwidth of :data:`MPU9250_DLPF`, s (register map, CONFIG
-#: DLPF_CFG table; hardware reference §1.4).
+#: :data:`MPU9250_GYRO_FILTER` as the readers use it: the bandwidth in Hz to DLPF_CFG.
+MPU9250_DLPF: Mapping[float, int] = MappingProxyType(
+    {f.bandwidth_hz: f.code for f in MPU9250_GYRO_FILTER}
+)
+#: The gyro's delay for each DLPF bandwidth of :data:`MPU9250_DLPF`, s (from
+#: :data:`MPU9250_GYRO_FILTER`).
 MPU9250_DLPF_DELAY_S: Mapping[float, float] = MappingProxyType(
-    {184.0: 2.9e-3, 92.0: 3.9e-3, 41.0: 5.9e-3, 20.0: 9.9e-3, 10.0: 17.85e-3, 5.0: 33.48e-3}
+    {f.bandwidth_hz: f.delay_s for f in MPU9250_GYRO_FILTER}  # type: ignore[misc]
+)
+
+#: Accelerometer DLPF settings with ACCEL_FCHOICE_B = 0, one row per A_DLPFCFG (ACCEL_CONFIG_2
+#: bits 2:0, reset 0): the bandwidth and delay of the register map's ACCEL_CONFIG_2 table
+#: (RM-MPU-9250A-00 register 29), ✓✓ with the mpu9250 crate's ``Dlpf`` enum docs
+#: (docs.rs/mpu9250: "Accelerometer: bandwidth=218.1Hz, delay=1.88ms" ...) and, for the
+#: bandwidths, Zephyr's ICM-20689 (same accelerometer block) ``ICM20689_DT_ACCEL_DLPF_*``
+#: (218.1, 99.0, 44.8, 21.2, 10.2, 5.1, 420.0 Hz). The accelerometer filters at 1 kHz ahead of
+#: SMPLRT_DIV (as the gyro's DLPF).
+_MPU_ACCEL_TABLE = "RM-MPU-9250A-00 ACCEL_CONFIG_2 table ✓✓ (mpu9250 crate Dlpf docs)"
+MPU9250_ACCEL_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(0, 218.1, 1.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(1, 218.1, 1.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(2, 99.0, 2.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(3, 44.8, 4.88e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(4, 21.2, 8.87e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(5, 10.2, 16.83e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(6, 5.05, 32.48e-3, None, _MPU_ACCEL_TABLE),
+    FilterSetting(7, 420.0, 1.38e-3, None, _MPU_ACCEL_TABLE),
 )
 
 #: RM-MPU-9250A-00 registers 19-24 (XG_OFFSET_H .. ZG_OFFSET_L): the offset the output gets,
@@ -815,6 +886,11 @@ class _ICM42688PBits:
     FS_SEL_SHIFT: int = 5
     ODR_MASK: int = 0x0F
     GYRO_UI_FILT_BW_MASK: int = 0x0F
+    GYRO_UI_FILT_ORD_SHIFT: int = 2  # GYRO_CONFIG1 bits 3:2 (:data:`ICM42688P_UI_FILT_ORDER`)
+    GYRO_UI_FILT_ORD_MASK: int = 0x0C
+    ACCEL_UI_FILT_BW_SHIFT: int = 4  # GYRO_ACCEL_CONFIG0 bits 7:4 (reset 1)
+    ACCEL_UI_FILT_ORD_SHIFT: int = 3  # ACCEL_CONFIG1 bits 4:3 (reset 0x0D: 01, second order)
+    ACCEL_UI_FILT_ORD_MASK: int = 0x18
     # TMST_CONFIG reset 0x23: TMST_FSYNC_EN | TMST_EN (DS-000347 §14.42; TDK sample code; the
     # transcription named in _ICM42688PRegisters)
     TMST_TO_REGS_EN: int = 0x10
@@ -856,12 +932,21 @@ ICM42688P_MAX_READER_ODR_HZ = 1000.0
 
 #: GYRO_ACCEL_CONFIG0.GYRO_UI_FILT_BW code → the UI filter bandwidth as a function of the ODR
 #: (DS-000347 "UI filter block" and register GYRO_ACCEL_CONFIG0): 0 is ODR/2, 1..7 are
-#: max(400 Hz, ODR) divided by 4, 5, 8, 10, 16, 20, 40. The reset value is 1. ⚠ The filter's
-#: order (GYRO_CONFIG1.GYRO_UI_FILT_ORD, reset value 0x16) is emulated as a
-#: first-order low-pass at this bandwidth, as for the LSM9DS1.
+#: max(400 Hz, ODR) divided by 4, 5, 8, 10, 16, 20, 40. The reset value is 1. The filter's
+#: order is :data:`ICM42688P_UI_FILT_ORDER`'s; no noise bandwidth or delay per setting was
+#: found (⚠ the emulator has its stand-in filter's own).
 ICM42688P_UI_FILT_DIVISOR: Mapping[int, float] = MappingProxyType(
     {1: 4.0, 2: 5.0, 3: 8.0, 4: 10.0, 5: 16.0, 6: 20.0, 7: 40.0}
 )
+
+
+#: GYRO_CONFIG1.GYRO_UI_FILT_ORD (bits 3:2) → the UI filter's order: 00 first, 01 second, 10
+#: third (DS-000347 register GYRO_CONFIG1; ✓✓ PX4 InvenSense_ICM42688P_registers.hpp
+#: ``GYRO_UI_FILT_ORD = Bit3 | Bit2, // 00: 1st Order``, TDK's IIM-423xx eMD defines
+#: ``..._UI_FILT_ORD_2ND_ORDER = (0x1 << ..._POS)``, ``_3RD_ORDER = (0x2 << ...)``). The reset
+#: value of GYRO_CONFIG1 is 0x16: second order. 11 is reserved (taken as the reset's second
+#: order ⚠).
+ICM42688P_UI_FILT_ORDER: Mapping[int, int] = MappingProxyType({0b00: 1, 0b01: 2, 0b10: 3})
 
 
 def icm42688p_bandwidth_hz(odr_hz: float, code: int) -> float:
@@ -1249,6 +1334,7 @@ class _ICM20948Bits:
     GYRO_FCHOICE: int = 0x01  # 1: the DLPF is on and the rate is 1125/(1 + GYRO_SMPLRT_DIV)
     ACCEL_FS_SEL_SHIFT: int = 1
     ACCEL_FCHOICE: int = 0x01  # 1: the accelerometer DLPF is on, rate 1125/(1 + ACCEL_SMPLRT_DIV)
+    ACCEL_DLPFCFG_SHIFT: int = 3  # ACCEL_CONFIG bits 5:3 (qwiic_icm20948.py:532-534)
     FIFO_EN_2_ACCEL: int = 0x10
     FIFO_EN_2_GYRO_Z: int = 0x08
     FIFO_EN_2_GYRO_Y: int = 0x04
@@ -1270,11 +1356,41 @@ ICM20948_REG2 = _ICM20948Bank2()
 ICM20948_REG3 = _ICM20948Bank3()
 ICM20948_BITS = _ICM20948Bits()
 
-#: Gyro DLPF bandwidth (3 dB, Hz) for each GYRO_DLPFCFG with GYRO_FCHOICE = 1, the internal
-#: rate then 1125 Hz (DS-000189 GYRO_CONFIG_1 table; SparkFun's gyr_d196bw6 ... names):
-#: maps the bandwidth to GYRO_DLPFCFG.
+#: Gyro DLPF settings with GYRO_FCHOICE = 1, the internal rate then 1125 Hz, one row per
+#: GYRO_DLPFCFG: the 3 dB and noise bandwidths of DS-000189's GYRO_CONFIG_1 table, ✓✓ with
+#: SparkFun's qwiic_icm20948.py lines 107-115 (``gyr_d196bw6_n229bw8`` ...: "A is integer part
+#: of 3db BW ... X is integer part of nyquist bandwidth", the table's NBW column) and the same
+#: names in SparkFun's ICM_20948_ENUMERATIONS.h. DS-000189 gives no delay for the gyro DLPF.
+_ICM20948_DLPF_TABLE = "DS-000189 GYRO_CONFIG_1 table ✓✓ (qwiic_icm20948.py:107-115)"
+ICM20948_GYRO_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(0, 196.6, None, 229.8, _ICM20948_DLPF_TABLE),
+    FilterSetting(1, 151.8, None, 187.6, _ICM20948_DLPF_TABLE),
+    FilterSetting(2, 119.5, None, 154.3, _ICM20948_DLPF_TABLE),
+    FilterSetting(3, 51.2, None, 73.3, _ICM20948_DLPF_TABLE),
+    FilterSetting(4, 23.9, None, 35.9, _ICM20948_DLPF_TABLE),
+    FilterSetting(5, 11.6, None, 17.8, _ICM20948_DLPF_TABLE),
+    FilterSetting(6, 5.7, None, 8.9, _ICM20948_DLPF_TABLE),
+    FilterSetting(7, 361.4, None, 376.5, _ICM20948_DLPF_TABLE),
+)
+#: :data:`ICM20948_GYRO_FILTER` as the reader uses it: the bandwidth in Hz to GYRO_DLPFCFG.
 ICM20948_DLPF: Mapping[float, int] = MappingProxyType(
-    {196.6: 0, 151.8: 1, 119.5: 2, 51.2: 3, 23.9: 4, 11.6: 5, 5.7: 6, 361.4: 7}
+    {f.bandwidth_hz: f.code for f in ICM20948_GYRO_FILTER}
+)
+
+#: Accelerometer DLPF settings with ACCEL_FCHOICE = 1 (its reset value), the internal rate
+#: 1125 Hz, one row per ACCEL_DLPFCFG (ACCEL_CONFIG bits 5:3, reset 0): DS-000189's
+#: ACCEL_CONFIG table, 3 dB and noise bandwidths, ✓✓ with SparkFun's qwiic_icm20948.py lines
+#: 96-104 (``acc_d246bw_n265bw`` ...). No delay is given.
+_ICM20948_ACCEL_TABLE = "DS-000189 ACCEL_CONFIG table ✓✓ (qwiic_icm20948.py:96-104)"
+ICM20948_ACCEL_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(0, 246.0, None, 265.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(1, 246.0, None, 265.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(2, 111.4, None, 136.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(3, 50.4, None, 68.8, _ICM20948_ACCEL_TABLE),
+    FilterSetting(4, 23.9, None, 34.4, _ICM20948_ACCEL_TABLE),
+    FilterSetting(5, 11.5, None, 17.0, _ICM20948_ACCEL_TABLE),
+    FilterSetting(6, 5.7, None, 8.3, _ICM20948_ACCEL_TABLE),
+    FilterSetting(7, 473.0, None, 499.0, _ICM20948_ACCEL_TABLE),
 )
 
 ICM20948 = ChipFamily(

@@ -69,4 +69,7 @@ def test_the_emulated_sensor_has_its_chips_figures(model):
     assert sim.truth.realism.bias_instability_rad_s == pytest.approx(
         math.radians(10.0) / 3600.0)  # the stated assumption (no datasheet gives it)
     assert sim.chip.output_filter  # the dlpf effect: the chip's own filter, as configured
+    # its order in the manifest: the ICM-42688-P's UI filter is second order at reset
+    # (DS-000347 GYRO_CONFIG1 = 0x16, GYRO_UI_FILT_ORD = 01), the others' first-order stand-ins
+    assert sim.truth_manifest()["realism"]["dlpf"]["order"] == (2 if model == "icm42688p" else 1)
     assert not build_sim(cfg, seed=3, realism=[]).chip.output_filter
