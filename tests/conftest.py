@@ -16,6 +16,11 @@ The units are handed out longest first (:data:`LONG_UNITS`, measured; the rest b
 of tests, xdist's ``--loadscope-reorder``), so that the short ones fill the end of the run on both
 workers and no long unit starts last.
 
+The tests that read a long end-to-end emulated run (:data:`E2E_FIXTURES`: the documents' chains
+and the shared ``gyrocal calibrate --sim`` runs) are marked ``long``: ``pytest -n 2 -m "not
+long"`` leaves them out for a quick loop while working. The README's command and ``.ci/run`` run
+them all.
+
 ``--dist`` other than ``load`` is left as asked.
 """
 
@@ -63,6 +68,30 @@ LONG_UNITS: dict[str, float] = {
     "tests/drivers/test_imu_config.py": 11.6,
     "tests/drivers/test_dxl_gimbal.py": 10.1,
 }
+
+#: Fixtures that run a long end-to-end emulated run (tens of CPU seconds each): a test that
+#: requests one, itself or through another fixture, is marked ``long``.
+E2E_FIXTURES: frozenset[str] = frozenset({
+    "doc_runner",  # tests/test_docs.py: the documents' commands, calibrations on the emulated jig
+    "full_run", "paper_full_run", "paper_diagonal_run", "verify_run",  # tests/kit/conftest.py
+    "aligned_run",  # tests/kit/test_align_e2e.py
+    "run_logs",  # tests/kit/test_calibrate.py
+    "three",  # tests/kit/test_plate.py
+})
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "long: reads a long end-to-end emulated run (tests/conftest.py E2E_FIXTURES); "
+        "-m 'not long' leaves these out, the README's command runs them")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark ``long`` every test that requests one of :data:`E2E_FIXTURES`."""
+    for item in items:
+        if E2E_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.long)
+
 
 try:
     from xdist.scheduler import LoadScopeScheduling
