@@ -4,7 +4,9 @@ Every fenced block of ``README.md`` and ``hardware_docs/*.md`` is run in the ord
 them: ``README.md``, then the index ``hardware_docs/README.md``, then the pages in the order of the
 index's table, each page's blocks in the order they appear; the documents that build on each
 other's files share a working directory (a chain, :data:`CHAINS`), in which a command reads the
-files every earlier command of its chain wrote:
+files every earlier command of its chain wrote (a chain's blocks that share no file with the rest
+of it but its configurations, its branches of :data:`BRANCHES`, run in directories of their own,
+so that a long chain runs on both xdist workers):
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
