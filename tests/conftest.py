@@ -50,7 +50,7 @@ from tests.test_docs import xdist_unit  # noqa: E402
 #: first. A unit missing here keeps xdist's order after them; a figure out of date only moves a
 #: unit in that order.
 LONG_UNITS: dict[str, float] = {
-    "tests/drivers/test_imu_streaming.py": 93.6,
+    "tests/drivers/test_imu_streaming.py": 98.7,
     "tests/test_docs.py::running": 79.1,  # its branches apart: 183.4 whole before s9-speed2
     "tests/test_docs.py::running/thermal": 56.3,
     "tests/kit/test_calibrate.py": 54.1,
@@ -65,11 +65,13 @@ LONG_UNITS: dict[str, float] = {
     "tests/kit/test_signals.py": 19.4,
     "tests/calib/test_tracker.py": 19.1,
     "tests/test_docs.py::single-servo": 19.0,
+    "tests/kit/test_model_choice.py": 17.2,
     "tests/kit/test_align_e2e.py": 18.0,
     "tests/test_docs.py::intro/demo": 18.0,
     "tests/kit/test_recording_reader.py": 16.4,
     "tests/kit/test_verify_general.py": 16.0,
     "tests/kit/test_track_v2.py": 13.9,
+    "tests/kit/test_single_servo.py": 13.0,
     "tests/kit/test_thermal.py": 11.6,
     "tests/drivers/test_imu_config.py": 11.6,
     "tests/drivers/test_dxl_gimbal.py": 10.1,
