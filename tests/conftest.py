@@ -6,7 +6,9 @@ Under pytest-xdist (``pytest -n 2``, the README's command) the scheduler below i
 * each chain of documents of ``tests/test_docs.py`` (:data:`tests.test_docs.CHAINS`: documents
   that read each other's files run in reading order in one directory) with the tests that read
   that chain's files. Split over workers, as xdist's default ``load`` scheduling does, a chain ran
-  on every worker that had one of its tests;
+  on every worker that had one of its tests. A chain's branches (:data:`tests.test_docs.BRANCHES`:
+  its blocks that share no file with the rest beyond the configurations) are units of their own,
+  so that the longest chain runs on both workers;
 * every other test module, whole (as ``--dist loadfile``): a module-scoped fixture (an emulated
   calibration, a simulated recording, a rendered report) is built by one worker only. With every
   test a unit of its own, the two workers took a module's tests in turn and each built its
@@ -15,6 +17,11 @@ Under pytest-xdist (``pytest -n 2``, the README's command) the scheduler below i
 The units are handed out longest first (:data:`LONG_UNITS`, measured; the rest by their number
 of tests, xdist's ``--loadscope-reorder``), so that the short ones fill the end of the run on both
 workers and no long unit starts last.
+
+The tests that read a long end-to-end emulated run (:data:`E2E_FIXTURES`: the documents' chains
+and the shared ``gyrocal calibrate --sim`` runs) are marked ``long``: ``pytest -n 2 -m "not
+long"`` leaves them out for a quick loop while working. The README's command and ``.ci/run`` run
+them all.
 
 ``--dist`` other than ``load`` is left as asked.
 """
@@ -43,26 +50,56 @@ from tests.test_docs import xdist_unit  # noqa: E402
 #: first. A unit missing here keeps xdist's order after them; a figure out of date only moves a
 #: unit in that order.
 LONG_UNITS: dict[str, float] = {
-    "tests/test_docs.py::running": 183.4,
-    "tests/drivers/test_imu_streaming.py": 93.6,
-    "tests/kit/test_calibrate.py": 55.3,  # 82.7 measured, less the two runs now shared
-    "tests/kit/test_plate.py": 51.2,
-    "tests/test_docs.py::intro": 47.0,
-    "tests/kit/test_reliability.py": 45.6,
+    "tests/drivers/test_imu_streaming.py": 98.7,
+    "tests/test_docs.py::running": 79.1,  # its branches apart: 183.4 whole before s9-speed2
+    "tests/test_docs.py::running/thermal": 56.3,
+    "tests/kit/test_calibrate.py": 54.1,
+    "tests/kit/test_plate.py": 42.5,
+    "tests/test_docs.py::running/plate": 32.4,
     "tests/kit/test_track_live.py": 31.3,
     "tests/kit/test_report.py": 29.6,
     "tests/kit/test_accel_recording.py": 25.4,  # the first to ask for the shared full_run
+    "tests/kit/test_reliability.py": 24.7,
+    "tests/test_docs.py::intro": 21.6,
     "tests/kit/test_track.py": 19.9,
     "tests/kit/test_signals.py": 19.4,
     "tests/calib/test_tracker.py": 19.1,
+    "tests/test_docs.py::single-servo": 19.0,
+    "tests/kit/test_model_choice.py": 17.2,
     "tests/kit/test_align_e2e.py": 18.0,
+    "tests/test_docs.py::intro/demo": 18.0,
     "tests/kit/test_recording_reader.py": 16.4,
     "tests/kit/test_verify_general.py": 16.0,
     "tests/kit/test_track_v2.py": 13.9,
+    "tests/kit/test_single_servo.py": 13.0,
     "tests/kit/test_thermal.py": 11.6,
     "tests/drivers/test_imu_config.py": 11.6,
     "tests/drivers/test_dxl_gimbal.py": 10.1,
 }
+
+#: Fixtures that run a long end-to-end emulated run (tens of CPU seconds each): a test that
+#: requests one, itself or through another fixture, is marked ``long``.
+E2E_FIXTURES: frozenset[str] = frozenset({
+    "doc_runner",  # tests/test_docs.py: the documents' commands, calibrations on the emulated jig
+    "full_run", "paper_full_run", "paper_diagonal_run", "verify_run",  # tests/kit/conftest.py
+    "aligned_run",  # tests/kit/test_align_e2e.py
+    "run_logs",  # tests/kit/test_calibrate.py
+    "three",  # tests/kit/test_plate.py
+})
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "long: reads a long end-to-end emulated run (tests/conftest.py E2E_FIXTURES); "
+        "-m 'not long' leaves these out, the README's command runs them")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark ``long`` every test that requests one of :data:`E2E_FIXTURES`."""
+    for item in items:
+        if E2E_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.long)
+
 
 try:
     from xdist.scheduler import LoadScopeScheduling

@@ -4,7 +4,9 @@ Every fenced block of ``README.md`` and ``hardware_docs/*.md`` is run in the ord
 them: ``README.md``, then the index ``hardware_docs/README.md``, then the pages in the order of the
 index's table, each page's blocks in the order they appear; the documents that build on each
 other's files share a working directory (a chain, :data:`CHAINS`), in which a command reads the
-files every earlier command of its chain wrote:
+files every earlier command of its chain wrote (a chain's blocks that share no file with the rest
+of it but its configurations, its branches of :data:`BRANCHES`, run in directories of their own,
+so that a long chain runs on both xdist workers):
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
@@ -312,18 +314,26 @@ def _run_c(block: Block, workdir: Path, run: DocRun) -> None:
     run.log.append(f"{block.where}: C example printed {ran.stdout.strip()!r}")
 
 
-def run_document(path: Path, workdir: Path) -> DocRun:
-    """Run every block of ``path`` in order in ``workdir``."""
+def run_document(path: Path, workdir: Path, part: str | None = None) -> DocRun:
+    """Run the blocks of ``path`` that belong to ``part`` of its chain (the branch of that name,
+    or with None the rest: :func:`block_branch`) in order in ``workdir``. The ``doctest: file``
+    blocks of every part write their files in every part: a later command of any part may read
+    them (a configuration in the working directory is read without being named)."""
     run = DocRun(workdir)
+    chain = chain_of(path)
     t0 = time.perf_counter()
     with _cwd(workdir):
         for block in parse_blocks(path):
             d = DIRECTIVE.match(block.directive) if block.directive else None
+            mine = block_branch(chain, block) == part
             if d and d.group("reason"):
-                run.skipped.append(f"{block.where}: {d.group('reason')}")
+                if mine:
+                    run.skipped.append(f"{block.where}: {d.group('reason')}")
                 continue
             if d and d.group("file"):
                 (workdir / d.group("file")).write_text(block.text, encoding="utf-8")
+            if not mine:
+                continue
             expect = int(d.group("exit")) if d and d.group("exit") else 0
             if block.lang in SHELL_LANGS:
                 commands = shell_commands(block)
@@ -384,6 +394,47 @@ CHAINS: dict[str, tuple[str, ...]] = {
 }
 
 
+#: Branches of a chain: blocks that read nothing the rest of their chain writes (beyond its
+#: ``doctest: file`` blocks) and write nothing the rest reads, split off so that a long chain runs
+#: on both xdist workers at once (``tests/conftest.py``). ``chain -> {branch: outputs}``: a block
+#: belongs to the branch whose outputs (a directory or file of the document's directory) one of
+#: its commands names, as ``--out`` or as an input (:func:`block_branch`); every other block to
+#: the chain's main part. A branch runs in a directory of its own, in which the chain's
+#: ``doctest: file`` blocks are written in their place in reading order and nothing else of the
+#: main part runs, so a branch block that read a main part's output, or a main block that read a
+#: branch's, would fail as it would for a reader who skipped it.
+BRANCHES: dict[str, dict[str, tuple[str, ...]]] = {
+    # running.md's two-sensor plate (plate1) and using.md's warm-up (five emulated
+    # calibrations, warmup) read only gyrocal.toml and plate.toml
+    "running": {"plate": ("plate1",), "thermal": ("warmup",)},
+    # the index's emulated run (demo) beside the README's: neither reads the other
+    "intro": {"demo": ("demo",)},
+}
+
+
+def _names(block: Block) -> list[str]:
+    """The words of a block that may be paths: its commands' arguments (shell blocks) or its
+    path-like words (other blocks)."""
+    if block.lang in SHELL_LANGS:
+        return [arg for argv in shell_commands(block) for arg in argv]
+    return re.findall(r"[\w.\-/]+", block.text)
+
+
+def block_branch(chain: str, block: Block) -> str | None:
+    """The branch of ``chain`` (:data:`BRANCHES`) that ``block`` belongs to, or None for the
+    chain's main part."""
+    names = [os.path.normpath(n) for n in _names(block)]
+    hits = {branch for branch, outputs in BRANCHES.get(chain, {}).items()
+            if any(n == out or n.startswith(out + "/") for n in names for out in outputs)}
+    assert len(hits) <= 1, f"{block.where} names the outputs of branches {sorted(hits)}"
+    return hits.pop() if hits else None
+
+
+def branch_ids() -> list[str]:
+    """Every branch as ``chain/branch``."""
+    return [f"{chain}/{branch}" for chain, branches in BRANCHES.items() for branch in branches]
+
+
 def chain_of(path: Path | str) -> str:
     """The name of the chain that runs document ``path``."""
     name = path if isinstance(path, str) else _name(path)
@@ -398,6 +449,8 @@ def xdist_unit(nodeid: str) -> str | None:
     this module), or None for a test that runs none (``tests/conftest.py``)."""
     module, _, test = nodeid.partition("::")
     name, _, param = test.partition("[")
+    if param.rstrip("]") in branch_ids():
+        return f"{module}::{param.rstrip(']')}"
     if param.rstrip("]") in {n for names in CHAINS.values() for n in names}:
         return f"{module}::{chain_of(param.rstrip(']'))}"
     chain = USES_CHAIN.get(name)
@@ -418,33 +471,36 @@ def uses_chain(chain: str) -> Any:
 
 
 class DocRunner:
-    """Runs each chain's documents once per worker, in reading order in the chain's directory (as
-    a reader would), and remembers what each produced."""
+    """Runs each part of each chain (its main part, and each branch: :data:`BRANCHES`) once per
+    worker, the chain's documents in reading order in the part's own directory (as a reader
+    would), and remembers what each produced."""
 
     def __init__(self, factory: pytest.TempPathFactory) -> None:
         self.factory = factory
-        self.workdirs: dict[str, Path] = {}
-        self.runs: dict[str, DocRun] = {}
-        self.failures: dict[str, BaseException] = {}
+        self.workdirs: dict[tuple[str, str | None], Path] = {}
+        self.runs: dict[tuple[str, str | None], DocRun] = {}
+        self.failures: dict[tuple[str, str | None], BaseException] = {}
 
-    def __call__(self, path: Path) -> DocRun:
+    def __call__(self, path: Path, part: str | None = None) -> DocRun:
         chain = chain_of(path)
         names = CHAINS[chain]
-        if chain not in self.workdirs:
-            self.workdirs[chain] = self.factory.mktemp(f"docs-{chain}")
+        if (chain, part) not in self.workdirs:
+            where = f"docs-{chain}" + (f"-{part}" if part else "")
+            self.workdirs[chain, part] = self.factory.mktemp(where)
         for key in names[: names.index(_name(path)) + 1]:
-            if key in self.failures:
+            if (key, part) in self.failures:
                 if key == _name(path):
-                    raise self.failures[key]
+                    raise self.failures[key, part]
                 raise AssertionError(f"{key}, read before {_name(path)}, failed: "
-                                     f"{self.failures[key]}")
-            if key not in self.runs:
+                                     f"{self.failures[key, part]}")
+            if (key, part) not in self.runs:
                 try:
-                    self.runs[key] = run_document(ROOT / key, self.workdirs[chain])
+                    self.runs[key, part] = run_document(ROOT / key, self.workdirs[chain, part],
+                                                        part)
                 except BaseException as exc:  # remember, so a second caller sees the same failure
-                    self.failures[key] = exc
+                    self.failures[key, part] = exc
                     raise
-        return self.runs[_name(path)]
+        return self.runs[_name(path), part]
 
 
 @pytest.fixture(scope="module")
@@ -475,6 +531,40 @@ def test_every_command_in_the_document_works(path: Path, docs: Any) -> None:
     for reason in run.skipped:
         assert "needs hardware" in reason or "no C compiler" in reason, (
             f"a skipped block must say which hardware it needs: {reason}")
+
+
+@pytest.mark.parametrize("branch", branch_ids())
+def test_every_command_of_a_branch_works(branch: str, doc_runner: DocRunner) -> None:
+    chain, _, part = branch.partition("/")
+    names = CHAINS[chain]
+    doc_runner(ROOT / names[-1], part)
+    runs = [doc_runner.runs[name, part] for name in names]
+    assert any(": gyrocal " in line for run in runs for line in run.log), f"{branch} ran nothing"
+    for reason in (r for run in runs for r in run.skipped):
+        assert "needs hardware" in reason or "no C compiler" in reason, (
+            f"a skipped block must say which hardware it needs: {reason}")
+
+
+def _outputs(blocks: list[Block]) -> set[str]:
+    """What the ``gyrocal`` commands of ``blocks`` write with ``--out``."""
+    return {os.path.normpath(value) for block in blocks if block.lang in SHELL_LANGS
+            for argv in shell_commands(block)
+            for flag, value in zip(argv, argv[1:], strict=False) if flag == "--out"}
+
+
+def test_each_branch_writes_its_outputs_and_reads_none_of_the_main_part() -> None:
+    # a branch's outputs are written by its commands, and its blocks name nothing a main-part
+    # command writes (block_branch refuses a block naming two branches' outputs)
+    for branch in branch_ids():
+        chain, _, part = branch.partition("/")
+        blocks = [b for name in CHAINS[chain] for b in parse_blocks(ROOT / name)]
+        mine = [b for b in blocks if block_branch(chain, b) == part]
+        assert set(BRANCHES[chain][part]) <= _outputs(mine), f"{branch}: an output not written"
+        main = _outputs([b for b in blocks if block_branch(chain, b) is None])
+        for block in mine:
+            clash = {n for n in map(os.path.normpath, _names(block)) for out in main
+                     if n == out or n.startswith(out + "/")}
+            assert not clash, f"{block.where} ({branch}) reads {sorted(clash)} of the main part"
 
 
 def test_the_chains_hold_every_document_once_in_reading_order() -> None:

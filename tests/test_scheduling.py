@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from tests.conftest import LONG_UNITS, longest_first, work_unit
-from tests.test_docs import CHAINS
+from tests.test_docs import CHAINS, branch_ids
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,6 +28,9 @@ def test_a_module_is_one_unit_and_a_chain_of_documents_another():
         "tests/test_docs.py::running"
     assert work_unit("tests/test_docs.py::test_exit_code_table_matches_the_code") == \
         "tests/test_docs.py"
+    # a branch of a chain (tests.test_docs.BRANCHES) is a unit of its own
+    branch = "tests/test_docs.py::test_every_command_of_a_branch_works[running/thermal]"
+    assert work_unit(branch) == "tests/test_docs.py::running/thermal"
 
 
 def test_the_long_units_go_first_longest_first_and_the_rest_keep_their_order():
@@ -42,7 +45,7 @@ def test_every_long_unit_names_a_chain_or_a_module_that_exists():
     for unit in LONG_UNITS:
         module, _, chain = unit.partition("::")
         assert (ROOT / module).is_file(), f"{unit}: no such module"
-        assert not chain or chain in CHAINS, f"{unit}: no such chain"
+        assert not chain or chain in CHAINS or chain in branch_ids(), f"{unit}: no such chain"
 
 
 class _Config:
@@ -108,3 +111,38 @@ def test_xdist_gets_whole_units_the_longest_first(monkeypatch):
     # a module whole on one worker, and a chain with the test that reads its files
     for together in (collection[7:], collection[1:3], collection[4:6]):
         assert any(set(together) <= set(r) for r in ran), together
+
+
+def _fixtures_defined() -> set[str]:
+    """The names of the functions decorated as pytest fixtures in tests/."""
+    import ast
+
+    names = set()
+    for path in (ROOT / "tests").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.FunctionDef) and any(
+                    "fixture" in ast.unparse(d) for d in node.decorator_list):
+                names.add(node.name)
+    return names
+
+
+class _Item:
+    """What the marking hook reads of a collected test."""
+
+    def __init__(self, fixtures: list[str]) -> None:
+        self.fixturenames = fixtures
+        self.markers: list[str] = []
+
+    def add_marker(self, mark: Any) -> None:
+        self.markers.append(mark.name)
+
+
+def test_the_readers_of_an_end_to_end_run_are_marked_long():
+    from tests import conftest
+
+    assert conftest.E2E_FIXTURES <= _fixtures_defined()
+    reader = _Item(["tmp_path", "full_run", "tmp_path_factory"])
+    through = _Item(["runs", "paper_diagonal_run", "run_logs"])  # requested by another fixture
+    other = _Item(["tmp_path", "capsys"])
+    conftest.pytest_collection_modifyitems([reader, through, other])
+    assert reader.markers == ["long"] and through.markers == ["long"] and other.markers == []

@@ -52,6 +52,11 @@ odr_hz = 225.0
 """
 
 
+#: The planner's diagonal protocol in 18 s of jig time (as tests/kit/test_reliability.py's
+#: forced rerun): for the runs that check how a failing sensor is handled, not the estimate.
+SHORT = '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n'
+
+
 def write(tmp_path, text, name="g.toml"):
     p = tmp_path / name
     p.write_text(text)
@@ -230,9 +235,9 @@ def test_one_plain_label_labels_each_sensor_by_its_place():
 
 
 def test_a_sensor_that_dies_mid_run_fails_alone(tmp_path, capsys):
-    cfg = write(tmp_path, TWO_BUSES)
+    cfg = write(tmp_path, TWO_BUSES + SHORT)
     out = tmp_path / "run"
-    code = main(["calibrate", "--sim", "--sim-seed", "2", *PAPER_SENSOR, "--protocol", "auto",
+    code = main(["calibrate", "--sim", "--sim-seed", "2", *PAPER_SENSOR,
                  "--config", str(cfg), "--out", str(out), "--quiet", "--no-report",
                  "--sim-fault", "imu-dead:6@b"])
     text = capsys.readouterr().out
@@ -254,11 +259,10 @@ def test_a_sensor_that_dies_mid_run_fails_alone(tmp_path, capsys):
 def test_a_sensor_whose_fifo_overflows_on_every_repeat_fails_alone(tmp_path, capsys):
     # a FIFO of one sample (14 bytes, as tests/kit/test_calibrate.py) on sensor b only
     cfg = write(tmp_path, '[[imu]]\nname = "mpu"\naddress = 0x68\n'
-                          '[[imu]]\nname = "b"\naddress = 0x69\n')
+                          '[[imu]]\nname = "b"\naddress = 0x69\n' + SHORT)
     out = tmp_path / "run"
-    code = main(["calibrate", "--sim", *PAPER_SENSOR, "--protocol", "auto", "--config",
-                 str(cfg), "--out", str(out), "--quiet", "--no-report",
-                 "--sim-fault", "fifo:14@b"])
+    code = main(["calibrate", "--sim", *PAPER_SENSOR, "--config", str(cfg), "--out", str(out),
+                 "--quiet", "--no-report", "--sim-fault", "fifo:14@b"])
     text = capsys.readouterr().out
     assert code == 5  # a check's class
     assert "== sensor mpu: mpu9250 at 0x68 on bus 1: PASSED" in text

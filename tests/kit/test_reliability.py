@@ -50,10 +50,13 @@ def test_a_failed_forced_rerun_leaves_the_old_run_whole(tmp_path, capsys):
     assert len(partial) == 1 and not (partial[0] / "calibration.json").exists()
     manifest = json.loads((partial[0] / "recording" / "manifest.json").read_text())
     assert manifest["complete"] is False
-    # a forced rerun that succeeds replaces the run as a whole
-    assert calibrate(out, "--sim-seed", "6", "--force", "--config", str(short)) == 0
+    # a forced rerun that succeeds replaces the run as a whole: the new run has no report
+    # (--no-report), so a report left of the old run would show a merge
+    assert calibrate(out, "--sim-seed", "6", "--force", "--config", str(short),
+                     "--no-report") == 0
     cal = json.loads((out / "calibration.json").read_text())
     assert cal["scale"] != json.loads(before[Path("calibration.json")])["scale"]
+    assert not (out / "report.html").exists() and not (out / "plots").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".run1.old-")]
 
 
@@ -138,7 +141,16 @@ def test_odr_inf_on_the_command_line_exits_2(tmp_path, capsys):
 def test_signed_axes_mean_the_same_to_the_validator_and_the_jig(tmp_path):
     from gyrocal.kit.config import load_config
 
+    # The names reach the emulated gimbal (its joints turn about -x, y, -z) and the manifest,
+    # against which the fit checks each servo's axis (exit 6, "implausible", for a servo whose
+    # fitted axis is another signed axis). Any protocol that turns each servo checks that, so
+    # the planner's diagonal one in 18 s of jig time does, without a report.
     cfg = tmp_path / "gyrocal.toml"
-    cfg.write_text('[gimbal]\naxes = ["-x", "+y", "-z"]\n')
+    cfg.write_text('[gimbal]\naxes = ["-x", "+y", "-z"]\n'
+                   '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n')
     assert load_config(cfg)["gimbal"]["axes"] == ["-x", "y", "-z"]
-    assert calibrate(tmp_path / "out", "--config", str(cfg)) in (0, 3)
+    out = tmp_path / "out"
+    assert calibrate(out, "--config", str(cfg), "--no-report") in (0, 3)
+    manifest = json.loads((out / "recording" / "manifest.json").read_text())
+    assert [m["axis"] for m in manifest["gimbal"]["motors"]] == ["-x", "y", "-z"]
+    assert (out / "calibration.json").exists()
