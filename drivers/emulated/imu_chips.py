@@ -699,8 +699,9 @@ class _EmulatedImu(ABC):
         head, tail = self._head_tail(n)
         head, tail = min(head, n), min(tail, n)
         # a filter runs on between the samples handed out: the tail starts early enough for
-        # its start to be forgotten (all of them when that reaches the head)
-        warm = self._filter_memory(period)
+        # its start to be forgotten (all of them when that reaches the head; the usual drain
+        # of a few samples needs no tail, and no filter memory worked out)
+        warm = 0 if head + tail >= n else self._filter_memory(period)
         if head + tail + warm >= n and self._release_ahead(n, period):
             return
         self._ahead = None
