@@ -498,11 +498,18 @@ class EmulatedSMBus:
         ad = self._adapter
         ad.transactions += 1
         clock, bus_hz, devices = ad.clock, ad.bus_hz, ad.devices
-        monotonic = clock.monotonic
+        monotonic, sleep = clock.monotonic, clock.sleep
         # Each step waits until the bus has clocked its bits since t0 (no wait with bus_hz 0):
         # a (repeated) START and the address byte, the data bytes at 9 bits (8 + ACK), a STOP.
-        wait = clock.sleep if bus_hz > 0 else None
+        # A host that stalled meanwhile (VirtualClock.stall_at) finds them clocked already: the
+        # adapter shifts the bits out without it.
         t0 = monotonic()
+
+        def wait(bits: int) -> None:
+            gap = t0 + bits / bus_hz - monotonic()
+            sleep(gap if gap > 0 else 0.0)
+
+        timed = bus_hz > 0
         bits = 0
         first = plan[0]
         register = first.data[0] if first.data else None
@@ -511,8 +518,8 @@ class EmulatedSMBus:
         try:
             for m in plan:
                 bits += 10
-                if wait is not None:
-                    wait(t0 + bits / bus_hz - monotonic())
+                if timed:
+                    wait(bits)
                 dev = devices.get(m.addr)
                 refusal = errno.EREMOTEIO if dev is None else dev.i2c_ack()
                 if refusal is not None:
@@ -522,8 +529,8 @@ class EmulatedSMBus:
                 data = m.data
                 if data is not None:
                     bits += 9 * len(data)
-                    if wait is not None:
-                        wait(t0 + bits / bus_hz - monotonic())
+                    if timed:
+                        wait(bits)
                     if data:  # a Quick Command is the address alone
                         dev.i2c_write(data)
                     continue
@@ -541,12 +548,12 @@ class EmulatedSMBus:
                 if len(data) != length:
                     raise RuntimeError(f"device returned {len(data)} bytes for {length}")
                 bits += 9 * length
-                if wait is not None:
-                    wait(t0 + bits / bus_hz - monotonic())
+                if timed:
+                    wait(bits)
                 reads.append(data)
             bits += 1  # STOP
-            if wait is not None:
-                wait(t0 + bits / bus_hz - monotonic())
+            if timed:
+                wait(bits)
         finally:
             ad.log.append(Transaction(t0, op, first.addr, register, _written(plan),
                                       sum(map(len, reads)), failure, monotonic() - t0))
