@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -110,6 +111,13 @@ class Backlog:
         self._thread: threading.Thread | None = None
         #: The most items that waited in the queue at once (a measure of the consumer's lag).
         self.high_water = 0
+        #: The most loop iterations the consumer writes (and flushes) as one append.
+        self.batch_items = 512
+        #: On an emulated clock (``realtime=False``), the wall time the consumer waits after
+        #: taking samples before it takes those queued behind them: nothing is due in wall time
+        #: there, and the loop, which would otherwise hand over the interpreter for every
+        #: iteration or two, queues tens of iterations meanwhile, written as one append.
+        self.gather_s = 0.05
 
     # ---------------------------------------------------------------- producer side
     def start(self) -> Backlog:
@@ -214,29 +222,63 @@ class Backlog:
 
     # ---------------------------------------------------------------- consumer side
     def _consume(self) -> None:
+        pending = None  # an item taken while gathering samples, handled next
         while True:
-            item = self._queue.get()
+            item, pending = (self._queue.get() if pending is None else pending), None
             if item is _STOP or self._error is not None:
                 if item is _STOP:
                     self._show()
                     return
                 continue
             try:
-                self._handle(item)
-                if self._queue.empty():
+                if item[0] == "samples":
+                    if not self.realtime and self._queue.qsize() < self.batch_items:
+                        time.sleep(self.gather_s)  # let the loop run ahead: fewer, longer writes
+                    items, pending = self._gather(item)
+                    self._write_samples(items)
+                else:
+                    self._handle(item)
+                if pending is None and self._queue.empty():
                     self._show()
             except BaseException as exc:  # kept for the producer; nothing more is written
                 self._error = exc
 
+    def _gather(self, first: tuple[Any, ...]) -> tuple[list[tuple[Any, ...]], Any]:
+        """``first`` and the samples items queued right behind it (at most
+        :attr:`batch_items`), and the next item of another kind taken on the way, if any."""
+        items = [first]
+        while len(items) < self.batch_items:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                return items, None
+            if item is _STOP or item[0] != "samples":
+                return items, item
+            items.append(item)
+        return items, None
+
+    def _write_samples(self, items: list[tuple[Any, ...]]) -> None:
+        """Write consecutive loop iterations' samples as one append (one write and one flush)
+        per file: the rows, and so the files' bytes, are those of one append per iteration,
+        and every row taken from the queue is flushed to the operating system before the next
+        item is taken (a process that dies keeps what the files hold)."""
+        imus = [it[1] for it in items]
+        if any(isinstance(imu, list) for imu in imus):
+            sensors = max(len(imu) for imu in imus if isinstance(imu, list))
+            per_sensor = [_join_rows([imu[k] for imu in imus
+                                      if isinstance(imu, list) and imu[k] is not None])
+                          for k in range(sensors)]
+            self.writer.append_imus(per_sensor)
+        else:
+            rows = _join_rows([imu for imu in imus if imu is not None])
+            if rows is not None:
+                self.writer.append_imu(*rows)
+        self.writer.append_encoder(*_join_encoder([it[2] for it in items]))
+
     def _handle(self, item: tuple[Any, ...]) -> None:
         kind = item[0]
         if kind == "samples":
-            _, imu, (te, ids, angles) = item
-            if isinstance(imu, list):
-                self.writer.append_imus(imu)
-            elif imu is not None:
-                self.writer.append_imu(*imu)
-            self.writer.append_encoder(te, ids, angles)
+            self._write_samples([item])
         elif kind == "segment":
             self.writer.append_segment(item[1])
         elif kind == "call":
@@ -266,6 +308,38 @@ class Backlog:
                 self.close(timeout_s=5.0)
             except Exception:
                 pass
+
+
+def _join_rows(rows: list[tuple[Any, ...]]) -> tuple[Any, ...] | None:
+    """Consecutive IMU rows ``(t, rate, temperature_c, accel)`` (the arguments of
+    :meth:`~gyrocal.kit.recording.RecordingWriter.append_imu`) joined into one, or None for no
+    rows. An absent temperature is NaN (which the writer writes as absent); an absent
+    accelerometer in any row leaves it absent."""
+    if len(rows) <= 1:
+        return rows[0] if rows else None
+    t = [np.asarray(r[0], dtype=float).reshape(-1) for r in rows]
+    rate = np.concatenate([np.asarray(r[1], dtype=float).reshape(-1, 3) for r in rows])
+    temp = np.concatenate([np.full(ti.size, np.nan) if r[2] is None
+                           else np.asarray(r[2], dtype=float).reshape(-1)
+                           for r, ti in zip(rows, t, strict=True)])
+    accel = None
+    if all(len(r) > 3 and r[3] is not None for r in rows):
+        accel = np.concatenate([np.asarray(r[3], dtype=float).reshape(-1, 3) for r in rows])
+    return np.concatenate(t), rate, temp, accel
+
+
+def _join_encoder(rows: list[tuple[float, Any, Any]]) -> tuple[Any, Any, Any]:
+    """Consecutive encoder readings ``(t, motor ids, angles)`` (the arguments of
+    :meth:`~gyrocal.kit.recording.RecordingWriter.append_encoder`) joined into one: the time
+    repeated for each motor, the ids and angles concatenated."""
+    if len(rows) == 1:
+        return rows[0]
+    ids = [np.asarray(m, dtype=np.int64).reshape(-1) for _, m, _ in rows]
+    angles = [np.asarray(a, dtype=float).reshape(-1) for _, _, a in rows]
+    if any(m.size != a.size for m, a in zip(ids, angles, strict=True)):
+        raise ValueError("append_encoder: motor and angle differ in length")
+    times = [np.full(m.size, t, dtype=float) for (t, _, _), m in zip(rows, ids, strict=True)]
+    return np.concatenate(times), np.concatenate(ids), np.concatenate(angles)
 
 
 class _Abandoned(Exception):

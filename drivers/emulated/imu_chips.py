@@ -410,9 +410,9 @@ class _Ahead:
     before the coloured noise ``m`` (the true rate through the filter and the sensor's errors,
     the g-sensitivity, the white noise), the accelerometer's counts, the die temperature and
     its counts; the filter's state after each (``lpf``), and the accelerometer's normals each
-    used. From sample ``coloured_from`` on, the coloured noise as one-sample drains would give
-    it from the state ``coloured_start`` (its states after each sample) and the gyro counts
-    with it."""
+    used. From sample ``coloured_from`` on (up to ``coloured_hi``), the coloured noise as
+    one-sample drains would give it from the state ``coloured_start`` (its states after each
+    sample) and the gyro counts with it."""
 
     token: tuple[Any, ...]
     k_first: int
@@ -430,6 +430,10 @@ class _Ahead:
     next: int = 0
     coloured_from: int = -1
     coloured_start: tuple[Any, Any] | None = None
+    #: The samples ``coloured_lo`` … ``coloured_hi − 1`` the coloured noise and the counts
+    #: below are for (their rows 0, 1, ...).
+    coloured_lo: int = 0
+    coloured_hi: int = 0
     gyro: np.ndarray | None = None
     gm: np.ndarray | None = None
     walk: np.ndarray | None = None
@@ -756,8 +760,9 @@ class _EmulatedImu(ABC):
         head, tail = self._head_tail(n)
         head, tail = min(head, n), min(tail, n)
         # a filter runs on between the samples handed out: the tail starts early enough for
-        # its start to be forgotten (all of them when that reaches the head)
-        warm = self._filter_memory(period)
+        # its start to be forgotten (all of them when that reaches the head; the usual drain
+        # of a few samples needs no tail, and no filter memory worked out)
+        warm = 0 if head + tail >= n else self._filter_memory(period)
         if head + tail + warm >= n and self._release_ahead(n, period):
             return
         self._ahead = None
@@ -903,19 +908,20 @@ class _EmulatedImu(ABC):
             c = self._coloured
             start = a.coloured_start
             state = c.state()
-            if a.coloured_from != i or start is None or any(
+            if a.coloured_from != i or j > a.coloured_hi or start is None or any(
                     x is not y for x, y in zip(start, state, strict=True)):
                 self._coloured_ahead(a, i)
+            r = i - a.coloured_lo  # the sample's row in the coloured arrays
             if a.gm is not None:
-                c.resume(a.gm[i], a.walk[i], 1)  # type: ignore[index]
+                c.resume(a.gm[r], a.walk[r], 1)  # type: ignore[index]
                 a.coloured_start = c.state()
             a.coloured_from = j
-            gyro = a.gyro[i:j]  # type: ignore[index]
+            gyro = a.gyro[r:r + 1]  # type: ignore[index]
             if a.frames is not None and self.faults.stuck_axis is None:
-                size = len(a.frames) // a.t.size
+                size = len(a.frames) // (a.coloured_hi - a.coloured_lo)
                 self._t_last = float(a.t[i])
                 self._note_temperature(float(a.temperature[i]))
-                self._ingest_frames(a.frames[i * size: j * size])
+                self._ingest_frames(a.frames[r * size: (r + 1) * size])
                 self._latest = _Sample(gyro[-1], a.accel[i], int(a.temp[i]))
                 self._k += 1
                 self._after_samples()
@@ -924,24 +930,30 @@ class _EmulatedImu(ABC):
                    a.temp[i:j])
         return True
 
+    #: Samples :meth:`_coloured_ahead` computes the coloured noise and counts of at a time:
+    #: a drain of several samples draws the noise afresh (:meth:`_emit`) and the samples
+    #: after it need them again from the new state, so few are computed beyond the next ones.
+    coloured_horizon = 16
+
     def _coloured_ahead(self, a: _Ahead, i: int) -> None:
-        """The coloured noise and the gyro counts of ``a``'s samples from ``i`` on, as drains
-        of one sample each would give them from the coloured noise's present state."""
+        """The coloured noise and the gyro counts of ``a``'s samples from ``i`` on (the next
+        :attr:`coloured_horizon`), as drains of one sample each would give them from the
+        coloured noise's present state (each step's the same arithmetic however many are
+        computed at once)."""
         c = self._coloured
-        m = a.m[i:]
+        hi = min(a.t.size, i + self.coloured_horizon)
+        m = a.m[i:hi]
         if c.active:
-            dt = np.diff(a.t[i:], prepend=self._t_last)
+            dt = np.diff(a.t[i:hi], prepend=self._t_last)
             noise, a.gm, a.walk = c.ahead(dt)
-            a.gm, a.walk = np.concatenate((np.empty((i,) + a.gm.shape[1:]), a.gm)), \
-                np.concatenate((np.empty((i, 3)), a.walk))
             m = m + noise
         else:
             a.gm = a.walk = None
-        gyro = np.clip(np.rint(m / a.sensitivity) + self._gyro_trim_counts(), -32768,
-                       32767).astype(np.int64)
-        a.gyro = np.concatenate((np.zeros((i, 3), dtype=np.int64), gyro))
+        a.gyro = np.clip(np.rint(m / a.sensitivity) + self._gyro_trim_counts(), -32768,
+                         32767).astype(np.int64)
         a.coloured_from, a.coloured_start = i, c.state()
-        a.frames = self._frames_ahead(a.gyro, a.accel, a.temp)
+        a.coloured_lo, a.coloured_hi = i, hi
+        a.frames = self._frames_ahead(a.gyro, a.accel[i:hi], a.temp[i:hi])
 
     def _frames_ahead(self, gyro: np.ndarray, accel: np.ndarray, temp: np.ndarray
                       ) -> bytes | None:

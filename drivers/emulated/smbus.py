@@ -493,36 +493,46 @@ class EmulatedSMBus:
 
     def _run(self, op: str, plan: list[_Msg], *, read_pec: bool = False) -> list[bytes]:
         """Carry out the messages in order; return what each read message got."""
-        self._check_open()
+        if not self._open:
+            raise _oserror(errno.EBADF)
         ad = self._adapter
         ad.transactions += 1
-        clock = ad.clock
-        t0 = clock.monotonic()
-        bits = 0
-        bus_hz, sleep, monotonic = ad.bus_hz, clock.sleep, clock.monotonic
+        clock, bus_hz, devices = ad.clock, ad.bus_hz, ad.devices
+        monotonic, sleep = clock.monotonic, clock.sleep
         # Each step waits until the bus has clocked its bits since t0 (no wait with bus_hz 0):
         # a (repeated) START and the address byte, the data bytes at 9 bits (8 + ACK), a STOP.
+        # A host that stalled meanwhile (VirtualClock.stall_at) finds them clocked already: the
+        # adapter shifts the bits out without it.
+        t0 = monotonic()
+
+        def wait(bits: int) -> None:
+            gap = t0 + bits / bus_hz - monotonic()
+            sleep(gap if gap > 0 else 0.0)
+
+        timed = bus_hz > 0
+        bits = 0
         first = plan[0]
         register = first.data[0] if first.data else None
         reads: list[bytes] = []
         failure: int | None = None
         try:
             for m in plan:
-                bits += 1 + 9
-                if bus_hz > 0:
-                    sleep(t0 + bits / bus_hz - monotonic())
-                dev = ad.devices.get(m.addr)
+                bits += 10
+                if timed:
+                    wait(bits)
+                dev = devices.get(m.addr)
                 refusal = errno.EREMOTEIO if dev is None else dev.i2c_ack()
                 if refusal is not None:
                     failure = refusal
                     raise _oserror(failure)
                 assert dev is not None
-                if m.data is not None:
-                    bits += 9 * len(m.data)
-                    if bus_hz > 0:
-                        sleep(t0 + bits / bus_hz - monotonic())
-                    if m.data:  # a Quick Command is the address alone
-                        dev.i2c_write(m.data)
+                data = m.data
+                if data is not None:
+                    bits += 9 * len(data)
+                    if timed:
+                        wait(bits)
+                    if data:  # a Quick Command is the address alone
+                        dev.i2c_write(data)
                     continue
                 length = m.length
                 data = bytes(dev.i2c_read(length))
@@ -538,24 +548,30 @@ class EmulatedSMBus:
                 if len(data) != length:
                     raise RuntimeError(f"device returned {len(data)} bytes for {length}")
                 bits += 9 * length
-                if bus_hz > 0:
-                    sleep(t0 + bits / bus_hz - monotonic())
+                if timed:
+                    wait(bits)
                 reads.append(data)
             bits += 1  # STOP
-            if bus_hz > 0:
-                sleep(t0 + bits / bus_hz - monotonic())
+            if timed:
+                wait(bits)
         finally:
-            written = b"".join(m.data[1:] if i == 0 else m.data
-                               for i, m in enumerate(plan) if m.data)
-            ad.log.append(Transaction(t0, op, first.addr, register, written,
-                                      sum(len(r) for r in reads), failure,
-                                      clock.monotonic() - t0))
+            ad.log.append(Transaction(t0, op, first.addr, register, _written(plan),
+                                      sum(map(len, reads)), failure, monotonic() - t0))
         return reads
 
     def __repr__(self) -> str:
         devs = ", ".join(f"0x{a:02X}: {type(d).__name__}"
                          for a, d in sorted(self._adapter.devices.items()))
         return f"EmulatedSMBus({{{devs}}}, bus_hz={self.bus_hz:g})"
+
+
+def _written(plan: list[_Msg]) -> bytes:
+    """The data bytes a transaction's write messages carried after its register byte."""
+    first = plan[0]
+    if (len(plan) == 2 and plan[1].data is None and first.data is not None
+            and len(first.data) <= 1):  # a register read: the register byte alone
+        return b""
+    return b"".join(m.data[1:] if i == 0 else m.data for i, m in enumerate(plan) if m.data)
 
 
 def _bytes(values: Iterable[int]) -> bytes:

@@ -234,6 +234,21 @@ def test_a_byte_write_takes_the_bit_times_of_the_bus():
     assert b.clock.monotonic() == pytest.approx(72.5e-6)
 
 
+def test_a_host_stall_inside_a_transfer_delays_it_and_does_not_break_it(bus):
+    # A host stall (VirtualClock.stall_at, the --sim-fault pause) that starts after the first
+    # message's address byte: the transfer goes on after it, its later bits already clocked,
+    # and the device answers as before (a ValueError from a negative sleep before).
+    clock = bus.clock
+    t0 = clock.monotonic()
+    clock.stall_at(t0 + 5e-6, 0.001)
+    assert bus.read_byte_data(0x50, 0x10) == 0x10
+    assert clock.monotonic() == pytest.approx(t0 + 10 / 400_000 + 0.001)
+    assert bus.log[-1].errno is None
+    t1 = clock.monotonic()
+    bus.read_byte_data(0x50, 0x11)  # the next transfer takes its bit times again
+    assert clock.monotonic() - t1 == pytest.approx(39 / 400_000)
+
+
 def test_handles_share_the_adapter_and_close_only_themselves(bus):
     other = bus.handle()
     SMBus = bus.smbus_class()

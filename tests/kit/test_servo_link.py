@@ -21,33 +21,37 @@ from gyrocal.kit.recording import load_recording
 
 
 class _Writer:
-    """Records what reaches it; ``gate`` (if set) holds every call until it opens."""
+    """Records the rows that reach it, one entry per row, and counts its calls; ``gate`` (if
+    set) holds every call until it opens; the call numbered ``fail_on`` (from 0) fails."""
 
     def __init__(self, gate: threading.Event | None = None, fail_on: int | None = None):
         self.calls: list[tuple] = []
+        self.n_calls = 0
         self.manifest: dict = {"protocol": {"name": "x"}}
         self.gate = gate
         self.fail_on = fail_on
 
-    def _call(self, *what):
+    def _call(self, *rows):
         if self.gate is not None:
             self.gate.wait(10)
-        if self.fail_on is not None and len(self.calls) == self.fail_on:
+        self.n_calls += 1
+        if self.fail_on is not None and self.n_calls - 1 == self.fail_on:
             raise OSError(28, "No space left on device")
-        self.calls.append(what)
+        self.calls.extend(rows)
 
-    def append_imu(self, t, rate, temp):
-        self._call("imu", float(t[0]))
+    def append_imu(self, t, rate, temp, accel=None):
+        self._call(*(("imu", float(x)) for x in np.asarray(t).reshape(-1)))
 
     def append_encoder(self, t, ids, angles):
-        self._call("enc", float(t))
+        t = np.broadcast_to(np.asarray(t, dtype=float), np.shape(ids))
+        self._call(*(("enc", float(x)) for x in t))
 
     def append_segment(self, seg):
-        self._call("seg", seg.index)
+        self._call(("seg", seg.index))
 
     def update_manifest(self, **fields):
         self.manifest.update(fields)
-        self._call("manifest", sorted(fields))
+        self._call(("manifest", sorted(fields)))
 
 
 def _samples(k: int):
@@ -114,7 +118,52 @@ def test_a_write_error_in_the_consumer_reaches_the_loop_and_nothing_is_written_a
             time.sleep(0.001)
     with pytest.raises(OSError):
         b.close(timeout_s=5)
-    assert len(w.calls) == 3
+    assert w.n_calls == 4  # the three that succeeded, the one that failed, nothing after
+
+
+def test_queued_iterations_are_written_as_one_flushed_append_with_the_same_bytes(tmp_path):
+    # The consumer joins the samples queued behind each other into one append per file (one
+    # write and one flush, not one per loop iteration): the files' bytes are those of one
+    # append per iteration, and every row it took is on disk (flushed to the operating system,
+    # so a process that dies keeps it) before it takes the next item.
+    from gyrocal.kit.recording import RecordingWriter
+
+    rng = np.random.default_rng(5)
+    items = []
+    for k in range(40):
+        n = int(rng.integers(0, 3))  # drains of 0, 1 or 2 samples
+        t = k * 0.005 + 0.001 * np.arange(n)
+        imu = (t, rng.normal(size=(n, 3)), 25 + rng.normal(size=n), rng.normal(size=(n, 3)))
+        items.append((imu if n else None, (k * 0.005, [1, 2, 3], rng.normal(size=3))))
+    parts = {"sensor": {}, "gimbal": {}, "protocol": {}, "accel": True}
+    with RecordingWriter(tmp_path / "each", **parts) as each:
+        for imu, (te, ids, angles) in items:
+            if imu is not None:
+                each.append_imu(*imu)
+            each.append_encoder(te, ids, angles)
+    w = RecordingWriter(tmp_path / "joined", **parts)
+    appends = []
+    real_append = w.append_imu
+    w.append_imu = lambda *a: (appends.append(len(a[0])), real_append(*a))[1]
+    hold, taken, on_disk = threading.Event(), threading.Event(), {}
+
+    def look():  # in the consumer, after the joined rows and before the next item
+        on_disk.update({f: (tmp_path / "joined" / f).read_bytes()
+                        for f in ("imu.csv", "encoder.csv")})
+        taken.set()
+
+    with Backlog(w, capacity=64) as b:
+        b.put_call(hold.wait, 10)  # the consumer waits while every iteration is queued
+        for imu, enc in items:
+            b.put_samples(imu, enc)
+        b.put_call(look)
+        hold.set()
+        assert taken.wait(10)
+    w.close()
+    for f in ("imu.csv", "encoder.csv"):
+        assert (tmp_path / "joined" / f).read_bytes() == (tmp_path / "each" / f).read_bytes()
+        assert on_disk[f] == (tmp_path / "each" / f).read_bytes()
+    assert appends == [sum(imu is not None and len(imu[0]) for imu, _ in items)]
 
 
 def test_capacity_must_be_positive():
