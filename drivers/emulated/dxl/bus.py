@@ -166,26 +166,25 @@ class ServoBus:
         runs once it has been (an instruction that changes the servo's ID or baud rate acts
         after its status packet, as the e-Manual's Factory Reset example shows)."""
 
+        lock, clock = self.lock, self.clock
+
         def produce() -> bytes:
-            with self.lock:
+            with lock:
                 try:
-                    return packet()
+                    now = clock.monotonic()
+                    if not servo.answers(now) or not servo.status_level_allows(kind):
+                        return b""
+                    error, params = make()
+                    fault = servo.reply_fault()
+                    if fault == "drop":
+                        return b""
+                    packet = status_packet(servo.dxl_id, servo.error_byte(error), params)
+                    if fault == "corrupt":
+                        packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
+                    return packet
                 finally:
                     if then is not None:
                         then()
-
-        def packet() -> bytes:
-            now = self.clock.monotonic()
-            if not servo.answers(now) or not servo.status_level_allows(kind):
-                return b""
-            error, params = make()
-            fault = servo.reply_fault()
-            if fault == "drop":
-                return b""
-            packet = status_packet(servo.dxl_id, servo.error_byte(error), params)
-            if fault == "corrupt":
-                packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
-            return packet
 
         return PendingReply(servo.return_delay_s, produce, servo.dxl_id)
 

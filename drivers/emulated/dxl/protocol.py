@@ -66,6 +66,10 @@ def _make_table() -> tuple[int, ...]:
 
 
 _TABLE = _make_table()
+#: The table for two bytes at a time: the CRC is linear, so feeding ``hi, lo`` (the next two
+#: bytes XORed into the register) is ``_TABLE2[hi] ^ _TABLE[lo]``, with
+#: ``_TABLE2[i] = ((_TABLE[i] & 0xFF) << 8) ^ _TABLE[_TABLE[i] >> 8]`` (one more byte through).
+_TABLE2 = tuple(((c & 0xFF) << 8) ^ _TABLE[c >> 8] for c in _TABLE)
 
 
 def crc16(data: bytes | bytearray, crc: int = 0) -> int:
@@ -79,9 +83,13 @@ def crc16(data: bytes | bytearray, crc: int = 0) -> int:
     crc : int
         A running CRC to continue (used by Fast Sync Read, §4.6).
     """
-    table = _TABLE
-    for b in data:
-        crc = ((crc << 8) ^ table[((crc >> 8) ^ b) & 0xFF]) & 0xFFFF
+    table, table2 = _TABLE, _TABLE2
+    n = len(data)
+    if n & 1:
+        crc = ((crc << 8) ^ table[((crc >> 8) ^ data[0]) & 0xFF]) & 0xFFFF
+    for hi, lo in zip(data[n & 1::2], data[(n & 1) + 1::2], strict=True):
+        x = crc ^ (hi << 8 | lo)
+        crc = table2[x >> 8] ^ table[x & 0xFF]
     return crc
 
 
@@ -184,7 +192,8 @@ class Instruction:
     @property
     def name(self) -> str:
         """The instruction's name (``"READ"``), or its code in hex if unknown."""
-        return INSTRUCTIONS.get(self.code, f"0x{self.code:02X}")
+        name = INSTRUCTIONS.get(self.code)
+        return name if name is not None else f"0x{self.code:02X}"
 
 
 class InstructionParser:
@@ -199,9 +208,18 @@ class InstructionParser:
 
     def __init__(self) -> None:
         self._buf = bytearray()
+        #: The last packet that came whole into an empty buffer, and what it parsed to: a
+        #: host polling the same way sends the same bytes again and again (a gimbal's
+        #: SYNC_READ), and they parse the same.
+        self._last: tuple[bytes, Instruction] | None = None
 
     def feed(self, data: bytes) -> Iterator[Instruction]:
         """Add ``data`` and yield every complete instruction packet it finishes."""
+        last = self._last
+        if last is not None and not self._buf and data == last[0]:
+            yield last[1]
+            return
+        whole = not self._buf
         self._buf += data
         buf = self._buf
         while True:
@@ -231,4 +249,7 @@ class InstructionParser:
             body = remove_stuffing(packet[7:-2])
             if not body:
                 continue
-            yield Instruction(packet[4], body[0], body[1:], crc16(packet[:-2]) == crc)
+            instr = Instruction(packet[4], body[0], body[1:], crc16(packet[:-2]) == crc)
+            if whole and not buf and len(packet) == len(data):
+                self._last = (packet, instr)
+            yield instr
