@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import reduce
+from operator import getitem, xor
 
 __all__ = [
     "BROADCAST_ID",
@@ -66,10 +68,23 @@ def _make_table() -> tuple[int, ...]:
 
 
 _TABLE = _make_table()
-#: The table for two bytes at a time: the CRC is linear, so feeding ``hi, lo`` (the next two
-#: bytes XORed into the register) is ``_TABLE2[hi] ^ _TABLE[lo]``, with
-#: ``_TABLE2[i] = ((_TABLE[i] & 0xFF) << 8) ^ _TABLE[_TABLE[i] >> 8]`` (one more byte through).
-_TABLE2 = tuple(((c & 0xFF) << 8) ^ _TABLE[c >> 8] for c in _TABLE)
+
+
+def _make_positions(span: int) -> tuple[tuple[int, ...], ...]:
+    """Per-position tables for runs of up to ``span`` bytes: ``[span - n + i][b]`` is what byte
+    ``b`` at position ``i`` of ``n`` bytes adds to their CRC (from 0): the CRC of ``b`` followed
+    by ``n - 1 - i`` zero bytes. The CRC is linear (XOR), so a run's CRC is the XOR of its bytes'
+    entries."""
+    rows = [_TABLE]
+    for _ in range(span - 1):  # one more zero byte through the register
+        rows.append(tuple(((c << 8) & 0xFFFF) ^ _TABLE[c >> 8] for c in rows[-1]))
+    return tuple(reversed(rows))
+
+
+#: Longest run :func:`crc16` does with :data:`_POSITIONS` (a status packet of a sync read of up
+#: to 53 bytes); longer runs go byte by byte.
+_SPAN = 64
+_POSITIONS = _make_positions(_SPAN)
 
 
 def crc16(data: bytes | bytearray, crc: int = 0) -> int:
@@ -82,19 +97,24 @@ def crc16(data: bytes | bytearray, crc: int = 0) -> int:
         included.
     crc : int
         A running CRC to continue (used by Fast Sync Read, §4.6).
+
+    Notes
+    -----
+    Runs of 2 to :data:`_SPAN` bytes XOR their bytes' entries of :data:`_POSITIONS` (a
+    running CRC ``c`` is the same as ``c``'s two bytes XORed into the first two); others go byte
+    by byte through the table.
     """
-    table, table2 = _TABLE, _TABLE2
     n = len(data)
-    if n & 1:
-        crc = ((crc << 8) ^ table[((crc >> 8) ^ data[0]) & 0xFF]) & 0xFFFF
-    for hi, lo in zip(data[n & 1::2], data[(n & 1) + 1::2], strict=True):
-        x = crc ^ (hi << 8 | lo)
-        crc = table2[x >> 8] ^ table[x & 0xFF]
+    if 2 <= n <= _SPAN:
+        tables = _POSITIONS[_SPAN - n:]
+        out = reduce(xor, map(getitem, tables, data), 0)
+        if crc:
+            out ^= tables[0][crc >> 8] ^ tables[1][crc & 0xFF]
+        return out
+    table = _TABLE
+    for b in data:
+        crc = ((crc << 8) ^ table[((crc >> 8) ^ b) & 0xFF]) & 0xFFFF
     return crc
-
-
-#: The CRC of the header every packet starts with (the rest of a packet continues it).
-_HEADER_CRC = crc16(HEADER)
 
 
 def stuff(body: bytes) -> bytes:
@@ -134,15 +154,14 @@ def _frame(dxl_id: int, body: bytes) -> bytes:
     """Header + ID + LEN + stuffed body + CRC."""
     stuffed = stuff(body)
     length = len(stuffed) + 2
-    head = HEADER + bytes([dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF])
-    packet = head + stuffed
-    crc = crc16(packet[4:], _HEADER_CRC)
-    return packet + bytes([crc & 0xFF, crc >> 8])
+    packet = HEADER + bytes((dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF)) + stuffed
+    crc = crc16(packet)
+    return packet + bytes((crc & 0xFF, crc >> 8))
 
 
 def status_packet(dxl_id: int, error: int, params: bytes = b"") -> bytes:
     """A (stuffed) status packet: ``FF FF FD 00 ID LEN 55 ERR PARAM… CRC`` (§4.1, §4.3)."""
-    return _frame(dxl_id, bytes([STATUS, error & 0xFF]) + bytes(params))
+    return _frame(dxl_id, bytes((STATUS, error & 0xFF)) + params)
 
 
 def instruction_packet(dxl_id: int, instruction: int, params: bytes = b"") -> bytes:

@@ -518,14 +518,15 @@ class EmulatedServo:
                 return ERR_ACCESS, b""
             self.advance_to(now)
             self._refresh(now, address, length)
-            out = bytearray(self._mem[address: address + length])
             end = address + length
-            if end > 224 and address <= 251 or end > 634 and address <= 661:  # Indirect Data
-                for i in range(length):
-                    target = self._indirect_target(address + i)
-                    if target is not None:
-                        self._refresh(now, target, 1)
-                        out[i] = self._mem[target]
+            if not (end > 224 and address <= 251 or end > 634 and address <= 661):
+                return 0, bytes(self._mem[address:end])
+            out = bytearray(self._mem[address:end])  # Indirect Data: each byte its target's
+            for i in range(length):
+                target = self._indirect_target(address + i)
+                if target is not None:
+                    self._refresh(now, target, 1)
+                    out[i] = self._mem[target]
             return 0, bytes(out)
 
     def _indirect_target(self, address: int) -> int | None:
@@ -719,7 +720,9 @@ class EmulatedServo:
         mem = self._mem
         torque = mem[64]
         d = -1 if mem[10] & 0x01 else 1  # Drive Mode's direction bit (_dir)
-        present = self._position_register(angle)
+        # _position_register(angle), inline
+        present = (d * round(self._abs0 + angle / POSITION_UNIT_RAD) + self._turn_offset
+                   + self._get("Homing Offset"))
         vel_units = round(d * rate / VELOCITY_UNIT_RAD_S)
         plan = self.motor.plan
         running = bool(torque) and plan.running(now)
