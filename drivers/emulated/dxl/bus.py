@@ -141,9 +141,15 @@ class ServoBus:
         value form a group"; "ID(7) has a higher priority"; "The EEPROM area of the Control
         Table cannot be modified with Secondary ID(12). Only the RAM area can be modified"; "If
         Instruction Packet ID is the same as Secondary ID(12), the Status Packet will not be
-        returned"; 253–255 deactivate it). Only the instructions that change RAM act: WRITE and
-        REG_WRITE to the RAM area, and ACTION; a READ or PING has nothing to return, and the
-        e-Manual does not say that REBOOT, CLEAR or FACTORY_RESET act by Secondary ID ⚠."""
+        returned"; 253–255 deactivate it).
+
+        The e-Manual names no instruction; its rule is the area each one changes. WRITE and
+        REG_WRITE act on the RAM area only, and ACTION; REBOOT (torque off, the RAM back to its
+        power-up values, the position re-based) and CLEAR (the multi-turn count of Present
+        Position) change nothing in the EEPROM, so they act too, their status unsent (a CLEAR
+        while moving fails with nobody told); FACTORY_RESET rewrites the EEPROM and does not
+        act; a PING or READ is only a status, so nothing happens ⚠ (the reading of REBOOT,
+        CLEAR and FACTORY_RESET follows from the rule, not from a sentence about them)."""
         group = [s for s in listeners
                  if s.dxl_id != instr.dxl_id and s.secondary_id == instr.dxl_id]
         if not group:
@@ -153,6 +159,10 @@ class ServoBus:
             s.note_instruction(now)
             if code == ACTION:
                 s.action()
+            elif code == REBOOT:
+                s.reboot()
+            elif code == CLEAR:
+                s.clear_multi_turn(p)
             elif code in (WRITE, REG_WRITE) and len(p) >= 3:
                 addr = p[0] | p[1] << 8
                 if not s.in_ram(addr, len(p) - 2):
@@ -166,26 +176,25 @@ class ServoBus:
         runs once it has been (an instruction that changes the servo's ID or baud rate acts
         after its status packet, as the e-Manual's Factory Reset example shows)."""
 
+        lock, clock = self.lock, self.clock
+
         def produce() -> bytes:
-            with self.lock:
+            with lock:
                 try:
-                    return packet()
+                    now = clock.monotonic()
+                    if not servo.answers(now) or not servo.status_level_allows(kind):
+                        return b""
+                    error, params = make()
+                    fault = servo.reply_fault()
+                    if fault == "drop":
+                        return b""
+                    packet = status_packet(servo.dxl_id, servo.error_byte(error), params)
+                    if fault == "corrupt":
+                        packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
+                    return packet
                 finally:
                     if then is not None:
                         then()
-
-        def packet() -> bytes:
-            now = self.clock.monotonic()
-            if not servo.answers(now) or not servo.status_level_allows(kind):
-                return b""
-            error, params = make()
-            fault = servo.reply_fault()
-            if fault == "drop":
-                return b""
-            packet = status_packet(servo.dxl_id, servo.error_byte(error), params)
-            if fault == "corrupt":
-                packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
-            return packet
 
         return PendingReply(servo.return_delay_s, produce, servo.dxl_id)
 

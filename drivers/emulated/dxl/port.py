@@ -86,7 +86,7 @@ class EmulatedPortHandler(PortHandler):
         if not self.is_open:
             return 0
         data = bytes(packet)
-        self._spend(len(data) * self._byte_time())
+        self._spend(len(data) * (10.0 / self.baudrate))
         self.bytes_sent += len(data)
         self._pending.extend(self.bus.receive(data, self.baudrate))
         return len(data)
@@ -105,7 +105,7 @@ class EmulatedPortHandler(PortHandler):
             self._spend(reply.delay_s)
             data = reply.produce()
             if data:
-                self._spend(len(data) * self._byte_time())
+                self._spend(len(data) * (10.0 / self.baudrate))
                 rx += data
                 self.bytes_received += len(data)
         if not rx and not pending:
@@ -113,14 +113,11 @@ class EmulatedPortHandler(PortHandler):
             remaining_ms = self.packet_start_time + self.packet_timeout - self.getCurrentTime()
             self.clock.sleep(max(remaining_ms, 0.0) / 1000.0 + 1e-6)
             return b""
-        out = bytes(self._rx[:length])
-        del self._rx[:length]
+        out = bytes(rx[:length])
+        del rx[:length]
         return out
 
     # ---- helpers -------------------------------------------------------------------------
-    def _byte_time(self) -> float:
-        return 10.0 / float(self.baudrate)
-
     def _spend(self, seconds: float) -> None:
         if self.model_timing and seconds > 0:
             self.clock.sleep(seconds)

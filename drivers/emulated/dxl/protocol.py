@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import reduce
+from operator import getitem, xor
 
 __all__ = [
     "BROADCAST_ID",
@@ -68,6 +70,23 @@ def _make_table() -> tuple[int, ...]:
 _TABLE = _make_table()
 
 
+def _make_positions(span: int) -> tuple[tuple[int, ...], ...]:
+    """Per-position tables for runs of up to ``span`` bytes: ``[span - n + i][b]`` is what byte
+    ``b`` at position ``i`` of ``n`` bytes adds to their CRC (from 0): the CRC of ``b`` followed
+    by ``n - 1 - i`` zero bytes. The CRC is linear (XOR), so a run's CRC is the XOR of its bytes'
+    entries."""
+    rows = [_TABLE]
+    for _ in range(span - 1):  # one more zero byte through the register
+        rows.append(tuple(((c << 8) & 0xFFFF) ^ _TABLE[c >> 8] for c in rows[-1]))
+    return tuple(reversed(rows))
+
+
+#: Longest run :func:`crc16` does with :data:`_POSITIONS` (a status packet of a sync read of up
+#: to 53 bytes); longer runs go byte by byte.
+_SPAN = 64
+_POSITIONS = _make_positions(_SPAN)
+
+
 def crc16(data: bytes | bytearray, crc: int = 0) -> int:
     """CRC-16 of Protocol 2.0: polynomial 0x8005, init 0, MSB first, no final XOR (§4.2).
 
@@ -78,15 +97,24 @@ def crc16(data: bytes | bytearray, crc: int = 0) -> int:
         included.
     crc : int
         A running CRC to continue (used by Fast Sync Read, §4.6).
+
+    Notes
+    -----
+    Runs of 2 to :data:`_SPAN` bytes XOR their bytes' entries of :data:`_POSITIONS` (a
+    running CRC ``c`` is the same as ``c``'s two bytes XORed into the first two); others go byte
+    by byte through the table.
     """
+    n = len(data)
+    if 2 <= n <= _SPAN:
+        tables = _POSITIONS[_SPAN - n:]
+        out = reduce(xor, map(getitem, tables, data), 0)
+        if crc:
+            out ^= tables[0][crc >> 8] ^ tables[1][crc & 0xFF]
+        return out
     table = _TABLE
     for b in data:
         crc = ((crc << 8) ^ table[((crc >> 8) ^ b) & 0xFF]) & 0xFFFF
     return crc
-
-
-#: The CRC of the header every packet starts with (the rest of a packet continues it).
-_HEADER_CRC = crc16(HEADER)
 
 
 def stuff(body: bytes) -> bytes:
@@ -126,15 +154,14 @@ def _frame(dxl_id: int, body: bytes) -> bytes:
     """Header + ID + LEN + stuffed body + CRC."""
     stuffed = stuff(body)
     length = len(stuffed) + 2
-    head = HEADER + bytes([dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF])
-    packet = head + stuffed
-    crc = crc16(packet[4:], _HEADER_CRC)
-    return packet + bytes([crc & 0xFF, crc >> 8])
+    packet = HEADER + bytes((dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF)) + stuffed
+    crc = crc16(packet)
+    return packet + bytes((crc & 0xFF, crc >> 8))
 
 
 def status_packet(dxl_id: int, error: int, params: bytes = b"") -> bytes:
     """A (stuffed) status packet: ``FF FF FD 00 ID LEN 55 ERR PARAM… CRC`` (§4.1, §4.3)."""
-    return _frame(dxl_id, bytes([STATUS, error & 0xFF]) + bytes(params))
+    return _frame(dxl_id, bytes((STATUS, error & 0xFF)) + params)
 
 
 def instruction_packet(dxl_id: int, instruction: int, params: bytes = b"") -> bytes:
@@ -184,7 +211,8 @@ class Instruction:
     @property
     def name(self) -> str:
         """The instruction's name (``"READ"``), or its code in hex if unknown."""
-        return INSTRUCTIONS.get(self.code, f"0x{self.code:02X}")
+        name = INSTRUCTIONS.get(self.code)
+        return name if name is not None else f"0x{self.code:02X}"
 
 
 class InstructionParser:
@@ -199,9 +227,18 @@ class InstructionParser:
 
     def __init__(self) -> None:
         self._buf = bytearray()
+        #: The last packet that came whole into an empty buffer, and what it parsed to: a
+        #: host polling the same way sends the same bytes again and again (a gimbal's
+        #: SYNC_READ), and they parse the same.
+        self._last: tuple[bytes, Instruction] | None = None
 
     def feed(self, data: bytes) -> Iterator[Instruction]:
         """Add ``data`` and yield every complete instruction packet it finishes."""
+        last = self._last
+        if last is not None and not self._buf and data == last[0]:
+            yield last[1]
+            return
+        whole = not self._buf
         self._buf += data
         buf = self._buf
         while True:
@@ -231,4 +268,7 @@ class InstructionParser:
             body = remove_stuffing(packet[7:-2])
             if not body:
                 continue
-            yield Instruction(packet[4], body[0], body[1:], crc16(packet[:-2]) == crc)
+            instr = Instruction(packet[4], body[0], body[1:], crc16(packet[:-2]) == crc)
+            if whole and not buf and len(packet) == len(data):
+                self._last = (packet, instr)
+            yield instr

@@ -84,6 +84,13 @@ def _put(mem: bytearray, lo: int, hi: int, address: int, size: int, value: int) 
         _PACK[size](mem, address, max(low, min(high, value)) & high)
 
 
+#: The live items of addresses 120..135 (Realtime Tick, Moving, Moving Status, Present PWM,
+#: Present Current, Present Velocity, Present Position; hardware reference §5): address and
+#: size of each, their range (:data:`_LIMITS`), and one packer for the whole block.
+_LIVE_ITEMS = ((120, 2), (122, 1), (123, 1), (124, 2), (126, 2), (128, 4), (132, 4))
+_LIVE_BLOCK = struct.Struct("<HBBHHII")
+_I32_MIN, _U32_MAX = _LIMITS[4]
+
 #: Deceleration of a shaft whose torque has been switched off (gearbox friction), rad/s².
 _FREE_DECEL = 40.0
 #: Deceleration of a stop forced by a stall, rad/s² (a Bus Watchdog trip stops at once).
@@ -511,14 +518,15 @@ class EmulatedServo:
                 return ERR_ACCESS, b""
             self.advance_to(now)
             self._refresh(now, address, length)
-            out = bytearray(self._mem[address: address + length])
             end = address + length
-            if end > 224 and address <= 251 or end > 634 and address <= 661:  # Indirect Data
-                for i in range(length):
-                    target = self._indirect_target(address + i)
-                    if target is not None:
-                        self._refresh(now, target, 1)
-                        out[i] = self._mem[target]
+            if not (end > 224 and address <= 251 or end > 634 and address <= 661):
+                return 0, bytes(self._mem[address:end])
+            out = bytearray(self._mem[address:end])  # Indirect Data: each byte its target's
+            for i in range(length):
+                target = self._indirect_target(address + i)
+                if target is not None:
+                    self._refresh(now, target, 1)
+                    out[i] = self._mem[target]
             return 0, bytes(out)
 
     def _indirect_target(self, address: int) -> int | None:
@@ -711,30 +719,24 @@ class EmulatedServo:
         angle, rate = self.motor.sample(now)
         mem = self._mem
         torque = mem[64]
-        d = self._dir
-        present = self._position_register(angle)
+        d = -1 if mem[10] & 0x01 else 1  # Drive Mode's direction bit (_dir)
+        # _position_register(angle), inline
+        present = (d * round(self._abs0 + angle / POSITION_UNIT_RAD) + self._turn_offset
+                   + self._get("Homing Offset"))
         vel_units = round(d * rate / VELOCITY_UNIT_RAD_S)
         plan = self.motor.plan
         running = bool(torque) and plan.running(now)
         speed_frac = min(abs(rate) / self._max_speed(), 1.5)
-        sign = 1 if vel_units >= 0 else -1
-        if lo < 122:
-            _put(mem, lo, hi, 120, 2,
-                 int(math.floor((now - self._boot_time) * 1000.0)) % TICK_MODULUS)
-        if lo < 124 and hi > 122:
-            moving = abs(vel_units) > int.from_bytes(mem[24:28], "little") or running
-            goal = int.from_bytes(mem[116:120], "little", signed=True)
-            in_position = (not running) and (abs(present - goal) <= 1 if mem[11] in (3, 4, 5)
-                                             else True)
-            _put(mem, lo, hi, 122, 1, int(moving))
-            _put(mem, lo, hi, 123, 1, int(in_position) | (int(running) << 1)
-                 | (_PROFILE_KIND.get(plan.kind, 0) << 4))
-        if lo < 128 and hi > 124:
-            _put(mem, lo, hi, 124, 2,
-                 round(sign * 885 * min(speed_frac + 0.05, 1.0)) if torque else 0)
-            _put(mem, lo, hi, 126, 2, round(sign * (50 + 150 * speed_frac)) if torque else 0)
-        _put(mem, lo, hi, 128, 4, vel_units)
-        _put(mem, lo, hi, 132, 4, present)
+        if lo <= 120 and hi >= 136:  # the whole motion block (a gimbal's sample): one pack
+            tick, moving, status, pwm, current, vel, pos = self._live_values(
+                now, torque, present, vel_units, running, speed_frac, plan)
+            # fitted as _put fits them: the first five are within their sizes' ranges by
+            # construction (tick < 32768, status < 64, |PWM| <= 885, |current| <= 275)
+            _LIVE_BLOCK.pack_into(mem, 120, tick, moving, status, pwm & 0xFFFF,
+                                  current & 0xFFFF, max(_I32_MIN, min(_U32_MAX, vel)) & _U32_MAX,
+                                  max(_I32_MIN, min(_U32_MAX, pos)) & _U32_MAX)
+        else:
+            self._put_live(now, lo, hi, torque, present, vel_units, running, speed_frac, plan)
         if hi > 136 and lo < 144:
             tp, tv = self.motor.trajectory(now)
             _put(mem, lo, hi, 136, 4, round(d * tv / VELOCITY_UNIT_RAD_S))
@@ -743,6 +745,30 @@ class EmulatedServo:
             _put(mem, lo, hi, 144, 2, round((self.supply_voltage - 0.3 * speed_frac) * 10.0))
             self._update_thermal(now)
             _put(mem, lo, hi, 146, 1, round(self._temperature))
+
+    def _live_values(self, now: float, torque: int, present: int, vel_units: int,
+                     running: bool, speed_frac: float, plan: Plan) -> tuple[int, ...]:
+        """The live items of addresses 120..135 as the servo computes them: Realtime Tick,
+        Moving, Moving Status, Present PWM, Present Current, Present Velocity, Present
+        Position (hardware reference §5), before they are fitted to their sizes."""
+        mem = self._mem
+        sign = 1 if vel_units >= 0 else -1
+        moving = abs(vel_units) > int.from_bytes(mem[24:28], "little") or running
+        goal = int.from_bytes(mem[116:120], "little", signed=True)
+        in_position = (not running) and (abs(present - goal) <= 1 if mem[11] in (3, 4, 5)
+                                         else True)
+        return (int(math.floor((now - self._boot_time) * 1000.0)) % TICK_MODULUS,
+                int(moving),
+                int(in_position) | (int(running) << 1) | (_PROFILE_KIND.get(plan.kind, 0) << 4),
+                round(sign * 885 * min(speed_frac + 0.05, 1.0)) if torque else 0,
+                round(sign * (50 + 150 * speed_frac)) if torque else 0,
+                vel_units, present)
+
+    def _put_live(self, now: float, lo: int, hi: int, *args) -> None:
+        """Store the live items of 120..135 that overlap ``lo..hi`` (a partial read)."""
+        values = self._live_values(now, *args)
+        for (address, size), v in zip(_LIVE_ITEMS, values, strict=True):
+            _put(self._mem, lo, hi, address, size, v)
 
     def reg_write(self, address: int, data: bytes) -> int:
         """REG_WRITE: validate and hold the write until ACTION (§4.4)."""
