@@ -45,6 +45,7 @@ from gyrocal.calib.windows import (  # the estimator's own weight and grid: plot
     weight_grid,
 )
 from gyrocal.kit.errors import InputError, OutputExistsError
+from gyrocal.kit.jig_kinds import DEFAULT_JIG, axis_label
 from gyrocal.kit.plots import literal, save_png
 from gyrocal.kit.recording import Recording
 
@@ -397,7 +398,7 @@ def _g_offsets(obs: Any, cal: GyroCalibration) -> tuple[np.ndarray, np.ndarray]:
 
 def window_residuals(
     extracted: ExtractedWindows, cal: GyroCalibration,
-    axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...],
+    axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...], jig: str = DEFAULT_JIG,
 ) -> Residuals:
     """Each window's mean minus what the calibration predicts, in units of its deviation.
 
@@ -444,7 +445,8 @@ def window_residuals(
         if per_window[i].pose_terms is not None:
             var = var + np.sum((obs.rate[i] * per_window[i].pose_terms @ a_inv.T) ** 2, axis=0)
         sig.append(np.sqrt(var))
-        labels.append(f"s{w.motor}{'+' if w.direction > 0 else '-'}")
+        labels.append(f"{axis_label(jig, int(w.motor), short=True)}"  # type: ignore[arg-type]
+                      f"{'+' if w.direction > 0 else '-'}")
         kinds.append("rotate")
     for i, w in enumerate(extracted.rests):
         err.append(obs.rest_mean[i] + b + f_rest[i])  # type: ignore[index]
@@ -460,6 +462,13 @@ def window_residuals(
 
 
 # ============================================================================ the report
+def _jig(rec: Recording) -> str:
+    """The jig kind ``rec`` was made on (:func:`gyrocal.kit.pipeline.recording_jig`)."""
+    from gyrocal.kit.pipeline import recording_jig
+
+    return recording_jig(rec)
+
+
 @dataclass(frozen=True)
 class PlannedPlot:
     """One file of the report."""
@@ -473,8 +482,9 @@ class PlannedPlot:
 def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot]:
     """The files :func:`write_report` writes, in index order (no matplotlib needed)."""
     by_segment = {w.segment: w for w in extracted.windows}
-    plots = [PlannedPlot("overview.png", "the whole recording: raw rates, the windows used, "
-                         "servo angles", "overview")]
+    jig = _jig(rec)
+    plots = [PlannedPlot("overview.png", "the whole recording: raw rates, the windows used"
+                         + (", servo angles" if rec.enc_t.size else ""), "overview")]
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue
@@ -486,7 +496,8 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
             what = f"{w.kind} window over {w.revolutions:.2f} rev at {abs(w.rate):.4f} rad/s"
         plots.append(PlannedPlot(
             f"turn-{seg.index:02d}-servo{seg.motor}-{sense}.png",
-            f"segment {seg.index}: servo {seg.motor} turns "
+            f"segment {seg.index}: {axis_label(jig, int(seg.motor))} turns "  # type: ignore[arg-type]
+
             f"{'positive' if seg.direction > 0 else 'negative'}, {what}", "turn", seg))
     plots.append(PlannedPlot("rests.png", f"{len(extracted.rests)} rest windows: mean reading "
                              "against -bias", "rests"))
@@ -681,7 +692,8 @@ def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: 
     g = calibrated(cal, m, f) if m.shape[0] else np.zeros((0, 3))
     fig, axs = figures.get()
     sense = "positive" if seg.direction > 0 else "negative"
-    head = (f"segment {seg.index}: servo {seg.motor} turns {sense}; axis "
+    head = (f"segment {seg.index}: {axis_label(_jig(rec), int(seg.motor))} turns "  # type: ignore[arg-type]
+            f"{sense}; axis "
             f"[{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}] ({axis.source})")
     if window is not None:
         head += (f"\n{window.kind} window over {window.revolutions:.2f} rev, reference "
@@ -746,8 +758,13 @@ def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: 
 
 
 def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any:
-    fig, axs = plt.subplots(2, 1, sharex=True, figsize=(12, 6.5), constrained_layout=True,
-                            gridspec_kw={"height_ratios": [1.6, 1.0]})
+    servos = sorted(int(x) for x in np.unique(rec.enc_motor))
+    rows = 2 if servos else 1  # a hand recording has no servo angles to show
+    fig, axs = plt.subplots(rows, 1, sharex=True, figsize=(12, 4.5 + 2.0 * (rows - 1)),
+                            constrained_layout=True, squeeze=False,
+                            gridspec_kw={"height_ratios": [1.6, 1.0][:rows]})
+    axs = axs[:, 0]
+    jig = _jig(rec)
     step = max(1, rec.imu_t.size // 20000)
     t = rec.imu_t[::step]
     ax = axs[0]
@@ -764,21 +781,22 @@ def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any
     from matplotlib.patches import Patch
 
     handles += [Patch(color=colors[m], alpha=0.3) for m in motors]
-    labels += [f"window, servo {m}" for m in motors]
+    labels += [f"window, {axis_label(jig, m)}" for m in motors]
     handles.append(Patch(color="0.5", alpha=0.3))
     labels.append("rest window")
     ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     ax.set_ylabel("raw gyro rates, rad/s")
     ax.grid(True, alpha=0.3)
-    ax = axs[1]
-    for m in sorted(int(x) for x in np.unique(rec.enc_motor)):
-        et, ea = rec.encoder(m)
-        ax.plot(et, ea / (2 * np.pi), lw=1.0, label=f"servo {m}",
-                color=colors.get(m, "0.3"))
-    ax.set_ylabel("servo angle, turns")
-    ax.set_xlabel("t on the recording clock, s")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    if servos:
+        ax = axs[1]
+        for m in servos:
+            et, ea = rec.encoder(m)
+            ax.plot(et, ea / (2 * np.pi), lw=1.0, label=f"servo {m}",
+                    color=colors.get(m, "0.3"))
+        ax.set_ylabel("servo angle, turns")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    axs[-1].set_xlabel("t on the recording clock, s")
     state = "complete" if rec.complete else "INCOMPLETE (interrupted run)"
     fig.suptitle(f"{literal(rec.path)}: {rec.imu_t.size} gyro samples over "
                  f"{rec.imu_t[-1] - rec.imu_t[0]:.1f} s, {len(extracted.windows)} rotation "
@@ -820,7 +838,7 @@ def _rests_plot(plt: Any, extracted: ExtractedWindows, cal: GyroCalibration,
     return fig
 
 
-def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
+def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration, jig: str) -> Any:
     fig, (ax, axh) = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True,
                                   gridspec_kw={"width_ratios": [3, 1]})
     n = len(res.labels)
@@ -844,10 +862,10 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
                  f"({c.verdict})")
     sources = set(res.axis_sources.values())
     if not sources <= {"calibration", "kinematics"}:
-        text += "\nservo axes: " + ", ".join(f"servo {m} {s}" for m, s in
+        text += "\nturn axes: " + ", ".join(f"{axis_label(jig, m)} {s}" for m, s in
                                              sorted(res.axis_sources.items()))
         if "fitted" in sources:
-            text += " (fitted: to the windows under this calibration, which has none)"
+            text += " (fitted: to the windows under this calibration)"
         if "nominal" in sources:
             text += " (nominal: mounting misalignment shows as off-axis residuals)"
     ax.set_title(text, fontsize=9)
@@ -937,6 +955,7 @@ def _draw(plt: Any, p: PlannedPlot, out: Path, rec: Recording, cal: GyroCalibrat
     elif p.kind == "rests":
         fig = _rests_plot(plt, extracted, cal, rec.truth)
     else:
-        fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
+        jig = _jig(rec)
+        fig = _residuals_plot(plt, window_residuals(extracted, cal, axes, jig), cal, jig)
     save_png(fig, out / p.name, force=force, dpi=_DPI, keep=p.kind == "turn")
     return out / p.name, p.description
