@@ -935,10 +935,9 @@ def write_report(
     written: list[tuple[Path, str]] = []
     turns = _TurnFigure(plt)
     try:
-        with plt.rc_context(_RC):
-            for p in plan:
-                written.append(_draw(plt, p, out, rec, cal, extracted, turns, home, axes,
-                                     index, force))
+        for p in plan:
+            written.append(_draw(plt, p, out, rec, cal, extracted, turns, home, axes, index,
+                                 force))
     finally:
         turns.close()
     return written
@@ -948,20 +947,22 @@ def _draw(plt: Any, p: PlannedPlot, out: Path, rec: Recording, cal: GyroCalibrat
           extracted: ExtractedWindows, turns: _TurnFigure, home: Mapping[int, ServoAxis],
           axes: list[ServoAxis], index: Mapping[int, tuple[int, Window]], force: bool
           ) -> tuple[Path, str]:
-    """Draw and write one planned plot; the turn plots on the one reused figure."""
-    if p.kind == "overview":
-        fig = _overview_plot(plt, rec, extracted)
-    elif p.kind == "turn":
-        seg = p.segment
-        i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
-        # a turn with no window (skipped by the extraction) is drawn about the servo's
-        # home axis
-        axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
-        fig = _turn_plot(turns, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
-    elif p.kind == "rests":
-        fig = _rests_plot(plt, extracted, cal, rec.truth)
-    else:
-        jig = _jig(rec)
-        fig = _residuals_plot(plt, window_residuals(extracted, cal, axes, jig), cal, jig)
-    save_png(fig, out / p.name, force=force, dpi=_DPI, keep=p.kind == "turn")
+    """Draw and write one planned plot with :data:`_RC`; the turn plots on the one reused
+    figure."""
+    with plt.rc_context(_RC):
+        if p.kind == "overview":
+            fig = _overview_plot(plt, rec, extracted)
+        elif p.kind == "turn":
+            seg = p.segment
+            i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
+            # a turn with no window (skipped by the extraction) is drawn about the servo's
+            # home axis
+            axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
+            fig = _turn_plot(turns, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
+        elif p.kind == "rests":
+            fig = _rests_plot(plt, extracted, cal, rec.truth)
+        else:
+            jig = _jig(rec)
+            fig = _residuals_plot(plt, window_residuals(extracted, cal, axes, jig), cal, jig)
+        save_png(fig, out / p.name, force=force, dpi=_DPI, keep=p.kind == "turn")
     return out / p.name, p.description
