@@ -278,7 +278,7 @@ def diagonal_note(sensor_model: str | None, reason: str, *, jig: str = "gimbal")
     )
 
 
-def diagonal_g_note(fit: FitResult) -> str | None:
+def diagonal_g_note(fit: FitResult, jig: str = "gimbal") -> str | None:
     """What a diagonal fit did with g-sensitivity, and what the diagonal calibration leaves out.
 
     :func:`gyrocal.calib.estimators.fit_paired_axis` fits ``G`` along the directions of gravity
@@ -286,8 +286,12 @@ def diagonal_g_note(fit: FitResult) -> str | None:
     horizontal turns), so the bias is the zero-g bias; Calibration v1 has no ``G``, so the
     calibrated rate is off by ``k ∘ (G f)`` in use: the note states that size. Where the data
     did not need ``G`` (``extra["g_left_out_per_g"]``), the note says how large the ``G`` left
-    in the bias is. None for a full-model fit, or a fit where gravity was not modelled.
+    in the bias is. None for a full-model fit, or a fit where gravity was not modelled. What
+    calibrates the full model is said for the recording's ``jig``
+    (:attr:`gyrocal.kit.jig_kinds.JigKind.full_model`).
     """
+    from gyrocal.kit.jig_kinds import JIG_KINDS
+
     left = fit.extra.get("g_left_out_per_g") if fit.matrix is None else None
     if left is not None:
         return (f"g-sensitivity not fitted: the rests and the turns agree within their noise; "
@@ -301,8 +305,8 @@ def diagonal_g_note(fit: FitResult) -> str | None:
     return (f"g-sensitivity fitted along {k} of 3 directions of gravity (where the rests and "
             f"turns see gravity differently), so the bias is the zero-g bias; the diagonal model "
             f"(Calibration v1) cannot carry it: in use the calibrated rate is off by up to "
-            f"{per_g:.2g} rad/s per g of specific force ({math.degrees(per_g):.2g} °/s/g), "
-            "which the full model (--protocol full) calibrates")
+            f"{per_g:.2g} rad/s per g of specific force ({math.degrees(per_g):.2g} °/s/g); the "
+            f"full model carries it. {JIG_KINDS[jig].full_model}")
 
 
 class _Systematics(NamedTuple):
@@ -532,7 +536,7 @@ def estimate_recording(
                               seats=seat_starts(rec.manifest) is not None)
     if not fit.success:
         raise EstimationError(f"{fit.method} failed on {rec.path}: {fit.message}")
-    notes = (*notes, *filter(None, [diagonal_g_note(fit)]), drift.note())
+    notes = (*notes, *filter(None, [diagonal_g_note(fit, recording_jig(rec))]), drift.note())
     cal = replace(fit.to_calibration(
         sensor=rec.sensor,
         temperature_c=ex.observations.temperature_c,

@@ -5,7 +5,7 @@ mount's misalignment, what to do next); the full model that was fitted with its 
 deviations (the gyro's matrix and bias, its g-sensitivity, the accelerometer); for a simulated
 recording the error against its truth (:func:`gyrocal.kit.report.error_against_truth`, the
 terminal's own numbers); the verification's verdict in words and its errors in rad/s; the noise
-figures measured on the rests; the servo axes; the plots, with the ten or so per-turn plots
+figures measured on the rests; the turn axes; the plots, with the ten or so per-turn plots
 folded behind a ``<details>`` element; the environment. Every plot is inline as a base64 PNG, so
 the one file is the whole report: no network, no neighbouring files, no scripts. Every text
 that comes from a file or a user is HTML-escaped.
@@ -28,6 +28,7 @@ import numpy as np
 
 from gyrocal.calib.model import GyroCalibration
 from gyrocal.kit import __version__
+from gyrocal.kit.jig_kinds import DEFAULT_JIG, JIG_KINDS, axis_label
 from gyrocal.kit.report import TruthError, error_against_truth, inconsistency_causes
 
 __all__ = ["NoiseFigures", "environment", "gyro_noise", "render_html", "write_run_report"]
@@ -198,7 +199,7 @@ def _largest_cross_axis(cal: GyroCalibration) -> tuple[int, int] | None:
     return int(j), int(i)
 
 
-def _cross_axis_text(cal: GyroCalibration) -> str:
+def _cross_axis_text(cal: GyroCalibration, jig: str) -> str:
     where = _largest_cross_axis(cal)
     if where is None:
         from gyrocal.kit.pipeline import datasheet_cross_axis
@@ -207,7 +208,7 @@ def _cross_axis_text(cal: GyroCalibration) -> str:
         size = (f"its datasheet allows up to ±{allowed * 100:g} %" if allowed else
                 "MEMS datasheets allow a few %")
         return (f"<span class=bad>not calibrated</span>: this diagonal model has no cross-axis "
-                f"terms ({_e(size)}); calibrate with <code>--protocol full</code> to fit them")
+                f"terms ({_e(size)}). {_e(JIG_KINDS[jig].full_model)}")
     j, i = where
     a = float(np.asarray(cal.matrix)[j, i])
     s = float(np.asarray(cal.matrix_std)[j, i]) if cal.matrix_std is not None else math.nan
@@ -215,14 +216,22 @@ def _cross_axis_text(cal: GyroCalibration) -> str:
             f"{'xyz'[j]} rate takes {a * 100:+.2f} % of the {'xyz'[i]} reading")
 
 
-def _misalignment_text(cal: GyroCalibration) -> str:
+def _axis_name(jig: str, motor: Any) -> str:
+    """A calibration's ``axes`` key (a motor ID) as the jig names it (:func:`axis_label`)."""
+    try:
+        return axis_label(jig, int(motor))
+    except (TypeError, ValueError):
+        return f"motor {motor}"
+
+
+def _misalignment_text(cal: GyroCalibration, jig: str) -> str:
     if not cal.axes:
-        return "not estimated (this calibration has no servo axes)"
+        return "not estimated (this calibration has no turn axes)"
     worst = max(cal.axes.items(), key=lambda kv: float(kv[1]["misalignment_deg"]))
     low = min(float(v["misalignment_deg"]) for v in cal.axes.values())
     m, info = worst
-    return (f"the servo axes are {low:.2f}°–{float(info['misalignment_deg']):.2f}° off the "
-            f"sensor's axes (largest: servo {_e(m)} about {_e(info['nearest'])}, "
+    return (f"the turn axes are {low:.2f}°–{float(info['misalignment_deg']):.2f}° off the "
+            f"sensor's axes (largest: {_e(_axis_name(jig, m))} about {_e(info['nearest'])}, "
             f"{float(info['misalignment_deg']):.2f}° ± {float(info['std_deg']):.3f}°); the fit "
             "estimates the mount, so this needs no correction unless it is large")
 
@@ -248,7 +257,7 @@ def _model_name(cal: GyroCalibration) -> str:
 
 
 def _next_steps(cal: GyroCalibration, verification: Any, calibration: str | None,
-                simulated: bool) -> list[str]:
+                simulated: bool, jig: str) -> list[str]:
     c = cal.consistency
     path = _e(calibration) if calibration else "CAL"
     steps = []
@@ -261,7 +270,12 @@ def _next_steps(cal: GyroCalibration, verification: Any, calibration: str | None
     if calibration is None:
         steps.append("this page's calibration was estimated from the recording and not saved: "
                      "<code>gyrocal estimate RECORDING --out calibration.json</code> writes one")
-    if verification is None:
+    if verification is None and jig != "gimbal":
+        steps.append(f"gyrocal verify turns the gimbal's three servos against their encoders, "
+                     f"which the {_e(jig)} jig does not have: check this calibration on a second "
+                     f"{_e(jig)} session (calibrate again, compare the two within their σ) or on "
+                     "a gimbal")
+    elif verification is None:
         sim = " --sim --sim-seed S" if simulated else ""
         steps.append(f"verify it on fresh turns: <code>gyrocal verify {path}{sim} --json &gt; "
                      "verification.json</code>" + (" (S: this run's seed)" if simulated else "")
@@ -273,7 +287,7 @@ def _next_steps(cal: GyroCalibration, verification: Any, calibration: str | None
 
 
 def _summary(cal: GyroCalibration, err: TruthError | None, verification: Any,
-             calibration: str | None) -> str:
+             calibration: str | None, jig: str) -> str:
     rows = [("verdict", _consistency_text(cal.consistency, "the fit is "))]
     if verification is not None:
         word = ("<span class=ok>passed</span>" if verification.ok
@@ -283,8 +297,8 @@ def _summary(cal: GyroCalibration, err: TruthError | None, verification: Any,
                           f"{cal.iterations} iterations"))
     if cal.model_choice is not None:
         rows.append(("model choice", _e(cal.model_choice.sentence())))
-    rows.append(("largest cross-axis term", _cross_axis_text(cal)))
-    rows.append(("misalignment", _misalignment_text(cal)))
+    rows.append(("largest cross-axis term", _cross_axis_text(cal, jig)))
+    rows.append(("misalignment", _misalignment_text(cal, jig)))
     if cal.g_sensitivity is not None:
         e = cal.g_rate_error_per_g
         rows.append(("g-sensitivity", f"fitted: up to {e:.2g} rad/s ({e * RAD2DEG:.2g} °/s) per g "
@@ -299,7 +313,7 @@ def _summary(cal: GyroCalibration, err: TruthError | None, verification: Any,
                      f"largest error {worst[1]:.2f} σ ({_e(worst[0])}); "
                      "within about 3 σ is what the noise explains"))
     steps = "".join(f"<li>{s}</li>" for s in _next_steps(
-        cal, verification, calibration, err is not None))
+        cal, verification, calibration, err is not None, jig))
     rows.append(("what to do next", f"<ol>{steps}</ol>"))
     body = "".join(f"<tr><th>{_e(k)}</th><td>{v}</td></tr>" for k, v in rows)
     return f"<section id=summary><table>{body}</table></section>"
@@ -464,14 +478,15 @@ def _noise(noise: NoiseFigures | None, acc: Any) -> str:
             "<table id=noise>" + "".join(rows) + "</table>")
 
 
-def _axes(cal: GyroCalibration) -> str:
+def _axes(cal: GyroCalibration, jig: str) -> str:
     if not cal.axes:
-        return "<p>no servo axes in this calibration</p>"
-    rows = ["<tr><th>servo</th><th>axis in the sensor frame</th><th>nearest</th>"
+        return "<p>no turn axes in this calibration</p>"
+    rows = ["<tr><th>turns about</th><th>axis in the sensor frame</th><th>nearest</th>"
             "<th>misalignment</th></tr>"]
     for motor, info in sorted(cal.axes.items(), key=lambda kv: int(kv[0])):
         u = np.asarray(info["axis"], dtype=float)
-        rows.append(f"<tr><td>{_e(motor)}</td><td class=n>[{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]"
+        rows.append(f"<tr><td>{_e(_axis_name(jig, motor))}</td>"
+                    f"<td class=n>[{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]"
                     f"</td><td>{_e(info['nearest'])}</td><td class=n>"
                     f"{info['misalignment_deg']:.2f}° ± {info['std_deg']:.3f}°</td></tr>")
     return "<table id=axes>" + "".join(rows) + "</table>"
@@ -516,6 +531,7 @@ def render_html(
     env: Mapping[str, str] | None = None,
     noise: NoiseFigures | None = None,
     calibration: str | None = None,
+    jig: str = DEFAULT_JIG,
 ) -> str:
     """The report page as one HTML string (module docstring).
 
@@ -539,6 +555,9 @@ def render_html(
     calibration : str, optional
         Where the calibration file is, for the next steps' commands (else ``CAL``, and the page
         says it was estimated and not saved).
+    jig : str
+        The jig the recording was made on (:data:`gyrocal.kit.jig_kinds.JIG_KINDS`): how the
+        turn axes are named, what calibrates the full model, how to check the calibration.
 
     Raises
     ------
@@ -553,7 +572,7 @@ def render_html(
         "<!DOCTYPE html><html lang=en><head><meta charset=utf-8>",
         f"<title>gyrocal report: {_e(title)}</title><style>{_CSS}</style></head><body>",
         f"<h1>gyrocal calibration report</h1><p class=note>{_e(title)}</p>",
-        _summary(cal, err, ver, calibration),
+        _summary(cal, err, ver, calibration, jig),
         "<h2>The model that was fitted</h2>",
         _gyro_model(cal),
     ]
@@ -566,7 +585,7 @@ def render_html(
                  "<p>no verification given (<code>gyrocal verify CAL --json &gt; FILE</code>, "
                  "then <code>gyrocal report ... --verification FILE</code>)</p>")
     parts.append(_noise(noise, cal.accelerometer))
-    parts += ["<h2>Servo axes</h2>", _axes(cal)]
+    parts += ["<h2>Turn axes</h2>", _axes(cal, jig)]
     if plots:
         parts += _plots(plots)
     if env:
@@ -603,6 +622,7 @@ def write_run_report(
         The plots with their descriptions, then the page.
     """
     from gyrocal.kit.fileio import atomic_write_text, refuse_existing
+    from gyrocal.kit.pipeline import recording_jig
     from gyrocal.kit.report_plots import write_report
 
     html_path = Path(out_dir) / "report.html" if html_path is None else Path(html_path)
@@ -614,7 +634,8 @@ def write_run_report(
     written = write_report(rec, cal, extracted, out_dir, force=force)
     page = render_html(cal, title=title, plots=written, truth=rec.truth,
                        verification=verification, env=environment(rec.manifest),
-                       noise=gyro_noise(rec, extracted), calibration=calibration)
+                       noise=gyro_noise(rec, extracted), calibration=calibration,
+                       jig=recording_jig(rec))
     atomic_write_text(html_path, page, force=force)
     return [*written, (html_path, "the whole report as one self-contained page")]
 

@@ -45,6 +45,7 @@ from gyrocal.calib.windows import (  # the estimator's own weight and grid: plot
     weight_grid,
 )
 from gyrocal.kit.errors import InputError, OutputExistsError
+from gyrocal.kit.jig_kinds import DEFAULT_JIG, axis_label
 from gyrocal.kit.plots import literal, save_png
 from gyrocal.kit.recording import Recording
 
@@ -397,7 +398,7 @@ def _g_offsets(obs: Any, cal: GyroCalibration) -> tuple[np.ndarray, np.ndarray]:
 
 def window_residuals(
     extracted: ExtractedWindows, cal: GyroCalibration,
-    axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...],
+    axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...], jig: str = DEFAULT_JIG,
 ) -> Residuals:
     """Each window's mean minus what the calibration predicts, in units of its deviation.
 
@@ -444,7 +445,8 @@ def window_residuals(
         if per_window[i].pose_terms is not None:
             var = var + np.sum((obs.rate[i] * per_window[i].pose_terms @ a_inv.T) ** 2, axis=0)
         sig.append(np.sqrt(var))
-        labels.append(f"s{w.motor}{'+' if w.direction > 0 else '-'}")
+        labels.append(f"{axis_label(jig, int(w.motor), short=True)}"  # type: ignore[arg-type]
+                      f"{'+' if w.direction > 0 else '-'}")
         kinds.append("rotate")
     for i, w in enumerate(extracted.rests):
         err.append(obs.rest_mean[i] + b + f_rest[i])  # type: ignore[index]
@@ -460,6 +462,13 @@ def window_residuals(
 
 
 # ============================================================================ the report
+def _jig(rec: Recording) -> str:
+    """The jig kind ``rec`` was made on (:func:`gyrocal.kit.pipeline.recording_jig`)."""
+    from gyrocal.kit.pipeline import recording_jig
+
+    return recording_jig(rec)
+
+
 @dataclass(frozen=True)
 class PlannedPlot:
     """One file of the report."""
@@ -473,8 +482,9 @@ class PlannedPlot:
 def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot]:
     """The files :func:`write_report` writes, in index order (no matplotlib needed)."""
     by_segment = {w.segment: w for w in extracted.windows}
-    plots = [PlannedPlot("overview.png", "the whole recording: raw rates, the windows used, "
-                         "servo angles", "overview")]
+    jig = _jig(rec)
+    plots = [PlannedPlot("overview.png", "the whole recording: raw rates, the windows used"
+                         + (", servo angles" if rec.enc_t.size else ""), "overview")]
     for seg in rec.segments:
         if seg.kind != "rotate":
             continue
@@ -486,7 +496,8 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
             what = f"{w.kind} window over {w.revolutions:.2f} rev at {abs(w.rate):.4f} rad/s"
         plots.append(PlannedPlot(
             f"turn-{seg.index:02d}-servo{seg.motor}-{sense}.png",
-            f"segment {seg.index}: servo {seg.motor} turns "
+            f"segment {seg.index}: {axis_label(jig, int(seg.motor))} turns "  # type: ignore[arg-type]
+
             f"{'positive' if seg.direction > 0 else 'negative'}, {what}", "turn", seg))
     plots.append(PlannedPlot("rests.png", f"{len(extracted.rests)} rest windows: mean reading "
                              "against -bias", "rests"))
@@ -538,12 +549,24 @@ def _difference_panel(ax: Any, t: np.ndarray, gu: np.ndarray, et: np.ndarray,
         ax.set_ylim(-2.5 * span, 2.5 * span)
 
 
+#: The report's resolution, px per inch (the turn plots are placed at it).
+_DPI = 100
+#: matplotlib settings of the report's figures. Glyphs unhinted (FreeType's ``no_hinting``):
+#: matplotlib 3.11 renders each glyph through FreeType on its own, running the font's hinting
+#: program each time (a 25-character label: 4.9 ms hinted, 2.8 ms unhinted, on this host); the
+#: report's write_report takes 5-13 % less CPU, its text a shade softer at the same sizes.
+_RC = {"text.hinting": "no_hinting"}
+#: The turn plot's three panels: their heights relative to each other.
+_TURN_HEIGHTS = (1.3, 1.0, 1.0)
+
+
 class _TurnFigure:
     """The turn plots' figure, drawn once and reused: every turn plot has the same three
     panels, and a fresh figure costs its axes, ticks and tick labels again (a third of a turn
     plot's time). :meth:`get` hands it back emptied of the last turn's artists, with the
-    axes' limits, data limits and positions as a new figure has them, so that a turn plot is
-    drawn as on a figure of its own (``tests/kit/test_report.py`` compares the pixels)."""
+    axes' limits, data limits and positions as a new figure has them, and each turn is placed
+    by :func:`_place_column` from its own texts, so that a turn plot is drawn as on a figure
+    of its own (``tests/kit/test_report.py`` compares the pixels)."""
 
     def __init__(self, plt: Any) -> None:
         self.plt = plt
@@ -554,14 +577,12 @@ class _TurnFigure:
     def get(self) -> tuple[Any, Any]:
         """The figure and its three axes, ready for a turn."""
         if self.fig is None:
-            self.fig, self.axs = self.plt.subplots(
-                3, 1, sharex=True, figsize=(10, 8.5), constrained_layout=True,
-                gridspec_kw={"height_ratios": [1.3, 1.0, 1.0]})
+            self.fig, self.axs = self.plt.subplots(3, 1, sharex=True, figsize=(10, 8.5),
+                                                   dpi=_DPI)
             self._positions = [ax.get_position(original=True) for ax in self.axs]
             return self.fig, self.axs
         from matplotlib.transforms import Bbox
 
-        self.fig.set_layout_engine("constrained")
         for ax, pos in zip(self.axs, self._positions, strict=True):
             for artist in [*ax.lines, *ax.collections, *ax.patches, *ax.texts]:
                 artist.remove()
@@ -570,9 +591,7 @@ class _TurnFigure:
             ax.dataLim.set_points(Bbox.null().get_points())
             ax.ignore_existing_data_limits = True
             ax.set_autoscale_on(True)
-            # as the layout engine places axes (the public set_position would take the axes
-            # out of the layout)
-            ax._set_position(pos)
+            ax.set_position(pos)
         return self.fig, self.axs
 
     def close(self) -> None:
@@ -580,6 +599,77 @@ class _TurnFigure:
         if self.fig is not None:
             self.plt.close(self.fig)
             self.fig = None
+
+
+def _tick_label_boxes(axis: Any, renderer: Any) -> list[Any]:
+    """The window extents of ``axis``' shown major tick labels (visible, within the view),
+    its ticks updated for the axes' present size."""
+    axis.get_majorticklabels()  # sets each major tick's position and label
+    lo, hi = sorted(axis.get_view_interval())
+    tol = 1e-9 * (hi - lo)
+    return [t.label1.get_window_extent(renderer) for t in axis.get_major_ticks()
+            if t.label1.get_visible() and t.label1.get_text() and
+            lo - tol <= t.get_loc() <= hi + tol]
+
+
+def _offset_height(axis: Any, renderer: Any) -> float:
+    """Height in px of ``axis``' offset text (``1e−2`` above a y axis), 0 when it has none."""
+    text = axis.get_major_formatter().get_offset()
+    if not text:
+        return 0.0
+    label = axis.get_offset_text()
+    label.set_text(text)
+    return float(label.get_window_extent(renderer).height)
+
+
+def _place_column(fig: Any, axs: Any, title: Any, heights: tuple[float, ...]) -> None:
+    """Place a column of panels that share their x axis (its tick labels and label on the
+    bottom panel only) under the figure's title ``title``.
+
+    Each text gets the room it measures and a pad of 3 points (constrained layout's), and the
+    panels share the height left in proportion to ``heights``. The vertical room comes first
+    (a y axis' ticks depend on its panel's height), then the left margin from the y axes' tick
+    labels and labels; the right one holds half the bottom axis' widest tick label (the one at
+    the edge is centred on it).
+
+    Constrained layout placed these panels too, but it measures every decoration of every
+    panel twice and computes every axis' ticks again for each measure (about 60 tick
+    computations per turn plot, a quarter of its CPU); this measures the few texts that take
+    room once. As with the layout engine, the places depend on the plot's own texts only.
+    """
+    renderer = fig.canvas.get_renderer()
+    pt = fig.dpi / 72.0  # px per point
+    width, height = fig.bbox.width, fig.bbox.height
+    pad = 3 * pt
+    bottom_x = axs[-1].xaxis
+    x_boxes = _tick_label_boxes(bottom_x, renderer)
+    x_tick = (bottom_x.get_tick_padding() + bottom_x.majorTicks[0].get_pad()) * pt
+    x_room = (x_tick + max((b.height for b in x_boxes), default=0.0)
+              + bottom_x.labelpad * pt + bottom_x.label.get_window_extent(renderer).height)
+    y_boxes = [_tick_label_boxes(ax.yaxis, renderer) for ax in axs]
+    half_label = max((b.height for boxes in y_boxes for b in boxes), default=0.0) / 2
+    above = [max(half_label, _offset_height(ax.yaxis, renderer) + ax.yaxis.OFFSETTEXTPAD * pt)
+             for ax in axs]
+    below = [max(half_label, ax.xaxis.get_tick_padding() * pt) for ax in axs[:-1]]
+    title.set_y(1.0 - pad / height)
+    top = pad + title.get_window_extent(renderer).height + pad + above[0]
+    gaps = [b + 2 * pad + a for b, a in zip(below, above[1:], strict=True)]
+    free = height - top - (pad + x_room) - sum(gaps)
+    rows, y = [], height - top
+    for i, h in enumerate(heights):
+        rows.append((y - free * h / sum(heights), free * h / sum(heights)))
+        y = rows[-1][0] - (gaps[i] if i < len(gaps) else 0.0)
+    for ax, (y0, h) in zip(axs, rows, strict=True):
+        ax.set_position([ax.get_position().x0, y0 / height, ax.get_position().width,
+                         h / height])
+    left = pad + max(
+        ax.yaxis.label.get_window_extent(renderer).width + ax.yaxis.labelpad * pt
+        + max((b.width for b in _tick_label_boxes(ax.yaxis, renderer)), default=0.0)
+        + (ax.yaxis.get_tick_padding() + ax.yaxis.majorTicks[0].get_pad()) * pt
+        for ax in axs)
+    right = pad + max((b.width for b in x_boxes), default=0.0) / 2
+    for ax, (y0, h) in zip(axs, rows, strict=True):
+        ax.set_position([left / width, y0 / height, (width - left - right) / width, h / height])
 
 
 def _inside(legend: Any) -> None:
@@ -607,14 +697,15 @@ def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: 
     g = calibrated(cal, m, f) if m.shape[0] else np.zeros((0, 3))
     fig, axs = figures.get()
     sense = "positive" if seg.direction > 0 else "negative"
-    head = (f"segment {seg.index}: servo {seg.motor} turns {sense}; axis "
+    head = (f"segment {seg.index}: {axis_label(_jig(rec), int(seg.motor))} turns "  # type: ignore[arg-type]
+            f"{sense}; axis "
             f"[{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}] ({axis.source})")
     if window is not None:
         head += (f"\n{window.kind} window over {window.revolutions:.2f} rev, reference "
                  f"{window.rate:+.5f} rad/s (encoder), {window.count} gyro samples")
     else:
         head += "\nno window: the extraction skipped this turn (see its warnings)"
-    fig.suptitle(head, fontsize=10)
+    title = fig.suptitle(head, fontsize=10)
 
     # 1: rate about the servo axis
     ax = axs[0]
@@ -630,7 +721,7 @@ def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: 
     _mark_gaps(ax, gaps)
     ax.set_ylabel("rate about the servo axis\nrad/s")
     ax.grid(True, alpha=0.3)
-    _inside(ax.legend(loc="best", fontsize=8, ncol=2))
+    ax.legend(loc="best", fontsize=8, ncol=2)
 
     # 2: calibrated minus reference on one weight, and the window mean the fit used
     ax = axs[1]
@@ -652,7 +743,7 @@ def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: 
     ax.set_ylabel("calibrated − reference\nrad/s")
     ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
     ax.grid(True, alpha=0.3)
-    _inside(ax.legend(loc="upper right", fontsize=8))
+    ax.legend(loc="upper right", fontsize=8)
 
     # 3: raw rates, all axes
     ax = axs[2]
@@ -665,14 +756,20 @@ def _turn_plot(figures: _TurnFigure, rec: Recording, cal: GyroCalibration, seg: 
     ax.set_ylabel("raw gyro rates\nrad/s")
     ax.set_xlabel("t on the recording clock, s")
     ax.grid(True, alpha=0.3)
-    _inside(ax.legend(loc="best", fontsize=8, ncol=3))
+    ax.legend(loc="best", fontsize=8, ncol=3)
     ax.set_xlim(lo, hi)
+    _place_column(fig, axs, title, _TURN_HEIGHTS)
     return fig
 
 
 def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any:
-    fig, axs = plt.subplots(2, 1, sharex=True, figsize=(12, 6.5), constrained_layout=True,
-                            gridspec_kw={"height_ratios": [1.6, 1.0]})
+    servos = sorted(int(x) for x in np.unique(rec.enc_motor))
+    rows = 2 if servos else 1  # a hand recording has no servo angles to show
+    fig, axs = plt.subplots(rows, 1, sharex=True, figsize=(12, 4.5 + 2.0 * (rows - 1)),
+                            constrained_layout=True, squeeze=False,
+                            gridspec_kw={"height_ratios": [1.6, 1.0][:rows]})
+    axs = axs[:, 0]
+    jig = _jig(rec)
     step = max(1, rec.imu_t.size // 20000)
     t = rec.imu_t[::step]
     ax = axs[0]
@@ -689,21 +786,22 @@ def _overview_plot(plt: Any, rec: Recording, extracted: ExtractedWindows) -> Any
     from matplotlib.patches import Patch
 
     handles += [Patch(color=colors[m], alpha=0.3) for m in motors]
-    labels += [f"window, servo {m}" for m in motors]
+    labels += [f"window, {axis_label(jig, m)}" for m in motors]
     handles.append(Patch(color="0.5", alpha=0.3))
     labels.append("rest window")
     ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     ax.set_ylabel("raw gyro rates, rad/s")
     ax.grid(True, alpha=0.3)
-    ax = axs[1]
-    for m in sorted(int(x) for x in np.unique(rec.enc_motor)):
-        et, ea = rec.encoder(m)
-        ax.plot(et, ea / (2 * np.pi), lw=1.0, label=f"servo {m}",
-                color=colors.get(m, "0.3"))
-    ax.set_ylabel("servo angle, turns")
-    ax.set_xlabel("t on the recording clock, s")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    if servos:
+        ax = axs[1]
+        for m in servos:
+            et, ea = rec.encoder(m)
+            ax.plot(et, ea / (2 * np.pi), lw=1.0, label=f"servo {m}",
+                    color=colors.get(m, "0.3"))
+        ax.set_ylabel("servo angle, turns")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    axs[-1].set_xlabel("t on the recording clock, s")
     state = "complete" if rec.complete else "INCOMPLETE (interrupted run)"
     fig.suptitle(f"{literal(rec.path)}: {rec.imu_t.size} gyro samples over "
                  f"{rec.imu_t[-1] - rec.imu_t[0]:.1f} s, {len(extracted.windows)} rotation "
@@ -738,14 +836,14 @@ def _rests_plot(plt: Any, extracted: ExtractedWindows, cal: GyroCalibration,
         ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 3), useOffset=False)
         ax.grid(True, alpha=0.3)
     axs[0].set_ylabel("mean reading at rest, rad/s")
-    axs[0].legend(fontsize=8)
+    _inside(axs[0].legend(fontsize=8))
     fig.suptitle("rest windows: a still sensor reads −bias (Calibration v1 convention)"
                  + ("; with g-sensitivity −(bias + G f), f gravity's direction in the rest"
                     if gsens else ""), fontsize=10)
     return fig
 
 
-def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
+def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration, jig: str) -> Any:
     fig, (ax, axh) = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True,
                                   gridspec_kw={"width_ratios": [3, 1]})
     n = len(res.labels)
@@ -760,7 +858,7 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
     lim = max(4.0, float(np.nanmax(np.abs(res.z))) * 1.1) if n else 4.0
     ax.set_ylim(-lim, lim)
     ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
+    _inside(ax.legend(fontsize=8, loc="upper right"))
     dof_all = res.z.size
     text = f"Σz² = {res.chi2:.1f} over {dof_all} residuals"
     c = cal.consistency
@@ -769,10 +867,10 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
                  f"({c.verdict})")
     sources = set(res.axis_sources.values())
     if not sources <= {"calibration", "kinematics"}:
-        text += "\nservo axes: " + ", ".join(f"servo {m} {s}" for m, s in
+        text += "\nturn axes: " + ", ".join(f"{axis_label(jig, m)} {s}" for m, s in
                                              sorted(res.axis_sources.items()))
         if "fitted" in sources:
-            text += " (fitted: to the windows under this calibration, which has none)"
+            text += " (fitted: to the windows under this calibration)"
         if "nominal" in sources:
             text += " (nominal: mounting misalignment shows as off-axis residuals)"
     ax.set_title(text, fontsize=9)
@@ -783,7 +881,7 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration) -> Any:
         zz = np.linspace(-lim, lim, 200)
         axh.plot(zz, np.exp(-0.5 * zz**2) / math.sqrt(2 * math.pi), color="k", lw=1.0,
                  label="N(0, 1)")
-        axh.legend(fontsize=8)
+        _inside(axh.legend(fontsize=8))
     axh.set_xlabel("z")
     fig.suptitle(f"residuals of the windows against the calibration ({cal.method})", fontsize=10)
     return fig
@@ -849,19 +947,22 @@ def _draw(plt: Any, p: PlannedPlot, out: Path, rec: Recording, cal: GyroCalibrat
           extracted: ExtractedWindows, turns: _TurnFigure, home: Mapping[int, ServoAxis],
           axes: list[ServoAxis], index: Mapping[int, tuple[int, Window]], force: bool
           ) -> tuple[Path, str]:
-    """Draw and write one planned plot; the turn plots on the one reused figure."""
-    if p.kind == "overview":
-        fig = _overview_plot(plt, rec, extracted)
-    elif p.kind == "turn":
-        seg = p.segment
-        i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
-        # a turn with no window (skipped by the extraction) is drawn about the servo's
-        # home axis
-        axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
-        fig = _turn_plot(turns, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
-    elif p.kind == "rests":
-        fig = _rests_plot(plt, extracted, cal, rec.truth)
-    else:
-        fig = _residuals_plot(plt, window_residuals(extracted, cal, axes), cal)
-    save_png(fig, out / p.name, force=force, dpi=100, keep=p.kind == "turn")
+    """Draw and write one planned plot with :data:`_RC`; the turn plots on the one reused
+    figure."""
+    with plt.rc_context(_RC):
+        if p.kind == "overview":
+            fig = _overview_plot(plt, rec, extracted)
+        elif p.kind == "turn":
+            seg = p.segment
+            i, w = index.get(seg.index, (None, None))  # type: ignore[union-attr]
+            # a turn with no window (skipped by the extraction) is drawn about the servo's
+            # home axis
+            axis = home[int(seg.motor)] if i is None else axes[i]  # type: ignore[union-attr,arg-type]
+            fig = _turn_plot(turns, rec, cal, seg, w, axis, extracted, i)  # type: ignore[arg-type]
+        elif p.kind == "rests":
+            fig = _rests_plot(plt, extracted, cal, rec.truth)
+        else:
+            jig = _jig(rec)
+            fig = _residuals_plot(plt, window_residuals(extracted, cal, axes, jig), cal, jig)
+        save_png(fig, out / p.name, force=force, dpi=_DPI, keep=p.kind == "turn")
     return out / p.name, p.description

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 
 import numpy as np
 import pytest
@@ -110,3 +111,64 @@ def test_a_recording_without_turns_or_jig_kind_is_told_about_the_hand_jig(tmp_pa
         w.finish()
     assert main(["estimate", str(root)]) == 2
     assert '"jig": {"kind": "hand"}' in capsys.readouterr().err
+
+
+def test_the_report_of_a_hand_recording_names_the_box_axes_not_servos(hand_recording):
+    """The report of a hand recording (the independent generator's): its turn axes are the
+    box's (no servo on this jig: kit.jig_kinds' ``axis_label``), what calibrates the full model
+    is the hand jig's sentence, not ``--protocol full`` (a gimbal's flag), and the next steps
+    do not send the user to `gyrocal verify` (which turns a gimbal); the overview has no empty
+    servo-angle panel (before: one, with a legend of no entries and matplotlib's warning)."""
+    pytest.importorskip("matplotlib")
+    from gyrocal.calib.model import GyroCalibration
+    from gyrocal.kit import report_plots as rp
+    from gyrocal.kit.pipeline import judged_windows, recording_jig
+    from gyrocal.kit.plots import require_matplotlib
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.report_html import render_html
+
+    root, truth = hand_recording
+    rec = load_recording(root)
+    ex = judged_windows(rec)[0]
+    jig = recording_jig(rec)
+    axes = {str(m): {"axis": list(np.eye(3)[m - 1]), "misalignment_deg": 0.5,
+                     "nearest": f"+{'xyz'[m - 1]}", "std_deg": 0.01} for m in (1, 2, 3)}
+    cal = GyroCalibration(scale=truth.scale, bias=truth.bias, axes=axes)
+    page = render_html(cal, title="hand", jig=jig)
+    summary = page[page.index("<section id=summary>"):page.index("</section>")]
+    table = page[page.index("<table id=axes>"):]
+    table = table[:table.index("</table>")]
+    for name in "xyz":
+        assert f"<td>box axis {name}</td>" in table
+    assert "servo" not in table and not re.search(r"servo \d", summary)
+    assert "--protocol full" not in page
+    assert JIG_KINDS["hand"].full_model.split(" (")[0] in summary
+    assert "<code>gyrocal verify" not in summary and "second hand session" in summary
+    labels = rp.window_residuals(ex, cal, rp.window_axes(ex, cal, rec.manifest), jig).labels
+    assert {x for x in labels if not x.startswith("rest")} == {
+        f"box {a}{s}" for a in "xyz" for s in "+-"}
+    plt = require_matplotlib()
+    fig = rp._overview_plot(plt, rec, ex)
+    try:
+        assert len(fig.axes) == 1
+        legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+        assert {f"window, box axis {a}" for a in "xyz"} <= set(legend)
+    finally:
+        plt.close(fig)
+
+
+def test_the_g_sensitivity_note_says_what_calibrates_the_full_model_on_each_jig():
+    """A diagonal fit with g-sensitivity: the note says the rate error in use and what
+    calibrates the full model on the recording's jig (kit.jig_kinds' ``full_model``):
+    ``--protocol full`` on a gimbal only, where the flag means something."""
+    from gyrocal.calib.estimators import FitResult
+    from gyrocal.kit.pipeline import diagonal_g_note
+
+    fit = FitResult("paired-axis", np.ones(3), np.zeros(3), np.eye(6), 3, True, "ok", "",
+                    g_sensitivity=np.diag([1e-3, 2e-3, 1e-3]), g_directions=np.eye(3))
+    notes = {jig: diagonal_g_note(fit, jig) for jig in JIG_KINDS}
+    for jig, note in notes.items():
+        assert "0.002 rad/s per g" in note and note.endswith(JIG_KINDS[jig].full_model)
+        assert ("--protocol full" in note) == (jig == "gimbal")
+    assert "V-block" in notes["single-servo"] and "cannot" in notes["hand"]
+    assert diagonal_g_note(fit) == notes["gimbal"]
