@@ -1047,9 +1047,9 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
                               "the accelerometer's frames: they need rotations about two "
                               "servo axes (plan the run with accelerometer rests)")
     # rests that scatter more than their noise says (the jig's wobble: a rest's pose is not
-    # quite the one its encoders give) widen the covariance by the reduced χ² (Birge ratio)
-    dof = 2 * n - 5
-    spread = max(1.0, float(res.fun @ res.fun) / dof) if dof > 0 else 1.0
+    # quite the one its encoders give) widen the covariance: the one rule of calib.dispersion
+    # (the Birge ratio χ²/dof when the white-noise test fails)
+    spread = _scatter_factor(res.fun, 2 * n - 5)
     inv = np.linalg.inv(jtj)
     cov = spread * inv[:3, :3]
     if axes_std is not None:
@@ -1057,6 +1057,17 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
                                      resid_axes)
     ang = np.arcsin(np.clip(np.linalg.norm(np.cross(K @ g0 @ R.T, u), axis=1), 0, 1))
     return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
+
+
+def _scatter_factor(z: np.ndarray, dof: int) -> float:
+    """The variance factor whitened residuals ``z`` on ``dof`` degrees of freedom ask of a
+    fit's covariance (:func:`gyrocal.calib.dispersion.multiplicative`: 1 when their χ² passes
+    the test, ``χ²/dof`` otherwise); 1 without redundancy."""
+    from gyrocal.calib.dispersion import multiplicative
+
+    if dof <= 0:
+        return 1.0
+    return multiplicative(z, dof, 0.0, alpha=CONSISTENCY_LEVEL).factor
 
 
 def _across(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

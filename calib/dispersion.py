@@ -61,7 +61,12 @@ __all__ = ["SCATTER_TOLERANCE", "Dispersion", "additive", "multiplicative"]
 #:   wanders between them; ``python -m bench jigs``), the emulated hand jig by 0
 #:   (``gyrocal calibrate --sim --jig hand``); a slipped mount leaves about 4e-4 (the gyro
 #:   row's), which this row still calls a model error.
-SCATTER_TOLERANCE = {"accelerometer": 1e-3, "gyro": 1e-4, "hand": 3e-4}
+#: * ``thermal``, in units of the calibrations' own σ (``noise_ratio`` 1), for the thermal
+#:   model's fit of calibrations made at several temperatures
+#:   (:func:`gyrocal.calib.thermal.fit_thermal`): each calibration's σ already holds its
+#:   windows' scatter, so no scatter between calibrations beyond it is ordinary: any is "not
+#:   consistent" (and the σ are widened all the same).
+SCATTER_TOLERANCE = {"accelerometer": 1e-3, "gyro": 1e-4, "hand": 3e-4, "thermal": 0.0}
 
 
 @dataclass(frozen=True)
