@@ -188,7 +188,8 @@ class AccelCalibration:
         The averaging time the density was read at, s.
     fixed : tuple of str
         :data:`PARAMETER_NAMES` the rests could not determine (the design check,
-        :func:`determined_terms`): held at zero, with the datasheet's bound as their σ.
+        :func:`determined_terms`): held at zero, with the datasheet's bound as their σ and
+        its effect on the fitted terms in theirs (:func:`_held_covariance`).
         Written as ``fixed`` only when not empty; a document without it reads as none fixed.
     """
 
@@ -386,8 +387,11 @@ REAL_SCATTER = 3e-4
 #: accelerometer (MPU-9250, PS-MPU-9250A-01 Rev 1.0 Table 2), so that the fit can tell it from
 #: zero; otherwise it stays zero with that bound as its σ (:data:`CROSS_AXIS_PRIOR`).
 CROSS_AXIS_LIMIT = 0.005
-#: σ of a cross-axis term the rests cannot determine: ±2 % as a uniform bound (datasheet above).
-CROSS_AXIS_PRIOR = 0.02 / math.sqrt(3.0)
+#: σ of a cross-axis term the rests cannot determine: each term of the lower-triangular frame
+#: (:data:`ACCEL_FRAME`) holds the sum of two of the sensor's cross-axis sensitivities
+#: (``c_ij + c_ji``; their difference is a rotation of the frame), each ±2 % as a uniform bound
+#: (datasheet above): ``0.02 √(2/3)``.
+CROSS_AXIS_PRIOR = 0.02 * math.sqrt(2.0 / 3.0)
 #: A scale (relative) or bias (relative to gravity) the rests determine worse than this at
 #: :data:`REAL_SCATTER` is refused, naming the poses to add.
 SCALE_BIAS_LIMIT = 0.01
@@ -480,7 +484,8 @@ def fit_accelerometer(
     """Fit ``f = A (a + b)`` to rest windows' mean readings against gravity's magnitude.
 
     Steps: the design check (:func:`determined_terms`: cross-axis terms the rests cannot
-    determine stay zero, with the datasheet's bound as σ, and are listed in ``fixed``); the
+    determine stay zero, with the datasheet's bound as σ, its effect in the fitted terms' σ,
+    and are listed in ``fixed``); the
     fit weighted by each rest's white noise; the verdict with the excess between-rest scatter
     (:func:`gyrocal.calib.dispersion.additive`); when that excess is positive, the fit again
     weighted by the white noise plus the excess, whose covariance is reported.
@@ -525,7 +530,8 @@ def fit_accelerometer(
         p, res = _solve(p, a, g, lambda q: np.sqrt(_sigma(q, a, cov) ** 2 + verdict.tau2),
                         free, max_nfev)
         sigma = np.sqrt(_sigma(p, a, cov) ** 2 + verdict.tau2)
-    covariance = _covariance(p, a, g, sigma, free)
+    covariance = _covariance(p, a, g, sigma, free) + _held_covariance(p, a, g, sigma, free,
+                                                                      max_nfev)
     matrix, bias = _unpack(p)
     if np.any(np.diag(matrix) <= 0):  # the sign-flipped twin of the same fit
         flip = np.sign(np.diag(matrix))
@@ -564,8 +570,8 @@ def _solve(p: np.ndarray, a: np.ndarray, g: float, weights: Any, free: np.ndarra
 
 def _covariance(p: np.ndarray, a: np.ndarray, g: float, sigma: np.ndarray,
                 free: np.ndarray) -> np.ndarray:
-    """``(JᵀJ)⁻¹`` of the free parameters; a fixed cross-axis term gets the datasheet's
-    bound as its σ (:data:`CROSS_AXIS_PRIOR`)."""
+    """``(JᵀJ)⁻¹`` of the free parameters (zero on the held ones: :func:`_held_covariance`
+    adds their prior and what it does to the others)."""
     jac = _jacobian(p, a, g, sigma)[:, free]
     jtj = jac.T @ jac
     if np.linalg.cond(jtj) > 1e14:
@@ -574,8 +580,32 @@ def _covariance(p: np.ndarray, a: np.ndarray, g: float, sigma: np.ndarray,
                               "add rests in other poses")
     out = np.zeros((9, 9))
     out[np.ix_(free, free)] = np.linalg.inv(jtj)
-    fixed = np.flatnonzero(~free)
-    out[fixed, fixed] = CROSS_AXIS_PRIOR**2
+    return out
+
+
+def _held_covariance(p: np.ndarray, a: np.ndarray, g: float, sigma: np.ndarray,
+                     free: np.ndarray, max_nfev: int) -> np.ndarray:
+    """What the cross-axis terms held at zero do to the fit, as covariance (9, 9).
+
+    A held term is not known to be zero: the datasheet allows ±2 % (σ
+    :data:`CROSS_AXIS_PRIOR`), and the fitted terms take up whatever it is. The rests still
+    determine ``|A (a + b)|``, so a scale moves with the held terms at first order where a
+    rest's reading leans off its axis (the box's faces are not the sensor's axes) and at
+    second order (``A_xx² + A_yx² + A_zx²`` is what gravity along ``x`` fixes) everywhere.
+    Each held term is set to ``±σ`` in turn and the fit solved again; with ``d±`` the
+    changes of all nine parameters (the held term's own ``±σ`` among them), the held terms'
+    part of the covariance is ``Σ ½ (d₊d₊ᵀ + d₋d₋ᵀ)``: ``σ²`` on the held term itself, its
+    first-order effect on the others, and the second-order shift's square, for terms of
+    variance ``σ²`` (the gyro's diagonal model carries the cross-axis bound the same way,
+    :func:`gyrocal.calib.design.choose_model`)."""
+    out = np.zeros((9, 9))
+    for i in np.flatnonzero(~free):
+        for sign in (1.0, -1.0):
+            q = p.copy()
+            q[i] = p[i] + sign * CROSS_AXIS_PRIOR
+            q, _ = _solve(q, a, g, lambda _q: sigma, free, max_nfev)
+            d = q - p
+            out += 0.5 * np.outer(d, d)
     return out
 
 
@@ -1047,9 +1077,9 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
                               "the accelerometer's frames: they need rotations about two "
                               "servo axes (plan the run with accelerometer rests)")
     # rests that scatter more than their noise says (the jig's wobble: a rest's pose is not
-    # quite the one its encoders give) widen the covariance by the reduced χ² (Birge ratio)
-    dof = 2 * n - 5
-    spread = max(1.0, float(res.fun @ res.fun) / dof) if dof > 0 else 1.0
+    # quite the one its encoders give) widen the covariance: the one rule of calib.dispersion
+    # (the Birge ratio χ²/dof when the white-noise test fails)
+    spread = _scatter_factor(res.fun, 2 * n - 5)
     inv = np.linalg.inv(jtj)
     cov = spread * inv[:3, :3]
     if axes_std is not None:
@@ -1057,6 +1087,17 @@ def frame_rotation(forces: Any, angles: Any, axes: Any, reference: Any,
                                      resid_axes)
     ang = np.arcsin(np.clip(np.linalg.norm(np.cross(K @ g0 @ R.T, u), axis=1), 0, 1))
     return FrameRotation(R, cov, g0, float(np.sqrt(np.mean(ang**2))), n)
+
+
+def _scatter_factor(z: np.ndarray, dof: int) -> float:
+    """The variance factor whitened residuals ``z`` on ``dof`` degrees of freedom ask of a
+    fit's covariance (:func:`gyrocal.calib.dispersion.multiplicative`: 1 when their χ² passes
+    the test, ``χ²/dof`` otherwise); 1 without redundancy."""
+    from gyrocal.calib.dispersion import multiplicative
+
+    if dof <= 0:
+        return 1.0
+    return multiplicative(z, dof, 0.0, alpha=CONSISTENCY_LEVEL).factor
 
 
 def _across(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

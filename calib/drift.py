@@ -37,9 +37,26 @@ random walk (rad/s/√s) of each axis, and ``T`` the run's span (s):
   assumed before) fell short by that factor.
 
 The added variance of each bias component is therefore ``B² Φ(T, H) + K² T / 12``
-(:attr:`BiasDrift.run_variance`). In the ``horizon`` after the calibration the bias itself moves
-by ``sqrt(B² + K² · horizon)`` (one sigma; :attr:`BiasDrift.wander`): what a user should expect
-between the calibrated bias and the sensor's an hour later, beside the calibration's own σ.
+(:attr:`BiasDrift.run_variance`).
+
+**The hour after.** What a user meets later is the bias then against the calibration's
+estimate, the run's average over ``[0, T]``. Averaged as the run averaged it (over ``T``, so
+no instant's unbounded flicker variance enters), the bias a ``horizon`` ``H`` later, over
+``[H, H + T]``, differs from it by (one sigma, :attr:`BiasDrift.wander`)
+
+    Var(avg_[H, H+T] − avg_[0, T]) = B² Ψ(T, H) + K² (H − T/3)
+
+* **rate random walk**: each average departs from the walk at its own interval's start by
+  ``K² T / 3`` (the Wiener average above), the two starts by ``K² (H − T)``, all independent;
+* **flicker**: for one Gauss–Markov process the two averages share
+  ``(D(H + T) + D(H − T) − 2 D(H)) / 2`` (over ``T²``; ``D`` as above), so
+  ``Var = s² [2 D(T) − D(H + T) − D(H − T) + 2 D(H)] / T²``, and ``Ψ(T, H)`` is its integral
+  over ``ln c`` divided by ``π`` (:func:`flicker_later_factor`; ``Ψ = 3.79`` for a 42 s run and
+  an hour). ``H`` is at least ``T`` (the later average starts after the run ends).
+
+This replaces ``sqrt(B² + K² H)``, which took ``B²`` for the flicker's variance (it is not the
+variance of anything for flicker) and the walk's value at the hour's end against its value at
+the calibration's instant (the run averages it).
 """
 
 from __future__ import annotations
@@ -53,7 +70,7 @@ import numpy as np
 
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 
-__all__ = ["HORIZON_S", "BiasDrift", "flicker_run_factor"]
+__all__ = ["HORIZON_S", "BiasDrift", "flicker_later_factor", "flicker_run_factor"]
 
 #: The horizon the calibration states the bias's expected wander over, s (an hour).
 HORIZON_S = 3600.0
@@ -115,6 +132,33 @@ def flicker_run_factor(span_s: float, horizon_s: float = HORIZON_S, *,
     return float(step * (per_unit.sum() - 0.5 * (per_unit[0] + per_unit[-1])) / math.pi)
 
 
+def flicker_later_factor(span_s: float, horizon_s: float = HORIZON_S) -> float:
+    """``Ψ(T, H)``: the variance, in units of ``B²``, of a flicker bias's average over
+    ``[H, H + T]`` about its average over the run ``[0, T]`` (module docstring, "The hour
+    after").
+
+    Parameters
+    ----------
+    span_s : float
+        ``T``, the run's span, s (taken as at least 1 s, as :func:`flicker_run_factor`).
+    horizon_s : float
+        ``H``, how long after the run's start the later average starts, s (at least ``T``).
+
+    Returns
+    -------
+    float
+        ``Ψ``.
+    """
+    T = max(float(span_s), _MIN_SPAN_S)
+    H = max(float(horizon_s), T)
+    ln_c = np.linspace(np.log(T) - _LN_C_MARGIN, np.log(H + T) + _LN_C_MARGIN, _LN_C_POINTS)
+    c = np.exp(ln_c)
+    d = [_avg_integral(L, c) for L in (T, H + T, H - T, H)]
+    per_unit = c**2 * (2 * d[0] - d[1] - d[2] + 2 * d[3]) / T**2
+    step = ln_c[1] - ln_c[0]  # the trapezoid rule on the even grid
+    return float(step * (per_unit.sum() - 0.5 * (per_unit[0] + per_unit[-1])) / math.pi)
+
+
 def _triple(v: Any, name: str, err: type[Exception]) -> tuple[float, float, float]:
     try:
         a = np.broadcast_to(np.asarray(v, dtype=float), (3,))
@@ -171,6 +215,11 @@ class BiasDrift:
         return flicker_run_factor(self.span_s, self.horizon_s)
 
     @property
+    def later_factor(self) -> float:
+        """``Ψ(T, H)`` of this run's span and horizon (:func:`flicker_later_factor`)."""
+        return flicker_later_factor(self.span_s, self.horizon_s)
+
+    @property
     def run_variance(self) -> np.ndarray:
         """Variance the wander adds to each bias component's estimate, (rad/s)²:
         ``B² Φ(T, H) + K² T / 12`` (module docstring)."""
@@ -207,10 +256,13 @@ class BiasDrift:
 
     @property
     def wander(self) -> np.ndarray:
-        """Expected (one-sigma) wander of each bias component in the ``horizon_s`` after the
-        calibration, rad/s: ``sqrt(B² + K² · horizon)``."""
+        """Expected (one-sigma) departure of each bias component ``horizon_s`` after the
+        calibration from the calibration's estimate, both averaged over the run's span, rad/s:
+        ``sqrt(B² Ψ(T, H) + K² (H − T/3))`` (module docstring, "The hour after")."""
         B, K = np.asarray(self.bias_instability), np.asarray(self.rate_random_walk)
-        return np.sqrt(B**2 + K**2 * self.horizon_s)
+        T = max(self.span_s, _MIN_SPAN_S)
+        H = max(self.horizon_s, T)
+        return np.sqrt(B**2 * self.later_factor + K**2 * (H - T / 3.0))
 
     def note(self) -> str:
         """What the calibration added to the bias's σ, and why, in one sentence."""
@@ -219,9 +271,10 @@ class BiasDrift:
                 f"sqrt(B^2 Phi + K^2 T/12) = {1e6 * float(add.max()):.0f} urad/s (B "
                 f"{1e6 * max(self.bias_instability):.3g} urad/s, Phi "
                 f"{self.flicker_factor:.2f} for the run against its {self.horizon_s / 3600:g} h, K "
-                f"{max(self.rate_random_walk):.3g} rad/s/sqrt(s): {self.source}); in the "
-                f"{self.horizon_s / 3600:g} h after it the bias may wander by "
-                f"{1e6 * float(self.wander.max()):.0f} urad/s (1 sigma)")
+                f"{max(self.rate_random_walk):.3g} rad/s/sqrt(s): {self.source}); "
+                f"{self.horizon_s / 3600:g} h later the bias, averaged as the run averages "
+                f"it, may be {1e6 * float(self.wander.max()):.0f} urad/s from this estimate "
+                f"(1 sigma, sqrt(B^2 Psi + K^2 (H - T/3)), Psi {self.later_factor:.2f})")
 
     def to_dict(self) -> dict[str, Any]:
         """The calibration document's ``bias_drift`` object (hardware_docs/formats.md)."""

@@ -243,7 +243,7 @@ def add_bias_drift(fit: FitResult, drift: BiasDrift) -> FitResult:
 
     The fit's covariance counts the white noise only, but the bias it estimates is an average
     over rests and windows spread over the run, during which the bias itself wanders (bias
-    instability, rate random walk); :attr:`BiasDrift.run_variance` (``B² + K² T / 12`` per
+    instability, rate random walk); :attr:`BiasDrift.run_variance` (``B² Φ(T, H) + K² T / 12`` per
     component, :mod:`gyrocal.calib.drift`) is added to the diagonal of the bias block. The
     wander is independent of the white noise and common to every window, so it adds to the bias
     alone (its correlation with the matrix, through the windows' weights, is neglected).

@@ -25,7 +25,9 @@ that leave at least one redundant calibration (``p ≤ n − 2``; at most
 (independent) variances on its degrees of freedom, so a wander that is in fact independent
 between calibrations shows as scatter; when it fails (p-value below
 :data:`~gyrocal.calib.estimators.CONSISTENCY_ALPHA`) the coefficients' covariances are scaled
-by the Birge ratio ``χ²/dof`` so that the stated uncertainty covers the scatter actually seen.
+by the Birge ratio ``χ²/dof`` so that the stated uncertainty covers the scatter actually seen:
+the one rule of :mod:`gyrocal.calib.dispersion` (its ``thermal`` row: any such scatter is "not
+consistent"; a single calibration that does not fit the others is named).
 
 The model is valid over the covered range ``[min T_i, max T_i]``: :meth:`ThermalModel.at`
 clamps a temperature outside it to the nearest end and says so (``clamped``); it never
@@ -310,15 +312,35 @@ class ThermalModel:
 
 
 def _wls(x: np.ndarray, y: np.ndarray, var: np.ndarray, order: int
-         ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Weighted polynomial least squares: coefficients (ascending), their covariance, χ²."""
+         ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Weighted polynomial least squares: coefficients (ascending), their covariance, χ² and
+    the residuals whitened by the stated σ."""
     X = x[:, None] ** np.arange(order + 1)
     w = 1.0 / var
     XtW = X.T * w
     cov = np.linalg.inv(XtW @ X)
     c = cov @ (XtW @ y)
-    r = y - X @ c
-    return c, cov, float(np.sum(w * r * r))
+    z = (y - X @ c) * np.sqrt(w)
+    return c, cov, float(z @ z), z
+
+
+def _judged(z: np.ndarray, chi2: float, dof: int, temperature_c: np.ndarray
+            ) -> tuple[Consistency, float]:
+    """The verdict on the calibrations' whitened residuals ``z`` (the bias axes' fits, then
+    the gain entries', each over the calibrations in order) and the variance factor the
+    coefficients' covariances take: the one rule of :mod:`gyrocal.calib.dispersion`
+    (:func:`~gyrocal.calib.dispersion.multiplicative`, its ``thermal`` tolerance: no scatter
+    beyond the calibrations' stated σ is ordinary, so any is "not consistent", and the σ are
+    widened by the Birge ratio ``χ²/dof`` all the same)."""
+    # imported here: calib.windows imports this module for correct_drift, which needs no
+    # scipy (a recording alone, issue 25)
+    from gyrocal.calib.dispersion import SCATTER_TOLERANCE, multiplicative
+
+    n = temperature_c.size
+    names = [f"the calibration at {temperature_c[i % n]:.2f} °C" for i in range(z.size)]
+    verdict = multiplicative(z, dof, 1.0, alpha=_ALPHA, tolerance=SCATTER_TOLERANCE["thermal"],
+                             names=names, chi2=chi2, groups=np.arange(z.size) % n)
+    return verdict.consistency, verdict.factor
 
 
 def _positive_var(std: np.ndarray, name: str) -> np.ndarray:
@@ -421,7 +443,8 @@ def fit_thermal(
 
     g_coeffs = g_std = None
     diagonal = False
-    g_chi2 = []
+    g_chi2: list[float] = []
+    g_z: list[np.ndarray] = []
     if gain is not None:
         g = np.asarray(gain, dtype=float)
         diagonal = g.shape == (n, 3)
@@ -444,30 +467,25 @@ def fit_thermal(
                 g_coeffs[0, i, k] = g[0, i, k]
                 continue
             var = _positive_var(s[:, i, k], f"gain_std[{i}][{k}]")
-            c, cv, ch = _wls(x, g[:, i, k], var, 1)
+            c, cv, ch, z = _wls(x, g[:, i, k], var, 1)
             g_coeffs[:, i, k], g_std[:, i, k] = c, np.sqrt(np.diag(cv))
             g_chi2.append(ch)
+            g_z.append(z)
         chi2 += sum(g_chi2)
         dof += len(g_chi2) * (n - 2)
 
-    consistency = None
+    consistency, factor = None, 1.0
     if dof > 0:
-        # χ² tail without scipy.stats' import cost, imported here: calib.windows imports this
-        # module for correct_drift, which needs no scipy (a recording alone, issue 25)
-        from scipy.special import chdtrc
-
-        pv = float(chdtrc(dof, chi2))
-        consistency = Consistency(chi2=float(chi2), dof=int(dof), p_value=pv, ok=pv >= _ALPHA)
-        if not consistency.ok:  # Birge ratio: the scatter, not the stated σ, sets the error
-            birge = chi2 / dof
-            cov = cov * birge
-            if g_std is not None:
-                g_std = g_std * math.sqrt(birge)
+        z = np.concatenate([f[3] for f in fits[p]] + g_z)
+        consistency, factor = _judged(z, float(chi2), int(dof), T)
+        cov = cov * factor
+        if g_std is not None:
+            g_std = g_std * math.sqrt(factor)
     cov[:, 0, 0] += common  # the shared offset: the constant coefficient's alone
     criterion = {"name": "BIC", "bias_order": p,
                  "scores": {str(k): float(v) for k, v in scores.items()},
                  "gain_order": None if gain is None else 1,
-                 "birge_scaled": bool(consistency is not None and not consistency.ok)}
+                 "birge_scaled": factor != 1.0}
     return ThermalModel(ref, (lo, hi), coeffs, cov, g_coeffs, g_std, diagonal, criterion,
                         consistency, n, kind)
 
@@ -561,7 +579,7 @@ def correct_drift(obs: Any, window_temp_c: np.ndarray, rest_temp_c: np.ndarray
     x = tr[ok] - t_bar
     beta, beta_std = np.zeros(3), np.zeros(3)
     for j in range(3):
-        c, cov, _ = _wls(x, obs.rest_mean[ok, j], obs.rest_mean_std[ok, j] ** 2, 1)
+        c, cov, _, _ = _wls(x, obs.rest_mean[ok, j], obs.rest_mean_std[ok, j] ** 2, 1)
         beta[j], beta_std[j] = c[1], math.sqrt(cov[1, 1])
     dw, dr = (tw - t_bar)[:, None], np.where(ok, tr - t_bar, 0.0)[:, None]
     fixed = replace(

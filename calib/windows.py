@@ -386,6 +386,9 @@ class _Turn:
     mean_std: np.ndarray
     rate_std: float
     ref: tuple[int, int, float]  # still angle before, after, 1/∫w (-1, -1, 0 when unused)
+    # each component's share of the turning axis's motion (0 on that axis): its noise is
+    # measured with the motion taken out (:func:`_noise_beside_motion`)
+    follow: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -560,12 +563,38 @@ def _turn_window(
                                   _ramp_angle_std(t, th, b2, b, q)) / wint)
         ref = (-1, -1, 0.0)
     x = imu_rate[(imu_t >= a) & (imu_t <= b)]
-    noise = np.maximum(diff_noise(x), 1e-12)
+    noise, follow = _noise_beside_motion(x)
     mean_std = noise * float(np.sqrt(np.sum(qw**2)) / np.sum(qw))  # white; see _pool_noise
     win = Window(kind, seg.index, int(seg.motor), d, corners, revs, float(rate),  # type: ignore[arg-type]
                  tuple(float(v) for v in mean), int(x.shape[0]))  # type: ignore[arg-type]
     return _Turn(win, mean, float(rate), int(x.shape[0]), noise, mean_std, rate_std,
-                 ref)  # type: ignore[arg-type]
+                 ref, follow)  # type: ignore[arg-type]
+
+
+def _noise_beside_motion(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample noise of a turning window's samples ``x`` (n, 3) on each component with
+    the servo's motion taken out, and each component's share ``c`` of the turning axis's.
+
+    The servo's speed ripple (gear mesh, commutation, its control loop) is real motion along
+    the turning axis: every component sees ``(A⁻¹u)_j ω(t)``, and it cancels between the gyro
+    mean and the reference (same weight, same motion: module docstring), so it is no noise of
+    the window's mean. First differences pass it for noise wherever the axis has a share: on a
+    posed turn, whose axis lies between two sensor axes, the second component's differences
+    are ten times the white noise (emulated ``--sim``: 3.4e-2 rad/s against 2.5e-3 at the
+    rests). So each component ``j`` other than the turning one ``d`` is read as
+    ``x_j − c_j x_d``, ``c_j`` the least-squares slope of its first differences on ``d``'s
+    (the ripple's share, whatever the bias); what is left is ``x_j``'s noise and ``c_j`` times
+    ``d``'s, which :func:`_turning_axis_noise` takes out. ``d`` keeps its own differences
+    (replaced there by the noise measured where no servo reaches it).
+    """
+    dx = np.diff(x, axis=0)
+    d = int(np.argmax(np.abs(x.mean(axis=0))))
+    ref = dx[:, d]
+    den = float(ref @ ref)
+    follow = (ref @ dx) / den if den > 0 else np.zeros(3)
+    follow[d] = 0.0
+    noise = np.maximum(diff_noise(x - np.outer(x[:, d], follow)), 1e-12)
+    return noise, follow
 
 
 def _rest_windows(
@@ -622,6 +651,13 @@ def _turning_axis_noise(turns: Sequence[_Turn], rest_samples: Sequence[np.ndarra
     noise_rows = np.array([w.noise for w in turns])
     neff = np.array([w.mean_std for w in turns]) / noise_rows  # 1/sqrt(n_eff) per window, axis
     dominant = np.argmax(np.abs(np.array([w.mean for w in turns])), axis=1)
+    # a component read beside the turning axis's motion still holds c² times that axis's
+    # noise (_noise_beside_motion): out, in the ratio of the two axes' noise at the rests
+    at_rest = (np.sqrt(np.mean([diff_noise(x) ** 2 for x in rest_samples], axis=0))
+               if rest_samples else np.ones(3))
+    for i, w in enumerate(turns):
+        ratio = (at_rest[dominant[i]] / np.maximum(at_rest, 1e-300)) ** 2
+        noise_rows[i] = noise_rows[i] / np.sqrt(1.0 + w.follow**2 * ratio)
     for j in range(3):
         var, dof = [], []
         for x in rest_samples:

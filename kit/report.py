@@ -264,9 +264,11 @@ def inconsistency_causes(cal: GyroCalibration) -> str:
 
 def _drift_rows(d: Any) -> list[str]:
     """The bias's wander (:class:`gyrocal.calib.drift.BiasDrift`): what its σ includes, and
-    how far it may move in the hour after the calibration."""
+    how far the bias an hour later may be from the calibration's
+    (:attr:`~gyrocal.calib.drift.BiasDrift.wander`)."""
     run = np.sqrt(d.run_variance)
-    return [f"bias wander in the {d.horizon_s / 3600:g} h after calibration (1 sigma): "
+    return [f"bias wander {d.horizon_s / 3600:g} h after calibration, against this bias "
+            "(1 sigma): "
             + " ".join(f"{x:.1e}" for x in d.wander) + " rad/s"
             f" (bias instability {max(d.bias_instability):.2g} rad/s, rate random walk "
             f"{max(d.rate_random_walk):.2g} rad/s/√s: {d.source});",

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from gyrocal.calib.drift import BiasDrift, flicker_run_factor
+from gyrocal.calib.drift import BiasDrift, flicker_later_factor, flicker_run_factor
 from gyrocal.calib.errors import CalibInputError, CalibrationFormatError
 from gyrocal.calib.estimators import FitResult, add_bias_drift
 from gyrocal.calib.model import GyroCalibration
@@ -61,7 +61,8 @@ def test_run_variance_adds_flicker_and_walk_and_the_hour_after_adds_the_walk():
     d = BiasDrift((1e-5, 2e-5, 3e-5), 2e-6, 60.0)
     B = np.array([1e-5, 2e-5, 3e-5])
     assert d.run_variance == pytest.approx(B**2 * flicker_run_factor(60.0) + 4e-12 * 60 / 12)
-    assert d.wander == pytest.approx(np.sqrt(B**2 + 4e-12 * 3600))
+    assert d.wander == pytest.approx(np.sqrt(B**2 * flicker_later_factor(60.0)
+                                             + 4e-12 * (3600 - 60 / 3)))
     with pytest.raises(CalibInputError, match="span_s"):
         BiasDrift(1e-5, 2e-6, -1.0)
     with pytest.raises(CalibInputError, match="rate_random_walk"):
@@ -123,3 +124,29 @@ def test_window_variance_bounds_a_windows_flicker_about_the_runs_mean():
     # the rate random walk's share: a Wiener average's about its start, K² T / 3
     K = 2e-6
     assert BiasDrift(0.0, K, T).window_variance([L, 2 * L]) == pytest.approx(K**2 * T / 3)
+
+
+def test_the_hour_after_matches_flicker_and_a_random_walk_made_independently():
+    # independent truth: 1/f noise made in the frequency domain (the independent generator's,
+    # not the formula's Gauss–Markov continuum) plus a random walk drawn step by step; a 42 s
+    # run's average against the average over the same span an hour later (what the bias is
+    # then, averaged as the calibration averaged it)
+    rng = np.random.default_rng(38)
+    B, K, dt, T, H = 5e-5, 2e-6, 2.0, 42.0, 3600.0
+    nT, nH, hours = int(T / dt), int(H / dt), 8
+    flick = np.concatenate([flicker_noise(rng, B, 1 / dt, int(hours * H / dt)).T
+                            for _ in range(60)])  # 180 draws of 8 hours, periodic
+    pairs = flick.reshape(-1, 2 * nH)  # 720 two-hour stretches: the run at each one's start
+    walk = np.cumsum(rng.standard_normal(pairs.shape) * K * np.sqrt(dt), axis=1)
+    x = pairs + walk
+    err = x[:, nH: nH + nT].mean(axis=1) - x[:, :nT].mean(axis=1)
+    d = BiasDrift(B, K, T)
+    # sample variance of 720 draws: relative standard error sqrt(2/720) = 5 %
+    assert np.var(err) == pytest.approx(d.wander[0] ** 2, rel=0.15)
+    # each part on its own: the flicker's Ψ and the walk's K² (H − T/3)
+    e_f = pairs[:, nH: nH + nT].mean(axis=1) - pairs[:, :nT].mean(axis=1)
+    assert np.var(e_f) == pytest.approx(B**2 * flicker_later_factor(T, H), rel=0.15)
+    e_w = walk[:, nH: nH + nT].mean(axis=1) - walk[:, :nT].mean(axis=1)
+    assert np.var(e_w) == pytest.approx(K**2 * (H - T / 3), rel=0.15)
+    # the figure before, sqrt(B² + K² H), is not it
+    assert not np.var(err) == pytest.approx(B**2 + K**2 * H, rel=0.3)

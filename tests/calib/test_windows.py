@@ -214,3 +214,20 @@ def test_malformed_arrays(kwargs, message):
 def test_trapezoid_weight_at_known_points():
     w = trapezoid_weight(np.array([0.0, 1.0, 1.5, 2.0, 5.0, 6.5, 7.0, 8.0]), (1.0, 2.0, 6.0, 7.0))
     np.testing.assert_allclose(w, [0, 0, 0.5, 1, 1, 0.5, 0, 0])
+
+
+def test_a_tilted_turns_ripple_is_not_taken_for_noise():
+    # A servo whose axis lies between the sensor's x and y (as a posed turn's does) carries its
+    # 5 % speed ripple on both: real motion that the encoder reference sees too and that cancels
+    # in the window's mean, so no component's noise may include it. The simulator's white noise
+    # (noise_std, the truth) is what every window's noise must be; before, the tilted axis's
+    # components read up to 1.5x it.
+    rng = np.random.default_rng(41)
+    k, b = draw_sensors(rng, 1)
+    axes = np.array([[0.6, 0.8, 0.0], [-0.8, 0.6, 0.0], [0.0, 0.0, 1.0]])
+    noise_std = 0.005
+    run = simulate_raw_run(rng, k[0], b[0], axes, SimProtocol(speed=3.0, turns=2, rest_s=1.0,
+                                                              ripple=0.05), noise_std)
+    obs = _extract(run).observations
+    assert obs.noise.shape == (6, 3)
+    np.testing.assert_allclose(obs.noise, noise_std, rtol=0.15)
