@@ -204,7 +204,8 @@ CHILD = textwrap.dedent("""
 
 def _child(tmp_path, url, mode):
     script = tmp_path / "child.py"
-    script.write_text(CHILD)
+    if not script.exists():  # rewriting it while an earlier child reads it gives that child
+        script.write_text(CHILD)  # an empty script: exit 0 with nothing printed
     return subprocess.Popen([sys.executable, str(script), url, mode, str(Path(__file__).parent)],
                             stdout=subprocess.PIPE, text=True)
 
