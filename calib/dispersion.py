@@ -51,7 +51,7 @@ __all__ = ["SCATTER_TOLERANCE", "Dispersion", "additive", "multiplicative"]
 #:   (``python -m bench real``).
 #: * ``gyro``, of the turn rate: the jig's windows are whole revolutions timed by the encoders
 #:   (DESIGN.md fact 2); the realistic emulator's honest run passes the white-noise test
-#:   outright (χ² 57.1 on 42 dof, ``gyrocal calibrate --sim``), a 0.5° slip of the mount
+#:   outright (χ² 65.4 on 42 dof, ``gyrocal calibrate --sim``), a 0.5° slip of the mount
 #:   mid-run leaves 4.2e-4 of the rate (``--sim-fault slip:30:0.5``) and the cross-axis terms
 #:   a diagonal fit leaves out 3.1e-3 (``estimate --method iterative-ls``). No real jig's
 #:   scatter is measured yet: revisit this row with one.
