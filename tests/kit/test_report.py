@@ -412,13 +412,17 @@ def test_a_turn_drawn_on_the_reused_figure_is_the_turn_drawn_alone(full, full_re
     import matplotlib.image as mpimg
 
     from gyrocal.kit import report_plots as rp
+    from gyrocal.kit.pipeline import judged_windows
     from gyrocal.kit.plots import require_matplotlib
 
-    _, rec, extracted, cal = full
+    _, rec, _, cal = full
+    extracted = judged_windows(rec)[0]  # the windows `gyrocal report` draws (its σ as judged)
     plt = require_matplotlib()
     last = [p for p in rp.plan_report(rec, extracted) if p.kind == "turn"][-1]
     motors = sorted({int(s.motor) for s in rec.segments if s.kind == "rotate"})
-    home = servo_axes(motors, cal, rec.manifest, extracted.windows)
+    forces = rp.window_forces(extracted.observations, cal)
+    home = servo_axes(motors, cal, rec.manifest, extracted.windows,
+                      None if forces is None else forces[0])
     axes = window_axes(extracted, cal, rec.manifest)
     index = {w.segment: (i, w) for i, w in enumerate(extracted.windows)}
     alone = rp._TurnFigure(plt)
