@@ -33,6 +33,7 @@ __all__ = [
     "ICM42688P_MAX_READER_ODR_HZ",
     "ICM42688P_ODR",
     "ICM42688P_REG",
+    "ICM42688P_ST_DATA",
     "ICM42688P_UI_FILT_DIVISOR",
     "LSM6DSOX",
     "LSM6DSOX_BITS",
@@ -543,7 +544,9 @@ def mpu9250_self_test_otp(code: int, fs: int = 0) -> float:
     code : int
         The SELF_TEST_* register byte (1..255; 0 means no factory value).
     fs : int
-        GYRO_FS_SEL or ACCEL_FS_SEL of the range the response is read at.
+        The range the response is read at, as its doublings above ±250 °/s or ±2 g: the
+        MPU-9250's GYRO_FS_SEL or ACCEL_FS_SEL; negative for a narrower range (the
+        ICM-42688-P's ``3 − FS_SEL``: TDK eMD Icm426xxSelfTest.c, INV_ST_OTP_EQUATION).
 
     Returns
     -------
@@ -821,8 +824,28 @@ class _ICM42688PRegisters:
     FSYNC_CONFIG: int = 0x62  # reset 0x10
     INT_CONFIG1: int = 0x64  # reset 0x10
     INT_SOURCE0: int = 0x65  # reset 0x10 (RESET_DONE_INT1_EN)
+    # SELF_TEST_CONFIG (DS-000347 register map, bank 0): ACCEL_ST_POWER bit 6, EN_AZ/AY/AX_ST
+    # bits 5:3, EN_GZ/GY/GX_ST bits 2:0 (X in the low bit); TDK eMD Icm426xxDefs.h
+    # MPUREG_SELF_TEST_CONFIG 0x70, BIT_GYRO_X_ST_EN 0x01 .. BIT_ST_REGULATOR_EN 0x40
+    SELF_TEST_CONFIG: int = 0x70
     WHO_AM_I: int = 0x75
     REG_BANK_SEL: int = 0x76
+
+
+@dataclass(frozen=True)
+class _ICM42688PSelfTestCodes:
+    """Where the ICM-42688-P keeps its factory self-test codes, one byte per axis: XG/YG/ZG_ST_DATA
+    in user bank 1 and XA/YA/ZA_ST_DATA in user bank 2 (DS-000347 register map, banks 1 and 2;
+    TDK eMD Icm426xxDefs.h MPUREG_XG_ST_DATA_B1 0x5F, MPUREG_XA_ST_DATA_B2 0x3B, as vendored by
+    VaderMester/ESP32-ICM426XX-driver; kriswiner/ICM42688 ICM42688.h:94-96, 108-110)."""
+
+    BANK_GYRO: int = 1
+    XG_ST_DATA: int = 0x5F  # YG, ZG at 0x60, 0x61
+    BANK_ACCEL: int = 2
+    XA_ST_DATA: int = 0x3B  # YA, ZA at 0x3C, 0x3D
+
+
+ICM42688P_ST_DATA = _ICM42688PSelfTestCodes()
 
 
 #: The ICM-42688-P's registers in user banks 1, 2 and 4 whose reset value is not 0, one row each:
@@ -883,6 +906,10 @@ class _ICM42688PBits:
     PWR_MGMT0_GYRO_MODE_MASK: int = 0x0C
     PWR_MGMT0_ACCEL_MODE_MASK: int = 0x03
     MODE_LOW_NOISE: int = 0b11
+    # SELF_TEST_CONFIG fields (:attr:`_ICM42688PRegisters.SELF_TEST_CONFIG`)
+    SELF_TEST_GYRO_EN_SHIFT: int = 0  # EN_GX_ST bit 0, EN_GY_ST bit 1, EN_GZ_ST bit 2
+    SELF_TEST_ACCEL_EN_SHIFT: int = 3  # EN_AX_ST bit 3, EN_AY_ST bit 4, EN_AZ_ST bit 5
+    SELF_TEST_ACCEL_ST_POWER: int = 0x40
     FS_SEL_SHIFT: int = 5
     ODR_MASK: int = 0x0F
     GYRO_UI_FILT_BW_MASK: int = 0x0F
