@@ -961,7 +961,12 @@ ICM42688P_MAX_READER_ODR_HZ = 1000.0
 #: (DS-000347 "UI filter block" and register GYRO_ACCEL_CONFIG0): 0 is ODR/2, 1..7 are
 #: max(400 Hz, ODR) divided by 4, 5, 8, 10, 16, 20, 40. The reset value is 1. The filter's
 #: order is :data:`ICM42688P_UI_FILT_ORDER`'s; no noise bandwidth or delay per setting was
-#: found (⚠ the emulator has its stand-in filter's own).
+#: found (⚠ the emulator has its stand-in filter's own: at 1 kHz, second order, 1.14 ms at code
+#: 1 to 8.7 ms at code 7). Searched: DS-000347's §5 (only its contents were reached in an open
+#: copy: §5.3 anti-alias filter, §5.5 UI filter block), GYRO_ACCEL_CONFIG0's description as
+#: ten open headers found by the code index transcribe it (bandwidth formulas; codes 14 and 15
+#: "Low Latency option: Trivial decimation @ ODR of Dec2 filter output", no delay), and TDK's
+#: eMD ICM-426xx sources (Icm426xxDefs.h: the bandwidth codes; Icm426xxSelfTest.c).
 ICM42688P_UI_FILT_DIVISOR: Mapping[int, float] = MappingProxyType(
     {1: 4.0, 2: 5.0, 3: 8.0, 4: 10.0, 5: 16.0, 6: 20.0, 7: 40.0}
 )
@@ -1387,7 +1392,15 @@ ICM20948_BITS = _ICM20948Bits()
 #: GYRO_DLPFCFG: the 3 dB and noise bandwidths of DS-000189's GYRO_CONFIG_1 table, ✓✓ with
 #: SparkFun's qwiic_icm20948.py lines 107-115 (``gyr_d196bw6_n229bw8`` ...: "A is integer part
 #: of 3db BW ... X is integer part of nyquist bandwidth", the table's NBW column) and the same
-#: names in SparkFun's ICM_20948_ENUMERATIONS.h. DS-000189 gives no delay for the gyro DLPF.
+#: names in SparkFun's ICM_20948_ENUMERATIONS.h. No delay per setting is published: each
+#: row's ``delay_s`` is None and the emulated delay is its stand-in filter's own (⚠ not a
+#: datasheet figure; 0.73 ms at 196.6 Hz to 27.9 ms at 5.7 Hz). Searched: DS-000189's
+#: GYRO_CONFIG_1 and ACCEL_CONFIG tables (3 dB bandwidth, NBW and rate columns only), SparkFun's
+#: names (bandwidths only), TDK's eMD (Icm20948Defs.h, Icm20948SelfTest.c); one open header
+#: (``gyro_config.h``, "ICM-20948 ... Table 35"; its repository is not named by the code
+#: index) does print a delay column, but its rows (250,
+#: 176, 92 ... Hz; 0.97, 1.9, 2.8 ... ms) are the MPU-9250's CONFIG table under the
+#: ICM-20948's name, so it is not used.
 _ICM20948_DLPF_TABLE = "DS-000189 GYRO_CONFIG_1 table ✓✓ (qwiic_icm20948.py:107-115)"
 ICM20948_GYRO_FILTER: tuple[FilterSetting, ...] = (
     FilterSetting(0, 196.6, None, 229.8, _ICM20948_DLPF_TABLE),
@@ -1407,7 +1420,7 @@ ICM20948_DLPF: Mapping[float, int] = MappingProxyType(
 #: Accelerometer DLPF settings with ACCEL_FCHOICE = 1 (its reset value), the internal rate
 #: 1125 Hz, one row per ACCEL_DLPFCFG (ACCEL_CONFIG bits 5:3, reset 0): DS-000189's
 #: ACCEL_CONFIG table, 3 dB and noise bandwidths, ✓✓ with SparkFun's qwiic_icm20948.py lines
-#: 96-104 (``acc_d246bw_n265bw`` ...). No delay is given.
+#: 96-104 (``acc_d246bw_n265bw`` ...). No delay is given (searched as for the gyro table).
 _ICM20948_ACCEL_TABLE = "DS-000189 ACCEL_CONFIG table ✓✓ (qwiic_icm20948.py:96-104)"
 ICM20948_ACCEL_FILTER: tuple[FilterSetting, ...] = (
     FilterSetting(0, 246.0, None, 265.0, _ICM20948_ACCEL_TABLE),
