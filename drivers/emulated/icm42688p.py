@@ -15,7 +15,8 @@ What it models, register by register (bank 0 unless said):
 - SELF_TEST_CONFIG (0x70): each EN_G*_ST / EN_A*_ST bit moves its axis's output by the
   response its code stands for at the configured range, ``2620 / 2^(3 − FS_SEL) ·
   1.01^(code − 1)`` counts (TDK's INV_ST_OTP_EQUATION; :mod:`~gyrocal.drivers.emulated.
-  self_test`), through the UI filter like the signal.
+  self_test`), added to the output counts as a step (not through the UI filter ⚠, as the
+  MPU-9250's and ICM-20948's).
 - WHO_AM_I (0x75) = 0x47. DEVICE_CONFIG.SOFT_RESET restores the reset values: INTF_CONFIG0 =
   0x30 (big-endian data and FIFO count, count in bytes), TMST_CONFIG = 0x23,
   GYRO_CONFIG0 = ACCEL_CONFIG0 = 0x06 (±2000 °/s / ±16 g, 1 kHz), GYRO_CONFIG1 = 0x16,
