@@ -9,13 +9,24 @@ What it models, register by register (bank 0 unless said):
   wrong registers, as on the chip. They hold their datasheet reset values (GYRO_CONFIG_STATIC2
   = 0xA0 and the others of :data:`~gyrocal.drivers.imu.chips.ICM42688P_BANK_RESET`) after
   power-on and SOFT_RESET; what they configure (anti-alias and notch filters, APEX) is not
-  emulated.
+  emulated. Bank 1 holds the gyro's factory self-test codes at XG/YG/ZG_ST_DATA (0x5F-0x61),
+  bank 2 the accelerometer's at XA/YA/ZA_ST_DATA (0x3B-0x3D): one real part's
+  (:data:`~gyrocal.drivers.emulated.self_test.ICM42688P_FACTORY_SELF_TEST_CODES`, ⚠).
+- SELF_TEST_CONFIG (0x70): each EN_G*_ST / EN_A*_ST bit moves its axis's output by the
+  response its code stands for at the configured range, ``2620 / 2^(3 − FS_SEL) ·
+  1.01^(code − 1)`` counts (TDK's INV_ST_OTP_EQUATION; :mod:`~gyrocal.drivers.emulated.
+  self_test`), added to the output counts as a step (not through the UI filter ⚠, as the
+  MPU-9250's and ICM-20948's).
 - WHO_AM_I (0x75) = 0x47. DEVICE_CONFIG.SOFT_RESET restores the reset values: INTF_CONFIG0 =
   0x30 (big-endian data and FIFO count, count in bytes), TMST_CONFIG = 0x23,
   GYRO_CONFIG0 = ACCEL_CONFIG0 = 0x06 (±2000 °/s / ±16 g, 1 kHz), GYRO_CONFIG1 = 0x16,
   GYRO_ACCEL_CONFIG0 = 0x11, PWR_MGMT0 = 0 (sensors off).
 - The gyro samples while PWR_MGMT0.GYRO_MODE is low-noise (11), at the GYRO_CONFIG0.GYRO_ODR
-  rate, on the chip's own clock (:class:`SensorTruth.clock_ppm`).
+  rate, on the chip's own clock (:class:`SensorTruth.clock_ppm`); the accelerometer with it.
+  With the gyro off and ACCEL_MODE low-noise, the accelerometer samples alone at
+  ACCEL_CONFIG0.ACCEL_ODR, and the gyro's data (registers and FIFO) read 0x8000, the value the
+  kernel's inv_icm42600_fifo_is_data_valid skips (the accelerometer's data with it off and the
+  gyro on are still emulated ⚠).
 - The FIFO (2048 bytes) collects while FIFO_CONFIG.FIFO_MODE is stream (01) or stop-on-full
   (1x) and FIFO_CONFIG1 enables the gyro and/or the accelerometer. Packets (DS-000347 FIFO
   packet structure; kernel ``inv_icm42600_buffer.c``): with both sensors, 16 bytes — header,
@@ -55,12 +66,18 @@ from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.banks import UserBanks
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
+from gyrocal.drivers.emulated.self_test import (
+    ICM42688P_FACTORY_SELF_TEST_CODES,
+    SelfTestLayout,
+    self_test_counts,
+)
 from gyrocal.drivers.imu.chips import (
     ICM42688P,
     ICM42688P_BANK_RESET,
     ICM42688P_BITS,
     ICM42688P_ODR,
     ICM42688P_REG,
+    ICM42688P_ST_DATA,
     ICM42688P_UI_FILT_ORDER,
     FilterSetting,
     icm42688p_bandwidth_hz,
@@ -68,7 +85,7 @@ from gyrocal.drivers.imu.chips import (
 
 __all__ = ["EmulatedICM42688P"]
 
-_R, _B = ICM42688P_REG, ICM42688P_BITS
+_R, _B, _ST = ICM42688P_REG, ICM42688P_BITS, ICM42688P_ST_DATA
 _ODR_BY_CODE = {code: hz for hz, code in ICM42688P_ODR.items()}
 _RESET = {
     _R.INTF_CONFIG0: 0x30, _R.TMST_CONFIG: 0x23, _R.GYRO_CONFIG0: 0x06, _R.ACCEL_CONFIG0: 0x06,
@@ -76,10 +93,25 @@ _RESET = {
     _R.INTF_CONFIG1: 0x91, _R.ACCEL_CONFIG1: 0x0D, _R.DRIVE_CONFIG: 0x05,
     _R.APEX_CONFIG0: 0x82, _R.FSYNC_CONFIG: 0x10, _R.INT_CONFIG1: 0x10, _R.INT_SOURCE0: 0x10,
 }
+#: Where the self-test codes (gyro: bank 1, accelerometer: bank 2) and SELF_TEST_CONFIG's
+#: enable bits (X in the low bit) are, and how FS_SEL counts (011 = ±250 °/s and ±2 g, lower
+#: codes wider ranges: TDK's ``2620 / 2^(3 − FS)``; :mod:`~gyrocal.drivers.emulated.self_test`).
+_GYRO_SELF_TEST = SelfTestLayout(_ST.XG_ST_DATA, _R.SELF_TEST_CONFIG, _B.SELF_TEST_GYRO_EN_SHIFT,
+                                 _R.GYRO_CONFIG0, _B.FS_SEL_SHIFT, x_in_low_bit=True,
+                                 fs_mask=0x07, fs_of_base_range=3, fs_code_narrows=True)
+_ACCEL_SELF_TEST = SelfTestLayout(_ST.XA_ST_DATA, _R.SELF_TEST_CONFIG,
+                                  _B.SELF_TEST_ACCEL_EN_SHIFT, _R.ACCEL_CONFIG0, _B.FS_SEL_SHIFT,
+                                  x_in_low_bit=True, fs_mask=0x03, fs_of_base_range=3,
+                                  fs_code_narrows=True)
 #: Banks 1, 2 and 4's registers that do not reset to 0 (DS-000347 §15 on;
-#: :data:`~gyrocal.drivers.imu.chips.ICM42688P_BANK_RESET`).
+#: :data:`~gyrocal.drivers.imu.chips.ICM42688P_BANK_RESET`), and the factory self-test codes
+#: (:data:`~gyrocal.drivers.emulated.self_test.ICM42688P_FACTORY_SELF_TEST_CODES`).
 _BANK_RESET = {bank: {address: value for b, address, _, value in ICM42688P_BANK_RESET if b == bank}
                for bank in {row[0] for row in ICM42688P_BANK_RESET}}
+_BANK_RESET[_ST.BANK_GYRO].update(
+    _GYRO_SELF_TEST.codes_reset(ICM42688P_FACTORY_SELF_TEST_CODES[:3]))
+_BANK_RESET[_ST.BANK_ACCEL].update(
+    _ACCEL_SELF_TEST.codes_reset(ICM42688P_FACTORY_SELF_TEST_CODES[3:]))
 #: The sensor data registers before the first sample (DS-000347 reset value 0x80, 0x00; the
 #: kernel's INV_ICM42600_DATA_INVALID).
 _DATA_INVALID = -32768
@@ -153,12 +185,19 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
 
     # -- configuration --------------------------------------------------------------------------
 
-    def _odr_hz(self) -> float | None:
+    def _gyro_on(self) -> bool:
         mode = (self._regs[_R.PWR_MGMT0] & _B.PWR_MGMT0_GYRO_MODE_MASK) >> (
             _B.PWR_MGMT0_GYRO_MODE_SHIFT)
-        if mode != _B.MODE_LOW_NOISE:
-            return None
-        return _ODR_BY_CODE.get(self._regs[_R.GYRO_CONFIG0] & _B.ODR_MASK)
+        return mode == _B.MODE_LOW_NOISE
+
+    def _odr_hz(self) -> float | None:
+        """The gyro's ODR with the gyro in low-noise mode; else the accelerometer's with it in
+        low-noise mode (the gyro's data then invalid); else ``None``."""
+        if self._gyro_on():
+            return _ODR_BY_CODE.get(self._regs[_R.GYRO_CONFIG0] & _B.ODR_MASK)
+        if self._regs[_R.PWR_MGMT0] & _B.PWR_MGMT0_ACCEL_MODE_MASK == _B.MODE_LOW_NOISE:
+            return _ODR_BY_CODE.get(self._regs[_R.ACCEL_CONFIG0] & _B.ODR_MASK)
+        return None
 
     def _sensitivity_rad_s_per_lsb(self) -> float:
         fs = self._regs[_R.GYRO_CONFIG0] >> _B.FS_SEL_SHIFT
@@ -169,6 +208,16 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
 
     def _note_temperature(self, temperature_c: float) -> None:
         self._last_temp_c = temperature_c  # what TEMP_DATA shows
+
+    def _gyro_trim_counts(self) -> np.ndarray | float:
+        """The gyro's self-test actuation: SELF_TEST_CONFIG.EN_G*_ST with the bank-1 codes
+        (:func:`~gyrocal.drivers.emulated.self_test.self_test_counts`)."""
+        return self_test_counts(_GYRO_SELF_TEST, self._banks[_ST.BANK_GYRO], self._regs)
+
+    def _accel_trim_counts(self) -> np.ndarray | float:
+        """The accelerometer's self-test actuation: SELF_TEST_CONFIG.EN_A*_ST with the bank-2
+        codes (ACCEL_ST_POWER, which TDK's procedure sets with them, is not required ⚠)."""
+        return self_test_counts(_ACCEL_SELF_TEST, self._banks[_ST.BANK_ACCEL], self._regs)
 
     def cutoff_hz(self) -> float | None:
         """The emulated output filter's bandwidth: the UI filter's (GYRO_ACCEL_CONFIG0.
@@ -244,6 +293,8 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
         word = ">i2" if big else "<i2"
         has_g, has_a = bool(en & _B.FIFO_CONFIG1_GYRO_EN), bool(en & _B.FIFO_CONFIG1_ACCEL_EN)
         header = (_B.HEADER_GYRO if has_g else 0) | (_B.HEADER_ACCEL if has_a else 0)
+        if not self._gyro_on():  # the accelerometer alone samples
+            gyro = np.full_like(gyro, _DATA_INVALID)
         cols: list[np.ndarray] = []
         if has_a:
             cols.append(accel.astype(word).view(np.uint8).reshape(n, 6))
@@ -340,7 +391,8 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
             reg_lsb = self.family.extra["register_temperature_lsb_per_c"]
             t = int(np.clip(round((self._last_temp_c - 25.0) * reg_lsb), -32768, 32767))
             big = bool(self._regs[r.INTF_CONFIG0] & _B.INTF_CONFIG0_SENSOR_DATA_ENDIAN)
-            words = np.concatenate(([t], s.accel, s.gyro)) if self._sampled else np.full(
+            gyro = s.gyro if self._gyro_on() else np.full(3, _DATA_INVALID)
+            words = np.concatenate(([t], s.accel, gyro)) if self._sampled else np.full(
                 7, _DATA_INVALID)
             words = words.astype(">i2" if big else "<i2")
             return words.tobytes()[register - r.TEMP_DATA1]

@@ -33,6 +33,7 @@ __all__ = [
     "ICM42688P_MAX_READER_ODR_HZ",
     "ICM42688P_ODR",
     "ICM42688P_REG",
+    "ICM42688P_ST_DATA",
     "ICM42688P_UI_FILT_DIVISOR",
     "LSM6DSOX",
     "LSM6DSOX_BITS",
@@ -543,7 +544,9 @@ def mpu9250_self_test_otp(code: int, fs: int = 0) -> float:
     code : int
         The SELF_TEST_* register byte (1..255; 0 means no factory value).
     fs : int
-        GYRO_FS_SEL or ACCEL_FS_SEL of the range the response is read at.
+        The range the response is read at, as its doublings above ±250 °/s or ±2 g: the
+        MPU-9250's GYRO_FS_SEL or ACCEL_FS_SEL; negative for a narrower range (the
+        ICM-42688-P's ``3 − FS_SEL``: TDK eMD Icm426xxSelfTest.c, INV_ST_OTP_EQUATION).
 
     Returns
     -------
@@ -821,8 +824,28 @@ class _ICM42688PRegisters:
     FSYNC_CONFIG: int = 0x62  # reset 0x10
     INT_CONFIG1: int = 0x64  # reset 0x10
     INT_SOURCE0: int = 0x65  # reset 0x10 (RESET_DONE_INT1_EN)
+    # SELF_TEST_CONFIG (DS-000347 register map, bank 0): ACCEL_ST_POWER bit 6, EN_AZ/AY/AX_ST
+    # bits 5:3, EN_GZ/GY/GX_ST bits 2:0 (X in the low bit); TDK eMD Icm426xxDefs.h
+    # MPUREG_SELF_TEST_CONFIG 0x70, BIT_GYRO_X_ST_EN 0x01 .. BIT_ST_REGULATOR_EN 0x40
+    SELF_TEST_CONFIG: int = 0x70
     WHO_AM_I: int = 0x75
     REG_BANK_SEL: int = 0x76
+
+
+@dataclass(frozen=True)
+class _ICM42688PSelfTestCodes:
+    """Where the ICM-42688-P keeps its factory self-test codes, one byte per axis: XG/YG/ZG_ST_DATA
+    in user bank 1 and XA/YA/ZA_ST_DATA in user bank 2 (DS-000347 register map, banks 1 and 2;
+    TDK eMD Icm426xxDefs.h MPUREG_XG_ST_DATA_B1 0x5F, MPUREG_XA_ST_DATA_B2 0x3B, as vendored by
+    VaderMester/ESP32-ICM426XX-driver; kriswiner/ICM42688 ICM42688.h:94-96, 108-110)."""
+
+    BANK_GYRO: int = 1
+    XG_ST_DATA: int = 0x5F  # YG, ZG at 0x60, 0x61
+    BANK_ACCEL: int = 2
+    XA_ST_DATA: int = 0x3B  # YA, ZA at 0x3C, 0x3D
+
+
+ICM42688P_ST_DATA = _ICM42688PSelfTestCodes()
 
 
 #: The ICM-42688-P's registers in user banks 1, 2 and 4 whose reset value is not 0, one row each:
@@ -883,6 +906,10 @@ class _ICM42688PBits:
     PWR_MGMT0_GYRO_MODE_MASK: int = 0x0C
     PWR_MGMT0_ACCEL_MODE_MASK: int = 0x03
     MODE_LOW_NOISE: int = 0b11
+    # SELF_TEST_CONFIG fields (:attr:`_ICM42688PRegisters.SELF_TEST_CONFIG`)
+    SELF_TEST_GYRO_EN_SHIFT: int = 0  # EN_GX_ST bit 0, EN_GY_ST bit 1, EN_GZ_ST bit 2
+    SELF_TEST_ACCEL_EN_SHIFT: int = 3  # EN_AX_ST bit 3, EN_AY_ST bit 4, EN_AZ_ST bit 5
+    SELF_TEST_ACCEL_ST_POWER: int = 0x40
     FS_SEL_SHIFT: int = 5
     ODR_MASK: int = 0x0F
     GYRO_UI_FILT_BW_MASK: int = 0x0F
@@ -934,7 +961,12 @@ ICM42688P_MAX_READER_ODR_HZ = 1000.0
 #: (DS-000347 "UI filter block" and register GYRO_ACCEL_CONFIG0): 0 is ODR/2, 1..7 are
 #: max(400 Hz, ODR) divided by 4, 5, 8, 10, 16, 20, 40. The reset value is 1. The filter's
 #: order is :data:`ICM42688P_UI_FILT_ORDER`'s; no noise bandwidth or delay per setting was
-#: found (⚠ the emulator has its stand-in filter's own).
+#: found (⚠ the emulator has its stand-in filter's own: at 1 kHz, second order, 1.14 ms at code
+#: 1 to 8.7 ms at code 7). Searched: DS-000347's §5 (only its contents were reached in an open
+#: copy: §5.3 anti-alias filter, §5.5 UI filter block), GYRO_ACCEL_CONFIG0's description as
+#: ten open headers found by the code index transcribe it (bandwidth formulas; codes 14 and 15
+#: "Low Latency option: Trivial decimation @ ODR of Dec2 filter output", no delay), and TDK's
+#: eMD ICM-426xx sources (Icm426xxDefs.h: the bandwidth codes; Icm426xxSelfTest.c).
 ICM42688P_UI_FILT_DIVISOR: Mapping[int, float] = MappingProxyType(
     {1: 4.0, 2: 5.0, 3: 8.0, 4: 10.0, 5: 16.0, 6: 20.0, 7: 40.0}
 )
@@ -1360,7 +1392,15 @@ ICM20948_BITS = _ICM20948Bits()
 #: GYRO_DLPFCFG: the 3 dB and noise bandwidths of DS-000189's GYRO_CONFIG_1 table, ✓✓ with
 #: SparkFun's qwiic_icm20948.py lines 107-115 (``gyr_d196bw6_n229bw8`` ...: "A is integer part
 #: of 3db BW ... X is integer part of nyquist bandwidth", the table's NBW column) and the same
-#: names in SparkFun's ICM_20948_ENUMERATIONS.h. DS-000189 gives no delay for the gyro DLPF.
+#: names in SparkFun's ICM_20948_ENUMERATIONS.h. No delay per setting is published: each
+#: row's ``delay_s`` is None and the emulated delay is its stand-in filter's own (⚠ not a
+#: datasheet figure; 0.73 ms at 196.6 Hz to 27.9 ms at 5.7 Hz). Searched: DS-000189's
+#: GYRO_CONFIG_1 and ACCEL_CONFIG tables (3 dB bandwidth, NBW and rate columns only), SparkFun's
+#: names (bandwidths only), TDK's eMD (Icm20948Defs.h, Icm20948SelfTest.c); one open header
+#: (``gyro_config.h``, "ICM-20948 ... Table 35"; its repository is not named by the code
+#: index) does print a delay column, but its rows (250,
+#: 176, 92 ... Hz; 0.97, 1.9, 2.8 ... ms) are the MPU-9250's CONFIG table under the
+#: ICM-20948's name, so it is not used.
 _ICM20948_DLPF_TABLE = "DS-000189 GYRO_CONFIG_1 table ✓✓ (qwiic_icm20948.py:107-115)"
 ICM20948_GYRO_FILTER: tuple[FilterSetting, ...] = (
     FilterSetting(0, 196.6, None, 229.8, _ICM20948_DLPF_TABLE),
@@ -1380,7 +1420,7 @@ ICM20948_DLPF: Mapping[float, int] = MappingProxyType(
 #: Accelerometer DLPF settings with ACCEL_FCHOICE = 1 (its reset value), the internal rate
 #: 1125 Hz, one row per ACCEL_DLPFCFG (ACCEL_CONFIG bits 5:3, reset 0): DS-000189's
 #: ACCEL_CONFIG table, 3 dB and noise bandwidths, ✓✓ with SparkFun's qwiic_icm20948.py lines
-#: 96-104 (``acc_d246bw_n265bw`` ...). No delay is given.
+#: 96-104 (``acc_d246bw_n265bw`` ...). No delay is given (searched as for the gyro table).
 _ICM20948_ACCEL_TABLE = "DS-000189 ACCEL_CONFIG table ✓✓ (qwiic_icm20948.py:96-104)"
 ICM20948_ACCEL_FILTER: tuple[FilterSetting, ...] = (
     FilterSetting(0, 246.0, None, 265.0, _ICM20948_ACCEL_TABLE),

@@ -246,6 +246,174 @@ def test_icm20948_passes_tdks_own_self_test_and_fails_without_its_response(
     assert emd_run_selftest(bus, addr, clock) == (0b11 if response else 0b00)
 
 
+# -- TDK's own ICM-42688-P self-test, modelled from its source --------------------------------
+#
+# TDK InvenSense eMD for the ICM-426xx family (the ICM-42688-P is one of its
+# CONFIG_ICM426XX_DEV_NAME choices, Icm426xxDefs.h:56-57) as vendored by
+# VaderMester/ESP32-ICM426XX-driver (commit 9465655d), components/ICM426XX/Invn/Drivers/Icm426xx/:
+# Icm426xxSelfTest.c (line numbers below are this file's) and Icm426xxDefs.h (bank 0
+# ACCEL_DATA_X0_UI 0x1F, GYRO_DATA_X0_UI 0x25, INT_STATUS 0x2D at 138-142, INTF_CONFIG0 0x4C ..
+# ACCEL_CONFIG1 0x53 at 157-164, SELF_TEST_CONFIG 0x70 at 180, REG_BANK_SEL 0x76 at 186; bank 1
+# XG_ST_DATA 0x5F at 194, bank 2 XA_ST_DATA 0x3B at 208; BIT_INT_STATUS_DRDY 0x08 at 475;
+# SELF_TEST_CONFIG bits at 1345-1351; GYRO_MODE bits 3:2 and ACCEL_MODE bits 1:0, LN = 11, at
+# 747-764; FS_SEL bits 7:5, 250 dps = 3 and 4 g = 2, at 773, 794, 830, 845; ODR 1 kHz = 6 at 815
+# and 868; UI filter third order = 2 at bits 3:2 / 4:3, 893, 957; bandwidth ODR/10 = 4 at 915,
+# 937). The data's byte order is INTF_CONFIG0 bit 4, read at the driver's set-up
+# (Icm426xxDriver_HL.c:134-135).
+
+TDK426_SAMPLES = 200  # average_sensor_output, line 459
+
+
+def tdk426_rmw(bus, addr, register, clear, value):
+    """The read-modify-write of one register every step below uses."""
+    old = bus.read_byte_data(addr, register)
+    bus.write_byte_data(addr, register, (old & ~clear & 0xFF) | value)
+
+
+def tdk426_average(bus, addr, clock, gyro, st_bits):
+    """average_sensor_output, lines 376-482: the sensor on in low-noise mode, the self-test bits
+    (if any) on, 200 data-ready samples averaged in C's int arithmetic, then both off."""
+    big = bool(bus.read_byte_data(addr, 0x4C) & 0x10)  # s->endianess_data
+    data_reg = 0x25 if gyro else 0x1F  # 388, 400
+    mode = 0x0C if gyro else 0x03
+    tdk426_rmw(bus, addr, 0x4E, mode, mode)  # 391-394, 403-406: GYRO_MODE / ACCEL_MODE LN
+    clock.sleep(0.060 if gyro else 0.025)  # 397, 409
+    if st_bits:
+        st = bus.read_byte_data(addr, 0x70) | st_bits  # 416-418
+        bus.write_byte_data(addr, 0x70, st)
+        clock.sleep(0.200 if gyro else 0.025)  # 422, 425
+    total, it, discarded, timeout = [0, 0, 0], 0, 0, 300
+    while True:  # 428-459: do { ... } while ((it < 200) && (timeout > 0))
+        if bus.read_byte_data(addr, 0x2D) & 0x08:  # 430-432
+            raw = bytes(bus.read_i2c_block_data(addr, data_reg, 6))  # 437
+            d = [int(v) for v in np.frombuffer(raw, dtype=">i2" if big else "<i2")]  # 439-447
+            if -32768 not in d:  # 448-454
+                total = [s + v for s, v in zip(total, d, strict=True)]
+            else:
+                discarded += 1
+            it += 1
+        clock.sleep(0.001)  # 457
+        timeout -= 1
+        if not (it < TDK426_SAMPLES and timeout > 0):
+            break
+    tdk426_rmw(bus, addr, 0x4E, 0x0F, 0x00)  # 462-467: gyro and accelerometer off
+    if st_bits:
+        bus.write_byte_data(addr, 0x70, st & ~st_bits)  # 470-473
+    n = it - discarded  # 476; no sample at all divides by zero (in C too)
+    return [int(s / n) for s in total]  # 477-479: int32 / int, toward zero
+
+
+def tdk426_otp(fs_sel, code):
+    """INV_ST_OTP_EQUATION (line 62), cast to uint32_t: a code of 0 is not special here."""
+    return int(2620 / 2 ** (3 - fs_sel) * 1.01 ** (code - 1) + 0.5)
+
+
+def tdk426_codes(bus, addr, bank, register):
+    bus.write_byte_data(addr, 0x76, bank)  # 239-243, 329-333
+    codes = bus.read_i2c_block_data(addr, register, 3)
+    bus.write_byte_data(addr, 0x76, 0)
+    return codes
+
+
+def tdk426_gyro(bus, addr, clock):
+    """run_gyro_self_test, lines 190-271: 1 when the gyro passes."""
+    tdk426_rmw(bus, addr, 0x4F, 0xE0 | 0x0F, (3 << 5) | 0x06)  # 209-214: ±250 °/s, 1 kHz
+    tdk426_rmw(bus, addr, 0x51, 0x0C, 2 << 2)  # 216-219: UI filter third order
+    tdk426_rmw(bus, addr, 0x52, 0x0F, 0x04)  # 221-224: bandwidth ODR/10
+    off = tdk426_average(bus, addr, clock, True, 0)  # 227
+    on = tdk426_average(bus, addr, clock, True, 0x01 | 0x02 | 0x04)  # 231-232
+    response = [abs(a - b) for a, b in zip(on, off, strict=True)]  # 235-236
+    otp = [tdk426_otp(3, c) for c in tdk426_codes(bus, addr, 1, 0x5F)]  # 239-248
+    sensitivity = 32768 // 250  # 251
+    result = 1
+    for r, o in zip(response, otp, strict=True):  # 253-261
+        if o and r / o <= 0.5:  # MIN_RATIO_GYRO, line 66
+            result = 0
+        elif not o and r < 60 * sensitivity:  # MIN_ST_GYRO_DPS, line 67
+            result = 0
+    if any(abs(v) > 20 * sensitivity for v in off):  # 264-266: MAX_ST_GYRO_OFFSET_DPS
+        result = 0
+    return result
+
+
+def tdk426_accel(bus, addr, clock):
+    """run_accel_self_test, lines 278-374: 1 when the accelerometer passes."""
+    tdk426_rmw(bus, addr, 0x50, 0xE0 | 0x0F, (2 << 5) | 0x06)  # 298-303: ±4 g, 1 kHz
+    tdk426_rmw(bus, addr, 0x53, 0x18, 2 << 3)  # 305-308: UI filter third order
+    tdk426_rmw(bus, addr, 0x52, 0xF0, 0x04 << 4)  # 310-313: bandwidth ODR/10
+    off = tdk426_average(bus, addr, clock, False, 0)  # 316
+    on = tdk426_average(bus, addr, clock, False, 0x08 | 0x10 | 0x20 | 0x40)  # 320-321
+    response = [abs(a - b) for a, b in zip(on, off, strict=True)]  # 325-326
+    otp = [tdk426_otp(2, c) for c in tdk426_codes(bus, addr, 2, 0x3B)]  # 329-338
+    sensitivity = 32768 // 4  # 342
+    result = 1
+    for r, o in zip(response, otp, strict=True):  # 344-353
+        if o and not 0.5 < r / o < 1.5:  # MIN/MAX_RATIO_GYRO, lines 70-71
+            result = 0
+        elif not o and not 50 * sensitivity // 1000 <= r <= 1200 * sensitivity // 1000:
+            result = 0  # MIN/MAX_ST_ACCEL_MG, lines 72-73
+    return result
+
+
+def tdk426_run_selftest(bus, addr, clock):
+    """inv_icm426xx_run_selftest, lines 109-140: (accel << 1) | gyro. Not modelled: saving and
+    restoring the settings (121, 132) and writing the biases found to bank 4's user offsets
+    (124-129); the result depends on neither."""
+    gyro = tdk426_gyro(bus, addr, clock)  # 123
+    accel = tdk426_accel(bus, addr, clock)  # 127
+    return (accel << 1) | gyro  # 135
+
+
+@pytest.mark.parametrize("response", [True, False], ids=["with-response", "response-removed"])
+def test_icm42688p_passes_tdks_own_self_test_and_fails_without_its_response(
+        response, monkeypatch):
+    if not response:  # the codes stay, the actuation they stand for is gone
+        monkeypatch.setattr("gyrocal.drivers.emulated.icm42688p.self_test_counts",
+                            lambda *args: 0.0)
+    clock = VirtualClock()
+    truth = SensorTruth(bias=np.array([0.5, -1.0, 2.0]) * DEG)  # the datasheet noise density
+    bus, addr = make_emulated_imu("icm42688p", clock, truth=truth, seed=7, subsamples=1)
+    assert tdk426_run_selftest(bus, addr, clock) == (0b11 if response else 0b00)
+
+
+@pytest.mark.parametrize(("gyro_fs", "accel_fs"), [(0, 0), (3, 2), (4, 3)])
+def test_icm42688p_self_test_bits_move_each_axis_by_its_codes_response(gyro_fs, accel_fs):
+    # TDK's INV_ST_OTP_EQUATION at each range (FS_SEL 000 = ±2000 °/s / ±16 g, 100 = ±125 °/s):
+    # one axis at a time, the others unmoved; at rest, so ±125 °/s holds the response
+    clock, bus, addr, _ = chip("icm42688p", omega=np.zeros(3))
+    bus.write_byte_data(addr, 0x4F, (gyro_fs << 5) | 0x06)  # GYRO_CONFIG0, 1 kHz
+    bus.write_byte_data(addr, 0x50, (accel_fs << 5) | 0x06)  # ACCEL_CONFIG0, 1 kHz
+    bus.write_byte_data(addr, 0x4E, 0x0F)
+    gyro_codes = tdk426_codes(bus, addr, 1, 0x5F)
+    accel_codes = tdk426_codes(bus, addr, 2, 0x3B)
+
+    def accel_gyro():
+        clock.sleep(0.1)  # the UI filter settles
+        return be16s(bus.read_i2c_block_data(addr, 0x1F, 12))
+
+    base = accel_gyro()
+    for axis in range(3):
+        bus.write_byte_data(addr, 0x70, (0x01 << axis) | (0x08 << axis))
+        moved = accel_gyro() - base
+        expected = np.zeros(6)
+        expected[axis] = 2620 / 2 ** (3 - accel_fs) * 1.01 ** (accel_codes[axis] - 1)
+        expected[3 + axis] = 2620 / 2 ** (3 - gyro_fs) * 1.01 ** (gyro_codes[axis] - 1)
+        np.testing.assert_allclose(moved, expected, atol=1.0)
+    bus.write_byte_data(addr, 0x70, 0x00)
+    np.testing.assert_array_equal(accel_gyro(), base)
+
+
+def test_icm42688p_gyro_off_accelerometer_alone_samples_gyro_data_invalid():
+    clock, bus, addr, _ = chip("icm42688p")
+    bus.write_byte_data(addr, 0x50, 0x46)  # ACCEL_CONFIG0: ±4 g, 1 kHz
+    bus.write_byte_data(addr, 0x4E, 0x03)  # PWR_MGMT0: the accelerometer alone, low-noise
+    clock.sleep(0.01)
+    assert bus.read_byte_data(addr, 0x2D) & 0x08  # DATA_RDY_INT
+    data = be16s(bus.read_i2c_block_data(addr, 0x1F, 12))
+    assert -32768 not in data[:3] and abs(np.linalg.norm(data[:3]) / 8192 - 1) < 0.05  # 1 g
+    np.testing.assert_array_equal(data[3:], [-32768] * 3)
+
+
 # -- ICM-42688-P, LSM6DSOX ---------------------------------------------------------------------
 
 
@@ -297,6 +465,34 @@ ICM42688P_BANK_1_2_4_RESET = (
 )
 
 
+#: One real ICM-42688-P's self-test run as kriswiner/ICM42688 issue #6 prints it (2022-08-18):
+#: per axis the difference (mg, °/s) and the ratio (%) of the repository's ICM42688::selfTest
+#: (ICM42688.cpp:195-200: ratio = difference in counts / (1310 or 2620 · 1.01^(code − 1) + 0.5)),
+#: with the resolutions the report prints (ares 6.10352e-05 g, gres 0.00762939 °/s per count).
+ISSUE6_ACCEL = ((95.1538, 92.7708), (106.567, 95.001), (724.304, 218.31))
+ISSUE6_GYRO = ((13.5269, 12.4669), (13.7253, 12.4005), (13.7405, 12.4143))
+
+
+def issue6_codes():
+    """The part's codes, (bank, register, code): each difference / ratio solved for the code."""
+    rows = []
+    for bank, register, base, res, runs in ((2, 0x3B, 1310, 6.10352e-05 * 1000, ISSUE6_ACCEL),
+                                            (1, 0x5F, 2620, 0.00762939, ISSUE6_GYRO)):
+        for i, (diff, ratio) in enumerate(runs):
+            otp = diff / res / (ratio / 100)
+            code = 1 + math.log((otp - 0.5) / base) / math.log(1.01)
+            assert abs(code - round(code)) < 1e-3  # the figures solve to whole codes
+            rows.append((bank, register + i, round(code)))
+    return rows
+
+
+def test_icm42688p_self_test_codes_are_the_reported_parts():
+    clock, bus, addr, _ = chip("icm42688p")
+    for bank, register, code in issue6_codes():
+        bus.write_byte_data(addr, 0x76, bank)
+        assert bus.read_byte_data(addr, register) == code, (bank, hex(register))
+
+
 def icm42688p_bank_registers(bus, addr):
     """Every register of banks 1, 2 and 4 but REG_BANK_SEL, as (bank, register) → value; then
     bank 0 again."""
@@ -310,10 +506,10 @@ def icm42688p_bank_registers(bus, addr):
 
 def test_icm42688p_banks_1_2_4_reset_values_after_power_on_and_soft_reset():
     clock, bus, addr, _ = chip("icm42688p")
-    expected = {(bank, r): v for bank, r, v in ICM42688P_BANK_1_2_4_RESET}
+    expected = {(bank, r): v for bank, r, v in (*ICM42688P_BANK_1_2_4_RESET, *issue6_codes())}
     got = icm42688p_bank_registers(bus, addr)
     assert {k: v for k, v in got.items() if v} == expected  # the listed ones, and 0 elsewhere
-    for bank, register, _ in ICM42688P_BANK_1_2_4_RESET:
+    for bank, register, _ in (*ICM42688P_BANK_1_2_4_RESET, *issue6_codes()):
         bus.write_byte_data(addr, 0x76, bank)
         bus.write_byte_data(addr, register, 0x00)
     bus.write_byte_data(addr, 0x76, 0)
