@@ -64,6 +64,7 @@ __all__ = [
     "METHODS",
     "FullMatrixBatch",
     "FitResult",
+    "ModelResiduals",
     "add_bias_drift",
     "estimate",
     "fit_full_matrix",
@@ -75,6 +76,7 @@ __all__ = [
     "lm_solve",
     "matrix_in_frame",
     "paired_axis_batch",
+    "residuals_at",
 ]
 
 #: The chi-square test's level: a fit is consistent when its p-value is at least this.
@@ -813,6 +815,7 @@ def paired_axis_batch(
     rest_force: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-10,
+    hold: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> PairedAxisBatch:
     """The paired-axis fit for ``B`` runs of the same protocol at once (vectorised).
 
@@ -848,6 +851,9 @@ def paired_axis_batch(
         Convergence threshold on the largest parameter step (relative to ``1 + max k``); a run
         has also converged when a step changes the cost by less than ``1e-10`` relative, up or
         down (rounding level).
+    hold : (ndarray (B, 3), ndarray (B, 3)), optional
+        Scale factors and biases to hold (:func:`residuals_at`): only the axes, the still
+        angles' errors and ``G`` are fitted.
 
     Returns
     -------
@@ -866,6 +872,11 @@ def paired_axis_batch(
     P0 = 6 + 2 * S + n_still
     P = P0 + 3 * nk
     k, b, u = _paired_initial(mean, rate, motor_index, S, rest_mean, rest_std)
+    if hold is not None:  # the start's axes are k0 ∘ d: the held scales' are k ∘ d
+        k_held = np.broadcast_to(np.asarray(hold[0], dtype=float), (B, 3))
+        u = k_held[:, None, :] * u / k[:, None, :]
+        u /= np.linalg.norm(u, axis=2, keepdims=True)
+        k, b = k_held.copy(), np.broadcast_to(np.asarray(hold[1], dtype=float), (B, 3)).copy()
     z = np.zeros((B, n_still))  # still-angle errors (reading minus true), rad
     gs = np.zeros((B, 3, nk))
     var_m = mean_std**2
@@ -924,7 +935,8 @@ def paired_axis_batch(
         return (k_new, b + step[:, 3:6], u_new, z + step[:, 6 + 2 * S : P0], gs_new), ok
 
     state, E, J, iterations, converged = _lm_batch(
-        evaluate, retract, (k, b, u, z, gs), max_iter=max_iter, xtol=xtol,
+        _holding(evaluate, 6 if hold is not None else 0), retract, (k, b, u, z, gs),
+        max_iter=max_iter, xtol=xtol,
         step_scale=lambda state: 1.0 + np.max(np.abs(state[0]), axis=1))
     k, b, u, z, gs = state
     cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
@@ -944,7 +956,8 @@ def paired_axis_batch(
 
 
 def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: bool = True,
-                    max_g_std: float | None = None) -> FitResult:
+                    max_g_std: float | None = None,
+                    hold: tuple[np.ndarray, np.ndarray] | None = None) -> FitResult:
     r"""Paired-axis fit: scale, bias and each servo's axis from every window's full mean vector.
 
     Model (paper Eq. 1 inverted): a window of servo ``s`` at signed reference rate ``ω_i`` reads
@@ -983,6 +996,8 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
     max_g_std : float, optional
         Largest one-sigma uncertainty of ``G`` along a direction for it to be fitted
         (default :data:`MAX_G_STD`).
+    hold : (ndarray (3,), ndarray (3,)), optional
+        Scale factors and biases to hold instead of fitting (:func:`residuals_at`).
 
     Returns
     -------
@@ -1011,7 +1026,8 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
             obs.rest_mean[None], obs.rest_mean_std[None],  # type: ignore[index]
             ref_matrix=obs.reference_matrix(), still_std=obs.still_angle_std,
             force=None if force is None else force[0][None],
-            rest_force=None if force is None else force[1][None], max_iter=max_iter)
+            rest_force=None if force is None else force[1][None], max_iter=max_iter,
+            hold=None if hold is None else (hold[0][None], hold[1][None]))
 
     res = run(None)
     basis = np.zeros((3, 0))
@@ -1325,6 +1341,7 @@ def full_matrix_batch(
     rest_force: np.ndarray | None = None,
     max_iter: int = 50,
     xtol: float = 1e-12,
+    hold: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> FullMatrixBatch:
     r"""The full-matrix fit for ``B`` runs at once (vectorised); model in :func:`fit_full_matrix`.
 
@@ -1358,6 +1375,10 @@ def full_matrix_batch(
         after the still angles).
     xtol : float
         Convergence threshold on the largest parameter step.
+    hold : (ndarray (B, 6), ndarray (B, 3)), optional
+        The lower triangle of ``C = A⁻¹`` (row-major) and the biases to hold
+        (:func:`residuals_at`): only the joint axes, the still angles' errors and ``G`` are
+        fitted.
 
     Returns
     -------
@@ -1382,6 +1403,9 @@ def full_matrix_batch(
     P0 = 9 + 2 * S + n_still
     P = P0 + nG
     c, b, u0 = _full_initial(mean, rate, midx, delta, S, rest_mean, rest_std, mean_std)
+    if hold is not None:
+        c = np.broadcast_to(np.asarray(hold[0], dtype=float), (B, 6)).copy()
+        b = np.broadcast_to(np.asarray(hold[1], dtype=float), (B, 3)).copy()
     z = np.zeros((B, n_still))
     gs = np.zeros((B, 3, nk))
     var_m = mean_std**2
@@ -1464,7 +1488,8 @@ def full_matrix_batch(
     owner = _still_owner(G, ps, midx, n_still)
     movable = _gauge_servos(owner, ps, midx, S, G)
     state, E, J, iterations, converged = _lm_batch(
-        evaluate, retract, (c, b, u0, z, gs), max_iter=max_iter, xtol=xtol)
+        _holding(evaluate, 9 if hold is not None else 0), retract, (c, b, u0, z, gs),
+        max_iter=max_iter, xtol=xtol)
     c, b, u0, z, gs = state
     JtJ = J.transpose(0, 2, 1) @ J
     cov = _scaled_pinv(JtJ)
@@ -1520,6 +1545,22 @@ def _scaled_pinv(JtJ: np.ndarray) -> np.ndarray:
     s = np.where(d > 0, np.sqrt(np.where(d > 0, d, 1.0)), 1.0)
     inv = np.linalg.pinv(JtJ / (s[:, :, None] * s[:, None, :]), hermitian=True)
     return inv / (s[:, :, None] * s[:, None, :])
+
+
+def _holding(evaluate, n_held: int):  # type: ignore[no-untyped-def]
+    """``evaluate`` of :func:`_lm_batch` with the Jacobian's first ``n_held`` columns zeroed:
+    the step of a parameter no residual sees is zero (:func:`_scaled_damped_step`), so those
+    parameters stay where they started (a fit with the model held, :func:`residuals_at`)."""
+    if not n_held:
+        return evaluate
+
+    def held(*args):  # type: ignore[no-untyped-def]
+        E, J, tb = evaluate(*args)
+        if J is not None:
+            J[..., :n_held] = 0.0
+        return E, J, tb
+
+    return held
 
 
 def _lm_batch(evaluate, retract, state, *, max_iter: int, xtol: float,  # type: ignore[no-untyped-def]
@@ -1592,7 +1633,7 @@ MAX_G_STD = 1.75e-3
 
 def fit_full_matrix(
     obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: bool = True,
-    max_g_std: float = MAX_G_STD,
+    max_g_std: float = MAX_G_STD, hold: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> FitResult:
     r"""Full-matrix fit: ``g = A (m + b)`` with ``A`` a full 3×3 matrix, from a posed protocol.
 
@@ -1631,6 +1672,9 @@ def fit_full_matrix(
     max_g_std : float
         Largest one-sigma uncertainty of ``G`` along a direction for it to be fitted
         (:data:`MAX_G_STD`).
+    hold : (ndarray (6,), ndarray (3,)), optional
+        The lower triangle of ``C = A⁻¹`` (row-major, frame :data:`FULL_FRAME`) and the biases
+        to hold instead of fitting (:func:`residuals_at`).
 
     Returns
     -------
@@ -1666,6 +1710,7 @@ def fit_full_matrix(
             still_std=obs.still_angle_std, pose_still=obs.pose_still, max_iter=max_iter,
             force=None if force is None else force[0][None],
             rest_force=None if force is None else force[1][None],
+            hold=None if hold is None else (hold[0][None], hold[1][None]),
         )
 
     res = run(None)
@@ -1797,3 +1842,79 @@ def gravity_directions(force: np.ndarray, rest_force: np.ndarray, mean_std: np.n
 
 
 METHODS["full-matrix"] = fit_full_matrix
+
+
+@dataclass(frozen=True, eq=False)
+class ModelResiduals:
+    """The whitened residuals of the paired-axis or full-matrix fit (:func:`residuals_at`), in
+    the fits' layout: ``Σ`` of their squares is the fit's χ².
+
+    Attributes
+    ----------
+    windows : ndarray (n, 3)
+        Each rotation window's ``L⁻¹ (m̄ − E[m̄])``, ``L`` the Cholesky factor of its
+        covariance ``diag(σ²) + σ²_ω (C u)(C u)ᵀ`` (its first component is the x residual over
+        its σ; the next ones are what each adds beyond those before it).
+    rests : ndarray (r, 3)
+        Each rest window's ``(m̄ + b + G f) / σ``.
+    stills : ndarray (a,)
+        Each still angle's fitted error over its prior σ (an encoder's hold within its tick; the
+        hand jig's return to the stop, :data:`gyrocal.calib.hand.STOP_STD_RAD`): windows that
+        share a still angle share its error, which the fit estimates.
+    method : str
+        The fit whose model they are: ``paired-axis`` or ``full-matrix``.
+    """
+
+    windows: np.ndarray
+    rests: np.ndarray
+    stills: np.ndarray
+    method: str
+
+    @property
+    def chi2(self) -> float:
+        """The sum of the squared residuals."""
+        return float(np.sum(self.windows**2) + np.sum(self.rests**2) + np.sum(self.stills**2))
+
+
+def residuals_at(obs: ObservationSet, bias: np.ndarray, *, scale: np.ndarray | None = None,
+                 matrix: np.ndarray | None = None) -> ModelResiduals:
+    """The fit's own residuals at a calibration's scale (or matrix) and bias: the paired-axis
+    fit (:func:`fit_paired_axis`; the full-matrix one, :func:`fit_full_matrix`, for a
+    ``matrix``) run with the model held, so that only what the calibration does not carry is
+    fitted: the turn axes, each still angle's error and the g-sensitivity where the fit
+    would take it. At the parameters the fit found on these observations the fit's own
+    optimum is the held one's, so the sum of their squares is the fit's χ²; at another
+    calibration's they show where it disagrees with this run.
+
+    Parameters
+    ----------
+    obs : ObservationSet
+        The observations as the fit saw them (``gyrocal.kit.pipeline.judged_windows``).
+    bias : ndarray (3,)
+    scale : ndarray (3,), optional
+        The diagonal model's scale factors (paper Eq. 1); one of ``scale`` and ``matrix``.
+    matrix : ndarray (3, 3), optional
+        The full model's ``A``, in any output frame (the residuals do not depend on it: the
+        matrix is taken into :data:`FULL_FRAME` by :func:`matrix_in_frame`).
+
+    Returns
+    -------
+    ModelResiduals
+
+    Raises
+    ------
+    CalibInputError
+        As the fit raises for ``obs``, or when neither or both of ``scale`` and ``matrix``.
+    """
+    if (scale is None) == (matrix is None):
+        raise CalibInputError("residuals_at needs the scale factors or the matrix, not both")
+    b = np.asarray(bias, dtype=float)
+    if matrix is None:
+        fit = fit_paired_axis(obs, hold=(np.asarray(scale, dtype=float), b))
+    else:
+        C = np.linalg.inv(matrix_in_frame(np.linalg.inv(np.asarray(matrix, dtype=float))))
+        fit = fit_full_matrix(obs, hold=(C[_TRIL], b))
+    n, r = obs.n_windows, obs.n_rests if obs.rest_mean is not None else 0
+    e = fit.residuals
+    return ModelResiduals(e[:3 * n].reshape(n, 3), e[3 * n:3 * (n + r)].reshape(r, 3),
+                          e[3 * (n + r):], fit.method)

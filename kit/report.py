@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.calib.model import GyroCalibration
+from gyrocal.kit.jig_kinds import DEFAULT_JIG, axis_label
 
 __all__ = ["TruthError", "accelerometer_rows", "calibration_table", "error_against_truth",
            "inconsistency_causes", "model_choice_rows"]
@@ -111,11 +112,15 @@ def _general_motion(cal: GyroCalibration, truth: Mapping[str, Any]) -> float:
                               np.asarray(truth["bias"], dtype=float))
 
 
-def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = None) -> str:
+def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = None, *,
+                      jig: str = DEFAULT_JIG) -> str:
     """The result table: scale and bias with standard deviations, the verdict, the axes.
 
     With ``truth`` (a simulated recording's ``{"scale", "bias"}``) the table also shows the
-    error in units of each parameter's standard deviation (:func:`error_against_truth`).
+    error in units of each parameter's standard deviation (:func:`error_against_truth`). The
+    turn axes are named as the recording's ``jig`` names them
+    (:func:`gyrocal.kit.jig_kinds.axis_label`: ``servo 2`` on a gimbal, ``box axis y`` on the
+    hand jig), as the HTML report names them.
     """
     try:
         err = error_against_truth(cal, truth)
@@ -124,8 +129,8 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
             raise
         # a hand-edited manifest's truth (a string for a number): the calibration, already
         # written, is shown without the comparison rather than lost to a traceback
-        return (calibration_table(cal, None) + "\n(the recording manifest's 'truth' is not "
-                "the simulator's numbers: not compared)")
+        return (calibration_table(cal, None, jig=jig) + "\n(the recording manifest's 'truth' "
+                "is not the simulator's numbers: not compared)")
     lines = [f"gyrocal calibration ({cal.method}, {cal.iterations} iterations)"]
     if cal.matrix is not None:
         lines += _matrix_rows(cal, err)
@@ -133,6 +138,8 @@ def calibration_table(cal: GyroCalibration, truth: Mapping[str, Any] | None = No
         lines += _diagonal_rows(cal, err)
     lines += model_choice_rows(cal, err)
     _verdict(cal, lines)
+    lines += _axes_rows(cal, jig)
+    lines += _trailer_rows(cal)
     if cal.accelerometer is not None:
         lines += accelerometer_rows(cal.accelerometer, err)
     return "\n".join(lines)
@@ -287,17 +294,27 @@ def _verdict(cal: GyroCalibration, lines: list[str]) -> None:
         )
         if not c.ok:
             lines.append("  " + inconsistency_causes(cal))
-    if cal.axes:
-        lines.append("")
-        lines.append("servo axes in the sensor frame (mounting misalignment):")
-        for motor, info in sorted(cal.axes.items(), key=lambda kv: int(kv[0])):
-            u = np.asarray(info["axis"])
-            lines.append(
-                f"  servo {motor}: [{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]  nearest {info['nearest']}"
-                f", off by {info['misalignment_deg']:.2f}° ± {info['std_deg']:.3f}°"
-            )
+
+
+def _axes_rows(cal: GyroCalibration, jig: str) -> list[str]:
+    """The turn axes the fit estimated, each named as ``jig`` names it (:func:`axis_label`)."""
+    if not cal.axes:
+        return []
+    lines = ["", "turn axes in the sensor frame (mounting misalignment):"]
+    for motor, info in sorted(cal.axes.items(), key=lambda kv: int(kv[0])):
+        u = np.asarray(info["axis"])
+        lines.append(
+            f"  {axis_label(jig, int(motor))}: [{u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}]  nearest "
+            f"{info['nearest']}, off by {info['misalignment_deg']:.2f}° ± {info['std_deg']:.3f}°"
+        )
+    return lines
+
+
+def _trailer_rows(cal: GyroCalibration) -> list[str]:
+    """The bias's wander and the die temperature, where the calibration has them."""
+    lines = []
     if cal.bias_drift is not None:
-        lines.append("")
-        lines += _drift_rows(cal.bias_drift)
+        lines += ["", *_drift_rows(cal.bias_drift)]
     if cal.temperature_c is not None:
         lines.append(f"\nmean die temperature: {cal.temperature_c:.1f} °C")
+    return lines

@@ -21,7 +21,8 @@ calibration's prediction (the full model's ``A`` where it has one), and :func:`e
 ``rests.png``
     Each rest window's mean reading with its standard error against ``-bias``.
 ``residuals.png``
-    Each window's mean minus its prediction in units of its standard deviation.
+    Each window's mean minus its prediction in units of its standard deviation, and each still
+    angle's error in its prior's: the residuals the fit's χ² sums (:func:`fit_residuals`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,9 +58,11 @@ __all__ = [
     "calibrated",
     "calibration_axis",
     "encoder_rate",
+    "fit_residuals",
     "nominal_axis",
     "plan_report",
     "ramp_lag",
+    "report_residuals",
     "servo_axes",
     "window_axes",
     "window_forces",
@@ -352,26 +355,37 @@ class Residuals:
     kinds : list of str
         ``rotate`` or ``rest``.
     z : ndarray (n, 3)
-        ``(mean − prediction) / σ`` per sensor axis.
-    error : ndarray (n, 3)
-        ``mean − prediction``, rad/s.
-    sigma : ndarray (n, 3)
-        The standard deviation each residual is divided by, rad/s.
+        ``(mean − prediction) / σ`` per sensor axis (:func:`window_residuals`), or the fit's
+        whitened residuals (:func:`fit_residuals`; a still angle's one value in the first
+        column, NaN in the others).
+    error : ndarray (n, 3) or None
+        ``mean − prediction``, rad/s (:func:`window_residuals` only).
+    sigma : ndarray (n, 3) or None
+        The standard deviation each residual is divided by, rad/s (:func:`window_residuals`
+        only).
     axis_sources : dict
         Servo -> where its axis came from (see :class:`ServoAxis`).
+    note : str
+        What the plot's title says the residuals are.
     """
 
     labels: list[str]
     kinds: list[str]
     z: np.ndarray
-    error: np.ndarray
-    sigma: np.ndarray
+    error: np.ndarray | None
+    sigma: np.ndarray | None
     axis_sources: dict[int, str]
+    note: str = ""
 
     @property
     def chi2(self) -> float:
         """Sum of the squared whitened residuals."""
-        return float(np.sum(self.z**2))
+        return float(np.nansum(self.z**2))
+
+    @property
+    def count(self) -> int:
+        """How many residuals there are (the NaN padding of a still angle's row not counted)."""
+        return int(np.sum(np.isfinite(self.z)))
 
 
 def window_forces(obs: Any, cal: GyroCalibration) -> tuple[np.ndarray, np.ndarray] | None:
@@ -410,8 +424,8 @@ def window_residuals(
     windows where it is homogeneous, as the fits do) and the reference rate's; for an axis from
     the kinematics also ``Σ_k (ω A⁻¹ ∂u/∂θ_k σ_q)²`` for every held servo ``k`` (it holds
     anywhere within its encoder tick, ``σ_q = q/√12``; the fit estimates these hold errors as
-    shared unknowns, the report does not). With the
-    calibration fitted on these windows, ``Σ z²`` is close to the fit's chi-square. Axes fitted
+    shared unknowns, this function does not, nor a hand turn's return to the stop: the fit's
+    own residuals, whose ``Σ z²`` is its χ², are :func:`fit_residuals`). Axes fitted
     to the windows (:func:`servo_axes`, :func:`window_axes`) take two degrees of freedom per
     servo and pose from the residuals; nominal axes leave the mount's misalignment in them.
 
@@ -461,6 +475,61 @@ def window_residuals(
     return Residuals(labels, kinds, error / sigma, error, sigma, sources)
 
 
+def fit_residuals(extracted: ExtractedWindows, cal: GyroCalibration, jig: str = DEFAULT_JIG
+                  ) -> Residuals:
+    """The residuals the fit's χ² sums, at ``cal``'s model
+    (:func:`gyrocal.calib.estimators.residuals_at`): each window's and rest's, whitened by its
+    covariance as the fit whitens it, and each still angle's fitted error over its prior σ
+    (the encoder's hold within its tick; on the hand jig the box's return to the stop, which
+    every turn from or to that rest shares). The turn axes, the still angles' errors and the
+    g-sensitivity are fitted to the windows under ``cal``'s scale (or matrix) and bias, as
+    the fit fits them; ``Σ z²`` is then the fit's χ² for a calibration fitted on these
+    windows (:func:`gyrocal.kit.pipeline.judged_windows`), on every jig.
+
+    Raises
+    ------
+    InputError
+        If the fit's model cannot be fitted to these windows (a full-model calibration and a
+        recording without the gimbal's poses, too few windows, ...).
+    """
+    from gyrocal.calib.errors import CalibInputError
+    from gyrocal.calib.estimators import residuals_at
+
+    obs = extracted.observations
+    try:
+        if cal.matrix is None:
+            res = residuals_at(obs, np.asarray(cal.bias), scale=np.asarray(cal.scale))
+        else:
+            res = residuals_at(obs, np.asarray(cal.bias), matrix=np.asarray(cal.matrix))
+    except CalibInputError as exc:
+        raise InputError(f"the {cal.method} fit's residuals: {exc}") from None
+    stills = np.full((res.stills.size, 3), np.nan)
+    stills[:, 0] = res.stills
+    labels = [f"{axis_label(jig, int(w.motor), short=True)}"  # type: ignore[arg-type]
+              f"{'+' if w.direction > 0 else '-'}" for w in extracted.windows]
+    labels += [f"rest {w.segment}" for w in extracted.rests]
+    labels += [f"still {k + 1}" for k in range(res.stills.size)]
+    kinds = (["rotate"] * len(extracted.windows) + ["rest"] * len(extracted.rests)
+             + ["still"] * res.stills.size)
+    z = np.vstack([res.windows, res.rests, stills])
+    return Residuals(labels, kinds, z, None, None, {}, note=(
+        f"the {res.method} fit's residuals at this calibration, the turn axes and the still "
+        "angles' errors fitted as the fit fits them"))
+
+
+def report_residuals(extracted: ExtractedWindows, cal: GyroCalibration,
+                     axes: Mapping[int, ServoAxis] | tuple[ServoAxis, ...],
+                     jig: str = DEFAULT_JIG) -> Residuals:
+    """The residuals ``residuals.png`` draws: :func:`fit_residuals` (what the fit's χ²
+    sums), or where the fit's model cannot be fitted to these windows the per-window
+    :func:`window_residuals` about ``axes``, with the reason in its ``note``."""
+    try:
+        return fit_residuals(extracted, cal, jig)
+    except InputError as exc:
+        res = window_residuals(extracted, cal, axes, jig)
+        return replace(res, note=f"each window against its own σ ({exc})")
+
+
 # ============================================================================ the report
 def _jig(rec: Recording) -> str:
     """The jig kind ``rec`` was made on (:func:`gyrocal.kit.pipeline.recording_jig`)."""
@@ -502,7 +571,7 @@ def plan_report(rec: Recording, extracted: ExtractedWindows) -> list[PlannedPlot
     plots.append(PlannedPlot("rests.png", f"{len(extracted.rests)} rest windows: mean reading "
                              "against -bias", "rests"))
     plots.append(PlannedPlot("residuals.png", "each window's mean minus its prediction, in "
-                             "standard deviations", "residuals"))
+                             "standard deviations (the fit's χ²)", "residuals"))
     return plots
 
 
@@ -848,9 +917,13 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration, jig: str) ->
                                   gridspec_kw={"width_ratios": [3, 1]})
     n = len(res.labels)
     x = np.arange(n)
+    still = np.array([k == "still" for k in res.kinds], dtype=bool)
     for j in range(3):
-        ax.plot(x + (j - 1) * 0.2, res.z[:, j], "o", color=_AXIS_COLORS[j], ms=5,
-                label=f"{_AXES[j]} component")
+        ax.plot(x + (j - 1) * 0.2, np.where(still, np.nan, res.z[:, j]), "o",
+                color=_AXIS_COLORS[j], ms=5, label=f"{_AXES[j]} component")
+    if still.any():
+        ax.plot(x[still], res.z[still, 0], "s", color="k", ms=5,
+                label="still angle: its fitted error / its prior σ")
     for level, style in ((0, "-"), (2, "--"), (-2, "--"), (3, ":"), (-3, ":")):
         ax.axhline(level, color="0.5", lw=0.8, ls=style)
     ax.set_xticks(x, res.labels, rotation=60, fontsize=8)
@@ -859,12 +932,13 @@ def _residuals_plot(plt: Any, res: Residuals, cal: GyroCalibration, jig: str) ->
     ax.set_ylim(-lim, lim)
     ax.grid(True, axis="y", alpha=0.3)
     _inside(ax.legend(fontsize=8, loc="upper right"))
-    dof_all = res.z.size
-    text = f"Σz² = {res.chi2:.1f} over {dof_all} residuals"
+    text = f"Σz² = {res.chi2:.1f} over {res.count} residuals"
     c = cal.consistency
     if c is not None:
         text += (f"; the fit: χ² = {c.chi2:.1f} on {c.dof} dof, p = {c.p_value:.3g} "
                  f"({c.verdict})")
+    if res.note:
+        text += f"\n{res.note}"
     sources = set(res.axis_sources.values())
     if not sources <= {"calibration", "kinematics"}:
         text += "\nturn axes: " + ", ".join(f"{axis_label(jig, m)} {s}" for m, s in
@@ -963,6 +1037,6 @@ def _draw(plt: Any, p: PlannedPlot, out: Path, rec: Recording, cal: GyroCalibrat
             fig = _rests_plot(plt, extracted, cal, rec.truth)
         else:
             jig = _jig(rec)
-            fig = _residuals_plot(plt, window_residuals(extracted, cal, axes, jig), cal, jig)
+            fig = _residuals_plot(plt, report_residuals(extracted, cal, axes, jig), cal, jig)
         save_png(fig, out / p.name, force=force, dpi=_DPI, keep=p.kind == "turn")
     return out / p.name, p.description

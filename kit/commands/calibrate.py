@@ -152,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     from gyrocal.kit.commands.history import history_target_from, store_and_say
     from gyrocal.kit.fileio import atomic_write_text, built_beside, refuse_existing
     from gyrocal.kit.jig import load_cli_config, output_dir, run_jig
-    from gyrocal.kit.pipeline import check_plausible, estimate_recording
+    from gyrocal.kit.pipeline import check_plausible, estimate_recording, recording_jig
     from gyrocal.kit.recording import load_recording
     from gyrocal.kit.report import calibration_table
 
@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()
     else:
-        print(calibration_table(cal, rec.truth))
+        print(calibration_table(cal, rec.truth, jig=recording_jig(rec)))
         print()
         print(_what_next(args, out, cal, report))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0

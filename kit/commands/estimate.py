@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     rec = load_recording(args.recording)  # path and contents checked before scipy is imported
     from gyrocal.kit.commands.history import store_and_say
     from gyrocal.kit.fileio import atomic_write_text
-    from gyrocal.kit.pipeline import check_plausible, estimate_recording
+    from gyrocal.kit.pipeline import check_plausible, estimate_recording, recording_jig
     from gyrocal.kit.report import calibration_table
 
     for w in rec.warnings:
@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         json.dump(cal.to_dict(), sys.stdout, indent=2)
         print()
     else:
-        print(calibration_table(cal, rec.truth))
+        print(calibration_table(cal, rec.truth, jig=recording_jig(rec)))
     return 3 if cal.consistency is not None and not cal.consistency.ok else 0
 
 

@@ -172,3 +172,48 @@ def test_the_g_sensitivity_note_says_what_calibrates_the_full_model_on_each_jig(
         assert ("--protocol full" in note) == (jig == "gimbal")
     assert "V-block" in notes["single-servo"] and "cannot" in notes["hand"]
     assert diagonal_g_note(fit) == notes["gimbal"]
+
+
+@pytest.fixture(scope="module")
+def hand_estimate(hand_recording):
+    """``hand_recording`` loaded and estimated as ``gyrocal estimate`` does."""
+    from gyrocal.kit.pipeline import estimate_recording
+    from gyrocal.kit.recording import load_recording
+
+    rec = load_recording(hand_recording[0])
+    return rec, estimate_recording(rec)
+
+
+def test_the_text_table_of_a_hand_run_names_the_box_axes_not_servos(hand_estimate):
+    """The terminal's table names each turn axis as the hand jig does (kit.jig_kinds'
+    ``axis_label``, the name the HTML page gives it): ``box axis x``, never ``servo 1``
+    (before: ``servo 1: [...] nearest +x``)."""
+    from gyrocal.kit.jig_kinds import axis_label
+    from gyrocal.kit.report import calibration_table
+
+    rec, est = hand_estimate
+    table = calibration_table(est.calibration, rec.truth, jig="hand")
+    assert "servo" not in table
+    for m in est.calibration.axes:
+        assert f"  {axis_label('hand', int(m))}: [" in table
+    assert {axis_label("hand", m) for m in (1, 2, 3)} == {f"box axis {a}" for a in "xyz"}
+    assert "  servo 1: [" in calibration_table(est.calibration, rec.truth)  # a gimbal's name
+
+
+def test_the_drawn_residuals_of_a_hand_run_sum_to_the_fit_s_chi_square(hand_estimate,
+                                                                        tmp_path, monkeypatch):
+    """residuals.png's Σz² is the fit's χ² on the hand jig, whose rests are each turn's stop:
+    the stop's repeatability (0.1°, 2.8e-4 of a turn), which the fit carries as each rest's
+    shared still-angle error, is in what the report draws (before: left out, Σz² 43.6 against
+    χ² 32.0 here, 99.4 against 26.7 on `gyrocal calibrate --sim --jig hand --sim-seed 4242`);
+    the box's turns are labelled with their box axes."""
+    pytest.importorskip("matplotlib")
+    from tests.kit.report_drawn import drawn_residuals
+
+    rec, est = hand_estimate
+    cal = est.calibration
+    res = drawn_residuals(rec, cal, est.extracted, tmp_path, monkeypatch)
+    assert res.chi2 == pytest.approx(cal.consistency.chi2, rel=1e-3, abs=0.05)
+    assert sum(k == "still" for k in res.kinds) > 0
+    assert {x[:-1] for x, k in zip(res.labels, res.kinds, strict=True) if k == "rotate"} == {
+        f"box {a}" for a in "xyz"}
