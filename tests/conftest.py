@@ -67,7 +67,6 @@ LONG_UNITS: dict[str, float] = {
     "tests/test_docs.py::single-servo": 19.0,
     "tests/kit/test_model_choice.py": 17.2,
     "tests/kit/test_align_e2e.py": 18.0,
-    "tests/test_docs.py::intro/demo": 18.0,
     "tests/kit/test_recording_reader.py": 16.4,
     "tests/kit/test_verify_general.py": 16.0,
     "tests/kit/test_track_v2.py": 13.9,
