@@ -36,6 +36,11 @@ An HTML comment right before a block changes what happens to it:
     servo emulated by ``gyrocal emulate --pty`` in a subprocess.
 ``<!-- doctest: skip (needs hardware: why) -->``
     do not run the block; the reason is required.
+``<!-- doctest: output -->``
+    the (``text``) block is what the document's last ``gyrocal`` command before it (in the
+    block's part of its chain) printed on stdout, line by line (trailing spaces aside); a line
+    ``...`` stands for any lines left out. A sample that no longer matches fails with the
+    command's output.
 
 Besides, the tables the documents promise to keep in step with the code are compared with it: the
 configuration keys with :data:`gyrocal.kit.config.SCHEMA`, the exit codes with
@@ -93,7 +98,7 @@ MARKER = re.compile(r"^<!--\s*doctest:\s*(.*?)\s*-->$")
 SHELL_OPERATORS = {"|", "||", ";", "&", ">", ">>", "<", "2>", "2>&1"}
 #: The only directives a marker may carry (``skip`` needs a reason in parentheses).
 DIRECTIVE = re.compile(
-    r"^(sim|emulated-servo|file\s+(?P<file>[\w.\-]+)|exit\s+(?P<exit>\d+)"
+    r"^(sim|emulated-servo|output|file\s+(?P<file>[\w.\-]+)|exit\s+(?P<exit>\d+)"
     r"|skip\s+\((?P<reason>[^)]+)\))$"
 )
 
@@ -234,6 +239,11 @@ class DocRun:
     log: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    #: The last ``gyrocal`` command run (its block and command line) and what it printed on
+    #: stdout, for a ``doctest: output`` block.
+    last_output: tuple[str, str] | None = None
+    #: The ``doctest: output`` blocks compared.
+    outputs_checked: list[str] = field(default_factory=list)
 
 
 @contextlib.contextmanager
@@ -348,7 +358,9 @@ class JigRuns:
 
 
 def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str],
-                 jig_runs: JigRuns | None = None) -> None:
+                 jig_runs: JigRuns | None = None) -> str:
+    """Run ``gyrocal argv`` in-process; it must exit ``expect``. Returns what it printed on
+    stdout."""
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
             (jig_runs.installed() if jig_runs else contextlib.nullcontext()):
@@ -359,6 +371,41 @@ def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str],
             f"{where}: `gyrocal {shlex.join(argv)}` exited {code}, expected {expect}\n"
             f"--- stdout ---\n{out.getvalue()[-3000:]}\n--- stderr ---\n{err.getvalue()[-3000:]}"
         )
+    return out.getvalue()
+
+
+def sample_matches(sample: str, printed: str) -> bool:
+    """Whether a document's sample output is what a command printed: line by line, trailing
+    spaces aside, a sample line ``...`` standing for any number of printed lines."""
+    want = [line.rstrip() for line in sample.rstrip("\n").split("\n")]
+    got = [line.rstrip() for line in printed.rstrip("\n").split("\n")]
+    pattern = "".join(r"(?:[^\n]*\n)*?" if line == "..." else re.escape(line + "\n")
+                      for line in want)
+    return re.fullmatch(pattern, "\n".join(got) + "\n", flags=re.S) is not None
+
+
+def _run_shell_block(block: Block, expect: int, run: DocRun, jig_runs: JigRuns | None) -> None:
+    """Run the ``gyrocal`` commands of a shell block (with ``--sim`` added to the jig's under
+    ``doctest: sim``); each must exit ``expect``."""
+    commands = shell_commands(block)
+    if block.directive == "sim":
+        assert any(needs_jig(c) for c in commands), (
+            f"{block.where}: 'doctest: sim' on a block with no jig command")
+    for argv in commands:
+        if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
+            argv = [*argv, "--sim"]
+        printed = _run_gyrocal(argv, block.where, expect, run.log, jig_runs)
+        run.last_output = (f"{block.where}: gyrocal {shlex.join(argv)}", printed)
+
+
+def _check_output(block: Block, run: DocRun) -> None:
+    """A ``doctest: output`` block against what the document's last command printed."""
+    assert block.lang in ("text", ""), f"{block.where}: 'doctest: output' on a {block.lang} block"
+    assert run.last_output is not None, f"{block.where}: 'doctest: output' after no command"
+    command, printed = run.last_output
+    assert sample_matches(block.text, printed), (
+        f"{block.where}: the sample is not what `{command}` prints now; it printed:\n{printed}")
+    run.outputs_checked.append(block.where)
 
 
 def _exec_python(block: Block, argv: list[str] | None = None) -> None:
@@ -444,15 +491,10 @@ def run_document(path: Path, workdir: Path, part: str | None = None,
             if not mine:
                 continue
             expect = int(d.group("exit")) if d and d.group("exit") else 0
-            if block.lang in SHELL_LANGS:
-                commands = shell_commands(block)
-                if block.directive == "sim":
-                    assert any(needs_jig(c) for c in commands), (
-                        f"{block.where}: 'doctest: sim' on a block with no jig command")
-                for argv in commands:
-                    if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
-                        argv = [*argv, "--sim"]
-                    _run_gyrocal(argv, block.where, expect, run.log, jig_runs)
+            if block.directive == "output":
+                _check_output(block, run)
+            elif block.lang in SHELL_LANGS:
+                _run_shell_block(block, expect, run, jig_runs)
             elif block.lang == "python":
                 if block.directive == "emulated-servo":
                     with _emulated_servo() as device:
@@ -639,6 +681,9 @@ def docs(doc_runner: DocRunner, request: pytest.FixtureRequest) -> Any:
 @pytest.mark.parametrize("path", DOCS, ids=_name)
 def test_every_command_in_the_document_works(path: Path, docs: Any) -> None:
     run = docs(path)
+    samples = [b.where for b in parse_blocks(path)
+               if b.directive == "output" and block_branch(chain_of(path), b) is None]
+    assert run.outputs_checked == samples, "a 'doctest: output' sample was not compared"
     for reason in run.skipped:
         assert "needs hardware" in reason or "no C compiler" in reason, (
             f"a skipped block must say which hardware it needs: {reason}")
@@ -773,6 +818,21 @@ def test_the_documents_run_gyrocal_commands_and_few_blocks_are_skipped() -> None
         skipped += [b.where for p in DOCS for b in parse_blocks(p)
                     if b.lang == "c" and re.search(r"\bint\s+main\s*\(", b.text)]
     assert len(skipped) <= 3, skipped
+
+
+def test_a_sample_output_matches_only_what_was_printed() -> None:
+    printed = "a\nb 1.00\nc\nd\n"
+    assert sample_matches("a\nb 1.00\nc\nd\n", printed)
+    assert sample_matches("a   \nb 1.00\nc\nd", printed)  # trailing spaces and newline aside
+    assert sample_matches("a\n...\nd\n", printed)
+    assert sample_matches("a\n...\nb 1.00\nc\nd\n", printed)  # `...` for no line
+    assert not sample_matches("a\nb 1.01\nc\nd\n", printed)  # a stale figure
+    assert not sample_matches("a\nb 1.00\nc\n", printed)  # a line left out without `...`
+    assert not sample_matches("a\nb 1\n...\nd\n", printed)  # part of a line
+    assert not sample_matches("a\nb 1.00\nc\nd\ne\n", printed)  # a line not printed
+    # the documents compare samples: setup.md's doctor, running.md's calibrate
+    marked = [b.where for p in DOCS for b in parse_blocks(p) if b.directive == "output"]
+    assert len(marked) >= 2, marked
 
 
 def test_no_two_documents_write_one_output() -> None:
