@@ -51,7 +51,7 @@ from tests.test_docs import xdist_unit  # noqa: E402
 #: unit in that order.
 LONG_UNITS: dict[str, float] = {
     "tests/drivers/test_imu_streaming.py": 98.7,
-    "tests/test_docs.py::running": 79.1,  # its branches apart: 183.4 whole before s9-speed2
+    "tests/test_docs.py::running": 52.8,  # its branches apart; history.md's run-h shares run1's
     "tests/test_docs.py::running/thermal": 56.3,
     "tests/kit/test_calibrate.py": 54.1,
     "tests/kit/test_plate.py": 42.5,
@@ -60,14 +60,13 @@ LONG_UNITS: dict[str, float] = {
     "tests/kit/test_report.py": 29.6,
     "tests/kit/test_accel_recording.py": 25.4,  # the first to ask for the shared full_run
     "tests/kit/test_reliability.py": 24.7,
-    "tests/test_docs.py::intro": 21.6,
+    "tests/test_docs.py::intro": 26.3,  # with the index's demo run, which shares the README's
     "tests/kit/test_track.py": 19.9,
     "tests/kit/test_signals.py": 19.4,
     "tests/calib/test_tracker.py": 19.1,
     "tests/test_docs.py::single-servo": 19.0,
     "tests/kit/test_model_choice.py": 17.2,
     "tests/kit/test_align_e2e.py": 18.0,
-    "tests/test_docs.py::intro/demo": 18.0,
     "tests/kit/test_recording_reader.py": 16.4,
     "tests/kit/test_verify_general.py": 16.0,
     "tests/kit/test_track_v2.py": 13.9,

@@ -6,7 +6,10 @@ index's table, each page's blocks in the order they appear; the documents that b
 other's files share a working directory (a chain, :data:`CHAINS`), in which a command reads the
 files every earlier command of its chain wrote (a chain's blocks that share no file with the rest
 of it but its configurations, its branches of :data:`BRANCHES`, run in directories of their own,
-so that a long chain runs on both xdist workers):
+so that a long chain runs on both xdist workers). An emulated ``gyrocal calibrate`` that a part
+of a chain runs a second time under another name (:data:`SHARED_RUNS`: the same configuration and
+jig arguments, so the same recording) is recorded once: the second run's command runs in full on
+a copy of the first's recording (:class:`JigRuns`). The blocks:
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
@@ -33,6 +36,11 @@ An HTML comment right before a block changes what happens to it:
     servo emulated by ``gyrocal emulate --pty`` in a subprocess.
 ``<!-- doctest: skip (needs hardware: why) -->``
     do not run the block; the reason is required.
+``<!-- doctest: output -->``
+    the (``text``) block is what the document's last ``gyrocal`` command before it (in the
+    block's part of its chain) printed on stdout, line by line (trailing spaces aside); a line
+    ``...`` stands for any lines left out. A sample that no longer matches fails with the
+    command's output.
 
 Besides, the tables the documents promise to keep in step with the code are compared with it: the
 configuration keys with :data:`gyrocal.kit.config.SCHEMA`, the exit codes with
@@ -90,7 +98,7 @@ MARKER = re.compile(r"^<!--\s*doctest:\s*(.*?)\s*-->$")
 SHELL_OPERATORS = {"|", "||", ";", "&", ">", ">>", "<", "2>", "2>&1"}
 #: The only directives a marker may carry (``skip`` needs a reason in parentheses).
 DIRECTIVE = re.compile(
-    r"^(sim|emulated-servo|file\s+(?P<file>[\w.\-]+)|exit\s+(?P<exit>\d+)"
+    r"^(sim|emulated-servo|output|file\s+(?P<file>[\w.\-]+)|exit\s+(?P<exit>\d+)"
     r"|skip\s+\((?P<reason>[^)]+)\))$"
 )
 
@@ -231,6 +239,11 @@ class DocRun:
     log: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    #: The last ``gyrocal`` command run (its block and command line) and what it printed on
+    #: stdout, for a ``doctest: output`` block.
+    last_output: tuple[str, str] | None = None
+    #: The ``doctest: output`` blocks compared.
+    outputs_checked: list[str] = field(default_factory=list)
 
 
 @contextlib.contextmanager
@@ -243,9 +256,114 @@ def _cwd(path: Path) -> Iterator[None]:
         os.chdir(old)
 
 
-def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str]) -> None:
+#: The arguments of ``gyrocal calibrate`` that say only what becomes of a recording once the jig
+#: has made it (where the run goes, whether it replaces one, whether it is stored in a history,
+#: whether a report is written, how the result is printed, whether an implausible result is
+#: written): two runs that differ in these alone make the same recording (``calibrate.run`` in
+#: ``kit/commands/calibrate.py`` reads them only around or after ``run_jig``).
+AFTER_THE_JIG = frozenset({"out", "force", "history", "sensor_label", "json", "no_report",
+                           "allow_implausible"})
+
+
+@dataclass(frozen=True)
+class _JigRun:
+    """What one emulated jig run wrote in its run's directory (a copy), and printed."""
+
+    files: Path
+    stdout: str
+    stderr: str
+    jig: Any
+
+
+class JigRuns:
+    """The emulated jig's ``gyrocal calibrate`` runs made so far by one worker, by what defines
+    their recording (:meth:`key`), each made once.
+
+    The documents show one emulated run under several names: the README's ``gyrocal calibrate
+    --sim`` and the index's ``--out demo``; running.md's ``run1`` and history.md's ``run-h``
+    (stored in a history). The emulated jig records the same bytes for the same configuration,
+    arguments and code (``tests/drivers/test_emulated_golden.py`` pins a seed's recording), so
+    the second of these gets a copy of what the first's jig wrote in its directory (the
+    recording, ``sim-state.json``), with the recording's ``created`` stamp made now as a new run
+    would (:func:`gyrocal.kit.recording.now_iso`), and what the first's jig printed; everything
+    of the command after the jig (the fit, ``calibration.json``, the report, the history, the
+    printed result and exit code) runs for it as for the first. A run that fails is not kept.
+    Runs of other commands, with an ``extend``, or into a directory other than the run's
+    ``recording/`` (a plate's sensors) always run.
+    """
+
+    def __init__(self, store: Path) -> None:
+        from gyrocal.kit import jig
+
+        self.store = store
+        self.runs: dict[str, _JigRun] = {}
+        self.replayed: list[str] = []
+        self._jig_module = jig
+        self._real = jig.run_jig
+
+    @staticmethod
+    def key(cfg: Any, args: Any) -> str | None:
+        """What defines an emulated ``gyrocal calibrate`` run's recording: the configuration
+        (with the command line's overrides) and every argument but :data:`AFTER_THE_JIG`; None
+        for a run that is not one (another command, or the real jig)."""
+        if getattr(args, "command", None) != "calibrate" or not getattr(args, "sim", False):
+            return None
+        fields = {k: v for k, v in sorted(vars(args).items()) if k not in AFTER_THE_JIG}
+        return repr((cfg, fields))
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[None]:
+        """``gyrocal.kit.jig.run_jig`` replaced by :meth:`run_jig` for the duration."""
+        self._jig_module.run_jig = self.run_jig
+        try:
+            yield
+        finally:
+            self._jig_module.run_jig = self._real
+
+    def run_jig(self, cfg: Any, args: Any, out: Path, rec_dir: Path, extend: Any = None) -> Any:
+        """:func:`gyrocal.kit.jig.run_jig`, made once per :meth:`key`."""
+        key = self.key(cfg, args) if extend is None and rec_dir == out / "recording" else None
+        if key is None:
+            return self._real(cfg, args, out, rec_dir, extend)
+        if key in self.runs:
+            return self._replay(self.runs[key], out, rec_dir)
+        before = set(out.iterdir())
+        stdout, stderr = io.StringIO(), io.StringIO()
+        try:
+            with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+                jig = self._real(cfg, args, out, rec_dir, extend)
+        finally:
+            sys.stdout.write(stdout.getvalue())
+            sys.stderr.write(stderr.getvalue())
+        files = self.store / f"run{len(self.runs)}"
+        files.mkdir()
+        for path in sorted(set(out.iterdir()) - before):
+            (shutil.copytree if path.is_dir() else shutil.copy2)(path, files / path.name)
+        self.runs[key] = _JigRun(files, stdout.getvalue(), stderr.getvalue(), jig)
+        return jig
+
+    def _replay(self, run: _JigRun, out: Path, rec_dir: Path) -> Any:
+        from gyrocal.kit.recording import now_iso
+
+        shutil.copytree(run.files, out, dirs_exist_ok=True)
+        manifest = rec_dir / "manifest.json"
+        text = manifest.read_text(encoding="utf-8")
+        stamp = json.dumps(json.loads(text)["created"])
+        manifest.write_text(text.replace(f'"created": {stamp}', f'"created": "{now_iso()}"', 1),
+                            encoding="utf-8")
+        sys.stdout.write(run.stdout)
+        sys.stderr.write(run.stderr)
+        self.replayed.append(str(rec_dir.resolve()))
+        return run.jig
+
+
+def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str],
+                 jig_runs: JigRuns | None = None) -> str:
+    """Run ``gyrocal argv`` in-process; it must exit ``expect``. Returns what it printed on
+    stdout."""
     out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            (jig_runs.installed() if jig_runs else contextlib.nullcontext()):
         code = gyrocal_main(argv)
     log.append(f"{where}: gyrocal {shlex.join(argv)} -> {code}")
     if code != expect:
@@ -253,6 +371,41 @@ def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str]) -> No
             f"{where}: `gyrocal {shlex.join(argv)}` exited {code}, expected {expect}\n"
             f"--- stdout ---\n{out.getvalue()[-3000:]}\n--- stderr ---\n{err.getvalue()[-3000:]}"
         )
+    return out.getvalue()
+
+
+def sample_matches(sample: str, printed: str) -> bool:
+    """Whether a document's sample output is what a command printed: line by line, trailing
+    spaces aside, a sample line ``...`` standing for any number of printed lines."""
+    want = [line.rstrip() for line in sample.rstrip("\n").split("\n")]
+    got = [line.rstrip() for line in printed.rstrip("\n").split("\n")]
+    pattern = "".join(r"(?:[^\n]*\n)*?" if line == "..." else re.escape(line + "\n")
+                      for line in want)
+    return re.fullmatch(pattern, "\n".join(got) + "\n", flags=re.S) is not None
+
+
+def _run_shell_block(block: Block, expect: int, run: DocRun, jig_runs: JigRuns | None) -> None:
+    """Run the ``gyrocal`` commands of a shell block (with ``--sim`` added to the jig's under
+    ``doctest: sim``); each must exit ``expect``."""
+    commands = shell_commands(block)
+    if block.directive == "sim":
+        assert any(needs_jig(c) for c in commands), (
+            f"{block.where}: 'doctest: sim' on a block with no jig command")
+    for argv in commands:
+        if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
+            argv = [*argv, "--sim"]
+        printed = _run_gyrocal(argv, block.where, expect, run.log, jig_runs)
+        run.last_output = (f"{block.where}: gyrocal {shlex.join(argv)}", printed)
+
+
+def _check_output(block: Block, run: DocRun) -> None:
+    """A ``doctest: output`` block against what the document's last command printed."""
+    assert block.lang in ("text", ""), f"{block.where}: 'doctest: output' on a {block.lang} block"
+    assert run.last_output is not None, f"{block.where}: 'doctest: output' after no command"
+    command, printed = run.last_output
+    assert sample_matches(block.text, printed), (
+        f"{block.where}: the sample is not what `{command}` prints now; it printed:\n{printed}")
+    run.outputs_checked.append(block.where)
 
 
 def _exec_python(block: Block, argv: list[str] | None = None) -> None:
@@ -314,11 +467,14 @@ def _run_c(block: Block, workdir: Path, run: DocRun) -> None:
     run.log.append(f"{block.where}: C example printed {ran.stdout.strip()!r}")
 
 
-def run_document(path: Path, workdir: Path, part: str | None = None) -> DocRun:
+def run_document(path: Path, workdir: Path, part: str | None = None,
+                 jig_runs: JigRuns | None = None) -> DocRun:
     """Run the blocks of ``path`` that belong to ``part`` of its chain (the branch of that name,
     or with None the rest: :func:`block_branch`) in order in ``workdir``. The ``doctest: file``
     blocks of every part write their files in every part: a later command of any part may read
-    them (a configuration in the working directory is read without being named)."""
+    them (a configuration in the working directory is read without being named). With
+    ``jig_runs``, an emulated calibration run already made gives its recording
+    (:class:`JigRuns`)."""
     run = DocRun(workdir)
     chain = chain_of(path)
     t0 = time.perf_counter()
@@ -335,15 +491,10 @@ def run_document(path: Path, workdir: Path, part: str | None = None) -> DocRun:
             if not mine:
                 continue
             expect = int(d.group("exit")) if d and d.group("exit") else 0
-            if block.lang in SHELL_LANGS:
-                commands = shell_commands(block)
-                if block.directive == "sim":
-                    assert any(needs_jig(c) for c in commands), (
-                        f"{block.where}: 'doctest: sim' on a block with no jig command")
-                for argv in commands:
-                    if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
-                        argv = [*argv, "--sim"]
-                    _run_gyrocal(argv, block.where, expect, run.log)
+            if block.directive == "output":
+                _check_output(block, run)
+            elif block.lang in SHELL_LANGS:
+                _run_shell_block(block, expect, run, jig_runs)
             elif block.lang == "python":
                 if block.directive == "emulated-servo":
                     with _emulated_servo() as device:
@@ -407,8 +558,8 @@ BRANCHES: dict[str, dict[str, tuple[str, ...]]] = {
     # running.md's two-sensor plate (plate1) and using.md's warm-up (five emulated
     # calibrations, warmup) read only gyrocal.toml and plate.toml
     "running": {"plate": ("plate1",), "thermal": ("warmup",)},
-    # the index's emulated run (demo) beside the README's: neither reads the other
-    "intro": {"demo": ("demo",)},
+    # not the index's emulated run (demo): it is the README's run under another name, made once
+    # with it in the chain's main part (JigRuns)
 }
 
 
@@ -473,13 +624,15 @@ def uses_chain(chain: str) -> Any:
 class DocRunner:
     """Runs each part of each chain (its main part, and each branch: :data:`BRANCHES`) once per
     worker, the chain's documents in reading order in the part's own directory (as a reader
-    would), and remembers what each produced."""
+    would), and remembers what each produced; an emulated calibration that two documents of a
+    part run under different names is made once (:class:`JigRuns`)."""
 
     def __init__(self, factory: pytest.TempPathFactory) -> None:
         self.factory = factory
         self.workdirs: dict[tuple[str, str | None], Path] = {}
         self.runs: dict[tuple[str, str | None], DocRun] = {}
         self.failures: dict[tuple[str, str | None], BaseException] = {}
+        self.jig_runs = JigRuns(factory.mktemp("jig-runs"))
 
     def __call__(self, path: Path, part: str | None = None) -> DocRun:
         chain = chain_of(path)
@@ -496,7 +649,7 @@ class DocRunner:
             if (key, part) not in self.runs:
                 try:
                     self.runs[key, part] = run_document(ROOT / key, self.workdirs[chain, part],
-                                                        part)
+                                                        part, self.jig_runs)
                 except BaseException as exc:  # remember, so a second caller sees the same failure
                     self.failures[key, part] = exc
                     raise
@@ -528,6 +681,9 @@ def docs(doc_runner: DocRunner, request: pytest.FixtureRequest) -> Any:
 @pytest.mark.parametrize("path", DOCS, ids=_name)
 def test_every_command_in_the_document_works(path: Path, docs: Any) -> None:
     run = docs(path)
+    samples = [b.where for b in parse_blocks(path)
+               if b.directive == "output" and block_branch(chain_of(path), b) is None]
+    assert run.outputs_checked == samples, "a 'doctest: output' sample was not compared"
     for reason in run.skipped:
         assert "needs hardware" in reason or "no C compiler" in reason, (
             f"a skipped block must say which hardware it needs: {reason}")
@@ -543,6 +699,71 @@ def test_every_command_of_a_branch_works(branch: str, doc_runner: DocRunner) -> 
     for reason in (r for run in runs for r in run.skipped):
         assert "needs hardware" in reason or "no C compiler" in reason, (
             f"a skipped block must say which hardware it needs: {reason}")
+
+
+#: The emulated calibrations the documents show again under another name, by chain: (the first
+#: run's directory, a glob; the second's), the second made from a copy of the first's recording
+#: (:class:`JigRuns`).
+SHARED_RUNS: dict[str, tuple[str, str]] = {
+    "intro": ("gyrocal-*", "demo"),  # the README's `gyrocal calibrate --sim`, the index's
+    "running": ("run1", "run-h"),  # running.md's, history.md's (stored in a history)
+}
+
+
+def _check_shared_run(doc_runner: DocRunner, chain: str) -> None:
+    first, again = SHARED_RUNS[chain]
+    doc_runner(ROOT / CHAINS[chain][-1])
+    workdir = doc_runner.workdirs[chain, None]
+    (a,) = (p / "recording" for p in workdir.glob(first))
+    b = workdir / again / "recording"
+    assert str(b.resolve()) in doc_runner.jig_runs.replayed, (
+        f"{chain}: {again} no longer makes the same emulated run as {first} (JigRuns.key): "
+        f"its recording was made again; list it in SHARED_RUNS only if it should be shared")
+    assert sorted(p.name for p in b.iterdir()) == sorted(p.name for p in a.iterdir())
+    for path in sorted(a.iterdir()):
+        got, want = (b / path.name).read_text(), path.read_text()
+        if path.name == "manifest.json":  # the created stamp is the run's own
+            got, want = ({k: v for k, v in json.loads(t).items() if k != "created"}
+                         for t in (got, want))
+        assert got == want, f"{b / path.name} is not {path}"
+
+
+@uses_chain("intro")
+def test_the_index_demo_run_is_the_readme_run_recorded_once(doc_runner: DocRunner) -> None:
+    _check_shared_run(doc_runner, "intro")
+
+
+@uses_chain("running")
+def test_history_md_run_is_running_md_run_recorded_once(doc_runner: DocRunner) -> None:
+    _check_shared_run(doc_runner, "running")
+
+
+def test_an_emulated_run_is_shared_only_by_runs_that_record_the_same(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from gyrocal.kit.cli import build_parser
+    from gyrocal.kit.jig import load_cli_config
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "other.toml").write_text("[imu]\nodr_hz = 100\n", encoding="utf-8")
+
+    def key(*argv: str) -> str | None:
+        args = build_parser(list(argv)).parse_args(list(argv))
+        return JigRuns.key(load_cli_config(args), args)
+
+    base = key("calibrate", "--sim")
+    assert base is not None
+    # what becomes of the recording: the same run
+    assert key("calibrate", "--sim", "--out", "demo", "--force", "--json", "--no-report",
+               "--history", "sqlite:///h.sqlite", "--sensor-label", "imu-07",
+               "--allow-implausible") == base
+    # what the jig records or prints: another run
+    for other in (["--sim-seed", "1"], ["--sim-noise-seed", "5"], ["--config", "other.toml"],
+                  ["--protocol", "auto"], ["--odr", "100"], ["--sim-without", "wobble"],
+                  ["--jig", "single-servo"], ["--quiet"]):
+        assert key("calibrate", "--sim", *other) not in (base, None), other
+    # the real jig, and other commands, always run
+    assert key("calibrate") is None
+    assert key("verify", "run1/calibration.json", "--sim") is None
 
 
 def _outputs(blocks: list[Block]) -> set[str]:
@@ -597,6 +818,21 @@ def test_the_documents_run_gyrocal_commands_and_few_blocks_are_skipped() -> None
         skipped += [b.where for p in DOCS for b in parse_blocks(p)
                     if b.lang == "c" and re.search(r"\bint\s+main\s*\(", b.text)]
     assert len(skipped) <= 3, skipped
+
+
+def test_a_sample_output_matches_only_what_was_printed() -> None:
+    printed = "a\nb 1.00\nc\nd\n"
+    assert sample_matches("a\nb 1.00\nc\nd\n", printed)
+    assert sample_matches("a   \nb 1.00\nc\nd", printed)  # trailing spaces and newline aside
+    assert sample_matches("a\n...\nd\n", printed)
+    assert sample_matches("a\n...\nb 1.00\nc\nd\n", printed)  # `...` for no line
+    assert not sample_matches("a\nb 1.01\nc\nd\n", printed)  # a stale figure
+    assert not sample_matches("a\nb 1.00\nc\n", printed)  # a line left out without `...`
+    assert not sample_matches("a\nb 1\n...\nd\n", printed)  # part of a line
+    assert not sample_matches("a\nb 1.00\nc\nd\ne\n", printed)  # a line not printed
+    # the documents compare samples: setup.md's doctor, running.md's calibrate
+    marked = [b.where for p in DOCS for b in parse_blocks(p) if b.directive == "output"]
+    assert len(marked) >= 2, marked
 
 
 def test_no_two_documents_write_one_output() -> None:
