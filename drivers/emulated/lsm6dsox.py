@@ -33,8 +33,9 @@ What it models:
   AN5192; the LSM9DS1 model does the same).
 - The gyro's output filter is the chain of AN5192 Table 14 (:data:`~gyrocal.drivers.imu.chips.
   LSM6DSOX_GYRO_FILTER`): LPF2 alone, or with CTRL4_C.LPF1_SEL_G set LPF1 + LPF2 at
-  CTRL6_C.FTYPE's bandwidth, the white noise entering ahead of it; the accelerometer's LPF2 at
-  ODR / CTRL8_XL.HPCF_XL's divisor when CTRL1_XL.LPF2_XL_EN is set (HP_SLOPE_XL_EN clear;
+  CTRL6_C.FTYPE's bandwidth, the white noise entering ahead of it, and a pure delay making the
+  output's phase delay at the table's frequency the table's (⚠ AN5192 only); the accelerometer's
+  LPF2 at ODR / CTRL8_XL.HPCF_XL's divisor when CTRL1_XL.LPF2_XL_EN is set (HP_SLOPE_XL_EN clear;
   :data:`~gyrocal.drivers.imu.chips.LSM6DSOX_ACCEL_LPF2_DIVISOR`), LPF1's ODR/2 alone being the
   per-sample mean. The filters' shapes are not published: the emulator's first-order stand-in
   at the table's −3 dB bandwidth stands in (⚠); the accelerometer shares the gyro's ODR.
@@ -42,6 +43,7 @@ What it models:
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any
 
@@ -54,6 +56,7 @@ from gyrocal.drivers.imu.chips import (
     LSM6DSOX,
     LSM6DSOX_ACCEL_LPF2_DIVISOR,
     LSM6DSOX_BITS,
+    LSM6DSOX_GYRO_PHASE_HZ,
     LSM6DSOX_ODR,
     LSM6DSOX_REG,
     FilterSetting,
@@ -149,6 +152,25 @@ class EmulatedLSM6DSOX(_EmulatedImu):
             return None
         return lsm6dsox_gyro_filter(code, bool(self._regs[_R.CTRL4_C] & _B.LPF1_SEL_G),
                                     self._regs[_R.CTRL6_C] & _B.FTYPE_MASK)
+
+    def _pure_delay_s(self, period: float) -> float:
+        """What the table's phase delay at its frequency (AN5192 Table 14, ⚠ one source) has
+        beyond the emulated path's there: the first-order stand-in's phase delay at that
+        frequency and the per-sample mean's half window (as the MPU-9250's CONFIG-table
+        delay is made up)."""
+        setting = self.filter_setting() if self.output_filter else None
+        section, rate = self._filter_section(), self._filter_rate_hz()
+        if setting is None or setting.delay_s is None or section is None or rate is None:
+            return 0.0
+        f = LSM6DSOX_GYRO_PHASE_HZ[self._regs[_R.CTRL2_G] >> _B.ODR_SHIFT]
+        k, order = section
+        w = 2.0 * math.pi * f / rate
+        a = (k - 1.0) / (k + 1.0)
+        # one section b (1 + z⁻¹) / (1 + a z⁻¹): the numerator lags ω/2, the denominator
+        # arg(1 + a e^(−jω))
+        lag = order * (0.5 * w + math.atan2(-a * math.sin(w), 1.0 + a * math.cos(w)))
+        boxcar = 0.5 * self._average_window_s(period) if self.subsamples > 1 else 0.0
+        return max(0.0, setting.delay_s - lag / (2.0 * math.pi * f) - boxcar)
 
     def cutoff_hz(self) -> float | None:
         """The gyro chain's bandwidth (:meth:`filter_setting`); ``None`` with the gyro off."""

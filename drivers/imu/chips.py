@@ -38,6 +38,7 @@ __all__ = [
     "LSM6DSOX_ACCEL_LPF2_DIVISOR",
     "LSM6DSOX_BITS",
     "LSM6DSOX_GYRO_FILTER",
+    "LSM6DSOX_GYRO_PHASE_HZ",
     "LSM6DSOX_MAX_READER_ODR_HZ",
     "LSM6DSOX_ODR",
     "LSM6DSOX_REG",
@@ -1228,10 +1229,15 @@ _LSM6DSO_GYRO_BW: dict[int, tuple[tuple[float, float, float], ...]] = {
 _LSM6DSO_TABLE_14 = "AN5192 Rev 5 Table 14 ✓✓ (LSM6DSO32 DocID032891 Rev 1 Tables 18, 60)"
 _LSM6DSO_TABLE_60 = "LSM6DSO32 DocID032891 Rev 1 Table 60 ⚠ (AN5192 Table 14: not available)"
 
+#: The frequency at which AN5192 Table 14 gives each ODR code's phase delays, Hz.
+LSM6DSOX_GYRO_PHASE_HZ: Mapping[int, float] = MappingProxyType(
+    {code: rows[0][2] for code, rows in _LSM6DSO_GYRO_BW.items()})
+
 #: The LSM6DSOX's gyro filter settings, one tuple of rows per CTRL2_G.ODR_G code; a row's code
 #: is ``LPF1_SEL_G · 8 + FTYPE`` (0: LPF1 off, the reset; 8..15: LPF1 on, FTYPE 000..111), its
 #: bandwidth the whole chain's (:data:`_LSM6DSO_GYRO_BW`) and its delay the table's phase delay
-#: over its frequency (``φ / (360° f)``, ⚠ AN5192 only; None where no phase is given). The
+#: at :data:`LSM6DSOX_GYRO_PHASE_HZ` (``φ / (360° f)``, ⚠ AN5192 only; None where no phase is
+#: given). The
 #: filters are bypassed in the gyro's low-power mode (CTRL7_G.G_HM_MODE = 1, AN5192 Table 15),
 #: which gyrocal does not use.
 LSM6DSOX_GYRO_FILTER: Mapping[int, tuple[FilterSetting, ...]] = MappingProxyType({

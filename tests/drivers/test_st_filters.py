@@ -3,11 +3,11 @@ bandwidth the one the emulated chip applies.
 
 LSM6DSOX gyro: the chain's bandwidth per ODR and LPF1/FTYPE setting (AN5192 Rev 5 Table 14,
 LSM6DSO32 DocID032891 Rev 1 Table 60, written out below), a sine at that bandwidth keeps 1/√2,
-the noise per sample follows the bandwidth, and the filter runs on whatever the client's
-polling. LSM6DSOX accelerometer: LPF2 at ODR / HPCF_XL's divisor (AN5192 Table 10). LSM9DS1
-accelerometer: the anti-aliasing filter per ODR or BW_XL and the high-resolution low-pass at
-ODR / DCF's divisor (DocID025715 CTRL_REG6_XL / CTRL_REG7_XL as ST's lsm9ds1_reg.h and SparkFun
-transcribe them).
+the noise per sample follows the bandwidth, the filter runs on whatever the client's polling,
+and it lags a 20 Hz sine by the table's phase. LSM6DSOX accelerometer: LPF2 at ODR / HPCF_XL's
+divisor (AN5192 Table 10). LSM9DS1 accelerometer: the anti-aliasing filter per ODR or BW_XL and
+the high-resolution low-pass at ODR / DCF's divisor (DocID025715 CTRL_REG6_XL / CTRL_REG7_XL as
+ST's lsm9ds1_reg.h and SparkFun transcribe them).
 """
 
 from __future__ import annotations
@@ -132,6 +132,36 @@ def test_the_lsm6dsox_filter_runs_on_whatever_the_clients_polling():
     got = np.asarray([every[k] for k in ks]) / 57.14  # 17.5 mdps/LSB at ±500 °/s
     rising = got[(t > 0.3) & (t < 0.306)]
     assert rising.size >= 2 and np.all(rising < 70) and got[t > 0.40].min() > 99
+
+
+# AN5192 Table 14 at 417 Hz, written out: (LPF1_SEL_G, FTYPE) -> phase at 20 Hz, degrees
+AN5192_PHASE_417 = {(0, 0): 17.81, (1, 0b011): 21.11, (1, 0b100): 33.75, (1, 0b111): 76.33}
+
+
+@pytest.mark.parametrize("lpf1,ftype", sorted(AN5192_PHASE_417))
+def test_the_lsm6dsox_gyro_lags_a_20_hz_sine_by_the_tables_phase(lpf1, ftype):
+    # the emulated path (the first-order stand-in plus a pure delay making up the rest) lags a
+    # 20 Hz sine by the table's phase delay, read from the data registers every sample
+    f, amp = 20.0, 100 * DEG
+    motion = FunctionMotion(lambda t: np.column_stack(
+        [amp * np.sin(2 * np.pi * f * t), 0 * t, 0 * t]))
+    clock = VirtualClock()
+    bus, addr = make_emulated_imu("lsm6dsox", clock, motion, SensorTruth(), seed=1)
+    chip = bus.device(addr)
+    for reg, value in ((0x13, 0x02 * lpf1), (0x15, ftype), (0x11, 0x64)):  # 417 Hz, ±500 °/s
+        bus.write_byte_data(addr, reg, value)
+    ks, xs = [], []
+    while clock.monotonic() < 1.0:
+        clock.sleep(1 / ODR_417)
+        lo, hi = bus.read_i2c_block_data(addr, 0x22, 2)
+        xs.append(int.from_bytes(bytes((lo, hi)), "little", signed=True))
+        ks.append(chip.samples_taken)
+    t = chip.sample_time(np.asarray(ks))
+    keep = t > 0.4
+    basis = np.column_stack([np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t)])[keep]
+    c = np.linalg.lstsq(basis, np.asarray(xs, dtype=float)[keep], rcond=None)[0]
+    lag_deg = -math.degrees(math.atan2(c[1], c[0]))
+    assert lag_deg == pytest.approx(AN5192_PHASE_417[(lpf1, ftype)], abs=0.3)
 
 
 def _accel_sigma(model: str, odr: float, write) -> tuple[float, float, object]:
