@@ -24,7 +24,12 @@ impulse response ``h``: ``order`` equal bilinear first-order sections, the ICM-4
 second order at reset), against ``N √(2 ENBW)`` with the analog prototype's noise bandwidth
 (``π fc / 2`` for one section), and, where the datasheet gives a noise bandwidth (the
 ICM-20948's NBW column), against ``N √(2 NBW)``; with the filter's delay (its group delay at DC
-plus any pure delay) beside the datasheet's (the MPU-9250's CONFIG table; the others give none).
+plus any pure delay) beside the datasheet's (the MPU-9250's CONFIG table; the LSM6DSOX's phase
+delay in AN5192 Table 14 over its frequency; the others give none); (3) at ``--sim``'s rate, the
+bandwidth each reader states against the one its emulated chip applies, and the noise per
+sample there (:func:`sim_rate_rows`). The accelerometer table takes three settings per chip
+(the LSM6DSOX's LPF2 per AN5192 Table 10, the LSM9DS1's anti-aliasing and high-resolution
+filters per its CTRL_REG6_XL / CTRL_REG7_XL).
 A datasheet's RMS noise (MPU-9250: 0.1 °/s at 92 Hz) reads its density as one-sided,
 ``σ = N √NBW``: the emulator is √2 above that reading, on the safe side
 (:mod:`gyrocal.drivers.emulated.accel` says the same of the accelerometer).
@@ -108,7 +113,8 @@ NOISE_SETTINGS: dict[str, tuple[float, float, tuple[float, ...], float]] = {
     "lsm9ds1": (952.0, 245.0, (58.0, 100.0, 33.0), 952.0),  # LPF2 at the output rate
     "icm20948": (1125.0, 250.0, (51.2, 196.6, 5.7), 1125.0),  # DLPF at the internal 1125 Hz
     "icm42688p": (1000.0, 250.0, (125.0, 250.0, 25.0), 1000.0),  # UI filter at the ODR
-    "lsm6dsox": (1 / (48 * 25e-6), 250.0, (), 1 / (48 * 25e-6)),  # no filter emulated
+    # the gyro chain at 833 Hz (AN5192 Table 14): LPF1 off 295.5, FTYPE 100 96.6, 110 25.0 Hz
+    "lsm6dsox": (1 / (48 * 25e-6), 250.0, (295.5, 96.6, 25.0), 1 / (48 * 25e-6)),
 }
 
 
@@ -222,6 +228,15 @@ ACCEL_SETTINGS: dict[str, tuple[float, tuple[tuple[str, list[tuple[int, ...]]], 
     # GYRO_ACCEL_CONFIG0 (0x52) bits 7:4 ACCEL_UI_FILT_BW 1 (the reset), 3, 7
     "icm42688p": (1000.0, tuple((f"ACCEL_UI_FILT_BW {c}", [(0x52, 0xF0, c << 4)])
                                 for c in (1, 3, 7))),
+    # CTRL1_XL (0x10) bit 1 LPF2_XL_EN off (LPF1, ODR/2: the per-sample mean); on with CTRL8_XL
+    # (0x17) HPCF_XL 000 (ODR/4) and 100 (ODR/100), AN5192 Table 10
+    "lsm6dsox": (208.0, (("LPF2 off", []),
+                         ("HPCF_XL 000", [(0x10, 0x02, 0x02), (0x17, 0x00)]),
+                         ("HPCF_XL 100", [(0x10, 0x02, 0x02), (0x17, 0x80)]))),
+    # CTRL_REG6_XL (0x20) BW_SCAL_ODR 0 (105 Hz at 238 Hz) or 1 with BW_XL 11 (50 Hz);
+    # CTRL_REG7_XL (0x21) HR with DCF 10 (ODR/9)
+    "lsm9ds1": (238.0, (("BW_SCAL_ODR 0", []), ("BW_XL 11", [(0x20, 0x07, 0x07)]),
+                        ("HR, DCF 10", [(0x21, 0xC0)]))),
 }
 
 
@@ -277,6 +292,41 @@ def accel_rows(seconds: float) -> list[list[object]]:
     return rows
 
 
+def sim_rate_rows(seconds: float) -> list[list[object]]:
+    """Each chip at rest through its reader at ``--sim``'s rate (200 Hz asked, the nearest the
+    reader offers) with the reader's default filter: the bandwidth the reader states, the one
+    the emulated chip applies, the rate its filter runs at, and the gyro noise per sample
+    against the design at that rate (:func:`predicted_sigma`) and against the analog
+    prototype's ``N √(2 ENBW)``."""
+    from gyrocal.drivers.imu import nearest_offered_rate
+
+    rows: list[list[object]] = []
+    for seed, model in enumerate(sorted(READERS)):
+        odr = nearest_offered_rate(model, 200.0)
+        clock = VirtualClock()
+        bus, addr = make_emulated_imu(model, clock, seed=seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            reader = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=odr)
+        reader.start()
+        chunks = []
+        while clock.monotonic() < seconds:
+            clock.sleep(0.02)
+            chunks.append(reader.read().rate)
+        rate = np.vstack(chunks)[int(0.5 * odr):]
+        chip = bus.device(addr)
+        fc, order = chip.cutoff_hz(), chip.filter_order()
+        filter_rate = chip._filter_rate_hz()
+        n = READERS[model].family.gyro_errors.noise_density_rad_s_sqrt_hz
+        sigma = float(np.mean(np.std(rate, axis=0)))
+        want = predicted_sigma(n, fc, filter_rate, order)
+        analog = n * math.sqrt(2 * analog_enbw_hz(fc, order)) if fc else float("nan")
+        rows.append([model, odr, reader.info.lowpass_hz, fc or "none", order, filter_rate,
+                     sigma / RAD_PER_DEG, want / RAD_PER_DEG, sigma / want,
+                     analog / RAD_PER_DEG])
+    return rows
+
+
 def main(argv: list[str]) -> None:
     """Print the table (see the module docstring)."""
     quick = "--quick" in argv
@@ -296,6 +346,11 @@ def main(argv: list[str]) -> None:
                  "datasheet delay ms"], per_sample,
                 title="Noise per sample against the filter bandwidth (white noise ahead of the "
                       "filter)")
+    print_table(["chip", "odr Hz", "reader's filter Hz", "emulated filter Hz", "order",
+                 "filter rate Hz", "σ/sample °/s", "predicted °/s", "ratio",
+                 "N√(2 ENBW) °/s"], sim_rate_rows(noise_s / 4),
+                title="At --sim's rate (200 Hz asked), the reader's default filter: stated and "
+                      "emulated bandwidth, noise per sample")
     accel = accel_rows(5.0 if quick else 20.0)
     print_table(["chip", "setting", "filter Hz", "order", "filter rate Hz", "σ/sample mg",
                  "predicted mg", "ratio", "N√(2 NBW) datasheet mg", "datasheet delay ms",

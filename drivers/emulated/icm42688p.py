@@ -222,15 +222,13 @@ class EmulatedICM42688P(UserBanks, _EmulatedImu):
     def cutoff_hz(self) -> float | None:
         """The emulated output filter's bandwidth: the UI filter's (GYRO_ACCEL_CONFIG0.
         GYRO_UI_FILT_BW codes 0..7; the low-latency codes are treated as ODR/2); ``None`` with
-        the gyro off or a bandwidth of ODR/2 or more (no filter beyond the per-sample mean)."""
+        the gyro off. A bandwidth of ODR/2 or more (codes 0 and 1 below 400 Hz) runs faster
+        than the ODR (:func:`~gyrocal.drivers.emulated.imu_chips.filter_steps`)."""
         odr = self._odr_hz()
         if odr is None:
             return None
         code = self._regs[_R.GYRO_ACCEL_CONFIG0] & _B.GYRO_UI_FILT_BW_MASK
-        bandwidth = icm42688p_bandwidth_hz(odr, code if code <= 7 else 0)
-        # a first-order stand-in at or above Nyquist would be a pole at z = -1 (undamped):
-        # there the per-sample mean is the only filter emulated
-        return bandwidth if bandwidth < 0.5 * odr else None
+        return icm42688p_bandwidth_hz(odr, code if code <= 7 else 0)
 
     def accel_filter_setting(self) -> FilterSetting | None:
         """The accelerometer UI filter: GYRO_ACCEL_CONFIG0.ACCEL_UI_FILT_BW's bandwidth (the

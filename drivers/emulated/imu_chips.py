@@ -63,6 +63,9 @@ from gyrocal.drivers.emulated.smbus import EmulatedSMBus, I2CDevice
 from gyrocal.drivers.imu.chips import (
     GYRO_OFFSET_COUNTS_PER_CODE_FS0,
     LSM9DS1,
+    LSM9DS1_ACCEL_AA_AUTO_HZ,
+    LSM9DS1_ACCEL_AA_FILTER,
+    LSM9DS1_ACCEL_HR_DIVISOR,
     LSM9DS1_BITS,
     LSM9DS1_BW_G_CUTOFF_HZ,
     LSM9DS1_LPF1_CUTOFF_HZ,
@@ -83,6 +86,7 @@ __all__ = [
     "EmulatedMPU9250",
     "SensorRealism",
     "SensorTruth",
+    "filter_steps",
     "make_emulated_imu",
 ]
 
@@ -442,6 +446,31 @@ class _Ahead:
     accel_lpf: np.ndarray | None = None
     accel_key: tuple[float, int, float] | None = None
     start_accel_lpf: Any = None
+
+
+def filter_steps(bandwidth_hz: float, odr_hz: float) -> int:
+    """Filter steps per output sample for a chip whose output filter runs at its output rate:
+    1 while the bandwidth is below half that rate; a bandwidth at or above it (the ICM-42688-P's
+    GYRO_UI_FILT_BW 0 and 1 below 400 Hz, DS-000347; the LSM6DSOX's LPF2 at 1.67 kHz, AN5192
+    Table 14), which no filter at the output rate has, runs at the smallest power-of-two
+    multiple of the output rate that holds it below a quarter of the filter's rate, and the
+    output is its last step (as silicon, whose filters run at an internal rate and are
+    decimated: the noise above half the output rate aliases in). The internal rates are not
+    published (⚠ a stand-in; the LSM6DSOX's 1.67 kHz lands on its 6.67 kHz base rate).
+
+    Parameters
+    ----------
+    bandwidth_hz : float
+        The filter's −3 dB bandwidth.
+    odr_hz : float
+        The output data rate.
+    """
+    if bandwidth_hz < 0.5 * odr_hz:
+        return 1
+    steps = 2
+    while bandwidth_hz >= 0.25 * steps * odr_hz:
+        steps *= 2
+    return steps
 
 
 def _memory(k: float, order: int, steps: int) -> int:
@@ -1081,17 +1110,24 @@ class _EmulatedImu(ABC):
     def _average_window_s(self, period: float) -> float:
         """The span the true rate is averaged over for one output sample (see
         :meth:`_true_rate`): the output period, or with a filter at the internal rate one
-        internal sample only (the filter, not the decimation, is then the anti-alias filter)."""
-        if not self.filters_at_internal_rate or self._lowpass_hz() is None:
+        internal sample only (the filter, not the decimation, is then the anti-alias filter),
+        or one step of a filter run faster than the output rate (:func:`filter_steps`)."""
+        if self._lowpass_hz() is None:
             return period
+        if not self.filters_at_internal_rate:
+            return period / self._internal_per_output(period)
         return min(period, 1.0 / self.family.extra["internal_rate_hz"])
 
     def _internal_per_output(self, period: float) -> int:
-        """Internal samples the chip filters per output sample: 1 when it filters at the output
-        rate; with a filter at the internal rate, the rate divider's ``1 + SMPLRT_DIV``
-        (register map CONFIG, SMPLRT_DIV; hardware reference §1.4)."""
-        if not self.filters_at_internal_rate or self._lowpass_hz() is None:
+        """Internal samples the chip filters per output sample: with a filter at the internal
+        rate, the rate divider's ``1 + SMPLRT_DIV`` (register map CONFIG, SMPLRT_DIV; hardware
+        reference §1.4); else :func:`filter_steps` (1 unless the bandwidth reaches half the
+        output rate)."""
+        fc = self._lowpass_hz()
+        if fc is None:
             return 1
+        if not self.filters_at_internal_rate:
+            return filter_steps(fc, 1.0 / period)
         return max(1, round(period * self.family.extra["internal_rate_hz"]))
 
     def _internal_rates(self, t: np.ndarray, period: float, peek: bool = False) -> np.ndarray:
@@ -1177,12 +1213,13 @@ class _EmulatedImu(ABC):
         ICM-42688-P's ACCEL_UI_FILT_ORD)."""
         return 1
 
-    def _accel_filter_rate_hz(self, odr: float) -> float:
-        """The rate the accelerometer filter runs at: the chip's internal rate ahead of its
-        divider where the filter runs there (the InvenSense DLPFs), else the output rate."""
+    def _accel_filter_rate_hz(self, odr: float, bandwidth_hz: float) -> float:
+        """The rate the accelerometer filter of ``bandwidth_hz`` runs at: the chip's internal
+        rate ahead of its divider where the filter runs there (the InvenSense DLPFs), else the
+        output rate times :func:`filter_steps`."""
         if self.filters_at_internal_rate:
             return max(odr, float(self.family.extra["internal_rate_hz"]))
-        return odr
+        return odr * filter_steps(bandwidth_hz, odr)
 
     def _accel_filter_key(self, odr: float) -> tuple[float, int, float] | None:
         """The emulated accelerometer filter as ``(bandwidth, order, rate)`` (with the chip's
@@ -1191,7 +1228,7 @@ class _EmulatedImu(ABC):
         setting = self.accel_filter_setting() if self.output_filter else None
         if setting is None:
             return None
-        rate = self._accel_filter_rate_hz(odr)
+        rate = self._accel_filter_rate_hz(odr, setting.bandwidth_hz)
         if setting.bandwidth_hz >= 0.5 * rate:
             return None
         return setting.bandwidth_hz, self.accel_filter_order(), rate
@@ -1636,6 +1673,34 @@ class EmulatedLSM9DS1(_EmulatedImu):
                                  "ST DocID025715 Table 47 (BW_G), hardware reference §2.3 ⚠")
         return FilterSetting(0, LSM9DS1_LPF1_CUTOFF_HZ[odr], None, None,
                              "ST DocID025715 Table 46 (LPF1), hardware reference §2.3")
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer's filter: in high-resolution mode (CTRL_REG7_XL.HR = 1, FDS = 0)
+        the digital low-pass at ODR / DCF's divisor (:data:`~gyrocal.drivers.imu.chips.
+        LSM9DS1_ACCEL_HR_DIVISOR`, code DCF | 0x10); else the analog anti-aliasing filter,
+        BW_XL's with BW_SCAL_ODR = 1 (:data:`~gyrocal.drivers.imu.chips.
+        LSM9DS1_ACCEL_AA_FILTER`), else the ODR's (:data:`~gyrocal.drivers.imu.chips.
+        LSM9DS1_ACCEL_AA_AUTO_HZ`), while it is below half the ODR: a wider one (408 Hz at
+        14.9 and 59.5 Hz) is left to the per-sample mean, the chip's decimation ahead of the
+        output being unpublished. With HR on, the anti-aliasing filter (at least 0.42 ODR
+        where it acts) is left out beside the digital low-pass (at most ODR/9) ⚠. FDS = 1
+        (the high-pass output) is not emulated. ``None`` with the gyro off (the
+        accelerometer's own ODR is not emulated)."""
+        odr = self._odr_hz()
+        if odr is None:
+            return None
+        reg6, reg7 = self._regs[_LR.CTRL_REG6_XL], self._regs[_LR.CTRL_REG7_XL]
+        if reg7 & _LB.XL_HR and not reg7 & _LB.XL_FDS:
+            dcf = (reg7 & _LB.DCF_MASK) >> _LB.DCF_SHIFT
+            return FilterSetting(0x10 | dcf, odr / LSM9DS1_ACCEL_HR_DIVISOR[dcf], None, None,
+                                 "DocID025715 CTRL_REG7_XL DCF ✓✓ (ST lsm9ds1_reg.h; SparkFun "
+                                 "LSM9DS1_Settings)")
+        if reg6 & _LB.BW_SCAL_ODR:
+            setting = LSM9DS1_ACCEL_AA_FILTER[reg6 & _LB.BW_XL_MASK]
+        else:
+            setting = FilterSetting(0, LSM9DS1_ACCEL_AA_AUTO_HZ[odr], None, None,
+                                    "DocID025715 CTRL_REG6_XL BW_SCAL_ODR = 0")
+        return setting if setting.bandwidth_hz < 0.5 * odr else None
 
 
     def _reset_state(self) -> None:

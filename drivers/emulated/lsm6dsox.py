@@ -31,11 +31,19 @@ What it models:
 - STATUS_REG (0x1E): XLDA, GDA, TDA set with every new sample (XLDA while the accelerometer is
   on) and each cleared when its output registers are read ⚠ (ST's rule for its STATUS_REG,
   AN5192; the LSM9DS1 model does the same).
-- No output low-pass is emulated (the gyro chain's bandwidth with LPF1 off is not transcribed ⚠).
+- The gyro's output filter is the chain of AN5192 Table 14 (:data:`~gyrocal.drivers.imu.chips.
+  LSM6DSOX_GYRO_FILTER`): LPF2 alone, or with CTRL4_C.LPF1_SEL_G set LPF1 + LPF2 at
+  CTRL6_C.FTYPE's bandwidth, the white noise entering ahead of it, and a pure delay making the
+  output's phase delay at the table's frequency the table's (⚠ AN5192 only); the accelerometer's
+  LPF2 at ODR / CTRL8_XL.HPCF_XL's divisor when CTRL1_XL.LPF2_XL_EN is set (HP_SLOPE_XL_EN clear;
+  :data:`~gyrocal.drivers.imu.chips.LSM6DSOX_ACCEL_LPF2_DIVISOR`), LPF1's ODR/2 alone being the
+  per-sample mean. The filters' shapes are not published: the emulator's first-order stand-in
+  at the table's −3 dB bandwidth stands in (⚠); the accelerometer shares the gyro's ODR.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any
 
@@ -44,7 +52,16 @@ import numpy as np
 from gyrocal.drivers.clock import Clock
 from gyrocal.drivers.emulated.imu_chips import SensorTruth, _EmulatedImu
 from gyrocal.drivers.emulated.motion import MotionSource
-from gyrocal.drivers.imu.chips import LSM6DSOX, LSM6DSOX_BITS, LSM6DSOX_ODR, LSM6DSOX_REG
+from gyrocal.drivers.imu.chips import (
+    LSM6DSOX,
+    LSM6DSOX_ACCEL_LPF2_DIVISOR,
+    LSM6DSOX_BITS,
+    LSM6DSOX_GYRO_PHASE_HZ,
+    LSM6DSOX_ODR,
+    LSM6DSOX_REG,
+    FilterSetting,
+    lsm6dsox_gyro_filter,
+)
 
 __all__ = ["EmulatedLSM6DSOX"]
 
@@ -68,7 +85,8 @@ class EmulatedLSM6DSOX(_EmulatedImu):
     clock, motion, truth, faults, seed, subsamples
         As for :class:`~gyrocal.drivers.emulated.imu_chips.EmulatedMPU9250`.
     output_filter : bool
-        Accepted for a uniform interface; no output filter is emulated.
+        Whether the gyro and accelerometer output filters are emulated (``--sim``'s ``dlpf``
+        effect); ``False`` leaves the per-sample mean.
     """
 
     family = LSM6DSOX
@@ -106,6 +124,7 @@ class EmulatedLSM6DSOX(_EmulatedImu):
         self._ovr_now = False
         self._slot = 0
         self._status = 0
+        self._lpf = None
 
     def _after_samples(self) -> None:
         """New samples: STATUS_REG's GDA and TDA, and XLDA while the accelerometer is on."""
@@ -123,6 +142,54 @@ class EmulatedLSM6DSOX(_EmulatedImu):
     def _odr_hz(self) -> float | None:
         entry = LSM6DSOX_ODR.get(self._regs[_R.CTRL2_G] >> _B.ODR_SHIFT)
         return None if entry is None else entry[1]
+
+    def filter_setting(self) -> FilterSetting | None:
+        """The gyro chain's row of AN5192 Table 14 for CTRL2_G.ODR_G, CTRL4_C.LPF1_SEL_G and
+        CTRL6_C.FTYPE (:func:`~gyrocal.drivers.imu.chips.lsm6dsox_gyro_filter`); ``None``
+        with the gyro off."""
+        code = self._regs[_R.CTRL2_G] >> _B.ODR_SHIFT
+        if code not in LSM6DSOX_ODR:
+            return None
+        return lsm6dsox_gyro_filter(code, bool(self._regs[_R.CTRL4_C] & _B.LPF1_SEL_G),
+                                    self._regs[_R.CTRL6_C] & _B.FTYPE_MASK)
+
+    def _pure_delay_s(self, period: float) -> float:
+        """What the table's phase delay at its frequency (AN5192 Table 14, ⚠ one source) has
+        beyond the emulated path's there: the first-order stand-in's phase delay at that
+        frequency and the per-sample mean's half window (as the MPU-9250's CONFIG-table
+        delay is made up)."""
+        setting = self.filter_setting() if self.output_filter else None
+        section, rate = self._filter_section(), self._filter_rate_hz()
+        if setting is None or setting.delay_s is None or section is None or rate is None:
+            return 0.0
+        f = LSM6DSOX_GYRO_PHASE_HZ[self._regs[_R.CTRL2_G] >> _B.ODR_SHIFT]
+        k, order = section
+        w = 2.0 * math.pi * f / rate
+        a = (k - 1.0) / (k + 1.0)
+        # one section b (1 + z⁻¹) / (1 + a z⁻¹): the numerator lags ω/2, the denominator
+        # arg(1 + a e^(−jω))
+        lag = order * (0.5 * w + math.atan2(-a * math.sin(w), 1.0 + a * math.cos(w)))
+        boxcar = 0.5 * self._average_window_s(period) if self.subsamples > 1 else 0.0
+        return max(0.0, setting.delay_s - lag / (2.0 * math.pi * f) - boxcar)
+
+    def cutoff_hz(self) -> float | None:
+        """The gyro chain's bandwidth (:meth:`filter_setting`); ``None`` with the gyro off."""
+        setting = self.filter_setting()
+        return None if setting is None else setting.bandwidth_hz
+
+    def accel_filter_setting(self) -> FilterSetting | None:
+        """The accelerometer's LPF2 with CTRL1_XL.LPF2_XL_EN set and CTRL8_XL.HP_SLOPE_XL_EN
+        clear: ODR / HPCF_XL's divisor (AN5192 Table 10), at the gyro's ODR, which the
+        emulated accelerometer shares; ``None`` otherwise (LPF1's ODR/2 is the per-sample
+        mean) or with the chip not sampling."""
+        odr = self._odr_hz()
+        ctrl8 = self._regs[_R.CTRL8_XL]
+        if (odr is None or not self._regs[_R.CTRL1_XL] & _B.LPF2_XL_EN
+                or ctrl8 & _B.HP_SLOPE_XL_EN):
+            return None
+        hpcf = ctrl8 >> _B.HPCF_XL_SHIFT
+        return FilterSetting(hpcf, odr / LSM6DSOX_ACCEL_LPF2_DIVISOR[hpcf], None, None,
+                             "AN5192 Rev 5 Table 10 ✓✓ (LSM6DSO32 DocID032891 Rev 1 Table 65)")
 
     def _sensitivity_rad_s_per_lsb(self) -> float:
         ctrl2 = self._regs[_R.CTRL2_G]

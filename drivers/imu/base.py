@@ -51,6 +51,7 @@ __all__ = [
     "SensorInfo",
     "TimestampedFifoReader",
     "divided_rate",
+    "default_band",
     "filter_band",
     "nearest_rate",
     "open_bus",
@@ -102,10 +103,20 @@ def divided_rate(chip: str, base_hz: float, odr_hz: float, divider: str,
     return actual, div
 
 
+def default_band(bands: Iterable[float], odr_hz: float) -> float:
+    """The readers' default gyro bandwidth among ``bands``, Hz: the widest below half
+    ``odr_hz`` (the narrowest if none is). Below, not at: a filter at half the output rate or
+    wider runs ahead of a decimation on the chip and lets the noise above half the rate alias
+    in (:func:`gyrocal.drivers.emulated.imu_chips.filter_steps`), which the datasheets' noise
+    densities do not include."""
+    ordered = sorted(bands, reverse=True)
+    return next((b for b in ordered if b < odr_hz / 2), ordered[-1])
+
+
 def filter_band(chip: str, bands: Iterable[float], lowpass_hz: float | None,
                 odr_hz: float) -> float:
     """The gyro low-pass bandwidth, Hz: ``lowpass_hz`` when it is one of ``bands`` (to 0.5 Hz),
-    else by default the widest below half ``odr_hz`` (the narrowest if none is).
+    else :func:`default_band`.
 
     Raises
     ------
@@ -114,7 +125,7 @@ def filter_band(chip: str, bands: Iterable[float], lowpass_hz: float | None,
     """
     ordered = sorted(bands, reverse=True)
     if lowpass_hz is None:
-        return next((b for b in ordered if b <= odr_hz / 2), ordered[-1])
+        return default_band(ordered, odr_hz)
     lp = next((b for b in ordered if abs(b - float(lowpass_hz)) <= 0.5), None)
     if lp is None:
         raise ConfigurationError(
@@ -671,7 +682,7 @@ class ImuReader(ABC):
             Output data rate; one the chip offers (within 1 %; the error lists them).
         lowpass_hz : float, optional
             Gyro low-pass bandwidth; one the chip offers at that rate. By default the widest
-            bandwidth not above half the rate.
+            bandwidth below half the rate (:func:`default_band`).
 
         Returns
         -------

@@ -36,11 +36,17 @@ __all__ = [
     "ICM42688P_ST_DATA",
     "ICM42688P_UI_FILT_DIVISOR",
     "LSM6DSOX",
+    "LSM6DSOX_ACCEL_LPF2_DIVISOR",
     "LSM6DSOX_BITS",
+    "LSM6DSOX_GYRO_FILTER",
+    "LSM6DSOX_GYRO_PHASE_HZ",
     "LSM6DSOX_MAX_READER_ODR_HZ",
     "LSM6DSOX_ODR",
     "LSM6DSOX_REG",
     "LSM9DS1",
+    "LSM9DS1_ACCEL_AA_AUTO_HZ",
+    "LSM9DS1_ACCEL_AA_FILTER",
+    "LSM9DS1_ACCEL_HR_DIVISOR",
     "LSM9DS1_BITS",
     "LSM9DS1_BW_G_CUTOFF_HZ",
     "LSM9DS1_LPF1_CUTOFF_HZ",
@@ -69,6 +75,7 @@ __all__ = [
     "RAD_PER_DEG",
     "STANDARD_GRAVITY_M_S2",
     "icm42688p_bandwidth_hz",
+    "lsm6dsox_gyro_filter",
     "register_names",
 ]
 
@@ -646,6 +653,7 @@ class _LSM9DS1Registers:
     CTRL_REG4: int = 0x1E
     CTRL_REG5_XL: int = 0x1F
     CTRL_REG6_XL: int = 0x20
+    CTRL_REG7_XL: int = 0x21
     CTRL_REG8: int = 0x22
     CTRL_REG9: int = 0x23
     OUT_X_L_XL: int = 0x28
@@ -667,6 +675,15 @@ class _LSM9DS1Bits:
     OUT_SEL_MASK: int = 0x03
     OUT_SEL_LPF2: int = 0x02
     FS_XL_SHIFT: int = 3
+    # CTRL_REG6_XL [ODR_XL2:0][FS1:0_XL][BW_SCAL_ODR][BW_XL1:0] and CTRL_REG7_XL
+    # [HR][DCF1:0][0][0][FDS][0][HPIS1] (DocID025715 Tables 67-70, as SparkFun's
+    # SparkFunLSM9DS1.cpp initAccel comments transcribe them; ST lsm9ds1_reg.h bit fields)
+    BW_SCAL_ODR: int = 0x04
+    BW_XL_MASK: int = 0x03
+    XL_HR: int = 0x80
+    DCF_SHIFT: int = 5
+    DCF_MASK: int = 0x60
+    XL_FDS: int = 0x04
     CTRL_REG4_GYRO_AXES: int = 0x38
     CTRL_REG8_BOOT: int = 0x80
     CTRL_REG8_BDU: int = 0x40
@@ -717,6 +734,36 @@ LSM9DS1_BW_G_CUTOFF_HZ: Mapping[float, tuple[float, float, float, float]] = Mapp
         476.0: (21.0, 28.0, 57.0, 100.0),
         952.0: (33.0, 40.0, 58.0, 100.0),
     }
+)
+
+#: The accelerometer's analog anti-aliasing filter, CTRL_REG6_XL.BW_XL with BW_SCAL_ODR = 1:
+#: 00 408 Hz, 01 211 Hz, 10 105 Hz, 11 50 Hz (DocID025715 CTRL_REG6_XL description) ✓✓ ST's
+#: lsm9ds1_reg.h ``lsm9ds1_xl_aa_bw_t`` (LSM9DS1_408Hz = 0x10 .. LSM9DS1_50Hz = 0x13, the 0x10
+#: being BW_SCAL_ODR) and SparkFun's LSM9DS1_Settings.ino ("0 = 408 Hz 2 = 105 Hz, 1 = 211 Hz
+#: 3 = 50 Hz"). No delay or noise bandwidth is given.
+_LSM9DS1_AA = "DocID025715 CTRL_REG6_XL BW_XL ✓✓ (ST lsm9ds1_reg.h; SparkFun LSM9DS1_Settings)"
+LSM9DS1_ACCEL_AA_FILTER: tuple[FilterSetting, ...] = (
+    FilterSetting(0b00, 408.0, None, None, _LSM9DS1_AA),
+    FilterSetting(0b01, 211.0, None, None, _LSM9DS1_AA),
+    FilterSetting(0b10, 105.0, None, None, _LSM9DS1_AA),
+    FilterSetting(0b11, 50.0, None, None, _LSM9DS1_AA),
+)
+#: The anti-aliasing bandwidth with BW_SCAL_ODR = 0 (the reset: "bandwidth determined by ODR
+#: selection: BW = 408 Hz when ODR = 952 Hz, 50 Hz, 10 Hz; BW = 211 Hz when ODR = 476 Hz; BW =
+#: 105 Hz when ODR = 238 Hz; BW = 50 Hz when ODR = 119 Hz", DocID025715, as SparkFun's
+#: SparkFunLSM9DS1.cpp initAccel and other open drivers quote it), keyed by the gyro ODR that
+#: sets the accelerometer's rate while the gyro is on (ODR code 1, 2, 6: 408 Hz; the
+#: accelerometer-only 10 and 50 Hz are codes 1 and 2).
+LSM9DS1_ACCEL_AA_AUTO_HZ: Mapping[float, float] = MappingProxyType(
+    {14.9: 408.0, 59.5: 408.0, 119.0: 50.0, 238.0: 105.0, 476.0: 211.0, 952.0: 408.0}
+)
+#: The accelerometer's digital low-pass in high-resolution mode (CTRL_REG7_XL.HR = 1, FDS = 0):
+#: DCF[1:0] → the divisor of the ODR that is its cutoff, 00 ODR/50, 01 ODR/100, 10 ODR/9, 11
+#: ODR/400 (DocID025715 CTRL_REG7_XL) ✓✓ ST's lsm9ds1_reg.h ``lsm9ds1_xl_lp_bw_t``
+#: (LSM9DS1_LP_ODR_DIV_50 = 0x10 .. _DIV_400 = 0x13, 0x10 being HR) and SparkFun's
+#: LSM9DS1_Settings.ino ("0 = ODR/50 2 = ODR/9, 1 = ODR/100 3 = ODR/400").
+LSM9DS1_ACCEL_HR_DIVISOR: Mapping[int, float] = MappingProxyType(
+    {0b00: 50.0, 0b01: 100.0, 0b10: 9.0, 0b11: 400.0}
 )
 
 LSM9DS1 = ChipFamily(
@@ -1098,8 +1145,9 @@ class _LSM6DSOXRegisters:
     CTRL2_G: int = 0x11
     CTRL3_C: int = 0x12
     CTRL4_C: int = 0x13
-    CTRL6_C: int = 0x15
+    CTRL6_C: int = 0x15  # FTYPE[2:0]: the gyro LPF1 bandwidth (:data:`LSM6DSOX_GYRO_FILTER`)
     CTRL7_G: int = 0x16
+    CTRL8_XL: int = 0x17  # HPCF_XL[7:5], HP_SLOPE_XL_EN[2]: the accelerometer LPF2 / HPF
     CTRL10_C: int = 0x19
     STATUS_REG: int = 0x1E
     OUT_TEMP_L: int = 0x20
@@ -1122,6 +1170,15 @@ class _LSM6DSOXBits:
     FS_G_MASK: int = 0x0C
     FS_125: int = 0x02
     FS_XL_SHIFT: int = 2
+    # the filters (AN5192 Rev 5 §3.8, §3.10; LSM6DSO32 DocID032891 Rev 1 Tables 43, 57, 65):
+    # CTRL4_C bit 1 routes the gyro through LPF1, CTRL6_C bits 2:0 set its bandwidth; CTRL1_XL
+    # bit 1 selects the accelerometer's LPF2 output, CTRL8_XL bits 7:5 its cutoff and bit 2
+    # the high-pass path instead
+    LPF1_SEL_G: int = 0x02
+    FTYPE_MASK: int = 0x07
+    LPF2_XL_EN: int = 0x02
+    HPCF_XL_SHIFT: int = 5
+    HP_SLOPE_XL_EN: int = 0x04
     CTRL3_C_BOOT: int = 0x80
     CTRL3_C_BDU: int = 0x40
     CTRL3_C_IF_INC: int = 0x04
@@ -1168,6 +1225,92 @@ LSM6DSOX_ODR: Mapping[int, tuple[float, float]] = MappingProxyType(
      for code, nominal in ((1, 12.5), (2, 26.0), (3, 52.0), (4, 104.0), (5, 208.0), (6, 416.0),
                            (7, 833.0), (8, 1666.0), (9, 3333.0), (10, 6667.0))}
 )
+#: The gyro chain's bandwidth in Mode 1/2, high-performance mode (AN5192 Rev 5 Table 14
+#: "Gyroscope overall bandwidth selection", LSM6DSO, the LSM6DSOX's gyro and registers), one
+#: row per CTRL2_G.ODR_G code: the bandwidth with LPF1 off (LPF2 alone, which the user cannot
+#: set), then with CTRL4_C.LPF1_SEL_G = 1 for CTRL6_C.FTYPE 000..111, and each setting's phase
+#: delay as the table gives it (degrees at a frequency, Hz). ✓✓ with the LSM6DSO32 datasheet
+#: DocID032891 Rev 1 (Table 18, LPF2 alone; Table 60, LPF1 + LPF2: every bandwidth the same);
+#: the 6.67 kHz row's FTYPE 000..011 also in Betaflight's LSM6DSO driver (``..._FTYPE_335HZ``,
+#: ``_232HZ``, ``_171HZ``, ``_609HZ``: "gyro LPF1 cutoff 335.5hz" ...). At 3.33 and 6.67 kHz
+#: AN5192 has FTYPE 1xx "not available" where DocID032891 gives 100.4/100.6, 49.9, 25.1, 12.5
+#: Hz: those eight come from the datasheet alone (⚠). The phases are AN5192's only (⚠).
+_LSM6DSO_GYRO_BW: dict[int, tuple[tuple[float, float, float], ...]] = {
+    # code: ((bandwidth, phase °, at Hz) for LPF1 off, FTYPE 000, 001, ..., 111)
+    1: ((4.2, 36, 1.3),) * 6 + ((4.2, 36, 1.3), (4.1, 36, 1.3), (3.9, 36, 1.3)),
+    2: ((8.3, 36, 2.5),) * 7 + ((7.8, 36, 2.5), (6.7, 36, 2.5)),
+    3: ((16.6, 36, 5),) * 5 + ((16.7, 39, 5), (16.8, 43, 5), (13.4, 45, 5), (9.7, 49, 5)),
+    4: ((33.0, 36, 10),) + ((33.0, 38, 10),) * 4 + ((33.0, 43, 10), (31.0, 52, 10),
+                                                    (19.0, 55, 10), (11.5, 64, 10)),
+    5: ((66.8, 35.09, 20),) + ((67.0, 39, 20),) * 4 + ((62.4, 51.03, 20), (43.2, 68.67, 20),
+                                                      (23.1, 74.11, 20), (12.2, 93.61, 20)),
+    6: ((135.9, 17.81, 20), (136.6, 22.89, 20), (130.5, 24.98, 20), (120.3, 27.38, 20),
+        (137.1, 21.11, 20), (86.7, 33.75, 20), (48.0, 51.39, 20), (24.6, 56.83, 20),
+        (12.4, 76.33, 20)),
+    7: ((295.5, 9.17, 20), (239.2, 14.25, 20), (192.4, 16.34, 20), (154.2, 18.74, 20),
+        (281.8, 12.47, 20), (96.6, 25.11, 20), (49.4, 42.75, 20), (25.0, 48.19, 20),
+        (12.5, 67.69, 20)),
+    8: ((1108.1, 4.85, 20), (304.2, 9.93, 20), (220.7, 12.02, 20), (166.6, 14.42, 20),
+        (453.2, 8.15, 20), (99.6, 20.79, 20), (49.8, 38.43, 20), (25.1, 43.87, 20),
+        (12.5, 63.37, 20)),
+    9: ((1320.7, 2.69, 20), (328.5, 7.77, 20), (229.6, 9.86, 20), (170.1, 12.26, 20),
+        (559.2, 5.99, 20), (100.4, 0, 0), (49.9, 0, 0), (25.1, 0, 0), (12.5, 0, 0)),
+    10: ((1441.8, 1.61, 20), (335.5, 6.69, 20), (232.0, 8.78, 20), (171.1, 11.18, 20),
+         (609.0, 4.91, 20), (100.6, 0, 0), (49.9, 0, 0), (25.1, 0, 0), (12.5, 0, 0)),
+}
+_LSM6DSO_TABLE_14 = "AN5192 Rev 5 Table 14 ✓✓ (LSM6DSO32 DocID032891 Rev 1 Tables 18, 60)"
+_LSM6DSO_TABLE_60 = "LSM6DSO32 DocID032891 Rev 1 Table 60 ⚠ (AN5192 Table 14: not available)"
+
+#: The frequency at which AN5192 Table 14 gives each ODR code's phase delays, Hz.
+LSM6DSOX_GYRO_PHASE_HZ: Mapping[int, float] = MappingProxyType(
+    {code: rows[0][2] for code, rows in _LSM6DSO_GYRO_BW.items()})
+
+#: The LSM6DSOX's gyro filter settings, one tuple of rows per CTRL2_G.ODR_G code; a row's code
+#: is ``LPF1_SEL_G · 8 + FTYPE`` (0: LPF1 off, the reset; 8..15: LPF1 on, FTYPE 000..111), its
+#: bandwidth the whole chain's (:data:`_LSM6DSO_GYRO_BW`) and its delay the table's phase delay
+#: at :data:`LSM6DSOX_GYRO_PHASE_HZ` (``φ / (360° f)``, ⚠ AN5192 only; None where no phase is
+#: given). The
+#: filters are bypassed in the gyro's low-power mode (CTRL7_G.G_HM_MODE = 1, AN5192 Table 15),
+#: which gyrocal does not use.
+LSM6DSOX_GYRO_FILTER: Mapping[int, tuple[FilterSetting, ...]] = MappingProxyType({
+    odr_code: tuple(
+        FilterSetting(0 if i == 0 else 8 + i - 1, bw, (phase / (360.0 * f)) if f else None,
+                      None, _LSM6DSO_TABLE_14 if f else _LSM6DSO_TABLE_60)
+        for i, (bw, phase, f) in enumerate(rows))
+    for odr_code, rows in _LSM6DSO_GYRO_BW.items()
+})
+
+
+def lsm6dsox_gyro_filter(odr_code: int, lpf1: bool, ftype: int) -> FilterSetting:
+    """The row of :data:`LSM6DSOX_GYRO_FILTER` for CTRL2_G.ODR_G ``odr_code``,
+    CTRL4_C.LPF1_SEL_G ``lpf1`` and CTRL6_C.FTYPE ``ftype`` (AN5192 Rev 5 Table 14).
+
+    Parameters
+    ----------
+    odr_code : int
+        ODR_G, 1..10.
+    lpf1 : bool
+        Whether LPF1 is in the chain.
+    ftype : int
+        FTYPE[2:0], 0..7 (ignored with LPF1 off).
+    """
+    code = 8 + (ftype & 0x07) if lpf1 else 0
+    return next(r for r in LSM6DSOX_GYRO_FILTER[odr_code] if r.code == code)
+
+
+#: CTRL8_XL.HPCF_XL → the divisor of the ODR that is the accelerometer's bandwidth with
+#: CTRL1_XL.LPF2_XL_EN = 1 and HP_SLOPE_XL_EN = 0 (LPF2 after LPF1; AN5192 Rev 5 Table 10
+#: "Accelerometer bandwidth selection in Mode 1/2/3", ✓✓ LSM6DSO32 DocID032891 Rev 1 Table 65,
+#: and open drivers' enums: ``ODR_OVER_4`` .. ``ODR_OVER_800`` in TeamSunride's
+#: LSM6DSO32_constants.h). With LPF2_XL_EN = 0 the output is LPF1's, ODR/2 in high-performance
+#: mode (the same tables), which the emulator's per-sample mean stands for: ST quotes the
+#: accelerometer's RMS noise "related to BW = ODR/2" (LSM6DSO DS12140 Table 2 note 10), the
+#: noise of a filter whose noise bandwidth is ODR/2, where a first-order stand-in at ODR/2
+#: would have π/4 · ODR.
+LSM6DSOX_ACCEL_LPF2_DIVISOR: Mapping[int, float] = MappingProxyType(
+    {0b000: 4.0, 0b001: 10.0, 0b010: 20.0, 0b011: 45.0, 0b100: 100.0, 0b101: 200.0,
+     0b110: 400.0, 0b111: 800.0})
+
 #: The fastest rate the reader streams: two 7-byte FIFO words (timestamp, gyro) per sample are
 #: 210 kbit/s on the wire at 1666 Hz, too much of a 400 kHz bus.
 LSM6DSOX_MAX_READER_ODR_HZ = 834.0

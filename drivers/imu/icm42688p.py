@@ -9,7 +9,8 @@ Siblings (ICM-42605 0x42, ICM-42686-P 0x44, ...) are named.
 Bring-up: DEVICE_CONFIG.SOFT_RESET, wait 1 ms; WHO_AM_I again; INTF_CONFIG0 = big-endian data and
 FIFO count, count in bytes (the reset value 0x30); GYRO_CONFIG0 = FS_SEL | ODR; ACCEL_CONFIG0 = ±4 g
 (the family's ``accel_range``, 8192 LSB/g) at the same ODR (so that every FIFO packet carries both
-sensors of one sample and the timestamp); GYRO_ACCEL_CONFIG0 = the UI filter bandwidth; TMST_CONFIG
+sensors of one sample and the timestamp); GYRO_ACCEL_CONFIG0 = the UI filter bandwidth, the
+accelerometer's the gyro's (by default the widest below half the ODR); TMST_CONFIG
 = TMST_EN | TMST_RES (16 µs units); PWR_MGMT0 = gyro and accelerometer low-noise, then no write for
 200 µs; the configuration is read back; wait for the gyro to start (60 ms, the kernel's figure).
 
@@ -37,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, TimestampedFifoReader, nearest_rate
+from gyrocal.drivers.imu.base import BLOCK_MAX, TimestampedFifoReader, default_band, nearest_rate
 from gyrocal.drivers.imu.chips import (
     ICM42688P,
     ICM42688P_BITS,
@@ -89,8 +90,8 @@ class ICM42688PReader(TimestampedFifoReader):
                                            if r <= ICM42688P_MAX_READER_ODR_HZ), odr_hz)
         bands = {code: icm42688p_bandwidth_hz(odr, code) for code in range(8)}
         if lowpass_hz is None:
-            below = {c: b for c, b in bands.items() if b <= odr / 2}
-            code = max(below, key=lambda c: (below[c], -c))
+            widest = default_band(bands.values(), odr)
+            code = min(c for c, b in bands.items() if b == widest)
         else:
             near = [c for c, b in bands.items() if abs(b - float(lowpass_hz)) <= 0.5]
             if not near:
@@ -112,7 +113,9 @@ class ICM42688PReader(TimestampedFifoReader):
         intf = B.INTF_CONFIG0_FIFO_COUNT_ENDIAN | B.INTF_CONFIG0_SENSOR_DATA_ENDIAN
         gyro = (rng.code << B.FS_SEL_SHIFT) | odr_code
         accel = (self.accel_range.code << B.FS_SEL_SHIFT) | odr_code
-        filters = (1 << 4) | filt  # accelerometer UI filter at its reset value, 1
+        # the accelerometer's UI filter at the gyro's bandwidth code: its reset value, 1, is
+        # ODR/2 below 400 Hz, which aliases the noise above half the rate in
+        filters = (filt << 4) | filt
         tmst = B.TMST_EN | B.TMST_RES_16US
         writes = ((R.INTF_CONFIG0, intf), (R.GYRO_CONFIG0, gyro), (R.ACCEL_CONFIG0, accel),
                   (R.GYRO_ACCEL_CONFIG0, filters), (R.TMST_CONFIG, tmst))

@@ -9,7 +9,9 @@ Siblings (LSM6DSL 0x6A, LSM6DSR/ISM330DHCX 0x6B, ...) are named; the LSM9DS1 (0x
 register and addresses) is recognised as the chip to configure instead.
 
 Bring-up: CTRL3_C = SW_RESET | IF_INC, wait; WHO_AM_I again; CTRL3_C = BDU | IF_INC; FIFO
-bypass; LPF1 and the high-pass off (CTRL4_C, CTRL7_G); CTRL1_XL = ODR_XL (the gyro's rate
+bypass; the high-pass off (CTRL7_G); CTRL4_C.LPF1_SEL_G and CTRL6_C.FTYPE for the gyro chain's
+bandwidth (AN5192 Table 14, :data:`~gyrocal.drivers.imu.chips.LSM6DSOX_GYRO_FILTER`: by default
+the widest not above half the rate, LPF1 off where it ties); CTRL1_XL = ODR_XL (the gyro's rate
 code; DS12814 CTRL1_XL and CTRL2_G share the codes) | FS_XL ±4 g (0.122 mg/LSB, Table 2);
 CTRL10_C.TIMESTAMP_EN; CTRL2_G = ODR_G | FS_G (or FS_125); the configuration is read back; wait
 for the gyro to settle.
@@ -39,10 +41,16 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, TimestampedFifoReader
+from gyrocal.drivers.imu.base import (
+    BLOCK_MAX,
+    ODR_RELATIVE_TOLERANCE,
+    TimestampedFifoReader,
+    default_band,
+)
 from gyrocal.drivers.imu.chips import (
     LSM6DSOX,
     LSM6DSOX_BITS,
+    LSM6DSOX_GYRO_FILTER,
     LSM6DSOX_MAX_READER_ODR_HZ,
     LSM6DSOX_ODR,
     LSM6DSOX_REG,
@@ -96,16 +104,23 @@ class LSM6DSOXReader(TimestampedFifoReader):
                 "stream over I²C; choose one of "
                 + ", ".join(f"{n:g}" for n, _ in sorted(offered.values())) + " Hz"
             )
-        # the gyro chain's bandwidth with LPF1 off is not transcribed (⚠): ODR/2 is reported
-        # as its upper bound, and a lowpass_hz other than that is refused
-        if lowpass_hz is not None and abs(float(lowpass_hz) - actual / 2) > 0.5:
-            raise ConfigurationError(
-                f"lowpass_hz={lowpass_hz!r}: gyrocal does not set the LSM6DSOX's gyro filter "
-                f"(LPF1 stays off); leave lowpass_hz out, or give {actual / 2:g}"
-            )
-        return actual, actual / 2, code
+        rows = LSM6DSOX_GYRO_FILTER[code]
+        if lowpass_hz is None:
+            widest = default_band((r.bandwidth_hz for r in rows), actual)
+            row = min((r for r in rows if r.bandwidth_hz == widest), key=lambda r: r.code)
+        else:
+            near = [r for r in rows if abs(r.bandwidth_hz - float(lowpass_hz)) <= 0.5]
+            if not near:
+                bands = sorted({r.bandwidth_hz for r in rows}, reverse=True)
+                raise ConfigurationError(
+                    f"lowpass_hz={lowpass_hz!r} is not an LSM6DSOX gyro bandwidth at "
+                    f"{offered[code][0]:g} Hz; choose one of "
+                    + ", ".join(f"{b:g}" for b in bands) + " Hz")
+            row = min(near, key=lambda r: (abs(r.bandwidth_hz - float(lowpass_hz)), r.code))
+        return actual, row.bandwidth_hz, (code, row.code)
 
     def _bring_up(self, rng: GyroRange, setting: Any) -> None:
+        code, filt = setting  # ODR_G, and LPF1_SEL_G · 8 + FTYPE (LSM6DSOX_GYRO_FILTER)
         fam = self.family
         self._write_byte(R.CTRL3_C, B.CTRL3_C_SW_RESET | B.CTRL3_C_IF_INC)
         self._clock.sleep(fam.reset_time_s)
@@ -114,11 +129,12 @@ class LSM6DSOXReader(TimestampedFifoReader):
         writes = (
             (R.CTRL3_C, B.CTRL3_C_BDU | B.CTRL3_C_IF_INC),
             (R.FIFO_CTRL4, B.FIFO_MODE_BYPASS),
-            (R.CTRL4_C, 0x00),
+            (R.CTRL4_C, B.LPF1_SEL_G if filt & 0x08 else 0x00),
+            (R.CTRL6_C, filt & B.FTYPE_MASK),
             (R.CTRL7_G, 0x00),
-            (R.CTRL1_XL, (setting << B.ODR_SHIFT) | (self.accel_range.code << B.FS_XL_SHIFT)),
+            (R.CTRL1_XL, (code << B.ODR_SHIFT) | (self.accel_range.code << B.FS_XL_SHIFT)),
             (R.CTRL10_C, B.CTRL10_C_TIMESTAMP_EN),
-            (R.CTRL2_G, (setting << B.ODR_SHIFT) | fs),
+            (R.CTRL2_G, (code << B.ODR_SHIFT) | fs),
         )
         for reg, value in writes:
             self._write_byte(reg, value)

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from gyrocal.drivers.errors import ConfigurationError
-from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader
+from gyrocal.drivers.imu.base import BLOCK_MAX, ODR_RELATIVE_TOLERANCE, ImuReader, default_band
 from gyrocal.drivers.imu.chips import (
     LSM9DS1,
     LSM9DS1_BITS,
@@ -90,8 +90,7 @@ class LSM9DS1Reader(ImuReader):
             )
         cutoffs = LSM9DS1_BW_G_CUTOFF_HZ[odr]
         if lowpass_hz is None:
-            below = [c for c in cutoffs if c <= odr / 2]
-            lp = max(below) if below else min(cutoffs)
+            lp = default_band(cutoffs, odr)
         else:
             lp = next((c for c in cutoffs if abs(c - float(lowpass_hz)) <= 0.5), None)
             if lp is None:

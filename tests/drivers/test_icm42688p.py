@@ -210,7 +210,8 @@ def test_a_chip_left_in_another_bank_is_found():
     clock, bus, addr, _ = icm()
     bus.write_byte_data(addr, REG_BANK_SEL, 3)
     reader = open_imu("icm42688p", bus, addr, clock=clock, range_dps=2000, odr_hz=200)
-    assert reader.model == "icm42688p" and reader.info.lowpass_hz == 100.0
+    # the widest UI filter bandwidth below half of 200 Hz: max(400, 200)/5 = 80 Hz (code 2)
+    assert reader.model == "icm42688p" and reader.info.lowpass_hz == 80.0
 
 
 @pytest.mark.parametrize("who, name", [(0x42, "ICM-42605"), (0x44, "ICM-42686-P"),
@@ -242,11 +243,12 @@ def test_rates_and_filters_offered_and_refused():
         open_imu("icm42688p", bus, addr, clock=clock, range_dps=2000, odr_hz=1000, lowpass_hz=7)
 
 
-def test_the_output_filter_stands_in_below_nyquist_only():
+def test_the_output_filter_at_half_the_odr_runs_faster_than_the_odr():
     clock, bus, addr, chip = icm(output_filter=True)
     gyro_on(bus, addr)  # 1 kHz, GYRO_UI_FILT_BW reset value 1: max(400, 1000)/4 = 250 Hz
-    assert chip.cutoff_hz() == 250.0
+    assert chip.cutoff_hz() == 250.0 and chip._filter_rate_hz() == 1000.0
     bus.write_byte_data(addr, 0x52, 0x17)  # code 7: 1000/40 = 25 Hz
     assert chip.cutoff_hz() == 25.0
-    bus.write_byte_data(addr, 0x52, 0x10)  # code 0: ODR/2, no first-order stand-in there
-    assert chip.cutoff_hz() is None
+    # code 0: ODR/2, which no filter at the ODR has: it runs at 4 kHz, 500 Hz below a quarter
+    bus.write_byte_data(addr, 0x52, 0x10)
+    assert chip.cutoff_hz() == 500.0 and chip._filter_rate_hz() == 4000.0
