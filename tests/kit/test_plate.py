@@ -52,9 +52,15 @@ odr_hz = 225.0
 """
 
 
+#: The jig's loop (each sensor's FIFO drain and the servos' sync read) at 50 Hz instead of 200:
+#: a quarter of the emulated bus traffic, which is most of a plate run's cost, for the same
+#: samples (each chip's FIFO holds them between drains, as tests/kit/test_thermal.py's fast_jig).
+#: What the plate runs check (each sensor's own calibration, routing, one sensor failing
+#: alone) does not depend on the loop rate; the default rate is the shared full_run's.
+LOOP_50_HZ = "[gimbal]\nsample_hz = 50\n"
 #: The planner's diagonal protocol in 18 s of jig time (as tests/kit/test_reliability.py's
 #: forced rerun): for the runs that check how a failing sensor is handled, not the estimate.
-SHORT = '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n'
+SHORT = '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n' + LOOP_50_HZ
 
 
 def write(tmp_path, text, name="g.toml"):
@@ -158,7 +164,7 @@ def test_recording_group_routes_rows_and_closes_a_failed_sensor(tmp_path):
 @pytest.fixture(scope="module")
 def three(tmp_path_factory):
     d = tmp_path_factory.mktemp("plate3")
-    cfg = write(d, THREE)
+    cfg = write(d, THREE + LOOP_50_HZ)
     out = d / "run"
     code = main(["calibrate", "--sim", "--sim-seed", "11", *PAPER_SENSOR, "--config", str(cfg),
                  "--out", str(out), "--quiet", "--no-report",
