@@ -34,6 +34,11 @@ SHARED_SEED = 5
 PAPER_REALISM = ("--sim-sensor", "paper", "--sim-realism", "off")
 #: The paper's sensor and model: no cross-axis terms, the planner's diagonal protocol.
 PAPER_DIAGONAL = (*PAPER_REALISM, "--protocol", "auto", "--sim-cross-axis", "0")
+#: A config of the jig's loop (each sensor's FIFO drain and the servos' sync read) at 50 Hz
+#: instead of 200: a quarter of the emulated bus traffic, which is most of an emulated run's
+#: CPU, for the same samples (each chip's FIFO holds them between drains). For the runs whose
+#: checks do not depend on the loop rate; the default rate is ``full_run``'s (and the docs').
+LOOP_50_HZ = "[gimbal]\nsample_hz = 50\n"
 
 
 def _once(tmp_path_factory: pytest.TempPathFactory, name: str,

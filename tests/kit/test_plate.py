@@ -18,6 +18,7 @@ from gyrocal.kit.plate import RecordingGroup
 from gyrocal.kit.recording import RecordingWriter, load_recording, read_manifest
 from gyrocal.kit.sim import build_sim, build_sim_plate
 from tests.calib.fullmodel_truth import truth_in_frame
+from tests.kit.conftest import LOOP_50_HZ
 
 PAPER_SENSOR = ("--sim-realism", "off")  # as tests/kit/test_calibrate.py: no realism effects
 
@@ -52,14 +53,11 @@ odr_hz = 225.0
 """
 
 
-#: The jig's loop (each sensor's FIFO drain and the servos' sync read) at 50 Hz instead of 200:
-#: a quarter of the emulated bus traffic, which is most of a plate run's cost, for the same
-#: samples (each chip's FIFO holds them between drains, as tests/kit/test_thermal.py's fast_jig).
-#: What the plate runs check (each sensor's own calibration, routing, one sensor failing
-#: alone) does not depend on the loop rate; the default rate is the shared full_run's.
-LOOP_50_HZ = "[gimbal]\nsample_hz = 50\n"
 #: The planner's diagonal protocol in 18 s of jig time (as tests/kit/test_reliability.py's
 #: forced rerun): for the runs that check how a failing sensor is handled, not the estimate.
+#: These and the three-sensor run loop at 50 Hz (:data:`tests.kit.conftest.LOOP_50_HZ`): what
+#: they check (each sensor's own calibration, routing, one sensor failing alone) does not
+#: depend on the loop rate.
 SHORT = '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n' + LOOP_50_HZ
 
 
