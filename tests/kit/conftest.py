@@ -41,6 +41,13 @@ PAPER_DIAGONAL = (*PAPER_REALISM, "--protocol", "auto", "--sim-cross-axis", "0")
 LOOP_50_HZ = "[gimbal]\nsample_hz = 50\n"
 
 
+def loop_50_hz_config(run: Path) -> str:
+    """A config file of :data:`LOOP_50_HZ` beside the run directory ``run`` (for ``--config``)."""
+    cfg = run.with_name(run.name + ".toml")
+    cfg.write_text(LOOP_50_HZ)
+    return str(cfg)
+
+
 def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
           make: Callable[[Path], int]) -> tuple[Path, int]:
     """Run ``make(directory)`` once per test session (across xdist workers, whose base
@@ -91,10 +98,10 @@ def paper_full_run(tmp_path_factory):
     """``(directory, exit code)`` of ``gyrocal calibrate --sim`` with the full protocol on the
     paper's exaggerated sensor (``--sim-sensor paper``, the datasheet's cross-axis terms, no
     realism effects): for what compares with a truth that has no g-sensitivity or coloured noise
-    in it (the tracker's bias)."""
+    in it (the tracker's bias). Its loop at 50 Hz (:data:`LOOP_50_HZ`)."""
     return _once(tmp_path_factory, "calibrate-paper", lambda d: main(
-        ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), *PAPER_REALISM, "--out", str(d),
-         "--quiet", "--no-report"]))
+        ["calibrate", "--sim", "--sim-seed", str(SHARED_SEED), *PAPER_REALISM, "--config",
+         loop_50_hz_config(d), "--out", str(d), "--quiet", "--no-report"]))
 
 
 @pytest.fixture(scope="session")
