@@ -46,34 +46,36 @@ from tests.test_docs import xdist_unit  # noqa: E402
 
 #: CPU seconds of the longest work units (:func:`work_unit`), each measured alone on one worker
 #: (``python -m pytest -p no:randomly`` with a plugin summing each test's CPU time, own and
-#: children's, fixtures included, on a loaded host): the scheduler hands them out first, longest
-#: first. A unit missing here keeps xdist's order after them; a figure out of date only moves a
-#: unit in that order.
+#: children's, fixtures included, on a loaded host; a module measured alone pays for the shared
+#: runs of tests/kit/conftest.py it reads, about 17 s for ``full_run``, which the suite builds
+#: once): the scheduler hands them out first, longest first. A unit missing here keeps xdist's
+#: order after them; a figure out of date only moves a unit in that order.
 LONG_UNITS: dict[str, float] = {
-    "tests/drivers/test_imu_streaming.py": 98.7,
+    "tests/drivers/test_imu_streaming.py": 73.9,
     "tests/test_docs.py::running": 52.8,  # its branches apart; history.md's run-h shares run1's
     "tests/test_docs.py::running/thermal": 56.3,
-    "tests/kit/test_calibrate.py": 54.1,
-    "tests/kit/test_plate.py": 42.5,
+    "tests/kit/test_calibrate.py": 38.8,
+    "tests/kit/test_plate.py": 16.2,
     "tests/test_docs.py::running/plate": 32.4,
-    "tests/kit/test_track_live.py": 31.3,
-    "tests/kit/test_report.py": 29.6,
-    "tests/kit/test_accel_recording.py": 25.4,  # the first to ask for the shared full_run
-    "tests/kit/test_reliability.py": 24.7,
+    "tests/kit/test_track_live.py": 41.2,
+    "tests/kit/test_report.py": 35.5,
+    "tests/kit/test_accel_recording.py": 20.7,  # the first to ask for the shared full_run
+    "tests/kit/test_reliability.py": 28.0,
     "tests/test_docs.py::intro": 26.3,  # with the index's demo run, which shares the README's
-    "tests/kit/test_track.py": 19.9,
-    "tests/kit/test_signals.py": 19.4,
-    "tests/calib/test_tracker.py": 19.1,
+    "tests/kit/test_track.py": 15.8,
+    "tests/kit/test_signals.py": 19.7,
+    "tests/calib/test_tracker.py": 20.6,
     "tests/test_docs.py::single-servo": 19.0,
     "tests/kit/test_model_choice.py": 17.2,
-    "tests/kit/test_align_e2e.py": 18.0,
+    "tests/kit/test_align_e2e.py": 7.8,
     "tests/kit/test_recording_reader.py": 16.4,
-    "tests/kit/test_verify_general.py": 16.0,
-    "tests/kit/test_track_v2.py": 13.9,
+    "tests/kit/test_verify_general.py": 32.4,
+    "tests/kit/test_track_v2.py": 24.7,
     "tests/kit/test_single_servo.py": 13.0,
-    "tests/kit/test_thermal.py": 11.6,
+    "tests/kit/test_thermal.py": 12.2,
     "tests/drivers/test_imu_config.py": 11.6,
     "tests/drivers/test_dxl_gimbal.py": 10.1,
+    "tests/kit/test_report_html.py": 26.0,
 }
 
 #: Fixtures that run a long end-to-end emulated run (tens of CPU seconds each): a test that

@@ -29,7 +29,7 @@ from gyrocal.kit.alignment import align_to_accelerometer
 from gyrocal.kit.cli import main
 from gyrocal.kit.pipeline import estimate_recording, extract_recording
 from gyrocal.kit.recording import load_recording
-from tests.kit.conftest import _once
+from tests.kit.conftest import _once, loop_50_hz_config
 from tests.kit.contract_fullmodel_recording import draw_accel, write_recording
 
 SEED = 7
@@ -37,9 +37,12 @@ SEED = 7
 
 @pytest.fixture(scope="module")
 def aligned_run(tmp_path_factory):
+    """The run, its loop at 50 Hz (:data:`tests.kit.conftest.LOOP_50_HZ`: the same samples
+    for a quarter of the emulated bus traffic; the frames and their truth do not depend on it)."""
     return _once(tmp_path_factory, "calibrate-aligned", lambda d: main(
         ["calibrate", "--sim", "--sim-seed", str(SEED), "--sim-without", "wobble",
-         "--align-gyro-to-accel", "--out", str(d), "--no-report"]))
+         "--align-gyro-to-accel", "--config", loop_50_hz_config(d), "--out", str(d),
+         "--no-report"]))
 
 
 def test_aligned_matrix_is_the_true_gyro_calibration_in_the_accelerometer_frame(aligned_run):

@@ -18,6 +18,7 @@ from gyrocal.kit.plate import RecordingGroup
 from gyrocal.kit.recording import RecordingWriter, load_recording, read_manifest
 from gyrocal.kit.sim import build_sim, build_sim_plate
 from tests.calib.fullmodel_truth import truth_in_frame
+from tests.kit.conftest import LOOP_50_HZ
 
 PAPER_SENSOR = ("--sim-realism", "off")  # as tests/kit/test_calibrate.py: no realism effects
 
@@ -54,7 +55,10 @@ odr_hz = 225.0
 
 #: The planner's diagonal protocol in 18 s of jig time (as tests/kit/test_reliability.py's
 #: forced rerun): for the runs that check how a failing sensor is handled, not the estimate.
-SHORT = '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n'
+#: These and the three-sensor run loop at 50 Hz (:data:`tests.kit.conftest.LOOP_50_HZ`): what
+#: they check (each sensor's own calibration, routing, one sensor failing alone) does not
+#: depend on the loop rate.
+SHORT = '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n' + LOOP_50_HZ
 
 
 def write(tmp_path, text, name="g.toml"):
@@ -158,7 +162,7 @@ def test_recording_group_routes_rows_and_closes_a_failed_sensor(tmp_path):
 @pytest.fixture(scope="module")
 def three(tmp_path_factory):
     d = tmp_path_factory.mktemp("plate3")
-    cfg = write(d, THREE)
+    cfg = write(d, THREE + LOOP_50_HZ)
     out = d / "run"
     code = main(["calibrate", "--sim", "--sim-seed", "11", *PAPER_SENSOR, "--config", str(cfg),
                  "--out", str(out), "--quiet", "--no-report",

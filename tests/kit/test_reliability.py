@@ -4,12 +4,14 @@ exit 2, implausible calibrations are refused (exit 6), config numbers are bounde
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from gyrocal.kit.cli import main
+from tests.kit.conftest import LOOP_50_HZ
 from tests.kit.contract_recording import write_recording
 
 
@@ -29,13 +31,16 @@ def contract(tmp_path_factory):
 
 
 # ---- --force: the whole run or nothing -----------------------------------------------------
-def test_a_failed_forced_rerun_leaves_the_old_run_whole(tmp_path, capsys):
-    # what is checked is how a run directory is replaced, not the estimate: the planner's
-    # diagonal protocol in 18 s of jig time writes the same set of files as the full one
+def test_a_failed_forced_rerun_leaves_the_old_run_whole(tmp_path, capsys, full_run):
+    # the old run: a copy of the shared `gyrocal calibrate --sim` run with its report
+    # (tests/kit/conftest.py). What is checked is how a run directory is replaced, not the
+    # estimate: the reruns' planned diagonal protocol in 18 s of jig time, their loop at 50 Hz
+    # (a quarter of the emulated bus traffic), writes the same set of files as the full one
     short = tmp_path / "short.toml"
-    short.write_text('[protocol]\nname = "auto"\ntime_budget_s = 18.0\n')
+    short.write_text('[protocol]\nname = "auto"\ntime_budget_s = 18.0\n' + LOOP_50_HZ)
     out = tmp_path / "run1"
-    assert calibrate(out, "--sim-seed", "4", "--config", str(short)) == 0
+    assert full_run[1] == 0
+    shutil.copytree(full_run[0], out)
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert {"calibration.json", "recording/imu.csv", "report.html"} <= {str(p) for p in before}
     capsys.readouterr()

@@ -54,11 +54,12 @@ def expected_names(rec):
     return names
 
 
-def check_pngs(directory, names):
+def check_pngs(directory, names, page="report.html"):
     import matplotlib.image as mpimg
 
-    # nothing else (no temporary files) but the HTML page (tests/kit/test_report_html.py)
-    assert {p.name for p in directory.iterdir()} == names | {"report.html"}
+    # nothing else (no temporary files) but the HTML page (tests/kit/test_report_html.py), which
+    # `gyrocal calibrate` writes beside its plots directory (``page=None``)
+    assert {p.name for p in directory.iterdir()} == names | ({page} if page else set())
     for name in names:
         data = (directory / name).read_bytes()
         assert data[:8] == PNG_MAGIC, name
@@ -246,22 +247,21 @@ def full(full_run):
 
 
 @pytest.fixture(scope="module")
-def full_report(full, tmp_path_factory):
-    """`gyrocal report` of the shared default run's recording and calibration (the page a user
-    of `gyrocal calibrate --sim` gets), with its standard output."""
+def full_report(full):
+    """The report of the shared default run as `gyrocal calibrate --sim` wrote it (the page a
+    user of the command gets): ``(plots directory, page)``. `gyrocal calibrate` and `gyrocal
+    report` draw it with one function (kit.report_html.write_run_report) from the same windows
+    (kit.pipeline.judged_windows); the report command itself is run on :func:`run_dir` above."""
     d = full[0]
-    out_dir = tmp_path_factory.mktemp("full-report") / "plots"
-    code = main(["report", str(d / "recording"), str(d / "calibration.json"), "--out",
-                 str(out_dir)])
-    assert code == 0
-    return out_dir
+    assert (d / "report.html").is_file(), "the shared run wrote no report: is matplotlib there?"
+    return d / "plots", d / "report.html"
 
 
 def test_report_of_a_full_calibration_draws_every_posed_turn(full, full_report):
     _, rec, _, _ = full
     names = expected_names(rec)
     assert len(names) == 10 + 3  # six home turns and two posed pairs
-    check_pngs(full_report, names)
+    check_pngs(full_report[0], names, page=None)
 
 
 def _section(text, tag_id):
@@ -277,7 +277,7 @@ def test_the_page_shows_the_full_model_and_the_terminal_s_error_against_truth(fu
     from gyrocal.kit.report import calibration_table
 
     _, rec, _, cal = full
-    text = (full_report / "report.html").read_text(encoding="utf-8")
+    text = full_report[1].read_text(encoding="utf-8")
     summary = _section(text, "summary")
     assert "g = A (m + b + G f)" in summary and "consistent" in summary
     # the largest cross-axis term, found here from the calibration's matrix
@@ -313,14 +313,14 @@ def test_the_page_gives_the_gyro_noise_the_emulated_sensor_has(full, full_report
     noise = gyro_noise(rec, ex)
     # the emulated MPU-9250's white rate noise is its datasheet's 0.01 °/s/√Hz
     assert np.all(np.abs(noise.gyro - N) < 4 * noise.gyro_std), (noise.gyro, noise.gyro_std)
-    table = _section((full_report / "report.html").read_text(encoding="utf-8"), "noise")
+    table = _section(full_report[1].read_text(encoding="utf-8"), "noise")
     assert f"{noise.gyro[0]:.3e} ± {noise.gyro_std[0]:.1e}" in table
 
 
 @needs_chromium
 def test_a_browser_shows_one_summarised_page_with_the_turns_folded(full_report, tmp_path):
     # issue 31: the default run's page was 11,551 px tall at 1280 px, ten turn plots open
-    dom, height, decoded, images = render(full_report / "report.html", tmp_path)
+    dom, height, decoded, images = render(full_report[1], tmp_path)
     assert decoded == images == 13
     assert height < 6000, height
     assert '<section id="summary">' in dom and "largest cross-axis term" in dom
@@ -431,7 +431,7 @@ def test_a_turn_drawn_on_the_reused_figure_is_the_turn_drawn_alone(full, full_re
                            False)
     finally:
         alone.close()
-    reused = mpimg.imread(full_report / last.name)
+    reused = mpimg.imread(full_report[0] / last.name)
     assert reused.shape == mpimg.imread(path).shape
     assert np.array_equal(reused, mpimg.imread(path))
 

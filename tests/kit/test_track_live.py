@@ -13,6 +13,7 @@ from gyrocal.calib.model import GyroCalibration
 from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
 from gyrocal.kit.cli import main
 from gyrocal.kit.sim import sim_truth
+from tests.kit.conftest import loop_50_hz_config
 
 
 def run_json(capsys, *argv):
@@ -224,8 +225,10 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
     from gyrocal.kit.recording import load_recording
 
     rec = tmp_path / "still"
+    # the loop at 50 Hz (tests/kit/conftest.py LOOP_50_HZ): the chip's FIFO holds the same
+    # samples between drains, for a quarter of the emulated bus traffic
     assert main(["track", "--live", "--sim", "--duration", "30", "--record", str(rec),
-                 "--rows", "2"]) == 0
+                 "--rows", "2", "--config", loop_50_hz_config(tmp_path / "loop")]) == 0
     r = load_recording(rec)
     assert r.complete and [s.kind for s in r.segments] == ["rest"]
     assert r.imu_t.size > 0.95 * 30 * 200
