@@ -13,6 +13,8 @@ from typing import Protocol, runtime_checkable
 
 __all__ = ["Clock", "SystemClock", "VirtualClock"]
 
+_INF = math.inf
+
 
 @runtime_checkable
 class Clock(Protocol):
@@ -71,6 +73,7 @@ class VirtualClock:
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)
         self._stalls: list[tuple[float, float]] = []
+        self._next_stall = math.inf  # the first stall's time (inf: none)
 
     def monotonic(self) -> float:
         """The current virtual time in seconds."""
@@ -85,11 +88,20 @@ class VirtualClock:
             If ``seconds`` is negative or not finite.
         """
         seconds = float(seconds)
-        if not 0.0 <= seconds < math.inf:
+        if not 0.0 <= seconds < _INF:
             raise ValueError(f"sleep needs a finite, non-negative duration, got {seconds!r}")
-        self._t += seconds
-        while self._stalls and self._stalls[0][0] <= self._t:
-            self._t += self._stalls.pop(0)[1]
+        t = self._t + seconds
+        if t >= self._next_stall:
+            t = self._stall(t)
+        self._t = t
+
+    def _stall(self, t: float) -> float:
+        """``t`` after every stall due by it (each adds its duration), the next one noted."""
+        stalls = self._stalls
+        while stalls and stalls[0][0] <= t:
+            t += stalls.pop(0)[1]
+        self._next_stall = stalls[0][0] if stalls else _INF
+        return t
 
     advance = sleep
 
@@ -108,6 +120,7 @@ class VirtualClock:
                              f"{seconds!r}")
         self._stalls.append((float(t), float(seconds)))
         self._stalls.sort()
+        self._next_stall = self._stalls[0][0]
 
     def __repr__(self) -> str:
         return f"VirtualClock(t={self._t:.6f})"

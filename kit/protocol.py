@@ -283,6 +283,7 @@ class Runner:
         self._next = 0.0
         # Loop dither (see _tick); seeded so that runs repeat exactly.
         self._dither = np.random.default_rng(0x6779726F)
+        self._dithers: list[float] = []  # drawn ahead from _dither, next one last
         self._rest_s = max((s.rest_s for s in self.steps if s.kind == "rest"), default=0.5)
         self._segments: list[Segment] = []
         self._pose: dict[int, float] = {}  # servo -> angle of its last move (0 = home)
@@ -330,7 +331,8 @@ class Runner:
                 d.imu_rate.append(batch.rate)
                 if batch.accel is not None:
                     d.imu_accel.append(batch.accel)
-                d.saturated += int(np.any(batch.saturated, axis=-1).sum())
+                if batch.saturated.any():
+                    d.saturated += int(np.any(batch.saturated, axis=-1).sum())
         if batch.gaps and d is not None:
             d.gaps.extend(batch.gaps)
         who = f"{self.names[k]}: " if self.several else ""
@@ -374,7 +376,7 @@ class Runner:
             d.enc_t.append(ts)
             d.enc_angles.append(np.asarray(s.angles, dtype=float))
         if s.velocities is not None:
-            self.last_speed = float(np.max(np.abs(s.velocities)))
+            self.last_speed = max(map(abs, s.velocities.tolist()))
         if self.on_progress is not None:
             self.backlog.set_status(RunStatus(ts, self.step_index, len(self.steps),
                                               self.step_desc, self.last_rate, self.last_speed))
@@ -382,12 +384,19 @@ class Runner:
         # chip's sample grid, as the reader's clock fit assumes. A loop locked to the output data
         # rate would creep through the phase over many seconds and bias the fitted sample period
         # (a stretched IMU time axis is a scale error; DESIGN.md fact 2).
-        self._next += self.period * (1.0 + self._dither.uniform(-0.5, 0.5))
+        self._next += self.period * (1.0 + self._next_dither())
         wait = self._next - self.clock.monotonic()
         if wait > 0:
             self.clock.sleep(wait)
         else:
             self._next = self.clock.monotonic()  # late: do not try to catch up in a burst
+
+    def _next_dither(self) -> float:
+        """The next of ``_dither.uniform(-0.5, 0.5)``'s values, drawn 256 at a time (the
+        generator gives the same values in the same order either way)."""
+        if not self._dithers:
+            self._dithers = self._dither.uniform(-0.5, 0.5, size=256).tolist()[::-1]
+        return self._dithers.pop()
 
     # ------------------------------------------------------------------ steps
     def _run_rest(self, step: Step) -> tuple[float, float]:

@@ -663,12 +663,8 @@ class Gimbal:
             raise ServoCommunicationError(
                 failed_id, f"{what} of addresses {start}..{start + length - 1}", last,
                 self.retries + 1)
-        alerts = [i for i, (err, _) in blocks.items() if err & _ALERT]
-        if alerts:
-            self._raise_alert(alerts[0])
-        for i, (err, _) in blocks.items():
-            if err & 0x7F:
-                raise ServoStatusError(i, "SYNC_READ", err, self.ph.getRxPacketError(err & 0x7F))
+        if any(err for err, _ in blocks.values()):
+            self._raise_status_errors(blocks)
         t_mid = 0.5 * (t0 + t1)
         home = self.home_ticks
         if self.sample_layout == "motion":
@@ -691,6 +687,16 @@ class Gimbal:
         s = GimbalSample(t_mid, t0, t1, self.ids, angles, ticks, vel, tms, moving)
         self.last_sample = s
         return s
+
+    def _raise_status_errors(self, blocks: dict[int, tuple[int, bytes]]) -> None:
+        """A sync read's statuses carried an error: the first alert is read out and raised by
+        name, else the first error is raised."""
+        alerts = [i for i, (err, _) in blocks.items() if err & _ALERT]
+        if alerts:
+            self._raise_alert(alerts[0])
+        for i, (err, _) in blocks.items():
+            if err & 0x7F:
+                raise ServoStatusError(i, "SYNC_READ", err, self.ph.getRxPacketError(err & 0x7F))
 
     def _sync_read_once(self, start: int, length: int):
         """One sync-read transaction: ``({id: (error, bytes)}, "", None)`` or
@@ -1076,8 +1082,8 @@ class Gimbal:
 
     def _check_limits(self, s: GimbalSample) -> None:
         margin = 0.05
-        for k, i in enumerate(self.ids):
-            turns = abs(int(s.ticks[k]) - self.home_ticks[i]) / TICKS_PER_TURN
+        for tick, i in zip(s.ticks.tolist(), self.ids, strict=True):
+            turns = abs(tick - self.home_ticks[i]) / TICKS_PER_TURN
             if turns > self.max_turns + margin:
                 raise TurnLimitError(
                     f"servo {i} is {turns:.2f} turns from home, past the software limit of "

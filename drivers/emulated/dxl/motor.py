@@ -226,6 +226,91 @@ def plan_position(t0: float, p0: float, v0: float, goal: float, vmax: float,
 
 
 # --------------------------------------------------------------------------------------------
+# The recursions of the motor (per grid point, exactly as lfilter computes them)
+# --------------------------------------------------------------------------------------------
+def _constant_tail(x: np.ndarray) -> int:
+    """Index where the trailing run of bit-identical values of ``x`` begins."""
+    bits = x.view(np.int64)
+    changes = np.flatnonzero(bits[1:] != bits[:-1])
+    return int(changes[-1]) + 1 if changes.size else 0
+
+
+def _tracking_lags(alpha: float, x: np.ndarray, y1_last: float, y2_last: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The two first-order tracking lags in cascade over the trajectory ``x``, from the
+    previous grid point's outputs ``y1_last``, ``y2_last``.
+
+    Each lag is ``lfilter([1 - α], [1, -α], ·, zi=[α y_last])`` of
+    :mod:`gyrocal.drivers.emulated.iir` (the Direct Form II transposed recursion ``y = z + b₀x``,
+    ``z = b₁x − a₁y``) with the same operations in the same order, so the numbers are the same
+    to the last bit; both lags run in one loop. While the trajectory holds still (its trailing
+    run of identical inputs), the recursion is a monotone map of the state and reaches a fixed
+    point; once one step leaves both states unchanged (non-zero, so that the sign of a zero
+    cannot differ), every later step repeats it and the rest is filled in without the loop.
+    """
+    b0, b1, a1 = 1.0 - alpha, 0.0, -alpha
+    z1, z2 = alpha * y1_last, alpha * y2_last
+    m = x.size
+    out1 = np.empty(m)
+    out2 = np.empty(m)
+    j0 = _constant_tail(x) if m > 1 else m
+    ys1: list[float] = []
+    ys2: list[float] = []
+    put1, put2 = ys1.append, ys2.append
+    for xn in x[:j0].tolist():
+        y1 = z1 + b0 * xn
+        z1 = xn * b1 - y1 * a1
+        y2 = z2 + b0 * y1
+        z2 = y1 * b1 - y2 * a1
+        put1(y1)
+        put2(y2)
+    if j0 < m:
+        xn = float(x[j0])
+        for _ in range(m - j0):
+            y1 = z1 + b0 * xn
+            n1 = xn * b1 - y1 * a1
+            y2 = z2 + b0 * y1
+            n2 = y1 * b1 - y2 * a1
+            put1(y1)
+            put2(y2)
+            if n1 == z1 and n2 == z2 and n1 != 0.0 and n2 != 0.0:
+                break  # a fixed point: every later step gives y1, y2 again
+            z1, z2 = n1, n2
+    k = len(ys1)
+    out1[:k] = ys1
+    out2[:k] = ys2
+    if k < m:
+        out1[k:] = ys1[-1]
+        out2[k:] = ys2[-1]
+    return out1, out2
+
+
+def _resonator(c1: float, c2: float, xi: np.ndarray, u1: float, u2: float) -> np.ndarray:
+    """The ripple noise's second-order recursion over ``xi`` from the two previous outputs
+    ``u1`` (last) and ``u2``: ``lfilter([1], [1, -c1, -c2], xi, zi=[c1 u1 + c2 u2, c2 u1])``
+    with its operations in its order (see :func:`_tracking_lags`)."""
+    b0, b1, b2, a1, a2 = 1.0, 0.0, 0.0, -c1, -c2
+    z0, z1 = c1 * u1 + c2 * u2, c2 * u1
+    out: list[float] = []
+    put = out.append
+    for xn in xi.tolist():
+        yn = z0 + b0 * xn
+        z0 = z1 + xn * b1 - yn * a1
+        z1 = xn * b2 - yn * a2
+        put(yn)
+    return np.array(out)
+
+
+def _add_unless_idle(p: np.ndarray, scale: np.ndarray, term) -> None:
+    """``p += scale * term()``, where ``term()`` gives finite values, or nothing when the sum
+    would leave ``p`` as it is: every ``scale`` zero and no ``p`` zero (``±0`` added to a
+    non-zero number leaves it unchanged; to a zero it may flip its sign). A shaft at rest
+    skips the ripple's sines and the noise's product."""
+    if np.any(scale != 0.0) or not np.all(p):
+        p += scale * term()
+
+
+# --------------------------------------------------------------------------------------------
 # Motor
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -411,24 +496,21 @@ class ServoMotor:
         k_first = g.k0 + g.n
         t = self.t_start + (k_first + np.arange(m)) * self.dt
         pt, vt = self.plan.evaluate(t)
-        al = self._alpha
         last = g.n - 1
-        y1, _ = lfilter([1.0 - al], [1.0, -al], pt, zi=[al * g.y1[last]])
-        y2, _ = lfilter([1.0 - al], [1.0, -al], y1, zi=[al * g.y2[last]])
+        y1, y2 = _tracking_lags(self._alpha, pt, float(g.y1[last]), float(g.y2[last]))
         speed = np.abs(vt)
         env = np.minimum(speed / self.params.envelope_speed, 1.0) \
             if self.params.envelope_speed > 0 else (speed > 0).astype(float)
         p = y2.copy()
         if self._orders.size:
-            ph = np.multiply.outer(pt, self._orders) + self._phases
-            p += env * (np.sin(ph) @ self._amps)
+            _add_unless_idle(p, env, lambda: np.sin(
+                np.multiply.outer(pt, self._orders) + self._phases) @ self._amps)
         if self._g > 0:
             xi = self._noise(k_first, m) * self._g
-            u1 = g.u[last]
-            u2 = g.u[last - 1] if last >= 1 else 0.0
-            zi = [self._c1 * u1 + self._c2 * u2, self._c2 * u1]
-            u, _ = lfilter([1.0], [1.0, -self._c1, -self._c2], xi, zi=zi)
-            p += speed * u
+            u1 = float(g.u[last])
+            u2 = float(g.u[last - 1]) if last >= 1 else 0.0
+            u = _resonator(self._c1, self._c2, xi, u1, u2)
+            _add_unless_idle(p, speed, lambda: u)
         else:
             u = np.zeros(m)
         self._append(p, y1, y2, u)

@@ -86,10 +86,12 @@ class EmulatedPortHandler(PortHandler):
         if not self.is_open:
             return 0
         data = bytes(packet)
-        self._spend(len(data) * (10.0 / self.baudrate))
-        self.bytes_sent += len(data)
+        n = len(data)
+        if self.model_timing:
+            self.clock.sleep(n * (10.0 / self.baudrate))
+        self.bytes_sent += n
         self._pending.extend(self.bus.receive(data, self.baudrate))
-        return len(data)
+        return n
 
     def readPort(self, length: int) -> bytes:
         """Up to ``length`` received bytes; replies are sent (and time spent) as needed."""
@@ -100,12 +102,16 @@ class EmulatedPortHandler(PortHandler):
             out = bytes(rx[:length])
             del rx[:length]
             return out
+        timed = self.model_timing
+        sleep = self.clock.sleep
         while len(rx) < length and pending:
             reply = pending.popleft()
-            self._spend(reply.delay_s)
+            if timed and reply.delay_s > 0:
+                sleep(reply.delay_s)
             data = reply.produce()
             if data:
-                self._spend(len(data) * (10.0 / self.baudrate))
+                if timed:
+                    sleep(len(data) * (10.0 / self.baudrate))
                 rx += data
                 self.bytes_received += len(data)
         if not rx and not pending:
@@ -116,8 +122,3 @@ class EmulatedPortHandler(PortHandler):
         out = bytes(rx[:length])
         del rx[:length]
         return out
-
-    # ---- helpers -------------------------------------------------------------------------
-    def _spend(self, seconds: float) -> None:
-        if self.model_timing and seconds > 0:
-            self.clock.sleep(seconds)

@@ -152,7 +152,7 @@ def remove_stuffing(body: bytes) -> bytes:
 
 def _frame(dxl_id: int, body: bytes) -> bytes:
     """Header + ID + LEN + stuffed body + CRC."""
-    stuffed = stuff(body)
+    stuffed = stuff(body) if b"\xff\xff\xfd" in body else body
     length = len(stuffed) + 2
     packet = HEADER + bytes((dxl_id & 0xFF, length & 0xFF, (length >> 8) & 0xFF)) + stuffed
     crc = crc16(packet)

@@ -186,6 +186,9 @@ class EmulatedServo:
         else:
             self._abs0 = float(int(initial_ticks) % TICKS_PER_TURN)
         self._mem = bytearray(self.table.size)
+        #: Addresses of the one-byte items every packet reads.
+        self._torque_at = self.table["Torque Enable"].address
+        self._watchdog_at = self.table["Bus Watchdog"].address
         #: Item name -> (address, end, signed), filled as items are read (:meth:`_get`).
         self._where: dict[str, tuple[int, int, bool]] = {}
         self._factory = {"ID": int(dxl_id), "Baud Rate": codes[baudrate],
@@ -474,8 +477,9 @@ class EmulatedServo:
         with self.lock:
             self.advance_to(now)
             self.packets_received += 1
-            wd = self._get("Bus Watchdog")
-            if wd > 0 and self._get("Torque Enable"):
+            mem = self._mem
+            wd = mem[self._watchdog_at]  # one signed byte: 1..127 armed, 0 off, 255 (-1) tripped
+            if 0 < wd < 128 and mem[self._torque_at]:
                 self._watchdog_deadline = now + wd * WATCHDOG_UNIT_S
 
     def status_level_allows(self, kind: str) -> bool:
@@ -725,7 +729,7 @@ class EmulatedServo:
                    + self._get("Homing Offset"))
         vel_units = round(d * rate / VELOCITY_UNIT_RAD_S)
         plan = self.motor.plan
-        running = bool(torque) and plan.running(now)
+        running = bool(torque) and now < plan.end_time  # plan.running(now)
         speed_frac = min(abs(rate) / self._max_speed(), 1.5)
         if lo <= 120 and hi >= 136:  # the whole motion block (a gimbal's sample): one pack
             tick, moving, status, pwm, current, vel, pos = self._live_values(
