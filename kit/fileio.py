@@ -62,11 +62,31 @@ def make_output_dir(path: str | os.PathLike[str], flag: str) -> Path:
     if blocker is not None:
         where = "is a file" if blocker == out else f"is under {blocker}, which is a file"
         raise InputError(f"{flag} {path} {where}; give a new or existing directory")
+    new = [d for d in (out, *out.parents) if not d.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"{flag} {path}: cannot create the directory ({exc.strerror})") from None
+    _MADE.update(d.absolute() for d in new)
     return out
+
+
+#: The directories :func:`make_output_dir` created in this process: a run that fails before it
+#: writes anything removes them again (:func:`built_beside`), and only them.
+_MADE: set[Path] = set()
+
+
+def _remove_if_made_and_empty(path: Path) -> None:
+    """Remove ``path``, and the parents made with it, where :func:`make_output_dir` created
+    them and they are still empty; a directory the user made, or one holding anything, stays."""
+    for d in (path.absolute(), *path.absolute().parents):
+        if d not in _MADE:
+            return
+        try:
+            d.rmdir()  # only an empty directory goes
+        except OSError:
+            return
+        _MADE.discard(d)
 
 
 def atomic_write_bytes(
@@ -258,12 +278,15 @@ def built_beside(work: Path, out: Path) -> Iterator[Path]:
     """Build a run's output in ``work`` and, when the body ends without an exception, put it in
     the place of ``out`` as a whole (:func:`replace_dir`, shielded from signals); ``work`` may
     be ``out`` itself (nothing to replace). On failure ``out`` is untouched and stderr says
-    where this run's output is (``--force`` replaces a run only when the new one is whole)."""
+    where this run's output is (``--force`` replaces a run only when the new one is whole); a
+    directory this run created and left empty (a usage error found after it was made) is
+    removed."""
     from gyrocal.drivers.signals import shielded
 
     try:
         yield work
     except BaseException:
+        _remove_if_made_and_empty(work)
         if work != out:
             print(f"gyrocal: the previous run in {out} is untouched; this run's output is in "
                   f"{work}", file=sys.stderr)

@@ -255,9 +255,20 @@ def test_top_level_help_lists_the_exit_codes(capsys):
         (["doctor", "--sim", "--range-dps", "300"], "imu.range_dps is 300"),
     ],
 )
-def test_bad_usage_config_and_files_exit_2(tmp_path, capsys, argv, message):
+def test_bad_usage_config_and_files_exit_2(tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(tmp_path)  # where a run would make its default gyrocal-DATE directory
     assert main([*argv]) == 2
     assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # the refused run leaves no empty directory behind
+
+
+def test_a_refused_run_removes_only_the_directories_it_made(tmp_path, capsys):
+    bad = ["--sim", "--sim-fault", "melt:1"]
+    assert calibrate(tmp_path / "new" / "run", *bad) == 2
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "mine").mkdir()
+    assert calibrate(tmp_path / "mine", *bad) == 2
+    assert (tmp_path / "mine").is_dir()  # the user's own (empty) directory stays
 
 
 def test_bad_config_file_exits_2(tmp_path, capsys):
