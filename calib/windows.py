@@ -45,6 +45,10 @@ a sensor's low-pass filter). On the axis a window turns about, the servo's speed
 control loop) would pass for noise in the first differences; it is real motion that the encoder
 sees too and that cancels between the gyro mean and the reference, so that axis takes the noise
 measured where the servo cannot reach it: at rest and on the other windows' off-axis components.
+
+Each turn also keeps its readings' once-per-revolution part per unit rate, the coefficients of
+``θ̇ cos θ`` and ``θ̇ sin θ`` (:func:`_turn_nod`): what a nod of the turning servo's link shows,
+which :mod:`gyrocal.calib.systematics` measures and takes out of the posed windows.
 """
 
 from __future__ import annotations
