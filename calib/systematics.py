@@ -32,8 +32,12 @@ amplitude, phase or direction (a horn's runout, a bracket's bearing play under a
 nothing is assumed of ``ε``, and a nod's higher harmonics, which the coverage runs do not
 have, are left out.
 
-**Bounded.** Where a joint's nod is not measured (no turn of it in both directions, or a set
-without the windows' coefficients), ``ε`` of the servo table is a prior: with
+**Bounded.** Where a joint's nod is not measured (no pose of the other servos at which it
+turned both ways, or a set without the windows' coefficients), ``ε`` of the servo table is a
+prior. The default protocol's planner turns each servo's two directions at different angles of
+the servos outside it (emulated ``--sim`` seeds 1000–1002: the middle servo's at base angles
+π and π/2), so there a term of the angle alone (gravity through the g-sensitivity) cannot be
+told from the nod and the prior holds. With
 ``e_k = cos β p₁ + sin β p₂`` (``p₁, p₂`` a basis ⊥ ``u_k`` fixed to link ``k``, carried
 into the sensor frame like ``u_k``) and ``sin(θ + φ) = sin θ cos φ + cos θ sin φ`` about the
 reference angles, the tilt is a sum of four terms ``ε c_q f_q(θ) p_q`` per joint whose
