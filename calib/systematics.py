@@ -30,7 +30,10 @@ out of the posed windows, and :func:`add_wobble` adds what the measurement's err
 This holds of any rigid link whose tilt repeats with its servo's angle, whatever its
 amplitude, phase or direction (a horn's runout, a bracket's bearing play under a fixed load):
 nothing is assumed of ``ε``, and a nod's higher harmonics, which the coverage runs do not
-have, are left out.
+have, are left out. Over the independent generator's seeds 0–199 (``python -m bench coverage
+--independent --seeds=200 --walk=2e-6 --flicker=4.8481e-5 --wobble=0.05``) the 95 % intervals
+then hold the truth 97.8 % of the time off the diagonal (z RMS 0.90; with the prior, 99.5 % and
+0.94) and 96.5 % on it (0.93; 97.5 % and 0.93).
 
 **Bounded.** Where a joint's nod is not measured (no pose of the other servos at which it
 turned both ways, or a set without the windows' coefficients), ``ε`` of the servo table is a
