@@ -159,6 +159,15 @@ class ObservationSet:
         Per rotation window, the window-weighted means of ``cos φ`` and ``sin φ``, ``φ`` the
         turning servo's angle less its ``pose`` angle: how far the window is from whole
         revolutions (both 0 over whole revolutions at constant speed; the default).
+    nod, nod_std : array_like, shape (n, 2, 3), optional
+        Per rotation window, the reading's once-per-revolution part per unit rate: the
+        least-squares coefficients of ``θ̇ cos θ`` and ``θ̇ sin θ`` (rows), ``θ`` the turning
+        servo's encoder angle, and their standard errors; given together. What a nod of the
+        turning servo's link shows (:mod:`gyrocal.calib.systematics` measures and removes it).
+    nod_removed : bool
+        The nods the windows measure have been taken out of ``mean``
+        (:func:`gyrocal.calib.systematics.remove_nod`), so a fit's σ holds the measurement's
+        error, not the prior of an unmeasured nod.
     gravity : tuple of int, optional
         ``(servo ID, sign)``: in the home pose, "up" (the specific force of a still sensor, +1 g)
         points along ``sign`` times that servo's positive axis (the gimbal stands with that axis
@@ -211,6 +220,9 @@ class ObservationSet:
     home_pose: np.ndarray | None = None
     gravity: tuple[int, int] | None = None
     turn_phase: np.ndarray | None = None
+    nod: np.ndarray | None = None
+    nod_std: np.ndarray | None = None
+    nod_removed: bool = False
     force: np.ndarray | None = None
     rest_force: np.ndarray | None = None
     own_axes: bool = False
@@ -312,6 +324,19 @@ class ObservationSet:
         self._gravity_fields(r_mean.shape[0])
         self._force_fields(n, r_mean.shape[0])
         self._temp_offset_fields(n, r_mean.shape[0])
+        self._nod_fields(n)
+
+    def _nod_fields(self, n: int) -> None:
+        """Check and freeze ``nod`` and ``nod_std``."""
+        if self.nod is None and self.nod_std is None:
+            return
+        if self.nod is None or self.nod_std is None:
+            raise CalibInputError("nod and nod_std go together")
+        nod_std = _arr(self.nod_std, "nod_std", (n, 2, 3))
+        if np.any(nod_std <= 0):
+            raise CalibInputError("nod_std must be positive")
+        object.__setattr__(self, "nod", _ro(_arr(self.nod, "nod", (n, 2, 3))))
+        object.__setattr__(self, "nod_std", _ro(nod_std))
 
     def _temp_offset_fields(self, n: int, r: int) -> None:
         """Check and freeze ``temp_offset`` and ``rest_temp_offset``."""
@@ -587,7 +612,8 @@ class ObservationSet:
                     f"rest ({self.n_rests}) within them, got {sf.shape} and {rs.shape}")
             force = {"force": sf[seat - 1], "rest_force": sf[rs.astype(np.int64) - 1]}
         return replace(self, motor=seat, chain=chain, pose=np.zeros((seat.size, len(chain))),
-                       pose_still=None, rest_pose=None, home_pose=None, gravity=None, **force)
+                       pose_still=None, rest_pose=None, home_pose=None, gravity=None,
+                       nod=None, nod_std=None, **force)
 
     def with_pooled_noise(self, alpha: float = 0.01) -> ObservationSet:
         """The same set with each axis's noise pooled over all windows and rests where they are

@@ -45,6 +45,10 @@ a sensor's low-pass filter). On the axis a window turns about, the servo's speed
 control loop) would pass for noise in the first differences; it is real motion that the encoder
 sees too and that cancels between the gyro mean and the reference, so that axis takes the noise
 measured where the servo cannot reach it: at rest and on the other windows' off-axis components.
+
+Each turn also keeps its readings' once-per-revolution part per unit rate, the coefficients of
+``θ̇ cos θ`` and ``θ̇ sin θ`` (:func:`_turn_nod`): what a nod of the turning servo's link shows,
+which :mod:`gyrocal.calib.systematics` measures and takes out of the posed windows.
 """
 
 from __future__ import annotations
@@ -389,6 +393,8 @@ class _Turn:
     # each component's share of the turning axis's motion (0 on that axis): its noise is
     # measured with the motion taken out (:func:`_noise_beside_motion`)
     follow: np.ndarray
+    nod: np.ndarray  # (2, 3) once-per-revolution part per unit rate (:func:`_turn_nod`)
+    nod_std: np.ndarray  # (2, 3) its white-noise standard errors
 
 
 @dataclass(frozen=True)
@@ -562,13 +568,50 @@ def _turn_window(
         rate_std = float(np.hypot(_ramp_angle_std(t, th, a, a2, q),
                                   _ramp_angle_std(t, th, b2, b, q)) / wint)
         ref = (-1, -1, 0.0)
-    x = imu_rate[(imu_t >= a) & (imu_t <= b)]
+    inside = (imu_t >= a) & (imu_t <= b)
+    x = imu_rate[inside]
     noise, follow = _noise_beside_motion(x)
     mean_std = noise * float(np.sqrt(np.sum(qw**2)) / np.sum(qw))  # white; see _pool_noise
+    nod, nod_std = _turn_nod(imu_t[inside], x, t, th)
     win = Window(kind, seg.index, int(seg.motor), d, corners, revs, float(rate),  # type: ignore[arg-type]
                  tuple(float(v) for v in mean), int(x.shape[0]))  # type: ignore[arg-type]
     return _Turn(win, mean, float(rate), int(x.shape[0]), noise, mean_std, rate_std,
-                 ref, follow)  # type: ignore[arg-type]
+                 ref, follow, nod, nod_std)  # type: ignore[arg-type]
+
+
+def _turn_nod(ts: np.ndarray, x: np.ndarray, t: np.ndarray, th: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    r"""The once-per-revolution part of a turn's readings ``x`` (n, 3) at times ``ts``: the
+    least-squares coefficients of ``θ̇ cos θ`` and ``θ̇ sin θ`` (rows), ``θ`` the turning servo's
+    encoder angle (``t``, ``th``) and ``θ̇`` its rate, with a constant and ``θ̇`` beside them
+    (the bias, and the turn itself with its speed ripple); and their white-noise standard errors
+    from the residuals.
+
+    A link that nods as its servo turns (:mod:`gyrocal.calib.systematics`) shows here: its tilt
+    ``T(θ)`` adds ``θ̇ (dT/dθ + u × T)`` to the rate the sensor turns at, once per revolution
+    for the nod's first harmonic. The encoder's rate (central differences) carries the servo's
+    speed ripple, which the ``θ̇`` column takes out of every component; its quantisation noise
+    only dilutes the coefficients by its share of their regressors' variance (1e-4 or less at a
+    servo's 4 rad/s over 4096 ticks a turn at 100 Hz)."""
+    near = (t >= ts[0] - 0.1) & (t <= ts[-1] + 0.1) if ts.size else np.zeros(t.size, bool)
+    t, th = t[near], th[near]
+    if t.size > 1:  # one reading per time (a repeated timestamp has no rate of its own)
+        t, first = np.unique(t, return_index=True)
+        th = th[first]
+    if ts.size < 8 or t.size < 3:
+        return np.zeros((2, 3)), np.full((2, 3), np.inf)  # not measured
+    rate = np.gradient(th, t)
+    ang = np.interp(ts, t, th)
+    w = np.interp(ts, t, rate)
+    X = np.column_stack([np.ones(ts.size), w, w * np.cos(ang), w * np.sin(ang)])
+    coef, *_ = np.linalg.lstsq(X, x, rcond=None)
+    resid = x - X @ coef
+    var = np.sum(resid**2, axis=0) / max(ts.size - X.shape[1], 1)
+    try:
+        inv = np.diag(np.linalg.inv(X.T @ X))[2:]
+    except np.linalg.LinAlgError:
+        return np.zeros((2, 3)), np.full((2, 3), np.inf)  # not measured
+    return coef[2:], np.sqrt(np.outer(np.maximum(inv, 0.0), var))
 
 
 def _noise_beside_motion(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -719,6 +762,7 @@ def _assemble(
         noise=noise,
         mean_std=mean_std * np.sqrt(tau),
         rate_std=np.array([w.rate_std for w in turns]),
+        **_nod_fields(turns, tau),
         temperature_c=t_mean,
         chain=chain,
         pose=pose,
@@ -726,6 +770,16 @@ def _assemble(
         **rest_kw,  # type: ignore[arg-type]
         **ref_kw,  # type: ignore[arg-type]
     )
+
+
+def _nod_fields(turns: Sequence[_Turn], tau: np.ndarray) -> dict[str, np.ndarray]:
+    """The windows' once-per-revolution parts (:attr:`ObservationSet.nod`), their standard
+    errors with the correlation factor of the rests' noise (as ``mean_std``); none when a
+    window could not be measured (too few samples)."""
+    std = np.array([w.nod_std for w in turns]) * np.sqrt(tau)[None, None, :]
+    if not np.all(np.isfinite(std) & (std > 0)):
+        return {}
+    return {"nod": np.array([w.nod for w in turns]), "nod_std": std}
 
 
 def _turn_phase(turns: Sequence[_Turn], tracks: EncoderTracks, chain: tuple[int, ...],

@@ -30,7 +30,7 @@ from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
 from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
 from gyrocal.calib.model import GyroCalibration, ModelChoice
-from gyrocal.calib.systematics import add_wobble
+from gyrocal.calib.systematics import add_wobble, remove_nod
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
 from gyrocal.kit.errors import EstimationError, InputError
 from gyrocal.kit.recording import Recording, now_iso
@@ -488,7 +488,8 @@ def with_bias_wander(ex: ExtractedWindows, drift: BiasDrift) -> ExtractedWindows
 
 def judged_windows(rec: Recording) -> tuple[ExtractedWindows, BiasDrift]:
     """The recording's windows as a fit judges them (:func:`extract_recording`, each window's
-    and rest's σ widened by the bias's wander, :func:`with_bias_wander`), and the chip's bias
+    and rest's σ widened by the bias's wander, :func:`with_bias_wander`, the links' measured
+    nod taken out of their means, :func:`without_nod`), and the chip's bias
     drift figures: what :func:`estimate_recording` fits and a report's residuals are read
     against, so both give one χ².
 
@@ -499,7 +500,30 @@ def judged_windows(rec: Recording) -> tuple[ExtractedWindows, BiasDrift]:
     """
     ex = extract_recording(rec)
     drift = chip_bias_drift(rec.sensor.get("model"), ex)
-    return with_bias_wander(ex, drift), drift
+    return without_nod(with_bias_wander(ex, drift)), drift
+
+
+def without_nod(ex: ExtractedWindows) -> ExtractedWindows:
+    """``ex`` with the links' once-per-revolution nod, as each servo's own turns measure it,
+    taken out of the window means (:func:`gyrocal.calib.systematics.remove_nod`, through a
+    full-matrix fit of the windows as they are); ``ex`` as it is where the gimbal's chain is
+    not known or its poses do not determine the full matrix."""
+    obs = ex.observations
+    if obs.nod is None or obs.chain is None or obs.own_axes:
+        return ex
+    try:
+        fit = estimate(obs, "full-matrix")
+    except CalibInputError:
+        return ex
+    if not fit.success:
+        return ex
+    clean = remove_nod(obs, fit)
+    if not clean.nod_removed:
+        return ex
+    shift = np.asarray(obs.mean) - np.asarray(clean.mean)
+    windows = tuple(replace(w, mean=tuple(float(v) for v in np.asarray(w.mean) - shift[i]))
+                    for i, w in enumerate(ex.windows))
+    return replace(ex, observations=clean, windows=windows)
 
 
 def jig_wobble_rad(manifest: Mapping[str, Any]) -> float:
