@@ -21,9 +21,18 @@ import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from gyrocal.drivers import signals
-from gyrocal.kit import __version__
-from gyrocal.kit.errors import EXIT_CODES, exit_code_for
+# One BLAS thread, set before numpy loads OpenBLAS (a caller's own setting stands). Every matrix
+# the kit factors is small (a fit's 30–50 parameters, a plan's 3×3 designs), where OpenBLAS's
+# threads spin more than they help: on a two-core host with other work running, one batched
+# pseudo-inverse of the full-matrix fit took 40–146 ms of CPU with two threads and 1.5 ms with
+# one, and `calibrate --sim`'s fit and outputs 1.9 CPU s against 1.1 (issue 25). The test suite
+# sets the same (tests/conftest.py).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from gyrocal.drivers import signals  # noqa: E402
+from gyrocal.kit import __version__  # noqa: E402
+from gyrocal.kit.errors import EXIT_CODES, exit_code_for  # noqa: E402
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 

@@ -780,6 +780,8 @@ class _EmulatedImu(ABC):
         if period is None:
             return
         now = self.clock.monotonic()
+        if now < self._origin + (self._k + 1) * period:
+            return  # the next sample is not due (the guard below would stop there too)
         k_end = math.floor((now - self._origin) / period)
         while self._origin + k_end * period > now:  # guard the floor against rounding
             k_end -= 1

@@ -101,8 +101,10 @@ class Normals:
         return self._buf[self._pos: self._pos + n]
 
     def skip(self, n: int) -> None:
-        """Use up the next ``n`` values."""
-        self.peek(n)
+        """Use up the next ``n`` values (drawn first where the buffer runs short, as
+        :meth:`peek` draws them)."""
+        if self._pos + n > self._buf.size:
+            self.peek(n)
         self._pos += n
 
     def standard_normal(self, shape: int | tuple[int, ...]) -> np.ndarray:

@@ -502,13 +502,9 @@ class EmulatedSMBus:
         # Each step waits until the bus has clocked its bits since t0 (no wait with bus_hz 0):
         # a (repeated) START and the address byte, the data bytes at 9 bits (8 + ACK), a STOP.
         # A host that stalled meanwhile (VirtualClock.stall_at) finds them clocked already: the
-        # adapter shifts the bits out without it.
+        # adapter shifts the bits out without it. (The waits are written out in line: this runs
+        # three times per FIFO drain.)
         t0 = monotonic()
-
-        def wait(bits: int) -> None:
-            gap = t0 + bits / bus_hz - monotonic()
-            sleep(gap if gap > 0 else 0.0)
-
         timed = bus_hz > 0
         bits = 0
         first = plan[0]
@@ -519,41 +515,44 @@ class EmulatedSMBus:
             for m in plan:
                 bits += 10
                 if timed:
-                    wait(bits)
+                    gap = t0 + bits / bus_hz - monotonic()
+                    sleep(gap if gap > 0 else 0.0)
                 dev = devices.get(m.addr)
                 refusal = errno.EREMOTEIO if dev is None else dev.i2c_ack()
                 if refusal is not None:
                     failure = refusal
                     raise _oserror(failure)
-                assert dev is not None
                 data = m.data
                 if data is not None:
                     bits += 9 * len(data)
                     if timed:
-                        wait(bits)
+                        gap = t0 + bits / bus_hz - monotonic()
+                        sleep(gap if gap > 0 else 0.0)
                     if data:  # a Quick Command is the address alone
-                        dev.i2c_write(data)
+                        dev.i2c_write(data)  # type: ignore[union-attr]
                     continue
                 length = m.length
-                data = bytes(dev.i2c_read(length))
+                data = bytes(dev.i2c_read(length))  # type: ignore[union-attr]
                 if m.recv_len:
                     if not 1 <= data[0] <= I2C_SMBUS_BLOCK_MAX:
                         failure = errno.EPROTO
                         raise _oserror(failure)
                     length = 1 + data[0]
-                    data += bytes(dev.i2c_read(data[0]))
+                    data += bytes(dev.i2c_read(data[0]))  # type: ignore[union-attr]
                 if read_pec and m is plan[-1]:
                     length += 1
-                    data += bytes(dev.i2c_read(1))
+                    data += bytes(dev.i2c_read(1))  # type: ignore[union-attr]
                 if len(data) != length:
                     raise RuntimeError(f"device returned {len(data)} bytes for {length}")
                 bits += 9 * length
                 if timed:
-                    wait(bits)
+                    gap = t0 + bits / bus_hz - monotonic()
+                    sleep(gap if gap > 0 else 0.0)
                 reads.append(data)
             bits += 1  # STOP
             if timed:
-                wait(bits)
+                gap = t0 + bits / bus_hz - monotonic()
+                sleep(gap if gap > 0 else 0.0)
         finally:
             ad.log.append(Transaction(t0, op, first.addr, register, _written(plan),
                                       sum(map(len, reads)), failure, monotonic() - t0))

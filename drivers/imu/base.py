@@ -414,6 +414,8 @@ class ImuReader(ABC):
         self.discard_first = bool(discard_first)
         self.clock_fit_window_s = float(clock_fit_window_s)
         self._rdwr = callable(getattr(self._bus, "i2c_rdwr", None))
+        #: ``i2c_rdwr`` messages of :meth:`_burst` by (register, length).
+        self._burst_msgs: dict[tuple[int, int], tuple[Any, Any]] = {}
         self._info: SensorInfo | None = None
         self._streaming = False
         self._closed = False
@@ -499,12 +501,16 @@ class ImuReader(ABC):
 
     def _burst(self, register: int, length: int) -> bytes:
         """One long read starting at ``register`` through ``i2c_rdwr`` (write reg, read N)."""
-        from smbus2 import i2c_msg
+        msgs = self._burst_msgs.get((register, length))
+        if msgs is None:  # made once per register and length: the kernel copies them each time
+            from smbus2 import i2c_msg
 
-        w = i2c_msg.write(self.address, [register])
-        r = i2c_msg.read(self.address, length)
-        self._bus.i2c_rdwr(w, r)
-        return bytes(r)
+            if len(self._burst_msgs) > 64:
+                self._burst_msgs.clear()
+            msgs = self._burst_msgs[register, length] = (
+                i2c_msg.write(self.address, [register]), i2c_msg.read(self.address, length))
+        self._bus.i2c_rdwr(*msgs)
+        return bytes(msgs[1])
 
     def _read_stream(self, register: int, length: int, chunk: int) -> bytes:
         """Read ``length`` bytes from a FIFO data port (or a wrapping register window) at
@@ -947,11 +953,13 @@ class ImuReader(ABC):
     ) -> ImuBatch:
         if index.size == 0:
             return ImuBatch.empty(gaps)
-        rate = gyro.astype(np.float64) * self.info.sensitivity_rad_s_per_lsb
-        wide = gyro.astype(np.int32)
+        # gyro and accelerometer counts side by side in native int32 (the FIFO's words may be
+        # big-endian views): one conversion, one saturation test and one scaling for both, as a
+        # drain of a sample or two is mostly the per-call cost of numpy
+        wide = np.concatenate((gyro, accel), axis=1, dtype=np.int32)
         saturated = np.abs(wide) >= self._sat_counts
-        accel_wide = accel.astype(np.int32)
-        self._check_stuck(wide, saturated)
+        scaled = wide * self._scale6
+        self._check_stuck(wide[:, :3], saturated[:, :3])
         temperature = self.family.counts_to_celsius(temp_counts)
         t = self._sclock.time_of(index)
         if t[0] <= self._last_t:  # a refit moved the line back a hair: keep time increasing
@@ -960,15 +968,25 @@ class ImuReader(ABC):
         self.samples_delivered += index.size
         return ImuBatch(
             t=t,
-            rate=rate,
+            rate=scaled[:, :3],
             temperature_c=temperature,
-            saturated=saturated,
+            saturated=saturated[:, :3],
             raw_counts=gyro.astype(np.int16, copy=False),
             index=index,
-            accel=accel_wide * self.accel_range.sensitivity_m_s2_per_lsb,
-            accel_saturated=np.abs(accel_wide) >= self._sat_counts,
+            accel=scaled[:, 3:],
+            accel_saturated=saturated[:, 3:],
             gaps=gaps,
         )
+
+    @property
+    def _scale6(self) -> np.ndarray:
+        """Per column of :meth:`_make_batch`'s counts: the gyro's sensitivity (rad/s) thrice,
+        the accelerometer's (m/s²) thrice."""
+        key = (self.info.sensitivity_rad_s_per_lsb, self.accel_range.sensitivity_m_s2_per_lsb)
+        if getattr(self, "_scale6_key", None) != key:
+            self._scale6_key = key
+            self._scale6_cache = np.repeat(np.asarray(key, dtype=np.float64), 3)
+        return self._scale6_cache
 
     def _check_stuck(self, counts: np.ndarray, saturated: np.ndarray) -> None:
         """Track runs of identical counts per axis; raise when one is long enough to be stuck."""
