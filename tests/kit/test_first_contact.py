@@ -212,17 +212,6 @@ def test_emulate_help_says_what_a_client_at_another_baud_gets(capsys):
     assert "a client at another rate gets no reply" in help_text
 
 
-def test_setup_md_shows_what_doctor_sim_prints(tmp_path, monkeypatch, capsys):
-    page = (ROOT / "hardware_docs" / "setup.md").read_text(encoding="utf-8")
-    sample = re.search(r"\(`gyrocal doctor --sim`\) it prints:\n\n```text\n(.*?)```", page,
-                       re.S).group(1)
-    monkeypatch.chdir(tmp_path)
-    assert main(["init"]) == 0  # the page's previous step
-    capsys.readouterr()
-    assert main(["doctor", "--sim"]) == 0
-    assert capsys.readouterr().out == sample
-
-
 def test_doctor_warns_of_a_bias_only_beyond_the_chips_datasheet(capsys):
     # The default emulated LSM9DS1 has biases up to its datasheet's ±30 °/s (0.52 rad/s;
     # DocID025715 Table 3, G_TyOff): doctor used to call anything above 0.3 rad/s unusual.
