@@ -279,13 +279,23 @@ class Jig:
                 imu.close()
 
 
-def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | None:
-    """The gyro's white noise per sample at rest (rad/s), from a short stream before the
-    protocol (first differences; the median over the axes), for the planner; None if the stream
-    gave too few samples."""
+def measure_still_noise(imu: Any, clock: Any, seconds: float = 1.0) -> float | None:
+    """The gyro's noise per sample at rest that sets how well a window's mean is known (rad/s),
+    from a short stream before the protocol, for the planner; None if the stream gave too few
+    samples.
+
+    The planner predicts a window mean's σ as this figure over the root of the window's
+    samples, so the figure is the root of the long-run variance (the variance of a long mean
+    times its samples): first differences (:func:`~gyrocal.calib.observations.diff_noise`)
+    times the root of :func:`~gyrocal.calib.windows.correlation_factor`, which a chip's
+    low-pass filter makes above 1 (the emulated LSM6DSOX's first differences alone read 0.63
+    of it, and planned 0.6 s rests instead of 1.0). The median over the axes. One second
+    gives the factor's estimate about 200 batch means at 200 Hz.
+    """
     import numpy as np
 
     from gyrocal.calib.observations import diff_noise
+    from gyrocal.calib.windows import correlation_factor
 
     imu.start()
     try:
@@ -299,7 +309,7 @@ def measure_still_noise(imu: Any, clock: Any, seconds: float = 0.5) -> float | N
     x = np.concatenate(rates) if rates else np.zeros((0, 3))
     if x.shape[0] < 20:
         return None
-    return float(np.median(diff_noise(x)))
+    return float(np.median(diff_noise(x) * np.sqrt(correlation_factor([x]))))
 
 
 def _nominal_axes(names: list[str]) -> Any:

@@ -25,9 +25,11 @@ def _extract(run, **kw):
 
 def _true_mean(run, corners):
     """Noise-free weighted mean reading over a window, from the fine-grid truth (Eq. 1)."""
-    t = run.grid_t
+    lo, hi = np.searchsorted(run.grid_t, [corners[0], corners[3]])
+    span = slice(max(lo - 1, 0), hi + 1)  # the weight is 0 outside the window
+    t = run.grid_t[span]
     w = trapezoid_weight(t, corners)
-    g = run.grid_rate.T @ run.axes  # sensor-frame true rate
+    g = run.grid_rate[:, span].T @ run.axes  # sensor-frame true rate
     m = g / run.scale - run.bias
     return np.trapezoid(w[:, None] * m, t, axis=0) / np.trapezoid(w, t)
 
@@ -231,3 +233,32 @@ def test_a_tilted_turns_ripple_is_not_taken_for_noise():
     obs = _extract(run).observations
     assert obs.noise.shape == (6, 3)
     np.testing.assert_allclose(obs.noise, noise_std, rtol=0.15)
+
+
+def test_window_sigma_holds_the_scatter_of_filtered_noise():
+    # An independent noise generator: white noise through a second-order Butterworth low-pass
+    # at 67 Hz (the LSM6DSOX's at 208 Hz, AN5192), DC gain 1, so its long-run variance is the
+    # white input's, whatever the filter does to first differences (they read 0.6 of it). On
+    # the planned short rests (0.6 s, 0.2 s used of each), every window's and rest's σ must
+    # hold the scatter of its mean about the noise-free truth.
+    from scipy.signal import butter, lfilter
+
+    run = _run(20, SimProtocol(speed=3.0, turns=3, rest_s=0.6), enc_jitter_s=0.0,
+               imu_jitter_s=0.0, imu_clock_error=0.0)
+    fs = 1 / np.median(np.diff(run.imu_t))
+    filt = butter(2, 67.0 * fs / 208.33, fs=fs)
+    clean = np.stack([np.interp(run.imu_t, run.grid_t, run.grid_rate[s]) for s in range(3)], 1)
+    m0 = clean @ run.axes / run.scale - run.bias
+    z = []
+    for k in range(2):
+        white = np.random.default_rng(200 + k).normal(0, 0.035, (m0.shape[0] + 200, 3))
+        noise = lfilter(*filt, white, axis=0)[200:]
+        ex = extract_observations(run.imu_t, m0 + noise, run.enc_t, run.enc_motor,
+                                  run.enc_angle, run.segments)
+        obs = ex.observations
+        z += [(obs.mean[i] - _true_mean(run, w.corners)) / obs.mean_std[i]
+              for i, w in enumerate(ex.windows)]
+        z += list((obs.rest_mean + run.bias) / obs.rest_mean_std)
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    # 2 × (6 windows + 7 rests) × 3 axes: an honest σ gives an RMS of 1 ± 0.08
+    assert 0.8 < rms < 1.2, rms
