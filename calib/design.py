@@ -1478,6 +1478,33 @@ def _accel_rest_search(
 
     zero = index(0.0)
     eps = 1e-6 * np.eye(9)
+    # Each move's time between two grid angles, and each rest's one-servo moves within the
+    # limits (servo, grid index), once: the search below asks for them tens of thousands of
+    # times.
+    grid_moves = [[move_time(a, b) for b in grid] for a in grid]
+    reachable = [[(s, k) for s in range(S) for k in range(n_grid)
+                  if abs(grid[k]) <= limit[r][s] + 1e-9] for r in range(len(rests))]
+    grid_list = grid.tolist()
+
+    def rest_step(states: list[tuple], r: int, lam: float) -> list[tuple]:
+        """The beam after rest ``r``: each state as it is or with one servo moved first,
+        scored together (one batched log-determinant), the best ``beam`` kept (a stable sort:
+        ties keep the order of the states and their options)."""
+        options = []  # (state, pose indices, time, the move or None)
+        for j, (_, t, here, _, _, _) in enumerate(states):
+            options.append((j, here, t, None))
+            for s, k in reachable[r]:
+                if k != here[s]:
+                    options.append((j, here[:s] + (k,) + here[s + 1:],
+                                    t + still[r] + grid_moves[here[s]][k], (r, s, grid_list[k])))
+        pose = np.array([o[1] for o in options]) @ strides
+        ninfo = np.stack([st[4] for st in states])[[o[0] for o in options]] + info_all[pose]
+        score = (np.linalg.slogdet(ninfo + eps)[1]
+                 - lam * np.array([o[2] for o in options])).tolist()
+        kept = sorted(range(len(options)), key=lambda i: -score[i])[:int(beam)]
+        return [(score[i], options[i][2], options[i][1],
+                 states[options[i][0]][3] + ([options[i][3]] if options[i][3] else []),
+                 ninfo[i], states[options[i][0]][5] + [int(pose[i])]) for i in kept]
 
     def search(lam: float) -> tuple[float, list[tuple[int, int, float]], list[int]]:
         # a state: (score, time, angle indices, moves, information, pose per rest)
@@ -1492,22 +1519,7 @@ def _accel_rest_search(
                 continue
             if st[0] != "rest":
                 continue
-            grown: list[tuple] = []
-            for _, t, here, mv, info, seen in states:
-                options = [(here, t, mv)]
-                for s in range(S):
-                    for k in range(n_grid):
-                        if abs(grid[k]) <= limit[r][s] + 1e-9 and k != here[s]:
-                            options.append((here[:s] + (k,) + here[s + 1:],
-                                            t + still[r] + move_time(grid[here[s]], grid[k]),
-                                            mv + [(r, s, float(grid[k]))]))
-                pose = np.array([int(np.dot(o[0], strides)) for o in options])
-                ninfo = info + info_all[pose]
-                sc = np.linalg.slogdet(ninfo + eps)[1] - lam * np.array([o[1] for o in options])
-                grown += [(float(sc[i]), o[1], o[0], o[2], ninfo[i], seen + [int(pose[i])])
-                          for i, o in enumerate(options)]
-            grown.sort(key=lambda x: -x[0])
-            states = grown[:int(beam)]
+            states = rest_step(states, r, lam)
             r += 1
         best = min(((t + sum(move_time(grid[here[s]], 0.0) for s in range(S)), mv, seen)
                     for _, t, here, mv, _, seen in states), key=lambda x: x[0])

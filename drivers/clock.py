@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Clock", "SystemClock", "VirtualClock"]
+__all__ = ["Clock", "SystemClock", "VirtualClock", "waiter_until"]
 
 _INF = math.inf
 
@@ -55,6 +56,22 @@ class SystemClock:
 
     def __repr__(self) -> str:
         return "SystemClock()"
+
+
+def waiter_until(clock: Clock) -> Callable[[float], None]:
+    """A function that waits on ``clock`` until its time ``t``: the clock's own ``sleep_until``
+    (:meth:`VirtualClock.sleep_until`) where it has one, else ``sleep`` of the gap from
+    ``monotonic`` (nothing when ``t`` is past)."""
+    own = getattr(clock, "sleep_until", None)
+    if own is not None:
+        return own
+    monotonic, sleep = clock.monotonic, clock.sleep
+
+    def wait(t: float) -> None:
+        gap = t - monotonic()
+        sleep(gap if gap > 0 else 0.0)
+
+    return wait
 
 
 class VirtualClock:
@@ -104,6 +121,20 @@ class VirtualClock:
         return t
 
     advance = sleep
+
+    def sleep_until(self, t: float) -> None:
+        """Advance the virtual time to ``t`` (no change if it is past), exactly as
+        ``sleep(max(t - monotonic(), 0))`` does, stalls included, in one call: an emulated bus
+        waits for its bits this way several times per transfer.
+
+        A ``t`` that is not a number waits for nothing (as ``sleep`` of a NaN gap clipped
+        at zero would)."""
+        now = self._t
+        gap = t - now
+        now += gap if gap > 0 else 0.0
+        if now >= self._next_stall:
+            now = self._stall(now)
+        self._t = now
 
     def stall_at(self, t: float, seconds: float) -> None:
         """Model a host that stops running for ``seconds`` at time ``t`` (a scheduler stall

@@ -568,6 +568,11 @@ class _EmulatedImu(ABC):
         #: How far ahead of the clock samples are computed on a motion source that allows it
         #: (0: each when the clock reaches it).
         self.lookahead_s = 0.25
+        #: At most this many samples are computed ahead at once: at the power-on rate (8 kHz on
+        #: the MPU-9250) 0.25 s is 2,000 samples, and the driver's configuring drains them a
+        #: few at a time and then changes the rate (a seed-3 calibration computed 6,000 there
+        #: and used 85); 256 leaves every rate up to 1 kHz its full look-ahead.
+        self.lookahead_max = 256
         self._ahead: _Ahead | None = None
         r = self.truth.realism
         self._coloured = ColouredNoise(r.bias_instability_rad_s, r.rate_random_walk_rad_s_sqrt_s,
@@ -923,7 +928,7 @@ class _EmulatedImu(ABC):
         if self.motion.due_by(t_read):  # type: ignore[attr-defined]
             return False
         if a is None:
-            count = max(n, math.ceil(self.lookahead_s / period))
+            count = max(n, min(math.ceil(self.lookahead_s / period), self.lookahead_max))
             a = self._ahead = self._look_ahead(token, self._k + 1, count, period)
         i, j = a.next, a.next + n
         self.motion.touch(t_read)  # type: ignore[attr-defined]

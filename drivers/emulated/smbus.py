@@ -31,7 +31,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 
 from smbus2 import I2cFunc
 
-from gyrocal.drivers.clock import Clock, VirtualClock
+from gyrocal.drivers.clock import Clock, VirtualClock, waiter_until
 
 __all__ = ["I2C_SMBUS_BLOCK_MAX", "EmulatedSMBus", "I2CDevice", "Transaction", "smbus_pec"]
 
@@ -498,12 +498,12 @@ class EmulatedSMBus:
         ad = self._adapter
         ad.transactions += 1
         clock, bus_hz, devices = ad.clock, ad.bus_hz, ad.devices
-        monotonic, sleep = clock.monotonic, clock.sleep
+        monotonic, wait = clock.monotonic, waiter_until(clock)
         # Each step waits until the bus has clocked its bits since t0 (no wait with bus_hz 0):
         # a (repeated) START and the address byte, the data bytes at 9 bits (8 + ACK), a STOP.
         # A host that stalled meanwhile (VirtualClock.stall_at) finds them clocked already: the
-        # adapter shifts the bits out without it. (The waits are written out in line: this runs
-        # three times per FIFO drain.)
+        # adapter shifts the bits out without it. (One call per wait: this runs three times per
+        # FIFO drain.)
         t0 = monotonic()
         timed = bus_hz > 0
         bits = 0
@@ -515,8 +515,7 @@ class EmulatedSMBus:
             for m in plan:
                 bits += 10
                 if timed:
-                    gap = t0 + bits / bus_hz - monotonic()
-                    sleep(gap if gap > 0 else 0.0)
+                    wait(t0 + bits / bus_hz)
                 dev = devices.get(m.addr)
                 refusal = errno.EREMOTEIO if dev is None else dev.i2c_ack()
                 if refusal is not None:
@@ -526,8 +525,7 @@ class EmulatedSMBus:
                 if data is not None:
                     bits += 9 * len(data)
                     if timed:
-                        gap = t0 + bits / bus_hz - monotonic()
-                        sleep(gap if gap > 0 else 0.0)
+                        wait(t0 + bits / bus_hz)
                     if data:  # a Quick Command is the address alone
                         dev.i2c_write(data)  # type: ignore[union-attr]
                     continue
@@ -546,13 +544,11 @@ class EmulatedSMBus:
                     raise RuntimeError(f"device returned {len(data)} bytes for {length}")
                 bits += 9 * length
                 if timed:
-                    gap = t0 + bits / bus_hz - monotonic()
-                    sleep(gap if gap > 0 else 0.0)
+                    wait(t0 + bits / bus_hz)
                 reads.append(data)
             bits += 1  # STOP
             if timed:
-                gap = t0 + bits / bus_hz - monotonic()
-                sleep(gap if gap > 0 else 0.0)
+                wait(t0 + bits / bus_hz)
         finally:
             ad.log.append(Transaction(t0, op, first.addr, register, _written(plan),
                                       sum(map(len, reads)), failure, monotonic() - t0))
