@@ -88,6 +88,24 @@ _MIN_WINDOW_S = 0.05
 #: ``H/c`` outside; the tails beyond are < 1e-5 of ``Φ``).
 _LN_C_MARGIN = 12.0
 _LN_C_POINTS = 1201
+#: Points of the ``ln c`` grid :meth:`BiasDrift.window_covariance` integrates on (a matrix
+#: per point; the integrand is smooth in ``ln c``: a step of 0.8 is within 1e-6 of a step
+#: of 0.04 on 120 windows over a minute).
+_WINDOW_LN_C_POINTS = 41
+
+
+def _interval_integrals(G: Any, a: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """``∬ k(t − u) dt du`` over every pair of intervals ``[a_i, e_i] × [a_j, e_j]`` from
+    ``G`` (``G'' = k``, ``G(0) = G'(0) = 0``; :meth:`BiasDrift.window_covariance`)."""
+    return (G(e[:, None] - a[None, :]) + G(a[:, None] - e[None, :])
+            - G(e[:, None] - e[None, :]) - G(a[:, None] - a[None, :]))
+
+
+def _about_run(integrals: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """The covariance of the first ``N`` intervals' averages about the last one's (the run),
+    from the pairs' double integrals (:func:`_interval_integrals`) and the lengths."""
+    avg = integrals / np.outer(length, length)
+    return avg[:-1, :-1] - avg[:-1, -1:] - avg[-1:, :-1] + avg[-1, -1]
 
 
 def _avg_integral(L: np.ndarray | float, c: np.ndarray) -> np.ndarray:
@@ -253,6 +271,86 @@ class BiasDrift:
         phi = np.array([flicker_run_factor(L, self.span_s, min_span_s=_MIN_WINDOW_S)
                         for L in lengths])
         return phi[:, None] * B**2 + K**2 * self.span_s / 3.0
+
+    def window_covariance(self, start_s: Any, end_s: Any) -> np.ndarray:
+        """Covariance the wander adds to the window means about the run's mean, (3, N, N)
+        (rad/s)²: per axis, between every pair of windows, from the wander's autocovariance
+        between the windows' times (the truth :meth:`window_variance` bounds one window of).
+
+        The bias is one process in time, so windows seconds apart (a turn's two directions, a
+        rest beside a turn) see nearly the same wander and a fit's contrasts between them
+        cancel most of it; widening each window's σ by its variance instead treats it as
+        independent between windows and overstates what reaches the matrix. With ``ω̄_i`` the
+        wander's average over window ``i`` ``[a_i, e_i]`` and ``ω̄_R`` its average over the run
+        ``R = [min a, max e]`` (the common part, which a fit's constant bias takes whole and
+        :attr:`run_variance` states), this is ``Cov(ω̄_i − ω̄_R, ω̄_j − ω̄_R)``. For a
+        stationary kernel ``k`` with ``G'' = k``, ``G(0) = G'(0) = 0``, the double integral of
+        ``k(t − u)`` over two intervals is
+
+            I(i, j) = G(e_i − a_j) + G(a_i − e_j) − G(e_i − e_j) − G(a_i − a_j)
+
+        and the covariance is ``I(i,j)/(L_i L_j) − I(i,R)/(L_i T) − I(R,j)/(T L_j) + I(R,R)/T²``.
+
+        * **rate random walk**: ``Cov(W(s), W(t)) = min(s, t) = (s + t − |s − t|)/2`` from any
+          start; the ``s + t`` part cancels in the differences about ``R``, leaving the
+          stationary ``k(x) = −K² |x|/2``, ``G(x) = −K² |x|³/12``.
+        * **bias instability**: the continuum of Gauss–Markov processes of the module
+          docstring, ``k_c(x) = e^(−|x|/c)`` with variance ``B²/π`` per unit ``ln c``,
+          ``G_c(x) = c² (|x|/c − 1 + e^(−|x|/c))``, integrated over ``ln c`` (the trapezoid
+          rule; fast processes average out within a window, slow ones are common to the run).
+
+        Parameters
+        ----------
+        start_s, end_s : array_like, shape (N,)
+            Each window's first and last sample's time, s (any common origin).
+
+        Returns
+        -------
+        numpy.ndarray, shape (3, N, N)
+        """
+        a = np.atleast_1d(np.asarray(start_s, dtype=float))
+        e = np.atleast_1d(np.asarray(end_s, dtype=float))
+        e = np.maximum(e, a + _MIN_WINDOW_S)  # a window's mean is over its samples
+        a, e = np.append(a, a.min()), np.append(e, e.max())  # the run R last
+        length = e - a
+        B, K = np.asarray(self.bias_instability), np.asarray(self.rate_random_walk)
+        walk = _about_run(_interval_integrals(lambda x: -np.abs(x) ** 3 / 12.0, a, e), length)
+        flicker = np.zeros_like(walk)
+        if np.any(B > 0):
+            ln_c = np.linspace(np.log(length.min()) - _LN_C_MARGIN,
+                               np.log(length[-1]) + _LN_C_MARGIN, _WINDOW_LN_C_POINTS)
+            weights = np.full(ln_c.size, ln_c[1] - ln_c[0])
+            weights[[0, -1]] *= 0.5
+            for c, w in zip(np.exp(ln_c), weights, strict=True):
+                G = lambda x, c=c: 0.5 * c**2 * _avg_integral(np.abs(x), c)  # noqa: E731
+                flicker += w * _about_run(_interval_integrals(G, a, e), length)
+            flicker /= math.pi
+        return B[:, None, None] ** 2 * flicker + K[:, None, None] ** 2 * walk
+
+    def window_covariance_change(self, start_s: Any, end_s: Any) -> np.ndarray:
+        """What the wander's covariance between the windows' means (:meth:`window_covariance`)
+        differs by from the per-window variance their σ carry (:meth:`window_variance`),
+        ``(3N, 3N)`` (rad/s)², window-major (``3 i + axis``): ``Σ_wander − D``, the change
+        :func:`gyrocal.calib.estimators.add_window_wander` carries through a fit.
+
+        Parameters
+        ----------
+        start_s, end_s : array_like, shape (N,)
+            Each window's first and last sample's time, s.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3N, 3N)
+        """
+        start = np.atleast_1d(np.asarray(start_s, dtype=float))
+        end = np.atleast_1d(np.asarray(end_s, dtype=float))
+        N = start.size
+        change = np.zeros((N, 3, N, 3))
+        for p, dense in enumerate(self.window_covariance(start, end)):
+            change[:, p, :, p] = dense
+        widened = self.window_variance(end - start)  # (N, 3)
+        change[np.arange(N), :, np.arange(N), :] -= widened[:, :, None] * np.eye(3)
+        return change.reshape(3 * N, 3 * N)
 
     @property
     def wander(self) -> np.ndarray:

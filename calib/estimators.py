@@ -66,6 +66,7 @@ __all__ = [
     "FitResult",
     "ModelResiduals",
     "add_bias_drift",
+    "add_window_wander",
     "estimate",
     "fit_full_matrix",
     "full_matrix_batch",
@@ -138,6 +139,13 @@ class FitResult:
     bias_drift : BiasDrift or None
         The bias instability and rate random walk whose variance over the run
         :func:`add_bias_drift` added to ``covariance``'s bias block; None before.
+    mean_gain : numpy.ndarray, shape (Q, 3n + 3r), or None
+        Paired-axis and full-matrix only: the first-order change of ``(scale, bias)`` (``Q`` 6)
+        or ``(A row-major, b)`` (``Q`` 12) per unit change of each window's and then each
+        rest's mean (row-major, rad/s), the fit's own weights: ``−(J̃ᵀJ̃)⁻¹ J̃ᵀ`` carried back
+        through each window's whitening, times the root of the verdict's factor, so that
+        ``mean_gain Σ mean_gainᵀ`` is the covariance errors of covariance ``Σ`` in the means
+        give, on the scale of ``covariance`` (:func:`add_window_wander`).
     """
 
     method: str
@@ -160,6 +168,7 @@ class FitResult:
     g_sensitivity_cov: np.ndarray | None = None
     g_directions: np.ndarray | None = None
     bias_drift: BiasDrift | None = None
+    mean_gain: np.ndarray | None = None
 
     @property
     def scale_std(self) -> np.ndarray:
@@ -268,6 +277,61 @@ def add_bias_drift(fit: FitResult, drift: BiasDrift) -> FitResult:
     idx = np.arange(cov.shape[0] - 3, cov.shape[0])
     cov[idx, idx] += drift.run_variance
     return replace(fit, covariance=cov, bias_drift=drift)
+
+
+def add_window_wander(fit: FitResult, change: np.ndarray) -> FitResult:
+    """``fit`` with the bias's wander between its windows in the covariance as the process in
+    time it is, in place of the per-window variance the windows' σ carried.
+
+    A recording's windows are judged with their σ widened by the wander about the run's mean
+    (:meth:`BiasDrift.window_variance`, so the χ² test does not blame a rest for it), which
+    treats the wander as independent between windows. It is one process: a turn's two
+    directions and the rests beside them are seconds apart and share it, so the contrasts the
+    matrix comes from cancel most of it. With the fit's own weights (``fit.mean_gain``,
+    ``M``), the covariance of the estimates is ``M (Σ_white + Σ_wander) Mᵀ``; the fit stated
+    ``M (Σ_white + D) Mᵀ`` with ``D`` the per-window widening, so the result is
+
+        covariance + M (Σ_wander − D) Mᵀ
+
+    with ``Σ_wander`` the wander's covariance between the windows' means about the run's mean
+    (:meth:`BiasDrift.window_covariance`; the run's mean itself is common to every window and
+    goes whole into the bias: :func:`add_bias_drift`). The weights stay those the fit used
+    (not the best for correlated errors, but the covariance is theirs).
+
+    Parameters
+    ----------
+    fit : FitResult
+        A fit whose windows' and rests' σ carried ``D``; returned unchanged without
+        ``mean_gain`` (iterative-ls, levenberg-marquardt) or when ``change`` does not match it.
+    change : numpy.ndarray, shape (3 (n + r), 3 (n + r))
+        ``Σ_wander − D`` over the windows, then the rests, window-major
+        (:meth:`BiasDrift.window_covariance_change`).
+
+    Returns
+    -------
+    FitResult
+    """
+    gain = fit.mean_gain
+    if gain is None or change.shape != (gain.shape[1],) * 2:
+        return fit
+    cov = np.asarray(fit.covariance, dtype=float) + gain @ change @ gain.T
+    return replace(fit, covariance=0.5 * (cov + cov.T))
+
+
+def _mean_gain(cov: np.ndarray, J: np.ndarray, L: np.ndarray, rest_std: np.ndarray
+               ) -> np.ndarray:
+    """``−(J̃ᵀJ̃)⁻¹ J̃ᵀ`` carried back to the raw means: ``(B, P, 3n + 3r)``, the first-order
+    change of the parameters per unit change of each window's mean (whitened by ``L⁻¹``, ``L``
+    (B, n, 3, 3)) and each rest's (whitened by ``1 / rest_std``, (B, r, 3)), row-major."""
+    B, n = L.shape[:2]
+    r = rest_std.shape[1]
+    P = J.shape[-1]
+    Jw = J[:, : 3 * n].reshape(B, n, 3, P)
+    Linv = np.linalg.inv(L)
+    win = np.einsum("bnkp,bnkq->bpnq", Jw, Linv).reshape(B, P, 3 * n)
+    Jr = J[:, 3 * n : 3 * n + 3 * r].reshape(B, r, 3, P) / rest_std[..., None]
+    rest = np.moveaxis(Jr, 3, 1).reshape(B, P, 3 * r)
+    return -cov @ np.concatenate([win, rest], axis=2)
 
 
 def _nearest_axis(u: np.ndarray) -> str:
@@ -754,6 +818,7 @@ class PairedAxisBatch:
     residuals: np.ndarray  # (B, 3n + 3r) whitened
     g_sensitivity: np.ndarray | None = None  # (B, 3, k): G along the force's k directions
     g_covariance: np.ndarray | None = None  # (B, 3k, 3k), G row-major
+    mean_gain: np.ndarray | None = None  # (B, 6, 3n + 3r): d(k, b) / d(means) (_mean_gain)
 
 
 def _paired_initial(
@@ -883,13 +948,17 @@ def paired_axis_batch(
     var_w = rate_std[:, :, None, None] ** 2
     eye3 = np.eye(3)
 
+    def window_chol(ci: np.ndarray) -> np.ndarray:
+        """Each window's noise ``diag(σ²) + σ²_ω c cᵀ`` (``c`` its axis over ``k``), factored."""
+        return np.linalg.cholesky(var_m[..., None] * eye3 + var_w * ci[..., :, None]
+                                  * ci[..., None, :])
+
     def evaluate(k, b, u, z, gs, with_jac):
         ui = u[:, motor_index, :]  # (B, n, 3)
         ci = ui / k[:, None, :]
         w = (rate - z @ G.T)[:, :, None]  # the true reference: measured minus its error
         e = mean - (w * ci - b[:, None, :] - np.einsum("bpq,bnq->bnp", gs, f_win))  # (B, n, 3)
-        C = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
-        L = np.linalg.cholesky(C)  # (B, n, 3, 3)
+        L = window_chol(ci)  # (B, n, 3, 3)
         ew = np.linalg.solve(L, e[..., None])[..., 0]  # whitened: L⁻¹ e
         er = (rest_mean + b[:, None, :] + np.einsum("bpq,brq->brp", gs, f_rest)) / rest_std
         ez = z / still_std if n_still else z
@@ -940,6 +1009,8 @@ def paired_axis_batch(
         step_scale=lambda state: 1.0 + np.max(np.abs(state[0]), axis=1))
     k, b, u, z, gs = state
     cov = np.linalg.pinv(J.transpose(0, 2, 1) @ J, hermitian=True)
+    gain = _mean_gain(cov[:, :6], J, window_chol(u[:, motor_index, :] / k[:, None, :]),
+                      rest_std)
     return PairedAxisBatch(
         scale=k,
         bias=b,
@@ -952,6 +1023,7 @@ def paired_axis_batch(
         residuals=E,
         g_sensitivity=gs if nk else None,
         g_covariance=cov[:, P0:, P0:] if nk else None,
+        mean_gain=gain,
     )
 
 
@@ -1063,6 +1135,7 @@ def fit_paired_axis(obs: ObservationSet, *, max_iter: int = 50, g_sensitivity: b
         axes=axes,
         axes_std_rad=axes_std,
         extra=extra,
+        mean_gain=res.mean_gain[0] * np.sqrt(factor),  # type: ignore[index]
         **_g_terms(res, basis, factor),  # type: ignore[arg-type]
     )
 
@@ -1196,6 +1269,7 @@ class FullMatrixBatch:
     g_sensitivity: np.ndarray | None = None  # (B, 3, k) G of g = A (m + b + G f), rad/s per g
     g_covariance: np.ndarray | None = None  # (B, 3k, 3k) of G row-major
     g_cross_covariance: np.ndarray | None = None  # (B, 12, 3k): of (A row-major, b) with G
+    mean_gain: np.ndarray | None = None  # (B, 12, 3n + 3r): d(A, b) / d(means) (_mean_gain)
 
 
 def _inner_unrotate(u0: np.ndarray, delta: np.ndarray, j: int, v: np.ndarray) -> np.ndarray:
@@ -1428,6 +1502,11 @@ def full_matrix_batch(
     def axes_in_windows(u: np.ndarray, d: np.ndarray) -> np.ndarray:
         return kinematics.chain_axes(u[:, None], 0.0, d)[:, ar, midx]  # (B, n, 3)
 
+    def window_chol(ci: np.ndarray) -> np.ndarray:
+        """Each window's noise ``diag(σ²) + σ²_ω c cᵀ`` (``c = C u``), factored."""
+        return np.linalg.cholesky(var_m[..., None] * eye3 + var_w * ci[..., :, None]
+                                  * ci[..., None, :])
+
     def evaluate(c, b, u, z, gs, with_jac):
         C = _tril(c)
         d = true_delta(z)
@@ -1435,8 +1514,7 @@ def full_matrix_batch(
         ci = np.einsum("bpq,bnq->bnp", C, ui)
         w = (rate - np.einsum("bna,ba->bn", G, z))[:, :, None]
         e = mean - (w * ci - b[:, None, :] - np.einsum("bpq,bnq->bnp", gs, f_win))
-        cov = var_m[..., None] * eye3 + var_w * ci[..., :, None] * ci[..., None, :]
-        L = np.linalg.cholesky(cov)
+        L = window_chol(ci)
         ew = np.linalg.solve(L, e[..., None])[..., 0]
         er = (rest_mean + b[:, None, :] + np.einsum("bpq,brq->brp", gs, f_rest)) / rest_std
         ez = z / still_std if n_still else z
@@ -1507,6 +1585,8 @@ def full_matrix_batch(
         T[:, :9, col] = -(A[:, :, p, None] * A[:, None, q, :]).reshape(B, 9)
     T[:, 9:, 6:9] = eye3
     cov12 = T @ cov @ T.transpose(0, 2, 1)
+    ci = np.einsum("bpq,bnq->bnp", _tril(c), axes_in_windows(u0, true_delta(z)))
+    gain = T @ _mean_gain(cov, J, window_chol(ci), rest_std)
     ax_std = np.zeros((B, S))
     for s in range(S):
         blk = cov[:, 9 + 2 * s : 11 + 2 * s, 9 + 2 * s : 11 + 2 * s]
@@ -1517,6 +1597,7 @@ def full_matrix_batch(
         converged=converged, residuals=E, rank_deficiency=deficiency,
         g_sensitivity=gs if nG else None, g_covariance=cov[:, P0:, P0:] if nG else None,
         g_cross_covariance=T @ cov[:, :, P0:] if nG else None,
+        mean_gain=gain,
     )
 
 
@@ -1790,6 +1871,7 @@ def fit_full_matrix(
         matrix=A.copy(),
         frame=FULL_FRAME,
         kinematics=kin,
+        mean_gain=res.mean_gain[0] * np.sqrt(factor),  # type: ignore[index]
         **_g_terms(res, basis, factor),
     )
 

@@ -28,7 +28,7 @@ import numpy as np
 from gyrocal.calib.accel import AccelCalibration
 from gyrocal.calib.drift import BiasDrift
 from gyrocal.calib.errors import CalibInputError
-from gyrocal.calib.estimators import FitResult, add_bias_drift, estimate
+from gyrocal.calib.estimators import FitResult, add_bias_drift, add_window_wander, estimate
 from gyrocal.calib.model import GyroCalibration, ModelChoice
 from gyrocal.calib.systematics import add_wobble, remove_nod
 from gyrocal.calib.windows import ExtractedWindows, extract_observations
@@ -311,17 +311,22 @@ def diagonal_g_note(fit: FitResult, jig: str = "gimbal") -> str | None:
 
 class _Systematics(NamedTuple):
     """What widens a fit's σ beyond the white noise: the bias's wander over the run
-    (:class:`gyrocal.calib.drift.BiasDrift`) and the links' once-per-revolution tilt, rad
-    (:func:`jig_wobble_rad`)."""
+    (:class:`gyrocal.calib.drift.BiasDrift`) and between the windows and rests
+    (``wander_change``: :meth:`~gyrocal.calib.drift.BiasDrift.window_covariance_change`), and
+    the links' once-per-revolution tilt, rad (:func:`jig_wobble_rad`)."""
 
     drift: BiasDrift
     wobble_rad: float
+    wander_change: np.ndarray
 
     def widen(self, fit: FitResult, obs: Any) -> FitResult:
-        """``fit`` with both in its covariance (:func:`gyrocal.calib.systematics.add_wobble`,
+        """``fit`` with all three in its covariance
+        (:func:`gyrocal.calib.systematics.add_wobble`; the wander between the windows,
+        :func:`gyrocal.calib.estimators.add_window_wander`, and the run's,
         :func:`gyrocal.calib.estimators.add_bias_drift`); a failed fit as it is."""
         if not fit.success:
             return fit
+        fit = add_window_wander(fit, self.wander_change)
         return add_bias_drift(add_wobble(fit, obs, self.wobble_rad), self.drift)
 
 
@@ -474,7 +479,9 @@ def with_bias_wander(ex: ExtractedWindows, drift: BiasDrift) -> ExtractedWindows
     """``ex`` with each window's and rest's standard error widened by the bias's wander about
     the run's mean over its length (:meth:`gyrocal.calib.drift.BiasDrift.window_variance`):
     the fit takes one bias for the run, so the residuals see that wander beside the white
-    noise (a quiet gyro's rests disagree by it otherwise, and the χ² test blames a rest)."""
+    noise (a quiet gyro's rests disagree by it otherwise, and the χ² test blames a rest). The
+    fit's weights and verdict use these σ; its covariance takes the wander as the process in
+    time it is instead (:func:`gyrocal.calib.estimators.add_window_wander`)."""
     obs = ex.observations
     if obs.mean_std is None:
         return ex
@@ -555,7 +562,9 @@ def estimate_recording(
         If the estimator fails (the message says why).
     """
     ex, drift = judged_windows(rec)
-    systematics = _Systematics(drift, jig_wobble_rad(rec.manifest))
+    spans = np.array([(w.corners[0], w.corners[3]) for w in (*ex.windows, *ex.rests)])
+    systematics = _Systematics(drift, jig_wobble_rad(rec.manifest),
+                               drift.window_covariance_change(*spans.reshape(-1, 2).T))
     fit, choice, notes = _fit(ex, method, rec.sensor.get("model"), systematics, rec.path,
                               seats=seat_starts(rec.manifest) is not None)
     if not fit.success:
