@@ -49,7 +49,7 @@ def _kernel() -> Callable[..., Any] | None:
                 module = importlib.util.module_from_spec(spec)
                 spec.loader.exec_module(module)
                 _KERNEL = getattr(module, "_linear_filter", False)
-        except (ImportError, OSError):
+        except Exception:  # a private module: any SciPy that loads it differently falls back
             _KERNEL = False
     return _KERNEL or None
 
@@ -81,8 +81,13 @@ def lfilter(b: Sequence[float], a: Sequence[float], x: np.ndarray,
          else np.asarray(zi, dtype=float).reshape(n - 1, cols.shape[1]))
     kernel = _kernel()
     if kernel is not None and cols.shape[0]:
-        y, zf = kernel(np.array(bb), np.array(aa), cols, 0, z)
-        return y.reshape(x.shape), zf.reshape(np.shape(zi) if zi is not None else zf.shape)
+        try:
+            y, zf = kernel(np.array(bb), np.array(aa), cols, 0, z)
+        except (TypeError, ValueError):  # a SciPy whose private kernel takes other arguments
+            global _KERNEL
+            _KERNEL = False
+        else:
+            return y.reshape(x.shape), zf.reshape(np.shape(zi) if zi is not None else zf.shape)
     y = np.empty_like(cols)
     zf = np.empty_like(z)
     for j in range(cols.shape[1]):

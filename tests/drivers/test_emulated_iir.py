@@ -53,6 +53,24 @@ def test_the_compiled_kernel_and_the_python_loop_agree_to_the_last_bit(monkeypat
                 assert f.shape == s.shape and np.array_equal(f, s)
 
 
+def test_a_kernel_that_refuses_its_arguments_falls_back_to_the_python_loop(monkeypatch):
+    """The kernel is SciPy's private API: a version that takes other arguments must cost speed,
+    not a traceback, and give the Python loop's numbers."""
+    import gyrocal.drivers.emulated.iir as iir
+
+    x = np.random.default_rng(3).standard_normal((40, 3))
+    monkeypatch.setattr(iir, "_KERNEL", False)
+    want = lfilter([0.2, 0.1], [1.0, -0.5], x)
+
+    def refuses(*args):
+        raise TypeError("_linear_filter() takes other arguments")
+
+    monkeypatch.setattr(iir, "_KERNEL", refuses)
+    got = lfilter([0.2, 0.1], [1.0, -0.5], x)
+    assert all(np.array_equal(g, w) for g, w in zip(got, want, strict=True))
+    assert iir._KERNEL is False  # and it is not tried again
+
+
 def test_a_calibrations_emulators_do_not_import_scipy_signal():
     import subprocess
     import sys
