@@ -9,7 +9,9 @@ of it but its configurations, its branches of :data:`BRANCHES`, run in directori
 so that a long chain runs on both xdist workers). An emulated ``gyrocal calibrate`` that a part
 of a chain runs a second time under another name (:data:`SHARED_RUNS`: the same configuration and
 jig arguments, so the same recording) is recorded once: the second run's command runs in full on
-a copy of the first's recording (:class:`JigRuns`). The blocks:
+a copy of the first's recording (:class:`JigRuns`); and a report plot that a worker's documents
+draw a second time from the same data is a copy of the first drawing (:class:`ReportPlots`). The
+blocks:
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
@@ -287,7 +289,8 @@ class JigRuns:
     recording, ``sim-state.json``), with the recording's ``created`` stamp made now as a new run
     would (:func:`gyrocal.kit.recording.now_iso`), and what the first's jig printed; everything
     of the command after the jig (the fit, ``calibration.json``, the report, the history, the
-    printed result and exit code) runs for it as for the first. A run that fails is not kept.
+    printed result and exit code) runs for it as for the first (but for the report's plots that
+    show nothing of the run's own, copies: :class:`ReportPlots`). A run that fails is not kept.
     Runs of other commands, with an ``extend``, or into a directory other than the run's
     ``recording/`` (a plate's sensors) always run.
     """
