@@ -52,7 +52,8 @@ from tests.test_docs import xdist_unit  # noqa: E402
 #: order after them; a figure out of date only moves a unit in that order.
 LONG_UNITS: dict[str, float] = {
     "tests/drivers/test_imu_streaming.py": 73.9,
-    "tests/test_docs.py::running": 52.8,  # its branches apart; history.md's run-h shares run1's
+    "tests/test_docs.py::running": 41.1,  # its branches apart; history.md's run-h shares run1's
+    # recording and plots, the report command run1's plots
     "tests/test_docs.py::running/thermal": 56.3,
     "tests/kit/test_calibrate.py": 38.8,
     "tests/kit/test_plate.py": 16.2,
@@ -61,7 +62,8 @@ LONG_UNITS: dict[str, float] = {
     "tests/kit/test_report.py": 35.5,
     "tests/kit/test_accel_recording.py": 20.7,  # the first to ask for the shared full_run
     "tests/kit/test_reliability.py": 28.0,
-    "tests/test_docs.py::intro": 26.3,  # with the index's demo run, which shares the README's
+    "tests/test_docs.py::intro": 18.0,  # with the index's demo run, which shares the README's
+    # recording and plots
     "tests/kit/test_track.py": 15.8,
     "tests/kit/test_signals.py": 19.7,
     "tests/calib/test_tracker.py": 20.6,

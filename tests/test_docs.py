@@ -9,7 +9,9 @@ of it but its configurations, its branches of :data:`BRANCHES`, run in directori
 so that a long chain runs on both xdist workers). An emulated ``gyrocal calibrate`` that a part
 of a chain runs a second time under another name (:data:`SHARED_RUNS`: the same configuration and
 jig arguments, so the same recording) is recorded once: the second run's command runs in full on
-a copy of the first's recording (:class:`JigRuns`). The blocks:
+a copy of the first's recording (:class:`JigRuns`); and a report plot that a worker's documents
+draw a second time from the same data is a copy of the first drawing (:class:`ReportPlots`). The
+blocks:
 
 * ``sh``/``bash``/``shell``/``console`` blocks: every ``gyrocal ...`` command (in ``console``
   blocks the lines after a ``$`` prompt; ``a && gyrocal b`` chains are split) runs in-process
@@ -65,7 +67,7 @@ import sys
 import time
 import tomllib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -287,7 +289,8 @@ class JigRuns:
     recording, ``sim-state.json``), with the recording's ``created`` stamp made now as a new run
     would (:func:`gyrocal.kit.recording.now_iso`), and what the first's jig printed; everything
     of the command after the jig (the fit, ``calibration.json``, the report, the history, the
-    printed result and exit code) runs for it as for the first. A run that fails is not kept.
+    printed result and exit code) runs for it as for the first (but for the report's plots that
+    show nothing of the run's own, copies: :class:`ReportPlots`). A run that fails is not kept.
     Runs of other commands, with an ``extend``, or into a directory other than the run's
     ``recording/`` (a plate's sensors) always run.
     """
@@ -357,13 +360,109 @@ class JigRuns:
         return run.jig
 
 
+class ReportPlots:
+    """The report plots drawn so far by one worker, by what each shows (:meth:`key`), each
+    drawn once.
+
+    The documents draw some plots twice from the same data: running.md's ``gyrocal report
+    run1/recording run1/calibration.json`` draws every plot its ``gyrocal calibrate`` drew in
+    ``run1/plots``, and the runs :class:`JigRuns` makes once (``demo``, ``run-h``) draw every
+    plot of the first's but the overview, whose title names the recording's directory. A plot
+    is a function of the recording's data and manifest, the calibration and the windows
+    extracted (:func:`gyrocal.kit.report_plots._draw`; the recording's path is shown by the
+    overview only, the calibration's ``created`` and ``source`` by none), drawn by the same
+    code in the same process, so the second gets the bytes of the first's file, written where
+    and as the second's would have been (``atomic_write_bytes``, refusing an existing file
+    without ``force`` as ``save_png`` does); everything else of the command (the fit, the other
+    plots, the page) runs. ``copied`` lists the files so made.
+    """
+
+    def __init__(self) -> None:
+        from gyrocal.kit import report_plots
+
+        self._module = report_plots
+        self._real = report_plots._draw
+        self.drawn: dict[str, bytes] = {}
+        self.copied: list[str] = []
+        #: The digest of each (recording, calibration, windows) seen, kept with them (their ids
+        #: are not reused while they are held here).
+        self._digests: dict[tuple[int, int, int], tuple[Any, str]] = {}
+
+    @staticmethod
+    def key(p: Any, rec: Any, cal: Any, extracted: Any, data: str) -> str:
+        """What defines plot ``p``'s file: the plot, ``data`` (:meth:`digest` of what it is
+        drawn from), and for the overview the recording's path."""
+        import hashlib
+        import pickle
+
+        shown = str(rec.path) if p.kind == "overview" else None
+        return hashlib.sha256(pickle.dumps((p, shown, data))).hexdigest()
+
+    @staticmethod
+    def digest(rec: Any, cal: Any, extracted: Any) -> str:
+        """A digest of what a report's plots are drawn from: the recording's arrays, segments
+        and manifest (but its ``created`` stamp), the calibration (but its ``created`` and
+        ``source``) and the windows."""
+        import hashlib
+        import pickle
+
+        manifest = {k: v for k, v in rec.manifest.items() if k != "created"}
+        doc = {k: v for k, v in cal.to_dict().items() if k not in ("created", "source")}
+        arrays = (rec.imu_t, rec.imu_rate, rec.imu_temp, rec.enc_t, rec.enc_motor,
+                  rec.enc_angle, rec.segments, rec.warnings, rec.imu_accel)
+        return hashlib.sha256(pickle.dumps((
+            json.dumps(manifest, sort_keys=True, default=repr),
+            json.dumps(doc, sort_keys=True, default=repr), arrays, extracted))).hexdigest()
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[None]:
+        """``gyrocal.kit.report_plots._draw`` replaced by :meth:`draw` for the duration."""
+        self._module._draw = self.draw
+        try:
+            yield
+        finally:
+            self._module._draw = self._real
+
+    def draw(self, plt: Any, p: Any, out: Path, rec: Any, cal: Any, extracted: Any,
+             turns: Any, home: Any, axes: Any, index: Any, force: bool) -> tuple[Path, str]:
+        """:func:`gyrocal.kit.report_plots._draw`, each plot drawn once per :meth:`key`."""
+        from gyrocal.kit.fileio import atomic_write_bytes
+
+        ids = (id(rec), id(cal), id(extracted))
+        if ids not in self._digests:
+            self._digests[ids] = ((rec, cal, extracted), self.digest(rec, cal, extracted))
+        key = self.key(p, rec, cal, extracted, self._digests[ids][1])
+        if key in self.drawn:
+            path = atomic_write_bytes(out / p.name, self.drawn[key], force=force)
+            self.copied.append(str(path.resolve()))
+            return path, p.description
+        written = self._real(plt, p, out, rec, cal, extracted, turns, home, axes, index, force)
+        self.drawn[key] = Path(written[0]).read_bytes()
+        return written
+
+
+@dataclass
+class Shares:
+    """What one worker's document runs share: the emulated jig's runs (:class:`JigRuns`) and
+    the report plots (:class:`ReportPlots`)."""
+
+    jig: JigRuns
+    plots: ReportPlots
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[None]:
+        """Both in place for the duration."""
+        with self.jig.installed(), self.plots.installed():
+            yield
+
+
 def _run_gyrocal(argv: list[str], where: str, expect: int, log: list[str],
-                 jig_runs: JigRuns | None = None) -> str:
+                 shares: Shares | None = None) -> str:
     """Run ``gyrocal argv`` in-process; it must exit ``expect``. Returns what it printed on
     stdout."""
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
-            (jig_runs.installed() if jig_runs else contextlib.nullcontext()):
+            (shares.installed() if shares else contextlib.nullcontext()):
         code = gyrocal_main(argv)
     log.append(f"{where}: gyrocal {shlex.join(argv)} -> {code}")
     if code != expect:
@@ -384,7 +483,7 @@ def sample_matches(sample: str, printed: str) -> bool:
     return re.fullmatch(pattern, "\n".join(got) + "\n", flags=re.S) is not None
 
 
-def _run_shell_block(block: Block, expect: int, run: DocRun, jig_runs: JigRuns | None) -> None:
+def _run_shell_block(block: Block, expect: int, run: DocRun, shares: Shares | None) -> None:
     """Run the ``gyrocal`` commands of a shell block (with ``--sim`` added to the jig's under
     ``doctest: sim``); each must exit ``expect``."""
     commands = shell_commands(block)
@@ -394,7 +493,7 @@ def _run_shell_block(block: Block, expect: int, run: DocRun, jig_runs: JigRuns |
     for argv in commands:
         if block.directive == "sim" and needs_jig(argv) and "--sim" not in argv:
             argv = [*argv, "--sim"]
-        printed = _run_gyrocal(argv, block.where, expect, run.log, jig_runs)
+        printed = _run_gyrocal(argv, block.where, expect, run.log, shares)
         run.last_output = (f"{block.where}: gyrocal {shlex.join(argv)}", printed)
 
 
@@ -468,13 +567,13 @@ def _run_c(block: Block, workdir: Path, run: DocRun) -> None:
 
 
 def run_document(path: Path, workdir: Path, part: str | None = None,
-                 jig_runs: JigRuns | None = None) -> DocRun:
+                 shares: Shares | None = None) -> DocRun:
     """Run the blocks of ``path`` that belong to ``part`` of its chain (the branch of that name,
     or with None the rest: :func:`block_branch`) in order in ``workdir``. The ``doctest: file``
     blocks of every part write their files in every part: a later command of any part may read
     them (a configuration in the working directory is read without being named). With
-    ``jig_runs``, an emulated calibration run already made gives its recording
-    (:class:`JigRuns`)."""
+    ``shares``, an emulated calibration run already made gives its recording (:class:`JigRuns`)
+    and a report plot already drawn from the same data its file (:class:`ReportPlots`)."""
     run = DocRun(workdir)
     chain = chain_of(path)
     t0 = time.perf_counter()
@@ -494,7 +593,7 @@ def run_document(path: Path, workdir: Path, part: str | None = None,
             if block.directive == "output":
                 _check_output(block, run)
             elif block.lang in SHELL_LANGS:
-                _run_shell_block(block, expect, run, jig_runs)
+                _run_shell_block(block, expect, run, shares)
             elif block.lang == "python":
                 if block.directive == "emulated-servo":
                     with _emulated_servo() as device:
@@ -625,7 +724,8 @@ class DocRunner:
     """Runs each part of each chain (its main part, and each branch: :data:`BRANCHES`) once per
     worker, the chain's documents in reading order in the part's own directory (as a reader
     would), and remembers what each produced; an emulated calibration that two documents of a
-    part run under different names is made once (:class:`JigRuns`)."""
+    part run under different names is made once (:class:`JigRuns`), and a report plot drawn
+    twice from the same data is drawn once (:class:`ReportPlots`)."""
 
     def __init__(self, factory: pytest.TempPathFactory) -> None:
         self.factory = factory
@@ -633,6 +733,8 @@ class DocRunner:
         self.runs: dict[tuple[str, str | None], DocRun] = {}
         self.failures: dict[tuple[str, str | None], BaseException] = {}
         self.jig_runs = JigRuns(factory.mktemp("jig-runs"))
+        self.report_plots = ReportPlots()
+        self.shares = Shares(self.jig_runs, self.report_plots)
 
     def __call__(self, path: Path, part: str | None = None) -> DocRun:
         chain = chain_of(path)
@@ -649,7 +751,7 @@ class DocRunner:
             if (key, part) not in self.runs:
                 try:
                     self.runs[key, part] = run_document(ROOT / key, self.workdirs[chain, part],
-                                                        part, self.jig_runs)
+                                                        part, self.shares)
                 except BaseException as exc:  # remember, so a second caller sees the same failure
                     self.failures[key, part] = exc
                     raise
@@ -726,6 +828,68 @@ def _check_shared_run(doc_runner: DocRunner, chain: str) -> None:
             got, want = ({k: v for k, v in json.loads(t).items() if k != "created"}
                          for t in (got, want))
         assert got == want, f"{b / path.name} is not {path}"
+    _check_copied_plots(doc_runner, a.parent / "plots", b.parent / "plots", {"overview.png"})
+
+
+def _check_copied_plots(doc_runner: DocRunner, first: Path, again: Path,
+                        drawn: set[str]) -> None:
+    """``again`` holds the plots of ``first``, each a copy (:class:`ReportPlots`) but those of
+    ``drawn``, which were drawn (they show something of their own)."""
+    names = sorted(p.name for p in first.glob("*.png"))
+    assert names and sorted(p.name for p in again.glob("*.png")) == names
+    copied = set(doc_runner.report_plots.copied)
+    for name in names:
+        was_copied = str((again / name).resolve()) in copied
+        assert was_copied == (name not in drawn), (
+            f"{again / name}: {'copied' if was_copied else 'drawn again'} (ReportPlots.key)")
+        if name not in drawn:
+            assert (again / name).read_bytes() == (first / name).read_bytes()
+
+
+@uses_chain("running")
+def test_the_report_command_copies_the_plots_calibrate_drew(doc_runner: DocRunner) -> None:
+    # running.md's `gyrocal report run1/recording run1/calibration.json --out run1/report`
+    # draws from what `gyrocal calibrate --out run1` drew from: every plot is a copy
+    doc_runner(ROOT / CHAINS["running"][0])
+    run1 = doc_runner.workdirs["running", None] / "run1"
+    _check_copied_plots(doc_runner, run1 / "plots", run1 / "report", set())
+
+
+@uses_chain("running")
+def test_a_copied_plot_is_the_plot_drawn_again(doc_runner: DocRunner, tmp_path: Path) -> None:
+    # the premise of ReportPlots: the same data draw the same bytes. run1/report/overview.png
+    # was copied from run1/plots; drawn again here from what the report command reads
+    from gyrocal.kit.exports import load_document
+    from gyrocal.kit.pipeline import judged_windows
+    from gyrocal.kit.plots import require_matplotlib
+    from gyrocal.kit.recording import load_recording
+    from gyrocal.kit.report_plots import plan_report
+
+    doc_runner(ROOT / CHAINS["running"][0])
+    workdir = doc_runner.workdirs["running", None]
+    copy = workdir / "run1" / "report" / "overview.png"
+    assert str(copy.resolve()) in doc_runner.report_plots.copied
+    with _cwd(workdir):
+        rec = load_recording("run1/recording")
+        cal = load_document("run1/calibration.json", "gyrocal-calibration", "calibration")
+        extracted = judged_windows(rec)[0]  # as kit/commands/report.py reads them
+        (plot,) = (p for p in plan_report(rec, extracted) if p.kind == "overview")
+        plots = doc_runner.report_plots
+        path, _ = plots._real(require_matplotlib(), plot, tmp_path, rec, cal, extracted,
+                              None, None, None, None, False)
+        assert path.read_bytes() == copy.read_bytes()
+        # what the key holds: the data drawn, not when or from where the calibration was made
+        data = plots.digest(rec, cal, extracted)
+        assert plots.key(plot, rec, cal, extracted, data) in plots.drawn
+        stamped = replace(cal, created="2000-01-01T00:00:00+00:00", source="elsewhere")
+        assert plots.digest(rec, stamped, extracted) == data
+        assert plots.digest(rec, replace(cal, bias=(0.0, 0.0, 0.0)), extracted) != data
+        moved = replace(rec, path=Path("elsewhere"))
+        turn = next(p for p in plan_report(rec, extracted) if p.kind == "turn")
+        assert plots.key(plot, moved, cal, extracted, data) != plots.key(
+            plot, rec, cal, extracted, data)
+        assert plots.key(turn, moved, cal, extracted, data) == plots.key(
+            turn, rec, cal, extracted, data)
 
 
 @uses_chain("intro")
