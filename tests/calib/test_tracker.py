@@ -481,8 +481,9 @@ def test_fast_update_with_reference_matches_one_sample_process_calls(temperature
     """update() with a reference rate takes the scalar path too, with the arithmetic of a
     one-sample process() call per reading (the path it replaced) to 1e-12: turns about three
     axes (a v2 matrix with cross-axis terms), rests between them, and a process() batch in the
-    middle of a turn so that samples awaiting their decision change hands both ways."""
-    s = simulate_session(np.random.default_rng(31), 40.0, model=MODEL, motion="jig",
+    middle of a turn so that samples awaiting their decision change hands both ways. 20 s
+    (4,000 one-sample process() calls) hold turns about all three axes and 68 updates."""
+    s = simulate_session(np.random.default_rng(31), 20.0, model=MODEL, motion="jig",
                          still_s=(1.0, 3.0), motion_s=(2.0, 4.0))
     A = np.diag(s.scale) + 0.01 * np.array(
         [[0.0, 1.0, -0.5], [0.8, 0.0, 0.3], [-0.4, 0.6, 0.0]])
@@ -490,7 +491,7 @@ def test_fast_update_with_reference_matches_one_sample_process_calls(temperature
     st = settings(rate_random_walk=None, temperature_model=temperature_model)
     rr, ra = s.reference_rate, s.reference_axis
     turning = np.flatnonzero(np.isfinite(rr))
-    assert turning.size > 1000
+    assert turning.size > 1000 and len(np.unique(ra[turning], axis=0)) == 3
     mid = int(turning[turning.size // 2])  # the batch starts inside a turn
     old, new = BiasTracker(st, cal, keep_states=True), BiasTracker(st, cal, keep_states=True)
     ref_c, ref_b, ref_s = [], [], []
