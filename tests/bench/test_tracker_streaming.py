@@ -9,20 +9,29 @@ from bench.bench_tracker import _reference
 from bench.sessions import generate
 from gyrocal.calib.tracker import BiasTracker, TrackerSettings
 
-N = 30_000  # 30 s at 1 kHz: rests and turns with the encoder's reference
+#: The samples of each family's session (1 kHz) run here. The jig's first 20 s: a rest, turns
+#: with the encoder's reference about each axis, part of the next rest (73 updates of both
+#: kinds). The bias-steps session's first steps come at 286 s and 451 s (its first 30 s are the
+#: jig's turns again, with no step): 270-300 s hold the first, rests and turns around it.
+WINDOWS = {"jig turns, 6-15 s rests": slice(0, 20_000), "bias steps": slice(270_000, 300_000)}
 
 
-@pytest.mark.parametrize("family", ["jig turns, 6-15 s rests", "bias steps"])
+@pytest.mark.parametrize("family", list(WINDOWS))
 def test_update_drains_and_feed_equal_one_batch_at_1khz(family):
     s = generate(family, 7, 1000.0)
     rr, ra = _reference(s)
-    t, m, temp, rr, ra = s.t[:N], s.rate[:N], s.temperature_c[:N], rr[:N], ra[:N]
+    w = WINDOWS[family]
+    t, m, temp, rr, ra = s.t[w], s.rate[w], s.temperature_c[w], rr[w], ra[w]
+    N = t.size
     st = TrackerSettings(odr_hz=s.odr_hz, noise_density=tuple(s.noise_density),
                          temperature_model=True)
     batch_tr = BiasTracker(st, s.calibration)
     batch = batch_tr.process(t, m, temp, reference_rate=rr, reference_axis=ra)
     assert np.isfinite(rr).sum() > 1000 and batch.updates.t.size > 50
     assert set(batch.updates.kind) == {"still", "reference"}
+    steps = [u for u in s.step_times if t[0] < u < t[-1]]
+    assert (len(steps), int(batch.updates.alarm.sum()) > 0) == (
+        (1, True) if family == "bias steps" else (0, False))
     # update(): the same estimate at every sample
     up = BiasTracker(st, s.calibration)
     bias = np.empty((N, 3))

@@ -481,8 +481,9 @@ def test_fast_update_with_reference_matches_one_sample_process_calls(temperature
     """update() with a reference rate takes the scalar path too, with the arithmetic of a
     one-sample process() call per reading (the path it replaced) to 1e-12: turns about three
     axes (a v2 matrix with cross-axis terms), rests between them, and a process() batch in the
-    middle of a turn so that samples awaiting their decision change hands both ways."""
-    s = simulate_session(np.random.default_rng(31), 40.0, model=MODEL, motion="jig",
+    middle of a turn so that samples awaiting their decision change hands both ways. 20 s
+    (4,000 one-sample process() calls) hold turns about all three axes and 68 updates."""
+    s = simulate_session(np.random.default_rng(31), 20.0, model=MODEL, motion="jig",
                          still_s=(1.0, 3.0), motion_s=(2.0, 4.0))
     A = np.diag(s.scale) + 0.01 * np.array(
         [[0.0, 1.0, -0.5], [0.8, 0.0, 0.3], [-0.4, 0.6, 0.0]])
@@ -490,7 +491,7 @@ def test_fast_update_with_reference_matches_one_sample_process_calls(temperature
     st = settings(rate_random_walk=None, temperature_model=temperature_model)
     rr, ra = s.reference_rate, s.reference_axis
     turning = np.flatnonzero(np.isfinite(rr))
-    assert turning.size > 1000
+    assert turning.size > 1000 and len(np.unique(ra[turning], axis=0)) == 3
     mid = int(turning[turning.size // 2])  # the batch starts inside a turn
     old, new = BiasTracker(st, cal, keep_states=True), BiasTracker(st, cal, keep_states=True)
     ref_c, ref_b, ref_s = [], [], []
@@ -676,16 +677,20 @@ def test_steps_left_to_later_update_calls_change_nothing_observable():
     stream = BiasTracker(st, cal)
     pending_seen = 0
     every = 37
+    corrected, bias, bias_std = [], [], []  # compared with the batch's after the loop
     for i in range(s.n):
         ref = s.reference_rate[i]
-        c = stream.update(s.rate[i], s.t[i], s.temperature_c[i],
-                          reference_rate=None if np.isnan(ref) else float(ref),
-                          reference_axis=None if np.isnan(ref) else s.reference_axis[i])
-        np.testing.assert_allclose(c, batch.corrected[i], rtol=0, atol=1e-14)
+        corrected.append(stream.update(
+            s.rate[i], s.t[i], s.temperature_c[i],
+            reference_rate=None if np.isnan(ref) else float(ref),
+            reference_axis=None if np.isnan(ref) else s.reference_axis[i]))
         pending_seen += bool(stream._todo)
         if i % every == 0:
-            np.testing.assert_allclose(stream.bias, batch.bias[i], rtol=0, atol=1e-15)
-            np.testing.assert_allclose(stream.bias_std, batch.bias_std[i], rtol=1e-12)
+            bias.append(stream.bias)
+            bias_std.append(stream.bias_std)
+    np.testing.assert_allclose(np.array(corrected), batch.corrected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(np.array(bias), batch.bias[::every], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.array(bias_std), batch.bias_std[::every], rtol=1e-12)
     assert pending_seen > 100  # the steps really were spread over later calls
     h = stream.health
     assert h.updates == batch.updates.t.size and h.alarms == int(batch.updates.alarm.sum())

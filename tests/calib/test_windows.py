@@ -34,6 +34,17 @@ def _true_mean(run, corners):
     return np.trapezoid(w[:, None] * m, t, axis=0) / np.trapezoid(w, t)
 
 
+@pytest.fixture(scope="module")
+def three_turns():
+    """One run of three 3 rad/s turns per servo with 1 s rests, shared by the tests that fit it
+    as it is or damage a copy of one of its parts (read-only: none can change it)."""
+    run = _run(6, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+    for value in vars(run).values():
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return run
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_multi_turn_windows_are_tapered_and_exact(seed):
     # Accelerating and decelerating turns, 5 % ripple, 3 ms encoder jitter, IMU clock 1 % off.
@@ -111,8 +122,8 @@ def test_rests_measure_minus_the_bias():
     assert obs.temperature_c == pytest.approx(25.0)
 
 
-def test_whole_chain_recovers_the_truth():
-    run = _run(6, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_whole_chain_recovers_the_truth(three_turns):
+    run = three_turns
     res = fit_paired_axis(_extract(run).observations)
     assert res.success and res.consistency.ok
     assert np.all(np.abs(res.scale - run.scale) < 4 * res.scale_std)
@@ -139,8 +150,8 @@ def test_coloured_noise_is_corrected_on_the_rests():
     np.testing.assert_allclose(ex.noise_correlation, expected, rtol=0.2)
 
 
-def test_a_gap_in_the_gyro_stream_drops_that_turn_with_a_warning():
-    run = _run(8, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_a_gap_in_the_gyro_stream_drops_that_turn_with_a_warning(three_turns):
+    run = three_turns
     seg = [s for s in run.segments if s.kind == "rotate"][2]
     mid = (seg.t_start + seg.t_end) / 2
     keep = np.abs(run.imu_t - mid) > 0.1
@@ -150,8 +161,8 @@ def test_a_gap_in_the_gyro_stream_drops_that_turn_with_a_warning():
     assert any(f"segment {seg.index}: gap" in w for w in ex.warnings)
 
 
-def test_a_rest_with_movement_is_skipped():
-    run = _run(9, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_a_rest_with_movement_is_skipped(three_turns):
+    run = three_turns
     rest = [s for s in run.segments if s.kind == "rest"][1]
     enc_angle = run.enc_angle.copy()
     nudge = (run.enc_t > rest.t_start + 0.4) & (run.enc_t < rest.t_start + 0.6) & (
@@ -164,24 +175,24 @@ def test_a_rest_with_movement_is_skipped():
 
 
 # ------------------------------------------------------------------ bad input
-def test_truncated_gyro_stream_is_named():
-    run = _run(10, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_truncated_gyro_stream_is_named(three_turns):
+    run = three_turns
     cut = run.imu_t < run.imu_t[-1] * 0.6
     with pytest.raises(CalibInputError, match="the recording is truncated"):
         extract_observations(run.imu_t[cut], run.imu_rate[cut], run.enc_t, run.enc_motor,
                              run.enc_angle, run.segments)
 
 
-def test_missing_servo_encoder_is_named():
-    run = _run(11, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_missing_servo_encoder_is_named(three_turns):
+    run = three_turns
     keep = run.enc_motor != 3
     with pytest.raises(CalibInputError, match="no encoder readings of servo 3"):
         extract_observations(run.imu_t, run.imu_rate, run.enc_t[keep], run.enc_motor[keep],
                              run.enc_angle[keep], run.segments)
 
 
-def test_turn_against_its_command_is_named():
-    run = _run(12, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_turn_against_its_command_is_named(three_turns):
+    run = three_turns
     segs = [Segment(s.index, s.kind, s.motor, -s.direction, s.speed, s.t_start, s.t_end)
             if s.kind == "rotate" else s for s in run.segments]
     with pytest.raises(CalibInputError, match="against its command"):
@@ -189,8 +200,8 @@ def test_turn_against_its_command_is_named():
                              segs)
 
 
-def test_stalled_servo_is_named():
-    run = _run(13, SimProtocol(speed=3.0, turns=3, rest_s=1.0))
+def test_stalled_servo_is_named(three_turns):
+    run = three_turns
     angle = np.where(run.enc_motor == 1, 0.0, run.enc_angle)
     with pytest.raises(CalibInputError, match="stalled"):
         extract_observations(run.imu_t, run.imu_rate, run.enc_t, run.enc_motor, angle,

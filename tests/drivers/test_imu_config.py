@@ -47,13 +47,13 @@ def rig(model, truth=QUIET, omega=(0.0, 0.0, 0.0), **kw):
     return clock, bus, addr
 
 
-def stream(reader, clock, seconds, seed=0):
-    """Read every 10-30 ms for ``seconds``; return the concatenated batches' arrays."""
+def stream(reader, clock, seconds, seed=0, step=(0.01, 0.03)):
+    """Read every ``step`` (10-30 ms) for ``seconds``; return the concatenated batches' arrays."""
     out = []
     rng = np.random.default_rng(seed)
     end = clock.monotonic() + seconds
     while clock.monotonic() < end:
-        clock.sleep(rng.uniform(0.01, 0.03))
+        clock.sleep(rng.uniform(*step))
         out.append(reader.read())
     assert not any(b.gaps for b in out)
     return (np.concatenate([b.t for b in out]), np.concatenate([b.rate for b in out]),
@@ -146,7 +146,9 @@ def test_every_mpu_rate_is_written_and_streams_at_that_rate():
         assert bandwidth == max([b for b in MPU_DLPF_CFG if b < odr / 2], default=5)
         t0 = clock.monotonic()
         r.start()
-        t, *_ = stream(r, clock, max(1.0, 40 / odr), seed=div)
+        # drained every 10-30 sample periods (10-30 ms at 1 kHz; the FIFO holds 36 frames), so
+        # each rate costs a few drains, not the 50 per second of a fixed 10-30 ms
+        t, *_ = stream(r, clock, max(1.0, 40 / odr), seed=div, step=(10 / odr, 30 / odr))
         elapsed = clock.monotonic() - t0
         r.stop()
         assert len(t) == pytest.approx(odr * elapsed, abs=2)  # first one dropped, one in flight

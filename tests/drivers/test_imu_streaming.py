@@ -122,13 +122,18 @@ def test_constant_rate_reads_back_within_quantization_and_noise(model):
 
 
 @pytest.mark.parametrize("model", SETUPS)
-def test_a_simulated_minute_delivers_every_sample_once_in_order_on_time(model):
+def test_twenty_simulated_seconds_deliver_every_sample_once_in_order_on_time(model):
+    # 20 s, four time constants of the clock fit's forgetting (SampleClock window_s = 5 s): the
+    # fit has forgotten its start and every later stretch is like the last, so a longer stream
+    # adds drains of the same kind (the ICM-42688-P's 16-bit timestamp wraps every 1.05 s, 19
+    # times here; the LSM6DSOX's after 29.8 h, in no test). SampleClock alone is followed for a
+    # minute at 0 and ±1 % and on a drifting clock in tests/drivers/test_imu_timing.py.
     odr, range_dps, lsb = SETUPS[model]
     truth = SensorTruth(noise_density_rad_s_sqrt_hz=0.0)
     motion = wave(range_dps)
     clock, bus, chip, reader = rig(model, truth, motion, stuck_after_s=None)
     reader.start()
-    batches = collect(reader, clock, 62.0)
+    batches = collect(reader, clock, 20.0)
     t, rate, index = cat(batches, "t"), cat(batches, "rate"), cat(batches, "index")
     assert not any(b.gaps for b in batches)
     assert np.all(np.diff(index) == 1) and index[0] == 1  # sample 0 is dropped after a start
@@ -142,11 +147,18 @@ def test_a_simulated_minute_delivers_every_sample_once_in_order_on_time(model):
     assert accel.shape == rate.shape and not cat(batches, "accel_saturated").any()
     np.testing.assert_allclose(accel, np.tile([0.0, 0.0, np.rint(per_g) / per_g * 9.80665],
                                               (len(t), 1)), atol=1e-12)
-    assert np.max(np.abs(t - chip.sample_time(ks))) < 0.5e-3
-    # a minute between two samples' midpoints holds exactly ODR × 60 s samples
+    true_t = chip.sample_time(ks)
+    assert np.max(np.abs(t - true_t)) < 0.5e-3
+    # a time scale off by s puts the samples s·T late after T: the minute this test streamed
+    # before bounded s by 0.5 ms / 62 s; the slope of the error bounds it as tightly in 20 s
+    # (the streams here: at most 2.5e-6, the start's transient included)
+    assert abs(np.polyfit(true_t, t - true_t, 1)[0]) < 0.5e-3 / 62
+    # 12 s between two samples' midpoints hold exactly ODR × 12 s samples (an integer at every
+    # rate here), wherever the 12 s start
     period = 1.0 / odr
-    t0 = t[500] - period / 2
-    assert np.count_nonzero((t >= t0) & (t < t0 + 60.0)) == round(odr * 60)
+    t0 = t[500:-round(odr * 12):1000] - period / 2
+    held = np.searchsorted(t, t0 + 12.0) - np.searchsorted(t, t0)
+    assert len(t0) >= 6 and np.all(held == round(odr * 12))
     # nothing was left behind: every sample the chip put in its FIFO was delivered (sample 0
     # dropped by design) or is still there
     in_fifo = chip.fifo_level // FIFO_UNIT[model]
@@ -161,8 +173,8 @@ def test_timestamps_follow_a_chip_clock_one_percent_off(model, ppm):
     clock, _, chip, reader = rig(model, truth, wave(range_dps))
     reader.start()
     # 20 s: four time constants of the clock fit's forgetting (SampleClock window_s = 5 s), so
-    # the period is measured as well as after a minute (the nominal clock's minute is
-    # test_a_simulated_minute_delivers_every_sample_once_in_order_on_time's)
+    # the period is measured as well as after a minute (the nominal clock's 20 s are
+    # test_twenty_simulated_seconds_deliver_every_sample_once_in_order_on_time's)
     batches = collect(reader, clock, 20.0, seed=7)
     assert not any(b.gaps for b in batches)
     t = cat(batches, "t")
@@ -296,16 +308,19 @@ def check_faulty_stream(model, truth, motion, chip, batches, slack=1, max_error_
     ``max_error_s`` of the instant the chip took it (by default a sample period + 0.5 ms).
 
     The samples between gaps are matched by value against the truth at the chip's sample
-    numbers around the reader's; a smooth motion makes every sample distinct.
+    numbers around the reader's; a smooth motion makes every sample distinct. The truth is
+    computed once for every chip sample number a segment may be matched to.
     """
     odr, _, lsb = SETUPS[model]
     rate, t = cat(batches, "rate"), cat(batches, "t")
     naive = grid_index(chip, batches)
     ks = naive.copy()
+    first = int(naive.min()) - slack
+    truth_of = expected_rate(truth, motion, chip, np.arange(first, naive.max() + slack + 1), lsb)
     for seg in np.split(np.arange(len(ks)), np.flatnonzero(np.diff(naive) != 1) + 1):
         for d in sorted(range(-slack, slack + 1), key=abs):
-            expect = expected_rate(truth, motion, chip, naive[seg] + d, lsb)
-            if np.allclose(rate[seg], expect, rtol=0, atol=1e-12):
+            expect = truth_of[naive[seg] + d - first]
+            if np.all(np.abs(rate[seg] - expect) <= 1e-12):  # np.allclose(rtol=0, atol=1e-12)
                 ks[seg] += d
                 break
         else:
