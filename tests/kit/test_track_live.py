@@ -255,16 +255,3 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
     assert main(["track", "--live", "--sim", "--turns", "1", "--record", str(tmp_path / "x"),
                  "--cal", "c.json"]) == 2
 
-
-def test_live_says_once_that_it_does_not_apply_g_sensitivity(full_run, tmp_path, capsys):
-    """A calibration written before calibrate stored the home pose 'up' refers to."""
-    d, code = full_run
-    assert code == 0
-    doc = json.loads((d / "calibration.json").read_text())
-    assert doc["g_sensitivity"] is not None
-    doc["kinematics"] = {k: v for k, v in doc["kinematics"].items()
-                         if k not in ("home_angles_rad", "up_servo")}
-    old = tmp_path / "old.json"
-    old.write_text(json.dumps(doc))
-    _, err = run_json(capsys, "--sim-seed", "5", "--duration", "3", "--cal", str(old))
-    assert err.count("g-sensitivity is NOT applied live") == 1, err
