@@ -188,9 +188,15 @@ def test_tempco_needs_temperatures(tmp_path, capsys):
 def test_json_decimates_on_request_and_on_long_sessions_and_says_so(random_rec, capsys,
                                                                     monkeypatch):
     s, rec, cal = random_rec
-    full, _ = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5")
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5",
-                        "--every", "2")
+    import gyrocal.kit.commands.track as cmd
+
+    # the 300 s session (60,000 samples) is a long one once JSON_MAX_ROWS is 1000
+    monkeypatch.setattr(cmd, "JSON_MAX_ROWS", 1000)
+    common = [str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5"]
+    # --every 0: every row all the same, the reference for the decimated rows below
+    full, err = run_json(capsys, *common, "--every", "0")
+    assert "decimated" not in err and len(full["t"]) == s.n
+    doc, err = run_json(capsys, *common, "--every", "2")
     assert "decimated to one row every 2 s" in err and doc["decimated_every_s"] == 2.0
     assert len(doc["t"]) == 150
     # each row is the full document's row at the same sample
@@ -200,14 +206,8 @@ def test_json_decimates_on_request_and_on_long_sessions_and_says_so(random_rec, 
     fs = np.array(full["still"])
     assert doc["still"][0] == bool(fs[: idx[0] + 1].any())
     # long sessions are decimated by default, and say so
-    import gyrocal.kit.commands.track as cmd
-
-    monkeypatch.setattr(cmd, "JSON_MAX_ROWS", 1000)
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5")
+    doc, err = run_json(capsys, *common)
     assert "decimated" in err and 500 < len(doc["t"]) <= 1000
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5",
-                        "--every", "0")
-    assert "decimated" not in err and len(doc["t"]) == s.n
     assert main(["track", str(rec), "--every", "-1"]) == 2
     assert "--every must be" in capsys.readouterr().err
 
