@@ -50,9 +50,24 @@ def test_json_document_per_sample_in_calibration_sign_convention(random_rec, cap
     np.testing.assert_allclose(bias[late].mean(0), -s.rate[late].mean(0), atol=2e-4)
 
 
-def test_defaults_without_noise_flags_still_track(random_rec, capsys):
-    s, rec, cal = random_rec
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal))
+@pytest.fixture(scope="module")
+def cal_only(random_rec):
+    """``(document, stderr)`` of ``gyrocal track REC --cal CAL --json`` (nothing else given:
+    the smoothed replay with the noise estimated), read by two tests below."""
+    import contextlib
+    import io
+
+    _, rec, cal = random_rec
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["track", str(rec), "--cal", str(cal), "--json"])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue()), err.getvalue()
+
+
+def test_defaults_without_noise_flags_still_track(random_rec, cal_only):
+    s, _, _ = random_rec
+    doc, err = cal_only
     assert "noise density estimated" in err
     assert "bias random walk estimated from the innovations" in err
     assert "temperature coefficient" in err  # on by default: the recording has temperatures
@@ -62,11 +77,11 @@ def test_defaults_without_noise_flags_still_track(random_rec, capsys):
     assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
 
 
-def test_replay_is_smoothed_unless_causal(random_rec, capsys):
+def test_replay_is_smoothed_unless_causal(random_rec, cal_only, capsys):
     # A whole recording is at hand: the smoothed estimate (default) must beat the causal
     # filter's against the simulated truth, with a band that still holds it.
     s, rec, cal = random_rec
-    smooth, err = run_json(capsys, str(rec), "--cal", str(cal))
+    smooth, _ = cal_only
     causal, _ = run_json(capsys, str(rec), "--cal", str(cal), "--causal")
     rms = {}
     for name, doc in (("smooth", smooth), ("causal", causal)):
