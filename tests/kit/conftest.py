@@ -131,3 +131,46 @@ def verify_run(tmp_path_factory, full_run):
                      str(SHARED_SEED), "--config", str(d / "gyrocal.toml"), "--out",
                      str(d / "run"), "--quiet", "--json"])
     return _once(tmp_path_factory, "verify", make)
+
+
+def verification_document(ok: bool) -> dict:
+    """A `gyrocal verify --json` document as the command writes it (Verification.to_dict), with
+    errors within (ok) or beyond 3 times the prediction on y."""
+    import numpy as np
+
+    from gyrocal.kit.verify import KINDS, Verification
+
+    full = np.array([0.003, 0.004 if ok else 0.02, 0.0025])
+    v = Verification(
+        rms_before=np.array([0.1, 0.2, 0.3]), rms_diagonal=full, rms_full=np.full(3, np.nan),
+        rms_predicted=np.array([0.004, 0.005, 0.004]),
+        rms_by_kind={k: full for k in KINDS}, predicted_by_kind={k: full for k in KINDS},
+        blocks={"rest": 20, "one_servo": 18, "several_servos": 0, "ramp_excluded": 22},
+        block_s=0.5, reference="home-pose axes", full=False)
+    return {"calibration": "cal.json", "recording": "rec", **v.to_dict()}
+
+
+@pytest.fixture(scope="session")
+def paper_diagonal_report(tmp_path_factory, paper_diagonal_run):
+    """``(plots directory, what it printed)`` of ``gyrocal report`` of ``paper_diagonal_run``'s
+    recording and calibration (a version 1, diagonal one) with a failing verification document
+    (:func:`verification_document`): one drawing read by tests/kit/test_report.py (the plots
+    and their listing) and tests/kit/test_report_html.py (the page). Needs the plot extra."""
+    pytest.importorskip("matplotlib")
+    run, code = paper_diagonal_run
+    assert code == 0
+
+    def make(d: Path) -> int:
+        d.mkdir()
+        verification = d / "verification.json"
+        verification.write_text(json.dumps(verification_document(ok=False)))
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            code = main(["report", str(run / "recording"), str(run / "calibration.json"),
+                         "--out", str(d / "plots"), "--verification", str(verification)])
+        _stdout_file(d).write_text(out.getvalue())
+        return code
+
+    d, code = _once(tmp_path_factory, "report-paper-diagonal", make)
+    assert code == 0
+    return d / "plots", _stdout_file(d).read_text()
