@@ -22,7 +22,9 @@ def loop_50_hz(tmp_path):
     quarter of the emulated bus traffic. The tracker takes every sample either way (seed 4's
     20 s: 3998 samples at 200 Hz, 3996 at 50; its final bias 0.76, -1.04, -0.34 sigma from the
     truth at both rates); seed 7's 24 s with turns: 56 reference-rate updates at both rates,
-    0 NIS alarms with the true axes, 11 (200 Hz) and 12 (50 Hz) with every axis flipped."""
+    0 NIS alarms with the true axes, 11 (200 Hz) and 12 (50 Hz) with every axis flipped. The
+    interrupt and the servo alert land at the same jig time at either rate (the trap counts
+    drains: 1000 at 200 Hz, 250 at 50)."""
     return ["--config", loop_50_hz_config(tmp_path / "loop")]
 
 
@@ -107,22 +109,23 @@ class _Trap:
     (KeyboardInterrupt(), 130, "interrupted"),
     (TerminatedBySignal(15), 143, "terminated"),
 ])
-def test_interrupt_stops_the_servos_and_exits_with_its_code(monkeypatch, capsys, exc, code,
-                                                            word):
-    trap = _Trap(monkeypatch, exc, at=1000)  # 5 s into the run at 200 Hz
-    assert main(["track", "--live", "--sim", "--duration", "20", "--json"]) == code
+def test_interrupt_stops_the_servos_and_exits_with_its_code(monkeypatch, tmp_path, capsys, exc,
+                                                            code, word):
+    trap = _Trap(monkeypatch, exc, at=250)  # 5 s into the run, its loop at 50 Hz
+    assert main(["track", "--live", "--sim", "--duration", "20", "--json",
+                 *loop_50_hz(tmp_path)]) == code
     out, err = capsys.readouterr()
     assert out == ""
     assert f"{word} after" in err and "torque off" in err
     assert trap.torque() == {"1": 0, "2": 0, "3": 0}
 
 
-def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, capsys):
+def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, tmp_path, capsys):
     def overload(jig):
         jig.sim.servo_bus.servo(2).raise_alert_at(jig.clock.monotonic() + 4.0, bits=1 << 5)
 
     trap = _Trap(monkeypatch, after=overload)
-    assert main(["track", "--live", "--sim", "--duration", "20"]) == 4
+    assert main(["track", "--live", "--sim", "--duration", "20", *loop_50_hz(tmp_path)]) == 4
     out, err = capsys.readouterr()
     assert "servo 2" in err and "gyrocal: error:" in err
     assert trap.torque() == {"1": 0, "2": 0, "3": 0}
