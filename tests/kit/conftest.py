@@ -117,11 +117,60 @@ def paper_diagonal_run(tmp_path_factory):
 @pytest.fixture(scope="session")
 def verify_run(tmp_path_factory, full_run):
     """``(directory, exit code)`` of ``gyrocal verify`` of ``full_run``'s calibration on the same
-    emulated sensor (fresh noise), its protocol the planner's diagonal one in 18 s."""
+    emulated sensor (fresh noise), its protocol the planner's diagonal one in 18 s, its loop at
+    50 Hz (:data:`LOOP_50_HZ`: verify's blocks are cut from the recorded samples and segments,
+    which the loop rate does not change; at 200 Hz and at 50 the same 40 rest, 17 one-servo, 4
+    several-servo and 29 ramp-excluded blocks; the truth's full calibration at 0.43, 0.35, 0.25
+    times its predicted error at 200 Hz, 0.44, 0.38, 0.27 at 50 (flagged above 3), its diagonal
+    part at 18.5 and 19.2 times at worst)."""
     def make(d: Path) -> int:
         d.mkdir()
-        (d / "gyrocal.toml").write_text('[protocol]\nname = "auto"\ntime_budget_s = 18.0\n')
+        (d / "gyrocal.toml").write_text('[protocol]\nname = "auto"\ntime_budget_s = 18.0\n'
+                                        + LOOP_50_HZ)
         return main(["verify", str(full_run[0] / "calibration.json"), "--sim", "--sim-seed",
                      str(SHARED_SEED), "--config", str(d / "gyrocal.toml"), "--out",
                      str(d / "run"), "--quiet", "--json"])
     return _once(tmp_path_factory, "verify", make)
+
+
+def verification_document(ok: bool) -> dict:
+    """A `gyrocal verify --json` document as the command writes it (Verification.to_dict), with
+    errors within (ok) or beyond 3 times the prediction on y."""
+    import numpy as np
+
+    from gyrocal.kit.verify import KINDS, Verification
+
+    full = np.array([0.003, 0.004 if ok else 0.02, 0.0025])
+    v = Verification(
+        rms_before=np.array([0.1, 0.2, 0.3]), rms_diagonal=full, rms_full=np.full(3, np.nan),
+        rms_predicted=np.array([0.004, 0.005, 0.004]),
+        rms_by_kind={k: full for k in KINDS}, predicted_by_kind={k: full for k in KINDS},
+        blocks={"rest": 20, "one_servo": 18, "several_servos": 0, "ramp_excluded": 22},
+        block_s=0.5, reference="home-pose axes", full=False)
+    return {"calibration": "cal.json", "recording": "rec", **v.to_dict()}
+
+
+@pytest.fixture(scope="session")
+def paper_diagonal_report(tmp_path_factory, paper_diagonal_run):
+    """``(plots directory, what it printed)`` of ``gyrocal report`` of ``paper_diagonal_run``'s
+    recording and calibration (a version 1, diagonal one) with a failing verification document
+    (:func:`verification_document`): one drawing read by tests/kit/test_report.py (the plots
+    and their listing) and tests/kit/test_report_html.py (the page). Needs the plot extra."""
+    pytest.importorskip("matplotlib")
+    run, code = paper_diagonal_run
+    assert code == 0
+
+    def make(d: Path) -> int:
+        d.mkdir()
+        verification = d / "verification.json"
+        verification.write_text(json.dumps(verification_document(ok=False)))
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            code = main(["report", str(run / "recording"), str(run / "calibration.json"),
+                         "--out", str(d / "plots"), "--verification", str(verification)])
+        _stdout_file(d).write_text(out.getvalue())
+        return code
+
+    d, code = _once(tmp_path_factory, "report-paper-diagonal", make)
+    assert code == 0
+    return d / "plots", _stdout_file(d).read_text()

@@ -195,31 +195,62 @@ def test_files_over_their_size_cap_are_refused(tmp_path, monkeypatch):
         load_recording(tmp_path / "r")
 
 
-@pytest.mark.parametrize("name", ["imu.csv", "encoder.csv", "segments.csv", "manifest.json"])
-@pytest.mark.parametrize("kind", ["directory", "symlink-to-directory", "dev-zero", "fifo"])
-def test_only_regular_files_are_read(tmp_path, name, kind):
-    # In a child process with a timeout: a reader that blocked on a FIFO or read /dev/zero
-    # for ever fails the test instead of hanging it.
-    root = write_rec(tmp_path / "r", make_rows(10)[0])
-    target = root / name
-    target.unlink()
-    if kind == "directory":
-        target.mkdir()
-    elif kind == "symlink-to-directory":
-        target.symlink_to(tmp_path)
-    elif kind == "dev-zero":
-        target.symlink_to("/dev/zero")
-    else:
-        os.mkfifo(target)
-    code = ("import sys\nfrom gyrocal.kit.recording import load_recording, RecordingError\n"
-            "try:\n    load_recording(sys.argv[1])\nexcept RecordingError as e:\n"
-            "    print(e)\n    sys.exit(2)\n")
-    out = subprocess.run([sys.executable, "-c", code, str(root)], capture_output=True,
-                         text=True, timeout=60)
-    assert out.returncode == 2, out.stderr
+NAMES = ["imu.csv", "encoder.csv", "segments.csv", "manifest.json"]
+KINDS = ["directory", "symlink-to-directory", "dev-zero", "fifo"]
+
+#: The child process that reads each recording of :func:`irregular_reads` in turn: its exit
+#: code (2 on a RecordingError, 1 on any other exception, 0 if it read) and message per case.
+READ_EACH = """import json, sys
+from gyrocal.kit.recording import load_recording, RecordingError
+out = {}
+for case, root in json.loads(sys.argv[1]).items():
+    try:
+        load_recording(root)
+        out[case] = [0, ""]
+    except RecordingError as e:
+        out[case] = [2, str(e)]
+    except Exception as e:
+        out[case] = [1, repr(e)]
+print(json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def irregular_reads(tmp_path_factory):
+    """``"kind/name" -> (exit code, message)`` of reading a recording whose file ``name`` is
+    not a regular file but ``kind``, every case read in one child process with a timeout: a
+    reader that blocked on a FIFO or read /dev/zero for ever fails the tests instead of hanging
+    them (one interpreter start for the 16 cases instead of one each)."""
+    roots = {}
+    for kind in KINDS:
+        for name in NAMES:
+            d = tmp_path_factory.mktemp("irregular")
+            root = write_rec(d / "r", make_rows(10)[0])
+            target = root / name
+            target.unlink()
+            if kind == "directory":
+                target.mkdir()
+            elif kind == "symlink-to-directory":
+                target.symlink_to(d)
+            elif kind == "dev-zero":
+                target.symlink_to("/dev/zero")
+            else:
+                os.mkfifo(target)
+            roots[f"{kind}/{name}"] = str(root)
+    out = subprocess.run([sys.executable, "-c", READ_EACH, json.dumps(roots)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("kind", KINDS)
+def test_only_regular_files_are_read(irregular_reads, name, kind):
+    code, message = irregular_reads[f"{kind}/{name}"]
+    assert code == 2, message
     want = {"directory": "is a directory", "symlink-to-directory": "is a directory",
             "dev-zero": "is a character device", "fifo": "is a named pipe (FIFO)"}[kind]
-    assert f"{name} {want}: a recording's files must be regular files" in out.stdout
+    assert f"{name} {want}: a recording's files must be regular files" in message
 
 
 def test_damaged_manifest_messages_stay_short(tmp_path):

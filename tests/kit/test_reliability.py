@@ -149,9 +149,10 @@ def test_signed_axes_mean_the_same_to_the_validator_and_the_jig(tmp_path):
     # The names reach the emulated gimbal (its joints turn about -x, y, -z) and the manifest,
     # against which the fit checks each servo's axis (exit 6, "implausible", for a servo whose
     # fitted axis is another signed axis). Any protocol that turns each servo checks that, so
-    # the planner's diagonal one in 18 s of jig time does, without a report.
+    # the planner's diagonal one in 18 s of jig time does, without a report, and at any loop
+    # rate: 50 Hz here (LOOP_50_HZ; exit 0, each fitted axis the configured signed one).
     cfg = tmp_path / "gyrocal.toml"
-    cfg.write_text('[gimbal]\naxes = ["-x", "+y", "-z"]\n'
+    cfg.write_text('[gimbal]\naxes = ["-x", "+y", "-z"]\nsample_hz = 50\n'
                    '[protocol]\nname = "auto"\ntime_budget_s = 18.0\n')
     assert load_config(cfg)["gimbal"]["axes"] == ["-x", "y", "-z"]
     out = tmp_path / "out"

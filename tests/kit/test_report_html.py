@@ -9,39 +9,17 @@ from gyrocal.kit.cli import main
 from tests.kit.browser import needs_chromium, render
 
 
-def verification_document(ok: bool) -> dict:
-    """A `gyrocal verify --json` document as the command writes it (Verification.to_dict), with
-    errors within (ok) or beyond 3 times the prediction on y."""
-    import numpy as np
-
-    from gyrocal.kit.verify import KINDS, Verification
-
-    full = np.array([0.003, 0.004 if ok else 0.02, 0.0025])
-    v = Verification(
-        rms_before=np.array([0.1, 0.2, 0.3]), rms_diagonal=full, rms_full=np.full(3, np.nan),
-        rms_predicted=np.array([0.004, 0.005, 0.004]),
-        rms_by_kind={k: full for k in KINDS}, predicted_by_kind={k: full for k in KINDS},
-        blocks={"rest": 20, "one_servo": 18, "several_servos": 0, "ramp_excluded": 22},
-        block_s=0.5, reference="home-pose axes", full=False)
-    return {"calibration": "cal.json", "recording": "rec", **v.to_dict()}
-
-
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
-    pytest.importorskip("matplotlib")
-    d = tmp_path_factory.mktemp("html")
-    rec = d / "rec"
-    assert main(["simulate-recording", str(rec), "--seed", "5", "--turns", "1"]) == 0
-    verification = d / "v.json"
-    verification.write_text(json.dumps(verification_document(ok=False)))
-    assert main(["report", str(rec), "--out", str(d / "out"),
-                 "--verification", str(verification)]) == 0
-    truth = json.loads((rec / "manifest.json").read_text())["truth"]
-    return d / "out" / "report.html", truth
+def report(paper_diagonal_report, paper_diagonal_run):
+    """The page of ``gyrocal report`` of the shared seeded diagonal run with its calibration and
+    a failing verification document (tests/kit/conftest.py ``paper_diagonal_report``), and the
+    recording it was drawn from."""
+    plots, _ = paper_diagonal_report
+    return plots / "report.html", paper_diagonal_run[0] / "recording"
 
 
 def test_the_page_is_self_contained_and_holds_the_results(report):
-    page, truth = report
+    page, _ = report
     text = page.read_text(encoding="utf-8")
     assert not re.search(r"""(src|href)=['"](?!data:)""", text)  # nothing outside the file
     assert text.count("data:image/png;base64,") == len(list(page.parent.glob("*.png"))) > 3
@@ -63,11 +41,11 @@ def test_the_verification_verdict_is_said_in_words_with_its_units(report):
 
 def test_a_document_that_is_not_a_verification_is_refused_before_drawing(report, tmp_path,
                                                                          capsys):
-    page, _ = report
+    _, rec = report
     bad = tmp_path / "v.json"
     bad.write_text(json.dumps({"rms_before": [0.1, 0.2, 0.3], "blocks": 12}))
     out = tmp_path / "out"
-    assert main(["report", str(page.parent.parent / "rec"), "--out", str(out),
+    assert main(["report", str(rec), "--out", str(out),
                  "--verification", str(bad)]) == 2
     assert "not a `gyrocal verify --json` document" in capsys.readouterr().err
     assert not out.exists()
@@ -88,8 +66,7 @@ def test_user_strings_are_escaped(tmp_path):
 
 
 def test_the_existing_page_is_not_replaced_without_force(report, capsys):
-    page, _ = report
-    rec = page.parent.parent / "rec"
+    page, rec = report
     assert main(["report", str(rec), "--out", str(page.parent)]) == 2
     assert "report.html already exists" in capsys.readouterr().err
 

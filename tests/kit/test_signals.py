@@ -77,11 +77,16 @@ def test_a_signal_at_any_moment_ends_with_torque_off(rig, config, tmp_path, sig,
         assert "is kept, marked incomplete" in out.stderr
 
 
-def test_kill_9_mid_turn_the_bus_watchdog_stops_the_servo(rig, config, tmp_path):
+def test_kill_9_mid_turn_the_bus_watchdog_stops_the_servo(rig, tmp_path):
     """No handler runs on SIGKILL: the servo's own Bus Watchdog (armed before the turn) stops
     it (hardware reference §5, address 98, 20 ms units). The kill is counted from the first
     packet after a servo started turning with its watchdog armed, so it lands mid-motion
-    however loaded the host is."""
+    however loaded the host is. The watchdog is 1 s here, not :data:`LOADED_HOST`'s 2.5 s:
+    the test waits for it to run out after the kill, and the kill lands about 20 polls into
+    the first turn, so a late poll has little time to trip it first; 1 s is still over three
+    times the kit's default (0.3 s)."""
+    config = write_config(tmp_path / "gyrocal.toml", rig.path, ids=rig.ids,
+                          **{**LOADED_HOST, "watchdog_s": 1.0})
     out = rig.run(config, tmp_path / "run", [(20, signal.SIGKILL, 0.0)], from_motion=True)
     assert out.returncode == -signal.SIGKILL
     # at the kill a servo was turning, watched by its armed watchdog

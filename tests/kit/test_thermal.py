@@ -223,13 +223,16 @@ def test_thermal_on_the_emulated_jig_recovers_the_drawn_coefficients(tmp_path, c
 
 
 def test_static_warmup_fits_bias_only_and_keeps_the_spin_scale(tmp_path, capsys):
-    """--static: one spin calibration, then the still sensor while it warms (PX4/ArduPilot)."""
+    """--static: one spin calibration, then the still sensor while it warms (PX4/ArduPilot).
+    A 60 s warm-up (the ambient 20 to 24 °C in 60 s): the die covers 22.1-25.3 °C and the
+    model's bias is at most 2.48 sigma from the truth's over it (120 s, 20 to 24 °C in 120 s:
+    21.3-26.1 °C, 2.17 sigma; sigma 2.3e-5 and 2.5e-5 rad/s)."""
     from gyrocal.calib.model import GyroCalibration
     from gyrocal.kit.thermal import truth_at
 
     code, out, err = run_thermal(capsys, "--sim", "--sim-seed", "5", *fast_jig(tmp_path),
-                                 "--sim-temperature", "ramp:20:24:120",
-                                 "--static", "120", "--out", tmp_path / "s", "--json")
+                                 "--sim-temperature", "ramp:20:24:60",
+                                 "--static", "60", "--out", tmp_path / "s", "--json")
     assert code == 0, err
     cal = GyroCalibration.from_json(out)
     doc = json.loads(out)["temperature_model"]

@@ -15,8 +15,14 @@ MODEL = NoiseModel(rate_random_walk=1e-5)
 
 @pytest.fixture(scope="module")
 def random_rec(tmp_path_factory):
+    """A 150 s simulated session (30,000 samples) and its calibration, replayed by the tests
+    below. It was 300 s; the checks hold with the same margins on half of it (300 s -> 150 s):
+    every sample within 3 sigma in every replay; the smoothed RMS 0.555 -> 0.491 of the causal;
+    the late still mean 2.7e-5 -> 2.3e-5 from the readings (atol 2e-4); without a calibration
+    the last bias 1.0e-4 -> 8.5e-5 off (< 1e-3); the stale calibration's move 1.6e-4 -> 4.2e-4
+    off (atol 2e-3), its late bias 1.8e-4 -> 1.3e-4 (< 1e-3)."""
     d = tmp_path_factory.mktemp("track")
-    s = simulate_session(np.random.default_rng(21), 300.0, model=MODEL)
+    s = simulate_session(np.random.default_rng(21), 150.0, model=MODEL)
     rec = write_session(d / "rec", s)
     cal = sim_calibration(np.random.default_rng(22), s)
     (d / "cal.json").write_text(cal.to_json())
@@ -46,13 +52,28 @@ def test_json_document_per_sample_in_calibration_sign_convention(random_rec, cap
     assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
     still = np.array(doc["still"])
     assert still.any() and not np.any(still & ~s.still)
-    late = still & (s.t > 200)
+    late = still & (s.t > 100)
     np.testing.assert_allclose(bias[late].mean(0), -s.rate[late].mean(0), atol=2e-4)
 
 
-def test_defaults_without_noise_flags_still_track(random_rec, capsys):
-    s, rec, cal = random_rec
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal))
+@pytest.fixture(scope="module")
+def cal_only(random_rec):
+    """``(document, stderr)`` of ``gyrocal track REC --cal CAL --json`` (nothing else given:
+    the smoothed replay with the noise estimated), read by two tests below."""
+    import contextlib
+    import io
+
+    _, rec, cal = random_rec
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["track", str(rec), "--cal", str(cal), "--json"])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue()), err.getvalue()
+
+
+def test_defaults_without_noise_flags_still_track(random_rec, cal_only):
+    s, _, _ = random_rec
+    doc, err = cal_only
     assert "noise density estimated" in err
     assert "bias random walk estimated from the innovations" in err
     assert "temperature coefficient" in err  # on by default: the recording has temperatures
@@ -62,11 +83,11 @@ def test_defaults_without_noise_flags_still_track(random_rec, capsys):
     assert np.all(np.mean(np.abs(z) <= 3, axis=0) > 0.99)
 
 
-def test_replay_is_smoothed_unless_causal(random_rec, capsys):
+def test_replay_is_smoothed_unless_causal(random_rec, cal_only, capsys):
     # A whole recording is at hand: the smoothed estimate (default) must beat the causal
     # filter's against the simulated truth, with a band that still holds it.
     s, rec, cal = random_rec
-    smooth, err = run_json(capsys, str(rec), "--cal", str(cal))
+    smooth, _ = cal_only
     causal, _ = run_json(capsys, str(rec), "--cal", str(cal), "--causal")
     rms = {}
     for name, doc in (("smooth", smooth), ("causal", causal)):
@@ -188,11 +209,17 @@ def test_tempco_needs_temperatures(tmp_path, capsys):
 def test_json_decimates_on_request_and_on_long_sessions_and_says_so(random_rec, capsys,
                                                                     monkeypatch):
     s, rec, cal = random_rec
-    full, _ = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5")
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5",
-                        "--every", "2")
+    import gyrocal.kit.commands.track as cmd
+
+    # the 150 s session (30,000 samples) is a long one once JSON_MAX_ROWS is 1000
+    monkeypatch.setattr(cmd, "JSON_MAX_ROWS", 1000)
+    common = [str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5"]
+    # --every 0: every row all the same, the reference for the decimated rows below
+    full, err = run_json(capsys, *common, "--every", "0")
+    assert "decimated" not in err and len(full["t"]) == s.n
+    doc, err = run_json(capsys, *common, "--every", "2")
     assert "decimated to one row every 2 s" in err and doc["decimated_every_s"] == 2.0
-    assert len(doc["t"]) == 150
+    assert len(doc["t"]) == 75
     # each row is the full document's row at the same sample
     idx = np.searchsorted(full["t"], doc["t"])
     np.testing.assert_allclose(np.array(full["bias"])[idx], doc["bias"], rtol=0, atol=0)
@@ -200,14 +227,8 @@ def test_json_decimates_on_request_and_on_long_sessions_and_says_so(random_rec, 
     fs = np.array(full["still"])
     assert doc["still"][0] == bool(fs[: idx[0] + 1].any())
     # long sessions are decimated by default, and say so
-    import gyrocal.kit.commands.track as cmd
-
-    monkeypatch.setattr(cmd, "JSON_MAX_ROWS", 1000)
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5")
+    doc, err = run_json(capsys, *common)
     assert "decimated" in err and 500 < len(doc["t"]) <= 1000
-    doc, err = run_json(capsys, str(rec), "--cal", str(cal), "--rate-random-walk", "1e-5",
-                        "--every", "0")
-    assert "decimated" not in err and len(doc["t"]) == s.n
     assert main(["track", str(rec), "--every", "-1"]) == 2
     assert "--every must be" in capsys.readouterr().err
 

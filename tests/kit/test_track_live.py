@@ -16,6 +16,18 @@ from gyrocal.kit.sim import sim_truth
 from tests.kit.conftest import loop_50_hz_config
 
 
+def loop_50_hz(tmp_path):
+    """``--config`` of the jig's loop at 50 Hz (tests/kit/conftest.py LOOP_50_HZ): each chip's
+    FIFO holds the same samples between drains and the servos are polled at 50 Hz, for a
+    quarter of the emulated bus traffic. The tracker takes every sample either way (seed 4's
+    20 s: 3998 samples at 200 Hz, 3996 at 50; its final bias 0.76, -1.04, -0.34 sigma from the
+    truth at both rates); seed 7's 24 s with turns: 56 reference-rate updates at both rates,
+    0 NIS alarms with the true axes, 11 (200 Hz) and 12 (50 Hz) with every axis flipped. The
+    interrupt and the servo alert land at the same jig time at either rate (the trap counts
+    drains: 1000 at 200 Hz, 250 at 50)."""
+    return ["--config", loop_50_hz_config(tmp_path / "loop")]
+
+
 def run_json(capsys, *argv):
     # the paper's sensor: these check the tracker, not the realism effects (bench realism)
     code = main(["track", "--live", "--sim", "--sim-realism", "off", *argv, "--json"])
@@ -24,8 +36,8 @@ def run_json(capsys, *argv):
     return json.loads(out), err
 
 
-def test_live_sim_tracks_the_true_bias_within_its_uncertainty(capsys):
-    doc, err = run_json(capsys, "--sim-seed", "4", "--duration", "20")
+def test_live_sim_tracks_the_true_bias_within_its_uncertainty(tmp_path, capsys):
+    doc, err = run_json(capsys, "--sim-seed", "4", "--duration", "20", *loop_50_hz(tmp_path))
     _, true_bias = sim_truth(4)  # Calibration v1 convention: the chip reads m = g/k - bias
     t, bias, std = np.array(doc["t"]), np.array(doc["bias"]), np.array(doc["bias_std"])
     still = np.array(doc["still"])
@@ -53,7 +65,7 @@ def test_live_with_a_calibration_and_the_jig_as_still_flag(tmp_path, capsys):
     path.write_text(cal.to_json())
     doc, err = run_json(capsys, "--sim-seed", "5", "--duration", "10", "--cal", str(path),
                         "--still", "segments", "--noise-density", "1.75e-4",
-                        "--rate-random-walk", "1e-5")
+                        "--rate-random-walk", "1e-5", *loop_50_hz(tmp_path))
     bias, std = np.array(doc["bias"]), np.array(doc["bias_std"])
     np.testing.assert_allclose(bias[0], cal.bias, atol=2e-4)  # starts from the calibration
     assert np.all(std[-1] < 1e-4)
@@ -97,22 +109,23 @@ class _Trap:
     (KeyboardInterrupt(), 130, "interrupted"),
     (TerminatedBySignal(15), 143, "terminated"),
 ])
-def test_interrupt_stops_the_servos_and_exits_with_its_code(monkeypatch, capsys, exc, code,
-                                                            word):
-    trap = _Trap(monkeypatch, exc, at=1000)  # 5 s into the run at 200 Hz
-    assert main(["track", "--live", "--sim", "--duration", "20", "--json"]) == code
+def test_interrupt_stops_the_servos_and_exits_with_its_code(monkeypatch, tmp_path, capsys, exc,
+                                                            code, word):
+    trap = _Trap(monkeypatch, exc, at=250)  # 5 s into the run, its loop at 50 Hz
+    assert main(["track", "--live", "--sim", "--duration", "20", "--json",
+                 *loop_50_hz(tmp_path)]) == code
     out, err = capsys.readouterr()
     assert out == ""
     assert f"{word} after" in err and "torque off" in err
     assert trap.torque() == {"1": 0, "2": 0, "3": 0}
 
 
-def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, capsys):
+def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, tmp_path, capsys):
     def overload(jig):
         jig.sim.servo_bus.servo(2).raise_alert_at(jig.clock.monotonic() + 4.0, bits=1 << 5)
 
     trap = _Trap(monkeypatch, after=overload)
-    assert main(["track", "--live", "--sim", "--duration", "20"]) == 4
+    assert main(["track", "--live", "--sim", "--duration", "20", *loop_50_hz(tmp_path)]) == 4
     out, err = capsys.readouterr()
     assert "servo 2" in err and "gyrocal: error:" in err
     assert trap.torque() == {"1": 0, "2": 0, "3": 0}
@@ -183,7 +196,7 @@ def _turns_run(capsys, tmp_path, cal_path):
                  "1", "--turn-every", "3", "--turn-speed-dps", "120", "--cal", str(cal_path),
                  "--out", str(out_json), "--rows", "2",
                  # the paper's sensor: the tracker applies only the scale (issue 14's fix pending)
-                 "--sim-cross-axis", "0", "--sim-realism", "off"])
+                 "--sim-cross-axis", "0", "--sim-realism", "off", *loop_50_hz(tmp_path)])
     out, err = capsys.readouterr()
     assert code == 0, err
     counts = re.search(r"(\d+) zero-rate, (\d+) reference-rate", out)
@@ -245,16 +258,3 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
     assert main(["track", "--live", "--sim", "--turns", "1", "--record", str(tmp_path / "x"),
                  "--cal", "c.json"]) == 2
 
-
-def test_live_says_once_that_it_does_not_apply_g_sensitivity(full_run, tmp_path, capsys):
-    """A calibration written before calibrate stored the home pose 'up' refers to."""
-    d, code = full_run
-    assert code == 0
-    doc = json.loads((d / "calibration.json").read_text())
-    assert doc["g_sensitivity"] is not None
-    doc["kinematics"] = {k: v for k, v in doc["kinematics"].items()
-                         if k not in ("home_angles_rad", "up_servo")}
-    old = tmp_path / "old.json"
-    old.write_text(json.dumps(doc))
-    _, err = run_json(capsys, "--sim-seed", "5", "--duration", "3", "--cal", str(old))
-    assert err.count("g-sensitivity is NOT applied live") == 1, err
