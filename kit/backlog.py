@@ -118,11 +118,15 @@ class Backlog:
         #: there, and the loop, which would otherwise hand over the interpreter for every
         #: iteration or two, queues tens of iterations meanwhile, written as one append.
         self.gather_s = 0.05
+        #: Set by :meth:`close`: the loop has stopped, so nothing more will queue up behind the
+        #: samples left and the consumer writes them without waiting.
+        self._closing = threading.Event()
 
     # ---------------------------------------------------------------- producer side
     def start(self) -> Backlog:
         """Start the consumer thread."""
         if self._thread is None:
+            self._closing.clear()
             self._thread = threading.Thread(target=self._consume, name="gyrocal-backlog",
                                             daemon=True)
             self._thread.start()
@@ -206,6 +210,7 @@ class Backlog:
             self.check()
             return True
         done = True
+        self._closing.set()
         try:
             self._queue.put(_STOP, timeout=timeout_s)
         except queue.Full:
@@ -223,6 +228,7 @@ class Backlog:
     # ---------------------------------------------------------------- consumer side
     def _consume(self) -> None:
         pending = None  # an item taken while gathering samples, handled next
+        unwaited = 0  # items queued when the last wait ended, not yet taken: no new wait
         while True:
             item, pending = (self._queue.get() if pending is None else pending), None
             if item is _STOP or self._error is not None:
@@ -232,16 +238,28 @@ class Backlog:
                 continue
             try:
                 if item[0] == "samples":
-                    if not self.realtime and self._queue.qsize() < self.batch_items:
+                    if unwaited <= 0 and self._worth_gathering():
                         time.sleep(self.gather_s)  # let the loop run ahead: fewer, longer writes
+                        unwaited = self._queue.qsize() + 1
                     items, pending = self._gather(item)
                     self._write_samples(items)
+                    unwaited -= len(items)
                 else:
                     self._handle(item)
+                    unwaited -= 1
                 if pending is None and self._queue.empty():
                     self._show()
             except BaseException as exc:  # kept for the producer; nothing more is written
                 self._error = exc
+
+    def _worth_gathering(self) -> bool:
+        """Whether to wait :attr:`gather_s` for more samples before writing: on an emulated
+        clock only, while the loop still runs (not after :meth:`close`) and fewer than a batch
+        are queued. :meth:`_consume` waits once for what was queued when its last wait ended:
+        events between the samples split them into many short batches, each of which waited
+        before (a FIFO-fault run on a two-sensor plate held the loop 4 s on a full queue)."""
+        return (not self.realtime and not self._closing.is_set()
+                and self._queue.qsize() < self.batch_items)
 
     def _gather(self, first: tuple[Any, ...]) -> tuple[list[tuple[Any, ...]], Any]:
         """``first`` and the samples items queued right behind it (at most

@@ -109,6 +109,37 @@ def test_on_an_emulated_clock_a_full_queue_waits_instead_of_failing():
     assert sum(c[0] == "enc" for c in w.calls) == 10
 
 
+def test_on_an_emulated_clock_what_is_queued_at_close_is_written_without_waiting(monkeypatch):
+    # On an emulated clock the consumer waits gather_s before each batch of samples, so that
+    # the loop queues more behind it; once close() is called nothing more comes, and waiting
+    # before each of the batches left (events break them apart) only idles: a FIFO-fault run
+    # left 543 items behind and close() slept 89 times (2.8 s) before this.
+    from gyrocal.kit import backlog as backlog_module
+
+    gate = threading.Event()  # the writer is held until close() has queued its stop
+    w = _Writer(gate)
+    b = Backlog(w, capacity=1000, realtime=False, on_event=lambda line, t: None).start()
+    waits_after_close: list[float] = []
+    real_sleep = time.sleep
+    monkeypatch.setattr(backlog_module.time, "sleep",
+                        lambda s: (gate.is_set() and waits_after_close.append(s), real_sleep(0)))
+    put = b._queue.put
+
+    def put_and_open_at_stop(item, *args, **kwargs):
+        put(item, *args, **kwargs)
+        if item is backlog_module._STOP:
+            gate.set()
+
+    monkeypatch.setattr(b._queue, "put", put_and_open_at_stop)
+    n = 40
+    for k in range(n):  # samples and events alternate: each samples item is a batch of its own
+        b.put_samples(*_samples(k))
+        b.put_event(f"event {k}", k * 0.01)
+    assert b.close(timeout_s=10)
+    assert sum(c[0] == "enc" for c in w.calls) == n
+    assert waits_after_close == []
+
+
 def test_a_write_error_in_the_consumer_reaches_the_loop_and_nothing_is_written_after_it():
     w = _Writer(fail_on=3)
     b = Backlog(w, capacity=100).start()
