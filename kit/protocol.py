@@ -324,7 +324,7 @@ class Runner:
         if len(batch):
             t = batch.t - self.t0
             rows = (t, batch.rate, batch.temperature_c, batch.accel)
-            if k == min(set(range(len(self.imus))) - set(self.failed)):
+            if k == (min(set(range(len(self.imus))) - set(self.failed)) if self.failed else 0):
                 self.last_rate = batch.rate[-1]
             if d is not None:
                 d.imu_t.append(t)

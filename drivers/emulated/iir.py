@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["lfilter"]
+__all__ = ["compiled", "lfilter"]
 
 #: SciPy's compiled DF2T kernel once looked for: ``None`` not yet, ``False`` not found.
 _KERNEL: Any = None
@@ -52,6 +52,12 @@ def _kernel() -> Callable[..., Any] | None:
         except Exception:  # a private module: any SciPy that loads it differently falls back
             _KERNEL = False
     return _KERNEL or None
+
+
+def compiled() -> bool:
+    """Whether :func:`lfilter` runs in SciPy's compiled kernel here (else in its Python loop,
+    twenty times slower: a caller with a faster loop of its own for a special case keeps it)."""
+    return _kernel() is not None
 
 
 def lfilter(b: Sequence[float], a: Sequence[float], x: np.ndarray,

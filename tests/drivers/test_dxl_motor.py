@@ -1,8 +1,9 @@
 """The emulated servo motor's grid is the per-point recursion of its filters, to the last bit.
 
-The motor runs its two tracking lags and its ripple noise in its own loop, stops running the
-lags once a still shaft reaches the recursion's fixed point, and skips the ripple and noise
-terms where the shaft is at rest. The reference here computes every grid point the plain way:
+The motor runs its two tracking lags and its ripple noise in SciPy's compiled DF2T kernel where
+it loads, else in its own loop, which stops running the lags once a still shaft reaches the
+recursion's fixed point; it skips the ripple and noise terms where the shaft is at rest. Both
+paths are tested. The reference here computes every grid point the plain way:
 :func:`gyrocal.drivers.emulated.iir.lfilter` (itself checked against SciPy) for the three
 recursions, the ripple and the noise term added on every point.
 """
@@ -10,6 +11,7 @@ recursions, the ripple and the noise term added on every point.
 import numpy as np
 import pytest
 
+import gyrocal.drivers.emulated.dxl.motor as motor_module
 from gyrocal.drivers.emulated.dxl.motor import (
     ServoMotor,
     _tracking_lags,
@@ -43,6 +45,16 @@ class _PointByPoint(ServoMotor):
         self._append(p + speed * u, y1, y2, u)
 
 
+@pytest.fixture(params=["compiled", "loop"])
+def recursions(request, monkeypatch):
+    """The motor's recursions in the compiled kernel (where it loads), or in its own loop."""
+    if request.param == "loop":
+        monkeypatch.setattr(motor_module, "compiled", lambda: False)
+    else:
+        assert motor_module.compiled()  # the installed SciPy has it: the fast path is tested
+    return request.param
+
+
 def _moves(t0, p0, v0):
     return plan_position(t0, p0, v0, 2.0, 3.0, 20.0)
 
@@ -57,7 +69,8 @@ COMMANDS = [  # (time, plan): moves, holds long enough to reach the fixed point,
 
 
 @pytest.mark.parametrize("seed", [11, 12])
-def test_the_motor_grid_equals_the_point_by_point_recursion_through_moves_and_holds(seed):
+def test_the_motor_grid_equals_the_point_by_point_recursion_through_moves_and_holds(
+        seed, recursions):
     fast, plain = ServoMotor(0.0, seed=seed), _PointByPoint(0.0, seed=seed)
     reads = np.arange(0.0, 9.0, 0.0037)  # reads between the commands, as a poll loop makes
     for m in (fast, plain):
@@ -73,7 +86,7 @@ def test_the_motor_grid_equals_the_point_by_point_recursion_through_moves_and_ho
         assert getattr(a, name)[:a.n].tobytes() == getattr(b, name)[:b.n].tobytes(), name
 
 
-def test_the_lags_fixed_point_shortcut_gives_the_recursions_numbers():
+def test_the_lags_fixed_point_shortcut_gives_the_recursions_numbers(recursions):
     rng = np.random.default_rng(3)
     al = ServoMotor(0.0)._alpha
     for x in (np.full(900, 1.7), np.r_[np.linspace(0.0, 1.0, 300), np.full(700, 1.0)],

@@ -89,6 +89,26 @@ def test_stuffing_matches_the_sdk_and_round_trips(params):
     assert parsed == Instruction(1, 0x03, params, True)
 
 
+def test_status_packets_are_the_sdks_framing_whatever_their_header_cache_holds():
+    """status_packet takes its header's CRC from a cache by (ID, LEN) and continues it over
+    the error byte and parameters: every status is still what dynamixel-sdk's addStuffing and
+    updateCRC make of it, the same header again (a poll), other IDs and lengths, and
+    parameters that need stuffing, including a pattern that starts at the error byte."""
+    rng = np.random.default_rng(25)
+    for trial in range(400):
+        dxl_id = int(rng.choice([1, 2, 3, int(rng.integers(0, 253))]))
+        n = int(rng.choice([16, 4, int(rng.integers(0, 60))]))
+        params = bytes(rng.integers(0, 256, n, dtype=np.uint8))
+        if trial % 4 == 0:  # bytes that stuff: FF FF FD runs
+            params = bytes(rng.choice([0xFF, 0xFD, 0x00], n))
+        error = int(rng.choice([0, 0x80, 0xFF, int(rng.integers(0, 256))]))
+        if trial % 50 == 1:
+            error, params = 0xFF, h("FF FD") + params  # the pattern begins at the error byte
+        want = _sdk_stuffed(dxl_id, 0x55, bytes([error]) + params)
+        assert status_packet(dxl_id, error, params) == want, (dxl_id, error, params)
+        assert status_packet(dxl_id, error, params) == want  # the header from the cache
+
+
 def test_parser_finds_packets_among_noise_and_split_feeds():
     a = instruction_packet(1, 0x02, h("84 00 04 00"))
     b = instruction_packet(2, 0x03, h("40 00 01"))

@@ -49,8 +49,9 @@ def _run(model, lookahead_s, odr, lookahead_max=256, **open_kw):
                         temperature_c=DieTemperature(parse_ambient("ramp:20:30:5")))
     bus, addr = make_emulated_imu(model, clock, jig, truth, seed=5)
     chip = bus.device(addr)
-    chip.lookahead_s = lookahead_s
-    chip.lookahead_max = lookahead_max
+    if lookahead_s is not None:  # None: the chip's own look-ahead
+        chip.lookahead_s = lookahead_s
+        chip.lookahead_max = lookahead_max
     reader = open_imu(model, bus, addr, clock=clock, range_dps=500, odr_hz=odr, **open_kw)
     reader.start()
     servos[1].stall_at(clock.monotonic() + 0.6, 0.5)
@@ -80,12 +81,15 @@ def _run(model, lookahead_s, odr, lookahead_max=256, **open_kw):
 
 # The ICM-42688-P's look-ahead is cut at 7 samples (as a rate over 1 kHz is cut at 256):
 # blocks then end mid-drain and after drains of several samples.
-@pytest.mark.parametrize(("model", "odr", "cap", "open_kw"), [
-    ("mpu9250", 200.0, 256, {"lowpass_hz": 92}),
-    ("icm42688p", 200.0, 7, {}),
+# The chip's own look-ahead (None: 256 samples at 200 Hz, a calibration's rate) too.
+@pytest.mark.parametrize(("model", "odr", "lookahead_s", "cap", "open_kw"), [
+    ("mpu9250", 200.0, 0.1, 256, {"lowpass_hz": 92}),
+    ("mpu9250", 200.0, None, None, {"lowpass_hz": 92}),
+    ("icm42688p", 200.0, 0.1, 7, {}),
 ])
-def test_samples_computed_ahead_are_those_computed_on_time(model, odr, cap, open_kw):
-    ahead, chip = _run(model, 0.1, odr, cap, **open_kw)
+def test_samples_computed_ahead_are_those_computed_on_time(model, odr, lookahead_s, cap,
+                                                           open_kw):
+    ahead, chip = _run(model, lookahead_s, odr, cap, **open_kw)
     on_time, _ = _run(model, 0.0, odr, **open_kw)
     assert len(ahead) == len(on_time)
     n_samples = sum(len(b[0]) for b in ahead)

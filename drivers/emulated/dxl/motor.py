@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gyrocal.drivers.emulated.iir import lfilter
+from gyrocal.drivers.emulated.iir import compiled, lfilter
 
 __all__ = [
     "MotorParams",
@@ -247,7 +247,13 @@ def _tracking_lags(alpha: float, x: np.ndarray, y1_last: float, y2_last: float
     run of identical inputs), the recursion is a monotone map of the state and reaches a fixed
     point; once one step leaves both states unchanged (non-zero, so that the sign of a zero
     cannot differ), every later step repeats it and the rest is filled in without the loop.
+    Where :func:`~gyrocal.drivers.emulated.iir.lfilter` runs compiled, the two lags are its
+    two calls over every point instead (a fifth of the loop's CPU on a 0.1 s block).
     """
+    if compiled():
+        b, a = [1.0 - alpha], [1.0, -alpha]
+        y1, _ = lfilter(b, a, x, zi=[alpha * y1_last])
+        return y1, lfilter(b, a, y1, zi=[alpha * y2_last])[0]
     b0, b1, a1 = 1.0 - alpha, 0.0, -alpha
     z1, z2 = alpha * y1_last, alpha * y2_last
     m = x.size
@@ -288,7 +294,10 @@ def _tracking_lags(alpha: float, x: np.ndarray, y1_last: float, y2_last: float
 def _resonator(c1: float, c2: float, xi: np.ndarray, u1: float, u2: float) -> np.ndarray:
     """The ripple noise's second-order recursion over ``xi`` from the two previous outputs
     ``u1`` (last) and ``u2``: ``lfilter([1], [1, -c1, -c2], xi, zi=[c1 u1 + c2 u2, c2 u1])``
-    with its operations in its order (see :func:`_tracking_lags`)."""
+    with its operations in its order (see :func:`_tracking_lags`); that very call where it runs
+    compiled (a third of the loop's CPU)."""
+    if compiled():
+        return lfilter([1.0], [1.0, -c1, -c2], xi, zi=[c1 * u1 + c2 * u2, c2 * u1])[0]
     b0, b1, b2, a1, a2 = 1.0, 0.0, 0.0, -c1, -c2
     z0, z1 = c1 * u1 + c2 * u2, c2 * u1
     out: list[float] = []

@@ -159,9 +159,31 @@ def _frame(dxl_id: int, body: bytes) -> bytes:
     return packet + bytes((crc & 0xFF, crc >> 8))
 
 
+#: Status packets' first eight bytes (``FF FF FD 00 ID LEN_L LEN_H 55``) and their CRC, by
+#: ``(ID, LEN)``: a servo answers a poll with the same header again and again.
+_STATUS_HEADS: dict[tuple[int, int], tuple[bytes, int]] = {}
+
+
 def status_packet(dxl_id: int, error: int, params: bytes = b"") -> bytes:
-    """A (stuffed) status packet: ``FF FF FD 00 ID LEN 55 ERR PARAM… CRC`` (§4.1, §4.3)."""
-    return _frame(dxl_id, bytes((STATUS, error & 0xFF)) + params)
+    """A (stuffed) status packet: ``FF FF FD 00 ID LEN 55 ERR PARAM… CRC`` (§4.1, §4.3).
+
+    Without stuffing to do (the usual case) the header's CRC is taken up from
+    :data:`_STATUS_HEADS` and continued over the error byte and parameters: the CRC of a run
+    continued from a running CRC is the CRC of the whole (:func:`crc16`).
+    """
+    rest = bytes((error & 0xFF,)) + params
+    if b"\xff\xff\xfd" in rest:  # STATUS (0x55) cannot begin the pattern: rest can
+        return _frame(dxl_id, bytes((STATUS,)) + rest)
+    key = (dxl_id & 0xFF, len(rest) + 3)
+    head = _STATUS_HEADS.get(key)
+    if head is None:
+        if len(_STATUS_HEADS) > 1024:
+            _STATUS_HEADS.clear()
+        length = key[1]
+        packet = HEADER + bytes((key[0], length & 0xFF, (length >> 8) & 0xFF, STATUS))
+        head = _STATUS_HEADS[key] = (packet, crc16(packet))
+    crc = crc16(rest, head[1])
+    return head[0] + rest + bytes((crc & 0xFF, crc >> 8))
 
 
 def instruction_packet(dxl_id: int, instruction: int, params: bytes = b"") -> bytes:
