@@ -173,9 +173,9 @@ def settled(rng: np.random.Generator, band: float, tick: float):  # type: ignore
     default (hardware-reference §5, addresses 80–84): within a tick or two of the goal the PWM
     cannot turn the geared shaft against its friction, so it stops where friction holds it,
     anywhere within its tick, and another approach stops elsewhere (an XL430-W250 stopping
-    4–5 ticks short of its goal, answers.ros.org question 303081; Present Position moving
-    ±3 pulses in the gears' backlash, forum.robotis.com thread 7582). Nothing puts the shaft
-    on the tick grid.
+    4–5 ticks short of its goal with the default gains, answers.ros.org question 303081;
+    ROBOTIS on an XH540 holding a goal: Present Position moves ±3 pulses in the gears' 0.25°
+    backlash, forum.robotis.com thread 7582). Nothing puts the shaft on the tick grid.
     """
     def offset(angle: float) -> float:
         if not band:
