@@ -21,16 +21,20 @@
    sum), and the truth the bias's mean over the hour from the recording's start
    (:mod:`gyrocal.calib.drift`). ``--wobble=DEG`` makes every link of the generator's gimbal
    nod by that much once per revolution (its own model, :mod:`gyrocal.calib.systematics`).
+   ``--hold-band=F`` (default 1): every servo of the generator comes to rest anywhere within
+   ``F`` encoder ticks about its goal's tick, a new draw at each rest, as an X-series
+   position loop leaves it (``settled`` in the generator); 0 puts every servo exactly on its
+   commanded angle at every rest (home on a tick's centre: no hold error at all).
 
 ``--python=PATH`` runs the calibrations with another installation's interpreter (e.g. the
 code before a change: ``--python=/work/venv-main/bin/python``); the comparison with the truth
 is this installation's.
 
 Usage: ``python -m bench coverage [--quick (3 seeds)] [--seeds=N] [--first=S] [--python=PATH]
-[--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--keep=DIR]``. ``--keep=DIR``
-keeps each emulated run in ``DIR/seed-S`` and, where one is there already, re-fits its
-recording with ``gyrocal estimate`` instead of emulating it again (a change to the fit's σ
-measured on the same runs in minutes).
+[--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--hold-band=F] [--keep=DIR]``.
+``--keep=DIR`` keeps each emulated run in ``DIR/seed-S`` and, where one is there already,
+re-fits its recording with ``gyrocal estimate`` instead of emulating it again (a change to the
+fit's σ measured on the same runs in minutes).
 """
 
 from __future__ import annotations
@@ -104,7 +108,7 @@ def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
         return _z(cal, truth["truth"])
 
 
-def _independent_run(job: tuple[str, int, float, float, float]
+def _independent_run(job: tuple[str, int, float, float, float, float]
                      ) -> dict[str, np.ndarray] | None:
     """One recording of the independent generator with a bias random walk of ``K`` = job[2],
     fitted by ``gyrocal estimate``: z of the bias against its value at the recording's middle
@@ -113,7 +117,7 @@ def _independent_run(job: tuple[str, int, float, float, float]
     figures (B = 0, K) over the calibration's span: the formula on data it did not make."""
     from gyrocal.calib.drift import BiasDrift
 
-    python, seed, walk, flicker, wobble = job
+    python, seed, walk, flicker, wobble, band = job
     root = Path(__file__).resolve().parent.parent
     sys.path.insert(0, str(root))
     from tests.kit.contract_fullmodel_recording import write_recording
@@ -121,7 +125,7 @@ def _independent_run(job: tuple[str, int, float, float, float]
     with tempfile.TemporaryDirectory() as tmp:
         rec = Path(tmp) / "rec"
         t = write_recording(rec, seed=seed, bias_walk=walk, bias_flicker=flicker,
-                            wobble_rad=np.radians(wobble))
+                            wobble_rad=np.radians(wobble), hold_band=band)
         run = subprocess.run([python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"],
                              capture_output=True, text=True, check=False)
         if run.returncode not in (0, 3):
@@ -178,12 +182,14 @@ def main(argv: list[str]) -> None:
     seed_list = range(first, first + seeds)
     if "--independent" in argv:
         flicker, wobble = float(opt("flicker", "0")), float(opt("wobble", "0"))
+        band = float(opt("hold-band", "1"))
         for walk in (float(w) for w in opt("walk", "2e-6,1e-4").split(",")):
             res = pooled(_independent_run,
-                         [(python, s, walk, flicker, wobble) for s in seed_list], _describe)
+                         [(python, s, walk, flicker, wobble, band) for s in seed_list],
+                         _describe)
             _table(res, f"Independent generator, bias random walk {walk:g} rad/s/√s, flicker "
-                        f"B {flicker:g} rad/s, link nod {wobble:g}°, seeds {first}.."
-                        f"{first + seeds - 1}, {python}")
+                        f"B {flicker:g} rad/s, link nod {wobble:g}°, holds within {band:g} "
+                        f"tick, seeds {first}..{first + seeds - 1}, {python}")
         return
     keep = opt("keep", "")
     res = pooled(_sim_run, [(python, s, keep) for s in seed_list], _describe)

@@ -161,6 +161,30 @@ def specific_force(links: list, mount: np.ndarray, angles: np.ndarray) -> np.nda
     return np.einsum("nki,k->ni", R, links[2])
 
 
+def settled(rng: np.random.Generator, band: float, tick: float):  # type: ignore[no-untyped-def]
+    """Where a servo commanded to an angle comes to rest: a function of the commanded angle
+    (rad) giving the true rest angle less the commanded one, the rest angle uniform within
+    ``band`` ticks (of ``tick`` rad) about the centre of the tick nearest the commanded angle,
+    a new draw per call; 0 when ``band`` is 0.
+
+    An X-series position loop sets the motor's PWM from the position error in encoder ticks
+    (ROBOTIS-GIT/emanual ``_includes/en/dxl/control_table_position_pid_gain.md``, step 4: the
+    feedforward and PID controller calculate the PWM output), with Position I Gain 0 by
+    default (hardware-reference §5, addresses 80–84): within a tick or two of the goal the PWM
+    cannot turn the geared shaft against its friction, so it stops where friction holds it,
+    anywhere within its tick, and another approach stops elsewhere (an XL430-W250 stopping
+    4–5 ticks short of its goal with the default gains, answers.ros.org question 303081;
+    ROBOTIS on an XH540 holding a goal: Present Position moves ±3 pulses in the gears' 0.25°
+    backlash, forum.robotis.com thread 7582). Nothing puts the shaft on the tick grid.
+    """
+    def offset(angle: float) -> float:
+        if not band:
+            return 0.0
+        return float((np.round(angle / tick) + band * rng.uniform(-0.5, 0.5)) * tick - angle)
+
+    return offset
+
+
 def flicker_noise(rng: np.random.Generator, B: float, rate_hz: float, n: int) -> np.ndarray:
     """``n`` samples (n, 3) at ``rate_hz`` of flicker noise of one-sided spectral density
     ``(B²/π)/f`` and no mean, made by shaping white noise's spectrum (periodic over the ``n``
@@ -181,7 +205,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
                     hold: float = 0.06, bias_walk: float = 0.0, bias_flicker: float = 0.0,
-                    wobble_rad: float = 0.0,
+                    wobble_rad: float = 0.0, hold_band: float = 0.0,
                     temp_ramp: tuple[float, float] | None = None,
                     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
                     accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
@@ -203,6 +227,11 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     ``bias_flicker_hour`` (3,). With ``wobble_rad`` (``ε``) each link nods by ``ε sin θ_j``
     about an axis drawn perpendicular to its own (:func:`sensor_rate`; the gyro only, the
     accelerometer's force is left rigid); the axes are ``truth["wobble_axes"]``. With
+    ``hold_band`` (a fraction of an encoder tick) every servo comes to rest, at the start and
+    after each move and turn, at a true angle drawn uniformly within ``hold_band`` ticks about
+    the centre of its goal's tick (the tick nearest the commanded angle), each rest its own
+    draw: a position loop stops where friction holds the shaft, not on the tick grid
+    (:func:`settled`); 0 stops every servo exactly on its commanded angle. With
     ``temp_ramp`` (°C at the start and the end) the die temperature
     ramps linearly (written in the ``temp`` column) and the bias follows it,
     ``bias + tempco (T − T_start)``. With ``accel_truth`` (:func:`draw_accel`) the
@@ -218,6 +247,10 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     segs: list[tuple] = []  # (kind, motor index or None, direction, speed, t0, t1, [(j, Δθ)])
     t = 0.0
     pose = np.zeros(3)
+    settle = settled(np.random.default_rng([seed, 0x401D]), hold_band,
+                     2 * np.pi / (ticks or TICKS))
+    start = np.array([settle(0.0) for _ in range(3)])  # where each servo rests at the start
+    off = start.copy()  # each servo's true angle at rest less its commanded one
     _, _, turn_time = _profile(np.zeros(1), speed, turns, accel)
     with_tour = tour and accel_truth is not None
     plan = steps if steps is not None else [
@@ -229,11 +262,15 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
             t += step[1]
         elif step[0] == "rotate":
             _, s, d = step
-            segs.append(("rotate", s, d, speed, t, t + turn_time, [(s, d * 2 * np.pi * turns)]))
+            new = settle(pose[s])  # whole turns: back to the same tick
+            segs.append(("rotate", s, d, speed, t, t + turn_time,
+                         [(s, d * 2 * np.pi * turns + new - off[s])]))
+            off[s] = new
             t += turn_time
         else:
             target = np.asarray(step[1])
-            moving = [(j, target[j] - pose[j]) for j in range(3) if target[j] != pose[j]]
+            new = {j: settle(target[j]) for j in range(3) if target[j] != pose[j]}
+            moving = [(j, target[j] - pose[j] + new[j] - off[j]) for j in new]
             durations = []
             for j, delta in moving:
                 turns_j = abs(delta) / (2 * np.pi)
@@ -246,14 +283,15 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                                        for sg in segs[-len(moving):]]
                 durations.append(max(durations) + hold)
             t += max(durations)
-            pose = target
+            pose = target.copy()
+            off[list(new)] = list(new.values())
     segs.append(("rest", None, 0, 0.0, t, t + rest, []))
     t_end = t + rest
     ts = np.arange(0.0, t_end, 1 / odr)
     te = np.arange(0.0, t_end, 1 / enc_hz)
 
     def motion(times):
-        ang = np.zeros((times.size, 3))
+        ang = np.broadcast_to(start, (times.size, 3)).copy()
         rate = np.zeros((times.size, 3))
         for _, _, _, sp, t0, _, parts in segs:
             for j, delta in parts:
