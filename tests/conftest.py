@@ -44,41 +44,41 @@ import pytest  # noqa: E402
 
 from tests.test_docs import xdist_unit  # noqa: E402
 
-#: CPU seconds of the longest work units (:func:`work_unit`), each measured alone on one worker
-#: (``python -m pytest -p no:randomly`` with a plugin summing each test's CPU time, own and
-#: children's, fixtures included, on a loaded host; a module measured alone pays for the shared
-#: runs of tests/kit/conftest.py it reads, about 17 s for ``full_run``, which the suite builds
-#: once): the scheduler hands them out first, longest first. A unit missing here keeps xdist's
-#: order after them; a figure out of date only moves a unit in that order.
+#: Wall seconds of the longest work units (:func:`work_unit`), from a `pytest -n 2` run of a
+#: clean clone with a plugin summing each test's wall time, fixtures included (a shared run of
+#: tests/kit/conftest.py counts on the first unit that asks for it on its worker): the scheduler
+#: hands them out first, longest first. A unit missing here keeps xdist's order after them; a
+#: figure out of date only moves a unit in that order. Wall, not CPU: the frozen-link cases of
+#: test_signals wait out the servos' timeouts.
 LONG_UNITS: dict[str, float] = {
-    "tests/drivers/test_imu_streaming.py": 56.2,  # 73.9 x 0.76, the cut of 2026-11 (measured
-    # interleaved with the old tests: 20 s streams, shared checks; see git log)
-    "tests/test_docs.py::running": 41.1,  # its branches apart; history.md's run-h shares run1's
-    # recording and plots, the report command run1's plots
-    "tests/test_docs.py::running/thermal": 56.3,
-    "tests/kit/test_calibrate.py": 38.8,
-    "tests/kit/test_plate.py": 16.2,
-    "tests/test_docs.py::running/plate": 32.4,
-    "tests/kit/test_track_live.py": 41.2,
-    "tests/kit/test_report.py": 35.5,
-    "tests/kit/test_accel_recording.py": 20.7,  # the first to ask for the shared full_run
-    "tests/kit/test_reliability.py": 28.0,
-    "tests/test_docs.py::intro": 18.0,  # with the index's demo run, which shares the README's
-    # recording and plots
-    "tests/kit/test_track.py": 15.8,
-    "tests/kit/test_signals.py": 19.7,
-    "tests/calib/test_tracker.py": 16.4,  # 20.6 x 0.80 after the same cut
-    "tests/test_docs.py::single-servo": 19.0,
-    "tests/kit/test_model_choice.py": 17.2,
-    "tests/kit/test_align_e2e.py": 7.8,
-    "tests/kit/test_recording_reader.py": 16.4,
-    "tests/kit/test_verify_general.py": 32.4,
-    "tests/kit/test_track_v2.py": 24.7,
-    "tests/kit/test_single_servo.py": 13.0,
-    "tests/kit/test_thermal.py": 12.2,
-    "tests/drivers/test_imu_config.py": 2.3,  # 11.6 before its 256 rates drained per period
-    "tests/drivers/test_dxl_gimbal.py": 10.1,
-    "tests/kit/test_report_html.py": 26.0,
+    "tests/drivers/test_imu_streaming.py": 42.3,
+    "tests/kit/test_signals.py": 35.5,
+    "tests/test_docs.py::running/thermal": 34.0,
+    "tests/test_docs.py::running": 33.9,
+    "tests/kit/test_report.py": 24.5,
+    "tests/kit/test_calibrate.py": 23.9,
+    "tests/test_docs.py::running/plate": 23.1,
+    "tests/kit/test_verify_general.py": 17.9,
+    "tests/calib/test_tracker.py": 15.0,
+    "tests/test_docs.py::intro": 12.3,
+    "tests/kit/test_history.py": 12.2,
+    "tests/kit/test_plate.py": 12.0,
+    "tests/test_docs.py::single-servo": 11.7,
+    "tests/kit/test_track.py": 9.9,
+    "tests/kit/test_model_choice.py": 9.0,
+    "tests/kit/test_track_live.py": 8.9,
+    "tests/kit/test_recording_reader.py": 8.6,
+    "tests/test_docs.py::hand": 6.8,
+    "tests/kit/test_servo_link.py": 6.8,
+    "tests/kit/test_cli_imports.py": 6.7,
+    "tests/kit/test_thermal.py": 6.5,
+    "tests/drivers/test_chip_noise.py": 6.3,
+    "tests/kit/test_reliability.py": 6.2,
+    "tests/drivers/test_dxl_gimbal.py": 6.0,
+    "tests/kit/test_fullmodel_contract.py": 5.5,
+    "tests/kit/test_align_e2e.py": 5.2,
+    "tests/calib/test_allan.py": 5.1,
+    "tests/calib/test_windows.py": 5.0,
 }
 
 #: Fixtures that run a long end-to-end emulated run (tens of CPU seconds each): a test that

@@ -625,7 +625,7 @@ def run_document(path: Path, workdir: Path, part: str | None = None,
 #: chain's own, each after the ones before it (a command reads what the earlier ones wrote, and a
 #: second ``--out`` of the same name fails as it would for the reader); the chains share no
 #: directory, so under pytest-xdist they run on different workers at once (``tests/conftest.py``
-#: hands out the longest work units first, by their CPU seconds in ``LONG_UNITS``: a chain added
+#: hands out the longest work units first, by their wall seconds in ``LONG_UNITS``: a chain added
 #: here belongs there too). A document that needs a file of
 #: another chain fails, as it would for a reader who skipped that page; what one directory for
 #: all caught across chains (two documents writing one output) is checked by
