@@ -38,6 +38,14 @@ def draw_truth(rng: np.random.Generator, cross: float = 0.02, tilt_rad: float = 
 
 
 def body_axis(links, mount, angles, j: int) -> np.ndarray:
+    """Servo ``j``'s turn axis in the sensor frame at the pose ``angles`` (S,): (3,); or at
+    many poses at once, ``angles`` (N, S): (N, 3)."""
+    angles = np.asarray(angles, dtype=float)
+    if angles.ndim == 2:
+        inner = np.broadcast_to(np.eye(3), (angles.shape[0], 3, 3))
+        for k in range(j + 1, len(links)):
+            inner = inner @ Rotation.from_rotvec(angles[:, k:k + 1] * links[k]).as_matrix()
+        return np.einsum("nki,k->ni", inner @ mount, links[j])
     inner = np.eye(3)
     for k in range(j + 1, len(links)):
         inner = inner @ Rotation.from_rotvec(links[k] * angles[k]).as_matrix()
