@@ -48,6 +48,12 @@ def loop_50_hz_config(run: Path) -> str:
     return str(cfg)
 
 
+def loop_50_hz_args(run: Path) -> list[str]:
+    """``--config`` of :func:`loop_50_hz_config` (the file beside ``run``), for a command's
+    arguments."""
+    return ["--config", loop_50_hz_config(run)]
+
+
 def _once(tmp_path_factory: pytest.TempPathFactory, name: str,
           make: Callable[[Path], int]) -> tuple[Path, int]:
     """Run ``make(directory)`` once per test session (across xdist workers, whose base

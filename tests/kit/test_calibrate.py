@@ -15,7 +15,7 @@ import pytest
 
 from gyrocal.kit.cli import COMMANDS, main
 from gyrocal.kit.recording import load_recording
-from tests.kit.conftest import LOOP_50_HZ, loop_50_hz_config
+from tests.kit.conftest import LOOP_50_HZ, loop_50_hz_args, loop_50_hz_config
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -154,19 +154,17 @@ def test_verify_falls_back_to_the_nominal_axes(runs, tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ runtime checks and faults
-#: The fault runs below loop at 50 Hz (LOOP_50_HZ):
-#: each check reads what the chip's FIFO and the servos' encoders hold, not the loop's rate.
-#: At 200 Hz and at 50 the same error is said: servo 2 held only 3.88 of 4.32 rad/s (failed
-#: twice); the gyro saturated in servo 1's negative turn (258 and 255 samples at full scale);
-#: the sensor moved during a rest; the I²C error at 1.996 and 1.991 s (399 and 398 samples).
-def loop_50(tmp_path):
-    """``--config`` of :data:`LOOP_50_HZ`, the file beside ``tmp_path`` (the run's directory,
-    which calibrate wants empty)."""
-    return ("--config", loop_50_hz_config(tmp_path))
+# The fault runs below loop at 50 Hz (LOOP_50_HZ):
+# each check reads what the chip's FIFO and the servos' encoders hold, not the loop's rate.
+# At 200 Hz and at 50 the same error is said: servo 2 held only 3.88 of 4.32 rad/s (failed
+# twice); the gyro saturated in servo 1's negative turn (258 and 255 samples at full scale);
+# the sensor moved during a rest; the I²C error at 1.996 and 1.991 s (399 and 398 samples).
+# (loop_50_hz_args writes the file beside the run's directory, which calibrate wants empty.)
 
 
 def test_a_servo_that_does_not_reach_its_speed_stops_the_run(tmp_path, capsys):
-    assert calibrate(tmp_path, "--sim-fault", "stall:2:7.5:0.9", *loop_50(tmp_path)) == 5
+    assert calibrate(tmp_path, "--sim-fault", "stall:2:7.5:0.9",
+                     *loop_50_hz_args(tmp_path)) == 5
     err = capsys.readouterr().err
     assert "servo 2 held only" in err and "lower the speed" in err and "failed twice" in err
     assert all(s["torque_enable"] == 0 for s in sim_state(tmp_path).values())
@@ -205,14 +203,14 @@ def test_a_fifo_gap_is_caught(tmp_path, capsys):
 def test_movement_during_a_rest_is_caught(tmp_path, capsys):
     # two slips in the diagonal protocol's second rest (4.8-5.4 s and its repeat)
     code = calibrate(tmp_path, "--sim-fault", "slip:5.1:1", "--sim-fault", "slip:5.7:1",
-                     "--protocol", "auto", *loop_50(tmp_path))
+                     "--protocol", "auto", *loop_50_hz_args(tmp_path))
     assert code == 5
     assert "the sensor moved during a rest" in capsys.readouterr().err
 
 
 def test_an_error_mid_turn_stops_the_servos_and_keeps_the_recording(tmp_path, capsys):
     # The IMU dies in the middle of servo 1's first turn: a bus error, exit 4.
-    assert calibrate(tmp_path, "--sim-fault", "imu-dead:2.0", *loop_50(tmp_path)) == 4
+    assert calibrate(tmp_path, "--sim-fault", "imu-dead:2.0", *loop_50_hz_args(tmp_path)) == 4
     err = capsys.readouterr().err
     # The error is the one that stopped the run (a FIFO drain), not one from stopping the IMU.
     assert "gyrocal: error: I²C error" in err and "FIFO_COUNTH" in err

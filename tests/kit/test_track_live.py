@@ -13,19 +13,16 @@ from gyrocal.calib.model import GyroCalibration
 from gyrocal.drivers.dynamixel.errors import TerminatedBySignal
 from gyrocal.kit.cli import main
 from gyrocal.kit.sim import sim_truth
-from tests.kit.conftest import loop_50_hz_config
+from tests.kit.conftest import loop_50_hz_args
 
-
-def loop_50_hz(tmp_path):
-    """``--config`` of the jig's loop at 50 Hz (tests/kit/conftest.py LOOP_50_HZ): each chip's
-    FIFO holds the same samples between drains and the servos are polled at 50 Hz, for a
-    quarter of the emulated bus traffic. The tracker takes every sample either way (seed 4's
-    20 s: 3998 samples at 200 Hz, 3996 at 50; its final bias 0.76, -1.04, -0.34 sigma from the
-    truth at both rates); seed 7's 24 s with turns: 56 reference-rate updates at both rates,
-    0 NIS alarms with the true axes, 11 (200 Hz) and 12 (50 Hz) with every axis flipped. The
-    interrupt and the servo alert land at the same jig time at either rate (the trap counts
-    drains: 1000 at 200 Hz, 250 at 50)."""
-    return ["--config", loop_50_hz_config(tmp_path / "loop")]
+# The jig's loop at 50 Hz (loop_50_hz_args, tests/kit/conftest.py LOOP_50_HZ): each chip's
+# FIFO holds the same samples between drains and the servos are polled at 50 Hz, for a
+# quarter of the emulated bus traffic. The tracker takes every sample either way (seed 4's
+# 20 s: 3998 samples at 200 Hz, 3996 at 50; its final bias 0.76, -1.04, -0.34 sigma from the
+# truth at both rates); seed 7's 24 s with turns: 56 reference-rate updates at both rates,
+# 0 NIS alarms with the true axes, 11 (200 Hz) and 12 (50 Hz) with every axis flipped. The
+# interrupt and the servo alert land at the same jig time at either rate (the trap counts
+# drains: 1000 at 200 Hz, 250 at 50).
 
 
 def run_json(capsys, *argv):
@@ -37,7 +34,8 @@ def run_json(capsys, *argv):
 
 
 def test_live_sim_tracks_the_true_bias_within_its_uncertainty(tmp_path, capsys):
-    doc, err = run_json(capsys, "--sim-seed", "4", "--duration", "20", *loop_50_hz(tmp_path))
+    doc, err = run_json(capsys, "--sim-seed", "4", "--duration", "20",
+                        *loop_50_hz_args(tmp_path / "loop"))
     _, true_bias = sim_truth(4)  # Calibration v1 convention: the chip reads m = g/k - bias
     t, bias, std = np.array(doc["t"]), np.array(doc["bias"]), np.array(doc["bias_std"])
     still = np.array(doc["still"])
@@ -65,7 +63,7 @@ def test_live_with_a_calibration_and_the_jig_as_still_flag(tmp_path, capsys):
     path.write_text(cal.to_json())
     doc, err = run_json(capsys, "--sim-seed", "5", "--duration", "10", "--cal", str(path),
                         "--still", "segments", "--noise-density", "1.75e-4",
-                        "--rate-random-walk", "1e-5", *loop_50_hz(tmp_path))
+                        "--rate-random-walk", "1e-5", *loop_50_hz_args(tmp_path / "loop"))
     bias, std = np.array(doc["bias"]), np.array(doc["bias_std"])
     np.testing.assert_allclose(bias[0], cal.bias, atol=2e-4)  # starts from the calibration
     assert np.all(std[-1] < 1e-4)
@@ -113,7 +111,7 @@ def test_interrupt_stops_the_servos_and_exits_with_its_code(monkeypatch, tmp_pat
                                                             code, word):
     trap = _Trap(monkeypatch, exc, at=250)  # 5 s into the run, its loop at 50 Hz
     assert main(["track", "--live", "--sim", "--duration", "20", "--json",
-                 *loop_50_hz(tmp_path)]) == code
+                 *loop_50_hz_args(tmp_path / "loop")]) == code
     out, err = capsys.readouterr()
     assert out == ""
     assert f"{word} after" in err and "torque off" in err
@@ -125,7 +123,8 @@ def test_servo_alert_while_holding_exits_4_with_torque_off(monkeypatch, tmp_path
         jig.sim.servo_bus.servo(2).raise_alert_at(jig.clock.monotonic() + 4.0, bits=1 << 5)
 
     trap = _Trap(monkeypatch, after=overload)
-    assert main(["track", "--live", "--sim", "--duration", "20", *loop_50_hz(tmp_path)]) == 4
+    assert main(["track", "--live", "--sim", "--duration", "20",
+                 *loop_50_hz_args(tmp_path / "loop")]) == 4
     out, err = capsys.readouterr()
     assert "servo 2" in err and "gyrocal: error:" in err
     assert trap.torque() == {"1": 0, "2": 0, "3": 0}
@@ -196,7 +195,8 @@ def _turns_run(capsys, tmp_path, cal_path):
                  "1", "--turn-every", "3", "--turn-speed-dps", "120", "--cal", str(cal_path),
                  "--out", str(out_json), "--rows", "2",
                  # the paper's sensor: the tracker applies only the scale (issue 14's fix pending)
-                 "--sim-cross-axis", "0", "--sim-realism", "off", *loop_50_hz(tmp_path)])
+                 "--sim-cross-axis", "0", "--sim-realism", "off",
+                 *loop_50_hz_args(tmp_path / "loop")])
     out, err = capsys.readouterr()
     assert code == 0, err
     counts = re.search(r"(\d+) zero-rate, (\d+) reference-rate", out)
@@ -241,7 +241,7 @@ def test_a_recorded_still_session_gives_the_chips_noise_density(tmp_path, capsys
     # the loop at 50 Hz (tests/kit/conftest.py LOOP_50_HZ): the chip's FIFO holds the same
     # samples between drains, for a quarter of the emulated bus traffic
     assert main(["track", "--live", "--sim", "--duration", "30", "--record", str(rec),
-                 "--rows", "2", "--config", loop_50_hz_config(tmp_path / "loop")]) == 0
+                 "--rows", "2", *loop_50_hz_args(tmp_path / "loop")]) == 0
     r = load_recording(rec)
     assert r.complete and [s.kind for s in r.segments] == ["rest"]
     assert r.imu_t.size > 0.95 * 30 * 200
