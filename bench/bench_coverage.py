@@ -25,13 +25,18 @@
    ``F`` encoder ticks about its goal's tick, a new draw at each rest, as an X-series
    position loop leaves it (``settled`` in the generator); 0 puts every servo exactly on its
    commanded angle at every rest (home on a tick's centre: no hold error at all).
+   ``--ripple=F`` (default 0.05): every turn and move of the generator carries speed ripple of
+   that RMS fraction of its speed, 1–20 Hz (``speed_ripple`` in the generator; the paper's
+   simulation adds 5 % of the speed as rotation noise), which the gyro and the encoder both
+   see; 0 turns at exactly the trapezoid's speed.
 
 ``--python=PATH`` runs the calibrations with another installation's interpreter (e.g. the
 code before a change: ``--python=/work/venv-main/bin/python``); the comparison with the truth
 is this installation's.
 
 Usage: ``python -m bench coverage [--quick (3 seeds)] [--seeds=N] [--first=S] [--python=PATH]
-[--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--hold-band=F] [--keep=DIR]``.
+[--independent] [--walk=K,K] [--flicker=B] [--wobble=DEG] [--hold-band=F] [--ripple=F]
+[--keep=DIR]``.
 ``--keep=DIR`` keeps each emulated run in ``DIR/seed-S`` and, where one is there already,
 re-fits its recording with ``gyrocal estimate`` instead of emulating it again (a change to the
 fit's σ measured on the same runs in minutes).
@@ -108,7 +113,7 @@ def _sim_run(job: tuple[str, int, str]) -> dict[str, np.ndarray] | None:
         return _z(cal, truth["truth"])
 
 
-def _independent_run(job: tuple[str, int, float, float, float, float]
+def _independent_run(job: tuple[str, int, float, float, float, float, float]
                      ) -> dict[str, np.ndarray] | None:
     """One recording of the independent generator with a bias random walk of ``K`` = job[2],
     fitted by ``gyrocal estimate``: z of the bias against its value at the recording's middle
@@ -117,7 +122,7 @@ def _independent_run(job: tuple[str, int, float, float, float, float]
     figures (B = 0, K) over the calibration's span: the formula on data it did not make."""
     from gyrocal.calib.drift import BiasDrift
 
-    python, seed, walk, flicker, wobble, band = job
+    python, seed, walk, flicker, wobble, band, ripple = job
     root = Path(__file__).resolve().parent.parent
     sys.path.insert(0, str(root))
     from tests.kit.contract_fullmodel_recording import write_recording
@@ -125,7 +130,7 @@ def _independent_run(job: tuple[str, int, float, float, float, float]
     with tempfile.TemporaryDirectory() as tmp:
         rec = Path(tmp) / "rec"
         t = write_recording(rec, seed=seed, bias_walk=walk, bias_flicker=flicker,
-                            wobble_rad=np.radians(wobble), hold_band=band)
+                            wobble_rad=np.radians(wobble), hold_band=band, ripple=ripple)
         run = subprocess.run([python, "-m", "gyrocal.kit", "estimate", str(rec), "--json"],
                              capture_output=True, text=True, check=False)
         if run.returncode not in (0, 3):
@@ -183,13 +188,15 @@ def main(argv: list[str]) -> None:
     if "--independent" in argv:
         flicker, wobble = float(opt("flicker", "0")), float(opt("wobble", "0"))
         band = float(opt("hold-band", "1"))
+        ripple = float(opt("ripple", "0.05"))
         for walk in (float(w) for w in opt("walk", "2e-6,1e-4").split(",")):
             res = pooled(_independent_run,
-                         [(python, s, walk, flicker, wobble, band) for s in seed_list],
+                         [(python, s, walk, flicker, wobble, band, ripple) for s in seed_list],
                          _describe)
             _table(res, f"Independent generator, bias random walk {walk:g} rad/s/√s, flicker "
                         f"B {flicker:g} rad/s, link nod {wobble:g}°, holds within {band:g} "
-                        f"tick, seeds {first}..{first + seeds - 1}, {python}")
+                        f"tick, speed ripple {100 * ripple:g} %, seeds "
+                        f"{first}..{first + seeds - 1}, {python}")
         return
     keep = opt("keep", "")
     res = pooled(_sim_run, [(python, s, keep) for s in seed_list], _describe)

@@ -35,8 +35,10 @@ have, are left out. Over the independent generator's seeds 0–199 (``python -m 
 then hold the truth 97.8 % of the time off the diagonal (z RMS 0.90; with the prior, 99.5 % and
 0.94) and 96.5 % on it (0.93; 97.5 % and 0.93), with the generator's servos back exactly on
 their commanded angles at every rest (now ``--hold-band=0``); with each rest anywhere within
-its encoder tick, as a position loop leaves it (the default since), 97.2 % (0.95) and 96.0 %
-(0.97).
+its encoder tick, as a position loop leaves it, 97.2 % (0.95) and 96.0 % (0.97) (94.2 % and
+97.0 % on seeds 200–399); with the servos' speed ripple besides (5 % of the speed,
+``--ripple=0.05``; both the default since), 96.3 % (0.96) and 96.5 % (0.95) (95.5 % and
+97.0 % on seeds 200–399).
 
 **Bounded.** Where a joint's nod is not measured (no pose of the other servos at which it
 turned both ways, or a set without the windows' coefficients), ``ε`` of the servo table is a

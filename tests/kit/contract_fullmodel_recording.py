@@ -185,6 +185,45 @@ def settled(rng: np.random.Generator, band: float, tick: float):  # type: ignore
     return offset
 
 
+def speed_ripple(rng: np.random.Generator, fraction: float, speed: float,
+                 components: int = 12, band_hz: tuple[float, float] = (1.0, 20.0)):  # type: ignore[no-untyped-def]
+    """Speed ripple of one turn or move: a function of the time since its start ``τ``, the
+    trapezoid's rate as a fraction of ``speed`` ``u(τ)`` and its derivative ``u̇(τ)``, giving
+    the angle perturbation ``p = u g`` and its rate ``ṗ = u̇ g + u ġ`` (rad, rad/s), with
+    ``g(τ) = Σ_k A_k sin(ω_k τ + φ_k)`` the sum of ``components`` sines at frequencies uniform
+    in ``band_hz``, random phases, and amplitudes that give a rate ripple of RMS ``fraction ×
+    speed`` while cruising (``A_k ω_k = fraction · speed · √(2/K)``). ``p`` vanishes at rest, so
+    the turn still ends where its position loop stops it.
+
+    A servo does not turn at a constant speed: the paper's simulation adds rotation noise of 5 %
+    of the speed (Section III, "to simulate vibration during operation"), and its corrected
+    readings still fluctuate with "motor speed instability" (Section III-B). Gear meshes,
+    commutation and the velocity loop put it at a few hertz to tens of hertz at calibration
+    speeds; the band here is a plain choice within that, not a model of one servo.
+    """
+    if not fraction:
+        return lambda tau, u, du: (0.0, 0.0)
+    w = 2 * np.pi * rng.uniform(*band_hz, components)
+    phase = rng.uniform(0, 2 * np.pi, components)
+    amp = fraction * speed * np.sqrt(2.0 / components) / w
+
+    def wiggle(tau: np.ndarray, u: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        arg = np.outer(tau, w) + phase
+        g, dg = np.sin(arg) @ amp, np.cos(arg) @ (amp * w)
+        return u * g, du * g + u * dg
+
+    return wiggle
+
+
+def _acceleration(tau: np.ndarray, speed: float, delta: float, accel: float) -> np.ndarray:
+    """The trapezoid's acceleration (rad/s², signless) at ``tau`` after its start, for a move
+    of ``|delta|`` rad (:func:`~tests.kit.contract_recording._profile`'s shape)."""
+    _, _, end = _profile(np.zeros(1), speed, abs(delta) / (2 * np.pi), accel)
+    ramp = speed / accel
+    return np.where((tau < 0) | (tau > end), 0.0,
+                    np.where(tau < ramp, accel, np.where(tau > end - ramp, -accel, 0.0)))
+
+
 def flicker_noise(rng: np.random.Generator, B: float, rate_hz: float, n: int) -> np.ndarray:
     """``n`` samples (n, 3) at ``rate_hz`` of flicker noise of one-sided spectral density
     ``(B²/π)/f`` and no mean, made by shaping white noise's spectrum (periodic over the ``n``
@@ -205,7 +244,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                     lsb: float = LSB_500DPS, ids: tuple = (11, 12, 13),
                     g_sensitivity: np.ndarray | None = None, steps: list | None = None,
                     hold: float = 0.06, bias_walk: float = 0.0, bias_flicker: float = 0.0,
-                    wobble_rad: float = 0.0, hold_band: float = 0.0,
+                    wobble_rad: float = 0.0, hold_band: float = 0.0, ripple: float = 0.0,
                     temp_ramp: tuple[float, float] | None = None,
                     tempco: tuple[float, float, float] = (0.0, 0.0, 0.0),
                     accel_truth: dict | None = None, gravity_m_s2: float = 9.80665,
@@ -231,7 +270,10 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     after each move and turn, at a true angle drawn uniformly within ``hold_band`` ticks about
     the centre of its goal's tick (the tick nearest the commanded angle), each rest its own
     draw: a position loop stops where friction holds the shaft, not on the tick grid
-    (:func:`settled`); 0 stops every servo exactly on its commanded angle. With
+    (:func:`settled`); 0 stops every servo exactly on its commanded angle. With ``ripple``
+    (a fraction) every turn and move carries speed ripple of that RMS fraction of its speed
+    (:func:`speed_ripple`), which the gyro and the encoder both see; 0 turns at exactly the
+    trapezoid's speed. With
     ``temp_ramp`` (°C at the start and the end) the die temperature
     ramps linearly (written in the ``temp`` column) and the bias follows it,
     ``bias + tempco (T − T_start)``. With ``accel_truth`` (:func:`draw_accel`) the
@@ -252,6 +294,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
     start = np.array([settle(0.0) for _ in range(3)])  # where each servo rests at the start
     off = start.copy()  # each servo's true angle at rest less its commanded one
     _, _, turn_time = _profile(np.zeros(1), speed, turns, accel)
+    ripple_rng = np.random.default_rng([seed, 0x919])
     with_tour = tour and accel_truth is not None
     plan = steps if steps is not None else [
         x for step in schedule(pose_deg, gravity=g_sensitivity is not None, tour=with_tour)
@@ -264,7 +307,8 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
             _, s, d = step
             new = settle(pose[s])  # whole turns: back to the same tick
             segs.append(("rotate", s, d, speed, t, t + turn_time,
-                         [(s, d * 2 * np.pi * turns + new - off[s])]))
+                         [(s, d * 2 * np.pi * turns + new - off[s],
+                           speed_ripple(ripple_rng, ripple, speed))]))
             off[s] = new
             t += turn_time
         else:
@@ -276,7 +320,7 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
                 turns_j = abs(delta) / (2 * np.pi)
                 _, _, dur = _profile(np.zeros(1), move_speed, turns_j, accel)
                 segs.append(("move", j, int(np.sign(delta)), move_speed, t, t + dur,
-                             [(j, delta)]))
+                             [(j, delta, speed_ripple(ripple_rng, ripple, move_speed))]))
                 durations.append(dur)
             if steps is not None:
                 segs[-len(moving):] = [sg[:5] + (sg[5] + hold,) + sg[6:]
@@ -294,10 +338,11 @@ def write_recording(path, *, seed: int = 0, cross: float = 0.02, noise: float = 
         ang = np.broadcast_to(start, (times.size, 3)).copy()
         rate = np.zeros((times.size, 3))
         for _, _, _, sp, t0, _, parts in segs:
-            for j, delta in parts:
+            for j, delta, wiggle in parts:
                 a, r, _ = _profile(times - t0, sp, abs(delta) / (2 * np.pi), accel)
-                ang[:, j] += np.sign(delta) * np.where(times >= t0, a, 0.0)
-                rate[:, j] += np.sign(delta) * r
+                p, dp = wiggle(times - t0, r / sp, _acceleration(times - t0, sp, delta, accel) / sp)
+                ang[:, j] += np.sign(delta) * (np.where(times >= t0, a, 0.0) + p)
+                rate[:, j] += np.sign(delta) * (r + dp)
         return ang, rate
 
     ang, rate = motion(ts)
