@@ -196,8 +196,9 @@ def speed_ripple(rng: np.random.Generator, fraction: float, speed: float,
     the turn still ends where its position loop stops it.
 
     A servo does not turn at a constant speed: the paper's simulation adds rotation noise of 5 %
-    of the speed (Section III, "to simulate vibration during operation"), and its corrected
-    readings still fluctuate with "motor speed instability" (Section III-B). Gear meshes,
+    of the speed ("to simulate vibration during operation"), and its corrected readings still
+    fluctuate with "motor speed instability" (both Section III-A, "Simulation Under Normal
+    Conditions"). Gear meshes,
     commutation and the velocity loop put it at a few hertz to tens of hertz at calibration
     speeds; the band here is a plain choice within that, not a model of one servo.
     """
