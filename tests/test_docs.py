@@ -70,6 +70,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import pytest
 
@@ -314,14 +315,9 @@ class JigRuns:
         fields = {k: v for k, v in sorted(vars(args).items()) if k not in AFTER_THE_JIG}
         return repr((cfg, fields))
 
-    @contextlib.contextmanager
-    def installed(self) -> Iterator[None]:
+    def installed(self) -> contextlib.AbstractContextManager[Any]:
         """``gyrocal.kit.jig.run_jig`` replaced by :meth:`run_jig` for the duration."""
-        self._jig_module.run_jig = self.run_jig
-        try:
-            yield
-        finally:
-            self._jig_module.run_jig = self._real
+        return mock.patch.object(self._jig_module, "run_jig", self.run_jig)
 
     def run_jig(self, cfg: Any, args: Any, out: Path, rec_dir: Path, extend: Any = None) -> Any:
         """:func:`gyrocal.kit.jig.run_jig`, made once per :meth:`key`."""
@@ -414,14 +410,9 @@ class ReportPlots:
             json.dumps(manifest, sort_keys=True, default=repr),
             json.dumps(doc, sort_keys=True, default=repr), arrays, extracted))).hexdigest()
 
-    @contextlib.contextmanager
-    def installed(self) -> Iterator[None]:
+    def installed(self) -> contextlib.AbstractContextManager[Any]:
         """``gyrocal.kit.report_plots._draw`` replaced by :meth:`draw` for the duration."""
-        self._module._draw = self.draw
-        try:
-            yield
-        finally:
-            self._module._draw = self._real
+        return mock.patch.object(self._module, "_draw", self.draw)
 
     def draw(self, plt: Any, p: Any, out: Path, rec: Any, cal: Any, extracted: Any,
              turns: Any, home: Any, axes: Any, index: Any, force: bool) -> tuple[Path, str]:
